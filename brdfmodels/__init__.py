@@ -1,0 +1,54 @@
+"""brdfmodels: how a surface reflects.
+
+Pluggable BRDF models (Lambertian, ideal mirror, five-parameter Torrance-Sparrow,
+spherical-harmonic in halfway/difference coordinates, dynamic over a state table,
+conservative envelopes, sums and scaled models), their registry and JSON persistence,
+surface state histories (oxidation, thin-plate heating) and integrals over a BRDF.
+This package knows nothing of scenes or hazards.
+
+Frames: z = outward normal, x = material tangent (groove direction); ``wi`` and ``wo``
+point from the surface to the source and to the observer; BRDF values in 1/sr.
+"""
+
+from .analysis import DHRResult, EnvelopeReport, envelope_report, hemispherical_reflectance
+from .geometry import (
+    half_diff,
+    half_diff_to_directions,
+    local_frame,
+    local_to_world,
+    mirror_direction,
+    rotate_about_normal,
+    spherical_to_vector,
+    to_material_frame,
+    vector_to_spherical,
+    world_to_local,
+)
+from .history import HeatingResult, History, OxidationModel, ThinPlateHeating
+from .models import (
+    FR_MAX,
+    BRDFModel,
+    DynamicBRDF,
+    Envelope,
+    Lambertian,
+    Scaled,
+    Specular,
+    SphericalHarmonicBRDF,
+    Sum,
+    TorranceSparrow5,
+)
+from .optics import fresnel_reflectance, optical_constants
+from .registry import available_models, create, dumps, load, loads, model_from_dict, register, save
+from .sh import SHBasis, fan_out, real_sph_harm
+from .states import StateTable
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "BRDFModel", "DHRResult", "DynamicBRDF", "Envelope", "EnvelopeReport", "FR_MAX", "HeatingResult",
+    "History", "Lambertian", "OxidationModel", "SHBasis", "Scaled", "Specular", "SphericalHarmonicBRDF",
+    "StateTable", "Sum", "ThinPlateHeating", "TorranceSparrow5", "available_models", "create", "dumps",
+    "envelope_report", "fan_out", "fresnel_reflectance", "half_diff", "half_diff_to_directions",
+    "hemispherical_reflectance", "load", "loads", "local_frame", "local_to_world", "mirror_direction",
+    "model_from_dict", "optical_constants", "real_sph_harm", "register", "rotate_about_normal", "save",
+    "spherical_to_vector", "to_material_frame", "vector_to_spherical", "world_to_local",
+]

@@ -1,0 +1,230 @@
+"""Integrals and checks over a BRDF: hemispherical reflectance, envelope conservativeness.
+
+Directional-hemispherical reflectance (DHR)
+    ``rho(wi) = integral over the hemisphere of f_r(wi, wo) cos(theta_o) d omega_o``
+    (Nicodemus et al., NBS Monograph 160, 1977). It is computed in half-vector space,
+    ``wo = 2 (wi.h) h - wi`` with ``d omega_o = 4 (wi.h) d omega_h``, so a specular lobe
+    (a function of theta_h) lies along the edge ``cos theta_h = 1`` of the integration
+    rectangle ``(cos theta_h, phi_h) in [0, 1] x [-pi, pi]``. The rectangle is cut into
+    cells graded geometrically towards that edge and through the incidence direction
+    (retro-reflection peaks); every cell is integrated with tensor Gauss-Legendre and
+    compared with its four children; the cells with the largest differences are split
+    until the summed difference meets the tolerance. Delta (mirror) lobes are added
+    analytically.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._checks import directions, finite_scalar
+
+__all__ = ["hemispherical_reflectance", "DHRResult", "envelope_report", "EnvelopeReport"]
+
+_NGL = 6
+_GX, _GW = np.polynomial.legendre.leggauss(_NGL)
+
+
+@dataclass(frozen=True)
+class DHRResult:
+    """Directional-hemispherical reflectance with its quadrature error estimate."""
+
+    value: float
+    error_estimate: float
+    evaluations: int
+    cells: int
+    converged: bool
+    specular_part: float
+    wall_time_s: float
+
+    def __float__(self):
+        return self.value
+
+
+def _cell_integrals(model, wi, cells, state):
+    """Gauss-Legendre integral of the warped integrand over each cell (n, 4)."""
+    c0, c1, p0, p1 = cells.T
+    cc = (0.5 * (c1 - c0))[:, None] * (_GX[None, :] + 1.0) + c0[:, None]  # (n, g)
+    pp = (0.5 * (p1 - p0))[:, None] * (_GX[None, :] + 1.0) + p0[:, None]
+    c = np.repeat(cc, _NGL, axis=1)  # (n, g*g): c varies slowest
+    p = np.tile(pp, (1, _NGL))
+    s = np.sqrt(np.maximum(1.0 - c * c, 0.0))
+    h = np.stack([s * np.cos(p), s * np.sin(p), c], axis=-1)
+    wih = h @ wi
+    wo = 2.0 * wih[..., None] * h - wi
+    # Guard against round-off taking wo a hair out of unit length.
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    g = model.evaluate_cos(np.broadcast_to(wi, wo.shape), wo, state=state) * 4.0 * np.maximum(wih, 0.0)
+    w = np.outer(_GW, _GW).ravel()
+    area = 0.25 * (c1 - c0) * (p1 - p0)
+    return (g * w).sum(axis=1) * area
+
+
+def _split(cells):
+    c0, c1, p0, p1 = cells.T
+    cm, pm = 0.5 * (c0 + c1), 0.5 * (p0 + p1)
+    return np.concatenate(
+        [
+            np.stack([c0, cm, p0, pm], 1),
+            np.stack([cm, c1, p0, pm], 1),
+            np.stack([c0, cm, pm, p1], 1),
+            np.stack([cm, c1, pm, p1], 1),
+        ]
+    )
+
+
+def _estimate(model, wi, cells, state):
+    """Fine value (sum over children) and error |coarse - fine| per cell."""
+    coarse = _cell_integrals(model, wi, cells, state)
+    fine = _cell_integrals(model, wi, _split(cells), state).reshape(4, -1).sum(axis=0)
+    return fine, np.abs(fine - coarse)
+
+
+def _initial_cells(wi):
+    ci = float(np.clip(wi[2], 0.0, 1.0))
+    phi_i = math.atan2(wi[1], wi[0])
+    c_breaks = [0.0, 0.25, 0.5, 0.75, 0.9, 1 - 1e-2, 1 - 1e-3, 1 - 1e-4, 1 - 1e-5, 1 - 1e-6, 1 - 1e-7, 1.0]
+    c_breaks = np.unique(np.clip(np.concatenate([c_breaks, [ci]]), 0.0, 1.0))
+    p_breaks = np.linspace(-math.pi, math.pi, 17)
+    p_breaks = np.unique(np.concatenate([p_breaks, [phi_i]]))
+    cc = np.stack(np.meshgrid(np.arange(c_breaks.size - 1), np.arange(p_breaks.size - 1), indexing="ij"), -1).reshape(-1, 2)
+    return np.stack(
+        [c_breaks[cc[:, 0]], c_breaks[cc[:, 0] + 1], p_breaks[cc[:, 1]], p_breaks[cc[:, 1] + 1]], axis=1
+    )
+
+
+def hemispherical_reflectance(model, wi, *, state=None, rtol=1e-6, atol=1e-10, max_evaluations=2_000_000) -> DHRResult:
+    """Directional-hemispherical reflectance of ``model`` at incidence ``wi``.
+
+    Parameters
+    ----------
+    model : BRDFModel
+    wi : array_like, shape (3,)
+        Direction to the source in the surface frame (z > 0).
+    state : float, optional
+        Material state for dynamic models.
+    rtol, atol : float
+        Stop when the summed cell error estimate is below ``max(rtol * value, atol)``.
+    max_evaluations : int
+        Budget of BRDF evaluations; the result says whether it converged within it.
+
+    Returns
+    -------
+    DHRResult
+        ``value`` (dimensionless; includes delta lobes), ``error_estimate`` (absolute),
+        evaluation count and convergence flag.
+    """
+    wi = directions("wi", wi)
+    if wi.shape != (3,):
+        raise ValueError(f"wi: expected one direction of shape (3,), got {wi.shape}")
+    if not wi[2] > 0:
+        raise ValueError(f"wi={wi.tolist()!r}: expected a direction above the surface (z > 0)")
+    rtol = finite_scalar("rtol", rtol, minimum=0.0)
+    atol = finite_scalar("atol", atol, minimum=0.0)
+    start = time.perf_counter()
+    spec = float(model.specular_reflectance(wi, state=state))
+    per_cell = 5 * _NGL * _NGL
+    cells = _initial_cells(wi)
+    vals, errs = _estimate(model, wi, cells, state)
+    evals = per_cell * cells.shape[0]
+    while True:
+        total, err = float(vals.sum()), float(errs.sum())
+        if err <= max(rtol * abs(total + spec), atol):
+            converged = True
+            break
+        # split the cells holding the largest errors (at least the worst one)
+        order = np.argsort(errs)[::-1]
+        cum = np.cumsum(errs[order])
+        k = int(np.searchsorted(cum, 0.5 * err)) + 1
+        k = min(max(k, 1), order.size)
+        if evals + 4 * k * per_cell > max_evaluations:
+            converged = False
+            break
+        chosen = order[:k]
+        keep = np.ones(cells.shape[0], bool)
+        keep[chosen] = False
+        children = _split(cells[chosen])
+        cv, ce = _estimate(model, wi, children, state)
+        evals += per_cell * children.shape[0]
+        cells = np.concatenate([cells[keep], children])
+        vals = np.concatenate([vals[keep], cv])
+        errs = np.concatenate([errs[keep], ce])
+    return DHRResult(
+        value=total + spec,
+        error_estimate=err,
+        evaluations=evals,
+        cells=int(cells.shape[0]),
+        converged=converged,
+        specular_part=spec,
+        wall_time_s=time.perf_counter() - start,
+    )
+
+
+@dataclass(frozen=True)
+class EnvelopeReport:
+    """How well an envelope bounds a model over sampled direction pairs and states.
+
+    ``fraction_bounded`` must be 1.0 for a conservative envelope; the ratios (envelope /
+    model, over pairs where the model is > 0) say how much it over-predicts.
+    """
+
+    fraction_bounded: float
+    median_ratio: float
+    max_ratio: float
+    min_ratio: float
+    pairs: int
+    states: int
+
+    def __str__(self):
+        return (
+            f"bounded {100 * self.fraction_bounded:.4f} % of {self.pairs} pairs x {self.states} states; "
+            f"over-prediction median {self.median_ratio:.3g}x, max {self.max_ratio:.3g}x"
+        )
+
+
+def envelope_report(envelope, model, wi, wo, states=None, *, rtol=1e-12) -> EnvelopeReport:
+    """Check that ``envelope`` bounds ``model`` at every sampled pair and state.
+
+    Parameters
+    ----------
+    envelope : BRDFModel
+        The static bound (typically :class:`~brdfmodels.Envelope`).
+    model : BRDFModel
+        The model it must bound.
+    wi, wo : array_like, shape (N, 3)
+        Sampled direction pairs.
+    states : array_like, optional
+        States to check (default for dynamic models: the nodes, the midpoints between them
+        and 64 evenly spread states).
+    rtol : float
+        Relative slack for rounding.
+    """
+    env = envelope.evaluate(wi, wo)
+    if model.is_dynamic:
+        if states is None:
+            lo, hi = model.state_range
+            nodes = model.state_nodes()
+            nodes = nodes[(nodes >= lo) & (nodes <= hi)]
+            mids = 0.5 * (nodes[1:] + nodes[:-1])
+            states = np.unique(np.concatenate([nodes, mids, np.linspace(lo, hi, 64)]))
+        states = np.atleast_1d(np.asarray(states, dtype=float))
+        vals = np.stack([model.evaluate(wi, wo, state=s) for s in states], axis=-1)
+    else:
+        states = np.array([np.nan])
+        vals = model.evaluate(wi, wo)[..., None]
+    env = np.broadcast_to(np.asarray(env)[..., None], vals.shape)
+    bounded = env >= vals * (1.0 - rtol)
+    pos = vals > 0
+    ratio = env[pos] / vals[pos]
+    return EnvelopeReport(
+        fraction_bounded=float(bounded.mean()),
+        median_ratio=float(np.median(ratio)) if ratio.size else float("nan"),
+        max_ratio=float(ratio.max()) if ratio.size else float("nan"),
+        min_ratio=float(ratio.min()) if ratio.size else float("nan"),
+        pairs=int(np.prod(vals.shape[:-1])),
+        states=int(states.size),
+    )

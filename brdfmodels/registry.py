@@ -1,0 +1,150 @@
+"""Model registry and versioned JSON persistence.
+
+Models register themselves with :func:`register` (a class decorator) under a canonical,
+lower-case name. Third-party packages add models through the entry-point group
+``brdfmodels.models`` (name = model name, value = ``module:Class``); they are loaded on
+the first lookup. Saved models are JSON documents rebuilt by looking the model up by name
+(never pickle); unknown keys, types and format versions are errors.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from importlib.metadata import entry_points
+from pathlib import Path
+
+__all__ = [
+    "register",
+    "create",
+    "available_models",
+    "model_class",
+    "model_from_dict",
+    "save",
+    "load",
+    "dumps",
+    "loads",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+]
+
+ENTRY_POINT_GROUP = "brdfmodels.models"
+FORMAT_NAME = "brdfmodels.model"
+FORMAT_VERSION = 1
+
+_REGISTRY: dict = {}
+_PLUGINS_LOADED = False
+
+
+def register(name: str):
+    """Class decorator: register a BRDF model class under ``name`` (case-insensitive)."""
+
+    def deco(cls):
+        key = name.lower()
+        if key in _REGISTRY and _REGISTRY[key] is not cls:
+            raise ValueError(f"model name {name!r} is already registered by {_REGISTRY[key].__qualname__}")
+        cls.name = key
+        _REGISTRY[key] = cls
+        return cls
+
+    return deco
+
+
+def _load_plugins() -> None:
+    global _PLUGINS_LOADED
+    if _PLUGINS_LOADED:
+        return
+    _PLUGINS_LOADED = True
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name.lower() in _REGISTRY:
+            continue
+        cls = ep.load()
+        register(ep.name)(cls)
+
+
+def available_models() -> list:
+    """Sorted canonical names of every registered model (built-in and plug-in)."""
+    _load_plugins()
+    return sorted(_REGISTRY)
+
+
+def model_class(name: str):
+    """The class registered under ``name``; ValueError listing the known names otherwise."""
+    if not isinstance(name, str):
+        raise ValueError(f"model={name!r}: expected a model name, one of {available_models()}")
+    _load_plugins()
+    try:
+        return _REGISTRY[name.lower()]
+    except KeyError:
+        raise ValueError(f"model={name!r} is unknown: expected one of {available_models()}") from None
+
+
+def create(name: str, **params):
+    """Build a registered model by name from its parameters, e.g. ``create("lambertian", reflectance=0.5)``."""
+    return model_class(name).from_params(params)
+
+
+def model_from_dict(data: dict):
+    """Rebuild a model from ``{"type": name, "params": {...}}`` (nested models allowed)."""
+    if not isinstance(data, dict):
+        raise ValueError(f"model: expected a mapping with 'type' and 'params', got {type(data).__name__}")
+    unknown = set(data) - {"type", "params"}
+    if unknown:
+        raise ValueError(f"model: unknown keys {sorted(unknown)}; expected 'type' and 'params'")
+    if "type" not in data:
+        raise ValueError("model: missing 'type' (the model name)")
+    return model_class(data["type"]).from_params(dict(data.get("params", {})))
+
+
+def dumps(model) -> str:
+    """Versioned JSON text of a model."""
+    doc = {"format": FORMAT_NAME, "version": FORMAT_VERSION, "model": model.to_dict()}
+    return json.dumps(doc, indent=1, allow_nan=False)
+
+
+def loads(text: str):
+    """Model from the JSON text written by :func:`dumps`."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"not a brdfmodels JSON document: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ValueError("not a brdfmodels JSON document: expected an object at the top level")
+    unknown = set(doc) - {"format", "version", "model"}
+    if unknown:
+        raise ValueError(f"unknown keys {sorted(unknown)} in model file; expected format, version, model")
+    if doc.get("format") != FORMAT_NAME:
+        raise ValueError(f"format={doc.get('format')!r}: expected {FORMAT_NAME!r}")
+    if doc.get("version") != FORMAT_VERSION:
+        raise ValueError(f"version={doc.get('version')!r}: this library reads version {FORMAT_VERSION}")
+    return model_from_dict(doc["model"])
+
+
+def save(model, path) -> Path:
+    """Write ``model`` as versioned JSON to ``path`` atomically (temporary file, then rename)."""
+    path = Path(path)
+    text = dumps(model)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def load(path):
+    """Read a model written by :func:`save`."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ValueError(f"cannot read model file {str(path)!r}: {exc.strerror}") from None
+    try:
+        return loads(text)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None

@@ -1,0 +1,257 @@
+"""Real spherical harmonics and the pruned halfway/difference basis of the dynamic BRDF.
+
+Convention (spec `dynamic-sh-brdf.md` section 5, paper Eqs. 27-28): orthonormal real
+harmonics **without** the Condon-Shortley phase,
+
+    y_l^0  = N_l^0 P_l^0(cos theta)
+    y_l^m  = sqrt(2) N_l^m P_l^m(cos theta) cos(m phi)     (m > 0)
+    y_l^-m = sqrt(2) N_l^m P_l^m(cos theta) sin(m phi)     (m > 0)
+
+with P_l^m the associated Legendre functions without the (-1)^m factor. They equal
+``sqrt(2) (-1)^m Re/Im`` of SciPy's ``sph_harm_y`` (which includes the phase). The
+normalised Legendre values come from the standard three-term recurrence on fully
+normalised functions (no factorials), accurate to ~1e-13 up to l = 64 including the poles.
+
+The BRDF basis (paper Sec. IV C, spec section 7) keeps, for reciprocity and symmetry about
+the plane of incidence, only m >= 0 (cosine) terms with even m in the difference part:
+``0 <= m_h <= min(l_h, mh_max)`` and ``m_d`` even, ``0 <= m_d <= min(l_d, md_max)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SHBasis", "real_sph_harm", "fan_out"]
+
+_INV_SQRT_4PI = 1.0 / math.sqrt(4.0 * math.pi)
+_SQRT2 = math.sqrt(2.0)
+HALF_PI = 0.5 * math.pi
+
+
+def fan_out(theta, exponent: float) -> np.ndarray:
+    """Angle fan-out of paper Eq. 34: ``theta~ / pi = (theta / (pi/2)) ** exponent``.
+
+    Maps [0, pi/2] onto [0, pi]; inputs are clipped to [0, pi/2] first.
+    """
+    t = np.clip(np.asarray(theta, dtype=float), 0.0, HALF_PI) / HALF_PI
+    if exponent == 1.0:
+        return math.pi * t
+    return math.pi * np.power(t, exponent)
+
+
+def _legendre_table(x: np.ndarray, s: np.ndarray, lmax: int, mmax: int) -> dict:
+    """Fully normalised P_l^m (incl. 1/sqrt(4 pi)), no Condon-Shortley phase.
+
+    Returns a dict ``(l, m) -> array`` for 0 <= m <= min(l, mmax), 0 <= l <= lmax.
+    ``x = cos(theta)``, ``s = sin(theta) >= 0``.
+    """
+    out = {}
+    pmm = np.full_like(x, _INV_SQRT_4PI)
+    for m in range(0, min(lmax, mmax) + 1):
+        if m > 0:
+            pmm = math.sqrt((2 * m + 1) / (2 * m)) * s * pmm
+        out[(m, m)] = pmm
+        if m + 1 > lmax:
+            continue
+        p_lm1 = pmm
+        p_l = math.sqrt(2 * m + 3) * x * pmm
+        out[(m + 1, m)] = p_l
+        for l in range(m + 2, lmax + 1):
+            a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
+            b = math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
+            p_new = a * (x * p_l - b * p_lm1)
+            p_lm1, p_l = p_l, p_new
+            out[(l, m)] = p_l
+    return out
+
+
+def _cos_multiples(c: np.ndarray, s: np.ndarray, mmax: int, *, with_sin: bool = False):
+    """cos(m phi) (and sin(m phi)) for m = 0..mmax from cos(phi), sin(phi) by recurrence."""
+    cos_m = [np.ones_like(c)]
+    sin_m = [np.zeros_like(c)]
+    for m in range(1, mmax + 1):
+        # angle addition keeps both sequences accurate
+        cos_m.append(cos_m[-1] * c - sin_m[-1] * s)
+        sin_m.append(sin_m[-1] * c + cos_m[-2] * s)
+    return (cos_m, sin_m) if with_sin else cos_m
+
+
+def real_sph_harm(l: int, m: int, theta, phi) -> np.ndarray:
+    """Real orthonormal spherical harmonic y_l^m (no Condon-Shortley phase).
+
+    Parameters
+    ----------
+    l, m : int
+        Degree l >= 0 and order -l <= m <= l (m < 0: sine terms).
+    theta, phi : array_like
+        Polar angle and azimuth [rad].
+    """
+    if not (isinstance(l, (int, np.integer)) and l >= 0):
+        raise ValueError(f"l={l!r}: expected an integer >= 0")
+    if not (isinstance(m, (int, np.integer)) and abs(m) <= l):
+        raise ValueError(f"m={m!r}: expected an integer with |m| <= l={l}")
+    theta, phi = np.broadcast_arrays(np.asarray(theta, float), np.asarray(phi, float))
+    table = _legendre_table(np.cos(theta), np.abs(np.sin(theta)), int(l), abs(int(m)))
+    p = table[(int(l), abs(int(m)))]
+    if m == 0:
+        return p.copy()
+    if m > 0:
+        return _SQRT2 * p * np.cos(m * phi)
+    return _SQRT2 * p * np.sin(-m * phi)
+
+
+def _check_order(name: str, value) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+        raise ValueError(f"{name}={value!r}: expected an integer >= 0")
+    if value > 128:
+        raise ValueError(f"{name}={value!r}: expected an order <= 128 (the basis is tested to l = 64)")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class SHBasis:
+    """Pruned spherical-harmonic basis in fanned-out halfway/difference angles.
+
+    Parameters
+    ----------
+    lh_max, mh_max : int
+        Maximum degree and order of the halfway harmonics (``mh_max = 0``: isotropic).
+    ld_max, md_max : int
+        Maximum degree and order of the difference harmonics; only even ``md`` are kept
+        (reciprocity).
+    separable : bool
+        True: the separable form of paper Eq. 33, columns
+        ``[constant] + [y_h(lh >= 1)] + [y_d(ld >= 1)]`` (the two constant terms are the
+        same function and are kept once). False: the full product form of Eq. 29, columns
+        ``y_h(lh, mh) * y_d(ld, md)`` for every pair.
+
+    Notes
+    -----
+    Sizes in the paper's settings (separable): (8, 4, 2, 0) -> 37, (10, 4, 2, 0) -> 47,
+    (8, 0, 2, 0) -> 11.
+    """
+
+    lh_max: int
+    mh_max: int
+    ld_max: int
+    md_max: int
+    separable: bool = True
+
+    def __post_init__(self):
+        for name in ("lh_max", "mh_max", "ld_max", "md_max"):
+            object.__setattr__(self, name, _check_order(name, getattr(self, name)))
+        if not isinstance(self.separable, (bool, np.bool_)):
+            raise ValueError(f"separable={self.separable!r}: expected True or False")
+        object.__setattr__(self, "separable", bool(self.separable))
+
+    # -- term lists --------------------------------------------------------------------
+    @property
+    def terms_h(self) -> tuple:
+        """(l, m) of the halfway harmonics, l = 0 included."""
+        return tuple((l, m) for l in range(self.lh_max + 1) for m in range(min(l, self.mh_max) + 1))
+
+    @property
+    def terms_d(self) -> tuple:
+        """(l, m) of the difference harmonics (even m), l = 0 included."""
+        return tuple((l, m) for l in range(self.ld_max + 1) for m in range(0, min(l, self.md_max) + 1, 2))
+
+    @property
+    def columns(self) -> tuple:
+        """Descriptor of every column: ('h', l, m), ('d', l, m) or ('hd', lh, mh, ld, md)."""
+        if self.separable:
+            cols = [("h", 0, 0)]
+            cols += [("h", l, m) for (l, m) in self.terms_h if l > 0]
+            cols += [("d", l, m) for (l, m) in self.terms_d if l > 0]
+            return tuple(cols)
+        return tuple(("hd", lh, mh, ld, md) for (lh, mh) in self.terms_h for (ld, md) in self.terms_d)
+
+    @property
+    def size(self) -> int:
+        """Number of basis functions K."""
+        nh, nd = len(self.terms_h), len(self.terms_d)
+        return nh + nd - 1 if self.separable else nh * nd
+
+    def to_dict(self) -> dict:
+        return {
+            "lh_max": self.lh_max,
+            "mh_max": self.mh_max,
+            "ld_max": self.ld_max,
+            "md_max": self.md_max,
+            "separable": self.separable,
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "SHBasis":
+        known = {"lh_max", "mh_max", "ld_max", "md_max", "separable"}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"basis: unknown keys {sorted(unknown)}; expected {sorted(known)}")
+        return cls(**data)
+
+    # -- evaluation -----------------------------------------------------------------------
+    def _half(self, theta_tilde, cph, sph, terms, mmax):
+        x = np.cos(theta_tilde)
+        s = np.abs(np.sin(theta_tilde))
+        lmax = max(l for l, _ in terms)
+        leg = _legendre_table(x, s, lmax, mmax)
+        cos_m = _cos_multiples(cph, sph, mmax)
+        vals = []
+        for (l, m) in terms:
+            p = leg[(l, m)]
+            vals.append(p if m == 0 else (_SQRT2 * p) * cos_m[m])
+        return vals
+
+    def design_transposed(self, theta_h, cph, sph, theta_d, cpd, spd, fanout_h, fanout_d, out=None):
+        """Basis values as a (K, N) array from half/diff angles and azimuth cosines/sines.
+
+        This is the hot-path entry point (no input checks); ``out`` may be a reusable
+        (K, N) buffer.
+        """
+        n = np.shape(theta_h)[0]
+        if out is None:
+            out = np.empty((self.size, n))
+        vh = self._half(fan_out(theta_h, fanout_h), cph, sph, self.terms_h, self.mh_max)
+        vd = self._half(fan_out(theta_d, fanout_d), cpd, spd, self.terms_d, self.md_max)
+        if self.separable:
+            k = 0
+            for v in vh:
+                out[k] = v
+                k += 1
+            for (l, _m), v in zip(self.terms_d, vd):
+                if l == 0:
+                    continue
+                out[k] = v
+                k += 1
+        else:
+            k = 0
+            for a in vh:
+                for b in vd:
+                    np.multiply(a, b, out=out[k])
+                    k += 1
+        return out
+
+    def evaluate(self, theta_h, phi_h, theta_d, phi_d, *, fanout=0.6, fanout_h=None) -> np.ndarray:
+        """Design matrix (N, K) at half/diff angles [rad] (1-d arrays of length N).
+
+        ``fanout`` is the exponent of Eq. 34 for both angles; ``fanout_h`` overrides it for
+        the halfway angle (a smaller value broadens the specular lobe).
+        """
+        th, ph, td, pd = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (theta_h, phi_h, theta_d, phi_d))
+        th, ph, td, pd = (a.ravel() for a in np.broadcast_arrays(th, ph, td, pd))
+        fh = fanout if fanout_h is None else fanout_h
+        return self.design_transposed(th, np.cos(ph), np.sin(ph), td, np.cos(pd), np.sin(pd), fh, fanout).T
+
+    def evaluate_directions(self, wi, wo, *, fanout=0.6, fanout_h=None) -> np.ndarray:
+        """Design matrix (N, K) at direction pairs (..., 3) in the surface frame."""
+        from ._checks import directions
+        from .geometry import _half_diff_parts
+
+        wi = directions("wi", wi)
+        wo = directions("wo", wo)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        parts = [p.ravel() for p in _half_diff_parts(wi.reshape(-1, 3), wo.reshape(-1, 3))]
+        fh = fanout if fanout_h is None else fanout_h
+        return self.design_transposed(*parts, fh, fanout).T
