@@ -55,9 +55,9 @@ def finite_array(name: str, value, *, ndim=None, minimum=None, dtype=float) -> n
         raise ValueError(f"{name}: expected a {ndim}-d array, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         bad = arr[~np.isfinite(arr)].ravel()[0]
-        raise ValueError(f"{name} contains {bad!r}: expected finite numbers")
+        raise ValueError(f"{name} contains {float(bad)!r}: expected finite numbers")
     if minimum is not None and arr.size and arr.min() < minimum:
-        raise ValueError(f"{name} contains {arr.min()!r}: expected numbers >= {minimum}")
+        raise ValueError(f"{name} contains {float(arr.min())!r}: expected numbers >= {minimum}")
     return arr
 
 

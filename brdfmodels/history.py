@@ -140,7 +140,7 @@ class OxidationModel:
             i = int(np.argmin(np.diff(t)))
             raise ValueError(f"times_s: expected non-decreasing times, got {t[i]!r} then {t[i + 1]!r}")
         if np.any(temp <= 0):
-            raise ValueError(f"temperatures_k contains {temp.min()!r}: expected absolute temperatures > 0 K")
+            raise ValueError(f"temperatures_k contains {float(temp.min())!r}: expected absolute temperatures > 0 K")
         integrals = _arrhenius_integrals(t, temp, self.activation_temperature_k)
         xi2 = self.initial_extinction**2 + self.rate_per_s * np.concatenate([[0.0], np.cumsum(integrals)])
         return np.sqrt(xi2)

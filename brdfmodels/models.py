@@ -728,7 +728,7 @@ class Scaled(BRDFModel):
         self.model = model
         if isinstance(factor, StateTable):
             if factor.values.min() < 0:
-                raise ValueError(f"factor: table values must be >= 0, got {factor.values.min()!r}")
+                raise ValueError(f"factor: table values must be >= 0, got {float(factor.values.min())!r}")
             if model.is_dynamic and model.state_name != factor.state_name:
                 raise ValueError(
                     f"factor: its state {factor.state_name!r} differs from the model's {model.state_name!r}"

@@ -44,7 +44,7 @@ def check_in_range(query: np.ndarray, nodes: np.ndarray, state_name: str, policy
     if policy == "error":
         outside = (q < lo) | (q > hi)
         if np.any(outside):
-            bad = q[outside].ravel()[0]
+            bad = float(q[outside].ravel()[0])
             raise ValueError(
                 f"{state_name}={bad!r} is outside the tabulated range [{lo!r}, {hi!r}]; "
                 f"pass extrapolation='clamp' to hold the end states"
