@@ -4,13 +4,16 @@ Directional-hemispherical reflectance (DHR)
     ``rho(wi) = integral over the hemisphere of f_r(wi, wo) cos(theta_o) d omega_o``
     (Nicodemus et al., NBS Monograph 160, 1977). It is computed in half-vector space,
     ``wo = 2 (wi.h) h - wi`` with ``d omega_o = 4 (wi.h) d omega_h``, so a specular lobe
-    (a function of theta_h) lies along the edge ``cos theta_h = 1`` of the integration
-    rectangle ``(cos theta_h, phi_h) in [0, 1] x [-pi, pi]``. The rectangle is cut into
-    cells graded geometrically towards that edge and through the incidence direction
-    (retro-reflection peaks); every cell is integrated with tensor Gauss-Legendre and
-    compared with its four children; the cells with the largest differences are split
-    until the summed difference meets the tolerance. Delta (mirror) lobes are added
-    analytically.
+    (a function of theta_h) lies along one edge of the integration rectangle. The
+    observer's horizon ``wo_z = 0`` is the curve ``theta_h = theta_max(phi_h) =
+    (pi/2 + atan2(a, wi_z)) / 2`` with ``a = |wi_xy| cos(phi_h - phi_i)``; the variables
+    ``(u, phi_h)`` with ``theta_h = u theta_max(phi_h)``, ``u in [0, 1]``, map the valid
+    region exactly onto a rectangle, so the integrand has no discontinuity inside it.
+    The rectangle is cut into cells graded geometrically towards ``u = 0`` (the mirror
+    direction, lobes down to ~1e-6 rad wide) and through the retro direction; each cell is
+    integrated with tensor Gauss-Legendre and compared with its four children; the cells
+    with the largest differences are split until the summed difference meets the
+    tolerance. Delta (mirror) lobes are added analytically.
 """
 
 from __future__ import annotations
@@ -45,22 +48,31 @@ class DHRResult:
         return self.value
 
 
+def _theta_max(wi, phi):
+    """Half-vector polar angle at which the reflected direction reaches the horizon."""
+    a = math.hypot(wi[0], wi[1]) * np.cos(phi - math.atan2(wi[1], wi[0]))
+    return 0.5 * (0.5 * math.pi + np.arctan2(a, wi[2]))
+
+
 def _cell_integrals(model, wi, cells, state):
-    """Gauss-Legendre integral of the warped integrand over each cell (n, 4)."""
-    c0, c1, p0, p1 = cells.T
-    cc = (0.5 * (c1 - c0))[:, None] * (_GX[None, :] + 1.0) + c0[:, None]  # (n, g)
+    """Gauss-Legendre integral of the warped integrand over each (u, phi_h) cell (n, 4)."""
+    u0, u1, p0, p1 = cells.T
+    uu = (0.5 * (u1 - u0))[:, None] * (_GX[None, :] + 1.0) + u0[:, None]  # (n, g)
     pp = (0.5 * (p1 - p0))[:, None] * (_GX[None, :] + 1.0) + p0[:, None]
-    c = np.repeat(cc, _NGL, axis=1)  # (n, g*g): c varies slowest
+    u = np.repeat(uu, _NGL, axis=1)  # (n, g*g): u varies slowest
     p = np.tile(pp, (1, _NGL))
-    s = np.sqrt(np.maximum(1.0 - c * c, 0.0))
-    h = np.stack([s * np.cos(p), s * np.sin(p), c], axis=-1)
+    tmax = _theta_max(wi, p)
+    theta = u * tmax
+    st = np.sin(theta)
+    h = np.stack([st * np.cos(p), st * np.sin(p), np.cos(theta)], axis=-1)
     wih = h @ wi
     wo = 2.0 * wih[..., None] * h - wi
-    # Guard against round-off taking wo a hair out of unit length.
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    # Round-off can put wo a hair below the horizon at u = 1; the BRDF is 0 there anyway.
     g = model.evaluate_cos(np.broadcast_to(wi, wo.shape), wo, state=state) * 4.0 * np.maximum(wih, 0.0)
+    g *= st * tmax  # d omega_h = sin(theta) d theta d phi = sin(theta) theta_max du d phi
     w = np.outer(_GW, _GW).ravel()
-    area = 0.25 * (c1 - c0) * (p1 - p0)
+    area = 0.25 * (u1 - u0) * (p1 - p0)
     return (g * w).sum(axis=1) * area
 
 
@@ -85,15 +97,16 @@ def _estimate(model, wi, cells, state):
 
 
 def _initial_cells(wi):
-    ci = float(np.clip(wi[2], 0.0, 1.0))
     phi_i = math.atan2(wi[1], wi[0])
-    c_breaks = [0.0, 0.25, 0.5, 0.75, 0.9, 1 - 1e-2, 1 - 1e-3, 1 - 1e-4, 1 - 1e-5, 1 - 1e-6, 1 - 1e-7, 1.0]
-    c_breaks = np.unique(np.clip(np.concatenate([c_breaks, [ci]]), 0.0, 1.0))
+    theta_i = math.acos(min(max(wi[2], -1.0), 1.0))
+    u_retro = theta_i / float(_theta_max(wi, np.array(phi_i)))
+    u_breaks = [0.0, *10.0 ** np.arange(-7.0, 0.0), 0.25, 0.5, 0.75, 1.0]
+    u_breaks = np.unique(np.clip(np.concatenate([u_breaks, [u_retro]]), 0.0, 1.0))
     p_breaks = np.linspace(-math.pi, math.pi, 17)
     p_breaks = np.unique(np.concatenate([p_breaks, [phi_i]]))
-    cc = np.stack(np.meshgrid(np.arange(c_breaks.size - 1), np.arange(p_breaks.size - 1), indexing="ij"), -1).reshape(-1, 2)
+    cc = np.stack(np.meshgrid(np.arange(u_breaks.size - 1), np.arange(p_breaks.size - 1), indexing="ij"), -1).reshape(-1, 2)
     return np.stack(
-        [c_breaks[cc[:, 0]], c_breaks[cc[:, 0] + 1], p_breaks[cc[:, 1]], p_breaks[cc[:, 1] + 1]], axis=1
+        [u_breaks[cc[:, 0]], u_breaks[cc[:, 0] + 1], p_breaks[cc[:, 1]], p_breaks[cc[:, 1] + 1]], axis=1
     )
 
 

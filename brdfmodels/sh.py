@@ -21,10 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["SHBasis", "real_sph_harm", "fan_out"]
+__all__ = ["SHBasis", "real_sph_harm", "fan_out", "zonal_coefficients"]
 
 _INV_SQRT_4PI = 1.0 / math.sqrt(4.0 * math.pi)
 _SQRT2 = math.sqrt(2.0)
@@ -255,3 +256,29 @@ class SHBasis:
         parts = [p.ravel() for p in _half_diff_parts(wi.reshape(-1, 3), wo.reshape(-1, 3))]
         fh = fanout if fanout_h is None else fanout_h
         return self.design_transposed(*parts, fh, fanout).T
+
+
+@lru_cache(maxsize=8)
+def _gauss_legendre(n: int):
+    from scipy.special import roots_legendre
+
+    return roots_legendre(n)
+
+
+def zonal_coefficients(profile, lh_max: int, fanout: float = 0.6, *, quadrature_points: int = 4096) -> np.ndarray:
+    """Coefficients of an isotropic halfway profile in the zonal harmonics y_l^0(theta~_h).
+
+    Projects ``g(theta_h)`` (a function of the halfway angle [rad] on [0, pi/2]) onto
+    ``y_l^0`` of the fanned-out angle over the whole sphere, ``c_l = 2 pi integral
+    g y_l^0 sin(theta~) d theta~``, by Gauss-Legendre quadrature in cos(theta~). The
+    result orders like :attr:`SHBasis.columns` of ``SHBasis(lh_max, 0, 0, 0)``.
+
+    Use it to build a model from an in-plane profile of ln f~ (log models) or f~.
+    """
+    lh_max = _check_order("lh_max", lh_max)
+    x, w = _gauss_legendre(int(quadrature_points))
+    tt = np.arccos(x)  # theta~ in [0, pi]
+    theta_h = HALF_PI * (tt / math.pi) ** (1.0 / fanout)
+    g = np.asarray(profile(theta_h), dtype=float)
+    table = _legendre_table(x, np.sqrt(1 - x * x), lh_max, 0)
+    return np.array([2 * math.pi * np.sum(w * g * table[(l, 0)]) for l in range(lh_max + 1)])
