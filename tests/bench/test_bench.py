@@ -1,0 +1,12 @@
+"""Benchmarks as pytest items, excluded from the default run (marker ``bench``)."""
+
+import pytest
+
+pytestmark = pytest.mark.bench
+
+
+def test_bench_evaluate_many():
+    from .bench_brdf import run
+
+    res = run()
+    print(res)

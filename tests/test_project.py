@@ -1,0 +1,34 @@
+"""Project-level checks: light imports, runnable examples, the CI script follows the README."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+HEAVY = ("pyvista", "vtk", "matplotlib", "dask", "distributed", "trimesh", "embreex", "nlopt")
+
+
+@pytest.mark.parametrize("package", ["brdfmodels", "hazard", "scenes"])
+def test_import_stays_light(package):
+    code = f"import sys, {package}; print(','.join(m for m in {HEAVY!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "", f"import {package} pulled in {out.stdout.strip()}"
+
+
+def test_brdf_tour_example_runs(tmp_path):
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / "brdf_tour.py"), "--out", str(tmp_path)],
+        capture_output=True, text=True, check=True, cwd=ROOT,
+    )
+    assert "TS5 white paint" in out.stdout and "bounded 100.0000 %" in out.stdout
+    assert (tmp_path / "brdf_tour.png").stat().st_size > 10_000
+
+
+def test_ci_runs_the_readme_test_command():
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert "<!-- test-command -->" in readme and "<!-- test-command -->" in ci
+    block = readme.split("<!-- test-command -->", 1)[1].split("```bash", 1)[1].split("```", 1)[0].strip()
+    assert block == 'python -m pip install -e ".[all]" && python -m pytest'
