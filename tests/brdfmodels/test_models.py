@@ -323,3 +323,16 @@ def test_load_names_the_file(tmp_path):
     p.write_text("{not json")
     with pytest.raises(ValueError, match="bad.json: not a brdfmodels JSON document"):
         bm.load(p)
+
+
+@pytest.mark.parametrize("scale", [1e2, 1e4])
+def test_extreme_sh_coefficients_stay_finite(scale):
+    basis = bm.SHBasis(8, 4, 2, 0)
+    rng = np.random.default_rng(11)
+    coef = rng.normal(scale=scale, size=(2, basis.size))
+    dyn = bm.DynamicBRDF(basis, [0.0, 1.0], coef, "time_s")
+    wi, wo = rng.normal(size=(300, 3)), rng.normal(size=(300, 3))
+    many = dyn.evaluate_many(wi, wo, [0.0, 0.5, 1.0])
+    assert np.all(np.isfinite(many)) and np.all(many >= 0) and many.max() <= bm.FR_MAX
+    single = dyn.evaluate(wi, wo, state=0.5)
+    assert np.all(np.isfinite(single))
