@@ -49,7 +49,8 @@ __all__ = [
 
 FR_MAX = 1e300
 _COS_FLOOR = 1e-100  # cosines below this are floored where a model divides by them
-_EXP_MAX = 700.0
+_EXP_MAX = 700.0  # largest exponent accepted in a parameter (TS5 b)
+_LOG_FR_MAX = math.log(FR_MAX)  # exponents of log-SH models are capped here: f_r <= FR_MAX
 
 
 def _prepare(wi, wo):
@@ -399,7 +400,7 @@ def _sh_eval(basis, fanout_h, fanout_d, log, wi, wo, coef, divide_r):
         v = s - np.log(ci)
         if divide_r:
             v -= np.log(cr)
-        return np.exp(np.minimum(v, _EXP_MAX))
+        return np.exp(np.minimum(v, _LOG_FR_MAX))
     den = ci * cr if divide_r else ci
     return np.maximum(s, 0.0) / den
 
@@ -588,7 +589,7 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             # augmented row -ln(cos i cos r) with coefficient 1: exp() gives f_r directly
             coef_aug = np.vstack([coef, np.ones((1, nq))])
         ybuf = np.empty((k + 1, min(chunk_rows, max(n, 1))))
-        guard = self._exponent_bound + 2.0 * -math.log(_COS_FLOOR) > _EXP_MAX
+        guard = self._exponent_bound + 2.0 * -math.log(_COS_FLOOR) > _LOG_FR_MAX
         for s in range(0, n, chunk_rows):
             e = min(s + chunk_rows, n)
             a, b = wi[s:e], wo[s:e]
@@ -607,7 +608,7 @@ class DynamicBRDF(_SHMixin, BRDFModel):
                 np.negative(lc, out=yb[k])
                 np.matmul(yb.T, coef_aug, out=blk)
                 if guard:
-                    np.minimum(blk, _EXP_MAX, out=blk)
+                    np.minimum(blk, _LOG_FR_MAX, out=blk)
                 np.exp(blk, out=blk)
             else:
                 np.matmul(yb[:k].T, coef, out=blk)
