@@ -1,0 +1,174 @@
+"""The ``hazard`` command line.
+
+``main(argv) -> int`` so tests and scripts call it directly. Results go to stdout (text,
+or JSON with ``--json``); errors are one line on stderr with exit code 2.
+
+Verbs:
+  hazard mpe   --wavelength-nm L --duration-s T [--standard S] [--skin] [--json]
+  hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from . import mpe as _mpe
+from . import nohd as _nohd
+
+__all__ = ["main", "build_parser"]
+
+EXIT_OK = 0
+EXIT_ERROR = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser that raises instead of exiting, so main() returns the code."""
+
+    def error(self, message):
+        raise _UsageError(f"{self.prog}: {message}")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def _add_mpe_args(p, *, required):
+    p.add_argument("--wavelength-nm", type=float, required=required, help="laser wavelength [nm], 400 nm to 1 mm")
+    p.add_argument("--duration-s", type=float, required=required, help="exposure duration (or pulse duration) [s], 1e-13 to 3e4")
+    p.add_argument("--standard", default=_mpe.DEFAULT_STANDARD, help=f"one of {sorted(_mpe.STANDARDS)} (default {_mpe.DEFAULT_STANDARD})")
+    p.add_argument("--angular-subtense-rad", type=float, default=0.0, help="apparent source size [rad] (0: point source)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
+    sub.required = True
+
+    p = sub.add_parser("mpe", help="maximum permissible exposure with every step")
+    _add_mpe_args(p, required=True)
+    p.add_argument("--skin", action="store_true", help="skin MPE instead of ocular")
+    p.add_argument("--prf-hz", type=float, help="pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
+    p.add_argument("--exposure-duration-s", type=float, help="duration of the pulse train [s] (with --prf-hz)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+
+    p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step")
+    p.add_argument("--kind", default="direct", choices=["direct", "diffuse", "specular"], help="direct beam, Lambertian or mirror reflection")
+    p.add_argument("--power-w", type=float, required=True, help="laser power [W] (pulse energy [J] with a J/m^2 MPE)")
+    p.add_argument("--mpe-w-m2", type=float, help="MPE [W/m^2]; otherwise computed from --wavelength-nm and --duration-s")
+    _add_mpe_args(p, required=False)
+    p.add_argument("--beam-diameter-m", type=float, help="beam diameter at the aperture, 1/e [m] (direct, specular)")
+    p.add_argument("--divergence-rad", type=float, help="full-angle divergence, 1/e [rad] (direct, specular)")
+    p.add_argument("--reflectance", type=float, help="reflectance of the surface (diffuse, specular)")
+    p.add_argument("--viewing-angle-deg", type=float, default=0.0, help="viewing angle from the surface normal [deg] (diffuse)")
+    p.add_argument("--range-to-reflector-m", type=float, default=0.0, help="laser to mirror [m] (specular)")
+    att = p.add_mutually_exclusive_group()
+    att.add_argument("--attenuation-per-m", type=float, default=0.0, help="atmospheric attenuation [1/m]")
+    att.add_argument("--visibility-km", type=float, help="meteorological visibility [km] (Kruse model)")
+    p.add_argument("--optical-gain", type=float, help="collecting gain of viewing optics (>= 1)")
+    p.add_argument("--magnification", type=float, help="viewing optics magnification (with --objective-diameter-m)")
+    p.add_argument("--objective-diameter-m", type=float, help="viewing optics objective diameter [m]")
+    p.add_argument("--transmission", type=float, default=1.0, help="viewing optics transmission")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    return parser
+
+
+def _cmd_mpe(args, out):
+    if args.prf_hz is not None:
+        if args.exposure_duration_s is None:
+            raise ValueError("--exposure-duration-s: required with --prf-hz (the duration of the pulse train)")
+        if args.skin:
+            raise ValueError("--skin: the repetitive-pulse rules are implemented for ocular exposure only")
+        res = _mpe.repetitive_pulse_mpe(
+            args.wavelength_nm, args.duration_s, args.prf_hz, args.exposure_duration_s,
+            standard=args.standard, angular_subtense_rad=args.angular_subtense_rad,
+        )
+    elif args.skin:
+        res = _mpe.skin_mpe(args.wavelength_nm, args.duration_s, standard=args.standard)
+    else:
+        res = _mpe.ocular_mpe(args.wavelength_nm, args.duration_s, standard=args.standard, angular_subtense_rad=args.angular_subtense_rad)
+    out.write((json.dumps(res.to_dict(), indent=1) if args.json else str(res)) + "\n")
+    return EXIT_OK
+
+
+def _require(args, *names):
+    for n in names:
+        if getattr(args, n) is None:
+            raise ValueError(f"--{n.replace('_', '-')}: required for --kind {args.kind}")
+
+
+def _cmd_nohd(args, out):
+    doc = {}
+    lines = []
+    if args.mpe_w_m2 is not None:
+        mpe_w_m2 = args.mpe_w_m2
+    else:
+        if args.wavelength_nm is None or args.duration_s is None:
+            raise ValueError("--mpe-w-m2: give it, or --wavelength-nm and --duration-s to compute it")
+        m = _mpe.ocular_mpe(args.wavelength_nm, args.duration_s, standard=args.standard, angular_subtense_rad=args.angular_subtense_rad)
+        mpe_w_m2 = m.irradiance_w_m2
+        doc["mpe"] = m.to_dict()
+        lines += list(m.steps) + [""]
+    mu = args.attenuation_per_m
+    if args.visibility_km is not None:
+        if args.wavelength_nm is None:
+            raise ValueError("--visibility-km: needs --wavelength-nm for the Kruse model")
+        mu = _nohd.attenuation_from_visibility(args.visibility_km, args.wavelength_nm)
+        lines.append(f"Atmosphere: visibility {args.visibility_km:g} km at {args.wavelength_nm:g} nm (Kruse) -> mu = {mu:.6g} 1/m")
+    gain = 1.0 if args.optical_gain is None else args.optical_gain
+    if args.magnification is not None or args.objective_diameter_m is not None:
+        if args.optical_gain is not None:
+            raise ValueError("--optical-gain: give either it or --magnification/--objective-diameter-m, not both")
+        if args.magnification is None or args.objective_diameter_m is None:
+            raise ValueError("--magnification and --objective-diameter-m: give both for viewing optics")
+        gain = _nohd.optical_gain(args.magnification, args.objective_diameter_m, args.transmission)
+        lines.append(
+            f"Optics: {args.magnification:g}x, {1e3 * args.objective_diameter_m:g} mm, tau {args.transmission:g} -> K = {gain:.6g}"
+        )
+    if args.kind == "direct":
+        _require(args, "beam_diameter_m", "divergence_rad")
+        res = _nohd.nohd_direct(args.power_w, mpe_w_m2, args.beam_diameter_m, args.divergence_rad, attenuation_per_m=mu, optical_gain=gain)
+    elif args.kind == "specular":
+        _require(args, "beam_diameter_m", "divergence_rad", "reflectance")
+        res = _nohd.nohd_specular(
+            args.power_w, mpe_w_m2, args.beam_diameter_m, args.divergence_rad, args.reflectance,
+            attenuation_per_m=mu, optical_gain=gain, range_to_reflector_m=args.range_to_reflector_m,
+        )
+    else:
+        _require(args, "reflectance")
+        res = _nohd.nohd_diffuse(
+            args.power_w, mpe_w_m2, args.reflectance, viewing_angle_rad=math.radians(args.viewing_angle_deg),
+            attenuation_per_m=mu, optical_gain=gain,
+        )
+    doc["nohd"] = res.to_dict()
+    lines += list(res.steps)
+    out.write((json.dumps(doc, indent=1) if args.json else "\n".join(lines)) + "\n")
+    return EXIT_OK
+
+
+_COMMANDS = {"mpe": _cmd_mpe, "nohd": _cmd_nohd}
+
+
+def main(argv=None, *, stdout=None, stderr=None) -> int:
+    """Run the command line; returns the exit code (0 ok, 2 bad input)."""
+    out = stdout or sys.stdout
+    err = stderr or sys.stderr
+    parser = build_parser()
+    try:
+        args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+    except _UsageError as exc:
+        err.write(f"{exc}\n")
+        return EXIT_ERROR
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+    try:
+        return _COMMANDS[args.verb](args, out)
+    except ValueError as exc:
+        err.write(f"hazard {args.verb}: error: {exc}\n")
+        return EXIT_ERROR
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,566 @@
+"""Maximum permissible exposure (MPE) per ANSI Z136.1 and IEC 60825-1, with every step.
+
+Values and factors from the 2014 editions (ICNIRP 2013 values; ANSI and IEC agree in SI
+units) and, for comparison, the 2007 editions, as collected in the project's spec
+(`laser-safety.md` sections 2.1-2.5). Every row carries its provenance label:
+
+* ``[C]`` read in a cited public implementation or guide of the standard;
+* ``[D]`` derived (e.g. a unit conversion or an identity between two [C] rows);
+* ``[M]`` general knowledge, unverified against the standard's text: such rows are
+  flagged in the result (``unverified=True``) and in the printed steps.
+
+Coverage: ocular and skin MPE from 400 nm to 1 mm and 1e-13 s to 3e4 s. The UV rows
+(180-400 nm) are not implemented: their values could not be verified for this tool, and
+a wrong MPE is worse than none; a UV wavelength raises ValueError saying so.
+
+Units: SI throughout (J/m^2, W/m^2); ANSI's tables are in J/cm^2 (1 J/cm^2 = 1e4 J/m^2).
+Notation: ANSI C_A, C_B, C_C, C_E = IEC C4, C3, C7, C6.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+__all__ = [
+    "STANDARDS",
+    "DEFAULT_STANDARD",
+    "MPEResult",
+    "CorrectionFactors",
+    "correction_factors",
+    "ocular_mpe",
+    "skin_mpe",
+    "repetitive_pulse_mpe",
+    "check_standard",
+]
+
+STANDARDS = {
+    "ansi-z136.1-2014": "ANSI Z136.1-2014",
+    "iec-60825-1-2014": "IEC 60825-1:2014",
+    "ansi-z136.1-2007": "ANSI Z136.1-2007",
+    "iec-60825-1-2007": "IEC 60825-1:2007",
+}
+DEFAULT_STANDARD = "ansi-z136.1-2014"
+
+WAVELENGTH_MIN_NM = 180.0
+WAVELENGTH_MAX_NM = 1.0e6
+DURATION_MIN_S = 1e-13
+DURATION_MAX_S = 3e4
+ALPHA_MIN_RAD = 1.5e-3
+
+
+def check_standard(standard: str) -> str:
+    """Canonical standard key; ValueError listing the known ones otherwise."""
+    key = str(standard).lower()
+    if key not in STANDARDS:
+        raise ValueError(f"standard={standard!r} is unknown: expected one of {sorted(STANDARDS)}")
+    return key
+
+
+def _edition(standard: str) -> int:
+    return int(standard[-4:])
+
+
+def _table_name(standard: str, kind: str) -> str:
+    """Where the row lives: IEC Annex A tables [C]; ANSI table numbers [M]."""
+    if standard.startswith("iec"):
+        return f"{STANDARDS[standard]} Table A.{'1' if kind == 'ocular' else '5'}"
+    which = "ocular MPE table (Table 5a point / 5b extended" if kind == "ocular" else "skin MPE table (Table 7"
+    return f"{STANDARDS[standard]} {which}; table number [M])"
+
+
+def _check_inputs(wavelength_nm, duration_s, angular_subtense_rad):
+    for name, v in (("wavelength_nm", wavelength_nm), ("duration_s", duration_s), ("angular_subtense_rad", angular_subtense_rad)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"{name}={v!r}: expected a finite number")
+    wl, t, a = float(wavelength_nm), float(duration_s), float(angular_subtense_rad)
+    if not WAVELENGTH_MIN_NM <= wl <= WAVELENGTH_MAX_NM:
+        raise ValueError(f"wavelength_nm={wl!r} is outside the standards' tables: expected 180 nm to 1 mm (1e6 nm)")
+    if wl < 400.0:
+        raise ValueError(
+            f"wavelength_nm={wl!r}: the UV rows (180-400 nm) are not implemented - their values are not "
+            f"verified for this tool; expected 400 nm to 1 mm"
+        )
+    if not DURATION_MIN_S <= t <= DURATION_MAX_S:
+        raise ValueError(f"duration_s={t!r} is outside the tables: expected 1e-13 s to 3e4 s")
+    if a < 0:
+        raise ValueError(f"angular_subtense_rad={a!r}: expected >= 0 (0 for a point source)")
+    return wl, t, a
+
+
+# ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CorrectionFactors:
+    """Correction factors and breakpoints (spec section 2.4) at one wavelength/duration."""
+
+    C_A: float
+    C_B: float
+    C_C: float
+    C_E: float
+    T1_s: float
+    T2_s: float
+    alpha_min_rad: float
+    alpha_max_rad: float
+
+    def lines(self) -> list:
+        return [
+            f"C_A (IEC C4) = {self.C_A:.6g}",
+            f"C_B (IEC C3) = {self.C_B:.6g}",
+            f"C_C (IEC C7) = {self.C_C:.6g}",
+            f"C_E (IEC C6) = {self.C_E:.6g}",
+            f"T1 = {self.T1_s:.6g} s, T2 = {self.T2_s:.6g} s",
+            f"alpha_min = {1e3 * self.alpha_min_rad:.6g} mrad, alpha_max = {1e3 * self.alpha_max_rad:.6g} mrad",
+        ]
+
+
+def correction_factors(wavelength_nm, duration_s, angular_subtense_rad=0.0, standard=DEFAULT_STANDARD) -> CorrectionFactors:
+    """C_A, C_B, C_C, C_E, T1, T2, alpha_min, alpha_max (spec section 2.4, [C]).
+
+    C_A = 1 (< 700 nm), 10^(0.002 (l - 700)) (700-1050), 5 (1050-1400).
+    C_B = 1 (400-450), 10^(0.02 (l - 450)) (450-600).
+    C_C = 1 (< 1150), 10^(0.018 (l - 1150)) (1150-1200), 8 + 10^(0.04 (l - 1250)) (1200-1400;
+    2007 editions: 8).
+    T1 = 10 s (< 450 nm), 10 * 10^(0.02 (l - 450)) s (450-500), 100 s (> 500).
+    T2 = 10 * 10^((alpha - 1.5) / 98.5) s for alpha in mrad, clipped to [10, 100] s.
+    alpha_max (2014) = 5 mrad (t < 625 us), 200 t^0.5 mrad, 100 mrad (t > 0.25 s); 2007: 100.
+    C_E = 1 (alpha < alpha_min), alpha / alpha_min, and above alpha_max: alpha_max/alpha_min
+    (2014) or alpha^2 / (alpha_min alpha_max) (2007).
+    """
+    std = check_standard(standard)
+    wl, t, alpha = float(wavelength_nm), float(duration_s), float(angular_subtense_rad)
+    # the retinal factors apply to 400-1400 nm only; elsewhere they are reported as 1
+    retinal = wl < 1400
+    c_a = 1.0 if (wl < 700 or not retinal) else (10 ** (0.002 * (wl - 700)) if wl < 1050 else 5.0)
+    c_b = 1.0 if (wl < 450 or wl >= 600) else 10 ** (0.02 * (wl - 450))
+    if wl < 1150 or not retinal:
+        c_c = 1.0
+    elif wl < 1200:
+        c_c = 10 ** (0.018 * (wl - 1150))
+    else:
+        c_c = 8.0 + 10 ** (0.04 * (wl - 1250)) if _edition(std) >= 2014 else 8.0
+    t1 = 10.0 if wl < 450 else (10.0 * 10 ** (0.02 * (wl - 450)) if wl < 500 else 100.0)
+    a_mrad = alpha * 1e3
+    t2 = 10.0 if a_mrad <= 1.5 else (10.0 * 10 ** ((a_mrad - 1.5) / 98.5) if a_mrad <= 100 else 100.0)
+    if _edition(std) >= 2014:
+        a_max = 5e-3 if t < 625e-6 else (200e-3 * math.sqrt(t) if t <= 0.25 else 0.1)
+    else:
+        a_max = 0.1
+    if alpha < ALPHA_MIN_RAD:
+        c_e = 1.0
+    elif alpha <= a_max:
+        c_e = alpha / ALPHA_MIN_RAD
+    else:
+        c_e = a_max / ALPHA_MIN_RAD if _edition(std) >= 2014 else alpha**2 / (ALPHA_MIN_RAD * a_max)
+    return CorrectionFactors(c_a, c_b, c_c, c_e, t1, t2, ALPHA_MIN_RAD, a_max)
+
+
+# ----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Limit:
+    """One candidate limit: radiant exposure H [J/m^2] with its row, formula and label."""
+
+    name: str
+    radiant_exposure_j_m2: float
+    row: str
+    formula: str
+    label: str
+
+    @property
+    def unverified(self) -> bool:
+        return "[M]" in self.label or "UNVERIFIED" in self.label
+
+
+@dataclass(frozen=True)
+class MPEResult:
+    """An MPE with everything needed to redo it by hand.
+
+    Attributes
+    ----------
+    radiant_exposure_j_m2 : float
+        MPE as radiant exposure H over the exposure duration [J/m^2].
+    irradiance_w_m2 : float
+        MPE as average irradiance over the duration, H / t [W/m^2].
+    governing_limit : str
+        Which limit governs (e.g. "retinal thermal", "photochemical", "corneal").
+    table_row, formula : str
+        The row of the standard and the formula with numbers.
+    limits : tuple
+        Every candidate limit of a dual-limit case, as (name, H [J/m^2], label).
+    unverified : bool
+        True when the governing row is labelled [M] (not verified against the text).
+    steps : tuple of str
+        The calculation, line by line.
+    """
+
+    kind: str
+    standard: str
+    wavelength_nm: float
+    duration_s: float
+    angular_subtense_rad: float
+    radiant_exposure_j_m2: float
+    irradiance_w_m2: float
+    governing_limit: str
+    table_row: str
+    formula: str
+    label: str
+    unverified: bool
+    factors: CorrectionFactors
+    limits: tuple
+    limiting_aperture_m: float
+    steps: tuple = field(default=())
+
+    def to_dict(self) -> dict:
+        return {
+            "kind": self.kind,
+            "standard": self.standard,
+            "standard_title": STANDARDS[self.standard],
+            "wavelength_nm": self.wavelength_nm,
+            "duration_s": self.duration_s,
+            "angular_subtense_rad": self.angular_subtense_rad,
+            "radiant_exposure_j_m2": self.radiant_exposure_j_m2,
+            "irradiance_w_m2": self.irradiance_w_m2,
+            "governing_limit": self.governing_limit,
+            "table_row": self.table_row,
+            "formula": self.formula,
+            "label": self.label,
+            "unverified": self.unverified,
+            "factors": self.factors.__dict__.copy(),
+            "limits": [{"name": n, "radiant_exposure_j_m2": h, "label": lab} for n, h, lab in self.limits],
+            "limiting_aperture_m": self.limiting_aperture_m,
+            "steps": list(self.steps),
+        }
+
+    def __str__(self):
+        return "\n".join(self.steps)
+
+
+def _limiting_aperture_m(kind: str, wl: float, t: float, governing: str) -> float:
+    """Limiting aperture (spec section 2.4): retina 7 mm; skin 3.5 mm; cornea 1 mm
+    (t < 0.3 s), 1.5 t^0.375 mm (0.3-10 s), 3.5 mm (t > 10 s) [C]; applied above 1400 nm
+    and to the ANSI corneal limit."""
+    if kind == "skin":
+        return 3.5e-3
+    if wl < 1400 and governing != "corneal":
+        return 7e-3
+    if t < 0.3:
+        return 1e-3
+    if t <= 10:
+        return 1.5e-3 * t**0.375
+    return 3.5e-3
+
+
+# -- ocular rows ----------------------------------------------------------------------------
+def _retinal_thermal(wl, t, f: CorrectionFactors, std, alpha) -> _Limit:
+    ed = _edition(std)
+    far = wl >= 1050
+    band = "1050-1400 nm" if far else ("700-1050 nm" if wl >= 700 else "400-700 nm")
+    ca, cc, ce = f.C_A, f.C_C, f.C_E
+    src = "[C] OLBtools Z136 (A), akufcsak table_a1 (I)"
+    if t < 1e-11:
+        if ed >= 2014:
+            if far:
+                h = 1e-3 * cc
+                return _Limit("retinal thermal", h, f"{band}, 1e-13 - 1e-11 s", f"H = 1e-3 C_C = 1e-3 * {cc:.6g}",
+                              "[C] code A only, UNVERIFIED (IEC 2007 had 1.5e-3 C7 C6)")
+            return _Limit("retinal thermal", 1e-3, f"{band}, 1e-13 - 1e-11 s", "H = 1.0e-3 J/m^2 (no C_A in either code)", src)
+        if far:
+            h = 1.5e-3 * cc * ce
+            return _Limit("retinal thermal", h, f"{band}, 1e-13 - 1e-11 s", f"H = 1.5e-3 C7 C6 = 1.5e-3 * {cc:.6g} * {ce:.6g}", "[C] IEC 2007 (spec 2.1)")
+        raise ValueError(
+            f"duration_s={t!r}: {STANDARDS[std]} has no verified row below 1e-11 s for 400-1050 nm in this tool; "
+            f"use a 2014 edition"
+        )
+    if ed >= 2014:
+        ns_end = 1.3e-5 if far else 5e-6
+        if t < ns_end:
+            if far:
+                return _Limit("retinal thermal", 2e-2 * cc * ce, f"{band}, 1e-11 - 1.3e-5 s",
+                              f"H = 2.0e-2 C_C C_E = 2.0e-2 * {cc:.6g} * {ce:.6g}", src)
+            return _Limit("retinal thermal", 2e-3 * ca * ce, f"{band}, 1e-11 - 5e-6 s",
+                          f"H = 2.0e-3 C_A C_E = 2.0e-3 * {ca:.6g} * {ce:.6g}", src)
+    else:
+        if t < 1e-9:
+            k = 2.7e5 if far else 2.7e4
+            fac = cc if far else ca
+            name = "C_C" if far else "C_A"
+            return _Limit("retinal thermal", k * t**0.75 * fac * ce, f"{band}, 1e-11 - 1e-9 s",
+                          f"H = {k:.1e} t^0.75 {name} C_E = {k:.1e} * {t:.6g}^0.75 * {fac:.6g} * {ce:.6g}",
+                          "[C] Laser-Studio EMPdataBinary (2007)")
+        ns_end = 5e-5 if far else 1.8e-5
+        if t < ns_end:
+            if far:
+                return _Limit("retinal thermal", 5e-2 * cc * ce, f"{band}, 1e-9 - 5e-5 s",
+                              f"H = 5e-2 C_C C_E = 5e-2 * {cc:.6g} * {ce:.6g}", "[C] Laser-Studio (2007)")
+            return _Limit("retinal thermal", 5e-3 * ca * ce, f"{band}, 1e-9 - 1.8e-5 s",
+                          f"H = 5e-3 C_A C_E = 5e-3 * {ca:.6g} * {ce:.6g}", "[C] Laser-Studio (2007)")
+    k, fac, fac_name = (90.0, cc, "C_C") if far else (18.0, ca, "C_A")
+    start = ("1.3e-5" if far else "5e-6") if ed >= 2014 else ("5e-5" if far else "1.8e-5")
+    if t < 10:
+        return _Limit("retinal thermal", k * fac * ce * t**0.75, f"{band}, {start} - 10 s",
+                      f"H = {k:g} {fac_name} C_E t^0.75 = {k:g} * {fac:.6g} * {ce:.6g} * {t:.6g}^0.75", src)
+    # t >= 10 s
+    if alpha <= ALPHA_MIN_RAD:
+        e = 10.0 * ca * cc
+        formula = f"E = 10 C_A C_C W/m^2 = 10 * {ca:.6g} * {cc:.6g}; H = E t"
+        return _Limit("retinal thermal", e * t, f"{band}, 10 - 3e4 s (point source)", formula, src)
+    if t < f.T2_s:
+        return _Limit("retinal thermal", k * fac * ce * t**0.75,
+                      f"{band}, 10 s - T2 (extended source)",
+                      f"H = {k:g} {fac_name} C_E t^0.75 = {k:g} * {fac:.6g} * {ce:.6g} * {t:.6g}^0.75",
+                      "[M] extended-source rule (IEC 60825-1:2014 Table A.1 structure), unverified")
+    e = k * fac * ce * f.T2_s**-0.25
+    return _Limit("retinal thermal", e * t, f"{band}, T2 - 3e4 s (extended source)",
+                  f"E = {k:g} {fac_name} C_E T2^-0.25 = {k:g} * {fac:.6g} * {ce:.6g} * {f.T2_s:.6g}^-0.25 W/m^2; H = E t",
+                  "[M] extended-source rule (IEC 60825-1:2014 Table A.1 structure), unverified")
+
+
+def _photochemical(wl, t, f: CorrectionFactors, std):
+    """Photochemical (blue-light) limit, 400-600 nm, t >= 10 s ([C] A; point-source
+    irradiance form - for sources larger than the averaging angle gamma the standard
+    limits radiance, which this irradiance form bounds conservatively)."""
+    if not (400 <= wl < 600 and t >= 10):
+        return None
+    label = "[C] OLBtools Z136 (A)" if _edition(std) >= 2014 else "[M] same values assumed for 2007"
+    if t < 100:
+        return _Limit("photochemical", 100.0 * f.C_B, "400-600 nm, 10 - 100 s", f"H = 100 C_B J/m^2 = 100 * {f.C_B:.6g}", label)
+    return _Limit("photochemical", f.C_B * t, "400-600 nm, 100 - 3e4 s", f"E = 1 C_B W/m^2 = {f.C_B:.6g}; H = E t", label)
+
+
+def _corneal_ansi(wl, t, std):
+    """ANSI Z136.1-2014 corneal dual limit, 1200-1400 nm [C] OLBtools (A), with the
+    t^0.25 term only in its own band (the OLBtools precedence pitfall, spec 2.6)."""
+    if not (std == "ansi-z136.1-2014" and 1200 <= wl < 1400 and t >= 1e-11):
+        return None
+    k = 10 ** (0.01 * (1400 - wl))
+    if t < 1e-3:
+        h_cm2, formula = 0.3 * k, f"H = 0.3 K = 0.3 * {k:.6g} J/cm^2"
+    elif t < 4:
+        h_cm2 = 0.3 * k + 0.56 * t**0.25 - 0.1
+        formula = f"H = 0.3 K + 0.56 t^0.25 - 0.1 = 0.3 * {k:.6g} + 0.56 * {t:.6g}^0.25 - 0.1 J/cm^2"
+    elif t < 10:
+        h_cm2, formula = 0.3 * k + 0.7, f"H = 0.3 K + 0.7 = 0.3 * {k:.6g} + 0.7 J/cm^2"
+    else:
+        h_cm2 = (0.03 * k + 0.07) * t
+        formula = f"E = 0.03 K + 0.07 = 0.03 * {k:.6g} + 0.07 W/cm^2; H = E t"
+    return _Limit("corneal", h_cm2 * 1e4, "1200-1400 nm corneal dual limit, K = 10^(0.01 (1400 - l))",
+                  formula + " (x 1e4 to J/m^2)", "[C] OLBtools Z136 (A)")
+
+
+def _infrared(wl, t, std):
+    """1400 nm - 1 mm (cornea/skin), spec 2.3: IEC [C] Laser-Studio (2007 table); ANSI
+    equivalents [M]."""
+    label = "[C] Laser-Studio (IEC 2007 table)" if std.startswith("iec") else "[M] ANSI equivalent of the IEC row"
+    if 1400 <= wl < 1500 or 1800 <= wl < 2600:
+        band, e_sub = ("1400-1500 nm" if wl < 1500 else "1800-2600 nm"), 1e12
+    elif 1500 <= wl < 1800:
+        band, e_sub = "1500-1800 nm", 1e13
+    else:
+        band, e_sub = "2600 nm - 1 mm", 1e11
+    if t >= 10:
+        return _Limit("corneal", 1000.0 * t, "1400 nm - 1 mm, 10 - 3e4 s", "E = 1000 W/m^2; H = E t", label)
+    if t < 1e-9:
+        return _Limit("corneal", e_sub * t, f"{band}, < 1e-9 s", f"E = {e_sub:.0e} W/m^2; H = E t", label)
+    if band == "1500-1800 nm":
+        return _Limit("corneal", 1e4, f"{band}, 1e-9 - 10 s", "H = 1e4 J/m^2", label)
+    if band == "2600 nm - 1 mm":
+        if t < 1e-7:
+            return _Limit("corneal", 100.0, f"{band}, 1e-9 - 1e-7 s", "H = 100 J/m^2", label)
+        return _Limit("corneal", 5600.0 * t**0.25, f"{band}, 1e-7 - 10 s", f"H = 5600 t^0.25 = 5600 * {t:.6g}^0.25", label)
+    if t < 1e-3:
+        return _Limit("corneal", 1000.0, f"{band}, 1e-9 - 1e-3 s", "H = 1000 J/m^2", label)
+    return _Limit("corneal", 5600.0 * t**0.25, f"{band}, 1e-3 - 10 s", f"H = 5600 t^0.25 = 5600 * {t:.6g}^0.25", label)
+
+
+def _skin_400_1400(wl, t, f: CorrectionFactors, std):
+    """Skin, 400-1400 nm, spec 2.5: [C] akufcsak table_a5 and Laser-Studio."""
+    ca = f.C_A
+    label = "[C] akufcsak table_a5, Laser-Studio adaptForSkinEMP"
+    if t < 1e-9:
+        return _Limit("skin", 2e11 * ca * t, "400-1400 nm, < 1e-9 s", f"E = 2e11 C_A W/m^2 = 2e11 * {ca:.6g}; H = E t", label)
+    if t < 1e-7:
+        return _Limit("skin", 200.0 * ca, "400-1400 nm, 1e-9 - 1e-7 s", f"H = 200 C_A J/m^2 = 200 * {ca:.6g}", label)
+    if t < 10:
+        return _Limit("skin", 1.1e4 * ca * t**0.25, "400-1400 nm, 1e-7 - 10 s",
+                      f"H = 1.1e4 C_A t^0.25 = 1.1e4 * {ca:.6g} * {t:.6g}^0.25", label)
+    return _Limit("skin", 2000.0 * ca * t, "400-1400 nm, 10 - 3e4 s", f"E = 2000 C_A W/m^2 = 2000 * {ca:.6g}; H = E t", label)
+
+
+def _result(kind, std, wl, t, alpha, f, candidates) -> MPEResult:
+    candidates = [c for c in candidates if c is not None]
+    gov = min(candidates, key=lambda c: c.radiant_exposure_j_m2)
+    h = gov.radiant_exposure_j_m2
+    aperture = _limiting_aperture_m(kind, wl, t, gov.name)
+    table = _table_name(std, kind)
+    steps = [
+        f"{kind.capitalize()} MPE per {STANDARDS[std]} at {wl:g} nm for {t:g} s"
+        + (f", source subtense {1e3 * alpha:g} mrad" if alpha > 0 else " (point source)"),
+        *[f"  {line}" for line in f.lines()],
+    ]
+    for c in candidates:
+        mark = "  <- governs (lowest)" if c is gov and len(candidates) > 1 else ""
+        steps.append(f"  {c.name} limit, {table}, row {c.row}: {c.formula} -> H = {c.radiant_exposure_j_m2:.6g} J/m^2 {c.label}{mark}")
+    steps.append(f"  MPE: H = {h:.6g} J/m^2 ({h * 1e-4:.6g} J/cm^2); E = H / t = {h / t:.6g} W/m^2 ({h / t * 1e-4:.6g} W/cm^2)")
+    steps.append(f"  limiting aperture: {1e3 * aperture:.4g} mm")
+    if gov.unverified:
+        steps.append("  WARNING: the governing row is not verified against the standard's text; check it before relying on it")
+    return MPEResult(
+        kind=kind,
+        standard=std,
+        wavelength_nm=wl,
+        duration_s=t,
+        angular_subtense_rad=alpha,
+        radiant_exposure_j_m2=h,
+        irradiance_w_m2=h / t,
+        governing_limit=gov.name,
+        table_row=f"{table}: {gov.row}",
+        formula=gov.formula,
+        label=gov.label,
+        unverified=gov.unverified,
+        factors=f,
+        limits=tuple((c.name, c.radiant_exposure_j_m2, c.label) for c in candidates),
+        limiting_aperture_m=aperture,
+        steps=tuple(steps),
+    )
+
+
+def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_subtense_rad=0.0) -> MPEResult:
+    """Ocular MPE for a single exposure of ``duration_s`` at ``wavelength_nm``.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        400 nm to 1 mm (1e6 nm).
+    duration_s : float
+        Exposure duration, 1e-13 s to 3e4 s (the pulse duration for a single pulse).
+    standard : str
+        ``"ansi-z136.1-2014"`` (default), ``"iec-60825-1-2014"``, or the 2007 editions.
+    angular_subtense_rad : float
+        Apparent source size alpha [rad] (0: point source). Enters C_E and T2.
+
+    Returns
+    -------
+    MPEResult
+        The lowest of the applicable limits (retinal thermal, photochemical 400-600 nm
+        for t >= 10 s, ANSI corneal 1200-1400 nm; corneal above 1400 nm), with every
+        step.
+    """
+    std = check_standard(standard)
+    wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
+    f = correction_factors(wl, t, alpha, std)
+    if wl < 1400:
+        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std)]
+    else:
+        cands = [_infrared(wl, t, std)]
+    return _result("ocular", std, wl, t, alpha, f, cands)
+
+
+def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResult:
+    """Skin MPE (spec section 2.5): 400-1400 nm from the skin table; above 1400 nm the
+    skin MPE equals the ocular (corneal) MPE [C Laser-Studio]."""
+    std = check_standard(standard)
+    wl, t, _ = _check_inputs(wavelength_nm, duration_s, 0.0)
+    f = correction_factors(wl, t, 0.0, std)
+    cand = _skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)
+    return _result("skin", std, wl, t, 0.0, f, [cand])
+
+
+# ----------------------------------------------------------------------------------------
+PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014), spec section 2.4 [C]
+    (400.0, 1050.0, 5e-6),
+    (1050.0, 1400.0, 13e-6),
+    (1400.0, 1500.0, 1e-3),
+    (1500.0, 1800.0, 10.0),
+    (1800.0, 2600.0, 1e-3),
+    (2600.0, 1e6 + 1, 1e-7),
+)
+
+
+def _pulse_summing_time(wl):
+    for lo, hi, ti in PULSE_SUMMING_TIME_S:
+        if lo <= wl < hi:
+            return ti
+    return PULSE_SUMMING_TIME_S[-1][2]
+
+
+@dataclass(frozen=True)
+class RepetitivePulseResult:
+    """Per-pulse MPE of a pulse train, with the three rules and the governing one."""
+
+    per_pulse_radiant_exposure_j_m2: float
+    governing_rule: str
+    rules: tuple
+    pulses: float
+    pulse_groups: float
+    c_p: float
+    steps: tuple
+
+    def to_dict(self):
+        return {
+            "per_pulse_radiant_exposure_j_m2": self.per_pulse_radiant_exposure_j_m2,
+            "governing_rule": self.governing_rule,
+            "rules": [{"rule": r, "per_pulse_radiant_exposure_j_m2": v} for r, v in self.rules],
+            "pulses": self.pulses,
+            "pulse_groups": self.pulse_groups,
+            "c_p": self.c_p,
+            "steps": list(self.steps),
+        }
+
+    def __str__(self):
+        return "\n".join(self.steps)
+
+
+def repetitive_pulse_mpe(
+    wavelength_nm, pulse_duration_s, prf_hz, exposure_duration_s, *, standard=DEFAULT_STANDARD, angular_subtense_rad=0.0
+) -> RepetitivePulseResult:
+    """Per-pulse ocular MPE of a repetitively pulsed laser (ANSI rules 1-3 / IEC C5).
+
+    Rule 1: no pulse exceeds the single-pulse MPE. Rule 2: the train's average does not
+    exceed the MPE for its duration (per pulse: H(T) / N). Rule 3 (thermal, 400-1400 nm):
+    the single-pulse MPE times C_P = N^-0.25 [M: classic ANSI rule; IEC 2014's C5 is never
+    lower than this for the same N, so the result is conservative for IEC too]. Pulses
+    closer than the summing time T_i (spec 2.4) are grouped: a group counts as one pulse
+    of duration T_i carrying all its energy.
+    """
+    std = check_standard(standard)
+    wl, tau, alpha = _check_inputs(wavelength_nm, pulse_duration_s, angular_subtense_rad)
+    for name, v in (("prf_hz", prf_hz), ("exposure_duration_s", exposure_duration_s)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise ValueError(f"{name}={v!r}: expected a finite number > 0")
+    prf, big_t = float(prf_hz), float(exposure_duration_s)
+    if tau * prf >= 1.0:
+        raise ValueError(f"pulse_duration_s * prf_hz = {tau * prf:g}: expected < 1 (pulses must not overlap); treat it as CW")
+    _check_inputs(wl, big_t, alpha)
+    n = max(prf * big_t, 1.0)
+    single = ocular_mpe(wl, tau, standard=std, angular_subtense_rad=alpha)
+    train = ocular_mpe(wl, big_t, standard=std, angular_subtense_rad=alpha)
+    rule1 = single.radiant_exposure_j_m2
+    rule2 = train.radiant_exposure_j_m2 / n
+    ti = _pulse_summing_time(wl)
+    steps = [
+        f"Repetitive-pulse MPE per {STANDARDS[std]}: {wl:g} nm, pulse {tau:g} s at {prf:g} Hz for {big_t:g} s (N = {n:g})",
+        f"  rule 1 (single pulse): H_1 = {rule1:.6g} J/m^2  [{single.table_row}: {single.formula}]",
+        f"  rule 2 (average): H(T) / N = {train.radiant_exposure_j_m2:.6g} / {n:g} = {rule2:.6g} J/m^2",
+    ]
+    rules = [("rule 1: single pulse", rule1), ("rule 2: average power", rule2)]
+    groups, c_p = n, 1.0
+    if 400 <= wl < 1400:
+        if 1.0 / prf < ti:
+            per_group = max(prf * ti, 1.0)
+            groups = max(big_t / ti, 1.0)
+            grouped = ocular_mpe(wl, ti, standard=std, angular_subtense_rad=alpha)
+            c_p = groups**-0.25
+            rule3 = grouped.radiant_exposure_j_m2 * c_p / per_group
+            steps.append(
+                f"  pulses closer than T_i = {ti:g} s are grouped: {per_group:g} pulses per group, {groups:g} groups"
+            )
+            steps.append(
+                f"  rule 3 (thermal): H(T_i) C_P / n_group = {grouped.radiant_exposure_j_m2:.6g} * {groups:g}^-0.25 / {per_group:g} = {rule3:.6g} J/m^2 [M]"
+            )
+        else:
+            c_p = n**-0.25
+            rule3 = rule1 * c_p
+            steps.append(f"  rule 3 (thermal): H_1 C_P = {rule1:.6g} * {n:g}^-0.25 = {rule3:.6g} J/m^2 [M]")
+        rules.append(("rule 3: thermal (C_P)", rule3))
+    gov = min(rules, key=lambda r: r[1])
+    steps.append(f"  per-pulse MPE = {gov[1]:.6g} J/m^2 ({gov[0]} governs)")
+    return RepetitivePulseResult(gov[1], gov[0], tuple(rules), n, groups, c_p, tuple(steps))
