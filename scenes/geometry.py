@@ -1,0 +1,223 @@
+"""Triangle meshes of the scene's shapes, terrain, and observer layouts (numpy only).
+
+Shapes are built in their own frame (x = tangent, y = normal x tangent, z = normal) and
+placed at ``center_m``. Closed shapes have outward-facing triangles. Mesh files are read
+with trimesh, imported only when a scene has one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+import brdfmodels
+
+__all__ = ["Mesh", "shape_mesh", "terrain_mesh", "observer_points", "Heightfield"]
+
+
+@dataclass
+class Mesh:
+    """Vertices (V, 3) [m] and triangles (F, 3), plus what each triangle belongs to.
+
+    ``analytic`` names a shape whose exact normal is known (sphere, cylinder side), with
+    its parameters, so hits get exact normals instead of facet normals.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    analytic: tuple | None = None
+
+    @property
+    def face_normals(self) -> np.ndarray:
+        v = self.vertices[self.faces]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def _frame(normal, tangent):
+    return brdfmodels.local_frame(normal, tangent)  # rows x, y, z
+
+
+def _place(local_vertices, frame, center):
+    return local_vertices @ frame + np.asarray(center, dtype=float)
+
+
+def _plate(w, h):
+    v = np.array([[-w / 2, -h / 2, 0], [w / 2, -h / 2, 0], [w / 2, h / 2, 0], [-w / 2, h / 2, 0]], float)
+    return v, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def _disk(d, n=64):
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    v = np.vstack([[0, 0, 0], np.stack([d / 2 * np.cos(a), d / 2 * np.sin(a), np.zeros(n)], 1)])
+    f = np.stack([np.zeros(n, int), 1 + np.arange(n), 1 + (np.arange(n) + 1) % n], 1)
+    return v, f
+
+
+def _box(sx, sy, sz):
+    v = np.array([[x, y, z] for z in (-sz / 2, sz / 2) for y in (-sy / 2, sy / 2) for x in (-sx / 2, sx / 2)], float)
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    f = []
+    for a, b, c, d in quads:
+        f += [[a, b, c], [a, c, d]]
+    return v, np.array(f)
+
+
+def _sphere(d, n_lat=48, n_lon=96):
+    r = d / 2
+    th = np.linspace(0, np.pi, n_lat + 1)
+    ph = np.linspace(0, 2 * np.pi, n_lon, endpoint=False)
+    tt, pp = np.meshgrid(th, ph, indexing="ij")
+    v = np.stack([r * np.sin(tt) * np.cos(pp), r * np.sin(tt) * np.sin(pp), r * np.cos(tt)], -1).reshape(-1, 3)
+    f = []
+    for i in range(n_lat):
+        for j in range(n_lon):
+            a, b = i * n_lon + j, i * n_lon + (j + 1) % n_lon
+            c, d_ = a + n_lon, b + n_lon
+            if i > 0:
+                f.append([a, c, b])
+            if i < n_lat - 1:
+                f.append([b, c, d_])
+    return v, np.array(f)
+
+
+def _cylinder(d, h, n=96):
+    r = d / 2
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.stack([r * np.cos(a), r * np.sin(a)], 1)
+    bottom = np.hstack([ring, np.full((n, 1), -h / 2)])
+    top = np.hstack([ring, np.full((n, 1), h / 2)])
+    v = np.vstack([bottom, top, [[0, 0, -h / 2], [0, 0, h / 2]]])
+    i = np.arange(n)
+    j = (i + 1) % n
+    side = np.vstack([np.stack([i, j, n + j], 1), np.stack([i, n + j, n + i], 1)])
+    cap_b = np.stack([np.full(n, 2 * n), j, i], 1)
+    cap_t = np.stack([np.full(n, 2 * n + 1), n + i, n + j], 1)
+    return v, np.vstack([side, cap_b, cap_t])
+
+
+def shape_mesh(spec, base_dir=None) -> Mesh:
+    """Mesh of a target or occluder spec (world coordinates, float64)."""
+    frame = _frame(spec.normal, spec.tangent)
+    s = spec.size_m
+    if spec.shape == "plate":
+        v, f = _plate(*s)
+        return Mesh(_place(v, frame, spec.center_m), f)
+    if spec.shape == "disk":
+        v, f = _disk(s[0])
+        return Mesh(_place(v, frame, spec.center_m), f)
+    if spec.shape == "box":
+        v, f = _box(*s)
+        return Mesh(_place(v, frame, spec.center_m), f)
+    if spec.shape == "sphere":
+        v, f = _sphere(s[0])
+        return Mesh(_place(v, frame, spec.center_m), f, ("sphere", np.asarray(spec.center_m, float), s[0] / 2))
+    if spec.shape == "cylinder":
+        v, f = _cylinder(*s)
+        return Mesh(_place(v, frame, spec.center_m), f, ("cylinder", np.asarray(spec.center_m, float), frame[2], s[0] / 2, s[1] / 2))
+    return _mesh_file(spec, frame, base_dir)
+
+
+def _mesh_file(spec, frame, base_dir):
+    import trimesh  # only for scenes with mesh files
+
+    from pathlib import Path
+
+    path = Path(spec.file)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    try:
+        m = trimesh.load(str(path), force="mesh")
+    except Exception as exc:  # trimesh raises many kinds
+        raise ValueError(f"file={spec.file!r}: cannot read the mesh ({exc})") from None
+    if len(m.faces) == 0:
+        raise ValueError(f"file={spec.file!r}: the mesh has no triangles")
+    v = np.asarray(m.vertices, float) * spec.scale
+    return Mesh(_place(v, frame, spec.center_m), np.asarray(m.faces, int))
+
+
+@dataclass
+class Heightfield:
+    """Regular grid of ground heights z(x, y) [m] with bilinear interpolation."""
+
+    x0: float
+    y0: float
+    dx: float
+    heights: np.ndarray  # (ny, nx)
+
+    def height_at(self, x, y) -> np.ndarray:
+        ny, nx = self.heights.shape
+        fx = np.clip((np.asarray(x, float) - self.x0) / self.dx, 0, nx - 1 - 1e-9)
+        fy = np.clip((np.asarray(y, float) - self.y0) / self.dx, 0, ny - 1 - 1e-9)
+        i, j = np.floor(fy).astype(int), np.floor(fx).astype(int)
+        ty, tx = fy - i, fx - j
+        h = self.heights
+        return (h[i, j] * (1 - tx) * (1 - ty) + h[i, j + 1] * tx * (1 - ty) + h[i + 1, j] * (1 - tx) * ty + h[i + 1, j + 1] * tx * ty)
+
+    def contains_xy(self, x, y) -> np.ndarray:
+        ny, nx = self.heights.shape
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        return (x >= self.x0) & (x <= self.x0 + (nx - 1) * self.dx) & (y >= self.y0) & (y <= self.y0 + (ny - 1) * self.dx)
+
+    def mesh(self) -> Mesh:
+        ny, nx = self.heights.shape
+        xs = self.x0 + self.dx * np.arange(nx)
+        ys = self.y0 + self.dx * np.arange(ny)
+        xx, yy = np.meshgrid(xs, ys)
+        v = np.stack([xx, yy, self.heights], -1).reshape(-1, 3)
+        idx = np.arange(ny * nx).reshape(ny, nx)
+        a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel(), idx[1:, :-1].ravel()
+        f = np.vstack([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])  # upward-facing
+        return Mesh(v, f)
+
+
+def terrain_heightfield(spec, base_dir=None) -> Heightfield:
+    """Heightfield of a terrain spec."""
+    if spec.kind == "heightmap":
+        from pathlib import Path
+
+        path = Path(spec.file)
+        if not path.is_absolute() and base_dir is not None:
+            path = Path(base_dir) / path
+        try:
+            h = np.load(path)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({exc})") from None
+        if h.ndim != 2 or min(h.shape) < 2 or not np.all(np.isfinite(h)):
+            raise ValueError(f"terrain.file={spec.file!r}: expected a 2-d array of finite heights [m], got shape {h.shape}")
+        return Heightfield(spec.origin_m[0], spec.origin_m[1], spec.spacing_m, np.asarray(h, float))
+    cx, cy, cz = spec.center_m
+    n = int(math.ceil(spec.extent_m / spec.resolution_m))
+    xs = cx + spec.resolution_m * np.arange(-n, n + 1)
+    ys = cy + spec.resolution_m * np.arange(-n, n + 1)
+    xx, yy = np.meshgrid(xs, ys)
+    if spec.kind == "flat":
+        h = np.full(xx.shape, cz)
+    else:
+        sign = 1.0 if spec.kind == "hill" else -1.0
+        h = cz + sign * spec.height_m * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * spec.radius_m**2))
+    return Heightfield(xs[0], ys[0], spec.resolution_m, h)
+
+
+def observer_points(spec) -> np.ndarray:
+    """Observer positions (N, 3) [m] of one observer group (before eye-height placement)."""
+    if spec.layout == "points":
+        return np.asarray(spec.points_m, float).reshape(-1, 3)
+    if spec.layout == "line":
+        t = np.linspace(0.0, 1.0, spec.count) if spec.count > 1 else np.zeros(1)
+        a, b = np.asarray(spec.start_m, float), np.asarray(spec.end_m, float)
+        return a + t[:, None] * (b - a)
+    if spec.layout == "grid":
+        nu, nv = spec.counts
+        o, u, v = (np.asarray(x, float) for x in (spec.origin_m, spec.u_m, spec.v_m))
+        iu = np.arange(nu) / max(nu - 1, 1)
+        iv = np.arange(nv) / max(nv - 1, 1)
+        return (o + iv[:, None, None] * v + iu[None, :, None] * u).reshape(-1, 3)  # row-major, tile order
+    # shell: Fibonacci points on the upper hemisphere
+    k = np.arange(spec.count) + 0.5
+    z = 1.0 - k / spec.count
+    phi = np.pi * (1 + 5**0.5) * k
+    r = np.sqrt(1 - z * z)
+    return np.asarray(spec.center_m, float) + spec.radius_m * np.stack([r * np.cos(phi), r * np.sin(phi), z], 1)

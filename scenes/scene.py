@@ -1,0 +1,337 @@
+"""Load a TOML scene, validate it, and convert it once to SI numpy arrays.
+
+Coordinates are re-centred on a float64 local origin (the first target's centre) so that
+Embree's float32 arithmetic is accurate; ``Scene.offset_m`` keeps the origin and every
+output is reported in the file's own coordinates.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from pydantic import ValidationError
+
+import brdfmodels
+
+from .geometry import Heightfield, Mesh, observer_points, shape_mesh, terrain_heightfield
+from .spec import SceneSpec
+
+__all__ = ["Scene", "Target", "Observers", "SceneError", "load", "loads", "examples", "example_path", "json_schema"]
+
+
+class SceneError(ValueError):
+    """A scene that cannot be used; the message names the field path and what was expected."""
+
+
+def _path(loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif isinstance(part, str) and not part.startswith(("function-", "literal[")) and part not in ("list", "float", "int"):
+            out += ("." if out else "") + part
+    return out or "(scene)"
+
+
+def _format_validation(exc: ValidationError, source: str) -> str:
+    errs = exc.errors(include_url=False)
+    msgs = []
+    for e in errs:
+        where = _path(e["loc"])
+        msg = e["msg"].removeprefix("Value error, ")
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key (check its spelling)"
+        inp = e.get("input")
+        shown = "" if isinstance(inp, dict) or e["type"] in ("missing", "extra_forbidden") else f" (got {inp!r})"
+        msgs.append(f"{where}: {msg}{shown}")
+    more = f" (and {len(msgs) - 1} more: {'; '.join(msgs[1:4])})" if len(msgs) > 1 else ""
+    return f"{source}: {msgs[0]}{more}"
+
+
+@dataclass
+class Target:
+    """A target converted for analysis (local coordinates)."""
+
+    name: str
+    index: int
+    mesh: Mesh
+    material: brdfmodels.BRDFModel
+    groove_angle_rad: float
+    normal: np.ndarray
+    tangent: np.ndarray
+    center_m: np.ndarray
+    spec: object
+    history: brdfmodels.History | None = None
+
+    @property
+    def is_dynamic(self) -> bool:
+        return self.material.is_dynamic
+
+
+@dataclass
+class Observers:
+    """All observer points (N, 3), local coordinates, with group names and optical gain."""
+
+    positions_m: np.ndarray
+    group: np.ndarray
+    index_in_group: np.ndarray
+    optical_gain: np.ndarray
+    group_names: tuple
+
+    def __len__(self):
+        return self.positions_m.shape[0]
+
+    def labels(self) -> list:
+        return [f"{self.group_names[g]}[{i}]" for g, i in zip(self.group, self.index_in_group)]
+
+
+@dataclass
+class Scene:
+    """A validated scene in SI units, local coordinates (``world = local + offset_m``)."""
+
+    spec: SceneSpec
+    source: str
+    base_dir: Path | None
+    text_sha256: str
+    offset_m: np.ndarray
+    laser_position_m: np.ndarray
+    laser_direction: np.ndarray
+    targets: list
+    occluders: list = field(default_factory=list)
+    terrain: Heightfield | None = None
+    observers: Observers | None = None
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def to_world(self, p):
+        return np.asarray(p, float) + self.offset_m
+
+    def echo(self) -> dict:
+        """The validated scene as plain data (for reports)."""
+        return json.loads(self.spec.model_dump_json())
+
+
+def _optical_gain(o) -> float:
+    # same formula as hazard.nohd.optical_gain ([C] Laser-Studio), without a beam-size limit
+    if o is None:
+        return 1.0
+    terms = [o.transmission * o.magnification**2, o.transmission * (o.objective_diameter_m / 7e-3) ** 2]
+    return min(max(t, 1.0) for t in terms)
+
+
+def _identity_factor(model):
+    """Scale a static material by the reflectance factor R(t)/R(0) carried as the state."""
+    table = brdfmodels.StateTable([0.0, 1.0], [0.0, 1.0], "reflectance_factor", extrapolation="error")
+    return brdfmodels.Scaled(model, table)
+
+
+def _material(spec, where, base_dir):
+    try:
+        if spec.file is not None:
+            p = Path(spec.file)
+            if not p.is_absolute() and base_dir is not None:
+                p = base_dir / p
+            return brdfmodels.load(p)
+        return brdfmodels.create(spec.model, **spec.params)
+    except ValueError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def _history(spec, where, base_dir):
+    if spec is None or spec.kind != "series":
+        return None
+    if spec.file is not None:
+        p = Path(spec.file)
+        if not p.is_absolute() and base_dir is not None:
+            p = base_dir / p
+        try:
+            data = np.genfromtxt(p, delimiter=",", names=True)
+        except OSError as exc:
+            raise SceneError(f"{where}.file={spec.file!r}: cannot read ({exc.strerror})") from None
+        names = data.dtype.names or ()
+        if "time_s" not in names or spec.state not in names:
+            raise SceneError(f"{where}.file={spec.file!r}: expected CSV columns time_s and {spec.state}, got {list(names)}")
+        times, states = data["time_s"], data[spec.state]
+    else:
+        times, states = spec.times_s, spec.states
+    try:
+        return brdfmodels.History(times, states, spec.state, extrapolation=spec.extrapolation)
+    except ValueError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+def _inside_solid(p, spec) -> np.ndarray:
+    """Points strictly inside a closed primitive (box, sphere, cylinder)."""
+    if spec.shape not in ("box", "sphere", "cylinder"):
+        return np.zeros(len(p), bool)
+    frame = brdfmodels.local_frame(spec.normal, spec.tangent)
+    q = (p - np.asarray(spec.center_m)) @ frame.T
+    s = spec.size_m
+    if spec.shape == "box":
+        return np.all(np.abs(q) < np.asarray(s) / 2 * (1 - 1e-9), axis=1)
+    if spec.shape == "sphere":
+        return np.linalg.norm(q, axis=1) < s[0] / 2 * (1 - 1e-9)
+    return (np.hypot(q[:, 0], q[:, 1]) < s[0] / 2 * (1 - 1e-9)) & (np.abs(q[:, 2]) < s[1] / 2 * (1 - 1e-9))
+
+
+def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> Scene:
+    offset = np.asarray(spec.targets[0].center_m, float)
+    lp = np.asarray(spec.laser.position_m, float)
+    if spec.laser.aim_m is not None:
+        d = np.asarray(spec.laser.aim_m, float) - lp
+    else:
+        d = np.asarray(spec.laser.direction, float)
+    d = d / np.linalg.norm(d)
+
+    targets = []
+    for i, ts in enumerate(spec.targets):
+        where = f"targets[{i}]"
+        try:
+            mesh = shape_mesh(ts, base_dir)
+        except ValueError as exc:
+            raise SceneError(f"{where}: {exc}") from None
+        mesh.vertices = mesh.vertices - offset
+        if mesh.analytic is not None:
+            mesh.analytic = (mesh.analytic[0], mesh.analytic[1] - offset, *mesh.analytic[2:])
+        material = _material(ts.material, f"{where}.material", base_dir)
+        hist = _history(ts.history, f"{where}.history", base_dir)
+        if ts.history is not None:
+            state = ts.history.state
+            if state == "reflectance_factor" and not material.is_dynamic:
+                material = _identity_factor(material)
+            elif not material.is_dynamic:
+                raise SceneError(
+                    f"{where}.history: the material is static; a history needs a dynamic material, "
+                    f"or state = 'reflectance_factor' to scale it"
+                )
+            elif material.state_name != state:
+                raise SceneError(f"{where}.history.state={state!r}: the material depends on {material.state_name!r}")
+        elif material.is_dynamic:
+            raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
+        frame = brdfmodels.local_frame(ts.normal, ts.tangent)
+        targets.append(
+            Target(ts.name, i, mesh, material, math.radians(ts.material.groove_angle_deg), frame[2], frame[0],
+                   np.asarray(ts.center_m, float) - offset, ts, hist)
+        )
+    occluders = []
+    for i, os_ in enumerate(spec.occluders):
+        try:
+            m = shape_mesh(os_, base_dir)
+        except ValueError as exc:
+            raise SceneError(f"occluders[{i}]: {exc}") from None
+        m.vertices = m.vertices - offset
+        occluders.append(m)
+    terrain = None
+    if spec.terrain is not None:
+        try:
+            hf = terrain_heightfield(spec.terrain, base_dir)
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
+        terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
+
+    pos, grp, idx, gain = [], [], [], []
+    for g, ob in enumerate(spec.observers):
+        p = observer_points(ob)
+        if ob.eye_height_m is not None:
+            if terrain is None:
+                raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
+            local = p - offset
+            if not np.all(terrain.contains_xy(local[:, 0], local[:, 1])):
+                raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
+            p = p.copy()
+            p[:, 2] = terrain.height_at(local[:, 0], local[:, 1]) + offset[2] + ob.eye_height_m
+        for solid_list, label in ((spec.targets, "targets"), (spec.occluders, "occluders")):
+            for j, s in enumerate(solid_list):
+                inside = _inside_solid(p, s)
+                if np.any(inside):
+                    k = int(np.argmax(inside))
+                    raise SceneError(
+                        f"observers[{g}] ({ob.name}): point {p[k].tolist()} is inside {label}[{j}] ({s.shape}); "
+                        f"expected observers in open air"
+                    )
+        if terrain is not None:
+            local = p - offset
+            on = terrain.contains_xy(local[:, 0], local[:, 1])
+            below = on & (local[:, 2] < terrain.height_at(local[:, 0], local[:, 1]) - 1e-6)
+            if np.any(below):
+                k = int(np.argmax(below))
+                raise SceneError(f"observers[{g}] ({ob.name}): point {p[k].tolist()} is below the terrain; use eye_height_m")
+        pos.append(p - offset)
+        grp.append(np.full(len(p), g))
+        idx.append(np.arange(len(p)))
+        gain.append(np.full(len(p), _optical_gain(ob.optics)))
+    if pos:
+        observers = Observers(np.vstack(pos), np.concatenate(grp), np.concatenate(idx), np.concatenate(gain),
+                              tuple(o.name for o in spec.observers))
+    else:
+        observers = Observers(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), np.empty(0), ())
+    return Scene(
+        spec=spec,
+        source=source,
+        base_dir=base_dir,
+        text_sha256=hashlib.sha256(text.encode()).hexdigest(),
+        offset_m=offset,
+        laser_position_m=lp - offset,
+        laser_direction=d,
+        targets=targets,
+        occluders=occluders,
+        terrain=terrain,
+        observers=observers,
+    )
+
+
+def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
+    """Scene from TOML text; relative file names resolve against ``base_dir``."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        spec = SceneSpec.model_validate(data)
+    except ValidationError as exc:
+        raise SceneError(_format_validation(exc, source)) from None
+    try:
+        return _compile(spec, source, None if base_dir is None else Path(base_dir), text)
+    except SceneError as exc:
+        msg = str(exc)
+        raise SceneError(msg if msg.startswith(source) else f"{source}: {msg}") from None
+
+
+def load(path) -> Scene:
+    """Read, validate and convert a TOML scene file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read the scene ({exc.strerror})") from None
+    return loads(text, source=str(path), base_dir=path.parent)
+
+
+def examples() -> dict:
+    """Bundled example scenes: name -> path of the TOML file."""
+    folder = resources.files("scenes").joinpath("examples")
+    return {Path(p.name).stem: Path(str(p)) for p in sorted(folder.iterdir(), key=lambda q: q.name) if p.name.endswith(".toml")}
+
+
+def example_path(name: str) -> Path:
+    ex = examples()
+    if name not in ex:
+        raise SceneError(f"example {name!r} is unknown: expected one of {sorted(ex)}")
+    return ex[name]
+
+
+def json_schema() -> dict:
+    """JSON schema of scene files (for editors)."""
+    schema = SceneSpec.model_json_schema()
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "laser-hazard scene"
+    return schema

@@ -1,0 +1,351 @@
+"""Scene files: pydantic v2 classes that validate a TOML scene at load.
+
+Every class forbids unknown keys, so a misspelled key is an error with its path
+(``targets[2].material.reflectance``). Units are SI and in the key names; wavelengths in
+nm. The classes only validate; :mod:`scenes.scene` converts them once to numpy arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+__all__ = [
+    "SceneSpec",
+    "LaserSpec",
+    "ExposureSpec",
+    "TargetSpec",
+    "MaterialSpec",
+    "HistorySpec",
+    "OccluderSpec",
+    "TerrainSpec",
+    "ObserverSpec",
+    "OpticsSpec",
+    "AtmosphereSpec",
+    "AnalysisSpec",
+    "STANDARD_KEYS",
+]
+
+# the standards hazard.mpe knows; kept here because scenes may not import hazard
+STANDARD_KEYS = ("ansi-z136.1-2014", "iec-60825-1-2014", "ansi-z136.1-2007", "iec-60825-1-2007")
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _finite(v, name):
+    for x in v if isinstance(v, list) else [v]:
+        if not math.isfinite(x):
+            raise ValueError(f"{name}: expected finite numbers, got {x!r}")
+    return v
+
+
+def _nonzero(v, name):
+    if math.fsum(x * x for x in v) <= 0:
+        raise ValueError(f"{name}: expected a non-zero direction vector, got {v!r}")
+    return v
+
+
+class LaserSpec(_Strict):
+    """The laser: CW (``power_w``) or pulsed (``pulse_energy_j``, ``pulse_duration_s``, ``prf_hz``)."""
+
+    wavelength_nm: float = Field(ge=180.0, le=1.0e6, description="wavelength [nm], 180 nm to 1 mm")
+    power_w: float | None = Field(default=None, gt=0, description="CW power [W]")
+    pulse_energy_j: float | None = Field(default=None, gt=0, description="energy per pulse [J]")
+    pulse_duration_s: float | None = Field(default=None, gt=0, description="pulse duration [s]")
+    prf_hz: float | None = Field(default=None, gt=0, description="pulse repetition frequency [Hz]")
+    beam_diameter_m: float = Field(gt=0, description="beam diameter at the aperture, 1/e points [m]")
+    divergence_rad: float = Field(ge=0, description="full-angle divergence, 1/e points [rad]")
+    position_m: Vec3
+    aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m]")
+    direction: Vec3 | None = Field(default=None, description="beam direction (alternative to aim_m)")
+
+    @field_validator("position_m", "aim_m", "direction")
+    @classmethod
+    def _finite_vec(cls, v, info):
+        return None if v is None else _finite(v, info.field_name)
+
+    @model_validator(mode="after")
+    def _check(self):
+        pulsed = [self.pulse_energy_j, self.pulse_duration_s, self.prf_hz]
+        if self.power_w is None and any(p is None for p in pulsed):
+            raise ValueError("give power_w (CW) or all of pulse_energy_j, pulse_duration_s, prf_hz (pulsed)")
+        if self.power_w is not None and any(p is not None for p in pulsed):
+            raise ValueError("give either power_w (CW) or the pulse keys, not both")
+        if self.pulse_duration_s is not None and self.pulse_duration_s * self.prf_hz >= 1:
+            raise ValueError(f"pulse_duration_s * prf_hz = {self.pulse_duration_s * self.prf_hz:g}: expected < 1")
+        if (self.aim_m is None) == (self.direction is None):
+            raise ValueError("give exactly one of aim_m or direction")
+        if self.aim_m is not None and math.dist(self.aim_m, self.position_m) <= 0:
+            raise ValueError(f"aim_m={self.aim_m!r} equals position_m: expected an aim point away from the laser")
+        if self.direction is not None:
+            _nonzero(self.direction, "direction")
+        return self
+
+    @property
+    def average_power_w(self) -> float:
+        return self.power_w if self.power_w is not None else self.pulse_energy_j * self.prf_hz
+
+
+class ExposureSpec(_Strict):
+    duration_s: float = Field(gt=0, le=3e4, description="exposure duration the MPE applies to [s]")
+    standard: Literal[STANDARD_KEYS] = "ansi-z136.1-2014"
+
+
+class OxidationSpec(_Strict):
+    activation_temperature_k: float = Field(ge=0)
+    rate_per_s: float = Field(ge=0)
+    initial_extinction: float = Field(ge=0)
+
+
+class HistorySpec(_Strict):
+    """How the target's state evolves.
+
+    ``kind = "series"``: a measured series (``times_s`` and ``states`` inline, or a CSV
+    ``file`` with columns ``time_s`` and the state). ``kind = "heating"``: a thin-plate
+    heating model driven by the laser's peak irradiance on the spot.
+    """
+
+    kind: Literal["series", "heating"]
+    state: Literal["temperature_k", "extinction", "time_s", "reflectance_factor"] = "temperature_k"
+    times_s: list[float] | None = None
+    states: list[float] | None = None
+    file: str | None = None
+    plate: Literal["stainless_steel", "copper"] | None = None
+    thickness_m: float | None = Field(default=None, gt=0)
+    initial_reflectance: float | None = Field(default=None, ge=0, le=1)
+    oxidation: OxidationSpec | None = None
+    rtol: float = Field(default=1e-7, gt=0, le=0.1, description="heating ODE tolerance")
+    extrapolation: Literal["error", "clamp"] = "clamp"
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.kind == "series":
+            inline = self.times_s is not None or self.states is not None
+            if inline == (self.file is not None):
+                raise ValueError("a series history needs times_s and states inline, or a file, not both")
+            if inline:
+                if self.times_s is None or self.states is None or len(self.times_s) != len(self.states) or len(self.times_s) < 2:
+                    raise ValueError("times_s and states: expected two lists of the same length (at least 2)")
+                if any(b <= a for a, b in zip(self.times_s, self.times_s[1:])):
+                    raise ValueError("times_s: expected strictly increasing times")
+        else:
+            if self.plate is None:
+                raise ValueError("a heating history needs plate = 'stainless_steel' or 'copper'")
+            if self.state == "time_s":
+                raise ValueError("state='time_s' is for series histories; a heating history gives temperature_k, extinction or reflectance_factor")
+        return self
+
+
+class MaterialSpec(BaseModel):
+    """A BRDF: ``model`` plus its parameters inline, or a saved model ``file`` (JSON).
+
+    Extra keys are the model's parameters; they are checked by building the model, so a
+    misspelled parameter is an error that lists the model's parameters.
+    """
+
+    model_config = ConfigDict(extra="allow", frozen=True)
+
+    model: str | None = None
+    file: str | None = None
+    groove_angle_deg: float = Field(default=0.0, description="angle of the material grooves from the target tangent [deg]")
+
+    @model_validator(mode="after")
+    def _check(self):
+        if (self.model is None) == (self.file is None):
+            raise ValueError("give either model (with its parameters inline) or file, not both")
+        if self.file is not None and self.model_extra:
+            raise ValueError(f"unexpected keys {sorted(self.model_extra)} next to file")
+        if self.model is not None:
+            import brdfmodels
+
+            brdfmodels.create(self.model, **self.model_extra)  # raises ValueError naming the problem
+        return self
+
+    @property
+    def params(self) -> dict:
+        return dict(self.model_extra or {})
+
+
+_SHAPES = Literal["plate", "disk", "box", "sphere", "cylinder", "mesh"]
+
+
+class _Shape(_Strict):
+    shape: _SHAPES
+    center_m: Vec3 = [0.0, 0.0, 0.0]
+    normal: Vec3 = [0.0, 0.0, 1.0]
+    tangent: Vec3 = [1.0, 0.0, 0.0]
+    size_m: list[float] | None = None
+    file: str | None = None
+    scale: float = Field(default=1.0, gt=0)
+
+    @field_validator("center_m", "normal", "tangent")
+    @classmethod
+    def _finite_vec(cls, v, info):
+        _finite(v, info.field_name)
+        if info.field_name != "center_m":
+            _nonzero(v, info.field_name)
+        return v
+
+    @model_validator(mode="after")
+    def _sizes(self):
+        need = {"plate": 2, "disk": 1, "box": 3, "sphere": 1, "cylinder": 2}
+        if self.shape == "mesh":
+            if self.file is None:
+                raise ValueError("shape='mesh' needs file (STL, OBJ or PLY)")
+        else:
+            n = need[self.shape]
+            if self.size_m is None or len(self.size_m) != n or any(not (s > 0 and math.isfinite(s)) for s in self.size_m):
+                raise ValueError(f"size_m={self.size_m!r}: a {self.shape} needs {n} positive size(s) in m")
+        n, t = self.normal, self.tangent
+        cross = [n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]]
+        if math.fsum(c * c for c in cross) <= 1e-18 * math.fsum(x * x for x in n) * math.fsum(x * x for x in t):
+            raise ValueError(f"tangent={t!r} is parallel to normal={n!r}: expected a tangent along the surface")
+        return self
+
+
+class TargetSpec(_Shape):
+    name: str = "target"
+    material: MaterialSpec
+    history: HistorySpec | None = None
+
+
+class OccluderSpec(_Shape):
+    name: str = "occluder"
+
+
+class TerrainSpec(_Strict):
+    """Ground: a heightmap (``file`` .npy of heights [m], ``origin_m`` and ``spacing_m``) or a
+    procedural ``hill`` / ``valley`` (Gaussian bump) / ``flat`` ground."""
+
+    kind: Literal["heightmap", "hill", "valley", "flat"]
+    file: str | None = None
+    origin_m: list[float] = Field(default=[0.0, 0.0], min_length=2, max_length=2)
+    spacing_m: float | None = Field(default=None, gt=0)
+    center_m: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
+    height_m: float = 10.0
+    radius_m: float = Field(default=100.0, gt=0)
+    extent_m: float = Field(default=500.0, gt=0, description="half-width of the procedural ground [m]")
+    resolution_m: float = Field(default=5.0, gt=0)
+
+    @model_validator(mode="after")
+    def _check(self):
+        if self.kind == "heightmap" and (self.file is None or self.spacing_m is None):
+            raise ValueError("a heightmap terrain needs file (.npy) and spacing_m")
+        if self.kind != "heightmap" and self.extent_m / self.resolution_m > 2000:
+            raise ValueError(f"extent_m / resolution_m = {self.extent_m / self.resolution_m:g}: at most 2000 cells per half-width")
+        return self
+
+
+class OpticsSpec(_Strict):
+    magnification: float = Field(ge=1)
+    objective_diameter_m: float = Field(gt=0)
+    transmission: float = Field(default=1.0, gt=0, le=1)
+
+
+class ObserverSpec(_Strict):
+    """Observers: explicit ``points_m``, a ``line`` (``start_m``, ``end_m``, ``count``), a
+    ``grid`` (``origin_m``, ``u_m``, ``v_m``, ``counts``) or a spherical ``shell``
+    (``center_m``, ``radius_m``, ``count``, upper hemisphere)."""
+
+    name: str
+    points_m: list[Vec3] | None = None
+    start_m: Vec3 | None = None
+    end_m: Vec3 | None = None
+    count: int | None = Field(default=None, ge=1, le=10_000_000)
+    origin_m: Vec3 | None = None
+    u_m: Vec3 | None = None
+    v_m: Vec3 | None = None
+    counts: list[int] | None = Field(default=None, min_length=2, max_length=2)
+    center_m: Vec3 | None = None
+    radius_m: float | None = Field(default=None, gt=0)
+    eye_height_m: float | None = Field(default=None, description="height above the terrain [m]; replaces z")
+    optics: OpticsSpec | None = None
+
+    @model_validator(mode="after")
+    def _one_layout(self):
+        layouts = {
+            "points_m": self.points_m is not None,
+            "line": self.start_m is not None or self.end_m is not None,
+            "grid": self.origin_m is not None or self.u_m is not None or self.v_m is not None,
+            "shell": self.radius_m is not None,
+        }
+        chosen = [k for k, v in layouts.items() if v]
+        if len(chosen) != 1:
+            raise ValueError(f"give exactly one layout (points_m, line, grid or shell), got {chosen or 'none'}")
+        kind = chosen[0]
+        if kind == "line" and (self.start_m is None or self.end_m is None or self.count is None):
+            raise ValueError("a line needs start_m, end_m and count")
+        if kind == "grid" and (self.origin_m is None or self.u_m is None or self.v_m is None or self.counts is None):
+            raise ValueError("a grid needs origin_m, u_m, v_m and counts")
+        if kind == "shell" and (self.center_m is None or self.count is None):
+            raise ValueError("a shell needs center_m, radius_m and count")
+        if kind == "points_m":
+            if not self.points_m:
+                raise ValueError("points_m: expected at least one point")
+            for p in self.points_m:
+                _finite(p, "points_m")
+        if self.counts is not None and any(c < 1 for c in self.counts):
+            raise ValueError(f"counts={self.counts!r}: expected positive counts")
+        return self
+
+    @property
+    def layout(self) -> str:
+        if self.points_m is not None:
+            return "points"
+        if self.start_m is not None:
+            return "line"
+        if self.origin_m is not None:
+            return "grid"
+        return "shell"
+
+
+class AtmosphereSpec(_Strict):
+    attenuation_per_m: float | None = Field(default=None, ge=0)
+    visibility_km: float | None = Field(default=None, gt=0)
+
+    @model_validator(mode="after")
+    def _one(self):
+        if self.attenuation_per_m is not None and self.visibility_km is not None:
+            raise ValueError("give attenuation_per_m or visibility_km, not both")
+        return self
+
+
+class AnalysisSpec(_Strict):
+    """Accuracy knobs and outputs of an analysis."""
+
+    time_end_s: float | None = Field(default=None, gt=0, description="end of the history window [s] (default: exposure duration)")
+    time_step_s: float | None = Field(default=None, gt=0, description="time step of the dynamic analysis [s]")
+    direction_grid_deg: float = Field(default=2.0, gt=0, le=30, description="keep-out lobe grid resolution [deg]")
+    refine_levels: int = Field(default=3, ge=0, le=8, description="adaptive refinement levels of the keep-out lobe")
+    beam_samples: int = Field(default=256, ge=1, le=1_000_000, description="rays across the beam cross-section")
+    footprint_resolution_m: float | None = Field(default=None, gt=0)
+    outputs: list[Literal["report", "csv", "render"]] = ["report", "csv"]
+
+
+class SceneSpec(_Strict):
+    name: str
+    description: str = ""
+    laser: LaserSpec
+    exposure: ExposureSpec
+    targets: list[TargetSpec] = Field(min_length=1)
+    occluders: list[OccluderSpec] = []
+    terrain: TerrainSpec | None = None
+    observers: list[ObserverSpec] = []
+    atmosphere: AtmosphereSpec = AtmosphereSpec()
+    analysis: AnalysisSpec = AnalysisSpec()
+
+    @model_validator(mode="after")
+    def _names(self):
+        names = [t.name for t in self.targets]
+        if len(set(names)) != len(names):
+            raise ValueError(f"targets: names must be unique, got {names}")
+        obs = [o.name for o in self.observers]
+        if len(set(obs)) != len(obs):
+            raise ValueError(f"observers: names must be unique, got {obs}")
+        return self
