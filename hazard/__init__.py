@@ -28,7 +28,16 @@ from .nohd import (
 
 __version__ = "0.1.0"
 
+
+def analyze(scene, **kwargs):
+    """Run the hazard analysis of a loaded scene; see :func:`hazard.analysis.analyze`."""
+    from .analysis import analyze as _analyze
+
+    return _analyze(scene, **kwargs)
+
+
 __all__ = [
+    "analyze",
     "DEFAULT_STANDARD", "MPEResult", "NOHDResult", "STANDARDS", "attenuation_from_visibility",
     "correction_factors", "hazard_distance", "nohd_diffuse", "nohd_direct", "nohd_from_intensity",
     "nohd_specular", "ocular_mpe", "optical_gain", "repetitive_pulse_mpe", "skin_mpe",

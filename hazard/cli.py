@@ -4,8 +4,16 @@
 or JSON with ``--json``); errors are one line on stderr with exit code 2.
 
 Verbs:
+  hazard run SCENE -o OUTDIR   analyse a scene; write report.json and observers.csv
+  hazard compare SCENE         static vs dynamic: NOHD per target, changed verdicts
+  hazard validate SCENE        check a scene file
+  hazard models                registered BRDF models
+  hazard schema                JSON schema of scene files
   hazard mpe   --wavelength-nm L --duration-s T [--standard S] [--skin] [--json]
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
+
+SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
+Exit codes: 0 done, 2 bad input, 3 hazard found (only with --fail-on-hazard).
 """
 
 from __future__ import annotations
@@ -14,6 +22,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 from . import mpe as _mpe
 from . import nohd as _nohd
@@ -22,6 +31,7 @@ __all__ = ["main", "build_parser"]
 
 EXIT_OK = 0
 EXIT_ERROR = 2
+EXIT_HAZARD = 3
 
 
 class _Parser(argparse.ArgumentParser):
@@ -42,10 +52,37 @@ def _add_mpe_args(p, *, required):
     p.add_argument("--angular-subtense-rad", type=float, default=0.0, help="apparent source size [rad] (0: point source)")
 
 
+def _add_run_args(p):
+    p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
+    p.add_argument("--fail-on-hazard", action="store_true", help="exit with code 3 if any hazard is found")
+    p.add_argument("--backend", default="embree", choices=["embree", "numpy"], help="ray engine (default embree)")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
     sub.required = True
+
+    p = sub.add_parser("run", help="analyse a scene and write report.json and observers.csv")
+    p.add_argument("scene", help="scene TOML file, or a bundled example's name")
+    p.add_argument("-o", "--output", required=True, help="output folder")
+    p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    _add_run_args(p)
+
+    p = sub.add_parser("compare", help="static vs dynamic reflectance: NOHD per target and observer verdicts")
+    p.add_argument("scene", help="scene TOML file, or a bundled example's name")
+    _add_run_args(p)
+
+    p = sub.add_parser("validate", help="check a scene file and print what it contains")
+    p.add_argument("scene", help="scene TOML file, or a bundled example's name")
+    p.add_argument("--json", action="store_true", help="print JSON")
+
+    p = sub.add_parser("models", help="list the registered BRDF models")
+    p.add_argument("--json", action="store_true", help="print JSON")
+
+    p = sub.add_parser("schema", help="print the JSON schema of scene files")
+    p.add_argument("-o", "--output", help="write to this file instead of stdout")
 
     p = sub.add_parser("mpe", help="maximum permissible exposure with every step")
     _add_mpe_args(p, required=True)
@@ -75,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _cmd_mpe(args, out):
+def _cmd_mpe(args, out, err=None):
     if args.prf_hz is not None:
         if args.exposure_duration_s is None:
             raise ValueError("--exposure-duration-s: required with --prf-hz (the duration of the pulse train)")
@@ -99,7 +136,7 @@ def _require(args, *names):
             raise ValueError(f"--{n.replace('_', '-')}: required for --kind {args.kind}")
 
 
-def _cmd_nohd(args, out):
+def _cmd_nohd(args, out, err=None):
     doc = {}
     lines = []
     if args.mpe_w_m2 is not None:
@@ -148,7 +185,116 @@ def _cmd_nohd(args, out):
     return EXIT_OK
 
 
-_COMMANDS = {"mpe": _cmd_mpe, "nohd": _cmd_nohd}
+def _load_scene(name):
+    import scenes
+
+    path = Path(name)
+    if not path.exists() and name in scenes.examples():
+        path = scenes.example_path(name)
+    return scenes.load(path)
+
+
+def _analyse(args, err):
+    from .analysis import analyze
+
+    scene = _load_scene(args.scene)
+    progress = None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
+    return analyze(scene, backend=args.backend, progress=progress)
+
+
+def _finish(args, result):
+    return EXIT_HAZARD if (args.fail_on_hazard and result.any_hazard) else EXIT_OK
+
+
+def _cmd_run(args, out, err):
+    from .report import report_dict, summary_text, write_outputs
+
+    result = _analyse(args, err)
+    paths = write_outputs(result, args.output, force=args.force)
+    if args.json:
+        out.write(json.dumps(report_dict(result), indent=1) + "\n")
+    else:
+        out.write(summary_text(result) + "\n")
+        out.write("".join(f"  wrote {p}\n" for p in paths))
+    return _finish(args, result)
+
+
+def _cmd_compare(args, out, err):
+    result = _analyse(args, err)
+    rows = []
+    for t in result.targets:
+        d = t.to_dict()
+        rows.append({"target": t.name, "state": t.state_name, "state_range": t.state_range,
+                     "nohd_static_m": d["nohd_static_m"], "nohd_dynamic_m": d["nohd_dynamic_m"],
+                     "keepout_volume_static_m3": d["keepout_static"]["volume_m3"],
+                     "keepout_volume_dynamic_m3": d["keepout_dynamic"]["volume_m3"],
+                     "specular_nohd_static_m": t.specular_nohd_static_m, "specular_nohd_dynamic_m": t.specular_nohd_dynamic_m})
+    changed = result.verdict_changes()
+    if args.json:
+        doc = {"targets": rows, "verdict_changes": changed,
+               "observers": [{"name": n, "static_irradiance_w_m2": float(s_), "peak_irradiance_w_m2": float(p_)}
+                             for n, s_, p_ in zip(result.observers.labels, result.observers.static_irradiance_w_m2,
+                                                  result.observers.peak_irradiance_w_m2)]}
+        out.write(json.dumps(doc, indent=1) + "\n")
+    else:
+        out.write(f"Static vs dynamic reflectance, scene {result.scene.name!r} (MPE {result.mpe_w_m2:.6g} W/m^2)\n")
+        for r in rows:
+            line = f"  {r['target']}: NOHD static {r['nohd_static_m']:.4g} m -> dynamic {r['nohd_dynamic_m']:.4g} m; " \
+                   f"keep-out volume {r['keepout_volume_static_m3']:.4g} -> {r['keepout_volume_dynamic_m3']:.4g} m^3"
+            if r["state"]:
+                line += f" (state {r['state']} in [{r['state_range'][0]:.4g}, {r['state_range'][1]:.4g}])"
+            out.write(line + "\n")
+            if r["specular_nohd_static_m"] is not None:
+                out.write(f"    mirror lobe beyond the target: {r['specular_nohd_static_m']:.4g} m -> {r['specular_nohd_dynamic_m']:.4g} m\n")
+        out.write(f"  observers whose verdict changes: {', '.join(changed) if changed else 'none'}\n")
+    return _finish(args, result)
+
+
+def _cmd_validate(args, out, err):
+    scene = _load_scene(args.scene)
+    info = {
+        "scene": scene.name,
+        "source": scene.source,
+        "sha256": scene.text_sha256,
+        "targets": [{"name": t.name, "shape": t.spec.shape, "material": t.material.name, "dynamic": t.material.is_dynamic}
+                    for t in scene.targets],
+        "occluders": len(scene.occluders),
+        "terrain": scene.terrain is not None,
+        "observer_points": len(scene.observers),
+        "offset_m": scene.offset_m.tolist(),
+    }
+    if args.json:
+        out.write(json.dumps(info, indent=1) + "\n")
+    else:
+        out.write(f"{scene.source}: valid scene {scene.name!r}: {len(scene.targets)} target(s), {len(scene.occluders)} occluder(s), "
+                  f"{'terrain, ' if scene.terrain is not None else ''}{len(scene.observers)} observer point(s); "
+                  f"local origin {scene.offset_m.tolist()} m\n")
+    return EXIT_OK
+
+
+def _cmd_models(args, out, err):
+    import brdfmodels
+
+    names = brdfmodels.available_models()
+    out.write((json.dumps(names) if args.json else "\n".join(names)) + "\n")
+    return EXIT_OK
+
+
+def _cmd_schema(args, out, err):
+    import scenes
+
+    text = json.dumps(scenes.json_schema(), indent=1)
+    if args.output:
+        from .report import atomic_write_text
+
+        atomic_write_text(Path(args.output), text)
+    else:
+        out.write(text + "\n")
+    return EXIT_OK
+
+
+_COMMANDS = {"mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+             "models": _cmd_models, "schema": _cmd_schema}
 
 
 def main(argv=None, *, stdout=None, stderr=None) -> int:
@@ -163,10 +309,13 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
         return EXIT_ERROR
     except SystemExit as exc:  # --help
         return int(exc.code or 0)
+    from .report import OutputExistsError
+
     try:
-        return _COMMANDS[args.verb](args, out)
-    except ValueError as exc:
-        err.write(f"hazard {args.verb}: error: {exc}\n")
+        return _COMMANDS[args.verb](args, out, err)
+    except (ValueError, OutputExistsError) as exc:
+        msg = " ".join(str(exc).split())  # one line
+        err.write(f"hazard {args.verb}: error: {msg}\n")
         return EXIT_ERROR
 
 

@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import math
 import sys
+
+import numpy as np
 from dataclasses import dataclass, field
 
 from scipy.optimize import brentq
@@ -41,6 +43,7 @@ __all__ = [
     "hazard_distance",
     "optical_gain",
     "attenuation_from_visibility",
+    "range_from_intensity",
     "PUPIL_DIAMETER_M",
 ]
 
@@ -212,6 +215,23 @@ def nohd_from_intensity(intensity_w_sr, mpe_w_m2, *, attenuation_per_m=0.0) -> N
         f"  {formula} = {r:.6g} m ({method})",
     )
     return NOHDResult(r, "intensity", method, formula, dict(intensity_w_sr=i, mpe_w_m2=mpe, attenuation_per_m=mu), steps)
+
+
+def range_from_intensity(intensity_w_sr, mpe_w_m2, attenuation_per_m=0.0) -> np.ndarray:
+    """Vectorised :func:`nohd_from_intensity`: hazard range [m] for an array of radiant
+    intensities [W/sr] (no checks, no steps; for keep-out grids)."""
+    i = np.maximum(np.asarray(intensity_w_sr, dtype=float), 0.0)
+    r0 = np.sqrt(i / mpe_w_m2)
+    if attenuation_per_m == 0.0:
+        return r0
+    mu = attenuation_per_m
+    z = mu * r0 / 2.0
+    out = np.zeros_like(r0)
+    small = (z > 0) & (z < 1e-8)
+    out[small] = r0[small] * (1.0 - z[small])  # W(z) = z - z^2 + ...
+    big = z >= 1e-8
+    out[big] = 2.0 / mu * lambertw(z[big]).real
+    return out
 
 
 def nohd_diffuse(power_w, mpe_w_m2, reflectance, *, viewing_angle_rad=0.0, attenuation_per_m=0.0, optical_gain=1.0) -> NOHDResult:

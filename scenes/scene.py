@@ -89,7 +89,9 @@ class Observers:
         return self.positions_m.shape[0]
 
     def labels(self) -> list:
-        return [f"{self.group_names[g]}[{i}]" for g, i in zip(self.group, self.index_in_group)]
+        """Point names: the group name for a one-point group, ``group[i]`` otherwise."""
+        sizes = np.bincount(self.group, minlength=len(self.group_names))
+        return [self.group_names[g] if sizes[g] == 1 else f"{self.group_names[g]}[{i}]" for g, i in zip(self.group, self.index_in_group)]
 
 
 @dataclass

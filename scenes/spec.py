@@ -324,7 +324,7 @@ class AnalysisSpec(_Strict):
     direction_grid_deg: float = Field(default=2.0, gt=0, le=30, description="keep-out lobe grid resolution [deg]")
     refine_levels: int = Field(default=3, ge=0, le=8, description="adaptive refinement levels of the keep-out lobe")
     beam_samples: int = Field(default=256, ge=1, le=1_000_000, description="rays across the beam cross-section")
-    footprint_resolution_m: float | None = Field(default=None, gt=0)
+    footprint_eye_height_m: float = Field(default=1.7, ge=0, description="eye height above the terrain for the ground footprint [m]")
     outputs: list[Literal["report", "csv", "render"]] = ["report", "csv"]
 
 

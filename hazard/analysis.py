@@ -1,0 +1,494 @@
+"""``hazard.analyze(scene)``: the whole analysis, planned from what the scene needs.
+
+Stages (each reported as ran or skipped, with the reason and its run time):
+
+``mpe`` -> ``rays`` (Embree scene; skipped when the targets are flat and nothing can
+block a line of sight: beam hits are then computed analytically) -> ``beam`` ->
+``history`` (skipped for static materials) -> ``static`` -> ``dynamic`` (the time loop;
+skipped for static materials) -> ``specular`` (delta lobes; skipped if none) ->
+``line_of_sight`` (skipped when nothing can block) -> ``keepout`` -> ``footprint``
+(needs terrain) -> ``exposure``.
+
+Exposure (spec `laser-safety.md` section 4): per observer the irradiance history E(t)
+over the analysis window; peak irradiance; the radiant exposure over the exposure
+duration as a sliding-window maximum of the integral of E; the hazard ratio peak / MPE;
+and the first time at which the accumulated exposure exceeds the MPE for that elapsed
+time. "Static" holds the material's initial state for the whole window.
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import brdfmodels
+
+from . import mpe as _mpe
+from .engine import Beam, Spot, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
+from .keepout import Footprint, Lobe, ground_footprint, hazard_lobe
+from .nohd import attenuation_from_visibility, nohd_direct
+
+__all__ = ["analyze", "HazardResult", "Stage", "TargetResult", "ObserverResults"]
+
+
+@dataclass
+class Stage:
+    name: str
+    ran: bool
+    detail: str
+    seconds: float = 0.0
+
+    def to_dict(self):
+        return {"name": self.name, "ran": self.ran, "detail": self.detail, "seconds": self.seconds}
+
+
+@dataclass
+class TargetResult:
+    """Per-target outcome: the spot, the static and dynamic lobes, the specular NOHD."""
+
+    name: str
+    spot_power_w: float
+    spot_size_m: float
+    static_lobe: Lobe | None
+    dynamic_lobe: Lobe | None
+    specular_nohd_static_m: float | None
+    specular_nohd_dynamic_m: float | None
+    specular_direction: list | None
+    state_name: str | None
+    state_range: list | None
+
+    def to_dict(self):
+        def lobe(lb):
+            return None if lb is None else lb.summary()
+
+        return {
+            "name": self.name,
+            "spot_power_w": self.spot_power_w,
+            "spot_size_m": self.spot_size_m,
+            "nohd_static_m": None if self.static_lobe is None else self.static_lobe.max_range_m,
+            "nohd_dynamic_m": None if self.dynamic_lobe is None else self.dynamic_lobe.max_range_m,
+            "keepout_static": lobe(self.static_lobe),
+            "keepout_dynamic": lobe(self.dynamic_lobe),
+            "specular_nohd_static_m": self.specular_nohd_static_m,
+            "specular_nohd_dynamic_m": self.specular_nohd_dynamic_m,
+            "specular_direction": self.specular_direction,
+            "state_name": self.state_name,
+            "state_range": self.state_range,
+        }
+
+
+@dataclass
+class ObserverResults:
+    """Arrays over the M observer points (file coordinates)."""
+
+    labels: list
+    position_m: np.ndarray
+    static_irradiance_w_m2: np.ndarray
+    peak_irradiance_w_m2: np.ndarray
+    peak_time_s: np.ndarray
+    radiant_exposure_j_m2: np.ndarray
+    static_radiant_exposure_j_m2: np.ndarray
+    first_exceedance_s: np.ndarray
+    line_of_sight: np.ndarray
+    far_field: np.ndarray
+    irradiance_w_m2: np.ndarray  # (M, T) total irradiance history
+
+    def __len__(self):
+        return len(self.labels)
+
+
+@dataclass
+class HazardResult:
+    """Everything an analysis produced, with the stages that ran."""
+
+    scene: object
+    mpe: object
+    mpe_w_m2: float
+    mpe_radiant_exposure_j_m2: float
+    pulse: object | None
+    attenuation_per_m: float
+    times_s: np.ndarray
+    stages: list
+    targets: list
+    observers: ObserverResults
+    spill_w: float
+    blocked_w: float
+    beam_power_w: float
+    footprint_static: Footprint | None = None
+    footprint_dynamic: Footprint | None = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def hazard_ratio(self) -> np.ndarray:
+        return self.observers.peak_irradiance_w_m2 / self.mpe_w_m2
+
+    @property
+    def hazardous(self) -> np.ndarray:
+        return self.hazard_ratio >= 1.0
+
+    @property
+    def hazardous_static(self) -> np.ndarray:
+        return self.observers.static_irradiance_w_m2 / self.mpe_w_m2 >= 1.0
+
+    @property
+    def any_hazard(self) -> bool:
+        return bool(np.any(self.hazardous)) or any(
+            (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
+            for t in self.targets
+        )
+
+    def stage(self, name) -> Stage:
+        return next(s for s in self.stages if s.name == name)
+
+    def verdict_changes(self) -> list:
+        """Observers whose verdict differs between the static and the dynamic analysis."""
+        changed = np.flatnonzero(self.hazardous != self.hazardous_static)
+        return [self.observers.labels[i] for i in changed]
+
+
+# ---------------------------------------------------------------------------------------
+class _FlatScene:
+    """Beam hits on plates and disks by ray-plane intersection (no ray library)."""
+
+    def __init__(self, targets):
+        self.targets = targets
+        self.scale_m = 1.0
+
+    def face_normals(self, faces):
+        return np.stack([self.targets[f].normal for f in faces]) if len(faces) else np.empty((0, 3))
+
+    def first_hit(self, origins, directions):
+        from .rays import Hits
+
+        o = np.asarray(origins, float)
+        d = np.asarray(directions, float)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        n = len(o)
+        best_t = np.full(n, np.inf)
+        best = np.full(n, -1)
+        for t in self.targets:
+            den = d @ t.normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tt = ((t.center_m - o) @ t.normal) / den
+            p = o + d * np.where(np.isfinite(tt), tt, 0)[:, None]
+            q = p - t.center_m
+            x = q @ t.tangent
+            y = q @ np.cross(t.normal, t.tangent)
+            s = t.spec.size_m
+            inside = (np.abs(x) <= s[0] / 2) & (np.abs(y) <= s[1] / 2) if t.spec.shape == "plate" else (x * x + y * y <= (s[0] / 2) ** 2)
+            ok = np.isfinite(tt) & (tt > 0) & inside & (tt < best_t)
+            best_t[ok] = tt[ok]
+            best[ok] = t.index
+        hit = best >= 0
+        point = np.where(hit[:, None], o + d * np.where(hit, best_t, 0)[:, None], np.nan)
+        return Hits(hit, best_t, best, best, point)
+
+
+def _ray_meshes(scene):
+    meshes = [(t.mesh.vertices, t.mesh.faces, t.index) for t in scene.targets]
+    base = len(scene.targets)
+    meshes += [(m.vertices, m.faces, base + i) for i, m in enumerate(scene.occluders)]
+    if scene.terrain is not None:
+        tm = scene.terrain.mesh()
+        meshes.append((tm.vertices, tm.faces, base + len(scene.occluders)))
+    return meshes
+
+
+def _sliding_max_integral(times, e, window):
+    """Max over window positions of the integral of E over [t, t + window] (rows of e)."""
+    if len(times) == 1:
+        return e[:, 0] * window
+    cum = np.concatenate([np.zeros((e.shape[0], 1)), np.cumsum(0.5 * (e[:, 1:] + e[:, :-1]) * np.diff(times), axis=1)], axis=1)
+    span = times[-1] - times[0]
+    if window >= span:
+        return cum[:, -1]
+    starts = times[times <= times[-1] - window]
+    ends = starts + window
+    best = np.zeros(e.shape[0])
+    for s, t in zip(starts, ends):
+        j = np.searchsorted(times, t)
+        # integral up to t: cumulative at node j-1 plus the partial trapezoid
+        t0, t1 = times[j - 1], times[min(j, len(times) - 1)]
+        frac = 0.0 if t1 == t0 else (t - t0) / (t1 - t0)
+        e_t = e[:, j - 1] + frac * (e[:, min(j, len(times) - 1)] - e[:, j - 1])
+        c_t = cum[:, j - 1] + 0.5 * (e[:, j - 1] + e_t) * (t - t0)
+        i = np.searchsorted(times, s)
+        best = np.maximum(best, c_t - cum[:, i])
+    return best
+
+
+def _first_exceedance(times, e, wl, std, alpha):
+    """First time at which the exposure accumulated since the start exceeds the MPE for
+    that elapsed time (nan if never)."""
+    out = np.full(e.shape[0], np.nan)
+    if len(times) < 2:
+        return out
+    cum = np.concatenate([np.zeros((e.shape[0], 1)), np.cumsum(0.5 * (e[:, 1:] + e[:, :-1]) * np.diff(times), axis=1)], axis=1)
+    for j in range(1, len(times)):
+        elapsed = min(max(times[j] - times[0], _mpe.DURATION_MIN_S), _mpe.DURATION_MAX_S)
+        h = _mpe.ocular_mpe(wl, elapsed, standard=std, angular_subtense_rad=alpha).radiant_exposure_j_m2
+        newly = np.isnan(out) & (cum[:, j] > h)
+        out[newly] = times[j]
+    return out
+
+
+def analyze(scene, *, backend="embree", progress=None) -> HazardResult:
+    """Run the hazard analysis of a loaded scene (see the module notes for the stages).
+
+    Parameters
+    ----------
+    scene : scenes.Scene
+    backend : {"embree", "numpy"}
+        Ray engine when rays are needed.
+    progress : callable, optional
+        Called with a short message at each stage (the CLI prints them on stderr).
+    """
+    spec = scene.spec
+    stages = []
+    notes = []
+    say = progress or (lambda msg: None)
+
+    @contextmanager
+    def stage(name, detail=""):
+        say(f"{name}...")
+        t0 = time.perf_counter()
+        st = Stage(name, True, detail)
+        yield st
+        st.seconds = time.perf_counter() - t0
+        stages.append(st)
+
+    def skip(name, why):
+        stages.append(Stage(name, False, why))
+
+    laser = spec.laser
+    wl, t_exp, std = laser.wavelength_nm, spec.exposure.duration_s, spec.exposure.standard
+    with stage("mpe") as st:
+        mpe_res = _mpe.ocular_mpe(wl, t_exp, standard=std)
+        pulse = None
+        mpe_w_m2 = mpe_res.irradiance_w_m2
+        if laser.power_w is None:
+            pulse = _mpe.repetitive_pulse_mpe(wl, laser.pulse_duration_s, laser.prf_hz, t_exp, standard=std)
+            mpe_w_m2 = min(mpe_w_m2, pulse.per_pulse_radiant_exposure_j_m2 * laser.prf_hz)
+            st.detail = f"pulsed: per-pulse MPE x PRF = {pulse.per_pulse_radiant_exposure_j_m2 * laser.prf_hz:.6g} W/m^2 average"
+        else:
+            st.detail = f"{mpe_res.irradiance_w_m2:.6g} W/m^2 for {t_exp:g} s"
+        mpe_h = mpe_w_m2 * t_exp
+    atm = spec.atmosphere
+    if atm.attenuation_per_m is not None:
+        mu = atm.attenuation_per_m
+    elif atm.visibility_km is not None:
+        mu = attenuation_from_visibility(atm.visibility_km, wl)
+    else:
+        mu = 0.0
+
+    flat_only = all(t.spec.shape in ("plate", "disk") for t in scene.targets)
+    need_los = bool(scene.occluders) or scene.terrain is not None or len(scene.targets) > 1 or any(t.spec.shape == "mesh" for t in scene.targets)
+    ray_scene = None
+    if need_los or not flat_only:
+        with stage("rays") as st:
+            from .rays import RayScene
+
+            ray_scene = RayScene(_ray_meshes(scene), backend=backend)
+            st.detail = f"{backend}: {ray_scene.n_triangles} triangles"
+    else:
+        skip("rays", "flat targets and nothing to block a line of sight: beam hits computed analytically")
+    tracer = ray_scene if ray_scene is not None else _FlatScene(scene.targets)
+
+    with stage("beam") as st:
+        beam = sample_beam(scene.laser_position_m, scene.laser_direction, laser.average_power_w, laser.beam_diameter_m,
+                           laser.divergence_rad, spec.analysis.beam_samples)
+        # atmospheric loss on the way to the target, per ray
+        spots, spill, blocked = trace_spots(beam, scene.targets, tracer)
+        for sp in spots:
+            sp.power_w = sp.power_w * np.exp(-mu * sp.range_from_laser_m)
+        st.detail = f"{len(beam.power_w)} rays; {len(spots)} spot(s); spill {spill:.4g} W, blocked {blocked:.4g} W"
+        if spill > 1e-3 * laser.average_power_w:
+            notes.append(f"{100 * spill / laser.average_power_w:.3g} % of the beam misses every target (spill)")
+
+    # -- states over time ------------------------------------------------------------------
+    t_end = spec.analysis.time_end_s or t_exp
+    dt = spec.analysis.time_step_s or t_end / 100.0
+    dynamic_spots = [sp for sp in spots if sp.target.material.is_dynamic]
+    if dynamic_spots:
+        times = np.arange(0.0, t_end + 0.5 * dt, dt)
+        times[-1] = min(times[-1], t_end) if len(times) > 1 else times[-1]
+    else:
+        times = np.array([0.0])
+    states = {}
+    if dynamic_spots:
+        with stage("history") as st:
+            parts = []
+            for sp in dynamic_spots:
+                t = sp.target
+                hist = t.history
+                if t.spec.history.kind == "heating":
+                    hs = t.spec.history
+                    kw = {}
+                    if hs.thickness_m is not None:
+                        kw["thickness_m"] = hs.thickness_m
+                    if hs.initial_reflectance is not None:
+                        kw["initial_reflectance"] = hs.initial_reflectance
+                    if hs.oxidation is not None:
+                        kw["oxidation"] = brdfmodels.OxidationModel(**hs.oxidation.model_dump())
+                    plate = getattr(brdfmodels.ThinPlateHeating, hs.plate)(**kw)
+                    d_spot = beam.diameter_at(sp.mean_range_m)
+                    irr = 4 * sp.total_power_w / (math.pi * d_spot**2)  # peak of the Gaussian spot
+                    res = plate.solve(times if len(times) > 1 else np.array([0.0, t_end]), irr, rtol=hs.rtol)
+                    hist = res.history(hs.state, extrapolation="clamp")
+                    parts.append(f"{t.name}: heating at {irr:.4g} W/m^2, T_max {res.temperature_k.max():.0f} K")
+                else:
+                    parts.append(f"{t.name}: measured series")
+                states[t.index] = hist.state_at(times)
+            st.detail = "; ".join(parts)
+    else:
+        skip("history", "no dynamic material")
+
+    def initial(sp):
+        return None if sp.target.index not in states else states[sp.target.index][:1]
+
+    obs = scene.observers
+    m = len(obs)
+    pos = obs.positions_m
+    gain = obs.optical_gain
+    with stage("static") as st:
+        e_static = np.zeros(m)
+        far_any = np.zeros(m, bool)
+        per_spot_static = []
+        for sp in spots:
+            e, far = spot_irradiance(sp, pos, gain, mu, initial(sp))
+            e = e[:, 0] if e.ndim == 2 else e
+            per_spot_static.append(e)
+            far_any |= far
+        st.detail = f"{m} observers; {int(far_any.sum())} far-field (spot as a point source), {m - int(far_any.sum())} summed over hits"
+
+    per_spot_dyn = []
+    if dynamic_spots and m:
+        with stage("dynamic") as st:
+            for sp in spots:
+                if sp.target.index in states:
+                    e, _ = spot_irradiance(sp, pos, gain, mu, states[sp.target.index])
+                else:
+                    e = np.repeat(per_spot_static[spots.index(sp)][:, None], len(times), axis=1)
+                per_spot_dyn.append(e)
+            st.detail = f"{m} observers x {len(times)} times"
+    else:
+        skip("dynamic", "no dynamic material" if not dynamic_spots else "no observers")
+        per_spot_dyn = [e[:, None] for e in per_spot_static]
+
+    spec_spots = [sp for sp in spots if sp.target.material.has_specular]
+    if spec_spots:
+        with stage("specular") as st:
+            for k, sp in enumerate(spots):
+                if not sp.target.material.has_specular:
+                    continue
+                st_s = specular_irradiance(sp, pos, gain, mu, beam, initial(sp))
+                per_spot_static[k] = per_spot_static[k] + (st_s[:, 0] if st_s.ndim == 2 else st_s)
+                sts = states.get(sp.target.index)
+                dyn = specular_irradiance(sp, pos, gain, mu, beam, sts) if sts is not None else st_s.reshape(m, -1)
+                per_spot_dyn[k] = per_spot_dyn[k] + dyn
+            st.detail = f"{len(spec_spots)} mirror lobe(s) traced as reflected beams (image source, folded path)"
+    else:
+        skip("specular", "no ideal-mirror (delta) lobe")
+
+    los = np.ones((len(spots), m), bool)
+    if need_los and m and spots:
+        with stage("line_of_sight") as st:
+            for k, sp in enumerate(spots):
+                start = sp.centroid + sp.mean_frame[2] * 1e-6 * max(ray_scene.scale_m, 1.0)
+                los[k] = ~ray_scene.occluded(np.broadcast_to(start, (m, 3)), pos)
+            st.detail = f"{len(spots) * m} segments against {ray_scene.n_triangles} triangles; {int((~los).sum())} blocked"
+    else:
+        skip("line_of_sight", "nothing can block a line of sight (no occluders, no terrain, one target)" if not need_los else "no observers")
+
+    e_static = sum(los[k] * per_spot_static[k] for k in range(len(spots))) if spots else np.zeros(m)
+    e_t = sum(los[k][:, None] * per_spot_dyn[k] for k in range(len(spots))) if spots else np.zeros((m, 1))
+    e_t = np.broadcast_to(e_t, (m, len(times))).copy() if m else np.zeros((0, len(times)))
+
+    # -- keep-out ----------------------------------------------------------------------------
+    a = spec.analysis
+    target_results = []
+    with stage("keepout") as st:
+        for sp in spots:
+            t = sp.target
+            dyn_states = None
+            if t.index in states:
+                s_hist = states[t.index]
+                nodes = t.material.state_nodes()
+                lo, hi = s_hist.min(), s_hist.max()
+                dyn_states = np.unique(np.concatenate([s_hist, nodes[(nodes >= lo) & (nodes <= hi)]]))
+            static_lobe = hazard_lobe(sp, mpe_w_m2, mu, states=initial(sp), grid_deg=a.direction_grid_deg, refine_levels=a.refine_levels)
+            dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(
+                sp, mpe_w_m2, mu, states=dyn_states, grid_deg=a.direction_grid_deg, refine_levels=a.refine_levels)
+            spec_static = spec_dyn = spec_dir = None
+            if t.material.has_specular:
+                p0 = specular_power_w(sp, initial(sp))
+                p0 = float(np.max(p0))
+                pd = float(np.max(specular_power_w(sp, dyn_states))) if dyn_states is not None else p0
+                spec_static = nohd_direct(p0, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu).nohd_m
+                spec_dyn = nohd_direct(pd, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu).nohd_m
+                spec_static = max(spec_static - sp.mean_range_m, 0.0)
+                spec_dyn = max(spec_dyn - sp.mean_range_m, 0.0)
+                spec_dir = mirror_axis(sp).tolist()
+            target_results.append(TargetResult(
+                t.name, sp.total_power_w, sp.size_m, static_lobe, dynamic_lobe, spec_static, spec_dyn, spec_dir,
+                t.material.state_name if t.material.is_dynamic else None,
+                [float(states[t.index].min()), float(states[t.index].max())] if t.index in states else None,
+            ))
+        st.detail = f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
+
+    fp_static = fp_dyn = None
+    if scene.terrain is not None and spots:
+        with stage("footprint") as st:
+            eye = a.footprint_eye_height_m
+            rmax = max([tr.dynamic_lobe.max_range_m for tr in target_results] + [tr.specular_nohd_dynamic_m or 0.0 for tr in target_results])
+            fp_static = ground_footprint(spots, beam, scene.terrain, ray_scene, mpe_w_m2, mu, eye, states=None, max_range_m=rmax)
+            if dynamic_spots:
+                fp_dyn = ground_footprint(spots, beam, scene.terrain, ray_scene, mpe_w_m2, mu, eye,
+                                          states=np.unique(np.concatenate([states[s.target.index] for s in dynamic_spots])), max_range_m=rmax)
+            else:
+                fp_dyn = fp_static
+            st.detail = f"hazardous ground at {eye:g} m eye height: static {fp_static.area_m2:.4g} m^2, dynamic {fp_dyn.area_m2:.4g} m^2"
+    else:
+        skip("footprint", "no terrain" if scene.terrain is None else "no spot")
+
+    with stage("exposure") as st:
+        peak = e_t.max(axis=1) if m else np.zeros(0)
+        peak_t = times[e_t.argmax(axis=1)] if m else np.zeros(0)
+        h = _sliding_max_integral(times, e_t, t_exp) if dynamic_spots and m else e_t[:, 0] * t_exp if m else np.zeros(0)
+        h_static = e_static * t_exp
+        first = _first_exceedance(times, e_t, wl, std, 0.0) if (dynamic_spots and m) else np.where(e_static > mpe_w_m2, 0.0, np.nan)
+        st.detail = f"window {t_exp:g} s over {len(times)} time(s)"
+    observers = ObserverResults(
+        labels=obs.labels(),
+        position_m=scene.to_world(pos) if m else np.zeros((0, 3)),
+        static_irradiance_w_m2=e_static,
+        peak_irradiance_w_m2=peak,
+        peak_time_s=peak_t,
+        radiant_exposure_j_m2=h,
+        static_radiant_exposure_j_m2=h_static,
+        first_exceedance_s=first,
+        line_of_sight=los.any(axis=0) if spots else np.ones(m, bool),
+        far_field=far_any,
+        irradiance_w_m2=e_t,
+    )
+    return HazardResult(scene, mpe_res, mpe_w_m2, mpe_h, pulse, mu, times, stages, target_results, observers, spill, blocked,
+                        float(beam.power_w.sum()), fp_static, fp_dyn, notes)
+
+
+def versions() -> dict:
+    import scipy
+
+    from . import __version__
+
+    return {
+        "laser-hazard": __version__,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "brdfmodels": brdfmodels.__version__,
+    }

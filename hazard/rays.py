@@ -1,0 +1,185 @@
+"""Ray queries on the scene's triangles: Embree (embreex raw API) or trimesh's numpy engine.
+
+Facts this module is built on (spec `engineering-notes.md`, checked against embreex's
+source): Embree takes float32 only, so callers pass local coordinates near the origin
+(scenes re-centre them); finite segments exist only in the raw API (``dists`` is tfar in
+units of |dir|, and is overwritten in place, so a fresh array is passed every call);
+tnear is fixed at 0, so rays leaving a surface start a small distance off it; the query
+releases the GIL, so two threads over chunks nearly double throughput; the scene is
+built once and reused.
+
+Both backends share one interface and are tested against each other.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["RayScene", "Hits", "BACKENDS"]
+
+BACKENDS = ("embree", "numpy")
+_CHUNK = 65536
+
+
+@dataclass
+class Hits:
+    """First hits of N rays: ``hit`` mask, distance ``t`` [m], ``face`` and ``obj`` index
+    (-1 where nothing was hit) and the hit ``point`` (N, 3) in float64."""
+
+    hit: np.ndarray
+    t: np.ndarray
+    face: np.ndarray
+    obj: np.ndarray
+    point: np.ndarray
+
+
+class RayScene:
+    """Triangles of several objects, queried for first hits and segment occlusion.
+
+    Parameters
+    ----------
+    meshes : sequence of (vertices (V, 3), faces (F, 3), object_id)
+        Local coordinates [m]; ``object_id`` labels which object each triangle belongs to.
+    backend : {"embree", "numpy"}
+    threads : int
+        Worker threads for large Embree batches.
+    """
+
+    def __init__(self, meshes, backend="embree", threads=2):
+        if backend not in BACKENDS:
+            raise ValueError(f"backend={backend!r}: expected one of {list(BACKENDS)}")
+        verts, faces, objs = [], [], []
+        base = 0
+        for v, f, oid in meshes:
+            v = np.asarray(v, float)
+            f = np.asarray(f, np.int64)
+            verts.append(v)
+            faces.append(f + base)
+            objs.append(np.full(len(f), oid))
+            base += len(v)
+        self.vertices = np.vstack(verts) if verts else np.empty((0, 3))
+        self.faces = np.vstack(faces) if faces else np.empty((0, 3), np.int64)
+        self.face_object = np.concatenate(objs) if objs else np.empty(0, int)
+        self.backend = backend
+        self.threads = max(1, int(threads))
+        self.scale_m = float(np.ptp(self.vertices, axis=0).max()) if len(self.vertices) else 1.0
+        self._impl = None
+        if len(self.faces):
+            self._impl = _EmbreeImpl(self.vertices, self.faces) if backend == "embree" else _NumpyImpl(self.vertices, self.faces)
+
+    @property
+    def n_triangles(self) -> int:
+        return int(len(self.faces))
+
+    def face_normals(self, faces) -> np.ndarray:
+        v = self.vertices[self.faces[faces]]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+    def first_hit(self, origins, directions) -> Hits:
+        """Nearest hit along each ray (directions need not be unit length; ``t`` is in m)."""
+        o = np.asarray(origins, float)
+        d = np.asarray(directions, float)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        n = len(o)
+        if self._impl is None or n == 0:
+            return Hits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1), np.full(n, -1), np.full((n, 3), np.nan))
+        face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), n, 2)
+        hit = face >= 0
+        if np.any(hit):
+            # refine t in float64 against the hit triangle's plane (Embree works in float32)
+            f = face[hit]
+            nrm = self.face_normals(f)
+            v0 = self.vertices[self.faces[f, 0]]
+            den = np.einsum("ij,ij->i", d[hit], nrm)
+            good = np.abs(den) > 1e-12
+            t_ref = t[hit].copy()
+            t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[hit][good], nrm[good]) / den[good]
+            t = t.copy()
+            t[hit] = t_ref
+        t = np.where(hit, t, np.inf)
+        point = np.where(hit[:, None], o + d * np.where(hit, t, 0.0)[:, None], np.nan)
+        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
+        return Hits(hit, t, face, obj, point)
+
+    def occluded(self, starts, ends, *, end_clearance_m=None) -> np.ndarray:
+        """True where the open segment start -> end crosses a triangle.
+
+        ``end_clearance_m`` shortens each segment at its end (observers standing on a
+        surface must not be blocked by it); the default is 1e-6 of the scene size.
+        Callers start segments a little off the surface they leave (tnear is 0).
+        """
+        s = np.asarray(starts, float)
+        e = np.asarray(ends, float)
+        n = len(s)
+        if self._impl is None or n == 0:
+            return np.zeros(n, bool)
+        clear = 1e-6 * self.scale_m if end_clearance_m is None else float(end_clearance_m)
+        vec = e - s
+        length = np.linalg.norm(vec, axis=1)
+        frac = np.clip(1.0 - clear / np.maximum(length, 1e-300), 0.0, 1.0)
+        (occ,) = self._map(lambda a, b: (self._impl.occluded(s[a:b], vec[a:b], frac[a:b]),), n, 1)
+        return occ
+
+    def _map(self, fn, n, n_out):
+        if self.backend != "embree" or self.threads == 1 or n <= 2 * _CHUNK:
+            return fn(0, n)
+        bounds = [(a, min(a + _CHUNK, n)) for a in range(0, n, _CHUNK)]
+        with ThreadPoolExecutor(self.threads) as pool:
+            parts = list(pool.map(lambda ab: fn(*ab), bounds))
+        return tuple(np.concatenate([p[i] for p in parts]) for i in range(n_out))
+
+
+class _EmbreeImpl:
+    def __init__(self, vertices, faces):
+        from embreex import mesh_construction, rtcore_scene
+
+        self.scene = rtcore_scene.EmbreeScene()
+        self.mesh = mesh_construction.TriangleMesh(self.scene, vertices.astype(np.float32), faces.astype(np.int32))
+
+    def first(self, o, d):
+        out = self.scene.run(o.astype(np.float32), d.astype(np.float32), output=True)
+        face = out["primID"].astype(np.int64)
+        return face, out["tfar"].astype(float)
+
+    def occluded(self, s, vec, frac):
+        # dists is tfar in units of |dir|; a fresh float32 array each call (Embree writes it)
+        res = self.scene.run(s.astype(np.float32), vec.astype(np.float32), dists=frac.astype(np.float32), query="OCCLUDED")
+        return res == 0
+
+
+class _NumpyImpl:
+    def __init__(self, vertices, faces):
+        import trimesh
+
+        self.mesh = trimesh.Trimesh(vertices, faces, process=False)
+        self.engine = trimesh.ray.ray_triangle.RayMeshIntersector(self.mesh)
+
+    def first(self, o, d):
+        tri, ray, loc = self.engine.intersects_id(o, d, multiple_hits=True, return_locations=True)
+        n = len(o)
+        face = np.full(n, -1, np.int64)
+        t = np.full(n, np.inf)
+        if len(tri):
+            dist = np.einsum("ij,ij->i", loc - o[ray], d[ray])
+            ok = dist > 0
+            order = np.lexsort((dist[ok], ray[ok]))
+            r, f, dd = ray[ok][order], tri[ok][order], dist[ok][order]
+            first = np.r_[True, r[1:] != r[:-1]]
+            face[r[first]] = f[first]
+            t[r[first]] = dd[first]
+        return face, t
+
+    def occluded(self, s, vec, frac):
+        length = np.linalg.norm(vec, axis=1)
+        d = vec / np.maximum(length, 1e-300)[:, None]
+        tri, ray, loc = self.engine.intersects_id(s, d, multiple_hits=True, return_locations=True)
+        occ = np.zeros(len(s), bool)
+        if len(tri):
+            dist = np.einsum("ij,ij->i", loc - s[ray], d[ray])
+            block = (dist > 0) & (dist < length[ray] * frac[ray])
+            occ[ray[block]] = True
+        return occ

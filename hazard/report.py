@@ -1,0 +1,154 @@
+"""Outputs of an analysis: ``report.json`` (every step) and ``observers.csv``, atomically.
+
+Each file is written to a temporary name in the output folder and renamed into place, so
+a crash never leaves a half-written report. An existing report is never overwritten
+unless asked (``force=True``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows"]
+
+REPORT_FORMAT = "laser-hazard.report"
+REPORT_VERSION = 1
+
+
+class OutputExistsError(FileExistsError):
+    pass
+
+
+def _num(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def observer_rows(result) -> list:
+    obs = result.observers
+    ratio = result.hazard_ratio
+    rows = []
+    for i, name in enumerate(obs.labels):
+        rows.append({
+            "name": name,
+            "position_m": [float(v) for v in obs.position_m[i]],
+            "peak_irradiance_w_m2": float(obs.peak_irradiance_w_m2[i]),
+            "peak_time_s": float(obs.peak_time_s[i]),
+            "static_irradiance_w_m2": float(obs.static_irradiance_w_m2[i]),
+            "radiant_exposure_j_m2": float(obs.radiant_exposure_j_m2[i]),
+            "static_radiant_exposure_j_m2": float(obs.static_radiant_exposure_j_m2[i]),
+            "mpe_w_m2": float(result.mpe_w_m2),
+            "mpe_radiant_exposure_j_m2": float(result.mpe_radiant_exposure_j_m2),
+            "hazard_ratio": float(ratio[i]),
+            "exposure_ratio": float(obs.radiant_exposure_j_m2[i] / result.mpe_radiant_exposure_j_m2),
+            "hazardous": bool(result.hazardous[i]),
+            "hazardous_static": bool(result.hazardous_static[i]),
+            "first_exceedance_s": _num(obs.first_exceedance_s[i]),
+            "line_of_sight": bool(obs.line_of_sight[i]),
+            "far_field": bool(obs.far_field[i]),
+        })
+    return rows
+
+
+def report_dict(result) -> dict:
+    """The report as plain data: versions, scene echo and hash, MPE with its steps,
+    stages, per-target NOHD and keep-out summaries, per-observer verdicts."""
+    from .analysis import versions
+
+    scene = result.scene
+    fp = {}
+    for key, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
+        if f is not None:
+            fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
+    return {
+        "format": REPORT_FORMAT,
+        "version": REPORT_VERSION,
+        "versions": versions(),
+        "scene": {"name": scene.name, "source": scene.source, "sha256": scene.text_sha256,
+                  "offset_m": scene.offset_m.tolist(), "echo": scene.echo()},
+        "mpe": result.mpe.to_dict(),
+        "pulse": None if result.pulse is None else result.pulse.to_dict(),
+        "mpe_w_m2": result.mpe_w_m2,
+        "attenuation_per_m": result.attenuation_per_m,
+        "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w},
+        "stages": [s.to_dict() for s in result.stages],
+        "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
+        "targets": [t.to_dict() for t in result.targets],
+        "footprint": fp or None,
+        "observers": observer_rows(result),
+        "verdict_changes": result.verdict_changes(),
+        "any_hazard": result.any_hazard,
+        "notes": list(result.notes),
+    }
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "peak_time_s",
+               "radiant_exposure_j_m2", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
+               "first_exceedance_s", "line_of_sight", "far_field"]
+
+
+def _csv_text(rows) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(CSV_COLUMNS)
+    for r in rows:
+        x, y, z = r["position_m"]
+        w.writerow([r["name"], repr(x), repr(y), repr(z)] + [
+            "" if r[k] is None else (repr(r[k]) if isinstance(r[k], float) else r[k]) for k in CSV_COLUMNS[4:]
+        ])
+    return buf.getvalue()
+
+
+def write_outputs(result, outdir, *, force=False) -> list:
+    """Write report.json and observers.csv into ``outdir`` (created if needed)."""
+    out = Path(outdir)
+    targets = [out / "report.json", out / "observers.csv"]
+    existing = [p for p in targets if p.exists()]
+    if existing and not force:
+        raise OutputExistsError(f"{existing[0]} exists: pass --force to overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    doc = report_dict(result)
+    atomic_write_text(targets[0], json.dumps(doc, indent=1, allow_nan=False))
+    atomic_write_text(targets[1], _csv_text(doc["observers"]))
+    return targets
+
+
+def summary_text(result) -> str:
+    """A short human summary (stdout of ``hazard run``)."""
+    lines = [f"Scene {result.scene.name!r}: MPE {result.mpe_w_m2:.6g} W/m^2 ({result.mpe.standard}, {result.mpe.duration_s:g} s)"]
+    for s in result.stages:
+        lines.append(f"  {'ran    ' if s.ran else 'skipped'} {s.name:14s} {s.detail}" + (f" [{s.seconds:.3g} s]" if s.ran else ""))
+    for t in result.targets:
+        d = t.to_dict()
+        lines.append(f"  target {t.name}: NOHD static {d['nohd_static_m']:.4g} m, dynamic {d['nohd_dynamic_m']:.4g} m"
+                     + (f"; mirror lobe beyond target: static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m"
+                        if t.specular_nohd_static_m is not None else ""))
+    n_h = int(np.sum(result.hazardous))
+    lines.append(f"  observers: {len(result.observers)} points, {n_h} hazardous (static: {int(np.sum(result.hazardous_static))})")
+    changed = result.verdict_changes()
+    if changed:
+        lines.append(f"  verdict changes static -> dynamic: {', '.join(changed[:10])}" + (" ..." if len(changed) > 10 else ""))
+    for n in result.notes:
+        lines.append(f"  note: {n}")
+    return "\n".join(lines)
