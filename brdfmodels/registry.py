@@ -10,10 +10,10 @@ the first lookup. Saved models are JSON documents rebuilt by looking the model u
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from importlib.metadata import entry_points
 from pathlib import Path
+
+from ._io import atomic_write_text
 
 __all__ = [
     "register",
@@ -123,18 +123,7 @@ def loads(text: str):
 
 def save(model, path) -> Path:
     """Write ``model`` as versioned JSON to ``path`` atomically (temporary file, then rename)."""
-    path = Path(path)
-    text = dumps(model)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent or ".")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return atomic_write_text(path, dumps(model))
 
 
 def load(path):

@@ -11,11 +11,11 @@ import csv
 import io
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from brdfmodels._io import atomic_write_text
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows"]
 
@@ -58,6 +58,18 @@ def observer_rows(result) -> list:
     return rows
 
 
+def _json_safe(obj):
+    """Non-finite floats as the strings "inf", "-inf", "nan" (JSON has no such numbers;
+    an infinite NOHD - a collimated beam without attenuation - must not vanish)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
 def report_dict(result) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts."""
@@ -68,7 +80,7 @@ def report_dict(result) -> dict:
     for key, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
-    return {
+    return _json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
         "versions": versions(),
@@ -87,20 +99,7 @@ def report_dict(result) -> dict:
         "verdict_changes": result.verdict_changes(),
         "any_hazard": result.any_hazard,
         "notes": list(result.notes),
-    }
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    })
 
 
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "peak_time_s",

@@ -132,7 +132,8 @@ def _optical_gain(o) -> float:
 
 def _identity_factor(model):
     """Scale a static material by the reflectance factor R(t)/R(0) carried as the state."""
-    table = brdfmodels.StateTable([0.0, 1.0], [0.0, 1.0], "reflectance_factor", extrapolation="error")
+    # identity on [0, 1000]: factors above 1 are real (cleaning raises copper's reflectance)
+    table = brdfmodels.StateTable([0.0, 1000.0], [0.0, 1000.0], "reflectance_factor", extrapolation="error")
     return brdfmodels.Scaled(model, table)
 
 

@@ -299,8 +299,6 @@ def test_entry_point_plugins_are_registered(monkeypatch):
 def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     target = tmp_path / "m.json"
     target.write_text("old")
-    from brdfmodels import registry
-
     class Unserialisable(bm.Lambertian):
         def to_dict(self):
             return {"type": "lambertian", "params": {"reflectance": float("nan")}}  # json refuses nan
@@ -312,7 +310,9 @@ def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     def failing_write(*a, **k):
         raise RuntimeError("disk full")
 
-    monkeypatch.setattr(registry.os, "replace", failing_write)
+    from brdfmodels import _io
+
+    monkeypatch.setattr(_io.os, "replace", failing_write)
     with pytest.raises(RuntimeError):
         bm.save(bm.Lambertian(0.5), target)
     assert target.read_text() == "old" and list(tmp_path.iterdir()) == [target]
