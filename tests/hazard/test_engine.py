@@ -1,0 +1,242 @@
+"""The reflection hazard engine against analytic oracles, and its plan, outputs and CLI."""
+
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import quad
+
+import hazard
+import scenes
+from hazard.analysis import _sliding_max_integral
+from hazard.cli import main
+from hazard.report import write_outputs
+
+PLATE = """
+name = "t"
+[laser]
+wavelength_nm = 1064.0
+power_w = {power}
+beam_diameter_m = 0.005
+divergence_rad = 0.001
+position_m = [0.0, -50.0, 0.0]
+aim_m = [0.0, 0.0, 0.0]
+[exposure]
+duration_s = 10.0
+[atmosphere]
+attenuation_per_m = {mu}
+[[targets]]
+name = "plate"
+shape = "plate"
+center_m = [0.0, 0.0, 0.0]
+normal = [0.0, -1.0, 0.0]
+tangent = [1.0, 0.0, 0.0]
+size_m = [1.0, 1.0]
+material = {material}
+{extra}
+[analysis]
+beam_samples = {samples}
+direction_grid_deg = {grid}
+refine_levels = {levels}
+"""
+
+
+def plate(power=100.0, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=256, grid=2.0, levels=3, observers=()):
+    obs = "".join(f'[[observers]]\nname = "o{i}"\npoints_m = [{list(map(float, p))}]\n' for i, p in enumerate(observers))
+    return scenes.loads(PLATE.format(power=power, mu=mu, material=material, extra=extra + "\n" + obs, samples=samples, grid=grid, levels=levels))
+
+
+def test_lambertian_plate_far_field_oracle():
+    # E = rho P cos(theta_r) / (pi R^2) (spec section 3.1; ANSI diffuse form)
+    angles = np.radians([0.0, 30.0, 60.0, 85.0, 89.9])
+    pts = [(30 * math.sin(a), -30 * math.cos(a), 0.0) for a in angles]
+    res = hazard.analyze(plate(observers=pts))
+    expected = 0.5 * 100.0 * np.cos(angles) / (math.pi * 30.0**2)
+    np.testing.assert_allclose(res.observers.static_irradiance_w_m2, expected, rtol=1e-9)
+    assert np.all(res.observers.far_field)
+    # its lobe maximum is the diffuse NHZ of the same power and MPE
+    assert res.targets[0].static_lobe.max_range_m == pytest.approx(hazard.nohd_diffuse(100.0, 50.0, 0.5).nohd_m, rel=1e-9)
+
+
+def test_lambertian_plate_near_field_sums_over_the_gaussian_spot():
+    z = 0.3  # a few spot sizes away: near field
+    res = hazard.analyze(plate(observers=[(0.0, -z, 0.0)], samples=1024))
+    assert not res.observers.far_field[0]
+    d = 0.005 + 50 * 0.001  # 1/e diameter at the plate
+    e0 = 4 * 100.0 / (math.pi * d**2)
+    ref = quad(lambda r: 0.5 / math.pi * z / (z * z + r * r) ** 1.5 * e0 * math.exp(-4 * r * r / d**2) * 2 * math.pi * r, 0, 10 * d)[0]
+    assert res.observers.static_irradiance_w_m2[0] == pytest.approx(ref, rel=1e-6)
+
+
+def test_flat_mirror_is_the_direct_beam_at_the_folded_range():
+    # mirror at 45 deg: reflected beam along -x; E = rho 4 P / (pi D^2) with D = a + (R1 + z) phi
+    mat = "{ model = \"specular\", reflectance = 0.9 }"
+    scene = plate(material=mat, observers=[(-100.0, 0.0, 0.0), (-100.0, 0.0, 0.1)])
+    scene_text = PLATE.format(power=100.0, mu=0.0, material=mat, extra="", samples=256, grid=2.0, levels=3)
+    scene_text = scene_text.replace("normal = [0.0, -1.0, 0.0]", "normal = [-0.7071067811865476, -0.7071067811865476, 0.0]")
+    scene_text = scene_text.replace("tangent = [1.0, 0.0, 0.0]", "tangent = [0.7071067811865476, -0.7071067811865476, 0.0]")
+    scene_text += '[[observers]]\nname = "axis"\npoints_m = [[-100.0, 0.0, 0.0]]\n[[observers]]\nname = "off"\npoints_m = [[-100.0, 0.0, 0.1]]\n'
+    scene = scenes.loads(scene_text)
+    res = hazard.analyze(scene)
+    d = 0.005 + 150 * 0.001
+    on_axis = 0.9 * 4 * 100 / (math.pi * d * d)
+    e = res.observers.static_irradiance_w_m2
+    assert e[0] == pytest.approx(on_axis, rel=1e-3)
+    assert e[1] == pytest.approx(on_axis * math.exp(-4 * 0.01 / d**2), rel=1e-3)
+    # the mirror lobe's NOHD beyond the mirror = folded direct-beam NOHD minus the 50 m to it
+    folded = hazard.nohd_specular(100.0, 50.0, 0.005, 0.001, 0.9).nohd_m
+    assert res.targets[0].specular_nohd_static_m == pytest.approx(folded - 50.0, rel=1e-3)
+    assert res.stage("specular").ran
+
+
+def test_occlusion_by_a_box():
+    res = hazard.analyze(scenes.load(scenes.example_path("plate")))
+    e = dict(zip(res.observers.labels, res.observers.static_irradiance_w_m2))
+    assert e["west-behind-box"] == 0.0 and e["east"] > 0
+    assert res.stage("line_of_sight").ran and res.stage("rays").ran
+
+
+def test_plan_leaves_out_what_the_scene_does_not_need():
+    res = hazard.analyze(plate(observers=[(5.0, -20.0, 0.0)]))
+    ran = {s.name: s.ran for s in res.stages}
+    assert ran == {"mpe": True, "rays": False, "beam": True, "history": False, "static": True, "dynamic": False,
+                   "specular": False, "line_of_sight": False, "keepout": True, "footprint": False, "exposure": True}
+    assert "analytically" in res.stage("rays").detail
+
+
+def test_analytic_beam_hits_equal_ray_traced_ones():
+    pts = [(5.0, -20.0, 1.0), (-3.0, -8.0, 2.0)]
+    flat = hazard.analyze(plate(observers=pts))
+    far_box = '[[occluders]]\nshape = "box"\ncenter_m = [100.0, 100.0, 100.0]\nsize_m = [1.0, 1.0, 1.0]'
+    traced = hazard.analyze(plate(observers=pts, extra=far_box))
+    assert traced.stage("rays").ran and not flat.stage("rays").ran
+    np.testing.assert_allclose(traced.observers.static_irradiance_w_m2, flat.observers.static_irradiance_w_m2, rtol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["range_terrain", "plate", "mirror_window"])
+def test_embree_and_numpy_engines_agree(name):
+    scene = scenes.load(scenes.example_path(name))
+    a = hazard.analyze(scene, backend="embree")
+    b = hazard.analyze(scene, backend="numpy")
+    np.testing.assert_array_equal(a.observers.line_of_sight, b.observers.line_of_sight)
+    np.testing.assert_allclose(a.observers.static_irradiance_w_m2, b.observers.static_irradiance_w_m2, rtol=1e-7, atol=1e-12)
+    if a.footprint_static is not None:
+        np.testing.assert_array_equal(a.footprint_static.mask, b.footprint_static.mask)
+
+
+@given(p1=st.floats(1.0, 1e5), p2=st.floats(1.0, 1e5), m1=st.floats(0, 0.05), m2=st.floats(0, 0.05))
+@settings(max_examples=15, deadline=None)
+def test_property_keepout_monotone_in_power_and_attenuation(p1, p2, m1, m2):
+    lo_p, hi_p = sorted((p1, p2))
+    lo_m, hi_m = sorted((m1, m2))
+    r = lambda p, m: hazard.analyze(plate(power=p, mu=m, grid=10.0, levels=0, samples=16)).targets[0].static_lobe.max_range_m
+    assert r(hi_p, lo_m) >= r(lo_p, lo_m) * (1 - 1e-12)
+    assert r(hi_p, hi_m) <= r(hi_p, lo_m) * (1 + 1e-12)
+
+
+def test_sliding_window_exposure():
+    t = np.linspace(0, 10, 101)
+    e = np.vstack([np.ones_like(t), t, np.where(t < 5, 0.0, 2.0)])
+    h = _sliding_max_integral(t, e, 2.0)
+    np.testing.assert_allclose(h, [2.0, 18.0, 4.0], rtol=1e-12)
+    # E(t) is piecewise linear between samples: the ramp 4.9 -> 5.0 s adds 0.5 * 0.1 * 2
+    np.testing.assert_allclose(_sliding_max_integral(t, e, 20.0), [10.0, 50.0, 10.1], rtol=1e-12)
+
+
+def test_dynamic_scene_states_and_verdicts():
+    res = hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
+    assert res.stage("history").ran and res.stage("dynamic").ran
+    copper = next(t for t in res.targets if t.name == "copper")
+    assert copper.state_range == [pytest.approx(0.1), pytest.approx(1.3)]
+    # the reflectance rises 30 % by cleaning: the dynamic lobe reaches further than the static one
+    assert copper.dynamic_lobe.max_range_m == pytest.approx(copper.static_lobe.max_range_m * math.sqrt(1.3), rel=1e-6)
+    assert res.observers.irradiance_w_m2.shape == (len(res.observers), len(res.times_s))
+    assert np.all(res.observers.peak_irradiance_w_m2 >= res.observers.irradiance_w_m2[:, 0] - 1e-12)
+    steel = next(t for t in res.targets if t.name == "stainless")
+    assert steel.state_range[0] == pytest.approx(0.311) and steel.state_range[1] > 1.0
+
+
+def test_dynamic_irradiance_equals_static_material_at_that_state():
+    from hazard.engine import Spot, spot_irradiance
+
+    scene = scenes.load(scenes.example_path("witness_screen"))
+    res = hazard.analyze(scene)
+    t = scene.targets[0]
+    dyn = t.material
+    from hazard.analysis import _FlatScene
+    from hazard.engine import sample_beam, trace_spots
+
+    beam = sample_beam(scene.laser_position_m, scene.laser_direction, 230.0, 0.005, 0.001, 256)
+    (spot,), _, _ = trace_spots(beam, scene.targets, _FlatScene(scene.targets))
+    pts = scene.observers.positions_m[::97]
+    gain = np.ones(len(pts))
+    states = np.array([0.311, 0.7, 1.3])
+    e_many, _ = spot_irradiance(spot, pts, gain, 0.0, states)
+    for j, s in enumerate(states):
+        t_static = type(t)(**{**t.__dict__, "material": dyn.at_state(s)})
+        spot_s = Spot(t_static, spot.points, spot.power_w, spot.incoming, spot.frames, spot.range_from_laser_m)
+        e1, _ = spot_irradiance(spot_s, pts, gain, 0.0)
+        np.testing.assert_allclose(e_many[:, j], e1, rtol=1e-10)
+    assert res.verdict_changes()  # broadening and dimming change some screen verdicts
+
+
+@pytest.mark.parametrize("name", sorted(scenes.examples()))
+def test_every_bundled_scene_runs(name, tmp_path):
+    res = hazard.analyze(scenes.load(scenes.example_path(name)))
+    paths = write_outputs(res, tmp_path)
+    doc = json.loads(paths[0].read_text())
+    assert doc["scene"]["name"] == name and doc["mpe"]["irradiance_w_m2"] > 0
+    for o in doc["observers"]:
+        assert {"name", "position_m", "peak_irradiance_w_m2", "static_irradiance_w_m2", "mpe_w_m2", "hazard_ratio",
+                "hazardous", "hazardous_static"} <= set(o)
+        assert o["hazardous"] == (o["hazard_ratio"] >= 1.0)
+
+
+def test_report_is_atomic_and_never_overwrites(tmp_path):
+    res = hazard.analyze(scenes.load(scenes.example_path("plate")))
+    write_outputs(res, tmp_path)
+    with pytest.raises(FileExistsError, match="pass --force"):
+        write_outputs(res, tmp_path)
+    write_outputs(res, tmp_path, force=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["observers.csv", "report.json"]
+    lines = (tmp_path / "observers.csv").read_text().splitlines()
+    assert lines[0].startswith("name,x_m,y_m,z_m,static_irradiance_w_m2") and len(lines) == 3
+    doc = json.loads((tmp_path / "report.json").read_text())
+    assert doc["scene"]["sha256"] and doc["versions"]["numpy"] and doc["stages"][0]["name"] == "mpe"
+    assert doc["mpe"]["steps"] and doc["targets"][0]["nohd_static_m"] > 0
+
+
+def run(*argv):
+    out, err = io.StringIO(), io.StringIO()
+    return main(list(argv), stdout=out, stderr=err), out.getvalue(), err.getvalue()
+
+
+def test_cli_run_compare_validate(tmp_path):
+    code, out, err = run("run", "plate", "-o", str(tmp_path / "o"))
+    assert code == 0 and "skipped history" in out and "hazard: beam..." in err
+    code, out, err = run("run", "plate", "-o", str(tmp_path / "o"))
+    assert code == 2 and "exists: pass --force" in err
+    code, _, _ = run("run", "plate", "-o", str(tmp_path / "o"), "--force", "--fail-on-hazard", "--quiet")
+    assert code == 3  # the plate has a 0.56 m keep-out zone
+    code, out, _ = run("compare", "steel_vs_copper", "--quiet", "--json")
+    doc = json.loads(out)
+    assert code == 0 and {t["target"] for t in doc["targets"]} == {"stainless", "copper"}
+    code, out, _ = run("validate", str(scenes.example_path("binoculars")))
+    assert code == 0 and "valid scene 'binoculars'" in out
+    code, out, _ = run("models")
+    assert "dynamic-spherical-harmonic" in out.split()
+    code, out, _ = run("schema")
+    assert json.loads(out)["title"] == "laser-hazard scene"
+
+
+def test_cli_bad_scene_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(PLATE.format(power=-1.0, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=16, grid=2.0, levels=1))
+    code, out, err = run("run", str(bad), "-o", str(tmp_path / "o"))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "laser.power_w: Input should be greater than 0" in err
+    assert not (tmp_path / "o").exists()
