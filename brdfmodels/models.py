@@ -555,7 +555,7 @@ class DynamicBRDF(_SHMixin, BRDFModel):
     def _fr_segment_max(self, wi, wo, s_lo, s_hi, fanout_h):
         return np.maximum(self._fr(wi, wo, s_lo, fanout_h), self._fr(wi, wo, s_hi, fanout_h))
 
-    def evaluate_many(self, wi, wo, states, *, projected=False, chunk_rows=16384, out=None) -> np.ndarray:
+    def evaluate_many(self, wi, wo, states, *, projected=False, row_scale=None, chunk_rows=16384, out=None) -> np.ndarray:
         """BRDF at N direction pairs and Q states as one basis evaluation and one GEMM.
 
         Parameters
@@ -566,6 +566,10 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             States (policy ``extrapolation`` applies).
         projected : bool
             Return ``f_r cos(theta_r)`` instead of ``f_r``.
+        row_scale : array_like, shape (N,), optional
+            Non-negative factor per row (e.g. power / range^2 of an irradiance map). For
+            log models it enters the exponent (no extra pass over the output); a zero
+            row gives exactly 0.
         chunk_rows : int
             Rows per fused block (basis, GEMM, exp); tune for cache, not accuracy.
         out : ndarray, shape (N, Q), optional
@@ -577,6 +581,10 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             f_r [1/sr] (0 below the horizon).
         """
         wi, wo, _ = _prepare(wi, wo)
+        if row_scale is not None:
+            row_scale = finite_array("row_scale", row_scale, ndim=1, minimum=0.0)
+            if row_scale.shape != (wi.shape[0],):
+                raise ValueError(f"row_scale: expected shape ({wi.shape[0]},), got {row_scale.shape}")
         q = check_in_range(np.atleast_1d(np.asarray(states, dtype=float)).ravel(), self.states, self.state_name, self.extrapolation)
         coef = self.coefficients.T @ interpolation_weights(self.states, q)  # (K, Q)
         n, nq = wi.shape[0], q.size
@@ -590,6 +598,8 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             coef_aug = np.vstack([coef, np.ones((1, nq))])
         ybuf = np.empty((k + 1, min(chunk_rows, max(n, 1))))
         guard = self._exponent_bound + 2.0 * -math.log(_COS_FLOOR) > _LOG_FR_MAX
+        # a finite stand-in for log(0): exp() of it underflows to exactly 0 whatever Y c is
+        log_zero = -(self._exponent_bound + 1000.0)
         for s in range(0, n, chunk_rows):
             e = min(s + chunk_rows, n)
             a, b = wi[s:e], wo[s:e]
@@ -606,8 +616,13 @@ class DynamicBRDF(_SHMixin, BRDFModel):
                 if not projected:
                     lc += np.log(np.maximum(cr, _COS_FLOOR))
                 np.negative(lc, out=yb[k])
+                if row_scale is not None:
+                    rs = row_scale[s:e]
+                    with np.errstate(divide="ignore"):
+                        yb[k] += np.where(rs > 0, np.log(np.where(rs > 0, rs, 1.0)), log_zero)
                 np.matmul(yb.T, coef_aug, out=blk)
-                if guard:
+                # clip only when this block's exponent could pass ln(FR_MAX)
+                if guard or (row_scale is not None and self._exponent_bound + yb[k].max() > _LOG_FR_MAX):
                     np.minimum(blk, _LOG_FR_MAX, out=blk)
                 np.exp(blk, out=blk)
             else:
@@ -615,6 +630,8 @@ class DynamicBRDF(_SHMixin, BRDFModel):
                 np.maximum(blk, 0.0, out=blk)
                 den = np.maximum(ci, _COS_FLOOR) * (1.0 if projected else np.maximum(cr, _COS_FLOOR))
                 blk /= den[:, None]
+                if row_scale is not None:
+                    blk *= row_scale[s:e, None]
                 np.minimum(blk, FR_MAX, out=blk)
             if not valid.all():
                 blk[~valid] = 0.0

@@ -193,45 +193,48 @@ class SHBasis:
         return cls(**data)
 
     # -- evaluation -----------------------------------------------------------------------
-    def _half(self, theta_tilde, cph, sph, terms, mmax):
-        x = np.cos(theta_tilde)
-        s = np.abs(np.sin(theta_tilde))
+    @staticmethod
+    def _fill(rows, theta, cph, sph, terms, mmax, fanout, skip_l0=False):
+        """Write y_l^m(fan_out(theta), phi) of ``terms`` into the successive ``rows``."""
+        tt = fan_out(theta, fanout)
+        x = np.cos(tt)
+        s = np.abs(np.sin(tt))
         lmax = max(l for l, _ in terms)
         leg = _legendre_table(x, s, lmax, mmax)
-        cos_m = _cos_multiples(cph, sph, mmax)
-        vals = []
+        cos_m = _cos_multiples(cph, sph, mmax) if mmax > 0 else None
+        k = 0
         for (l, m) in terms:
-            p = leg[(l, m)]
-            vals.append(p if m == 0 else (_SQRT2 * p) * cos_m[m])
-        return vals
+            if skip_l0 and l == 0:
+                continue
+            if m == 0:
+                rows[k][...] = leg[(l, m)]
+            else:
+                np.multiply(leg[(l, m)], cos_m[m], out=rows[k])
+                rows[k] *= _SQRT2
+            k += 1
+        return k
 
     def design_transposed(self, theta_h, cph, sph, theta_d, cpd, spd, fanout_h, fanout_d, out=None):
         """Basis values as a (K, N) array from half/diff angles and azimuth cosines/sines.
 
         This is the hot-path entry point (no input checks); ``out`` may be a reusable
-        (K, N) buffer.
+        (K, N) buffer. Rows are written in place, in the order of :attr:`columns`.
         """
         n = np.shape(theta_h)[0]
         if out is None:
             out = np.empty((self.size, n))
-        vh = self._half(fan_out(theta_h, fanout_h), cph, sph, self.terms_h, self.mh_max)
-        vd = self._half(fan_out(theta_d, fanout_d), cpd, spd, self.terms_d, self.md_max)
         if self.separable:
-            k = 0
-            for v in vh:
-                out[k] = v
-                k += 1
-            for (l, _m), v in zip(self.terms_d, vd):
-                if l == 0:
-                    continue
-                out[k] = v
-                k += 1
+            k = self._fill(out, theta_h, cph, sph, self.terms_h, self.mh_max, fanout_h)
+            if self.ld_max > 0:
+                self._fill(out[k:], theta_d, cpd, spd, self.terms_d, self.md_max, fanout_d, skip_l0=True)
         else:
-            k = 0
-            for a in vh:
-                for b in vd:
-                    np.multiply(a, b, out=out[k])
-                    k += 1
+            nh, nd = len(self.terms_h), len(self.terms_d)
+            vh = np.empty((nh, n))
+            vd = np.empty((nd, n))
+            self._fill(vh, theta_h, cph, sph, self.terms_h, self.mh_max, fanout_h)
+            self._fill(vd, theta_d, cpd, spd, self.terms_d, self.md_max, fanout_d)
+            for i in range(nh):
+                np.multiply(vh[i], vd, out=out[i * nd:(i + 1) * nd])
         return out
 
     def evaluate(self, theta_h, phi_h, theta_d, phi_d, *, fanout=0.6, fanout_h=None) -> np.ndarray:

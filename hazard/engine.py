@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -52,6 +53,13 @@ def _perp_basis(axis):
     return e1, np.cross(axis, e1)
 
 
+@lru_cache(maxsize=16)
+def _laguerre(n):
+    """Gauss-Laguerre nodes and weights (cached: an eigenvalue solve each time would also
+    leave BLAS threads spinning into the next stage)."""
+    return np.polynomial.laguerre.laggauss(n)
+
+
 def sample_beam(position_m, axis, power_w, diameter_m, divergence_rad, n_samples) -> Beam:
     """Rays across a Gaussian beam (1/e diameter ``diameter_m`` at the aperture, full
     1/e divergence ``divergence_rad``), ``n_samples`` of them (rounded to a polar grid)."""
@@ -61,7 +69,7 @@ def sample_beam(position_m, axis, power_w, diameter_m, divergence_rad, n_samples
         return Beam(pos[None], axis[None], np.array([power_w]), pos, axis, diameter_m, divergence_rad)
     n_r = max(1, int(round(math.sqrt(n_samples / 4))))
     n_phi = max(4, int(math.ceil(n_samples / n_r)))
-    u, w = np.polynomial.laguerre.laggauss(n_r)  # int_0^inf f(u) e^-u du, u = rho^2
+    u, w = _laguerre(n_r)  # int_0^inf f(u) e^-u du, u = rho^2
     rho = np.sqrt(u)
     psi = 2 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
     rr, pp = np.meshgrid(rho, psi, indexing="ij")
@@ -175,26 +183,33 @@ def trace_spots(beam: Beam, targets, ray_scene):
 
 
 # -- BRDF evaluation over states ------------------------------------------------------------
-def projected_brdf(model, wi, wo, states=None) -> np.ndarray:
-    """``f_r cos(theta_r)`` [1/sr] at pairs (N, 3), for no state (N,) or states (T,) -> (N, T).
+def projected_brdf(model, wi, wo, states=None, row_scale=None) -> np.ndarray:
+    """``f_r cos(theta_r)`` [1/sr] at pairs (N, 3), for no state (N,) or states (T,) -> (N, T),
+    optionally multiplied by a per-row factor ``row_scale`` (N,).
 
     Dynamic SH models are evaluated as one basis evaluation and one matrix product over
-    all states; a state-table factor multiplies; other models loop over the states.
+    all states, with ``row_scale`` folded into the exponent; a state-table factor
+    multiplies; other models loop over the states.
     """
     if states is None:
-        return model.evaluate_cos(wi, wo)
+        f = model.evaluate_cos(wi, wo)
+        return f if row_scale is None else f * row_scale
     states = np.asarray(states, float)
     if isinstance(model, DynamicBRDF):
-        return model.evaluate_many(wi, wo, states, projected=True)
+        return model.evaluate_many(wi, wo, states, projected=True, row_scale=row_scale)
     if isinstance(model, Scaled):
-        inner = projected_brdf(model.model, wi, wo, states if model.model.is_dynamic else None)
+        inner = projected_brdf(model.model, wi, wo, states if model.model.is_dynamic else None, row_scale)
         if inner.ndim == 1:
             inner = inner[:, None]
         fac = model.factor(states)[None, :] if isinstance(model.factor, StateTable) else model.factor
         return inner * fac
     if not model.is_dynamic:
-        return np.repeat(model.evaluate_cos(wi, wo)[:, None], states.size, axis=1)
-    return np.stack([model.evaluate_cos(wi, wo, state=float(s)) for s in states], axis=-1)
+        f = model.evaluate_cos(wi, wo)
+        if row_scale is not None:
+            f = f * row_scale
+        return np.repeat(f[:, None], states.size, axis=1)
+    f = np.stack([model.evaluate_cos(wi, wo, state=float(s)) for s in states], axis=-1)
+    return f if row_scale is None else f * row_scale[:, None]
 
 
 def _to_local(frames, v):
@@ -204,11 +219,14 @@ def _to_local(frames, v):
     return np.einsum("nij,nj->ni", frames, v)
 
 
-def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=None):
+def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=None, visible=None, *, sparse=False):
     """BRDF-reflected irradiance [W/m^2] at observers (M, 3) from one spot.
 
     Returns ``(E, far)``: E of shape (M,) or (M, T) with states, and the far-field mask.
-    Line of sight is not applied here.
+    ``visible`` (M,) is the line-of-sight mask (default: all visible); it is folded into
+    the per-observer factor, so occluded observers cost no extra pass. With
+    ``sparse=True`` (all observers far-field) it returns ``((rows, E_rows), far)``: only
+    the rows that receive light, so maps skip everyone behind the surface or out of sight.
     """
     obs = np.asarray(observers_m, float)
     m = len(obs)
@@ -216,6 +234,27 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     c = spot.centroid
     rng = np.linalg.norm(obs - c, axis=1)
     far = rng >= FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
+    vis = np.ones(m) if visible is None else np.asarray(visible, float)
+    if np.all(far):
+        fr = spot.mean_frame
+        wi = _to_local(fr, -spot.mean_incoming)[None, :]
+        wo = _to_local(fr, (obs - c) / rng[:, None])
+        scale = spot.total_power_w * gain * vis / rng**2
+        if attenuation_per_m:
+            scale *= np.exp(-attenuation_per_m * rng)
+        # observers behind the surface or out of sight receive nothing: evaluate the rest only
+        live = (wo[:, 2] > 0) & (scale > 0)
+        if sparse:
+            rows = np.flatnonzero(live)
+            wl = wo[rows]
+            return (rows, projected_brdf(model, np.broadcast_to(wi, wl.shape), wl, states, scale[rows])), far
+        if live.all():
+            return projected_brdf(model, np.broadcast_to(wi, wo.shape), wo, states, scale), far
+        e = np.zeros((m,) if states is None else (m, len(states)))
+        if live.any():
+            wl = wo[live]
+            e[live] = projected_brdf(model, np.broadcast_to(wi, wl.shape), wl, states, scale[live])
+        return e, far
     shape = (m,) if states is None else (m, len(states))
     e = np.zeros(shape)
     if np.any(far):
@@ -223,19 +262,17 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
         wi = _to_local(fr, -spot.mean_incoming)[None, :]
         d = (obs[far] - c) / rng[far, None]
         wo = _to_local(fr, d)
-        f = projected_brdf(model, np.broadcast_to(wi, wo.shape), wo, states)
-        scale = spot.total_power_w * np.exp(-attenuation_per_m * rng[far]) * gain[far] / rng[far] ** 2
-        e[far] = f * (scale if f.ndim == 1 else scale[:, None])
-    if np.any(~far):
-        near = np.flatnonzero(~far)
+        scale = spot.total_power_w * np.exp(-attenuation_per_m * rng[far]) * gain[far] * vis[far] / rng[far] ** 2
+        e[far] = projected_brdf(model, np.broadcast_to(wi, wo.shape), wo, states, scale)
+    near = np.flatnonzero(~far & (vis > 0))
+    if len(near):
         wi_all = _to_local(spot.frames, -spot.incoming)
         for i in range(len(spot.points)):
             v = obs[near] - spot.points[i]
             r = np.linalg.norm(v, axis=1)
             wo = _to_local(spot.frames[i], v / np.maximum(r, 1e-300)[:, None])
-            f = projected_brdf(model, np.broadcast_to(wi_all[i], wo.shape), wo, states)
-            scale = spot.power_w[i] * np.exp(-attenuation_per_m * r) * gain[near] / np.maximum(r, 1e-300) ** 2
-            e[near] += f * (scale if f.ndim == 1 else scale[:, None])
+            scale = spot.power_w[i] * np.exp(-attenuation_per_m * r) * gain[near] * vis[near] / np.maximum(r, 1e-300) ** 2
+            e[near] += projected_brdf(model, np.broadcast_to(wi_all[i], wo.shape), wo, states, scale)
     return e, far
 
 

@@ -182,9 +182,11 @@ class Footprint:
     eye_height_m: float
 
 
-def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states=None, max_range_m=np.inf) -> Footprint:
+def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
     """Hazardous ground area: terrain nodes whose eye-height point sees more than the MPE
-    (BRDF and specular lobes of every spot, with line of sight), max over states."""
+    (BRDF and specular lobes of every spot, with line of sight), max over each target's
+    states (``states_by_target``: target index -> states, absent for static materials)."""
+    states_by_target = states_by_target or {}
     ny, nx = terrain.heights.shape
     xs = terrain.x0 + terrain.dx * np.arange(nx)
     ys = terrain.y0 + terrain.dx * np.arange(ny)
@@ -201,6 +203,7 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
         gx, gy = np.meshgrid(xs[ix], ys[iy])
         pts = np.stack([gx.ravel(), gy.ravel(), terrain.heights[np.ix_(iy, ix)].ravel() + eye_height_m], 1)
         gain = np.ones(len(pts))
+        states = states_by_target.get(spot.target.index)
         e, _ = spot_irradiance(spot, pts, gain, attenuation_per_m, states)
         if spot.target.material.has_specular:
             e = e + specular_irradiance(spot, pts, gain, attenuation_per_m, beam, states)

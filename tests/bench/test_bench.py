@@ -10,3 +10,9 @@ def test_bench_evaluate_many():
 
     res = run()
     print(res)
+
+
+def test_bench_hazard_map():
+    from .bench_engine import run
+
+    print(run())
