@@ -240,3 +240,44 @@ def test_cli_bad_scene_one_line(tmp_path):
     assert code == 2 and out == "" and err.count("\n") == 1
     assert "laser.power_w: Input should be greater than 0" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_footprint_with_dynamic_materials_on_terrain():
+    # two targets with different state variables over flat ground: each spot must get its
+    # own states, and the static footprint (initial states) lies inside the dynamic one
+    text = scenes.example_path("steel_vs_copper").read_text()
+    text = text.replace("[[observers]]", '[terrain]\nkind = "flat"\ncenter_m = [0.0, 0.0, -1.0]\nextent_m = 40.0\nresolution_m = 0.5\n[[observers]]', 1)
+    text = text.replace("[analysis]", '[analysis]\nfootprint_eye_height_m = 1.0', 1)
+    res = hazard.analyze(scenes.loads(text, base_dir=scenes.example_path("steel_vs_copper").parent))
+    fs, fd = res.footprint_static, res.footprint_dynamic
+    assert res.stage("footprint").ran and fd.area_m2 > 0
+    assert np.all(fd.mask[fs.mask]) and fd.area_m2 >= fs.area_m2
+
+
+def test_sparse_map_rows_equal_dense():
+    from hazard.engine import spot_irradiance
+
+    scene = scenes.load(scenes.example_path("witness_screen"))
+    from hazard.analysis import _FlatScene
+    from hazard.engine import sample_beam, trace_spots
+
+    beam = sample_beam(scene.laser_position_m, scene.laser_direction, 230.0, 0.005, 0.001, 64)
+    (spot,), _, _ = trace_spots(beam, scene.targets, _FlatScene(scene.targets))
+    pts = scene.observers.positions_m
+    vis = np.random.default_rng(1).uniform(size=len(pts)) > 0.3
+    states = np.array([0.311, 0.9])
+    dense, _ = spot_irradiance(spot, pts, np.ones(len(pts)), 1e-3, states, vis)
+    (rows, vals), _ = spot_irradiance(spot, pts, np.ones(len(pts)), 1e-3, states, vis, sparse=True)
+    np.testing.assert_allclose(dense[rows], vals, rtol=1e-12)
+    rest = np.setdiff1d(np.arange(len(pts)), rows)
+    assert np.all(dense[rest] == 0)
+
+
+def test_history_kept_only_when_asked_for_large_maps():
+    scene = scenes.load(scenes.example_path("witness_screen"))
+    full = hazard.analyze(scene, keep_history=True)
+    lean = hazard.analyze(scene, keep_history=False)
+    assert full.observers.irradiance_w_m2.shape == (len(full.observers), len(full.times_s))
+    assert lean.observers.irradiance_w_m2 is None and any("not kept" in n for n in lean.notes)
+    np.testing.assert_allclose(lean.observers.peak_irradiance_w_m2, full.observers.irradiance_w_m2.max(axis=1), rtol=1e-12)
+    np.testing.assert_array_equal(lean.hazardous, full.hazardous)
