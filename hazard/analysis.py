@@ -31,7 +31,7 @@ import brdfmodels
 from . import mpe as _mpe
 from .engine import FAR_FIELD_SPOT_SIZES, Beam, Spot, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
 from .keepout import Footprint, Lobe, ground_footprint, hazard_lobe
-from .nohd import attenuation_from_visibility, nohd_direct
+from .nohd import attenuation_from_visibility, nohd_direct, optical_gain
 
 __all__ = ["analyze", "HazardResult", "Stage", "TargetResult", "ObserverResults"]
 
@@ -352,7 +352,9 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
     obs = scene.observers
     m = len(obs)
     pos = obs.positions_m
-    gain = obs.optical_gain
+    group_gain = np.array([1.0 if o is None else optical_gain(o.magnification, o.objective_diameter_m, o.transmission)
+                           for o in obs.optics])
+    gain = group_gain[obs.group] if m else np.ones(0)
 
     los = np.ones((len(spots), m), bool)
     if need_los and m and spots:

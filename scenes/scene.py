@@ -77,13 +77,14 @@ class Target:
 
 @dataclass
 class Observers:
-    """All observer points (N, 3), local coordinates, with group names and optical gain."""
+    """All observer points (N, 3), local coordinates, with their group and the viewing
+    optics of each group (``optics[g]``: an OpticsSpec or None for the naked eye)."""
 
     positions_m: np.ndarray
     group: np.ndarray
     index_in_group: np.ndarray
-    optical_gain: np.ndarray
     group_names: tuple
+    optics: tuple = ()
 
     def __len__(self):
         return self.positions_m.shape[0]
@@ -120,14 +121,6 @@ class Scene:
     def echo(self) -> dict:
         """The validated scene as plain data (for reports)."""
         return json.loads(self.spec.model_dump_json())
-
-
-def _optical_gain(o) -> float:
-    # same formula as hazard.nohd.optical_gain ([C] Laser-Studio), without a beam-size limit
-    if o is None:
-        return 1.0
-    terms = [o.transmission * o.magnification**2, o.transmission * (o.objective_diameter_m / 7e-3) ** 2]
-    return min(max(t, 1.0) for t in terms)
 
 
 def _identity_factor(model):
@@ -241,7 +234,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
             raise SceneError(str(exc)) from None
         terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
 
-    pos, grp, idx, gain = [], [], [], []
+    pos, grp, idx = [], [], []
     for g, ob in enumerate(spec.observers):
         p = observer_points(ob)
         if ob.eye_height_m is not None:
@@ -271,12 +264,11 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         pos.append(p - offset)
         grp.append(np.full(len(p), g))
         idx.append(np.arange(len(p)))
-        gain.append(np.full(len(p), _optical_gain(ob.optics)))
     if pos:
-        observers = Observers(np.vstack(pos), np.concatenate(grp), np.concatenate(idx), np.concatenate(gain),
-                              tuple(o.name for o in spec.observers))
+        observers = Observers(np.vstack(pos), np.concatenate(grp), np.concatenate(idx),
+                              tuple(o.name for o in spec.observers), tuple(o.optics for o in spec.observers))
     else:
-        observers = Observers(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), np.empty(0), ())
+        observers = Observers(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), ())
     return Scene(
         spec=spec,
         source=source,
