@@ -281,3 +281,25 @@ def test_history_kept_only_when_asked_for_large_maps():
     assert lean.observers.irradiance_w_m2 is None and any("not kept" in n for n in lean.notes)
     np.testing.assert_allclose(lean.observers.peak_irradiance_w_m2, full.observers.irradiance_w_m2.max(axis=1), rtol=1e-12)
     np.testing.assert_array_equal(lean.hazardous, full.hazardous)
+
+
+def test_mesh_file_target_and_heightmap_terrain(tmp_path):
+    import trimesh
+
+    # a 1 m square plate as an STL mesh (two triangles facing +z in its own frame), placed
+    # with normal -y like the analytic plate: same irradiance as the primitive
+    trimesh.Trimesh([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]], [[0, 1, 2], [0, 2, 3]]).export(tmp_path / "plate.stl")
+    np.save(tmp_path / "ground.npy", np.full((41, 41), -3.0))
+    text = PLATE.format(power=100.0, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=64, grid=4.0, levels=1)
+    text = text.replace('shape = "plate"', 'shape = "mesh"\nfile = "plate.stl"').replace("size_m = [1.0, 1.0]\n", "")
+    text = text.replace("aim_m = [0.0, 0.0, 0.0]", "direction = [0.0, 1.0, 0.0]")
+    text += '[terrain]\nkind = "heightmap"\nfile = "ground.npy"\norigin_m = [-20.0, -40.0]\nspacing_m = 1.0\n'
+    text += '[[observers]]\nname = "o"\npoints_m = [[10.0, -17.0, 0.0]]\n'
+    scene = scenes.loads(text, base_dir=tmp_path)
+    res = hazard.analyze(scene)
+    assert res.stage("rays").ran and res.stage("line_of_sight").ran
+    r = math.hypot(10, 17)
+    assert res.observers.static_irradiance_w_m2[0] == pytest.approx(0.5 * 100 * (17 / r) / (math.pi * r * r), rel=1e-9)
+    bad = text.replace('file = "plate.stl"', 'file = "missing.stl"')
+    with pytest.raises(scenes.SceneError, match="cannot read the mesh"):
+        scenes.loads(bad, base_dir=tmp_path)
