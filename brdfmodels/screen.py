@@ -1,0 +1,453 @@
+"""Witness-screen BRDF measurement: reduction of camera frames, and a forward simulator.
+
+Restates Bailey et al., J. Laser Appl. 20(1), 2008, Secs. II-III (spec
+`witness-screen.md`). Lab frame: origin at the laser spot on the sample, +y along the
+incident beam, +z up. A flat Lambertian screen is filmed by a camera; every pixel of a
+frame gives f_r for one reflection direction at one moment of the sample's history.
+
+* Eq. 6, pixel -> screen point:
+  ``r(i, j) = r_ul + (i - i_top)(r_ll - r_ul)/(i_bottom - i_top) + (j - j_left)(r_ur - r_ul)/(j_right - j_left)``
+* Eq. 13, responsivity from the point-source image U^P:
+  ``R(i, j) = (1/E_C) U^P(i, j) U_C / U_C^P * r^3 / r_C^3``
+* Eqs. 14-15: ``E_is = U / R``; ``f_r = E_is r^2 / (P cos(theta_is) cos(theta_rt))``
+* Eq. 16 (expanded, tested equal):
+  ``f_r = (E_C/P) (U U_C^P)/(U^P U_C) r_C^3 / r / (cos(theta_is) cos(theta_rt))``
+
+All counts are background-subtracted. Pixels at or below background, saturated, outside
+the screen rectangle, or seen from behind the sample carry no data and are masked.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import tomllib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._checks import finite_array, finite_scalar
+from .geometry import local_frame
+
+__all__ = [
+    "ScreenGeometry",
+    "Calibration",
+    "ScreenTest",
+    "Samples",
+    "screen_points",
+    "responsivity",
+    "frame_brdf",
+    "frame_brdf_expanded",
+    "reduce_test",
+    "load_test",
+    "simulate_test",
+    "group_by_state",
+    "SpotSizeWarning",
+]
+
+
+class SpotSizeWarning(UserWarning):
+    """The screen is closer than 20 spot sizes: the point-source approximation errs > 1 %."""
+
+
+@dataclass(frozen=True)
+class ScreenGeometry:
+    """Screen corners [m] (lab frame) and the pixel rows/columns of its edges."""
+
+    upper_left_m: np.ndarray
+    upper_right_m: np.ndarray
+    lower_left_m: np.ndarray
+    top_row: float
+    bottom_row: float
+    left_col: float
+    right_col: float
+
+    def __post_init__(self):
+        for name in ("upper_left_m", "upper_right_m", "lower_left_m"):
+            v = finite_array(name, getattr(self, name))
+            if v.shape != (3,):
+                raise ValueError(f"{name}: expected a 3-vector [m], got shape {v.shape}")
+            object.__setattr__(self, name, v)
+        if not self.bottom_row > self.top_row:
+            raise ValueError(f"bottom_row={self.bottom_row!r}: expected below top_row={self.top_row!r} (rows grow downwards)")
+        if not self.right_col > self.left_col:
+            raise ValueError(f"right_col={self.right_col!r}: expected right of left_col={self.left_col!r}")
+
+    @property
+    def normal(self) -> np.ndarray:
+        """Unit screen normal, facing the origin (the sample)."""
+        n = np.cross(self.upper_right_m - self.upper_left_m, self.lower_left_m - self.upper_left_m)
+        n /= np.linalg.norm(n)
+        return n if np.dot(n, -self.upper_left_m) > 0 else -n
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Calibration values: meter irradiance E_C [W/m^2] at pixel (i_C, j_C) where the
+    camera read U_C counts (background-subtracted)."""
+
+    irradiance_w_m2: float
+    pixel: tuple
+    counts: float
+
+    def __post_init__(self):
+        finite_scalar("calibration.irradiance_w_m2", self.irradiance_w_m2, minimum=0.0, strict_min=True)
+        finite_scalar("calibration.counts", self.counts, minimum=0.0, strict_min=True)
+        if len(self.pixel) != 2:
+            raise ValueError(f"calibration.pixel={self.pixel!r}: expected [row, column]")
+
+
+def screen_points(geom: ScreenGeometry, rows, cols) -> np.ndarray:
+    """Eq. 6: lab-frame screen point [m] of pixel (row i, column j); broadcasts."""
+    i = np.asarray(rows, float)[..., None]
+    j = np.asarray(cols, float)[..., None]
+    return (geom.upper_left_m + (i - geom.top_row) * (geom.lower_left_m - geom.upper_left_m) / (geom.bottom_row - geom.top_row)
+            + (j - geom.left_col) * (geom.upper_right_m - geom.upper_left_m) / (geom.right_col - geom.left_col))
+
+
+def responsivity(point_counts, r_m, cal: Calibration, r_cal_m: float) -> np.ndarray:
+    """Eq. 13: per-pixel responsivity R = (1/E_C) U^P U_C / U_C^P r^3 / r_C^3 [counts per W/m^2]."""
+    up = np.asarray(point_counts, float)
+    i_c, j_c = (int(round(p)) for p in cal.pixel)
+    up_c = up[i_c, j_c]
+    if not up_c > 0:
+        raise ValueError(f"calibration.pixel={list(cal.pixel)}: the point-source image has no signal there ({up_c!r} counts)")
+    return up * cal.counts / up_c * np.asarray(r_m) ** 3 / r_cal_m**3 / cal.irradiance_w_m2
+
+
+def frame_brdf(counts, resp, r_m, cos_is, cos_rt, power_w) -> np.ndarray:
+    """Eqs. 14-15 step by step: E_is = U / R, f_r = E_is r^2 / (P cos(theta_is) cos(theta_rt))."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e_is = np.asarray(counts, float) / resp
+        return e_is * np.asarray(r_m) ** 2 / (power_w * cos_is * cos_rt)
+
+
+def frame_brdf_expanded(counts, point_counts, cal: Calibration, r_m, r_cal_m, cos_is, cos_rt, power_w) -> np.ndarray:
+    """Eq. 16: f_r = (E_C / P) (U U_C^P) / (U^P U_C) r_C^3 / r / (cos(theta_is) cos(theta_rt))."""
+    up = np.asarray(point_counts, float)
+    i_c, j_c = (int(round(p)) for p in cal.pixel)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return (cal.irradiance_w_m2 / power_w) * (np.asarray(counts, float) * up[i_c, j_c]) / (up * cal.counts) \
+            * r_cal_m**3 / np.asarray(r_m) / (cos_is * cos_rt)
+
+
+@dataclass
+class ScreenTest:
+    """One test: geometry, sample orientation, laser, calibration, images and pyrometer."""
+
+    test_id: str
+    geometry: ScreenGeometry
+    sample_normal: np.ndarray
+    groove: np.ndarray
+    incidence: np.ndarray  # propagation direction of the beam (lab frame), default +y
+    power_w: float
+    calibration: Calibration
+    point_source: np.ndarray  # (H, W) counts, background included
+    frames: np.ndarray  # (F, H, W) counts, background included
+    times_s: np.ndarray  # (F,)
+    background: float | np.ndarray
+    saturation: float
+    point_source_background: float | np.ndarray = 0.0
+    pyrometer_times_s: np.ndarray | None = None
+    pyrometer_temperatures_k: np.ndarray | None = None
+    spot_size_m: float | None = None
+    weight_floor: float = 1.0
+
+
+@dataclass
+class Samples:
+    """Reduced samples: directions in the sample's surface frame (z = normal, x = grooves)."""
+
+    wi: np.ndarray
+    wo: np.ndarray
+    brdf_per_sr: np.ndarray
+    time_s: np.ndarray
+    temperature_k: np.ndarray
+    test_id: np.ndarray
+    frame_id: np.ndarray
+    weight: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    COLUMNS = ("wi_x", "wi_y", "wi_z", "wo_x", "wo_y", "wo_z", "brdf_per_sr", "time_s", "temperature_k", "test_id", "frame_id", "weight")
+
+    def __len__(self):
+        return len(self.brdf_per_sr)
+
+    def select(self, mask) -> "Samples":
+        m = np.asarray(mask)
+        return Samples(self.wi[m], self.wo[m], self.brdf_per_sr[m], self.time_s[m], self.temperature_k[m], self.test_id[m],
+                       self.frame_id[m], self.weight[m], dict(self.info))
+
+    @staticmethod
+    def concatenate(parts) -> "Samples":
+        parts = list(parts)
+        cat = lambda name: np.concatenate([getattr(p, name) for p in parts])
+        return Samples(cat("wi"), cat("wo"), cat("brdf_per_sr"), cat("time_s"), cat("temperature_k"), cat("test_id"),
+                       cat("frame_id"), cat("weight"))
+
+    def to_csv(self, path) -> Path:
+        from ._io import atomic_write_text
+        import io
+
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(self.COLUMNS)
+        for k in range(len(self)):
+            w.writerow([*map(repr, self.wi[k].tolist()), *map(repr, self.wo[k].tolist()), repr(float(self.brdf_per_sr[k])),
+                        repr(float(self.time_s[k])), repr(float(self.temperature_k[k])), self.test_id[k], int(self.frame_id[k]),
+                        repr(float(self.weight[k]))])
+        return atomic_write_text(path, buf.getvalue())
+
+    @classmethod
+    def from_csv(cls, path) -> "Samples":
+        path = Path(path)
+        try:
+            with open(path, newline="", encoding="utf-8") as fh:
+                rows = list(csv.reader(fh))
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read the samples ({exc.strerror})") from None
+        if not rows or tuple(rows[0]) != cls.COLUMNS:
+            raise ValueError(f"{path}: expected the columns {list(cls.COLUMNS)}")
+        body = rows[1:]
+        if not body:
+            raise ValueError(f"{path}: no samples")
+        num = np.array([[float(r[k]) for k in (0, 1, 2, 3, 4, 5, 6, 7, 8, 11)] for r in body])
+        return cls(num[:, 0:3], num[:, 3:6], num[:, 6], num[:, 7], num[:, 8], np.array([r[9] for r in body]),
+                   np.array([int(r[10]) for r in body]), num[:, 9])
+
+
+def reduce_test(test: ScreenTest) -> Samples:
+    """Reduce a test's frames to BRDF samples (Eqs. 6, 13-16), masking pixels without data.
+
+    Raises ValueError for inconsistent inputs (mismatched shapes, nan counts, a
+    calibration pixel outside the image, a pyrometer series that does not cover the
+    frames, all pixels masked) and warns (:class:`SpotSizeWarning`) when the screen is
+    nearer than 20 spot sizes.
+    """
+    g = test.geometry
+    up_raw = finite_array("point_source", test.point_source, ndim=2)
+    frames = np.asarray(test.frames, float)
+    if frames.ndim != 3 or frames.shape[1:] != up_raw.shape:
+        raise ValueError(f"frames: expected shape (F, {up_raw.shape[0]}, {up_raw.shape[1]}) like the point-source image, got {frames.shape}")
+    if not np.all(np.isfinite(frames)):
+        f = int(np.argwhere(~np.isfinite(frames))[0][0])
+        raise ValueError(f"frames: frame {f} contains nan or inf counts")
+    times = finite_array("times_s", test.times_s, ndim=1)
+    if times.shape != (frames.shape[0],):
+        raise ValueError(f"times_s: expected one time per frame ({frames.shape[0]}), got {times.shape[0]}")
+    h, w = up_raw.shape
+    i_c, j_c = (int(round(p)) for p in test.calibration.pixel)
+    if not (0 <= i_c < h and 0 <= j_c < w):
+        raise ValueError(f"calibration.pixel={list(test.calibration.pixel)} is outside the {h} x {w} image")
+    if not (g.top_row >= -0.5 and g.bottom_row <= h - 0.5 and g.left_col >= -0.5 and g.right_col <= w - 0.5):
+        raise ValueError(f"screen edges rows [{g.top_row}, {g.bottom_row}], columns [{g.left_col}, {g.right_col}] lie outside the {h} x {w} image")
+
+    rows, cols = np.mgrid[0:h, 0:w]
+    r_vec = screen_points(g, rows, cols)
+    r = np.linalg.norm(r_vec, axis=-1)
+    rhat = r_vec / r[..., None]
+    cos_is = np.abs(rhat @ g.normal)
+    frame = local_frame(test.sample_normal, test.groove)  # rows x (grooves), y, z (normal)
+    cos_rt = rhat @ frame[2]
+    r_c = float(r[i_c, j_c])
+
+    if test.spot_size_m is not None:
+        if r.min() < 20.0 * test.spot_size_m:
+            warnings.warn(f"test {test.test_id}: the screen is {r.min():.3g} m away, under 20 spot sizes "
+                          f"({20 * test.spot_size_m:.3g} m): point-source error above ~1 %", SpotSizeWarning, stacklevel=2)
+
+    up = up_raw - test.point_source_background
+    resp = responsivity(up, r, test.calibration, r_c)
+    inside = (rows >= g.top_row) & (rows <= g.bottom_row) & (cols >= g.left_col) & (cols <= g.right_col)
+    base_mask = inside & (up > 0) & (cos_rt > 0) & (cos_is > 0)
+    if test.pyrometer_times_s is not None:
+        pt = finite_array("pyrometer times_s", test.pyrometer_times_s, ndim=1)
+        pk = finite_array("pyrometer temperatures_k", test.pyrometer_temperatures_k, ndim=1)
+        if pt.shape != pk.shape or pt.size < 2:
+            raise ValueError("pyrometer: expected two equal-length columns (time_s, temperature_k), at least two rows")
+        if times.min() < pt.min() or times.max() > pt.max():
+            raise ValueError(f"pyrometer: the series covers [{pt.min():g}, {pt.max():g}] s but the frames span "
+                             f"[{times.min():g}, {times.max():g}] s")
+        temps = np.interp(times, pt, pk)
+    else:
+        temps = np.full(times.shape, np.nan)
+    wi_local = frame @ (-np.asarray(test.incidence, float) / np.linalg.norm(test.incidence))
+    wo_local = rhat @ frame.T
+    parts = []
+    for f in range(frames.shape[0]):
+        u = frames[f] - test.background
+        ok = base_mask & (u > 0) & (frames[f] < test.saturation)
+        if not np.any(ok):
+            continue
+        fr = frame_brdf(u[ok], resp[ok], r[ok], cos_is[ok], cos_rt[ok], test.power_w)
+        n = int(ok.sum())
+        parts.append(Samples(
+            np.tile(wi_local, (n, 1)), wo_local[ok], fr, np.full(n, times[f]), np.full(n, temps[f]),
+            np.full(n, test.test_id, dtype=object), np.full(n, f), np.maximum(u[ok], test.weight_floor) / np.maximum(u[ok].max(), 1.0),
+        ))
+    if not parts:
+        raise ValueError(f"test {test.test_id}: every pixel is masked (at or below background, saturated, off-screen or behind the sample)")
+    out = Samples.concatenate(parts)
+    out.info = {"test_id": test.test_id, "frames": int(frames.shape[0]), "screen_distance_min_m": float(r.min()),
+                "masked_fraction": float(1 - len(out) / (frames.shape[0] * h * w))}
+    return out
+
+
+def _need(d, key, where):
+    if key not in d:
+        raise ValueError(f"{where}.{key}: missing")
+    return d[key]
+
+
+def load_test(path) -> ScreenTest:
+    """Read a test description (TOML) and the files it names (.npy / .npz / CSV).
+
+    Keys: ``test_id``; ``[screen]`` upper_left_m, upper_right_m, lower_left_m, top_row,
+    bottom_row, left_col, right_col; ``[sample]`` normal, groove, incidence (beam
+    direction, default [0, 1, 0]), spot_size_m; ``[laser]`` power_w; ``[calibration]``
+    irradiance_w_m2, pixel, counts; ``[images]`` point_source (.npy), frames (.npz with
+    arrays ``frames`` and ``times_s``), background, point_source_background, saturation;
+    optional ``[pyrometer]`` file (CSV with columns time_s, temperature_k).
+    """
+    path = Path(path)
+    try:
+        d = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    base = path.parent
+    known = {"test_id", "screen", "sample", "laser", "calibration", "images", "pyrometer"}
+    unknown = set(d) - known
+    if unknown:
+        raise ValueError(f"{path}: unknown keys {sorted(unknown)}; expected {sorted(known)}")
+    s, smp, las, cal, img = (_need(d, k, "test") for k in ("screen", "sample", "laser", "calibration", "images"))
+    geom = ScreenGeometry(*(np.asarray(_need(s, k, "screen"), float) for k in ("upper_left_m", "upper_right_m", "lower_left_m")),
+                          *(float(_need(s, k, "screen")) for k in ("top_row", "bottom_row", "left_col", "right_col")))
+    try:
+        calib = Calibration(float(_need(cal, "irradiance_w_m2", "calibration")), tuple(_need(cal, "pixel", "calibration")),
+                            float(_need(cal, "counts", "calibration")))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+    def load_array(name, key=None):
+        p = base / name
+        try:
+            arr = np.load(p)
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"{path}: cannot read {name} ({exc})") from None
+        if key is not None:
+            if key not in arr:
+                raise ValueError(f"{path}: {name} has no array {key!r}")
+            return np.asarray(arr[key], float)
+        return np.asarray(arr, float)
+
+    frames_file = _need(img, "frames", "images")
+    pyro_t = pyro_k = None
+    if "pyrometer" in d:
+        pf = base / _need(d["pyrometer"], "file", "pyrometer")
+        try:
+            data = np.genfromtxt(pf, delimiter=",", names=True)
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read pyrometer file ({exc.strerror})") from None
+        if data.dtype.names is None or not {"time_s", "temperature_k"} <= set(data.dtype.names):
+            raise ValueError(f"{pf}: expected CSV columns time_s, temperature_k")
+        pyro_t, pyro_k = np.atleast_1d(data["time_s"]), np.atleast_1d(data["temperature_k"])
+    return ScreenTest(
+        test_id=str(d.get("test_id", path.stem)),
+        geometry=geom,
+        sample_normal=np.asarray(_need(smp, "normal", "sample"), float),
+        groove=np.asarray(_need(smp, "groove", "sample"), float),
+        incidence=np.asarray(smp.get("incidence", [0.0, 1.0, 0.0]), float),
+        power_w=finite_scalar("laser.power_w", _need(las, "power_w", "laser"), minimum=0.0, strict_min=True),
+        calibration=calib,
+        point_source=load_array(_need(img, "point_source", "images")),
+        frames=load_array(frames_file, "frames"),
+        times_s=load_array(frames_file, "times_s"),
+        background=float(img.get("background", 0.0)),
+        saturation=float(_need(img, "saturation", "images")),
+        point_source_background=float(img.get("point_source_background", img.get("background", 0.0))),
+        pyrometer_times_s=pyro_t,
+        pyrometer_temperatures_k=pyro_k,
+        spot_size_m=smp.get("spot_size_m"),
+    )
+
+
+def simulate_test(model, *, test_id="sim", incidence_deg=20.0, groove_angle_deg=0.0, power_w=230.0, distance_m=0.6,
+                  screen_size_m=0.6, pixels=(96, 96), times_s=(0.0,), state_of_time=None, temperature_of_time=None,
+                  calibration_irradiance_w_m2=5.0, point_source_intensity_w_sr=2.0, gain_counts=200.0, background=50.0,
+                  saturation=60000.0, noise=0.01, seed=0, spot_size_m=0.005) -> ScreenTest:
+    """Render a witness-screen test from a known BRDF (the forward model of the reduction).
+
+    The sample sits at the origin with its normal at ``incidence_deg`` from the incoming
+    beam (+y) in the horizontal plane, grooves at ``groove_angle_deg`` from horizontal;
+    the screen (``screen_size_m`` square) faces the sample ``distance_m`` away, centred on
+    the specular direction. The camera's responsivity varies smoothly across the image
+    (vignetting, ``gain_counts`` counts per W/m^2 at the centre); counts get multiplicative
+    Gaussian noise (``noise``), a ``background`` and clip at ``saturation``.
+    """
+    rng = np.random.default_rng(seed)
+    a = math.radians(incidence_deg)
+    n = np.array([math.sin(a), -math.cos(a), 0.0])
+    horiz = np.array([math.cos(a), math.sin(a), 0.0])
+    g = math.radians(groove_angle_deg)
+    groove = math.cos(g) * horiz + math.sin(g) * np.array([0.0, 0.0, 1.0])
+    d_in = np.array([0.0, 1.0, 0.0])
+    spec = d_in - 2 * np.dot(d_in, n) * n
+    centre = distance_m * spec
+    u = np.cross([0.0, 0.0, 1.0], spec)
+    u /= np.linalg.norm(u)
+    v = np.array([0.0, 0.0, 1.0])
+    half = screen_size_m / 2
+    h_px, w_px = pixels
+    margin = 4
+    geom = ScreenGeometry(centre - half * u + half * v, centre + half * u + half * v, centre - half * u - half * v,
+                          float(margin), float(h_px - 1 - margin), float(margin), float(w_px - 1 - margin))
+    rows, cols = np.mgrid[0:h_px, 0:w_px]
+    r_vec = screen_points(geom, rows, cols)
+    r = np.linalg.norm(r_vec, axis=-1)
+    rhat = r_vec / r[..., None]
+    cos_is = np.abs(rhat @ geom.normal)
+    frame = local_frame(n, groove)
+    cos_rt = rhat @ frame[2]
+    yy, xx = (rows - h_px / 2) / h_px, (cols - w_px / 2) / w_px
+    gain = gain_counts * (1.0 - 0.3 * (xx**2 + yy**2))  # counts per W/m^2
+
+    def camera(e):
+        c = gain * e * (1.0 + noise * rng.standard_normal(e.shape)) + background
+        return np.minimum(c, saturation)
+
+    # point source at the origin: E^P = I cos(theta_is) / r^2
+    ps = camera(point_source_intensity_w_sr * cos_is / r**2)
+    i_c, j_c = h_px // 2, w_px // 2
+    cal = Calibration(calibration_irradiance_w_m2, (i_c, j_c), float(gain[i_c, j_c] * calibration_irradiance_w_m2))
+    wi_local = frame @ (-d_in)
+    wo_local = (rhat @ frame.T).reshape(-1, 3)
+    frames = []
+    for t in times_s:
+        state = None if state_of_time is None else float(state_of_time(t))
+        f = model.evaluate(np.broadcast_to(wi_local, wo_local.shape), wo_local, state=state).reshape(h_px, w_px)
+        e_is = f * power_w * np.maximum(cos_rt, 0) * cos_is / r**2
+        frames.append(camera(e_is))
+    times = np.asarray(times_s, float)
+    temps = None if temperature_of_time is None else np.array([temperature_of_time(t) for t in times])
+    pyro_t = None if temps is None else np.concatenate([[times.min() - 1.0], times, [times.max() + 1.0]])
+    pyro_k = None if temps is None else np.concatenate([[temps[0]], temps, [temps[-1]]])
+    return ScreenTest(test_id, geom, n, groove, d_in, power_w, cal, ps, np.array(frames), times, background, saturation,
+                      point_source_background=background, pyrometer_times_s=pyro_t, pyrometer_temperatures_k=pyro_k,
+                      spot_size_m=spot_size_m)
+
+
+def group_by_state(samples: Samples, state: str, nodes) -> dict:
+    """Group samples by the nearest of the state ``nodes`` (``"temperature_k"`` or
+    ``"time_s"``): returns node -> Samples (nodes with no samples are left out)."""
+    if state not in ("temperature_k", "time_s"):
+        raise ValueError(f"state={state!r}: expected 'temperature_k' or 'time_s'")
+    values = getattr(samples, state)
+    if np.any(np.isnan(values)):
+        raise ValueError(f"state={state!r}: some samples have no {state} (no pyrometer series?)")
+    nodes = np.asarray(nodes, float)
+    nearest = np.abs(values[:, None] - nodes[None, :]).argmin(axis=1)
+    return {float(nodes[k]): samples.select(nearest == k) for k in range(nodes.size) if np.any(nearest == k)}
