@@ -1,0 +1,537 @@
+"""Fitting BRDF models and histories to measurements.
+
+* :func:`fit_sh` - spherical-harmonic fit of ln f~ (or f~) by truncated SVD, with the
+  paper's horizon tacking (Bailey et al. 2008, Sec. IV F; spec `dynamic-sh-brdf.md` 8).
+* :func:`fit_dynamic_sh` - one fit per state group -> :class:`DynamicBRDF`.
+* :func:`envelope_paper`, :func:`envelope_sh` - conservative envelopes that bound every
+  measured sample (the paper's base/multiplier/fan-out recipe with its parameters chosen
+  automatically; and a compact one-coefficient-set SH envelope from a linear program).
+* :func:`fit_ts5` - five-parameter model by a global nlopt stage and a local polish.
+* :func:`fit_oxidation` - Wagner/Arrhenius oxidation law from a reflectance series.
+
+Fits return result dataclasses (model, residuals, conditioning, evaluations, time); they
+never mutate a model.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._checks import directions, finite_array, finite_scalar
+from .geometry import spherical_to_vector
+from .history import OxidationModel
+from .models import DynamicBRDF, Envelope, SphericalHarmonicBRDF, TorranceSparrow5
+from .sh import SHBasis
+
+__all__ = [
+    "FitResult",
+    "fit_sh",
+    "fit_dynamic_sh",
+    "DynamicFitResult",
+    "envelope_paper",
+    "envelope_sh",
+    "EnvelopeFit",
+    "fit_ts5",
+    "TS5_METHODS",
+    "compare_ts5_methods",
+    "fit_oxidation",
+    "OxidationFit",
+    "DEFAULT_RCOND",
+    "DEFAULT_HORIZON_WEIGHT",
+]
+
+# Defaults chosen by held-out prediction error on the paper's validation protocol
+# (brdfmodels.validation.select_fit_defaults; table in docs/fit-defaults.md), not by
+# training residual.
+DEFAULT_RCOND = 1e-3
+DEFAULT_HORIZON_WEIGHT = 0.1
+FLOOR_FRACTION = 1e-3  # the horizon "zero" of a log fit: 1e-3 of the smallest measured f~
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Outcome of a fit.
+
+    Attributes
+    ----------
+    model : BRDFModel
+    residual_rms : float
+        RMS residual in the fitted space (ln f~ for log fits), data rows only.
+    relative_rms : float
+        sqrt(mean(((f_model - f_data) / f_data)^2)) over the data (the paper's error E).
+    condition_number : float
+        Of the (weighted) design matrix, before pruning (SH fits).
+    pruned_modes : int
+        Singular modes dropped by the truncated SVD.
+    samples, coefficients : int
+    evaluations : int
+        Objective evaluations (iterative fits).
+    fit_time_s : float
+    method : str
+    details : dict
+    """
+
+    model: object
+    residual_rms: float
+    relative_rms: float
+    condition_number: float
+    pruned_modes: int
+    samples: int
+    coefficients: int
+    evaluations: int
+    fit_time_s: float
+    method: str
+    details: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        return {
+            "model": self.model.name,
+            "method": self.method,
+            "samples": self.samples,
+            "coefficients": self.coefficients,
+            "residual_rms": self.residual_rms,
+            "relative_rms": self.relative_rms,
+            "condition_number": self.condition_number,
+            "pruned_modes": self.pruned_modes,
+            "evaluations": self.evaluations,
+            "fit_time_s": self.fit_time_s,
+            **{k: v for k, v in self.details.items() if isinstance(v, (int, float, str))},
+        }
+
+
+def _check_data(wi, wo, brdf, weights):
+    wi = directions("wi", wi).reshape(-1, 3)
+    wo = directions("wo", wo).reshape(-1, 3)
+    f = finite_array("brdf_per_sr", brdf).ravel()
+    if not (len(wi) == len(wo) == len(f)):
+        raise ValueError(f"wi, wo and brdf_per_sr: expected the same number of samples, got {len(wi)}, {len(wo)}, {len(f)}")
+    if weights is None:
+        w = np.ones(len(f))
+    else:
+        w = finite_array("weights", weights, minimum=0.0).ravel()
+        if w.shape != f.shape:
+            raise ValueError(f"weights: expected {len(f)} values, got {w.size}")
+    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    if not np.all(above):
+        raise ValueError(f"wi/wo: {int((~above).sum())} samples at or below the horizon; expected directions above the surface")
+    return wi, wo, f, w
+
+
+def horizon_directions(n_incidence=6, n_azimuth=24, theta_deg=89.5):
+    """Direction pairs on the observer's horizon used to tack a fit down (spec section 8)."""
+    ti = np.radians(np.linspace(0, 80, n_incidence))
+    pi = np.linspace(-np.pi, np.pi, 8, endpoint=False)
+    po = np.linspace(-np.pi, np.pi, n_azimuth, endpoint=False)
+    tt, pp, oo = np.meshgrid(ti, pi, po, indexing="ij")
+    wi = spherical_to_vector(tt.ravel(), pp.ravel())
+    wo = spherical_to_vector(np.full(oo.size, math.radians(theta_deg)), oo.ravel())
+    return wi, wo
+
+
+def _design(basis, wi, wo, fanout):
+    return basis.evaluate_directions(wi, wo, fanout=fanout)
+
+
+def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights=None, horizon=True,
+           horizon_weight=None, rcond=None) -> FitResult:
+    """Least-squares spherical-harmonic fit (truncated SVD) of measured f_r.
+
+    Parameters
+    ----------
+    wi, wo : array_like, shape (N, 3)
+        Sample directions in the surface frame.
+    brdf_per_sr : array_like, shape (N,)
+        Measured f_r [1/sr] (> 0 for a log fit: mask empty pixels before fitting).
+    basis : SHBasis
+    fanout : float
+        Fan-out exponent s_e (Eq. 34).
+    log : bool
+        Fit ln f~ (separable logarithmic form) rather than f~.
+    weights : array_like, optional
+        Per-sample weights (relative; normalised to mean 1).
+    horizon : bool
+        Tack the BRDF to "zero" at the horizon: extra rows at theta_r = 89.5 deg with
+        f~ = ``FLOOR_FRACTION`` x the smallest measured f~ (log) or 0 (linear).
+    horizon_weight : float
+        Total weight of the horizon rows as a fraction of the data's
+        (default ``DEFAULT_HORIZON_WEIGHT``).
+    rcond : float
+        Singular values below ``rcond * s_max`` are pruned (default ``DEFAULT_RCOND``).
+
+    Raises
+    ------
+    ValueError
+        Underdetermined data (fewer samples than coefficients), non-positive values in a
+        log fit, directions below the horizon.
+    """
+    start = time.perf_counter()
+    wi, wo, f, w = _check_data(wi, wo, brdf_per_sr, weights)
+    k = basis.size
+    if len(f) < k:
+        raise ValueError(f"underdetermined fit: {len(f)} samples for {k} coefficients; give at least {k} samples or a smaller basis")
+    rcond = DEFAULT_RCOND if rcond is None else finite_scalar("rcond", rcond, minimum=0.0, maximum=1.0)
+    hw = DEFAULT_HORIZON_WEIGHT if horizon_weight is None else finite_scalar("horizon_weight", horizon_weight, minimum=0.0)
+    ft = wi[:, 2] * wo[:, 2] * f  # f~ (Eq. 17)
+    if log:
+        if np.any(f <= 0):
+            raise ValueError(f"brdf_per_sr: {int((f <= 0).sum())} values <= 0 cannot enter a log fit; mask them first")
+        y = np.log(ft)
+    else:
+        y = ft
+    a = _design(basis, wi, wo, fanout)
+    w = w / w.mean()
+    rows_a, rows_y, rows_w = [a], [y], [w]
+    floor = None
+    if horizon and hw > 0:
+        hwi, hwo = horizon_directions()
+        floor = FLOOR_FRACTION * ft.min()
+        rows_a.append(_design(basis, hwi, hwo, fanout))
+        rows_y.append(np.full(len(hwi), math.log(floor) if log else 0.0))
+        rows_w.append(np.full(len(hwi), hw * len(f) / len(hwi)))
+    big_a = np.vstack(rows_a)
+    big_y = np.concatenate(rows_y)
+    sw = np.sqrt(np.concatenate(rows_w))
+    u, s, vt = np.linalg.svd(big_a * sw[:, None], full_matrices=False)
+    keep = s > rcond * s[0]
+    coef = vt[keep].T @ ((u[:, keep].T @ (big_y * sw)) / s[keep])
+    model = SphericalHarmonicBRDF(basis, coef, fanout=fanout, log=log)
+    pred = a @ coef
+    res = pred - y
+    f_model = np.exp(pred) / (wi[:, 2] * wo[:, 2]) if log else np.maximum(pred, 0) / (wi[:, 2] * wo[:, 2])
+    return FitResult(
+        model=model,
+        residual_rms=float(np.sqrt(np.mean(res**2))),
+        relative_rms=float(np.sqrt(np.mean(((f_model - f) / f) ** 2))),
+        condition_number=float(s[0] / s[-1]) if s[-1] > 0 else math.inf,
+        pruned_modes=int((~keep).sum()),
+        samples=len(f),
+        coefficients=k,
+        evaluations=1,
+        fit_time_s=time.perf_counter() - start,
+        method="truncated SVD",
+        details={"rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_f_tilde": floor or 0.0, "log": log, "fanout": fanout},
+    )
+
+
+@dataclass(frozen=True)
+class DynamicFitResult:
+    model: DynamicBRDF
+    fits: dict  # state -> FitResult
+    fit_time_s: float
+
+
+def fit_dynamic_sh(samples, basis: SHBasis, states, *, state="temperature_k", fanout=0.6, log=True, extrapolation="error",
+                   **kwargs) -> DynamicFitResult:
+    """One SH fit per state group (samples grouped to the nearest of ``states``).
+
+    ``samples`` is a :class:`brdfmodels.screen.Samples` table; each state needs enough
+    samples for the basis.
+    """
+    from .screen import group_by_state
+
+    start = time.perf_counter()
+    groups = group_by_state(samples, state, states)
+    missing = [s for s in np.asarray(states, float) if float(s) not in groups]
+    if missing:
+        raise ValueError(f"states {missing}: no samples near them; expected samples for every state")
+    fits = {}
+    for s_val, g in sorted(groups.items()):
+        try:
+            fits[s_val] = fit_sh(g.wi, g.wo, g.brdf_per_sr, basis, fanout=fanout, log=log, weights=g.weight, **kwargs)
+        except ValueError as exc:
+            raise ValueError(f"state {state}={s_val:g}: {exc}") from None
+    nodes = np.array(sorted(fits))
+    coef = np.array([fits[s].model.coefficients for s in nodes])
+    model = DynamicBRDF(basis, nodes, coef, state, fanout=fanout, log=log, extrapolation=extrapolation)
+    return DynamicFitResult(model, fits, time.perf_counter() - start)
+
+
+@dataclass(frozen=True)
+class EnvelopeFit:
+    """A conservative envelope with its check against the measured samples."""
+
+    model: object
+    fraction_bounded: float
+    median_overprediction: float
+    max_overprediction: float
+    method: str
+    details: dict = field(default_factory=dict)
+
+    def summary(self) -> dict:
+        return {"method": self.method, "fraction_bounded": self.fraction_bounded,
+                "median_overprediction": self.median_overprediction, "max_overprediction": self.max_overprediction, **self.details}
+
+
+def _bound_report(env_values, data):
+    ratio = env_values / data
+    return float(np.mean(env_values >= data * (1 - 1e-12))), float(np.median(ratio)), float(ratio.max())
+
+
+def envelope_paper(model, samples, *, fanout_h_candidates=None) -> EnvelopeFit:
+    """The paper's envelope recipe with its parameters chosen automatically.
+
+    For each candidate halfway fan-out (the fit's and smaller ones), the multiplier is the
+    smallest that makes ``Envelope(model, multiplier=m, fanout_h=s)`` bound every measured
+    sample (all states); the candidate with the smallest median over-prediction wins.
+    The base stays 0 (a log-SH envelope is never 0, so the multiplier alone suffices).
+    """
+    fan = getattr(model, "fanout", 0.6)
+    cands = fanout_h_candidates if fanout_h_candidates is not None else [None, 0.9 * fan, 0.75 * fan, 0.6 * fan]
+    best = None
+    for fh in cands:
+        env0 = Envelope(model, fanout_h=fh)
+        e = env0.evaluate(samples.wi, samples.wo)
+        mult = max(1.0, float(np.max(samples.brdf_per_sr / e)) * (1 + 1e-9))
+        env = Envelope(model, multiplier=mult, fanout_h=fh)
+        frac, med, mx = _bound_report(env.evaluate(samples.wi, samples.wo), samples.brdf_per_sr)
+        if best is None or med < best[0]:
+            best = (med, EnvelopeFit(env, frac, med, mx, "paper recipe (multiplier, halfway fan-out)",
+                                     {"multiplier": mult, "fanout_h": fh if fh is not None else fan, "base": 0.0}))
+    return best[1]
+
+
+def envelope_sh(samples, basis: SHBasis, *, fanout=0.6, horizon=True) -> EnvelopeFit:
+    """Compact conservative SH envelope: one log-coefficient set c with
+    ``ln f~_env >= ln f~_data`` at every sample (all states), minimising the summed log
+    over-prediction - a linear program (SciPy HiGHS). Horizon rows are capped at the data
+    maximum so the unconstrained parts cannot grow without bound.
+    """
+    from scipy.optimize import linprog
+
+    wi, wo, f, _ = _check_data(samples.wi, samples.wo, samples.brdf_per_sr, None)
+    if np.any(f <= 0):
+        raise ValueError("brdf_per_sr: values <= 0 cannot bound a log envelope; mask them first")
+    y = np.log(wi[:, 2] * wo[:, 2] * f)
+    a = _design(basis, wi, wo, fanout)
+    a_ub, b_ub = [-a], [-y]
+    if horizon:
+        hwi, hwo = horizon_directions()
+        a_ub.append(_design(basis, hwi, hwo, fanout))
+        b_ub.append(np.full(len(hwi), y.max()))
+    res = linprog(a.sum(axis=0), A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=[(None, None)] * basis.size, method="highs")
+    if not res.success:
+        raise ValueError(f"envelope_sh: the linear program failed ({res.message}); use a larger basis or envelope_paper")
+    model = SphericalHarmonicBRDF(basis, res.x, fanout=fanout, log=True)
+    frac, med, mx = _bound_report(model.evaluate(wi, wo), f)
+    return EnvelopeFit(model, frac, med, mx, "compact SH envelope (linear program)", {"coefficients": basis.size})
+
+
+# -- five-parameter model ---------------------------------------------------------------------
+TS5_BOUNDS = {  # search box of the global stage (transformed: log for positive parameters)
+    "kb": (1e-4, 100.0),
+    "kr": (0.05, 50.0),
+    "a": (0.05, 30.0),
+    "b": (-100.0, 10.0),
+    "kd": (1e-4, 10.0),
+}
+TS5_METHODS = {
+    "esch": "GN_ESCH",
+    "crs2": "GN_CRS2_LM",
+    "isres": "GN_ISRES",
+    "direct-l": "GN_DIRECT_L",
+    "mlsl": "G_MLSL_LDS",
+}
+
+
+def _ts5_params(x):
+    return dict(kb=math.exp(x[0]), kr=math.exp(x[1]), a=math.exp(x[2]), b=x[3], kd=math.exp(x[4]))
+
+
+def _ts5_objective(wi, wo, f, w):
+    def obj(x):
+        m = TorranceSparrow5(**_ts5_params(x))
+        rel = (m.evaluate(wi, wo) - f) / f
+        return float(np.sqrt(np.sum(w * rel * rel) / np.sum(w)))
+
+    return obj
+
+
+def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local="bobyqa", weights=None, xtol_rel=1e-10) -> FitResult:
+    """Fit the five-parameter model: a global nlopt stage, then a local polish.
+
+    The objective is the paper's relative RMS error E (Zhang et al. 2010 report E per
+    fit; its definition is not in the text - this one is stated in the spec). Parameters
+    are searched in transformed space (log kb, log kr, log a, b, log kd) inside
+    ``TS5_BOUNDS``.
+
+    Parameters
+    ----------
+    method : str
+        Global algorithm: one of ``TS5_METHODS`` ("esch" is the evolutionary method
+        nearest to the paper's GA). The default comes from :func:`compare_ts5_methods`.
+    seed : int
+        nlopt's random seed (results are reproducible).
+    maxeval : int
+        Budget of the global stage.
+    local : {"bobyqa", "neldermead"}
+        Local polish (nlopt LN_BOBYQA / LN_NELDERMEAD).
+    """
+    import nlopt
+
+    start = time.perf_counter()
+    wi, wo, f, w = _check_data(wi, wo, brdf_per_sr, weights)
+    if np.any(f <= 0):
+        raise ValueError("brdf_per_sr: values <= 0 cannot enter the relative error; mask them first")
+    if len(f) < 5:
+        raise ValueError(f"underdetermined fit: {len(f)} samples for 5 parameters")
+    if method not in TS5_METHODS:
+        raise ValueError(f"method={method!r}: expected one of {sorted(TS5_METHODS)}")
+    if local not in ("bobyqa", "neldermead"):
+        raise ValueError(f"local={local!r}: expected 'bobyqa' or 'neldermead'")
+    obj = _ts5_objective(wi, wo, f, w)
+    count = [0]
+
+    def fun(x, grad):
+        count[0] += 1
+        return obj(x)
+
+    lo = np.array([math.log(TS5_BOUNDS["kb"][0]), math.log(TS5_BOUNDS["kr"][0]), math.log(TS5_BOUNDS["a"][0]), TS5_BOUNDS["b"][0], math.log(TS5_BOUNDS["kd"][0])])
+    hi = np.array([math.log(TS5_BOUNDS["kb"][1]), math.log(TS5_BOUNDS["kr"][1]), math.log(TS5_BOUNDS["a"][1]), TS5_BOUNDS["b"][1], math.log(TS5_BOUNDS["kd"][1])])
+    nlopt.srand(int(seed))
+    opt = nlopt.opt(getattr(nlopt, TS5_METHODS[method]), 5)
+    if method == "mlsl":
+        loc = nlopt.opt(nlopt.LN_BOBYQA, 5)
+        loc.set_xtol_rel(1e-6)
+        opt.set_local_optimizer(loc)
+    opt.set_lower_bounds(lo)
+    opt.set_upper_bounds(hi)
+    opt.set_min_objective(fun)
+    opt.set_maxeval(int(maxeval))
+    x0 = 0.5 * (lo + hi)
+    try:
+        x = opt.optimize(x0)
+    except nlopt.RoundoffLimited:
+        x = x0
+    x_global, e_global, ev_global = np.array(x), obj(x), count[0]
+    pol = nlopt.opt(nlopt.LN_BOBYQA if local == "bobyqa" else nlopt.LN_NELDERMEAD, 5)
+    pol.set_lower_bounds(lo)
+    pol.set_upper_bounds(hi)
+    pol.set_min_objective(fun)
+    pol.set_xtol_rel(xtol_rel)
+    pol.set_maxeval(20000)
+    try:
+        x = pol.optimize(x_global)
+    except nlopt.RoundoffLimited:
+        x = x_global
+    e = obj(x)
+    model = TorranceSparrow5(**_ts5_params(x))
+    return FitResult(model, e, e, math.nan, 0, len(f), 5, count[0], time.perf_counter() - start, f"nlopt {method} + {local}",
+                     {"global_error": e_global, "global_evaluations": ev_global, **{f"p_{k}": v for k, v in _ts5_params(x).items()}})
+
+
+def compare_ts5_methods(wi, wo, brdf_per_sr, *, budgets=(2000, 8000), seeds=(0, 1, 2), methods=None) -> list:
+    """Error reached vs evaluations vs seconds for each global algorithm (+ polish)."""
+    rows = []
+    for method in methods or sorted(TS5_METHODS):
+        for budget in budgets:
+            errs, evals, secs = [], [], []
+            for seed in seeds:
+                r = fit_ts5(wi, wo, brdf_per_sr, method=method, seed=seed, maxeval=budget)
+                errs.append(r.relative_rms)
+                evals.append(r.evaluations)
+                secs.append(r.fit_time_s)
+            rows.append({"method": method, "budget": budget, "median_error": float(np.median(errs)), "worst_error": float(np.max(errs)),
+                         "evaluations": float(np.mean(evals)), "time_s": float(np.mean(secs))})
+    return rows
+
+
+# -- oxidation ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class OxidationFit:
+    """Fitted oxidation law with its uncertainty.
+
+    ``model`` holds T_0, d_0, xi_0; ``reflectance0`` is the bare reflectance R_0 in
+    ``R = R_0 exp(-xi)``. ``reference_temperature_k`` and ``rate_at_reference_per_s``
+    (k_ref = d_0 exp(-T_0 / T_ref)) are the well-conditioned parameters actually fitted;
+    ``correlation`` is their correlation matrix (T_0, ln k_ref, xi_0, ln R_0) and
+    ``correlation_t0_log_d0`` the correlation of T_0 with ln d_0 (near +-1: why the
+    reparametrisation is needed). ``ci95`` maps names to (low, high).
+    """
+
+    model: OxidationModel
+    reflectance0: float
+    reference_temperature_k: float
+    rate_at_reference_per_s: float
+    correlation: np.ndarray
+    correlation_t0_log_d0: float
+    condition_number: float
+    ci95: dict
+    residual_rms: float
+    fit_time_s: float
+
+
+def fit_oxidation(times_s, temperatures_k, reflectance, *, reference_temperature_k=None, initial=(8000.0, 0.3)) -> OxidationFit:
+    """Fit T_0, d_0, xi_0 (and R_0) of ``R = R_0 exp(-xi(t))`` to a reflectance series.
+
+    Uses the reparametrisation of the spec: ``d_0 exp(-T_0/T) = k_ref exp(-T_0 (1/T -
+    1/T_ref))`` with ``ln k_ref`` fitted (T_ref default: the 90th percentile of the
+    temperatures, where most oxidation happens), by nonlinear least squares on ln R.
+    """
+    from scipy.optimize import least_squares
+
+    start = time.perf_counter()
+    t = finite_array("times_s", times_s, ndim=1)
+    temp = finite_array("temperatures_k", temperatures_k, ndim=1)
+    r = finite_array("reflectance", reflectance, ndim=1)
+    if not (t.shape == temp.shape == r.shape):
+        raise ValueError(f"times_s, temperatures_k, reflectance: expected equal lengths, got {t.size}, {temp.size}, {r.size}")
+    if t.size < 6:
+        raise ValueError(f"underdetermined fit: {t.size} points for 4 parameters; give at least 6")
+    if np.any(r <= 0):
+        raise ValueError("reflectance: expected values > 0")
+    t_ref = float(np.percentile(temp, 90)) if reference_temperature_k is None else finite_scalar("reference_temperature_k", reference_temperature_k, minimum=0.0, strict_min=True)
+    y = np.log(r)
+
+    def xi_of(p):
+        t0, lk, xi0 = p[0], p[1], p[2]
+        d0 = math.exp(lk + t0 / t_ref)
+        return OxidationModel(max(t0, 0.0), d0, max(xi0, 0.0)).extinction(t, temp)
+
+    def resid(p):
+        return p[3] - xi_of(p) - y
+
+    t0_init, xi0_init = initial
+    # initial ln k_ref from the total darkening: xi_end^2 - xi0^2 ~ k_ref * (effective time)
+    darkening = max(y[0] - y[-1], 1e-3)
+    eff = OxidationModel(t0_init, 1.0, 0.0).extinction(t, temp)[-1] ** 2 * math.exp(t0_init / t_ref)
+    lk_init = math.log(max(((xi0_init + darkening) ** 2 - xi0_init**2) / max(eff, 1e-300), 1e-300))
+    p0 = np.array([t0_init, lk_init, xi0_init, y[0] + xi0_init])
+    sol = least_squares(resid, p0, x_scale=np.array([1000.0, 1.0, 0.1, 0.1]), bounds=([0.0, -200.0, 0.0, -10.0], [1e5, 200.0, 10.0, 5.0]),
+                        xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=5000)
+    p = sol.x
+    jac = sol.jac
+    dof = max(t.size - 4, 1)
+    s2 = float(np.sum(sol.fun**2) / dof)
+    jtj = jac.T @ jac
+    cov = s2 * np.linalg.pinv(jtj)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = cov / np.outer(np.maximum(sd, 1e-300), np.maximum(sd, 1e-300))
+    # covariance of (T0, ln d0) where ln d0 = ln k_ref + T0 / T_ref
+    jac_orig = np.array([[1.0, 0.0], [1.0 / t_ref, 1.0]])  # d(T0, ln d0)/d(T0, ln k_ref)
+    c2 = jac_orig @ cov[:2, :2] @ jac_orig.T
+    corr_t0_d0 = float(c2[0, 1] / math.sqrt(max(c2[0, 0] * c2[1, 1], 1e-300)))
+    d0 = math.exp(p[1] + p[0] / t_ref)
+    sd_ld0 = math.sqrt(max(c2[1, 1], 0.0))
+    ci = {
+        "activation_temperature_k": (p[0] - 1.96 * sd[0], p[0] + 1.96 * sd[0]),
+        "rate_per_s": (d0 * math.exp(-1.96 * sd_ld0), d0 * math.exp(1.96 * sd_ld0)),
+        "initial_extinction": (p[2] - 1.96 * sd[2], p[2] + 1.96 * sd[2]),
+        "rate_at_reference_per_s": (math.exp(p[1] - 1.96 * sd[1]), math.exp(p[1] + 1.96 * sd[1])),
+    }
+    ev = np.linalg.eigvalsh(jtj)
+    return OxidationFit(
+        model=OxidationModel(p[0], d0, p[2]),
+        reflectance0=math.exp(p[3]),
+        reference_temperature_k=t_ref,
+        rate_at_reference_per_s=math.exp(p[1]),
+        correlation=corr,
+        correlation_t0_log_d0=corr_t0_d0,
+        condition_number=float(math.sqrt(ev.max() / max(ev.min(), 1e-300))),
+        ci95=ci,
+        residual_rms=float(np.sqrt(np.mean(sol.fun**2))),
+        fit_time_s=time.perf_counter() - start,
+    )
