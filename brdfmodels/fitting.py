@@ -47,8 +47,8 @@ __all__ = [
 # Defaults chosen by held-out prediction error on the paper's validation protocol
 # (brdfmodels.validation.select_fit_defaults; table in docs/fit-defaults.md), not by
 # training residual.
-DEFAULT_RCOND = 1e-3
-DEFAULT_HORIZON_WEIGHT = 0.1
+DEFAULT_RCOND = 1e-2
+DEFAULT_HORIZON_WEIGHT = 0.01
 FLOOR_FRACTION = 1e-3  # the horizon "zero" of a log fit: 1e-3 of the smallest measured f~
 
 
