@@ -49,7 +49,10 @@ __all__ = [
 # training residual.
 DEFAULT_RCOND = 1e-2
 DEFAULT_HORIZON_WEIGHT = 0.01
-FLOOR_FRACTION = 1e-3  # the horizon "zero" of a log fit: 1e-3 of the smallest measured f~
+# The horizon "zero" of a log fit: f~ = cos(theta_i) cos(theta_r) f_r vanishes at the
+# horizon through cos(theta_r) itself, so the rows at theta_r = 89.5 deg take
+# f~ = cos_i cos_r * (smallest measured f_r). A fixed fraction of the smallest f~ instead
+# (tried: 1e-3) dragged the unmeasured hemisphere 1000x below a diffuse truth.
 
 
 @dataclass(frozen=True)
@@ -155,7 +158,7 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         Per-sample weights (relative; normalised to mean 1).
     horizon : bool
         Tack the BRDF to "zero" at the horizon: extra rows at theta_r = 89.5 deg with
-        f~ = ``FLOOR_FRACTION`` x the smallest measured f~ (log) or 0 (linear).
+        f~ = cos_i cos_r min(f_r) (log; f~ vanishes there through cos_r) or 0 (linear).
     horizon_weight : float
         Total weight of the horizon rows as a fraction of the data's
         (default ``DEFAULT_HORIZON_WEIGHT``).
@@ -188,9 +191,9 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
     floor = None
     if horizon and hw > 0:
         hwi, hwo = horizon_directions()
-        floor = FLOOR_FRACTION * ft.min()
+        floor = float(f.min())
         rows_a.append(_design(basis, hwi, hwo, fanout))
-        rows_y.append(np.full(len(hwi), math.log(floor) if log else 0.0))
+        rows_y.append(np.log(hwi[:, 2] * hwo[:, 2] * floor) if log else np.zeros(len(hwi)))
         rows_w.append(np.full(len(hwi), hw * len(f) / len(hwi)))
     big_a = np.vstack(rows_a)
     big_y = np.concatenate(rows_y)
@@ -213,7 +216,7 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         evaluations=1,
         fit_time_s=time.perf_counter() - start,
         method="truncated SVD",
-        details={"rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_f_tilde": floor or 0.0, "log": log, "fanout": fanout},
+        details={"rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_per_sr": floor or 0.0, "log": log, "fanout": fanout},
     )
 
 
