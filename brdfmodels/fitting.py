@@ -238,7 +238,7 @@ def fit_dynamic_sh(samples, basis: SHBasis, states, *, state="temperature_k", fa
 
     start = time.perf_counter()
     groups = group_by_state(samples, state, states)
-    missing = [s for s in np.asarray(states, float) if float(s) not in groups]
+    missing = [float(s) for s in np.asarray(states, float) if float(s) not in groups]
     if missing:
         raise ValueError(f"states {missing}: no samples near them; expected samples for every state")
     fits = {}
@@ -318,7 +318,13 @@ def envelope_sh(samples, basis: SHBasis, *, fanout=0.6, horizon=True) -> Envelop
     res = linprog(a.sum(axis=0), A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=[(None, None)] * basis.size, method="highs")
     if not res.success:
         raise ValueError(f"envelope_sh: the linear program failed ({res.message}); use a larger basis or envelope_paper")
-    model = SphericalHarmonicBRDF(basis, res.x, fanout=fanout, log=True)
+    coef = res.x.copy()
+    # the solver meets constraints to its tolerance (~1e-7 in ln f~): lift the constant
+    # term by the largest violation so every sample is bounded exactly
+    violation = float(np.max(y - a @ coef))
+    if violation > 0:
+        coef[0] += (violation + 1e-12) * math.sqrt(4.0 * math.pi)  # column 0 is y_0^0 = 1/sqrt(4 pi)
+    model = SphericalHarmonicBRDF(basis, coef, fanout=fanout, log=True)
     frac, med, mx = _bound_report(model.evaluate(wi, wo), f)
     return EnvelopeFit(model, frac, med, mx, "compact SH envelope (linear program)", {"coefficients": basis.size})
 

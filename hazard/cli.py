@@ -9,6 +9,10 @@ Verbs:
   hazard validate SCENE        check a scene file
   hazard models                registered BRDF models
   hazard schema                JSON schema of scene files
+  hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
+  hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
+  hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
+  hazard fit oxidation SERIES.csv -o OX.json      oxidation law from a reflectance series
   hazard mpe   --wavelength-nm L --duration-s T [--standard S] [--skin] [--json]
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
 
@@ -23,6 +27,8 @@ import json
 import math
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from . import mpe as _mpe
 from . import nohd as _nohd
@@ -83,6 +89,39 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("schema", help="print the JSON schema of scene files")
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
+
+    p = sub.add_parser("fit", help="fit BRDF models and histories to measurements")
+    fsub = p.add_subparsers(dest="fit_kind", metavar="KIND", parser_class=_Parser)
+    fsub.required = True
+    for kind, helptext in (("screen", "reduce witness-screen tests (TOML) and fit an SH BRDF"),
+                           ("sh", "fit an SH BRDF to a samples table (CSV)")):
+        q = fsub.add_parser(kind, help=helptext)
+        q.add_argument("inputs", nargs="+", help="test descriptions (TOML)" if kind == "screen" else "samples table (CSV)")
+        q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
+        q.add_argument("--basis", default="8,4,2,0", help="lh_max,mh_max,ld_max,md_max (default 8,4,2,0: 37 harmonics)")
+        q.add_argument("--fanout", type=float, default=0.6, help="fan-out exponent s_e (default 0.6)")
+        q.add_argument("--state", choices=["time_s", "temperature_k"], help="fit one model per state: the state label")
+        q.add_argument("--states", help="comma-separated state values to group the samples at (with --state)")
+        q.add_argument("--envelope", choices=["paper", "sh"], help="also write a conservative envelope bounding every sample")
+        q.add_argument("--envelope-output", help="envelope model file (JSON)")
+        q.add_argument("--samples-output", help="write the reduced samples table (CSV)" if kind == "screen" else argparse.SUPPRESS)
+        q.add_argument("--report", action="store_true", help="print the leave-one-test-out error-vs-cost table over basis orders")
+        q.add_argument("--force", action="store_true", help="overwrite existing outputs")
+        q.add_argument("--json", action="store_true", help="print the fit report as JSON")
+    q = fsub.add_parser("ts5", help="fit the five-parameter Torrance-Sparrow model to a samples table (CSV)")
+    q.add_argument("inputs", nargs=1, help="samples table (CSV)")
+    q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
+    q.add_argument("--method", default="crs2", help="global nlopt method: crs2 (default), esch, isres, direct-l, mlsl")
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--maxeval", type=int, default=20000, help="global-stage budget")
+    q.add_argument("--report", action="store_true", help="print the algorithm comparison table")
+    q.add_argument("--force", action="store_true")
+    q.add_argument("--json", action="store_true")
+    q = fsub.add_parser("oxidation", help="fit the oxidation law to a series CSV (time_s, temperature_k, reflectance)")
+    q.add_argument("inputs", nargs=1, help="series CSV with columns time_s, temperature_k, reflectance")
+    q.add_argument("-o", "--output", required=True, help="result file to write (JSON)")
+    q.add_argument("--force", action="store_true")
+    q.add_argument("--json", action="store_true")
 
     p = sub.add_parser("mpe", help="maximum permissible exposure with every step")
     _add_mpe_args(p, required=True)
@@ -293,7 +332,106 @@ def _cmd_schema(args, out, err):
     return EXIT_OK
 
 
-_COMMANDS = {"mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+def _check_new(path, force):
+    if Path(path).exists() and not force:
+        raise ValueError(f"{path} exists: pass --force to overwrite")
+
+
+def _basis_arg(text):
+    import brdfmodels
+
+    try:
+        parts = [int(x) for x in text.split(",")]
+    except ValueError:
+        raise ValueError(f"--basis={text!r}: expected four integers lh_max,mh_max,ld_max,md_max") from None
+    if len(parts) != 4:
+        raise ValueError(f"--basis={text!r}: expected four integers lh_max,mh_max,ld_max,md_max")
+    return brdfmodels.SHBasis(*parts)
+
+
+def _print_report(out, title, rows, as_json, extra=None):
+    from brdfmodels.accuracy import format_table
+
+    if as_json:
+        out.write(json.dumps({"report": title, "rows": rows, **(extra or {})}, indent=1, default=str) + "\n")
+    else:
+        out.write(format_table(rows, title) + "\n")
+        for k, v in (extra or {}).items():
+            out.write(f"  {k}: {v}\n")
+
+
+def _cmd_fit(args, out, err):
+    import brdfmodels
+    from brdfmodels import fitting, screen
+    from brdfmodels._io import atomic_write_text
+
+    _check_new(args.output, args.force)
+    if args.fit_kind == "oxidation":
+        path = Path(args.inputs[0])
+        try:
+            data = np.genfromtxt(path, delimiter=",", names=True)
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+        if data.dtype.names is None or not {"time_s", "temperature_k", "reflectance"} <= set(data.dtype.names):
+            raise ValueError(f"{path}: expected CSV columns time_s, temperature_k, reflectance")
+        r = fitting.fit_oxidation(data["time_s"], data["temperature_k"], data["reflectance"])
+        doc = {**r.model.to_dict(), "reflectance0": r.reflectance0, "reference_temperature_k": r.reference_temperature_k,
+               "rate_at_reference_per_s": r.rate_at_reference_per_s, "ci95": {k: list(map(float, v)) for k, v in r.ci95.items()},
+               "correlation_t0_log_d0": r.correlation_t0_log_d0, "condition_number": r.condition_number, "residual_rms": r.residual_rms}
+        atomic_write_text(args.output, json.dumps(doc, indent=1))
+        if args.json:
+            out.write(json.dumps(doc, indent=1) + "\n")
+        else:
+            out.write(f"oxidation fit: {r.model}; R0 = {r.reflectance0:.4g}\n")
+            for k, (lo, hi) in r.ci95.items():
+                out.write(f"  95 % CI {k}: [{lo:.5g}, {hi:.5g}]\n")
+            out.write(f"  fitted as k_ref at T_ref = {r.reference_temperature_k:.1f} K; corr(T0, ln d0) = {r.correlation_t0_log_d0:.4f}\n")
+            out.write(f"  wrote {args.output}\n")
+        return EXIT_OK
+    if args.fit_kind == "screen":
+        samples = brdfmodels.screen.Samples.concatenate(screen.reduce_test(screen.load_test(p)) for p in args.inputs)
+        if args.samples_output:
+            _check_new(args.samples_output, args.force)
+            samples.to_csv(args.samples_output)
+    else:
+        samples = screen.Samples.from_csv(args.inputs[0])
+    if args.fit_kind == "ts5":
+        if args.report:
+            rows = fitting.compare_ts5_methods(samples.wi, samples.wo, samples.brdf_per_sr)
+            _print_report(out, "five-parameter fit: error vs evaluations vs seconds", rows, args.json)
+        r = fitting.fit_ts5(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval)
+        brdfmodels.save(r.model, args.output)
+        _print_report(out, "five-parameter fit", [r.summary()], args.json, {"wrote": str(args.output)})
+        return EXIT_OK
+    basis = _basis_arg(args.basis)
+    if args.report:
+        best, table = brdfmodels.validation.choose_sh_basis(samples)
+        _print_report(out, "leave-one-test-out: basis orders and fan-out", table, args.json, {"best": best})
+    if args.state:
+        if not args.states:
+            raise ValueError("--states: give the state values to group at, e.g. --states 0,5,10")
+        nodes = [float(x) for x in args.states.split(",")]
+        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=args.state, fanout=args.fanout)
+        model = res.model
+        rows = [{"state": k, **v.summary()} for k, v in res.fits.items()]
+    else:
+        r = fitting.fit_sh(samples.wi, samples.wo, samples.brdf_per_sr, basis, fanout=args.fanout, weights=samples.weight)
+        model = r.model
+        rows = [r.summary()]
+    brdfmodels.save(model, args.output)
+    extra = {"wrote": str(args.output)}
+    if args.envelope:
+        if not args.envelope_output:
+            raise ValueError("--envelope-output: required with --envelope")
+        _check_new(args.envelope_output, args.force)
+        env = fitting.envelope_paper(model, samples) if args.envelope == "paper" else fitting.envelope_sh(samples, basis, fanout=args.fanout)
+        brdfmodels.save(env.model, args.envelope_output)
+        extra.update({"envelope": env.summary(), "envelope_file": str(args.envelope_output)})
+    _print_report(out, "spherical-harmonic fit", rows, args.json, extra)
+    return EXIT_OK
+
+
+_COMMANDS = {"fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
              "models": _cmd_models, "schema": _cmd_schema}
 
 
