@@ -315,15 +315,21 @@ def envelope_sh(samples, basis: SHBasis, *, fanout=0.6, horizon=True) -> Envelop
         hwi, hwo = horizon_directions()
         a_ub.append(_design(basis, hwi, hwo, fanout))
         b_ub.append(np.full(len(hwi), y.max()))
-    res = linprog(a.sum(axis=0), A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=[(None, None)] * basis.size, method="highs")
+    # Bound the coefficients relative to a least-squares fit: directions the samples do not
+    # constrain otherwise let the LP return huge, nearly cancelling coefficients whose
+    # evaluation is not reproducible to the margin below.
+    ls = fit_sh(wi, wo, f, basis, fanout=fanout).model.coefficients
+    cap = 10.0 * float(np.max(np.abs(ls))) + 10.0
+    res = linprog(a.sum(axis=0), A_ub=np.vstack(a_ub), b_ub=np.concatenate(b_ub), bounds=[(-cap, cap)] * basis.size, method="highs")
     if not res.success:
         raise ValueError(f"envelope_sh: the linear program failed ({res.message}); use a larger basis or envelope_paper")
     coef = res.x.copy()
     # the solver meets constraints to its tolerance (~1e-7 in ln f~): lift the constant
-    # term by the largest violation so every sample is bounded exactly
-    violation = float(np.max(y - a @ coef))
-    if violation > 0:
-        coef[0] += (violation + 1e-12) * math.sqrt(4.0 * math.pi)  # column 0 is y_0^0 = 1/sqrt(4 pi)
+    # term by the largest violation plus a margin for rounding at the coefficients' scale,
+    # so every sample is bounded whatever order the sum is evaluated in
+    margin = 1e-12 * (1.0 + float(np.abs(coef).sum()) * 4.0)
+    violation = max(float(np.max(y - a @ coef)), 0.0)
+    coef[0] += (violation + margin) * math.sqrt(4.0 * math.pi)  # column 0 is y_0^0 = 1/sqrt(4 pi)
     model = SphericalHarmonicBRDF(basis, coef, fanout=fanout, log=True)
     frac, med, mx = _bound_report(model.evaluate(wi, wo), f)
     return EnvelopeFit(model, frac, med, mx, "compact SH envelope (linear program)", {"coefficients": basis.size})

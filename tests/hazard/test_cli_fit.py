@@ -1,0 +1,117 @@
+"""hazard fit: from witness-screen files and tables to model files, and clear errors."""
+
+import io
+import json
+
+import numpy as np
+import pytest
+
+import brdfmodels as bm
+from brdfmodels import screen, validation
+from hazard.cli import main
+
+
+def write_test(folder, name, truth, incidence, groove, pixels=(48, 48), times=(0.0, 5.0)):
+    t = screen.simulate_test(truth, test_id=name, incidence_deg=incidence, groove_angle_deg=groove, times_s=times,
+                             state_of_time=lambda tt: 0.311 + 0.1189 * tt, temperature_of_time=lambda tt: 300 + 100 * tt,
+                             pixels=pixels, gain_counts=400.0)
+    np.save(folder / f"{name}_ps.npy", t.point_source)
+    np.savez(folder / f"{name}_frames.npz", frames=t.frames, times_s=t.times_s)
+    np.savetxt(folder / f"{name}_pyro.csv", np.c_[t.pyrometer_times_s, t.pyrometer_temperatures_k], delimiter=",",
+               header="time_s,temperature_k", comments="")
+    g = t.geometry
+    (folder / f"{name}.toml").write_text(f"""test_id = "{name}"
+[screen]
+upper_left_m = {g.upper_left_m.tolist()}
+upper_right_m = {g.upper_right_m.tolist()}
+lower_left_m = {g.lower_left_m.tolist()}
+top_row = {g.top_row}
+bottom_row = {g.bottom_row}
+left_col = {g.left_col}
+right_col = {g.right_col}
+[sample]
+normal = {t.sample_normal.tolist()}
+groove = {t.groove.tolist()}
+[laser]
+power_w = {t.power_w}
+[calibration]
+irradiance_w_m2 = {t.calibration.irradiance_w_m2}
+pixel = {list(t.calibration.pixel)}
+counts = {t.calibration.counts}
+[images]
+point_source = "{name}_ps.npy"
+frames = "{name}_frames.npz"
+background = {t.background}
+saturation = {t.saturation}
+[pyrometer]
+file = "{name}_pyro.csv"
+""")
+    return folder / f"{name}.toml"
+
+
+def run(*argv):
+    out, err = io.StringIO(), io.StringIO()
+    return main([str(a) for a in argv], stdout=out, stderr=err), out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def tests_folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("screen")
+    truth = validation.SyntheticGroovedMetal()
+    paths = [write_test(folder, f"t{k}", truth, inc, g) for k, (inc, g) in enumerate(validation.FIT_TESTS[:4])]
+    return folder, paths
+
+
+def test_fit_screen_dynamic_with_envelope(tests_folder):
+    folder, paths = tests_folder
+    code, out, err = run("fit", "screen", *paths, "-o", folder / "dyn.json", "--state", "time_s", "--states", "0,5",
+                         "--envelope", "sh", "--envelope-output", folder / "env.json", "--samples-output", folder / "s.csv", "--force")
+    assert code == 0, err
+    model = bm.load(folder / "dyn.json")
+    assert model.is_dynamic and model.state_name == "time_s" and model.basis.size == 37
+    env = bm.load(folder / "env.json")
+    samples = screen.Samples.from_csv(folder / "s.csv")
+    assert np.all(env.evaluate(samples.wi, samples.wo) >= samples.brdf_per_sr * (1 - 1e-12))
+    assert "'fraction_bounded': 1.0" in out
+
+
+def test_fit_sh_ts5_from_samples_and_report(tests_folder):
+    folder, paths = tests_folder
+    run("fit", "screen", *paths, "-o", folder / "tmp.json", "--samples-output", folder / "s2.csv", "--force")
+    code, out, _ = run("fit", "sh", folder / "s2.csv", "-o", folder / "static.json", "--basis", "6,4,2,0", "--json", "--force")
+    doc = json.loads(out)
+    assert code == 0 and doc["rows"][0]["coefficients"] == 27
+    code, out, _ = run("fit", "ts5", folder / "s2.csv", "-o", folder / "ts5.json", "--maxeval", "400", "--force")
+    assert code == 0 and isinstance(bm.load(folder / "ts5.json"), bm.TorranceSparrow5)
+
+
+def test_fit_oxidation_cli(tmp_path):
+    ox = bm.OxidationModel.stainless_steel()
+    t = np.linspace(0, 12, 121)
+    temp = np.minimum(293 + 500 * t, 1450)
+    r = 0.62 * np.exp(-ox.extinction(t, temp))
+    np.savetxt(tmp_path / "series.csv", np.c_[t, temp, r], delimiter=",", header="time_s,temperature_k,reflectance", comments="")
+    code, out, err = run("fit", "oxidation", tmp_path / "series.csv", "-o", tmp_path / "ox.json")
+    assert code == 0, err
+    doc = json.loads((tmp_path / "ox.json").read_text())
+    assert doc["activation_temperature_k"] == pytest.approx(9060, rel=1e-4) and "95 % CI" in out
+
+
+def test_fit_errors_are_one_line(tests_folder, tmp_path):
+    folder, paths = tests_folder
+    bad = tmp_path / "bad.toml"
+    bad.write_text(paths[0].read_text().replace("counts = ", "count = "))
+    for name in ("t0_ps.npy", "t0_frames.npz", "t0_pyro.csv"):
+        (tmp_path / name).write_bytes((folder / name).read_bytes())
+    code, out, err = run("fit", "screen", bad, "-o", tmp_path / "x.json")
+    assert code == 2 and "calibration.counts: missing" in err and err.count("\n") == 1
+    code, _, err = run("fit", "sh", folder / "nope.csv", "-o", tmp_path / "x.json")
+    assert code == 2 and "cannot read the samples" in err
+    run("fit", "screen", paths[0], "-o", tmp_path / "y.json", "--samples-output", tmp_path / "all.csv")
+    lines = (tmp_path / "all.csv").read_text().splitlines()
+    (tmp_path / "few.csv").write_text("\n".join(lines[:21]) + "\n")
+    code, _, err = run("fit", "sh", tmp_path / "few.csv", "-o", tmp_path / "x.json")
+    assert code == 2 and "underdetermined fit: 20 samples for 37 coefficients" in err
+    (tmp_path / "exists.json").write_text("{}")
+    code, _, err = run("fit", "screen", paths[0], "-o", tmp_path / "exists.json")
+    assert code == 2 and "pass --force" in err
