@@ -139,8 +139,19 @@ def _design(basis, wi, wo, fanout):
     return basis.evaluate_directions(wi, wo, fanout=fanout)
 
 
+def _hemisphere_grid(n_theta=12, n_phi=24):
+    """Direction pairs spread over the hemisphere (for constraints where nothing was measured)."""
+    t = np.radians(np.linspace(2.0, 86.0, n_theta))
+    p = np.linspace(-np.pi, np.pi, n_phi, endpoint=False)
+    tt, pp = np.meshgrid(t, p, indexing="ij")
+    dirs = spherical_to_vector(tt.ravel(), pp.ravel())
+    wi = np.repeat(dirs[:: max(1, len(dirs) // 24)], len(dirs), axis=0)
+    wo = np.tile(dirs, (len(dirs[:: max(1, len(dirs) // 24)]), 1))
+    return wi, wo
+
+
 def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights=None, horizon=True,
-           horizon_weight=None, rcond=None) -> FitResult:
+           horizon_weight=None, rcond=None, method="tsvd") -> FitResult:
     """Least-squares spherical-harmonic fit (truncated SVD) of measured f_r.
 
     Parameters
@@ -164,6 +175,11 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         (default ``DEFAULT_HORIZON_WEIGHT``).
     rcond : float
         Singular values below ``rcond * s_max`` are pruned (default ``DEFAULT_RCOND``).
+    method : {"tsvd", "constrained"}
+        Truncated SVD, or constrained least squares: the same weighted problem subject to
+        the fitted ln f~ staying at or below the largest measured value over a grid of
+        the whole hemisphere (no lobe taller than anything measured where nothing was
+        measured); solved with SLSQP from the SVD solution.
 
     Raises
     ------
@@ -201,6 +217,27 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
     u, s, vt = np.linalg.svd(big_a * sw[:, None], full_matrices=False)
     keep = s > rcond * s[0]
     coef = vt[keep].T @ ((u[:, keep].T @ (big_y * sw)) / s[keep])
+    if method not in ("tsvd", "constrained"):
+        raise ValueError(f"method={method!r}: expected 'tsvd' or 'constrained'")
+    n_active = 0
+    if method == "constrained":
+        from scipy.optimize import minimize
+
+        gwi, gwo = _hemisphere_grid()
+        g = _design(basis, gwi, gwo, fanout)
+        cap = float(y.max()) if log else float(ft.max())
+        # the cap applies to ln f~ (or f~); grid pairs carry their own cos factors already
+        b_mat = big_a * sw[:, None]
+        z = big_y * sw
+        scale = float(np.sum(z * z)) or 1.0
+        res = minimize(lambda c: 0.5 * float(np.sum((b_mat @ c - z) ** 2)) / scale, coef,
+                       jac=lambda c: (b_mat.T @ (b_mat @ c - z)) / scale, method="SLSQP",
+                       constraints=[{"type": "ineq", "fun": lambda c: cap - g @ c, "jac": lambda c: -g}],
+                       options={"maxiter": 500, "ftol": 1e-12})
+        if not res.success:
+            raise ValueError(f"constrained fit did not converge ({res.message}); use method='tsvd'")
+        coef = res.x
+        n_active = int(np.sum(g @ coef > cap - 1e-6))
     model = SphericalHarmonicBRDF(basis, coef, fanout=fanout, log=log)
     pred = a @ coef
     res = pred - y
@@ -215,8 +252,8 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         coefficients=k,
         evaluations=1,
         fit_time_s=time.perf_counter() - start,
-        method="truncated SVD",
-        details={"rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_per_sr": floor or 0.0, "log": log, "fanout": fanout},
+        method="truncated SVD" if method == "tsvd" else "constrained least squares (SLSQP)",
+        details={"active_constraints": n_active, "rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_per_sr": floor or 0.0, "log": log, "fanout": fanout},
     )
 
 

@@ -200,6 +200,53 @@ class Samples:
                         repr(float(self.weight[k]))])
         return atomic_write_text(path, buf.getvalue())
 
+    def to_parquet(self, path) -> Path:
+        """Write the table as Parquet (needs pyarrow: ``pip install pyarrow``); atomic."""
+        try:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise ValueError("Parquet output needs pyarrow: pip install pyarrow (or use CSV)") from None
+        import os
+        import tempfile
+
+        path = Path(path)
+        cols = dict(zip(self.COLUMNS[:6], np.hstack([self.wi, self.wo]).T))
+        cols.update(brdf_per_sr=self.brdf_per_sr, time_s=self.time_s, temperature_k=self.temperature_k,
+                    test_id=np.asarray(self.test_id, str), frame_id=np.asarray(self.frame_id, np.int64), weight=self.weight)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            pq.write_table(pa.table({k: cols[k] for k in self.COLUMNS}), tmp)
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+        return path
+
+    @classmethod
+    def from_parquet(cls, path) -> "Samples":
+        try:
+            import pyarrow.parquet as pq
+        except ImportError:
+            raise ValueError("Parquet input needs pyarrow: pip install pyarrow (or use CSV)") from None
+        t = pq.read_table(path).to_pydict()
+        missing = [c for c in cls.COLUMNS if c not in t]
+        if missing:
+            raise ValueError(f"{path}: missing columns {missing}")
+        g = lambda k: np.asarray(t[k], float)
+        return cls(np.stack([g("wi_x"), g("wi_y"), g("wi_z")], 1), np.stack([g("wo_x"), g("wo_y"), g("wo_z")], 1), g("brdf_per_sr"),
+                   g("time_s"), g("temperature_k"), np.asarray(t["test_id"]), np.asarray(t["frame_id"], int), g("weight"))
+
+    @classmethod
+    def read(cls, path) -> "Samples":
+        """CSV or Parquet by the file's suffix."""
+        return cls.from_parquet(path) if str(path).endswith(".parquet") else cls.from_csv(path)
+
+    def write(self, path) -> Path:
+        return self.to_parquet(path) if str(path).endswith(".parquet") else self.to_csv(path)
+
     @classmethod
     def from_csv(cls, path) -> "Samples":
         path = Path(path)

@@ -96,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     for kind, helptext in (("screen", "reduce witness-screen tests (TOML) and fit an SH BRDF"),
                            ("sh", "fit an SH BRDF to a samples table (CSV)")):
         q = fsub.add_parser(kind, help=helptext)
-        q.add_argument("inputs", nargs="+", help="test descriptions (TOML)" if kind == "screen" else "samples table (CSV)")
+        q.add_argument("inputs", nargs="+", help="test descriptions (TOML)" if kind == "screen" else "samples table (.csv or .parquet)")
         q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
         q.add_argument("--basis", default="8,4,2,0", help="lh_max,mh_max,ld_max,md_max (default 8,4,2,0: 37 harmonics)")
         q.add_argument("--fanout", type=float, default=0.6, help="fan-out exponent s_e (default 0.6)")
@@ -104,7 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--states", help="comma-separated state values to group the samples at (with --state)")
         q.add_argument("--envelope", choices=["paper", "sh"], help="also write a conservative envelope bounding every sample")
         q.add_argument("--envelope-output", help="envelope model file (JSON)")
-        q.add_argument("--samples-output", help="write the reduced samples table (CSV)" if kind == "screen" else argparse.SUPPRESS)
+        q.add_argument("--samples-output", help="write the reduced samples table (.csv, or .parquet with pyarrow)" if kind == "screen" else argparse.SUPPRESS)
         q.add_argument("--report", action="store_true", help="print the leave-one-test-out error-vs-cost table over basis orders")
         q.add_argument("--force", action="store_true", help="overwrite existing outputs")
         q.add_argument("--json", action="store_true", help="print the fit report as JSON")
@@ -392,9 +392,9 @@ def _cmd_fit(args, out, err):
         samples = brdfmodels.screen.Samples.concatenate(screen.reduce_test(screen.load_test(p)) for p in args.inputs)
         if args.samples_output:
             _check_new(args.samples_output, args.force)
-            samples.to_csv(args.samples_output)
+            samples.write(args.samples_output)
     else:
-        samples = screen.Samples.from_csv(args.inputs[0])
+        samples = screen.Samples.read(args.inputs[0])
     if args.fit_kind == "ts5":
         if args.report:
             rows = fitting.compare_ts5_methods(samples.wi, samples.wo, samples.brdf_per_sr)

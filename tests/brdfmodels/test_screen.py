@@ -157,6 +157,11 @@ file = "pyro.csv"
     back = screen.Samples.from_csv(tmp_path / "s.csv")
     np.testing.assert_array_equal(back.brdf_per_sr, s.brdf_per_sr)
     np.testing.assert_array_equal(back.wo, s.wo)
+    pytest.importorskip("pyarrow")
+    s.write(tmp_path / "s.parquet")
+    pq = screen.Samples.read(tmp_path / "s.parquet")
+    np.testing.assert_array_equal(pq.brdf_per_sr, s.brdf_per_sr)
+    np.testing.assert_array_equal(pq.test_id.astype(str), s.test_id.astype(str))
     (tmp_path / "b.toml").write_text(text.replace("counts = ", "count = "))
     with pytest.raises(ValueError, match="calibration.counts: missing"):
         screen.load_test(tmp_path / "b.toml")
