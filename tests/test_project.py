@@ -32,3 +32,13 @@ def test_ci_runs_the_readme_test_command():
     assert "<!-- test-command -->" in readme and "<!-- test-command -->" in ci
     block = readme.split("<!-- test-command -->", 1)[1].split("```bash", 1)[1].split("```", 1)[0].strip()
     assert block == 'python -m pip install -e ".[all]" && python -m pytest'
+
+
+@pytest.mark.parametrize("script, args, expect", [
+    ("accuracy_tables.py", [], "Thin-plate heating"),
+    ("sh_order_table.py", ["--quick"], "held_out_log_rms"),
+])
+def test_examples_run(script, args, expect, tmp_path):
+    extra = ["--out", str(tmp_path)] if script == "sh_order_table.py" else []
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / script), *args, *extra], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert expect in out.stdout
