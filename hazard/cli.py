@@ -9,6 +9,7 @@ Verbs:
   hazard validate SCENE        check a scene file
   hazard models                registered BRDF models
   hazard schema                JSON schema of scene files
+  hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
   hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
   hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
   hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
@@ -89,6 +90,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("schema", help="print the JSON schema of scene files")
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
+
+    p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
+    p.add_argument("study", help="study TOML")
+    p.add_argument("-o", "--output", required=True, help="output folder (a restarted study resumes there)")
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
+    p.add_argument("--workers", type=int, default=2, help="worker processes of the embedded cluster (default 2)")
+    p.add_argument("--serial", action="store_true", help="run in this process without Dask")
+    p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
     p = sub.add_parser("fit", help="fit BRDF models and histories to measurements")
     fsub = p.add_subparsers(dest="fit_kind", metavar="KIND", parser_class=_Parser)
@@ -431,7 +442,26 @@ def _cmd_fit(args, out, err):
     return EXIT_OK
 
 
-_COMMANDS = {"fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+def _cmd_study(args, out, err):
+    from .study import load_study, progress_bar, run_study
+
+    study = load_study(args.study)
+    res = run_study(study, args.output, scheduler=args.scheduler, serial=args.serial, n_workers=args.workers, force=args.force,
+                    progress=None if args.quiet else progress_bar(err))
+    if args.json:
+        out.write(json.dumps(res.summary, indent=1) + "\n")
+    else:
+        out.write(f"study {study.name!r}: {res.summary['scenarios']} scenarios ({res.ran} run now, {res.skipped} already done), "
+                  f"{res.failed} failed\n")
+        for col, st in res.summary["statistics"].items():
+            out.write(f"  {col:28s} p50 {st['p50']:.4g}  p95 {st['p95']:.4g}  max {st['max']:.4g}\n")
+        for f in res.summary["failures"][:5]:
+            out.write(f"  failed scenario {f['id']}: {f['error']}\n")
+        out.write(f"  wrote {res.outdir / 'results.csv'}, {res.outdir / 'summary.json'}\n")
+    return EXIT_OK
+
+
+_COMMANDS = {"study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
              "models": _cmd_models, "schema": _cmd_schema}
 
 

@@ -6,7 +6,7 @@ history), occluders, terrain, observers and atmosphere, from TOML files validate
 arrays in local coordinates (``Scene.offset_m`` is the float64 origin).
 """
 
-from .scene import Observers, Scene, SceneError, Target, example_path, examples, json_schema, load, loads
+from .scene import Observers, Scene, SceneError, Target, example_path, examples, from_data, json_schema, load, loads
 from .spec import SceneSpec
 
-__all__ = ["Observers", "Scene", "SceneError", "SceneSpec", "Target", "example_path", "examples", "json_schema", "load", "loads"]
+__all__ = ["Observers", "Scene", "SceneError", "SceneSpec", "Target", "example_path", "examples", "from_data", "json_schema", "load", "loads"]

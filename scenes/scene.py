@@ -23,7 +23,7 @@ import brdfmodels
 from .geometry import Heightfield, Mesh, observer_points, shape_mesh, terrain_heightfield
 from .spec import SceneSpec
 
-__all__ = ["Scene", "Target", "Observers", "SceneError", "load", "loads", "examples", "example_path", "json_schema"]
+__all__ = ["Scene", "Target", "Observers", "SceneError", "load", "loads", "from_data", "examples", "example_path", "json_schema"]
 
 
 class SceneError(ValueError):
@@ -290,6 +290,13 @@ def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{source}: not valid TOML: {exc}") from None
+    return from_data(data, source=source, base_dir=base_dir, text=text)
+
+
+def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) -> Scene:
+    """Scene from already-parsed TOML data (a dict), e.g. a study's modified base scene."""
+    if text is None:
+        text = json.dumps(data, sort_keys=True, default=str)
     try:
         spec = SceneSpec.model_validate(data)
     except ValidationError as exc:
