@@ -60,13 +60,15 @@ def set_path(data: dict, path: str, value):
         try:
             node = node[key]
         except (KeyError, IndexError, TypeError):
+            if isinstance(key, int):
+                raise ValueError(f"path={path!r}: index {key} is out of range (the list has {len(node)} items)") from None
             raise ValueError(f"path={path!r}: {key!r} does not exist in the base scene") from None
         if isinstance(nxt, int) and not isinstance(node, list):
             raise ValueError(f"path={path!r}: {key!r} is not a list")
     last = parts[-1]
     if isinstance(last, int):
         if not isinstance(node, list) or last >= len(node):
-            raise ValueError(f"path={path!r}: index {last} is out of range")
+            raise ValueError(f"path={path!r}: index {last} is out of range (the list has {len(node) if isinstance(node, list) else 0} items)")
     elif not isinstance(node, dict):
         raise ValueError(f"path={path!r}: cannot set {last!r} on a {type(node).__name__}")
     node[last] = value
