@@ -10,6 +10,7 @@ Verbs:
   hazard models                registered BRDF models
   hazard schema                JSON schema of scene files
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
+  hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
   hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
   hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
   hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
@@ -100,6 +101,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("convergence", help="error against run time for each accuracy knob of a scene")
+    p.add_argument("scene", help="scene TOML file, or a bundled example's name")
+    p.add_argument("--tolerance", type=float, default=0.01, help="relative error allowed for the recommendation (default 0.01)")
+    p.add_argument("--knob", action="append", help="only this knob (repeatable)")
+    p.add_argument("--plot", help="write a log-log plot (PNG) here")
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--quiet", action="store_true")
 
     p = sub.add_parser("fit", help="fit BRDF models and histories to measurements")
     fsub = p.add_subparsers(dest="fit_kind", metavar="KIND", parser_class=_Parser)
@@ -461,7 +470,24 @@ def _cmd_study(args, out, err):
     return EXIT_OK
 
 
-_COMMANDS = {"study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+def _cmd_convergence(args, out, err):
+    from . import convergence as conv
+
+    progress = None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
+    rep = conv.convergence(args.scene, knobs=args.knob, tolerance=args.tolerance, progress=progress)
+    if args.plot:
+        conv.plot(rep, args.plot)
+    if args.json:
+        out.write(json.dumps({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance}, indent=1) + "\n")
+    else:
+        from brdfmodels.accuracy import format_table
+
+        out.write(format_table(rep.rows, f"convergence (errors relative to the finest run of each knob)") + "\n")
+        out.write(f"recommended within {rep.tolerance:g}: " + ", ".join(f"{k} = {v}" for k, v in rep.recommended.items()) + "\n")
+    return EXIT_OK
+
+
+_COMMANDS = {"convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
              "models": _cmd_models, "schema": _cmd_schema}
 
 

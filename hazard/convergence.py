@@ -1,0 +1,155 @@
+"""Error against run time for a scene's accuracy knobs (``hazard convergence SCENE``).
+
+For each knob the scene uses - direction-grid resolution and refinement depth of the
+keep-out lobe, beam samples, time step of a dynamic analysis, ODE tolerance of a heating
+history - the analysis runs at increasing cost with the other knobs at the scene's
+values. The quantities of interest (max NOHD, keep-out volume, peak irradiance over the
+observers, all dynamic) are compared with the finest run; the report recommends the
+cheapest setting whose errors are all within the tolerance.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["convergence", "ConvergenceReport", "KNOB_LEVELS"]
+
+KNOB_LEVELS = {
+    "direction_grid_deg": (8.0, 4.0, 2.0, 1.0, 0.5),
+    "refine_levels": (0, 1, 2, 3, 5),
+    "beam_samples": (16, 64, 256, 1024, 4096),
+    "time_step_fraction": (0.1, 0.05, 0.02, 0.01, 0.005),  # of the analysis window
+    "heating_rtol": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
+}
+QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2")
+
+
+@dataclass
+class ConvergenceReport:
+    rows: list  # knob, value, quantities, errors, time_s
+    recommended: dict  # knob -> value
+    tolerance: float
+
+    def table(self, knob=None):
+        return [r for r in self.rows if knob is None or r["knob"] == knob]
+
+
+def _apply(data, knob, value):
+    d = copy.deepcopy(data)
+    a = d.setdefault("analysis", {})
+    if knob in ("direction_grid_deg", "refine_levels", "beam_samples"):
+        a[knob] = value
+    elif knob == "time_step_fraction":
+        t_end = a.get("time_end_s", d["exposure"]["duration_s"])
+        a["time_step_s"] = t_end * value
+    elif knob == "heating_rtol":
+        for t in d["targets"]:
+            if t.get("history", {}).get("kind") == "heating":
+                t["history"]["rtol"] = value
+    return d
+
+
+def _quantities(res):
+    tr = [t.to_dict() for t in res.targets]
+    return {
+        "max_nohd_m": max([t["nohd_dynamic_m"] for t in tr], default=0.0),
+        "keepout_volume_m3": sum(t["keepout_dynamic"]["volume_m3"] for t in tr),
+        "peak_irradiance_w_m2": float(np.max(res.observers.peak_irradiance_w_m2)) if len(res.observers) else 0.0,
+    }
+
+
+def knobs_used(data) -> list:
+    knobs = ["direction_grid_deg", "refine_levels", "beam_samples"]
+    dynamic = any("history" in t for t in data.get("targets", []))
+    if dynamic:
+        knobs.append("time_step_fraction")
+    if any(t.get("history", {}).get("kind") == "heating" for t in data.get("targets", [])):
+        knobs.append("heating_rtol")
+    return knobs
+
+
+def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress=None) -> ConvergenceReport:
+    """Run the scene's accuracy knobs at increasing cost; see the module notes.
+
+    Parameters
+    ----------
+    scene_path : str or Path
+        Scene TOML (or a bundled example's name).
+    knobs : list of str, optional
+        Default: every knob the scene uses.
+    levels : dict, optional
+        knob -> increasing-cost values (default ``KNOB_LEVELS``); the last is the reference.
+    tolerance : float
+        Relative error allowed for the recommendation.
+    """
+    import scenes
+
+    from .analysis import analyze
+
+    path = Path(scene_path)
+    if not path.exists() and str(scene_path) in scenes.examples():
+        path = scenes.example_path(str(scene_path))
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the scene ({exc.strerror})") from None
+    used = knobs_used(data)
+    knobs = used if knobs is None else list(knobs)
+    for k in knobs:
+        if k not in KNOB_LEVELS:
+            raise ValueError(f"knob {k!r} is unknown: expected some of {sorted(KNOB_LEVELS)}")
+        if k not in used:
+            raise ValueError(f"knob {k!r}: the scene does not use it (it uses {used})")
+    say = progress or (lambda msg: None)
+    rows, recommended = [], {}
+    for knob in knobs:
+        values = (levels or {}).get(knob, KNOB_LEVELS[knob])
+        runs = []
+        for v in values:
+            say(f"{knob} = {v}")
+            scene = scenes.from_data(_apply(data, knob, v), source=str(path), base_dir=path.parent)
+            t0 = time.perf_counter()
+            res = analyze(scene)
+            runs.append((v, _quantities(res), time.perf_counter() - t0))
+        ref = runs[-1][1]
+        best = None
+        for v, q, secs in runs:
+            err = {f"error_{k}": abs(q[k] - ref[k]) / abs(ref[k]) if ref[k] else abs(q[k]) for k in QUANTITIES}
+            rows.append({"knob": knob, "value": v, **q, **err, "time_s": secs})
+            if best is None and all(e <= tolerance for e in err.values()) and v != values[-1]:
+                best = v
+        recommended[knob] = best if best is not None else values[-1]
+    return ConvergenceReport(rows, recommended, tolerance)
+
+
+def plot(report: ConvergenceReport, path) -> Path | None:
+    """Log-log plot of error vs run time per knob (matplotlib; None if it is missing)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return None
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for knob in sorted({r["knob"] for r in report.rows}):
+        rs = report.table(knob)[:-1]  # the reference has zero error
+        err = [max(r[f"error_{q}"] for q in QUANTITIES) for r in rs]
+        ax.loglog([r["time_s"] for r in rs], np.maximum(err, 1e-16), "o-", label=knob)
+    ax.axhline(report.tolerance, ls=":", c="k", label=f"tolerance {report.tolerance:g}")
+    ax.set_xlabel("run time [s]")
+    ax.set_ylabel("max relative error vs the finest run")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    path = Path(path)
+    tmp = path.with_name("." + path.name + ".tmp.png")
+    fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+    tmp.replace(path)
+    return path
