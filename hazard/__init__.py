@@ -29,6 +29,15 @@ from .nohd import (
 __version__ = "0.1.0"
 
 
+def __getattr__(name):
+    # heavy modules load on first use (pyvista, matplotlib): ``import hazard`` stays light
+    if name in ("render", "plots", "study", "convergence"):
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'hazard' has no attribute {name!r}")
+
+
 def analyze(scene, **kwargs):
     """Run the hazard analysis of a loaded scene; see :func:`hazard.analysis.analyze`."""
     from .analysis import analyze as _analyze

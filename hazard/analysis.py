@@ -128,6 +128,9 @@ class HazardResult:
     footprint_static: Footprint | None = None
     footprint_dynamic: Footprint | None = None
     notes: list = field(default_factory=list)
+    spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
+    beam: object | None = None
+    states: dict = field(default_factory=dict)  # target index -> states over times_s
 
     @property
     def hazard_ratio(self) -> np.ndarray:
@@ -535,7 +538,7 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
         irradiance_w_m2=e_t,
     )
     return HazardResult(scene, mpe_res, mpe_w_m2, mpe_h, pulse, mu, times, stages, target_results, observers, spill, blocked,
-                        float(beam.power_w.sum()), fp_static, fp_dyn, notes)
+                        float(beam.power_w.sum()), fp_static, fp_dyn, notes, spots, beam, states)
 
 
 def versions() -> dict:

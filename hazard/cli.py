@@ -11,6 +11,7 @@ Verbs:
   hazard schema                JSON schema of scene files
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
   hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
+  hazard render SCENE -o OUTDIR   keep-out renders (PNG), VTK for ParaView, lobe animation
   hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
   hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
   hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
@@ -101,6 +102,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("render", help="3-D renders of the keep-out zones (PNG), a VTK multiblock and a lobe animation")
+    p.add_argument("scene", help="scene TOML file, or a bundled example's name")
+    p.add_argument("-o", "--output", required=True, help="output folder")
+    p.add_argument("--force", action="store_true", help="overwrite existing renders")
+    p.add_argument("--no-animation", action="store_true", help="skip the animation of the dynamic lobe")
+    p.add_argument("--resolution-deg", type=float, default=3.0, help="lobe surface resolution [deg]")
+    p.add_argument("--quiet", action="store_true")
 
     p = sub.add_parser("convergence", help="error against run time for each accuracy knob of a scene")
     p.add_argument("scene", help="scene TOML file, or a bundled example's name")
@@ -470,6 +479,22 @@ def _cmd_study(args, out, err):
     return EXIT_OK
 
 
+def _cmd_render(args, out, err):
+    from . import render
+
+    result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
+    try:
+        paths = render.keepout(result, args.output, lobe_resolution_deg=args.resolution_deg, force=args.force)
+    except FileExistsError as exc:
+        raise ValueError(str(exc)) from None
+    lines = [f"  wrote {p}" for k, p in paths.items() if k != "png"]
+    if not args.no_animation and result.states:
+        anim = render.animate_lobe(result, args.output)
+        lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")
+    out.write(f"renders of {result.scene.name!r}\n" + "\n".join(lines) + "\n")
+    return EXIT_OK
+
+
 def _cmd_convergence(args, out, err):
     from . import convergence as conv
 
@@ -487,7 +512,7 @@ def _cmd_convergence(args, out, err):
     return EXIT_OK
 
 
-_COMMANDS = {"convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+_COMMANDS = {"render": _cmd_render, "convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
              "models": _cmd_models, "schema": _cmd_schema}
 
 

@@ -1,0 +1,72 @@
+"""Renders for real (off-screen): pixels, VTK arrays, animation, and the light import."""
+
+import io
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import hazard
+import scenes
+from hazard.cli import main
+
+pv = pytest.importorskip("pyvista")
+
+
+@pytest.fixture(scope="module")
+def mirror_result():
+    return hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
+
+
+def _rgb(path):
+    import imageio.v2 as imageio
+
+    return np.asarray(imageio.imread(path))[..., :3].astype(int)
+
+
+def test_keepout_render_shows_both_lobes(mirror_result, tmp_path):
+    from hazard import render
+
+    paths = render.keepout(mirror_result, tmp_path)
+    img = _rgb(paths["keepout"])
+    assert img.shape[:2] == (900, 1280)
+    non_white = np.any(img < 235, axis=-1).mean()
+    assert non_white > 0.05  # not a blank picture
+    # the dynamic lobe's orange and the static lobe's dark/blue shading are both present
+    orange = (img[..., 0] > 200) & (img[..., 1] > 110) & (img[..., 1] < 200) & (img[..., 2] < 140)
+    assert orange.sum() > 500
+    assert paths["overview"].stat().st_size > 10_000
+    with pytest.raises(FileExistsError):
+        render.keepout(mirror_result, tmp_path)
+    blocks = pv.read(paths["vtm"])
+    names = list(blocks.keys())
+    assert {"lobe_static_stainless", "lobe_dynamic_copper", "observers"} <= set(names)
+    assert "nohd_m" in blocks["lobe_dynamic_copper"].array_names
+    assert {"hazard_ratio", "peak_irradiance_w_m2"} <= set(blocks["observers"].array_names)
+    lobe = blocks["lobe_static_stainless"]
+    assert lobe["nohd_m"].max() == pytest.approx(mirror_result.targets[0].static_lobe.max_range_m, rel=0.05)
+
+
+def test_lobe_animation(mirror_result, tmp_path):
+    from hazard import render
+
+    anim = render.animate_lobe(mirror_result, tmp_path, max_frames=4, window_size=(320, 240))
+    assert len(anim["frames"]) == 4 and all(f.stat().st_size > 2000 for f in anim["frames"])
+    assert anim["gif"].stat().st_size > 5000
+
+
+def test_render_cli_and_static_scene(tmp_path):
+    out, err = io.StringIO(), io.StringIO()
+    code = main(["render", "range_terrain", "-o", str(tmp_path), "--quiet"], stdout=out, stderr=err)
+    assert code == 0, err.getvalue()
+    assert (tmp_path / "keepout.png").exists() and not (tmp_path / "lobe.gif").exists()  # static: no animation
+    img = _rgb(tmp_path / "keepout.png")
+    red_ground = (img[..., 0] > 180) & (img[..., 1] < 90) & (img[..., 2] < 90)
+    assert red_ground.sum() > 1000  # the hazardous ground footprint is drawn
+
+
+def test_import_hazard_does_not_load_pyvista():
+    code = "import sys, hazard, scenes; hazard.analyze; print('pyvista' in sys.modules, 'matplotlib' in sys.modules, 'distributed' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False False False"
