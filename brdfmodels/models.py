@@ -389,11 +389,18 @@ def _check_fanout(name, value):
     return finite_scalar(name, value, minimum=0.0, strict_min=True, maximum=10.0)
 
 
+_SH_CHUNK = 32768  # rows per block: the (K, chunk) basis stays in cache, memory stays O(chunk)
+
+
 def _sh_eval(basis, fanout_h, fanout_d, log, wi, wo, coef, divide_r):
     """f~ / (cos i [cos r]) at direction pairs for coefficients (K,) or per-row (n, K)."""
-    parts = _half_diff_parts(wi, wo)
-    y = basis.design_transposed(*parts, fanout_h, fanout_d)
-    s = coef @ y if coef.ndim == 1 else np.einsum("kn,nk->n", y, coef)
+    n = wi.shape[0]
+    s = np.empty(n)
+    buf = np.empty((basis.size, min(n, _SH_CHUNK)))
+    for a in range(0, n, _SH_CHUNK):
+        b = min(a + _SH_CHUNK, n)
+        y = basis.design_transposed(*_half_diff_parts(wi[a:b], wo[a:b]), fanout_h, fanout_d, out=buf[:, : b - a])
+        s[a:b] = coef @ y if coef.ndim == 1 else np.einsum("kn,nk->n", y, coef[a:b])
     ci = np.maximum(wi[:, 2], _COS_FLOOR)
     cr = np.maximum(wo[:, 2], _COS_FLOOR)
     if log:

@@ -16,3 +16,9 @@ def test_bench_hazard_map():
     from .bench_engine import run
 
     print(run())
+
+
+def test_bench_workflows():
+    from .bench_workflows import run
+
+    print(run())

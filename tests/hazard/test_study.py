@@ -88,6 +88,9 @@ def test_monte_carlo_percentiles_and_files(tmp_path):
     doc = json.loads((tmp_path / "summary.json").read_text())
     assert doc["scenarios"] == 30 and doc["failed"] == 0
     assert (tmp_path / "summary.png").stat().st_size > 5000
+    pq = pytest.importorskip("pyarrow.parquet")
+    table = pq.read_table(tmp_path / "results.parquet").to_pydict()
+    assert len(table["nohd_static_m"]) == 30 and table["nohd_static_m"][0] == pytest.approx(vals[0])
 
 
 def test_load_study_errors(tmp_path):

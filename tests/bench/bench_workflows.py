@@ -1,0 +1,98 @@
+"""Benchmarks of the workflows of issue 6 (run on demand):
+
+    python -m tests.bench.bench_workflows
+
+* study: 200 scenarios of the `plate` scene on an embedded LocalCluster (2 workers).
+  Floor: 200 x the serial time of one scenario / 2 workers (perfect parallel speed-up),
+  measured in the same run.
+* keep-out lobe at 0.25 deg (no refinement) of the glossy copper panel (`binoculars`).
+  Floor: one BRDF evaluation call over the same number of directions.
+* render: `hazard.render.keepout` of `steel_vs_copper` (close view + overview + VTK).
+  Floor: two screenshots of the same meshes added as one MultiBlock, no styling.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import hazard
+import scenes
+from hazard.study import MonteCarlo, Study, run_scenario, run_study, scenarios
+
+
+def bench_study(n=200, workers=2):
+    study = Study("bench", "plate", montecarlo=MonteCarlo(samples=n, brdf_scale_sigma=0.3), seed=0)
+    import tomllib
+
+    base = tomllib.loads(scenes.example_path("plate").read_text())
+    sc = scenarios(study)
+    t_one = []
+    for s in sc[:10]:
+        t0 = time.perf_counter()
+        run_scenario(base, str(scenes.example_path("plate").parent), s, {"samples": n, "brdf_scale_sigma": 0.3, "normal_tilt_deg": 0.0})
+        t_one.append(time.perf_counter() - t0)
+    floor = statistics.median(t_one) * n / workers
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        res = run_study(study, tmp, n_workers=workers)
+        t = time.perf_counter() - t0
+    assert res.failed == 0 and len(res.rows) == n
+    return {"name": f"study, {n} scenarios, {workers} workers", "time_s": t, "floor_s": floor, "ratio": t / floor}
+
+
+def bench_lobe(grid_deg=0.25):
+    from hazard.engine import projected_brdf, spot_directions
+    from hazard.keepout import hazard_lobe
+
+    res = hazard.analyze(scenes.load(scenes.example_path("binoculars")))
+    spot = res.spots[0]
+    t0 = time.perf_counter()
+    lobe = hazard_lobe(spot, res.mpe_w_m2, res.attenuation_per_m, grid_deg=grid_deg, refine_levels=0)
+    t = time.perf_counter() - t0
+    rng = np.random.default_rng(0)
+    wo = rng.normal(size=(lobe.evaluations, 3))
+    wo[:, 2] = np.abs(wo[:, 2])
+    wi = np.broadcast_to(spot_directions(spot), wo.shape)
+    t0 = time.perf_counter()
+    projected_brdf(spot.target.material, wi, wo)
+    floor = time.perf_counter() - t0
+    return {"name": f"keep-out lobe at {grid_deg} deg ({lobe.evaluations} evaluations)", "time_s": t, "floor_s": floor, "ratio": t / floor}
+
+
+def bench_render():
+    import pyvista as pv
+
+    from hazard import render
+
+    res = hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
+    with tempfile.TemporaryDirectory() as tmp:
+        render.keepout(res, Path(tmp) / "warm", force=True)  # VTK/OpenGL start-up
+        t0 = time.perf_counter()
+        render.keepout(res, tmp, force=True)
+        t = time.perf_counter() - t0
+        blocks = render._scene_blocks(res, 3.0)
+        t0 = time.perf_counter()
+        for k in range(2):
+            p = pv.Plotter(off_screen=True, window_size=[1280, 900])
+            p.add_mesh(blocks)
+            p.screenshot(str(Path(tmp) / f"floor{k}.png"))
+            p.close()
+        floor = time.perf_counter() - t0
+    return {"name": "render (close view + overview + VTK)", "time_s": t, "floor_s": floor, "ratio": t / floor}
+
+
+def run(verbose=True):
+    rows = [bench_study(), bench_lobe(), bench_render()]
+    if verbose:
+        for r in rows:
+            print(f"{r['name']}: {r['time_s']:.2f} s; floor {r['floor_s']:.2f} s; ratio {r['ratio']:.2f}")
+    return rows
+
+
+if __name__ == "__main__":
+    run()
