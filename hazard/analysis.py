@@ -29,7 +29,7 @@ import numpy as np
 import brdfmodels
 
 from . import mpe as _mpe
-from .engine import FAR_FIELD_SPOT_SIZES, Beam, Spot, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
+from .engine import FAR_FIELD_SPOT_SIZES, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
 from .keepout import Footprint, Lobe, ground_footprint, hazard_lobe
 from .nohd import attenuation_from_visibility, nohd_direct, optical_gain
 

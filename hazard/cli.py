@@ -507,7 +507,7 @@ def _cmd_convergence(args, out, err):
     else:
         from brdfmodels.accuracy import format_table
 
-        out.write(format_table(rep.rows, f"convergence (errors relative to the finest run of each knob)") + "\n")
+        out.write(format_table(rep.rows, "convergence (errors relative to the finest run of each knob)") + "\n")
         out.write(f"recommended within {rep.tolerance:g}: " + ", ".join(f"{k} = {v}" for k, v in rep.recommended.items()) + "\n")
     return EXIT_OK
 

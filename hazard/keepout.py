@@ -109,7 +109,6 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         Split a cell when its Gauss values of R^3 differ by more than this fraction.
     """
     fn = _range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states)
-    step = math.radians(grid_deg)
     th = np.linspace(0, math.pi / 2, max(2, int(round(90 / grid_deg))) + 1)
     ph = np.linspace(-math.pi, math.pi, max(4, int(round(360 / grid_deg))) + 1)
     tt, pp = np.meshgrid(np.arange(len(th) - 1), np.arange(len(ph) - 1), indexing="ij")

@@ -21,7 +21,6 @@ The VTK multiblock (``keepout.vtm``) carries the same meshes with unit-suffixed 
 
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 

@@ -14,7 +14,7 @@ import numpy as np
 
 import brdfmodels
 
-__all__ = ["Mesh", "shape_mesh", "terrain_mesh", "observer_points", "Heightfield"]
+__all__ = ["Mesh", "shape_mesh", "terrain_heightfield", "observer_points", "Heightfield"]
 
 
 @dataclass

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import brdfmodels as bm
-from brdfmodels import fitting, screen, validation
+from brdfmodels import fitting, validation
 
 from .conftest import TS5_PUBLISHED
 

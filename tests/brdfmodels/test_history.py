@@ -1,6 +1,5 @@
 """Oxidation and heating histories against high-precision and analytic references."""
 
-import math
 
 import mpmath
 import numpy as np
