@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import csv
 import math
-import tomllib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ._checks import finite_array, finite_scalar
+from ._io import atomic_write, atomic_write_text, read_toml
 from .geometry import local_frame
 
 __all__ = [
@@ -188,7 +188,6 @@ class Samples:
                        cat("frame_id"), cat("weight"))
 
     def to_csv(self, path) -> Path:
-        from ._io import atomic_write_text
         import io
 
         buf = io.StringIO()
@@ -207,23 +206,10 @@ class Samples:
             import pyarrow.parquet as pq
         except ImportError:
             raise ValueError("Parquet output needs pyarrow: pip install pyarrow (or use CSV)") from None
-        import os
-        import tempfile
-
-        path = Path(path)
         cols = dict(zip(self.COLUMNS[:6], np.hstack([self.wi, self.wo]).T))
         cols.update(brdf_per_sr=self.brdf_per_sr, time_s=self.time_s, temperature_k=self.temperature_k,
                     test_id=np.asarray(self.test_id, str), frame_id=np.asarray(self.frame_id, np.int64), weight=self.weight)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            pq.write_table(pa.table({k: cols[k] for k in self.COLUMNS}), tmp)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
-        return path
+        return atomic_write(path, lambda tmp: pq.write_table(pa.table({k: cols[k] for k in self.COLUMNS}), tmp))
 
     @classmethod
     def from_parquet(cls, path) -> "Samples":
@@ -359,12 +345,7 @@ def load_test(path) -> ScreenTest:
     optional ``[pyrometer]`` file (CSV with columns time_s, temperature_k).
     """
     path = Path(path)
-    try:
-        d = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    d = read_toml(path)
     base = path.parent
     known = {"test_id", "screen", "sample", "laser", "calibration", "images", "pyrometer"}
     unknown = set(d) - known

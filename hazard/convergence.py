@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import copy
 import time
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from brdfmodels._io import read_toml
 
 __all__ = ["convergence", "ConvergenceReport", "KNOB_LEVELS"]
 
@@ -95,10 +96,7 @@ def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress
     path = Path(scene_path)
     if not path.exists() and str(scene_path) in scenes.examples():
         path = scenes.example_path(str(scene_path))
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read the scene ({exc.strerror})") from None
+    data = read_toml(path)
     used = knobs_used(data)
     knobs = used if knobs is None else list(knobs)
     for k in knobs:

@@ -28,6 +28,7 @@ import numpy as np
 
 import pyvista as pv
 
+from .engine import _perp_basis
 from .keepout import _range_fn
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe"]
@@ -46,10 +47,7 @@ def lobe_grid(spot, mpe_w_m2, mu, states=None, resolution_deg=3.0) -> pv.Structu
     fn = _range_fn(spot, mpe_w_m2, mu, 1.0, states)
     wi = -spot.mean_incoming @ spot.mean_frame.T  # incidence in the material frame
     m = wi * np.array([-1.0, -1.0, 1.0])
-    a = np.array([1.0, 0.0, 0.0]) if abs(m[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(m, a)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(m, e1)
+    e1, e2 = _perp_basis(m)
     th = np.unique(np.concatenate([[0.0, 0.1, 0.3, 1.0], np.arange(resolution_deg, 180.0 + 1e-9, resolution_deg)]))
     th = np.radians(th)
     ph = np.radians(np.arange(-180.0, 180.0 + 1e-9, resolution_deg))

@@ -26,13 +26,12 @@ import math
 import re
 import sys
 import time
-import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write_text
+from brdfmodels._io import atomic_write, atomic_write_text, read_toml
 
 __all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "StudyResult", "set_path"]
 
@@ -153,12 +152,7 @@ def load_study(path) -> Study:
     ``[sweep]`` kind, samples and ``[[sweep.parameters]]`` (path, values | range, scale);
     ``[montecarlo]`` samples, brdf_scale_sigma, normal_tilt_deg."""
     path = Path(path)
-    try:
-        d = tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    d = read_toml(path)
     known = {"name", "scene", "seed", "sweep", "montecarlo"}
     if set(d) - known:
         raise ValueError(f"{path}: unknown keys {sorted(set(d) - known)}; expected {sorted(known)}")
@@ -229,16 +223,15 @@ def _base_data(study: Study):
         if study.scene not in scenes.examples():
             raise ValueError(f"scene={study.scene!r}: not a file and not a bundled example ({sorted(scenes.examples())})")
         path = scenes.example_path(study.scene)
-    return tomllib.loads(path.read_text(encoding="utf-8")), path.parent
+    return read_toml(path), path.parent
 
 
 def _tilt(vec, tilt_rad, rng):
+    from .engine import _perp_basis
+
     v = np.asarray(vec, float)
     v = v / np.linalg.norm(v)
-    a = np.array([1.0, 0.0, 0.0]) if abs(v[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(v, a)
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(v, e1)
+    e1, e2 = _perp_basis(v)
     # isotropic small tilt: two Gaussian components of variance tilt^2 / 2, so the rms
     # tilt angle is tilt_rad
     tx, ty = rng.normal(0.0, tilt_rad / math.sqrt(2.0), 2)
@@ -359,9 +352,7 @@ def _write_table(rows, outdir: Path):
         return
     table = {c: [None if r.get(c) is None else (json.dumps(r[c]) if isinstance(r.get(c), (list, dict)) else r.get(c)) for r in rows] for c in cols}
     table = {c: [str(v) if v is not None and c.startswith("in:") else v for v in vals] for c, vals in table.items()}
-    tmp = outdir / ".results.parquet.tmp"
-    pq.write_table(pa.table(table), tmp)
-    tmp.replace(outdir / "results.parquet")
+    atomic_write(outdir / "results.parquet", lambda tmp: pq.write_table(pa.table(table), tmp))
 
 
 def _plot(study, rows, outdir):
