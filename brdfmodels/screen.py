@@ -43,6 +43,7 @@ __all__ = [
     "reduce_test",
     "load_test",
     "simulate_test",
+    "save_test",
     "group_by_state",
     "SpotSizeWarning",
 ]
@@ -401,6 +402,61 @@ def load_test(path) -> ScreenTest:
         pyrometer_temperatures_k=pyro_k,
         spot_size_m=smp.get("spot_size_m"),
     )
+
+
+def save_test(test: ScreenTest, folder, name=None) -> Path:
+    """Write a test as the files :func:`load_test` reads (the inverse of it): a TOML
+    description plus ``NAME_ps.npy``, ``NAME_frames.npz`` and ``NAME_pyro.csv``. Each file
+    is written atomically. Returns the TOML path."""
+    import io
+
+    folder = Path(folder)
+    name = name or str(test.test_id)
+
+    def save_npy(path, arr):
+        atomic_write(path, lambda tmp: np.save(open(tmp, "wb"), arr))
+
+    save_npy(folder / f"{name}_ps.npy", np.asarray(test.point_source))
+    atomic_write(folder / f"{name}_frames.npz", lambda tmp: np.savez(open(tmp, "wb"), frames=test.frames, times_s=test.times_s))
+    g = test.geometry
+    lines = [
+        f"test_id = {str(test.test_id)!r}".replace("'", '"'),
+        "[screen]",
+        f"upper_left_m = {g.upper_left_m.tolist()}",
+        f"upper_right_m = {g.upper_right_m.tolist()}",
+        f"lower_left_m = {g.lower_left_m.tolist()}",
+        f"top_row = {g.top_row!r}",
+        f"bottom_row = {g.bottom_row!r}",
+        f"left_col = {g.left_col!r}",
+        f"right_col = {g.right_col!r}",
+        "[sample]",
+        f"normal = {np.asarray(test.sample_normal, float).tolist()}",
+        f"groove = {np.asarray(test.groove, float).tolist()}",
+        f"incidence = {np.asarray(test.incidence, float).tolist()}",
+    ]
+    if test.spot_size_m is not None:
+        lines.append(f"spot_size_m = {float(test.spot_size_m)!r}")
+    lines += [
+        "[laser]",
+        f"power_w = {float(test.power_w)!r}",
+        "[calibration]",
+        f"irradiance_w_m2 = {float(test.calibration.irradiance_w_m2)!r}",
+        f"pixel = {[int(p) for p in test.calibration.pixel]}",
+        f"counts = {float(test.calibration.counts)!r}",
+        "[images]",
+        f'point_source = "{name}_ps.npy"',
+        f'frames = "{name}_frames.npz"',
+        f"background = {float(test.background)!r}",
+        f"point_source_background = {float(test.point_source_background)!r}",
+        f"saturation = {float(test.saturation)!r}",
+    ]
+    if test.pyrometer_times_s is not None:
+        buf = io.StringIO()
+        np.savetxt(buf, np.c_[test.pyrometer_times_s, test.pyrometer_temperatures_k], delimiter=",",
+                   header="time_s,temperature_k", comments="", fmt="%.17g")
+        atomic_write_text(folder / f"{name}_pyro.csv", buf.getvalue())
+        lines += ["[pyrometer]", f'file = "{name}_pyro.csv"']
+    return atomic_write_text(folder / f"{name}.toml", "\n".join(lines) + "\n")
 
 
 def simulate_test(model, *, test_id="sim", incidence_deg=20.0, groove_angle_deg=0.0, power_w=230.0, distance_m=0.6,

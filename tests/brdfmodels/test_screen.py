@@ -119,37 +119,8 @@ def test_screen_edges_outside_image():
 
 def test_files_round_trip_and_missing_calibration(tmp_path):
     t = screen.simulate_test(STEEL, times_s=(0.0, 1.0), temperature_of_time=lambda tt: 300.0 + tt)
-    np.save(tmp_path / "ps.npy", t.point_source)
-    np.savez(tmp_path / "fr.npz", frames=t.frames, times_s=t.times_s)
-    np.savetxt(tmp_path / "pyro.csv", np.c_[t.pyrometer_times_s, t.pyrometer_temperatures_k], delimiter=",", header="time_s,temperature_k", comments="")
-    g = t.geometry
-    text = f"""test_id = "a"
-[screen]
-upper_left_m = {g.upper_left_m.tolist()}
-upper_right_m = {g.upper_right_m.tolist()}
-lower_left_m = {g.lower_left_m.tolist()}
-top_row = {g.top_row}
-bottom_row = {g.bottom_row}
-left_col = {g.left_col}
-right_col = {g.right_col}
-[sample]
-normal = {t.sample_normal.tolist()}
-groove = {t.groove.tolist()}
-[laser]
-power_w = {t.power_w}
-[calibration]
-irradiance_w_m2 = {t.calibration.irradiance_w_m2}
-pixel = {list(t.calibration.pixel)}
-counts = {t.calibration.counts}
-[images]
-point_source = "ps.npy"
-frames = "fr.npz"
-background = {t.background}
-saturation = {t.saturation}
-[pyrometer]
-file = "pyro.csv"
-"""
-    (tmp_path / "a.toml").write_text(text)
+    t.test_id = "a"
+    text = screen.save_test(t, tmp_path).read_text()
     s = screen.reduce_test(screen.load_test(tmp_path / "a.toml"))
     direct = screen.reduce_test(t)
     np.testing.assert_allclose(s.brdf_per_sr, direct.brdf_per_sr)

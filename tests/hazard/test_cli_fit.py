@@ -15,38 +15,7 @@ def write_test(folder, name, truth, incidence, groove, pixels=(48, 48), times=(0
     t = screen.simulate_test(truth, test_id=name, incidence_deg=incidence, groove_angle_deg=groove, times_s=times,
                              state_of_time=lambda tt: 0.311 + 0.1189 * tt, temperature_of_time=lambda tt: 300 + 100 * tt,
                              pixels=pixels, gain_counts=400.0)
-    np.save(folder / f"{name}_ps.npy", t.point_source)
-    np.savez(folder / f"{name}_frames.npz", frames=t.frames, times_s=t.times_s)
-    np.savetxt(folder / f"{name}_pyro.csv", np.c_[t.pyrometer_times_s, t.pyrometer_temperatures_k], delimiter=",",
-               header="time_s,temperature_k", comments="")
-    g = t.geometry
-    (folder / f"{name}.toml").write_text(f"""test_id = "{name}"
-[screen]
-upper_left_m = {g.upper_left_m.tolist()}
-upper_right_m = {g.upper_right_m.tolist()}
-lower_left_m = {g.lower_left_m.tolist()}
-top_row = {g.top_row}
-bottom_row = {g.bottom_row}
-left_col = {g.left_col}
-right_col = {g.right_col}
-[sample]
-normal = {t.sample_normal.tolist()}
-groove = {t.groove.tolist()}
-[laser]
-power_w = {t.power_w}
-[calibration]
-irradiance_w_m2 = {t.calibration.irradiance_w_m2}
-pixel = {list(t.calibration.pixel)}
-counts = {t.calibration.counts}
-[images]
-point_source = "{name}_ps.npy"
-frames = "{name}_frames.npz"
-background = {t.background}
-saturation = {t.saturation}
-[pyrometer]
-file = "{name}_pyro.csv"
-""")
-    return folder / f"{name}.toml"
+    return screen.save_test(t, folder)
 
 
 def run(*argv):
