@@ -195,24 +195,65 @@ class SHBasis:
     # -- evaluation -----------------------------------------------------------------------
     @staticmethod
     def _fill(rows, theta, cph, sph, terms, mmax, fanout, skip_l0=False):
-        """Write y_l^m(fan_out(theta), phi) of ``terms`` into the successive ``rows``."""
+        """Write y_l^m(fan_out(theta), phi) of ``terms`` into the successive ``rows``.
+
+        The hot path of every SH evaluation: the recurrence of :func:`_legendre_table`
+        (same coefficients, same order of operations up to where sqrt(2) is applied) run
+        in place in the output rows, so each term costs four passes over one row and no
+        temporaries. Orders m not in ``terms`` (odd m of the difference part) go through
+        three rotating scratch rows.
+        """
+        n = np.shape(theta)[0]
         tt = fan_out(theta, fanout)
         x = np.cos(tt)
-        s = np.abs(np.sin(tt))
+        s = np.sin(tt, out=tt)  # tt is in [0, pi]: sin >= 0 up to rounding
+        np.abs(s, out=s)
+        where = {}
+        for lm in terms:
+            if not (skip_l0 and lm[0] == 0):
+                where[lm] = len(where)
         lmax = max(l for l, _ in terms)
-        leg = _legendre_table(x, s, lmax, mmax)
         cos_m = _cos_multiples(cph, sph, mmax) if mmax > 0 else None
-        k = 0
-        for (l, m) in terms:
-            if skip_l0 and l == 0:
+        scratch = [np.empty(n) for _ in range(3)]
+        tmp = np.empty(n)
+        pmm = np.full(n, _INV_SQRT_4PI)
+        for m in range(0, min(lmax, mmax) + 1):
+            if m > 0:
+                np.multiply(s, math.sqrt((2 * m + 1) / (2 * m)), out=tmp)
+                pmm *= tmp
+            col = [lm for lm in where if lm[1] == m]
+            if not col:
                 continue
-            if m == 0:
-                rows[k][...] = leg[(l, m)]
-            else:
-                np.multiply(leg[(l, m)], cos_m[m], out=rows[k])
-                rows[k] *= _SQRT2
-            k += 1
-        return k
+            top = max(l for l, _ in col)
+            free = list(scratch)
+
+            def dest(l):
+                r = where.get((l, m))
+                return rows[r] if r is not None else free.pop()
+
+            # column m scaled by sqrt(2) from its first element (the recurrence is linear)
+            p_lm1 = None
+            p_l = dest(m)
+            np.multiply(pmm, _SQRT2 if m > 0 else 1.0, out=p_l)
+            for l in range(m + 1, top + 1):
+                d = dest(l)
+                if l == m + 1:
+                    np.multiply(x, p_l, out=d)
+                    d *= math.sqrt(2 * m + 3)
+                else:
+                    a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
+                    b = math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
+                    np.multiply(x, p_l, out=d)
+                    np.multiply(p_lm1, b, out=tmp)
+                    d -= tmp
+                    d *= a
+                if p_lm1 is not None and (l - 2, m) not in where:
+                    free.append(p_lm1)  # a scratch row no longer needed
+                p_lm1, p_l = p_l, d
+            if m > 0:
+                for (l, _) in col:
+                    rows[where[(l, m)]] *= cos_m[m]
+        return len(where)
 
     def design_transposed(self, theta_h, cph, sph, theta_d, cpd, spd, fanout_h, fanout_d, out=None):
         """Basis values as a (K, N) array from half/diff angles and azimuth cosines/sines.

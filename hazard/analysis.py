@@ -19,6 +19,7 @@ time. "Static" holds the material's initial state for the whole window.
 from __future__ import annotations
 
 import math
+import os
 import platform
 import time
 from contextlib import contextmanager
@@ -231,11 +232,19 @@ def _sliding_max_integral(times, e, window):
     return best
 
 
+def default_threads() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 HISTORY_KEEP_MAX = 20_000_000  # observer x time values kept in memory by default (160 MB)
-MAP_CHUNK = 16384  # observers per block of the irradiance map (measured: 4096-65536 tried, 16384 best)
+MAP_CHUNK = 32768  # observers per block of the map (measured with 2 threads: 4096 0.48-0.59 s, 16384 0.36, 32768-131072 0.31-0.33)
 
 
-def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> HazardResult:
+def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None) -> HazardResult:
     """Run the hazard analysis of a loaded scene (see the module notes for the stages).
 
     Parameters
@@ -249,7 +258,13 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
         Keep the full irradiance history E(observer, t) in the result. Default: only
         when it has at most ``HISTORY_KEEP_MAX`` values; peaks, exposures and verdicts
         are computed either way.
+    threads : int, optional
+        Threads for the irradiance map and the ray queries (default: the CPUs this
+        process may use, see :func:`default_threads`). Results do not depend on it.
     """
+    threads = default_threads() if threads is None else int(threads)
+    if threads < 1:
+        raise ValueError(f"threads={threads!r}: expected an integer >= 1")
     spec = scene.spec
     stages = []
     notes = []
@@ -295,7 +310,7 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
         with stage("rays") as st:
             from .rays import RayScene
 
-            ray_scene = RayScene(_ray_meshes(scene), backend=backend)
+            ray_scene = RayScene(_ray_meshes(scene), backend=backend, threads=threads)
             st.detail = f"{backend}: {ray_scene.n_triangles} triangles"
     else:
         skip("rays", "flat targets and nothing to block a line of sight: beam hits computed analytically")
@@ -361,27 +376,31 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
     gain = group_gain[obs.group] if m else np.ones(0)
 
     los = np.ones((len(spots), m), bool)
-    if need_los and m and spots:
-        with stage("line_of_sight") as st:
-            n_seg = 0
-            for k, sp in enumerate(spots):
-                c, nrm = sp.centroid, sp.mean_frame[2]
-                start = c + nrm * 1e-6 * max(ray_scene.scale_m, 1.0)
-                # far-field observers behind the spot's surface receive nothing whatever is
-                # in between (the map evaluates them with the mean frame): no ray needed
-                rel = pos - c
-                far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(sp.size_m, 1e-9)) ** 2
-                # einsum, not @: a BLAS call here leaves OpenBLAS threads spinning on the two
-                # cores Embree is about to use (measured: 0.09 s query became 0.12-0.23 s)
-                need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | sp.target.material.has_specular
-                idx = np.flatnonzero(need)
-                los[k, ~need] = False
-                los[k, idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), pos[idx])
-                n_seg += len(idx)
-            st.detail = (f"{n_seg} segments against {ray_scene.n_triangles} triangles ({len(spots) * m - n_seg} observers behind "
-                         f"the surface need none); {int((~los).sum())} without line of sight")
-    else:
-        skip("line_of_sight", "nothing can block a line of sight (no occluders, no terrain, one target)" if not need_los else "no observers")
+    do_los = bool(need_los and m and spots)
+    los_segments = []  # segments traced per block (list.append is atomic: blocks run on threads)
+
+    def line_of_sight(sl):
+        """Line of sight from each spot to observers ``sl``: one occlusion query per spot,
+        run inside the map's block (single-threaded Embree, in parallel with the other
+        blocks' BRDF work). Returns the seconds it took."""
+        t0 = time.perf_counter()
+        p = pos[sl]
+        n_seg = 0
+        for k, sp in enumerate(spots):
+            c, nrm = sp.centroid, sp.mean_frame[2]
+            start = c + nrm * 1e-6 * max(ray_scene.scale_m, 1.0)
+            # far-field observers behind the spot's surface receive nothing whatever is
+            # in between (the map evaluates them with the mean frame): no ray needed
+            rel = p - c
+            far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(sp.size_m, 1e-9)) ** 2
+            need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | sp.target.material.has_specular
+            idx = np.flatnonzero(need)
+            row = los[k, sl]
+            row[~need] = False
+            row[idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])
+            n_seg += len(idx)
+        los_segments.append(n_seg)
+        return time.perf_counter() - t0
 
     spec_spots = [sp for sp in spots if sp.target.material.has_specular]
     if spec_spots:
@@ -410,7 +429,6 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
         elapsed = np.clip(times[1:] - times[0], _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)
         mpe_h_t = np.array([_mpe.ocular_mpe(wl, t, standard=std).radiant_exposure_j_m2 for t in elapsed])
         e_floor = float(np.min(mpe_h_t / np.maximum(times[1:] - times[0], 1e-300)))  # no exceedance below this
-    post_s = 0.0
     chunk = MAP_CHUNK
     one_spot = len(spots) == 1 and not spots[0].target.material.has_specular
 
@@ -434,46 +452,73 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None) -> Haz
             anyo = over.any(axis=1)
             first[rows[hot[anyo]]] = times[1 + over.argmax(axis=1)[anyo]]
 
+    def map_block(a0):
+        """Line of sight, irradiance and exposure of observers [a0, a0 + chunk); returns
+        the seconds spent on line of sight and on exposure. Blocks write disjoint rows,
+        so they run on threads (NumPy, BLAS and Embree release the GIL)."""
+        sl = slice(a0, min(a0 + chunk, m))
+        t_los = line_of_sight(sl) if do_los else 0.0
+        if one_spot:
+            sp = spots[0]
+            sk = states.get(sp.target.index) if dynamic else None
+            out, far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[0, sl], sparse=True) if np.all(
+                np.linalg.norm(pos[sl] - sp.centroid, axis=1) >= FAR_FIELD_SPOT_SIZES * max(sp.size_m, 1e-9)) else (None, None)
+            if out is not None:
+                far_any[sl] = far
+                live, ev = out
+                ev = ev if ev.ndim == 2 else ev[:, None]
+                if keep:
+                    e_t[sl.start + live] = ev
+                t0 = time.perf_counter()
+                post(ev, sl.start + live)
+                return t_los, time.perf_counter() - t0
+        ec = np.zeros((sl.stop - sl.start, n_t))
+        for k, sp in enumerate(spots):
+            sk = states.get(sp.target.index) if dynamic else None
+            e, far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[k, sl])
+            far_any[sl] |= far
+            if sp.target.material.has_specular:
+                e = e + specular_irradiance(sp, pos[sl], gain[sl], mu, beam, sk) * (los[k, sl] if sk is None else los[k, sl, None])
+            ec += e if e.ndim == 2 else e[:, None]
+        if keep:
+            e_t[sl] = ec
+        t0 = time.perf_counter()
+        post(ec, np.arange(sl.start, sl.stop))
+        return t_los, time.perf_counter() - t0
+
+    starts = range(0, m, chunk)
+    workers = max(1, min(threads, len(starts)))
     with stage("dynamic" if dynamic else "static") as st:
-        for a0 in range(0, m, chunk):
-            sl = slice(a0, min(a0 + chunk, m))
-            rows_all = np.arange(sl.start, sl.stop)
-            if one_spot:
-                sp = spots[0]
-                sk = states.get(sp.target.index) if dynamic else None
-                out, far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[0, sl], sparse=True) if np.all(
-                    np.linalg.norm(pos[sl] - sp.centroid, axis=1) >= FAR_FIELD_SPOT_SIZES * max(sp.size_m, 1e-9)) else (None, None)
-                if out is not None:
-                    far_any[sl] = far
-                    live, ev = out
-                    ev = ev if ev.ndim == 2 else ev[:, None]
-                    if keep:
-                        e_t[sl.start + live] = ev
-                    t0 = time.perf_counter()
-                    post(ev, sl.start + live)
-                    post_s += time.perf_counter() - t0
-                    continue
-            ec = np.zeros((sl.stop - sl.start, n_t))
-            for k, sp in enumerate(spots):
-                sk = states.get(sp.target.index) if dynamic else None
-                e, far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[k, sl])
-                far_any[sl] |= far
-                if sp.target.material.has_specular:
-                    e = e + specular_irradiance(sp, pos[sl], gain[sl], mu, beam, sk) * (los[k, sl] if sk is None else los[k, sl, None])
-                ec += e if e.ndim == 2 else e[:, None]
-            if keep:
-                e_t[sl] = ec
-            t0 = time.perf_counter()
-            post(ec, rows_all)
-            post_s += time.perf_counter() - t0
-        st.detail = (f"{m} observers x {n_t} time(s); {int(far_any.sum())} far-field (spot as a point source), "
-                     f"{m - int(far_any.sum())} summed over hits")
-    stages[-1].seconds -= post_s  # the exposure work is reported in its own stage
+        if workers > 1:
+            from concurrent.futures import ThreadPoolExecutor
+
+            from threadpoolctl import threadpool_limits
+
+            # one BLAS thread per block: the blocks are the parallelism (a two-thread BLAS
+            # pool per block would spin against the other block's work on two cores)
+            with threadpool_limits(1, user_api="blas"), ThreadPoolExecutor(workers) as pool:
+                parts = list(pool.map(map_block, starts))
+        else:
+            parts = [map_block(a0) for a0 in starts]
+        # per-thread shares of the wall time (the parts ran side by side on the workers)
+        los_s, post_s = (sum(p[i] for p in parts) / workers for i in (0, 1))
+        st.detail = (f"{m} observers x {n_t} time(s) in blocks of {chunk} on {workers} thread(s); {int(far_any.sum())} far-field "
+                     f"(spot as a point source), {m - int(far_any.sum())} summed over hits")
+    map_stage = stages[-1]
+    map_stage.seconds -= post_s + los_s  # line of sight and exposure are reported in their own stages
+    if do_los:
+        n_seg = sum(los_segments)
+        stages.insert(len(stages) - 1, Stage(
+            "line_of_sight", True, f"{n_seg} segments against {ray_scene.n_triangles} triangles ({len(spots) * m - n_seg} observers "
+                                   f"behind the surface need none); {int((~los).sum())} without line of sight (per block inside the map)", los_s))
+    else:
+        skip("line_of_sight", "nothing can block a line of sight (no occluders, no terrain, one target)" if not need_los else "no observers")
     if dynamic:
         skip("static", "static = the initial-state column of the dynamic map (no separate pass)")
     else:
         skip("dynamic", "no dynamic material: no time loop")
-    stages.append(Stage("exposure", True, f"window {t_exp:g} s over {n_t} time(s) (computed per chunk inside the map)", post_s))
+    stages.append(Stage("exposure", True, f"window {t_exp:g} s over {n_t} time(s) (computed per block inside the map; "
+                                          f"with {workers} threads its time is the per-thread share)", post_s))
 
     # -- keep-out ----------------------------------------------------------------------------
     a = spec.analysis

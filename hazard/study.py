@@ -242,8 +242,12 @@ def _tilt(vec, tilt_rad, rng):
     return (math.cos(ang) * v + math.sin(ang) * axis).tolist()
 
 
-def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict) -> dict:
-    """Analyse one scenario; returns its row (inputs, outputs, run time, or the error)."""
+def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=None) -> dict:
+    """Analyse one scenario; returns its row (inputs, outputs, run time, or the error).
+
+    ``threads`` goes to :func:`hazard.analyze`; on a cluster each scenario gets one
+    (the workers are the parallelism), in a serial run it uses every CPU.
+    """
     import brdfmodels
     import scenes
 
@@ -270,7 +274,7 @@ def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict) -> dict:
         for t, s in zip(scene.targets, scales):
             if s != 1.0:
                 t.material = brdfmodels.Scaled(t.material, s)
-        res = analyze(scene)
+        res = analyze(scene, threads=threads)
         tr = [t.to_dict() for t in res.targets]
         row.update({
             "nohd_static_m": max([t["nohd_static_m"] for t in tr], default=0.0),
@@ -457,7 +461,7 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
                 client = Client(scheduler, timeout="20s")
             try:
                 base_f = client.scatter(base, broadcast=True)
-                futures = [client.submit(run_scenario, base_f, str(base_dir), s, mc, pure=False) for s in pending]
+                futures = [client.submit(run_scenario, base_f, str(base_dir), s, mc, 1, pure=False) for s in pending]
                 for fut in as_completed(futures):
                     record(fut.result())
                     finished += 1

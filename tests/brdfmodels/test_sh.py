@@ -79,6 +79,29 @@ def test_design_matrix_columns_are_harmonics():
         np.testing.assert_allclose(y[:, k], ref, atol=1e-14)
 
 
+@pytest.mark.parametrize("args", [(8, 4, 2, 0, True), (12, 6, 6, 4, True), (5, 5, 7, 3, False), (0, 0, 3, 1, True)])
+def test_design_matrix_higher_orders_and_skipped_orders(args):
+    # the in-place recurrence: odd difference orders go through scratch rows, the shared
+    # constant is kept once (separable), the product form multiplies both parts
+    *orders, separable = args
+    b = bm.SHBasis(*orders, separable=separable)
+    rng = np.random.default_rng(sum(orders))
+    n = 40
+    th = np.concatenate([rng.uniform(0, np.pi / 2, n - 3), [0.0, np.pi / 2, 1e-12]])
+    td = np.concatenate([rng.uniform(0, np.pi / 2, n - 3), [np.pi / 2, 0.0, np.pi / 2 - 1e-12]])
+    ph, pd = rng.uniform(-np.pi, np.pi, n), rng.uniform(-np.pi, np.pi, n)
+    y = b.evaluate(th, ph, td, pd, fanout=0.6, fanout_h=0.45)
+    for k, col in enumerate(b.columns):
+        if col[0] == "hd":
+            _, lh, mh, ld, md = col
+            ref = bm.real_sph_harm(lh, mh, bm.fan_out(th, 0.45), ph) * bm.real_sph_harm(ld, md, bm.fan_out(td, 0.6), pd)
+        else:
+            kind, l, m = col
+            ang_t, ang_p, f = (th, ph, 0.45) if kind == "h" else (td, pd, 0.6)
+            ref = bm.real_sph_harm(l, m, bm.fan_out(ang_t, f), ang_p)
+        np.testing.assert_allclose(y[:, k], ref, atol=1e-13, err_msg=str(col))
+
+
 def test_phi_h_terms_vanish_at_mirror():
     # at theta_h = 0 every column with mh > 0 is 0, so the arbitrary phi_h does not matter
     b = bm.SHBasis(8, 4, 2, 0)

@@ -303,3 +303,28 @@ def test_mesh_file_target_and_heightmap_terrain(tmp_path):
     bad = text.replace('file = "plate.stl"', 'file = "missing.stl"')
     with pytest.raises(scenes.SceneError, match="cannot read the mesh"):
         scenes.loads(bad, base_dir=tmp_path)
+
+
+@pytest.mark.parametrize("name", ["steel_vs_copper", "witness_screen", "range_terrain"])
+def test_map_on_threads_equals_serial_map(name, monkeypatch):
+    # the map runs in blocks on threads (line of sight, BRDF, exposure per block); tiny
+    # blocks force many of them, with the multi-spot, single-spot and static paths
+    import hazard.analysis as ha
+
+    monkeypatch.setattr(ha, "MAP_CHUNK", 5)
+    scene = scenes.load(scenes.example_path(name))
+    one = hazard.analyze(scene, threads=1)
+    two = hazard.analyze(scene, threads=2)
+    assert "on 2 thread(s)" in two.stage("dynamic" if len(two.times_s) > 1 else "static").detail
+    a, b = one.observers, two.observers
+    for field in ("peak_irradiance_w_m2", "peak_time_s", "radiant_exposure_j_m2", "static_irradiance_w_m2",
+                  "first_exceedance_s", "line_of_sight", "far_field", "irradiance_w_m2"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field), err_msg=field)
+    assert one.stage("line_of_sight").ran == two.stage("line_of_sight").ran
+    if one.stage("line_of_sight").ran:
+        assert one.stage("line_of_sight").detail == two.stage("line_of_sight").detail
+
+
+def test_threads_must_be_positive():
+    with pytest.raises(ValueError, match="threads=0"):
+        hazard.analyze(plate(), threads=0)
