@@ -461,17 +461,14 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
         if one_spot:
             sp = spots[0]
             sk = states.get(sp.target.index) if dynamic else None
-            out, far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[0, sl], sparse=True) if np.all(
-                np.linalg.norm(pos[sl] - sp.centroid, axis=1) >= FAR_FIELD_SPOT_SIZES * max(sp.size_m, 1e-9)) else (None, None)
-            if out is not None:
-                far_any[sl] = far
-                live, ev = out
-                ev = ev if ev.ndim == 2 else ev[:, None]
-                if keep:
-                    e_t[sl.start + live] = ev
-                t0 = time.perf_counter()
-                post(ev, sl.start + live)
-                return t_los, time.perf_counter() - t0
+            (live, ev), far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[0, sl], sparse=True)
+            far_any[sl] = far
+            ev = ev if ev.ndim == 2 else ev[:, None]
+            if keep:
+                e_t[sl.start + live] = ev
+            t0 = time.perf_counter()
+            post(ev, sl.start + live)
+            return t_los, time.perf_counter() - t0
         ec = np.zeros((sl.stop - sl.start, n_t))
         for k, sp in enumerate(spots):
             sk = states.get(sp.target.index) if dynamic else None

@@ -225,8 +225,9 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     Returns ``(E, far)``: E of shape (M,) or (M, T) with states, and the far-field mask.
     ``visible`` (M,) is the line-of-sight mask (default: all visible); it is folded into
     the per-observer factor, so occluded observers cost no extra pass. With
-    ``sparse=True`` (all observers far-field) it returns ``((rows, E_rows), far)``: only
-    the rows that receive light, so maps skip everyone behind the surface or out of sight.
+    ``sparse=True`` it returns ``((rows, E_rows), far)``: when every observer is in the
+    far field only the rows that receive light (maps skip everyone behind the surface or
+    out of sight), otherwise all rows.
     """
     obs = np.asarray(observers_m, float)
     m = len(obs)
@@ -244,16 +245,15 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
             scale *= np.exp(-attenuation_per_m * rng)
         # observers behind the surface or out of sight receive nothing: evaluate the rest only
         live = (wo[:, 2] > 0) & (scale > 0)
+        # wi is one direction (1, 3): the models broadcast it after checking it once
         if sparse:
             rows = np.flatnonzero(live)
-            wl = wo[rows]
-            return (rows, projected_brdf(model, np.broadcast_to(wi, wl.shape), wl, states, scale[rows])), far
+            return (rows, projected_brdf(model, wi, wo[rows], states, scale[rows])), far
         if live.all():
-            return projected_brdf(model, np.broadcast_to(wi, wo.shape), wo, states, scale), far
+            return projected_brdf(model, wi, wo, states, scale), far
         e = np.zeros((m,) if states is None else (m, len(states)))
         if live.any():
-            wl = wo[live]
-            e[live] = projected_brdf(model, np.broadcast_to(wi, wl.shape), wl, states, scale[live])
+            e[live] = projected_brdf(model, wi, wo[live], states, scale[live])
         return e, far
     shape = (m,) if states is None else (m, len(states))
     e = np.zeros(shape)
@@ -273,7 +273,7 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
             wo = _to_local(spot.frames[i], v / np.maximum(r, 1e-300)[:, None])
             scale = spot.power_w[i] * np.exp(-attenuation_per_m * r) * gain[near] * vis[near] / np.maximum(r, 1e-300) ** 2
             e[near] += projected_brdf(model, np.broadcast_to(wi_all[i], wo.shape), wo, states, scale)
-    return e, far
+    return ((np.arange(m), e), far) if sparse else (e, far)
 
 
 def specular_power_w(spot: Spot, states=None):

@@ -34,7 +34,8 @@ def bench_study(n=200, workers=2):
     t_one = []
     for s in sc[:10]:
         t0 = time.perf_counter()
-        run_scenario(base, str(scenes.example_path("plate").parent), s, {"samples": n, "brdf_scale_sigma": 0.3, "normal_tilt_deg": 0.0})
+        # one thread, as on the workers
+        run_scenario(base, str(scenes.example_path("plate").parent), s, {"samples": n, "brdf_scale_sigma": 0.3, "normal_tilt_deg": 0.0}, 1)
         t_one.append(time.perf_counter() - t0)
     floor = statistics.median(t_one) * n / workers
     with tempfile.TemporaryDirectory() as tmp:

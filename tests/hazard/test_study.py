@@ -44,15 +44,23 @@ def _rows(res):
 
 
 def test_serial_equals_dask_embedded_and_existing_scheduler(tmp_path):
-    from distributed import LocalCluster
+    import os
 
+    from distributed import Client
+
+    from hazard.study import local_cluster
+
+    user_trim = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # before any cluster could set it
     study = plate_study(montecarlo=MonteCarlo(samples=2, brdf_scale_sigma=0.3, normal_tilt_deg=2.0), seed=3)
     serial = run_study(study, tmp_path / "serial", serial=True)
     dask = run_study(study, tmp_path / "dask", n_workers=2)
     assert _rows(serial) == _rows(dask) and len(serial.rows) == 6
     # a real scheduler and worker processes on loopback, reached by address
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None) as cluster:
+    with local_cluster(1) as cluster:
         remote = run_study(study, tmp_path / "remote", scheduler=cluster.scheduler_address)
+        with Client(cluster) as client:  # workers run without Dask's aggressive malloc trimming
+            env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
+        assert list(env.values()) == [user_trim]
     assert _rows(remote) == _rows(serial)
     assert (tmp_path / "dask" / "results.csv").read_text().count("\n") == 7
     nohd = [r["nohd_static_m"] for r in serial.rows]
