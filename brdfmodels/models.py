@@ -23,6 +23,7 @@ import numpy as np
 from ._checks import directions, finite_array, finite_scalar
 from .geometry import _half_diff_parts, _normalize_sum
 from .optics import fresnel_reflectance, optical_constants
+from .parallel import map_blocks
 from .registry import model_from_dict, register
 from .sh import SHBasis
 from .states import (
@@ -396,11 +397,12 @@ def _sh_eval(basis, fanout_h, fanout_d, log, wi, wo, coef, divide_r):
     """f~ / (cos i [cos r]) at direction pairs for coefficients (K,) or per-row (n, K)."""
     n = wi.shape[0]
     s = np.empty(n)
-    buf = np.empty((basis.size, min(n, _SH_CHUNK)))
-    for a in range(0, n, _SH_CHUNK):
-        b = min(a + _SH_CHUNK, n)
-        y = basis.design_transposed(*_half_diff_parts(wi[a:b], wo[a:b]), fanout_h, fanout_d, out=buf[:, : b - a])
+
+    def block(a, b):
+        y = basis.design_transposed(*_half_diff_parts(wi[a:b], wo[a:b]), fanout_h, fanout_d)
         s[a:b] = coef @ y if coef.ndim == 1 else np.einsum("kn,nk->n", y, coef[a:b])
+
+    map_blocks(block, n, _SH_CHUNK)
     ci = np.maximum(wi[:, 2], _COS_FLOOR)
     cr = np.maximum(wo[:, 2], _COS_FLOOR)
     if log:
@@ -562,7 +564,7 @@ class DynamicBRDF(_SHMixin, BRDFModel):
     def _fr_segment_max(self, wi, wo, s_lo, s_hi, fanout_h):
         return np.maximum(self._fr(wi, wo, s_lo, fanout_h), self._fr(wi, wo, s_hi, fanout_h))
 
-    def evaluate_many(self, wi, wo, states, *, projected=False, row_scale=None, chunk_rows=16384, out=None) -> np.ndarray:
+    def evaluate_many(self, wi, wo, states, *, projected=False, row_scale=None, chunk_rows=16384, out=None, threads=None) -> np.ndarray:
         """BRDF at N direction pairs and Q states as one basis evaluation and one GEMM.
 
         Parameters
@@ -581,6 +583,9 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             Rows per fused block (basis, GEMM, exp); tune for cache, not accuracy.
         out : ndarray, shape (N, Q), optional
             Output buffer.
+        threads : int, optional
+            Blocks run side by side on this many threads (default
+            :func:`brdfmodels.parallel.default_threads`); results do not depend on it.
 
         Returns
         -------
@@ -603,15 +608,13 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         if self.log:
             # augmented row -ln(cos i cos r) with coefficient 1: exp() gives f_r directly
             coef_aug = np.vstack([coef, np.ones((1, nq))])
-        ybuf = np.empty((k + 1, min(chunk_rows, max(n, 1))))
         guard = self._exponent_bound + 2.0 * -math.log(_COS_FLOOR) > _LOG_FR_MAX
         # a finite stand-in for log(0): exp() of it underflows to exactly 0 whatever Y c is
         log_zero = -(self._exponent_bound + 1000.0)
-        for s in range(0, n, chunk_rows):
-            e = min(s + chunk_rows, n)
+
+        def block(s, e):
             a, b = wi[s:e], wo[s:e]
-            m = e - s
-            yb = ybuf[:, :m]
+            yb = np.empty((k + 1, e - s))
             parts = _half_diff_parts(a, b)
             self.basis.design_transposed(*parts, self.fanout, self.fanout, out=yb[:k])
             ci = a[:, 2]
@@ -642,6 +645,8 @@ class DynamicBRDF(_SHMixin, BRDFModel):
                 np.minimum(blk, FR_MAX, out=blk)
             if not valid.all():
                 blk[~valid] = 0.0
+
+        map_blocks(block, n, chunk_rows, threads)
         return out
 
     def _params(self):

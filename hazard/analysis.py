@@ -19,7 +19,6 @@ time. "Static" holds the material's initial state for the whole window.
 from __future__ import annotations
 
 import math
-import os
 import platform
 import time
 from contextlib import contextmanager
@@ -28,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import brdfmodels
+from brdfmodels.parallel import default_threads, map_blocks, thread_limit
 
 from . import mpe as _mpe
 from .engine import FAR_FIELD_SPOT_SIZES, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
@@ -232,14 +232,6 @@ def _sliding_max_integral(times, e, window):
     return best
 
 
-def default_threads() -> int:
-    """CPUs this process may run on (its affinity mask where the OS has one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not on Linux
-        return max(1, os.cpu_count() or 1)
-
-
 HISTORY_KEEP_MAX = 20_000_000  # observer x time values kept in memory by default (160 MB)
 MAP_CHUNK = 32768  # observers per block of the map (measured with 2 threads: 4096 0.48-0.59 s, 16384 0.36, 32768-131072 0.31-0.33)
 
@@ -259,12 +251,17 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
         when it has at most ``HISTORY_KEEP_MAX`` values; peaks, exposures and verdicts
         are computed either way.
     threads : int, optional
-        Threads for the irradiance map and the ray queries (default: the CPUs this
-        process may use, see :func:`default_threads`). Results do not depend on it.
+        Threads for the irradiance map, the BRDF evaluations and the ray queries
+        (default: :func:`brdfmodels.parallel.default_threads`, the CPUs this process may
+        use). Results do not depend on it.
     """
-    threads = default_threads() if threads is None else int(threads)
-    if threads < 1:
-        raise ValueError(f"threads={threads!r}: expected an integer >= 1")
+    if threads is None:
+        return _analyze(scene, backend, progress, keep_history, default_threads())
+    with thread_limit(threads):  # checks it; caps every hot loop called from here
+        return _analyze(scene, backend, progress, keep_history, threads)
+
+
+def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
     spec = scene.spec
     stages = []
     notes = []
@@ -452,11 +449,11 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
             anyo = over.any(axis=1)
             first[rows[hot[anyo]]] = times[1 + over.argmax(axis=1)[anyo]]
 
-    def map_block(a0):
-        """Line of sight, irradiance and exposure of observers [a0, a0 + chunk); returns
+    def map_block(a0, a1):
+        """Line of sight, irradiance and exposure of observers [a0, a1); returns
         the seconds spent on line of sight and on exposure. Blocks write disjoint rows,
         so they run on threads (NumPy, BLAS and Embree release the GIL)."""
-        sl = slice(a0, min(a0 + chunk, m))
+        sl = slice(a0, a1)
         t_los = line_of_sight(sl) if do_los else 0.0
         if one_spot:
             sp = spots[0]
@@ -483,20 +480,9 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
         post(ec, np.arange(sl.start, sl.stop))
         return t_los, time.perf_counter() - t0
 
-    starts = range(0, m, chunk)
-    workers = max(1, min(threads, len(starts)))
+    workers = max(1, min(threads, -(-m // chunk)))
     with stage("dynamic" if dynamic else "static") as st:
-        if workers > 1:
-            from concurrent.futures import ThreadPoolExecutor
-
-            from threadpoolctl import threadpool_limits
-
-            # one BLAS thread per block: the blocks are the parallelism (a two-thread BLAS
-            # pool per block would spin against the other block's work on two cores)
-            with threadpool_limits(1, user_api="blas"), ThreadPoolExecutor(workers) as pool:
-                parts = list(pool.map(map_block, starts))
-        else:
-            parts = [map_block(a0) for a0 in starts]
+        parts = map_blocks(map_block, m, chunk, workers)
         # per-thread shares of the wall time (the parts ran side by side on the workers)
         los_s, post_s = (sum(p[i] for p in parts) / workers for i in (0, 1))
         st.detail = (f"{m} observers x {n_t} time(s) in blocks of {chunk} on {workers} thread(s); {int(far_any.sum())} far-field "

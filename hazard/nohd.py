@@ -31,7 +31,6 @@ import sys
 import numpy as np
 from dataclasses import dataclass, field
 
-from scipy.optimize import brentq
 from scipy.special import lambertw
 
 __all__ = [
@@ -298,6 +297,8 @@ def hazard_distance(irradiance_at, mpe_w_m2, *, r_start_m=1.0, r_max_m=1e9) -> f
         lo, hi = hi, hi * 2.0
         if hi > r_max_m:
             return math.inf
+    from scipy.optimize import brentq  # here: scipy.optimize costs 0.3 s at import
+
     return brentq(g, lo, hi, xtol=1e-12 * hi, rtol=4 * sys.float_info.epsilon, maxiter=500)
 
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from brdfmodels.parallel import default_threads
+
 __all__ = ["RayScene", "Hits", "BACKENDS"]
 
 BACKENDS = ("embree", "numpy")
@@ -44,11 +46,12 @@ class RayScene:
     meshes : sequence of (vertices (V, 3), faces (F, 3), object_id)
         Local coordinates [m]; ``object_id`` labels which object each triangle belongs to.
     backend : {"embree", "numpy"}
-    threads : int
-        Worker threads for large Embree batches.
+    threads : int, optional
+        Worker threads for large Embree batches (default, and cap: the
+        :func:`brdfmodels.parallel.default_threads` of the calling thread).
     """
 
-    def __init__(self, meshes, backend="embree", threads=2):
+    def __init__(self, meshes, backend="embree", threads=None):
         if backend not in BACKENDS:
             raise ValueError(f"backend={backend!r}: expected one of {list(BACKENDS)}")
         verts, faces, objs = [], [], []
@@ -64,7 +67,7 @@ class RayScene:
         self.faces = np.vstack(faces) if faces else np.empty((0, 3), np.int64)
         self.face_object = np.concatenate(objs) if objs else np.empty(0, int)
         self.backend = backend
-        self.threads = max(1, int(threads))
+        self.threads = None if threads is None else max(1, int(threads))
         self.scale_m = float(np.ptp(self.vertices, axis=0).max()) if len(self.vertices) else 1.0
         self._impl = None
         if len(self.faces):
@@ -125,10 +128,11 @@ class RayScene:
         return occ
 
     def _map(self, fn, n, n_out):
-        if self.backend != "embree" or self.threads == 1 or n <= 2 * _CHUNK:
+        threads = default_threads() if self.threads is None else min(self.threads, default_threads())  # 1 inside a block
+        if self.backend != "embree" or threads == 1 or n <= 2 * _CHUNK:
             return fn(0, n)
         bounds = [(a, min(a + _CHUNK, n)) for a in range(0, n, _CHUNK)]
-        with ThreadPoolExecutor(self.threads) as pool:
+        with ThreadPoolExecutor(threads) as pool:
             parts = list(pool.map(lambda ab: fn(*ab), bounds))
         return tuple(np.concatenate([p[i] for p in parts]) for i in range(n_out))
 
