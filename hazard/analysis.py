@@ -4,10 +4,14 @@ Stages (each reported as ran or skipped, with the reason and its run time):
 
 ``mpe`` -> ``rays`` (Embree scene; skipped when the targets are flat and nothing can
 block a line of sight: beam hits are then computed analytically) -> ``beam`` ->
-``history`` (skipped for static materials) -> ``static`` -> ``dynamic`` (the time loop;
-skipped for static materials) -> ``specular`` (delta lobes; skipped if none) ->
-``line_of_sight`` (skipped when nothing can block) -> ``keepout`` -> ``footprint``
-(needs terrain) -> ``exposure``.
+``history`` (skipped for static materials) -> ``specular`` (delta lobes; skipped if
+none) -> ``line_of_sight`` (skipped when nothing can block) -> ``static`` or ``dynamic``
+(the map; ``dynamic`` is the time loop, skipped for static materials) -> ``exposure`` ->
+``keepout`` -> ``footprint`` (needs terrain).
+
+The map runs in blocks of observers side by side on threads (``threads``); each block
+does its own line of sight, irradiance and exposure, so those three stages report their
+share of the map's wall time.
 
 Exposure (spec `laser-safety.md` section 4): per observer the irradiance history E(t)
 over the analysis window; peak irradiance; the radiant exposure over the exposure
