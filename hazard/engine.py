@@ -263,7 +263,7 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
         d = (obs[far] - c) / rng[far, None]
         wo = _to_local(fr, d)
         scale = spot.total_power_w * np.exp(-attenuation_per_m * rng[far]) * gain[far] * vis[far] / rng[far] ** 2
-        e[far] = projected_brdf(model, np.broadcast_to(wi, wo.shape), wo, states, scale)
+        e[far] = projected_brdf(model, wi, wo, states, scale)
     near = np.flatnonzero(~far & (vis > 0))
     if len(near):
         wi_all = _to_local(spot.frames, -spot.incoming)

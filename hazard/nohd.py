@@ -77,6 +77,22 @@ def _log_lambertw_exp(log_z: float) -> float:
     return math.log(w)
 
 
+def _lambertw0(z: np.ndarray) -> np.ndarray:
+    """Principal branch W0(z) for real z >= 0 (array), vectorised.
+
+    Winitzki's start ``l (1 - ln(1 + l) / (2 + l))``, ``l = ln(1 + z)`` (within a few per
+    cent everywhere), then three Halley steps on ``w - z e^-w = 0`` (scaled by e^-w, so
+    nothing overflows): within 4e-16 relative of ``scipy.special.lambertw`` for
+    1e-8 <= z <= 1e300 (tested), about 3x faster (keep-out grids evaluate millions).
+    """
+    l = np.log1p(z)
+    w = l * (1.0 - np.log1p(l) / (2.0 + l))
+    for _ in range(3):
+        t = w - z * np.exp(-w)
+        w = w - t / ((w + 1.0) - (w + 2.0) * t / (2.0 * w + 2.0))
+    return w
+
+
 def _scaled_lambertw(log_scale: float, log_z: float) -> float:
     """scale * W(e^L) from the logarithms of both (finite for mu -> 0 and mu R -> 700)."""
     return math.exp(log_scale + _log_lambertw_exp(log_z))
@@ -229,7 +245,9 @@ def range_from_intensity(intensity_w_sr, mpe_w_m2, attenuation_per_m=0.0) -> np.
     small = (z > 0) & (z < 1e-8)
     out[small] = r0[small] * (1.0 - z[small])  # W(z) = z - z^2 + ...
     big = z >= 1e-8
-    out[big] = 2.0 / mu * lambertw(z[big]).real
+    zb = z[big]
+    inf = np.isinf(zb)  # W(inf) = inf; the iteration would give nan
+    out[big] = np.where(inf, np.inf, 2.0 / mu * _lambertw0(np.where(inf, 1.0, zb)))
     return out
 
 

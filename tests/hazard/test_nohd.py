@@ -196,3 +196,28 @@ def test_property_finite_up_to_mu_r_700(mu_r, a):
 def test_bad_input(call, match):
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_vectorised_lambert_w_against_scipy_and_its_equation():
+    import numpy as np
+
+    from hazard.nohd import _lambertw0
+
+    z = np.concatenate([np.logspace(-8, 300, 20001), np.linspace(0.0, 10.0, 2001)[1:], [1.7e308]])
+    w = _lambertw0(z)
+    ref = lambertw(z).real
+    np.testing.assert_allclose(w, ref, rtol=1e-15)
+    np.testing.assert_allclose(w + np.log(w), np.log(z), rtol=1e-14, atol=1e-14)  # w e^w = z, in logs
+
+
+def test_range_from_intensity_matches_the_scalar_nohd():
+    import numpy as np
+
+    from hazard.nohd import range_from_intensity
+
+    i = np.array([0.0, 1e-12, 1e-3, 1.0, 1e3, 1e9, 1e30, np.inf])
+    for mu in (1e-12, 1e-4, 0.5):
+        r = range_from_intensity(i, 2.5, mu)
+        for ii, rr in zip(i[:-1], r[:-1]):
+            assert rr == pytest.approx(hz.nohd_from_intensity(ii, 2.5, attenuation_per_m=mu).nohd_m, rel=1e-13, abs=1e-300)
+        assert r[-1] == np.inf
