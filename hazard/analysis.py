@@ -505,7 +505,7 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
     else:
         skip("dynamic", "no dynamic material: no time loop")
     stages.append(Stage("exposure", True, f"window {t_exp:g} s over {n_t} time(s) (computed per block inside the map; "
-                                          f"with {workers} threads its time is the per-thread share)", post_s))
+                                          f"its time is the per-thread share of the map's wall time)", post_s))
 
     # -- keep-out ----------------------------------------------------------------------------
     a = spec.analysis

@@ -61,10 +61,22 @@ def _add_mpe_args(p, *, required):
     p.add_argument("--angular-subtense-rad", type=float, default=0.0, help="apparent source size [rad] (0: point source)")
 
 
+def _positive_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
+    return value
+
+
 def _add_run_args(p):
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.add_argument("--fail-on-hazard", action="store_true", help="exit with code 3 if any hazard is found")
     p.add_argument("--backend", default="embree", choices=["embree", "numpy"], help="ray engine (default embree)")
+    p.add_argument("--threads", type=_positive_int, default=None,
+                   help="threads for the map, BRDF evaluations and ray queries (default: every CPU this process may use)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
 
@@ -267,7 +279,7 @@ def _analyse(args, err):
 
     scene = _load_scene(args.scene)
     progress = None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
-    return analyze(scene, backend=args.backend, progress=progress)
+    return analyze(scene, backend=args.backend, progress=progress, threads=getattr(args, "threads", None))
 
 
 def _finish(args, result):

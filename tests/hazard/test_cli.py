@@ -61,6 +61,8 @@ def test_nohd_with_computed_mpe_atmosphere_and_optics():
         (["nohd", "--power-w", "5", "--mpe-w-m2", "50"], "--beam-diameter-m: required for --kind direct"),
         (["mpe", "--wavelength-nm", "abc", "--duration-s", "1"], "invalid float value: 'abc'"),
         (["frobnicate"], "invalid choice: 'frobnicate'"),
+        (["run", "plate", "-o", "x", "--threads", "0"], "argument --threads: '0': expected an integer >= 1"),
+        (["run", "plate", "-o", "x", "--threads", "two"], "argument --threads: 'two': expected an integer >= 1"),
     ],
 )
 def test_bad_input_one_clear_line(argv, message):
@@ -73,3 +75,12 @@ def test_console_script_installed():
     res = subprocess.run([sys.executable, "-m", "hazard.cli", "mpe", "--wavelength-nm", "532", "--duration-s", "0.25", "--json"],
                          capture_output=True, text=True)
     assert res.returncode == 0 and json.loads(res.stdout)["irradiance_w_m2"] == pytest.approx(25.4558441)
+
+
+def test_run_with_one_thread_equals_default(tmp_path):
+    reports = []
+    for k, extra in enumerate(([], ["--threads", "1"])):
+        code, _, _ = run("run", "witness_screen", "-o", str(tmp_path / str(k)), "--quiet", *extra)
+        assert code == 0
+        reports.append(json.loads((tmp_path / str(k) / "report.json").read_text())["observers"])
+    assert reports[0] == reports[1]
