@@ -33,6 +33,7 @@ from .states import (
     check_policy,
     interpolation_weights,
     interpolate_rows,
+    segment_extremes,
 )
 
 __all__ = [
@@ -564,7 +565,8 @@ class DynamicBRDF(_SHMixin, BRDFModel):
     def _fr_segment_max(self, wi, wo, s_lo, s_hi, fanout_h):
         return np.maximum(self._fr(wi, wo, s_lo, fanout_h), self._fr(wi, wo, s_hi, fanout_h))
 
-    def evaluate_many(self, wi, wo, states, *, projected=False, row_scale=None, chunk_rows=16384, out=None, threads=None) -> np.ndarray:
+    def evaluate_many(self, wi, wo, states, *, projected=False, row_scale=None, reduce=None, chunk_rows=16384, out=None,
+                      threads=None) -> np.ndarray:
         """BRDF at N direction pairs and Q states as one basis evaluation and one GEMM.
 
         Parameters
@@ -579,9 +581,13 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             Non-negative factor per row (e.g. power / range^2 of an irradiance map). For
             log models it enters the exponent (no extra pass over the output); a zero
             row gives exactly 0.
+        reduce : {None, "max"}
+            ``"max"``: only the maximum over the states, shape (N,), reduced inside each
+            block before the monotone steps (exp, clipping, the cosine division), so a
+            log model takes N exponentials instead of N x Q and no (N, Q) array exists.
         chunk_rows : int
             Rows per fused block (basis, GEMM, exp); tune for cache, not accuracy.
-        out : ndarray, shape (N, Q), optional
+        out : ndarray, shape (N, Q) (or (N,) with ``reduce="max"``), optional
             Output buffer.
         threads : int, optional
             Blocks run side by side on this many threads (default
@@ -589,21 +595,28 @@ class DynamicBRDF(_SHMixin, BRDFModel):
 
         Returns
         -------
-        ndarray, shape (N, Q)
+        ndarray, shape (N, Q) or (N,)
             f_r [1/sr] (0 below the horizon).
         """
+        if reduce not in (None, "max"):
+            raise ValueError(f"reduce={reduce!r}: expected None or 'max'")
         wi, wo, _ = _prepare(wi, wo)
         if row_scale is not None:
             row_scale = finite_array("row_scale", row_scale, ndim=1, minimum=0.0)
             if row_scale.shape != (wi.shape[0],):
                 raise ValueError(f"row_scale: expected shape ({wi.shape[0]},), got {row_scale.shape}")
         q = check_in_range(np.atleast_1d(np.asarray(states, dtype=float)).ravel(), self.states, self.state_name, self.extrapolation)
+        if reduce:
+            # the exponent (or f~) is linear in the state between nodes: only the first and
+            # last state of each node interval can hold the max (exact, not a bound)
+            q = segment_extremes(self.states, q)
         coef = self.coefficients.T @ interpolation_weights(self.states, q)  # (K, Q)
         n, nq = wi.shape[0], q.size
+        shape = (n,) if reduce else (n, nq)
         if out is None:
-            out = np.empty((n, nq))
-        elif out.shape != (n, nq):
-            raise ValueError(f"out: expected shape {(n, nq)}, got {out.shape}")
+            out = np.empty(shape)
+        elif out.shape != shape:
+            raise ValueError(f"out: expected shape {shape}, got {out.shape}")
         k = self.basis.size
         if self.log:
             # augmented row -ln(cos i cos r) with coefficient 1: exp() gives f_r directly
@@ -620,7 +633,6 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             ci = a[:, 2]
             cr = b[:, 2]
             valid = (ci > 0.0) & (cr > 0.0)
-            blk = out[s:e]
             if self.log:
                 lc = np.log(np.maximum(ci, _COS_FLOOR))
                 if not projected:
@@ -630,13 +642,24 @@ class DynamicBRDF(_SHMixin, BRDFModel):
                     rs = row_scale[s:e]
                     with np.errstate(divide="ignore"):
                         yb[k] += np.where(rs > 0, np.log(np.where(rs > 0, rs, 1.0)), log_zero)
-                np.matmul(yb.T, coef_aug, out=blk)
+            if reduce:
+                # max over states commutes with the monotone steps below (exp, clipping,
+                # multiplying by a non-negative row factor): reduce the GEMM first
+                prod = yb.T @ coef_aug if self.log else yb[:k].T @ coef
+                np.max(prod, axis=1, out=out[s:e])
+                blk = out[s:e, None]
+            else:
+                blk = out[s:e]
+            if self.log:
+                if not reduce:
+                    np.matmul(yb.T, coef_aug, out=blk)
                 # clip only when this block's exponent could pass ln(FR_MAX)
                 if guard or (row_scale is not None and self._exponent_bound + yb[k].max() > _LOG_FR_MAX):
                     np.minimum(blk, _LOG_FR_MAX, out=blk)
                 np.exp(blk, out=blk)
             else:
-                np.matmul(yb[:k].T, coef, out=blk)
+                if not reduce:
+                    np.matmul(yb[:k].T, coef, out=blk)
                 np.maximum(blk, 0.0, out=blk)
                 den = np.maximum(ci, _COS_FLOOR) * (1.0 if projected else np.maximum(cr, _COS_FLOOR))
                 blk /= den[:, None]

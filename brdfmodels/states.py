@@ -69,6 +69,23 @@ def interpolation_weights(nodes: np.ndarray, query: np.ndarray) -> np.ndarray:
     return w
 
 
+def segment_extremes(nodes: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """The query states that can hold the maximum, over ``query``, of a function that is
+    linear (or monotone of linear) between consecutive ``nodes``: the smallest and the
+    largest query state in each node interval, sorted and unique.
+
+    On a closed interval a linear function peaks at an end, so the other states of that
+    interval can never be larger: the max over the result equals the max over ``query``.
+    """
+    q = np.unique(np.asarray(query, dtype=float).ravel())  # sorted
+    if q.size <= 2:
+        return q
+    seg = np.searchsorted(nodes, q, side="right")  # non-decreasing along sorted q
+    first = np.r_[True, seg[1:] != seg[:-1]]
+    last = np.r_[seg[1:] != seg[:-1], True]
+    return q[first | last]
+
+
 def interpolate_rows(nodes: np.ndarray, table: np.ndarray, query: np.ndarray) -> np.ndarray:
     """Row-wise linear interpolation of ``table`` (T, K) at in-range ``query`` -> (Q, K)."""
     q = np.asarray(query, dtype=float).ravel()

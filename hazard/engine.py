@@ -183,33 +183,43 @@ def trace_spots(beam: Beam, targets, ray_scene):
 
 
 # -- BRDF evaluation over states ------------------------------------------------------------
-def projected_brdf(model, wi, wo, states=None, row_scale=None) -> np.ndarray:
+def projected_brdf(model, wi, wo, states=None, row_scale=None, reduce=None) -> np.ndarray:
     """``f_r cos(theta_r)`` [1/sr] at pairs (N, 3), for no state (N,) or states (T,) -> (N, T),
     optionally multiplied by a per-row factor ``row_scale`` (N,).
 
     Dynamic SH models are evaluated as one basis evaluation and one matrix product over
     all states, with ``row_scale`` folded into the exponent; a state-table factor
-    multiplies; other models loop over the states.
+    multiplies; other models loop over the states. ``reduce="max"`` returns the maximum
+    over the states (N,) without forming (N, T) where the model allows: inside the
+    dynamic SH evaluation, and as ``f x max(factor)`` for a static model scaled by a
+    (non-negative) state-table factor.
     """
     if states is None:
         f = model.evaluate_cos(wi, wo)
         return f if row_scale is None else f * row_scale
     states = np.asarray(states, float)
     if isinstance(model, DynamicBRDF):
-        return model.evaluate_many(wi, wo, states, projected=True, row_scale=row_scale)
+        return model.evaluate_many(wi, wo, states, projected=True, row_scale=row_scale, reduce=reduce)
     if isinstance(model, Scaled):
+        table = isinstance(model.factor, StateTable)
+        if reduce and not (table and model.model.is_dynamic):
+            # the max of a product with a non-negative factor that does not vary with the
+            # inner model's states (or an inner model that does not vary) factorises
+            inner = projected_brdf(model.model, wi, wo, states if model.model.is_dynamic else None, row_scale, reduce)
+            return inner * (float(np.max(model.factor(states))) if table else model.factor)
         inner = projected_brdf(model.model, wi, wo, states if model.model.is_dynamic else None, row_scale)
         if inner.ndim == 1:
             inner = inner[:, None]
-        fac = model.factor(states)[None, :] if isinstance(model.factor, StateTable) else model.factor
-        return inner * fac
+        f = inner * (model.factor(states)[None, :] if table else model.factor)
+        return f.max(axis=1) if reduce else f
     if not model.is_dynamic:
         f = model.evaluate_cos(wi, wo)
         if row_scale is not None:
             f = f * row_scale
-        return np.repeat(f[:, None], states.size, axis=1)
+        return f if reduce else np.repeat(f[:, None], states.size, axis=1)
     f = np.stack([model.evaluate_cos(wi, wo, state=float(s)) for s in states], axis=-1)
-    return f if row_scale is None else f * row_scale[:, None]
+    f = f if row_scale is None else f * row_scale[:, None]
+    return f.max(axis=1) if reduce else f
 
 
 def _to_local(frames, v):

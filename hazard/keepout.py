@@ -62,9 +62,7 @@ def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states):
     power = spot.total_power_w * gain
 
     def fn(wo):
-        f = projected_brdf(model, wi[None, :], wo, states)
-        if f.ndim == 2:
-            f = f.max(axis=1)
+        f = projected_brdf(model, wi[None, :], wo, states, reduce="max")  # the lobe: max over the states
         return range_from_intensity(f * power, mpe_w_m2, mu)
 
     return fn

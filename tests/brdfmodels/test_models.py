@@ -164,6 +164,43 @@ def test_evaluate_many_equals_per_state(projected):
     np.testing.assert_allclose(per_row, many[:, 2] if not projected else dyn.evaluate(wi, wo, state=600.0), rtol=1e-11)
 
 
+@pytest.mark.parametrize("log", [True, False])
+@pytest.mark.parametrize("projected", [False, True])
+def test_evaluate_many_max_over_states_equals_max_of_the_full_array(log, projected):
+    # the reduced path takes the max before exp / clipping / division by the cosines
+    dyn = make_dynamic()
+    if not log:
+        dyn = bm.DynamicBRDF(dyn.basis, dyn.states, np.abs(dyn.coefficients), "temperature_k", log=False)
+    rng = np.random.default_rng(3)
+    wi, wo = rng.normal(size=(700, 3)), rng.normal(size=(700, 3))  # half below the horizon
+    states = np.linspace(300.0, 900.0, 9)
+    scale = rng.uniform(0.0, 3.0, 700)
+    scale[:20] = 0.0
+    full = dyn.evaluate_many(wi, wo, states, projected=projected, row_scale=scale, chunk_rows=97)
+    top = dyn.evaluate_many(wi, wo, states, projected=projected, row_scale=scale, chunk_rows=97, reduce="max")
+    assert top.shape == (700,)
+    np.testing.assert_allclose(top, full.max(axis=1), rtol=1e-14, atol=0)
+    assert np.all(top[:20] == 0) and np.any(top > 0)
+    with pytest.raises(ValueError, match="reduce='min': expected None or 'max'"):
+        dyn.evaluate_many(wi, wo, states, reduce="min")
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=8, unique=True),
+       st.lists(st.floats(-1e3, 1e3), min_size=1, max_size=40),
+       st.integers(0, 2**32 - 1))
+def test_segment_extremes_keep_the_max_of_any_piecewise_linear_function(nodes, query, seed):
+    from brdfmodels.states import interpolation_weights, segment_extremes
+
+    nodes = np.sort(np.array(nodes))
+    q = np.clip(np.array(query), nodes[0], nodes[-1])
+    values = np.random.default_rng(seed).normal(size=(3, nodes.size))  # three functions
+    kept = segment_extremes(nodes, q)
+    assert set(kept) <= set(q) and kept.size <= 2 * (nodes.size + 1)
+    full = (values @ interpolation_weights(nodes, q)).max(axis=1)
+    np.testing.assert_allclose((values @ interpolation_weights(nodes, kept)).max(axis=1), full, rtol=0, atol=1e-9)
+
+
 def test_dynamic_shape_errors():
     basis = bm.SHBasis(4, 0, 2, 0)
     with pytest.raises(ValueError, match=r"coefficients: expected shape \(2, 7\)"):

@@ -328,3 +328,31 @@ def test_map_on_threads_equals_serial_map(name, monkeypatch):
 def test_threads_must_be_positive():
     with pytest.raises(ValueError, match="threads=0"):
         hazard.analyze(plate(), threads=0)
+
+
+def test_projected_brdf_max_over_states_for_every_model_kind():
+    # keep-out lobes take the max over the states without forming (N, T) where they can
+    import brdfmodels as bm
+    from hazard.engine import projected_brdf
+
+    rng = np.random.default_rng(11)
+    basis = bm.SHBasis(4, 2, 2, 0)
+    dyn = bm.DynamicBRDF(basis, [300.0, 600.0, 900.0], rng.normal(scale=0.3, size=(3, basis.size)), "temperature_k")
+    table = bm.StateTable([300.0, 600.0, 900.0], [1.0, 0.4, 0.7], "temperature_k")
+    models = {
+        "dynamic SH": dyn,
+        "static x table": bm.Scaled(bm.Lambertian(0.3), table),
+        "dynamic x table": bm.Scaled(dyn, table),
+        "dynamic x constant": bm.Scaled(dyn, 0.5),
+        "sum (state loop)": bm.Sum([dyn, bm.Lambertian(0.1)]),
+        "static": bm.Lambertian(0.5),
+    }
+    wi = bm.spherical_to_vector(0.5, 0.3)[None, :]
+    wo = bm.spherical_to_vector(rng.uniform(0, 1.6, 400), rng.uniform(-np.pi, np.pi, 400))
+    states = np.linspace(300.0, 900.0, 7)
+    scale = rng.uniform(0, 2, 400)
+    for name, model in models.items():
+        full = projected_brdf(model, wi, wo, states, scale)
+        top = projected_brdf(model, wi, wo, states, scale, reduce="max")
+        assert top.shape == (400,), name
+        np.testing.assert_allclose(top, full.max(axis=1), rtol=1e-14, atol=0, err_msg=name)
