@@ -109,7 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("study", help="study TOML")
     p.add_argument("-o", "--output", required=True, help="output folder (a restarted study resumes there)")
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
-    p.add_argument("--workers", type=int, default=2, help="worker processes of the embedded cluster (default 2)")
+    p.add_argument("--workers", type=_positive_int, default=2, help="worker processes of the embedded cluster (default 2)")
     p.add_argument("--serial", action="store_true", help="run in this process without Dask")
     p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")

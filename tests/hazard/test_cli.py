@@ -63,6 +63,7 @@ def test_nohd_with_computed_mpe_atmosphere_and_optics():
         (["frobnicate"], "invalid choice: 'frobnicate'"),
         (["run", "plate", "-o", "x", "--threads", "0"], "argument --threads: '0': expected an integer >= 1"),
         (["run", "plate", "-o", "x", "--threads", "two"], "argument --threads: 'two': expected an integer >= 1"),
+        (["study", "s.toml", "-o", "x", "--workers", "0"], "argument --workers: '0': expected an integer >= 1"),
     ],
 )
 def test_bad_input_one_clear_line(argv, message):
