@@ -43,6 +43,14 @@ def fan_out(theta, exponent: float) -> np.ndarray:
     return math.pi * np.power(t, exponent)
 
 
+def _recurrence(l: int, m: int):
+    """(a, b) of the normalised three-term recurrence
+    ``P_l^m = a (x P_{l-1}^m - b P_{l-2}^m)`` (l >= m + 2)."""
+    a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
+    b = math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
+    return a, b
+
+
 def _legendre_table(x: np.ndarray, s: np.ndarray, lmax: int, mmax: int) -> dict:
     """Fully normalised P_l^m (incl. 1/sqrt(4 pi)), no Condon-Shortley phase.
 
@@ -61,8 +69,7 @@ def _legendre_table(x: np.ndarray, s: np.ndarray, lmax: int, mmax: int) -> dict:
         p_l = math.sqrt(2 * m + 3) * x * pmm
         out[(m + 1, m)] = p_l
         for l in range(m + 2, lmax + 1):
-            a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
-            b = math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
+            a, b = _recurrence(l, m)
             p_new = a * (x * p_l - b * p_lm1)
             p_lm1, p_l = p_l, p_new
             out[(l, m)] = p_l
@@ -198,8 +205,9 @@ class SHBasis:
         """Write y_l^m(fan_out(theta), phi) of ``terms`` into the successive ``rows``.
 
         The hot path of every SH evaluation: the recurrence of :func:`_legendre_table`
-        (same coefficients, same order of operations up to where sqrt(2) is applied) run
-        in place in the output rows, so each term costs four passes over one row and no
+        (kept as the reference that :func:`real_sph_harm` and the tests use; same
+        coefficients, same order of operations up to where sqrt(2) is applied) run in
+        place in the output rows, so each term costs four passes over one row and no
         temporaries. Orders m not in ``terms`` (odd m of the difference part) go through
         three rotating scratch rows.
         """
@@ -241,8 +249,7 @@ class SHBasis:
                     np.multiply(x, p_l, out=d)
                     d *= math.sqrt(2 * m + 3)
                 else:
-                    a = math.sqrt((4 * l * l - 1) / (l * l - m * m))
-                    b = math.sqrt(((l - 1) ** 2 - m * m) / (4 * (l - 1) ** 2 - 1))
+                    a, b = _recurrence(l, m)
                     np.multiply(x, p_l, out=d)
                     np.multiply(p_lm1, b, out=tmp)
                     d -= tmp
