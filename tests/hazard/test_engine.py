@@ -356,3 +356,19 @@ def test_projected_brdf_max_over_states_for_every_model_kind():
         top = projected_brdf(model, wi, wo, states, scale, reduce="max")
         assert top.shape == (400,), name
         np.testing.assert_allclose(top, full.max(axis=1), rtol=1e-14, atol=0, err_msg=name)
+
+
+def test_long_histories_get_smaller_map_blocks(monkeypatch):
+    # memory per block is capped in observer x time values, whatever the history length
+    import hazard.analysis as ha
+
+    scene = scenes.load(scenes.example_path("witness_screen"))
+    ref = hazard.analyze(scene)
+    n_t = len(ref.times_s)
+    monkeypatch.setattr(ha, "MAP_BLOCK_VALUES", 300 * n_t)
+    small = hazard.analyze(scene)
+    assert f"in blocks of {ha.MAP_CHUNK} " in ref.stage("dynamic").detail
+    assert "in blocks of 300 " in small.stage("dynamic").detail
+    # other block edges may change the last bit of a GEMM (BLAS kernels), nothing more
+    np.testing.assert_allclose(small.observers.peak_irradiance_w_m2, ref.observers.peak_irradiance_w_m2, rtol=1e-14)
+    np.testing.assert_allclose(small.observers.radiant_exposure_j_m2, ref.observers.radiant_exposure_j_m2, rtol=1e-14)
