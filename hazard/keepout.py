@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import brdfmodels
+from brdfmodels.parallel import map_blocks
 
 from .engine import Spot, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
 from .nohd import range_from_intensity
@@ -179,38 +180,62 @@ class Footprint:
     eye_height_m: float
 
 
+FOOTPRINT_BLOCK_VALUES = 4_000_000  # ground point x time values per block of the footprint
+
+
 def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
-    """Hazardous ground area: terrain nodes whose eye-height point sees more than the MPE
-    (BRDF and specular lobes of every spot, with line of sight), max over each target's
-    states (``states_by_target``: target index -> states, absent for static materials)."""
+    """Hazardous ground area: terrain nodes whose eye-height point receives more than the
+    MPE at some time, the irradiance summed over every spot (BRDF and specular lobes, each
+    with its own line of sight) as in the observer map, max over the states in time
+    (``states_by_target``: target index -> states on one common time grid, absent for
+    static materials).
+
+    ``max_range_m`` is how far one spot alone can exceed the MPE: with one spot only the
+    nodes within it are evaluated. With several spots their sum can exceed the MPE where
+    none does alone, so every node is evaluated. Rays are traced only where the
+    unoccluded sum exceeds the MPE (occlusion can only lower it). Nodes go in blocks
+    (bounded memory, threads).
+    """
     states_by_target = states_by_target or {}
     ny, nx = terrain.heights.shape
     xs = terrain.x0 + terrain.dx * np.arange(nx)
     ys = terrain.y0 + terrain.dx * np.arange(ny)
     mask = np.zeros((ny, nx), bool)
-    for spot in spots:
-        c = spot.centroid
-        if not np.isfinite(max_range_m):
-            ix, iy = np.arange(nx), np.arange(ny)
-        else:
-            ix = np.flatnonzero(np.abs(xs - c[0]) <= max_range_m)
-            iy = np.flatnonzero(np.abs(ys - c[1]) <= max_range_m)
-        if not len(ix) or not len(iy):
-            continue
-        gx, gy = np.meshgrid(xs[ix], ys[iy])
-        pts = np.stack([gx.ravel(), gy.ravel(), terrain.heights[np.ix_(iy, ix)].ravel() + eye_height_m], 1)
-        gain = np.ones(len(pts))
-        states = states_by_target.get(spot.target.index)
-        e, _ = spot_irradiance(spot, pts, gain, attenuation_per_m, states)
-        if spot.target.material.has_specular:
-            e = e + specular_irradiance(spot, pts, gain, attenuation_per_m, beam, states)
-        if e.ndim == 2:
-            e = e.max(1)
-        hot = e > mpe_w_m2
-        if np.any(hot) and ray_scene is not None:
-            start = c + spot.mean_frame[2] * 1e-6 * max(ray_scene.scale_m, 1.0)
-            idx = np.flatnonzero(hot)
-            occ = ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), pts[idx])
-            hot[idx[occ]] = False
-        mask[np.ix_(iy, ix)] |= hot.reshape(len(iy), len(ix))
+    if not spots:
+        return Footprint(mask, 0.0, eye_height_m)
+    ix, iy = np.arange(nx), np.arange(ny)
+    if len(spots) == 1 and np.isfinite(max_range_m):
+        c = spots[0].centroid
+        ix = np.flatnonzero(np.abs(xs - c[0]) <= max_range_m)
+        iy = np.flatnonzero(np.abs(ys - c[1]) <= max_range_m)
+    if not len(ix) or not len(iy):
+        return Footprint(mask, 0.0, eye_height_m)
+    gx, gy = np.meshgrid(xs[ix], ys[iy])
+    pts = np.stack([gx.ravel(), gy.ravel(), terrain.heights[np.ix_(iy, ix)].ravel() + eye_height_m], 1)
+    hot = np.zeros(len(pts), bool)
+    n_t = max([len(v) for v in states_by_target.values()] + [1])
+
+    def block(a, b):
+        p = pts[a:b]
+        gain = np.ones(b - a)
+        parts = []
+        for spot in spots:
+            states = states_by_target.get(spot.target.index)
+            e, _ = spot_irradiance(spot, p, gain, attenuation_per_m, states)
+            if spot.target.material.has_specular:
+                e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states)
+            parts.append(e if e.ndim == 2 else e[:, None])
+        over = sum(parts).max(axis=1) > mpe_w_m2
+        if ray_scene is not None and over.any():
+            for spot, e in zip(spots, parts):
+                idx = np.flatnonzero(over & (e.max(axis=1) > 0))
+                if len(idx):
+                    start = spot.centroid + spot.mean_frame[2] * 1e-6 * max(ray_scene.scale_m, 1.0)
+                    e[idx[ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])]] = 0.0
+            rows = np.flatnonzero(over)
+            over[rows] = sum(e[rows] for e in parts).max(axis=1) > mpe_w_m2
+        hot[a:b] = over
+
+    map_blocks(block, len(pts), max(256, FOOTPRINT_BLOCK_VALUES // (n_t * len(spots))))
+    mask[np.ix_(iy, ix)] = hot.reshape(len(iy), len(ix))
     return Footprint(mask, float(mask.sum() * terrain.dx**2), eye_height_m)

@@ -372,3 +372,41 @@ def test_long_histories_get_smaller_map_blocks(monkeypatch):
     # other block edges may change the last bit of a GEMM (BLAS kernels), nothing more
     np.testing.assert_allclose(small.observers.peak_irradiance_w_m2, ref.observers.peak_irradiance_w_m2, rtol=1e-14)
     np.testing.assert_allclose(small.observers.radiant_exposure_j_m2, ref.observers.radiant_exposure_j_m2, rtol=1e-14)
+
+
+def test_footprint_sums_the_spots():
+    # two Lambertian plates side by side under one wide beam light the same ground: a
+    # node is hazardous when the SUM of their irradiances passes the MPE, even where
+    # neither does alone (the observer map sums them too)
+    from hazard.keepout import ground_footprint
+
+    text = PLATE.format(power=3.0e4, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=1024,
+                        grid=4.0, levels=0)
+    text = text.replace("beam_diameter_m = 0.005", "beam_diameter_m = 4.0")
+    plate_b = text[text.index("[[targets]]"):text.index("[analysis]")]
+    text = text.replace(plate_b, plate_b.replace("center_m = [0.0, 0.0, 0.0]", "center_m = [-0.6, 0.0, 0.0]")
+                        + plate_b.replace('name = "plate"', 'name = "plate2"').replace("center_m = [0.0, 0.0, 0.0]", "center_m = [0.6, 0.0, 0.0]"))
+    text += '[terrain]\nkind = "flat"\ncenter_m = [0.0, -30.0, -1.7]\nextent_m = 60.0\nresolution_m = 0.5\n'
+    scene = scenes.loads(text)
+    res = hazard.analyze(scene)
+    assert len(res.spots) == 2
+    from hazard.engine import spot_irradiance
+
+    t = scene.terrain
+    ny, nx = t.heights.shape
+    gx, gy = np.meshgrid(t.x0 + t.dx * np.arange(nx), t.y0 + t.dx * np.arange(ny))
+    pts = np.stack([gx.ravel(), gy.ravel(), t.heights.ravel() + 1.7], 1)
+    each = [spot_irradiance(sp, pts, np.ones(len(pts)), 0.0)[0] for sp in res.spots]
+    fp = ground_footprint(res.spots, res.beam, t, _ray_scene_of(scene), res.mpe_w_m2, 0.0, 1.7)
+    expected = ((each[0] + each[1]) > res.mpe_w_m2).reshape(ny, nx)
+    alone = ((each[0] > res.mpe_w_m2) | (each[1] > res.mpe_w_m2)).reshape(ny, nx)
+    assert alone.sum() > 0 and expected.sum() > alone.sum()  # the sum matters here
+    np.testing.assert_array_equal(fp.mask, expected)
+    np.testing.assert_array_equal(res.footprint_static.mask, expected)  # analyze passes the same
+
+
+def _ray_scene_of(scene):
+    from hazard.analysis import _ray_meshes
+    from hazard.rays import RayScene
+
+    return RayScene(_ray_meshes(scene))
