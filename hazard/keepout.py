@@ -173,7 +173,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
 
 @dataclass
 class Footprint:
-    """Where the reflected irradiance at eye height exceeds the MPE on the terrain grid."""
+    """Where the reflected irradiance at eye height reaches the MPE on the terrain grid."""
 
     mask: np.ndarray  # (ny, nx) over the terrain heightfield
     area_m2: float
@@ -184,7 +184,7 @@ FOOTPRINT_BLOCK_VALUES = 4_000_000  # ground point x time values per block of th
 
 
 def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
-    """Hazardous ground area: terrain nodes whose eye-height point receives more than the
+    """Hazardous ground area: terrain nodes whose eye-height point receives at least the
     MPE at some time, the irradiance summed over every spot (BRDF and specular lobes, each
     with its own line of sight) as in the observer map, max over the states in time
     (``states_by_target``: target index -> states on one common time grid, absent for
@@ -225,7 +225,7 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
             if spot.target.material.has_specular:
                 e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states)
             parts.append(e if e.ndim == 2 else e[:, None])
-        over = sum(parts).max(axis=1) > mpe_w_m2
+        over = sum(parts).max(axis=1) >= mpe_w_m2  # as for observers: ratio >= 1
         if ray_scene is not None and over.any():
             for spot, e in zip(spots, parts):
                 idx = np.flatnonzero(over & (e.max(axis=1) > 0))
@@ -233,7 +233,7 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
                     start = spot.centroid + spot.mean_frame[2] * 1e-6 * max(ray_scene.scale_m, 1.0)
                     e[idx[ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])]] = 0.0
             rows = np.flatnonzero(over)
-            over[rows] = sum(e[rows] for e in parts).max(axis=1) > mpe_w_m2
+            over[rows] = sum(e[rows] for e in parts).max(axis=1) >= mpe_w_m2
         hot[a:b] = over
 
     map_blocks(block, len(pts), max(256, FOOTPRINT_BLOCK_VALUES // (n_t * len(spots))))

@@ -398,8 +398,8 @@ def test_footprint_sums_the_spots():
     pts = np.stack([gx.ravel(), gy.ravel(), t.heights.ravel() + 1.7], 1)
     each = [spot_irradiance(sp, pts, np.ones(len(pts)), 0.0)[0] for sp in res.spots]
     fp = ground_footprint(res.spots, res.beam, t, _ray_scene_of(scene), res.mpe_w_m2, 0.0, 1.7)
-    expected = ((each[0] + each[1]) > res.mpe_w_m2).reshape(ny, nx)
-    alone = ((each[0] > res.mpe_w_m2) | (each[1] > res.mpe_w_m2)).reshape(ny, nx)
+    expected = ((each[0] + each[1]) >= res.mpe_w_m2).reshape(ny, nx)
+    alone = ((each[0] >= res.mpe_w_m2) | (each[1] >= res.mpe_w_m2)).reshape(ny, nx)
     assert alone.sum() > 0 and expected.sum() > alone.sum()  # the sum matters here
     np.testing.assert_array_equal(fp.mask, expected)
     np.testing.assert_array_equal(res.footprint_static.mask, expected)  # analyze passes the same
