@@ -390,7 +390,7 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
         n_seg = 0
         for k, sp in enumerate(spots):
             c, nrm = sp.centroid, sp.mean_frame[2]
-            start = c + nrm * 1e-6 * max(ray_scene.scale_m, 1.0)
+            start = ray_scene.off_surface(c, nrm)
             # far-field observers behind the spot's surface receive nothing whatever is
             # in between (the map evaluates them with the mean frame): no ray needed
             rel = p - c

@@ -108,6 +108,11 @@ class RayScene:
         obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
         return Hits(hit, t, face, obj, point)
 
+    def off_surface(self, point_m, normal) -> np.ndarray:
+        """A segment start just off a surface (tnear is 0, so a ray leaving a surface
+        must not begin on it): ``point + normal * 1e-6 * max(scene size, 1 m)``."""
+        return np.asarray(point_m, float) + np.asarray(normal, float) * 1e-6 * max(self.scale_m, 1.0)
+
     def occluded(self, starts, ends, *, end_clearance_m=None) -> np.ndarray:
         """True where the open segment start -> end crosses a triangle.
 
