@@ -18,7 +18,9 @@ import os
 import threading
 from contextlib import contextmanager
 
-__all__ = ["default_threads", "thread_limit", "map_blocks"]
+__all__ = ["default_threads", "thread_limit", "map_blocks", "block_rows", "BLOCK_VALUES"]
+
+BLOCK_VALUES = 4_000_000  # values per block (32 MB in float64; a few such arrays live per thread)
 
 _local = threading.local()
 _controller = None
@@ -67,6 +69,12 @@ def _blas_one_thread():
 
         _controller = ThreadpoolController()
     return _controller.limit(limits=1, user_api="blas")
+
+
+def block_rows(values_per_row: int, max_rows: int) -> int:
+    """Rows per block: at most ``max_rows``, and at most :data:`BLOCK_VALUES` values in
+    all (never below 256 rows), so long rows (many states or times) keep memory bounded."""
+    return min(max_rows, max(256, BLOCK_VALUES // max(1, values_per_row)))
 
 
 def map_blocks(fn, n: int, block: int, threads=None) -> list:

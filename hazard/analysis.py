@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import brdfmodels
-from brdfmodels.parallel import default_threads, map_blocks, thread_limit
+from brdfmodels.parallel import block_rows, default_threads, map_blocks, thread_limit
 
 from . import mpe as _mpe
 from .engine import FAR_FIELD_SPOT_SIZES, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
@@ -238,7 +238,6 @@ def _sliding_max_integral(times, e, window):
 
 HISTORY_KEEP_MAX = 20_000_000  # observer x time values kept in memory by default (160 MB)
 MAP_CHUNK = 32768  # observers per block of the map (measured with 2 threads: 4096 0.48-0.59 s, 16384 0.36, 32768-131072 0.31-0.33)
-MAP_BLOCK_VALUES = 4_000_000  # cap on observer x time values per block (32 MB each; a few live per thread)
 
 
 def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None) -> HazardResult:
@@ -431,8 +430,7 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
         elapsed = np.clip(times[1:] - times[0], _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)
         mpe_h_t = np.array([_mpe.ocular_mpe(wl, t, standard=std).radiant_exposure_j_m2 for t in elapsed])
         e_floor = float(np.min(mpe_h_t / np.maximum(times[1:] - times[0], 1e-300)))  # no exceedance below this
-    # long histories get fewer observers per block, so memory per thread stays bounded
-    chunk = min(MAP_CHUNK, max(256, MAP_BLOCK_VALUES // n_t))
+    chunk = block_rows(n_t, MAP_CHUNK)  # long histories: fewer observers per block
     one_spot = len(spots) == 1 and not spots[0].target.material.has_specular
 
     def post(ec, rows):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import brdfmodels
-from brdfmodels.parallel import map_blocks
+from brdfmodels.parallel import block_rows, map_blocks
 
 from .engine import Spot, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
 from .nohd import range_from_intensity
@@ -180,9 +180,6 @@ class Footprint:
     eye_height_m: float
 
 
-FOOTPRINT_BLOCK_VALUES = 4_000_000  # ground point x time values per block of the footprint
-
-
 def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
     """Hazardous ground area: terrain nodes whose eye-height point receives at least the
     MPE at some time, the irradiance summed over every spot (BRDF and specular lobes, each
@@ -236,6 +233,6 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
             over[rows] = sum(e[rows] for e in parts).max(axis=1) >= mpe_w_m2
         hot[a:b] = over
 
-    map_blocks(block, len(pts), max(256, FOOTPRINT_BLOCK_VALUES // (n_t * len(spots))))
+    map_blocks(block, len(pts), block_rows(n_t * len(spots), max(1, len(pts))))
     mask[np.ix_(iy, ix)] = hot.reshape(len(iy), len(ix))
     return Footprint(mask, float(mask.sum() * terrain.dx**2), eye_height_m)

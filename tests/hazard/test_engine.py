@@ -365,7 +365,9 @@ def test_long_histories_get_smaller_map_blocks(monkeypatch):
     scene = scenes.load(scenes.example_path("witness_screen"))
     ref = hazard.analyze(scene)
     n_t = len(ref.times_s)
-    monkeypatch.setattr(ha, "MAP_BLOCK_VALUES", 300 * n_t)
+    import brdfmodels.parallel as bp
+
+    monkeypatch.setattr(bp, "BLOCK_VALUES", 300 * n_t)
     small = hazard.analyze(scene)
     assert f"in blocks of {ha.MAP_CHUNK} " in ref.stage("dynamic").detail
     assert "in blocks of 300 " in small.stage("dynamic").detail
