@@ -1,5 +1,11 @@
-"""File helpers: atomic writes (a temporary file in the target folder, then a rename)
-and TOML reading with one clear error line."""
+"""File helpers: atomic writes (a temporary file in the target folder, then a rename),
+bounded input files (regular files of bounded size, bounded nesting) and TOML reading with
+one clear error line.
+
+Input limits (:data:`LIMITS`) protect against memory bombs and endless reads; each can be
+raised with an environment variable ``HAZARD_MAX_<NAME>`` (e.g. ``HAZARD_MAX_OBSERVERS=2e6``),
+and every error that hits a limit says so.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +13,160 @@ import os
 import tempfile
 import tomllib
 from pathlib import Path
+
+
+# name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
+LIMITS = {
+    "FILE_MB": (256, "size of an input file [MB]"),
+    "DEPTH": (32, "nesting depth of arrays and tables in an input file"),
+    "OBSERVERS": (1_000_000, "observer points of a scene"),
+    "BEAM_SAMPLES": (1_000_000, "rays across the beam cross-section (analysis.beam_samples)"),
+    "TIME_STEPS": (100_000, "time steps of a dynamic analysis (time_end_s / time_step_s)"),
+    "OBSERVER_STEPS": (50_000_000, "observer points x time steps of a dynamic analysis"),
+    "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
+    "SCENARIOS": (1_000_000, "scenarios of a study"),
+    "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
+}
+
+
+def limit(name: str) -> float:
+    """The current value of limit ``name`` (environment ``HAZARD_MAX_<NAME>`` or the default)."""
+    default = LIMITS[name][0]
+    text = os.environ.get(f"HAZARD_MAX_{name}")
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a number") from None
+    if not value > 0:
+        raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a positive number")
+    return value
+
+
+def check_limit(name: str, value, what: str) -> None:
+    """ValueError naming ``what``, the limit and how to raise it when ``value`` exceeds it."""
+    lim = limit(name)
+    if not value <= lim:  # also catches nan
+        shown = f"{value:.4g}" if isinstance(value, float) else f"{value}"
+        raise ValueError(f"{what} = {shown} exceeds the limit {lim:g} ({LIMITS[name][1]}); "
+                         f"if intended, raise it with the environment variable HAZARD_MAX_{name}")
+
+
+def check_input_file(path, what: str | None = None) -> Path:
+    """``path`` if it is a regular file within the size limit; ValueError otherwise
+    (missing files, folders, devices such as /dev/zero, FIFOs, oversized files)."""
+    import stat
+
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read{' the ' + what if what else ''} ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise ValueError(f"{path}: {kind}; expected a regular file{' (' + what + ')' if what else ''}")
+    mb = st.st_size / 1e6
+    if mb > limit("FILE_MB"):
+        check_limit("FILE_MB", mb, f"{path}: size [MB]")
+    return path
+
+
+def read_input_text(path, what: str | None = None) -> str:
+    """UTF-8 text of a bounded regular file; ValueError with one line otherwise."""
+    path = check_input_file(path, what)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(int(limit("FILE_MB") * 1e6) + 1)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read{' the ' + what if what else ''} ({exc.strerror})") from None
+    if len(data) > limit("FILE_MB") * 1e6:
+        check_limit("FILE_MB", len(data) / 1e6, f"{path}: size [MB]")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def toml_depth(text: str) -> int:
+    """Deepest nesting of ``[`` / ``{`` in TOML values (strings and comments skipped;
+    table headers do not count). Linear time, no recursion."""
+    depth = best = 0
+    i, n = 0, len(text)
+    line_start = True
+    while i < n:
+        c = text[i]
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if c in "\"'":
+            triple = text.startswith(c * 3, i)
+            if triple:
+                j = text.find(c * 3, i + 3)
+                i = n if j < 0 else j + 3
+                while i < n and text[i] == c:  # up to two quotes may close the string
+                    i += 1
+            else:
+                j = i + 1
+                while j < n and text[j] != c and text[j] != "\n":
+                    j += 2 if (c == '"' and text[j] == "\\") else 1
+                i = j + 1
+            line_start = False
+            continue
+        if c == "\n":
+            line_start = depth == 0
+        elif c in " \t\r":
+            pass
+        elif c == "[" and line_start and depth == 0:
+            # a table header [a] / [[a]]: skip to the end of the line
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        elif c in "[{":
+            depth += 1
+            best = max(best, depth)
+            line_start = False
+        elif c in "]}":
+            depth = max(depth - 1, 0)
+            line_start = False
+        else:
+            line_start = False
+        i += 1
+    return best
+
+
+def data_depth(data) -> int:
+    """Deepest nesting of dicts and lists in parsed data (iterative)."""
+    best = 0
+    stack = [(data, 0)]
+    while stack:
+        node, d = stack.pop()
+        if isinstance(node, dict):
+            node = list(node.values())
+        elif not isinstance(node, list):
+            continue
+        best = max(best, d + 1)
+        stack.extend((v, d + 1) for v in node)
+    return best
+
+
+def parse_toml(text: str, source: str) -> dict:
+    """Parse TOML text with bounded nesting; ValueError with one line naming ``source``."""
+    depth = toml_depth(text)
+    if depth > limit("DEPTH"):
+        check_limit("DEPTH", depth, f"{source}: nesting depth")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{source}: not valid TOML: {' '.join(str(exc).split())}") from None
+    except RecursionError:
+        raise ValueError(f"{source}: nesting too deep (the limit is {limit('DEPTH'):g} levels; "
+                         f"raise it with HAZARD_MAX_DEPTH)") from None
+    depth = data_depth(data)
+    if depth > limit("DEPTH") + 1:  # tables add one level to the arrays counted above
+        check_limit("DEPTH", depth, f"{source}: nesting depth")
+    return data
 
 
 def _umask() -> int:
@@ -46,9 +206,4 @@ def atomic_write_text(path, text: str) -> Path:
 def read_toml(path) -> dict:
     """Parse a TOML file; ValueError naming the file on a read or syntax error."""
     path = Path(path)
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    return parse_toml(read_input_text(path), str(path))

@@ -215,7 +215,15 @@ class BRDFModel:
         unknown = set(params) - set(known)
         if unknown:
             raise ValueError(f"{cls.name}: unknown parameters {sorted(unknown)}; expected some of {known}")
-        return cls(**cls._decode(dict(params)))
+        missing = [k for k, p in sig.parameters.items() if k != "self" and p.default is inspect.Parameter.empty
+                   and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and k not in params]
+        if missing:
+            raise ValueError(f"{cls.name}: missing parameter{'s' if len(missing) > 1 else ''} {', '.join(missing)}; "
+                             f"expected {known}")
+        try:
+            return cls(**cls._decode(dict(params)))
+        except (TypeError, AttributeError, KeyError, IndexError, ZeroDivisionError, OverflowError) as exc:
+            raise ValueError(f"{cls.name}: bad parameters ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})") from None
 
     def __eq__(self, other):
         return type(self) is type(other) and self.to_dict() == other.to_dict()

@@ -128,11 +128,10 @@ def save(model, path) -> Path:
 
 def load(path):
     """Read a model written by :func:`save`."""
+    from ._io import read_input_text
+
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ValueError(f"cannot read model file {str(path)!r}: {exc.strerror}") from None
+    text = read_input_text(path, "model file")  # a regular file of bounded size
     try:
         return loads(text)
     except ValueError as exc:

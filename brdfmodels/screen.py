@@ -228,7 +228,15 @@ class Samples:
 
     @classmethod
     def read(cls, path) -> "Samples":
-        """CSV or Parquet by the file's suffix."""
+        """CSV or Parquet by the file's suffix (a regular file of bounded size)."""
+        from ._io import check_input_file
+
+        try:
+            check_input_file(path, "samples")
+        except ValueError as exc:
+            if Path(path).exists():
+                raise
+            raise ValueError(f"{path}: cannot read the samples (No such file or directory)") from None
         return cls.from_parquet(path) if str(path).endswith(".parquet") else cls.from_csv(path)
 
     def write(self, path) -> Path:
@@ -329,6 +337,86 @@ def reduce_test(test: ScreenTest) -> Samples:
     return out
 
 
+def _test_schema():
+    """Pydantic classes of a screen-test file: strict types, finite numbers, no unknown keys."""
+    from typing import Annotated
+
+    from pydantic import BaseModel, ConfigDict, Field
+
+    class _S(BaseModel):
+        model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+    Num = Annotated[float, Field(ge=-1e9, le=1e9)]
+    Vec3 = Annotated[list[Num], Field(min_length=3, max_length=3)]
+    File = Annotated[str, Field(min_length=1, max_length=1000)]
+
+    class Screen(_S):
+        upper_left_m: Vec3
+        upper_right_m: Vec3
+        lower_left_m: Vec3
+        top_row: Num
+        bottom_row: Num
+        left_col: Num
+        right_col: Num
+
+    class Sample(_S):
+        normal: Vec3
+        groove: Vec3
+        incidence: Vec3 | None = None
+        spot_size_m: Annotated[float, Field(gt=0, le=10)] | None = None
+
+    class Laser(_S):
+        power_w: Annotated[float, Field(gt=0, le=1e9)]
+
+    class Cal(_S):
+        irradiance_w_m2: Annotated[float, Field(gt=0, le=1e12)]
+        pixel: Annotated[list[Num], Field(min_length=2, max_length=2)]
+        counts: Annotated[float, Field(gt=0, le=1e15)]
+
+    class Images(_S):
+        point_source: File
+        frames: File
+        background: Num = 0.0
+        point_source_background: Num | None = None
+        saturation: Annotated[float, Field(gt=0, le=1e15)]
+
+    class Pyrometer(_S):
+        file: File
+
+    class ScreenTestSpec(_S):
+        test_id: Annotated[str, Field(min_length=1, max_length=200)] | None = None
+        screen: Screen
+        sample: Sample
+        laser: Laser
+        calibration: Cal
+        images: Images
+        pyrometer: Pyrometer | None = None
+
+    return ScreenTestSpec
+
+
+def _validate_test(d, path):
+    from pydantic import ValidationError
+
+    try:
+        _test_schema().model_validate(d)
+    except ValidationError as exc:
+        errs = sorted(exc.errors(include_url=False), key=lambda e: e["type"] != "missing")
+        msgs = []
+        for e in errs:
+            where = "".join(f"[{p}]" if isinstance(p, int) else ("." if i else "") + str(p) for i, p in enumerate(e["loc"]))
+            if e["type"] == "missing":
+                msgs.append(f"{where}: missing")
+            elif e["type"] == "extra_forbidden":
+                msgs.append(f"{where}: unknown key (check its spelling)")
+            else:
+                inp = e.get("input")
+                shown = "" if isinstance(inp, (dict, list)) else f" (got {inp!r})"
+                msgs.append(f"{where}: {e['msg'].removeprefix('Value error, ')}{shown}")
+        more = f" (and {len(msgs) - 1} more: {'; '.join(msgs[1:4])})" if len(msgs) > 1 else ""
+        raise ValueError(f"{path}: {msgs[0]}{more}") from None
+
+
 def _need(d, key, where):
     if key not in d:
         raise ValueError(f"{where}.{key}: missing")
@@ -352,6 +440,7 @@ def load_test(path) -> ScreenTest:
     unknown = set(d) - known
     if unknown:
         raise ValueError(f"{path}: unknown keys {sorted(unknown)}; expected {sorted(known)}")
+    _validate_test(d, path)
     s, smp, las, cal, img = (_need(d, k, "test") for k in ("screen", "sample", "laser", "calibration", "images"))
     geom = ScreenGeometry(*(np.asarray(_need(s, k, "screen"), float) for k in ("upper_left_m", "upper_right_m", "lower_left_m")),
                           *(float(_need(s, k, "screen")) for k in ("top_row", "bottom_row", "left_col", "right_col")))
@@ -362,21 +451,33 @@ def load_test(path) -> ScreenTest:
         raise ValueError(f"{path}: {exc}") from None
 
     def load_array(name, key=None):
+        from ._io import check_input_file, check_limit
+
         p = base / name
+        check_input_file(p, f"image file of {path}")
         try:
-            arr = np.load(p)
-        except (OSError, ValueError) as exc:
+            arr = np.load(p, allow_pickle=False)
+        except (OSError, ValueError, EOFError) as exc:
             raise ValueError(f"{path}: cannot read {name} ({exc})") from None
         if key is not None:
             if key not in arr:
                 raise ValueError(f"{path}: {name} has no array {key!r}")
-            return np.asarray(arr[key], float)
+            info = arr.zip.getinfo(f"{key}.npy") if hasattr(arr, "zip") else None
+            if info is not None:  # a compressed member may unpack to far more than the file (zip bomb)
+                check_limit("SAMPLES", info.file_size / 8, f"{path}: {name}[{key}] size (8-byte values)")
+            arr = arr[key]
+        check_limit("SAMPLES", arr.size, f"{path}: {name} values")
+        if arr.dtype.kind not in "iuf":
+            raise ValueError(f"{path}: {name}: expected numbers, got dtype {arr.dtype}")
         return np.asarray(arr, float)
 
     frames_file = _need(img, "frames", "images")
     pyro_t = pyro_k = None
     if "pyrometer" in d:
         pf = base / _need(d["pyrometer"], "file", "pyrometer")
+        from ._io import check_input_file
+
+        check_input_file(pf, "pyrometer file")
         try:
             data = np.genfromtxt(pf, delimiter=",", names=True)
         except OSError as exc:

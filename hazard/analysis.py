@@ -34,7 +34,9 @@ import brdfmodels
 from brdfmodels.parallel import block_rows, default_threads, map_blocks, thread_limit
 
 from . import mpe as _mpe
-from .engine import FAR_FIELD_SPOT_SIZES, mirror_axis, sample_beam, spot_irradiance, specular_irradiance, specular_power_w, trace_spots
+from .beam import BeamGeometry, sample_cells
+from .engine import FAR_FIELD_SPOT_SIZES, build_spots, flat_outlines, spot_irradiance, specular_irradiance
+from .specular import specular_nohd
 from .keepout import Footprint, Lobe, ground_footprint, hazard_lobe
 from .nohd import attenuation_from_visibility, nohd_direct, optical_gain
 
@@ -66,17 +68,28 @@ class TargetResult:
     specular_direction: list | None
     state_name: str | None
     state_range: list | None
+    spot_power_error_w: float = 0.0  # bound on the spot power's error (already added to it: conservative)
+    spot_power_exact: bool = False  # spot power is the exact outline integral
+    peak_irradiance_w_m2: float = 0.0  # highest incident irradiance on the lit part (normal to the beam, attenuated)
+    mean_irradiance_w_m2: float = 0.0  # spot power over its lit area normal to the beam
+    lit_side: str = "front"
 
     def to_dict(self):
-        def lobe(lb):
-            return None if lb is None else lb.summary()
+        def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side
+            return {"max_nohd_m": 0.0, "max_direction": None, "volume_m3": 0.0, "volume_error_m3": 0.0, "cells": 0,
+                    "evaluations": 0} if lb is None else lb.summary()
 
         return {
             "name": self.name,
             "spot_power_w": self.spot_power_w,
+            "spot_power_error_w": self.spot_power_error_w,
+            "spot_power_exact": self.spot_power_exact,
+            "peak_irradiance_w_m2": self.peak_irradiance_w_m2,
+            "mean_irradiance_w_m2": self.mean_irradiance_w_m2,
+            "lit_side": self.lit_side,
             "spot_size_m": self.spot_size_m,
-            "nohd_static_m": None if self.static_lobe is None else self.static_lobe.max_range_m,
-            "nohd_dynamic_m": None if self.dynamic_lobe is None else self.dynamic_lobe.max_range_m,
+            "nohd_static_m": 0.0 if self.static_lobe is None else self.static_lobe.max_range_m,  # no spot: nothing reflected
+            "nohd_dynamic_m": 0.0 if self.dynamic_lobe is None else self.dynamic_lobe.max_range_m,
             "keepout_static": lobe(self.static_lobe),
             "keepout_dynamic": lobe(self.dynamic_lobe),
             "specular_nohd_static_m": self.specular_nohd_static_m,
@@ -102,6 +115,16 @@ class ObserverResults:
     line_of_sight: np.ndarray
     far_field: np.ndarray
     irradiance_w_m2: np.ndarray | None  # (M, T) total irradiance history (None if not kept)
+    # extended sources (hazard.extended_source, set by analyze()): the spot's angular
+    # subtense [rad], C_E and the MPE per observer (C_E = 1 and the scalar MPE unless
+    # [exposure] extended_source = true); None on results built without analyze()
+    angular_subtense_rad: np.ndarray | None = None
+    c_e: np.ndarray | None = None
+    mpe_w_m2: np.ndarray | None = None
+    mpe_radiant_exposure_j_m2: np.ndarray | None = None
+    # highest irradiance of the mirror (delta) lobes alone [W/m^2] per observer: > 0 where
+    # an observer sees the beam's image (a point source: C_E = 1); None if not computed
+    specular_irradiance_w_m2: np.ndarray | None = None
 
     def __len__(self):
         return len(self.position_m)
@@ -136,10 +159,18 @@ class HazardResult:
     spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
     beam: object | None = None
     states: dict = field(default_factory=dict)  # target index -> states over times_s
+    extended_source: dict = field(default_factory=dict)  # C_E summary for the report (hazard.extended_source)
+    beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
+
+    @property
+    def observer_mpe_w_m2(self):
+        """MPE [W/m^2] per observer (with C_E when applied), else the scalar MPE."""
+        per = self.observers.mpe_w_m2
+        return self.mpe_w_m2 if per is None else per
 
     @property
     def hazard_ratio(self) -> np.ndarray:
-        return self.observers.peak_irradiance_w_m2 / self.mpe_w_m2
+        return self.observers.peak_irradiance_w_m2 / self.observer_mpe_w_m2
 
     @property
     def hazardous(self) -> np.ndarray:
@@ -147,7 +178,7 @@ class HazardResult:
 
     @property
     def hazardous_static(self) -> np.ndarray:
-        return self.observers.static_irradiance_w_m2 / self.mpe_w_m2 >= 1.0
+        return self.observers.static_irradiance_w_m2 / self.observer_mpe_w_m2 >= 1.0
 
     @property
     def any_hazard(self) -> bool:
@@ -236,6 +267,60 @@ def _sliding_max_integral(times, e, window):
     return best
 
 
+def _level0_cells(beam_samples: int) -> int:
+    """Cells per side of the beam's coarsest grid: about ``beam_samples`` cells in all (at least 4 x 4)."""
+    return max(4, int(round(math.sqrt(beam_samples))))
+
+
+def _beam_detail(cells, built, power_w) -> str:
+    exact = f"; exact outline integrals for {', '.join(built.exact)}" if built.exact else ""
+    if built.unreflected:
+        exact += "; not reflected: " + ", ".join(f"{n} ({s} face, {p:.4g} W)" if s != "unresolved" else f"{n} (unresolved cells, {p:.4g} W)"
+                                                 for n, s, p in built.unreflected)
+    return (f"{cells.rays_traced} rays over {cells.levels_used} level(s) of cells; {len(built.spots)} spot(s); "
+            f"spill {built.spill_w:.4g} W, blocked {built.blocked_w:.4g} W; intercepted-power error bound "
+            f"{built.error_w:.3g} W ({built.error_w / power_w:.2g} of the beam, added to the spots){exact}")
+
+
+def _beam_sampling(cells, built, rtol) -> dict:
+    """The beam stage's accuracy for the report: rays, levels, the bound on the power
+    misassigned between objects [W] and which targets got exact outline integrals."""
+    return {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
+            "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
+            "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected]}
+
+
+def _unlit_targets(targets, spots, unreflected) -> list:
+    """A row for every target without a spot (after the spots' rows, same order as the
+    file), so no target disappears from a report: what reached it and why nothing reflects."""
+    lit = {sp.target.index for sp in spots}
+    why = {}
+    for name, side, p in unreflected:
+        why.setdefault(name, []).append((side, p))
+    rows = []
+    for t in targets:
+        if t.index in lit:
+            continue
+        parts = why.get(t.name, [])
+        power = float(sum(p for _, p in parts))
+        side = "; ".join(f"{s} face lit, not reflected" if s != "unresolved" else "only unresolved beam cells" for s, _ in parts) or "not lit"
+        rows.append(TargetResult(t.name, power, 0.0, None, None, None, None, None, None, None, lit_side=side))
+    return rows
+
+
+def _unreflected_notes(unreflected) -> list:
+    notes = []
+    for name, side, p in unreflected:
+        if side == "unresolved":
+            notes.append(f"target {name!r}: at most {p:.4g} W reaches it in unresolved beam cells and is not reflected")
+        elif side == "back":
+            notes.append(f"target {name!r}: the lit side is the back ({p:.4g} W) and it has no back material: "
+                         f"nothing was reflected from it (give targets.back to model the back face)")
+        else:
+            notes.append(f"target {name!r}: {p:.4g} W lands on its {side} faces and is not reflected (mixed sides: the other side carries more)")
+    return notes
+
+
 HISTORY_KEEP_MAX = 20_000_000  # observer x time values kept in memory by default (160 MB)
 MAP_CHUNK = 32768  # observers per block of the map (measured with 2 threads: 4096 0.48-0.59 s, 16384 0.36, 32768-131072 0.31-0.33)
 
@@ -258,11 +343,17 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
         Threads for the irradiance map, the BRDF evaluations and the ray queries
         (default: :func:`brdfmodels.parallel.default_threads`, the CPUs this process may
         use). Results do not depend on it.
+
+    The last stage, ``extended_source``, sets the MPE per observer: the point-source MPE
+    by default, C_E from the diffuse spot's angular subtense with ``[exposure]
+    extended_source = true`` (:func:`hazard.extended_source.apply_extended_source`).
     """
+    from .extended_source import apply_extended_source
+
     if threads is None:
-        return _analyze(scene, backend, progress, keep_history, default_threads())
+        return apply_extended_source(_analyze(scene, backend, progress, keep_history, default_threads()))
     with thread_limit(threads):  # checks it; caps every hot loop called from here
-        return _analyze(scene, backend, progress, keep_history, threads)
+        return apply_extended_source(_analyze(scene, backend, progress, keep_history, threads))
 
 
 def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
@@ -318,20 +409,22 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
     tracer = ray_scene if ray_scene is not None else _FlatScene(scene.targets)
 
     with stage("beam") as st:
-        beam = sample_beam(scene.laser_position_m, scene.laser_direction, laser.average_power_w, laser.beam_diameter_m,
-                           laser.divergence_rad, spec.analysis.beam_samples)
-        # atmospheric loss on the way to the target, per ray
-        spots, spill, blocked = trace_spots(beam, scene.targets, tracer)
-        for sp in spots:
-            sp.power_w = sp.power_w * np.exp(-mu * sp.range_from_laser_m)
-        st.detail = f"{len(beam.power_w)} rays; {len(spots)} spot(s); spill {spill:.4g} W, blocked {blocked:.4g} W"
+        beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, laser.average_power_w, laser.beam_diameter_m,
+                                   laser.divergence_rad)
+        outlines = flat_outlines(beam, scene.targets)
+        cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
+                             outlines={k: v[1] for k, v in outlines.items()})
+        built = build_spots(beam, cells, scene.targets, tracer, mu, outlines)
+        spots, spill, blocked = built.spots, built.spill_w, built.blocked_w
+        st.detail = _beam_detail(cells, built, laser.average_power_w)
         if spill > 1e-3 * laser.average_power_w:
             notes.append(f"{100 * spill / laser.average_power_w:.3g} % of the beam misses every target (spill)")
+        notes.extend(_unreflected_notes(built.unreflected))
 
     # -- states over time ------------------------------------------------------------------
     t_end = spec.analysis.time_end_s or t_exp
     dt = spec.analysis.time_step_s or t_end / 100.0
-    dynamic_spots = [sp for sp in spots if sp.target.material.is_dynamic]
+    dynamic_spots = [sp for sp in spots if sp.material.is_dynamic]
     if dynamic_spots:
         times = np.arange(0.0, t_end + 0.5 * dt, dt)
         times[-1] = min(times[-1], t_end) if len(times) > 1 else times[-1]
@@ -354,11 +447,11 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
                     if hs.oxidation is not None:
                         kw["oxidation"] = brdfmodels.OxidationModel(**hs.oxidation.model_dump())
                     plate = getattr(brdfmodels.ThinPlateHeating, hs.plate)(**kw)
-                    d_spot = beam.diameter_at(sp.mean_range_m)
-                    irr = 4 * sp.total_power_w / (math.pi * d_spot**2)  # peak of the Gaussian spot
+                    irr = sp.max_irradiance_w_m2  # the hottest point of the spot (local peak, after attenuation)
                     res = plate.solve(times if len(times) > 1 else np.array([0.0, t_end]), irr, rtol=hs.rtol)
                     hist = res.history(hs.state, extrapolation="clamp")
-                    parts.append(f"{t.name}: heating at {irr:.4g} W/m^2, T_max {res.temperature_k.max():.0f} K")
+                    parts.append(f"{t.name}: heating at the spot's peak {irr:.4g} W/m^2 (spot mean {sp.mean_irradiance_w_m2:.4g} W/m^2), "
+                                 f"T_max {res.temperature_k.max():.0f} K")
                 else:
                     parts.append(f"{t.name}: measured series")
                 states[t.index] = hist.state_at(times)
@@ -394,7 +487,7 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
             # in between (the map evaluates them with the mean frame): no ray needed
             rel = p - c
             far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(sp.size_m, 1e-9)) ** 2
-            need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | sp.target.material.has_specular
+            need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | sp.material.has_specular
             idx = np.flatnonzero(need)
             row = los[k, sl]
             row[~need] = False
@@ -403,10 +496,10 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
         los_segments.append(n_seg)
         return time.perf_counter() - t0
 
-    spec_spots = [sp for sp in spots if sp.target.material.has_specular]
+    spec_spots = [sp for sp in spots if sp.material.has_specular]
     if spec_spots:
-        stages.append(Stage("specular", True, f"{len(spec_spots)} mirror lobe(s) traced as reflected beams "
-                                              f"(image source, folded path), inside the irradiance map"))
+        stages.append(Stage("specular", True, f"{len(spec_spots)} mirror lobe(s) by geometric optics "
+                                              f"(unfolded beam on flat facets, Coddington spread on spheres and cylinders) from the lit part of each mirror, inside the irradiance map"))
     else:
         skip("specular", "no ideal-mirror (delta) lobe")
 
@@ -422,6 +515,7 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
     h = np.zeros(m)
     first = np.full(m, np.nan)
     far_any = np.zeros(m, bool)
+    spec_peak = np.zeros(m)  # highest specular (mirror-lobe) irradiance per observer over time
     if dynamic and n_t > 1:
         span = times[-1] - times[0]
         trap = np.zeros(n_t)
@@ -431,7 +525,7 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
         mpe_h_t = np.array([_mpe.ocular_mpe(wl, t, standard=std).radiant_exposure_j_m2 for t in elapsed])
         e_floor = float(np.min(mpe_h_t / np.maximum(times[1:] - times[0], 1e-300)))  # no exceedance below this
     chunk = block_rows(n_t, MAP_CHUNK)  # long histories: fewer observers per block
-    one_spot = len(spots) == 1 and not spots[0].target.material.has_specular
+    one_spot = len(spots) == 1 and not spots[0].material.has_specular
 
     def post(ec, rows):
         """Peak, exposure and first exceedance of the rows ``rows`` (global indices)."""
@@ -475,8 +569,10 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
             sk = states.get(sp.target.index) if dynamic else None
             e, far = spot_irradiance(sp, pos[sl], gain[sl], mu, sk, los[k, sl])
             far_any[sl] |= far
-            if sp.target.material.has_specular:
-                e = e + specular_irradiance(sp, pos[sl], gain[sl], mu, beam, sk) * (los[k, sl] if sk is None else los[k, sl, None])
+            if sp.material.has_specular:
+                es = specular_irradiance(sp, pos[sl], gain[sl], mu, beam, sk) * (los[k, sl] if sk is None else los[k, sl, None])
+                spec_peak[sl] = np.maximum(spec_peak[sl], es if es.ndim == 1 else es.max(axis=1))
+                e = e + es
             ec += e if e.ndim == 2 else e[:, None]
         if keep:
             e_t[sl] = ec
@@ -523,21 +619,18 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
             dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(
                 sp, mpe_w_m2, mu, states=dyn_states, grid_deg=a.direction_grid_deg, refine_levels=a.refine_levels)
             spec_static = spec_dyn = spec_dir = None
-            if t.material.has_specular:
-                p0 = specular_power_w(sp, initial(sp))
-                p0 = float(np.max(p0))
-                pd = float(np.max(specular_power_w(sp, dyn_states))) if dyn_states is not None else p0
-                spec_static = nohd_direct(p0, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu).nohd_m
-                spec_dyn = nohd_direct(pd, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu).nohd_m
-                spec_static = max(spec_static - sp.mean_range_m, 0.0)
-                spec_dyn = max(spec_dyn - sp.mean_range_m, 0.0)
-                spec_dir = mirror_axis(sp).tolist()
+            if sp.material.has_specular:
+                ns = specular_nohd(sp, mpe_w_m2, mu, initial(sp))
+                nd = specular_nohd(sp, mpe_w_m2, mu, dyn_states) if dyn_states is not None else ns
+                spec_static, spec_dyn, spec_dir = ns.nohd_m, nd.nohd_m, (nd.direction if nd.nohd_m >= ns.nohd_m else ns.direction)
             target_results.append(TargetResult(
                 t.name, sp.total_power_w, sp.size_m, static_lobe, dynamic_lobe, spec_static, spec_dyn, spec_dir,
                 t.material.state_name if t.material.is_dynamic else None,
                 [float(states[t.index].min()), float(states[t.index].max())] if t.index in states else None,
+                sp.power_error_w, sp.exact, sp.max_irradiance_w_m2, sp.mean_irradiance_w_m2, sp.side,
             ))
         st.detail = f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
+    target_results += _unlit_targets(scene.targets, spots, built.unreflected)
 
     fp_static = fp_dyn = None
     if scene.terrain is not None and spots:
@@ -569,9 +662,11 @@ def _analyze(scene, backend, progress, keep_history, threads) -> HazardResult:
         line_of_sight=los.any(axis=0) if spots else np.ones(m, bool),
         far_field=far_any,
         irradiance_w_m2=e_t,
+        specular_irradiance_w_m2=spec_peak,
     )
     return HazardResult(scene, mpe_res, mpe_w_m2, mpe_h, pulse, mu, times, stages, target_results, observers, spill, blocked,
-                        float(beam.power_w.sum()), fp_static, fp_dyn, notes, spots, beam, states)
+                        beam.power_w, fp_static, fp_dyn, notes, spots, beam, states,
+                        beam_sampling=_beam_sampling(cells, built, spec.analysis.beam_rtol))
 
 
 def versions() -> dict:

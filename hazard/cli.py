@@ -20,7 +20,9 @@ Verbs:
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
 
 SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
-Exit codes: 0 done, 2 bad input, 3 hazard found (only with --fail-on-hazard).
+Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard).
+Every error is one line on stderr naming the input; ``--debug`` (anywhere on the command
+line) shows the traceback instead.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from . import nohd as _nohd
 __all__ = ["main", "build_parser"]
 
 EXIT_OK = 0
+EXIT_INTERNAL = 1
 EXIT_ERROR = 2
 EXIT_HAZARD = 3
 
@@ -81,7 +84,10 @@ def _add_run_args(p):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.")
+    parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.",
+                     epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error); "
+                            "--debug shows the traceback. Input limits: HAZARD_MAX_<NAME> environment variables (see README).")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error (may also follow the verb)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
     sub.required = True
 
@@ -106,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
 
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
-    p.add_argument("study", help="study TOML")
+    p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars)")
     p.add_argument("-o", "--output", required=True, help="output folder (a restarted study resumes there)")
     p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
     p.add_argument("--workers", type=_positive_int, default=2, help="worker processes of the embedded cluster (default 2)")
@@ -265,19 +271,47 @@ def _cmd_nohd(args, out, err=None):
     return EXIT_OK
 
 
-def _load_scene(name):
+def _load_scene(name, err=None):
     import scenes
 
     path = Path(name)
     if not path.exists() and name in scenes.examples():
         path = scenes.example_path(name)
-    return scenes.load(path)
+    scene = scenes.load(path)
+    if err is not None:
+        for w in scene.warnings:
+            err.write(f"hazard: warning: {scene.source}: {w}\n")
+    return scene
+
+
+def _check_outdir(outdir, names, force):
+    """Before any work: the output folder is (or can be made) a writable folder, and its
+    outputs do not exist unless ``force``."""
+    import os
+
+    out = Path(outdir)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"-o {outdir}: exists and is not a folder")
+    if out.is_dir():
+        if not force:
+            for n in names:
+                if (out / n).exists():
+                    raise ValueError(f"{out / n} exists: pass --force to overwrite")
+        probe = out
+    else:
+        probe = out.parent if str(out.parent) else Path(".")
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        if not probe.is_dir():
+            raise ValueError(f"-o {outdir}: {probe} is not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ValueError(f"-o {outdir}: {probe} is not writable")
 
 
 def _analyse(args, err):
     from .analysis import analyze
 
-    scene = _load_scene(args.scene)
+    scene = _load_scene(args.scene, err)
     progress = None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
     return analyze(scene, backend=args.backend, progress=progress, threads=getattr(args, "threads", None))
 
@@ -289,6 +323,7 @@ def _finish(args, result):
 def _cmd_run(args, out, err):
     from .report import report_dict, summary_text, write_outputs
 
+    _check_outdir(args.output, ("report.json", "observers.csv"), args.force)
     result = _analyse(args, err)
     paths = write_outputs(result, args.output, force=args.force)
     if args.json:
@@ -331,7 +366,7 @@ def _cmd_compare(args, out, err):
 
 
 def _cmd_validate(args, out, err):
-    scene = _load_scene(args.scene)
+    scene = _load_scene(args.scene, err)
     info = {
         "scene": scene.name,
         "source": scene.source,
@@ -342,6 +377,7 @@ def _cmd_validate(args, out, err):
         "terrain": scene.terrain is not None,
         "observer_points": len(scene.observers),
         "offset_m": scene.offset_m.tolist(),
+        "warnings": list(scene.warnings),
     }
     if args.json:
         out.write(json.dumps(info, indent=1) + "\n")
@@ -430,7 +466,7 @@ def _cmd_fit(args, out, err):
             out.write(f"  wrote {args.output}\n")
         return EXIT_OK
     if args.fit_kind == "screen":
-        samples = brdfmodels.screen.Samples.concatenate(screen.reduce_test(screen.load_test(p)) for p in args.inputs)
+        samples = screen.Samples.concatenate(screen.reduce_test(screen.load_test(p)) for p in args.inputs)
         if args.samples_output:
             _check_new(args.samples_output, args.force)
             samples.write(args.samples_output)
@@ -446,7 +482,9 @@ def _cmd_fit(args, out, err):
         return EXIT_OK
     basis = _basis_arg(args.basis)
     if args.report:
-        best, table = brdfmodels.validation.choose_sh_basis(samples)
+        from brdfmodels import validation
+
+        best, table = validation.choose_sh_basis(samples)
         _print_report(out, "leave-one-test-out: basis orders and fan-out", table, args.json, {"best": best})
     if args.state:
         if not args.states:
@@ -528,26 +566,69 @@ _COMMANDS = {"render": _cmd_render, "convergence": _cmd_convergence, "study": _c
              "models": _cmd_models, "schema": _cmd_schema}
 
 
+def _input_of(args) -> str:
+    """The input a command works on, for error lines."""
+    for key in ("scene", "study"):
+        if getattr(args, key, None):
+            return str(getattr(args, key))
+    if getattr(args, "inputs", None):
+        return ", ".join(map(str, args.inputs))
+    return ""
+
+
+def _one_line(text, limit=600) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def main(argv=None, *, stdout=None, stderr=None) -> int:
-    """Run the command line; returns the exit code (0 ok, 2 bad input)."""
+    """Run the command line; returns the exit code (0 ok, 1 internal error, 2 bad input,
+    3 hazard with --fail-on-hazard). One error boundary: every exception becomes one line
+    on stderr naming the input; ``--debug`` shows the traceback instead."""
     out = stdout or sys.stdout
     err = stderr or sys.stderr
+    argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
+    debug = "--debug" in argv
+    argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
     try:
-        args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
+        args = parser.parse_args(argv)
     except _UsageError as exc:
         err.write(f"{exc}\n")
         return EXIT_ERROR
     except SystemExit as exc:  # --help
-        return int(exc.code or 0)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_ERROR
     from .report import OutputExistsError
 
+    where = _input_of(args)
     try:
         return _COMMANDS[args.verb](args, out, err)
-    except (ValueError, OutputExistsError) as exc:
-        msg = " ".join(str(exc).split())  # one line
+    except (ValueError, OutputExistsError) as exc:  # bad input (SceneError is a ValueError)
+        if debug:
+            raise
+        msg = _one_line(exc)
+        if where and where not in msg:
+            msg = f"{where}: {msg}"
         err.write(f"hazard {args.verb}: error: {msg}\n")
         return EXIT_ERROR
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        err.write(f"hazard {args.verb}: interrupted\n")
+        return 130
+    except (Exception, RecursionError, MemoryError) as exc:  # anything else: still one line
+        if debug:
+            raise
+        if isinstance(exc, ImportError):
+            what = f"a dependency is missing: {_one_line(exc)}"
+        elif isinstance(exc, MemoryError):
+            what = "out of memory (lower the observer count, beam_samples or the keep-out resolution)"
+        elif isinstance(exc, OSError):
+            what = f"{exc.strerror or type(exc).__name__}{': ' + str(exc.filename) if exc.filename else ''}"
+        else:
+            what = f"{type(exc).__name__}: {_one_line(exc, 300)}"
+        err.write(f"hazard {args.verb}: internal error{' on ' + where if where else ''}: {what} (run again with --debug for the traceback)\n")
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

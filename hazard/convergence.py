@@ -25,10 +25,11 @@ KNOB_LEVELS = {
     "direction_grid_deg": (8.0, 4.0, 2.0, 1.0, 0.5),
     "refine_levels": (0, 1, 2, 3, 5),
     "beam_samples": (16, 64, 256, 1024, 4096),
+    "beam_rtol": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
     "time_step_fraction": (0.1, 0.05, 0.02, 0.01, 0.005),  # of the analysis window
     "heating_rtol": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
 }
-QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2")
+QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2", "spot_power_w")
 
 
 @dataclass
@@ -44,7 +45,7 @@ class ConvergenceReport:
 def _apply(data, knob, value):
     d = copy.deepcopy(data)
     a = d.setdefault("analysis", {})
-    if knob in ("direction_grid_deg", "refine_levels", "beam_samples"):
+    if knob in ("direction_grid_deg", "refine_levels", "beam_samples", "beam_rtol"):
         a[knob] = value
     elif knob == "time_step_fraction":
         t_end = a.get("time_end_s", d["exposure"]["duration_s"])
@@ -62,11 +63,12 @@ def _quantities(res):
         "max_nohd_m": max([t["nohd_dynamic_m"] for t in tr], default=0.0),
         "keepout_volume_m3": sum(t["keepout_dynamic"]["volume_m3"] for t in tr),
         "peak_irradiance_w_m2": float(np.max(res.observers.peak_irradiance_w_m2)) if len(res.observers) else 0.0,
+        "spot_power_w": sum(t["spot_power_w"] for t in tr),
     }
 
 
 def knobs_used(data) -> list:
-    knobs = ["direction_grid_deg", "refine_levels", "beam_samples"]
+    knobs = ["direction_grid_deg", "refine_levels", "beam_samples", "beam_rtol"]
     dynamic = any("history" in t for t in data.get("targets", []))
     if dynamic:
         knobs.append("time_step_fraction")

@@ -1,98 +1,81 @@
-"""Reflected irradiance at observers: beam sampling, spots, BRDF and specular reflection.
+"""Reflected irradiance at observers: spots from the beam's cells, BRDF and specular reflection.
 
-Physics (spec `dynamic-sh-brdf.md` section 3 and `laser-safety.md` section 3.1):
+Physics (spec `dynamic-sh-brdf.md` section 3, `laser-safety.md` section 3.1,
+`range-safety.md` sections 1 and 4):
 
-* The beam is Gaussian with 1/e diameter ``D(R) = a + R phi`` (the growth law of the NOHD
-  formula). It is sampled by rays from a virtual source ``a / phi`` behind the aperture,
-  with Gauss-Laguerre radial nodes (exact moments of the Gaussian) and uniform azimuths;
-  each ray carries its share of the power. Rays that miss every target spill.
-* A hit of power P on a surface reflects to an observer at distance R as
-  ``E = f_r(wi, wo, state) cos(theta_r) P tau(R) K / R^2``, computed through
+* The beam's cross-section is sampled by :mod:`hazard.beam`: cells with exact Gaussian
+  powers, refined where objects' edges cross them; flat targets get the exact integral
+  over their projected outline. A spot is the set of cells that land on one target,
+  grouped into samples (cells of the coarsest level), each with its power after the
+  laser -> target attenuation ``exp(-mu R1)`` (once), hit point, normal and the highest
+  incident irradiance it holds.
+* A sample of power P on a surface reflects to an observer at distance R as
+  ``E = f_r(wi, wo, state) cos(theta_r) P exp(-mu R) K / R^2``, computed through
   ``f_r cos(theta_r)`` so grazing observers give no 0/0. Observers at least 20 spot sizes
   away see the spot as one point source (power-weighted centroid, mean direction and
-  normal); nearer ones sum over the hits.
-* An ideal-mirror (delta) lobe is traced as a reflected beam: image source, folded path
-  ``R1 + z``, the same Gaussian beam growth, flat mirror at the spot (conservative for
-  convex reflectors, which spread the beam more).
+  normal); nearer ones sum over the samples.
+* An ideal-mirror (delta) lobe is traced by geometric optics from what really hits the
+  mirror (:mod:`hazard.specular`): the unfolded beam through the lit part of a flat
+  mirror, the Coddington spread of a convex sphere or cylinder.
+* A target lit on its back face reflects with its ``back`` material, or not at all (the
+  analysis says so).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
 from brdfmodels import DynamicBRDF, Scaled, StateTable
 
-__all__ = ["Beam", "Spot", "sample_beam", "trace_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES"]
+__all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES"]
 
 FAR_FIELD_SPOT_SIZES = 20.0  # witness-screen rule: >= 20 spot sizes for ~1 % point-source error
 
 
 @dataclass
-class Beam:
-    origins: np.ndarray
-    directions: np.ndarray
-    power_w: np.ndarray
-    position_m: np.ndarray
-    axis: np.ndarray
-    diameter_m: float
-    divergence_rad: float
-
-    def diameter_at(self, range_m):
-        """1/e beam diameter [m] at a range from the aperture."""
-        return self.diameter_m + np.asarray(range_m) * self.divergence_rad
-
-
-def _perp_basis(axis):
-    a = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    e1 = np.cross(axis, a)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(axis, e1)
-
-
-@lru_cache(maxsize=16)
-def _laguerre(n):
-    """Gauss-Laguerre nodes and weights (cached: an eigenvalue solve each time would also
-    leave BLAS threads spinning into the next stage)."""
-    return np.polynomial.laguerre.laggauss(n)
-
-
-def sample_beam(position_m, axis, power_w, diameter_m, divergence_rad, n_samples) -> Beam:
-    """Rays across a Gaussian beam (1/e diameter ``diameter_m`` at the aperture, full
-    1/e divergence ``divergence_rad``), ``n_samples`` of them (rounded to a polar grid)."""
-    axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    pos = np.asarray(position_m, float)
-    if n_samples <= 1:
-        return Beam(pos[None], axis[None], np.array([power_w]), pos, axis, diameter_m, divergence_rad)
-    n_r = max(1, int(round(math.sqrt(n_samples / 4))))
-    n_phi = max(4, int(math.ceil(n_samples / n_r)))
-    u, w = _laguerre(n_r)  # int_0^inf f(u) e^-u du, u = rho^2
-    rho = np.sqrt(u)
-    psi = 2 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
-    rr, pp = np.meshgrid(rho, psi, indexing="ij")
-    ww = np.repeat(w[:, None], n_phi, axis=1) / n_phi
-    e1, e2 = _perp_basis(axis)
-    tr = (np.cos(pp)[..., None] * e1 + np.sin(pp)[..., None] * e2) * rr[..., None]  # in units of the 1/e radius
-    origins = pos + tr.reshape(-1, 3) * (diameter_m / 2)
-    dirs = axis + tr.reshape(-1, 3) * (divergence_rad / 2)
-    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    weights = ww.ravel() / ww.sum()
-    return Beam(origins, dirs, weights * power_w, pos, axis, diameter_m, divergence_rad)
-
-
-@dataclass
 class Spot:
-    """The beam's hits on one target, with per-hit material frames (rows x, y, z)."""
+    """The beam's samples on one target, with per-sample material frames (rows x, y, z).
+
+    ``power_w`` is after the laser -> target attenuation; ``peak_irradiance_w_m2`` per
+    sample is the highest incident irradiance (normal to the beam, attenuated) in its
+    cells; ``source_distance_m`` the incident wavefront radius (inf when collimated).
+    """
 
     target: object
     points: np.ndarray
     power_w: np.ndarray
     incoming: np.ndarray  # propagation direction (towards the surface), unit
-    frames: np.ndarray  # (n, 3, 3) material frames
+    frames: np.ndarray  # (n, 3, 3) material frames (z: the normal of the lit side)
     range_from_laser_m: np.ndarray
+    peak_irradiance_w_m2: np.ndarray | None = None
+    source_distance_m: np.ndarray | None = None
+    material: object = None  # the lit side's material (default: the target's)
+    side: str = "front"
+    power_error_w: float = 0.0  # bound on the error of total_power_w (already added: conservative)
+    exact: bool = False  # total power from the exact outline integral
+    lit_area_m2: float = 0.0  # lit area normal to the beam
+    cells: object = None  # hazard.beam.CellSampling (shared by the spots of one beam)
+    beam: object = None  # hazard.beam.BeamGeometry
+    ray_faces: tuple | None = None  # the target's triangles in the tracer: (ids, normals, a vertex each)
+    outline_s: np.ndarray | None = None  # exact lit outline in beam coordinates (flat targets hit whole)
+    spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
+
+    def __post_init__(self):
+        if self.material is None:
+            self.material = self.target.material
+
+    @property
+    def max_irradiance_w_m2(self) -> float:
+        """The hottest point's incident irradiance [W/m^2] (what drives heating)."""
+        return float(np.max(self.peak_irradiance_w_m2)) if self.peak_irradiance_w_m2 is not None else 0.0
+
+    @property
+    def mean_irradiance_w_m2(self) -> float:
+        """Spot power over its lit area normal to the beam [W/m^2]."""
+        return self.total_power_w / self.lit_area_m2 if self.lit_area_m2 > 0 else 0.0
 
     @property
     def total_power_w(self) -> float:
@@ -119,6 +102,8 @@ class Spot:
     def size_m(self) -> float:
         """Spot size: twice the power-weighted RMS radius (the 1/e diameter for a Gaussian)."""
         r2 = ((self.points - self.centroid) ** 2).sum(1)
+        if self.spread_m2 is not None:
+            r2 = r2 + self.spread_m2
         return float(2 * math.sqrt(max((r2 * self.power_w).sum() / self.total_power_w, 0.0)))
 
     @property
@@ -161,25 +146,292 @@ def _frames(target, normals):
     return np.stack([xm, ym, normals], axis=1)
 
 
-def trace_spots(beam: Beam, targets, ray_scene):
-    """First hits of the beam rays; returns (spots, spill_w, blocked_w).
+# -- spots from the beam's cells ----------------------------------------------------------
+@dataclass
+class SpotBuild:
+    """Spots of one beam and what else the beam did (powers after no attenuation)."""
 
-    ``blocked_w`` is power stopped by occluders or terrain before any target.
+    spots: list
+    spill_w: float
+    blocked_w: float
+    unreflected: list  # (target name, side, power [W]) lit but not reflected (back face without material)
+    exact: list  # target names whose power is the exact outline integral
+    error_w: float  # bound on the power misassigned between objects (unresolved cells + truncation)
+
+
+def flat_outlines(beam, targets) -> dict:
+    """Projected outlines of the flat targets wholly in front of the aperture:
+    index -> (upper-bound polygon, lower-bound polygon) in beam coordinates."""
+    from .beam import flat_outline_s
+
+    out = {}
+    for t in targets:
+        if t.spec.shape in ("plate", "disk"):
+            o = flat_outline_s(beam, t)
+            if o is not None:
+                out[t.index] = o
+    return out
+
+
+def _exact_power(beam, outline):
+    """Outline integral of the beam [W] and its bound (disk: circumscribed - inscribed)."""
+    from .beam import polygon_fraction
+
+    upper = beam.power_w * polygon_fraction(outline[0])
+    return upper, upper - beam.power_w * polygon_fraction(outline[1])
+
+
+@dataclass
+class OutlineCells:
+    """A flat target's projected outline cut by the beam's coarsest cells: per piece its
+    vertices in s and its exact Gaussian moments (:func:`hazard.beam.polygon_moments`)."""
+
+    pieces: list
+    moments: object
+
+
+def outline_cells(outline_s, n0) -> OutlineCells:
+    """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
+    beam square); pieces carrying no power are dropped."""
+    from .beam import HALF_WIDTH, clip_to_box, inside_convex, polygon_moments
+
+    d = 2 * HALF_WIDTH / n0
+    lo = np.clip(np.floor((outline_s.min(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
+    hi = np.clip(np.floor((outline_s.max(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
+    ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
+    s0, t0 = -HALF_WIDTH + ii.ravel() * d, -HALF_WIDTH + jj.ravel() * d
+    corners = np.stack([np.stack([s0 + a * d, t0 + b * d], axis=1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)
+    full = inside_convex(corners.reshape(-1, 2), outline_s).reshape(-1, 4).all(axis=1)
+    pieces = [corners[k] if full[k] else clip_to_box(outline_s, s0[k], s0[k] + d, t0[k], t0[k] + d) for k in range(len(s0))]
+    pieces = [p for p in pieces if len(p) >= 3]
+    m = polygon_moments(pieces)
+    keep = np.flatnonzero(m.fraction > 0)
+    from .beam import PolygonMoments
+
+    return OutlineCells([pieces[k] for k in keep], PolygonMoments(m.fraction[keep], m.mean[keep], m.cov[keep], m.r2_min[keep]))
+
+
+def _plane_hits(beam, target, s):
+    """Where the rays through s (N, 2) meet a flat target's plane: points, unit directions,
+    path lengths [m] and axial distances [m] (exact)."""
+    o, d = beam.rays(np.asarray(s, float).reshape(-1, 2))
+    n = target.normal
+    t = ((target.center_m - o) @ n) / (d @ n)
+    pts = o + t[:, None] * d
+    norm = np.linalg.norm(d, axis=1)
+    return pts, d / norm[:, None], t * norm, (pts - beam.position_m) @ beam.axis
+
+
+@dataclass
+class ExactSamples:
+    """Samples of a flat target from its outline pieces (see :func:`_exact_samples`)."""
+
+    points: np.ndarray  # hits of the rays through the pieces' centroids [m]
+    directions: np.ndarray  # their unit directions
+    path_m: np.ndarray  # laser -> hit path lengths [m]
+    axial_m: np.ndarray  # axial distances of the hits [m]
+    power_w: np.ndarray  # attenuated (shortest path in the piece: an upper bound)
+    peak_irradiance_w_m2: np.ndarray  # upper bound of the incident irradiance over each piece
+    cov_s: np.ndarray  # (n, 2, 2) covariance of s within each piece
+    area_s: np.ndarray  # piece areas in s (units of w^2)
+    error_w: float  # disk polygon bound + attenuation spread + nothing else
+    total_w: float  # the unattenuated outline integral
+
+
+def _exact_samples(beam, n0, target, outline, tracer, mu):
+    """Samples of a flat target hit whole by the beam, from its outline cut by the coarsest
+    cells (exact powers, centroids, covariances and nearest-to-axis points); None when a
+    ray through a piece's centroid meets another object first (the outline is then not
+    what is lit). Attenuation per piece uses its shortest path (an upper bound); the
+    spread to the longest goes into the error bound. The power outside the beam square
+    (<= 3.1e-8 P) is spread over the pieces."""
+    oc = outline_cells(outline[0], n0)
+    if not oc.pieces:
+        return None
+    m = oc.moments
+    o, dirs = beam.rays(m.mean)
+    label = tracer.first_hit(o, dirs).obj
+    if np.any((label != target.index) & (label >= 0)):
+        return None
+    pts, unit, path, z = _plane_hits(beam, target, m.mean)
+    verts = np.concatenate(oc.pieces)
+    owner = np.repeat(np.arange(len(oc.pieces)), [len(p) for p in oc.pieces])
+    _, _, vpath, vz = _plane_hits(beam, target, verts)
+    lmin, lmax, zmin, smax2 = np.minimum(path, np.inf), path.copy(), z.copy(), np.zeros(len(pts))
+    np.minimum.at(lmin, owner, vpath)
+    np.maximum.at(lmax, owner, vpath)
+    np.minimum.at(zmin, owner, vz)
+    np.maximum.at(smax2, owner, (verts * verts).sum(1))
+    total, disk_err = _exact_power(beam, outline)
+    power = beam.power_w * m.fraction
+    power *= total / power.sum()
+    up, down = np.exp(-mu * lmin), np.exp(-mu * lmax)
+    w = beam.diameter_at(zmin) / 2
+    peak = beam.power_w / (math.pi * w * w) * np.exp(-m.r2_min) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
+    x, y = verts[:, 0], verts[:, 1]
+    nxt = np.concatenate([np.roll(p, -1, axis=0) for p in oc.pieces])
+    area = np.abs(np.bincount(owner, x * nxt[:, 1] - y * nxt[:, 0], len(pts))) / 2
+    err = disk_err + float((power * (up - down)).sum())
+    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, area, err, total)
+
+
+def _aggregate(keys, weights, values):
+    """Weighted means of ``values`` (n, ...) over groups ``keys`` (n,)."""
+    uniq, inv = np.unique(keys, return_inverse=True)
+    wsum = np.bincount(inv, weights, len(uniq))
+    flat = values.reshape(len(values), -1)
+    out = np.stack([np.bincount(inv, weights * flat[:, k], len(uniq)) for k in range(flat.shape[1])], axis=1)
+    return inv, wsum, (out / np.maximum(wsum, 1e-300)[:, None]).reshape((len(uniq),) + values.shape[1:])
+
+
+def _surface_jacobian(beam, w, dirs, normals):
+    """d(hit point)/ds on the surface for rays (dirs, N x 3) at 1/e radii w [m]:
+    ``w (e_k - d (e_k . n) / (d . n))`` for k = 1, 2 (two N x 3 arrays)."""
+    den = np.einsum("ij,ij->i", dirs, normals)
+    den = np.where(np.abs(den) > 1e-9, den, -1e-9)
+    return [w[:, None] * (e[None, :] - dirs * ((normals @ e) / den)[:, None]) for e in (beam.e1, beam.e2)]
+
+
+def _leaf_geometry(beam, cells, rows, pts, dirs, normals):
+    """Per leaf: the Gaussian-weighted centroid of the cell's footprint on the surface and
+    its within-cell variance [m^2] (the cell's s-moments mapped by the Jacobian of the hit
+    point with respect to s)."""
+    s_c, z = beam.to_s(pts)
+    w = beam.diameter_at(z) / 2
+    mean, var = cells.moments(rows)
+    s0, s1, t0, t1 = cells.bounds(rows)
+    centre = np.stack([(s0 + s1) / 2, (t0 + t1) / 2], axis=1)
+    jac = _surface_jacobian(beam, w, dirs, normals)
+    shifted = pts + jac[0] * (mean[:, 0] - centre[:, 0])[:, None] + jac[1] * (mean[:, 1] - centre[:, 1])[:, None]
+    spread = (jac[0] ** 2).sum(1) * var[:, 0] + (jac[1] ** 2).sum(1) * var[:, 1]
+    return shifted, spread, s_c, z, w
+
+
+def _target_ray_faces(tracer, target):
+    if not hasattr(tracer, "face_object"):
+        return None
+    ids = np.flatnonzero(tracer.face_object == target.index)
+    return ids, tracer.face_normals(ids), tracer.vertices[tracer.faces[ids, 0]]
+
+
+def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale, error_w, exact):
+    """One spot from the leaves ``rows`` that hit ``target`` on one side."""
+    pts, dirs, t = cells.point[rows], cells.direction[rows], cells.t[rows]
+    normals = _hit_normals(target, pts, cells.faces[rows, 0], tracer)
+    if side == "back":
+        normals = -normals
+    atten = np.exp(-mu * t)
+    power = cells.power_w[rows] * scale * atten
+    pts, spread, s_c, z, w = _leaf_geometry(beam, cells, rows, pts, dirs, normals)
+    peak = beam.power_w / (math.pi * w * w) * cells.max_profile(rows) * atten * np.sqrt(1 + (s_c * s_c).sum(1) * (beam.divergence_rad / 2) ** 2)
+    area = float(np.sum(cells.size(cells.level[rows]) ** 2 * w * w))
+    lv = cells.level[rows]
+    key = (cells.i[rows] >> lv).astype(np.int64) * cells.n0 + (cells.j[rows] >> lv)  # the coarsest cell holding each leaf
+    wts = np.maximum(power, 1e-300)
+    inv, psum, means = _aggregate(key, wts, np.concatenate([pts, dirs, normals, t[:, None], z[:, None]], axis=1))
+    n_g = len(psum)
+    pk = np.zeros(n_g)
+    np.maximum.at(pk, inv, peak)
+    # second moment about each sample's centroid: within-leaf spread + leaves' scatter
+    scatter = np.bincount(inv, wts * (spread + ((pts - means[inv, 0:3]) ** 2).sum(1)), n_g) / np.maximum(psum, 1e-300)
+    nrm = means[:, 6:9] / np.linalg.norm(means[:, 6:9], axis=1, keepdims=True)
+    inc = means[:, 3:6] / np.linalg.norm(means[:, 3:6], axis=1, keepdims=True)
+    return Spot(target, means[:, 0:3], np.bincount(inv, power, n_g), inc, _frames(target, nrm), means[:, 9], pk,
+                beam.source_distance_m(means[:, 10]), material, side, float(error_w), exact, area, cells, beam,
+                _target_ray_faces(tracer, target), spread_m2=scatter)
+
+
+def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_s):
+    """One spot from a flat target's exact outline pieces (:class:`ExactSamples`)."""
+    normal = target.normal if side == "front" else -target.normal
+    normals = np.broadcast_to(normal, ex.points.shape).copy()
+    w = beam.diameter_at(ex.axial_m) / 2
+    jac = _surface_jacobian(beam, w, ex.directions, normals)
+    spread = np.zeros(len(w))
+    for r in range(2):
+        for c in range(2):
+            spread += ex.cov_s[:, r, c] * np.einsum("ij,ij->i", jac[r], jac[c])
+    return Spot(target, ex.points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
+                beam.source_distance_m(ex.axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
+                cells, beam, _target_ray_faces(tracer, target), outline_s, spread)
+
+
+def _pick_side(target, power_w, back):
+    """The side most power reaches, its material (None: not reflected) and the other side's power."""
+    side_back = power_w[back].sum() > power_w[~back].sum()
+    material = target.back_material if side_back else target.material
+    return ("back" if side_back else "front"), material, float(power_w[~back if side_back else back].sum())
+
+
+def _exact_spot(beam, cells, target, ex, tracer, outline_s, out):
+    back = ex.directions @ target.normal > 0
+    side, material, other = _pick_side(target, ex.power_w, back)
+    if other > 0:
+        out.unreflected.append((target.name, "back" if side == "front" else "front", other))
+    if material is None:
+        out.unreflected.append((target.name, side, float(ex.power_w.sum())))
+        return
+    use = back if side == "back" else ~back
+    ex = ExactSamples(*(getattr(ex, f)[use] if isinstance(getattr(ex, f), np.ndarray) else getattr(ex, f)
+                        for f in ExactSamples.__dataclass_fields__))
+    out.spots.append(_spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_s))
+
+
+def _sampled_spot(beam, cells, target, tracer, mu, out):
+    """A target's spot from the leaves whose centre ray hits it; its total raised by the
+    power of the mixed leaves touching it and the truncated tail (conservative)."""
+    k = target.index
+    rows = np.flatnonzero(cells.labels[:, 0] == k)
+    touch = np.flatnonzero(cells.mixed & np.any(cells.labels == k, axis=1))
+    if not len(rows):
+        if len(touch):
+            out.unreflected.append((target.name, "unresolved", float(cells.power_w[touch].sum())))
+        return 0.0
+    normals = _hit_normals(target, cells.point[rows], cells.faces[rows, 0], tracer)
+    back = np.einsum("ij,ij->i", cells.direction[rows], normals) > 0
+    # the true power lies between the leaves wholly on the target and those plus every
+    # mixed leaf touching it (and the truncated tail): take the upper end
+    raw = float(cells.power_w[rows].sum())
+    err = float(cells.power_w[touch].sum()) + cells.truncated_w
+    whole = raw - float(cells.power_w[rows][cells.mixed[rows]].sum())
+    scale = (whole + err) / raw
+    side, material, other = _pick_side(target, cells.power_w[rows] * scale, back)
+    if other > 0:
+        out.unreflected.append((target.name, "back" if side == "front" else "front", other))
+    use = rows[back] if side == "back" else rows[~back]
+    if material is None:
+        out.unreflected.append((target.name, side, float(cells.power_w[use].sum() * scale)))
+    else:
+        out.spots.append(_spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False))
+    return whole + err
+
+
+def build_spots(beam, cells, targets, tracer, mu, outlines=None) -> SpotBuild:
+    """Spots from the beam's leaf cells: one per lit target (the side that most power
+    reaches; a back face reflects with the target's ``back`` material or not at all).
+
+    A flat target whose edges meet only empty beam gets samples from its exact outline
+    (:func:`_exact_samples`); any other target's total is the cells' sum raised by the
+    power in mixed cells that touch it and the truncated tail (conservative: never less
+    than the true intercepted power, within the stated error).
     """
-    hits = ray_scene.first_hit(beam.origins, beam.directions)
-    spots = []
-    n_targets = len(targets)
-    on_target = hits.hit & (hits.obj >= 0) & (hits.obj < n_targets)
+    outlines = outlines or {}
+    out = SpotBuild([], 0.0, 0.0, [], [], cells.unresolved_w + cells.truncated_w)
+    totals = 0.0
     for target in targets:
-        sel = on_target & (hits.obj == target.index)
-        if not np.any(sel):
+        k = target.index
+        ex = None
+        if k in cells.exact_targets and k in outlines:
+            ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu)
+        if ex is None:
+            totals += _sampled_spot(beam, cells, target, tracer, mu, out)
             continue
-        pts = hits.point[sel]
-        normals = _hit_normals(target, pts, hits.face[sel], ray_scene)
-        spots.append(Spot(target, pts, beam.power_w[sel], beam.directions[sel], _frames(target, normals), hits.t[sel]))
-    spill = float(beam.power_w[~hits.hit].sum())
-    blocked = float(beam.power_w[hits.hit & ~on_target].sum())
-    return spots, spill, blocked
+        out.exact.append(target.name)
+        totals += ex.total_w
+        _exact_spot(beam, cells, target, ex, tracer, outlines[k][0], out)
+    out.blocked_w = float(cells.power_w[cells.labels[:, 0] >= len(targets)].sum())
+    out.spill_w = max(beam.power_w - totals - out.blocked_w, 0.0)  # the rest (exact where the targets' totals are)
+    return out
 
 
 # -- BRDF evaluation over states ------------------------------------------------------------
@@ -241,7 +493,7 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     """
     obs = np.asarray(observers_m, float)
     m = len(obs)
-    model = spot.target.material
+    model = spot.material
     c = spot.centroid
     rng = np.linalg.norm(obs - c, axis=1)
     far = rng >= FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
@@ -288,7 +540,7 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
 
 def specular_power_w(spot: Spot, states=None):
     """Power [W] in the delta (mirror) lobe of a spot, per state."""
-    model = spot.target.material
+    model = spot.material
     wi = _to_local(spot.frames, -spot.incoming)
     if states is None:
         return float((model.specular_reflectance(wi) * spot.power_w).sum())
@@ -302,25 +554,14 @@ def mirror_axis(spot: Spot) -> np.ndarray:
     return r / np.linalg.norm(r)
 
 
-def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam: Beam, states=None):
-    """Irradiance [W/m^2] of the reflected (delta-lobe) beam at observers (M,) or (M, T).
+def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None):
+    """Irradiance [W/m^2] of the reflected (delta-lobe) beam at observers (M,) or (M, T),
+    by geometric optics from the part of the beam that really hits the mirror (see
+    :func:`hazard.specular.specular_irradiance`; ``beam`` is not used: the spot carries
+    its beam)."""
+    from .specular import specular_irradiance as _specular
 
-    Image source with a folded path: ``E = P_s 4 / (pi D^2) exp(-4 rho^2 / D^2)
-    exp(-mu R_f) K`` with ``R_f = R1 + z``, ``D = a + R_f phi``, z the distance along the
-    mirror axis and rho the distance from it.
-    """
-    obs = np.asarray(observers_m, float)
-    c = spot.centroid
-    r_axis = mirror_axis(spot)
-    v = obs - c
-    z = v @ r_axis
-    rho2 = np.maximum((v * v).sum(1) - z * z, 0.0)
-    r_f = spot.mean_range_m + np.maximum(z, 0.0)
-    dia = beam.diameter_m + r_f * beam.divergence_rad
-    profile = 4.0 / (math.pi * dia**2) * np.exp(-4.0 * rho2 / dia**2) * np.exp(-attenuation_per_m * r_f) * gain
-    profile = np.where(z > 0, profile, 0.0)
-    p_s = specular_power_w(spot, states)
-    return profile * p_s if states is None else profile[:, None] * p_s[None, :]
+    return _specular(spot, observers_m, gain, attenuation_per_m, states)
 
 
 def spot_directions(spot: Spot):
@@ -328,4 +569,4 @@ def spot_directions(spot: Spot):
     return _to_local(spot.mean_frame, -spot.mean_incoming)
 
 
-__all__ += ["specular_power_w", "mirror_axis", "spot_directions"]
+__all__ += ["specular_power_w", "mirror_axis", "spot_directions", "SpotBuild"]

@@ -58,7 +58,7 @@ class Lobe:
 
 
 def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states):
-    model = spot.target.material
+    model = spot.material
     wi = spot_directions(spot)
     power = spot.total_power_w * gain
 
@@ -219,7 +219,7 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
         for spot in spots:
             states = states_by_target.get(spot.target.index)
             e, _ = spot_irradiance(spot, p, gain, attenuation_per_m, states)
-            if spot.target.material.has_specular:
+            if spot.material.has_specular:
                 e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states)
             parts.append(e if e.ndim == 2 else e[:, None])
         over = sum(parts).max(axis=1) >= mpe_w_m2  # as for observers: ratio >= 1

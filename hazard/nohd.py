@@ -31,7 +31,12 @@ import sys
 import numpy as np
 from dataclasses import dataclass, field
 
-from scipy.special import lambertw
+
+def lambertw(z, k=0, tol=1e-8):
+    """scipy.special.lambertw, imported on first use (``import hazard`` stays light)."""
+    from scipy.special import lambertw as _w
+
+    return _w(z, k, tol)
 
 __all__ = [
     "NOHDResult",

@@ -162,7 +162,13 @@ class _EmbreeImpl:
 
 class _NumpyImpl:
     def __init__(self, vertices, faces):
+        import importlib.util
+
         import trimesh
+
+        if importlib.util.find_spec("rtree") is None:  # trimesh's ray_triangle needs it
+            raise ValueError("--backend numpy needs the rtree package: pip install 'laser-hazard[numpy-backend]' "
+                             "(or use the default embree backend)")
 
         self.mesh = trimesh.Trimesh(vertices, faces, process=False)
         self.engine = trimesh.ray.ray_triangle.RayMeshIntersector(self.mesh)

@@ -28,7 +28,7 @@ import numpy as np
 
 import pyvista as pv
 
-from .engine import _perp_basis
+from .beam import perp_basis as _perp_basis
 from .keepout import _range_fn
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe"]

@@ -11,6 +11,9 @@ import csv
 import io
 import json
 import math
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +38,14 @@ def _num(x):
 def observer_rows(result) -> list:
     obs = result.observers
     ratio = result.hazard_ratio
+    m = len(obs)
+    # per observer: the spot's angular subtense, C_E and the MPE used (hazard.extended_source);
+    # results built without analyze() fall back to the point-source MPE
+    alpha = obs.angular_subtense_rad if obs.angular_subtense_rad is not None else np.full(m, np.nan)
+    c_e = obs.c_e if obs.c_e is not None else np.ones(m)
+    mpe_w = obs.mpe_w_m2 if obs.mpe_w_m2 is not None else np.full(m, float(result.mpe_w_m2))
+    mpe_h = (obs.mpe_radiant_exposure_j_m2 if obs.mpe_radiant_exposure_j_m2 is not None
+             else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
     rows = []
     for i, name in enumerate(obs.labels):
         rows.append({
@@ -45,10 +56,12 @@ def observer_rows(result) -> list:
             "static_irradiance_w_m2": float(obs.static_irradiance_w_m2[i]),
             "radiant_exposure_j_m2": float(obs.radiant_exposure_j_m2[i]),
             "static_radiant_exposure_j_m2": float(obs.static_radiant_exposure_j_m2[i]),
-            "mpe_w_m2": float(result.mpe_w_m2),
-            "mpe_radiant_exposure_j_m2": float(result.mpe_radiant_exposure_j_m2),
+            "angular_subtense_rad": _num(alpha[i]),
+            "c_e": float(c_e[i]),
+            "mpe_w_m2": float(mpe_w[i]),
+            "mpe_radiant_exposure_j_m2": float(mpe_h[i]),
             "hazard_ratio": float(ratio[i]),
-            "exposure_ratio": float(obs.radiant_exposure_j_m2[i] / result.mpe_radiant_exposure_j_m2),
+            "exposure_ratio": float(obs.radiant_exposure_j_m2[i] / mpe_h[i]),
             "hazardous": bool(result.hazardous[i]),
             "hazardous_static": bool(result.hazardous_static[i]),
             "first_exceedance_s": _num(obs.first_exceedance_s[i]),
@@ -89,8 +102,10 @@ def report_dict(result) -> dict:
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),
         "mpe_w_m2": result.mpe_w_m2,
+        "extended_source": getattr(result, "extended_source", None) or {"applied": False},
         "attenuation_per_m": result.attenuation_per_m,
-        "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w},
+        "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
+                 "sampling": getattr(result, "beam_sampling", None) or None},
         "stages": [s.to_dict() for s in result.stages],
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
         "targets": [t.to_dict() for t in result.targets],
@@ -103,7 +118,7 @@ def report_dict(result) -> dict:
 
 
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "peak_time_s",
-               "radiant_exposure_j_m2", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
+               "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
                "first_exceedance_s", "line_of_sight", "far_field"]
 
 
@@ -119,17 +134,88 @@ def _csv_text(rows) -> str:
     return buf.getvalue()
 
 
+def _write_synced(path: Path, text: str) -> None:
+    with open(path, "w", encoding="utf-8", newline="") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def write_outputs(result, outdir, *, force=False) -> list:
-    """Write report.json and observers.csv into ``outdir`` (created if needed)."""
+    """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit.
+
+    Both files are written (and fsynced) into a temporary folder beside ``outdir``, which
+    is then renamed into place: a new ``outdir`` appears whole, and an existing one that
+    holds only these outputs is swapped in two renames (never a new report beside an old
+    table). If ``outdir`` also holds other files, report.json is removed first and renamed
+    in last, so a report present is always the one matching the table. Nothing temporary
+    is left behind after an exception.
+    """
     out = Path(outdir)
-    targets = [out / "report.json", out / "observers.csv"]
+    names = ("report.json", "observers.csv")
+    targets = [out / n for n in names]
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out} exists and is not a folder")
     existing = [p for p in targets if p.exists()]
     if existing and not force:
         raise OutputExistsError(f"{existing[0]} exists: pass --force to overwrite")
-    out.mkdir(parents=True, exist_ok=True)
     doc = report_dict(result)
-    atomic_write_text(targets[0], json.dumps(doc, indent=1, allow_nan=False))
-    atomic_write_text(targets[1], _csv_text(doc["observers"]))
+    if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
+        doc["warnings"] = list(getattr(result.scene, "warnings", None) or [])
+    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False), "observers.csv": _csv_text(doc["observers"])}
+    parent = out.parent if str(out.parent) else Path(".")
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+    try:
+        mask = os.umask(0)
+        os.umask(mask)
+        for n in names:
+            _write_synced(tmp / n, texts[n])
+            os.chmod(tmp / n, 0o666 & ~mask)
+        _fsync_dir(tmp)
+        if not out.exists():
+            os.chmod(tmp, 0o777 & ~mask)
+            os.rename(tmp, out)  # one step: both outputs appear together
+        else:
+            swapped = False
+            if not out.is_symlink() and set(os.listdir(out)) <= set(names):
+                os.chmod(tmp, os.stat(out).st_mode & 0o7777)
+                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+                try:
+                    os.rename(out, old / "d")
+                except OSError:  # e.g. a mount point: fall back to file renames
+                    os.rmdir(old)
+                else:
+                    try:
+                        os.rename(tmp, out)
+                    except BaseException:
+                        os.rename(old / "d", out)
+                        raise
+                    swapped = True
+                    shutil.rmtree(old, ignore_errors=True)
+            if not swapped:
+                (out / "report.json").unlink(missing_ok=True)  # the report is the commit marker
+                os.replace(tmp / "observers.csv", out / "observers.csv")
+                os.replace(tmp / "report.json", out / "report.json")
+                os.rmdir(tmp)
+            _fsync_dir(out)
+        _fsync_dir(parent)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     return targets
 
 

@@ -147,11 +147,78 @@ class Study:
         return hashlib.sha256(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def _study_schema():
+    """Pydantic classes of a study file (strict types, finite numbers, bounded sizes)."""
+    from typing import Annotated, Any, Literal
+
+    from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+    class _S(BaseModel):
+        model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+    class ParameterSpec(_S):
+        path: Annotated[str, Field(min_length=1, max_length=500)]
+        values: Annotated[list[Any], Field(min_length=1, max_length=100_000)] | None = None
+        range: Annotated[list[float], Field(min_length=2, max_length=2)] | None = None
+        scale: Literal["linear", "log"] = "linear"
+
+        @field_validator("values")
+        @classmethod
+        def _finite_values(cls, v):
+            stack = list(v or ())
+            while stack:
+                x = stack.pop()
+                if isinstance(x, list):
+                    stack.extend(x)
+                elif isinstance(x, dict):
+                    stack.extend(x.values())
+                elif isinstance(x, float) and not math.isfinite(x):
+                    raise ValueError(f"expected finite numbers, got {x!r}")
+            return v
+
+    class SweepSpec(_S):
+        kind: Literal["grid", "random", "lhs"] = "grid"
+        samples: Annotated[int, Field(ge=0)] = 0
+        parameters: Annotated[list[ParameterSpec], Field(max_length=100)] = []
+
+    class MonteCarloSpec(_S):
+        samples: Annotated[int, Field(ge=0)] = 0
+        brdf_scale_sigma: Annotated[float, Field(ge=0, le=10)] = 0.0
+        normal_tilt_deg: Annotated[float, Field(ge=0, le=90)] = 0.0
+
+    class StudySpec(_S):
+        name: Annotated[str, Field(min_length=1, max_length=200)] | None = None
+        scene: Annotated[str, Field(min_length=1, max_length=1000)]
+        seed: Annotated[int, Field(ge=0, le=2**63 - 1)] = 0
+        sweep: SweepSpec = SweepSpec()
+        montecarlo: MonteCarloSpec = MonteCarloSpec()
+
+    return StudySpec
+
+
+def examples() -> dict:
+    """Bundled example studies: name -> path (``hazard study power_sweep -o out``)."""
+    from importlib import resources
+
+    try:  # an installed wheel: hazard/studies/*.toml
+        found = {Path(p.name).stem: Path(str(p)) for p in resources.files("hazard.studies").iterdir() if p.name.endswith(".toml")}
+    except (ModuleNotFoundError, TypeError, FileNotFoundError, NotADirectoryError):
+        found = {}
+    if not found:  # a source checkout: examples/studies
+        folder = Path(__file__).resolve().parents[1] / "examples" / "studies"
+        found = {p.stem: p for p in folder.glob("*.toml")} if folder.is_dir() else {}
+    return dict(sorted(found.items()))
+
+
 def load_study(path) -> Study:
-    """Read a study TOML: ``name``, ``scene`` (path or bundled name), ``seed``;
-    ``[sweep]`` kind, samples and ``[[sweep.parameters]]`` (path, values | range, scale);
-    ``[montecarlo]`` samples, brdf_scale_sigma, normal_tilt_deg."""
+    """Read a study TOML (or a bundled example's name): ``name``, ``scene`` (path or
+    bundled name), ``seed``; ``[sweep]`` kind, samples and ``[[sweep.parameters]]``
+    (path, values | range, scale); ``[montecarlo]`` samples, brdf_scale_sigma,
+    normal_tilt_deg. The whole file is validated (types, ranges, the number of
+    scenarios, the base scene and every swept path) before any work."""
     path = Path(path)
+    if not path.exists() and str(path) in examples():
+        path = examples()[str(path)]
     d = read_toml(path)
     known = {"name", "scene", "seed", "sweep", "montecarlo"}
     if set(d) - known:
@@ -175,11 +242,39 @@ def load_study(path) -> Study:
     mc = d.get("montecarlo", {})
     if set(mc) - {"samples", "brdf_scale_sigma", "normal_tilt_deg"}:
         raise ValueError(f"{path}: montecarlo: unknown keys {sorted(set(mc) - {'samples', 'brdf_scale_sigma', 'normal_tilt_deg'})}")
+    from pydantic import ValidationError
+
     try:
-        return Study(name=str(d.get("name", path.stem)), scene=str(d["scene"]), kind=sw.get("kind", "grid"), parameters=tuple(params),
-                     samples=int(sw.get("samples", 0)), montecarlo=MonteCarlo(**mc), seed=int(d.get("seed", 0)), base_dir=str(path.parent))
+        _study_schema().model_validate(d)
+    except ValidationError as exc:
+        from scenes.scene import _format_validation
+
+        raise ValueError(_format_validation(exc, str(path))) from None
+    try:
+        study = Study(name=str(d.get("name", path.stem)), scene=str(d["scene"]), kind=sw.get("kind", "grid"), parameters=tuple(params),
+                      samples=int(sw.get("samples", 0)), montecarlo=MonteCarlo(**mc), seed=int(d.get("seed", 0)), base_dir=str(path.parent))
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from None
+    _check_study(study, path)
+    return study
+
+
+def _check_study(study: Study, path) -> None:
+    """Before any work: the number of scenarios is within the limit, the base scene
+    loads, and every swept path exists in it."""
+    import scenes
+    from brdfmodels._io import check_limit
+
+    n = math.prod(len(p.values) for p in study.parameters) if study.kind == "grid" else study.samples
+    n *= max(1, study.montecarlo.samples)
+    try:
+        check_limit("SCENARIOS", n, "scenarios")
+        base, base_dir = _base_data(study)
+        for p in study.parameters:
+            set_path(copy.deepcopy(base), p.path, p.values[0] if p.values is not None else p.range[0])
+        scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {' '.join(str(exc).split())}") from None
 
 
 def _lhs(n, d, rng):
@@ -227,7 +322,7 @@ def _base_data(study: Study):
 
 
 def _tilt(vec, tilt_rad, rng):
-    from .engine import _perp_basis
+    from .beam import perp_basis as _perp_basis
 
     v = np.asarray(vec, float)
     v = v / np.linalg.norm(v)

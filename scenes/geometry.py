@@ -125,9 +125,12 @@ def _mesh_file(spec, frame, base_dir):
 
     from pathlib import Path
 
+    from brdfmodels._io import check_input_file
+
     path = Path(spec.file)
     if not path.is_absolute() and base_dir is not None:
         path = Path(base_dir) / path
+    check_input_file(path, "mesh file")
     try:
         m = trimesh.load(str(path), force="mesh")
     except Exception as exc:  # trimesh raises many kinds
@@ -135,6 +138,8 @@ def _mesh_file(spec, frame, base_dir):
     if len(m.faces) == 0:
         raise ValueError(f"file={spec.file!r}: the mesh has no triangles")
     v = np.asarray(m.vertices, float) * spec.scale
+    if not np.all(np.isfinite(v)) or np.abs(v).max() > 1e8:
+        raise ValueError(f"file={spec.file!r}: vertices must be finite and within 1e8 m")
     return Mesh(_place(v, frame, spec.center_m), np.asarray(m.faces, int))
 
 
@@ -178,14 +183,17 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     if spec.kind == "heightmap":
         from pathlib import Path
 
+        from brdfmodels._io import check_input_file
+
         path = Path(spec.file)
         if not path.is_absolute() and base_dir is not None:
             path = Path(base_dir) / path
+        check_input_file(path, "terrain.file")
         try:
-            h = np.load(path)
+            h = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
             raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({exc})") from None
-        if h.ndim != 2 or min(h.shape) < 2 or not np.all(np.isfinite(h)):
+        if h.dtype.kind not in "iuf" or h.ndim != 2 or min(h.shape) < 2 or not np.all(np.isfinite(h)) or np.abs(h).max() > 1e5:
             raise ValueError(f"terrain.file={spec.file!r}: expected a 2-d array of finite heights [m], got shape {h.shape}")
         return Heightfield(spec.origin_m[0], spec.origin_m[1], spec.spacing_m, np.asarray(h, float))
     cx, cy, cz = spec.center_m

@@ -19,6 +19,7 @@ import numpy as np
 from pydantic import ValidationError
 
 import brdfmodels
+from brdfmodels._io import check_input_file, parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, observer_points, shape_mesh, terrain_heightfield
 from .spec import SceneSpec
@@ -69,6 +70,7 @@ class Target:
     center_m: np.ndarray
     spec: object
     history: brdfmodels.History | None = None
+    back_material: brdfmodels.BRDFModel | None = None  # the back face's material (static), if given
 
     @property
     def is_dynamic(self) -> bool:
@@ -110,6 +112,8 @@ class Scene:
     occluders: list = field(default_factory=list)
     terrain: Heightfield | None = None
     observers: Observers | None = None
+    # plausibility warnings (values typical of unit mistakes); not errors
+    warnings: list = field(default_factory=list)
 
     @property
     def name(self) -> str:
@@ -130,16 +134,62 @@ def _identity_factor(model):
     return brdfmodels.Scaled(model, table)
 
 
+# incidence angles [deg] at which a material's hemispherical reflectance must be <= 1;
+# grazing angles are left out: fitted SH models extrapolate there (the bundled fits reach
+# 1.1-1.5 at 80 deg, outside the measured range)
+DHR_INCIDENCES_DEG = (0.0, 20.0, 40.0, 60.0)
+_DHR_CACHE: dict = {}
+
+
+def _check_dhr(model, where):
+    """SceneError if the directional-hemispherical reflectance exceeds 1 (energy from
+    nowhere: ``kd = 22``) at one of :data:`DHR_INCIDENCES_DEG` (and, for a dynamic model,
+    at the ends and the middle of its state range)."""
+    key = brdfmodels.dumps(model)
+    if key in _DHR_CACHE:
+        bad = _DHR_CACHE[key]
+    else:
+        states = [None]
+        if model.is_dynamic:
+            lo, hi = model.state_range
+            states = [lo, 0.5 * (lo + hi), hi] if math.isfinite(lo) and math.isfinite(hi) else [None]
+        bad = None
+        for st in states:
+            for th in DHR_INCIDENCES_DEG:
+                t = math.radians(th)
+                try:
+                    r = brdfmodels.hemispherical_reflectance(model, [math.sin(t), 0.0, math.cos(t)], state=st, rtol=1e-3,
+                                                             max_evaluations=200_000)
+                except ValueError:
+                    continue
+                if not math.isfinite(r.value) or r.value > 1.0 + 0.01 + r.error_estimate:
+                    bad = (th, st, r.value)
+                    break
+            if bad:
+                break
+        if len(_DHR_CACHE) > 256:
+            _DHR_CACHE.clear()
+        _DHR_CACHE[key] = bad
+    if bad:
+        th, st, v = bad
+        at = f" at state {st:g}" if st is not None else ""
+        raise SceneError(f"{where}: hemispherical reflectance {v:.4g} > 1 at {th:g} deg incidence{at}: "
+                         f"the material reflects more than it receives; check its parameters")
+
+
 def _material(spec, where, base_dir):
     try:
         if spec.file is not None:
             p = Path(spec.file)
             if not p.is_absolute() and base_dir is not None:
                 p = base_dir / p
-            return brdfmodels.load(p)
-        return brdfmodels.create(spec.model, **spec.params)
+            model = brdfmodels.loads(read_input_text(p, "material file"))
+        else:
+            model = brdfmodels.create(spec.model, **spec.params)
     except ValueError as exc:
         raise SceneError(f"{where}: {exc}") from None
+    _check_dhr(model, where)
+    return model
 
 
 def _history(spec, where, base_dir):
@@ -150,13 +200,18 @@ def _history(spec, where, base_dir):
         if not p.is_absolute() and base_dir is not None:
             p = base_dir / p
         try:
+            check_input_file(p, f"{where}.file")
             data = np.genfromtxt(p, delimiter=",", names=True)
         except OSError as exc:
             raise SceneError(f"{where}.file={spec.file!r}: cannot read ({exc.strerror})") from None
+        except ValueError as exc:
+            raise SceneError(f"{where}.file={spec.file!r}: {exc}") from None
         names = data.dtype.names or ()
         if "time_s" not in names or spec.state not in names:
             raise SceneError(f"{where}.file={spec.file!r}: expected CSV columns time_s and {spec.state}, got {list(names)}")
-        times, states = data["time_s"], data[spec.state]
+        times, states = np.atleast_1d(data["time_s"]), np.atleast_1d(data[spec.state])
+        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(states))):
+            raise SceneError(f"{where}.file={spec.file!r}: expected finite numbers in columns time_s and {spec.state}")
     else:
         times, states = spec.times_s, spec.states
     try:
@@ -177,6 +232,25 @@ def _inside_solid(p, spec) -> np.ndarray:
     if spec.shape == "sphere":
         return np.linalg.norm(q, axis=1) < s[0] / 2 * (1 - 1e-9)
     return (np.hypot(q[:, 0], q[:, 1]) < s[0] / 2 * (1 - 1e-9)) & (np.abs(q[:, 2]) < s[1] / 2 * (1 - 1e-9))
+
+
+def _warnings(spec: SceneSpec) -> list:
+    """Plausibility warnings: values typical of unit mistakes, naming the field and the likely unit."""
+    out = []
+    la = spec.laser
+    if la.divergence_rad > 0.05:
+        out.append(f"laser.divergence_rad = {la.divergence_rad:g} rad is a very wide beam (> 0.05 rad): mrad meant?")
+    if la.beam_diameter_m > 1.0:
+        out.append(f"laser.beam_diameter_m = {la.beam_diameter_m:g} m is over 1 m: mm meant?")
+    for g, ob in enumerate(spec.observers):
+        if ob.eye_height_m is not None and ob.eye_height_m > 3.0:
+            out.append(f"observers[{g}].eye_height_m = {ob.eye_height_m:g} m is above 3 m: cm or ft meant?")
+    if spec.analysis.footprint_eye_height_m > 3.0:
+        out.append(f"analysis.footprint_eye_height_m = {spec.analysis.footprint_eye_height_m:g} m is above 3 m: cm or ft meant?")
+    vis = spec.atmosphere.visibility_km
+    if vis is not None and vis < 0.05:
+        out.append(f"atmosphere.visibility_km = {vis:g} km is under 50 m (dense fog): m meant?")
+    return out
 
 
 def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> Scene:
@@ -211,12 +285,25 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
                 )
             elif material.state_name != state:
                 raise SceneError(f"{where}.history.state={state!r}: the material depends on {material.state_name!r}")
+            if hist is not None:  # the series' states must lie where the material is defined
+                s_lo, s_hi = float(np.min(hist.states)), float(np.max(hist.states))
+                for s_ in (s_lo, s_hi):
+                    try:
+                        material.evaluate([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], state=s_)
+                    except ValueError as exc:
+                        raise SceneError(f"{where}.history: states span [{s_lo:g}, {s_hi:g}]: {exc}") from None
         elif material.is_dynamic:
             raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
+        back = None
+        if ts.back is not None:
+            back = _material(ts.back, f"{where}.back", base_dir)
+            if back.is_dynamic:
+                raise SceneError(f"{where}.back: the back material depends on {back.state_name!r}; "
+                                 f"expected a static material (the history drives the front face only)")
         frame = brdfmodels.local_frame(ts.normal, ts.tangent)
         targets.append(
             Target(ts.name, i, mesh, material, math.radians(ts.material.groove_angle_deg), frame[2], frame[0],
-                   np.asarray(ts.center_m, float) - offset, ts, hist)
+                   np.asarray(ts.center_m, float) - offset, ts, hist, back)
         )
     occluders = []
     for i, os_ in enumerate(spec.occluders):
@@ -281,26 +368,33 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         occluders=occluders,
         terrain=terrain,
         observers=observers,
+        warnings=_warnings(spec),
     )
 
 
 def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
     """Scene from TOML text; relative file names resolve against ``base_dir``."""
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{source}: not valid TOML: {exc}") from None
+        data = parse_toml(text, source)  # bounded nesting; one-line errors
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     return from_data(data, source=source, base_dir=base_dir, text=text)
 
 
 def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) -> Scene:
     """Scene from already-parsed TOML data (a dict), e.g. a study's modified base scene."""
-    if text is None:
-        text = json.dumps(data, sort_keys=True, default=str)
+    if not isinstance(data, dict):
+        raise SceneError(f"{source}: expected a table of scene keys, got {type(data).__name__}")
     try:
+        if text is None:
+            text = json.dumps(data, sort_keys=True, default=str)
         spec = SceneSpec.model_validate(data)
     except ValidationError as exc:
         raise SceneError(_format_validation(exc, source)) from None
+    except RecursionError:
+        raise SceneError(f"{source}: nesting too deep") from None
+    except ValueError as exc:  # limits checked outside pydantic's own validators
+        raise SceneError(f"{source}: {' '.join(str(exc).split())}") from None
     try:
         return _compile(spec, source, None if base_dir is None else Path(base_dir), text)
     except SceneError as exc:
@@ -312,9 +406,9 @@ def load(path) -> Scene:
     """Read, validate and convert a TOML scene file."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SceneError(f"{path}: cannot read the scene ({exc.strerror})") from None
+        text = read_input_text(path, "scene")  # regular file of bounded size, UTF-8
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
     return loads(text, source=str(path), base_dir=path.parent)
 
 

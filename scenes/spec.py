@@ -3,6 +3,11 @@
 Every class forbids unknown keys, so a misspelled key is an error with its path
 (``targets[2].material.reflectance``). Units are SI and in the key names; wavelengths in
 nm. The classes only validate; :mod:`scenes.scene` converts them once to numpy arrays.
+
+Types are strict (``power_w = true`` or ``"5"`` is an error, not 1 W or 5 W), every number
+must be finite and within a physical range, and the total work a scene asks for (observer
+points, beam rays, time steps, keep-out cells) is bounded by the limits of
+:data:`brdfmodels._io.LIMITS` (raise them with ``HAZARD_MAX_<NAME>``).
 """
 
 from __future__ import annotations
@@ -11,6 +16,8 @@ import math
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+from brdfmodels._io import check_limit
 
 __all__ = [
     "SceneSpec",
@@ -31,11 +38,15 @@ __all__ = [
 # the standards hazard.mpe knows; kept here because scenes may not import hazard
 STANDARD_KEYS = ("ansi-z136.1-2014", "iec-60825-1-2014", "ansi-z136.1-2007", "iec-60825-1-2007")
 
-Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+# coordinates and direction components [m]: |x| <= 1e8 m (beyond the Moon's orbit is not a scene)
+Coord = Annotated[float, Field(ge=-1e8, le=1e8)]
+Vec3 = Annotated[list[Coord], Field(min_length=3, max_length=3)]
+Name = Annotated[str, Field(min_length=1, max_length=200)]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict: no bool -> number, no "5" -> 5; allow_inf_nan=False: every float finite
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
 
 
 def _finite(v, name):
@@ -55,12 +66,12 @@ class LaserSpec(_Strict):
     """The laser: CW (``power_w``) or pulsed (``pulse_energy_j``, ``pulse_duration_s``, ``prf_hz``)."""
 
     wavelength_nm: float = Field(ge=180.0, le=1.0e6, description="wavelength [nm], 180 nm to 1 mm")
-    power_w: float | None = Field(default=None, gt=0, description="CW power [W]")
-    pulse_energy_j: float | None = Field(default=None, gt=0, description="energy per pulse [J]")
-    pulse_duration_s: float | None = Field(default=None, gt=0, description="pulse duration [s]")
-    prf_hz: float | None = Field(default=None, gt=0, description="pulse repetition frequency [Hz]")
-    beam_diameter_m: float = Field(gt=0, description="beam diameter at the aperture, 1/e points [m]")
-    divergence_rad: float = Field(ge=0, description="full-angle divergence, 1/e points [rad]")
+    power_w: float | None = Field(default=None, gt=0, le=1e9, description="CW power [W]")
+    pulse_energy_j: float | None = Field(default=None, gt=0, le=1e7, description="energy per pulse [J]")
+    pulse_duration_s: float | None = Field(default=None, ge=1e-15, le=3e4, description="pulse duration [s]")
+    prf_hz: float | None = Field(default=None, gt=0, le=1e12, description="pulse repetition frequency [Hz]")
+    beam_diameter_m: float = Field(gt=0, le=100.0, description="beam diameter at the aperture, 1/e points [m]")
+    divergence_rad: float = Field(ge=0, le=math.pi, description="full-angle divergence, 1/e points [rad]")
     position_m: Vec3
     aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m]")
     direction: Vec3 | None = Field(default=None, description="beam direction (alternative to aim_m)")
@@ -93,14 +104,16 @@ class LaserSpec(_Strict):
 
 
 class ExposureSpec(_Strict):
-    duration_s: float = Field(gt=0, le=3e4, description="exposure duration the MPE applies to [s]")
+    duration_s: float = Field(ge=1e-13, le=3e4, description="exposure duration the MPE applies to [s]")
     standard: Literal[STANDARD_KEYS] = "ansi-z136.1-2014"
+    extended_source: bool = Field(default=False, description=(
+        "apply C_E per observer from the diffuse spot's angular subtense (default false: point-source MPE, conservative)"))
 
 
 class OxidationSpec(_Strict):
-    activation_temperature_k: float = Field(ge=0)
-    rate_per_s: float = Field(ge=0)
-    initial_extinction: float = Field(ge=0)
+    activation_temperature_k: float = Field(ge=0, le=1e6)
+    rate_per_s: float = Field(ge=0, le=1e12)
+    initial_extinction: float = Field(ge=0, le=1e3)
 
 
 class HistorySpec(_Strict):
@@ -113,11 +126,11 @@ class HistorySpec(_Strict):
 
     kind: Literal["series", "heating"]
     state: Literal["temperature_k", "extinction", "time_s", "reflectance_factor"] = "temperature_k"
-    times_s: list[float] | None = None
-    states: list[float] | None = None
-    file: str | None = None
+    times_s: list[Annotated[float, Field(ge=-1e9, le=1e9)]] | None = None
+    states: list[Annotated[float, Field(ge=-1e9, le=1e9)]] | None = None
+    file: Name | None = None
     plate: Literal["stainless_steel", "copper"] | None = None
-    thickness_m: float | None = Field(default=None, gt=0)
+    thickness_m: float | None = Field(default=None, gt=0, le=1.0)
     initial_reflectance: float | None = Field(default=None, ge=0, le=1)
     oxidation: OxidationSpec | None = None
     rtol: float = Field(default=1e-7, gt=0, le=0.1, description="heating ODE tolerance")
@@ -149,11 +162,12 @@ class MaterialSpec(BaseModel):
     misspelled parameter is an error that lists the model's parameters.
     """
 
-    model_config = ConfigDict(extra="allow", frozen=True)
+    model_config = ConfigDict(extra="allow", frozen=True, strict=True, allow_inf_nan=False)
 
-    model: str | None = None
-    file: str | None = None
-    groove_angle_deg: float = Field(default=0.0, description="angle of the material grooves from the target tangent [deg]")
+    model: Name | None = None
+    file: Name | None = None
+    groove_angle_deg: float = Field(default=0.0, ge=-360.0, le=360.0,
+                                    description="angle of the material grooves from the target tangent [deg]")
 
     @model_validator(mode="after")
     def _check(self):
@@ -180,9 +194,9 @@ class _Shape(_Strict):
     center_m: Vec3 = [0.0, 0.0, 0.0]
     normal: Vec3 = [0.0, 0.0, 1.0]
     tangent: Vec3 = [1.0, 0.0, 0.0]
-    size_m: list[float] | None = None
-    file: str | None = None
-    scale: float = Field(default=1.0, gt=0)
+    size_m: list[Annotated[float, Field(gt=0, le=1e6)]] | None = None
+    file: Name | None = None
+    scale: float = Field(default=1.0, gt=0, le=1e6)
 
     @field_validator("center_m", "normal", "tangent")
     @classmethod
@@ -210,13 +224,15 @@ class _Shape(_Strict):
 
 
 class TargetSpec(_Shape):
-    name: str = "target"
+    name: Name = "target"
     material: MaterialSpec
+    back: MaterialSpec | None = Field(default=None, description=(
+        "material of the back face (plates, disks, open meshes); without it a beam on the back reflects nothing, and the report says so"))
     history: HistorySpec | None = None
 
 
 class OccluderSpec(_Shape):
-    name: str = "occluder"
+    name: Name = "occluder"
 
 
 class TerrainSpec(_Strict):
@@ -224,14 +240,14 @@ class TerrainSpec(_Strict):
     procedural ``hill`` / ``valley`` (Gaussian bump) / ``flat`` ground."""
 
     kind: Literal["heightmap", "hill", "valley", "flat"]
-    file: str | None = None
-    origin_m: list[float] = Field(default=[0.0, 0.0], min_length=2, max_length=2)
-    spacing_m: float | None = Field(default=None, gt=0)
-    center_m: list[float] = Field(default=[0.0, 0.0, 0.0], min_length=3, max_length=3)
-    height_m: float = 10.0
-    radius_m: float = Field(default=100.0, gt=0)
-    extent_m: float = Field(default=500.0, gt=0, description="half-width of the procedural ground [m]")
-    resolution_m: float = Field(default=5.0, gt=0)
+    file: Name | None = None
+    origin_m: list[Coord] = Field(default=[0.0, 0.0], min_length=2, max_length=2)
+    spacing_m: float | None = Field(default=None, gt=0, le=1e5)
+    center_m: Vec3 = [0.0, 0.0, 0.0]
+    height_m: float = Field(default=10.0, ge=-1e5, le=1e5)
+    radius_m: float = Field(default=100.0, gt=0, le=1e7)
+    extent_m: float = Field(default=500.0, gt=0, le=1e7, description="half-width of the procedural ground [m]")
+    resolution_m: float = Field(default=5.0, gt=0, le=1e6)
 
     @model_validator(mode="after")
     def _check(self):
@@ -243,8 +259,8 @@ class TerrainSpec(_Strict):
 
 
 class OpticsSpec(_Strict):
-    magnification: float = Field(ge=1)
-    objective_diameter_m: float = Field(gt=0)
+    magnification: float = Field(ge=1, le=1e4)
+    objective_diameter_m: float = Field(gt=0, le=100.0)
     transmission: float = Field(default=1.0, gt=0, le=1)
 
 
@@ -253,18 +269,18 @@ class ObserverSpec(_Strict):
     ``grid`` (``origin_m``, ``u_m``, ``v_m``, ``counts``) or a spherical ``shell``
     (``center_m``, ``radius_m``, ``count``, upper hemisphere)."""
 
-    name: str
+    name: Name
     points_m: list[Vec3] | None = None
     start_m: Vec3 | None = None
     end_m: Vec3 | None = None
-    count: int | None = Field(default=None, ge=1, le=10_000_000)
+    count: int | None = Field(default=None, ge=1)
     origin_m: Vec3 | None = None
     u_m: Vec3 | None = None
     v_m: Vec3 | None = None
-    counts: list[int] | None = Field(default=None, min_length=2, max_length=2)
+    counts: list[Annotated[int, Field(ge=1)]] | None = Field(default=None, min_length=2, max_length=2)
     center_m: Vec3 | None = None
-    radius_m: float | None = Field(default=None, gt=0)
-    eye_height_m: float | None = Field(default=None, description="height above the terrain [m]; replaces z")
+    radius_m: float | None = Field(default=None, gt=0, le=1e8)
+    eye_height_m: float | None = Field(default=None, ge=0, le=1e5, description="height above the terrain [m]; replaces z")
     optics: OpticsSpec | None = None
 
     @model_validator(mode="after")
@@ -292,7 +308,20 @@ class ObserverSpec(_Strict):
                 _finite(p, "points_m")
         if self.counts is not None and any(c < 1 for c in self.counts):
             raise ValueError(f"counts={self.counts!r}: expected positive counts")
+        for key in ("count", "counts"):
+            if getattr(self, key) is not None and key not in ({"line": ("count",), "grid": ("counts",), "shell": ("count",)}.get(kind) or ()):
+                raise ValueError(f"{key}: not used by a {kind} layout; remove it")
+        check_limit("OBSERVERS", self.n_points, f"observer points of {self.name!r}")
         return self
+
+    @property
+    def n_points(self) -> int:
+        """Number of points this group makes (without building them)."""
+        if self.points_m is not None:
+            return len(self.points_m)
+        if self.counts is not None and self.origin_m is not None:
+            return self.counts[0] * self.counts[1]
+        return self.count or 0
 
     @property
     def layout(self) -> str:
@@ -306,8 +335,8 @@ class ObserverSpec(_Strict):
 
 
 class AtmosphereSpec(_Strict):
-    attenuation_per_m: float | None = Field(default=None, ge=0)
-    visibility_km: float | None = Field(default=None, gt=0)
+    attenuation_per_m: float | None = Field(default=None, ge=0, le=10.0)
+    visibility_km: float | None = Field(default=None, ge=1e-3, le=1e4)
 
     @model_validator(mode="after")
     def _one(self):
@@ -319,18 +348,29 @@ class AtmosphereSpec(_Strict):
 class AnalysisSpec(_Strict):
     """Accuracy knobs and outputs of an analysis."""
 
-    time_end_s: float | None = Field(default=None, gt=0, description="end of the history window [s] (default: exposure duration)")
-    time_step_s: float | None = Field(default=None, gt=0, description="time step of the dynamic analysis [s]")
+    time_end_s: float | None = Field(default=None, gt=0, le=1e6, description="end of the history window [s] (default: exposure duration)")
+    time_step_s: float | None = Field(default=None, gt=0, le=1e6, description="time step of the dynamic analysis [s]")
     direction_grid_deg: float = Field(default=2.0, gt=0, le=30, description="keep-out lobe grid resolution [deg]")
     refine_levels: int = Field(default=3, ge=0, le=8, description="adaptive refinement levels of the keep-out lobe")
-    beam_samples: int = Field(default=256, ge=1, le=1_000_000, description="rays across the beam cross-section")
-    footprint_eye_height_m: float = Field(default=1.7, ge=0, description="eye height above the terrain for the ground footprint [m]")
+    beam_samples: int = Field(default=256, ge=1, description=(
+        "cells of the beam's coarsest grid (at least 16; refined adaptively where edges cross the beam until beam_rtol is met)"))
+    beam_rtol: float = Field(default=1e-3, ge=1e-7, le=0.1, description=(
+        "bound on the beam power left in cells that straddle an edge, relative to the beam power"))
+    footprint_eye_height_m: float = Field(default=1.7, ge=0, le=1e4, description="eye height above the terrain for the ground footprint [m]")
+
+    @model_validator(mode="after")
+    def _work(self):
+        check_limit("BEAM_SAMPLES", self.beam_samples, "beam_samples")
+        g = self.direction_grid_deg
+        cells = max(2, round(90 / g)) * max(4, round(360 / g)) * 4.0**self.refine_levels if g >= 1e-6 else math.inf
+        check_limit("KEEPOUT_CELLS", float(cells), f"keep-out cells at direction_grid_deg={g:g}, refine_levels={self.refine_levels}")
+        return self
     outputs: list[Literal["report", "csv", "render"]] = ["report", "csv"]
 
 
 class SceneSpec(_Strict):
-    name: str
-    description: str = ""
+    name: Name
+    description: str = Field(default="", max_length=100_000)
     laser: LaserSpec
     exposure: ExposureSpec
     targets: list[TargetSpec] = Field(min_length=1)
@@ -348,4 +388,16 @@ class SceneSpec(_Strict):
         obs = [o.name for o in self.observers]
         if len(set(obs)) != len(obs):
             raise ValueError(f"observers: names must be unique, got {obs}")
+        return self
+
+    @model_validator(mode="after")
+    def _work(self):
+        n_obs = sum(o.n_points for o in self.observers)
+        check_limit("OBSERVERS", n_obs, "observer points in all")
+        if any(t.history is not None for t in self.targets):
+            a = self.analysis
+            t_end = a.time_end_s or self.exposure.duration_s
+            steps = t_end / (a.time_step_s or t_end / 100.0)
+            check_limit("TIME_STEPS", steps, f"time steps (time_end_s {t_end:g} s / time_step_s {a.time_step_s or t_end / 100:g} s)")
+            check_limit("OBSERVER_STEPS", n_obs * steps, f"observer points x time steps ({n_obs} x {steps:.0f})")
         return self

@@ -74,7 +74,7 @@ def run(rows=1000, n_states=100, verbose=True, repeat=3):
     basis = bm.SHBasis(8, 4, 2, 0)
     nodes = np.linspace(300.0, 1500.0, 13)
     coef = rng.normal(scale=0.15, size=(nodes.size, basis.size))
-    coef[:, 0] = 1.0
+    coef[:, 0] = -11.0  # DC term: a physical material (hemispherical reflectance < 1 at every state)
     with tempfile.TemporaryDirectory() as tmp:
         mat = Path(tmp) / "m.json"
         bm.save(bm.DynamicBRDF(basis, nodes, coef, "temperature_k"), mat)

@@ -33,7 +33,7 @@ def test_convergence_report_and_recommendation(tmp_path):
 
 
 def test_convergence_knobs_follow_the_scene():
-    assert conv.knobs_used({"targets": [{}]}) == ["direction_grid_deg", "refine_levels", "beam_samples"]
+    assert conv.knobs_used({"targets": [{}]}) == ["direction_grid_deg", "refine_levels", "beam_samples", "beam_rtol"]
     heat = {"targets": [{"history": {"kind": "heating"}}]}
     assert conv.knobs_used(heat)[-2:] == ["time_step_fraction", "heating_rtol"]
     with pytest.raises(ValueError, match="knob 'heating_rtol': the scene does not use it"):

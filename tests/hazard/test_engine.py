@@ -69,7 +69,8 @@ def test_lambertian_plate_near_field_sums_over_the_gaussian_spot():
     d = 0.005 + 50 * 0.001  # 1/e diameter at the plate
     e0 = 4 * 100.0 / (math.pi * d**2)
     ref = quad(lambda r: 0.5 / math.pi * z / (z * z + r * r) ** 1.5 * e0 * math.exp(-4 * r * r / d**2) * 2 * math.pi * r, 0, 10 * d)[0]
-    assert res.observers.static_irradiance_w_m2[0] == pytest.approx(ref, rel=1e-6)
+    # the near-field sum is a midpoint rule over beam cells of 1/4 of the 1/e radius (second order)
+    assert res.observers.static_irradiance_w_m2[0] == pytest.approx(ref, rel=3e-4)
 
 
 def test_flat_mirror_is_the_direct_beam_at_the_folded_range():
@@ -104,7 +105,8 @@ def test_plan_leaves_out_what_the_scene_does_not_need():
     res = hazard.analyze(plate(observers=[(5.0, -20.0, 0.0)]))
     ran = {s.name: s.ran for s in res.stages}
     assert ran == {"mpe": True, "rays": False, "beam": True, "history": False, "static": True, "dynamic": False,
-                   "specular": False, "line_of_sight": False, "keepout": True, "footprint": False, "exposure": True}
+                   "specular": False, "line_of_sight": False, "keepout": True, "footprint": False, "exposure": True,
+                   "extended_source": False}
     assert "analytically" in res.stage("rays").detail
 
 
@@ -123,7 +125,11 @@ def test_embree_and_numpy_engines_agree(name):
     a = hazard.analyze(scene, backend="embree")
     b = hazard.analyze(scene, backend="numpy")
     np.testing.assert_array_equal(a.observers.line_of_sight, b.observers.line_of_sight)
-    np.testing.assert_allclose(a.observers.static_irradiance_w_m2, b.observers.static_irradiance_w_m2, rtol=1e-7, atol=1e-12)
+    # Embree works in float32: a ray grazing an edge may land in a different leaf class,
+    # which moves a sampled (not exact) spot's power within its stated error bound
+    for ta, tb in zip(a.targets, b.targets):
+        assert abs(ta.spot_power_w - tb.spot_power_w) <= 1e-9 * ta.spot_power_w + min(ta.spot_power_error_w, tb.spot_power_error_w) * 1e-3
+    np.testing.assert_allclose(a.observers.static_irradiance_w_m2, b.observers.static_irradiance_w_m2, rtol=1e-5, atol=1e-12)
     if a.footprint_static is not None:
         np.testing.assert_array_equal(a.footprint_static.mask, b.footprint_static.mask)
 
@@ -160,6 +166,20 @@ def test_dynamic_scene_states_and_verdicts():
     assert steel.state_range[0] == pytest.approx(0.311) and steel.state_range[1] > 1.0
 
 
+def _flat_spot(scene, power_w, diameter_m, divergence_rad):
+    """The one spot of a scene of flat targets, built as the analysis builds it."""
+    from hazard.analysis import _FlatScene
+    from hazard.beam import BeamGeometry, sample_cells
+    from hazard.engine import build_spots, flat_outlines
+
+    beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, power_w, diameter_m, divergence_rad)
+    tracer = _FlatScene(scene.targets)
+    outlines = flat_outlines(beam, scene.targets)
+    cells = sample_cells(beam, tracer, scene.targets, outlines={k: v[1] for k, v in outlines.items()})
+    (spot,) = build_spots(beam, cells, scene.targets, tracer, 0.0, outlines).spots
+    return spot
+
+
 def test_dynamic_irradiance_equals_static_material_at_that_state():
     from hazard.engine import Spot, spot_irradiance
 
@@ -167,11 +187,7 @@ def test_dynamic_irradiance_equals_static_material_at_that_state():
     res = hazard.analyze(scene)
     t = scene.targets[0]
     dyn = t.material
-    from hazard.analysis import _FlatScene
-    from hazard.engine import sample_beam, trace_spots
-
-    beam = sample_beam(scene.laser_position_m, scene.laser_direction, 230.0, 0.005, 0.001, 256)
-    (spot,), _, _ = trace_spots(beam, scene.targets, _FlatScene(scene.targets))
+    spot = _flat_spot(scene, 230.0, 0.005, 0.001)
     pts = scene.observers.positions_m[::97]
     gain = np.ones(len(pts))
     states = np.array([0.311, 0.7, 1.3])
@@ -258,11 +274,7 @@ def test_sparse_map_rows_equal_dense():
     from hazard.engine import spot_irradiance
 
     scene = scenes.load(scenes.example_path("witness_screen"))
-    from hazard.analysis import _FlatScene
-    from hazard.engine import sample_beam, trace_spots
-
-    beam = sample_beam(scene.laser_position_m, scene.laser_direction, 230.0, 0.005, 0.001, 64)
-    (spot,), _, _ = trace_spots(beam, scene.targets, _FlatScene(scene.targets))
+    spot = _flat_spot(scene, 230.0, 0.005, 0.001)
     pts = scene.observers.positions_m
     vis = np.random.default_rng(1).uniform(size=len(pts)) > 0.3
     states = np.array([0.311, 0.9])

@@ -1,0 +1,550 @@
+"""The laser beam's cross-section: exact Gaussian powers, adaptive ray sampling, lit lookup.
+
+Beam model (spec `range-safety.md` section 1; `laser-safety.md` section 3.1): a Gaussian
+TEM00 profile with 1/e diameter ``D(z) = a + z phi``; irradiance normal to the axis
+``E = P / (pi w^2) exp(-|x_perp|^2 / w^2)``, ``w = D / 2``. Every ray leaves the aperture
+at ``pos + (a/2) s`` with direction ``axis + (phi/2) s`` for a fixed transverse vector
+``s`` (in units of the 1/e radius), so ``s`` is constant along the ray: the beam is a
+point source at ``a / phi`` behind the aperture (parallel rays when ``phi = 0``), and the
+power through any region of the beam cross-section is the 2-D Gaussian integral over its
+image in ``s``, density ``exp(-|s|^2) / pi``.
+
+* A cell ``[s0, s1] x [t0, t1]`` carries ``P/4 (erf s1 - erf s0)(erf t1 - erf t0)``
+  (exact).
+* A polygon carries the sum over its edges of the Gaussian integral over the triangle
+  (origin, A, B): ``(theta_B - theta_A) / (2 pi) - [T(h, t_B/h) - T(h, t_A/h)]`` with
+  Owen's T function, ``h`` the distance of the edge's line from the beam axis and ``t``
+  the positions along it (both in units of the standard deviation): exact, any position.
+  A plate's outline projects to a polygon (central projection maps lines to lines); a
+  disk's to an ellipse, bounded above and below by circumscribed and inscribed polygons.
+* Meshes, curved shapes, occluders and terrain are sampled by rays, one per cell of a
+  quadtree over ``s in [-L, L]^2`` (``L = 4``: the square holds all but ``1 - erf(4)^2 =
+  3.1e-8`` of the power), each cell carrying its exact power. A cell whose centre and four
+  corners do not hit the same object is split in four, level by level, until the power
+  in such mixed cells is below ``rtol`` of the beam; cells containing a target's projected
+  vertices are split until they are smaller than the target's projection, so no target
+  inside the footprint is missed. What is left in mixed cells is the error bound.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["BeamGeometry", "CellSampling", "PolygonMoments", "clip_to_box", "polygon_fraction", "polygon_moments", "rectangle_fraction", "sample_cells", "HALF_WIDTH"]
+
+HALF_WIDTH = 4.0  # beam square half-width in units of the 1/e radius (outside: 3.1e-8 of the power)
+MAX_LEVEL = 14  # finest cells: 2 L / n0 / 2^14 (about 1e-5 of the 1/e radius for n0 = 16)
+
+
+def _erf(x):
+    from scipy.special import erf
+
+    return erf(x)
+
+
+def perp_basis(axis) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors completing the unit ``axis`` to a right-handed frame (e1, e2, axis)."""
+    axis = np.asarray(axis, float)
+    a = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(axis, a)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(axis, e1)
+
+
+@dataclass
+class BeamGeometry:
+    """The beam's frame and profile (local scene coordinates, SI).
+
+    ``e1``, ``e2`` span the cross-section; ``s`` coordinates are transverse positions in
+    units of the 1/e radius ``w(z) = (a + z phi) / 2``.
+    """
+
+    position_m: np.ndarray
+    axis: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    power_w: float
+    diameter_m: float
+    divergence_rad: float
+
+    @classmethod
+    def create(cls, position_m, axis, power_w, diameter_m, divergence_rad) -> "BeamGeometry":
+        axis = np.asarray(axis, float) / np.linalg.norm(axis)
+        e1, e2 = perp_basis(axis)
+        return cls(np.asarray(position_m, float), axis, e1, e2, float(power_w), float(diameter_m), float(divergence_rad))
+
+    def diameter_at(self, range_m):
+        """1/e beam diameter [m] at a distance along the axis from the aperture."""
+        return self.diameter_m + np.asarray(range_m) * self.divergence_rad
+
+    def rays(self, s) -> tuple[np.ndarray, np.ndarray]:
+        """Origins and (non-unit) directions of the rays at transverse coordinates s (N, 2)."""
+        tr = s[:, :1] * self.e1 + s[:, 1:] * self.e2
+        return self.position_m + tr * (self.diameter_m / 2), self.axis + tr * (self.divergence_rad / 2)
+
+    def to_s(self, points_m) -> tuple[np.ndarray, np.ndarray]:
+        """Transverse coordinates s (N, 2) of points and their distance z along the axis [m].
+
+        Points behind the virtual source (``z <= -a/phi``) get NaN.
+        """
+        rel = np.asarray(points_m, float) - self.position_m
+        z = rel @ self.axis
+        w = self.diameter_at(z) / 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = np.stack([rel @ self.e1, rel @ self.e2], axis=1) / np.where(w > 0, w, np.nan)[:, None]
+        return s, z
+
+    def irradiance_w_m2(self, s, z) -> np.ndarray:
+        """Unattenuated irradiance [W/m^2] normal to the ray through ``s`` at axial distance z.
+
+        ``P / (pi w^2) exp(-|s|^2)`` is the flux across a plane normal to the axis; across a
+        plane normal to the (slightly tilted) ray it is larger by ``|dir|`` (exact).
+        """
+        w = self.diameter_at(z) / 2
+        s2 = (s * s).sum(axis=1)
+        tilt = np.sqrt(1.0 + s2 * (self.divergence_rad / 2) ** 2)
+        return self.power_w / (math.pi * w * w) * np.exp(-s2) * tilt
+
+    def source_distance_m(self, z) -> np.ndarray:
+        """Distance from the virtual point source along the axis [m] (inf when collimated):
+        the radius of the incident wavefront in geometric optics."""
+        if self.divergence_rad <= 0:
+            return np.full(np.shape(z), np.inf)
+        return np.asarray(z) + self.diameter_m / self.divergence_rad
+
+
+def rectangle_fraction(s0, s1, t0, t1) -> np.ndarray:
+    """Fraction of the beam power in cells [s0, s1] x [t0, t1] (units of the 1/e radius):
+    ``(erf s1 - erf s0)(erf t1 - erf t0) / 4`` (spec range-safety.md section 1)."""
+    return 0.25 * (_erf(s1) - _erf(s0)) * (_erf(t1) - _erf(t0))
+
+
+def polygon_fraction(vertices_s) -> float:
+    """Fraction of the beam power inside a simple polygon (V, 2) given in s coordinates.
+
+    Sum over edges of the signed Gaussian integral over the triangle (origin, A, B), in
+    closed form with Owen's T function (Owen 1956, Ann. Math. Statist. 27:1075, eq. 2.1):
+    with u = sqrt(2) s (standard normal), h the distance of the edge's line from the
+    origin and t_A < t_B the positions of A and B along it,
+    ``F = (theta_B - theta_A) / (2 pi) - [T(h, t_B / h) - T(h, t_A / h)]``,
+    ``theta = atan2(t, h)``, signed by the triangle's orientation. Exact for any polygon
+    position (inside, outside or around the axis); orientation-free (absolute value).
+    """
+    return float(polygon_moments([vertices_s]).fraction[0])
+
+
+def _owen_fractions(a, b, owner, n):
+    """Per polygon: the Owen's T sum above over its edges a -> b (s coordinates)."""
+    from scipy.special import owens_t
+
+    a, b = np.sqrt(2.0) * a, np.sqrt(2.0) * b
+    edge = b - a
+    length = np.linalg.norm(edge, axis=1)
+    tang = edge / np.where(length > 0, length, 1.0)[:, None]
+    ta, tb = (a * tang).sum(1), (b * tang).sum(1)
+    h = np.abs(a[:, 0] * tang[:, 1] - a[:, 1] * tang[:, 0])
+    cross = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    live = (length > 0) & (h > 1e-300)
+    hs = np.where(live, h, 1.0)
+    part = (np.arctan2(tb, hs) - np.arctan2(ta, hs)) / (2 * math.pi) - (owens_t(hs, tb / hs) - owens_t(hs, ta / hs))
+    return np.abs(np.bincount(owner, np.where(live, np.sign(cross) * part, 0.0), n))
+
+
+@dataclass
+class PolygonMoments:
+    """Gaussian moments of polygons in s (density ``exp(-|s|^2) / pi``).
+
+    ``fraction`` of the beam power in each; ``mean`` (n, 2) and ``cov`` (n, 2, 2) of s
+    over it; ``r2_min`` the smallest ``|s|^2`` on it (the Gaussian's largest value is
+    ``exp(-r2_min)``).
+    """
+
+    fraction: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    r2_min: np.ndarray
+
+
+def polygon_moments(polygons) -> PolygonMoments:
+    """Exact Gaussian power, mean and covariance of s over convex polygons (each (V, 2)).
+
+    Power: Owen's T sum (:func:`polygon_fraction`). Moments by the divergence theorem
+    with the fields ``-e^{-r^2}/2 e_x``, ``-x e^{-r^2}/2 e_x`` (and the same in y):
+    ``int x e^{-r^2} dA = -1/2 sum_edges n_x int e^{-r^2} dl``,
+    ``int x^2 e^{-r^2} dA = 1/2 int e^{-r^2} dA - 1/2 sum n_x int x e^{-r^2} dl``,
+    ``int x y e^{-r^2} dA = -1/2 sum n_x int y e^{-r^2} dl``, with ``n`` the outward
+    normal and, along an edge ``q + u tau`` (``q`` the foot of the perpendicular from the
+    origin), ``int e^{-r^2} du = e^{-|q|^2} sqrt(pi)/2 [erf u]`` and
+    ``int u e^{-r^2} du = -1/2 [e^{-r^2}]``. Moments that cancellation makes meaningless
+    (tiny polygons far out) fall back to the polygon's area centroid and the uniform
+    covariance of its bounding box.
+    """
+    polys = [np.asarray(p, float).reshape(-1, 2) for p in polygons]
+    n = len(polys)
+    counts = np.array([len(p) for p in polys], int)
+    owner = np.repeat(np.arange(n), counts)
+    a = np.concatenate(polys) if n else np.zeros((0, 2))
+    b = np.concatenate([np.roll(p, -1, axis=0) for p in polys]) if n else a
+    frac = _owen_fractions(a, b, owner, n)
+    area2 = np.bincount(owner, a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], n)
+    orient = np.where(area2 >= 0, 1.0, -1.0)[owner]
+    edge = b - a
+    length = np.linalg.norm(edge, axis=1)
+    tau = edge / np.where(length > 0, length, 1.0)[:, None]
+    nrm = orient[:, None] * np.stack([tau[:, 1], -tau[:, 0]], axis=1)
+    ua, ub = (a * tau).sum(1), (b * tau).sum(1)
+    q = a - ua[:, None] * tau
+    i0 = np.exp(-(q * q).sum(1)) * (math.sqrt(math.pi) / 2) * (_erf(ub) - _erf(ua))
+    i1 = -0.5 * (np.exp(-(b * b).sum(1)) - np.exp(-(a * a).sum(1)))
+    line = q * i0[:, None] + tau * i1[:, None]  # int (x, y) e^{-r^2} dl
+    first = np.stack([np.bincount(owner, -0.5 * nrm[:, k] * i0, n) for k in range(2)], axis=1) / math.pi
+    second = np.empty((n, 2, 2))
+    for r in range(2):
+        for c in range(2):
+            second[:, r, c] = np.bincount(owner, -0.5 * nrm[:, c] * line[:, r], n) / math.pi
+    second[:, 0, 0] += 0.5 * frac
+    second[:, 1, 1] += 0.5 * frac
+    second = 0.5 * (second + np.transpose(second, (0, 2, 1)))
+    safe = np.where(frac > 0, frac, 1.0)
+    mean = first / safe[:, None]
+    cov = second / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
+    return PolygonMoments(frac, *_checked_moments(polys, frac, mean, cov), _r2_min(a, b, owner, orient, n))
+
+
+def _checked_moments(polys, frac, mean, cov):
+    """Replace moments lost to cancellation by the area centroid and box covariance."""
+    for k, p in enumerate(polys):
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        span = hi - lo
+        ok = (frac[k] > 0 and np.all(mean[k] >= lo - 1e-9 * (1 + span)) and np.all(mean[k] <= hi + 1e-9 * (1 + span))
+              and np.all(np.diag(cov[k]) >= -1e-12) and np.all(np.diag(cov[k]) <= span * span / 4 * (1 + 1e-6) + 1e-300))
+        if not ok:
+            mean[k] = p.mean(axis=0)
+            cov[k] = np.diag(span * span / 12)
+        mean[k] = np.clip(mean[k], lo, hi)
+        cov[k][np.diag_indices(2)] = np.clip(np.diag(cov[k]), 0.0, span * span / 4)
+    return mean, cov
+
+
+def _r2_min(a, b, owner, orient, n):
+    """Smallest |s|^2 on each convex polygon (0 when it holds the origin)."""
+    edge = b - a
+    len2 = (edge * edge).sum(1)
+    u = np.clip(-(a * edge).sum(1) / np.where(len2 > 0, len2, 1.0), 0.0, 1.0)
+    near = a + u[:, None] * edge
+    d2 = (near * near).sum(1)
+    r2 = np.full(n, np.inf)
+    np.minimum.at(r2, owner, d2)
+    outside = orient * (edge[:, 0] * (-a[:, 1]) - edge[:, 1] * (-a[:, 0])) < 0  # origin right of a CCW edge
+    holds = np.bincount(owner, outside, n) == 0
+    return np.where(holds, 0.0, r2)
+
+
+def clip_to_box(polygon_s, s0, s1, t0, t1) -> np.ndarray:
+    """A convex polygon (V, 2) clipped to the box [s0, s1] x [t0, t1] (Sutherland-Hodgman);
+    (0, 2) when they do not overlap."""
+    poly = np.asarray(polygon_s, float)
+    for axis, bound, sign in ((0, s0, 1.0), (0, s1, -1.0), (1, t0, 1.0), (1, t1, -1.0)):
+        if len(poly) == 0:
+            break
+        v = sign * (poly[:, axis] - bound)
+        inside = v >= 0
+        if inside.all():
+            continue
+        if not inside.any():
+            return np.zeros((0, 2))
+        nxt, vn = np.roll(poly, -1, axis=0), np.roll(v, -1)
+        cross = inside != np.roll(inside, -1)
+        f = np.where(cross, v / np.where(cross, v - vn, 1.0), 0.0)
+        cut = poly + f[:, None] * (nxt - poly)
+        cut[cross, axis] = bound
+        pts = np.stack([poly, cut], axis=1)
+        poly = pts[np.stack([inside, cross], axis=1)]
+    return poly if len(poly) >= 3 else np.zeros((0, 2))
+
+
+# -- adaptive cell sampling ----------------------------------------------------------------
+@dataclass
+class CellSampling:
+    """Leaf cells of the beam quadtree and what each one's five rays hit.
+
+    ``level``, ``i``, ``j``: the cell ``[-L + i d, -L + (i+1) d] x [...]`` with
+    ``d = 2 L / (n0 2^level)``; ``power_w`` its exact power; ``labels`` (n, 5) the object
+    hit by the centre and four corner rays (-1: nothing); ``faces`` (n, 5) the triangles;
+    the centre ray's hit ``point``, range ``t`` and unit ``direction``.
+    """
+
+    n0: int
+    level: np.ndarray
+    i: np.ndarray
+    j: np.ndarray
+    power_w: np.ndarray
+    labels: np.ndarray
+    faces: np.ndarray
+    point: np.ndarray
+    t: np.ndarray
+    direction: np.ndarray
+    rays_traced: int = 0
+    levels_used: int = 0
+    unresolved_w: float = 0.0  # power in mixed leaves not covered by an exact outline integral
+    truncated_w: float = 0.0  # power outside the square
+    exact_targets: frozenset = frozenset()  # flat targets whose outline integral is their power
+    _lookup: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def mixed(self) -> np.ndarray:
+        return np.any(self.labels != self.labels[:, :1], axis=1)
+
+    def size(self, level=None) -> np.ndarray:
+        lv = self.level if level is None else level
+        return 2 * HALF_WIDTH / (self.n0 * 2.0 ** lv)
+
+    def bounds(self, rows=None):
+        """Cell bounds (s0, s1, t0, t1) of the leaves (or rows of them)."""
+        sl = slice(None) if rows is None else rows
+        d = self.size(self.level[sl])
+        s0 = -HALF_WIDTH + self.i[sl] * d
+        t0 = -HALF_WIDTH + self.j[sl] * d
+        return s0, s0 + d, t0, t0 + d
+
+    def moments(self, rows=None):
+        """Per leaf and axis: the Gaussian-weighted mean and variance of s inside the cell
+        (truncated normal of density ~ exp(-s^2) on [a, b]: mean
+        ``(e^-a^2 - e^-b^2) / (sqrt(pi) Z)``, second moment
+        ``1/2 + (a e^-a^2 - b e^-b^2) / (sqrt(pi) Z)``, ``Z = erf b - erf a``); cells too
+        small or too far out for that to be accurate use the uniform mean and ``h^2/12``.
+        Returns (mean (n, 2), variance (n, 2))."""
+        s0, s1, t0, t1 = self.bounds(rows)
+        means, vars_ = [], []
+        for a, b in ((s0, s1), (t0, t1)):
+            z = _erf(b) - _erf(a)
+            ea, eb = np.exp(-a * a), np.exp(-b * b)
+            good = z > 1e-6 * (b - a)
+            zs = np.where(good, z, 1.0) * math.sqrt(math.pi)
+            m = np.where(good, (ea - eb) / zs, 0.5 * (a + b))
+            m2 = 0.5 + (a * ea - b * eb) / zs
+            v = np.where(good, m2 - m * m, (b - a) ** 2 / 12)
+            v = np.where((v >= 0) & (v <= (b - a) ** 2 / 4), v, (b - a) ** 2 / 12)
+            m = np.clip(m, a, b)
+            means.append(m)
+            vars_.append(v)
+        return np.stack(means, axis=1), np.stack(vars_, axis=1)
+
+    def max_profile(self, rows=None) -> np.ndarray:
+        """``exp(-min |s|^2)`` over each leaf: the Gaussian's largest value in the cell."""
+        s0, s1, t0, t1 = self.bounds(rows)
+        ds = np.where(s0 > 0, s0, np.where(s1 < 0, -s1, 0.0))
+        dt = np.where(t0 > 0, t0, np.where(t1 < 0, -t1, 0.0))
+        return np.exp(-(ds * ds + dt * dt))
+
+    def leaf_of(self, s) -> np.ndarray:
+        """Index of the leaf containing each point s (N, 2); -1 outside the square."""
+        s = np.asarray(s, float)
+        out = np.full(len(s), -1)
+        if not self._lookup:
+            for lv in np.unique(self.level):
+                rows = np.flatnonzero(self.level == lv)
+                n = self.n0 * 2**int(lv)
+                key = self.i[rows].astype(np.int64) * n + self.j[rows]
+                order = np.argsort(key)
+                self._lookup[int(lv)] = (n, key[order], rows[order])
+        inside = np.all(np.isfinite(s), axis=1) & np.all(np.abs(np.nan_to_num(s)) < HALF_WIDTH, axis=1)
+        for lv, (n, keys, rows) in self._lookup.items():
+            todo = np.flatnonzero(inside & (out < 0))
+            if not len(todo):
+                break
+            d = 2 * HALF_WIDTH / n
+            ii = np.floor((s[todo, 0] + HALF_WIDTH) / d).astype(np.int64)
+            jj = np.floor((s[todo, 1] + HALF_WIDTH) / d).astype(np.int64)
+            key = ii * n + jj
+            pos = np.clip(np.searchsorted(keys, key), 0, len(keys) - 1)
+            found = keys[pos] == key
+            out[todo[found]] = rows[pos[found]]
+        return out
+
+
+_OFFSETS = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+
+
+def _trace_cells(beam, tracer, level, i, j, n0):
+    d = 2 * HALF_WIDTH / (n0 * 2.0**level)
+    base = np.stack([-HALF_WIDTH + i * d, -HALF_WIDTH + j * d], axis=1)
+    s = (base[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+    o, dirs = beam.rays(s)
+    hits = tracer.first_hit(o, dirs)
+    n = len(i)
+    labels = np.where(hits.hit, hits.obj, -1).reshape(n, 5)
+    faces = np.where(hits.hit, hits.face, -1).reshape(n, 5)
+    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    c = np.arange(n) * 5
+    return labels, faces, hits.point[c], hits.t[c], unit[c]
+
+
+def _seed_cells(seeds, level, i, j, n0):
+    """Cells that contain a target's projected point and are larger than its projection."""
+    if not seeds:
+        return np.zeros(len(i), bool)
+    d = 2 * HALF_WIDTH / (n0 * 2.0**level)
+    s0 = -HALF_WIDTH + i * d
+    t0 = -HALF_WIDTH + j * d
+    force = np.zeros(len(i), bool)
+    for pts, extent in seeds:
+        big = d > extent / 2
+        if not np.any(big):
+            continue
+        for p in pts:
+            force |= big & (p[0] >= s0) & (p[0] < s0 + d) & (p[1] >= t0) & (p[1] < t0 + d)
+    return force
+
+
+def target_seeds(beam: BeamGeometry, targets) -> list:
+    """Per target: its vertices and centre projected into s, and the projection's extent."""
+    seeds = []
+    for t in targets:
+        v = t.mesh.vertices
+        pts = np.vstack([v, v.mean(axis=0, keepdims=True), t.center_m[None]])
+        s, z = beam.to_s(pts)
+        s = s[np.all(np.isfinite(s), axis=1) & (z > 0)]
+        if len(s) == 0:
+            continue
+        inside = s[np.all(np.abs(s) < HALF_WIDTH, axis=1)]
+        extent = float(np.min(np.ptp(s, axis=0))) if len(s) > 1 else 0.0
+        # a closed shape's projected outline is at least its bounding box's smaller side
+        if len(inside):
+            seeds.append((inside, max(extent, 1e-9)))
+    return seeds
+
+
+def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
+    """Points (N, 2) inside a convex polygon (V, 2) by more than ``margin`` (distance from
+    every edge's line), either orientation (chunked)."""
+    pts = np.asarray(points_s, float)
+    poly = np.asarray(polygon_s, float)
+    edge = np.roll(poly, -1, axis=0) - poly
+    length = np.linalg.norm(edge, axis=1)
+    orient = np.sign(np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1]))
+    out = np.zeros(len(pts), bool)
+    for a in range(0, len(pts), 8192):
+        q = pts[a:a + 8192]
+        rel = q[:, None, :] - poly[None, :, :]
+        cross = edge[None, :, 0] * rel[..., 1] - edge[None, :, 1] * rel[..., 0]
+        out[a:a + 8192] = np.all(cross * orient > margin * length[None, :], axis=1)
+    return out
+
+
+def _unclean(outlines, clean, level, i, j, labels, n0):
+    """Flat targets with a ray inside their outline that hit something else (occluded,
+    or behind another object): their outline integral is not their power."""
+    d = 2 * HALF_WIDTH / (n0 * 2.0**level)
+    base = np.stack([-HALF_WIDTH + i * d, -HALF_WIDTH + j * d], axis=1)
+    s = (base[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+    lab = labels.ravel()
+    bad = set()
+    for k in clean:
+        foreign = lab != k
+        # rays within 1e-6 w of the outline may graze its edge in floating point
+        if np.any(foreign) and np.any(inside_convex(s[foreign], outlines[k], margin=1e-6)):
+            bad.add(k)
+    return bad
+
+
+def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_level=MAX_LEVEL, outlines=None) -> CellSampling:
+    """Adaptive quadtree over the beam cross-section (see the module notes).
+
+    Refines mixed cells level by level while the power in mixed cells exceeds
+    ``rtol * P`` (and seeded cells while they are larger than their target's projection).
+    ``outlines`` maps flat targets' indices to their projected outlines (inner bound):
+    a cell mixed only between such a target and empty beam needs no refinement while no
+    ray inside the outline hits anything else (the outline integral gives the power).
+    """
+    n0 = max(4, int(n0))
+    outlines = outlines or {}
+    clean = set(outlines)
+    ii, jj = np.meshgrid(np.arange(n0), np.arange(n0), indexing="ij")
+    level_i, level_j = ii.ravel(), jj.ravel()
+    seeds = target_seeds(beam, targets)
+    n_targets = len(targets)
+    hit_by_centre = set()
+    leaves = {k: [] for k in ("level", "i", "j", "power_w", "labels", "faces", "point", "t", "direction")}
+    rays = 0
+    lv = 0
+    while len(level_i):
+        lvl = np.full(len(level_i), lv)
+        labels, faces, point, t, direction = _trace_cells(beam, tracer, lvl, level_i, level_j, n0)
+        hit_by_centre.update(np.unique(labels[:, 0]).tolist())
+        rays += 5 * len(level_i)
+        clean -= _unclean(outlines, clean, lvl, level_i, level_j, labels, n0)
+        d = 2 * HALF_WIDTH / (n0 * 2.0**lv)
+        s0 = -HALF_WIDTH + level_i * d
+        t0 = -HALF_WIDTH + level_j * d
+        power = beam.power_w * rectangle_fraction(s0, s0 + d, t0, t0 + d)
+        need = _needs_split(labels, clean)
+        split = _seed_cells(seeds, lvl, level_i, level_j, n0) | _unseen_cells(labels, hit_by_centre, clean, n_targets)
+        if need.any() and power[need].sum() > rtol * beam.power_w:
+            split |= need
+        if lv >= max_level:
+            split[:] = False
+        keep = ~split
+        for k, v in (("level", lvl), ("i", level_i), ("j", level_j), ("power_w", power), ("labels", labels), ("faces", faces),
+                     ("point", point), ("t", t), ("direction", direction)):
+            leaves[k].append(v[keep])
+        level_i = np.concatenate([2 * level_i[split] + a for a in (0, 1, 0, 1)])
+        level_j = np.concatenate([2 * level_j[split] + b for b in (0, 0, 1, 1)])
+        lv += 1
+    cat = {k: np.concatenate(v) for k, v in leaves.items()}
+    truncated = beam.power_w * (1.0 - float(_erf(HALF_WIDTH)) ** 2)
+    unresolved = float(cat["power_w"][_needs_split(cat["labels"], clean)].sum())
+    out = CellSampling(n0, cat["level"], cat["i"], cat["j"], cat["power_w"], cat["labels"], cat["faces"], cat["point"], cat["t"],
+                       cat["direction"], rays, lv, unresolved, truncated)
+    out.exact_targets = frozenset(clean)
+    return out
+
+
+def _unseen_cells(labels, hit_by_centre, clean, n_targets) -> np.ndarray:
+    """Cells touching a (non-clean) target that no centre ray has hit yet: split them
+    until one does, so a target thinner than the cells still gets a spot."""
+    unseen = [k for k in np.unique(labels[:, 1:]) if 0 <= k < n_targets and k not in hit_by_centre and k not in clean]
+    if not unseen:
+        return np.zeros(len(labels), bool)
+    return np.any(np.isin(labels, unseen), axis=1)
+
+
+def _needs_split(labels, clean) -> np.ndarray:
+    """Mixed cells, except those mixed only between clean flat targets and empty beam."""
+    mixed = np.any(labels != labels[:, :1], axis=1)
+    if clean:
+        benign = np.all(np.isin(labels, list(clean) + [-1]), axis=1)
+        return mixed & ~benign
+    return mixed
+
+
+def flat_outline_s(beam: BeamGeometry, target, n_disk=1024):
+    """A flat target's outline in s: (polygon, lower-bound polygon) or None when any part
+    is not in front of the aperture (then the ray sampling decides). A plate's polygon is
+    exact (both the same); a disk's ellipse lies between the inscribed and circumscribed
+    polygons of ``n_disk`` sides (the circumscribed one is returned first: the upper bound).
+    """
+    spec = target.spec
+    x, z = target.tangent, target.normal
+    y = np.cross(z, x)
+    c = target.center_m
+    if spec.shape == "plate":
+        hw, hh = spec.size_m[0] / 2, spec.size_m[1] / 2
+        corners = [c + sx * hw * x + sy * hh * y for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+        outer = inner = np.array(corners)
+    elif spec.shape == "disk":
+        r = spec.size_m[0] / 2
+        a = 2 * math.pi * np.arange(n_disk) / n_disk
+        ring = np.cos(a)[:, None] * x + np.sin(a)[:, None] * y
+        inner = c + r * ring
+        outer = c + r / math.cos(math.pi / n_disk) * ring
+    else:
+        return None
+    so, zo = beam.to_s(outer)
+    si, zi = beam.to_s(inner)
+    if np.any(zo <= 0) or np.any(zi <= 0) or not (np.all(np.isfinite(so)) and np.all(np.isfinite(si))):
+        return None
+    return so, si

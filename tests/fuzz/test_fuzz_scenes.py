@@ -1,0 +1,316 @@
+"""Fuzz the input boundary: mutated scene files must give one clear error line or a
+sane result, never a traceback, a hang, a non-finite number or a vanished target.
+
+Every bundled example scene is made cheap (few observers, beam rays and keep-out cells)
+and then mutated at every field path of its data: the field deleted, set to NaN, +-inf,
+1e308, -1, 0, true, "x", [], a deeply nested list, a list one longer or shorter, or an
+unknown key added beside it. Each mutant is written as TOML and goes through
+``scenes.loads`` (and ``hazard validate`` for a share of them); accepted mutants are
+analysed in-process under a time limit.
+
+The default slice draws a fixed (derandomized) sample of the mutants; ``-m slow`` runs all
+of them (several thousand) plus random pairs of mutations.
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+import math
+import signal
+import threading
+import time
+import tomllib
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import hazard
+import scenes
+from hazard.cli import main
+from hazard.report import report_dict
+
+# every declared target must be in the report, hit by the beam or not (False: only count)
+REQUIRE_ALL_TARGETS = True
+CASE_SECONDS = 20  # time box of one analysis (the cheap bases run in well under 1 s)
+DEEP = 200  # nesting depth of the "deep list" mutation (the limit is 32)
+
+_MISSING = object()
+MUTATIONS = ("delete", "nan", "inf", "-inf", "1e308", "-1", "0", "true", "str", "empty", "deep", "longer", "shorter", "unknown")
+
+
+# -- TOML writing (inline tables only: every structure round-trips) ----------------------
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{json.dumps(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(type(v))
+
+
+def to_toml(data: dict) -> str:
+    return "".join(f"{json.dumps(k)} = {_toml_value(v)}\n" for k, v in data.items())
+
+
+# -- cheap bases and their field paths ---------------------------------------------------
+def _cheap(data: dict) -> dict:
+    a = data.setdefault("analysis", {})
+    a.update(beam_samples=16, direction_grid_deg=10.0, refine_levels=1)
+    for o in data.get("observers", []):
+        if "count" in o:
+            o["count"] = min(o["count"], 4)
+        if "counts" in o:
+            o["counts"] = [3, 3]
+    if any("history" in t for t in data["targets"]):
+        a["time_step_s"] = (a.get("time_end_s") or data["exposure"]["duration_s"]) / 8
+    return data
+
+
+BASES = {name: (_cheap(tomllib.loads(p.read_text())), p.parent) for name, p in scenes.examples().items()}
+
+
+def _paths(node, prefix=()):
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield prefix + (k,)
+            yield from _paths(v, prefix + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield prefix + (i,)
+            yield from _paths(v, prefix + (i,))
+
+
+def _mutate(data, path, kind):
+    d = copy.deepcopy(data)
+    node = d
+    for key in path[:-1]:
+        node = node[key]
+    last = path[-1]
+    old = node[last]
+    if kind == "delete":
+        if isinstance(node, list):
+            del node[last]
+        else:
+            del node[last]
+        return d
+    if kind == "unknown":
+        target = old if isinstance(old, dict) else node
+        if isinstance(target, dict):
+            target["no_such_key"] = 1.0
+        else:
+            target.append(1.0)
+        return d
+    if kind in ("longer", "shorter"):
+        if not isinstance(old, list):
+            return None
+        node[last] = old + [old[-1] if old else 1.0] if kind == "longer" else old[:-1]
+        return d
+    values = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf, "1e308": 1e308, "-1": -1, "0": 0, "true": True,
+              "str": "x", "empty": []}
+    if kind == "deep":
+        v = 1.0
+        for _ in range(DEEP):
+            v = [v]
+        node[last] = v
+    else:
+        node[last] = values[kind]
+    return d
+
+
+ALL_CASES = [(name, path, kind) for name, (data, _) in BASES.items() for path in _paths(data) for kind in MUTATIONS]
+
+
+# -- checks ------------------------------------------------------------------------------
+class _Timeout(Exception):
+    pass
+
+
+def _time_box(seconds):
+    """Raise _Timeout in the main thread after ``seconds`` (signal.setitimer)."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
+        return None
+
+    def fire(signum, frame):
+        raise _Timeout()
+
+    old = signal.signal(signal.SIGALRM, fire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    return old
+
+
+def _end_box(old):
+    if old is not None:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _non_finite(obj, where=""):
+    """Paths of NaN anywhere, and of infinities outside distances (an infinite NOHD of an
+    undiverging beam is a real answer; the report writes it as the string "inf")."""
+    out = []
+    stack = [(obj, where)]
+    while stack:
+        node, w = stack.pop()
+        if isinstance(node, dict):
+            stack.extend((v, f"{w}.{k}") for k, v in node.items())
+        elif isinstance(node, (list, tuple)):
+            stack.extend((v, f"{w}[{i}]") for i, v in enumerate(node))
+        elif node == "nan" or (isinstance(node, float) and math.isnan(node)):
+            out.append(w)
+        elif node in ("inf", "-inf") or (isinstance(node, float) and math.isinf(node)):
+            leaf = w.rsplit(".", 1)[-1]
+            if not any(s in leaf for s in ("nohd", "_m", "range", "ratio", "volume", "distance")):
+                out.append(w)
+    return out
+
+
+def run_case(name, path, kind, *, cli=False, tmp=None) -> str:
+    """Run one mutant; returns its outcome ("rejected", "accepted", "skipped") or raises
+    AssertionError describing the failure."""
+    data, base_dir = BASES[name]
+    mutant = _mutate(data, path, kind)
+    if mutant is None:
+        return "skipped"
+    text = to_toml(mutant)
+    label = f"{name}: {'.'.join(map(str, path))} <- {kind}"
+    try:
+        scene = scenes.loads(text, source="<fuzz>", base_dir=base_dir)
+    except ValueError as exc:  # SceneError is a ValueError
+        msg = str(exc)
+        assert msg and "\n" not in msg and len(msg) < 2000, f"{label}: unclear error {msg!r}"
+        accepted = False
+    else:
+        accepted = True
+    if cli and tmp is not None:
+        for extra in base_dir.iterdir():  # the files the scene names (materials, heightmaps)
+            if extra.suffix != ".toml" and not (Path(tmp) / extra.name).exists():
+                (Path(tmp) / extra.name).write_bytes(extra.read_bytes())
+        f = Path(tmp) / "mutant.toml"
+        f.write_text(text)
+        out, err = io.StringIO(), io.StringIO()
+        code = main(["validate", str(f), "--json"], stdout=out, stderr=err)
+        lines = [ln for ln in err.getvalue().splitlines() if not ln.startswith("hazard: warning:")]
+        assert "Traceback" not in err.getvalue(), f"{label}: traceback"
+        assert code == (0 if accepted else 2), f"{label}: validate exit {code} but loads {'accepted' if accepted else 'refused'}: {err.getvalue()}"
+        assert len(lines) == (0 if accepted else 1), f"{label}: stderr {err.getvalue()!r}"
+    if not accepted:
+        return "rejected"
+    old = _time_box(CASE_SECONDS)
+    start = time.perf_counter()
+    try:
+        result = hazard.analyze(scene, progress=None, threads=1)
+        doc = report_dict(result)
+    except _Timeout:
+        raise AssertionError(f"{label}: analysis ran over {CASE_SECONDS} s") from None
+    except ValueError as exc:  # an accepted scene the analysis refuses: validate and run disagree
+        raise AssertionError(f"{label}: accepted by loads but the analysis refused it: {exc}") from None
+    finally:
+        _end_box(old)
+    assert time.perf_counter() - start < CASE_SECONDS
+    declared = {t["name"] for t in mutant["targets"] if isinstance(t, dict) and "name" in t} or {t.name for t in scene.targets}
+    reported = {t["name"] for t in doc["targets"]}
+    bad = _non_finite(doc)
+    assert not bad, f"{label}: non-finite numbers at {bad[:5]}"
+    if not declared <= reported:
+        assert not REQUIRE_ALL_TARGETS, f"{label}: targets {sorted(declared - reported)} vanished from the report"
+        return "accepted, a target missing from the report"
+    return "accepted"
+
+
+# -- the tests ---------------------------------------------------------------------------
+STATS: Counter = Counter()
+
+
+@settings(max_examples=80, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(case=st.sampled_from(ALL_CASES), use_cli=st.integers(0, 3))
+def test_mutated_scenes(case, use_cli, tmp_path):
+    STATS[run_case(*case, cli=use_cli == 0, tmp=tmp_path)] += 1
+
+
+def test_named_examples_of_the_issue(tmp_path):
+    """The issue's examples: each is one clear error line, at validation."""
+    base = copy.deepcopy(BASES["plate"][0])
+    cases = {
+        "missing parameter": (("targets", 0, "material"), {"model": "lambertian"}, "missing parameter reflectance"),
+        "infinite beam": (("laser", "beam_diameter_m"), math.inf, "finite"),
+        "bool power": (("laser", "power_w"), True, "valid number"),
+        "tiny grid": (("analysis", "direction_grid_deg"), 1e-308, "HAZARD_MAX_KEEPOUT_CELLS"),
+        "device file": (("targets", 0, "material"), {"file": "/dev/zero"}, "not a regular file"),
+        "five-parameter kd = 22": (("targets", 0, "material"), {"model": "torrance-sparrow-5", "kb": 0.072, "kr": 16.125,
+                                                                 "b": -29.917, "a": 0.959, "kd": 22.0}, "hemispherical reflectance"),
+    }
+    for what, (path, value, expect) in cases.items():
+        d = copy.deepcopy(base)
+        node = d
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = value
+        with pytest.raises(scenes.SceneError, match=expect):
+            scenes.loads(to_toml(d))
+    d = copy.deepcopy(base)
+    d["observers"] = [{"name": "g", "origin_m": [0.0, -20.0, -5.0], "u_m": [10.0, 0.0, 0.0], "v_m": [0.0, 0.0, 10.0],
+                       "counts": [31623, 31623]}]
+    with pytest.raises(scenes.SceneError, match="HAZARD_MAX_OBSERVERS"):
+        scenes.loads(to_toml(d))
+    text = to_toml(base).replace('"position_m" = [0.0, -50.0, 0.0]', '"position_m" = ' + "[" * 10000 + "]" * 10000)
+    assert "[" * 10000 in text
+    with pytest.raises(scenes.SceneError, match="nesting depth"):
+        scenes.loads(text)
+    d = copy.deepcopy(base)
+    d["laser"]["divergence_rad"] = 1.0
+    d["laser"]["beam_diameter_m"] = 5.0
+    sc = scenes.loads(to_toml(d))
+    assert any("mrad" in w for w in sc.warnings) and any("mm meant" in w for w in sc.warnings)
+
+
+@pytest.mark.slow
+def test_every_mutation(tmp_path):
+    """Every mutant of every bundled scene (several thousand), validate on a quarter."""
+    counts = Counter()
+    failures = []
+    start = time.perf_counter()
+    for i, case in enumerate(ALL_CASES):
+        try:
+            counts[run_case(*case, cli=i % 4 == 0, tmp=tmp_path)] += 1
+        except AssertionError as exc:
+            failures.append(str(exc).splitlines()[0])
+    print(f"\nfuzz: {len(ALL_CASES)} cases, {dict(counts)}, {len(failures)} failures, {time.perf_counter() - start:.1f} s")
+    assert not failures, "\n".join(failures[:20])
+
+
+@pytest.mark.slow
+@settings(max_examples=2000, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(a=st.sampled_from(ALL_CASES), kind=st.sampled_from(MUTATIONS), k=st.integers(0, 10_000))
+def test_pairs_of_mutations(a, kind, k, tmp_path):
+    """Two mutations at once: one enumerated, one more at another path of the mutant."""
+    name, path, first = a
+    data, base_dir = BASES[name]
+    once = _mutate(data, path, first)
+    if once is None:
+        return
+    paths = list(_paths(once))
+    if not paths:
+        return
+    BASES[f"{name}+"] = (once, base_dir)
+    try:
+        run_case(f"{name}+", paths[k % len(paths)], kind)
+    finally:
+        del BASES[f"{name}+"]

@@ -1,0 +1,1 @@
+"""Independent validation suite: the hazard engine against references written from the spec formulas."""

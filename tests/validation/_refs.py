@@ -1,0 +1,529 @@
+"""Independent reference formulas for the validation suite (numpy/scipy only).
+
+Nothing here imports the engine (``hazard.engine``, ``hazard.analysis``, ``hazard.keepout``,
+``hazard.nohd``): every number is written out from the formulas of
+/work/shared/spec/range-safety.md (sections 1, 2, 4) and /work/shared/spec/laser-safety.md
+(sections 3.1: NOHD, diffuse reflection, Beer-Lambert attenuation, ENOHD gain).
+The functions are themselves checked in ``test_reference_selfcheck.py`` against brute-force
+quadrature, Monte Carlo ray traces and the worked examples of the spec.
+
+Beam conventions (range-safety.md section 1):
+  a    = 1/e irradiance diameter at the aperture, phi = full divergence at 1/e,
+  D(R) = a + R phi, w_e = D/2 (1/e radius), E(r) = 4P/(pi D^2) exp(-r^2 / w_e^2),
+  rays come from a virtual point source a/phi behind the aperture.
+Attenuation: exp(-mu * path length), once per leg.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.special import erf, lambertw
+from hypothesis import HealthCheck, Phase, settings
+from scipy.stats import ncx2
+
+# hypothesis settings: reproducible (derandomized), no deadline; few examples by default,
+# and no shrinking there (a failing engine must not stretch the default run; the example
+# printed is the drawn one)
+_HC = [HealthCheck.filter_too_much, HealthCheck.too_slow]
+FAST = settings(max_examples=25, derandomize=True, deadline=None, database=None, suppress_health_check=_HC,
+                phases=[Phase.explicit, Phase.generate])
+SLOW = settings(max_examples=120, derandomize=True, deadline=None, database=None, suppress_health_check=_HC)
+
+# --------------------------------------------------------------------------- vectors
+
+
+def unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def rotation_matrix(axis, angle):
+    """Rodrigues rotation about ``axis`` by ``angle`` [rad]."""
+    k = unit(axis)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(angle) * kx + (1 - math.cos(angle)) * kx @ kx
+
+
+def euler_rotation(yaw, pitch, roll):
+    """A proper rotation from three angles [rad] (z, then y, then x)."""
+    return rotation_matrix([0, 0, 1], yaw) @ rotation_matrix([0, 1, 0], pitch) @ rotation_matrix([1, 0, 0], roll)
+
+
+def plate_frame(normal, tangent):
+    """Plate frame as the scene schema defines it: x = tangent made orthogonal to the
+    normal, y = z cross x, z = normal (scenes/spec.py, scenes/geometry.py docstring)."""
+    z = unit(normal)
+    t = np.asarray(tangent, float)
+    x = unit(t - np.dot(t, z) * z)
+    y = np.cross(z, x)
+    return x, y, z
+
+
+def plate_corners(center, normal, tangent, size):
+    x, y, _ = plate_frame(normal, tangent)
+    c = np.asarray(center, float)
+    w, h = size
+    return np.array([c + sx * w / 2 * x + sy * h / 2 * y for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+
+
+def reflect(d, n):
+    """Mirror reflection of direction d about the plane with unit normal n."""
+    d = np.asarray(d, float)
+    n = unit(n)
+    return d - 2 * np.dot(d, n) * n
+
+
+def transverse_basis(u):
+    """Two unit vectors spanning the plane normal to the beam axis u."""
+    u = unit(u)
+    helper = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = unit(np.cross(u, helper))
+    e2 = np.cross(u, e1)
+    return e1, e2
+
+
+# --------------------------------------------------------------------------- the beam
+
+
+class Beam:
+    """Gaussian beam of range-safety.md section 1 (1/e diameter a, full 1/e divergence phi)."""
+
+    def __init__(self, power, a, phi, position, aim, mu=0.0):
+        self.P = float(power)
+        self.a = float(a)
+        self.phi = float(phi)
+        self.pos = np.asarray(position, float)
+        self.u = unit(np.asarray(aim, float) - self.pos)
+        self.mu = float(mu)
+        self.e1, self.e2 = transverse_basis(self.u)
+
+    def diameter(self, R):
+        """D(R) = a + R phi (laser-safety.md 3.1, range-safety.md 1)."""
+        return self.a + R * self.phi
+
+    def w(self, R):
+        return self.diameter(R) / 2.0
+
+    def peak(self, R):
+        """E0 = 4P/(pi D^2), unattenuated (range-safety.md 1)."""
+        return 4.0 * self.P / (math.pi * self.diameter(R) ** 2)
+
+    @property
+    def source(self):
+        """Virtual point source a/phi behind the aperture."""
+        if self.phi == 0:
+            return None
+        return self.pos - self.u * (self.a / self.phi)
+
+    def irradiance_at(self, p):
+        """Unattenuated beam irradiance (normal to the axis) at point p."""
+        d = np.asarray(p, float) - self.pos
+        R = float(np.dot(d, self.u))
+        r2 = float(np.dot(d, d) - R * R)
+        D = self.diameter(R)
+        return 4.0 * self.P / (math.pi * D * D) * math.exp(-4.0 * max(r2, 0.0) / (D * D))
+
+    def project(self, pts, R_plane):
+        """Central projection (from the virtual source) of points onto the transverse
+        plane at axial distance ``R_plane`` from the aperture; returns (N, 2) coordinates
+        in (e1, e2). Orthographic when phi = 0."""
+        pts = np.atleast_2d(np.asarray(pts, float))
+        if self.phi == 0:
+            d = pts - self.pos
+        else:
+            S = self.source
+            v = pts - S
+            depth = v @ self.u
+            if np.any(depth <= 0):
+                raise ValueError("point behind the virtual source")
+            t = (R_plane + self.a / self.phi) / depth
+            d = S + v * t[:, None] - self.pos
+        return np.stack([d @ self.e1, d @ self.e2], axis=1)
+
+    def unproject(self, q, R_plane, plane_point, plane_normal):
+        """Points where the rays through transverse coordinates q (at R_plane) meet a plane."""
+        q = np.atleast_2d(np.asarray(q, float))
+        at = self.pos + R_plane * self.u + q[:, :1] * self.e1 + q[:, 1:2] * self.e2
+        n = unit(plane_normal)
+        if self.phi == 0:
+            dirs = np.broadcast_to(self.u, at.shape)
+            origin = at
+        else:
+            origin = np.broadcast_to(self.source, at.shape)
+            dirs = at - origin
+        s = ((np.asarray(plane_point, float) - origin) @ n) / (dirs @ n)
+        return origin + dirs * s[:, None]
+
+
+# --------------------------------------------------------------------------- power fractions
+
+
+def rect_fraction(x1, x2, y1, y2, w):
+    """F = 1/4 [erf(x2/w) - erf(x1/w)] [erf(y2/w) - erf(y1/w)], w = 1/e radius
+    (range-safety.md section 1, 'Power fractions')."""
+    return 0.25 * (erf(x2 / w) - erf(x1 / w)) * (erf(y2 / w) - erf(y1 / w))
+
+
+def disk_fraction(rho, d, w):
+    """Disk of radius rho, centre offset d from the axis: F = 1 - Q1(d/sigma, rho/sigma)
+    = ncx2.cdf((rho/sigma)^2, 2, (d/sigma)^2), sigma = w/sqrt(2) (range-safety.md 1).
+    Centred: F = 1 - exp(-rho^2/w^2)."""
+    if d == 0:
+        return -math.expm1(-(rho / w) ** 2)
+    s = w / math.sqrt(2.0)
+    return float(ncx2.cdf((rho / s) ** 2, 2, (d / s) ** 2))
+
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
+
+
+def _gl(a, b):
+    half = 0.5 * (b - a)
+    return a + half * (_GL_X + 1.0), half * _GL_W
+
+
+def _gl_composite(a, b, pieces):
+    xs, ws = [], []
+    edges = np.linspace(a, b, pieces + 1)
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        x, wt = _gl(lo, hi)
+        xs.append(x)
+        ws.append(wt)
+    return np.concatenate(xs), np.concatenate(ws)
+
+
+def _polygon_z_range(poly, x):
+    """Lower and upper z of a convex polygon along the vertical lines at x (vectorised)."""
+    lo = np.full_like(x, np.inf)
+    hi = np.full_like(x, -np.inf)
+    n = len(poly)
+    for i in range(n):
+        (xa, za), (xb, zb) = poly[i], poly[(i + 1) % n]
+        if xa == xb:
+            continue
+        t = (x - xa) / (xb - xa)
+        inside = (t >= -1e-12) & (t <= 1 + 1e-12)
+        z = za + np.clip(t, 0, 1) * (zb - za)
+        lo = np.where(inside, np.minimum(lo, z), lo)
+        hi = np.where(inside, np.maximum(hi, z), hi)
+    return lo, hi
+
+
+def gaussian_polygon_fraction(poly, w, weight=None, clip=9.0):
+    """Fraction of a centred circular Gaussian (1/e radius w) inside a convex polygon
+    (vertices (N, 2) in order): integral of exp(-(x^2+z^2)/w^2)/(pi w^2).
+
+    Outer Gauss-Legendre in x between the vertices' abscissae (the bounds are linear
+    there), inner integral in closed form with erf, or Gauss-Legendre when a ``weight``
+    function weight(x, z) (e.g. attenuation along each ray) multiplies the Gaussian.
+    """
+    poly = np.asarray(poly, float)
+    L = clip * w
+    xs = np.unique(np.clip(poly[:, 0], -L, L))
+    total = 0.0
+    for xa, xb in zip(xs[:-1], xs[1:]):
+        if xb - xa <= 0:
+            continue
+        pieces = max(1, int(math.ceil((xb - xa) / (2.0 * w))))
+        x, wt = _gl_composite(xa, xb, pieces)
+        lo, hi = _polygon_z_range(poly, x)
+        ok = hi > lo
+        lo = np.clip(lo, -L, L)
+        hi = np.clip(hi, -L, L)
+        gx = np.exp(-(x / w) ** 2) / (math.sqrt(math.pi) * w)
+        if weight is None:
+            inner = 0.5 * (erf(hi / w) - erf(lo / w))
+        else:
+            inner = np.zeros_like(x)
+            for i in np.nonzero(ok & (hi > lo))[0]:
+                pieces_z = max(1, int(math.ceil((hi[i] - lo[i]) / (2.0 * w))))
+                z, wz = _gl_composite(lo[i], hi[i], pieces_z)
+                gz = np.exp(-(z / w) ** 2) / (math.sqrt(math.pi) * w)
+                inner[i] = np.sum(wz * gz * weight(np.full_like(z, x[i]), z))
+        total += float(np.sum(wt * gx * np.where(ok, inner, 0.0)))
+    return total
+
+
+def plate_spot_power(beam, center, normal, tangent, size, path="ray"):
+    """Power a flat plate intercepts from the beam, attenuated laser->target.
+
+    The plate's outline is projected centrally from the virtual source onto the
+    transverse plane through the plate centre, where the profile is the Gaussian with
+    w = D/2; the projection of a rectangle is a convex quadrilateral. With mu > 0 each
+    ray carries exp(-mu * L): ``path="ray"`` L = |hit - laser| (Beer-Lambert along the
+    ray), ``path="axial"`` L = the hit's range along the beam axis. The two differ by
+    r^2/(2R) per ray: the spread between them is the convention's own ambiguity."""
+    corners = plate_corners(center, normal, tangent, size)
+    R = float(np.dot(np.asarray(center, float) - beam.pos, beam.u))
+    poly = beam.project(corners, R)
+    poly = _ccw(poly)
+    w = beam.w(R)
+    weight = None
+    if beam.mu > 0:
+        def weight(x, z):
+            hits = beam.unproject(np.stack([x, z], 1), R, center, normal)
+            L = np.linalg.norm(hits - beam.pos, axis=1) if path == "ray" else (hits - beam.pos) @ beam.u
+            return np.exp(-beam.mu * L)
+    return beam.P * gaussian_polygon_fraction(poly, w, weight)
+
+
+def plate_peak_irradiance(beam, center, normal, tangent, size, n_grid=401):
+    """Highest incident irradiance (normal to the beam, attenuated laser->hit) on a flat
+    plate's lit part. A ray through the transverse point q (at the plate centre's range R)
+    hits the plate at range s(q); there the profile is 4P/(pi D(s)^2) exp(-4 r_s^2/D(s)^2)
+    with r_s/D(s) = |q|/D(R) (rays from the virtual source), i.e.
+    E0(R) (D(R)/D(s))^2 exp(-|q|^2/w^2) exp(-mu L(q)). Maximised over the projected
+    outline: a dense grid, the vertices and the outline point nearest the axis."""
+    corners = plate_corners(center, normal, tangent, size)
+    R = float(np.dot(np.asarray(center, float) - beam.pos, beam.u))
+    poly = _ccw(beam.project(corners, R))
+    w = beam.w(R)
+    lo = np.maximum(poly.min(0), -4 * w)
+    hi = np.minimum(poly.max(0), 4 * w)
+    cands = [poly, _nearest_on_polygon(poly)[None, :]]
+    if np.all(hi > lo):
+        gx, gz = np.meshgrid(np.linspace(lo[0], hi[0], n_grid), np.linspace(lo[1], hi[1], n_grid))
+        g = np.stack([gx.ravel(), gz.ravel()], 1)
+        zl, zh = _polygon_z_range(poly, g[:, 0])
+        cands.append(g[(g[:, 1] >= zl) & (g[:, 1] <= zh)])
+    q = np.vstack(cands)
+    hits = beam.unproject(q, R, center, normal)
+    rel = hits - beam.pos
+    s_ax = rel @ beam.u
+    L = np.linalg.norm(rel, axis=1)
+    e = beam.peak(R) * (beam.diameter(R) / beam.diameter(s_ax)) ** 2 * np.exp(-(q**2).sum(1) / w**2) * np.exp(-beam.mu * L)
+    return float(e.max())
+
+
+def _nearest_on_polygon(poly):
+    """Point of a convex polygon nearest the origin (the origin itself if inside)."""
+    n = len(poly)
+
+    def cross2(u, v):
+        return u[0] * v[1] - u[1] * v[0]
+
+    sides = [cross2(poly[(i + 1) % n] - poly[i], -poly[i]) for i in range(n)]
+    inside = all(c >= 0 for c in sides) or all(c <= 0 for c in sides)
+    if inside:
+        return np.zeros(2)
+    best, bd = None, math.inf
+    for i in range(n):
+        a, b = poly[i], poly[(i + 1) % n]
+        t = np.clip(-(a @ (b - a)) / ((b - a) @ (b - a)), 0, 1)
+        p = a + t * (b - a)
+        if p @ p < bd:
+            best, bd = p, p @ p
+    return best
+
+
+def lambertian_spot_irradiance(beam, center, normal, tangent, size, rho, observer, lit_normal):
+    """Irradiance at ``observer`` from a Lambertian plate (f_r = rho/pi) lit by the beam,
+    summed over the spot without the far-field step: each ray's power dP (attenuated
+    laser->hit) reflects to E = rho/pi cos(theta_r) dP exp(-mu |O - p|)/|O - p|^2, theta_r
+    from the lit face's normal (laser-safety.md 3.1 diffuse / BRDF forms; Beer-Lambert on
+    each leg). Far from the spot this is rho/pi cos(theta_r) P_spot exp(-mu R2)/R2^2."""
+    corners = plate_corners(center, normal, tangent, size)
+    R = float(np.dot(np.asarray(center, float) - beam.pos, beam.u))
+    poly = _ccw(beam.project(corners, R))
+    w = beam.w(R)
+    O = np.asarray(observer, float)
+    nl = unit(lit_normal)
+
+    def weight(x, z):
+        hits = beam.unproject(np.stack([x, z], 1), R, center, normal)
+        v = O - hits
+        L2 = np.einsum("ij,ij->i", v, v)
+        L = np.sqrt(L2)
+        cos_r = np.clip((v @ nl) / L, 0.0, None)
+        att = np.exp(-beam.mu * (np.linalg.norm(hits - beam.pos, axis=1) + L))
+        return rho / math.pi * cos_r * att / L2
+
+    return beam.P * gaussian_polygon_fraction(poly, w, weight)
+
+
+def _ccw(poly):
+    c = poly.mean(axis=0)
+    ang = np.arctan2(poly[:, 1] - c[1], poly[:, 0] - c[0])
+    return poly[np.argsort(ang)]
+
+
+def rect_peak_irradiance(beam, R, x1, x2, y1, y2):
+    """Highest beam irradiance on a rectangle normal to the axis at range R (coordinates
+    in the transverse plane): the Gaussian at the rectangle's point nearest the axis,
+    attenuated exp(-mu R)."""
+    x = min(max(0.0, x1), x2)
+    y = min(max(0.0, y1), y2)
+    w = beam.w(R)
+    return beam.peak(R) * math.exp(-(x * x + y * y) / (w * w)) * math.exp(-beam.mu * R)
+
+
+# --------------------------------------------------------------------------- NOHDs
+
+
+def folded_specular_range(power, rho, a, phi, mpe, mu=0.0, r_max=1e7):
+    """Folded range R where rho 4P exp(-mu R)/(pi (a + R phi)^2) = MPE (laser-safety.md 3.1,
+    specular NOHD with Beer-Lambert; range-safety.md 2: bracket and bisect, the left side
+    decreases monotonically). Returns 0 if already below the MPE at R = 0."""
+    def f(R):
+        D = a + R * phi
+        return math.inf if D == 0 else rho * 4 * power * math.exp(-mu * R) / (math.pi * D * D) - mpe
+
+    if f(0.0) <= 0:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    while f(hi) > 0:
+        hi *= 2
+        if hi > r_max:
+            raise ValueError("no root below r_max")
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if f(mid) > 0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def lambert_w_range(R0, mu):
+    """a = 0 closed form R = (2/mu) W(mu R0 / 2) (laser-safety.md 3.1, range-safety.md 2)."""
+    if mu == 0:
+        return R0
+    return float((2.0 / mu) * lambertw(mu * R0 / 2.0).real)
+
+
+# --------------------------------------------------------------------------- curved reflectors
+
+
+def sphere_intensity(rho, r, E0, w, psi):
+    """Convex sphere, Gaussian beam centred on it: I(psi) = rho (r^2/4) E0
+    exp(-r^2 sin^2(psi/2) / w^2) [W/sr], psi from the back-reflection direction
+    (range-safety.md section 4)."""
+    return rho * r * r / 4.0 * E0 * np.exp(-(r * np.sin(psi / 2.0)) ** 2 / (w * w))
+
+
+def cylinder_fan_irradiance(rho, E_inc, r, psi, D):
+    """Cylinder with axis normal to the beam, thin fan: E(D) = rho E r cos(psi/2) / (2 D)
+    (range-safety.md section 4); E_inc is the incident irradiance at the impact parameter
+    h = r sin(psi/2)."""
+    return rho * E_inc * r * np.cos(psi / 2.0) / (2.0 * D)
+
+
+def cylinder_fan_exact(rho, r, Rs, w, E0, observer_xy):
+    """Geometric-optics irradiance of the fan of a cylinder (radius r, axis normal to the
+    beam) at an observer in the plane normal to the axis, without the far-field step.
+
+    In-plane coordinates: X across the beam, Y along it, the cylinder axis at the origin,
+    the virtual source at (0, -Rs). The incident ray crossing Y = 0 at x0 carries
+    E0 exp(-x0^2/w^2) per unit x0 and unit height; find the x0 whose reflected ray passes
+    through the observer (exact circle intersection, mirror reflection), then
+    E = rho E0 exp(-x0^2/w^2) / |dW/dx0| (ray spacing at the observer) times the
+    out-of-plane spreading l0/(|p - S| + |O - p|) of the diverging beam (l0 = |S -> (x0, 0)|).
+    The same physics as rho E r cos(psi/2)/(2D) (range-safety.md 4) without its O(r/D)
+    error. Returns (irradiance, hit point)."""
+    from scipy.optimize import brentq
+
+    S = np.array([0.0, -Rs])
+    O = np.asarray(observer_xy, float)
+
+    def ray(x0):
+        d = np.array([x0, Rs]) / math.hypot(x0, Rs)
+        c = Rs * d[0] * np.array([d[1], -d[0]])  # foot of the perpendicular from the axis (stable form)
+        p = c - math.sqrt(max(r * r - float(c @ c), 0.0)) * d
+        n = p / r
+        return p, d - 2 * float(d @ n) * n, d
+
+    def dist(x0):
+        p, out, _ = ray(x0)
+        v = O - p
+        return out[0] * v[1] - out[1] * v[0]
+
+    xmax = r * Rs / math.sqrt(Rs * Rs - r * r) * (1 - 1e-9)
+    sgn = 1.0 if O[0] > 0 else -1.0
+    x0 = brentq(dist, 0.0, sgn * xmax, xtol=1e-15 * r, rtol=1e-14) if sgn > 0 else -brentq(
+        lambda x: dist(-x), 0.0, xmax, xtol=1e-15 * r, rtol=1e-14)
+    p, out, _ = ray(x0)
+    if float((O - p) @ out) <= 0:
+        raise ValueError("observer behind the reflecting point")
+    delta = 1e-4 * min(w, r)
+    spacing = abs(dist(x0 + delta) - dist(x0 - delta)) / (2 * delta)
+    l0 = math.hypot(x0, Rs)
+    zfac = l0 / (np.linalg.norm(p - S) + np.linalg.norm(O - p))
+    return rho * E0 * math.exp(-x0 * x0 / (w * w)) / spacing * zfac, p
+
+
+# --------------------------------------------------------------------------- optics
+
+
+def optical_gain(magnification, objective_diameter_m, transmission=1.0, beam_diameter_m=math.inf, pupil_m=7e-3):
+    """Collecting gain of viewing optics (laser-safety.md 3.1, ENOHD): K = min(tau M^2,
+    tau D0^2/g^2, tau D_b^2/g^2), g = 7 mm, each term clipped to >= 1. For diffuse light
+    the field fills the objective (D_b = infinity)."""
+    t = transmission
+    terms = [t * magnification**2, t * (objective_diameter_m / pupil_m) ** 2, t * (beam_diameter_m / pupil_m) ** 2]
+    return min(max(x, 1.0) for x in terms)
+
+
+# --------------------------------------------------------------------------- scene text
+
+
+def fmt(x):
+    return repr(float(x))
+
+
+def vec(v):
+    return "[" + ", ".join(fmt(x) for x in v) + "]"
+
+
+def scene_text(*, power, a, phi, position, aim, targets, observers=(), mu=0.0, wavelength_nm=1064.0,
+               duration_s=10.0, analysis="direction_grid_deg = 10.0\nrefine_levels = 0\n"):
+    """A scene file as TOML text. ``targets``: list of dicts with keys name, shape, center,
+    normal, tangent, size, material (inline TOML table text), optional back (same).
+    ``observers``: list of (name, point, optics-or-None) with optics a dict
+    {magnification, objective_diameter_m, transmission}."""
+    out = [
+        'name = "validation"',
+        "[laser]",
+        f"wavelength_nm = {fmt(wavelength_nm)}",
+        f"power_w = {fmt(power)}",
+        f"beam_diameter_m = {fmt(a)}",
+        f"divergence_rad = {fmt(phi)}",
+        f"position_m = {vec(position)}",
+        f"aim_m = {vec(aim)}",
+        "[exposure]",
+        f"duration_s = {fmt(duration_s)}",
+        "[atmosphere]",
+        f"attenuation_per_m = {fmt(mu)}",
+    ]
+    for t in targets:
+        out += [
+            "[[targets]]",
+            f'name = "{t["name"]}"',
+            f'shape = "{t["shape"]}"',
+            f"center_m = {vec(t['center'])}",
+            f"normal = {vec(t['normal'])}",
+            f"tangent = {vec(t['tangent'])}",
+            f"size_m = {vec(t['size'])}",
+            f"material = {t['material']}",
+        ]
+        if t.get("back"):
+            out.append(f"back = {t['back']}")
+    for name, p, optics in observers:
+        out += ["[[observers]]", f'name = "{name}"', f"points_m = [{vec(p)}]"]
+        if optics:
+            out.append(
+                "optics = { magnification = %s, objective_diameter_m = %s, transmission = %s }"
+                % (fmt(optics["magnification"]), fmt(optics["objective_diameter_m"]), fmt(optics.get("transmission", 1.0)))
+            )
+    if analysis:
+        out += ["[analysis]", analysis]
+    return "\n".join(out) + "\n"
+
+
+def lambertian(rho):
+    return '{ model = "lambertian", reflectance = %s }' % fmt(rho)
+
+
+def specular(rho):
+    return '{ model = "specular", reflectance = %s }' % fmt(rho)
