@@ -187,7 +187,7 @@ def polygon_moments(polygons) -> PolygonMoments:
     counts = np.array([len(p) for p in polys], int)
     owner = np.repeat(np.arange(n), counts)
     a = np.concatenate(polys) if n else np.zeros((0, 2))
-    b = np.concatenate([np.roll(p, -1, axis=0) for p in polys]) if n else a
+    b = a[ring_next(counts)]
     frac = _owen_fractions(a, b, owner, n)
     area2 = np.bincount(owner, a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], n)
     orient = np.where(area2 >= 0, 1.0, -1.0)[owner]
@@ -211,21 +211,40 @@ def polygon_moments(polygons) -> PolygonMoments:
     safe = np.where(frac > 0, frac, 1.0)
     mean = first / safe[:, None]
     cov = second / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
-    return PolygonMoments(frac, *_checked_moments(polys, frac, mean, cov), _r2_min(a, b, owner, orient, n))
+    return PolygonMoments(frac, *_checked_moments(a, counts, frac, mean, cov), _r2_min(a, b, owner, orient, n))
 
 
-def _checked_moments(polys, frac, mean, cov):
-    """Replace moments lost to cancellation by the area centroid and box covariance."""
-    for k, p in enumerate(polys):
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        span = hi - lo
-        ok = (frac[k] > 0 and np.all(mean[k] >= lo - 1e-9 * (1 + span)) and np.all(mean[k] <= hi + 1e-9 * (1 + span))
-              and np.all(np.diag(cov[k]) >= -1e-12) and np.all(np.diag(cov[k]) <= span * span / 4 * (1 + 1e-6) + 1e-300))
-        if not ok:
-            mean[k] = p.mean(axis=0)
-            cov[k] = np.diag(span * span / 12)
-        mean[k] = np.clip(mean[k], lo, hi)
-        cov[k][np.diag_indices(2)] = np.clip(np.diag(cov[k]), 0.0, span * span / 4)
+def ring_next(counts) -> np.ndarray:
+    """For polygons of ``counts`` vertices stored one after another: the index of each
+    vertex's successor around its own polygon."""
+    counts = np.asarray(counts, int)
+    nxt = np.arange(int(counts.sum())) + 1
+    if len(counts):
+        ends = np.cumsum(counts) - 1
+        nxt[ends[counts > 0]] = (ends - counts + 1)[counts > 0]
+    return nxt
+
+
+def _checked_moments(vertices, counts, frac, mean, cov):
+    """Replace moments lost to cancellation (tiny polygons far out) by the area centroid
+    and the uniform covariance of the bounding box; clip the rest into the box."""
+    if not len(counts):
+        return mean, cov
+    starts = np.cumsum(counts) - counts
+    lo = np.minimum.reduceat(vertices, starts, axis=0)
+    hi = np.maximum.reduceat(vertices, starts, axis=0)
+    span = hi - lo
+    var = np.stack([cov[:, 0, 0], cov[:, 1, 1]], axis=1)
+    ok = ((frac > 0) & np.all(mean >= lo - 1e-9 * (1 + span), axis=1) & np.all(mean <= hi + 1e-9 * (1 + span), axis=1)
+          & np.all(var >= -1e-12, axis=1) & np.all(var <= span * span / 4 * (1 + 1e-6) + 1e-300, axis=1))
+    if not np.all(ok):
+        bad = ~ok
+        mean[bad] = np.add.reduceat(vertices, starts, axis=0)[bad] / counts[bad, None]
+        cov[bad] = 0.0
+        cov[bad, 0, 0], cov[bad, 1, 1] = span[bad, 0] ** 2 / 12, span[bad, 1] ** 2 / 12
+    mean[:] = np.clip(mean, lo, hi)
+    cov[:, 0, 0] = np.clip(cov[:, 0, 0], 0.0, span[:, 0] ** 2 / 4)
+    cov[:, 1, 1] = np.clip(cov[:, 1, 1], 0.0, span[:, 1] ** 2 / 4)
     return mean, cov
 
 
@@ -243,26 +262,55 @@ def _r2_min(a, b, owner, orient, n):
     return np.where(holds, 0.0, r2)
 
 
+def _next(a):
+    """Each element's successor around a ring (np.roll(a, -1, axis=0), cheaper)."""
+    return np.concatenate([a[1:], a[:1]])
+
+
+def _clip_half_plane(poly, normal, offset, axis=None):
+    """Sutherland-Hodgman step: the part of a convex polygon where ``normal . p >= offset``
+    (``axis``: the normal is that coordinate axis, and cut points land exactly on it)."""
+    v = poly @ normal - offset
+    inside = v >= 0
+    if inside.all():
+        return poly
+    if not inside.any():
+        return np.zeros((0, 2))
+    nxt, vn = _next(poly), _next(v)
+    cross = inside != _next(inside)
+    f = np.where(cross, v / np.where(cross, v - vn, 1.0), 0.0)
+    cut = poly + f[:, None] * (nxt - poly)
+    if axis is not None:
+        cut[cross, axis] = offset * normal[axis]
+    return np.stack([poly, cut], axis=1)[np.stack([inside, cross], axis=1)]
+
+
 def clip_to_box(polygon_s, s0, s1, t0, t1) -> np.ndarray:
     """A convex polygon (V, 2) clipped to the box [s0, s1] x [t0, t1] (Sutherland-Hodgman);
     (0, 2) when they do not overlap."""
     poly = np.asarray(polygon_s, float)
     for axis, bound, sign in ((0, s0, 1.0), (0, s1, -1.0), (1, t0, 1.0), (1, t1, -1.0)):
+        normal = np.zeros(2)
+        normal[axis] = sign
+        poly = _clip_half_plane(poly, normal, sign * bound, axis)
         if len(poly) == 0:
             break
-        v = sign * (poly[:, axis] - bound)
-        inside = v >= 0
-        if inside.all():
+    return poly if len(poly) >= 3 else np.zeros((0, 2))
+
+
+def clip_convex(polygon_s, window_s) -> np.ndarray:
+    """The intersection of two convex polygons (Sutherland-Hodgman); (0, 2) if empty."""
+    poly = np.asarray(polygon_s, float)
+    win = np.asarray(window_s, float)
+    orient = 1.0 if np.sum(win[:, 0] * np.roll(win[:, 1], -1) - np.roll(win[:, 0], -1) * win[:, 1]) >= 0 else -1.0
+    for a, b in zip(win, np.roll(win, -1, axis=0)):
+        e = b - a
+        normal = orient * np.array([-e[1], e[0]])  # inward
+        if not np.any(normal):
             continue
-        if not inside.any():
-            return np.zeros((0, 2))
-        nxt, vn = np.roll(poly, -1, axis=0), np.roll(v, -1)
-        cross = inside != np.roll(inside, -1)
-        f = np.where(cross, v / np.where(cross, v - vn, 1.0), 0.0)
-        cut = poly + f[:, None] * (nxt - poly)
-        cut[cross, axis] = bound
-        pts = np.stack([poly, cut], axis=1)
-        poly = pts[np.stack([inside, cross], axis=1)]
+        poly = _clip_half_plane(poly, normal, float(normal @ a))
+        if len(poly) == 0:
+            break
     return poly if len(poly) >= 3 else np.zeros((0, 2))
 
 
@@ -292,6 +340,7 @@ class CellSampling:
     unresolved_w: float = 0.0  # power in mixed leaves not covered by an exact outline integral
     truncated_w: float = 0.0  # power outside the square
     exact_targets: frozenset = frozenset()  # flat targets whose outline integral is their power
+    occluders: dict = field(default_factory=dict)  # exact target -> the exact targets in front of it (outlines subtracted)
     _lookup: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -423,9 +472,10 @@ def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
     every edge's line), either orientation (chunked)."""
     pts = np.asarray(points_s, float)
     poly = np.asarray(polygon_s, float)
-    edge = np.roll(poly, -1, axis=0) - poly
-    length = np.linalg.norm(edge, axis=1)
-    orient = np.sign(np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1]))
+    nxt = _next(poly)
+    edge = nxt - poly
+    length = np.sqrt((edge * edge).sum(1))
+    orient = np.sign(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
     out = np.zeros(len(pts), bool)
     for a in range(0, len(pts), 8192):
         q = pts[a:a + 8192]
@@ -435,20 +485,34 @@ def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
     return out
 
 
-def _unclean(outlines, clean, level, i, j, labels, n0):
-    """Flat targets with a ray inside their outline that hit something else (occluded,
-    or behind another object): their outline integral is not their power."""
+def _foreign_hits(outlines, foreign, level, i, j, labels, n0):
+    """Add to ``foreign[k]`` the objects (-1: nothing) hit by rays inside flat target k's
+    outline other than k itself (in place)."""
     d = 2 * HALF_WIDTH / (n0 * 2.0**level)
     base = np.stack([-HALF_WIDTH + i * d, -HALF_WIDTH + j * d], axis=1)
     s = (base[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
     lab = labels.ravel()
-    bad = set()
-    for k in clean:
-        foreign = lab != k
-        # rays within 1e-6 w of the outline may graze its edge in floating point
-        if np.any(foreign) and np.any(inside_convex(s[foreign], outlines[k], margin=1e-6)):
-            bad.add(k)
-    return bad
+    for k, poly in outlines.items():
+        other = lab != k
+        if np.any(other):
+            # rays within 1e-6 w of the outline may graze its edge in floating point
+            inside = inside_convex(s[other], poly, margin=1e-6)
+            foreign[k].update(np.unique(lab[other][inside]).tolist())
+
+
+def exact_classes(foreign) -> dict:
+    """Flat targets whose power follows from outlines: k -> the targets in front of it.
+
+    Front targets (nothing else hit inside their outline) map to an empty set; a target
+    whose outline shows only front targets (no miss, nothing else) maps to those, whose
+    outlines are subtracted from its own. Every other target is sampled by rays.
+    """
+    front = {k for k, f in foreign.items() if not f}
+    out = {k: frozenset() for k in front}
+    for k, f in foreign.items():
+        if f and f <= front:
+            out[k] = frozenset(f)
+    return out
 
 
 def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_level=MAX_LEVEL, outlines=None) -> CellSampling:
@@ -462,6 +526,7 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
     """
     n0 = max(4, int(n0))
     outlines = outlines or {}
+    foreign = {k: set() for k in outlines}
     clean = set(outlines)
     ii, jj = np.meshgrid(np.arange(n0), np.arange(n0), indexing="ij")
     level_i, level_j = ii.ravel(), jj.ravel()
@@ -476,7 +541,8 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
         labels, faces, point, t, direction = _trace_cells(beam, tracer, lvl, level_i, level_j, n0)
         hit_by_centre.update(np.unique(labels[:, 0]).tolist())
         rays += 5 * len(level_i)
-        clean -= _unclean(outlines, clean, lvl, level_i, level_j, labels, n0)
+        _foreign_hits(outlines, foreign, lvl, level_i, level_j, labels, n0)
+        clean = set(exact_classes(foreign))
         d = 2 * HALF_WIDTH / (n0 * 2.0**lv)
         s0 = -HALF_WIDTH + level_i * d
         t0 = -HALF_WIDTH + level_j * d
@@ -500,6 +566,7 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
     out = CellSampling(n0, cat["level"], cat["i"], cat["j"], cat["power_w"], cat["labels"], cat["faces"], cat["point"], cat["t"],
                        cat["direction"], rays, lv, unresolved, truncated)
     out.exact_targets = frozenset(clean)
+    out.occluders = {k: v for k, v in exact_classes(foreign).items() if v}
     return out
 
 

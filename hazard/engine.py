@@ -184,8 +184,10 @@ def _exact_power(beam, outline):
 @dataclass
 class OutlineCells:
     """A flat target's projected outline cut by the beam's coarsest cells: per piece its
-    vertices in s and its exact Gaussian moments (:func:`hazard.beam.polygon_moments`)."""
+    cell key (``i n0 + j``), vertices in s and exact Gaussian moments
+    (:func:`hazard.beam.polygon_moments`)."""
 
+    keys: np.ndarray
     pieces: list
     moments: object
 
@@ -193,22 +195,84 @@ class OutlineCells:
 def outline_cells(outline_s, n0) -> OutlineCells:
     """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
     beam square); pieces carrying no power are dropped."""
-    from .beam import HALF_WIDTH, clip_to_box, inside_convex, polygon_moments
+    from .beam import HALF_WIDTH, PolygonMoments, clip_to_box, inside_convex, polygon_moments
 
     d = 2 * HALF_WIDTH / n0
     lo = np.clip(np.floor((outline_s.min(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
     hi = np.clip(np.floor((outline_s.max(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
-    ii, jj = np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij")
-    s0, t0 = -HALF_WIDTH + ii.ravel() * d, -HALF_WIDTH + jj.ravel() * d
+    ii, jj = (g.ravel() for g in np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"))
+    s0, t0 = -HALF_WIDTH + ii * d, -HALF_WIDTH + jj * d
     corners = np.stack([np.stack([s0 + a * d, t0 + b * d], axis=1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)
     full = inside_convex(corners.reshape(-1, 2), outline_s).reshape(-1, 4).all(axis=1)
     pieces = [corners[k] if full[k] else clip_to_box(outline_s, s0[k], s0[k] + d, t0[k], t0[k] + d) for k in range(len(s0))]
-    pieces = [p for p in pieces if len(p) >= 3]
-    m = polygon_moments(pieces)
+    live = [k for k, p in enumerate(pieces) if len(p) >= 3]
+    m = polygon_moments([pieces[k] for k in live])
     keep = np.flatnonzero(m.fraction > 0)
+    rows = np.asarray(live, int)[keep]
+    if not len(rows):  # wholly outside the beam square (< 3.1e-8 of the power): one piece
+        whole = polygon_moments([outline_s])
+        return OutlineCells(np.array([-1]), [np.asarray(outline_s, float)], whole) if whole.fraction[0] > 0 else \
+            OutlineCells(np.zeros(0, int), [], whole)
+    return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows],
+                        PolygonMoments(m.fraction[keep], m.mean[keep], m.cov[keep], m.r2_min[keep]))
+
+
+def _r2_min_outside(piece, holes, whole_holes, n_edge=256):
+    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value:
+    points on the boundaries of the piece and of its hole pieces ``holes`` (``n_edge``
+    per edge) that are not strictly inside any whole hole polygon ``whole_holes``, the
+    distance lowered by half their spacing."""
+    from .beam import inside_convex
+
+    rings = [piece] + holes
+    u = np.linspace(0.0, 1.0, n_edge + 1)[:, None, None]
+    edges = [np.concatenate([r[1:], r[:1]]) - r for r in rings]
+    pts = np.concatenate([(r + u * e).reshape(-1, 2) for r, e in zip(rings, edges)])
+    spacing = max(float(np.sqrt((e * e).sum(1).max())) for e in edges) / n_edge
+    free = np.ones(len(pts), bool)
+    origin = np.zeros((1, 2))
+    for h in whole_holes:
+        free &= ~inside_convex(pts, h, margin=1e-12)
+    if inside_convex(origin, piece, margin=-1e-12)[0] and not any(inside_convex(origin, h, margin=1e-12)[0] for h in whole_holes):
+        return 0.0
+    if not np.any(free):  # wholly hidden
+        return math.inf
+    r = math.sqrt(float(np.min((pts[free] ** 2).sum(1))))
+    return max(r - spacing / 2, 0.0) ** 2
+
+
+def _subtract_holes(oc, holes_oc, hole_polys):
+    """Moments of each piece minus those of the holes' pieces in the same cell (power,
+    first and second moments add over disjoint regions); returns the new moments and, per
+    piece, its hole pieces."""
     from .beam import PolygonMoments
 
-    return OutlineCells([pieces[k] for k in keep], PolygonMoments(m.fraction[keep], m.mean[keep], m.cov[keep], m.r2_min[keep]))
+    m = oc.moments
+    frac = m.fraction.copy()
+    first = m.mean * frac[:, None]
+    second = (m.cov + m.mean[:, :, None] * m.mean[:, None, :]) * frac[:, None, None]
+    where = {int(k): r for r, k in enumerate(oc.keys)}
+    holes = [[] for _ in oc.pieces]
+    for hoc in holes_oc:
+        hm = hoc.moments
+        for r, k in enumerate(hoc.keys):
+            q = where.get(int(k))
+            if q is None:
+                continue
+            frac[q] -= hm.fraction[r]
+            first[q] -= hm.mean[r] * hm.fraction[r]
+            second[q] -= (hm.cov[r] + np.outer(hm.mean[r], hm.mean[r])) * hm.fraction[r]
+            holes[q].append(hoc.pieces[r])
+    frac = np.maximum(frac, 0.0)
+    safe = np.where(frac > 1e-300, frac, 1.0)
+    mean = np.where((frac > 1e-300)[:, None], first / safe[:, None], m.mean)
+    cov = second / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
+    cov = np.where((frac > 1e-300)[:, None, None], cov, m.cov)
+    cov[:, 0, 0] = np.maximum(cov[:, 0, 0], 0.0)
+    cov[:, 1, 1] = np.maximum(cov[:, 1, 1], 0.0)
+    r2 = np.array([m.r2_min[q] if not holes[q] else _r2_min_outside(oc.pieces[q], holes[q], hole_polys)
+                   for q in range(len(frac))])
+    return PolygonMoments(frac, mean, cov, r2), holes
 
 
 def _plane_hits(beam, target, s):
@@ -238,24 +302,54 @@ class ExactSamples:
     total_w: float  # the unattenuated outline integral
 
 
-def _exact_samples(beam, n0, target, outline, tracer, mu):
-    """Samples of a flat target hit whole by the beam, from its outline cut by the coarsest
-    cells (exact powers, centroids, covariances and nearest-to-axis points); None when a
-    ray through a piece's centroid meets another object first (the outline is then not
-    what is lit). Attenuation per piece uses its shortest path (an upper bound); the
-    spread to the longest goes into the error bound. The power outside the beam square
-    (<= 3.1e-8 P) is spread over the pieces."""
+def _hole_cells(outline, fronts, n0):
+    """The parts of a flat target's outline hidden by exact targets in front of it, cut by
+    the coarsest cells, and the power fraction by which the smallest hole (inscribed
+    polygons) may fall short of the largest (circumscribed) one."""
+    from .beam import clip_convex, polygon_fraction
+
+    holes, polys, slack = [], [], 0.0
+    for front in fronts:
+        small = clip_convex(outline[1], front[1])
+        if len(small):
+            holes.append(outline_cells(small, n0))
+            polys.append(small)
+        big = clip_convex(outline[0], front[0])
+        slack += (polygon_fraction(big) if len(big) else 0.0) - (polygon_fraction(small) if len(small) else 0.0)
+    return holes, polys, slack
+
+
+def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
+    """Samples of a flat target from its outline cut by the coarsest cells (exact powers,
+    centroids, covariances and nearest-to-axis points), less the parts hidden by the flat
+    targets ``fronts`` (index -> outline) in front of it; None when a ray through a
+    piece's centroid meets anything else first (the outline is then not what is lit).
+    Attenuation per piece uses its shortest path (an upper bound); the spread to the
+    longest goes into the error bound. The power outside the beam square (<= 3.1e-8 P)
+    is spread over the pieces."""
+    from .beam import PolygonMoments, polygon_moments, ring_next
+
     oc = outline_cells(outline[0], n0)
     if not oc.pieces:
         return None
-    m = oc.moments
+    holes, hole_polys, slack = _hole_cells(outline, list(fronts.values()) if fronts else [], n0)
+    m, hole_pieces = _subtract_holes(oc, holes, hole_polys) if holes else (oc.moments, [[] for _ in oc.pieces])
+    lit = np.flatnonzero((m.fraction > 0) & np.isfinite(m.r2_min))
+    if not len(lit):
+        return None if not holes else ExactSamples(*(np.zeros((0,) + sh) for sh in ((3,), (3,), (), (), (), (), (2, 2), ())),
+                                                   0.0, 0.0)
+    oc = OutlineCells(oc.keys[lit], [oc.pieces[q] for q in lit], None)
+    m = PolygonMoments(m.fraction[lit], m.mean[lit], m.cov[lit], m.r2_min[lit])
+    hole_pieces = [hole_pieces[q] for q in lit]
     o, dirs = beam.rays(m.mean)
     label = tracer.first_hit(o, dirs).obj
-    if np.any((label != target.index) & (label >= 0)):
+    allowed = [target.index, -1] + list(fronts or {})
+    if np.any(~np.isin(label, allowed)):
         return None
     pts, unit, path, z = _plane_hits(beam, target, m.mean)
     verts = np.concatenate(oc.pieces)
-    owner = np.repeat(np.arange(len(oc.pieces)), [len(p) for p in oc.pieces])
+    counts = [len(p) for p in oc.pieces]
+    owner = np.repeat(np.arange(len(oc.pieces)), counts)
     _, _, vpath, vz = _plane_hits(beam, target, verts)
     lmin, lmax, zmin, smax2 = np.minimum(path, np.inf), path.copy(), z.copy(), np.zeros(len(pts))
     np.minimum.at(lmin, owner, vpath)
@@ -263,16 +357,32 @@ def _exact_samples(beam, n0, target, outline, tracer, mu):
     np.minimum.at(zmin, owner, vz)
     np.maximum.at(smax2, owner, (verts * verts).sum(1))
     total, disk_err = _exact_power(beam, outline)
+    total -= beam.power_w * sum(float(h.moments.fraction.sum()) for h in holes)
     power = beam.power_w * m.fraction
-    power *= total / power.sum()
+    power *= total / max(power.sum(), 1e-300)
     up, down = np.exp(-mu * lmin), np.exp(-mu * lmax)
     w = beam.diameter_at(zmin) / 2
-    peak = beam.power_w / (math.pi * w * w) * np.exp(-m.r2_min) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
-    x, y = verts[:, 0], verts[:, 1]
-    nxt = np.concatenate([np.roll(p, -1, axis=0) for p in oc.pieces])
-    area = np.abs(np.bincount(owner, x * nxt[:, 1] - y * nxt[:, 0], len(pts))) / 2
-    err = disk_err + float((power * (up - down)).sum())
-    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, area, err, total)
+    r2 = m.r2_min.copy()
+    whole_r2 = float(polygon_moments([outline[0]]).r2_min[0]) if not holes else math.inf
+    if whole_r2 < r2.min() * (1 - 1e-9) - 1e-12:  # the outline's nearest point lies outside the beam square
+        near = int(np.argmin(r2))
+        _, _, opath, oz = _plane_hits(beam, target, outline[0])
+        r2[near] = whole_r2
+        zmin[near], lmin[near] = min(zmin[near], float(oz.min())), min(lmin[near], float(opath.min()))
+        smax2[near] = max(smax2[near], float((outline[0] ** 2).sum(1).max()))
+        up[near] = math.exp(-mu * lmin[near])
+        w = beam.diameter_at(zmin) / 2
+    peak = beam.power_w / (math.pi * w * w) * np.exp(-r2) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
+    nxt = verts[ring_next(counts)]
+    area = np.abs(np.bincount(owner, verts[:, 0] * nxt[:, 1] - verts[:, 1] * nxt[:, 0], len(pts))) / 2
+    area -= np.array([sum(_polygon_area(h) for h in hp) for hp in hole_pieces])
+    err = disk_err + beam.power_w * slack + float((power * (up - down)).sum())
+    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, np.maximum(area, 0.0), err, total)
+
+
+def _polygon_area(poly) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))) / 2
 
 
 def _aggregate(keys, weights, values):
@@ -421,14 +531,17 @@ def build_spots(beam, cells, targets, tracer, mu, outlines=None) -> SpotBuild:
     for target in targets:
         k = target.index
         ex = None
-        if k in cells.exact_targets and k in outlines:
-            ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu)
+        fronts = {j: outlines[j] for j in cells.occluders.get(k, ())}
+        if k in cells.exact_targets and k in outlines and all(j in outlines for j in cells.occluders.get(k, ())):
+            ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu, fronts)
         if ex is None:
             totals += _sampled_spot(beam, cells, target, tracer, mu, out)
             continue
         out.exact.append(target.name)
         totals += ex.total_w
-        _exact_spot(beam, cells, target, ex, tracer, outlines[k][0], out)
+        if not ex.power_w.sum() > 0:  # wholly hidden by the targets in front of it
+            continue
+        _exact_spot(beam, cells, target, ex, tracer, None if fronts else outlines[k][0], out)
     out.blocked_w = float(cells.power_w[cells.labels[:, 0] >= len(targets)].sum())
     out.spill_w = max(beam.power_w - totals - out.blocked_w, 0.0)  # the rest (exact where the targets' totals are)
     return out
