@@ -296,51 +296,28 @@ def _specular_observers(result, m):
     return np.full(m, any_specular), False
 
 
-def apply_extended_source(result):
-    """Set the per-observer subtense, C_E and MPE on ``result`` (in place; returns it).
+def _point_source_only(result, m):
+    """C_E = 1 and the scalar MPE for every observer; a skipped stage."""
+    from .results import Stage
 
-    With ``[exposure] extended_source = true``: ``observers.angular_subtense_rad``,
-    ``observers.c_e`` and ``observers.mpe_w_m2`` (+ ``mpe_radiant_exposure_j_m2``) from
-    the spot subtense (see the module notes), a ran stage ``extended_source`` and
-    ``result.extended_source`` (a summary for the report). Otherwise C_E = 1 and the
-    scalar point-source MPE everywhere (the subtense is still reported), and a skipped
-    stage. ``hazard_ratio``, ``hazardous`` and ``hazardous_static`` use the per-observer
-    MPE; for static materials the first exceedance is recomputed with it.
-    """
-    from .analysis import Stage
-
-    t0 = time.perf_counter()
-    scene = result.scene
-    spec = scene.spec
     obs = result.observers
-    m = len(obs)
-    local = scene.observers.positions_m if (scene.observers is not None and m) else np.zeros((0, 3))
-    whole = [_holds_whole_beam(result, sp) for sp in result.spots]
-    alpha = observer_subtense_rad(result.spots, local, result.beam, whole) if (m and result.spots) else np.zeros(m)
-    t_exp = spec.exposure.duration_s
-    obs.angular_subtense_rad = alpha
-    if not spec.exposure.extended_source:
-        obs.c_e = np.ones(m)
-        obs.mpe_w_m2 = np.full(m, float(result.mpe_w_m2))
-        obs.mpe_radiant_exposure_j_m2 = np.full(m, float(result.mpe_radiant_exposure_j_m2))
-        result.extended_source = {"applied": False}
-        result.stages.append(Stage("extended_source", False,
-                                   "point-source MPE (conservative); set [exposure] extended_source = true to apply C_E"))
-        return result
+    obs.c_e = np.ones(m)
+    obs.mpe_w_m2 = np.full(m, float(result.mpe_w_m2))
+    obs.mpe_radiant_exposure_j_m2 = np.full(m, float(result.mpe_radiant_exposure_j_m2))
+    result.extended_source = {"applied": False}
+    result.stages.append(Stage("extended_source", False,
+                               "point-source MPE (conservative); set [exposure] extended_source = true to apply C_E"))
+    return result
 
-    laser = spec.laser
-    pulsed = result.pulse is not None
-    specular, known = _specular_observers(result, m)
-    alpha_used = np.where(specular, 0.0, alpha)
-    ext = extended_source_mpe(alpha_used, laser.wavelength_nm, t_exp, standard=spec.exposure.standard,
-                              pulse_duration_s=laser.pulse_duration_s if pulsed else None,
-                              prf_hz=laser.prf_hz if pulsed else None)
+
+def _set_observer_mpe(result, ext, specular, m, t_exp):
+    """Per-observer C_E and MPE; a static map's first exceedance with that MPE."""
+    obs = result.observers
     mpe_obs = ext.mpe_w_m2
     obs.c_e = np.where(specular, 1.0, ext.c_e)
     obs.mpe_w_m2 = mpe_obs
     obs.mpe_radiant_exposure_j_m2 = mpe_obs * t_exp
-    n_t = len(result.times_s)
-    if n_t == 1 and m:  # static: exceeded from the start or never (the map's rule, with the observer's MPE)
+    if len(result.times_s) == 1 and m:  # static: exceeded from the start or never (the map's rule, with the observer's MPE)
         changed = mpe_obs != float(result.mpe_w_m2)
         obs.first_exceedance_s = np.where(changed, np.where(obs.static_irradiance_w_m2 > mpe_obs, result.times_s[0], np.nan),
                                           obs.first_exceedance_s)
@@ -348,16 +325,15 @@ def apply_extended_source(result):
         result.notes.append("extended source: first_exceedance_s of dynamic materials uses the point-source MPE "
                             "(the earliest possible time; conservative)")
 
-    above = alpha_used > ALPHA_MIN_RAD
-    n_above = int(above.sum())
-    parts = []
+
+def _stage_detail(obs, alpha, ext, specular, known, n_above, m) -> str:
     if m:
-        parts.append(f"C_E from the spot subtense: {obs.c_e.min():.4g} .. {obs.c_e.max():.4g}, "
-                     f"{n_above} of {m} observers above alpha_min ({1e3 * ALPHA_MIN_RAD:g} mrad)")
-        parts.append(f"alpha {1e3 * alpha.min():.4g} .. {1e3 * alpha.max():.4g} mrad")
-        parts.append(f"MPE {mpe_obs.min():.6g} .. {mpe_obs.max():.6g} W/m^2")
+        parts = [f"C_E from the spot subtense: {obs.c_e.min():.4g} .. {obs.c_e.max():.4g}, "
+                 f"{n_above} of {m} observers above alpha_min ({1e3 * ALPHA_MIN_RAD:g} mrad)",
+                 f"alpha {1e3 * alpha.min():.4g} .. {1e3 * alpha.max():.4g} mrad",
+                 f"MPE {ext.mpe_w_m2.min():.6g} .. {ext.mpe_w_m2.max():.6g} W/m^2"]
     else:
-        parts.append("no observers")
+        parts = ["no observers"]
     n_spec = int(specular.sum())
     if n_spec:
         parts.append(f"{n_spec} observer(s) kept at C_E = 1 (specular irradiance"
@@ -367,24 +343,22 @@ def apply_extended_source(result):
         parts.append(f"{len(ext.evaluations)} MPE evaluations on 0.1 % log bins of alpha (rounded down)")
     else:
         parts.append(f"{len(ext.evaluations)} exact MPE evaluation(s)")
-    stage = Stage("extended_source", True, "; ".join(parts))
+    return "; ".join(parts)
 
-    evals = sorted(ext.evaluations.items())
-    applied = [(a, v) for a, v in evals if a > 0]
-    if any(v[0].unverified for _, v in applied):
-        result.notes.append("extended source: the governing MPE row for some observers is labelled [M] "
-                            "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, unverified)")
-    if n_above:
-        result.notes.append("extended source: keep-out lobes, NOHDs and the ground footprint use the point-source MPE (conservative)")
 
-    def entry(a, v):
-        res, pulse, e = v
-        return {"alpha_rad": a, "c_e": res.factors.C_E, "alpha_max_rad": res.factors.alpha_max_rad, "T2_s": res.factors.T2_s,
-                "mpe_w_m2": e, "table_row": res.table_row, "formula": res.formula, "label": res.label,
-                "unverified": res.unverified, "steps": list(res.steps),
-                "pulse": None if pulse is None else pulse.to_dict()}
+def _mpe_entry(a, v) -> dict:
+    res, pulse, e = v
+    return {"alpha_rad": a, "c_e": res.factors.C_E, "alpha_max_rad": res.factors.alpha_max_rad, "T2_s": res.factors.T2_s,
+            "mpe_w_m2": e, "table_row": res.table_row, "formula": res.formula, "label": res.label,
+            "unverified": res.unverified, "steps": list(res.steps),
+            "pulse": None if pulse is None else pulse.to_dict()}
 
-    result.extended_source = {
+
+def _summary(spec, ext, known, n_above, n_spec, t_exp) -> dict:
+    """The report's ``extended_source`` block."""
+    applied = [(a, v) for a, v in sorted(ext.evaluations.items()) if a > 0]
+    laser = spec.laser
+    return {
         "applied": True,
         "alpha_min_rad": ALPHA_MIN_RAD,
         "alpha_max_rad": _mpe.correction_factors(laser.wavelength_nm, t_exp, 0.0, spec.exposure.standard).alpha_max_rad,
@@ -398,9 +372,48 @@ def apply_extended_source(result):
         "observers_above_alpha_min": n_above,
         "observers_kept_specular": n_spec,
         # the MPE calculation at the smallest and the largest subtense applied (every step)
-        "mpe_smallest_alpha": entry(*applied[0]) if applied else None,
-        "mpe_largest_alpha": entry(*applied[-1]) if len(applied) > 1 else None,
+        "mpe_smallest_alpha": _mpe_entry(*applied[0]) if applied else None,
+        "mpe_largest_alpha": _mpe_entry(*applied[-1]) if len(applied) > 1 else None,
     }
-    stage.seconds = time.perf_counter() - t0
-    result.stages.append(stage)
+
+
+def apply_extended_source(result):
+    """Set the per-observer subtense, C_E and MPE on ``result`` (in place; returns it).
+
+    With ``[exposure] extended_source = true``: ``observers.angular_subtense_rad``,
+    ``observers.c_e`` and ``observers.mpe_w_m2`` (+ ``mpe_radiant_exposure_j_m2``) from
+    the spot subtense (see the module notes), a ran stage ``extended_source`` and
+    ``result.extended_source`` (a summary for the report). Otherwise C_E = 1 and the
+    scalar point-source MPE everywhere (the subtense is still reported), and a skipped
+    stage. ``hazard_ratio``, ``hazardous`` and ``hazardous_static`` use the per-observer
+    MPE; for static materials the first exceedance is recomputed with it.
+    """
+    from .results import Stage
+
+    t0 = time.perf_counter()
+    scene, obs = result.scene, result.observers
+    spec, m = scene.spec, len(result.observers)
+    local = scene.observers.positions_m if (scene.observers is not None and m) else np.zeros((0, 3))
+    whole = [_holds_whole_beam(result, sp) for sp in result.spots]
+    alpha = observer_subtense_rad(result.spots, local, result.beam, whole) if (m and result.spots) else np.zeros(m)
+    t_exp = spec.exposure.duration_s
+    obs.angular_subtense_rad = alpha
+    if not spec.exposure.extended_source:
+        return _point_source_only(result, m)
+    laser, pulsed = spec.laser, result.pulse is not None
+    specular, known = _specular_observers(result, m)
+    alpha_used = np.where(specular, 0.0, alpha)
+    ext = extended_source_mpe(alpha_used, laser.wavelength_nm, t_exp, standard=spec.exposure.standard,
+                              pulse_duration_s=laser.pulse_duration_s if pulsed else None,
+                              prf_hz=laser.prf_hz if pulsed else None)
+    _set_observer_mpe(result, ext, specular, m, t_exp)
+    n_above = int((alpha_used > ALPHA_MIN_RAD).sum())
+    if any(v[0].unverified for a, v in ext.evaluations.items() if a > 0):
+        result.notes.append("extended source: the governing MPE row for some observers is labelled [M] "
+                            "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, unverified)")
+    if n_above:
+        result.notes.append("extended source: keep-out lobes, NOHDs and the ground footprint use the point-source MPE (conservative)")
+    result.extended_source = _summary(spec, ext, known, n_above, int(specular.sum()), t_exp)
+    result.stages.append(Stage("extended_source", True, _stage_detail(obs, alpha, ext, specular, known, n_above, m),
+                               time.perf_counter() - t0))
     return result

@@ -105,7 +105,7 @@ def test_tiny_box_inside_the_beam_is_hit(x):
     collimated beam is a 4 x 4 mm square: erf product."""
     scene = scenes.loads(SCENE.format(shape="box", x=x, size="[0.004, 0.004, 0.004]"))
     beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, 1000.0, 0.2, 0.0)
-    from hazard.analysis import _ray_meshes
+    from hazard.pipeline.spots import ray_meshes as _ray_meshes
     from hazard.rays import RayScene
 
     rs = RayScene(_ray_meshes(scene))

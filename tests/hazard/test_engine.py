@@ -12,7 +12,7 @@ from scipy.integrate import quad
 
 import hazard
 import scenes
-from hazard.analysis import _sliding_max_integral
+from hazard.pipeline.irradiance_map import sliding_max_integral as _sliding_max_integral
 from hazard.cli import main
 from hazard.report import write_outputs
 
@@ -168,7 +168,7 @@ def test_dynamic_scene_states_and_verdicts():
 
 def _flat_spot(scene, power_w, diameter_m, divergence_rad):
     """The one spot of a scene of flat targets, built as the analysis builds it."""
-    from hazard.analysis import _FlatScene
+    from hazard.pipeline.spots import FlatScene as _FlatScene
     from hazard.beam import BeamGeometry, sample_cells
     from hazard.engine import build_spots, flat_outlines
 
@@ -420,7 +420,7 @@ def test_footprint_sums_the_spots():
 
 
 def _ray_scene_of(scene):
-    from hazard.analysis import _ray_meshes
+    from hazard.pipeline.spots import ray_meshes as _ray_meshes
     from hazard.rays import RayScene
 
     return RayScene(_ray_meshes(scene))

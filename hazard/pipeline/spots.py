@@ -1,0 +1,156 @@
+"""Stages ``rays`` and ``beam``: the ray scene, and the beam's spots on the targets.
+
+The beam's cross-section is integrated by :mod:`hazard.beam` (exact cell and outline
+powers, adaptive refinement with an error bound) and turned into spots by
+:func:`hazard.engine.build_spots`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..beam import BeamGeometry, sample_cells
+from ..engine import build_spots, flat_outlines
+from ..results import TargetResult
+
+__all__ = ["BeamStage", "ray_scene", "trace_beam", "unlit_targets"]
+
+
+class FlatScene:
+    """Beam hits on plates and disks by ray-plane intersection (no ray library)."""
+
+    def __init__(self, targets):
+        self.targets = targets
+        self.scale_m = 1.0
+
+    def face_normals(self, faces):
+        return np.stack([self.targets[f].normal for f in faces]) if len(faces) else np.empty((0, 3))
+
+    def first_hit(self, origins, directions):
+        from ..rays import Hits
+
+        o = np.asarray(origins, float)
+        d = np.asarray(directions, float)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        n = len(o)
+        best_t = np.full(n, np.inf)
+        best = np.full(n, -1)
+        for t in self.targets:
+            den = d @ t.normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                tt = ((t.center_m - o) @ t.normal) / den
+            p = o + d * np.where(np.isfinite(tt), tt, 0)[:, None]
+            q = p - t.center_m
+            x = q @ t.tangent
+            y = q @ np.cross(t.normal, t.tangent)
+            s = t.spec.size_m
+            inside = (np.abs(x) <= s[0] / 2) & (np.abs(y) <= s[1] / 2) if t.spec.shape == "plate" else (x * x + y * y <= (s[0] / 2) ** 2)
+            ok = np.isfinite(tt) & (tt > 0) & inside & (tt < best_t)
+            best_t[ok] = tt[ok]
+            best[ok] = t.index
+        hit = best >= 0
+        point = np.where(hit[:, None], o + d * np.where(hit, best_t, 0)[:, None], np.nan)
+        return Hits(hit, best_t, best, best, point)
+
+
+def ray_meshes(scene) -> list:
+    """(vertices, faces, object id) of the targets, then the occluders, then the terrain."""
+    meshes = [(t.mesh.vertices, t.mesh.faces, t.index) for t in scene.targets]
+    base = len(scene.targets)
+    meshes += [(m.vertices, m.faces, base + i) for i, m in enumerate(scene.occluders)]
+    if scene.terrain is not None:
+        tm = scene.terrain.mesh()
+        meshes.append((tm.vertices, tm.faces, base + len(scene.occluders)))
+    return meshes
+
+
+def ray_scene(scene, backend, threads):
+    """The ray scene of every object (Embree, or trimesh's numpy engine)."""
+    from ..rays import RayScene
+
+    return RayScene(ray_meshes(scene), backend=backend, threads=threads)
+
+
+@dataclass
+class BeamStage:
+    """The beam (:class:`hazard.beam.BeamGeometry`), its cells, the spots built from
+    them (:class:`hazard.engine.SpotBuild`) and the notes the stage leaves."""
+
+    beam: BeamGeometry
+    cells: object
+    built: object
+    notes: list
+    detail: str
+
+
+def trace_beam(scene, tracer, mu) -> BeamStage:
+    """Sample the beam against every object and build the targets' spots."""
+    spec, laser = scene.spec, scene.spec.laser
+    beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, laser.average_power_w, laser.beam_diameter_m,
+                               laser.divergence_rad)
+    outlines = flat_outlines(beam, scene.targets)
+    cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
+                         outlines={k: v[1] for k, v in outlines.items()})
+    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines)
+    notes = []
+    if built.spill_w > 1e-3 * laser.average_power_w:
+        notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")
+    notes.extend(_unreflected_notes(built.unreflected))
+    return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w))
+
+
+def _level0_cells(beam_samples: int) -> int:
+    """Cells per side of the beam's coarsest grid: about ``beam_samples`` cells in all (at least 4 x 4)."""
+    return max(4, int(round(math.sqrt(beam_samples))))
+
+
+def _beam_detail(cells, built, power_w) -> str:
+    exact = f"; exact outline integrals for {', '.join(built.exact)}" if built.exact else ""
+    if built.unreflected:
+        exact += "; not reflected: " + ", ".join(f"{n} ({s} face, {p:.4g} W)" if s != "unresolved" else f"{n} (unresolved cells, {p:.4g} W)"
+                                                 for n, s, p in built.unreflected)
+    return (f"{cells.rays_traced} rays over {cells.levels_used} level(s) of cells; {len(built.spots)} spot(s); "
+            f"spill {built.spill_w:.4g} W, blocked {built.blocked_w:.4g} W; intercepted-power error bound "
+            f"{built.error_w:.3g} W ({built.error_w / power_w:.2g} of the beam, added to the spots){exact}")
+
+
+def beam_sampling(cells, built, rtol) -> dict:
+    """The beam stage's accuracy for the report: rays, levels, the bound on the power
+    misassigned between objects [W] and which targets got exact outline integrals."""
+    return {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
+            "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
+            "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected]}
+
+
+def unlit_targets(targets, spots, unreflected) -> list:
+    """A row for every target without a spot (after the spots' rows, same order as the
+    file), so no target disappears from a report: what reached it and why nothing reflects."""
+    lit = {sp.target.index for sp in spots}
+    why = {}
+    for name, side, p in unreflected:
+        why.setdefault(name, []).append((side, p))
+    rows = []
+    for t in targets:
+        if t.index in lit:
+            continue
+        parts = why.get(t.name, [])
+        power = float(sum(p for _, p in parts))
+        side = "; ".join(f"{s} face lit, not reflected" if s != "unresolved" else "only unresolved beam cells" for s, _ in parts) or "not lit"
+        rows.append(TargetResult(t.name, power, 0.0, None, None, None, None, None, None, None, lit_side=side))
+    return rows
+
+
+def _unreflected_notes(unreflected) -> list:
+    notes = []
+    for name, side, p in unreflected:
+        if side == "unresolved":
+            notes.append(f"target {name!r}: at most {p:.4g} W reaches it in unresolved beam cells and is not reflected")
+        elif side == "back":
+            notes.append(f"target {name!r}: the lit side is the back ({p:.4g} W) and it has no back material: "
+                         f"nothing was reflected from it (give targets.back to model the back face)")
+        else:
+            notes.append(f"target {name!r}: {p:.4g} W lands on its {side} faces and is not reflected (mixed sides: the other side carries more)")
+    return notes

@@ -1,0 +1,166 @@
+"""What an analysis produces: stage records, per-target and per-observer results."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .keepout import Footprint, Lobe
+
+__all__ = ["Stage", "TargetResult", "ObserverResults", "HazardResult"]
+
+
+@dataclass
+class Stage:
+    """One step of an analysis: whether it ran, what it did or why it was skipped, its time [s]."""
+
+    name: str
+    ran: bool
+    detail: str
+    seconds: float = 0.0
+
+    def to_dict(self):
+        return {"name": self.name, "ran": self.ran, "detail": self.detail, "seconds": self.seconds}
+
+
+@dataclass
+class TargetResult:
+    """Per-target outcome: the spot, the static and dynamic lobes, the specular NOHD."""
+
+    name: str
+    spot_power_w: float
+    spot_size_m: float
+    static_lobe: Lobe | None
+    dynamic_lobe: Lobe | None
+    specular_nohd_static_m: float | None
+    specular_nohd_dynamic_m: float | None
+    specular_direction: list | None
+    state_name: str | None
+    state_range: list | None
+    spot_power_error_w: float = 0.0  # bound on the spot power's error (already added to it: conservative)
+    spot_power_exact: bool = False  # spot power is the exact outline integral
+    peak_irradiance_w_m2: float = 0.0  # highest incident irradiance on the lit part (normal to the beam, attenuated)
+    mean_irradiance_w_m2: float = 0.0  # spot power over its lit area normal to the beam
+    lit_side: str = "front"
+
+    def to_dict(self):
+        def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side
+            return {"max_nohd_m": 0.0, "max_direction": None, "volume_m3": 0.0, "volume_error_m3": 0.0, "cells": 0,
+                    "evaluations": 0} if lb is None else lb.summary()
+
+        return {
+            "name": self.name,
+            "spot_power_w": self.spot_power_w,
+            "spot_power_error_w": self.spot_power_error_w,
+            "spot_power_exact": self.spot_power_exact,
+            "peak_irradiance_w_m2": self.peak_irradiance_w_m2,
+            "mean_irradiance_w_m2": self.mean_irradiance_w_m2,
+            "lit_side": self.lit_side,
+            "spot_size_m": self.spot_size_m,
+            "nohd_static_m": 0.0 if self.static_lobe is None else self.static_lobe.max_range_m,  # no spot: nothing reflected
+            "nohd_dynamic_m": 0.0 if self.dynamic_lobe is None else self.dynamic_lobe.max_range_m,
+            "keepout_static": lobe(self.static_lobe),
+            "keepout_dynamic": lobe(self.dynamic_lobe),
+            "specular_nohd_static_m": self.specular_nohd_static_m,
+            "specular_nohd_dynamic_m": self.specular_nohd_dynamic_m,
+            "specular_direction": self.specular_direction,
+            "state_name": self.state_name,
+            "state_range": self.state_range,
+        }
+
+
+@dataclass
+class ObserverResults:
+    """Arrays over the M observer points (file coordinates)."""
+
+    observers: object  # scenes.Observers (names are built on demand: 1e6 strings cost 0.5 s)
+    position_m: np.ndarray
+    static_irradiance_w_m2: np.ndarray
+    peak_irradiance_w_m2: np.ndarray
+    peak_time_s: np.ndarray
+    radiant_exposure_j_m2: np.ndarray
+    static_radiant_exposure_j_m2: np.ndarray
+    first_exceedance_s: np.ndarray
+    line_of_sight: np.ndarray
+    far_field: np.ndarray
+    irradiance_w_m2: np.ndarray | None  # (M, T) total irradiance history (None if not kept)
+    # extended sources (hazard.extended_source, set by analyze()): the spot's angular
+    # subtense [rad], C_E and the MPE per observer (C_E = 1 and the scalar MPE unless
+    # [exposure] extended_source = true); None on results built without analyze()
+    angular_subtense_rad: np.ndarray | None = None
+    c_e: np.ndarray | None = None
+    mpe_w_m2: np.ndarray | None = None
+    mpe_radiant_exposure_j_m2: np.ndarray | None = None
+    # highest irradiance of the mirror (delta) lobes alone [W/m^2] per observer: > 0 where
+    # an observer sees the beam's image (a point source: C_E = 1); None if not computed
+    specular_irradiance_w_m2: np.ndarray | None = None
+
+    def __len__(self):
+        return len(self.position_m)
+
+    @property
+    def labels(self) -> list:
+        if not hasattr(self, "_labels"):
+            self._labels = self.observers.labels()
+        return self._labels
+
+
+@dataclass
+class HazardResult:
+    """Everything an analysis produced, with the stages that ran."""
+
+    scene: object
+    mpe: object
+    mpe_w_m2: float
+    mpe_radiant_exposure_j_m2: float
+    pulse: object | None
+    attenuation_per_m: float
+    times_s: np.ndarray
+    stages: list
+    targets: list
+    observers: ObserverResults
+    spill_w: float
+    blocked_w: float
+    beam_power_w: float
+    footprint_static: Footprint | None = None
+    footprint_dynamic: Footprint | None = None
+    notes: list = field(default_factory=list)
+    spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
+    beam: object | None = None
+    states: dict = field(default_factory=dict)  # target index -> states over times_s
+    extended_source: dict = field(default_factory=dict)  # C_E summary for the report (hazard.extended_source)
+    beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
+
+    @property
+    def observer_mpe_w_m2(self):
+        """MPE [W/m^2] per observer (with C_E when applied), else the scalar MPE."""
+        per = self.observers.mpe_w_m2
+        return self.mpe_w_m2 if per is None else per
+
+    @property
+    def hazard_ratio(self) -> np.ndarray:
+        return self.observers.peak_irradiance_w_m2 / self.observer_mpe_w_m2
+
+    @property
+    def hazardous(self) -> np.ndarray:
+        return self.hazard_ratio >= 1.0
+
+    @property
+    def hazardous_static(self) -> np.ndarray:
+        return self.observers.static_irradiance_w_m2 / self.observer_mpe_w_m2 >= 1.0
+
+    @property
+    def any_hazard(self) -> bool:
+        return bool(np.any(self.hazardous)) or any(
+            (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
+            for t in self.targets
+        )
+
+    def stage(self, name) -> Stage:
+        return next(s for s in self.stages if s.name == name)
+
+    def verdict_changes(self) -> list:
+        """Observers whose verdict differs between the static and the dynamic analysis."""
+        changed = np.flatnonzero(self.hazardous != self.hazardous_static)
+        return [self.observers.labels[i] for i in changed]
