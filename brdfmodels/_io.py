@@ -22,7 +22,7 @@ LIMITS = {
     "OBSERVERS": (1_000_000, "observer points of a scene"),
     "BEAM_SAMPLES": (1_000_000, "rays across the beam cross-section (analysis.beam_samples)"),
     "TIME_STEPS": (100_000, "time steps of a dynamic analysis (time_end_s / time_step_s)"),
-    "OBSERVER_STEPS": (50_000_000, "observer points x time steps of a dynamic analysis"),
+    "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
     "SCENARIOS": (1_000_000, "scenarios of a study"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
