@@ -21,6 +21,7 @@ import math
 import numpy as np
 from scipy.special import erf, lambertw
 from hypothesis import HealthCheck, Phase, settings
+from hypothesis import strategies as st
 from scipy.stats import ncx2
 
 # hypothesis settings: reproducible (derandomized), no deadline; few examples by default,
@@ -527,3 +528,20 @@ def lambertian(rho):
 
 def specular(rho):
     return '{ model = "specular", reflectance = %s }' % fmt(rho)
+
+
+# --------------------------------------------------------------------------- test helpers
+
+
+def log_uniform(lo, hi):
+    """A hypothesis strategy for floats uniform in log between lo and hi."""
+    return st.floats(math.log(lo), math.log(hi)).map(math.exp)
+
+
+def off_incident_beam(beam, p, factor=2.0):
+    """True if p lies outside the incident beam (more than factor x D from its axis, or
+    behind the laser), so no direct light can reach it."""
+    d = np.asarray(p) - beam.pos
+    R = float(d @ beam.u)
+    r = math.sqrt(max(float(d @ d) - R * R, 0.0))
+    return R < 0 or r > factor * beam.diameter(R)

@@ -34,15 +34,6 @@ import scenes
 from . import _refs as ref
 
 
-def _log_uniform(lo, hi):
-    return st.floats(math.log(lo), math.log(hi)).map(math.exp)
-
-
-def _off_incident_beam(beam, p, factor=2.0):
-    d = np.asarray(p) - beam.pos
-    R = float(d @ beam.u)
-    r = math.sqrt(max(float(d @ d) - R * R, 0.0))
-    return R < 0 or r > factor * beam.diameter(R)
 
 
 def _scene(beam, target, observers):
@@ -119,31 +110,37 @@ def test_sphere_spec_example_uniform_beam():
         d = math.cos(psi) * -beam.u + math.sin(psi) * (math.cos(az) * beam.e1 + math.sin(az) * beam.e2)
         pts.append(m * r * d)
     # observers 100 m from a 10 m wide beam: keep them out of it
-    pts = [p for p in pts if _off_incident_beam(beam, p)]
+    pts = [p for p in pts if ref.off_incident_beam(beam, p)]
     assert len(pts) >= 3
     res = hazard.analyze(_scene(beam, target, pts))
     _check_sphere(res.observers.peak_irradiance_w_m2, [5.625 / 100.0**2] * len(pts))
 
 
 SPHERE_ARGS = dict(
-    r=_log_uniform(0.02, 0.3), L=_log_uniform(20.0, 2000.0), w_over_r=_log_uniform(0.5, 5.0), q=st.floats(0.1, 0.9),
+    r=ref.log_uniform(0.02, 0.3), L=ref.log_uniform(20.0, 2000.0), w_over_r=ref.log_uniform(0.5, 5.0), q=st.floats(0.1, 0.9),
     mu=st.sampled_from([0.0, 1e-4, 2e-3]), rho=st.floats(0.3, 1.0),
     obs=st.lists(st.tuples(st.floats(math.radians(2), math.radians(120)), st.floats(0, 2 * math.pi),
-                           _log_uniform(1000.0, 5000.0)), min_size=1, max_size=6),
+                           ref.log_uniform(1000.0, 5000.0)), min_size=1, max_size=6),
     rot=st.tuples(st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi)),
 )
 
 
-def _sphere_property(r, L, w_over_r, q, mu, rho, obs, rot):
-    assume(L >= 1000 * r)  # locally collimated beam over the sphere, as the formula assumes
-    beam, scene, want, pts = _sphere_case(r, L, w_over_r, q, mu, rho, obs, rot)
-    keep = [i for i, p in enumerate(pts) if _off_incident_beam(beam, p)]
+def _observed_off_beam(case, check, *args):
+    """Build a case (its last two arguments: observers ``obs`` and scene rotation),
+    keep only the observers off the incident beam, analyse and check against the
+    reference."""
+    *head, obs, rot = args
+    beam, scene, want, pts = case(*head, obs, rot)
+    keep = [i for i, p in enumerate(pts) if ref.off_incident_beam(beam, p)]
     assume(keep)
     if len(keep) < len(pts):
-        obs = [obs[i] for i in keep]
-        beam, scene, want, pts = _sphere_case(r, L, w_over_r, q, mu, rho, obs, rot)
-    res = hazard.analyze(scene)
-    _check_sphere(res.observers.peak_irradiance_w_m2, want)
+        beam, scene, want, pts = case(*head, [obs[i] for i in keep], rot)
+    check(hazard.analyze(scene).observers.peak_irradiance_w_m2, want)
+
+
+def _sphere_property(r, L, w_over_r, q, mu, rho, obs, rot):
+    assume(L >= 1000 * r)  # locally collimated beam over the sphere, as the formula assumes
+    _observed_off_beam(_sphere_case, _check_sphere, r, L, w_over_r, q, mu, rho, obs, rot)
 
 
 @ref.FAST
@@ -228,7 +225,7 @@ def test_cylinder_fan_spec_example_scaled():
         exact = ref.cylinder_fan_exact(0.9, r, Rs, w, 1e4, (pts[-1][0], pts[-1][1]))[0]
         assert exact == pytest.approx(far, rel=0.01)
         want.append(far)
-    assert all(_off_incident_beam(beam, p) for p in pts)
+    assert all(ref.off_incident_beam(beam, p) for p in pts)
     target = dict(name="pipe", shape="cylinder", center=np.zeros(3), normal=[0, 0, 1.0], tangent=[1.0, 0, 0],
                   size=(2 * r, 40 * D), material=ref.specular(0.9))
     res = hazard.analyze(_scene(beam, target, pts))
@@ -236,24 +233,17 @@ def test_cylinder_fan_spec_example_scaled():
 
 
 CYL_ARGS = dict(
-    r=_log_uniform(0.05, 0.5), R1=_log_uniform(20.0, 2000.0), w_over_r=_log_uniform(0.3, 2.0), q=st.floats(0.1, 0.9),
+    r=ref.log_uniform(0.05, 0.5), R1=ref.log_uniform(20.0, 2000.0), w_over_r=ref.log_uniform(0.3, 2.0), q=st.floats(0.1, 0.9),
     mu=st.sampled_from([0.0, 1e-4, 2e-3]), rho=st.floats(0.3, 1.0),
     obs=st.lists(st.tuples(st.floats(math.radians(5), math.radians(120)).flatmap(
-        lambda p: st.sampled_from([p, -p])), _log_uniform(50.0, 400.0)), min_size=1, max_size=5),
+        lambda p: st.sampled_from([p, -p])), ref.log_uniform(50.0, 400.0)), min_size=1, max_size=5),
     rot=st.tuples(st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi)),
 )
 
 
 def _cylinder_property(r, R1, w_over_r, q, mu, rho, obs, rot):
     assume(R1 > 40 * r)
-    beam, scene, want, pts = _cylinder_case(r, R1, w_over_r, q, mu, rho, obs, rot)
-    keep = [i for i, p in enumerate(pts) if _off_incident_beam(beam, p)]
-    assume(keep)
-    if len(keep) < len(pts):
-        obs = [obs[i] for i in keep]
-        beam, scene, want, pts = _cylinder_case(r, R1, w_over_r, q, mu, rho, obs, rot)
-    res = hazard.analyze(scene)
-    _check_cylinder(res.observers.peak_irradiance_w_m2, want)
+    _observed_off_beam(_cylinder_case, _check_cylinder, r, R1, w_over_r, q, mu, rho, obs, rot)
 
 
 @ref.FAST

@@ -33,15 +33,6 @@ import scenes
 from . import _refs as ref
 
 
-def _log_uniform(lo, hi):
-    return st.floats(math.log(lo), math.log(hi)).map(math.exp)
-
-
-def _off_incident_beam(beam, p, factor=2.0):
-    d = np.asarray(p) - beam.pos
-    R = float(d @ beam.u)
-    r = math.sqrt(max(float(d @ d) - R * R, 0.0))
-    return R < 0 or r > factor * beam.diameter(R)
 
 
 def _plate(R1, a, phi, fw, fh, ox, oz, tilt_deg, tilt_az, spin, rot, back_lit):
@@ -93,7 +84,7 @@ def test_lambertian_far_field_attenuation_each_leg_and_binoculars():
     pts = [center + R2 * d for d in dirs]
     pts[0] = center + R2 * _directions(n, [(math.radians(5.0), 1.0)])[0]  # off the incident beam
     thetas[0] = math.radians(5.0)
-    assert all(_off_incident_beam(beam, p) for p in pts)
+    assert all(ref.off_incident_beam(beam, p) for p in pts)
     optics = dict(magnification=7.0, objective_diameter_m=0.05, transmission=0.9)
     K = ref.optical_gain(7.0, 0.05, 0.9)
     assert K == pytest.approx(44.1)
@@ -119,7 +110,7 @@ def test_thin_strip_through_the_beam_reflects(back_lit):
     beam = ref.Beam(1000.0, a, phi, pos, np.zeros(3))
     lit = -n if back_lit else n
     pts = [center + 5.0 * d for d in _directions(lit, [(math.radians(x), az) for x, az in ((10, 0.0), (45, 2.0))])]
-    assert all(_off_incident_beam(beam, p) for p in pts)
+    assert all(ref.off_incident_beam(beam, p) for p in pts)
     mat, back = (ref.lambertian(0.9), ref.lambertian(1.0)) if back_lit else (ref.lambertian(1.0), None)
     res = hazard.analyze(_scene(beam, center, n, t, size, mat, back, [(f"o{i}", p, None) for i, p in enumerate(pts)]))
     want = [ref.lambertian_spot_irradiance(beam, center, n, t, size, 1.0, p, lit) for p in pts]
@@ -127,11 +118,11 @@ def test_thin_strip_through_the_beam_reflects(back_lit):
 
 
 LAMB_ARGS = dict(
-    R1=_log_uniform(5.0, 2000.0), a=_log_uniform(2e-3, 0.05), phi=_log_uniform(1e-4, 2e-3),
-    fw=_log_uniform(0.05, 20.0), fh=_log_uniform(0.05, 20.0), ox=st.floats(-2.0, 2.0), oz=st.floats(-2.0, 2.0),
+    R1=ref.log_uniform(5.0, 2000.0), a=ref.log_uniform(2e-3, 0.05), phi=ref.log_uniform(1e-4, 2e-3),
+    fw=ref.log_uniform(0.05, 20.0), fh=ref.log_uniform(0.05, 20.0), ox=st.floats(-2.0, 2.0), oz=st.floats(-2.0, 2.0),
     tilt_deg=st.floats(0.0, 60.0), tilt_az=st.floats(0, 2 * math.pi), spin=st.floats(0, 2 * math.pi),
     mu=st.sampled_from([0.0, 1e-4, 2e-3]), rho=st.floats(0.05, 1.0),
-    obs=st.lists(st.tuples(st.floats(0.0, math.radians(70)), st.floats(0, 2 * math.pi), _log_uniform(300.0, 3000.0)),
+    obs=st.lists(st.tuples(st.floats(0.0, math.radians(70)), st.floats(0, 2 * math.pi), ref.log_uniform(300.0, 3000.0)),
                  min_size=1, max_size=4),
     optics=st.tuples(st.floats(2.0, 10.0), st.floats(0.02, 0.08), st.floats(0.5, 1.0)),
     rot=st.tuples(st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi)),
@@ -145,7 +136,7 @@ def _lambertian_property(R1, a, phi, fw, fh, ox, oz, tilt_deg, tilt_az, spin, mu
     lit = -n if back_lit else n
     ext = _spot_extent(size, D)
     pts = [center + m * ext * d for d, (_, _, m) in zip(_directions(lit, [(th, az) for th, az, _ in obs]), obs)]
-    pts = [p for p in pts if _off_incident_beam(beam, p)]
+    pts = [p for p in pts if ref.off_incident_beam(beam, p)]
     assume(pts)
     M, D0, tau = optics
     K = ref.optical_gain(M, D0, tau)
@@ -196,7 +187,7 @@ def _back_case(with_back, rho=0.5, mu=1e-4):
     front_pts = [center + 500 * ext * d for d in _directions(n, [(math.radians(x), az) for x, az in
                                                                   ((30, 1.0), (60, 3.0))])]
     pts = back_pts + front_pts
-    assert all(_off_incident_beam(beam, p) for p in pts)
+    assert all(ref.off_incident_beam(beam, p) for p in pts)
     observers = [(f"o{i}", p, None) for i, p in enumerate(pts)]
     back = ref.lambertian(rho) if with_back else None
     res = hazard.analyze(_scene(beam, center, n, t, size, ref.lambertian(0.9), back, observers))

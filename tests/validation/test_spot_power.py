@@ -32,9 +32,6 @@ P = 1000.0
 MU = st.sampled_from([0.0, 1e-4, 2e-3])
 
 
-def _log_uniform(lo, hi):
-    return st.floats(math.log(lo), math.log(hi)).map(math.exp)
-
 
 def _plate_case(R1, a, phi, fw, fh, ox, oz, tilt_deg, tilt_az, spin, mu, rot, shape="plate"):
     """Scene and reference for one flat target. The beam runs along +y from (0,-R1,0) to
@@ -165,8 +162,8 @@ def test_disk_spot_power_marcum(rho_over_w, d_over_w):
 # ------------------------------------------------------------------ properties
 
 PLATE_ARGS = dict(
-    R1=_log_uniform(5.0, 2000.0), a=_log_uniform(2e-3, 0.05), phi=_log_uniform(1e-4, 2e-3),
-    fw=_log_uniform(0.05, 20.0), fh=_log_uniform(0.05, 20.0), ox=st.floats(-2.0, 2.0), oz=st.floats(-2.0, 2.0),
+    R1=ref.log_uniform(5.0, 2000.0), a=ref.log_uniform(2e-3, 0.05), phi=ref.log_uniform(1e-4, 2e-3),
+    fw=ref.log_uniform(0.05, 20.0), fh=ref.log_uniform(0.05, 20.0), ox=st.floats(-2.0, 2.0), oz=st.floats(-2.0, 2.0),
     tilt_deg=st.floats(0.0, 60.0), tilt_az=st.floats(0.0, 2 * math.pi), spin=st.floats(0.0, 2 * math.pi), mu=MU,
     rot=st.tuples(st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi)),
 )
@@ -215,8 +212,8 @@ def test_plate_spot_power_error_bound_sweep(**kw):
 
 
 DISK_ARGS = dict(
-    R1=_log_uniform(5.0, 2000.0), a=_log_uniform(2e-3, 0.05), phi=_log_uniform(1e-4, 2e-3),
-    f=_log_uniform(0.05, 20.0), off=st.floats(0.0, 2.0), az=st.floats(0.0, 2 * math.pi), mu=MU,
+    R1=ref.log_uniform(5.0, 2000.0), a=ref.log_uniform(2e-3, 0.05), phi=ref.log_uniform(1e-4, 2e-3),
+    f=ref.log_uniform(0.05, 20.0), off=st.floats(0.0, 2.0), az=st.floats(0.0, 2 * math.pi), mu=MU,
     rot=st.tuples(st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi)),
 )
 
@@ -391,7 +388,7 @@ def test_plate_partly_hidden_by_a_plate_in_front(front, back):
 
 
 @ref.FAST
-@given(R_f=st.floats(5.0, 200.0), gap=st.floats(0.5, 100.0), a=_log_uniform(2e-3, 0.05), phi=_log_uniform(1e-4, 2e-3),
+@given(R_f=st.floats(5.0, 200.0), gap=st.floats(0.5, 100.0), a=ref.log_uniform(2e-3, 0.05), phi=ref.log_uniform(1e-4, 2e-3),
        f=st.tuples(st.floats(-2.0, 2.0), st.floats(0.02, 2.0), st.floats(-2.0, 2.0), st.floats(0.02, 2.0)),
        b=st.tuples(st.floats(-2.0, 2.0), st.floats(0.02, 3.0), st.floats(-2.0, 2.0), st.floats(0.02, 3.0)),
        mu=st.sampled_from([0.0, 2e-3]))
