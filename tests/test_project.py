@@ -47,3 +47,13 @@ def test_examples_run(script, args, expect, tmp_path):
     extra = [] if script == "accuracy_tables.py" else ["--out", str(tmp_path)]
     out = subprocess.run([sys.executable, str(ROOT / "examples" / script), *args, *extra], capture_output=True, text=True, check=True, cwd=ROOT)
     assert expect in out.stdout
+
+
+def test_every_package_is_in_the_wheel():
+    """A sub-package missing from pyproject's list installs nowhere but in editable mode."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("brdfmodels", "scenes", "hazard")
+             for p in (ROOT / top).rglob("__init__.py")}
+    assert found <= listed, f"not in [tool.setuptools] packages: {sorted(found - listed)}"
