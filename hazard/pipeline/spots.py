@@ -68,10 +68,11 @@ def ray_meshes(scene) -> list:
 
 
 def ray_scene(scene, backend, threads):
-    """The ray scene of every object (Embree, or trimesh's numpy engine)."""
-    from ..rays import RayScene
+    """The ray scene of every object (Embree, or trimesh's numpy engine), from the cache
+    when an earlier analysis (a study's scenario) had the same geometry."""
+    from ..rays import cached_ray_scene
 
-    return RayScene(ray_meshes(scene), backend=backend, threads=threads)
+    return cached_ray_scene(ray_meshes(scene), backend=backend, threads=threads)
 
 
 @dataclass
