@@ -296,8 +296,9 @@ def _specular_observers(result, m):
     return np.full(m, any_specular), False
 
 
-def _point_source_only(result, m):
-    """C_E = 1 and the scalar MPE for every observer; a skipped stage."""
+def _point_source_only(result, m, seconds):
+    """C_E = 1 and the scalar MPE for every observer; a skipped stage (its time: the
+    subtense, still computed for the report)."""
     from .results import Stage
 
     obs = result.observers
@@ -306,7 +307,8 @@ def _point_source_only(result, m):
     obs.mpe_radiant_exposure_j_m2 = np.full(m, float(result.mpe_radiant_exposure_j_m2))
     result.extended_source = {"applied": False}
     result.stages.append(Stage("extended_source", False,
-                               "point-source MPE (conservative); set [exposure] extended_source = true to apply C_E"))
+                               "point-source MPE (conservative); set [exposure] extended_source = true to apply C_E "
+                               "(the spot subtense is still computed for the report)", seconds))
     return result
 
 
@@ -399,7 +401,7 @@ def apply_extended_source(result):
     t_exp = spec.exposure.duration_s
     obs.angular_subtense_rad = alpha
     if not spec.exposure.extended_source:
-        return _point_source_only(result, m)
+        return _point_source_only(result, m, time.perf_counter() - t0)
     laser, pulsed = spec.laser, result.pulse is not None
     specular, known = _specular_observers(result, m)
     alpha_used = np.where(specular, 0.0, alpha)

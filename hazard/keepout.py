@@ -6,10 +6,12 @@ For a spot of power P and a direction w above it, the far-field radiant intensit
 ``R(w)`` over the hemisphere; its volume is ``integral R^3 / 3 d omega``. The dynamic
 lobe uses, per direction, the maximum intensity over the history's states.
 
-The direction grid (``grid_deg``) is refined adaptively: a cell whose 2x2 Gauss values
-of R^3 differ by more than ``rtol``, or that contains the mirror or retro direction, is
-split in four, up to ``refine_levels`` times. The volume error estimate is the
-difference between the 2x2 Gauss rule and the midpoint rule on the final cells.
+The direction grid (``grid_deg``) is refined only where the volume's error estimate
+asks: cells with the largest estimates, and those holding the mirror or retro
+direction, are split in four, up to ``refine_levels`` times, until the estimated
+volume error is within ``rtol`` (default ``VOLUME_RTOL``) of the volume. The maximum
+range does not depend on the grid: it is polished by a local search from the best
+evaluated directions.
 """
 
 from __future__ import annotations
@@ -24,10 +26,17 @@ from brdfmodels.parallel import block_rows, map_blocks
 
 from .engine import Spot, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
 from .nohd import range_from_intensity
+from .report import terminal_bar
 
 __all__ = ["Lobe", "hazard_lobe", "ground_footprint", "Footprint"]
 
 _G = 0.5 / math.sqrt(3.0)  # 2-point Gauss abscissae at 0.5 +- _G on [0, 1]
+VOLUME_RTOL = 1e-3  # default target of the estimated volume error, relative to the volume
+POLISH_SEEDS = 4  # best grid points kept as seeds of the polish (besides the mirror and retro directions)
+POLISH_FRACTION = 0.9  # seeds below this fraction of the best value are not polished
+POLISH_RTOL = 1e-12  # the polish stops when its quadratic model predicts less gain than this, relative to the range
+POLISH_MIN_SHRINK = 64  # ... once its stencil is this many times smaller than at the start
+POLISH_TOL_RAD = 1e-7  # ... or when its step is below this angle [rad]
 
 
 @dataclass
@@ -69,8 +78,26 @@ def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states):
     return fn
 
 
+def _grid_cells(grid_deg):
+    """Cells (n, 4) = (theta0, theta1, phi0, phi1) [rad] of the initial direction grid."""
+    th = np.linspace(0, math.pi / 2, max(2, int(round(90 / grid_deg))) + 1)
+    ph = np.linspace(-math.pi, math.pi, max(4, int(round(360 / grid_deg))) + 1)
+    tt, pp = np.meshgrid(np.arange(len(th) - 1), np.arange(len(ph) - 1), indexing="ij")
+    return np.stack([th[tt.ravel()], th[tt.ravel() + 1], ph[pp.ravel()], ph[pp.ravel() + 1]], 1)
+
+
+def _solid_angle(cells):
+    """Solid angle [sr] of each cell."""
+    return (np.cos(cells[:, 0]) - np.cos(cells[:, 1])) * (cells[:, 3] - cells[:, 2])
+
+
+def _centres(cells):
+    """Midpoint of each cell in (cos theta, phi): (theta [rad], phi [rad])."""
+    return np.arccos(0.5 * (np.cos(cells[:, 0]) + np.cos(cells[:, 1]))), 0.5 * (cells[:, 2] + cells[:, 3])
+
+
 def _cell_points(cells):
-    """2x2 Gauss points in (cos theta, phi) of each cell (n, 4): returns (n, 4, 3) and weights."""
+    """2x2 Gauss points in (cos theta, phi) of each cell (n, 4): returns (n, 4, 3)."""
     c0, c1 = np.cos(cells[:, 0]), np.cos(cells[:, 1])
     p0, p1 = cells[:, 2], cells[:, 3]
     pts = []
@@ -87,7 +114,165 @@ def _contains(cells, theta, phi):
     return (cells[:, 0] <= theta) & (theta <= cells[:, 1]) & (cells[:, 2] <= phi) & (phi <= cells[:, 3])
 
 
-def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states=None, grid_deg=2.0, refine_levels=3, rtol=0.05) -> Lobe:
+def _evaluate(fn, cells):
+    """Ranges [m] at the 2x2 Gauss points (n, 4) and the midpoint (n,) of each cell, in
+    one call; also returns the Gauss points (n, 4, 3)."""
+    n = len(cells)
+    pts = _cell_points(cells)
+    mid = brdfmodels.spherical_to_vector(*_centres(cells))
+    r = fn(np.concatenate([pts.reshape(-1, 3), mid.reshape(-1, 3)]))
+    return r[: 4 * n].reshape(n, 4), r[4 * n:], pts
+
+
+def _cell_volumes(cells, r, r_mid):
+    """Volume [m^3] of each cell by the 2x2 Gauss rule, and its error estimate [m^3]:
+    the difference from the midpoint rule (second order, so it bounds the Gauss rule's
+    error on resolved cells)."""
+    omega = _solid_angle(cells)
+    vol = omega * (r**3).mean(1) / 3.0
+    return vol, np.abs(vol - omega * r_mid**3 / 3.0)
+
+
+def _richardson(vol, parent_vol):
+    """Error estimate [m^3] of cells just made by :func:`_quarter` from parents of volume
+    ``parent_vol`` (n,): the difference between a parent's Gauss volume and the sum of
+    its four children's, shared equally among them (an estimate of the parent's error,
+    so a conservative one of the children's)."""
+    n = len(parent_vol)
+    diff = np.abs(parent_vol - vol.reshape(4, n).sum(0))
+    return np.tile(diff / 4.0, 4)
+
+
+def _to_split(err, allowance_m3, forced):
+    """Cells to split: the fewest, largest-error cells such that the errors of the cells
+    kept sum to at most ``allowance_m3``, plus the ``forced`` ones."""
+    order = np.argsort(err)
+    split = np.ones(len(err), bool)
+    split[order[np.cumsum(err[order]) <= allowance_m3]] = False
+    return (split & (err > 0)) | forced
+
+
+def _quarter(c):
+    """Each cell (n, 4) split in four at its (theta, phi) midpoint: (4n, 4)."""
+    tm, pm = 0.5 * (c[:, 0] + c[:, 1]), 0.5 * (c[:, 2] + c[:, 3])
+    return np.concatenate([
+        np.stack([c[:, 0], tm, c[:, 2], pm], 1), np.stack([tm, c[:, 1], c[:, 2], pm], 1),
+        np.stack([c[:, 0], tm, pm, c[:, 3]], 1), np.stack([tm, c[:, 1], pm, c[:, 3]], 1),
+    ])
+
+
+def _top_points(r, pts, k):
+    """The ``k`` largest values of ``r`` (any shape) and their directions ``pts`` (..., 3)."""
+    flat = r.ravel()
+    idx = np.argpartition(flat, -k)[-k:] if flat.size > k else np.arange(flat.size)
+    return flat[idx], pts.reshape(-1, 3)[idx]
+
+
+_STENCIL = np.array([[1, 0], [-1, 0], [0, 1], [0, -1], [1, 1], [1, -1], [-1, 1], [-1, -1]], float)
+
+
+def _on_sphere(w, h, ab):
+    """Directions ``w + h (a e1 + b e2)`` on the upper hemisphere, (e1, e2) a tangent
+    basis at each unit vector w (n, 3), for offsets ``ab`` (n, m, 2) in units of the
+    step ``h`` (n,) [rad]: returns (n, m, 3)."""
+    ref = np.where(np.abs(w[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    e1 = np.cross(w, ref)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(w, e1)
+    d = w[:, None] + h[:, None, None] * (ab[..., :1] * e1[:, None] + ab[..., 1:] * e2[:, None])
+    d[..., 2] = np.maximum(d[..., 2], 0.0)
+    return d / np.linalg.norm(d, axis=2, keepdims=True)
+
+
+def _model_step(f0, f):
+    """Maximum of the quadratic through a 3x3 stencil (centre ``f0`` (n,), the others
+    ``f`` (n, 8) in ``_STENCIL`` order), in units of the stencil's step, at most 2 long,
+    and the gain the quadratic predicts there [m]; where the quadratic is not concave,
+    the best stencil point and an infinite gain (not converged)."""
+    g = np.stack([f[:, 0] - f[:, 1], f[:, 2] - f[:, 3]], 1) / 2.0
+    hxx, hyy = f[:, 0] + f[:, 1] - 2 * f0, f[:, 2] + f[:, 3] - 2 * f0
+    hxy = (f[:, 4] - f[:, 5] - f[:, 6] + f[:, 7]) / 4.0
+    det = hxx * hyy - hxy * hxy
+    concave = (hxx < 0) & (det > 0)
+    safe = np.where(concave, det, 1.0)
+    s = -np.stack([hyy * g[:, 0] - hxy * g[:, 1], hxx * g[:, 1] - hxy * g[:, 0]], 1) / safe[:, None]
+    s *= np.minimum(1.0, 2.0 / np.maximum(np.linalg.norm(s, axis=1), 1e-300))[:, None]
+    gain = (g * s).sum(1) + 0.5 * (hxx * s[:, 0] ** 2 + 2 * hxy * s[:, 0] * s[:, 1] + hyy * s[:, 1] ** 2)
+    return np.where(concave[:, None], s, _STENCIL[f.argmax(1)]), np.where(concave, gain, np.inf)
+
+
+def _polish_max(fn, seeds, step_rad, max_iterations=60):
+    """Local maximum of the range [m] from each seed direction (k, 3): a 3x3 stencil in
+    the tangent plane and a step to the maximum of its quadratic; the stencil shrinks by
+    4 once that maximum lies inside it (or nothing improved). A seed is done when the
+    stencil has shrunk ``POLISH_MIN_SHRINK``-fold (so finer features than the grid are
+    looked at) and the quadratic predicts a gain below ``POLISH_RTOL`` of the range, or
+    when the stencil is below ``POLISH_TOL_RAD``. Returns the best range, its direction and the
+    evaluations; every value it returns was evaluated, so it can only raise a grid
+    maximum towards the true one."""
+    w = np.array(seeds, float)
+    r = fn(w)
+    evals = len(w)
+    h = np.full(len(w), float(step_rad))
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(h > POLISH_TOL_RAD)
+        if not len(idx):
+            break
+        st = _on_sphere(w[idx], h[idx], np.broadcast_to(_STENCIL, (len(idx), 8, 2)))
+        f = fn(st.reshape(-1, 3)).reshape(-1, 8)
+        s, gain = _model_step(r[idx], f)
+        cand = _on_sphere(w[idx], h[idx], s[:, None, :])
+        vals = np.concatenate([f, fn(cand[:, 0])[:, None]], 1)
+        evals += vals.size
+        pts = np.concatenate([st, cand], 1)
+        j = vals.argmax(1)
+        best = vals[np.arange(len(j)), j]
+        better = best > r[idx]
+        w[idx[better]], r[idx[better]] = pts[better, j[better]], best[better]
+        inside = np.linalg.norm(s, axis=1) <= 1.0
+        h[idx] *= np.where(better & ~inside, 1.0, 0.25)
+        done = inside & (gain <= POLISH_RTOL * np.maximum(r[idx], 1e-300)) & (h[idx] <= step_rad / POLISH_MIN_SHRINK)
+        h[idx[done]] = 0.0  # converged
+    k = int(np.argmax(r))
+    return float(r[k]), w[k], evals
+
+
+def _refine(fn, grid_deg, refine_levels, rtol, special, r_special, level_done=None):
+    """Adaptive cells of the lobe (see :func:`hazard_lobe`): returns the final cells,
+    their Gauss ranges (n, 4) [m], volumes and error estimates [m^3], the best
+    evaluated points (seeds of the polish: values [m], directions) and the evaluations.
+    ``level_done()``, if given, is called after each level (progress)."""
+    sp_t, sp_p = brdfmodels.vector_to_spherical(special)
+    cells, kept, evals, parent_vol = _grid_cells(grid_deg), [], 0, None
+    seeds_r, seeds_w = r_special, special
+    vol_kept = err_kept = 0.0
+    for level in range(refine_levels + 1):
+        r, r_mid, pts = _evaluate(fn, cells)
+        evals += 5 * len(cells)
+        seeds_r, seeds_w = _top_points(np.concatenate([seeds_r, r.ravel()]), np.concatenate([seeds_w, pts.reshape(-1, 3)]), POLISH_SEEDS)
+        vol, err = _cell_volumes(cells, r, r_mid)
+        if parent_vol is not None:
+            err = _richardson(vol, parent_vol)
+        split = np.zeros(len(cells), bool)
+        if level < refine_levels:
+            forced = np.zeros(len(cells), bool)
+            for t, p, rs in zip(sp_t, sp_p, r_special):
+                forced |= _contains(cells, t, p) & ((r.max(1) > 0) | (rs > 0))
+            split = _to_split(err, 0.5 * (rtol * (vol_kept + vol.sum()) - err_kept), forced)
+        kept.append((cells[~split], r[~split], vol[~split], err[~split]))
+        vol_kept += float(vol[~split].sum())
+        err_kept += float(err[~split].sum())
+        if level_done is not None:
+            level_done()
+        if not split.any():
+            break
+        cells, parent_vol = _quarter(cells[split]), vol[split]
+    out = [np.concatenate([k[i] for k in kept]) for i in range(4)]
+    return (*out, seeds_r, seeds_w, evals)
+
+
+def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states=None, grid_deg=2.0, refine_levels=3,
+                rtol=None) -> Lobe:
     """NOHD per reflection direction over the hemisphere above a spot.
 
     Parameters
@@ -96,6 +281,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
     mpe_w_m2 : float
         MPE [W/m^2] for the exposure duration.
     attenuation_per_m : float
+        Atmospheric attenuation coefficient [1/m].
     gain : float
         Optical gain of the viewer (1: naked eye).
     states : array_like, optional
@@ -104,69 +290,52 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         Initial direction-grid resolution [deg].
     refine_levels : int
         Maximum number of 4-way splits of a cell.
-    rtol : float
-        Split a cell when its Gauss values of R^3 differ by more than this fraction.
+    rtol : float, optional
+        Target of the estimated volume error, relative to the volume (default: the
+        module's ``VOLUME_RTOL`` when called, chosen from the table of
+        ``tests/bench/bench_keepout.py``). At each level the
+        cells with the largest error estimates are split until the estimates of the
+        cells kept take at most half of the budget left (``rtol`` x volume minus the
+        estimates already kept). The cells holding the mirror or retro direction are
+        always split (a lobe narrower than a cell still gets its volume).
+
+    Notes
+    -----
+    Each cell's volume is the 2x2 Gauss rule in (cos theta, phi). Its error estimate is
+    the difference from the midpoint rule on the initial grid (pessimistic where the
+    lobe is smooth) and, on a split cell's children, the difference between the
+    parent's volume and the children's sum (shared among them). ``volume_error_m3`` is
+    the sum of the final cells' estimates (absolute values: no cancellation).
+
+    The maximum range is the largest of every evaluated direction, the exact mirror and
+    retro directions, and a local search (:func:`_polish_max`) from the best of them, so
+    it does not depend on the grid down to ``POLISH_TOL_RAD``.
     """
+    rtol = VOLUME_RTOL if rtol is None else float(rtol)
     fn = _range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states)
-    th = np.linspace(0, math.pi / 2, max(2, int(round(90 / grid_deg))) + 1)
-    ph = np.linspace(-math.pi, math.pi, max(4, int(round(360 / grid_deg))) + 1)
-    tt, pp = np.meshgrid(np.arange(len(th) - 1), np.arange(len(ph) - 1), indexing="ij")
-    cells = np.stack([th[tt.ravel()], th[tt.ravel() + 1], ph[pp.ravel()], ph[pp.ravel() + 1]], 1)
     wi = spot_directions(spot)
-    mirror_t, mirror_p = brdfmodels.vector_to_spherical(wi * np.array([-1, -1, 1]))
-    retro_t, retro_p = brdfmodels.vector_to_spherical(wi)
-    evals = 0
-    done_cells, done_vals = [], []
-    best_r, best_dir = 0.0, np.array([0.0, 0.0, 1.0])
-    for level in range(refine_levels + 1):
-        pts = _cell_points(cells)
-        r = fn(pts.reshape(-1, 3)).reshape(-1, 4)
-        evals += r.size
-        k = int(np.argmax(r))
-        if r.flat[k] > best_r:
-            best_r, best_dir = float(r.flat[k]), pts.reshape(-1, 3)[k]
-        r3 = r**3
-        spread = (r3.max(1) - r3.min(1)) / np.maximum(r3.max(1), 1e-300)
-        split = (spread > rtol) | _contains(cells, mirror_t, mirror_p) | _contains(cells, retro_t, retro_p)
-        split &= r3.max(1) > 0
-        if level == refine_levels:
-            split[:] = False
-        done_cells.append(cells[~split])
-        done_vals.append(r[~split])
-        if not np.any(split):
-            break
-        c = cells[split]
-        tm, pm = 0.5 * (c[:, 0] + c[:, 1]), 0.5 * (c[:, 2] + c[:, 3])
-        cells = np.concatenate([
-            np.stack([c[:, 0], tm, c[:, 2], pm], 1), np.stack([tm, c[:, 1], c[:, 2], pm], 1),
-            np.stack([c[:, 0], tm, pm, c[:, 3]], 1), np.stack([tm, c[:, 1], pm, c[:, 3]], 1),
-        ])
-    cells = np.concatenate(done_cells)
-    vals = np.concatenate(done_vals)
-    omega = (np.cos(cells[:, 0]) - np.cos(cells[:, 1])) * (cells[:, 3] - cells[:, 2])
-    # exact peak directions: the mirror and retro directions (finite lobes peak there)
-    special = np.stack([wi * np.array([-1, -1, 1]), wi])
-    rs = fn(special)
-    evals += 2
-    if rs.max() > best_r:
-        best_r, best_dir = float(rs.max()), special[int(np.argmax(rs))]
-    centre_t, centre_p = 0.5 * (cells[:, 0] + cells[:, 1]), 0.5 * (cells[:, 2] + cells[:, 3])
-    centre = brdfmodels.spherical_to_vector(centre_t, centre_p)
-    r_mid = fn(centre)
-    evals += len(centre)
-    vol_gauss = float((omega * (vals**3).mean(1)).sum() / 3.0)
-    vol_mid = float((omega * r_mid**3).sum() / 3.0)
+    special = np.stack([wi * np.array([-1, -1, 1]), wi])  # mirror, retro
+    r_special = fn(special)
+    what = f"keep-out lobe {spot.target.name}" + (" (dynamic)" if states is not None and np.size(states) > 1 else "")
+    with terminal_bar(refine_levels + 1, what, unit="level") as bar:  # terminals only
+        cells, r, vol, err, seeds_r, seeds_w, evals = _refine(fn, grid_deg, refine_levels, rtol, special, r_special, bar.update)
+    best_r, best_dir, n_polish = 0.0, np.array([0.0, 0.0, 1.0]), 0
+    seeds_r, seeds_w = np.concatenate([r_special, seeds_r]), np.concatenate([special, seeds_w])
+    if seeds_r.max() > 0:  # polish the seeds within POLISH_FRACTION of the best value
+        near = seeds_r >= POLISH_FRACTION * seeds_r.max()
+        best_r, best_dir, n_polish = _polish_max(fn, seeds_w[near], math.radians(grid_deg) / 4)
+    centre_t, centre_p = _centres(cells)
     return Lobe(
         theta_rad=centre_t,
         phi_rad=centre_p,
-        solid_angle_sr=omega,
-        range_m=vals.mean(1),
-        volume_m3=vol_gauss,
-        volume_error_m3=abs(vol_gauss - vol_mid),
+        solid_angle_sr=_solid_angle(cells),
+        range_m=r.mean(1),
+        volume_m3=float(vol.sum()),
+        volume_error_m3=float(err.sum()),
         max_range_m=best_r,
         max_direction_local=best_dir,
         max_direction_world=best_dir @ spot.mean_frame,
-        evaluations=evals,
+        evaluations=evals + n_polish + 2,
         cells=len(cells),
     )
 
