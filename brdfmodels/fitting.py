@@ -265,11 +265,12 @@ class DynamicFitResult:
 
 
 def fit_dynamic_sh(samples, basis: SHBasis, states, *, state="temperature_k", fanout=0.6, log=True, extrapolation="error",
-                   **kwargs) -> DynamicFitResult:
+                   progress=None, **kwargs) -> DynamicFitResult:
     """One SH fit per state group (samples grouped to the nearest of ``states``).
 
     ``samples`` is a :class:`brdfmodels.screen.Samples` table; each state needs enough
-    samples for the basis.
+    samples for the basis. ``progress``, if given, is called with (states fitted, states)
+    after each fit.
     """
     from .screen import group_by_state
 
@@ -284,6 +285,8 @@ def fit_dynamic_sh(samples, basis: SHBasis, states, *, state="temperature_k", fa
             fits[s_val] = fit_sh(g.wi, g.wo, g.brdf_per_sr, basis, fanout=fanout, log=log, weights=g.weight, **kwargs)
         except ValueError as exc:
             raise ValueError(f"state {state}={s_val:g}: {exc}") from None
+        if progress is not None:
+            progress(len(fits), len(groups))
     nodes = np.array(sorted(fits))
     coef = np.array([fits[s].model.coefficients for s in nodes])
     model = DynamicBRDF(basis, nodes, coef, state, fanout=fanout, log=log, extrapolation=extrapolation)
@@ -402,7 +405,12 @@ def _ts5_objective(wi, wo, f, w):
     return obj
 
 
-def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local="bobyqa", weights=None, xtol_rel=1e-10) -> FitResult:
+TS5_POLISH_MAXEVAL = 20000  # budget of the local polish after the global stage
+PROGRESS_EVERY = 100  # objective evaluations between two progress calls of fit_ts5
+
+
+def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local="bobyqa", weights=None, xtol_rel=1e-10,
+            progress=None) -> FitResult:
     """Fit the five-parameter model: a global nlopt stage, then a local polish.
 
     The objective is the paper's relative RMS error E (Zhang et al. 2010 report E per
@@ -421,6 +429,10 @@ def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local=
         Budget of the global stage.
     local : {"bobyqa", "neldermead"}
         Local polish (nlopt LN_BOBYQA / LN_NELDERMEAD).
+    progress : callable, optional
+        Called with (evaluations, budget) every ``PROGRESS_EVERY`` objective evaluations
+        and at the end; budget = ``maxeval`` + ``TS5_POLISH_MAXEVAL`` (the polish usually
+        stops well short of its share).
     """
     import nlopt
 
@@ -436,9 +448,12 @@ def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local=
         raise ValueError(f"local={local!r}: expected 'bobyqa' or 'neldermead'")
     obj = _ts5_objective(wi, wo, f, w)
     count = [0]
+    budget = int(maxeval) + TS5_POLISH_MAXEVAL
 
     def fun(x, grad):
         count[0] += 1
+        if progress is not None and count[0] % PROGRESS_EVERY == 0:
+            progress(min(count[0], budget), budget)
         return obj(x)
 
     lo = np.array([math.log(TS5_BOUNDS["kb"][0]), math.log(TS5_BOUNDS["kr"][0]), math.log(TS5_BOUNDS["a"][0]), TS5_BOUNDS["b"][0], math.log(TS5_BOUNDS["kd"][0])])
@@ -464,21 +479,28 @@ def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local=
     pol.set_upper_bounds(hi)
     pol.set_min_objective(fun)
     pol.set_xtol_rel(xtol_rel)
-    pol.set_maxeval(20000)
+    pol.set_maxeval(TS5_POLISH_MAXEVAL)
     try:
         x = pol.optimize(x_global)
     except nlopt.RoundoffLimited:
         x = x_global
     e = obj(x)
+    if progress is not None:
+        progress(budget, budget)
     model = TorranceSparrow5(**_ts5_params(x))
     return FitResult(model, e, e, math.nan, 0, len(f), 5, count[0], time.perf_counter() - start, f"nlopt {method} + {local}",
                      {"global_error": e_global, "global_evaluations": ev_global, **{f"p_{k}": v for k, v in _ts5_params(x).items()}})
 
 
-def compare_ts5_methods(wi, wo, brdf_per_sr, *, budgets=(2000, 8000), seeds=(0, 1, 2), methods=None) -> list:
-    """Error reached vs evaluations vs seconds for each global algorithm (+ polish)."""
+def compare_ts5_methods(wi, wo, brdf_per_sr, *, budgets=(2000, 8000), seeds=(0, 1, 2), methods=None, progress=None) -> list:
+    """Error reached vs evaluations vs seconds for each global algorithm (+ polish).
+
+    ``progress``, if given, is called with (fits done, fits) after each fit.
+    """
     rows = []
-    for method in methods or sorted(TS5_METHODS):
+    methods = list(methods or sorted(TS5_METHODS))
+    total, done = len(methods) * len(budgets) * len(seeds), 0
+    for method in methods:
         for budget in budgets:
             errs, evals, secs = [], [], []
             for seed in seeds:
@@ -486,6 +508,9 @@ def compare_ts5_methods(wi, wo, brdf_per_sr, *, budgets=(2000, 8000), seeds=(0, 
                 errs.append(r.relative_rms)
                 evals.append(r.evaluations)
                 secs.append(r.fit_time_s)
+                done += 1
+                if progress is not None:
+                    progress(done, total)
             rows.append({"method": method, "budget": budget, "median_error": float(np.median(errs)), "worst_error": float(np.max(errs)),
                          "evaluations": float(np.mean(evals)), "time_s": float(np.mean(secs))})
     return rows

@@ -183,13 +183,15 @@ def _hemisphere(rng, n, min_cos):
 
 
 def choose_sh_basis(samples: Samples, *, lh_maxes=(4, 6, 8, 10), mh_maxes=(0, 2, 4), fanouts=(0.4, 0.6, 0.8), ld_max=2, md_max=0,
-                    tolerance=0.05, **fit_kwargs):
+                    tolerance=0.05, progress=None, **fit_kwargs):
     """Basis orders and fan-out by leave-one-test-out cross-validation.
 
     Each test (one incidence and groove orientation) is held out in turn; the mean
     held-out log-RMS error is the score. Returns ``(best, table)``: the cheapest setting
     (fewest coefficients) within ``tolerance`` of the lowest error, and the table of every
-    setting (error, coefficients, fit time) it was chosen from.
+    setting (error, coefficients, fit time) it was chosen from. ``progress``, if given,
+    is called with (settings done, settings) before each (orders, fan-out) setting and at
+    the end.
     """
     from .fitting import fit_sh
 
@@ -197,6 +199,8 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=(4, 6, 8, 10), mh_maxes=(0, 2,
     if len(tests) < 2:
         raise ValueError(f"choose_sh_basis: {len(tests)} test(s); leave-one-test-out needs at least 2")
     table = []
+    total = sum(mh <= lh for lh in lh_maxes for mh in mh_maxes) * len(fanouts)
+    done = 0
     for lh in lh_maxes:
         for mh in mh_maxes:
             if mh > lh:
@@ -204,6 +208,9 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=(4, 6, 8, 10), mh_maxes=(0, 2,
             basis = SHBasis(lh, mh, ld_max, md_max)
             eval_s = None
             for fan in fanouts:
+                if progress is not None:
+                    progress(done, total)
+                done += 1
                 errs, t_fit = [], 0.0
                 ok = True
                 for tid in tests:
@@ -226,6 +233,8 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=(4, 6, 8, 10), mh_maxes=(0, 2,
                     table.append({"lh_max": lh, "mh_max": mh, "fanout": fan, "coefficients": basis.size,
                                   "held_out_log_rms": float(np.mean(errs)), "fit_time_s": t_fit / len(tests),
                                   "eval_s_per_1e6": eval_s})
+    if progress is not None:
+        progress(total, total)
     best_err = min(r["held_out_log_rms"] for r in table)
     good = [r for r in table if r["held_out_log_rms"] <= best_err * (1 + tolerance)]
     best = min(good, key=lambda r: (r["coefficients"], r["held_out_log_rms"]))

@@ -4,7 +4,8 @@
 or JSON with ``--json``); errors are one line on stderr with exit code 2.
 
 Verbs:
-  hazard run SCENE -o OUTDIR   analyse a scene; write report.json and observers.csv
+  hazard run SCENE -o OUTDIR   analyse a scene; write report.json and observers.csv; print the
+                               answer (hazardous observers, NOHDs, what was skipped) first
   hazard compare SCENE         static vs dynamic: NOHD per target, changed verdicts
   hazard validate SCENE        check a scene file
   hazard models                registered BRDF models
@@ -80,7 +81,7 @@ def _add_run_args(p):
     p.add_argument("--backend", default="embree", choices=["embree", "numpy"], help="ray engine (default embree)")
     p.add_argument("--threads", type=_positive_int, default=None,
                    help="threads for the map, BRDF evaluations and ray queries (default: every CPU this process may use)")
-    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr (stage lines, and bars on a terminal)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -95,6 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="scene TOML file, or a bundled example's name")
     p.add_argument("-o", "--output", required=True, help="output folder")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
+    p.add_argument("--verbose", action="store_true", help="after the answer, print the stage log (every stage, ran or skipped, with its run time)")
     _add_run_args(p)
 
     p = sub.add_parser("compare", help="static vs dynamic reflectance: NOHD per target and observer verdicts")
@@ -127,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="overwrite existing renders")
     p.add_argument("--no-animation", action="store_true", help="skip the animation of the dynamic lobe")
     p.add_argument("--resolution-deg", type=float, default=3.0, help="lobe surface resolution [deg]")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = sub.add_parser("convergence", help="error against run time for each accuracy knob of a scene")
     p.add_argument("scene", help="scene TOML file, or a bundled example's name")
@@ -135,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--knob", action="append", help="only this knob (repeatable)")
     p.add_argument("--plot", help="write a log-log plot (PNG) here")
     p.add_argument("--json", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = sub.add_parser("fit", help="fit BRDF models and histories to measurements")
     fsub = p.add_subparsers(dest="fit_kind", metavar="KIND", parser_class=_Parser)
@@ -155,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--report", action="store_true", help="print the leave-one-test-out error-vs-cost table over basis orders")
         q.add_argument("--force", action="store_true", help="overwrite existing outputs")
         q.add_argument("--json", action="store_true", help="print the fit report as JSON")
+        q.add_argument("--quiet", action="store_true", help="no progress bars")
     q = fsub.add_parser("ts5", help="fit the five-parameter Torrance-Sparrow model to a samples table (CSV)")
     q.add_argument("inputs", nargs=1, help="samples table (CSV)")
     q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
@@ -164,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--report", action="store_true", help="print the algorithm comparison table")
     q.add_argument("--force", action="store_true")
     q.add_argument("--json", action="store_true")
+    q.add_argument("--quiet", action="store_true", help="no progress bars")
     q = fsub.add_parser("oxidation", help="fit the oxidation law to a series CSV (time_s, temperature_k, reflectance)")
     q.add_argument("inputs", nargs=1, help="series CSV with columns time_s, temperature_k, reflectance")
     q.add_argument("-o", "--output", required=True, help="result file to write (JSON)")
@@ -308,12 +312,19 @@ def _check_outdir(outdir, names, force):
         raise ValueError(f"-o {outdir}: {probe} is not writable")
 
 
+def _stage_lines(args, err):
+    """The stage-by-stage progress lines on stderr (``hazard: beam...``), None with --quiet."""
+    return None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
+
+
 def _analyse(args, err):
+    """Load and analyse ``args.scene``: stage lines and (on a terminal) bars on ``err``."""
     from .analysis import analyze
+    from .report import progress_to
 
     scene = _load_scene(args.scene, err)
-    progress = None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
-    return analyze(scene, backend=args.backend, progress=progress, threads=getattr(args, "threads", None))
+    with progress_to(None if args.quiet else err):
+        return analyze(scene, backend=args.backend, progress=_stage_lines(args, err), threads=getattr(args, "threads", None))
 
 
 def _finish(args, result):
@@ -329,8 +340,8 @@ def _cmd_run(args, out, err):
     if args.json:
         out.write(json.dumps(report_dict(result), indent=1) + "\n")
     else:
-        out.write(summary_text(result) + "\n")
-        out.write("".join(f"  wrote {p}\n" for p in paths))
+        out.write(summary_text(result, verbose=args.verbose) + "\n")
+        out.write("".join(f"wrote {p}\n" for p in paths))
     return _finish(args, result)
 
 
@@ -438,59 +449,98 @@ def _print_report(out, title, rows, as_json, extra=None):
 
 
 def _cmd_fit(args, out, err):
-    import brdfmodels
-    from brdfmodels import fitting, screen
-    from brdfmodels._io import atomic_write_text
+    from .report import progress_to
 
     _check_new(args.output, args.force)
-    if args.fit_kind == "oxidation":
-        path = Path(args.inputs[0])
-        try:
-            data = np.genfromtxt(path, delimiter=",", names=True)
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-        if data.dtype.names is None or not {"time_s", "temperature_k", "reflectance"} <= set(data.dtype.names):
-            raise ValueError(f"{path}: expected CSV columns time_s, temperature_k, reflectance")
-        r = fitting.fit_oxidation(data["time_s"], data["temperature_k"], data["reflectance"])
-        doc = {**r.model.to_dict(), "reflectance0": r.reflectance0, "reference_temperature_k": r.reference_temperature_k,
-               "rate_at_reference_per_s": r.rate_at_reference_per_s, "ci95": {k: list(map(float, v)) for k, v in r.ci95.items()},
-               "correlation_t0_log_d0": r.correlation_t0_log_d0, "condition_number": r.condition_number, "residual_rms": r.residual_rms}
-        atomic_write_text(args.output, json.dumps(doc, indent=1))
-        if args.json:
-            out.write(json.dumps(doc, indent=1) + "\n")
-        else:
-            out.write(f"oxidation fit: {r.model}; R0 = {r.reflectance0:.4g}\n")
-            for k, (lo, hi) in r.ci95.items():
-                out.write(f"  95 % CI {k}: [{lo:.5g}, {hi:.5g}]\n")
-            out.write(f"  fitted as k_ref at T_ref = {r.reference_temperature_k:.1f} K; corr(T0, ln d0) = {r.correlation_t0_log_d0:.4f}\n")
-            out.write(f"  wrote {args.output}\n")
-        return EXIT_OK
-    if args.fit_kind == "screen":
-        samples = screen.Samples.concatenate(screen.reduce_test(screen.load_test(p)) for p in args.inputs)
-        if args.samples_output:
-            _check_new(args.samples_output, args.force)
-            samples.write(args.samples_output)
+    with progress_to(None if getattr(args, "quiet", False) else err):  # bars on a terminal only
+        if args.fit_kind == "oxidation":
+            return _fit_oxidation(args, out)
+        samples = _fit_samples(args)
+        return _fit_ts5(args, out, samples) if args.fit_kind == "ts5" else _fit_sh(args, out, samples)
+
+
+def _fit_oxidation(args, out):
+    from brdfmodels import fitting
+    from brdfmodels._io import atomic_write_text
+
+    path = Path(args.inputs[0])
+    try:
+        data = np.genfromtxt(path, delimiter=",", names=True)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+    if data.dtype.names is None or not {"time_s", "temperature_k", "reflectance"} <= set(data.dtype.names):
+        raise ValueError(f"{path}: expected CSV columns time_s, temperature_k, reflectance")
+    r = fitting.fit_oxidation(data["time_s"], data["temperature_k"], data["reflectance"])
+    doc = {**r.model.to_dict(), "reflectance0": r.reflectance0, "reference_temperature_k": r.reference_temperature_k,
+           "rate_at_reference_per_s": r.rate_at_reference_per_s, "ci95": {k: list(map(float, v)) for k, v in r.ci95.items()},
+           "correlation_t0_log_d0": r.correlation_t0_log_d0, "condition_number": r.condition_number, "residual_rms": r.residual_rms}
+    atomic_write_text(args.output, json.dumps(doc, indent=1))
+    if args.json:
+        out.write(json.dumps(doc, indent=1) + "\n")
     else:
-        samples = screen.Samples.read(args.inputs[0])
-    if args.fit_kind == "ts5":
-        if args.report:
-            rows = fitting.compare_ts5_methods(samples.wi, samples.wo, samples.brdf_per_sr)
-            _print_report(out, "five-parameter fit: error vs evaluations vs seconds", rows, args.json)
-        r = fitting.fit_ts5(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval)
-        brdfmodels.save(r.model, args.output)
-        _print_report(out, "five-parameter fit", [r.summary()], args.json, {"wrote": str(args.output)})
-        return EXIT_OK
+        out.write(f"oxidation fit: {r.model}; R0 = {r.reflectance0:.4g}\n")
+        for k, (lo, hi) in r.ci95.items():
+            out.write(f"  95 % CI {k}: [{lo:.5g}, {hi:.5g}]\n")
+        out.write(f"  fitted as k_ref at T_ref = {r.reference_temperature_k:.1f} K; corr(T0, ln d0) = {r.correlation_t0_log_d0:.4f}\n")
+        out.write(f"  wrote {args.output}\n")
+    return EXIT_OK
+
+
+def _fit_samples(args):
+    """The samples to fit: witness-screen tests reduced (a bar per test), or a table."""
+    from brdfmodels import screen
+
+    from .report import terminal_bar
+
+    if args.fit_kind != "screen":
+        return screen.Samples.read(args.inputs[0])
+    parts = []
+    with terminal_bar(len(args.inputs), "reducing screen tests", unit="test", leave=True) as bar:
+        for p in args.inputs:
+            parts.append(screen.reduce_test(screen.load_test(p)))
+            bar.update()
+    samples = screen.Samples.concatenate(parts)
+    if args.samples_output:
+        _check_new(args.samples_output, args.force)
+        samples.write(args.samples_output)
+    return samples
+
+
+def _fit_ts5(args, out, samples):
+    import brdfmodels
+    from brdfmodels import fitting
+
+    from .report import progress_callback
+
+    if args.report:
+        rows = fitting.compare_ts5_methods(samples.wi, samples.wo, samples.brdf_per_sr,
+                                           progress=progress_callback("five-parameter methods", unit="fit"))
+        _print_report(out, "five-parameter fit: error vs evaluations vs seconds", rows, args.json)
+    r = fitting.fit_ts5(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval,
+                        progress=progress_callback("five-parameter fit", unit="eval"))
+    brdfmodels.save(r.model, args.output)
+    _print_report(out, "five-parameter fit", [r.summary()], args.json, {"wrote": str(args.output)})
+    return EXIT_OK
+
+
+def _fit_sh(args, out, samples):
+    import brdfmodels
+    from brdfmodels import fitting
+
+    from .report import progress_callback
+
     basis = _basis_arg(args.basis)
     if args.report:
         from brdfmodels import validation
 
-        best, table = validation.choose_sh_basis(samples)
+        best, table = validation.choose_sh_basis(samples, progress=progress_callback("leave-one-test-out settings", unit="setting"))
         _print_report(out, "leave-one-test-out: basis orders and fan-out", table, args.json, {"best": best})
     if args.state:
         if not args.states:
             raise ValueError("--states: give the state values to group at, e.g. --states 0,5,10")
         nodes = [float(x) for x in args.states.split(",")]
-        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=args.state, fanout=args.fanout)
+        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=args.state, fanout=args.fanout,
+                                     progress=progress_callback("SH fit per state", unit="state"))
         model = res.model
         rows = [{"state": k, **v.summary()} for k, v in res.fits.items()]
     else:
@@ -531,33 +581,39 @@ def _cmd_study(args, out, err):
 
 def _cmd_render(args, out, err):
     from . import render
+    from .report import progress_to
 
     result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
-    try:
-        paths = render.keepout(result, args.output, lobe_resolution_deg=args.resolution_deg, force=args.force)
-    except FileExistsError as exc:
-        raise ValueError(str(exc)) from None
-    lines = [f"  wrote {p}" for k, p in paths.items() if k != "png"]
-    if not args.no_animation and result.states:
-        anim = render.animate_lobe(result, args.output)
-        lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")
+    with progress_to(None if args.quiet else err):  # bars on a terminal only
+        try:
+            paths = render.keepout(result, args.output, lobe_resolution_deg=args.resolution_deg, force=args.force)
+        except FileExistsError as exc:
+            raise ValueError(str(exc)) from None
+        lines = [f"  wrote {p}" for k, p in paths.items() if k != "png"]
+        if not args.no_animation and result.states:
+            anim = render.animate_lobe(result, args.output)
+            lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")
     out.write(f"renders of {result.scene.name!r}\n" + "\n".join(lines) + "\n")
     return EXIT_OK
 
 
 def _cmd_convergence(args, out, err):
     from . import convergence as conv
+    from .report import _json_safe, progress_stream, progress_to
 
-    progress = None if args.quiet else (lambda msg: err.write(f"hazard: {msg}\n"))
-    rep = conv.convergence(args.scene, knobs=args.knob, tolerance=args.tolerance, progress=progress)
+    with progress_to(None if args.quiet else err):
+        # a bar of the runs on a terminal; elsewhere one line per run (as the stage lines of run)
+        lines = None if progress_stream() is not None else _stage_lines(args, err)
+        rep = conv.convergence(args.scene, knobs=args.knob, tolerance=args.tolerance, progress=lines)
     if args.plot:
         conv.plot(rep, args.plot)
-    if args.json:
-        out.write(json.dumps({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance}, indent=1) + "\n")
+    if args.json:  # a relative error against a zero reference is inf: written "inf" as in report.json
+        doc = _json_safe({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance})
+        out.write(json.dumps(doc, indent=1) + "\n")
     else:
         from brdfmodels.accuracy import format_table
 
-        out.write(format_table(rep.rows, "convergence (errors relative to the finest run of each knob)") + "\n")
+        out.write(format_table(rep.rows, "convergence (rel_error_*: relative error against the finest run of each knob, unitless)") + "\n")
         out.write(f"recommended within {rep.tolerance:g}: " + ", ".join(f"{k} = {v}" for k, v in rep.recommended.items()) + "\n")
     return EXIT_OK
 

@@ -6,11 +6,17 @@ history - the analysis runs at increasing cost with the other knobs at the scene
 values. The quantities of interest (max NOHD, keep-out volume, peak irradiance over the
 observers, all dynamic) are compared with the finest run; the report recommends the
 cheapest setting whose errors are all within the tolerance.
+
+Columns of a row: ``knob``, ``value``, each quantity in its unit (``max_nohd_m``,
+``keepout_volume_m3``, ``peak_irradiance_w_m2``, ``spot_power_w``), its relative error
+against the finest run (``rel_error_max_nohd``, ... : unitless, ``|q - q_ref| / |q_ref|``;
+0 when both are 0 and inf when only the reference is 0) and the run time ``time_s``.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +25,9 @@ import numpy as np
 
 from brdfmodels._io import read_toml
 
-__all__ = ["convergence", "ConvergenceReport", "KNOB_LEVELS"]
+from .report import progress_to, terminal_bar
+
+__all__ = ["convergence", "ConvergenceReport", "KNOB_LEVELS", "QUANTITIES", "REL_ERROR_COLUMNS"]
 
 KNOB_LEVELS = {
     "direction_grid_deg": (8.0, 4.0, 2.0, 1.0, 0.5),
@@ -30,6 +38,16 @@ KNOB_LEVELS = {
     "heating_rtol": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
 }
 QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2", "spot_power_w")
+# column of each quantity's relative error against the finest run: unitless, so no unit suffix
+REL_ERROR_COLUMNS = {"max_nohd_m": "rel_error_max_nohd", "keepout_volume_m3": "rel_error_keepout_volume",
+                     "peak_irradiance_w_m2": "rel_error_peak_irradiance", "spot_power_w": "rel_error_spot_power"}
+
+
+def _rel_error(q, ref) -> float:
+    """|q - ref| / |ref| (unitless); 0 when both are 0, inf when only ``ref`` is."""
+    if ref:
+        return abs(q - ref) / abs(ref)
+    return 0.0 if q == 0 else math.inf
 
 
 @dataclass
@@ -89,7 +107,15 @@ def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress
     levels : dict, optional
         knob -> increasing-cost values (default ``KNOB_LEVELS``); the last is the reference.
     tolerance : float
-        Relative error allowed for the recommendation.
+        Relative error allowed for the recommendation (unitless).
+    progress : callable, optional
+        Called with ``"knob = value"`` before each run. On a terminal a bar of the runs
+        is drawn on stderr as well (:func:`hazard.report.terminal_bar`).
+
+    Returns
+    -------
+    ConvergenceReport
+        Rows as in the module notes, the recommended value per knob, the tolerance.
     """
     import scenes
 
@@ -107,25 +133,39 @@ def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress
         if k not in used:
             raise ValueError(f"knob {k!r}: the scene does not use it (it uses {used})")
     say = progress or (lambda msg: None)
+    plan = {knob: (levels or {}).get(knob, KNOB_LEVELS[knob]) for knob in knobs}
     rows, recommended = [], {}
-    for knob in knobs:
-        values = (levels or {}).get(knob, KNOB_LEVELS[knob])
-        runs = []
-        for v in values:
-            say(f"{knob} = {v}")
-            scene = scenes.from_data(_apply(data, knob, v), source=str(path), base_dir=path.parent)
-            t0 = time.perf_counter()
-            res = analyze(scene)
-            runs.append((v, _quantities(res), time.perf_counter() - t0))
-        ref = runs[-1][1]
-        best = None
-        for v, q, secs in runs:
-            err = {f"error_{k}": abs(q[k] - ref[k]) / abs(ref[k]) if ref[k] else abs(q[k]) for k in QUANTITIES}
-            rows.append({"knob": knob, "value": v, **q, **err, "time_s": secs})
-            if best is None and all(e <= tolerance for e in err.values()) and v != values[-1]:
-                best = v
-        recommended[knob] = best if best is not None else values[-1]
+    with terminal_bar(sum(len(v) for v in plan.values()), "convergence runs", unit="run", leave=True) as bar:
+        for knob, values in plan.items():
+            runs = []
+            for v in values:
+                say(f"{knob} = {v}")
+                bar.set_description(f"convergence: {knob} = {v}")
+                scene = scenes.from_data(_apply(data, knob, v), source=str(path), base_dir=path.parent)
+                t0 = time.perf_counter()
+                with progress_to(None):  # one bar: not the keep-out bars of every run
+                    res = analyze(scene)
+                runs.append((v, _quantities(res), time.perf_counter() - t0))
+                bar.update()
+            rows += _rows(knob, runs)
+            recommended[knob] = _cheapest(rows[-len(runs):], tolerance)
     return ConvergenceReport(rows, recommended, tolerance)
+
+
+def _rows(knob, runs) -> list:
+    """Rows of one knob's runs [(value, quantities, seconds)], errors against the last run."""
+    ref = runs[-1][1]
+    return [{"knob": knob, "value": v, **q, **{REL_ERROR_COLUMNS[k]: _rel_error(q[k], ref[k]) for k in QUANTITIES}, "time_s": secs}
+            for v, q, secs in runs]
+
+
+def _cheapest(rows, tolerance):
+    """The first (cheapest) value whose relative errors are all within ``tolerance``, short
+    of the reference (the last row); the reference when none is."""
+    for r in rows[:-1]:
+        if all(r[REL_ERROR_COLUMNS[k]] <= tolerance for k in QUANTITIES):
+            return r["value"]
+    return rows[-1]["value"]
 
 
 def plot(report: ConvergenceReport, path) -> Path | None:
@@ -140,7 +180,7 @@ def plot(report: ConvergenceReport, path) -> Path | None:
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for knob in sorted({r["knob"] for r in report.rows}):
         rs = report.table(knob)[:-1]  # the reference has zero error
-        err = [max(r[f"error_{q}"] for q in QUANTITIES) for r in rs]
+        err = [max(r[REL_ERROR_COLUMNS[q]] for q in QUANTITIES) for r in rs]
         ax.loglog([r["time_s"] for r in rs], np.maximum(err, 1e-16), "o-", label=knob)
     ax.axhline(report.tolerance, ls=":", c="k", label=f"tolerance {report.tolerance:g}")
     ax.set_xlabel("run time [s]")

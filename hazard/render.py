@@ -30,6 +30,7 @@ import pyvista as pv
 
 from .beam import perp_basis as _perp_basis
 from .keepout import _range_fn
+from .report import terminal_bar
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe"]
 
@@ -222,23 +223,25 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
     env = [lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, np.unique(result.states[sp.target.index]), lobe_resolution_deg) for sp in dyn]
     bounds = pv.MultiBlock(env).bounds
     paths = []
-    for n, i in enumerate(idx):
-        p = pv.Plotter(off_screen=True, window_size=list(window_size))
-        p.set_background("white")
-        for sp in result.spots:
-            p.add_mesh(_mesh(sp.target.mesh.vertices, sp.target.mesh.faces), color="#555555")
-            st = result.states.get(sp.target.index)
-            g = lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, None if st is None else st[i:i + 1], lobe_resolution_deg)
-            p.add_mesh(g, scalars="nohd_m", cmap="viridis", clim=[0, max(e["nohd_m"].max() for e in env)],
-                       scalar_bar_args={"title": "NOHD [m]", "color": "black"})
-        p.add_text(f"t = {result.times_s[i]:.3g} s", font_size=12, color="black")
-        p.show_bounds(bounds=bounds, color="black", font_size=8)
-        p.camera_position = "iso"
-        p.reset_camera(bounds=bounds)
-        f = frames_dir / f"frame_{n:03d}.png"
-        p.screenshot(str(f))
-        p.close()
-        paths.append(f)
+    with terminal_bar(len(idx), "lobe animation frames", unit="frame", leave=True) as bar:  # terminals only
+        for n, i in enumerate(idx):
+            p = pv.Plotter(off_screen=True, window_size=list(window_size))
+            p.set_background("white")
+            for sp in result.spots:
+                p.add_mesh(_mesh(sp.target.mesh.vertices, sp.target.mesh.faces), color="#555555")
+                st = result.states.get(sp.target.index)
+                g = lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, None if st is None else st[i:i + 1], lobe_resolution_deg)
+                p.add_mesh(g, scalars="nohd_m", cmap="viridis", clim=[0, max(e["nohd_m"].max() for e in env)],
+                           scalar_bar_args={"title": "NOHD [m]", "color": "black"})
+            p.add_text(f"t = {result.times_s[i]:.3g} s", font_size=12, color="black")
+            p.show_bounds(bounds=bounds, color="black", font_size=8)
+            p.camera_position = "iso"
+            p.reset_camera(bounds=bounds)
+            f = frames_dir / f"frame_{n:03d}.png"
+            p.screenshot(str(f))
+            p.close()
+            paths.append(f)
+            bar.update()
     result_paths = {"frames": paths}
     try:
         import imageio.v2 as imageio

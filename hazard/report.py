@@ -7,20 +7,24 @@ unless asked (``force=True``).
 
 from __future__ import annotations
 
+import contextvars
 import csv
 import io
 import json
 import math
 import os
 import shutil
+import sys
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 from brdfmodels._io import atomic_write_text
 
-__all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows"]
+__all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
+           "summary_text", "answer_text", "stages_text", "terminal_bar", "progress_callback", "progress_to"]
 
 REPORT_FORMAT = "laser-hazard.report"
 REPORT_VERSION = 1
@@ -219,21 +223,273 @@ def write_outputs(result, outdir, *, force=False) -> list:
     return targets
 
 
-def summary_text(result) -> str:
-    """A short human summary (stdout of ``hazard run``)."""
-    lines = [f"Scene {result.scene.name!r}: MPE {result.mpe_w_m2:.6g} W/m^2 ({result.mpe.standard}, {result.mpe.duration_s:g} s)"]
-    for s in result.stages:
-        lines.append(f"  {'ran    ' if s.ran else 'skipped'} {s.name:14s} {s.detail}" + (f" [{s.seconds:.3g} s]" if s.ran else ""))
+# -- the text summary of ``hazard run``: the answer first, the stage log on request ------
+ANSWER_MAX_OBSERVERS = 20  # hazardous observers listed by name; the rest are counted (all are in observers.csv)
+NEVER_MODELLED = ("multiple bounces", "transmission through windows", "diffraction",
+                  "vaporisation or burn-through of the target")
+
+
+def _nearest_spot(result, idx):
+    """Distance [m] from observers ``idx`` to the nearest spot's centroid (the nearest
+    target's centre when no spot is lit), and that target's name, per observer."""
+    scene = result.scene
+    if result.spots:
+        centres = [scene.to_world(sp.centroid) for sp in result.spots]
+        names = [sp.target.name for sp in result.spots]
+    else:
+        centres = [scene.to_world(t.center_m) for t in scene.targets]
+        names = [t.name for t in scene.targets]
+    if not centres:
+        return np.full(len(idx), np.nan), [""] * len(idx)
+    d = np.linalg.norm(result.observers.position_m[idx][:, None, :] - np.asarray(centres)[None], axis=2)
+    k = d.argmin(axis=1)
+    return d[np.arange(len(idx)), k], [names[j] for j in k]
+
+
+def _cause(result, i) -> str:
+    """Why observer ``i`` is hazardous: the reflection ("diffuse": BRDF lobe, glossy
+    included; "specular": mirror beam, the larger part; "diffuse + specular") and whether
+    the dynamic material raised its peak above the static one."""
+    obs = result.observers
+    peak, static = float(obs.peak_irradiance_w_m2[i]), float(obs.static_irradiance_w_m2[i])
+    if obs.specular_irradiance_w_m2 is None:
+        kind = "reflection not split"
+    else:
+        spec = float(obs.specular_irradiance_w_m2[i])
+        kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * peak else "diffuse + specular")
+    if peak > static:
+        mpe = result.observer_mpe_w_m2
+        ratio_static = static / float(mpe if np.ndim(mpe) == 0 else mpe[i])
+        return f"{kind}, dynamic (static material: ratio {ratio_static:.3g})"
+    return f"{kind}, static"
+
+
+def _observer_lines(result, max_observers) -> list:
+    """The verdict line and the hazardous observers, highest hazard ratio first."""
+    obs = result.observers
+    m = len(obs)
+    head = f"Scene {result.scene.name!r}: "
+    mpe = (f"{result.mpe_w_m2:.6g} W/m^2, {result.mpe.standard}, {result.mpe.duration_s:g} s"
+           + (", C_E per observer" if (getattr(result, "extended_source", None) or {}).get("applied") else ""))
+    hazardous = np.flatnonzero(result.hazardous)
+    static = f"; with the static material: {int(np.sum(result.hazardous_static))}" if result.states else ""
+    if not len(hazardous):
+        return [f"{head}no observer point reaches the MPE ({mpe}): 0 of {m} hazardous{static}.",
+                "  The observers are only the points the scene lists: anyone inside a NOHD below is at risk."]
+    ratio = result.hazard_ratio
+    order = hazardous[np.argsort(-ratio[hazardous], kind="stable")][:max_observers]
+    dist, near = _nearest_spot(result, order)
+    labels = [obs.labels[i] for i in order]
+    w_obs, w_spot = max(map(len, labels + ["observer"])), max(map(len, near + ["nearest spot"]))
+    lines = [f"{head}HAZARD: {len(hazardous)} of {m} observer point(s) at or above the MPE ({mpe}){static}.",
+             f"  {'observer':{w_obs}s}  {'hazard ratio':>12s}  {'distance [m]':>12s}  {'nearest spot':{w_spot}s}  cause"]
+    for i, label, d, name in zip(order, labels, dist, near):
+        lines.append(f"  {label:{w_obs}s}  {ratio[i]:12.4g}  {d:12.4g}  {name:{w_spot}s}  {_cause(result, i)}")
+    if len(hazardous) > len(order):
+        lines.append(f"  ... and {len(hazardous) - len(order)} more hazardous observer point(s) (all in observers.csv)")
+    return lines
+
+
+def _nohd_lines(result) -> list:
+    """NOHD per target: diffuse (BRDF lobe) and specular (mirror beam), static and dynamic."""
+    lines = ["NOHD per target (diffuse: BRDF lobe; specular: mirror beam beyond the target):"]
     for t in result.targets:
         d = t.to_dict()
-        lines.append(f"  target {t.name}: NOHD static {d['nohd_static_m']:.4g} m, dynamic {d['nohd_dynamic_m']:.4g} m"
-                     + (f"; mirror lobe beyond target: static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m"
-                        if t.specular_nohd_static_m is not None else ""))
-    n_h = int(np.sum(result.hazardous))
-    lines.append(f"  observers: {len(result.observers)} points, {n_h} hazardous (static: {int(np.sum(result.hazardous_static))})")
+        if t.static_lobe is None:
+            lines.append(f"  {t.name}: nothing reflected ({t.lit_side})")
+            continue
+        spec = ("no mirror beam" if t.specular_nohd_static_m is None else
+                f"specular static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m")
+        lines.append(f"  {t.name}: diffuse static {d['nohd_static_m']:.4g} m, dynamic {d['nohd_dynamic_m']:.4g} m; {spec}")
+    fs, fd = result.footprint_static, result.footprint_dynamic
+    if fs is not None and fd is not None:
+        lines.append(f"  hazardous ground at {fs.eye_height_m:g} m eye height: static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2")
+    return lines
+
+
+def _not_modelled_lines(result) -> list:
+    lines = ["Skipped in this run, and notes:"]
+    lines += [f"  skipped {s.name}: {s.detail}" for s in result.stages if not s.ran]
+    lines += [f"  note: {n}" for n in result.notes]
+    lines.append(f"  never modelled: {', '.join(NEVER_MODELLED)}")
+    return lines
+
+
+def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
+    """What a range safety officer asks first, in plain text.
+
+    Parameters
+    ----------
+    result : hazard.HazardResult
+    max_observers : int
+        Hazardous observers listed by name, highest hazard ratio (peak irradiance / MPE,
+        unitless) first; the others are counted.
+
+    Returns
+    -------
+    str
+        The verdict; the hazardous observers with their hazard ratio, distance [m] to the
+        nearest spot and cause (diffuse or specular; static, or raised by the dynamic
+        material); the NOHD [m] of every target (diffuse and specular, static and
+        dynamic); the skipped stages, notes and what the tool never models.
+    """
+    lines = _observer_lines(result, max_observers) + _nohd_lines(result) + _not_modelled_lines(result)
+    return "\n".join(lines)
+
+
+def stages_text(result) -> str:
+    """The stage log: every stage, ran or skipped, with its detail and run time [s]."""
+    lines = ["Stages:"]
+    for s in result.stages:
+        lines.append(f"  {'ran    ' if s.ran else 'skipped'} {s.name:14s} {s.detail}" + (f" [{s.seconds:.3g} s]" if s.ran else ""))
     changed = result.verdict_changes()
     if changed:
         lines.append(f"  verdict changes static -> dynamic: {', '.join(changed[:10])}" + (" ..." if len(changed) > 10 else ""))
-    for n in result.notes:
-        lines.append(f"  note: {n}")
     return "\n".join(lines)
+
+
+def summary_text(result, *, verbose=False, max_observers=ANSWER_MAX_OBSERVERS) -> str:
+    """The text of ``hazard run``: :func:`answer_text`, then (``verbose``) :func:`stages_text`."""
+    text = answer_text(result, max_observers)
+    return text + "\n" + stages_text(result) if verbose else text
+
+
+# -- progress bars: stderr, terminals only ------------------------------------------------
+_OFF = object()
+_PROGRESS_STREAM = contextvars.ContextVar("hazard_progress_stream", default=None)
+
+
+@contextmanager
+def progress_to(stream):
+    """Draw the progress bars of the work done inside on ``stream`` (None: no bars).
+
+    Without it bars go to ``sys.stderr``. Either way a bar is drawn only when its stream
+    is a terminal; the command line uses this for ``--quiet`` and for its own stderr.
+    """
+    token = _PROGRESS_STREAM.set(_OFF if stream is None else stream)
+    try:
+        yield
+    finally:
+        _PROGRESS_STREAM.reset(token)
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError, OSError):  # no isatty, or a closed stream
+        return False
+
+
+def progress_stream():
+    """The stream progress bars go to now, or None when bars are off (not a terminal, or
+    turned off by :func:`progress_to`)."""
+    stream = _PROGRESS_STREAM.get()
+    if stream is _OFF:
+        return None
+    stream = sys.stderr if stream is None else stream
+    return stream if _is_terminal(stream) else None
+
+
+class _NoBar:
+    """The bar when bars are off: counts, draws nothing."""
+
+    def __init__(self, total, initial=0):
+        self.total, self.n = total, initial
+
+    def update(self, n=1):
+        self.n += n
+
+    def set_description(self, desc):
+        pass
+
+    def close(self):
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class _TextBar(_NoBar):
+    """``desc [#####.....] 12/40`` redrawn in place, when tqdm is not installed."""
+
+    WIDTH = 30
+
+    def __init__(self, stream, total, desc, leave, initial=0):
+        super().__init__(total, initial)
+        self.stream, self.desc, self.leave, self.closed = stream, desc, leave, False
+        self._draw()
+
+    def _draw(self):
+        k = int(self.WIDTH * min(self.n, self.total) / max(self.total, 1))
+        self.stream.write(f"\r{self.desc} [{'#' * k}{'.' * (self.WIDTH - k)}] {self.n}/{self.total}\x1b[K")
+        self.stream.flush()
+
+    def update(self, n=1):
+        super().update(n)
+        self._draw()
+
+    def set_description(self, desc):
+        self.desc = desc
+        self._draw()
+
+    def close(self):
+        if not self.closed:
+            self.closed = True
+            self.stream.write("\n" if self.leave else "\r\x1b[K")
+            self.stream.flush()
+
+
+def terminal_bar(total, desc, *, unit="step", leave=False, initial=0, stream=None):
+    """A progress bar for a step that can take more than a few seconds.
+
+    Parameters
+    ----------
+    total : int
+        Steps in all.
+    desc : str
+        What is counted, shown before the bar.
+    unit : str
+        Name of one step (tqdm's rate display).
+    leave : bool
+        Keep the finished bar on screen (else it is erased).
+    initial : int
+        Steps already done.
+    stream : file, optional
+        Draw here (when it is a terminal); default: the stream of :func:`progress_to`,
+        else ``sys.stderr``.
+
+    Returns
+    -------
+    object
+        With ``update(n=1)``, ``set_description(text)``, ``close()``, ``n`` and ``total``;
+        a context manager. A tqdm bar when tqdm is installed, a plain text bar otherwise,
+        and a bar that draws nothing unless the stream is a terminal.
+    """
+    stream = progress_stream() if stream is None else (stream if _is_terminal(stream) else None)
+    if stream is None:
+        return _NoBar(total, initial)
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return _TextBar(stream, total, desc, leave, initial)
+    return tqdm(total=total, desc=desc, unit=unit, leave=leave, initial=initial, file=stream, dynamic_ncols=True)
+
+
+def progress_callback(desc, *, unit="step", leave=True, stream=None):
+    """A ``progress(done, total)`` callback that draws a :func:`terminal_bar`, closed when
+    ``done`` reaches ``total`` (for loops that report through a callback)."""
+    bar = None
+
+    def show(done, total):
+        nonlocal bar
+        if bar is None:
+            bar = terminal_bar(total, desc, unit=unit, leave=leave, initial=done, stream=stream)
+        else:
+            bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+
+    return show

@@ -24,7 +24,6 @@ import hashlib
 import json
 import math
 import re
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -32,6 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from brdfmodels._io import atomic_write, atomic_write_text, read_toml
+
+from .report import progress_callback, progress_to
 
 __all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path"]
 
@@ -369,7 +370,8 @@ def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=No
         for t, s in zip(scene.targets, scales):
             if s != 1.0:
                 t.material = brdfmodels.Scaled(t.material, s)
-        res = analyze(scene, threads=threads)
+        with progress_to(None):  # the study draws one bar; none per scenario (nor in Dask workers)
+            res = analyze(scene, threads=threads)
         tr = [t.to_dict() for t in res.targets]
         row.update({
             "nohd_static_m": max([t["nohd_static_m"] for t in tr], default=0.0),
@@ -528,7 +530,8 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     force : bool
         Start over if ``outdir`` holds a different study's results.
     progress : callable, optional
-        Called with (done, total) as scenarios finish.
+        Called with (done, total) as scenarios finish (:func:`progress_bar` draws a bar
+        on a terminal). The scenarios' own progress bars (keep-out lobes) are not drawn.
     """
     outdir = Path(outdir)
     sdir = outdir / "scenarios"
@@ -591,15 +594,7 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
 
 
 def progress_bar(stream=None):
-    """A text progress bar for stderr: ``[#####.....] 12/40``."""
-    out = stream or sys.stderr
-
-    def show(done, total):
-        width = 30
-        k = int(width * done / max(total, 1))
-        out.write(f"\r[{'#' * k}{'.' * (width - k)}] {done}/{total}")
-        if done >= total:
-            out.write("\n")
-        out.flush()
-
-    return show
+    """A ``progress(done, total)`` callback for :func:`run_study`: a bar of the scenarios
+    done on ``stream`` (default stderr), drawn only when it is a terminal
+    (:func:`hazard.report.progress_callback`)."""
+    return progress_callback("scenarios", unit="scenario", leave=True, stream=stream)

@@ -27,7 +27,7 @@ def test_convergence_report_and_recommendation(tmp_path):
     rep = conv.convergence("plate", knobs=["direction_grid_deg", "beam_samples"],
                            levels={"direction_grid_deg": (8.0, 4.0, 2.0), "beam_samples": (16, 64)}, tolerance=1e-3)
     assert [r["knob"] for r in rep.rows] == ["direction_grid_deg"] * 3 + ["beam_samples"] * 2
-    assert rep.rows[2]["error_max_nohd_m"] == 0.0 and all(r["time_s"] > 0 for r in rep.rows)
+    assert rep.rows[2]["rel_error_max_nohd"] == 0.0 and all(r["time_s"] > 0 for r in rep.rows)
     assert rep.recommended == {"direction_grid_deg": 8.0, "beam_samples": 16}
     assert conv.plot(rep, tmp_path / "c.png").stat().st_size > 5000
 
