@@ -611,7 +611,7 @@ def flat_outline_s(beam: BeamGeometry, target, n_disk=1024):
     else:
         return None
     so, zo = beam.to_s(outer)
-    si, zi = beam.to_s(inner)
+    si, zi = (so, zo) if inner is outer else beam.to_s(inner)  # a plate: one exact polygon (the same object)
     if np.any(zo <= 0) or np.any(zi <= 0) or not (np.all(np.isfinite(so)) and np.all(np.isfinite(si))):
         return None
     return so, si

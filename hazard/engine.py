@@ -178,6 +178,8 @@ def _exact_power(beam, outline):
     from .beam import polygon_fraction
 
     upper = beam.power_w * polygon_fraction(outline[0])
+    if outline[1] is outline[0]:  # a plate: its outline is exact
+        return upper, 0.0
     return upper, upper - beam.power_w * polygon_fraction(outline[1])
 
 
@@ -314,8 +316,9 @@ def _hole_cells(outline, fronts, n0):
         if len(small):
             holes.append(outline_cells(small, n0))
             polys.append(small)
-        big = clip_convex(outline[0], front[0])
-        slack += (polygon_fraction(big) if len(big) else 0.0) - (polygon_fraction(small) if len(small) else 0.0)
+        if outline[0] is not outline[1] or front[0] is not front[1]:  # disks: the largest hole may be larger
+            big = clip_convex(outline[0], front[0])
+            slack += (polygon_fraction(big) if len(big) else 0.0) - (polygon_fraction(small) if len(small) else 0.0)
     return holes, polys, slack
 
 
