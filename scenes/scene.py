@@ -250,7 +250,22 @@ def _warnings(spec: SceneSpec) -> list:
     vis = spec.atmosphere.visibility_km
     if vis is not None and vis < 0.05:
         out.append(f"atmosphere.visibility_km = {vis:g} km is under 50 m (dense fog): m meant?")
-    return out
+    return out + _magnitude_warnings(spec)
+
+
+# Orders of magnitude beyond the bundled range (100 W .. 100 kW) that a unit slip gives:
+# a power in mW or kW typed as W. (exposure.duration_s beyond the MPE tables' 3e4 s is
+# already an error of the schema.)
+POWER_PLAUSIBLE_W = (1e-3, 1e7)
+
+
+def _magnitude_warnings(spec: SceneSpec) -> list:
+    p = spec.laser.power_w
+    if p is not None and p > POWER_PLAUSIBLE_W[1]:
+        return [f"laser.power_w = {p:g} W is over 10 MW: mW or kW meant?"]
+    if p is not None and p < POWER_PLAUSIBLE_W[0]:
+        return [f"laser.power_w = {p:g} W is under 1 mW for a high-energy laser range: W or kW meant?"]
+    return []
 
 
 def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> Scene:

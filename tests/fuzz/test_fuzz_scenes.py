@@ -278,6 +278,11 @@ def test_named_examples_of_the_issue(tmp_path):
     d["laser"]["beam_diameter_m"] = 5.0
     sc = scenes.loads(to_toml(d))
     assert any("mrad" in w for w in sc.warnings) and any("mm meant" in w for w in sc.warnings)
+    for power, hint in ((5e7, "over 10 MW"), (1e-4, "under 1 mW")):
+        d = copy.deepcopy(base)
+        d["laser"]["power_w"] = power
+        assert any(hint in w and "laser.power_w" in w for w in scenes.loads(to_toml(d)).warnings)
+    assert not scenes.loads(to_toml(base)).warnings
 
 
 @pytest.mark.slow
