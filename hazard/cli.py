@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -45,6 +46,7 @@ EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_ERROR = 2
 EXIT_HAZARD = 3
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout went away (the outputs are written first)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -678,6 +680,12 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
             raise
         err.write(f"hazard {args.verb}: interrupted\n")
         return 130
+    except BrokenPipeError:  # the reader went away (hazard run ... | head): stop quietly, as after SIGPIPE
+        try:
+            sys.stdout = open(os.devnull, "w")  # Python's own flush at exit must not fail again
+        except OSError:
+            pass
+        return EXIT_BROKEN_PIPE
     except (Exception, RecursionError, MemoryError) as exc:  # anything else: still one line
         if debug:
             raise

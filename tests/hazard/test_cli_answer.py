@@ -129,3 +129,21 @@ def test_convergence_columns_name_their_unit():
     # a relative error has no unit even when the reference is zero: 0 or inf, never |q| in metres
     assert conv._rel_error(0.0, 0.0) == 0.0 and conv._rel_error(0.3, 0.0) == math.inf
     assert conv._rel_error(1.1, 1.0) == pytest.approx(0.1)
+
+
+def test_a_closed_pipe_stops_quietly(tmp_path):
+    """`hazard run ... | head`: the reader goes away after the first line (witness_screen's
+    answer is longer than the stream buffer, so a later write meets the closed pipe); the
+    outputs are already written, and the command ends with 141 (128 + SIGPIPE) and
+    without an 'internal error' line (it said "internal error: Broken pipe", exit 1)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from hazard.cli import main; "
+            f"sys.exit(main(['run', 'witness_screen', '-o', {str(tmp_path / 'o')!r}, '--quiet']))")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.readline()
+    p.stdout.close()  # the reader goes away
+    err = p.stderr.read().decode()
+    assert p.wait() == 141 and "internal error" not in err and "Traceback" not in err
+    assert (tmp_path / "o" / "report.json").exists()
