@@ -6,7 +6,7 @@ others are left out; each stage is a function of explicit inputs in its own modu
 (``result.stages``: ran or skipped, the reason, the run time) comes from that plan:
 
 ``mpe`` (:mod:`~hazard.pipeline.limits`) -> ``rays`` and ``beam``
-(:mod:`~hazard.pipeline.spots`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
+(:mod:`~hazard.pipeline.spots`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
 ``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
 (:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
 -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
@@ -22,7 +22,7 @@ import numpy as np
 from brdfmodels.parallel import default_threads, thread_limit
 
 from .nohd import optical_gain
-from .pipeline import ground, history, irradiance_map, limits, lobes, spots as beam_stage
+from .pipeline import direct, ground, history, irradiance_map, limits, lobes, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
 from .pipeline.plan import plan
@@ -75,7 +75,18 @@ def _trace(scene, the_plan, log, backend, threads, mu):
     with log.run("beam") as st:
         traced = beam_stage.trace_beam(scene, tracer, mu)
         st.detail = traced.detail
-    return ray_scene, traced
+    return ray_scene, tracer, traced
+
+
+def _direct(scene, traced, tracer, mu, log, the_plan):
+    """Stage ``direct``: the laser's own beam at the observers (None without observers)."""
+    if the_plan.skipped("direct"):
+        log.skip("direct", the_plan.skipped("direct"))
+        return None
+    with log.run("direct") as st:
+        d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
+        st.detail = d.detail
+    return d
 
 
 def _histories(scene, spots, log):
@@ -134,8 +145,9 @@ def _log_map(log, inp, out, the_plan):
                         f"its time is the per-thread share of the map's wall time)", out.exposure_seconds)
 
 
-def _observers(scene, out) -> ObserverResults:
+def _observers(scene, out, direct_w_m2) -> ObserverResults:
     obs, m = scene.observers, len(scene.observers)
+    direct_w_m2 = np.zeros(m) if direct_w_m2 is None else direct_w_m2
     return ObserverResults(
         observers=obs, position_m=scene.to_world(obs.positions_m) if m else np.zeros((0, 3)),
         static_irradiance_w_m2=out.static_w_m2, peak_irradiance_w_m2=out.peak_w_m2, peak_time_s=out.peak_time_s,
@@ -143,6 +155,7 @@ def _observers(scene, out) -> ObserverResults:
         first_exceedance_s=out.first_exceedance_s,
         line_of_sight=out.line_of_sight.any(axis=0) if len(out.line_of_sight) else np.ones(m, bool),
         far_field=out.far_field, irradiance_w_m2=out.history_w_m2, specular_irradiance_w_m2=out.specular_w_m2,
+        direct_irradiance_w_m2=direct_w_m2, reflected_irradiance_w_m2=np.maximum(out.peak_w_m2 - direct_w_m2, 0.0),
     )
 
 
@@ -173,10 +186,12 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
         exposure = limits.exposure_limits(scene.spec)
         st.detail = exposure.detail
     mu = limits.attenuation_per_m(scene.spec)
-    ray_scene, traced = _trace(scene, the_plan, log, backend, threads, mu)
+    ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(traced.notes)
+    direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
     times, states = _histories(scene, traced.built.spots, log)
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
+    inp.direct_w_m2 = None if direct_beam is None else direct_beam.irradiance_w_m2
     if not inp.keep_history:
         notes.append(f"irradiance history not kept ({len(inp.positions_m)} x {len(times)} values); pass keep_history=True to keep it")
     out = irradiance_map.irradiance_map(inp)
@@ -185,7 +200,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
     built = traced.built
     return HazardResult(scene, exposure.mpe, exposure.irradiance_w_m2, exposure.radiant_exposure_j_m2, exposure.pulse, mu, times,
-                        log.stages(), rows, _observers(scene, out), built.spill_w, built.blocked_w, traced.beam.power_w,
+                        log.stages(), rows, _observers(scene, out, inp.direct_w_m2), built.spill_w, built.blocked_w, traced.beam.power_w,
                         None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
                         traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol))
 

@@ -681,10 +681,11 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
         err.write(f"hazard {args.verb}: interrupted\n")
         return 130
     except BrokenPipeError:  # the reader went away (hazard run ... | head): stop quietly, as after SIGPIPE
-        try:
-            sys.stdout = open(os.devnull, "w")  # Python's own flush at exit must not fail again
-        except OSError:
-            pass
+        if out is sys.stdout:
+            try:
+                sys.stdout = open(os.devnull, "w")  # Python's own flush at exit must not fail again
+            except OSError:
+                pass
         return EXIT_BROKEN_PIPE
     except (Exception, RecursionError, MemoryError) as exc:  # anything else: still one line
         if debug:

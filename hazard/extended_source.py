@@ -51,7 +51,9 @@ Conventions (all chosen so that the subtense is never overstated):
 * **Several spots**: the smallest subtense (so the smallest C_E) among the spots the
   observer is in front of; an observer in front of none keeps C_E = 1.
 * **Point sources**: specular (mirror) reflections and direct beams are point sources
-  (C_E = 1). An observer that receives any specular irradiance keeps C_E = 1; when the
+  (C_E = 1). An observer that receives any specular irradiance keeps C_E = 1; one in
+  the laser's own beam adds the two exposures as fractions of their MPEs
+  (``E_d / MPE + E_r / (C_E MPE)``: the effective C_E reported lies between); when the
   analysis does not say which observers do (no ``specular_irradiance_w_m2``), every
   observer keeps C_E = 1 as soon as any spot's material has a specular lobe.
 * **Viewing optics**: binoculars magnify the retinal image (alpha x M); the unmagnified
@@ -312,11 +314,29 @@ def _point_source_only(result, m, seconds):
     return result
 
 
+def _with_direct_beam(obs, mpe_point, mpe_ext):
+    """The MPE [W/m^2] of observers that also receive the laser's own beam (a point
+    source, MPE ``mpe_point``) beside the extended spot (``mpe_ext``): the exposures add
+    as fractions of their limits (``E_d / MPE_point + E_r / MPE_ext``), so the MPE of the
+    total is ``E / (E_d / MPE_point + E_r / MPE_ext)`` (exactly ``mpe_point`` for the
+    direct beam alone)."""
+    direct = getattr(obs, "direct_irradiance_w_m2", None)
+    if direct is None or not np.any(direct > 0):
+        return mpe_ext
+    total = obs.peak_irradiance_w_m2
+    refl = np.maximum(total - direct, 0.0)
+    both = (direct > 0) & (total > 0)
+    frac = np.where(both, direct / mpe_point + refl / mpe_ext, 1.0)
+    return np.where(both, total / frac, mpe_ext)
+
+
 def _set_observer_mpe(result, ext, specular, m, t_exp):
-    """Per-observer C_E and MPE; a static map's first exceedance with that MPE."""
+    """Per-observer C_E and MPE (for observers also in the direct beam, C_E is the ratio of
+    their combined MPE to the point-source one); a static map's first exceedance with it."""
     obs = result.observers
-    mpe_obs = ext.mpe_w_m2
-    obs.c_e = np.where(specular, 1.0, ext.c_e)
+    mpe_obs = _with_direct_beam(obs, float(result.mpe_w_m2), ext.mpe_w_m2)
+    mixed = mpe_obs != ext.mpe_w_m2  # with the direct beam: the effective factor of the sum
+    obs.c_e = np.where(specular, 1.0, np.where(mixed, mpe_obs / float(result.mpe_w_m2), ext.c_e))
     obs.mpe_w_m2 = mpe_obs
     obs.mpe_radiant_exposure_j_m2 = mpe_obs * t_exp
     if len(result.times_s) == 1 and m:  # static: exceeded from the start or never (the map's rule, with the observer's MPE)

@@ -50,12 +50,16 @@ def observer_rows(result) -> list:
     mpe_w = obs.mpe_w_m2 if obs.mpe_w_m2 is not None else np.full(m, float(result.mpe_w_m2))
     mpe_h = (obs.mpe_radiant_exposure_j_m2 if obs.mpe_radiant_exposure_j_m2 is not None
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
+    direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
+    reflected = obs.reflected_irradiance_w_m2 if obs.reflected_irradiance_w_m2 is not None else obs.peak_irradiance_w_m2
     rows = []
     for i, name in enumerate(obs.labels):
         rows.append({
             "name": name,
             "position_m": [float(v) for v in obs.position_m[i]],
             "peak_irradiance_w_m2": float(obs.peak_irradiance_w_m2[i]),
+            "direct_irradiance_w_m2": float(direct[i]),
+            "reflected_irradiance_w_m2": float(reflected[i]),
             "peak_time_s": float(obs.peak_time_s[i]),
             "static_irradiance_w_m2": float(obs.static_irradiance_w_m2[i]),
             "radiant_exposure_j_m2": float(obs.radiant_exposure_j_m2[i]),
@@ -121,7 +125,8 @@ def report_dict(result) -> dict:
     })
 
 
-CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "peak_time_s",
+CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
+               "reflected_irradiance_w_m2", "peak_time_s",
                "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
                "first_exceedance_s", "line_of_sight", "far_field"]
 
@@ -247,16 +252,22 @@ def _nearest_spot(result, idx):
 
 
 def _cause(result, i) -> str:
-    """Why observer ``i`` is hazardous: the reflection ("diffuse": BRDF lobe, glossy
-    included; "specular": mirror beam, the larger part; "diffuse + specular") and whether
+    """Why observer ``i`` is hazardous: the laser's own beam ("direct beam", the larger
+    part), the reflection ("diffuse": BRDF lobe, glossy included; "specular": mirror beam,
+    the larger part; "diffuse + specular") and whether
     the dynamic material raised its peak above the static one."""
     obs = result.observers
     peak, static = float(obs.peak_irradiance_w_m2[i]), float(obs.static_irradiance_w_m2[i])
+    direct = 0.0 if obs.direct_irradiance_w_m2 is None else float(obs.direct_irradiance_w_m2[i])
     if obs.specular_irradiance_w_m2 is None:
         kind = "reflection not split"
     else:
         spec = float(obs.specular_irradiance_w_m2[i])
-        kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * peak else "diffuse + specular")
+        kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * (peak - direct) else "diffuse + specular")
+    if direct >= 0.5 * peak and direct > 0:
+        kind = "direct beam"
+    elif direct > 0:
+        kind = f"direct beam + {kind}"
     if peak > static:
         mpe = result.observer_mpe_w_m2
         ratio_static = static / float(mpe if np.ndim(mpe) == 0 else mpe[i])

@@ -95,6 +95,10 @@ class ObserverResults:
     # highest irradiance of the mirror (delta) lobes alone [W/m^2] per observer: > 0 where
     # an observer sees the beam's image (a point source: C_E = 1); None if not computed
     specular_irradiance_w_m2: np.ndarray | None = None
+    # the laser's own beam [W/m^2] (constant in time) and the peak of the reflected part
+    # (peak_irradiance_w_m2 = direct + reflected peak); None if not computed
+    direct_irradiance_w_m2: np.ndarray | None = None
+    reflected_irradiance_w_m2: np.ndarray | None = None
 
     def __len__(self):
         return len(self.position_m)

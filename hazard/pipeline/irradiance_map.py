@@ -52,6 +52,7 @@ class MapInputs:
     keep_history: bool
     threads: int
     chunk: int = MAP_CHUNK
+    direct_w_m2: np.ndarray | None = None  # the laser's own beam at each observer (constant in time), added to the map
 
 
 @dataclass
@@ -185,6 +186,16 @@ class _MapRun:
             e = e + es
         return e
 
+    def _with_direct(self, ev, rows, sl):
+        """Add the direct beam to the rows the spot reaches, and give the rows only the
+        direct beam reaches their own (constant) history."""
+        direct = self.inp.direct_w_m2
+        if direct is None:
+            return ev, rows
+        extra = np.setdiff1d(sl.start + np.flatnonzero(direct[sl] > 0), rows)
+        ev = np.concatenate([ev + direct[rows, None], np.broadcast_to(direct[extra, None], (len(extra), ev.shape[1]))])
+        return ev, np.concatenate([rows, extra])
+
     def block(self, a0, a1):
         """Line of sight, irradiance and exposure of observers [a0, a1); returns the
         seconds spent on line of sight and on exposure."""
@@ -197,12 +208,15 @@ class _MapRun:
                                               out.line_of_sight[0, sl], sparse=True)
             out.far_field[sl] = far
             ev, rows = (ev if ev.ndim == 2 else ev[:, None]), sl.start + live
+            ev, rows = self._with_direct(ev, rows, sl)
         else:
             ev = np.zeros((a1 - a0, len(inp.times_s)))
             for k, sp in enumerate(inp.spots):
                 e = self._spot_rows(k, sp, sl)
                 ev += e if e.ndim == 2 else e[:, None]
             rows = np.arange(a0, a1)
+            if inp.direct_w_m2 is not None:
+                ev += inp.direct_w_m2[sl, None]
         if out.history_w_m2 is not None:
             out.history_w_m2[rows] = ev
         t0 = time.perf_counter()

@@ -56,21 +56,27 @@ def test_lambertian_plate_far_field_oracle():
     pts = [(30 * math.sin(a), -30 * math.cos(a), 0.0) for a in angles]
     res = hazard.analyze(plate(observers=pts))
     expected = 0.5 * 100.0 * np.cos(angles) / (math.pi * 30.0**2)
-    np.testing.assert_allclose(res.observers.static_irradiance_w_m2, expected, rtol=1e-9)
+    np.testing.assert_allclose(res.observers.reflected_irradiance_w_m2, expected, rtol=1e-9)
     assert np.all(res.observers.far_field)
+    # the observer on the normal stands in the beam, 20 m from the laser: the direct beam
+    # 4 P / (pi (a + R phi)^2) comes on top (range-safety.md 2)
+    direct = np.zeros(len(pts))
+    direct[0] = 4 * 100.0 / (math.pi * (0.005 + 20.0 * 0.001) ** 2)
+    np.testing.assert_allclose(res.observers.direct_irradiance_w_m2, direct, rtol=1e-9)
+    np.testing.assert_allclose(res.observers.static_irradiance_w_m2, expected + direct, rtol=1e-9)
     # its lobe maximum is the diffuse NHZ of the same power and MPE
     assert res.targets[0].static_lobe.max_range_m == pytest.approx(hazard.nohd_diffuse(100.0, 50.0, 0.5).nohd_m, rel=1e-9)
 
 
 def test_lambertian_plate_near_field_sums_over_the_gaussian_spot():
     z = 0.3  # a few spot sizes away: near field
-    res = hazard.analyze(plate(observers=[(0.0, -z, 0.0)], samples=1024))
+    res = hazard.analyze(plate(observers=[(0.0, -z, 0.0)], samples=1024))  # in the beam: the reflected part
     assert not res.observers.far_field[0]
     d = 0.005 + 50 * 0.001  # 1/e diameter at the plate
     e0 = 4 * 100.0 / (math.pi * d**2)
     ref = quad(lambda r: 0.5 / math.pi * z / (z * z + r * r) ** 1.5 * e0 * math.exp(-4 * r * r / d**2) * 2 * math.pi * r, 0, 10 * d)[0]
     # the near-field sum is a midpoint rule over beam cells of 1/4 of the 1/e radius (second order)
-    assert res.observers.static_irradiance_w_m2[0] == pytest.approx(ref, rel=3e-4)
+    assert res.observers.reflected_irradiance_w_m2[0] == pytest.approx(ref, rel=3e-4)
 
 
 def test_flat_mirror_is_the_direct_beam_at_the_folded_range():
@@ -104,7 +110,7 @@ def test_occlusion_by_a_box():
 def test_plan_leaves_out_what_the_scene_does_not_need():
     res = hazard.analyze(plate(observers=[(5.0, -20.0, 0.0)]))
     ran = {s.name: s.ran for s in res.stages}
-    assert ran == {"mpe": True, "rays": False, "beam": True, "history": False, "static": True, "dynamic": False,
+    assert ran == {"mpe": True, "rays": False, "beam": True, "direct": True, "history": False, "static": True, "dynamic": False,
                    "specular": False, "line_of_sight": False, "keepout": True, "footprint": False, "exposure": True,
                    "extended_source": False}
     assert "analytically" in res.stage("rays").detail

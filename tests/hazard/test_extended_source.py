@@ -139,11 +139,12 @@ def test_default_is_point_source_and_ratio_unchanged():
 
 
 def test_extended_source_divides_the_ratio_by_c_e():
-    pts = [on_normal(20.0), at_angle(20.0, 60.0), on_normal(200.0), on_normal(2.0)]
+    # (on the normal closer than the laser's 10 m an eye would stand in the beam itself)
+    pts = [on_normal(20.0), at_angle(20.0, 60.0), on_normal(200.0), at_angle(2.0, 20.0)]
     off = hazard.analyze(scene(pts))
     on = hazard.analyze(scene(pts, extended=True))
-    alpha = np.array([alpha_hand(20.0), alpha_hand(20.0, 60.0), alpha_hand(200.0), alpha_hand(2.0)])
-    # 5.05, 2.52, 0.505 (< alpha_min), 50.4 mrad: alpha_max = 100 mrad at 1 s
+    alpha = np.array([alpha_hand(20.0), alpha_hand(20.0, 60.0), alpha_hand(200.0), alpha_hand(2.0, 20.0)])
+    # 5.05, 2.52, 0.505 (< alpha_min), 47.4 mrad: alpha_max = 100 mrad at 1 s
     c_e = np.where(alpha < ALPHA_MIN, 1.0, alpha / ALPHA_MIN)
     np.testing.assert_allclose(on.observers.angular_subtense_rad, alpha, rtol=1e-9)
     np.testing.assert_allclose(on.observers.c_e, c_e, rtol=1e-9)
@@ -172,9 +173,9 @@ def test_beyond_alpha_max_2014_short_exposure():
 
 
 def test_beyond_alpha_max_2007_grows_as_alpha_squared():
-    pts = [on_normal(0.8)]  # 126 mrad > alpha_max = 100 mrad (2007: at every duration)
+    pts = [at_angle(0.6, 35.0)]  # 138 mrad > alpha_max = 100 mrad (2007: at every duration); well off the beam
     res = hazard.analyze(scene(pts, extended=True, std="iec-60825-1-2007"))
-    alpha = alpha_hand(0.8)
+    alpha = alpha_hand(0.6, 35.0)
     assert alpha > 0.1
     c_e = alpha**2 / (ALPHA_MIN * 0.1)
     assert res.observers.c_e[0] == pytest.approx(c_e, rel=1e-9)
@@ -182,6 +183,22 @@ def test_beyond_alpha_max_2007_grows_as_alpha_squared():
     # the 2014 edition caps C_E at alpha_max / alpha_min = 66.7 for the same observer
     res14 = hazard.analyze(scene(pts, extended=True))
     assert res14.observers.c_e[0] == pytest.approx(0.1 / ALPHA_MIN, rel=1e-12)
+
+
+def test_observer_in_the_direct_beam_adds_the_exposures_as_fractions_of_their_mpes():
+    """2 m in front of the plate on its normal an eye stands in the laser's own beam (a
+    point source: the point-source MPE) and sees the diffuse spot behind it (C_E): the
+    hazard ratio is E_direct / MPE + E_reflected / (C_E MPE). Beside the beam (0.68 m off
+    its axis, where the Gaussian is ~1e-70 of its peak) the spot's C_E alone."""
+    res = hazard.analyze(scene([on_normal(2.0), at_angle(2.0, 20.0)], extended=True))
+    obs = res.observers
+    mpe = mpe_1064_hand(1.0, 1.0)
+    c_e0 = alpha_hand(2.0) / ALPHA_MIN
+    assert obs.direct_irradiance_w_m2[0] > 1e3 * obs.reflected_irradiance_w_m2[0] > 0
+    want = obs.direct_irradiance_w_m2[0] / mpe + obs.reflected_irradiance_w_m2[0] / mpe_1064_hand(1.0, c_e0)
+    assert res.hazard_ratio[0] == pytest.approx(want, rel=1e-9)
+    assert 1.0 < obs.c_e[0] < c_e0
+    assert obs.c_e[1] == pytest.approx(alpha_hand(2.0, 20.0) / ALPHA_MIN, rel=1e-6)
 
 
 def test_specular_observer_keeps_c_e_1():

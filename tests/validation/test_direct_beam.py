@@ -1,0 +1,131 @@
+"""The laser's own beam at observers, against the Gaussian beam written from the formulas
+(range-safety.md section 2; laser-safety.md 3.1), not from the engine:
+
+- on the axis at range R: E = 4 P exp(-mu R) / (pi (a + R phi)^2);
+- off the axis by r (perpendicular to the axis at axial range R): times exp(-r^2 / w^2),
+  w = (a + R phi) / 2 the 1/e radius (the ray tilt adds a factor 1 + O(phi^2 r^2 / w^2),
+  below 1e-9 here);
+- through optics: K = min(tau M^2, tau (D_o / 7 mm)^2, tau (D_b / 7 mm)^2), each term
+  clipped to >= 1, D_b = a + R phi the beam diameter at the observer;
+- nothing where a target or occluder stands between the aperture and the eye; the part
+  of the beam that misses a small target (the spill) goes on.
+The total irradiance is the direct plus the reflected part. Tolerance 1e-6 (the
+references are exact).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import hazard
+import scenes
+from hazard.cli import main
+
+from . import _refs as ref
+
+P, A, PHI = 5000.0, 0.02, 1e-3  # W, m, rad
+R_T = 800.0  # laser -> target [m]; the beam runs along +y from (0, -R_T, 0)
+
+
+def _e_axis(R, mu=0.0):
+    D = A + R * PHI
+    return 4 * P * math.exp(-mu * R) / (math.pi * D * D)
+
+
+def _gain(M, D0, tau, R):
+    Db = A + R * PHI
+    return min(max(tau * M * M, 1.0), max(tau * (D0 / 7e-3) ** 2, 1.0), max(tau * (Db / 7e-3) ** 2, 1.0))
+
+
+def _scene(observers, *, mu=0.0, plate=0.5, occluder=None):
+    target = dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                  tangent=np.array([1.0, 0.0, 0.0]), size=(plate, plate), material=ref.lambertian(0.5))
+    text = ref.scene_text(power=P, a=A, phi=PHI, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3), targets=[target],
+                          observers=observers, mu=mu)
+    if occluder is not None:
+        c, size = occluder
+        text += f"[[occluders]]\nshape = \"box\"\ncenter_m = {ref.vec(c)}\nsize_m = {ref.vec(size)}\n"
+    return scenes.loads(text)
+
+
+def _at(R, x=0.0, z=0.0):
+    """A point at axial range R from the laser, offset (x, z) across the beam."""
+    return np.array([x, R - R_T, z])
+
+
+def test_on_axis_off_axis_and_through_binoculars():
+    """Observers standing in the beam 300 m from the laser (on the axis, 1 w and 2 w off it,
+    one with 7x50 binoculars): the direct beam, and it is what makes them hazardous."""
+    R, w = 300.0, (A + 300.0 * PHI) / 2
+    optics = dict(magnification=7.0, objective_diameter_m=0.05, transmission=0.9)
+    obs = [("axis", _at(R), None), ("one-w", _at(R, x=w), None), ("two-w", _at(R, x=w * 0.6, z=-w * 0.8 * 2), None),
+           ("bino", _at(R, x=w), optics)]
+    res = hazard.analyze(_scene(obs))
+    r2 = [0.0, w * w, (0.6 * w) ** 2 + (1.6 * w) ** 2, w * w]
+    want = [_e_axis(R) * math.exp(-q / w**2) for q in r2]
+    want[3] *= _gain(7.0, 0.05, 0.9, R)
+    got = res.observers.direct_irradiance_w_m2
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    # the total is direct + reflected, and the verdict uses it
+    np.testing.assert_allclose(res.observers.peak_irradiance_w_m2, got + res.observers.reflected_irradiance_w_m2, rtol=1e-12)
+    assert res.hazardous[0] and res.stage("direct").ran
+
+
+@pytest.mark.parametrize("mu", [1e-4, 2e-3])
+def test_attenuation_once_along_the_path(mu):
+    R = 500.0
+    res = hazard.analyze(_scene([("axis", _at(R), None)], mu=mu))
+    assert res.observers.direct_irradiance_w_m2[0] == pytest.approx(_e_axis(R, mu), rel=1e-6)
+
+
+def test_target_shadow_spill_and_occluder():
+    """Beyond the target: in its shadow nothing, beside it (the spill of a 0.5 m plate in a
+    1.7 m beam) the beam at that range; behind a box on the way: nothing."""
+    R = R_T + 200.0
+    w = (A + R * PHI) / 2
+    box = (np.array([3.0, -500.0, 0.0]), (1.0, 1.0, 1.0))  # at 300 m from the laser, 3 m off the axis
+    obs = [("shadow", _at(R), None), ("spill", _at(R, x=0.8 * w), None), ("behind-box", _at(600.0, x=3.0 * 600 / 300), None)]
+    res = hazard.analyze(_scene(obs, occluder=box))
+    got = res.observers.direct_irradiance_w_m2
+    assert got[0] == 0.0 and got[2] == 0.0
+    assert got[1] == pytest.approx(_e_axis(R) * math.exp(-0.64), rel=1e-6)
+
+
+def test_observer_in_the_beam_is_a_hazard_on_the_command_line(tmp_path):
+    """An observer 500 m in front of the target, in the beam: `--fail-on-hazard` exits 3
+    (it exited 0: the direct beam was left out)."""
+    path = tmp_path / "in_beam.toml"
+    text = ref.scene_text(power=P, a=A, phi=PHI, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3),
+                          targets=[dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                                        tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))],
+                          observers=[("in-beam", _at(300.0), None)])
+    path.write_text(text)
+    out = io.StringIO()
+    code = main(["run", str(path), "-o", str(tmp_path / "o"), "--fail-on-hazard", "--quiet"], stdout=out, stderr=io.StringIO())
+    assert code == 3 and "in-beam" in out.getvalue()
+
+
+@ref.FAST
+@given(R=st.floats(5.0, 3000.0), x=st.floats(-3.0, 3.0), z=st.floats(-3.0, 3.0), mu=st.sampled_from([0.0, 1e-4, 2e-3]))
+def test_direct_beam_property(R, x, z, mu):
+    """Random observers in front of and beyond the target, on and off the beam: the
+    Gaussian at their range where the plate does not shadow them, else 0."""
+    w = (A + R * PHI) / 2
+    p = _at(R, x=x * w, z=z * w)
+    res = hazard.analyze(_scene([("o", p, None)], mu=mu))
+    # rays leave a virtual point source a / phi behind the aperture: the plate's shadow
+    # at range R is the plate scaled by (R + a/phi) / (R_T + a/phi)
+    k = (R_T + A / PHI) / (R + A / PHI)
+    behind_plate = R > R_T and abs(x * w) * k < 0.25 and abs(z * w) * k < 0.25
+    want = 0.0 if behind_plate else _e_axis(R, mu) * math.exp(-(x * x + z * z))
+    got = res.observers.direct_irradiance_w_m2[0]
+    # the one convention between the engine and this reference: the path along the ray
+    # is longer than the axial range by about r^2 / (2R)
+    path_excess = mu * ((x * x + z * z) * w * w) / (2 * R)
+    assert got == pytest.approx(want, rel=1e-6 + path_excess, abs=1e-9 * _e_axis(R, mu))
