@@ -191,7 +191,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
     times, states = _histories(scene, traced.built.spots, log)
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
-    inp.direct_w_m2 = None if direct_beam is None else direct_beam.irradiance_w_m2
+    if direct_beam is not None and direct_beam.irradiance_w_m2.any():
+        inp.direct_w_m2 = direct_beam.irradiance_w_m2
     if not inp.keep_history:
         notes.append(f"irradiance history not kept ({len(inp.positions_m)} x {len(times)} values); pass keep_history=True to keep it")
     out = irradiance_map.irradiance_map(inp)
@@ -200,7 +201,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
     built = traced.built
     return HazardResult(scene, exposure.mpe, exposure.irradiance_w_m2, exposure.radiant_exposure_j_m2, exposure.pulse, mu, times,
-                        log.stages(), rows, _observers(scene, out, inp.direct_w_m2), built.spill_w, built.blocked_w, traced.beam.power_w,
+                        log.stages(), rows, _observers(scene, out, None if direct_beam is None else direct_beam.irradiance_w_m2),
+                        built.spill_w, built.blocked_w, traced.beam.power_w,
                         None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
                         traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol))
 

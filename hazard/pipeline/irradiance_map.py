@@ -190,7 +190,7 @@ class _MapRun:
         """Add the direct beam to the rows the spot reaches, and give the rows only the
         direct beam reaches their own (constant) history."""
         direct = self.inp.direct_w_m2
-        if direct is None:
+        if direct is None or not direct[sl].any():
             return ev, rows
         extra = np.setdiff1d(sl.start + np.flatnonzero(direct[sl] > 0), rows)
         ev = np.concatenate([ev + direct[rows, None], np.broadcast_to(direct[extra, None], (len(extra), ev.shape[1]))])
@@ -215,7 +215,7 @@ class _MapRun:
                 e = self._spot_rows(k, sp, sl)
                 ev += e if e.ndim == 2 else e[:, None]
             rows = np.arange(a0, a1)
-            if inp.direct_w_m2 is not None:
+            if inp.direct_w_m2 is not None and inp.direct_w_m2[sl].any():
                 ev += inp.direct_w_m2[sl, None]
         if out.history_w_m2 is not None:
             out.history_w_m2[rows] = ev
