@@ -12,32 +12,15 @@ The saving per scenario that shares the geometry is the build minus the hit.
 from __future__ import annotations
 
 import copy
-import time
 
-import numpy as np
 
 import scenes
 from brdfmodels._io import read_toml
 from hazard import rays
+from hazard.pipeline.spots import ray_meshes as _meshes  # the meshes in the order analyze uses
 from hazard.rays import RayScene, cached_ray_scene
 
-
-def _meshes(scene) -> list:
-    """(vertices, faces, object id) of every object, in the order analyze uses."""
-    meshes = [(t.mesh.vertices, t.mesh.faces, t.index) for t in scene.targets]
-    base = len(scene.targets)
-    meshes += [(m.vertices, m.faces, base + i) for i, m in enumerate(scene.occluders)]
-    tm = scene.terrain.mesh()
-    return meshes + [(tm.vertices, tm.faces, base + len(scene.occluders))]
-
-
-def _best(fn, repeat):
-    best, out = np.inf, None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
+from .bench_whole_run import _best
 
 
 def run(resolution_m=1.7, verbose=True, repeat=3) -> dict:
