@@ -268,6 +268,22 @@ def _magnitude_warnings(spec: SceneSpec) -> list:
     return []
 
 
+def _check_laser_in_open_air(spec: SceneSpec, lp, offset, terrain) -> None:
+    """A laser inside a target or occluder, or below the terrain, cannot be meant: its
+    beam would be blocked at the aperture and every observer would look safe."""
+    for solid_list, label in ((spec.targets, "targets"), (spec.occluders, "occluders")):
+        for j, s in enumerate(solid_list):
+            if _inside_solid(np.asarray(lp, float)[None], s)[0]:
+                raise SceneError(f"laser.position_m = {list(map(float, lp))} is inside {label}[{j}] ({s.shape}); "
+                                 f"expected the laser in open air")
+    if terrain is not None:
+        local = np.asarray(lp, float) - offset
+        x, y = np.array([local[0]]), np.array([local[1]])
+        if terrain.contains_xy(x, y)[0] and local[2] < terrain.height_at(x, y)[0] - 1e-6:
+            raise SceneError(f"laser.position_m = {list(map(float, lp))} is below the terrain "
+                             f"(ground at {float(terrain.height_at(x, y)[0] + offset[2]):.6g} m); expected the laser above it")
+
+
 def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> Scene:
     offset = np.asarray(spec.targets[0].center_m, float)
     lp = np.asarray(spec.laser.position_m, float)
@@ -335,6 +351,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         except ValueError as exc:
             raise SceneError(str(exc)) from None
         terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
+    _check_laser_in_open_air(spec, lp, offset, terrain)
 
     pos, grp, idx = [], [], []
     for g, ob in enumerate(spec.observers):

@@ -99,6 +99,9 @@ def trace_beam(scene, tracer, mu) -> BeamStage:
     notes = []
     if built.spill_w > 1e-3 * laser.average_power_w:
         notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")
+    if built.blocked_w > 1e-3 * laser.average_power_w:
+        notes.append(f"{100 * built.blocked_w / laser.average_power_w:.3g} % of the beam is stopped by an occluder or the "
+                     f"terrain before any target")
     notes.extend(_unreflected_notes(built.unreflected))
     return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w))
 

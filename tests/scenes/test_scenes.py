@@ -67,6 +67,8 @@ def test_examples_bundled_and_valid():
         ("name = \"plate\"\nshape", "colour = \"red\"\nname = \"plate\"\nshape", "targets[0].colour: unknown key"),
         ("points_m = [[10.0, -17.0, 0.0]]", "points_m = [[-5.0, -8.0, 0.5]]", "observers[0] (east): point [-5.0, -8.0, 0.5] is inside occluders[0] (box)"),
         ("tangent = [1.0, 0.0, 0.0]", "tangent = [0.0, 2.0, 0.0]", "is parallel to normal"),
+        ("position_m = [0.0, -50.0, 0.0]", "position_m = [-5.0, -8.0, 0.5]",
+         "laser.position_m = [-5.0, -8.0, 0.5] is inside occluders[0] (box); expected the laser in open air"),
     ],
 )
 def test_bad_scenes_name_the_field(old, new, message):
@@ -178,3 +180,12 @@ def test_spec_standards_match_hazard():
 def test_echo_is_json():
     s = scenes.loads(BASE)
     assert json.loads(json.dumps(s.echo()))["laser"]["power_w"] == 100.0
+
+
+def test_laser_below_the_terrain_is_an_error():
+    """A laser under the ground would have its beam stopped at the aperture: every observer
+    would look safe. It cannot be meant: an error naming the field and the ground height."""
+    text = open(scenes.example_path("range_terrain")).read()
+    assert "position_m = [0.0, -400.0, 3.0]" in text
+    with pytest.raises(scenes.SceneError, match=r"laser.position_m = \[0.0, -400.0, -30.0\] is below the terrain"):
+        scenes.loads(text.replace("position_m = [0.0, -400.0, 3.0]", "position_m = [0.0, -400.0, -30.0]"))
