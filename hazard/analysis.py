@@ -193,6 +193,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
         inp.direct_w_m2 = direct_beam.irradiance_w_m2
+    if exposure.pulse is not None:
+        inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
     if not inp.keep_history:
         notes.append(f"irradiance history not kept ({len(inp.positions_m)} x {len(times)} values); pass keep_history=True to keep it")
     out = irradiance_map.irradiance_map(inp)

@@ -53,6 +53,7 @@ class MapInputs:
     threads: int
     chunk: int = MAP_CHUNK
     direct_w_m2: np.ndarray | None = None  # the laser's own beam at each observer (constant in time), added to the map
+    pulse_limit_w_m2: float | None = None  # pulsed: per-pulse MPE x PRF (the first pulse above it is an exceedance)
 
 
 @dataclass
@@ -109,6 +110,7 @@ class _Exposure:
 
     def __init__(self, inp: MapInputs, out: MapOutputs):
         self.times, self.t_exp, self.mpe_w_m2, self.out = inp.times_s, inp.duration_s, inp.mpe_w_m2, out
+        self.pulse_limit = inp.pulse_limit_w_m2
         times = self.times
         if len(times) > 1:
             self.span = times[-1] - times[0]
@@ -137,6 +139,20 @@ class _Exposure:
             over = cum > self.mpe_h_t
             anyo = over.any(axis=1)
             out.first_exceedance_s[rows[hot[anyo]]] = times[1 + over.argmax(axis=1)[anyo]]
+        if self.pulse_limit is not None:
+            self._first_pulse_over(ec, pk, rows)
+
+    def _first_pulse_over(self, ec, pk, rows):
+        """Pulsed lasers: the first time a pulse's exposure E(t) / PRF reaches the per-pulse
+        MPE (rules 1 and 3 for the whole train, as the hazard ratio uses it), if earlier
+        than the average rule's exceedance."""
+        out = self.out
+        hit = np.flatnonzero(pk >= self.pulse_limit)
+        if not len(hit):
+            return
+        t_pulse = self.times[(ec[hit] >= self.pulse_limit).argmax(axis=1)]
+        current = out.first_exceedance_s[rows[hit]]
+        out.first_exceedance_s[rows[hit]] = np.where(np.isnan(current), t_pulse, np.minimum(current, t_pulse))
 
 
 class _MapRun:

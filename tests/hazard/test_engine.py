@@ -440,3 +440,25 @@ def test_a_beam_stopped_before_the_target_is_said_not_silent():
     assert any("100 % of the beam is stopped by an occluder or the terrain before any target" in n for n in res.notes)
     assert res.targets[0].spot_power_w == 0.0 and res.targets[0].lit_side == "not lit"
     assert res.blocked_w == pytest.approx(100.0, rel=1e-6)
+
+
+def test_pulsed_dynamic_first_exceedance_follows_the_pulse_rules():
+    """A pulsed laser on the dynamic steel_vs_copper scene (100 J, 10 ns, 100 Hz for 10 s at
+    1064 nm): per-pulse MPE by ANSI Z136.1-2014 Table 5a, 1050-1400 nm, 1e-11 - 1.3e-5 s:
+    H_1 = 2.0e-2 C_C J/m^2 (C_C = 1); rule 3: H_1 N^-0.25, N = 1000 -> 3.5566e-3 J/m^2;
+    rule 2: 50 W/m^2 x 10 s / N = 0.5 J/m^2. As an average irradiance: x PRF = 0.35566
+    W/m^2. An observer is exceeded from the first time E(t) / PRF reaches it (or earlier by
+    the average rule); every hazardous observer has a first exceedance (it said 'never'
+    while the hazard ratio was 28)."""
+    path = scenes.example_path("steel_vs_copper")
+    text = path.read_text().replace("power_w = 10000.0", "pulse_energy_j = 100.0\npulse_duration_s = 1e-8\nprf_hz = 100.0")
+    res = hazard.analyze(scenes.loads(text, base_dir=path.parent), keep_history=True)
+    limit = 2.0e-2 * 1000 ** -0.25 * 100.0
+    assert res.mpe_w_m2 == pytest.approx(limit, rel=1e-9)
+    first = res.observers.first_exceedance_s
+    assert np.all(np.isfinite(first[res.hazardous])) and res.hazardous.sum() > 0
+    e = res.observers.irradiance_w_m2
+    over = e >= limit
+    rows = np.flatnonzero(over.any(axis=1))
+    t_pulse = res.times_s[over[rows].argmax(axis=1)]
+    assert np.all(first[rows] <= t_pulse)
