@@ -163,8 +163,10 @@ def _targets(scene, traced, states, exposure, mu, log):
     """Stage ``keepout`` and a row for every target (lit or not)."""
     a, spots = scene.spec.analysis, traced.built.spots
     with log.run("keepout") as st:
-        rows = lobes.target_results(spots, states, exposure.irradiance_w_m2, mu, a)
-        st.detail = f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
+        aids = lobes.scene_aids(scene)
+        rows = lobes.target_results(spots, states, exposure.irradiance_w_m2, mu, a, aids)
+        st.detail = (f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
+                     + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else ""))
     return rows + beam_stage.unlit_targets(scene.targets, spots, traced.built.unreflected)
 
 

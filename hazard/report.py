@@ -312,6 +312,10 @@ def _nohd_lines(result) -> list:
         spec = ("no mirror beam" if t.specular_nohd_static_m is None else
                 f"specular static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m")
         lines.append(f"  {t.name}: diffuse static {d['nohd_static_m']:.4g} m, dynamic {d['nohd_dynamic_m']:.4g} m; {spec}")
+        for a in t.aided:
+            spec_a = "" if a["specular_nohd_dynamic_m"] is None else f"; specular {a['specular_nohd_dynamic_m']:.4g} m"
+            lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics (gain {a['gain']:.3g}): "
+                         f"diffuse {a['nohd_dynamic_m']:.4g} m{spec_a}")
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
         lines.append(f"  hazardous ground at {fs.eye_height_m:g} m eye height: static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2")

@@ -43,6 +43,7 @@ class TargetResult:
     peak_irradiance_w_m2: float = 0.0  # highest incident irradiance on the lit part (normal to the beam, attenuated)
     mean_irradiance_w_m2: float = 0.0  # spot power over its lit area normal to the beam
     lit_side: str = "front"
+    aided: list = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
 
     def to_dict(self):
         def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side
@@ -67,6 +68,7 @@ class TargetResult:
             "specular_direction": self.specular_direction,
             "state_name": self.state_name,
             "state_range": self.state_range,
+            "aided": list(self.aided),
         }
 
 

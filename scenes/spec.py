@@ -108,6 +108,9 @@ class ExposureSpec(_Strict):
     standard: Literal[STANDARD_KEYS] = "ansi-z136.1-2014"
     extended_source: bool = Field(default=False, description=(
         "apply C_E per observer from the diffuse spot's angular subtense (default false: point-source MPE, conservative)"))
+    optics: list[OpticsSpec] = Field(default_factory=list, max_length=16, description=(
+        "optical aids anyone on the range might carry (binoculars, scopes): every target reports its NOHDs with each, "
+        "beside those of the observer groups' optics"))
 
 
 class OxidationSpec(_Strict):

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..keepout import hazard_lobe
+from ..nohd import optical_gain
 from ..results import TargetResult
 from ..specular import specular_nohd
 
@@ -50,6 +51,47 @@ def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
     )
 
 
-def target_results(spots, states, mpe_w_m2, mu, analysis) -> list:
-    """Rows of the lit targets, in the order of their spots."""
-    return [target_result(sp, states, mpe_w_m2, mu, analysis) for sp in spots]
+def scene_aids(scene) -> list:
+    """The distinct optical aids of the scene: the observer groups' optics, then
+    ``[exposure] optics`` (each an OpticsSpec)."""
+    seen, out = set(), []
+    groups = scene.observers.optics if scene.observers is not None else ()
+    for o in list(groups) + list(scene.spec.exposure.optics):
+        key = None if o is None else (o.magnification, o.objective_diameter_m, o.transmission)
+        if key is not None and key not in seen:
+            seen.add(key)
+            out.append(o)
+    return out
+
+
+def aided_nohds(sp, states, mpe_w_m2, mu, analysis, aid) -> dict:
+    """NOHDs [m] of one lit target seen through an optical aid: the lobes and the specular
+    NOHD with the aid's gain ``K = min(tau M^2, tau (D_o / 7 mm)^2)`` (each term >= 1;
+    diffuse light fills the objective; for the mirror beam the beam-size limit is not
+    taken, an upper bound)."""
+    k = optical_gain(aid.magnification, aid.objective_diameter_m, aid.transmission)
+    t = sp.target
+    initial = states[t.index][:1] if t.index in states else None
+    dyn_states = _dynamic_states(t, states)
+    grid = dict(gain=k, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
+    static_lobe = hazard_lobe(sp, mpe_w_m2, mu, states=initial, **grid)
+    dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(sp, mpe_w_m2, mu, states=dyn_states, **grid)
+    spec = [None, None]
+    if sp.material.has_specular:
+        ns = specular_nohd(sp, mpe_w_m2, mu, initial, gain=k)
+        nd = specular_nohd(sp, mpe_w_m2, mu, dyn_states, gain=k) if dyn_states is not None else ns
+        spec = [ns.nohd_m, nd.nohd_m]
+    return {"magnification": aid.magnification, "objective_diameter_m": aid.objective_diameter_m,
+            "transmission": aid.transmission, "gain": k, "nohd_static_m": static_lobe.max_range_m,
+            "nohd_dynamic_m": dynamic_lobe.max_range_m, "specular_nohd_static_m": spec[0], "specular_nohd_dynamic_m": spec[1]}
+
+
+def target_results(spots, states, mpe_w_m2, mu, analysis, aids=()) -> list:
+    """Rows of the lit targets, in the order of their spots, with their NOHDs through each
+    optical aid in ``aids``."""
+    rows = []
+    for sp in spots:
+        row = target_result(sp, states, mpe_w_m2, mu, analysis)
+        row.aided = [aided_nohds(sp, states, mpe_w_m2, mu, analysis, aid) for aid in aids]
+        rows.append(row)
+    return rows

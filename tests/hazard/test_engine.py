@@ -462,3 +462,23 @@ def test_pulsed_dynamic_first_exceedance_follows_the_pulse_rules():
     rows = np.flatnonzero(over.any(axis=1))
     t_pulse = res.times_s[over[rows].argmax(axis=1)]
     assert np.all(first[rows] <= t_pulse)
+
+
+def test_aided_nohd_of_a_lambertian_plate_is_sqrt_k_times_the_naked_one():
+    """[exposure] optics = 7x50 binoculars (tau 0.9): K = min(0.9 x 7^2, 0.9 x (50/7)^2)
+    = 44.1 (laser-safety.md 3.1); a Lambertian plate's NOHD on its normal,
+    sqrt(rho P / (pi MPE)) without attenuation, grows by sqrt(K) (range-safety.md: aided
+    NOHD = sqrt(K) x naked)."""
+    text = PLATE.format(power=100.0, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=256,
+                        grid=2.0, levels=3)
+    text = text.replace("[atmosphere]", "optics = [{ magnification = 7.0, objective_diameter_m = 0.05, transmission = 0.9 }]\n"
+                                        "[atmosphere]")
+    res = hazard.analyze(scenes.loads(text))
+    mpe = res.mpe_w_m2
+    naked = math.sqrt(0.5 * 100.0 / (math.pi * mpe))
+    row = res.targets[0].to_dict()
+    assert row["nohd_static_m"] == pytest.approx(naked, rel=1e-6)
+    (aid,) = row["aided"]
+    assert aid["gain"] == pytest.approx(44.1, rel=1e-12)
+    assert aid["nohd_static_m"] == pytest.approx(math.sqrt(44.1) * naked, rel=1e-6)
+    assert aid["specular_nohd_static_m"] is None
