@@ -6,7 +6,8 @@ others are left out; each stage is a function of explicit inputs in its own modu
 (``result.stages``: ran or skipped, the reason, the run time) comes from that plan:
 
 ``mpe`` (:mod:`~hazard.pipeline.limits`) -> ``rays`` and ``beam``
-(:mod:`~hazard.pipeline.spots`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
+(:mod:`~hazard.pipeline.spots`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``spill``
+(:mod:`~hazard.pipeline.spill`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
 ``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
 (:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
 -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
@@ -22,7 +23,7 @@ import numpy as np
 from brdfmodels.parallel import default_threads, thread_limit
 
 from .nohd import optical_gain
-from .pipeline import direct, ground, history, irradiance_map, limits, lobes, spots as beam_stage
+from .pipeline import direct, ground, history, irradiance_map, limits, lobes, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
 from .pipeline.plan import plan
@@ -87,6 +88,17 @@ def _direct(scene, traced, tracer, mu, log, the_plan):
         d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
         st.detail = d.detail
     return d
+
+
+def _spill(scene, traced, mu, exposure, log) -> dict:
+    """Stage ``spill``: where the beam that misses every target goes, and its NOHD."""
+    with log.run("spill") as st:
+        out = spill.spill_summary(scene, traced, mu, exposure.irradiance_w_m2, lobes.scene_aids(scene))
+        stopped = "; ".join(f"{d['power_w']:.4g} W stopped by {d['object']} at {d['range_m']:.4g} m" for d in out["stopped"])
+        st.detail = (f"{out['leaves_scene_w']:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
+                     f"{out['nohd_m']:.4g} m (the spill's highest point of the beam profile: {out['peak_profile']:.3g})"
+                     + (f"; {stopped}" if stopped else ""))
+    return out
 
 
 def _histories(scene, spots, log):
@@ -191,6 +203,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(traced.notes)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
+    spill_part = _spill(scene, traced, mu, exposure, log)
     times, states = _histories(scene, traced.built.spots, log)
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
@@ -208,7 +221,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
                         log.stages(), rows, _observers(scene, out, None if direct_beam is None else direct_beam.irradiance_w_m2),
                         built.spill_w, built.blocked_w, traced.beam.power_w,
                         None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
-                        traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol))
+                        traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
+                        spill=spill_part)
 
 
 def versions() -> dict:

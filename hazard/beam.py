@@ -476,12 +476,20 @@ def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
     edge = nxt - poly
     length = np.sqrt((edge * edge).sum(1))
     orient = np.sign(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
-    out = np.zeros(len(pts), bool)
-    for a in range(0, len(pts), 8192):
-        q = pts[a:a + 8192]
+    # many-sided polygons (disks): settle the points well inside the inscribed circle
+    # about the centroid, or outside the circumscribed one, without the edge loop
+    c = poly.mean(axis=0)
+    rel_c = poly - c
+    r_in = float(np.min(orient * (edge[:, 0] * (-rel_c[:, 1]) - edge[:, 1] * (-rel_c[:, 0])) / np.where(length > 0, length, 1.0)))
+    r_out = float(np.sqrt((rel_c * rel_c).sum(1).max()))
+    d = np.sqrt(((pts - c) ** 2).sum(1))
+    out = d < r_in - margin - 1e-12 * (1 + r_out) if r_in > 0 else np.zeros(len(pts), bool)
+    todo = np.flatnonzero(~out & (d <= r_out + abs(margin) + 1e-12 * (1 + r_out)))
+    for a in range(0, len(todo), 8192):
+        q = pts[todo[a:a + 8192]]
         rel = q[:, None, :] - poly[None, :, :]
         cross = edge[None, :, 0] * rel[..., 1] - edge[None, :, 1] * rel[..., 0]
-        out[a:a + 8192] = np.all(cross * orient > margin * length[None, :], axis=1)
+        out[todo[a:a + 8192]] = np.all(cross * orient > margin * length[None, :], axis=1)
     return out
 
 

@@ -219,34 +219,61 @@ def outline_cells(outline_s, n0) -> OutlineCells:
                         PolygonMoments(m.fraction[keep], m.mean[keep], m.cov[keep], m.r2_min[keep]))
 
 
-def _r2_min_outside(piece, holes, whole_holes, n_edge=256):
-    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value:
-    points on the boundaries of the piece and of its hole pieces ``holes`` (``n_edge``
-    per edge) that are not strictly inside any whole hole polygon ``whole_holes``, the
-    distance lowered by half their spacing."""
+def _ring_points(ring, spacing):
+    """Points along a closed polygon's edges, at most ``spacing`` apart (vertices included)."""
+    steps = np.concatenate([ring[1:], ring[:1]]) - ring
+    lengths = np.sqrt((steps * steps).sum(1))
+    per_edge = np.maximum(np.ceil(lengths / max(spacing, 1e-300)).astype(int), 1)
+    edge = np.repeat(np.arange(len(ring)), per_edge + 1)
+    frac = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in per_edge])
+    return ring[edge] + frac[:, None] * steps[edge], float((lengths / per_edge).max())
+
+
+def _r2_min_outside(piece, holes, n_edge=256, seam=0.0):
+    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value.
+
+    ``holes``: (part of a hole inside the piece, the whole hole) pairs. Candidates are
+    points on the piece's boundary and on each hole part's boundary, about
+    ``1 / n_edge`` of the piece's size apart; a point is covered when it lies strictly
+    inside a whole hole, or within ``seam`` of a hole it is not on the edge of (two
+    plates meeting edge to edge leave no gap). The nearest free candidate's distance,
+    lowered by the spacing, bounds the true one from below.
+    """
     from .beam import inside_convex
 
-    rings = [piece] + holes
-    u = np.linspace(0.0, 1.0, n_edge + 1)[:, None, None]
-    edges = [np.concatenate([r[1:], r[:1]]) - r for r in rings]
-    pts = np.concatenate([(r + u * e).reshape(-1, 2) for r, e in zip(rings, edges)])
-    spacing = max(float(np.sqrt((e * e).sum(1).max())) for e in edges) / n_edge
-    free = np.ones(len(pts), bool)
     origin = np.zeros((1, 2))
-    for h in whole_holes:
-        free &= ~inside_convex(pts, h, margin=1e-12)
-    if inside_convex(origin, piece, margin=-1e-12)[0] and not any(inside_convex(origin, h, margin=1e-12)[0] for h in whole_holes):
+    if inside_convex(origin, piece, margin=-1e-12)[0] and not any(inside_convex(origin, w, margin=1e-12)[0] for _, w in holes):
         return 0.0
-    if not np.any(free):  # wholly hidden
-        return math.inf
-    r = math.sqrt(float(np.min((pts[free] ** 2).sum(1))))
-    return max(r - spacing / 2, 0.0) ** 2
+    spacing = float(np.ptp(piece, axis=0).max()) / n_edge
+    rings = [(np.asarray(piece, float), -1)] + [(np.asarray(p, float), k) for k, (p, _) in enumerate(holes)]
+    cand, owner, step = [], [], spacing
+    for ring, k in rings:
+        pts, sp = _ring_points(ring, spacing)
+        cand.append(pts)
+        owner.append(np.full(len(pts), k))
+        step = max(step, sp)
+    pts, owner = np.concatenate(cand), np.concatenate(owner)
+    r2 = (pts * pts).sum(1)
+    order = np.argsort(r2)
+    for a in range(0, len(order), 512):  # nearest candidates first
+        batch = order[a:a + 512]
+        free = np.ones(len(batch), bool)
+        for k, (_, whole) in enumerate(holes):
+            mine = owner[batch] == k  # on this hole's own boundary: covered only strictly inside
+            strictly = inside_convex(pts[batch], whole, margin=1e-12)
+            near = inside_convex(pts[batch], whole, margin=-seam)
+            free &= ~np.where(mine, strictly, near)
+        if free.any():
+            # the free region's nearest point lies on a candidate ring within one spacing
+            # of a free candidate: lowered by it, never above the truth
+            return max(math.sqrt(float(r2[batch[np.argmax(free)]])) - step, 0.0) ** 2
+    return math.inf  # wholly hidden
 
 
 def _subtract_holes(oc, holes_oc, hole_polys):
     """Moments of each piece minus those of the holes' pieces in the same cell (power,
     first and second moments add over disjoint regions); returns the new moments and, per
-    piece, its hole pieces."""
+    piece, its (hole piece, whole hole) pairs."""
     from .beam import PolygonMoments
 
     m = oc.moments
@@ -255,7 +282,7 @@ def _subtract_holes(oc, holes_oc, hole_polys):
     second = (m.cov + m.mean[:, :, None] * m.mean[:, None, :]) * frac[:, None, None]
     where = {int(k): r for r, k in enumerate(oc.keys)}
     holes = [[] for _ in oc.pieces]
-    for hoc in holes_oc:
+    for i, hoc in enumerate(holes_oc):
         hm = hoc.moments
         for r, k in enumerate(hoc.keys):
             q = where.get(int(k))
@@ -264,7 +291,7 @@ def _subtract_holes(oc, holes_oc, hole_polys):
             frac[q] -= hm.fraction[r]
             first[q] -= hm.mean[r] * hm.fraction[r]
             second[q] -= (hm.cov[r] + np.outer(hm.mean[r], hm.mean[r])) * hm.fraction[r]
-            holes[q].append(hoc.pieces[r])
+            holes[q].append((hoc.pieces[r], hole_polys[i]))
     frac = np.maximum(frac, 0.0)
     safe = np.where(frac > 1e-300, frac, 1.0)
     mean = np.where((frac > 1e-300)[:, None], first / safe[:, None], m.mean)
@@ -272,8 +299,7 @@ def _subtract_holes(oc, holes_oc, hole_polys):
     cov = np.where((frac > 1e-300)[:, None, None], cov, m.cov)
     cov[:, 0, 0] = np.maximum(cov[:, 0, 0], 0.0)
     cov[:, 1, 1] = np.maximum(cov[:, 1, 1], 0.0)
-    r2 = np.array([m.r2_min[q] if not holes[q] else _r2_min_outside(oc.pieces[q], holes[q], hole_polys)
-                   for q in range(len(frac))])
+    r2 = np.array([m.r2_min[q] if not holes[q] else _r2_min_outside(oc.pieces[q], holes[q]) for q in range(len(frac))])
     return PolygonMoments(frac, mean, cov, r2), holes
 
 
@@ -378,7 +404,7 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     peak = beam.power_w / (math.pi * w * w) * np.exp(-r2) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
     nxt = verts[ring_next(counts)]
     area = np.abs(np.bincount(owner, verts[:, 0] * nxt[:, 1] - verts[:, 1] * nxt[:, 0], len(pts))) / 2
-    area -= np.array([sum(_polygon_area(h) for h in hp) for hp in hole_pieces])
+    area -= np.array([sum(_polygon_area(h) for h, _ in hp) for hp in hole_pieces])
     err = disk_err + beam.power_w * slack + float((power * (up - down)).sum())
     return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, np.maximum(area, 0.0), err, total)
 

@@ -113,7 +113,8 @@ def report_dict(result) -> dict:
         "extended_source": getattr(result, "extended_source", None) or {"applied": False},
         "attenuation_per_m": result.attenuation_per_m,
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
-                 "sampling": getattr(result, "beam_sampling", None) or None},
+                 "sampling": getattr(result, "beam_sampling", None) or None,
+                 "spill": getattr(result, "spill", None) or None},
         "stages": [s.to_dict() for s in result.stages],
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
         "targets": [t.to_dict() for t in result.targets],
@@ -316,6 +317,14 @@ def _nohd_lines(result) -> list:
             spec_a = "" if a["specular_nohd_dynamic_m"] is None else f"; specular {a['specular_nohd_dynamic_m']:.4g} m"
             lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics (gain {a['gain']:.3g}): "
                          f"diffuse {a['nohd_dynamic_m']:.4g} m{spec_a}")
+    sp = getattr(result, "spill", None) or {}
+    if sp.get("nohd_m"):
+        aided = "".join(f"; through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics {a['nohd_m']:.4g} m"
+                        for a in sp["aided"])
+        lines.append(f"  the beam past the targets ({sp['leaves_scene_w']:.4g} W leaves the scene): direct-beam NOHD "
+                     f"{sp['nohd_m']:.4g} m{aided}")
+    for d in sp.get("stopped", []):
+        lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m")
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
         lines.append(f"  hazardous ground at {fs.eye_height_m:g} m eye height: static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2")

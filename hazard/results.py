@@ -137,6 +137,7 @@ class HazardResult:
     states: dict = field(default_factory=dict)  # target index -> states over times_s
     extended_source: dict = field(default_factory=dict)  # C_E summary for the report (hazard.extended_source)
     beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
+    spill: dict = field(default_factory=dict)  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill)
 
     @property
     def observer_mpe_w_m2(self):

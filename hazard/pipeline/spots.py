@@ -85,6 +85,7 @@ class BeamStage:
     built: object
     notes: list
     detail: str
+    outlines: dict  # flat targets' projected outlines: index -> (upper, lower) polygons in s
 
 
 def trace_beam(scene, tracer, mu) -> BeamStage:
@@ -103,7 +104,8 @@ def trace_beam(scene, tracer, mu) -> BeamStage:
         notes.append(f"{100 * built.blocked_w / laser.average_power_w:.3g} % of the beam is stopped by an occluder or the "
                      f"terrain before any target")
     notes.extend(_unreflected_notes(built.unreflected))
-    return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w))
+    return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w),
+                     {k: v[0] for k, v in outlines.items()})
 
 
 def _level0_cells(beam_samples: int) -> int:
