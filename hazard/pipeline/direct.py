@@ -35,8 +35,10 @@ class DirectBeam:
 
     @property
     def detail(self) -> str:
-        return (f"{self.reached} observer(s) in the direct beam, {self.blocked} more behind something that blocks it "
-                f"(Gaussian profile at each range, attenuation, optical gain)")
+        top = float(self.irradiance_w_m2.max()) if len(self.irradiance_w_m2) else 0.0
+        return (f"{self.reached} observer(s) with a clear line into the beam (E > 0, at most {top:.4g} W/m^2), "
+                f"{self.blocked} more behind something that blocks it (Gaussian profile at each range, attenuation, "
+                f"optical gain)")
 
 
 def _beam_gain(optics, group, beam_diameter_m):
