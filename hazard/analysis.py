@@ -6,7 +6,7 @@ others are left out; each stage is a function of explicit inputs in its own modu
 (``result.stages``: ran or skipped, the reason, the run time) comes from that plan:
 
 ``mpe`` (:mod:`~hazard.pipeline.limits`) -> ``rays`` and ``beam``
-(:mod:`~hazard.pipeline.spots`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``spill``
+(:mod:`~hazard.pipeline.spots`) -> ``crossings`` (:mod:`~hazard.pipeline.crossings`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``spill``
 (:mod:`~hazard.pipeline.spill`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
 ``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
 (:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
@@ -23,7 +23,7 @@ import numpy as np
 from brdfmodels.parallel import default_threads, thread_limit
 
 from .nohd import optical_gain
-from .pipeline import direct, ground, history, irradiance_map, limits, lobes, spill, spots as beam_stage
+from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
 from .pipeline.plan import plan
@@ -77,6 +77,17 @@ def _trace(scene, the_plan, log, backend, threads, mu):
         traced = beam_stage.trace_beam(scene, tracer, mu)
         st.detail = traced.detail
     return ray_scene, tracer, traced
+
+
+def _crossings(scene, traced, mu, log, the_plan):
+    """Stage ``crossings``: observer points added where a beam crosses a line between its
+    points (the scene is returned with them; the caller's is not changed)."""
+    if the_plan.skipped("crossings"):
+        log.skip("crossings", the_plan.skipped("crossings"))
+        return scene
+    with log.run("crossings") as st:
+        scene, st.detail = crossings.add_crossings(scene, traced.beam, traced.built.spots, mu)
+    return scene
 
 
 def _direct(scene, traced, tracer, mu, log, the_plan):
@@ -202,6 +213,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     mu = limits.attenuation_per_m(scene.spec)
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(traced.notes)
+    scene = _crossings(scene, traced, mu, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
     spill_part = _spill(scene, traced, mu, exposure, log)
     times, states = _histories(scene, traced.built.spots, log)

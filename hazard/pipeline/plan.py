@@ -3,7 +3,7 @@
 The stages, in order (pvlib's ModelChain steps and scikit-learn's Pipeline are the
 models: each stage is a function of explicit inputs, the plan decides which run):
 
-``mpe`` -> ``rays`` -> ``beam`` -> ``direct`` -> ``spill`` -> ``history`` -> ``specular`` -> ``line_of_sight`` ->
+``mpe`` -> ``rays`` -> ``beam`` -> ``crossings`` -> ``direct`` -> ``spill`` -> ``history`` -> ``specular`` -> ``line_of_sight`` ->
 ``static`` | ``dynamic`` -> ``exposure`` -> ``keepout`` -> ``footprint`` ->
 ``extended_source``.
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 __all__ = ["Plan", "plan", "STAGES"]
 
-STAGES = ("mpe", "rays", "beam", "direct", "spill", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
+STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
           "footprint", "extended_source")
 
 
@@ -75,4 +75,6 @@ def plan(scene) -> Plan:
         reasons["footprint"] = "no terrain"
     if not observers:
         reasons["direct"] = "no observers"
+    if not any(o.layout == "line" and o.count >= 2 for o in scene.spec.observers):
+        reasons["crossings"] = "no observer line"
     return Plan(rays, los and observers, dynamic, specular, scene.terrain is not None, reasons)

@@ -162,3 +162,49 @@ def test_spill_stopped_by_an_occluder_is_reported_with_its_range():
     (stop,) = res.spill["stopped"]
     assert stop["object"] == "occluders[0]" and 0 < stop["power_w"] < P
     assert stop["range_m"] == pytest.approx(299.0, abs=0.5)
+
+
+def _road(start, end, count):
+    return (f'[[observers]]\nname = "road"\nstart_m = {ref.vec(np.asarray(start, float))}\n'
+            f'end_m = {ref.vec(np.asarray(end, float))}\ncount = {count}\n')
+
+
+@pytest.mark.parametrize("offset", [0.0, 3.7, -6.2])
+def test_a_road_sampled_every_10_m_finds_the_beam_between_its_points(offset):
+    """A 2.7 cm beam crosses a road 300 m from the laser, perpendicular, between two of its
+    points 10 m apart (the nearest is `offset` + 5 m away): the crossing is added as a
+    point of its own with the on-axis irradiance 4 P / (pi (a + R phi)^2) (1e-6) and it
+    is hazardous; the road's own points see nothing (range-safety.md 2; issue 13 item 7)."""
+    R = 300.0
+    x0 = -500.0 + 5.0 + offset  # the road's points sit at x0 + 10 k: the axis (x = 0) falls between two
+    text = ref.scene_text(power=P, a=A, phi=PHI, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3),
+                          targets=[dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                                        tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))])
+    text = text.replace("[analysis]", _road([x0, R - R_T, 0.0], [x0 + 1000.0, R - R_T, 0.0], 101) + "[analysis]")
+    res = hazard.analyze(scenes.loads(text))
+    obs = res.observers
+    labels = obs.labels
+    k = labels.index("road:crossing")
+    assert obs.position_m[k][0] == pytest.approx(0.0, abs=1e-6)
+    assert obs.direct_irradiance_w_m2[k] == pytest.approx(_e_axis(R), rel=1e-6)
+    assert res.hazardous[k] and "direct beam" in res.stage("crossings").detail
+    road = [i for i, n in enumerate(labels) if n.startswith("road[")]
+    assert len(road) == 101 and np.all(obs.direct_irradiance_w_m2[road] < 1e-6 * _e_axis(R))
+
+
+def test_a_mirror_beam_crossing_a_road_is_found():
+    """A flat mirror at 45 deg sends the beam along -x; a road along y at x = -100 m with
+    points every 10 m misses it. The crossing point: the image beam at folded range
+    R_T + 100 m, on its axis: rho 4 P / (pi (a + R phi)^2) (image source; 1e-3)."""
+    rho = 0.9
+    n = np.array([-1.0, -1.0, 0.0]) / math.sqrt(2)
+    target = dict(name="mirror", shape="plate", center=np.zeros(3), normal=n, tangent=np.array([1.0, -1.0, 0.0]) / math.sqrt(2),
+                  size=(0.5, 0.5), material=ref.specular(rho))
+    text = ref.scene_text(power=P, a=A, phi=PHI, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3), targets=[target])
+    text = text.replace("[analysis]", _road([-100.0, -503.0, 0.0], [-100.0, 497.0, 0.0], 101) + "[analysis]")
+    res = hazard.analyze(scenes.loads(text))
+    k = res.observers.labels.index("road:crossing")
+    D = A + (R_T + 100.0) * PHI
+    assert res.observers.position_m[k][1] == pytest.approx(0.0, abs=1e-3)
+    assert res.observers.peak_irradiance_w_m2[k] == pytest.approx(rho * 4 * P / (math.pi * D * D), rel=1e-3)
+    assert "the mirror beam of mirror crosses" in res.stage("crossings").detail
