@@ -28,6 +28,7 @@ __all__ = ["add_crossings", "SUBSAMPLES", "GAIN"]
 SUBSAMPLES = 64  # points per segment of the line in the first pass, and again around the best one
 GAIN = 1.01  # a crossing is kept when it beats the line's own points by more than this factor
 MAX_CANDIDATES = 2_000_000  # first-pass points per line and beam (bounds memory on long lines)
+FLOOR = 1e-4  # crossings weaker than this fraction of the MPE are not added
 
 
 def _direct(beam, mu):
@@ -101,9 +102,11 @@ def _line_groups(scene):
             yield g, spec.name, obs.positions_m[rows[np.argsort(obs.index_in_group[rows])]]
 
 
-def add_crossings(scene, beam, spots, mu):
+def add_crossings(scene, beam, spots, mu, mpe_w_m2):
     """The scene with an observer point added at each beam crossing of a line that falls
-    between its points (see the module notes), and a one-line account."""
+    between its points (see the module notes), and a one-line account. Crossings below
+    ``FLOOR`` of the MPE (naked eye) are left out: even through optics of gain 1000 they
+    stay under a tenth of it."""
     if scene.observers is None or not len(scene.observers):
         return scene, "no observers"
     sources = [("direct beam", _direct(beam, mu))] + [(f"mirror beam of {sp.target.name}", _mirror(sp, beam, mu))
@@ -113,7 +116,7 @@ def add_crossings(scene, beam, spots, mu):
         for label, fn in sources:
             at_points = float(fn(pts).max())
             value, point = _densest(fn, pts)
-            if value > 0 and value > GAIN * at_points:
+            if value >= FLOOR * mpe_w_m2 and value > GAIN * at_points:
                 added.append((g, name, point))
                 said.append(f"{name}: the {label} crosses between its points at "
                             f"[{point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}] m (local; its value is the map's)")
