@@ -24,27 +24,33 @@ def _dynamic_states(target, states):
     return np.unique(np.concatenate([s_hist, nodes[(nodes >= lo) & (nodes <= hi)]]))
 
 
-def _specular(sp, mpe_w_m2, mu, initial, dyn_states):
+def _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain):
     """Specular NOHD static and dynamic [m] and the direction of the longer (or Nones)."""
     if not sp.material.has_specular:
         return None, None, None
-    ns = specular_nohd(sp, mpe_w_m2, mu, initial)
-    nd = specular_nohd(sp, mpe_w_m2, mu, dyn_states) if dyn_states is not None else ns
+    ns = specular_nohd(sp, mpe_w_m2, mu, initial, gain=gain)
+    nd = specular_nohd(sp, mpe_w_m2, mu, dyn_states, gain=gain) if dyn_states is not None else ns
     return ns.nohd_m, nd.nohd_m, (nd.direction if nd.nohd_m >= ns.nohd_m else ns.direction)
 
 
-def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
-    """One lit target's row: spot, lobes at ``analysis.direction_grid_deg`` with
-    ``analysis.refine_levels`` levels, specular NOHDs, state range."""
+def _hazards(sp, states, mpe_w_m2, mu, analysis, gain=1.0):
+    """Static and dynamic lobes at ``analysis.direction_grid_deg`` with
+    ``analysis.refine_levels`` levels, and the specular NOHDs (static, dynamic,
+    direction), for an eye with optical gain ``gain``."""
     t = sp.target
     initial = states[t.index][:1] if t.index in states else None
     dyn_states = _dynamic_states(t, states)
-    grid = dict(grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
+    grid = dict(gain=gain, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
     static_lobe = hazard_lobe(sp, mpe_w_m2, mu, states=initial, **grid)
     dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(sp, mpe_w_m2, mu, states=dyn_states, **grid)
-    spec_static, spec_dyn, spec_dir = _specular(sp, mpe_w_m2, mu, initial, dyn_states)
+    return (static_lobe, dynamic_lobe) + _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain)
+
+
+def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
+    """One lit target's row: spot, naked-eye lobes and specular NOHDs, state range."""
+    t = sp.target
     return TargetResult(
-        t.name, sp.total_power_w, sp.size_m, static_lobe, dynamic_lobe, spec_static, spec_dyn, spec_dir,
+        t.name, sp.total_power_w, sp.size_m, *_hazards(sp, states, mpe_w_m2, mu, analysis),
         t.material.state_name if t.material.is_dynamic else None,
         [float(states[t.index].min()), float(states[t.index].max())] if t.index in states else None,
         sp.power_error_w, sp.exact, sp.max_irradiance_w_m2, sp.mean_irradiance_w_m2, sp.side,
@@ -70,20 +76,10 @@ def aided_nohds(sp, states, mpe_w_m2, mu, analysis, aid) -> dict:
     diffuse light fills the objective; for the mirror beam the beam-size limit is not
     taken, an upper bound)."""
     k = optical_gain(aid.magnification, aid.objective_diameter_m, aid.transmission)
-    t = sp.target
-    initial = states[t.index][:1] if t.index in states else None
-    dyn_states = _dynamic_states(t, states)
-    grid = dict(gain=k, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
-    static_lobe = hazard_lobe(sp, mpe_w_m2, mu, states=initial, **grid)
-    dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(sp, mpe_w_m2, mu, states=dyn_states, **grid)
-    spec = [None, None]
-    if sp.material.has_specular:
-        ns = specular_nohd(sp, mpe_w_m2, mu, initial, gain=k)
-        nd = specular_nohd(sp, mpe_w_m2, mu, dyn_states, gain=k) if dyn_states is not None else ns
-        spec = [ns.nohd_m, nd.nohd_m]
+    static_lobe, dynamic_lobe, spec_static, spec_dyn, _ = _hazards(sp, states, mpe_w_m2, mu, analysis, gain=k)
     return {"magnification": aid.magnification, "objective_diameter_m": aid.objective_diameter_m,
             "transmission": aid.transmission, "gain": k, "nohd_static_m": static_lobe.max_range_m,
-            "nohd_dynamic_m": dynamic_lobe.max_range_m, "specular_nohd_static_m": spec[0], "specular_nohd_dynamic_m": spec[1]}
+            "nohd_dynamic_m": dynamic_lobe.max_range_m, "specular_nohd_static_m": spec_static, "specular_nohd_dynamic_m": spec_dyn}
 
 
 def target_results(spots, states, mpe_w_m2, mu, analysis, aids=()) -> list:
