@@ -112,13 +112,12 @@ def _spill(scene, traced, mu, exposure, log) -> dict:
     return out
 
 
-def _histories(scene, spots, log):
+def _histories(scene, spots, log, the_plan):
     """Stage ``history``: analysis times and the dynamic spots' states over them."""
     dynamic_spots = [sp for sp in spots if sp.material.is_dynamic]
     times = history.analysis_times(scene.spec, bool(dynamic_spots))
     if not dynamic_spots:
-        log.skip("history", "no dynamic material" if not any(t.material.is_dynamic for t in scene.targets)
-                 else "no lit target has a dynamic material")
+        log.skip("history", the_plan.skipped("history") or "no lit target has a dynamic material")
         return times, {}
     t_end = scene.spec.analysis.time_end_s or scene.spec.exposure.duration_s
     with log.run("history") as st:
@@ -162,8 +161,7 @@ def _log_map(log, inp, out, the_plan):
     name, other = ("dynamic", "static") if inp.states else ("static", "dynamic")
     log.ran(name, f"{m} observers x {n_t} time(s) in blocks of {out.chunk} on {out.workers} thread(s); {far} far-field "
                   f"(spot as a point source), {m - far} summed over hits", out.map_seconds - out.exposure_seconds - out.los_seconds)
-    log.skip(other, "static = the initial-state column of the dynamic map (no separate pass)" if inp.states
-             else "no dynamic material: no time loop")
+    log.skip(other, the_plan.skipped(other) or "no lit target has a dynamic material: no time loop")
     log.ran("exposure", f"window {inp.duration_s:g} s over {n_t} time(s) (computed per block inside the map; "
                         f"its time is the per-thread share of the map's wall time)", out.exposure_seconds)
 
@@ -216,7 +214,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     scene = _crossings(scene, traced, mu, exposure.irradiance_w_m2, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
     spill_part = _spill(scene, traced, mu, exposure, log)
-    times, states = _histories(scene, traced.built.spots, log)
+    times, states = _histories(scene, traced.built.spots, log, the_plan)
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
         inp.direct_w_m2 = direct_beam.irradiance_w_m2
