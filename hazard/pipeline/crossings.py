@@ -22,6 +22,7 @@ import dataclasses
 import numpy as np
 
 from ..engine import specular_irradiance
+from .direct import beam_at
 
 __all__ = ["add_crossings", "SUBSAMPLES", "GAIN"]
 
@@ -32,11 +33,11 @@ FLOOR = 1e-4  # crossings weaker than this fraction of the MPE are not added
 
 
 def _direct(beam, mu):
+    """The laser's own beam, nothing in the way (the map checks the line of sight)."""
     def fn(p):
-        s, z = beam.to_s(p)
-        ok = np.isfinite(z) & (z > 0) & np.all(np.isfinite(s), axis=1)
+        at = beam_at(beam, p, mu)
         e = np.zeros(len(p))
-        e[ok] = beam.irradiance_w_m2(s[ok], z[ok]) * np.exp(-mu * z[ok])
+        e[at.rows] = at.irradiance_w_m2
         return e
     return fn
 

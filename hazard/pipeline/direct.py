@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..nohd import PUPIL_DIAMETER_M
+from ..nohd import PUPIL_DIAMETER_M, optical_gain
 
-__all__ = ["DirectBeam", "direct_beam"]
+__all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam"]
 
 
 @dataclass
@@ -50,31 +50,48 @@ def _beam_gain(optics, group, beam_diameter_m):
         rows = np.flatnonzero(group == g)
         if o is None or not len(rows):
             continue
-        tau = o.transmission
-        fixed = min(max(tau * o.magnification**2, 1.0), max(tau * (o.objective_diameter_m / PUPIL_DIAMETER_M) ** 2, 1.0))
-        gain[rows] = np.minimum(fixed, np.maximum(tau * (beam_diameter_m[rows] / PUPIL_DIAMETER_M) ** 2, 1.0))
+        fixed = optical_gain(o.magnification, o.objective_diameter_m, o.transmission)  # the first two terms
+        gain[rows] = np.minimum(fixed, np.maximum(o.transmission * (beam_diameter_m[rows] / PUPIL_DIAMETER_M) ** 2, 1.0))
     return gain
+
+
+@dataclass
+class BeamAt:
+    """The unobstructed beam at points: ``rows`` of the points it reaches (in front of
+    the aperture, irradiance above floating-point zero), their irradiance [W/m^2] with
+    attenuation along the ray, the ray's aperture point [m], its path to the point [m]
+    and the axial distance [m]."""
+
+    rows: np.ndarray
+    irradiance_w_m2: np.ndarray
+    origin_m: np.ndarray
+    path_m: np.ndarray
+    axial_m: np.ndarray
+
+
+def beam_at(beam, points_m, mu) -> BeamAt:
+    """The Gaussian beam at points (N, 3), nothing in the way (see the module notes)."""
+    p = np.asarray(points_m, float).reshape(-1, 3)
+    s, z = beam.to_s(p)
+    idx = np.flatnonzero(np.isfinite(z) & (z > 0) & np.all(np.isfinite(s), axis=1))
+    e = beam.irradiance_w_m2(s[idx], z[idx])
+    live = e > 0  # exp(-|s|^2) underflows to 0 only far outside the beam
+    idx, e = idx[live], e[live]
+    o, _ = beam.rays(s[idx])
+    dist = np.linalg.norm(p[idx] - o, axis=1)
+    return BeamAt(idx, e * np.exp(-mu * dist), o, dist, z[idx])
 
 
 def direct_beam(beam, observers, tracer, mu) -> DirectBeam:
     """The direct beam at every observer (see the module notes); ``tracer`` answers
     ``first_hit(origins, directions)`` against every object in the scene."""
     p = observers.positions_m
-    m = len(p)
-    out = np.zeros(m)
-    if not m:
+    out = np.zeros(len(p))
+    if not len(p):
         return DirectBeam(out, 0, 0)
-    s, z = beam.to_s(p)
-    ok = np.isfinite(z) & (z > 0) & np.all(np.isfinite(s), axis=1)
-    idx = np.flatnonzero(ok)
-    e = beam.irradiance_w_m2(s[idx], z[idx])
-    live = e > 0  # exp(-|s|^2) underflows to 0 only far outside the beam
-    idx, e = idx[live], e[live]
-    o, _ = beam.rays(s[idx])
-    seg = p[idx] - o
-    dist = np.linalg.norm(seg, axis=1)
-    hits = tracer.first_hit(o, seg)
-    clear = ~(hits.hit & (hits.t < dist * (1 - 1e-9)))
-    gain = _beam_gain(observers.optics, observers.group[idx], beam.diameter_at(z[idx]))
-    out[idx] = np.where(clear, e * np.exp(-mu * dist) * gain, 0.0)
+    at = beam_at(beam, p, mu)
+    hits = tracer.first_hit(at.origin_m, p[at.rows] - at.origin_m)
+    clear = ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
+    gain = _beam_gain(observers.optics, observers.group[at.rows], beam.diameter_at(at.axial_m))
+    out[at.rows] = np.where(clear, at.irradiance_w_m2 * gain, 0.0)
     return DirectBeam(out, int(np.count_nonzero(out)), int((~clear).sum()))
