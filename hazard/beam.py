@@ -159,13 +159,18 @@ class PolygonMoments:
 
     ``fraction`` of the beam power in each; ``mean`` (n, 2) and ``cov`` (n, 2, 2) of s
     over it; ``r2_min`` the smallest ``|s|^2`` on it (the Gaussian's largest value is
-    ``exp(-r2_min)``).
+    ``exp(-r2_min)``); ``area`` its area (units of w^2).
     """
 
     fraction: np.ndarray
     mean: np.ndarray
     cov: np.ndarray
     r2_min: np.ndarray
+    area: np.ndarray
+
+    def take(self, rows) -> "PolygonMoments":
+        """The moments of the polygons ``rows`` only."""
+        return PolygonMoments(self.fraction[rows], self.mean[rows], self.cov[rows], self.r2_min[rows], self.area[rows])
 
 
 def polygon_moments(polygons) -> PolygonMoments:
@@ -211,7 +216,7 @@ def polygon_moments(polygons) -> PolygonMoments:
     safe = np.where(frac > 0, frac, 1.0)
     mean = first / safe[:, None]
     cov = second / safe[:, None, None] - mean[:, :, None] * mean[:, None, :]
-    return PolygonMoments(frac, *_checked_moments(a, counts, frac, mean, cov), _r2_min(a, b, owner, orient, n))
+    return PolygonMoments(frac, *_checked_moments(a, counts, frac, mean, cov), _r2_min(a, b, owner, orient, n), np.abs(area2) / 2)
 
 
 def ring_next(counts) -> np.ndarray:

@@ -173,11 +173,12 @@ def flat_outlines(beam, targets) -> dict:
     return out
 
 
-def _exact_power(beam, outline):
-    """Outline integral of the beam [W] and its bound (disk: circumscribed - inscribed)."""
+def _exact_power(beam, outline, upper_fraction):
+    """Outline integral of the beam [W] (``upper_fraction``: the outer outline's power
+    fraction) and its bound (disk: circumscribed - inscribed)."""
     from .beam import polygon_fraction
 
-    upper = beam.power_w * polygon_fraction(outline[0])
+    upper = beam.power_w * upper_fraction
     if outline[1] is outline[0]:  # a plate: its outline is exact
         return upper, 0.0
     return upper, upper - beam.power_w * polygon_fraction(outline[1])
@@ -197,7 +198,7 @@ class OutlineCells:
 def outline_cells(outline_s, n0) -> OutlineCells:
     """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
     beam square); pieces carrying no power are dropped."""
-    from .beam import HALF_WIDTH, PolygonMoments, clip_to_box, inside_convex, polygon_moments
+    from .beam import HALF_WIDTH, clip_to_box, inside_convex, polygon_moments
 
     d = 2 * HALF_WIDTH / n0
     lo = np.clip(np.floor((outline_s.min(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
@@ -215,8 +216,7 @@ def outline_cells(outline_s, n0) -> OutlineCells:
         whole = polygon_moments([outline_s])
         return OutlineCells(np.array([-1]), [np.asarray(outline_s, float)], whole) if whole.fraction[0] > 0 else \
             OutlineCells(np.zeros(0, int), [], whole)
-    return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows],
-                        PolygonMoments(m.fraction[keep], m.mean[keep], m.cov[keep], m.r2_min[keep]))
+    return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows], m.take(keep))
 
 
 def _ring_points(ring, spacing):
@@ -272,12 +272,12 @@ def _r2_min_outside(piece, holes, n_edge=256, seam=0.0):
 
 def _subtract_holes(oc, holes_oc, hole_polys):
     """Moments of each piece minus those of the holes' pieces in the same cell (power,
-    first and second moments add over disjoint regions); returns the new moments and, per
-    piece, its (hole piece, whole hole) pairs."""
+    area, first and second moments add over disjoint regions); the nearest point to the
+    axis is searched outside the holes."""
     from .beam import PolygonMoments
 
     m = oc.moments
-    frac = m.fraction.copy()
+    frac, area = m.fraction.copy(), m.area.copy()
     first = m.mean * frac[:, None]
     second = (m.cov + m.mean[:, :, None] * m.mean[:, None, :]) * frac[:, None, None]
     where = {int(k): r for r, k in enumerate(oc.keys)}
@@ -289,6 +289,7 @@ def _subtract_holes(oc, holes_oc, hole_polys):
             if q is None:
                 continue
             frac[q] -= hm.fraction[r]
+            area[q] -= hm.area[r]
             first[q] -= hm.mean[r] * hm.fraction[r]
             second[q] -= (hm.cov[r] + np.outer(hm.mean[r], hm.mean[r])) * hm.fraction[r]
             holes[q].append((hoc.pieces[r], hole_polys[i]))
@@ -300,7 +301,7 @@ def _subtract_holes(oc, holes_oc, hole_polys):
     cov[:, 0, 0] = np.maximum(cov[:, 0, 0], 0.0)
     cov[:, 1, 1] = np.maximum(cov[:, 1, 1], 0.0)
     r2 = np.array([m.r2_min[q] if not holes[q] else _r2_min_outside(oc.pieces[q], holes[q]) for q in range(len(frac))])
-    return PolygonMoments(frac, mean, cov, r2), holes
+    return PolygonMoments(frac, mean, cov, r2, np.maximum(area, 0.0))
 
 
 def _plane_hits(beam, target, s):
@@ -356,20 +357,19 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     Attenuation per piece uses its shortest path (an upper bound); the spread to the
     longest goes into the error bound. The power outside the beam square (<= 3.1e-8 P)
     is spread over the pieces."""
-    from .beam import PolygonMoments, polygon_moments, ring_next
+    from .beam import polygon_moments
 
     oc = outline_cells(outline[0], n0)
     if not oc.pieces:
         return None
     holes, hole_polys, slack = _hole_cells(outline, list(fronts.values()) if fronts else [], n0)
-    m, hole_pieces = _subtract_holes(oc, holes, hole_polys) if holes else (oc.moments, [[] for _ in oc.pieces])
+    m = _subtract_holes(oc, holes, hole_polys) if holes else oc.moments
     lit = np.flatnonzero((m.fraction > 0) & np.isfinite(m.r2_min))
     if not len(lit):
         return None if not holes else ExactSamples(*(np.zeros((0,) + sh) for sh in ((3,), (3,), (), (), (), (), (2, 2), ())),
                                                    0.0, 0.0)
     oc = OutlineCells(oc.keys[lit], [oc.pieces[q] for q in lit], None)
-    m = PolygonMoments(m.fraction[lit], m.mean[lit], m.cov[lit], m.r2_min[lit])
-    hole_pieces = [hole_pieces[q] for q in lit]
+    m = m.take(lit)
     o, dirs = beam.rays(m.mean)
     label = tracer.first_hit(o, dirs).obj
     allowed = [target.index, -1] + list(fronts or {})
@@ -385,14 +385,15 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     np.maximum.at(lmax, owner, vpath)
     np.minimum.at(zmin, owner, vz)
     np.maximum.at(smax2, owner, (verts * verts).sum(1))
-    total, disk_err = _exact_power(beam, outline)
+    whole = polygon_moments([outline[0]])
+    total, disk_err = _exact_power(beam, outline, float(whole.fraction[0]))
     total -= beam.power_w * sum(float(h.moments.fraction.sum()) for h in holes)
     power = beam.power_w * m.fraction
     power *= total / max(power.sum(), 1e-300)
     up, down = np.exp(-mu * lmin), np.exp(-mu * lmax)
     w = beam.diameter_at(zmin) / 2
     r2 = m.r2_min.copy()
-    whole_r2 = float(polygon_moments([outline[0]]).r2_min[0]) if not holes else math.inf
+    whole_r2 = float(whole.r2_min[0]) if not holes else math.inf
     if whole_r2 < r2.min() * (1 - 1e-9) - 1e-12:  # the outline's nearest point lies outside the beam square
         near = int(np.argmin(r2))
         _, _, opath, oz = _plane_hits(beam, target, outline[0])
@@ -402,16 +403,8 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
         up[near] = math.exp(-mu * lmin[near])
         w = beam.diameter_at(zmin) / 2
     peak = beam.power_w / (math.pi * w * w) * np.exp(-r2) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
-    nxt = verts[ring_next(counts)]
-    area = np.abs(np.bincount(owner, verts[:, 0] * nxt[:, 1] - verts[:, 1] * nxt[:, 0], len(pts))) / 2
-    area -= np.array([sum(_polygon_area(h) for h, _ in hp) for hp in hole_pieces])
     err = disk_err + beam.power_w * slack + float((power * (up - down)).sum())
-    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, np.maximum(area, 0.0), err, total)
-
-
-def _polygon_area(poly) -> float:
-    x, y = poly[:, 0], poly[:, 1]
-    return abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))) / 2
+    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total)
 
 
 def _aggregate(keys, weights, values):
