@@ -423,13 +423,19 @@ class CellSampling:
 _OFFSETS = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
 
 
-def _trace_cells(beam, tracer, level, i, j, n0):
-    d = 2 * HALF_WIDTH / (n0 * 2.0**level)
-    base = np.stack([-HALF_WIDTH + i * d, -HALF_WIDTH + j * d], axis=1)
-    s = (base[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+def _ray_s(s0, t0, d) -> np.ndarray:
+    """The five rays (centre, four corners) of cells with lower corners (s0, t0) and side
+    d, as s coordinates (5n, 2), cell by cell."""
+    base = np.stack([s0, t0], axis=1)
+    return (base[:, None, :] + _OFFSETS[None, :, :] * d).reshape(-1, 2)
+
+
+def _trace_cells(beam, tracer, s):
+    """What the five rays per cell (``_ray_s``) hit: labels and faces (n, 5), and the
+    centre ray's hit point, range and unit direction."""
     o, dirs = beam.rays(s)
     hits = tracer.first_hit(o, dirs)
-    n = len(i)
+    n = len(s) // 5
     labels = np.where(hits.hit, hits.obj, -1).reshape(n, 5)
     faces = np.where(hits.hit, hits.face, -1).reshape(n, 5)
     unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -437,14 +443,12 @@ def _trace_cells(beam, tracer, level, i, j, n0):
     return labels, faces, hits.point[c], hits.t[c], unit[c]
 
 
-def _seed_cells(seeds, level, i, j, n0):
-    """Cells that contain a target's projected point and are larger than its projection."""
+def _seed_cells(seeds, s0, t0, d):
+    """Cells (lower corners s0, t0; side d) that contain a target's projected point and
+    are larger than its projection."""
     if not seeds:
-        return np.zeros(len(i), bool)
-    d = 2 * HALF_WIDTH / (n0 * 2.0**level)
-    s0 = -HALF_WIDTH + i * d
-    t0 = -HALF_WIDTH + j * d
-    force = np.zeros(len(i), bool)
+        return np.zeros(len(s0), bool)
+    force = np.zeros(len(s0), bool)
     for pts, extent in seeds:
         big = d > extent / 2
         if not np.any(big):
@@ -498,12 +502,9 @@ def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
     return out
 
 
-def _foreign_hits(outlines, foreign, level, i, j, labels, n0):
-    """Add to ``foreign[k]`` the objects (-1: nothing) hit by rays inside flat target k's
-    outline other than k itself (in place)."""
-    d = 2 * HALF_WIDTH / (n0 * 2.0**level)
-    base = np.stack([-HALF_WIDTH + i * d, -HALF_WIDTH + j * d], axis=1)
-    s = (base[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+def _foreign_hits(outlines, foreign, s, labels):
+    """Add to ``foreign[k]`` the objects (-1: nothing) hit by rays (at s, labels (n, 5))
+    inside flat target k's outline other than k itself (in place)."""
     lab = labels.ravel()
     for k, poly in outlines.items():
         other = lab != k
@@ -551,17 +552,17 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
     lv = 0
     while len(level_i):
         lvl = np.full(len(level_i), lv)
-        labels, faces, point, t, direction = _trace_cells(beam, tracer, lvl, level_i, level_j, n0)
+        d = 2 * HALF_WIDTH / (n0 * 2.0**lv)
+        s0, t0 = -HALF_WIDTH + level_i * d, -HALF_WIDTH + level_j * d
+        s_rays = _ray_s(s0, t0, d)
+        labels, faces, point, t, direction = _trace_cells(beam, tracer, s_rays)
         hit_by_centre.update(np.unique(labels[:, 0]).tolist())
         rays += 5 * len(level_i)
-        _foreign_hits(outlines, foreign, lvl, level_i, level_j, labels, n0)
+        _foreign_hits(outlines, foreign, s_rays, labels)
         clean = set(exact_classes(foreign))
-        d = 2 * HALF_WIDTH / (n0 * 2.0**lv)
-        s0 = -HALF_WIDTH + level_i * d
-        t0 = -HALF_WIDTH + level_j * d
         power = beam.power_w * rectangle_fraction(s0, s0 + d, t0, t0 + d)
         need = _needs_split(labels, clean)
-        split = _seed_cells(seeds, lvl, level_i, level_j, n0) | _unseen_cells(labels, hit_by_centre, clean, n_targets)
+        split = _seed_cells(seeds, s0, t0, d) | _unseen_cells(labels, hit_by_centre, clean, n_targets)
         if need.any() and power[need].sum() > rtol * beam.power_w:
             split |= need
         if lv >= max_level:
