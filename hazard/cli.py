@@ -322,7 +322,7 @@ def _stage_lines(args, err):
 def _analyse(args, err):
     """Load and analyse ``args.scene``: stage lines and (on a terminal) bars on ``err``."""
     from .analysis import analyze
-    from .report import progress_to
+    from .progress import progress_to
 
     scene = _load_scene(args.scene, err)
     with progress_to(None if args.quiet else err):
@@ -451,7 +451,7 @@ def _print_report(out, title, rows, as_json, extra=None):
 
 
 def _cmd_fit(args, out, err):
-    from .report import progress_to
+    from .progress import progress_to
 
     _check_new(args.output, args.force)
     with progress_to(None if getattr(args, "quiet", False) else err):  # bars on a terminal only
@@ -498,7 +498,7 @@ def _fit_samples(args):
     """The samples to fit: witness-screen tests reduced (a bar per test), or a table."""
     from brdfmodels import screen
 
-    from .report import terminal_bar
+    from .progress import terminal_bar
 
     if args.fit_kind != "screen":
         return screen.Samples.read(args.inputs[0])
@@ -518,7 +518,7 @@ def _fit_ts5(args, out, samples):
     import brdfmodels
     from brdfmodels import fitting
 
-    from .report import progress_callback
+    from .progress import progress_callback
 
     if args.report:
         rows = fitting.compare_ts5_methods(samples.wi, samples.wo, samples.brdf_per_sr,
@@ -535,7 +535,7 @@ def _fit_sh(args, out, samples):
     import brdfmodels
     from brdfmodels import fitting
 
-    from .report import progress_callback
+    from .progress import progress_callback
 
     basis = _basis_arg(args.basis)
     if args.report:
@@ -589,7 +589,7 @@ def _cmd_study(args, out, err):
 
 def _cmd_render(args, out, err):
     from . import render
-    from .report import progress_to
+    from .progress import progress_to
 
     result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
     with progress_to(None if args.quiet else err):  # bars on a terminal only
@@ -607,7 +607,8 @@ def _cmd_render(args, out, err):
 
 def _cmd_convergence(args, out, err):
     from . import convergence as conv
-    from .report import _json_safe, progress_stream, progress_to
+    from .progress import progress_stream, progress_to
+    from .report import _json_safe
 
     with progress_to(None if args.quiet else err):
         # a bar of the runs on a terminal; elsewhere one line per run (as the stage lines of run)

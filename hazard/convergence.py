@@ -25,7 +25,7 @@ import numpy as np
 
 from brdfmodels._io import read_toml
 
-from .report import progress_to, terminal_bar
+from .progress import progress_to, terminal_bar
 
 __all__ = ["convergence", "ConvergenceReport", "KNOB_LEVELS", "QUANTITIES", "REL_ERROR_COLUMNS"]
 
@@ -110,7 +110,7 @@ def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress
         Relative error allowed for the recommendation (unitless).
     progress : callable, optional
         Called with ``"knob = value"`` before each run. On a terminal a bar of the runs
-        is drawn on stderr as well (:func:`hazard.report.terminal_bar`).
+        is drawn on stderr as well (:func:`hazard.progress.terminal_bar`).
 
     Returns
     -------

@@ -26,7 +26,7 @@ from brdfmodels.parallel import block_rows, map_blocks
 
 from .engine import Spot, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
 from .nohd import range_from_intensity
-from .report import terminal_bar
+from .progress import terminal_bar
 
 __all__ = ["Lobe", "hazard_lobe", "ground_footprint", "Footprint"]
 

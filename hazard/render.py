@@ -30,7 +30,7 @@ import pyvista as pv
 
 from .beam import perp_basis as _perp_basis
 from .keepout import _range_fn
-from .report import terminal_bar
+from .progress import terminal_bar
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe"]
 

@@ -32,7 +32,7 @@ import numpy as np
 
 from brdfmodels._io import atomic_write, atomic_write_text, read_toml
 
-from .report import progress_callback, progress_to
+from .progress import progress_callback, progress_to
 
 __all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path"]
 
@@ -596,5 +596,5 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
 def progress_bar(stream=None):
     """A ``progress(done, total)`` callback for :func:`run_study`: a bar of the scenarios
     done on ``stream`` (default stderr), drawn only when it is a terminal
-    (:func:`hazard.report.progress_callback`)."""
+    (:func:`hazard.progress.progress_callback`)."""
     return progress_callback("scenarios", unit="scenario", leave=True, stream=stream)

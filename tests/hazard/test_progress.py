@@ -12,7 +12,7 @@ import hazard
 import scenes
 from brdfmodels import fitting, validation
 from hazard.cli import main
-from hazard.report import progress_callback, progress_to, terminal_bar
+from hazard.progress import progress_callback, progress_to, terminal_bar
 from hazard.study import Parameter, Study, progress_bar, run_study
 
 
