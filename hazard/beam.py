@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["BeamGeometry", "CellSampling", "PolygonMoments", "clip_to_box", "polygon_fraction", "polygon_moments", "rectangle_fraction", "sample_cells", "HALF_WIDTH"]
+__all__ = ["BeamGeometry", "CellSampling", "PolygonMoments", "clip_to_box", "polygon_fraction", "polygon_moments", "r2_min_outside", "rectangle_fraction", "sample_cells", "HALF_WIDTH"]
 
 HALF_WIDTH = 4.0  # beam square half-width in units of the 1/e radius (outside: 3.1e-8 of the power)
 MAX_LEVEL = 14  # finest cells: 2 L / n0 / 2^14 (about 1e-5 of the 1/e radius for n0 = 16)
@@ -267,6 +267,12 @@ def _r2_min(a, b, owner, orient, n):
     return np.where(holds, 0.0, r2)
 
 
+def _signed_area2(poly) -> float:
+    """Twice the signed area of a polygon (V, 2): > 0 counter-clockwise (shoelace)."""
+    nxt = _next(poly)
+    return float(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
+
+
 def _next(a):
     """Each element's successor around a ring (np.roll(a, -1, axis=0), cheaper)."""
     return np.concatenate([a[1:], a[:1]])
@@ -290,6 +296,55 @@ def _clip_half_plane(poly, normal, offset, axis=None):
     return np.stack([poly, cut], axis=1)[np.stack([inside, cross], axis=1)]
 
 
+def _ring_points(ring, spacing):
+    """Points along a closed polygon's edges, at most ``spacing`` apart (vertices included)."""
+    steps = np.concatenate([ring[1:], ring[:1]]) - ring
+    lengths = np.sqrt((steps * steps).sum(1))
+    per_edge = np.maximum(np.ceil(lengths / max(spacing, 1e-300)).astype(int), 1)
+    edge = np.repeat(np.arange(len(ring)), per_edge + 1)
+    frac = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in per_edge])
+    return ring[edge] + frac[:, None] * steps[edge], float((lengths / per_edge).max())
+
+
+def r2_min_outside(piece, holes, n_edge=256, seam=0.0):
+    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value.
+
+    ``holes``: (part of a hole inside the piece, the whole hole) pairs. Candidates are
+    points on the piece's boundary and on each hole part's boundary, about
+    ``1 / n_edge`` of the piece's size apart; a point is covered when it lies strictly
+    inside a whole hole, or within ``seam`` of a hole it is not on the edge of (two
+    plates meeting edge to edge leave no gap). The nearest free candidate's distance,
+    lowered by the spacing, bounds the true one from below.
+    """
+    origin = np.zeros((1, 2))
+    if inside_convex(origin, piece, margin=-1e-12)[0] and not any(inside_convex(origin, w, margin=1e-12)[0] for _, w in holes):
+        return 0.0
+    spacing = float(np.ptp(piece, axis=0).max()) / n_edge
+    rings = [(np.asarray(piece, float), -1)] + [(np.asarray(p, float), k) for k, (p, _) in enumerate(holes)]
+    cand, owner, step = [], [], spacing
+    for ring, k in rings:
+        pts, sp = _ring_points(ring, spacing)
+        cand.append(pts)
+        owner.append(np.full(len(pts), k))
+        step = max(step, sp)
+    pts, owner = np.concatenate(cand), np.concatenate(owner)
+    r2 = (pts * pts).sum(1)
+    order = np.argsort(r2)
+    for a in range(0, len(order), 512):  # nearest candidates first
+        batch = order[a:a + 512]
+        free = np.ones(len(batch), bool)
+        for k, (_, whole) in enumerate(holes):
+            mine = owner[batch] == k  # on this hole's own boundary: covered only strictly inside
+            strictly = inside_convex(pts[batch], whole, margin=1e-12)
+            near = inside_convex(pts[batch], whole, margin=-seam)
+            free &= ~np.where(mine, strictly, near)
+        if free.any():
+            # the free region's nearest point lies on a candidate ring within one spacing
+            # of a free candidate: lowered by it, never above the truth
+            return max(math.sqrt(float(r2[batch[np.argmax(free)]])) - step, 0.0) ** 2
+    return math.inf  # wholly hidden
+
+
 def clip_to_box(polygon_s, s0, s1, t0, t1) -> np.ndarray:
     """A convex polygon (V, 2) clipped to the box [s0, s1] x [t0, t1] (Sutherland-Hodgman);
     (0, 2) when they do not overlap."""
@@ -307,7 +362,7 @@ def clip_convex(polygon_s, window_s) -> np.ndarray:
     """The intersection of two convex polygons (Sutherland-Hodgman); (0, 2) if empty."""
     poly = np.asarray(polygon_s, float)
     win = np.asarray(window_s, float)
-    orient = 1.0 if np.sum(win[:, 0] * np.roll(win[:, 1], -1) - np.roll(win[:, 0], -1) * win[:, 1]) >= 0 else -1.0
+    orient = 1.0 if _signed_area2(win) >= 0 else -1.0
     for a, b in zip(win, np.roll(win, -1, axis=0)):
         e = b - a
         normal = orient * np.array([-e[1], e[0]])  # inward
@@ -484,7 +539,7 @@ def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
     nxt = _next(poly)
     edge = nxt - poly
     length = np.sqrt((edge * edge).sum(1))
-    orient = np.sign(np.sum(poly[:, 0] * nxt[:, 1] - nxt[:, 0] * poly[:, 1]))
+    orient = np.sign(_signed_area2(poly))
     # many-sided polygons (disks): settle the points well inside the inscribed circle
     # about the centroid, or outside the circumscribed one, without the edge loop
     c = poly.mean(axis=0)

@@ -219,62 +219,11 @@ def outline_cells(outline_s, n0) -> OutlineCells:
     return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows], m.take(keep))
 
 
-def _ring_points(ring, spacing):
-    """Points along a closed polygon's edges, at most ``spacing`` apart (vertices included)."""
-    steps = np.concatenate([ring[1:], ring[:1]]) - ring
-    lengths = np.sqrt((steps * steps).sum(1))
-    per_edge = np.maximum(np.ceil(lengths / max(spacing, 1e-300)).astype(int), 1)
-    edge = np.repeat(np.arange(len(ring)), per_edge + 1)
-    frac = np.concatenate([np.linspace(0.0, 1.0, k + 1) for k in per_edge])
-    return ring[edge] + frac[:, None] * steps[edge], float((lengths / per_edge).max())
-
-
-def _r2_min_outside(piece, holes, n_edge=256, seam=0.0):
-    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value.
-
-    ``holes``: (part of a hole inside the piece, the whole hole) pairs. Candidates are
-    points on the piece's boundary and on each hole part's boundary, about
-    ``1 / n_edge`` of the piece's size apart; a point is covered when it lies strictly
-    inside a whole hole, or within ``seam`` of a hole it is not on the edge of (two
-    plates meeting edge to edge leave no gap). The nearest free candidate's distance,
-    lowered by the spacing, bounds the true one from below.
-    """
-    from .beam import inside_convex
-
-    origin = np.zeros((1, 2))
-    if inside_convex(origin, piece, margin=-1e-12)[0] and not any(inside_convex(origin, w, margin=1e-12)[0] for _, w in holes):
-        return 0.0
-    spacing = float(np.ptp(piece, axis=0).max()) / n_edge
-    rings = [(np.asarray(piece, float), -1)] + [(np.asarray(p, float), k) for k, (p, _) in enumerate(holes)]
-    cand, owner, step = [], [], spacing
-    for ring, k in rings:
-        pts, sp = _ring_points(ring, spacing)
-        cand.append(pts)
-        owner.append(np.full(len(pts), k))
-        step = max(step, sp)
-    pts, owner = np.concatenate(cand), np.concatenate(owner)
-    r2 = (pts * pts).sum(1)
-    order = np.argsort(r2)
-    for a in range(0, len(order), 512):  # nearest candidates first
-        batch = order[a:a + 512]
-        free = np.ones(len(batch), bool)
-        for k, (_, whole) in enumerate(holes):
-            mine = owner[batch] == k  # on this hole's own boundary: covered only strictly inside
-            strictly = inside_convex(pts[batch], whole, margin=1e-12)
-            near = inside_convex(pts[batch], whole, margin=-seam)
-            free &= ~np.where(mine, strictly, near)
-        if free.any():
-            # the free region's nearest point lies on a candidate ring within one spacing
-            # of a free candidate: lowered by it, never above the truth
-            return max(math.sqrt(float(r2[batch[np.argmax(free)]])) - step, 0.0) ** 2
-    return math.inf  # wholly hidden
-
-
 def _subtract_holes(oc, holes_oc, hole_polys):
     """Moments of each piece minus those of the holes' pieces in the same cell (power,
     area, first and second moments add over disjoint regions); the nearest point to the
     axis is searched outside the holes."""
-    from .beam import PolygonMoments
+    from .beam import PolygonMoments, r2_min_outside
 
     m = oc.moments
     frac, area = m.fraction.copy(), m.area.copy()
@@ -300,7 +249,7 @@ def _subtract_holes(oc, holes_oc, hole_polys):
     cov = np.where((frac > 1e-300)[:, None, None], cov, m.cov)
     cov[:, 0, 0] = np.maximum(cov[:, 0, 0], 0.0)
     cov[:, 1, 1] = np.maximum(cov[:, 1, 1], 0.0)
-    r2 = np.array([m.r2_min[q] if not holes[q] else _r2_min_outside(oc.pieces[q], holes[q]) for q in range(len(frac))])
+    r2 = np.array([m.r2_min[q] if not holes[q] else r2_min_outside(oc.pieces[q], holes[q]) for q in range(len(frac))])
     return PolygonMoments(frac, mean, cov, r2, np.maximum(area, 0.0))
 
 

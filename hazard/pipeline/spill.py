@@ -37,8 +37,7 @@ def _cell_profile(cells, row, outlines) -> float:
     target's outline (those whose edges cross it); the whole cell's when another object
     shares it. Points within 1e-9 w of an outline count as covered, so two plates meeting
     edge to edge leave no gap."""
-    from ..engine import _r2_min_outside
-    from ..beam import clip_to_box
+    from ..beam import clip_to_box, r2_min_outside
 
     labels = set(cells.labels[row].tolist()) - {-1}
     if not labels or not labels <= set(outlines):
@@ -46,7 +45,7 @@ def _cell_profile(cells, row, outlines) -> float:
     s0, s1, t0, t1 = (float(v[0]) for v in cells.bounds(np.array([row])))
     box = np.array([[s0, t0], [s1, t0], [s1, t1], [s0, t1]])
     holes = [(p, q) for p, q in ((clip_to_box(outlines[k], s0, s1, t0, t1), outlines[k]) for k in labels) if len(p)]
-    r2 = _r2_min_outside(box, holes, n_edge=512, seam=1e-9)
+    r2 = r2_min_outside(box, holes, n_edge=512, seam=1e-9)
     return float(np.exp(-r2))
 
 
