@@ -23,6 +23,7 @@ import numpy as np
 
 from ..engine import specular_irradiance
 from .direct import beam_at
+from .plan import GRIDS_NOT_SEARCHED
 
 __all__ = ["add_crossings", "SUBSAMPLES", "GAIN"]
 
@@ -121,8 +122,10 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2):
                 added.append((g, name, point))
                 said.append(f"{name}: the {label} crosses between its points at "
                             f"[{point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}] m (local; its value is the map's)")
+    if any(o.layout in ("grid", "shell") for o in scene.spec.observers):
+        said.append(GRIDS_NOT_SEARCHED)
     if not added:
-        return scene, "no beam crosses an observer line between its points"
+        return scene, "; ".join(["no beam crosses an observer line between its points"] + said)
     return dataclasses.replace(scene, observers=_with_points(scene.observers, added)), "; ".join(said)
 
 

@@ -16,7 +16,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Plan", "plan", "STAGES"]
+__all__ = ["Plan", "plan", "STAGES", "GRIDS_NOT_SEARCHED"]
+
+GRIDS_NOT_SEARCHED = ("grids and shells are not searched between their points (a beam narrower than their spacing "
+                      "can pass between them unseen)")
 
 STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
           "footprint", "extended_source")
@@ -76,5 +79,6 @@ def plan(scene) -> Plan:
     if not observers:
         reasons["direct"] = "no observers"
     if not any(o.layout == "line" and o.count >= 2 for o in scene.spec.observers):
-        reasons["crossings"] = "no observer line"
+        gridded = any(o.layout in ("grid", "shell") for o in scene.spec.observers)
+        reasons["crossings"] = "no observer line" + (f"; {GRIDS_NOT_SEARCHED}" if gridded else "")
     return Plan(rays, los and observers, dynamic, specular, scene.terrain is not None, reasons)
