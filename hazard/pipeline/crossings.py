@@ -1,18 +1,24 @@
-"""Stage ``crossings``: where a narrow beam crosses an observer line between its points.
+"""Stage ``crossings``: where a narrow beam passes between an observer group's points.
 
 A road sampled every 10 m can let a 0.3 m beam (the laser's own, or a mirror's) pass
-between two points unseen. Along every line of observers (``start_m``/``end_m``/``count``,
-the polyline through its points, following the terrain when placed at eye height) the
-irradiance of the direct beam and of each mirror beam is searched between the points:
-``SUBSAMPLES`` per segment, then the best interval again as finely, then a
-golden-section search to the maximum. Where the highest
-value found exceeds the line's own points by more than ``GAIN`` it is added as an
-observer point of its own (group ``<line>:crossing``, the line's optics), so the map,
-the lines of sight, the verdicts and the report treat it like any other. The first pass
-locates a beam as long as one of its points lies within ~25 1/e radii of the beam's
-axis (where the Gaussian is still above floating-point zero: a 10 m road's 16 cm spacing
-finds a beam of 1 cm radius); lines of more than ``MAX_CANDIDATES / SUBSAMPLES``
-segments get fewer points per segment.
+between two points unseen, and so can a grid of 10 m cells or a shell. For every line,
+grid and shell of observers (:mod:`hazard.pipeline.surfaces`) the irradiance of the
+direct beam and of each mirror beam is searched between the points:
+
+- along a line, on the polyline through its points (``SUBSAMPLES`` per segment);
+- on a grid or a shell, along the curve ``project(o + t d)`` of each beam's axis ray
+  (the direct beam's axis; for a mirror the reflected rays through its hottest point
+  and through its centroid) projected on the surface: it passes through every point
+  where the ray meets the surface, so a crossing is on it. The ray is cut to the
+  surface's bounding box (widened by 5 beam radii) and sampled every eighth of the beam's
+  1/e diameter (``STEP_DIAMETERS``), at most ``MAX_CANDIDATES`` points.
+
+Around each of the ``PEAKS`` highest local maxima of the first pass the search runs
+again as finely, then a golden-section search to the maximum. A maximum that beats the
+group's nearest ``NEIGHBOURS`` points by more than ``GAIN`` and reaches ``FLOOR`` of the
+MPE is added as an observer point of its own (group ``<group>:crossing``, the group's
+optics), so the map, the lines of sight, the verdicts and the report treat it like any
+other (a crossing behind a hill gets no light there; the other maxima are kept for that).
 """
 
 from __future__ import annotations
@@ -23,14 +29,29 @@ import numpy as np
 
 from ..engine import specular_irradiance
 from .direct import beam_at
-from .plan import GRIDS_NOT_SEARCHED
+from .surfaces import Polyline, observer_surfaces
 
-__all__ = ["add_crossings", "SUBSAMPLES", "GAIN"]
+__all__ = ["add_crossings", "SUBSAMPLES", "GAIN", "STEP_DIAMETERS"]
 
-SUBSAMPLES = 64  # points per segment of the line in the first pass, and again around the best one
-GAIN = 1.01  # a crossing is kept when it beats the line's own points by more than this factor
-MAX_CANDIDATES = 2_000_000  # first-pass points per line and beam (bounds memory on long lines)
+SUBSAMPLES = 64  # points per segment of a line in the first pass, and again around each maximum
+GAIN = 1.01  # a crossing is kept when it beats the group's nearest points by more than this factor
+MAX_CANDIDATES = 2_000_000  # first-pass points per group and beam (bounds memory on long lines)
 FLOOR = 1e-4  # crossings weaker than this fraction of the MPE are not added
+STEP_DIAMETERS = 1.0 / 8  # first-pass step along a beam's axis, in 1/e beam diameters
+PEAKS = 4  # local maxima of the first pass refined per group and beam
+NEIGHBOURS = 16  # a crossing is compared with this many of the group's nearest points
+MARGIN_RADII = 5.0  # a surface's bounding box is widened by this many beam radii (exp(-25) beyond)
+
+
+@dataclasses.dataclass(frozen=True)
+class Ray:
+    """A beam's axis ray: origin and unit direction (local m), the axial range of the
+    origin from the laser [m] (for the beam's width along it) and the step floor [m]."""
+
+    origin_m: np.ndarray
+    direction: np.ndarray
+    range0_m: float
+    min_step_m: float
 
 
 def _direct(beam, mu):
@@ -54,78 +75,152 @@ def _mirror(spot, beam, mu):
     return fn
 
 
-def _densest(fn, pts):
-    """The highest value of ``fn`` between consecutive points of a polyline (n, 3):
-    ``SUBSAMPLES`` per segment, then as many over the two segments' worth around the
-    best; returns (value, point)."""
-    seg = pts[1:] - pts[:-1]
-    per = int(max(2, min(SUBSAMPLES, MAX_CANDIDATES // max(len(seg), 1))))  # long lines: fewer per segment
-    u = np.linspace(0.0, 1.0, per, endpoint=False)
-    cand = (pts[:-1, None, :] + u[None, :, None] * seg[:, None, :]).reshape(-1, 3)
-    e = fn(cand)
-    k = int(np.argmax(e))
-    i, j = divmod(k, per)
-    t0 = i + (j - 1) / per
-    t = np.clip(np.linspace(t0, t0 + 2.0 / per, SUBSAMPLES + 1), 0.0, len(seg) - 1e-12)
-    idx = np.minimum(t.astype(int), len(seg) - 1)
-    fine = pts[idx] + (t - idx)[:, None] * seg[idx]
-    ef = fn(fine)
-    q = int(np.argmax(ef))
-    if ef[q] < e[k]:
-        return float(e[k]), cand[k]
-    return _golden(fn, fine[max(q - 1, 0)], fine[min(q + 1, len(fine) - 1)], float(ef[q]), fine[q])
+def _mirror_rays(spot, beam):
+    """Reflected rays through the spot's hottest sample and through its centroid."""
+    k = int(np.argmax(spot.peak_irradiance_w_m2)) if spot.peak_irradiance_w_m2 is not None else 0
+    rays = []
+    for q, d, n, z in ((spot.points[k], spot.incoming[k], spot.frames[k][2], spot.range_from_laser_m[k]),
+                       (spot.centroid, spot.mean_incoming, spot.mean_frame[2], spot.mean_range_m)):
+        r = d - 2 * np.dot(d, n) * n
+        width = min(float(beam.diameter_at(z)), max(spot.size_m, 1e-6))
+        rays.append(Ray(np.asarray(q, float), r / np.linalg.norm(r), float(z), width))
+    return rays
 
 
-def _golden(fn, a, b, best, at, iterations=60):
-    """Golden-section search for the maximum of ``fn`` on the segment [a, b] (unimodal
-    near a beam's crossing); the better of it and (best, at)."""
+def _sources(beam, spots, mu):
+    """(label, irradiance function, axis rays) of the direct beam and each mirror beam."""
+    out = [("direct beam", _direct(beam, mu), [Ray(beam.position_m, beam.axis, 0.0, beam.diameter_m)])]
+    for sp in spots:
+        if sp.material.has_specular:
+            out.append((f"mirror beam of {sp.target.name}", _mirror(sp, beam, mu), _mirror_rays(sp, beam)))
+    return out
+
+
+def _peaks(e, floor):
+    """Indices of the ``PEAKS`` highest local maxima of e at or above ``floor``."""
+    left = np.concatenate([[-np.inf], e[:-1]])
+    right = np.concatenate([e[1:], [-np.inf]])
+    idx = np.flatnonzero((e >= left) & (e >= right) & (e >= floor) & (e > 0))
+    return idx[np.argsort(e[idx])[::-1][:PEAKS]]
+
+
+def _golden(fn_t, a, b, iterations=60):
+    """Golden-section search for the maximum of ``fn_t`` on [a, b]: (value, t)."""
     g = (np.sqrt(5.0) - 1) / 2
-    lo, hi = 0.0, 1.0
-    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-    f1, f2 = (float(fn((a + x * (b - a))[None])[0]) for x in (x1, x2))
+    x1, x2 = b - g * (b - a), a + g * (b - a)
+    f1, f2 = float(fn_t(np.array([x1]))[0]), float(fn_t(np.array([x2]))[0])
     for _ in range(iterations):
         if f1 >= f2:
-            hi, x2, f2 = x2, x1, f1
-            x1 = hi - g * (hi - lo)
-            f1 = float(fn((a + x1 * (b - a))[None])[0])
+            b, x2, f2 = x2, x1, f1
+            x1 = b - g * (b - a)
+            f1 = float(fn_t(np.array([x1]))[0])
         else:
-            lo, x1, f1 = x1, x2, f2
-            x2 = lo + g * (hi - lo)
-            f2 = float(fn((a + x2 * (b - a))[None])[0])
-    x, f = (x1, f1) if f1 >= f2 else (x2, f2)
-    return (f, a + x * (b - a)) if f >= best else (best, at)
+            a, x1, f1 = x1, x2, f2
+            x2 = a + g * (b - a)
+            f2 = float(fn_t(np.array([x2]))[0])
+    return (f1, x1) if f1 >= f2 else (f2, x2)
 
 
-def _line_groups(scene):
-    obs = scene.observers
-    for g, spec in enumerate(scene.spec.observers):
-        if spec.layout == "line" and spec.count >= 2:
-            rows = np.flatnonzero(obs.group == g)
-            yield g, spec.name, obs.positions_m[rows[np.argsort(obs.index_in_group[rows])]]
+def _refine(fn_t, t, e, k):
+    """The maximum near first-pass sample k: ``SUBSAMPLES`` between its neighbours,
+    then a golden-section search; (value, t), never below the sample itself."""
+    lo, hi = t[max(k - 1, 0)], t[min(k + 1, len(t) - 1)]
+    tf = np.linspace(lo, hi, SUBSAMPLES + 1)
+    ef = fn_t(tf)
+    q = int(np.argmax(ef))
+    best = (float(ef[q]), tf[q]) if ef[q] >= e[k] else (float(e[k]), t[k])
+    g = _golden(fn_t, tf[max(q - 1, 0)], tf[min(q + 1, len(tf) - 1)])
+    return g if g[0] >= best[0] else best
+
+
+def _maxima(fn_t, t, floor):
+    """(value, t) of each refined local maximum of ``fn_t`` sampled at t."""
+    e = fn_t(t)
+    return [_refine(fn_t, t, e, k) for k in _peaks(e, floor)]
+
+
+def _ray_span(ray, corners, beam):
+    """[t0, t1] of the ray inside the box around ``corners`` widened by ``MARGIN_RADII``
+    beam radii (slab method), or None; and the first-pass step [m]."""
+    far = float(np.max(np.linalg.norm(corners - ray.origin_m, axis=1)))
+    pad = MARGIN_RADII * float(beam.diameter_at(ray.range0_m + far)) / 2
+    lo, hi = corners.min(axis=0) - pad, corners.max(axis=0) + pad
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo - ray.origin_m) / ray.direction, (hi - ray.origin_m) / ray.direction
+    inside = (ray.origin_m >= lo) & (ray.origin_m <= hi)
+    par = ray.direction == 0
+    if np.any(par & ~inside):
+        return None
+    t0 = max(0.0, float(np.max(np.where(par, -np.inf, np.minimum(ta, tb)))))
+    t1 = float(np.min(np.where(par, np.inf, np.maximum(ta, tb))))
+    if t1 <= t0:
+        return None
+    step = STEP_DIAMETERS * min(float(beam.diameter_at(ray.range0_m + t0)), ray.min_step_m)
+    return t0, t1, max(step, (t1 - t0) / (MAX_CANDIDATES - 1))
+
+
+def _on_surface(fn, surface, rays, beam, floor):
+    """(value, point) of the maxima of ``fn`` on a grid's or shell's surface along the
+    projections of ``rays``."""
+    found = []
+    for ray in rays:
+        span = _ray_span(ray, surface.corners(), beam)
+        if span is None:
+            continue
+        t0, t1, step = span
+        def at(t, ray=ray):
+            return surface.project(ray.origin_m + np.asarray(t)[:, None] * ray.direction)
+        def fn_t(t, at=at):
+            return fn(at(t))
+        t = np.linspace(t0, t1, int(np.ceil((t1 - t0) / step)) + 1)
+        found += [(v, at(np.array([x]))[0]) for v, x in _maxima(fn_t, t, floor)]
+    return found
+
+
+def _on_line(fn, line, floor):
+    """(value, point) of the maxima of ``fn`` along a polyline."""
+    n_seg = len(line.points_m) - 1
+    per = int(max(2, min(SUBSAMPLES, MAX_CANDIDATES // n_seg)))  # long lines: fewer per segment
+    t = np.linspace(0.0, n_seg, n_seg * per + 1)
+    return [(v, line.at(np.array([x]))[0]) for v, x in _maxima(lambda s: fn(line.at(s)), t, floor)]
+
+
+def _new_crossings(fn, found, group_points):
+    """The maxima of ``found`` ((value, point), highest first) that beat the group's
+    ``NEIGHBOURS`` nearest points by more than ``GAIN`` and are not a higher one seen
+    again (closer to it than a quarter of the way to the group's nearest point)."""
+    kept = []
+    for value, point in sorted(found, key=lambda x: -x[0]):
+        d2 = np.einsum("ij,ij->i", group_points - point, group_points - point)
+        near = np.argsort(d2)[:NEIGHBOURS]
+        if value <= GAIN * float(fn(group_points[near]).max()):
+            continue
+        if all(np.linalg.norm(point - p) > 0.25 * np.sqrt(d2[near[0]]) for p in kept):
+            kept.append(point)
+    return kept
 
 
 def add_crossings(scene, beam, spots, mu, mpe_w_m2):
-    """The scene with an observer point added at each beam crossing of a line that falls
-    between its points (see the module notes), and a one-line account. Crossings below
-    ``FLOOR`` of the MPE (naked eye) are left out: even through optics of gain 1000 they
-    stay under a tenth of it."""
+    """The scene with an observer point added at each beam crossing that falls between an
+    observer group's points (see the module notes), and a one-line account. Crossings
+    below ``FLOOR`` of the MPE (naked eye) are left out: even through optics of gain 1000
+    they stay under a tenth of it."""
     if scene.observers is None or not len(scene.observers):
         return scene, "no observers"
-    sources = [("direct beam", _direct(beam, mu))] + [(f"mirror beam of {sp.target.name}", _mirror(sp, beam, mu))
-                                                      for sp in spots if sp.material.has_specular]
+    obs, floor = scene.observers, FLOOR * mpe_w_m2
+    surfaces, left_out = observer_surfaces(scene)
     added, said = [], []
-    for g, name, pts in _line_groups(scene):
-        for label, fn in sources:
-            at_points = float(fn(pts).max())
-            value, point = _densest(fn, pts)
-            if value >= FLOOR * mpe_w_m2 and value > GAIN * at_points:
+    for g, name, surface in surfaces:
+        pts = obs.positions_m[obs.group == g]
+        for label, fn, rays in _sources(beam, spots, mu):
+            found = _on_line(fn, surface, floor) if isinstance(surface, Polyline) else _on_surface(fn, surface, rays, beam, floor)
+            for point in _new_crossings(fn, found, pts):
                 added.append((g, name, point))
                 said.append(f"{name}: the {label} crosses between its points at "
                             f"[{point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}] m (local; its value is the map's)")
-    if any(o.layout in ("grid", "shell") for o in scene.spec.observers):
-        said.append(GRIDS_NOT_SEARCHED)
+    said += [f"not searched: {x}" for x in left_out]
     if not added:
-        return scene, "; ".join(["no beam crosses an observer line between its points"] + said)
+        return scene, "; ".join(["no beam crosses an observer line, grid or shell between its points"] + said)
     return dataclasses.replace(scene, observers=_with_points(scene.observers, added)), "; ".join(said)
 
 

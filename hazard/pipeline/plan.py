@@ -16,10 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Plan", "plan", "STAGES", "GRIDS_NOT_SEARCHED"]
-
-GRIDS_NOT_SEARCHED = ("grids and shells are not searched between their points (a beam narrower than their spacing "
-                      "can pass between them unseen)")
+__all__ = ["Plan", "plan", "STAGES"]
 
 STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
           "footprint", "extended_source")
@@ -78,7 +75,6 @@ def plan(scene) -> Plan:
         reasons["footprint"] = "no terrain"
     if not observers:
         reasons["direct"] = "no observers"
-    if not any(o.layout == "line" and o.count >= 2 for o in scene.spec.observers):
-        gridded = any(o.layout in ("grid", "shell") for o in scene.spec.observers)
-        reasons["crossings"] = "no observer line" + (f"; {GRIDS_NOT_SEARCHED}" if gridded else "")
+    if not any(o.layout != "points" and o.n_points >= 2 for o in scene.spec.observers):
+        reasons["crossings"] = "no observer line, grid or shell (explicit points are not searched between)"
     return Plan(rays, los and observers, dynamic, specular, scene.terrain is not None, reasons)
