@@ -105,7 +105,7 @@ def _spill(scene, traced, mu, exposure, log) -> dict:
     """Stage ``spill``: where the beam that misses every target goes, and its NOHD."""
     with log.run("spill") as st:
         out = spill.spill_summary(scene, traced, mu, exposure.irradiance_w_m2, lobes.scene_aids(scene))
-        stopped = "; ".join(f"{d['power_w']:.4g} W stopped by {d['object']} at {d['range_m']:.4g} m" for d in out["stopped"])
+        stopped = "; ".join(f"{d['power_w']:.4g} W stopped by {d['object']} at {d['range_m']:.4g} m, {d['reflected']}" for d in out["stopped"])
         st.detail = (f"{out['leaves_scene_w']:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
                      f"{out['nohd_m']:.4g} m (the spill's highest point of the beam profile: {out['peak_profile']:.3g})"
                      + (f"; {stopped}" if stopped else ""))

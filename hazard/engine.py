@@ -487,9 +487,11 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     return whole + err
 
 
-def build_spots(beam, cells, targets, tracer, mu, outlines=None) -> SpotBuild:
+def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) -> SpotBuild:
     """Spots from the beam's leaf cells: one per lit target (the side that most power
-    reaches; a back face reflects with the target's ``back`` material or not at all).
+    reaches; a back face reflects with the target's ``back`` material or not at all),
+    and one on ``ground`` (the terrain as a target, :attr:`scenes.Scene.terrain_target`)
+    where the beam lands on it: its power stays counted as blocked.
 
     A flat target whose edges meet only empty beam gets samples from its exact outline
     (:func:`_exact_samples`); any other target's total is the cells' sum raised by the
@@ -513,6 +515,8 @@ def build_spots(beam, cells, targets, tracer, mu, outlines=None) -> SpotBuild:
         if not ex.power_w.sum() > 0:  # wholly hidden by the targets in front of it
             continue
         _exact_spot(beam, cells, target, ex, tracer, None if fronts else outlines[k][0], out)
+    if ground is not None:
+        _sampled_spot(beam, cells, ground, tracer, mu, out)
     out.blocked_w = float(cells.power_w[cells.labels[:, 0] >= len(targets)].sum())
     out.spill_w = max(beam.power_w - totals - out.blocked_w, 0.0)  # the rest (exact where the targets' totals are)
     return out

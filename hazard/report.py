@@ -321,7 +321,7 @@ def _nohd_lines(result) -> list:
         lines.append(f"  the beam past the targets ({sp['leaves_scene_w']:.4g} W leaves the scene): direct-beam NOHD "
                      f"{sp['nohd_m']:.4g} m{aided}")
     for d in sp.get("stopped", []):
-        lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m")
+        lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m: {d['reflected']}")
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
         lines.append(f"  hazardous ground at {fs.eye_height_m:g} m eye height: static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2")

@@ -112,6 +112,8 @@ class Scene:
     occluders: list = field(default_factory=list)
     terrain: Heightfield | None = None
     observers: Observers | None = None
+    # the terrain as a reflector of the beam that lands on it (index: its object id in the ray scene)
+    terrain_target: Target | None = None
     # plausibility warnings (values typical of unit mistakes); not errors
     warnings: list = field(default_factory=list)
 
@@ -190,6 +192,59 @@ def _material(spec, where, base_dir):
         raise SceneError(f"{where}: {exc}") from None
     _check_dhr(model, where)
     return model
+
+
+TERRAIN_DEFAULT_REFLECTANCE = 1.0  # Lambertian: the most a diffuse ground can return (conservative)
+
+
+@dataclass(frozen=True)
+class TerrainReflector:
+    """What a target's ``spec`` says for the terrain: its shape and (no) history."""
+
+    shape: str = "terrain"
+    history: None = None
+    material_given: bool = False
+
+
+class _TerrainMesh:
+    """The terrain's triangles, built when first asked for (the ray scene builds its own)."""
+
+    analytic = None
+
+    def __init__(self, terrain):
+        self._terrain, self._mesh = terrain, None
+
+    def _built(self):
+        if self._mesh is None:
+            self._mesh = self._terrain.mesh()
+        return self._mesh
+
+    @property
+    def vertices(self):
+        return self._built().vertices
+
+    @property
+    def faces(self):
+        return self._built().faces
+
+
+def _terrain_target(spec, terrain, index, base_dir) -> Target:
+    """The terrain as a reflector (a :class:`Target` named ``terrain``, object ``index``
+    in the ray scene): ``[terrain] material`` or a Lambertian of reflectance
+    ``TERRAIN_DEFAULT_REFLECTANCE``."""
+    ms = spec.terrain.material
+    if ms is None:
+        material = brdfmodels.create("lambertian", reflectance=TERRAIN_DEFAULT_REFLECTANCE)
+    else:
+        material = _material(ms, "terrain.material", base_dir)
+        if material.is_dynamic:
+            raise SceneError(f"terrain.material: depends on {material.state_name!r}; expected a static material (the ground has no history)")
+    h = terrain.heights
+    ny, nx = h.shape
+    centre = np.array([terrain.x0 + terrain.dx * (nx - 1) / 2, terrain.y0 + terrain.dx * (ny - 1) / 2, float(h.mean())])
+    groove = math.radians(ms.groove_angle_deg) if ms is not None else 0.0
+    return Target("terrain", index, _TerrainMesh(terrain), material, groove, np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]),
+                  centre, TerrainReflector(material_given=ms is not None))
 
 
 def _history(spec, where, base_dir):
@@ -344,13 +399,14 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
             raise SceneError(f"occluders[{i}]: {exc}") from None
         m.vertices = m.vertices - offset
         occluders.append(m)
-    terrain = None
+    terrain = terrain_target = None
     if spec.terrain is not None:
         try:
             hf = terrain_heightfield(spec.terrain, base_dir)
         except ValueError as exc:
             raise SceneError(str(exc)) from None
         terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
+        terrain_target = _terrain_target(spec, terrain, len(targets) + len(occluders), base_dir)
     _check_laser_in_open_air(spec, lp, offset, terrain)
 
     pos, grp, idx = [], [], []
@@ -400,6 +456,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         occluders=occluders,
         terrain=terrain,
         observers=observers,
+        terrain_target=terrain_target,
         warnings=_warnings(spec),
     )
 

@@ -251,6 +251,9 @@ class TerrainSpec(_Strict):
     radius_m: float = Field(default=100.0, gt=0, le=1e7)
     extent_m: float = Field(default=500.0, gt=0, le=1e7, description="half-width of the procedural ground [m]")
     resolution_m: float = Field(default=5.0, gt=0, le=1e6)
+    material: MaterialSpec | None = Field(default=None, description=(
+        "how the ground reflects the beam that lands on it (static); default Lambertian of reflectance "
+        "TERRAIN_DEFAULT_REFLECTANCE = 1, the most any diffuse ground can return (snow at 1 um reaches 0.8-0.9)"))
 
     @model_validator(mode="after")
     def _check(self):

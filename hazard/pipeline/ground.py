@@ -21,7 +21,8 @@ class Footprints:
 def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, states, target_rows) -> Footprints:
     """Ground cells at ``eye_height_m`` where the irradiance summed over every spot
     reaches the MPE, out to the longest NOHD of any target (diffuse or specular)."""
-    rmax = max([tr.dynamic_lobe.max_range_m for tr in target_rows] + [tr.specular_nohd_dynamic_m or 0.0 for tr in target_rows])
+    lit = [tr for tr in target_rows if tr.dynamic_lobe is not None]  # unlit targets' rows carry no lobe
+    rmax = max([tr.dynamic_lobe.max_range_m for tr in lit] + [tr.specular_nohd_dynamic_m or 0.0 for tr in lit] + [0.0])
     initial = {k: v[:1] for k, v in states.items()}
     fp_static = ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, states_by_target=initial,
                                  max_range_m=rmax)

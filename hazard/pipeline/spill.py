@@ -1,7 +1,9 @@
 """Stage ``spill``: where the part of the beam that misses every target goes.
 
 The beam's cells (:mod:`hazard.beam`) that hit no target either stop on an occluder or
-the terrain (where, how much) or leave the scene. Along the part that leaves, the direct
+the terrain (where, how much) or leave the scene. What lands on the terrain is reflected
+by it: the beam stage gives the terrain a spot of its own (target ``terrain``, its
+``[terrain] material`` or a Lambertian of reflectance 1); occluders absorb. Along the part that leaves, the direct
 beam keeps the full beam's profile (range-safety.md section 2): its hazard distance is
 the direct-beam NOHD (:func:`hazard.nohd.nohd_direct`) of the beam scaled by the highest
 Gaussian value ``exp(-min |s|^2)`` among those cells, so a spill made only of the
@@ -20,7 +22,8 @@ __all__ = ["spill_summary"]
 
 
 def _stopped(cells, scene) -> list:
-    """Power [W] and mean range [m] of the beam stopped on each occluder and the terrain."""
+    """Power [W] and mean range [m] of the beam stopped on each occluder and the terrain,
+    and what it does there (``reflected``)."""
     n_t, n_o = len(scene.targets), len(scene.occluders)
     centre = cells.labels[:, 0]
     out = []
@@ -28,8 +31,19 @@ def _stopped(cells, scene) -> list:
         rows = centre == k
         p = float(cells.power_w[rows].sum())
         name = f"occluders[{int(k) - n_t}]" if k < n_t + n_o else "terrain"
-        out.append({"object": name, "power_w": p, "range_m": float((cells.t[rows] * cells.power_w[rows]).sum() / p)})
+        out.append({"object": name, "power_w": p, "range_m": float((cells.t[rows] * cells.power_w[rows]).sum() / p),
+                    "reflected": terrain_reflection(scene) if name == "terrain" else
+                    "not reflected (occluders absorb: they have no material)"})
     return out
+
+
+def terrain_reflection(scene) -> str:
+    """How the terrain reflects the beam that lands on it, in words."""
+    t = scene.terrain_target
+    if t.spec.material_given:
+        return f"reflected by the terrain's material ({t.material.name}), as the target 'terrain'"
+    return (f"reflected diffusely as the target 'terrain': Lambertian of reflectance {t.material.reflectance:g} "
+            f"(the default: the most a diffuse ground returns; give [terrain] material for the real ground)")
 
 
 def _cell_profile(cells, row, outlines) -> float:

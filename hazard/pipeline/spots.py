@@ -96,13 +96,13 @@ def trace_beam(scene, tracer, mu) -> BeamStage:
     outlines = flat_outlines(beam, scene.targets)
     cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
-    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines)
+    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
     notes = []
     if built.spill_w > 1e-3 * laser.average_power_w:
         notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")
     if built.blocked_w > 1e-3 * laser.average_power_w:
-        notes.append(f"{100 * built.blocked_w / laser.average_power_w:.3g} % of the beam is stopped by an occluder or the "
-                     f"terrain before any target")
+        notes.append(f"{100 * built.blocked_w / laser.average_power_w:.3g} % of the beam is stopped by an occluder or the terrain "
+                     f"(before a target or past them; see the spill)")
     notes.extend(_unreflected_notes(built.unreflected))
     return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w),
                      {k: v[0] for k, v in outlines.items()})
