@@ -7,7 +7,7 @@ others are left out; each stage is a function of explicit inputs in its own modu
 
 ``mpe`` (:mod:`~hazard.pipeline.limits`) -> ``rays`` and ``beam``
 (:mod:`~hazard.pipeline.spots`) -> ``crossings`` (:mod:`~hazard.pipeline.crossings`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``spill``
-(:mod:`~hazard.pipeline.spill`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
+(:mod:`~hazard.pipeline.spill`) -> ``sdz`` (:mod:`~hazard.pipeline.sdz`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
 ``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
 (:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
 -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
@@ -23,7 +23,7 @@ import numpy as np
 from brdfmodels.parallel import default_threads, thread_limit
 
 from .nohd import optical_gain
-from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, spill, spots as beam_stage
+from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
 from .pipeline.plan import plan
@@ -109,6 +109,19 @@ def _spill(scene, traced, mu, exposure, log) -> dict:
         st.detail = (f"{out['leaves_scene_w']:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
                      f"{out['nohd_m']:.4g} m (the spill's highest point of the beam profile: {out['peak_profile']:.3g})"
                      + (f"; {stopped}" if stopped else ""))
+    return out
+
+
+def _sdz(scene, exposure, mu, log, ray_scene) -> dict:
+    """Stage ``sdz``: the laser surface danger zone of the direct beam over its pointing
+    cone or sector."""
+    with log.run("sdz") as st:
+        out = sdz.danger_zone(scene, exposure.irradiance_w_m2, mu, lobes.scene_aids(scene), ray_scene)
+        d = out["directions"]
+        st.detail = (f"{d['count']} direction(s) ({d['kind']}, buffer {d['buffer_rad']:.3g} rad, step {d['step_rad']:.3g} rad); "
+                     f"{out['area_m2']:.4g} m^2 out to {out['max_range_m']:.4g} m; "
+                     + ("contained by backstops" if out["contained"] else f"{out['escaping_directions']} direction(s) reach their NOHD "
+                        f"({out['nohd_m']:.4g} m) without a backstop" + (", some above the horizon" if out["above_horizon"] else "")))
     return out
 
 
@@ -214,6 +227,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     scene = _crossings(scene, traced, mu, exposure.irradiance_w_m2, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
     spill_part = _spill(scene, traced, mu, exposure, log)
+    zone = _sdz(scene, exposure, mu, log, ray_scene)
     times, states = _histories(scene, traced.built.spots, log, the_plan)
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
@@ -232,7 +246,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
                         built.spill_w, built.blocked_w, traced.beam.power_w,
                         None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
                         traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
-                        spill=spill_part)
+                        spill=spill_part, sdz=zone)
 
 
 def versions() -> dict:

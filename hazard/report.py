@@ -112,6 +112,7 @@ def report_dict(result) -> dict:
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
                  "sampling": getattr(result, "beam_sampling", None) or None,
                  "spill": getattr(result, "spill", None) or None},
+        "sdz": getattr(result, "sdz", None) or None,
         "stages": [s.to_dict() for s in result.stages],
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
         "targets": [t.to_dict() for t in result.targets],
@@ -322,9 +323,34 @@ def _nohd_lines(result) -> list:
                      f"{sp['nohd_m']:.4g} m{aided}")
     for d in sp.get("stopped", []):
         lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m: {d['reflected']}")
+    lines += _sdz_lines(getattr(result, "sdz", None) or {})
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
         lines.append(f"  hazardous ground at {fs.eye_height_m:g} m eye height: static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2")
+    return lines
+
+
+def _sdz_lines(z) -> list:
+    """The laser surface danger zone in a few lines (report.json ``sdz``)."""
+    if not z:
+        return []
+    d = z["directions"]
+    where = {"aim": "the aim alone (no pointing error given: set [laser] pointing_error_rad)",
+             "cone": f"the pointing cone of {d['buffer_rad']:.3g} rad"
+                     + (f" ({d['pointing_error_sigmas']:g} sigma)" if d["pointing_error_kind"] == "sigma" else " (bound)"),
+             "sector": f"the sector widened by {d['buffer_rad']:.3g} rad"}[d["kind"]]
+    size = ("unbounded (a collimated beam in clear air: its NOHD is infinite; the polygon is drawn to 100 km)" if z.get("unbounded")
+            else f"{z['area_m2']:.4g} m^2")
+    lines = [f"  laser surface danger zone over {where}: {size}, out to {z['max_range_m']:.4g} m "
+             f"(direct-beam NOHD {z['nohd_m']:.4g} m); "
+             + ("contained by backstops" if z["contained"] else
+                f"NOT contained: {z['escaping_directions']} of {d['count']} directions reach the NOHD without a backstop"
+                + (", some above the horizon" if z["above_horizon"] else ""))]
+    if z.get("leaves_boundary"):
+        lines.append(f"    it leaves the range boundary: {z['outside_boundary_m2']:.4g} m^2 outside")
+    for a in z.get("aided", []):
+        lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics: {a['area_m2']:.4g} m^2 out to "
+                     f"{a['max_range_m']:.4g} m" + ("" if a["contained"] else ", not contained"))
     return lines
 
 

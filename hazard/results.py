@@ -138,6 +138,7 @@ class HazardResult:
     extended_source: dict = field(default_factory=dict)  # C_E summary for the report (hazard.extended_source)
     beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
     spill: dict = field(default_factory=dict)  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill)
+    sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
 
     @property
     def observer_mpe_w_m2(self):

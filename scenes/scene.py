@@ -295,6 +295,8 @@ def _warnings(spec: SceneSpec) -> list:
     la = spec.laser
     if la.divergence_rad > 0.05:
         out.append(f"laser.divergence_rad = {la.divergence_rad:g} rad is a very wide beam (> 0.05 rad): mrad meant?")
+    if la.pointing_error_rad > 0.05:
+        out.append(f"laser.pointing_error_rad = {la.pointing_error_rad:g} rad is over 50 mrad: mrad or deg meant?")
     if la.beam_diameter_m > 1.0:
         out.append(f"laser.beam_diameter_m = {la.beam_diameter_m:g} m is over 1 m: mm meant?")
     for g, ob in enumerate(spec.observers):

@@ -32,6 +32,8 @@ __all__ = [
     "OpticsSpec",
     "AtmosphereSpec",
     "AnalysisSpec",
+    "SectorSpec",
+    "RangeSpec",
     "STANDARD_KEYS",
 ]
 
@@ -62,6 +64,24 @@ def _nonzero(v, name):
     return v
 
 
+class SectorSpec(_Strict):
+    """Where the beam may point: compass bearings clockwise from +y (north) and elevations
+    above the horizontal, both [deg], each ``[low, high]``."""
+
+    azimuth_deg: list[Annotated[float, Field(ge=-720.0, le=720.0)]] = Field(min_length=2, max_length=2)
+    elevation_deg: list[Annotated[float, Field(ge=-90.0, le=90.0)]] = Field(min_length=2, max_length=2)
+
+    @model_validator(mode="after")
+    def _order(self):
+        a0, a1 = self.azimuth_deg
+        if not 0 <= a1 - a0 <= 360:
+            raise ValueError(f"azimuth_deg={self.azimuth_deg!r}: expected [low, high] with 0 <= high - low <= 360 (e.g. [350, 370] across north)")
+        e0, e1 = self.elevation_deg
+        if e1 < e0:
+            raise ValueError(f"elevation_deg={self.elevation_deg!r}: expected [low, high]")
+        return self
+
+
 class LaserSpec(_Strict):
     """The laser: CW (``power_w``) or pulsed (``pulse_energy_j``, ``pulse_duration_s``, ``prf_hz``)."""
 
@@ -75,6 +95,19 @@ class LaserSpec(_Strict):
     position_m: Vec3
     aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m]")
     direction: Vec3 | None = Field(default=None, description="beam direction (alternative to aim_m)")
+    pointing_error_rad: float = Field(default=0.0, ge=0, le=0.5, description=(
+        "aiming error of the beam (boresight retention + tracking) [rad]: a bound, or one standard deviation "
+        "with pointing_error_kind = 'sigma'"))
+    pointing_error_kind: Literal["bound", "sigma"] = "bound"
+    pointing_error_sigmas: float | None = Field(default=None, gt=0, le=10, description=(
+        "with pointing_error_kind = 'sigma': the buffer is this many standard deviations (required: no default is assumed)"))
+    pointing_error_source: str = Field(default="", max_length=1000, description="where the pointing error comes from (recorded in the report)")
+    sector: SectorSpec | None = Field(default=None, description="the directions the beam may point in (default: the aim alone)")
+
+    @property
+    def pointing_buffer_rad(self) -> float:
+        """The buffer angle around the aim or sector [rad]: the bound, or sigmas x the standard deviation."""
+        return self.pointing_error_rad * (self.pointing_error_sigmas if self.pointing_error_kind == "sigma" else 1.0)
 
     @field_validator("position_m", "aim_m", "direction")
     @classmethod
@@ -96,6 +129,11 @@ class LaserSpec(_Strict):
             raise ValueError(f"aim_m={self.aim_m!r} equals position_m: expected an aim point away from the laser")
         if self.direction is not None:
             _nonzero(self.direction, "direction")
+        if self.pointing_error_kind == "sigma" and self.pointing_error_sigmas is None:
+            raise ValueError("pointing_error_kind = 'sigma' needs pointing_error_sigmas (the buffer in standard deviations, "
+                             "from your range's rules: no default is assumed)")
+        if self.pointing_error_kind == "bound" and self.pointing_error_sigmas is not None:
+            raise ValueError("pointing_error_sigmas: only used with pointing_error_kind = 'sigma'; remove it")
         return self
 
     @property
@@ -376,6 +414,12 @@ class AnalysisSpec(_Strict):
     outputs: list[Literal["report", "csv", "render"]] = ["report", "csv"]
 
 
+class RangeSpec(_Strict):
+    """The range: its boundary, a polygon of [x, y] points [m] (world coordinates)."""
+
+    boundary_m: list[Annotated[list[Coord], Field(min_length=2, max_length=2)]] = Field(min_length=3, max_length=100_000)
+
+
 class SceneSpec(_Strict):
     name: Name
     description: str = Field(default="", max_length=100_000)
@@ -387,6 +431,7 @@ class SceneSpec(_Strict):
     observers: list[ObserverSpec] = []
     atmosphere: AtmosphereSpec = AtmosphereSpec()
     analysis: AnalysisSpec = AnalysisSpec()
+    range: RangeSpec | None = None
 
     @model_validator(mode="after")
     def _names(self):

@@ -3,7 +3,7 @@
 The stages, in order (pvlib's ModelChain steps and scikit-learn's Pipeline are the
 models: each stage is a function of explicit inputs, the plan decides which run):
 
-``mpe`` -> ``rays`` -> ``beam`` -> ``crossings`` -> ``direct`` -> ``spill`` -> ``history`` -> ``specular`` -> ``line_of_sight`` ->
+``mpe`` -> ``rays`` -> ``beam`` -> ``crossings`` -> ``direct`` -> ``spill`` -> ``sdz`` -> ``history`` -> ``specular`` -> ``line_of_sight`` ->
 ``static`` | ``dynamic`` -> ``exposure`` -> ``keepout`` -> ``footprint`` ->
 ``extended_source``.
 
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 __all__ = ["Plan", "plan", "STAGES"]
 
-STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
+STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "sdz", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
           "footprint", "extended_source")
 
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..nohd import nohd_direct, optical_gain
 
-__all__ = ["spill_summary"]
+__all__ = ["spill_summary", "direct_nohds"]
 
 
 def _stopped(cells, scene) -> list:
@@ -90,12 +90,19 @@ def spill_summary(scene, traced, mu, mpe_w_m2, aids=()) -> dict:
            "nohd_m": 0.0, "aided": []}
     if profile <= 0:
         return out
-    power = laser.average_power_w * profile
-    nohd = nohd_direct(power, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu)
-    out["nohd_m"] = float(nohd.nohd_m)
+    out["nohd_m"], out["aided"] = direct_nohds(laser, laser.average_power_w * profile, mpe_w_m2, mu, aids)
+    return out
+
+
+def direct_nohds(laser, power_w, mpe_w_m2, mu, aids=()) -> tuple[float, list]:
+    """Direct-beam NOHD [m] of ``power_w`` in the laser's beam, naked, and through each
+    aid (a dict per aid with its gain ``K = min(tau M^2, tau (D_o / 7 mm)^2)``, no
+    beam-size limit: an upper bound)."""
+    naked = float(nohd_direct(power_w, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu).nohd_m)
+    aided = []
     for a in aids:
         k = optical_gain(a.magnification, a.objective_diameter_m, a.transmission)
-        aided = nohd_direct(power, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu, optical_gain=k)
-        out["aided"].append({"magnification": a.magnification, "objective_diameter_m": a.objective_diameter_m,
-                             "transmission": a.transmission, "gain": k, "nohd_m": float(aided.nohd_m)})
-    return out
+        r = nohd_direct(power_w, mpe_w_m2, laser.beam_diameter_m, laser.divergence_rad, attenuation_per_m=mu, optical_gain=k)
+        aided.append({"magnification": a.magnification, "objective_diameter_m": a.objective_diameter_m,
+                      "transmission": a.transmission, "gain": k, "nohd_m": float(r.nohd_m)})
+    return naked, aided

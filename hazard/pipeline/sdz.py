@@ -1,0 +1,300 @@
+"""Stage ``sdz``: the laser surface danger zone (LSDZ) of the direct beam on the ground.
+
+Range practice (range-safety.md section 3; NAVFAC MIL-HDBK-1027/3B section 8, citing
+MCO P3570.1A; MIL-HDBK-828B): the beam may point anywhere within its aiming error
+around the aim (``[laser] pointing_error_rad``, a bound or ``pointing_error_sigmas``
+standard deviations: the buffer angle theta_b) or within a ``[laser] sector`` widened
+by theta_b. Along each direction the hazard reaches L = min(NOHD, the first backstop):
+the direct-beam NOHD (with attenuation; :func:`hazard.nohd.nohd_direct`), cut where the
+ray meets the terrain or an occluder. The LSDZ is the ground projection of those
+segments, widened by the beam's own hazardous half-width.
+
+How it is computed, and what is conservative:
+
+- directions: a pointing cone in rings every theta_b / 32; a sector on an azimuth x
+  elevation lattice every theta_b / 4 (the spec's "azimuth steps of at most theta_b /
+  4"), at most ``MAX_RAYS`` (a coarser step is said);
+- each direction is ray-cast (Embree) against the terrain and the occluders. Targets
+  are not backstops: within its pointing error the beam can miss them;
+- the zone is star-shaped about the laser's foot: around it, in bins of the largest
+  angular gap between the sampled directions' bearings, each bin reaches the longest
+  sampled reach of itself and its two neighbours, drawn as an outer polygon (its chords
+  lie outside that arc); then widened by the beam's largest hazardous half-width,
+  max over R of w(R) sqrt(ln(E(R) / MPE)) (:func:`hazard_half_width_m`);
+- ``contained``: every direction ends on a backstop before its NOHD; a direction above
+  the horizon that does not, and a zone leaving ``[range] boundary_m``, are said.
+Not modelled: the Earth's curvature and refraction; nothing stops the beam beyond the
+terrain's extent.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..beam import perp_basis
+from .spill import direct_nohds
+
+__all__ = ["Directions", "pointing_directions", "bearing_vectors", "danger_zone", "zone_polygon", "MAX_RAYS"]
+
+MAX_RAYS = 1_000_000  # directions cast per zone (a sector finer than this gets a coarser step, said)
+CONE_STEP = 1.0 / 32  # cone: ring and arc step in buffer angles (area overestimate 0.5-2.2 %, 4 ms: README table)
+SECTOR_STEP = 1.0 / 4  # sector: lattice step in buffer angles (range-safety.md 3: at most theta_b / 4)
+SECTOR_STEP_NO_BUFFER_RAD = 1e-3  # sector without a pointing error: 1 mrad steps
+UNBOUNDED_DRAW_M = 1e5  # an infinite NOHD's zone is drawn this far (its area and range are reported as inf)
+BUFFER_QUAD_SEGS = 16  # segments per quarter circle of the widened zone's round corners
+
+
+@dataclass(frozen=True)
+class Directions:
+    """Unit beam directions (N, 3) the laser may point in, the sampling step [rad], what
+    they cover (``aim``, ``cone`` or ``sector``) and the buffer angle theta_b [rad]."""
+
+    unit: np.ndarray
+    step_rad: float
+    kind: str
+    buffer_rad: float
+
+
+def bearing_vectors(azimuth_rad, elevation_rad) -> np.ndarray:
+    """Unit vectors (N, 3) from compass bearings (clockwise from +y, north) and elevations."""
+    az, el = np.asarray(azimuth_rad, float), np.asarray(elevation_rad, float)
+    return np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1).reshape(-1, 3)
+
+
+def _cone_basis(axis):
+    """Two unit vectors across ``axis``: e1 horizontal, e2 rising (so the rings' samples
+    at psi = 0, pi/2, pi, 3 pi/2 are the cone's extreme bearings and elevations)."""
+    e1 = np.cross(axis, [0.0, 0.0, 1.0])
+    if np.linalg.norm(e1) < 1e-9:  # a vertical beam: any pair will do
+        return perp_basis(axis)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(e1, axis)
+    return e1, (e2 if e2[2] >= 0 else -e2) / np.linalg.norm(e2)
+
+
+def _cone(axis, half_angle, step) -> np.ndarray:
+    """Directions filling a cone of ``half_angle`` about ``axis``: rings every ``step``,
+    each with a multiple of 4 samples starting at the horizontal offset."""
+    e1, e2 = _cone_basis(axis)
+    out = [axis[None]]
+    n_r = max(1, math.ceil(half_angle / step))
+    for k in range(1, n_r + 1):
+        rho = half_angle * k / n_r
+        psi = np.linspace(0.0, 2 * np.pi, 4 * max(2, math.ceil(2 * np.pi * math.sin(rho) / step / 4)), endpoint=False)
+        out.append(math.cos(rho) * axis + math.sin(rho) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2))
+    return np.vstack(out)
+
+
+def _sector(sector, buffer_rad) -> tuple[np.ndarray, float]:
+    """The sector widened by ``buffer_rad`` on an azimuth x elevation lattice, and its step."""
+    b = math.degrees(buffer_rad)
+    a0, a1 = sector.azimuth_deg[0] - b, sector.azimuth_deg[1] + b
+    e0, e1 = max(sector.elevation_deg[0] - b, -90.0), min(sector.elevation_deg[1] + b, 90.0)
+    full = a1 - a0 >= 360.0
+    span_a, span_e = (2 * np.pi if full else math.radians(a1 - a0)), math.radians(e1 - e0)
+    step = SECTOR_STEP * buffer_rad if buffer_rad > 0 else SECTOR_STEP_NO_BUFFER_RAD
+    n = (span_a / step + 1) * (span_e / step + 1)
+    if n > MAX_RAYS:
+        step *= math.sqrt(n / MAX_RAYS)
+    az = (np.linspace(0.0, span_a, max(1, math.ceil(span_a / step)), endpoint=False) if full
+          else np.linspace(0.0, span_a, max(2, math.ceil(span_a / step) + 1))) + math.radians(a0)
+    el = np.linspace(math.radians(e0), math.radians(e1), max(2, math.ceil(span_e / step) + 1)) if span_e > 0 else np.array([math.radians(e0)])
+    aa, ee = np.meshgrid(az, el)
+    return bearing_vectors(aa.ravel(), ee.ravel()), step
+
+
+def pointing_directions(scene) -> Directions:
+    """The directions the beam may point in (see the module notes)."""
+    laser = scene.spec.laser
+    b = laser.pointing_buffer_rad
+    if laser.sector is not None:
+        unit, step = _sector(laser.sector, b)
+        return Directions(unit, step, "sector", b)
+    axis = np.asarray(scene.laser_direction, float)
+    if b <= 0:
+        return Directions(axis[None], 0.0, "aim", 0.0)
+    return Directions(_cone(axis, b, CONE_STEP * b), CONE_STEP * b, "cone", b)
+
+
+def _envelope(phi, reach) -> tuple[np.ndarray, bool]:
+    """Outer polygon vertices (K, 2) about the origin of a star-shaped zone given by
+    sampled bearings ``phi`` [rad] and reaches [m] (see the module notes), and whether it
+    goes all the way round (else the origin closes it).
+
+    Bins of width w (the largest gap between neighbouring bearings inside the zone) each
+    reach the longest reach of itself and its neighbours, ``near``; the vertex on the
+    edge between two bins sits at the larger of their ``near`` over cos(w / 2), so the
+    chord between two edges stays outside the arc of the bin's ``near``."""
+    order = np.argsort(phi)
+    phi, reach = phi[order], reach[order]
+    gaps = np.diff(np.concatenate([phi, [phi[0] + 2 * np.pi]]))
+    g = int(np.argmax(gaps))
+    round_ = bool(gaps[g] <= np.pi / 8)
+    if round_:
+        start, width = phi[0], float(gaps[g])
+        n_bins = math.ceil(2 * np.pi / width)
+    else:
+        start = phi[(g + 1) % len(phi)]
+        width = float(np.delete(gaps, g).max())
+        n_bins = math.floor((2 * np.pi - gaps[g]) / max(width, 1e-12)) + 1 if width > 0 else 1
+    width = max(width, 1e-9)
+    k = np.minimum(((phi - start) % (2 * np.pi)) // width, n_bins - 1).astype(int)
+    r = np.zeros(n_bins)
+    np.maximum.at(r, k, reach)
+    if round_:
+        near = np.maximum(r, np.maximum(np.roll(r, 1), np.roll(r, -1)))
+        radius = np.maximum(near, np.roll(near, 1))  # edge j lies between bins j - 1 and j
+        edges = start + width * np.arange(n_bins)
+    else:
+        pad = np.concatenate([[0.0], r, [0.0]])
+        near = np.maximum(pad[1:-1], np.maximum(pad[:-2], pad[2:]))
+        padn = np.concatenate([[0.0], near, [0.0]])
+        radius = np.maximum(padn[:-1], padn[1:])  # n_bins + 1 edges
+        edges = start + width * np.arange(n_bins + 1)
+    radius = radius / math.cos(width / 2)  # width < pi: the largest gap, outside the zone, is larger
+    return np.stack([radius * np.sin(edges), radius * np.cos(edges)], axis=1), round_
+
+
+def zone_polygon(foot_xy, ends_xy, pad_m):
+    """The ground zone (shapely polygon) swept by segments from ``foot_xy`` to each of
+    ``ends_xy`` (N, 2), as an outer envelope, widened by ``pad_m``."""
+    from shapely.geometry import LineString, Point, Polygon
+
+    pad_m = pad_m / math.cos(math.pi / (4 * BUFFER_QUAD_SEGS))  # shapely's round caps are inscribed polygons: circumscribe them
+
+    rel = np.asarray(ends_xy, float) - foot_xy
+    reach = np.hypot(rel[:, 0], rel[:, 1])
+    far = reach > 1e-9 * max(float(reach.max()), 1.0)
+    if not far.any():
+        return Point(foot_xy).buffer(pad_m, quad_segs=BUFFER_QUAD_SEGS)
+    phi = np.arctan2(rel[far, 0], rel[far, 1])
+    if np.ptp(phi) == 0:
+        return LineString([foot_xy, foot_xy + rel[far][np.argmax(reach[far])]]).buffer(pad_m, quad_segs=BUFFER_QUAD_SEGS)
+    pts, round_ = _envelope(phi, reach[far])
+    ring = pts + foot_xy if round_ else np.vstack([[0.0, 0.0], pts]) + foot_xy
+    poly = Polygon(ring)
+    if not poly.is_valid:
+        poly = poly.buffer(0)
+    return poly.buffer(pad_m, quad_segs=BUFFER_QUAD_SEGS)
+
+
+def hazard_half_width_m(laser, power_w, mpe_w_m2, length_m, mu=0.0) -> float:
+    """The beam's largest hazardous half-width [m] out to ``length_m``: the largest r
+    with E(R) exp(-r^2 / w(R)^2) >= MPE, i.e. max over R of w(R) sqrt(ln(E(R) / MPE)),
+    E(R) = 4 P exp(-mu R) / (pi (a + R phi)^2), w = (a + R phi) / 2 (range-safety.md 1;
+    without attenuation the maximum is sqrt(P / (pi e MPE)) where D(R)^2 = 4 P / (pi e
+    MPE)). Found by a bounded scalar search and raised by 1e-6 of itself."""
+    from scipy.optimize import minimize_scalar
+
+    a, phi = laser.beam_diameter_m, laser.divergence_rad
+
+    def half(r):
+        d = a + r * phi
+        ln = math.log(4 * power_w / (math.pi * d * d * mpe_w_m2)) - mu * r
+        return d / 2 * math.sqrt(ln) if ln > 0 else 0.0
+
+    best = max(half(0.0), half(length_m))
+    if length_m > 0 and phi > 0:
+        res = minimize_scalar(lambda r: -half(r), bounds=(0.0, length_m), method="bounded", options={"xatol": 1e-9 * max(length_m, 1.0)})
+        best = max(best, -float(res.fun))
+    return best * (1 + 1e-6)
+
+
+def _first_backstop(origin, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
+    """Distance [m] to the first terrain or occluder hit along each direction (inf: none),
+    through the targets (rays that meet a target go on from just past it)."""
+    out = np.full(len(dirs), np.inf)
+    if ray_scene is None:
+        return out
+    rows = np.arange(len(dirs))
+    start = np.broadcast_to(origin, dirs.shape).copy()
+    gone = np.zeros(len(dirs))
+    step = 1e-6 * max(getattr(ray_scene, "scale_m", 1.0), 1.0)
+    for _ in range(max_passes):
+        hits = ray_scene.first_hit(start[rows], dirs[rows])
+        stop = hits.hit & (hits.obj >= n_targets)
+        out[rows[stop]] = gone[rows[stop]] + hits.t[stop]
+        through = hits.hit & (hits.obj < n_targets)
+        if not through.any():
+            return out
+        r = rows[through]
+        gone[r] += hits.t[through] + step
+        start[r] = start[r] + dirs[r] * (hits.t[through] + step)[:, None]
+        rows = r
+    out[rows] = gone[rows]  # still inside a stack of targets: stop there (said never to happen in practice)
+    return out
+
+
+@dataclass
+class Zone:
+    """One LSDZ: its polygon (local, shapely), NOHD [m], and per direction the reach [m]
+    and whether a backstop stops it."""
+
+    polygon: object
+    nohd_m: float
+    reach_m: np.ndarray
+    stopped: np.ndarray
+    half_width_m: float
+
+
+def _zone(scene, dirs, backstop_m, nohd_m, power_w, mpe_w_m2, mu) -> Zone:
+    """The zone out to min(backstop, NOHD) along each direction. An infinite NOHD (a
+    collimated beam in clear air) is drawn to ``UNBOUNDED_DRAW_M`` and its area and
+    range stay infinite."""
+    laser, origin = scene.spec.laser, np.asarray(scene.laser_position_m, float)
+    reach = np.minimum(backstop_m, nohd_m)
+    drawn = np.minimum(reach, UNBOUNDED_DRAW_M)
+    ends = origin + dirs * drawn[:, None]
+    half = hazard_half_width_m(laser, power_w, mpe_w_m2, float(drawn.max()), mu)
+    return Zone(zone_polygon(origin[:2], ends[:, :2], half + 1e-9), nohd_m, reach, backstop_m <= nohd_m, half)
+
+
+def _zone_dict(scene, z: Zone, dirs, boundary) -> dict:
+    """A zone as report data (world coordinates)."""
+    poly = z.polygon
+    ring = np.asarray(poly.exterior.coords) + scene.offset_m[:2]
+    escape = ~z.stopped
+    unbounded = bool(np.isinf(z.reach_m).any())
+    out = {"nohd_m": z.nohd_m, "polygon_m": ring.round(3).tolist(), "area_m2": math.inf if unbounded else float(poly.area),
+           "unbounded": unbounded,
+           "max_range_m": float(z.reach_m.max()), "hazard_half_width_m": z.half_width_m, "contained": bool(z.stopped.all()),
+           "escaping_directions": int(escape.sum()), "above_horizon": bool(np.any(escape & (dirs[:, 2] > 0)))}
+    if boundary is not None:
+        outside = poly.difference(boundary)
+        out["leaves_boundary"] = bool(outside.area > 0)
+        out["outside_boundary_m2"] = math.inf if unbounded and outside.area > 0 else float(outside.area)
+    return out
+
+
+def _boundary(scene):
+    from shapely.geometry import Polygon
+
+    r = scene.spec.range
+    if r is None:
+        return None
+    b = Polygon(np.asarray(r.boundary_m, float) - scene.offset_m[:2])
+    return b if b.is_valid else b.buffer(0)
+
+
+def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
+    """The LSDZ of the direct beam, naked and through each optical aid (report.json
+    ``sdz``; see the module notes). ``ray_scene``: the analysis' ray scene (targets,
+    occluders, terrain), None when the scene has no terrain and no occluders."""
+    laser = scene.spec.laser
+    d = pointing_directions(scene)
+    backstop_m = _first_backstop(np.asarray(scene.laser_position_m, float), d.unit, ray_scene, len(scene.targets))
+    power = laser.average_power_w
+    naked, aided = direct_nohds(laser, power, mpe_w_m2, mu, aids)
+    boundary = _boundary(scene)
+    out = {"directions": {"kind": d.kind, "count": int(len(d.unit)), "step_rad": d.step_rad, "buffer_rad": d.buffer_rad,
+                          "pointing_error_rad": laser.pointing_error_rad, "pointing_error_kind": laser.pointing_error_kind,
+                          "pointing_error_sigmas": laser.pointing_error_sigmas, "pointing_error_source": laser.pointing_error_source}}
+    out.update(_zone_dict(scene, _zone(scene, d.unit, backstop_m, naked, power, mpe_w_m2, mu), d.unit, boundary))
+    out["aided"] = []
+    for a in aided:
+        z = _zone(scene, d.unit, backstop_m, a["nohd_m"], power * a["gain"], mpe_w_m2, mu)
+        out["aided"].append({**a, **_zone_dict(scene, z, d.unit, boundary)})
+    return out

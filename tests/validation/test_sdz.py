@@ -1,0 +1,152 @@
+"""The laser surface danger zone (issue 13 item 3) against geometry written from the
+formulas (range-safety.md sections 1-3), not the engine:
+
+- the direct-beam NOHD without attenuation: 4 P / (pi (a + L phi)^2) = MPE, so
+  L = (sqrt(4 P / (pi MPE)) - a) / phi; the MPE is ANSI Z136.1-2014 Table 5b,
+  1050-1400 nm, t >= T2 = 10 s: 5.0 C_C mW/cm^2 = 50 W/m^2 (C_C = 1);
+- the beam's hazardous half-width: max over R of w sqrt(ln(E(R) / MPE)), w = D / 2; with
+  u = D^2 the maximum of u ln(c / u) / 4 (c = 4 P / (pi MPE)) is at u = c / e, giving
+  sqrt(P / (pi e MPE)) when that D lies on the path, else the end value;
+- a cone of half-angle theta about a horizontal aim, nothing in the way: a circular
+  sector of radius L and half-angle theta about the laser's foot; widened by h its area
+  is (Steiner) theta L^2 + (2 L + 2 theta L) h + pi h^2;
+- a cone about a downward aim that meets flat ground everywhere: the convex hull of the
+  laser's foot and the cone's ground ellipse (each boundary ray o + t d meets z = 0 at
+  t = z_o / -d_z), widened by h; its longest ray: z_o / sin(beta - theta);
+- a wall across the whole cone stops every ray at its distance: contained.
+The zone is an outer envelope of sampled directions: never smaller than the reference
+(1e-6), at most 5 % larger (the cone is sampled every theta_b / 32: 0.5-2.2 % over in 12 random draws,
+4 % where the cone grazes the ground at 3 deg).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from shapely.geometry import MultiPoint
+
+import hazard
+import scenes
+
+from . import _refs as ref
+
+P, A, PHI, MPE = 1000.0, 0.05, 1e-3, 50.0
+C = 4 * P / (math.pi * MPE)
+L = (math.sqrt(C) - A) / PHI  # 4996 m
+
+
+def _half_width(r_max):
+    """max over R in [0, r_max] of w(R) sqrt(ln(E(R) / MPE)) (no attenuation)."""
+    d_star = math.sqrt(C / math.e)
+    d_end = A + r_max * PHI
+    if A <= d_star <= d_end:
+        return math.sqrt(P / (math.pi * math.e * MPE))
+    d = d_end if d_end < d_star else A
+    return d / 2 * math.sqrt(math.log(C / (d * d)))
+
+
+def _scene(position, aim, *, pointing=None, extra="", sector=None, plate_at=(300.0, 300.0, 50.0)):
+    plate = dict(name="plate", shape="plate", center=np.array(plate_at, float), normal=np.array([0.0, -1.0, 0.0]),
+                 tangent=np.array([1.0, 0.0, 0.0]), size=(1.0, 1.0), material=ref.lambertian(0.5))
+    text = ref.scene_text(power=P, a=A, phi=PHI, position=np.asarray(position, float), aim=np.asarray(aim, float), targets=[plate])
+    laser_extra = ""
+    if pointing is not None:
+        laser_extra += f"pointing_error_rad = {ref.fmt(pointing)}\n"
+    if sector is not None:
+        laser_extra += f"sector = {{ azimuth_deg = [{ref.fmt(sector[0])}, {ref.fmt(sector[1])}], elevation_deg = [0.0, 0.0] }}\n"
+    text = text.replace("[exposure]", laser_extra + "[exposure]")
+    return scenes.loads(text.replace("[analysis]", extra + "[analysis]"))
+
+
+FLAT = '[terrain]\nkind = "flat"\nextent_m = 20000.0\nresolution_m = 1000.0\n'
+
+
+@pytest.mark.parametrize("theta", [5e-4, 2e-3, 2e-2])
+def test_a_horizontal_pointing_cone_sweeps_a_circular_sector(theta):
+    """A laser 30 m up aiming level (its lowest ray meets the ground beyond L): the zone is
+    the sector of radius L, half-angle theta, widened by the hazardous half-width."""
+    res = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=theta, extra=FLAT if theta < 5e-3 else ""))
+    assert res.mpe_w_m2 == MPE
+    z = res.sdz
+    h = _half_width(L)
+    area = theta * L * L + (2 * L + 2 * theta * L) * h + math.pi * h * h
+    assert z["nohd_m"] == pytest.approx(L, rel=1e-9) and z["max_range_m"] == pytest.approx(L, rel=1e-9)
+    assert z["hazard_half_width_m"] == pytest.approx(h, rel=1e-5) and z["hazard_half_width_m"] >= h
+    assert area * (1 - 1e-6) <= z["area_m2"] <= area * 1.02
+    assert not z["contained"] and z["escaping_directions"] == z["directions"]["count"] and z["above_horizon"]
+    assert z["directions"]["kind"] == "cone" and z["directions"]["buffer_rad"] == theta
+
+
+@ref.FAST
+@given(beta_deg=st.floats(8.0, 60.0), theta_deg=st.floats(0.5, 5.0), height=st.floats(5.0, 100.0), bearing=st.floats(-3.1, 3.1))
+def test_a_downward_cone_over_flat_ground_covers_the_hull_of_its_ground_ellipse(beta_deg, theta_deg, height, bearing):
+    """Every ray meets the ground before L: the zone is the hull of the foot and the
+    ellipse, contained, longest ray z_o / sin(beta - theta)."""
+    beta, theta = math.radians(beta_deg), math.radians(theta_deg)
+    o = np.array([10.0, -20.0, height])
+    d0 = np.array([math.sin(bearing) * math.cos(beta), math.cos(bearing) * math.cos(beta), -math.sin(beta)])
+    res = hazard.analyze(_scene(o, o + 10.0 * d0, pointing=theta, extra='[terrain]\nkind = "flat"\nextent_m = 5000.0\nresolution_m = 250.0\n'))
+    z = res.sdz
+    # the cone's boundary rays from the formula: cos(theta) d0 + sin(theta) (cos psi e1 + sin psi e2)
+    e1 = np.cross(d0, [0.0, 0.0, 1.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(d0, e1)
+    psi = np.linspace(0.0, 2 * np.pi, 7200, endpoint=False)
+    dirs = math.cos(theta) * d0 + math.sin(theta) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
+    ground = o + dirs * (height / -dirs[:, 2])[:, None]
+    longest = height / math.sin(beta - theta)
+    h = _half_width(longest)
+    hull = MultiPoint(np.vstack([ground[:, :2], o[:2]]).tolist()).convex_hull.buffer(h, quad_segs=256)
+    assert z["contained"] and z["escaping_directions"] == 0 and not z["above_horizon"]
+    assert z["max_range_m"] == pytest.approx(longest, rel=1e-6)
+    assert hull.area * (1 - 1e-4) <= z["area_m2"] <= hull.area * 1.05
+
+
+def test_a_wall_across_the_cone_contains_it():
+    """A 40 m wall 500 m down range across a 2 mrad cone stops every ray at ~500 m; the
+    1 m target plate at 250 m in the beam is not a backstop (the beam can miss it)."""
+    wall = '[[occluders]]\nshape = "box"\ncenter_m = [0.0, 501.0, 30.0]\nsize_m = [40.0, 2.0, 40.0]\n'
+    res = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=2e-3, extra=wall, plate_at=(0.0, 250.0, 30.0)))
+    assert res.targets[0].spot_power_w > 0
+    z = res.sdz
+    assert z["contained"] and z["max_range_m"] == pytest.approx(500.0 / math.cos(2e-3), rel=1e-6)
+    assert z["area_m2"] <= 2e-3 * 500.0**2 * 1.02 + (2 * 500.0 * 1.002 + 2e-3 * 1000) * _half_width(500.0 / math.cos(2e-3)) * 1.02 + 1.0
+
+
+def test_a_sector_and_a_range_boundary():
+    """A level sector of bearings [-10, 10] deg widened by a 1 mrad pointing bound: the
+    sector of radius L and half-angle 10 deg + 1 mrad; a square boundary of 3 km x 3 km
+    about the laser cuts it: the part outside is said (its area from the formula: the
+    reference sector (a fine polygon of its arc) minus the square)."""
+    half = math.radians(10.0) + 1e-3
+    res = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=1e-3, sector=(-10.0, 10.0),
+                                extra="[range]\nboundary_m = [[-1500.0, -1500.0], [1500.0, -1500.0], [1500.0, 1500.0], [-1500.0, 1500.0]]\n"))
+    z = res.sdz
+    h = _half_width(L)
+    area = half * L * L + (2 * L + 2 * half * L) * h + math.pi * h * h
+    assert z["directions"]["kind"] == "sector" and z["directions"]["step_rad"] <= 1e-3 / 4 * (1 + 1e-9)
+    assert area * (1 - 1e-6) <= z["area_m2"] <= area * 1.02
+    assert z["leaves_boundary"]
+    psi = np.linspace(-half, half, 4001)
+    sector = MultiPoint([[0.0, 0.0]] + (L * np.stack([np.sin(psi), np.cos(psi)], 1)).tolist()).convex_hull
+    from shapely.geometry import box
+    outside = sector.difference(box(-1500.0, -1500.0, 1500.0, 1500.0)).area
+    assert z["outside_boundary_m2"] >= outside * (1 - 1e-6)
+
+
+def test_a_sigma_pointing_error_needs_its_multiple_and_uses_it():
+    """A 1-sigma pointing error without its multiple is an error (no default is assumed);
+    with 3 sigma the buffer is 3 x 0.1 mrad and the source is recorded."""
+    base = ref.scene_text(power=P, a=A, phi=PHI, position=np.array([0.0, 0.0, 30.0]), aim=np.array([0.0, 1000.0, 30.0]),
+                          targets=[dict(name="plate", shape="plate", center=np.array([0.0, 1000.0, 30.0]), normal=np.array([0.0, -1.0, 0.0]),
+                                        tangent=np.array([1.0, 0.0, 0.0]), size=(1.0, 1.0), material=ref.lambertian(0.5))])
+    with pytest.raises(scenes.SceneError, match="pointing_error_sigmas"):
+        scenes.loads(base.replace("[exposure]", 'pointing_error_rad = 1e-4\npointing_error_kind = "sigma"\n[exposure]'))
+    sc = scenes.loads(base.replace("[exposure]", 'pointing_error_rad = 1e-4\npointing_error_kind = "sigma"\npointing_error_sigmas = 3.0\n'
+                                                 'pointing_error_source = "range SOP table 2"\n[exposure]'))
+    z = hazard.analyze(sc).sdz
+    assert z["directions"]["buffer_rad"] == pytest.approx(3e-4) and z["directions"]["pointing_error_source"] == "range SOP table 2"
