@@ -99,6 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, help="output folder")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--verbose", action="store_true", help="after the answer, print the stage log (every stage, ran or skipped, with its run time)")
+    p.add_argument("--plot", action="store_true", help="also write plan.png: the plan view (danger zone, beams, hazard circles, observers by verdict)")
     _add_run_args(p)
 
     p = sub.add_parser("compare", help="static vs dynamic reflectance: NOHD per target and observer verdicts")
@@ -290,6 +291,15 @@ def _load_scene(name, err=None):
     return scene
 
 
+def _needs(module, extra):
+    """Before any work: an optional dependency is importable, else a one-line error
+    naming the extra that installs it."""
+    import importlib.util
+
+    if importlib.util.find_spec(module) is None:
+        raise ValueError(f"{module} is not installed: pip install 'laser-hazard[{extra}]' (or [all])")
+
+
 def _check_outdir(outdir, names, force):
     """Before any work: the output folder is (or can be made) a writable folder, and its
     outputs do not exist unless ``force``."""
@@ -336,9 +346,16 @@ def _finish(args, result):
 def _cmd_run(args, out, err):
     from .report import report_dict, summary_text, write_outputs
 
-    _check_outdir(args.output, ("report.json", "observers.csv"), args.force)
+    _check_outdir(args.output, ("report.json", "observers.csv") + (("plan.png",) if args.plot else ()), args.force)
+    if args.plot:
+        _needs("matplotlib", "render")
     result = _analyse(args, err)
-    paths = write_outputs(result, args.output, force=args.force)
+    extra = {}
+    if args.plot:
+        from .plan_view import plan_png
+
+        extra["plan.png"] = plan_png(result)
+    paths = write_outputs(result, args.output, force=args.force, extra=extra)
     if args.json:
         out.write(json.dumps(report_dict(result), indent=1) + "\n")
     else:
@@ -598,6 +615,9 @@ def _cmd_render(args, out, err):
         except FileExistsError as exc:
             raise ValueError(str(exc)) from None
         lines = [f"  wrote {p}" for k, p in paths.items() if k != "png"]
+        from .plan_view import PlanViewDisplay
+
+        lines.append(f"  wrote {PlanViewDisplay.from_result(result).save(Path(args.output) / 'plan.png')}")
         if not args.no_animation and result.states:
             anim = render.animate_lobe(result, args.output)
             lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")

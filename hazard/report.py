@@ -142,9 +142,9 @@ def _csv_text(rows) -> str:
     return buf.getvalue()
 
 
-def _write_synced(path: Path, text: str) -> None:
-    with open(path, "w", encoding="utf-8", newline="") as fh:
-        fh.write(text)
+def _write_synced(path: Path, data: bytes) -> None:
+    with open(path, "wb") as fh:
+        fh.write(data)
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -162,8 +162,9 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def write_outputs(result, outdir, *, force=False) -> list:
-    """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit.
+def write_outputs(result, outdir, *, force=False, extra=None) -> list:
+    """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit,
+    with the files of ``extra`` (name -> bytes, e.g. ``plan.png``) in the same unit.
 
     Both files are written (and fsynced) into a temporary folder beside ``outdir``, which
     is then renamed into place: a new ``outdir`` appears whole, and an existing one that
@@ -173,7 +174,8 @@ def write_outputs(result, outdir, *, force=False) -> list:
     is left behind after an exception.
     """
     out = Path(outdir)
-    names = ("report.json", "observers.csv")
+    extra = dict(extra or {})
+    names = ("report.json", "observers.csv") + tuple(extra)
     targets = [out / n for n in names]
     if out.exists() and not out.is_dir():
         raise OutputExistsError(f"{out} exists and is not a folder")
@@ -183,7 +185,8 @@ def write_outputs(result, outdir, *, force=False) -> list:
     doc = report_dict(result)
     if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
         doc["warnings"] = list(getattr(result.scene, "warnings", None) or [])
-    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False), "observers.csv": _csv_text(doc["observers"])}
+    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(doc["observers"]).encode(),
+             **extra}
     parent = out.parent if str(out.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
@@ -216,7 +219,8 @@ def write_outputs(result, outdir, *, force=False) -> list:
                     shutil.rmtree(old, ignore_errors=True)
             if not swapped:
                 (out / "report.json").unlink(missing_ok=True)  # the report is the commit marker
-                os.replace(tmp / "observers.csv", out / "observers.csv")
+                for n in names[1:]:
+                    os.replace(tmp / n, out / n)
                 os.replace(tmp / "report.json", out / "report.json")
                 os.rmdir(tmp)
             _fsync_dir(out)

@@ -61,6 +61,7 @@ def test_render_cli_and_static_scene(tmp_path):
     code = main(["render", "range_terrain", "-o", str(tmp_path), "--quiet"], stdout=out, stderr=err)
     assert code == 0, err.getvalue()
     assert (tmp_path / "keepout.png").exists() and not (tmp_path / "lobe.gif").exists()  # static: no animation
+    assert (tmp_path / "plan.png").stat().st_size > 20_000 and "plan.png" in out.getvalue()
     img = _rgb(tmp_path / "keepout.png")
     red_ground = (img[..., 0] > 180) & (img[..., 1] < 90) & (img[..., 2] < 90)
     assert red_ground.sum() > 1000  # the hazardous ground footprint is drawn

@@ -1,0 +1,237 @@
+"""The plan view of a run (issue 13 item 8): what a range safety officer pins on the wall.
+
+World x (east) and y (north, +y) in metres, equal scale, with a scale bar and a north
+arrow: the laser surface danger zone (naked eye filled, through each optical aid
+outlined), the aim line, the range boundary, the targets with their diffuse hazard
+circles (radius: the target's longest diffuse NOHD, a plan-view bound of its lobe) and
+mirror beams (the specular NOHD along the mirror axis, projected), the hazardous ground
+at eye height (terrain footprints), terrain contours and the observers coloured by
+verdict. Written by ``hazard run --plot`` (``plan.png`` with the other outputs, as one
+unit) and by ``hazard render``. matplotlib is imported when it draws.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .plots import _Display
+
+__all__ = ["PlanViewDisplay", "plan_png"]
+
+
+@dataclass
+class PlanViewDisplay(_Display):
+    """Plan-view data in world x, y [m] (see the module notes); ``plot`` only draws."""
+
+    title: str
+    laser_xy: np.ndarray
+    aim_xy: np.ndarray  # (2, 2): the aim line from the laser to the zone's range
+    zone: np.ndarray | None  # (K, 2) the naked-eye LSDZ ring
+    zone_label: str
+    aided_zones: list = field(default_factory=list)  # (label, ring)
+    boundary: np.ndarray | None = None
+    targets: list = field(default_factory=list)  # (name, xy, diffuse NOHD [m])
+    mirrors: list = field(default_factory=list)  # (name, xy start, xy end)
+    footprint_xy: np.ndarray | None = None  # (N, 2) hazardous ground nodes
+    footprint_cell_m: float = 0.0
+    contours: tuple | None = None  # (x (nx,), y (ny,), heights (ny, nx))
+    observers_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    hazardous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    @classmethod
+    def from_result(cls, result) -> "PlanViewDisplay":
+        scene = result.scene
+        off = np.asarray(scene.offset_m, float)
+        z = getattr(result, "sdz", None) or {}
+        laser = np.asarray(scene.laser_position_m, float) + off
+        reach = z.get("max_range_m", 0.0)
+        reach = min(reach, 1e5) if math.isfinite(reach) else 1e5
+        aim = np.array([laser[:2], laser[:2] + np.asarray(scene.laser_direction, float)[:2] * reach])
+        zone = np.asarray(z["polygon_m"], float) if z.get("polygon_m") else None
+        aided = [(f"LSDZ through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", np.asarray(a["polygon_m"], float))
+                 for a in z.get("aided", [])]
+        boundary = np.asarray(scene.spec.range.boundary_m, float) if scene.spec.range is not None else None
+        obs = result.observers
+        return cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, boundary,
+                   _targets(result, off), _mirrors(result, off), *_footprint(result, off), _contours(scene, off),
+                   np.asarray(obs.position_m, float)[:, :2] if len(obs.position_m) else np.zeros((0, 2)),
+                   np.asarray(result.hazardous, bool))
+
+    def plot(self, axes=None):
+        """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
+        targets, observers, hazardous ground). Returns (figure, axes)."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        if axes is None:
+            fig, axes = plt.subplots(1, 2, figsize=(15, 7.5))
+        fig = axes[0].figure
+        for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
+            self._draw_ground(ax)
+            self._draw_zones(ax)
+            self._draw_objects(ax)
+            ax.set_aspect("equal", adjustable="box" if limits is not None else "datalim")
+            if limits is not None:
+                ax.set_xlim(limits[0], limits[1])
+                ax.set_ylim(limits[2], limits[3])
+            ax.set_xlabel("x (east) [m]")
+            ax.set_ylabel("y (north) [m]")
+            ax.set_title(f"{self.title}: {title}")
+        axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
+        fig.tight_layout()
+        fig.canvas.draw()  # settle the limits before the scale bars and the arrows
+        for ax in axes:
+            _scale_bar(ax)
+            _north_arrow(ax)
+        return fig, axes
+
+    def site_limits(self) -> tuple:
+        """x0, x1, y0, y1 [m] around the laser, the targets' diffuse hazard circles, the
+        observers and the hazardous ground, 10 % wider (at least 20 m across)."""
+        pts = [self.laser_xy[None]] + [np.asarray(xy, float)[None] + [[-r, -r], [r, r]] for _, xy, r in self.targets]
+        pts += [self.observers_xy] if len(self.observers_xy) else []
+        pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
+        p = np.vstack(pts)
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
+        return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+
+    def _draw_ground(self, ax):
+        if self.contours is not None:
+            x, y, h = self.contours
+            if np.ptp(h) > 0:
+                cs = ax.contour(x, y, h, levels=8, colors="#b0b0b0", linewidths=0.6)
+                ax.clabel(cs, fontsize=6, fmt="%.0f m")
+        if self.footprint_xy is not None and len(self.footprint_xy):
+            s = self.footprint_cell_m
+            ax.scatter(*self.footprint_xy.T, s=4, marker="s", c="#ff8c00", alpha=0.6, lw=0,
+                       label=f"hazardous ground at eye height ({s:g} m cells)")
+        if self.boundary is not None:
+            ring = np.vstack([self.boundary, self.boundary[:1]])
+            ax.plot(*ring.T, c="k", lw=1.5, label="range boundary")
+
+    def _draw_zones(self, ax):
+        if self.zone is not None:
+            ax.fill(*self.zone.T, fc="#e41a1c", alpha=0.25, ec="#e41a1c", lw=1.0, label=self.zone_label)
+        for (label, ring), ls in zip(self.aided_zones, ("--", ":", "-.") * 8):
+            ax.plot(*ring.T, c="#984ea3", lw=1.0, ls=ls, label=label)
+        ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
+
+    def _draw_objects(self, ax):
+        ax.plot(*self.laser_xy, marker="^", ms=10, c="k", ls="", label="laser")
+        for i, (name, xy, nohd) in enumerate(self.targets):
+            ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets" if i == 0 else None)
+            if nohd > 0:
+                ax.add_patch(matplotlib_circle(xy, nohd))
+            ax.annotate(name, xy, xytext=(4, 4), textcoords="offset points", fontsize=7)
+        for i, (name, a, b) in enumerate(self.mirrors):
+            ax.plot([a[0], b[0]], [a[1], b[1]], c="#ff7f00", lw=1.2, label="mirror beams (specular NOHD)" if i == 0 else None)
+        if len(self.observers_xy):
+            safe = ~self.hazardous
+            ax.scatter(*self.observers_xy[safe].T, s=6, c="#4daf4a", lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            ax.scatter(*self.observers_xy[self.hazardous].T, s=10, c="#e41a1c", marker="x", lw=0.8,
+                       label=f"observers at or above the MPE ({int(self.hazardous.sum())})")
+
+    def png_bytes(self) -> bytes:
+        """The figure as PNG bytes (for outputs written as one unit)."""
+        import matplotlib.pyplot as plt
+
+        fig, _ = self.plot()
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110)
+        plt.close(fig)
+        return buf.getvalue()
+
+
+def matplotlib_circle(xy, r):
+    from matplotlib.patches import Circle
+
+    return Circle(xy, r, fill=False, ec="#377eb8", lw=0.8, ls=":")
+
+
+def _zone_label(z) -> str:
+    if not z:
+        return "LSDZ"
+    d = z["directions"]
+    what = {"aim": "aim only", "cone": f"pointing cone {d['buffer_rad']:.2g} rad", "sector": "sector + buffer"}[d["kind"]]
+    state = "contained" if z["contained"] else "NOT contained"
+    return f"laser surface danger zone ({what}; {state})"
+
+
+def _targets(result, off) -> list:
+    out = []
+    for t in result.targets:
+        src = next((sp for sp in result.spots if sp.target.name == t.name), None)
+        xy = (src.centroid if src is not None else next((x.center_m for x in result.scene.targets if x.name == t.name),
+                                                       np.zeros(3))) + off
+        nohd = t.to_dict().get("nohd_dynamic_m") or 0.0
+        out.append((t.name, np.asarray(xy, float)[:2], float(nohd) if math.isfinite(nohd) else 0.0))
+    return out
+
+
+def _mirrors(result, off) -> list:
+    from .engine import mirror_axis
+
+    out = []
+    rows = {t.name: t for t in result.targets}
+    for sp in result.spots:
+        row = rows.get(sp.target.name)
+        if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
+            continue
+        length = min(float(row.specular_nohd_dynamic_m), 1e5)
+        a = sp.centroid + off
+        out.append((sp.target.name, a[:2], (a + mirror_axis(sp) * length)[:2]))
+    return out
+
+
+def _footprint(result, off):
+    f = result.footprint_dynamic
+    terrain = result.scene.terrain
+    if f is None or terrain is None or not f.mask.any():
+        return None, 0.0
+    iy, ix = np.nonzero(f.mask)
+    xy = np.stack([terrain.x0 + terrain.dx * ix, terrain.y0 + terrain.dx * iy], axis=1) + off[:2]
+    return xy, float(terrain.dx)
+
+
+def _contours(scene, off):
+    t = scene.terrain
+    if t is None:
+        return None
+    ny, nx = t.heights.shape
+    k = max(1, max(ny, nx) // 400)  # at most ~400 x 400 nodes drawn
+    x = t.x0 + t.dx * np.arange(0, nx, k) + off[0]
+    y = t.y0 + t.dx * np.arange(0, ny, k) + off[1]
+    return x, y, t.heights[::k, ::k] + off[2]
+
+
+def _nice_length(span) -> float:
+    """A 1, 2 or 5 x 10^k length near a fifth of ``span``."""
+    raw = span / 5
+    e = 10 ** math.floor(math.log10(raw))
+    return max(m * e for m in (1, 2, 5) if m * e <= raw) if raw >= e else e
+
+
+def _scale_bar(ax):
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    x0, x1 = ax.get_xlim()
+    length = _nice_length(x1 - x0)
+    label = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
+    ax.add_artist(AnchoredSizeBar(ax.transData, length, label, "lower left", pad=0.5, frameon=True, size_vertical=0))
+
+
+def _north_arrow(ax):
+    ax.annotate("N", xy=(0.06, 0.95), xytext=(0.06, 0.83), xycoords="axes fraction", ha="center", va="center",
+                fontsize=11, fontweight="bold", arrowprops=dict(arrowstyle="-|>", color="k", lw=1.5))
+
+
+def plan_png(result) -> bytes:
+    """The plan view of ``result`` as PNG bytes."""
+    return PlanViewDisplay.from_result(result).png_bytes()

@@ -1,0 +1,64 @@
+"""The plan view (hazard run --plot, hazard render): what it draws, checked in its pixels."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+
+from hazard.cli import main
+from hazard.plan_view import PlanViewDisplay, _nice_length
+
+pytest.importorskip("matplotlib")
+imageio = pytest.importorskip("imageio.v3")
+
+
+def _near(img, rgb, tol=12):
+    return np.all(np.abs(img[..., :3].astype(int) - rgb) <= tol, axis=-1)
+
+
+@pytest.fixture(scope="module")
+def run_with_plot(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plan")
+    text = io.StringIO()
+    code = main(["run", "steel_vs_copper", "-o", str(out / "o"), "--plot"], stdout=text, stderr=io.StringIO())
+    assert code == 0
+    return out / "o", text.getvalue()
+
+
+def test_run_plot_writes_the_plan_with_the_other_outputs(run_with_plot):
+    out, text = run_with_plot
+    assert sorted(p.name for p in out.iterdir()) == ["observers.csv", "plan.png", "report.json"]
+    assert "wrote " + str(out / "plan.png") in text
+
+
+def test_the_plan_shows_the_zone_the_mirror_beam_and_both_verdicts(run_with_plot):
+    img = imageio.imread(run_with_plot[0] / "plan.png")
+    zone_fill = _near(img, (249, 197, 198))  # #e41a1c at alpha 0.25 over white
+    mirror = _near(img, (255, 127, 0), 30)  # the copper mirror beam, #ff7f00
+    green = _near(img, (77, 175, 74), 30)  # observers below the MPE
+    red = _near(img, (228, 26, 28), 30)  # hazardous observers' crosses, the aim line and the zone's edge
+    assert zone_fill.sum() > 5000 and mirror.sum() > 300 and green.sum() > 300 and red.sum() > 300
+
+
+def test_a_plot_without_matplotlib_is_a_clear_error(monkeypatch, tmp_path):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "matplotlib" else real(name, *a))
+    err = io.StringIO()
+    code = main(["run", "plate", "-o", str(tmp_path / "o"), "--plot"], stdout=io.StringIO(), stderr=err)
+    assert code != 0 and "laser-hazard[render]" in err.getvalue() and not (tmp_path / "o").exists()
+
+
+def test_site_limits_hold_every_observer_and_hazard_circle():
+    d = PlanViewDisplay("t", np.zeros(2), np.zeros((2, 2)), None, "z", targets=[("a", np.array([100.0, 0.0]), 30.0)],
+                        observers_xy=np.array([[-50.0, 20.0]]), hazardous=np.array([False]))
+    x0, x1, y0, y1 = d.site_limits()
+    assert x0 <= -50 and x1 >= 130 and y0 <= -30 and y1 >= 30
+
+
+@pytest.mark.parametrize("span, want", [(1000.0, 200.0), (73.0, 10.0), (5e4, 1e4), (9.0, 1.0), (0.3, 0.05)])
+def test_the_scale_bar_is_a_round_fifth_of_the_width(span, want):
+    assert _nice_length(span) == pytest.approx(want)
