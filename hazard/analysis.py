@@ -79,14 +79,15 @@ def _trace(scene, the_plan, log, backend, threads, mu):
     return ray_scene, tracer, traced
 
 
-def _crossings(scene, traced, mu, mpe_w_m2, log, the_plan):
+def _crossings(scene, traced, tracer, mu, mpe_w_m2, log, the_plan):
     """Stage ``crossings``: observer points added where a beam crosses a line between its
     points (the scene is returned with them; the caller's is not changed)."""
     if the_plan.skipped("crossings"):
         log.skip("crossings", the_plan.skipped("crossings"))
         return scene
     with log.run("crossings") as st:
-        scene, st.detail = crossings.add_crossings(scene, traced.beam, traced.built.spots, mu, mpe_w_m2)
+        spill_s = spill.hottest_spill_s(traced, len(scene.targets))
+        scene, st.detail = crossings.add_crossings(scene, traced.beam, traced.built.spots, mu, mpe_w_m2, tracer, spill_s)
     return scene
 
 
@@ -224,7 +225,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     mu = limits.attenuation_per_m(scene.spec)
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(traced.notes)
-    scene = _crossings(scene, traced, mu, exposure.irradiance_w_m2, log, the_plan)
+    scene = _crossings(scene, traced, tracer, mu, exposure.irradiance_w_m2, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
     spill_part = _spill(scene, traced, mu, exposure, log)
     zone = _sdz(scene, exposure, mu, log, ray_scene)

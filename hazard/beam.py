@@ -306,8 +306,9 @@ def _ring_points(ring, spacing):
     return ring[edge] + frac[:, None] * steps[edge], float((lengths / per_edge).max())
 
 
-def r2_min_outside(piece, holes, n_edge=256, seam=0.0):
-    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value.
+def r2_min_outside(piece, holes, n_edge=256, seam=0.0, with_point=False):
+    """Smallest |s|^2 over a convex piece minus convex holes, never above the true value
+    (with ``with_point``: and the free point found, not lowered; None when none is free).
 
     ``holes``: (part of a hole inside the piece, the whole hole) pairs. Candidates are
     points on the piece's boundary and on each hole part's boundary, about
@@ -318,7 +319,7 @@ def r2_min_outside(piece, holes, n_edge=256, seam=0.0):
     """
     origin = np.zeros((1, 2))
     if inside_convex(origin, piece, margin=-1e-12)[0] and not any(inside_convex(origin, w, margin=1e-12)[0] for _, w in holes):
-        return 0.0
+        return (0.0, np.zeros(2)) if with_point else 0.0
     spacing = float(np.ptp(piece, axis=0).max()) / n_edge
     rings = [(np.asarray(piece, float), -1)] + [(np.asarray(p, float), k) for k, (p, _) in enumerate(holes)]
     cand, owner, step = [], [], spacing
@@ -341,8 +342,10 @@ def r2_min_outside(piece, holes, n_edge=256, seam=0.0):
         if free.any():
             # the free region's nearest point lies on a candidate ring within one spacing
             # of a free candidate: lowered by it, never above the truth
-            return max(math.sqrt(float(r2[batch[np.argmax(free)]])) - step, 0.0) ** 2
-    return math.inf  # wholly hidden
+            q = batch[np.argmax(free)]
+            r2_low = max(math.sqrt(float(r2[q])) - step, 0.0) ** 2
+            return (r2_low, pts[q].copy()) if with_point else r2_low
+    return (math.inf, None) if with_point else math.inf  # wholly hidden
 
 
 def clip_to_box(polygon_s, s0, s1, t0, t1) -> np.ndarray:

@@ -106,7 +106,8 @@ class PlanViewDisplay(_Display):
         if self.contours is not None:
             x, y, h = self.contours
             if np.ptp(h) > 0:
-                cs = ax.contour(x, y, h, levels=8, colors="#b0b0b0", linewidths=0.6)
+                lo, hi = float(h.min()), float(h.max())
+                cs = ax.contour(x, y, h, levels=np.linspace(lo + 0.1 * (hi - lo), hi - 0.05 * (hi - lo), 7), colors="#b0b0b0", linewidths=0.6)
                 ax.clabel(cs, fontsize=6, fmt="%.0f m")
         if self.footprint_xy is not None and len(self.footprint_xy):
             s = self.footprint_cell_m

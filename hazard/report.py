@@ -326,7 +326,9 @@ def _nohd_lines(result) -> list:
         lines.append(f"  the beam past the targets ({sp['leaves_scene_w']:.4g} W leaves the scene): direct-beam NOHD "
                      f"{sp['nohd_m']:.4g} m{aided}")
     for d in sp.get("stopped", []):
-        lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m: {d['reflected']}")
+        way = (f" (up to {d['peak_irradiance_w_m2']:.3g} W/m^2 on its way from {d['from_range_m']:.4g} m, hazard ratio "
+               f"{d['hazard_ratio']:.3g}: an eye in it is at risk)" if d.get("hazard_ratio", 0) >= 1 else "")
+        lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m{way}: {d['reflected']}")
     lines += _sdz_lines(getattr(result, "sdz", None) or {})
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:

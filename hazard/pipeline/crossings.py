@@ -7,13 +7,15 @@ direct beam and of each mirror beam is searched between the points:
 
 - along a line, on the polyline through its points (``SUBSAMPLES`` per segment);
 - on a grid or a shell, along the curve ``project(o + t d)`` of each beam's axis ray
-  (the direct beam's axis; for a mirror the reflected rays through its hottest point
-  and through its centroid) projected on the surface: it passes through every point
+  (the direct beam's axis and the ray through the hottest point of its spill, just off
+  the edge of the target that cuts it; for a mirror the reflected rays through its
+  hottest point and through its centroid) projected on the surface: it passes through every point
   where the ray meets the surface, so a crossing is on it. The ray is cut to the
   surface's bounding box (widened by 5 beam radii) and sampled every eighth of the beam's
   1/e diameter (``STEP_DIAMETERS``), at most ``MAX_CANDIDATES`` points.
 
-Around each of the ``PEAKS`` highest local maxima of the first pass the search runs
+The direct beam is searched with its shadows (nothing where a target, occluder or the
+terrain stands on the ray). Around each of the ``PEAKS`` highest local maxima of the first pass the search runs
 again as finely, then a golden-section search to the maximum. A maximum that beats the
 group's nearest ``NEIGHBOURS`` points by more than ``GAIN`` and reaches ``FLOOR`` of the
 MPE is added as an observer point of its own (group ``<group>:crossing``, the group's
@@ -28,7 +30,8 @@ import dataclasses
 import numpy as np
 
 from ..engine import specular_irradiance
-from .direct import beam_at
+from .direct import beam_at, clear_of_objects
+from .spill import hottest_spill_s
 from .surfaces import Polyline, observer_surfaces
 
 __all__ = ["add_crossings", "SUBSAMPLES", "GAIN", "STEP_DIAMETERS"]
@@ -54,14 +57,29 @@ class Ray:
     min_step_m: float
 
 
-def _direct(beam, mu):
-    """The laser's own beam, nothing in the way (the map checks the line of sight)."""
+def _direct(beam, mu, tracer):
+    """The laser's own beam where nothing stands on the ray (a target cutting the beam
+    leaves its shadow: the spill around it is what is searched)."""
     def fn(p):
         at = beam_at(beam, p, mu)
         e = np.zeros(len(p))
-        e[at.rows] = at.irradiance_w_m2
+        if len(at.rows):
+            e[at.rows] = np.where(clear_of_objects(at, p, tracer), at.irradiance_w_m2, 0.0)
         return e
     return fn
+
+
+SPILL_OUTSET = 1e-3  # the spill's hottest ray is moved this fraction outward (off the target's edge it grazes)
+
+
+def _direct_rays(beam, spill_s) -> list:
+    """The beam's axis ray, and the ray through the hottest point of its spill (the edge
+    of a target that cuts the beam), moved ``SPILL_OUTSET`` outward."""
+    rays = [Ray(beam.position_m, beam.axis, 0.0, beam.diameter_m)]
+    if spill_s is not None and np.any(spill_s != 0):
+        o, d = beam.rays(np.asarray(spill_s, float)[None] * (1 + SPILL_OUTSET))
+        rays.append(Ray(o[0], d[0] / np.linalg.norm(d[0]), 0.0, beam.diameter_m))
+    return rays
 
 
 def _mirror(spot, beam, mu):
@@ -87,9 +105,9 @@ def _mirror_rays(spot, beam):
     return rays
 
 
-def _sources(beam, spots, mu):
+def _sources(beam, spots, mu, tracer, spill_s):
     """(label, irradiance function, axis rays) of the direct beam and each mirror beam."""
-    out = [("direct beam", _direct(beam, mu), [Ray(beam.position_m, beam.axis, 0.0, beam.diameter_m)])]
+    out = [("direct beam", _direct(beam, mu, tracer), _direct_rays(beam, spill_s))]
     for sp in spots:
         if sp.material.has_specular:
             out.append((f"mirror beam of {sp.target.name}", _mirror(sp, beam, mu), _mirror_rays(sp, beam)))
@@ -200,11 +218,13 @@ def _new_crossings(fn, found, group_points):
     return kept
 
 
-def add_crossings(scene, beam, spots, mu, mpe_w_m2):
+def add_crossings(scene, beam, spots, mu, mpe_w_m2, tracer, spill_s=None):
     """The scene with an observer point added at each beam crossing that falls between an
     observer group's points (see the module notes), and a one-line account. Crossings
     below ``FLOOR`` of the MPE (naked eye) are left out: even through optics of gain 1000
-    they stay under a tenth of it."""
+    they stay under a tenth of it. ``tracer`` answers ``first_hit`` against every
+    object (the direct beam's shadows); ``spill_s``: the hottest point of the beam's
+    spill in beam coordinates (:func:`hazard.pipeline.spill.hottest_spill_s`)."""
     if scene.observers is None or not len(scene.observers):
         return scene, "no observers"
     obs, floor = scene.observers, FLOOR * mpe_w_m2
@@ -212,7 +232,7 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2):
     added, said = [], []
     for g, name, surface in surfaces:
         pts = obs.positions_m[obs.group == g]
-        for label, fn, rays in _sources(beam, spots, mu):
+        for label, fn, rays in _sources(beam, spots, mu, tracer, spill_s):
             found = _on_line(fn, surface, floor) if isinstance(surface, Polyline) else _on_surface(fn, surface, rays, beam, floor)
             for point in _new_crossings(fn, found, pts):
                 added.append((g, name, point))

@@ -82,6 +82,13 @@ def beam_at(beam, points_m, mu) -> BeamAt:
     return BeamAt(idx, e * np.exp(-mu * dist), o, dist, z[idx])
 
 
+def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:
+    """Per row of ``at``: no object stands between the ray's origin and the point."""
+    p = np.asarray(points_m, float).reshape(-1, 3)[at.rows]
+    hits = tracer.first_hit(at.origin_m, p - at.origin_m)
+    return ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
+
+
 def direct_beam(beam, observers, tracer, mu) -> DirectBeam:
     """The direct beam at every observer (see the module notes); ``tracer`` answers
     ``first_hit(origins, directions)`` against every object in the scene."""
@@ -90,8 +97,7 @@ def direct_beam(beam, observers, tracer, mu) -> DirectBeam:
     if not len(p):
         return DirectBeam(out, 0, 0)
     at = beam_at(beam, p, mu)
-    hits = tracer.first_hit(at.origin_m, p[at.rows] - at.origin_m)
-    clear = ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
+    clear = clear_of_objects(at, p, tracer)
     gain = _beam_gain(observers.optics, observers.group[at.rows], beam.diameter_at(at.axial_m))
     out[at.rows] = np.where(clear, at.irradiance_w_m2 * gain, 0.0)
     return DirectBeam(out, int(np.count_nonzero(out)), int((~clear).sum()))

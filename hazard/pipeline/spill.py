@@ -18,12 +18,16 @@ import numpy as np
 
 from ..nohd import nohd_direct, optical_gain
 
-__all__ = ["spill_summary", "direct_nohds"]
+__all__ = ["spill_summary", "direct_nohds", "spill_profile", "hottest_spill_s"]
 
 
-def _stopped(cells, scene) -> list:
+def _stopped(cells, scene, outlines, start_m, mu, mpe_w_m2) -> list:
     """Power [W] and mean range [m] of the beam stopped on each occluder and the terrain,
-    and what it does there (``reflected``)."""
+    what it does there (``reflected``), and the highest irradiance of that part of the
+    beam on its way [W/m^2] (``peak_irradiance_w_m2``: its highest Gaussian value
+    ``exp(-min |s|^2)`` at the range ``start_m`` where it passed the first target, or at
+    the aperture; with its ``hazard_ratio``): an eye in it before it ends is at risk."""
+    laser = scene.spec.laser
     n_t, n_o = len(scene.targets), len(scene.occluders)
     centre = cells.labels[:, 0]
     out = []
@@ -31,7 +35,12 @@ def _stopped(cells, scene) -> list:
         rows = centre == k
         p = float(cells.power_w[rows].sum())
         name = f"occluders[{int(k) - n_t}]" if k < n_t + n_o else "terrain"
+        start = min(start_m, float(cells.t[rows].min()))
+        d = laser.beam_diameter_m + start * laser.divergence_rad
+        peak = (4 * laser.average_power_w / (np.pi * d * d) * np.exp(-mu * start)
+                * spill_profile(cells, outlines, np.flatnonzero(np.any(cells.labels == k, axis=1)))[0])
         out.append({"object": name, "power_w": p, "range_m": float((cells.t[rows] * cells.power_w[rows]).sum() / p),
+                    "peak_irradiance_w_m2": float(peak), "hazard_ratio": float(peak / mpe_w_m2), "from_range_m": start,
                     "reflected": terrain_reflection(scene) if name == "terrain" else
                     "not reflected (occluders absorb: they have no material)"})
     return out
@@ -46,37 +55,51 @@ def terrain_reflection(scene) -> str:
             f"(the default: the most a diffuse ground returns; give [terrain] material for the real ground)")
 
 
-def _cell_profile(cells, row, outlines) -> float:
+def _cell_profile(cells, row, outlines) -> tuple[float, np.ndarray | None]:
     """The largest ``exp(-|s|^2)`` over the part of leaf ``row`` outside every exact flat
     target's outline (those whose edges cross it); the whole cell's when another object
     shares it. Points within 1e-9 w of an outline count as covered, so two plates meeting
-    edge to edge leave no gap."""
+    edge to edge leave no gap. With it, the point s where it is found (None: none)."""
     from ..beam import clip_to_box, r2_min_outside
 
     labels = set(cells.labels[row].tolist()) - {-1}
-    if not labels or not labels <= set(outlines):
-        return float(cells.max_profile(np.array([row]))[0])
     s0, s1, t0, t1 = (float(v[0]) for v in cells.bounds(np.array([row])))
+    if not labels or not labels <= set(outlines):
+        return float(cells.max_profile(np.array([row]))[0]), np.array([min(max(0.0, s0), s1), min(max(0.0, t0), t1)])
     box = np.array([[s0, t0], [s1, t0], [s1, t1], [s0, t1]])
     holes = [(p, q) for p, q in ((clip_to_box(outlines[k], s0, s1, t0, t1), outlines[k]) for k in labels) if len(p)]
-    r2 = r2_min_outside(box, holes, n_edge=512, seam=1e-9)
-    return float(np.exp(-r2))
+    r2, point = r2_min_outside(box, holes, n_edge=512, seam=1e-9, with_point=True)
+    return float(np.exp(-r2)), point
 
 
-def _spill_profile(cells, outlines) -> float:
-    """The highest Gaussian value ``exp(-|s|^2)`` anywhere in the spill: over the leaves
-    with a ray that hits nothing, best first, stopping when no leaf left can beat it."""
-    rows = np.flatnonzero(np.any(cells.labels == -1, axis=1))
+def spill_profile(cells, outlines, rows=None) -> tuple[float, np.ndarray | None]:
+    """The highest Gaussian value ``exp(-|s|^2)`` anywhere in the spill, and where (s;
+    None when there is no spill): over the leaves ``rows`` (default: those with a ray
+    that hits nothing), best first, stopping when no leaf left can beat it."""
+    if rows is None:
+        rows = np.flatnonzero(np.any(cells.labels == -1, axis=1))
     if not len(rows):
-        return 0.0
+        return 0.0, None
     bound = cells.max_profile(rows)
     order = np.argsort(-bound)
-    best = 0.0
+    best, at = 0.0, None
     for q in order:
         if bound[q] <= best:
             break
-        best = max(best, _cell_profile(cells, rows[q], outlines))
-    return best
+        value, point = _cell_profile(cells, rows[q], outlines)
+        if value > best:
+            best, at = value, point
+    return best, at
+
+
+def hottest_spill_s(traced, n_targets) -> np.ndarray | None:
+    """Where (beam coordinates s) the part of the beam that no target takes is hottest:
+    the spill that leaves the scene and what ends on the terrain or an occluder
+    (``n_targets``: object ids below it are targets)."""
+    cells = traced.cells
+    outlines = {k: v for k, v in traced.outlines.items() if k in cells.exact_targets}
+    rows = np.flatnonzero(np.any((cells.labels == -1) | (cells.labels >= n_targets), axis=1))
+    return spill_profile(cells, outlines, rows)[1]
 
 
 def spill_summary(scene, traced, mu, mpe_w_m2, aids=()) -> dict:
@@ -85,8 +108,10 @@ def spill_summary(scene, traced, mu, mpe_w_m2, aids=()) -> dict:
     stops the rest."""
     cells, laser = traced.cells, scene.spec.laser
     outlines = {k: v for k, v in traced.outlines.items() if k in cells.exact_targets}
-    profile = _spill_profile(cells, outlines)
-    out = {"leaves_scene_w": float(traced.built.spill_w), "peak_profile": profile, "stopped": _stopped(cells, scene),
+    profile = spill_profile(cells, outlines)[0]
+    start = min((float(sp.range_from_laser_m.min()) for sp in traced.built.spots if sp.target.name != "terrain"), default=0.0)
+    out = {"leaves_scene_w": float(traced.built.spill_w), "peak_profile": profile,
+           "stopped": _stopped(cells, scene, outlines, start, mu, mpe_w_m2),
            "nohd_m": 0.0, "aided": []}
     if profile <= 0:
         return out

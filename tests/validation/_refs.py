@@ -540,7 +540,8 @@ def log_uniform(lo, hi):
 
 def off_incident_beam(beam, p, factor=2.0):
     """True if p lies outside the incident beam (more than factor x D from its axis, or
-    behind the laser), so no direct light can reach it."""
+    behind the laser). The Gaussian's wings still reach it (exp(-4 factor^2) of the
+    peak at factor x D): tests of a reflection compare the reflected part alone."""
     d = np.asarray(p) - beam.pos
     R = float(d @ beam.u)
     r = math.sqrt(max(float(d @ d) - R * R, 0.0))

@@ -87,7 +87,7 @@ def test_sphere_observers_5_to_19_degrees_off_back_reflection(psi_deg):
     psi = math.radians(psi_deg)
     beam, scene, want, _ = _sphere_case(0.05, 200.0, 1.0, 0.5, 0.0, 0.9, [(psi, 0.3, 2000.0)], (0.0, 0.0, 0.0))
     res = hazard.analyze(scene)
-    got = res.observers.peak_irradiance_w_m2
+    got = res.observers.reflected_irradiance_w_m2  # the reflection alone (the direct beam's Gaussian wings may add to the total)
     assert got[0] > 0
     _check_sphere(got, want)
 

@@ -87,7 +87,7 @@ def test_truncated_beam_table_of_the_spec():
     for R, v in zip(Rs, table):
         assert (beam.diameter(2000.0) / beam.diameter(2000.0 + R)) ** 2 == pytest.approx(v, abs=6e-5)
     res = hazard.analyze(_scene(beam, n, t, (0.05,), rho, [R * rdir for R in Rs], shape="disk"))
-    got = res.observers.peak_irradiance_w_m2
+    got = res.observers.reflected_irradiance_w_m2  # the reflection alone (the direct beam's Gaussian wings may add to the total)
     for g, v in zip(got, table):
         assert g == pytest.approx(rho * e_inc * v, rel=0.01)
 
@@ -115,7 +115,7 @@ def test_mirror_observers_on_axis_off_axis_and_missed():
     for p in obs + [O_miss]:
         assert ref.off_incident_beam(beam, p)
     res = hazard.analyze(_scene(beam, n, t, size, rho, obs + [O_miss]))
-    got = res.observers.peak_irradiance_w_m2
+    got = res.observers.reflected_irradiance_w_m2  # the reflection alone (the direct beam's Gaussian wings may add to the total)
     np.testing.assert_allclose(got[:-1], want, rtol=0.01)
     assert got[-1] <= 1e-3 * rho * beam.peak(R1 + 300.0)
 
@@ -159,7 +159,7 @@ def _mirror_property(R1, a, phi, theta_i, chi, spin, fw, fh, rho, mu, R2, alpha,
     O_miss, _ = _lit_observer(beam, n, t, size, ma, mb, R2)
     assume(all(ref.off_incident_beam(beam, p) for p in (on_axis, O_lit, O_miss)))
     res = hazard.analyze(_scene(beam, n, t, size, rho, [on_axis, O_lit, O_miss]))
-    got = res.observers.peak_irradiance_w_m2
+    got = res.observers.reflected_irradiance_w_m2  # the reflection alone (the direct beam's Gaussian wings may add to the total)
     want_axis = rho * beam.peak(R1 + R2) * math.exp(-mu * (R1 + R2))
     assert got[0] == pytest.approx(want_axis, rel=0.01), "on the reflected axis"
     assert got[1] == pytest.approx(rho * e_lit, rel=0.01), "off axis, unfolded ray through the mirror"

@@ -4,6 +4,7 @@ formulas (range-safety.md section 1; laser-safety.md 3.1), not the engine:
 - the plate in the beam takes F = erf(h / w)^2 of it (a centred square of half-side h
   facing the laser, w = (a + R phi) / 2 the 1/e radius at its range R);
 - the rest, P_g = P (1 - F) exp(-mu L_g), lands on flat ground around the axis point;
+  on its way it peaks at the square's edge: 4 P / (pi D^2) exp(-h^2 / w^2) at the plate;
 - a Lambertian ground of reflectance rho sends an observer at distance d, at angle
   theta_r from the ground's normal, E = rho P_g cos(theta_r) / (pi d^2) (a spot ~0.1 m
   across seen from >= 10 m: the point-source form is good to (0.1 / 10)^2 = 1e-4).
@@ -80,6 +81,12 @@ def test_the_ground_reflects_the_spill_with_its_material_or_reflectance_1(rho):
     (stop,) = res.spill["stopped"]
     assert stop["object"] == "terrain" and stop["power_w"] == pytest.approx(_ground_power(), rel=3e-3)
     assert ("Lambertian of reflectance 1" in stop["reflected"]) == (rho is None)
+    # on its way from the plate to the ground the spill is the beam outside the square:
+    # its highest point is on the square's edge, E = 4 P / (pi D^2) exp(-h^2 / w^2) at the plate's range
+    r_c = float(np.linalg.norm(C - O))
+    d = A + r_c * PHI
+    peak = 4 * P / (math.pi * d * d) * math.exp(-(HALF / (d / 2)) ** 2)
+    assert peak <= stop["peak_irradiance_w_m2"] <= peak * (1 + 1e-4) and stop["hazard_ratio"] == pytest.approx(peak / res.mpe_w_m2, rel=1e-4)
     assert "terrain" in [t.name for t in res.targets]
 
 
