@@ -34,7 +34,7 @@ class PlanViewDisplay(_Display):
     zone_label: str
     aided_zones: list = field(default_factory=list)  # (label, ring)
     boundary: np.ndarray | None = None
-    targets: list = field(default_factory=list)  # (name, xy, diffuse NOHD [m])
+    targets: list = field(default_factory=list)  # (name, xy, diffuse NOHD [m], longest aided diffuse NOHD [m])
     mirrors: list = field(default_factory=list)  # (name, xy start, xy end)
     footprint_xy: np.ndarray | None = None  # (N, 2) hazardous ground nodes
     footprint_cell_m: float = 0.0
@@ -92,10 +92,12 @@ class PlanViewDisplay(_Display):
         return fig, axes
 
     def site_limits(self) -> tuple:
-        """x0, x1, y0, y1 [m] around the laser, the targets' diffuse hazard circles, the
-        observers and the hazardous ground, 10 % wider (at least 20 m across)."""
-        pts = [self.laser_xy[None]] + [np.asarray(xy, float)[None] + [[-r, -r], [r, r]] for _, xy, r in self.targets]
-        pts += [self.observers_xy] if len(self.observers_xy) else []
+        """x0, x1, y0, y1 [m] around the targets: their diffuse hazard circles (naked and
+        aided, at least 20 m), the hazardous observers and the hazardous ground, 10 %
+        wider."""
+        pts = [np.asarray(xy, float)[None] + max(r, ra, 20.0) * np.array([[-1.0, -1.0], [1.0, 1.0]])
+               for name, xy, r, ra in self.targets if name != "terrain"] or [self.laser_xy[None]]
+        pts += [self.observers_xy[self.hazardous]] if self.hazardous.any() else []
         pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
         p = np.vstack(pts)
         lo, hi = p.min(axis=0), p.max(axis=0)
@@ -126,10 +128,12 @@ class PlanViewDisplay(_Display):
 
     def _draw_objects(self, ax):
         ax.plot(*self.laser_xy, marker="^", ms=10, c="k", ls="", label="laser")
-        for i, (name, xy, nohd) in enumerate(self.targets):
-            ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets" if i == 0 else None)
+        for i, (name, xy, nohd, aided) in enumerate(self.targets):
+            ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets (circles: diffuse NOHD, naked / aided)" if i == 0 else None)
             if nohd > 0:
-                ax.add_patch(matplotlib_circle(xy, nohd))
+                ax.add_patch(matplotlib_circle(xy, nohd, "#377eb8", ":"))
+            if aided > nohd:
+                ax.add_patch(matplotlib_circle(xy, aided, "#984ea3", "--"))
             ax.annotate(name, xy, xytext=(4, 4), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c="#ff7f00", lw=1.2, label="mirror beams (specular NOHD)" if i == 0 else None)
@@ -150,10 +154,10 @@ class PlanViewDisplay(_Display):
         return buf.getvalue()
 
 
-def matplotlib_circle(xy, r):
+def matplotlib_circle(xy, r, colour, style):
     from matplotlib.patches import Circle
 
-    return Circle(xy, r, fill=False, ec="#377eb8", lw=0.8, ls=":")
+    return Circle(xy, r, fill=False, ec=colour, lw=0.8, ls=style)
 
 
 def _zone_label(z) -> str:
@@ -172,8 +176,13 @@ def _targets(result, off) -> list:
         xy = (src.centroid if src is not None else next((x.center_m for x in result.scene.targets if x.name == t.name),
                                                        np.zeros(3))) + off
         nohd = t.to_dict().get("nohd_dynamic_m") or 0.0
-        out.append((t.name, np.asarray(xy, float)[:2], float(nohd) if math.isfinite(nohd) else 0.0))
+        aided = max([a.get("nohd_dynamic_m") or 0.0 for a in t.aided] + [0.0])
+        out.append((t.name, np.asarray(xy, float)[:2], _finite_or_0(nohd), _finite_or_0(aided)))
     return out
+
+
+def _finite_or_0(x) -> float:
+    return float(x) if math.isfinite(x) else 0.0
 
 
 def _mirrors(result, off) -> list:

@@ -52,11 +52,11 @@ def test_a_plot_without_matplotlib_is_a_clear_error(monkeypatch, tmp_path):
     assert code != 0 and "laser-hazard[render]" in err.getvalue() and not (tmp_path / "o").exists()
 
 
-def test_site_limits_hold_every_observer_and_hazard_circle():
-    d = PlanViewDisplay("t", np.zeros(2), np.zeros((2, 2)), None, "z", targets=[("a", np.array([100.0, 0.0]), 30.0)],
-                        observers_xy=np.array([[-50.0, 20.0]]), hazardous=np.array([False]))
+def test_site_limits_hold_the_hazard_circles_and_the_hazardous_observers():
+    d = PlanViewDisplay("t", np.zeros(2), np.zeros((2, 2)), None, "z", targets=[("a", np.array([100.0, 0.0]), 30.0, 45.0)],
+                        observers_xy=np.array([[-50.0, 20.0], [0.0, 500.0]]), hazardous=np.array([True, False]))
     x0, x1, y0, y1 = d.site_limits()
-    assert x0 <= -50 and x1 >= 130 and y0 <= -30 and y1 >= 30
+    assert x0 <= -50 and x1 >= 145 and y0 <= -45 and y1 >= 45 and y1 < 500  # the safe far observer is not framed
 
 
 @pytest.mark.parametrize("span, want", [(1000.0, 200.0), (73.0, 10.0), (5e4, 1e4), (9.0, 1.0), (0.3, 0.05)])
