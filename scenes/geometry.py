@@ -156,10 +156,13 @@ class Heightfield:
         ny, nx = self.heights.shape
         fx = np.clip((np.asarray(x, float) - self.x0) / self.dx, 0, nx - 1 - 1e-9)
         fy = np.clip((np.asarray(y, float) - self.y0) / self.dx, 0, ny - 1 - 1e-9)
-        i, j = np.floor(fy).astype(int), np.floor(fx).astype(int)
+        i, j = fy.astype(np.intp), fx.astype(np.intp)  # fx, fy >= 0: truncation is the floor
         ty, tx = fy - i, fx - j
-        h = self.heights
-        return (h[i, j] * (1 - tx) * (1 - ty) + h[i, j + 1] * tx * (1 - ty) + h[i + 1, j] * (1 - tx) * ty + h[i + 1, j + 1] * tx * ty)
+        h = self.heights.ravel()
+        k = i * nx + j  # flat gathers (one index array per corner) are cheaper than 2-D ones
+        below = h[k] + tx * (h[k + 1] - h[k])
+        above = h[k + nx] + tx * (h[k + nx + 1] - h[k + nx])
+        return below + ty * (above - below)
 
     def contains_xy(self, x, y) -> np.ndarray:
         ny, nx = self.heights.shape

@@ -431,7 +431,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
                         f"observers[{g}] ({ob.name}): point {p[k].tolist()} is inside {label}[{j}] ({s.shape}); "
                         f"expected observers in open air"
                     )
-        if terrain is not None:
+        if terrain is not None and ob.eye_height_m is None:  # eye-height points stand on it by construction
             local = p - offset
             on = terrain.contains_xy(local[:, 0], local[:, 1])
             below = on & (local[:, 2] < terrain.height_at(local[:, 0], local[:, 1]) - 1e-6)

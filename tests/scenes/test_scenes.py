@@ -189,3 +189,20 @@ def test_laser_below_the_terrain_is_an_error():
     assert "position_m = [0.0, -400.0, 3.0]" in text
     with pytest.raises(scenes.SceneError, match=r"laser.position_m = \[0.0, -400.0, -30.0\] is below the terrain"):
         scenes.loads(text.replace("position_m = [0.0, -400.0, 3.0]", "position_m = [0.0, -400.0, -30.0]"))
+
+
+def test_terrain_heights_are_scipys_bilinear_interpolation():
+    """Heightfield.height_at against scipy's RegularGridInterpolator (linear) on random
+    heights, at random points and on the nodes and edges."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    from scenes.geometry import Heightfield
+
+    rng = np.random.default_rng(3)
+    h = rng.normal(size=(17, 23)) * 10
+    hf = Heightfield(-4.0, 7.0, 2.5, h)
+    xs, ys = -4.0 + 2.5 * np.arange(23), 7.0 + 2.5 * np.arange(17)
+    ref = RegularGridInterpolator((ys, xs), h, method="linear")
+    x = np.concatenate([rng.uniform(xs[0], xs[-1], 2000), xs, np.full(17, xs[-1])])
+    y = np.concatenate([rng.uniform(ys[0], ys[-1], 2000), np.full(23, ys[0]), ys])
+    np.testing.assert_allclose(hf.height_at(x, y), ref(np.stack([y, x], 1)), rtol=1e-12, atol=1e-6)  # last row/column: clipped 1e-9 cell inside
