@@ -33,6 +33,7 @@ class PlanViewDisplay(_Display):
     zone: np.ndarray | None  # (K, 2) the naked-eye LSDZ ring
     zone_label: str
     aided_zones: list = field(default_factory=list)  # (label, ring)
+    nominal: np.ndarray | None = None  # (K, 2) a sector's zone without the pointing buffer
     boundary: np.ndarray | None = None
     targets: list = field(default_factory=list)  # (name, xy, diffuse NOHD [m], longest aided diffuse NOHD [m])
     mirrors: list = field(default_factory=list)  # (name, xy start, xy end)
@@ -56,7 +57,8 @@ class PlanViewDisplay(_Display):
                  for a in z.get("aided", [])]
         boundary = np.asarray(scene.spec.range.boundary_m, float) if scene.spec.range is not None else None
         obs = result.observers
-        return cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, boundary,
+        nominal = np.asarray(z["nominal"]["polygon_m"], float) if z.get("nominal") else None
+        return cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
                    _targets(result, off), _mirrors(result, off), *_footprint(result, off), _contours(scene, off),
                    np.asarray(obs.position_m, float)[:, :2] if len(obs.position_m) else np.zeros((0, 2)),
                    np.asarray(result.hazardous, bool))
@@ -122,6 +124,8 @@ class PlanViewDisplay(_Display):
     def _draw_zones(self, ax):
         if self.zone is not None:
             ax.fill(*self.zone.T, fc="#e41a1c", alpha=0.25, ec="#e41a1c", lw=1.0, label=self.zone_label)
+        if self.nominal is not None:
+            ax.plot(*self.nominal.T, c="#e41a1c", lw=0.8, ls=":", label="the sector without the buffer (the band between is the buffer zone)")
         for (label, ring), ls in zip(self.aided_zones, ("--", ":", "-.") * 8):
             ax.plot(*ring.T, c="#984ea3", lw=1.0, ls=ls, label=label)
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")

@@ -7,20 +7,22 @@ direct beam and of each mirror beam is searched between the points:
 
 - along a line, on the polyline through its points (``SUBSAMPLES`` per segment);
 - on a grid or a shell, along the curve ``project(o + t d)`` of each beam's axis ray
-  (the direct beam's axis and the ray through the hottest point of its spill, just off
-  the edge of the target that cuts it; for a mirror the reflected rays through its
-  hottest point and through its centroid) projected on the surface: it passes through every point
-  where the ray meets the surface, so a crossing is on it. The ray is cut to the
-  surface's bounding box (widened by 5 beam radii) and sampled every eighth of the beam's
-  1/e diameter (``STEP_DIAMETERS``), at most ``MAX_CANDIDATES`` points.
+  projected on the surface (:mod:`hazard.pipeline.surfaces`): it passes through every
+  point where the ray meets the surface, so a crossing is on it. The rays: the direct
+  beam's axis and the ray through the hottest point of its spill (just off the edge of
+  a target that cuts the beam); for a mirror, the reflected rays through its hottest
+  point and through its centroid. Each ray is cut to the surface's bounding box (widened
+  by 5 beam radii) and sampled every eighth of the beam's 1/e diameter
+  (``STEP_DIAMETERS``), at most ``MAX_CANDIDATES`` points.
 
 The direct beam is searched with its shadows (nothing where a target, occluder or the
-terrain stands on the ray). Around each of the ``PEAKS`` highest local maxima of the first pass the search runs
-again as finely, then a golden-section search to the maximum. A maximum that beats the
-group's nearest ``NEIGHBOURS`` points by more than ``GAIN`` and reaches ``FLOOR`` of the
-MPE is added as an observer point of its own (group ``<group>:crossing``, the group's
-optics), so the map, the lines of sight, the verdicts and the report treat it like any
-other (a crossing behind a hill gets no light there; the other maxima are kept for that).
+terrain stands on the ray). Around each of the ``PEAKS`` highest local maxima of the
+first pass the search runs again as finely, then a golden-section search to the
+maximum. A maximum that beats the group's nearest ``NEIGHBOURS`` points by more than
+``GAIN`` and reaches ``FLOOR`` of the MPE is added as an observer point of its own
+(group ``<group>:crossing``, the group's optics), so the map, the lines of sight, the
+verdicts and the report treat it like any other (a mirror-beam crossing behind a hill
+gets no light there in the map; the other maxima are kept for that).
 """
 
 from __future__ import annotations

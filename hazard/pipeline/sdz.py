@@ -21,6 +21,8 @@ How it is computed, and what is conservative:
   sampled reach of itself and its two neighbours, drawn as an outer polygon (its chords
   lie outside that arc); then widened by the beam's largest hazardous half-width,
   max over R of w(R) sqrt(ln(E(R) / MPE)) (:func:`hazard_half_width_m`);
+- a sector's zone without the buffer is given too (``nominal``), so the buffer zone is
+  the difference;
 - ``contained``: every direction ends on a backstop before its NOHD; a direction above
   the horizon that does not, and a zone leaving ``[range] boundary_m``, are said.
 Not modelled: the Earth's curvature and refraction; nothing stops the beam beyond the
@@ -224,8 +226,7 @@ def _first_backstop(origin, dirs, ray_scene, n_targets, max_passes=64) -> np.nda
         gone[r] += hits.t[through] + step
         start[r] = start[r] + dirs[r] * (hits.t[through] + step)[:, None]
         rows = r
-    out[rows] = gone[rows]  # still inside a stack of targets: stop there (said never to happen in practice)
-    return out
+    return out  # rays still passing targets after max_passes stay unstopped (inf): conservative
 
 
 @dataclass
@@ -293,6 +294,12 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
                           "pointing_error_rad": laser.pointing_error_rad, "pointing_error_kind": laser.pointing_error_kind,
                           "pointing_error_sigmas": laser.pointing_error_sigmas, "pointing_error_source": laser.pointing_error_source}}
     out.update(_zone_dict(scene, _zone(scene, d.unit, backstop_m, naked, power, mpe_w_m2, mu), d.unit, boundary))
+    if d.kind == "sector" and d.buffer_rad > 0:  # the sector itself, without the buffer (drawn in the plan view)
+        unit, _ = _sector(laser.sector, 0.0)
+        stop = _first_backstop(np.asarray(scene.laser_position_m, float), unit, ray_scene, len(scene.targets))
+        z0 = _zone(scene, unit, stop, naked, power, mpe_w_m2, mu)
+        out["nominal"] = {"polygon_m": (np.asarray(z0.polygon.exterior.coords) + scene.offset_m[:2]).round(3).tolist(),
+                          "area_m2": math.inf if np.isinf(z0.reach_m).any() else float(z0.polygon.area)}
     out["aided"] = []
     for a in aided:
         z = _zone(scene, d.unit, backstop_m, a["nohd_m"], power * a["gain"], mpe_w_m2, mu)

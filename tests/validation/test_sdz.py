@@ -131,6 +131,10 @@ def test_a_sector_and_a_range_boundary():
     assert z["directions"]["kind"] == "sector" and z["directions"]["step_rad"] <= 1e-3 / 4 * (1 + 1e-9)
     assert area * (1 - 1e-6) <= z["area_m2"] <= area * 1.02
     assert z["leaves_boundary"]
+    # the sector without its buffer: half-angle 10 deg exactly
+    half0 = math.radians(10.0)
+    area0 = half0 * L * L + (2 * L + 2 * half0 * L) * h + math.pi * h * h
+    assert area0 * (1 - 1e-6) <= z["nominal"]["area_m2"] <= area0 * 1.02 and z["nominal"]["area_m2"] < z["area_m2"]
     psi = np.linspace(-half, half, 4001)
     sector = MultiPoint([[0.0, 0.0]] + (L * np.stack([np.sin(psi), np.cos(psi)], 1)).tolist()).convex_hull
     from shapely.geometry import box
