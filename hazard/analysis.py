@@ -109,7 +109,9 @@ def _spill(scene, traced, mu, exposure, log) -> dict:
         stopped = "; ".join(f"{d['power_w']:.4g} W stopped by {d['object']} at {d['range_m']:.4g} m, {d['reflected']}" for d in out["stopped"])
         st.detail = (f"{out['leaves_scene_w']:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
                      f"{out['nohd_m']:.4g} m (the spill's highest point of the beam profile: {out['peak_profile']:.3g})"
-                     + (f"; {stopped}" if stopped else ""))
+                     + (f"; {stopped}" if stopped else "")
+                     + (f"; {out['shared_w']:.4g} W in beam cells shared by a target and a stopper (it lands on one of them)"
+                        if out["shared_w"] > 0 else ""))
     return out
 
 

@@ -105,12 +105,19 @@ def hottest_spill_s(traced, n_targets) -> np.ndarray | None:
 def spill_summary(scene, traced, mu, mpe_w_m2, aids=()) -> dict:
     """What of the beam misses every target: how much leaves the scene (exact where the
     targets' powers are), its direct-beam NOHD [m] (naked and through each aid), and what
-    stops the rest."""
+    stops the rest.
+
+    The power no target takes and no stopper takes whole (``traced.built.spill_w``)
+    leaves the scene only as far as beam cells meet nothing: at most the power of the
+    cells with a ray that hits nothing. The rest (``shared_w``) lies in cells shared by a
+    target and a stopper: it lands on one of them, counted with neither."""
     cells, laser = traced.cells, scene.spec.laser
     outlines = {k: v for k, v in traced.outlines.items() if k in cells.exact_targets}
     profile = spill_profile(cells, outlines)[0]
     start = min((float(sp.range_from_laser_m.min()) for sp in traced.built.spots if sp.target.name != "terrain"), default=0.0)
-    out = {"leaves_scene_w": float(traced.built.spill_w), "peak_profile": profile,
+    rest = float(traced.built.spill_w)
+    leaves = min(rest, float(cells.power_w[np.any(cells.labels == -1, axis=1)].sum()))
+    out = {"leaves_scene_w": leaves, "shared_w": rest - leaves, "peak_profile": profile,
            "stopped": _stopped(cells, scene, outlines, start, mu, mpe_w_m2),
            "nohd_m": 0.0, "aided": []}
     if profile <= 0:
