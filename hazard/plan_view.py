@@ -35,13 +35,15 @@ class PlanViewDisplay(_Display):
     aided_zones: list = field(default_factory=list)  # (label, ring)
     nominal: np.ndarray | None = None  # (K, 2) a sector's zone without the pointing buffer
     boundary: np.ndarray | None = None
-    targets: list = field(default_factory=list)  # (name, xy, diffuse NOHD [m], longest aided diffuse NOHD [m])
+    targets: list = field(default_factory=list)  # (name, xy, diffuse NOHD [m], longest aided diffuse NOHD [m], framed)
     mirrors: list = field(default_factory=list)  # (name, xy start, xy end)
     footprint_xy: np.ndarray | None = None  # (N, 2) hazardous ground nodes
     footprint_cell_m: float = 0.0
     contours: tuple | None = None  # (x (nx,), y (ny,), heights (ny, nx))
     observers_xy: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     hazardous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    aided: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # observers with optics
+    occluders: list = field(default_factory=list)  # (K, 2) plan outlines (convex hulls)
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -58,10 +60,13 @@ class PlanViewDisplay(_Display):
         boundary = np.asarray(scene.spec.range.boundary_m, float) if scene.spec.range is not None else None
         obs = result.observers
         nominal = np.asarray(z["nominal"]["polygon_m"], float) if z.get("nominal") else None
+        with_optics = np.array([o is not None for o in obs.observers.optics], bool)
         return cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
                    _targets(result, off), _mirrors(result, off), *_footprint(result, off), _contours(scene, off),
                    np.asarray(obs.position_m, float)[:, :2] if len(obs.position_m) else np.zeros((0, 2)),
-                   np.asarray(result.hazardous, bool))
+                   np.asarray(result.hazardous, bool),
+                   with_optics[obs.observers.group] if len(obs.position_m) and len(with_optics) else np.zeros(len(obs.position_m), bool),
+                   _occluders(scene, off))
 
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
@@ -98,7 +103,7 @@ class PlanViewDisplay(_Display):
         aided, at least 20 m), the hazardous observers and the hazardous ground, 10 %
         wider."""
         pts = [np.asarray(xy, float)[None] + max(r, ra, 20.0) * np.array([[-1.0, -1.0], [1.0, 1.0]])
-               for name, xy, r, ra in self.targets if name != "terrain"] or [self.laser_xy[None]]
+               for name, xy, r, ra, framed in self.targets if framed] or [self.laser_xy[None]]
         pts += [self.observers_xy[self.hazardous]] if self.hazardous.any() else []
         pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
         p = np.vstack(pts)
@@ -132,18 +137,23 @@ class PlanViewDisplay(_Display):
 
     def _draw_objects(self, ax):
         ax.plot(*self.laser_xy, marker="^", ms=10, c="k", ls="", label="laser")
-        for i, (name, xy, nohd, aided) in enumerate(self.targets):
+        for ring in self.occluders:
+            ax.fill(*ring.T, fc="#999999", ec="#555555", lw=0.8, label="occluders" if ring is self.occluders[0] else None)
+        for i, (name, xy, nohd, aided, _) in enumerate(self.targets):
             ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets (circles: diffuse NOHD, naked / aided)" if i == 0 else None)
             if nohd > 0:
                 ax.add_patch(matplotlib_circle(xy, nohd, "#377eb8", ":"))
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#984ea3", "--"))
-            ax.annotate(name, xy, xytext=(4, 4), textcoords="offset points", fontsize=7)
+            ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c="#ff7f00", lw=1.2, label="mirror beams (specular NOHD)" if i == 0 else None)
         if len(self.observers_xy):
             safe = ~self.hazardous
             ax.scatter(*self.observers_xy[safe].T, s=6, c="#4daf4a", lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            if self.aided.any():
+                ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
+                           label=f"observers with optics ({int(self.aided.sum())})")
             ax.scatter(*self.observers_xy[self.hazardous].T, s=10, c="#e41a1c", marker="x", lw=0.8,
                        label=f"observers at or above the MPE ({int(self.hazardous.sum())})")
 
@@ -181,7 +191,20 @@ def _targets(result, off) -> list:
                                                        np.zeros(3))) + off
         nohd = t.to_dict().get("nohd_dynamic_m") or 0.0
         aided = max([a.get("nohd_dynamic_m") or 0.0 for a in t.aided] + [0.0])
-        out.append((t.name, np.asarray(xy, float)[:2], _finite_or_0(nohd), _finite_or_0(aided)))
+        framed = t.name != "terrain" and t.spot_power_w >= 1e-6 * result.beam_power_w  # lit by more than the beam's far tail
+        out.append((t.name, np.asarray(xy, float)[:2], _finite_or_0(nohd), _finite_or_0(aided), framed))
+    return out
+
+
+def _occluders(scene, off) -> list:
+    """Plan outlines (convex hulls of the vertices) of the occluders, world x, y."""
+    from shapely.geometry import MultiPoint
+
+    out = []
+    for m in scene.occluders:
+        hull = MultiPoint((np.asarray(m.vertices, float)[:, :2] + off[:2]).tolist()).convex_hull
+        if hull.geom_type == "Polygon":
+            out.append(np.asarray(hull.exterior.coords))
     return out
 
 

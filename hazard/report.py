@@ -324,7 +324,7 @@ def _nohd_lines(result) -> list:
         aided = "".join(f"; through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics {a['nohd_m']:.4g} m"
                         for a in sp["aided"])
         lines.append(f"  the beam past the targets ({sp['leaves_scene_w']:.4g} W leaves the scene): direct-beam NOHD "
-                     f"{sp['nohd_m']:.4g} m{aided}")
+                     f"{sp['nohd_m']:.4g} m from the laser{aided}")
     for d in sp.get("stopped", []):
         way = (f" (up to {d['peak_irradiance_w_m2']:.3g} W/m^2 on its way from {d['from_range_m']:.4g} m, hazard ratio "
                f"{d['hazard_ratio']:.3g}: an eye in it is at risk)" if d.get("hazard_ratio", 0) >= 1 else "")
@@ -332,7 +332,8 @@ def _nohd_lines(result) -> list:
     lines += _sdz_lines(getattr(result, "sdz", None) or {})
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
-        lines.append(f"  hazardous ground at {fs.eye_height_m:g} m eye height: static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2")
+        lines.append(f"  hazardous ground from the reflections at {fs.eye_height_m:g} m eye height (analysis.footprint_eye_height_m): "
+                     f"static {fs.area_m2:.4g} m^2, dynamic {fd.area_m2:.4g} m^2 (the direct beam's is the danger zone below)")
     return lines
 
 
@@ -353,7 +354,9 @@ def _sdz_lines(z) -> list:
                 f"NOT contained: {z['escaping_directions']} of {d['count']} directions reach the NOHD without a backstop"
                 + (", some above the horizon" if z["above_horizon"] else ""))]
     if z.get("leaves_boundary"):
-        lines.append(f"    it leaves the range boundary: {z['outside_boundary_m2']:.4g} m^2 outside")
+        lines.append(f"    it LEAVES the range boundary: {z['outside_boundary_m2']:.4g} m^2 outside")
+    elif "leaves_boundary" in z:
+        lines.append("    it stays within the range boundary")
     for a in z.get("aided", []):
         lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics: {a['area_m2']:.4g} m^2 out to "
                      f"{a['max_range_m']:.4g} m" + ("" if a["contained"] else ", not contained"))

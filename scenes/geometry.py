@@ -212,6 +212,18 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     return Heightfield(xs[0], ys[0], spec.resolution_m, h)
 
 
+def direction_in_sector(direction, sector, buffer_rad=0.0) -> bool:
+    """Whether ``direction`` (3,) points within ``sector`` (compass bearings clockwise from
+    +y and elevations, [deg]) widened by ``buffer_rad`` on every side."""
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    b = math.degrees(buffer_rad)
+    el = math.degrees(math.asin(max(-1.0, min(1.0, float(d[2])))))
+    az = math.degrees(math.atan2(float(d[0]), float(d[1])))
+    a0, a1 = sector.azimuth_deg
+    inside_az = a1 - a0 + 2 * b >= 360.0 or (az - (a0 - b)) % 360.0 <= (a1 - a0) + 2 * b
+    return inside_az and sector.elevation_deg[0] - b <= el <= sector.elevation_deg[1] + b
+
+
 def observer_points(spec) -> np.ndarray:
     """Observer positions (N, 3) [m] of one observer group (before eye-height placement)."""
     if spec.layout == "points":

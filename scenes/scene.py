@@ -21,7 +21,7 @@ from pydantic import ValidationError
 import brdfmodels
 from brdfmodels._io import check_input_file, parse_toml, read_input_text
 
-from .geometry import Heightfield, Mesh, observer_points, shape_mesh, terrain_heightfield
+from .geometry import Heightfield, Mesh, direction_in_sector, observer_points, shape_mesh, terrain_heightfield
 from .spec import SceneSpec
 
 __all__ = ["Scene", "Target", "Observers", "SceneError", "load", "loads", "from_data", "examples", "example_path", "json_schema"]
@@ -289,12 +289,28 @@ def _inside_solid(p, spec) -> np.ndarray:
     return (np.hypot(q[:, 0], q[:, 1]) < s[0] / 2 * (1 - 1e-9)) & (np.abs(q[:, 2]) < s[1] / 2 * (1 - 1e-9))
 
 
+def _buried_targets(targets, terrain) -> list:
+    """Targets whose centre lies below the terrain: odd (the beam cannot reach them), said."""
+    if terrain is None:
+        return []
+    out = []
+    for t in targets:
+        c = t.center_m
+        if terrain.contains_xy(c[0], c[1]) and c[2] < float(terrain.height_at(c[0], c[1])):
+            out.append(f"targets[{t.index}] ({t.name}): its centre is below the terrain there; the beam cannot reach what is buried")
+    return out
+
+
 def _warnings(spec: SceneSpec) -> list:
     """Plausibility warnings: values typical of unit mistakes, naming the field and the likely unit."""
     out = []
     la = spec.laser
     if la.divergence_rad > 0.05:
         out.append(f"laser.divergence_rad = {la.divergence_rad:g} rad is a very wide beam (> 0.05 rad): mrad meant?")
+    if la.sector is not None and la.aim_m is not None and not direction_in_sector(
+            np.asarray(la.aim_m, float) - np.asarray(la.position_m, float), la.sector, la.pointing_buffer_rad):
+        out.append(f"laser.sector = {la.sector.azimuth_deg} deg bearing, {la.sector.elevation_deg} deg elevation does not hold "
+                   f"the aim (laser.aim_m): the danger zone covers both")
     if la.pointing_error_rad > 0.05:
         out.append(f"laser.pointing_error_rad = {la.pointing_error_rad:g} rad is over 50 mrad: mrad or deg meant?")
     if la.beam_diameter_m > 1.0:
@@ -459,7 +475,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         terrain=terrain,
         observers=observers,
         terrain_target=terrain_target,
-        warnings=_warnings(spec),
+        warnings=_warnings(spec) + _buried_targets(targets, terrain),
     )
 
 

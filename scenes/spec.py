@@ -419,6 +419,18 @@ class RangeSpec(_Strict):
 
     boundary_m: list[Annotated[list[Coord], Field(min_length=2, max_length=2)]] = Field(min_length=3, max_length=100_000)
 
+    @model_validator(mode="after")
+    def _simple(self):
+        from shapely.geometry import Polygon
+
+        poly = Polygon(self.boundary_m)
+        if not poly.is_valid or poly.area <= 0:
+            from shapely.validation import explain_validity
+
+            why = explain_validity(poly) if not poly.is_valid else "no area (collinear points)"
+            raise ValueError(f"boundary_m: expected a simple polygon (points in order around the range), got {why}")
+        return self
+
 
 class SceneSpec(_Strict):
     name: Name

@@ -23,6 +23,10 @@ How it is computed, and what is conservative:
   max over R of w(R) sqrt(ln(E(R) / MPE)) (:func:`hazard_half_width_m`);
 - a sector's zone without the buffer is given too (``nominal``), so the buffer zone is
   the difference;
+- each direction is stopped only where its whole hazardous cross-section is: the centre
+  ray and 8 rays on the octagon around the hazardous disk |s| <= sqrt(ln(E_0 K / MPE))
+  are cast (:func:`beam_stop_m`): a beam that clips a wall's top or a ridge goes on;
+- an aim outside the declared sector is added to it (with its cone), and the scene warns;
 - ``contained``: every direction ends on a backstop before its NOHD; a direction above
   the horizon that does not, and a zone leaving ``[range] boundary_m``, are said.
 Not modelled: the Earth's curvature and refraction; nothing stops the beam beyond the
@@ -35,6 +39,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+from scenes.geometry import direction_in_sector
 
 from ..beam import perp_basis
 from .spill import direct_nohds
@@ -112,10 +118,12 @@ def pointing_directions(scene) -> Directions:
     """The directions the beam may point in (see the module notes)."""
     laser = scene.spec.laser
     b = laser.pointing_buffer_rad
+    axis = np.asarray(scene.laser_direction, float)
     if laser.sector is not None:
         unit, step = _sector(laser.sector, b)
+        if not direction_in_sector(axis, laser.sector, b):  # the aim must be in the zone whatever the sector says
+            unit = np.vstack([unit, _cone(axis, b, CONE_STEP * b) if b > 0 else axis[None]])
         return Directions(unit, step, "sector", b)
-    axis = np.asarray(scene.laser_direction, float)
     if b <= 0:
         return Directions(axis[None], 0.0, "aim", 0.0)
     return Directions(_cone(axis, b, CONE_STEP * b), CONE_STEP * b, "cone", b)
@@ -205,14 +213,53 @@ def hazard_half_width_m(laser, power_w, mpe_w_m2, length_m, mu=0.0) -> float:
     return best * (1 + 1e-6)
 
 
+EDGE_RAYS = 8  # rays around each direction's hazardous cross-section (a circumscribed octagon)
+
+
+def beam_stop_m(laser, origin, dirs, ray_scene, n_targets, s_max) -> np.ndarray:
+    """Distance [m] along each direction to where its whole hazardous cross-section is
+    stopped (inf: some of it never is). The beam pointed along d is the Gaussian of the
+    laser's a and phi; its hazardous part lies within |s| <= ``s_max`` = sqrt(ln(E_0 K /
+    MPE)) (E_0 the aperture's peak; it shrinks with range, so this bounds it). Rays at the
+    vertices of the octagon circumscribing that disk (|s| = s_max / cos(pi / 8)) and the
+    centre ray are cast: a backstop that stops all of them stops the disk where its edge
+    is straight across the beam (a wall's top, a ridge's crest); the direction's distance
+    is the farthest of theirs. A backstop the beam only clips lets it go on."""
+    dirs = np.asarray(dirs, float)
+    n = len(dirs)
+    stop = _first_backstop(origin, dirs, ray_scene, n_targets)
+    if ray_scene is None or s_max <= 0:
+        return stop
+    ref = np.where(np.abs(dirs[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(dirs, ref)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(dirs, e1)
+    psi = 2 * np.pi * np.arange(EDGE_RAYS) / EDGE_RAYS
+    r = s_max / math.cos(np.pi / EDGE_RAYS)
+    s1, s2 = r * np.cos(psi), r * np.sin(psi)  # (E,)
+    tr = s1[None, :, None] * e1[:, None, :] + s2[None, :, None] * e2[:, None, :]  # (N, E, 3)
+    o = origin + tr * (laser.beam_diameter_m / 2)
+    d = dirs[:, None, :] + tr * (laser.divergence_rad / 2)
+    edge = _first_backstop_rays(o.reshape(-1, 3), d.reshape(-1, 3), ray_scene, n_targets).reshape(n, EDGE_RAYS)
+    return np.maximum(stop, edge.max(axis=1))
+
+
 def _first_backstop(origin, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
     """Distance [m] to the first terrain or occluder hit along each direction (inf: none),
     through the targets (rays that meet a target go on from just past it)."""
+    return _first_backstop_rays(np.broadcast_to(origin, np.shape(dirs)), dirs, ray_scene, n_targets, max_passes)
+
+
+def _first_backstop_rays(origins, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
+    """As :func:`_first_backstop`, for rays of their own origins (distance along the
+    normalised direction)."""
+    dirs = np.asarray(dirs, float)
+    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     out = np.full(len(dirs), np.inf)
     if ray_scene is None:
         return out
     rows = np.arange(len(dirs))
-    start = np.broadcast_to(origin, dirs.shape).copy()
+    start = np.array(origins, float)
     gone = np.zeros(len(dirs))
     step = 1e-6 * max(getattr(ray_scene, "scale_m", 1.0), 1.0)
     for _ in range(max_passes):
@@ -250,7 +297,8 @@ def _zone(scene, dirs, backstop_m, nohd_m, power_w, mpe_w_m2, mu) -> Zone:
     drawn = np.minimum(reach, UNBOUNDED_DRAW_M)
     ends = origin + dirs * drawn[:, None]
     half = hazard_half_width_m(laser, power_w, mpe_w_m2, float(drawn.max()), mu)
-    return Zone(zone_polygon(origin[:2], ends[:, :2], half + 1e-9), nohd_m, reach, backstop_m <= nohd_m, half)
+    stopped = np.isfinite(backstop_m) & (backstop_m <= nohd_m)  # an infinite NOHD is never reached by a backstop at inf
+    return Zone(zone_polygon(origin[:2], ends[:, :2], half + 1e-9), nohd_m, reach, stopped, half)
 
 
 def _zone_dict(scene, z: Zone, dirs, boundary) -> dict:
@@ -286,9 +334,12 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
     occluders, terrain), None when the scene has no terrain and no occluders."""
     laser = scene.spec.laser
     d = pointing_directions(scene)
-    backstop_m = _first_backstop(np.asarray(scene.laser_position_m, float), d.unit, ray_scene, len(scene.targets))
     power = laser.average_power_w
     naked, aided = direct_nohds(laser, power, mpe_w_m2, mu, aids)
+    gain = max([1.0] + [a["gain"] for a in aided])  # the widest hazardous beam: one cast serves every zone
+    s_max = math.sqrt(max(math.log(4 * power * gain / (math.pi * laser.beam_diameter_m ** 2 * mpe_w_m2)), 0.0))
+    origin = np.asarray(scene.laser_position_m, float)
+    backstop_m = beam_stop_m(laser, origin, d.unit, ray_scene, len(scene.targets), s_max)
     boundary = _boundary(scene)
     out = {"directions": {"kind": d.kind, "count": int(len(d.unit)), "step_rad": d.step_rad, "buffer_rad": d.buffer_rad,
                           "pointing_error_rad": laser.pointing_error_rad, "pointing_error_kind": laser.pointing_error_kind,
@@ -296,7 +347,7 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
     out.update(_zone_dict(scene, _zone(scene, d.unit, backstop_m, naked, power, mpe_w_m2, mu), d.unit, boundary))
     if d.kind == "sector" and d.buffer_rad > 0:  # the sector itself, without the buffer (drawn in the plan view)
         unit, _ = _sector(laser.sector, 0.0)
-        stop = _first_backstop(np.asarray(scene.laser_position_m, float), unit, ray_scene, len(scene.targets))
+        stop = beam_stop_m(laser, origin, unit, ray_scene, len(scene.targets), s_max)
         z0 = _zone(scene, unit, stop, naked, power, mpe_w_m2, mu)
         out["nominal"] = {"polygon_m": (np.asarray(z0.polygon.exterior.coords) + scene.offset_m[:2]).round(3).tolist(),
                           "area_m2": math.inf if np.isinf(z0.reach_m).any() else float(z0.polygon.area)}

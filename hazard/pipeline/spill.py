@@ -21,12 +21,14 @@ from ..nohd import nohd_direct, optical_gain
 __all__ = ["spill_summary", "direct_nohds", "spill_profile", "hottest_spill_s"]
 
 
-def _stopped(cells, scene, outlines, start_m, mu, mpe_w_m2) -> list:
+def _stopped(cells, scene, outlines, target_range_m, mu, mpe_w_m2) -> list:
     """Power [W] and mean range [m] of the beam stopped on each occluder and the terrain,
     what it does there (``reflected``), and the highest irradiance of that part of the
     beam on its way [W/m^2] (``peak_irradiance_w_m2``: its highest Gaussian value
-    ``exp(-min |s|^2)`` at the range ``start_m`` where it passed the first target, or at
-    the aperture; with its ``hazard_ratio``): an eye in it before it ends is at risk."""
+    ``exp(-min |s|^2)`` at ``from_range_m``, where it parts from the rest of the beam: the
+    nearest target whose edge cuts the beam cell holding that point (``target_range_m``:
+    target index -> range [m]), else the aperture; with its ``hazard_ratio``): an eye in
+    it before it ends is at risk."""
     laser = scene.spec.laser
     n_t, n_o = len(scene.targets), len(scene.occluders)
     centre = cells.labels[:, 0]
@@ -35,10 +37,11 @@ def _stopped(cells, scene, outlines, start_m, mu, mpe_w_m2) -> list:
         rows = centre == k
         p = float(cells.power_w[rows].sum())
         name = f"occluders[{int(k) - n_t}]" if k < n_t + n_o else "terrain"
-        start = min(start_m, float(cells.t[rows].min()))
+        profile, _, leaf = spill_profile(cells, outlines, np.flatnonzero(np.any(cells.labels == k, axis=1)))
+        cut = [target_range_m.get(int(j), 0.0) for j in (cells.labels[leaf] if leaf >= 0 else []) if 0 <= j < n_t]
+        start = min(cut + [float(cells.t[rows].min())]) if cut else 0.0
         d = laser.beam_diameter_m + start * laser.divergence_rad
-        peak = (4 * laser.average_power_w / (np.pi * d * d) * np.exp(-mu * start)
-                * spill_profile(cells, outlines, np.flatnonzero(np.any(cells.labels == k, axis=1)))[0])
+        peak = 4 * laser.average_power_w / (np.pi * d * d) * np.exp(-mu * start) * profile
         out.append({"object": name, "power_w": p, "range_m": float((cells.t[rows] * cells.power_w[rows]).sum() / p),
                     "peak_irradiance_w_m2": float(peak), "hazard_ratio": float(peak / mpe_w_m2), "from_range_m": start,
                     "reflected": terrain_reflection(scene) if name == "terrain" else
@@ -72,24 +75,25 @@ def _cell_profile(cells, row, outlines) -> tuple[float, np.ndarray | None]:
     return float(np.exp(-r2)), point
 
 
-def spill_profile(cells, outlines, rows=None) -> tuple[float, np.ndarray | None]:
-    """The highest Gaussian value ``exp(-|s|^2)`` anywhere in the spill, and where (s;
-    None when there is no spill): over the leaves ``rows`` (default: those with a ray
-    that hits nothing), best first, stopping when no leaf left can beat it."""
+def spill_profile(cells, outlines, rows=None) -> tuple[float, np.ndarray | None, int]:
+    """The highest Gaussian value ``exp(-|s|^2)`` anywhere in the spill, where (s; None
+    when there is no spill) and in which leaf (-1: none): over the leaves ``rows``
+    (default: those with a ray that hits nothing), best first, stopping when no leaf left
+    can beat it."""
     if rows is None:
         rows = np.flatnonzero(np.any(cells.labels == -1, axis=1))
     if not len(rows):
-        return 0.0, None
+        return 0.0, None, -1
     bound = cells.max_profile(rows)
     order = np.argsort(-bound)
-    best, at = 0.0, None
+    best, at, leaf = 0.0, None, -1
     for q in order:
         if bound[q] <= best:
             break
         value, point = _cell_profile(cells, rows[q], outlines)
         if value > best:
-            best, at = value, point
-    return best, at
+            best, at, leaf = value, point, int(rows[q])
+    return best, at, leaf
 
 
 def hottest_spill_s(traced, n_targets) -> np.ndarray | None:
@@ -114,11 +118,11 @@ def spill_summary(scene, traced, mu, mpe_w_m2, aids=()) -> dict:
     cells, laser = traced.cells, scene.spec.laser
     outlines = {k: v for k, v in traced.outlines.items() if k in cells.exact_targets}
     profile = spill_profile(cells, outlines)[0]
-    start = min((float(sp.range_from_laser_m.min()) for sp in traced.built.spots if sp.target.name != "terrain"), default=0.0)
+    ranges = {sp.target.index: float(sp.range_from_laser_m.min()) for sp in traced.built.spots if sp.target.index < len(scene.targets)}
     rest = float(traced.built.spill_w)
     leaves = min(rest, float(cells.power_w[np.any(cells.labels == -1, axis=1)].sum()))
     out = {"leaves_scene_w": leaves, "shared_w": rest - leaves, "peak_profile": profile,
-           "stopped": _stopped(cells, scene, outlines, start, mu, mpe_w_m2),
+           "stopped": _stopped(cells, scene, outlines, ranges, mu, mpe_w_m2),
            "nohd_m": 0.0, "aided": []}
     if profile <= 0:
         return out

@@ -53,7 +53,7 @@ def test_a_plot_without_matplotlib_is_a_clear_error(monkeypatch, tmp_path):
 
 
 def test_site_limits_hold_the_hazard_circles_and_the_hazardous_observers():
-    d = PlanViewDisplay("t", np.zeros(2), np.zeros((2, 2)), None, "z", targets=[("a", np.array([100.0, 0.0]), 30.0, 45.0)],
+    d = PlanViewDisplay("t", np.zeros(2), np.zeros((2, 2)), None, "z", targets=[("a", np.array([100.0, 0.0]), 30.0, 45.0, True), ("far", np.array([5e3, 0.0]), 1.0, 1.0, False)],
                         observers_xy=np.array([[-50.0, 20.0], [0.0, 500.0]]), hazardous=np.array([True, False]))
     x0, x1, y0, y1 = d.site_limits()
     assert x0 <= -50 and x1 >= 145 and y0 <= -45 and y1 >= 45 and y1 < 500  # the safe far observer is not framed

@@ -27,6 +27,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.optimize import brentq
 from shapely.geometry import MultiPoint
 
 import hazard
@@ -84,8 +85,13 @@ def test_a_horizontal_pointing_cone_sweeps_a_circular_sector(theta):
 @ref.FAST
 @given(beta_deg=st.floats(8.0, 60.0), theta_deg=st.floats(0.5, 5.0), height=st.floats(5.0, 100.0), bearing=st.floats(-3.1, 3.1))
 def test_a_downward_cone_over_flat_ground_covers_the_hull_of_its_ground_ellipse(beta_deg, theta_deg, height, bearing):
-    """Every ray meets the ground before L: the zone is the hull of the foot and the
-    ellipse, contained, longest ray z_o / sin(beta - theta)."""
+    """Every ray meets the ground before L: the zone covers the hull of the foot and the
+    ellipse, contained. Its far end is where the hazardous edge of the topmost beam (at
+    elevation -(beta - theta)) comes down: the upper edge of {r <= w(R) sqrt(ln(E(R) /
+    MPE))} meets z = 0 at R* (bisection on the formula); the zone's reach along that
+    direction lies between R* and the hit of the ray the engine casts at the octagon
+    vertex around |s| <= s_0 = sqrt(ln(E_0 / MPE)) (origin s_0 / cos(pi/8) a/2 up, tilt
+    s_0 / cos(pi/8) phi/2): conservative, and not more than that outer ray."""
     beta, theta = math.radians(beta_deg), math.radians(theta_deg)
     o = np.array([10.0, -20.0, height])
     d0 = np.array([math.sin(bearing) * math.cos(beta), math.cos(bearing) * math.cos(beta), -math.sin(beta)])
@@ -98,12 +104,22 @@ def test_a_downward_cone_over_flat_ground_covers_the_hull_of_its_ground_ellipse(
     psi = np.linspace(0.0, 2 * np.pi, 7200, endpoint=False)
     dirs = math.cos(theta) * d0 + math.sin(theta) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2)
     ground = o + dirs * (height / -dirs[:, 2])[:, None]
-    longest = height / math.sin(beta - theta)
-    h = _half_width(longest)
+    eps = beta - theta  # the topmost direction's depression
+
+    def edge_z(R):  # height of the hazardous region's upper edge at axial range R
+        w = (A + R * PHI) / 2
+        rh = w * math.sqrt(max(math.log(C / (A + R * PHI) ** 2), 0.0))
+        return height - R * math.sin(eps) + rh * math.cos(eps)
+
+    r_star = brentq(edge_z, 0.0, 10 * height / math.sin(eps))
+    s_o = math.sqrt(math.log(C / A**2)) / math.cos(math.pi / 8)
+    z0 = height + s_o * A / 2 * math.cos(eps)  # the outer ray: origin raised, direction tilted up
+    t_out = z0 / (math.sin(eps) - s_o * PHI / 2 * math.cos(eps))
+    h = _half_width(t_out)
     hull = MultiPoint(np.vstack([ground[:, :2], o[:2]]).tolist()).convex_hull.buffer(h, quad_segs=256)
     assert z["contained"] and z["escaping_directions"] == 0 and not z["above_horizon"]
-    assert z["max_range_m"] == pytest.approx(longest, rel=1e-6)
-    assert hull.area * (1 - 1e-4) <= z["area_m2"] <= hull.area * 1.05
+    assert r_star * (1 - 1e-6) <= z["max_range_m"] <= t_out * (1 + 1e-5)  # measured along the outer ray itself
+    assert hull.area * (1 - 1e-4) <= z["area_m2"] <= hull.area * (t_out * math.sin(eps) / height) ** 2 * 1.05
 
 
 def test_a_wall_across_the_cone_contains_it():
@@ -113,7 +129,7 @@ def test_a_wall_across_the_cone_contains_it():
     res = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=2e-3, extra=wall, plate_at=(0.0, 250.0, 30.0)))
     assert res.targets[0].spot_power_w > 0
     z = res.sdz
-    assert z["contained"] and z["max_range_m"] == pytest.approx(500.0 / math.cos(2e-3), rel=1e-6)
+    assert z["contained"] and 500.0 / math.cos(2e-3) * (1 - 1e-9) <= z["max_range_m"] <= 500.0 / math.cos(2e-3) * (1 + 2e-5)
     assert z["area_m2"] <= 2e-3 * 500.0**2 * 1.02 + (2 * 500.0 * 1.002 + 2e-3 * 1000) * _half_width(500.0 / math.cos(2e-3)) * 1.02 + 1.0
 
 
@@ -154,3 +170,44 @@ def test_a_sigma_pointing_error_needs_its_multiple_and_uses_it():
                                                  'pointing_error_source = "range SOP table 2"\n[exposure]'))
     z = hazard.analyze(sc).sdz
     assert z["directions"]["buffer_rad"] == pytest.approx(3e-4) and z["directions"]["pointing_error_source"] == "range SOP table 2"
+
+
+def test_a_collimated_beam_in_clear_air_is_never_contained():
+    """divergence 0, no attenuation: the NOHD is infinite and nothing stops the upper half
+    of a level cone (found by a new-user trial: inf <= inf had counted as 'stopped')."""
+    text = ref.scene_text(power=P, a=A, phi=0.0, position=np.array([0.0, 0.0, 30.0]), aim=np.array([0.0, 1000.0, 30.0]),
+                          targets=[dict(name="plate", shape="plate", center=np.array([300.0, 300.0, 50.0]), normal=np.array([0.0, -1.0, 0.0]),
+                                        tangent=np.array([1.0, 0.0, 0.0]), size=(1.0, 1.0), material=ref.lambertian(0.5))])
+    text = text.replace("[exposure]", "pointing_error_rad = 1e-3\n[exposure]").replace("[analysis]", FLAT + "[analysis]")
+    z = hazard.analyze(scenes.loads(text)).sdz
+    assert z["unbounded"] and not z["contained"] and z["above_horizon"] and z["escaping_directions"] > 0
+
+
+@pytest.mark.parametrize("clearance, contained", [(-0.5, False), (1.5, True)])
+def test_a_wall_the_beam_only_clips_does_not_contain_it(clearance, contained):
+    """A wall 500 m down range whose top lies `clearance` x s_0 w(R) above the beam's axis
+    (s_0 = sqrt(ln(E_0 / MPE)), the hazardous cross-section's largest reach in units of
+    w): below the axis plus the hazardous half-width, the beam's upper part goes over and
+    the zone is not contained; well above it, it is. No pointing error: the aim alone."""
+    R = 500.0
+    w = (A + R * PHI) / 2
+    s0 = math.sqrt(math.log(C / A**2))
+    rh = w * math.sqrt(math.log(C / (A + R * PHI) ** 2))  # the true hazardous half-width at the wall
+    top = 30.0 + (rh * 0.5 if clearance < 0 else clearance * s0 * w)
+    wall = f'[[occluders]]\nshape = "box"\ncenter_m = [0.0, 501.0, {ref.fmt(top - 20.0)}]\nsize_m = [40.0, 2.0, 40.0]\n'
+    z = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], extra=wall)).sdz
+    assert z["contained"] == contained
+    if not contained:
+        assert z["max_range_m"] == pytest.approx(L, rel=1e-9)  # the part over the wall goes on to the NOHD
+
+
+def test_an_aim_outside_the_sector_is_in_the_zone():
+    """A sector of bearings 80-100 deg (east) while the aim is due north: the zone covers
+    the aim line too (a new-user trial found it covered the east only), and the scene warns."""
+    sc = _scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=1e-3, sector=(80.0, 100.0))
+    assert any("sector" in w and "aim" in w for w in sc.warnings)
+    z = hazard.analyze(sc).sdz
+    from shapely.geometry import Point, Polygon
+
+    zone = Polygon(z["polygon_m"])
+    assert zone.contains(Point(0.0, 0.9 * L)) and zone.contains(Point(0.9 * L, 0.0))
