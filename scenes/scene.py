@@ -357,6 +357,95 @@ def _check_laser_in_open_air(spec: SceneSpec, lp, offset, terrain) -> None:
                              f"(ground at {float(terrain.height_at(x, y)[0] + offset[2]):.6g} m); expected the laser above it")
 
 
+def _target(i, ts, offset, base_dir) -> Target:
+    """Target ``i`` of the scene in local coordinates: its mesh, material (checked against
+    its history) and back material."""
+    where = f"targets[{i}]"
+    try:
+        mesh = shape_mesh(ts, base_dir)
+    except ValueError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+    mesh.vertices = mesh.vertices - offset
+    if mesh.analytic is not None:
+        mesh.analytic = (mesh.analytic[0], mesh.analytic[1] - offset, *mesh.analytic[2:])
+    material = _material(ts.material, f"{where}.material", base_dir)
+    hist = _history(ts.history, f"{where}.history", base_dir)
+    if ts.history is not None:
+        state = ts.history.state
+        if state == "reflectance_factor" and not material.is_dynamic:
+            material = _identity_factor(material)
+        elif not material.is_dynamic:
+            raise SceneError(
+                f"{where}.history: the material is static; a history needs a dynamic material, "
+                f"or state = 'reflectance_factor' to scale it"
+            )
+        elif material.state_name != state:
+            raise SceneError(f"{where}.history.state={state!r}: the material depends on {material.state_name!r}")
+        if hist is not None:  # the series' states must lie where the material is defined
+            s_lo, s_hi = float(np.min(hist.states)), float(np.max(hist.states))
+            for s_ in (s_lo, s_hi):
+                try:
+                    material.evaluate([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], state=s_)
+                except ValueError as exc:
+                    raise SceneError(f"{where}.history: states span [{s_lo:g}, {s_hi:g}]: {exc}") from None
+    elif material.is_dynamic:
+        raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
+    back = None
+    if ts.back is not None:
+        back = _material(ts.back, f"{where}.back", base_dir)
+        if back.is_dynamic:
+            raise SceneError(f"{where}.back: the back material depends on {back.state_name!r}; "
+                             f"expected a static material (the history drives the front face only)")
+    frame = brdfmodels.local_frame(ts.normal, ts.tangent)
+    return Target(ts.name, i, mesh, material, math.radians(ts.material.groove_angle_deg), frame[2], frame[0],
+                  np.asarray(ts.center_m, float) - offset, ts, hist, back)
+
+
+def _group_points(g, ob, spec, offset, terrain) -> np.ndarray:
+    """One observer group's points (world coordinates), placed at eye height over the
+    terrain when asked, checked to be in open air (not in a solid, not underground)."""
+    p = observer_points(ob)
+    if ob.eye_height_m is not None:
+        if terrain is None:
+            raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
+        local = p - offset
+        if not np.all(terrain.contains_xy(local[:, 0], local[:, 1])):
+            raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
+        p = p.copy()
+        p[:, 2] = terrain.height_at(local[:, 0], local[:, 1]) + offset[2] + ob.eye_height_m
+    for solid_list, label in ((spec.targets, "targets"), (spec.occluders, "occluders")):
+        for j, s in enumerate(solid_list):
+            inside = _inside_solid(p, s)
+            if np.any(inside):
+                k = int(np.argmax(inside))
+                raise SceneError(
+                    f"observers[{g}] ({ob.name}): point {p[k].tolist()} is inside {label}[{j}] ({s.shape}); "
+                    f"expected observers in open air"
+                )
+    if terrain is not None and ob.eye_height_m is None:  # eye-height points stand on it by construction
+        local = p - offset
+        on = terrain.contains_xy(local[:, 0], local[:, 1])
+        below = on & (local[:, 2] < terrain.height_at(local[:, 0], local[:, 1]) - 1e-6)
+        if np.any(below):
+            k = int(np.argmax(below))
+            raise SceneError(f"observers[{g}] ({ob.name}): point {p[k].tolist()} is below the terrain; use eye_height_m")
+    return p
+
+
+def _observers(spec, offset, terrain) -> Observers:
+    """Every observer group's points in local coordinates, with their group and index."""
+    pos, grp, idx = [], [], []
+    for g, ob in enumerate(spec.observers):
+        p = _group_points(g, ob, spec, offset, terrain)
+        pos.append(p - offset)
+        grp.append(np.full(len(p), g))
+        idx.append(np.arange(len(p)))
+    if not pos:
+        return Observers(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), ())
+    return Observers(np.vstack(pos), np.concatenate(grp), np.concatenate(idx),
+                     tuple(o.name for o in spec.observers), tuple(o.optics for o in spec.observers))
+
+
 def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> Scene:
     offset = np.asarray(spec.targets[0].center_m, float)
     lp = np.asarray(spec.laser.position_m, float)
@@ -366,49 +455,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         d = np.asarray(spec.laser.direction, float)
     d = d / np.linalg.norm(d)
 
-    targets = []
-    for i, ts in enumerate(spec.targets):
-        where = f"targets[{i}]"
-        try:
-            mesh = shape_mesh(ts, base_dir)
-        except ValueError as exc:
-            raise SceneError(f"{where}: {exc}") from None
-        mesh.vertices = mesh.vertices - offset
-        if mesh.analytic is not None:
-            mesh.analytic = (mesh.analytic[0], mesh.analytic[1] - offset, *mesh.analytic[2:])
-        material = _material(ts.material, f"{where}.material", base_dir)
-        hist = _history(ts.history, f"{where}.history", base_dir)
-        if ts.history is not None:
-            state = ts.history.state
-            if state == "reflectance_factor" and not material.is_dynamic:
-                material = _identity_factor(material)
-            elif not material.is_dynamic:
-                raise SceneError(
-                    f"{where}.history: the material is static; a history needs a dynamic material, "
-                    f"or state = 'reflectance_factor' to scale it"
-                )
-            elif material.state_name != state:
-                raise SceneError(f"{where}.history.state={state!r}: the material depends on {material.state_name!r}")
-            if hist is not None:  # the series' states must lie where the material is defined
-                s_lo, s_hi = float(np.min(hist.states)), float(np.max(hist.states))
-                for s_ in (s_lo, s_hi):
-                    try:
-                        material.evaluate([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], state=s_)
-                    except ValueError as exc:
-                        raise SceneError(f"{where}.history: states span [{s_lo:g}, {s_hi:g}]: {exc}") from None
-        elif material.is_dynamic:
-            raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
-        back = None
-        if ts.back is not None:
-            back = _material(ts.back, f"{where}.back", base_dir)
-            if back.is_dynamic:
-                raise SceneError(f"{where}.back: the back material depends on {back.state_name!r}; "
-                                 f"expected a static material (the history drives the front face only)")
-        frame = brdfmodels.local_frame(ts.normal, ts.tangent)
-        targets.append(
-            Target(ts.name, i, mesh, material, math.radians(ts.material.groove_angle_deg), frame[2], frame[0],
-                   np.asarray(ts.center_m, float) - offset, ts, hist, back)
-        )
+    targets = [_target(i, ts, offset, base_dir) for i, ts in enumerate(spec.targets)]
     occluders = []
     for i, os_ in enumerate(spec.occluders):
         try:
@@ -427,41 +474,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         terrain_target = _terrain_target(spec, terrain, len(targets) + len(occluders), base_dir)
     _check_laser_in_open_air(spec, lp, offset, terrain)
 
-    pos, grp, idx = [], [], []
-    for g, ob in enumerate(spec.observers):
-        p = observer_points(ob)
-        if ob.eye_height_m is not None:
-            if terrain is None:
-                raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
-            local = p - offset
-            if not np.all(terrain.contains_xy(local[:, 0], local[:, 1])):
-                raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
-            p = p.copy()
-            p[:, 2] = terrain.height_at(local[:, 0], local[:, 1]) + offset[2] + ob.eye_height_m
-        for solid_list, label in ((spec.targets, "targets"), (spec.occluders, "occluders")):
-            for j, s in enumerate(solid_list):
-                inside = _inside_solid(p, s)
-                if np.any(inside):
-                    k = int(np.argmax(inside))
-                    raise SceneError(
-                        f"observers[{g}] ({ob.name}): point {p[k].tolist()} is inside {label}[{j}] ({s.shape}); "
-                        f"expected observers in open air"
-                    )
-        if terrain is not None and ob.eye_height_m is None:  # eye-height points stand on it by construction
-            local = p - offset
-            on = terrain.contains_xy(local[:, 0], local[:, 1])
-            below = on & (local[:, 2] < terrain.height_at(local[:, 0], local[:, 1]) - 1e-6)
-            if np.any(below):
-                k = int(np.argmax(below))
-                raise SceneError(f"observers[{g}] ({ob.name}): point {p[k].tolist()} is below the terrain; use eye_height_m")
-        pos.append(p - offset)
-        grp.append(np.full(len(p), g))
-        idx.append(np.arange(len(p)))
-    if pos:
-        observers = Observers(np.vstack(pos), np.concatenate(grp), np.concatenate(idx),
-                              tuple(o.name for o in spec.observers), tuple(o.optics for o in spec.observers))
-    else:
-        observers = Observers(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), ())
+    observers = _observers(spec, offset, terrain)
     return Scene(
         spec=spec,
         source=source,
