@@ -162,6 +162,28 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+def _swap_folder(tmp: Path, out: Path, names, parent: Path) -> bool:
+    """Swap the new folder ``tmp`` in for ``out`` when ``out`` holds only these outputs
+    (two renames, the old one then removed); False when it cannot (other files, a
+    symlink, a mount point): the caller then renames the files one by one."""
+    if out.is_symlink() or not set(os.listdir(out)) <= set(names):
+        return False
+    os.chmod(tmp, os.stat(out).st_mode & 0o7777)
+    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+    try:
+        os.rename(out, old / "d")
+    except OSError:  # e.g. a mount point: fall back to file renames
+        os.rmdir(old)
+        return False
+    try:
+        os.rename(tmp, out)
+    except BaseException:
+        os.rename(old / "d", out)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
+    return True
+
+
 def write_outputs(result, outdir, *, force=False, extra=None) -> list:
     """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit,
     with the files of ``extra`` (name -> bytes, e.g. ``plan.png``) in the same unit.
@@ -199,25 +221,9 @@ def write_outputs(result, outdir, *, force=False, extra=None) -> list:
         _fsync_dir(tmp)
         if not out.exists():
             os.chmod(tmp, 0o777 & ~mask)
-            os.rename(tmp, out)  # one step: both outputs appear together
+            os.rename(tmp, out)  # one step: every output appears together
         else:
-            swapped = False
-            if not out.is_symlink() and set(os.listdir(out)) <= set(names):
-                os.chmod(tmp, os.stat(out).st_mode & 0o7777)
-                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-                try:
-                    os.rename(out, old / "d")
-                except OSError:  # e.g. a mount point: fall back to file renames
-                    os.rmdir(old)
-                else:
-                    try:
-                        os.rename(tmp, out)
-                    except BaseException:
-                        os.rename(old / "d", out)
-                        raise
-                    swapped = True
-                    shutil.rmtree(old, ignore_errors=True)
-            if not swapped:
+            if not _swap_folder(tmp, out, names, parent):
                 (out / "report.json").unlink(missing_ok=True)  # the report is the commit marker
                 for n in names[1:]:
                     os.replace(tmp / n, out / n)
