@@ -5,7 +5,11 @@ between two points unseen, and so can a grid of 10 m cells or a shell. For every
 grid and shell of observers (:mod:`hazard.pipeline.surfaces`) the irradiance of the
 direct beam and of each mirror beam is searched between the points:
 
-- along a line, on the polyline through its points (``SUBSAMPLES`` per segment);
+- along a line, on the polyline through its points (``SUBSAMPLES`` per segment), and
+  on every segment that passes within ``MARGIN_RADII`` beam radii of a beam's axis ray,
+  at the segment's point nearest that ray (closest points of two lines) and
+  ``CROSS_SAMPLES`` points each side of it every ``STEP_DIAMETERS`` beam diameters: a
+  3 cm beam crossing a 4 km segment is found, not only beams wider than the sampling;
 - on a grid or a shell, along the curve ``project(o + t d)`` of each beam's axis ray
   projected on the surface (:mod:`hazard.pipeline.surfaces`): it passes through every
   point where the ray meets the surface, so a crossing is on it. The rays: the direct
@@ -46,6 +50,7 @@ STEP_DIAMETERS = 1.0 / 8  # first-pass step along a beam's axis, in 1/e beam dia
 PEAKS = 4  # local maxima of the first pass refined per group and beam
 NEIGHBOURS = 16  # a crossing is compared with this many of the group's nearest points
 MARGIN_RADII = 5.0  # a surface's bounding box is widened by this many beam radii (exp(-25) beyond)
+CROSS_SAMPLES = 16  # a line's points each side of where a beam's axis passes nearest it (every STEP_DIAMETERS)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -197,11 +202,54 @@ def _on_surface(fn, surface, rays, beam, floor):
     return found
 
 
-def _on_line(fn, line, floor):
-    """(value, point) of the maxima of ``fn`` along a polyline."""
+def _closest_approach(line, ray):
+    """Per segment of ``line``: the fraction s in [0, 1] of its point nearest the ray
+    ``o + t d`` (t >= 0), that distance [m] and the ray's t there (closest points of two
+    lines, clamped to the segment and to t >= 0)."""
+    p0 = line.points_m[:-1]
+    seg = line.points_m[1:] - p0
+    d, w0 = ray.direction, p0 - ray.origin_m
+    aa = np.einsum("ij,ij->i", seg, seg)
+    b, dd, e = seg @ d, np.einsum("ij,ij->i", w0, seg), w0 @ d
+    den = aa - b * b  # |d| = 1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(den > 1e-12 * aa, (b * e - dd) / den, 0.0)
+    s = np.clip(np.nan_to_num(s), 0.0, 1.0)
+    t = np.maximum(b * s + e, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.clip(np.where(aa > 0, (t * b - dd) / aa, 0.0), 0.0, 1.0)  # back to the segment for the clamped t
+    gap = np.linalg.norm(p0 + s[:, None] * seg - (ray.origin_m + t[:, None] * d), axis=1)
+    return s, gap, t
+
+
+def _line_candidates(line, rays, beam) -> np.ndarray:
+    """Polyline parameters where a beam may cross ``line`` between its points, wherever
+    the sampling leaves off: on each segment that passes within ``MARGIN_RADII`` beam
+    radii of an axis ray, the point nearest the ray and ``CROSS_SAMPLES`` points each
+    side of it every ``STEP_DIAMETERS`` beam diameters (the crossing of a beam's axis
+    with the line is found analytically, however long the segment and narrow the beam)."""
+    out = []
+    seg_len = np.linalg.norm(np.diff(line.points_m, axis=0), axis=1)
+    k = np.arange(-CROSS_SAMPLES, CROSS_SAMPLES + 1)
+    for ray in rays:
+        s, gap, t = _closest_approach(line, ray)
+        width = np.asarray(beam.diameter_at(ray.range0_m + t), float)
+        width = np.maximum(np.minimum(width, ray.min_step_m), 1e-9)
+        near = np.flatnonzero((gap <= MARGIN_RADII * width / 2) & (seg_len > 0))
+        for i in near:
+            ds = STEP_DIAMETERS * width[i] / seg_len[i]
+            out.append(i + np.clip(s[i] + k * ds, 0.0, 1.0))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def _on_line(fn, line, floor, rays=(), beam=None):
+    """(value, point) of the maxima of ``fn`` along a polyline: a uniform first pass and
+    the analytic candidates of :func:`_line_candidates` for ``rays``."""
     n_seg = len(line.points_m) - 1
     per = int(max(2, min(SUBSAMPLES, MAX_CANDIDATES // n_seg)))  # long lines: fewer per segment
     t = np.linspace(0.0, n_seg, n_seg * per + 1)
+    if beam is not None and rays:
+        t = np.unique(np.concatenate([t, _line_candidates(line, rays, beam)]))
     return [(v, line.at(np.array([x]))[0]) for v, x in _maxima(lambda s: fn(line.at(s)), t, floor)]
 
 
@@ -235,7 +283,7 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2, tracer, spill_s=None):
     for g, name, surface in surfaces:
         pts = obs.positions_m[obs.group == g]
         for label, fn, rays in _sources(beam, spots, mu, tracer, spill_s):
-            found = _on_line(fn, surface, floor) if isinstance(surface, Polyline) else _on_surface(fn, surface, rays, beam, floor)
+            found = (_on_line(fn, surface, floor, rays, beam) if isinstance(surface, Polyline) else _on_surface(fn, surface, rays, beam, floor))
             for point in _new_crossings(fn, found, pts):
                 added.append((g, name, point))
                 said.append(f"{name}: the {label} crosses between its points at "
