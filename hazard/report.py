@@ -7,7 +7,6 @@ unless asked (``force=True``).
 
 from __future__ import annotations
 
-import csv
 import io
 import json
 import math
@@ -36,44 +35,82 @@ def _num(x):
     return x if math.isfinite(x) else None
 
 
-def observer_rows(result) -> list:
+JSON_OBSERVERS_MAX = 100_000  # observers listed in report.json (highest hazard ratio first beyond it); all are in observers.csv
+
+# observers.csv: each column and the observer_columns key it is read from
+CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
+               "reflected_irradiance_w_m2", "peak_time_s",
+               "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
+               "first_exceedance_s", "line_of_sight", "far_field"]
+
+
+def observer_columns(result) -> dict:
+    """Every per-observer quantity of the report as one array each (computed once: the
+    verdict properties of ``result`` are whole-array computations). Results built without
+    analyze() fall back to the point-source MPE, no direct beam, and NaN subtense."""
     obs = result.observers
-    ratio = result.hazard_ratio
     m = len(obs)
-    # per observer: the spot's angular subtense, C_E and the MPE used (hazard.extended_source);
-    # results built without analyze() fall back to the point-source MPE
-    alpha = obs.angular_subtense_rad if obs.angular_subtense_rad is not None else np.full(m, np.nan)
-    c_e = obs.c_e if obs.c_e is not None else np.ones(m)
-    mpe_w = obs.mpe_w_m2 if obs.mpe_w_m2 is not None else np.full(m, float(result.mpe_w_m2))
     mpe_h = (obs.mpe_radiant_exposure_j_m2 if obs.mpe_radiant_exposure_j_m2 is not None
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
-    direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
-    reflected = obs.reflected_irradiance_w_m2 if obs.reflected_irradiance_w_m2 is not None else obs.peak_irradiance_w_m2
-    rows = []
-    for i, name in enumerate(obs.labels):
-        rows.append({
-            "name": name,
-            "position_m": [float(v) for v in obs.position_m[i]],
-            "peak_irradiance_w_m2": float(obs.peak_irradiance_w_m2[i]),
-            "direct_irradiance_w_m2": float(direct[i]),
-            "reflected_irradiance_w_m2": float(reflected[i]),
-            "peak_time_s": float(obs.peak_time_s[i]),
-            "static_irradiance_w_m2": float(obs.static_irradiance_w_m2[i]),
-            "radiant_exposure_j_m2": float(obs.radiant_exposure_j_m2[i]),
-            "static_radiant_exposure_j_m2": float(obs.static_radiant_exposure_j_m2[i]),
-            "angular_subtense_rad": _num(alpha[i]),
-            "c_e": float(c_e[i]),
-            "mpe_w_m2": float(mpe_w[i]),
-            "mpe_radiant_exposure_j_m2": float(mpe_h[i]),
-            "hazard_ratio": float(ratio[i]),
-            "exposure_ratio": float(obs.radiant_exposure_j_m2[i] / mpe_h[i]),
-            "hazardous": bool(result.hazardous[i]),
-            "hazardous_static": bool(result.hazardous_static[i]),
-            "first_exceedance_s": _num(obs.first_exceedance_s[i]),
-            "line_of_sight": bool(obs.line_of_sight[i]),
-            "far_field": bool(obs.far_field[i]),
-        })
-    return rows
+    return {
+        "position_m": np.asarray(obs.position_m, float).reshape(m, 3),
+        "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
+        "direct_irradiance_w_m2": obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m),
+        "reflected_irradiance_w_m2": (obs.reflected_irradiance_w_m2 if obs.reflected_irradiance_w_m2 is not None
+                                      else obs.peak_irradiance_w_m2),
+        "peak_time_s": obs.peak_time_s,
+        "static_irradiance_w_m2": obs.static_irradiance_w_m2,
+        "radiant_exposure_j_m2": obs.radiant_exposure_j_m2,
+        "static_radiant_exposure_j_m2": obs.static_radiant_exposure_j_m2,
+        "angular_subtense_rad": obs.angular_subtense_rad if obs.angular_subtense_rad is not None else np.full(m, np.nan),
+        "c_e": obs.c_e if obs.c_e is not None else np.ones(m),
+        "mpe_w_m2": obs.mpe_w_m2 if obs.mpe_w_m2 is not None else np.full(m, float(result.mpe_w_m2)),
+        "mpe_radiant_exposure_j_m2": mpe_h,
+        "hazard_ratio": result.hazard_ratio,
+        "exposure_ratio": obs.radiant_exposure_j_m2 / mpe_h,
+        "hazardous": result.hazardous,
+        "hazardous_static": result.hazardous_static,
+        "first_exceedance_s": obs.first_exceedance_s,
+        "line_of_sight": obs.line_of_sight,
+        "far_field": obs.far_field,
+    }
+
+
+def _listed(cols, m) -> np.ndarray:
+    """Rows of report.json's observer list: every one up to ``JSON_OBSERVERS_MAX``, else
+    the highest hazard ratios (every hazardous one first), in the scene's order."""
+    if m <= JSON_OBSERVERS_MAX:
+        return np.arange(m)
+    order = np.argsort(-np.nan_to_num(cols["hazard_ratio"], nan=np.inf), kind="stable")[:JSON_OBSERVERS_MAX]
+    return np.sort(order)
+
+
+def observer_rows(result, rows=None, cols=None) -> list:
+    """One dict per observer (``rows``: which; default all) for report.json."""
+    cols = observer_columns(result) if cols is None else cols
+    labels = result.observers.labels
+    rows = np.arange(len(result.observers)) if rows is None else rows
+    plain = {k: np.asarray(v)[rows].tolist() for k, v in cols.items()}  # Python floats and bools, once
+    maybe = {"angular_subtense_rad", "first_exceedance_s"}  # NaN: not applicable (JSON null)
+    keys = [k for k in cols if k != "position_m"]
+    out = []
+    for j, i in enumerate(rows.tolist()):
+        row = {"name": labels[i], "position_m": plain["position_m"][j]}
+        for k in keys:
+            v = plain[k][j]
+            row[k] = _num(v) if k in maybe else v
+        out.append(row)
+    return out
+
+
+def observers_listed(result, cols) -> tuple[list, dict]:
+    """report.json's observer rows and a statement of which are listed."""
+    m = len(result.observers)
+    rows = _listed(cols, m)
+    said = {"count": m, "listed": int(len(rows)),
+            "which": "all" if len(rows) == m else
+            f"the {len(rows)} highest hazard ratios (every hazardous observer first); all {m} are in observers.csv"}
+    return observer_rows(result, rows, cols), said
 
 
 def _json_safe(obj):
@@ -98,6 +135,8 @@ def report_dict(result) -> dict:
     for key, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
+    cols = observer_columns(result)
+    listed, which = observers_listed(result, cols)
     return _json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
@@ -117,29 +156,41 @@ def report_dict(result) -> dict:
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
         "targets": [t.to_dict() for t in result.targets],
         "footprint": fp or None,
-        "observers": observer_rows(result),
+        "observers": listed,
+        "observers_listed": which,
         "verdict_changes": result.verdict_changes(),
         "any_hazard": result.any_hazard,
         "notes": list(result.notes),
     })
 
 
-CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
-               "reflected_irradiance_w_m2", "peak_time_s",
-               "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
-               "first_exceedance_s", "line_of_sight", "far_field"]
+_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s"}  # NaN there means "not applicable": an empty cell
 
 
-def _csv_text(rows) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(CSV_COLUMNS)
-    for r in rows:
-        x, y, z = r["position_m"]
-        w.writerow([r["name"], repr(x), repr(y), repr(z)] + [
-            "" if r[k] is None else (repr(r[k]) if isinstance(r[k], float) else r[k]) for k in CSV_COLUMNS[4:]
-        ])
-    return buf.getvalue()
+def _csv_cell(values, key) -> list:
+    """One column as CSV text: floats by repr (exact round trip; NaN empty where it means
+    "not applicable"), bools as True/False."""
+    values = np.asarray(values)
+    if values.dtype == bool:
+        return ["True" if v else "False" for v in values.tolist()]
+    blank = key in _CSV_BLANK_NAN
+    return ["" if (blank and v != v) else repr(v) for v in values.astype(float).tolist()]
+
+
+def _csv_name(label: str) -> str:
+    """A name as the csv module writes it (quoted only when it holds , " or a line break)."""
+    if any(c in label for c in ',"\r\n'):
+        return '"' + label.replace('"', '""') + '"'
+    return label
+
+
+def _csv_text(result, cols) -> str:
+    """observers.csv: every observer, one row each (columns computed once, joined as text)."""
+    pos = cols["position_m"]
+    text = [[_csv_name(x) for x in result.observers.labels]] + [_csv_cell(pos[:, k], "x") for k in range(3)]
+    text += [_csv_cell(cols[k], k) for k in CSV_COLUMNS[4:]]
+    lines = [",".join(CSV_COLUMNS)] + [",".join(r) for r in zip(*text)]
+    return "\r\n".join(lines) + "\r\n"
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -207,7 +258,7 @@ def write_outputs(result, outdir, *, force=False, extra=None) -> list:
     doc = report_dict(result)
     if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
         doc["warnings"] = list(getattr(result.scene, "warnings", None) or [])
-    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(doc["observers"]).encode(),
+    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, observer_columns(result)).encode(),
              **extra}
     parent = out.parent if str(out.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,83 @@
+"""The observer table of a run: every observer in observers.csv, the verdict arrays
+computed once (a 1e6-observer map was O(M^2) to write: each row recomputed the whole
+hazard-ratio array), and report.json listing at most ``JSON_OBSERVERS_MAX`` observers,
+the highest hazard ratios first, with a statement of which are listed."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+import hazard
+import scenes
+from hazard import report
+
+SCENE = """
+name = "table"
+[laser]
+wavelength_nm = 1064.0
+power_w = 100.0
+beam_diameter_m = 0.005
+divergence_rad = 0.001
+position_m = [0.0, -50.0, 0.0]
+aim_m = [0.0, 0.0, 0.0]
+[exposure]
+duration_s = 10.0
+[[targets]]
+name = "plate"
+shape = "plate"
+center_m = [0.0, 0.0, 0.0]
+normal = [0.0, -1.0, 0.0]
+tangent = [1.0, 0.0, 0.0]
+size_m = [1.0, 1.0]
+material = { model = "lambertian", reflectance = 0.9 }
+[[observers]]
+name = "field, west"
+origin_m = [-3.0, -4.0, -1.0]
+u_m = [6.0, 0.0, 0.0]
+v_m = [0.0, -40.0, 2.0]
+counts = [9, 21]
+"""
+
+
+@pytest.fixture(scope="module")
+def result():
+    return hazard.analyze(scenes.loads(SCENE))
+
+
+def test_csv_has_every_observer_with_the_arrays_values(tmp_path, result):
+    report.write_outputs(result, tmp_path / "o")
+    with open(tmp_path / "o" / "observers.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == len(result.observers) == 9 * 21
+    assert rows[0]["name"] == "field, west[0]"  # a name with a comma comes back whole
+    ratio = np.array([float(r["hazard_ratio"]) for r in rows])
+    np.testing.assert_array_equal(ratio, result.hazard_ratio)  # repr: exact round trip
+    np.testing.assert_array_equal([r["hazardous"] == "True" for r in rows], result.hazardous)
+    x = np.array([[float(r[k]) for k in ("x_m", "y_m", "z_m")] for r in rows])
+    np.testing.assert_array_equal(x, result.observers.position_m)
+    assert all(r["first_exceedance_s"] == "" for r, h in zip(rows, result.hazardous) if not h)
+    assert result.hazardous.any() and not result.hazardous.all()  # the test means something
+
+
+def test_json_lists_all_observers_below_the_limit(tmp_path, result):
+    doc = report.report_dict(result)
+    assert len(doc["observers"]) == len(result.observers)
+    assert doc["observers_listed"] == {"count": 189, "listed": 189, "which": "all"}
+
+
+def test_json_lists_the_highest_ratios_above_the_limit_and_says_so(monkeypatch, tmp_path, result):
+    monkeypatch.setattr(report, "JSON_OBSERVERS_MAX", 10)
+    report.write_outputs(result, tmp_path / "o")
+    doc = json.loads((tmp_path / "o" / "report.json").read_text())
+    listed = doc["observers"]
+    assert len(listed) == 10 and doc["observers_listed"]["listed"] == 10 and doc["observers_listed"]["count"] == 189
+    assert "all 189 are in observers.csv" in doc["observers_listed"]["which"]
+    top = np.sort(result.hazard_ratio)[::-1][:10]
+    np.testing.assert_allclose(sorted((o["hazard_ratio"] for o in listed), reverse=True), top)
+    names = [o["name"] for o in listed]
+    order = [result.observers.labels.index(n) for n in names]
+    assert order == sorted(order)  # in the scene's order
+    with open(tmp_path / "o" / "observers.csv", newline="") as fh:
+        assert len(list(csv.DictReader(fh))) == 189  # the table still has every observer
