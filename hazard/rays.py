@@ -328,6 +328,8 @@ class _NumpyImpl:
             ok = dist > 0
             order = np.lexsort((dist[ok], ray[ok]))
             r, f, dd = ray[ok][order], tri[ok][order], dist[ok][order]
+            if not len(r):  # every hit behind its ray's origin
+                return face, t
             first = np.r_[True, r[1:] != r[:-1]]
             face[r[first]] = f[first]
             t[r[first]] = dd[first]
