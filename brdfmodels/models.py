@@ -22,7 +22,7 @@ import numpy as np
 
 from ._checks import directions, finite_array, finite_scalar
 from .geometry import _half_diff_parts, _normalize_sum
-from .optics import fresnel_reflectance, optical_constants
+from .optics import POLARIZATIONS, fresnel_reflectance, optical_constants
 from .parallel import map_blocks
 from .registry import model_from_dict, register
 from .sh import SHBasis
@@ -286,9 +286,12 @@ class Specular(BRDFModel):
     n, k : float, optional
         Complex refractive index at the laser wavelength (give ``n``; ``k`` defaults to 0).
         Exactly one of ``reflectance`` and ``n`` must be given.
+    polarization : {"unpolarized", "worst"}, optional
+        With ``n``: the mean of the s and p reflectances (default), or the larger
+        (``"worst"``: bounds any polarisation state).
     """
 
-    def __init__(self, reflectance=None, n=None, k=None):
+    def __init__(self, reflectance=None, n=None, k=None, polarization=None):
         if (reflectance is None) == (n is None):
             raise ValueError(
                 f"Specular: give exactly one of reflectance (constant) or n (and k) for Fresnel; "
@@ -297,13 +300,19 @@ class Specular(BRDFModel):
         if reflectance is not None:
             if k is not None:
                 raise ValueError(f"k={k!r}: only used with n (Fresnel); a constant reflectance was given")
+            if polarization is not None:
+                raise ValueError(f"polarization={polarization!r}: only used with n (Fresnel); a constant reflectance was given")
             self.reflectance = finite_scalar("reflectance", reflectance, minimum=0.0, maximum=1.0)
             self.n = None
             self.k = None
+            self.polarization = None
         else:
             self.reflectance = None
             self.n = finite_scalar("n", n, minimum=0.0, strict_min=True)
             self.k = finite_scalar("k", 0.0 if k is None else k, minimum=0.0)
+            self.polarization = "unpolarized" if polarization is None else polarization
+            if self.polarization not in POLARIZATIONS:
+                raise ValueError(f"polarization={polarization!r}: expected one of {list(POLARIZATIONS)}")
         self._freeze()
 
     @classmethod
@@ -322,12 +331,13 @@ class Specular(BRDFModel):
     def _spec(self, wi, state):
         if self.reflectance is not None:
             return np.full(wi.shape[0], self.reflectance)
-        return fresnel_reflectance(wi[:, 2], self.n, self.k)
+        return fresnel_reflectance(wi[:, 2], self.n, self.k, self.polarization)
 
     def _params(self):
         if self.reflectance is not None:
             return {"reflectance": self.reflectance}
-        return {"n": self.n, "k": self.k}
+        extra = {} if self.polarization == "unpolarized" else {"polarization": self.polarization}
+        return {"n": self.n, "k": self.k, **extra}
 
 
 # ----------------------------------------------------------------------------------------

@@ -7,6 +7,9 @@ index N = n + i k (Born & Wolf, *Principles of Optics*, 7th ed., Sec. 1.5.2 and 
     r_s = (cos i - N cos t) / (cos i + N cos t)
     r_p = (N cos i - cos t) / (N cos i + cos t)
     R   = (|r_s|^2 + |r_p|^2) / 2               (unpolarised)
+    R   = max(|r_s|^2, |r_p|^2)                  ("worst": any polarisation state, since
+                                                  the reflectance of any state lies between
+                                                  |r_p|^2 and |r_s|^2)
 
 At normal incidence R = ((n-1)^2 + k^2) / ((n+1)^2 + k^2).
 
@@ -23,13 +26,16 @@ import numpy as np
 
 from ._checks import finite_scalar
 
-__all__ = ["fresnel_reflectance", "optical_constants", "available_optical_constants"]
+__all__ = ["fresnel_reflectance", "optical_constants", "available_optical_constants", "POLARIZATIONS"]
 
 _TABLES = {"cu": "cu_nk.csv", "al": "al_nk.csv"}
 
 
-def fresnel_reflectance(cos_incidence, n: float, k: float = 0.0) -> np.ndarray:
-    """Unpolarised Fresnel reflectance from air onto index ``n + i k``.
+POLARIZATIONS = ("unpolarized", "worst")
+
+
+def fresnel_reflectance(cos_incidence, n: float, k: float = 0.0, polarization: str = "unpolarized") -> np.ndarray:
+    """Fresnel reflectance from air onto index ``n + i k``.
 
     Parameters
     ----------
@@ -37,6 +43,10 @@ def fresnel_reflectance(cos_incidence, n: float, k: float = 0.0) -> np.ndarray:
         Cosine of the incidence angle (clipped to [0, 1]).
     n, k : float
         Real and imaginary parts of the refractive index (n > 0, k >= 0).
+    polarization : {"unpolarized", "worst"}
+        ``"unpolarized"``: the mean of s and p; ``"worst"``: the larger of the two, an
+        upper bound for any polarisation state (a linearly polarised laser whose
+        orientation to the plane of incidence is not known).
 
     Returns
     -------
@@ -51,7 +61,9 @@ def fresnel_reflectance(cos_incidence, n: float, k: float = 0.0) -> np.ndarray:
     ct = np.sqrt(1.0 - sin2 / (big_n * big_n) + 0j)
     rs = (ci - big_n * ct) / (ci + big_n * ct)
     rp = (big_n * ci - ct) / (big_n * ci + ct)
-    r = 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+    if polarization not in POLARIZATIONS:
+        raise ValueError(f"polarization={polarization!r}: expected one of {list(POLARIZATIONS)}")
+    r = np.maximum(np.abs(rs) ** 2, np.abs(rp) ** 2) if polarization == "worst" else 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
     return np.clip(r, 0.0, 1.0)
 
 

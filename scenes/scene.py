@@ -179,7 +179,21 @@ def _check_dhr(model, where):
                          f"the material reflects more than it receives; check its parameters")
 
 
-def _material(spec, where, base_dir):
+def _with_polarization(data, polarization):
+    """A model's dict with every Fresnel mirror (``specular`` with ``n``) that does not
+    name its polarization given ``polarization``."""
+    if isinstance(data, dict):
+        if data.get("type") == "specular" and "n" in data.get("params", {}) and "polarization" not in data["params"]:
+            return {**data, "params": {**data["params"], "polarization": polarization}}
+        return {k: _with_polarization(v, polarization) for k, v in data.items()}
+    if isinstance(data, list):
+        return [_with_polarization(v, polarization) for v in data]
+    return data
+
+
+def _material(spec, where, base_dir, polarization="unpolarized"):
+    """A target's (or the terrain's) BRDF; Fresnel mirrors take the laser's polarisation:
+    ``"unknown"`` -> the larger of s and p (:func:`brdfmodels.optics.fresnel_reflectance`)."""
     try:
         if spec.file is not None:
             p = Path(spec.file)
@@ -188,6 +202,8 @@ def _material(spec, where, base_dir):
             model = brdfmodels.loads(read_input_text(p, "material file"))
         else:
             model = brdfmodels.create(spec.model, **spec.params)
+        if model.has_specular:
+            model = brdfmodels.model_from_dict(_with_polarization(model.to_dict(), "worst" if polarization == "unknown" else polarization))
     except ValueError as exc:
         raise SceneError(f"{where}: {exc}") from None
     _check_dhr(model, where)
@@ -236,7 +252,7 @@ def _terrain_target(spec, terrain, index, base_dir) -> Target:
     if ms is None:
         material = brdfmodels.create("lambertian", reflectance=TERRAIN_DEFAULT_REFLECTANCE)
     else:
-        material = _material(ms, "terrain.material", base_dir)
+        material = _material(ms, "terrain.material", base_dir, spec.laser.polarization)
         if material.is_dynamic:
             raise SceneError(f"terrain.material: depends on {material.state_name!r}; expected a static material (the ground has no history)")
     h = terrain.heights
@@ -357,7 +373,7 @@ def _check_laser_in_open_air(spec: SceneSpec, lp, offset, terrain) -> None:
                              f"(ground at {float(terrain.height_at(x, y)[0] + offset[2]):.6g} m); expected the laser above it")
 
 
-def _target(i, ts, offset, base_dir) -> Target:
+def _target(i, ts, offset, base_dir, polarization="unknown") -> Target:
     """Target ``i`` of the scene in local coordinates: its mesh, material (checked against
     its history) and back material."""
     where = f"targets[{i}]"
@@ -368,7 +384,7 @@ def _target(i, ts, offset, base_dir) -> Target:
     mesh.vertices = mesh.vertices - offset
     if mesh.analytic is not None:
         mesh.analytic = (mesh.analytic[0], mesh.analytic[1] - offset, *mesh.analytic[2:])
-    material = _material(ts.material, f"{where}.material", base_dir)
+    material = _material(ts.material, f"{where}.material", base_dir, polarization)
     hist = _history(ts.history, f"{where}.history", base_dir)
     if ts.history is not None:
         state = ts.history.state
@@ -392,7 +408,7 @@ def _target(i, ts, offset, base_dir) -> Target:
         raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
     back = None
     if ts.back is not None:
-        back = _material(ts.back, f"{where}.back", base_dir)
+        back = _material(ts.back, f"{where}.back", base_dir, polarization)
         if back.is_dynamic:
             raise SceneError(f"{where}.back: the back material depends on {back.state_name!r}; "
                              f"expected a static material (the history drives the front face only)")
@@ -455,7 +471,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         d = np.asarray(spec.laser.direction, float)
     d = d / np.linalg.norm(d)
 
-    targets = [_target(i, ts, offset, base_dir) for i, ts in enumerate(spec.targets)]
+    targets = [_target(i, ts, offset, base_dir, spec.laser.polarization) for i, ts in enumerate(spec.targets)]
     occluders = []
     for i, os_ in enumerate(spec.occluders):
         try:

@@ -95,6 +95,10 @@ class LaserSpec(_Strict):
     position_m: Vec3
     aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m]")
     direction: Vec3 | None = Field(default=None, description="beam direction (alternative to aim_m)")
+    polarization: Literal["unknown", "unpolarized"] = Field(default="unknown", description=(
+        "the beam's polarisation for Fresnel mirrors (materials given by n and k): 'unknown' (default) takes the "
+        "larger of the s and p reflectances, an upper bound for any polarisation; 'unpolarized' their mean (a randomly "
+        "polarised laser). A material that names its own polarization keeps it"))
     pointing_error_rad: float = Field(default=0.0, ge=0, le=0.5, description=(
         "aiming error of the beam (boresight retention + tracking) [rad]: a bound, or one standard deviation "
         "with pointing_error_kind = 'sigma'"))
