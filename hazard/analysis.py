@@ -10,7 +10,7 @@ others are left out; each stage is a function of explicit inputs in its own modu
 (:mod:`~hazard.pipeline.spill`) -> ``sdz`` (:mod:`~hazard.pipeline.sdz`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
 ``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
 (:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
--> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
+-> ``mirror_beams`` (:mod:`~hazard.pipeline.mirror_reach`) -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
 (:mod:`hazard.extended_source`).
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 from brdfmodels.parallel import default_threads, thread_limit
 
 from .nohd import optical_gain
-from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, sdz, spill, spots as beam_stage
+from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
 from .pipeline.plan import plan
@@ -91,13 +91,17 @@ def _crossings(scene, traced, tracer, mu, mpe_w_m2, log, the_plan):
     return scene
 
 
-def _direct(scene, traced, tracer, mu, log, the_plan):
-    """Stage ``direct``: the laser's own beam at the observers (None without observers)."""
+def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
+    """Stage ``direct``: the laser's own beam at the observers, at its worst over the
+    pointing error or sector when the scene gives one (None without observers)."""
     if the_plan.skipped("direct"):
         log.skip("direct", the_plan.skipped("direct"))
         return None
     with log.run("direct") as st:
         d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
+        laser = scene.spec.laser
+        if laser.pointing_buffer_rad > 0 or laser.sector is not None:
+            d = direct.with_pointing(d, scene, scene.observers, mu, ray_scene)
         st.detail = d.detail
     return d
 
@@ -182,9 +186,10 @@ def _log_map(log, inp, out, the_plan):
                         f"its time is the per-thread share of the map's wall time)", out.exposure_seconds)
 
 
-def _observers(scene, out, direct_w_m2) -> ObserverResults:
+def _observers(scene, out, direct_beam) -> ObserverResults:
     obs, m = scene.observers, len(scene.observers)
-    direct_w_m2 = np.zeros(m) if direct_w_m2 is None else direct_w_m2
+    direct_w_m2 = np.zeros(m) if direct_beam is None else direct_beam.irradiance_w_m2
+    at_aim = direct_w_m2 if direct_beam is None or direct_beam.at_aim_w_m2 is None else direct_beam.at_aim_w_m2
     return ObserverResults(
         observers=obs, position_m=scene.to_world(obs.positions_m) if m else np.zeros((0, 3)),
         static_irradiance_w_m2=out.static_w_m2, peak_irradiance_w_m2=out.peak_w_m2, peak_time_s=out.peak_time_s,
@@ -193,6 +198,7 @@ def _observers(scene, out, direct_w_m2) -> ObserverResults:
         line_of_sight=out.line_of_sight.any(axis=0) if len(out.line_of_sight) else np.ones(m, bool),
         far_field=out.far_field, irradiance_w_m2=out.history_w_m2, specular_irradiance_w_m2=out.specular_w_m2,
         direct_irradiance_w_m2=direct_w_m2, reflected_irradiance_w_m2=np.maximum(out.peak_w_m2 - direct_w_m2, 0.0),
+        direct_at_aim_irradiance_w_m2=at_aim,
     )
 
 
@@ -205,6 +211,17 @@ def _targets(scene, traced, states, exposure, mu, log):
         st.detail = (f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
                      + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else ""))
     return rows + beam_stage.unlit_targets(scene.targets, spots, traced.built.unreflected)
+
+
+def _mirror_beams(scene, rows, spots, ray_scene, zone, log, the_plan) -> None:
+    """Stage ``mirror_beams``: each mirror beam's reach and containment, into ``zone``
+    (report.json ``sdz.mirror_beams``)."""
+    if the_plan.skipped("mirror_beams"):
+        log.skip("mirror_beams", the_plan.skipped("mirror_beams"))
+        return
+    with log.run("mirror_beams") as st:
+        zone["mirror_beams"] = mirror_reach.mirror_beams(scene, rows, spots, ray_scene)
+        st.detail = mirror_reach.summary(zone["mirror_beams"])
 
 
 def _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan):
@@ -228,7 +245,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(traced.notes)
     scene = _crossings(scene, traced, tracer, mu, exposure.irradiance_w_m2, log, the_plan)
-    direct_beam = _direct(scene, traced, tracer, mu, log, the_plan)
+    direct_beam = _direct(scene, traced, tracer, mu, log, the_plan, ray_scene)
     spill_part = _spill(scene, traced, mu, exposure, log)
     zone = _sdz(scene, exposure, mu, log, ray_scene)
     times, states = _histories(scene, traced.built.spots, log, the_plan)
@@ -242,10 +259,11 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     out = irradiance_map.irradiance_map(inp)
     _log_map(log, inp, out, the_plan)
     rows = _targets(scene, traced, states, exposure, mu, log)
+    _mirror_beams(scene, rows, traced.built.spots, ray_scene, zone, log, the_plan)
     fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
     built = traced.built
     return HazardResult(scene, exposure.mpe, exposure.irradiance_w_m2, exposure.radiant_exposure_j_m2, exposure.pulse, mu, times,
-                        log.stages(), rows, _observers(scene, out, None if direct_beam is None else direct_beam.irradiance_w_m2),
+                        log.stages(), rows, _observers(scene, out, direct_beam),
                         built.spill_w, built.blocked_w, traced.beam.power_w,
                         None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
                         traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),

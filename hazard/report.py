@@ -39,7 +39,7 @@ JSON_OBSERVERS_MAX = 100_000  # observers listed in report.json (highest hazard 
 
 # observers.csv: each column and the observer_columns key it is read from
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
-               "reflected_irradiance_w_m2", "peak_time_s",
+               "direct_at_aim_irradiance_w_m2", "reflected_irradiance_w_m2", "peak_time_s",
                "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
                "first_exceedance_s", "line_of_sight", "far_field"]
 
@@ -56,6 +56,9 @@ def observer_columns(result) -> dict:
         "position_m": np.asarray(obs.position_m, float).reshape(m, 3),
         "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
         "direct_irradiance_w_m2": obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m),
+        "direct_at_aim_irradiance_w_m2": (obs.direct_at_aim_irradiance_w_m2 if getattr(obs, "direct_at_aim_irradiance_w_m2", None)
+                                          is not None else obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None
+                                          else np.zeros(m)),
         "reflected_irradiance_w_m2": (obs.reflected_irradiance_w_m2 if obs.reflected_irradiance_w_m2 is not None
                                       else obs.peak_irradiance_w_m2),
         "peak_time_s": obs.peak_time_s,
@@ -324,10 +327,12 @@ def _cause(result, i) -> str:
     else:
         spec = float(obs.specular_irradiance_w_m2[i])
         kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * (peak - direct) else "diffuse + specular")
+    at_aim = getattr(obs, "direct_at_aim_irradiance_w_m2", None)
+    beam = "direct beam" if at_aim is None or float(at_aim[i]) >= direct else "direct beam within its pointing error"
     if direct >= 0.5 * peak and direct > 0:
-        kind = "direct beam"
+        kind = beam
     elif direct > 0:
-        kind = f"direct beam + {kind}"
+        kind = f"{beam} + {kind}"
     if peak > static:
         mpe = result.observer_mpe_w_m2
         ratio_static = static / float(mpe if np.ndim(mpe) == 0 else mpe[i])
@@ -417,7 +422,20 @@ def _sdz_lines(z) -> list:
     for a in z.get("aided", []):
         lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics: {a['area_m2']:.4g} m^2 out to "
                      f"{a['max_range_m']:.4g} m" + ("" if a["contained"] else ", not contained"))
+    lines += [_mirror_line(m) for m in z.get("mirror_beams", []) if m["nohd_m"] > 0]
     return lines
+
+
+def _mirror_line(m) -> str:
+    """One mirror beam's fate (report.json ``sdz.mirror_beams``)."""
+    fate = ("contained by backstops" if m["contained"] else
+            "NOT contained: it reaches its NOHD without a backstop" + (", above the horizon" if m["above_horizon"] else ""))
+    if m.get("leaves_boundary"):
+        fate += "; it LEAVES the range boundary"
+    a = m.get("aided")
+    if a and (not a["contained"] or a.get("leaves_boundary")) and (m["contained"] and not m.get("leaves_boundary")):
+        fate += f"; through optics (NOHD {a['nohd_m']:.4g} m) it is not contained" + (" and leaves the range" if a.get("leaves_boundary") else "")
+    return f"  mirror beam of {m['target']} (specular NOHD {m['nohd_m']:.4g} m, reaches {m['max_reach_m']:.4g} m): {fate}"
 
 
 def _not_modelled_lines(result) -> list:

@@ -101,6 +101,9 @@ class ObserverResults:
     # (peak_irradiance_w_m2 = direct + reflected peak); None if not computed
     direct_irradiance_w_m2: np.ndarray | None = None
     reflected_irradiance_w_m2: np.ndarray | None = None
+    # the direct beam at the nominal aim [W/m^2]; direct_irradiance_w_m2 is the worst over
+    # the pointing error / sector when the scene gives one (else the two are equal)
+    direct_at_aim_irradiance_w_m2: np.ndarray | None = None
 
     def __len__(self):
         return len(self.position_m)
@@ -160,8 +163,14 @@ class HazardResult:
 
     @property
     def any_hazard(self) -> bool:
-        return bool(np.any(self.hazardous)) or any(
+        """A hazard anywhere: a hazardous observer, a target's diffuse lobe or mirror beam
+        with a NOHD > 0, or the direct beam hazardous past the aperture (its NOHD > 0)."""
+        def positive(x):
+            return x is not None and x > 0
+
+        return bool(np.any(self.hazardous)) or positive((self.sdz or {}).get("nohd_m")) or any(
             (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
+            or positive(t.specular_nohd_static_m) or positive(t.specular_nohd_dynamic_m)
             for t in self.targets
         )
 

@@ -43,7 +43,7 @@ from .surfaces import Polyline, observer_surfaces
 __all__ = ["add_crossings", "SUBSAMPLES", "GAIN", "STEP_DIAMETERS"]
 
 SUBSAMPLES = 64  # points per segment of a line in the first pass, and again around each maximum
-GAIN = 1.01  # a crossing is kept when it beats the group's nearest points by more than this factor
+GAIN = 1.0 + 1e-9  # a crossing is kept when it beats the group's nearest points by more than this factor (a 1 % rule left roads up to 1 % under their peak)
 MAX_CANDIDATES = 2_000_000  # first-pass points per group and beam (bounds memory on long lines)
 FLOOR = 1e-4  # crossings weaker than this fraction of the MPE are not added
 STEP_DIAMETERS = 1.0 / 8  # first-pass step along a beam's axis, in 1/e beam diameters

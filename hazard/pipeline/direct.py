@@ -20,25 +20,47 @@ import numpy as np
 
 from ..nohd import PUPIL_DIAMETER_M, optical_gain
 
-__all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam"]
+__all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam", "with_pointing"]
 
 
 @dataclass
 class DirectBeam:
     """Per observer the direct-beam irradiance [W/m^2] (gain, attenuation and line of
     sight applied), and how many observers the beam reaches and how many it would reach
-    but something blocks."""
+    but something blocks. With a pointing error or sector, ``irradiance_w_m2`` is the
+    largest over the directions the beam may point in (:mod:`hazard.pipeline.pointing`)
+    and ``at_aim_w_m2`` the nominal aim's; ``raised``: observers the pointing raised."""
 
     irradiance_w_m2: np.ndarray
     reached: int
     blocked: int
+    at_aim_w_m2: np.ndarray | None = None
+    raised: int = 0
 
     @property
     def detail(self) -> str:
         top = float(self.irradiance_w_m2.max()) if len(self.irradiance_w_m2) else 0.0
-        return (f"{self.reached} observer(s) with a clear line into the beam (E > 0, at most {top:.4g} W/m^2), "
+        text = (f"{self.reached} observer(s) with a clear line into the beam (E > 0, at most {top:.4g} W/m^2), "
                 f"{self.blocked} more behind something that blocks it (Gaussian profile at each range, attenuation, "
                 f"optical gain)")
+        if self.at_aim_w_m2 is not None:
+            text += (f"; over the pointing error / sector (the worst direction at each observer; terrain and occluders "
+                     f"block it, targets do not): {self.raised} observer(s) get more than at the aim; "
+                     f"reflections are for the nominal aim only")
+        return text
+
+
+def with_pointing(d: DirectBeam, scene, observers, mu, ray_scene) -> DirectBeam:
+    """``d`` with each observer's direct beam raised to its worst over the directions the
+    beam may point in (:func:`hazard.pipeline.pointing.pointing_worst_w_m2`)."""
+    from .pointing import pointing_worst_w_m2
+
+    def gain(rows, diameter_m):
+        return _beam_gain(observers.optics, observers.group[rows], diameter_m)
+
+    worst = pointing_worst_w_m2(scene, observers.positions_m, mu, ray_scene, gain)
+    total = np.maximum(d.irradiance_w_m2, worst)
+    return DirectBeam(total, int(np.count_nonzero(total)), d.blocked, d.irradiance_w_m2, int((worst > d.irradiance_w_m2).sum()))
 
 
 def _beam_gain(optics, group, beam_diameter_m):

@@ -4,7 +4,7 @@ The stages, in order (pvlib's ModelChain steps and scikit-learn's Pipeline are t
 models: each stage is a function of explicit inputs, the plan decides which run):
 
 ``mpe`` -> ``rays`` -> ``beam`` -> ``crossings`` -> ``direct`` -> ``spill`` -> ``sdz`` -> ``history`` -> ``specular`` -> ``line_of_sight`` ->
-``static`` | ``dynamic`` -> ``exposure`` -> ``keepout`` -> ``footprint`` ->
+``static`` | ``dynamic`` -> ``exposure`` -> ``keepout`` -> ``mirror_beams`` -> ``footprint`` ->
 ``extended_source``.
 
 What the plan cannot know before the beam is traced (a dynamic target the beam misses,
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 __all__ = ["Plan", "plan", "STAGES"]
 
 STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "sdz", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
-          "footprint", "extended_source")
+          "mirror_beams", "footprint", "extended_source")
 
 
 @dataclass(frozen=True)
@@ -67,6 +67,7 @@ def plan(scene) -> Plan:
         reasons["static"] = "static = the initial-state column of the dynamic map (no separate pass)"
     if not specular:
         reasons["specular"] = "no ideal-mirror (delta) lobe"
+        reasons["mirror_beams"] = "no ideal-mirror (delta) lobe: no mirror beam to contain"
     if not los:
         reasons["line_of_sight"] = "nothing can block a line of sight (no occluders, no terrain, one target)"
     elif not observers:

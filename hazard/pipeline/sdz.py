@@ -240,17 +240,17 @@ def beam_stop_m(laser, origin, dirs, ray_scene, n_targets, s_max) -> np.ndarray:
     tr = s1[None, :, None] * e1[:, None, :] + s2[None, :, None] * e2[:, None, :]  # (N, E, 3)
     o = origin + tr * (laser.beam_diameter_m / 2)
     d = dirs[:, None, :] + tr * (laser.divergence_rad / 2)
-    edge = _first_backstop_rays(o.reshape(-1, 3), d.reshape(-1, 3), ray_scene, n_targets).reshape(n, EDGE_RAYS)
+    edge = first_backstop_rays(o.reshape(-1, 3), d.reshape(-1, 3), ray_scene, n_targets).reshape(n, EDGE_RAYS)
     return np.maximum(stop, edge.max(axis=1))
 
 
 def _first_backstop(origin, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
     """Distance [m] to the first terrain or occluder hit along each direction (inf: none),
     through the targets (rays that meet a target go on from just past it)."""
-    return _first_backstop_rays(np.broadcast_to(origin, np.shape(dirs)), dirs, ray_scene, n_targets, max_passes)
+    return first_backstop_rays(np.broadcast_to(origin, np.shape(dirs)), dirs, ray_scene, n_targets, max_passes)
 
 
-def _first_backstop_rays(origins, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
+def first_backstop_rays(origins, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
     """As :func:`_first_backstop`, for rays of their own origins (distance along the
     normalised direction)."""
     dirs = np.asarray(dirs, float)
@@ -297,7 +297,9 @@ def _zone(scene, dirs, backstop_m, nohd_m, power_w, mpe_w_m2, mu) -> Zone:
     drawn = np.minimum(reach, UNBOUNDED_DRAW_M)
     ends = origin + dirs * drawn[:, None]
     half = hazard_half_width_m(laser, power_w, mpe_w_m2, float(drawn.max()), mu)
-    stopped = np.isfinite(backstop_m) & (backstop_m <= nohd_m)  # an infinite NOHD is never reached by a backstop at inf
+    # an infinite NOHD is never reached by a backstop at inf; a zero NOHD (the beam below the
+    # MPE from the aperture on) has nothing hazardous to stop
+    stopped = (nohd_m <= 0) | (np.isfinite(backstop_m) & (backstop_m <= nohd_m))
     return Zone(zone_polygon(origin[:2], ends[:, :2], half + 1e-9), nohd_m, reach, stopped, half)
 
 
@@ -307,7 +309,8 @@ def _zone_dict(scene, z: Zone, dirs, boundary) -> dict:
     ring = np.asarray(poly.exterior.coords) + scene.offset_m[:2]
     escape = ~z.stopped
     unbounded = bool(np.isinf(z.reach_m).any())
-    out = {"nohd_m": z.nohd_m, "polygon_m": ring.round(3).tolist(), "area_m2": math.inf if unbounded else float(poly.area),
+    area = math.inf if unbounded else (float(poly.area) if z.nohd_m > 0 else 0.0)  # NOHD 0: only the 1e-9 m pad is drawn
+    out = {"nohd_m": z.nohd_m, "polygon_m": ring.round(3).tolist(), "area_m2": area,
            "unbounded": unbounded,
            "max_range_m": float(z.reach_m.max()), "hazard_half_width_m": z.half_width_m, "contained": bool(z.stopped.all()),
            "escaping_directions": int(escape.sum()), "above_horizon": bool(np.any(escape & (dirs[:, 2] > 0)))}
@@ -318,7 +321,8 @@ def _zone_dict(scene, z: Zone, dirs, boundary) -> dict:
     return out
 
 
-def _boundary(scene):
+def boundary_polygon(scene):
+    """The range boundary (shapely polygon, local coordinates), or None without a [range]."""
     from shapely.geometry import Polygon
 
     r = scene.spec.range
@@ -340,7 +344,7 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
     s_max = math.sqrt(max(math.log(4 * power * gain / (math.pi * laser.beam_diameter_m ** 2 * mpe_w_m2)), 0.0))
     origin = np.asarray(scene.laser_position_m, float)
     backstop_m = beam_stop_m(laser, origin, d.unit, ray_scene, len(scene.targets), s_max)
-    boundary = _boundary(scene)
+    boundary = boundary_polygon(scene)
     out = {"directions": {"kind": d.kind, "count": int(len(d.unit)), "step_rad": d.step_rad, "buffer_rad": d.buffer_rad,
                           "pointing_error_rad": laser.pointing_error_rad, "pointing_error_kind": laser.pointing_error_kind,
                           "pointing_error_sigmas": laser.pointing_error_sigmas, "pointing_error_source": laser.pointing_error_source}}

@@ -1,0 +1,135 @@
+"""The direct beam at observers over the pointing error (part of stage ``direct``).
+
+The laser surface danger zone (:mod:`hazard.pipeline.sdz`) is where the beam may go
+within its pointing error or sector; an observer standing in it must be judged by where
+the beam may go, not by the nominal aim alone (range-safety.md section 3: personnel are
+cleared from the zone because the beam may point there). With a pointing buffer
+theta_b (``[laser] pointing_error_rad``, a bound or k sigma) about the aim, and/or a
+``[laser] sector`` of azimuths and elevations, the beam may point in any direction of
+
+    A = (sector, or the aim alone) widened by theta_b (plus the aim's cone when the aim
+    lies outside the sector).
+
+For an observer at distance L in direction u from the aperture, the nearest direction
+of A is at angle delta = max(0, dist(u, core) - theta_b) (the core: the sector or the
+aim; the widening by theta_b is a Minkowski sum on the sphere, exact). The Gaussian beam
+pointed there gives (range-safety.md section 1; :class:`hazard.beam.BeamGeometry`)
+
+    E = P / (pi w^2) exp(-s^2) sqrt(1 + s^2 phi^2 / 4) exp(-mu L),
+    z = L cos delta, r = L sin delta, w = (a + z phi) / 2, s = r / w,
+
+its largest value over A (E falls with delta wherever 4 L / (a + L phi) > phi, i.e.
+beyond micrometres of the aperture), times the optical gain of the observer's group
+with the beam's diameter there. The distance from u to the sector (azimuth [A0, A1]
+clockwise from +y, elevation [E0, E1]) is exact: inside it is 0; else the least angle to
+its edges, the two meridian arcs (the foot of u on each arc's great circle, or an arc's
+ends) and the two circles of elevation (at u's azimuth when it lies in [A0, A1], else
+at their ends).
+
+What blocks it: the terrain and the occluders on the straight line from the aperture to
+the eye (targets do not: within its pointing error the beam can slip off them, as the
+danger zone assumes). The reflections are computed for the nominal aim only (said in
+the stage detail).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scenes.geometry import direction_in_sector
+
+__all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2"]
+
+
+def _unit(az, el) -> np.ndarray:
+    """Unit vectors from bearings az (clockwise from +y) and elevations el [rad]."""
+    az, el = np.broadcast_arrays(np.asarray(az, float), np.asarray(el, float))
+    return np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1)
+
+
+def _angle(u, v) -> np.ndarray:
+    """Angle [rad] between unit vectors (rows), accurate near 0 and pi (atan2 of the
+    cross and dot products)."""
+    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.einsum("...i,...i->...", u, v))
+
+
+def _in_azimuth(az, a0, a1) -> np.ndarray:
+    """az within the clockwise arc from a0 to a1 [rad] (a1 - a0 < 2 pi)."""
+    return (az - a0) % (2 * np.pi) <= (a1 - a0) + 1e-15
+
+
+def angle_to_sector_rad(u, sector) -> np.ndarray:
+    """Angle [rad] from unit directions u (N, 3) to the sector's set of directions (0
+    inside; see the module notes)."""
+    u = np.asarray(u, float).reshape(-1, 3)
+    az = np.arctan2(u[:, 0], u[:, 1])
+    el = np.arctan2(u[:, 2], np.hypot(u[:, 0], u[:, 1]))
+    e0, e1 = (math.radians(x) for x in sector.elevation_deg)
+    a0, a1 = (math.radians(x) for x in sector.azimuth_deg)
+    full = a1 - a0 >= 2 * np.pi
+    in_az = np.ones(len(u), bool) if full else _in_azimuth(az, a0, a1)
+    inside = in_az & (el >= e0) & (el <= e1)
+    best = np.full(len(u), np.inf)
+    for e in (e0, e1):  # circles of elevation: at u's azimuth when it is in the sector
+        best = np.where(in_az, np.minimum(best, _angle(u, _unit(az, e))), best)
+    if not full:
+        for a in (a0, a1):  # meridian arcs: the foot of u on the great circle, clamped; and the ends
+            h = np.array([math.sin(a), math.cos(a), 0.0])
+            foot = np.clip(np.arctan2(u[:, 2], u @ h), e0, e1)
+            for e in (foot, e0, e1):
+                best = np.minimum(best, _angle(u, _unit(a, e)))
+    return np.where(inside, 0.0, best)
+
+
+def pointing_offset_rad(scene, u) -> np.ndarray:
+    """Angle delta [rad] from unit directions u (N, 3) (laser to observer) to the nearest
+    direction the beam may point in (see the module notes)."""
+    laser = scene.spec.laser
+    b = laser.pointing_buffer_rad
+    axis = np.asarray(scene.laser_direction, float)
+    to_aim = _angle(u, axis[None])
+    if laser.sector is None:
+        return np.maximum(to_aim - b, 0.0)
+    core = angle_to_sector_rad(u, laser.sector)
+    if not direction_in_sector(axis, laser.sector, b):  # the aim's cone is added to an aim outside the sector
+        core = np.minimum(core, to_aim)
+    return np.maximum(core - b, 0.0)
+
+
+def beam_at_offset_w_m2(laser, power_w, distance_m, delta_rad, mu) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance [W/m^2] at distance L from the aperture, angle delta off the beam's
+    axis (see the module notes), and the beam's 1/e diameter there [m]."""
+    L, delta = np.asarray(distance_m, float), np.asarray(delta_rad, float)
+    z = L * np.cos(delta)
+    r = L * np.sin(delta)
+    w = (laser.beam_diameter_m + np.maximum(z, 0.0) * laser.divergence_rad) / 2
+    s2 = (r / w) ** 2
+    e = power_w / (math.pi * w * w) * np.exp(-s2) * np.sqrt(1.0 + s2 * (laser.divergence_rad / 2) ** 2) * np.exp(-mu * L)
+    return np.where(delta < np.pi / 2, e, 0.0), 2 * w
+
+
+def pointing_worst_w_m2(scene, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
+    """The largest direct-beam irradiance [W/m^2] at each point (N, 3) over the
+    directions the beam may point in; ``gain_fn(rows, beam_diameter_m)`` gives the
+    optical gain of those observers; ``ray_scene`` (None: nothing blocks) answers the
+    line from the aperture to each eye through the targets."""
+    from .sdz import first_backstop_rays
+
+    laser = scene.spec.laser
+    o = np.asarray(scene.laser_position_m, float)
+    rel = np.asarray(points_m, float).reshape(-1, 3) - o
+    dist = np.linalg.norm(rel, axis=1)
+    out = np.zeros(len(rel))
+    live = np.flatnonzero(dist > 0)
+    if not len(live):
+        return out
+    u = rel[live] / dist[live, None]
+    e, diameter = beam_at_offset_w_m2(laser, laser.average_power_w, dist[live], pointing_offset_rad(scene, u), mu)
+    hit = np.flatnonzero(e > 0)
+    if ray_scene is not None and len(hit):
+        stop = first_backstop_rays(np.broadcast_to(o, (len(hit), 3)), u[hit], ray_scene, len(scene.targets))
+        e[hit] = np.where(stop >= dist[live[hit]] * (1 - 1e-9), e[hit], 0.0)
+    out[live] = e * gain_fn(live, diameter)
+    return out
