@@ -137,14 +137,18 @@ class PlanViewDisplay(_Display):
 
     def _draw_objects(self, ax):
         ax.plot(*self.laser_xy, marker="^", ms=10, c="k", ls="", label="laser")
-        for ring in self.occluders:
-            ax.fill(*ring.T, fc="#999999", ec="#555555", lw=0.8, label="occluders" if ring is self.occluders[0] else None)
+        for i, ring in enumerate(self.occluders):
+            label = "occluders" if i == 0 else None
+            if len(ring) > 2:
+                ax.fill(*ring.T, fc="#999999", ec="#555555", lw=0.8, label=label)
+            else:  # a wall edge-on, or a rod: drawn thick so it shows at any scale
+                ax.plot(*ring.T, c="#555555", lw=3.0, marker="s" if len(ring) == 1 else None, ms=4, label=label)
         for i, (name, xy, nohd, aided, _) in enumerate(self.targets):
-            ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets (circles: diffuse NOHD, naked / aided)" if i == 0 else None)
+            ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets" if i == 0 else None)
             if nohd > 0:
-                ax.add_patch(matplotlib_circle(xy, nohd, "#377eb8", ":"))
+                ax.add_patch(matplotlib_circle(xy, nohd, "#377eb8", ":", "target's diffuse NOHD (naked eye)" if i == 0 else None))
             if aided > nohd:
-                ax.add_patch(matplotlib_circle(xy, aided, "#984ea3", "--"))
+                ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c="#ff7f00", lw=1.2, label="mirror beams (specular NOHD)" if i == 0 else None)
@@ -154,7 +158,7 @@ class PlanViewDisplay(_Display):
             if self.aided.any():
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
-            ax.scatter(*self.observers_xy[self.hazardous].T, s=10, c="#e41a1c", marker="x", lw=0.8,
+            ax.scatter(*self.observers_xy[self.hazardous].T, s=70, c="#e41a1c", marker="X", edgecolors="k", lw=0.6, zorder=10,
                        label=f"observers at or above the MPE ({int(self.hazardous.sum())})")
 
     def png_bytes(self) -> bytes:
@@ -163,15 +167,15 @@ class PlanViewDisplay(_Display):
 
         fig, _ = self.plot()
         buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110)
+        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # the legend beside the panels stays whole
         plt.close(fig)
         return buf.getvalue()
 
 
-def matplotlib_circle(xy, r, colour, style):
+def matplotlib_circle(xy, r, colour, style, label=None):
     from matplotlib.patches import Circle
 
-    return Circle(xy, r, fill=False, ec=colour, lw=0.8, ls=style)
+    return Circle(xy, r, fill=False, ec=colour, lw=0.8, ls=style, label=label)
 
 
 def _zone_label(z) -> str:
@@ -197,7 +201,8 @@ def _targets(result, off) -> list:
 
 
 def _occluders(scene, off) -> list:
-    """Plan outlines (convex hulls of the vertices) of the occluders, world x, y."""
+    """Plan outlines (convex hulls of the vertices) of the occluders, world x, y: a closed
+    ring, or the two ends of a wall seen edge-on (a vertical plate)."""
     from shapely.geometry import MultiPoint
 
     out = []
@@ -205,6 +210,10 @@ def _occluders(scene, off) -> list:
         hull = MultiPoint((np.asarray(m.vertices, float)[:, :2] + off[:2]).tolist()).convex_hull
         if hull.geom_type == "Polygon":
             out.append(np.asarray(hull.exterior.coords))
+        elif hull.geom_type == "LineString":
+            out.append(np.asarray(hull.coords))
+        else:  # a vertical rod seen end-on: a point
+            out.append(np.asarray(hull.coords)[:1])
     return out
 
 

@@ -62,3 +62,20 @@ def test_site_limits_hold_the_hazard_circles_and_the_hazardous_observers():
 @pytest.mark.parametrize("span, want", [(1000.0, 200.0), (73.0, 10.0), (5e4, 1e4), (9.0, 1.0), (0.3, 0.05)])
 def test_the_scale_bar_is_a_round_fifth_of_the_width(span, want):
     assert _nice_length(span) == pytest.approx(want)
+
+
+def test_the_legend_stays_inside_the_picture_and_an_edge_on_wall_is_drawn(tmp_path):
+    """A wall seen edge-on (a vertical plate occluder) has no plan area: it is drawn as a
+    thick line; the legend beside the site panel is not cut at the picture's edge (it
+    was: bbox_inches='tight' now)."""
+    ring = np.array([[-5.0, 100.0], [5.0, 100.0]])
+    d = PlanViewDisplay("t", np.zeros(2), np.array([[0.0, 0.0], [0.0, 200.0]]), None, "zone",
+                        targets=[("a", np.array([0.0, 50.0]), 3.0, 9.0, True)], occluders=[ring],
+                        observers_xy=np.array([[1.0, 20.0], [4.0, 60.0]]), hazardous=np.array([True, False]))
+    img = imageio.imread(io.BytesIO(d.png_bytes()))
+    wall = _near(img, (85, 85, 85), 10)  # #555555
+    assert wall.sum() > 20
+    legend_text = np.flatnonzero(np.any(img[..., :3].min(axis=-1) < 128, axis=0))
+    assert legend_text.max() < img.shape[1] - 2  # dark pixels end before the right edge: nothing cut off
+    red = _near(img, (228, 26, 28), 30)  # the hazardous observer's marker, drawn large on top
+    assert red.sum() > 40
