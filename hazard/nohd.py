@@ -247,7 +247,7 @@ def range_from_intensity(intensity_w_sr, mpe_w_m2, attenuation_per_m=0.0) -> np.
     mu = attenuation_per_m
     z = mu * r0 / 2.0
     out = np.zeros_like(r0)
-    small = (z > 0) & (z < 1e-8)
+    small = z < 1e-8  # z = 0 too: mu r0 / 2 underflows for a subnormal mu while r0 > 0 (it gave R = 0)
     out[small] = r0[small] * (1.0 - z[small])  # W(z) = z - z^2 + ...
     big = z >= 1e-8
     zb = z[big]

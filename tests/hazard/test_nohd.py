@@ -2,6 +2,8 @@
 
 import math
 
+import numpy as np
+
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
@@ -221,3 +223,12 @@ def test_range_from_intensity_matches_the_scalar_nohd():
         for ii, rr in zip(i[:-1], r[:-1]):
             assert rr == pytest.approx(hz.nohd_from_intensity(ii, 2.5, attenuation_per_m=mu).nohd_m, rel=1e-13, abs=1e-300)
         assert r[-1] == np.inf
+
+
+def test_range_from_intensity_with_a_subnormal_attenuation_is_the_unattenuated_range():
+    """mu = 5e-324: mu R0 / 2 underflows to 0 and the range came out 0 (hypothesis found it
+    through the keep-out lobe); with W(z) ~ z it is R0 (1 - z) = R0."""
+    from hazard.nohd import range_from_intensity
+
+    i = np.array([1.0, 100.0, 0.0])
+    np.testing.assert_array_equal(range_from_intensity(i, 50.0, 5e-324), np.sqrt(i / 50.0))
