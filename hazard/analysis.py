@@ -156,14 +156,14 @@ def _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_hist
     spots = traced.built.spots
     los_scene = ray_scene if (the_plan.line_of_sight and spots) else None
     spec = scene.spec
-    return MapInputs(spots, traced.beam, states, times, obs.positions_m, group_gain[obs.group] if m else np.ones(0), mu,
+    return MapInputs(spots, traced.beam, states, times, obs, group_gain[obs.group] if m else np.ones(0), mu,
                      spec.exposure.duration_s, spec.laser.wavelength_nm, spec.exposure.standard, exposure.irradiance_w_m2,
                      los_scene, keep, threads, MAP_CHUNK)
 
 
 def _log_map(log, inp, out, the_plan):
     """Records of ``specular``, ``line_of_sight``, the map and ``exposure``."""
-    spots, m, n_t = inp.spots, len(inp.positions_m), len(inp.times_s)
+    spots, m, n_t = inp.spots, len(inp.points), len(inp.times_s)
     spec_spots = [sp for sp in spots if sp.material.has_specular]
     if spec_spots:
         log.ran("specular", f"{len(spec_spots)} mirror lobe(s) by geometric optics (unfolded beam on flat facets, Coddington "
@@ -191,7 +191,7 @@ def _observers(scene, out, direct_beam) -> ObserverResults:
     direct_w_m2 = np.zeros(m) if direct_beam is None else direct_beam.irradiance_w_m2
     at_aim = direct_w_m2 if direct_beam is None or direct_beam.at_aim_w_m2 is None else direct_beam.at_aim_w_m2
     return ObserverResults(
-        observers=obs, position_m=scene.to_world(obs.positions_m) if m else np.zeros((0, 3)),
+        observers=obs, offset_m=np.asarray(scene.offset_m, float),
         static_irradiance_w_m2=out.static_w_m2, peak_irradiance_w_m2=out.peak_w_m2, peak_time_s=out.peak_time_s,
         radiant_exposure_j_m2=out.exposure_j_m2, static_radiant_exposure_j_m2=out.static_w_m2 * scene.spec.exposure.duration_s,
         first_exceedance_s=out.first_exceedance_s,
@@ -255,7 +255,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     if exposure.pulse is not None:
         inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
     if not inp.keep_history:
-        notes.append(f"irradiance history not kept ({len(inp.positions_m)} x {len(times)} values); pass keep_history=True to keep it")
+        notes.append(f"irradiance history not kept ({len(inp.points)} x {len(times)} values); pass keep_history=True to keep it")
     out = irradiance_map.irradiance_map(inp)
     _log_map(log, inp, out, the_plan)
     rows = _targets(scene, traced, states, exposure, mu, log)

@@ -399,6 +399,22 @@ def _summary(spec, ext, known, n_above, n_spec, t_exp) -> dict:
     }
 
 
+SUBTENSE_BLOCK = 1 << 16  # observers per block (their points generated per block: scenes.observers)
+
+
+def _subtense_by_block(result, observers, whole) -> np.ndarray:
+    """:func:`observer_subtense_rad` of every observer, in blocks on threads."""
+    from brdfmodels.parallel import map_blocks
+
+    alpha = np.zeros(len(observers))
+
+    def block(a0, a1):
+        alpha[a0:a1] = observer_subtense_rad(result.spots, observers.block(a0, a1), result.beam, whole)
+
+    map_blocks(block, len(observers), SUBTENSE_BLOCK)
+    return alpha
+
+
 def apply_extended_source(result):
     """Set the per-observer subtense, C_E and MPE on ``result`` (in place; returns it).
 
@@ -415,9 +431,8 @@ def apply_extended_source(result):
     t0 = time.perf_counter()
     scene, obs = result.scene, result.observers
     spec, m = scene.spec, len(result.observers)
-    local = scene.observers.positions_m if (scene.observers is not None and m) else np.zeros((0, 3))
     whole = [_holds_whole_beam(result, sp) for sp in result.spots]
-    alpha = observer_subtense_rad(result.spots, local, result.beam, whole) if (m and result.spots) else np.zeros(m)
+    alpha = _subtense_by_block(result, scene.observers, whole) if (m and result.spots) else np.zeros(m)
     t_exp = spec.exposure.duration_s
     obs.angular_subtense_rad = alpha
     if not spec.exposure.extended_source:

@@ -77,7 +77,7 @@ class ObserverResults:
     """Arrays over the M observer points (file coordinates)."""
 
     observers: object  # scenes.Observers (names are built on demand: 1e6 strings cost 0.5 s)
-    position_m: np.ndarray
+    offset_m: np.ndarray  # world = local + offset_m (positions are generated on demand: scenes.observers)
     static_irradiance_w_m2: np.ndarray
     peak_irradiance_w_m2: np.ndarray
     peak_time_s: np.ndarray
@@ -106,7 +106,14 @@ class ObserverResults:
     direct_at_aim_irradiance_w_m2: np.ndarray | None = None
 
     def __len__(self):
-        return len(self.position_m)
+        return len(self.observers)
+
+    @property
+    def position_m(self) -> np.ndarray:
+        """Every observer's position (M, 3), world coordinates [m] (made on first use)."""
+        if not hasattr(self, "_position_m"):
+            self._position_m = self.observers.positions_m + self.offset_m if len(self.observers) else np.zeros((0, 3))
+        return self._position_m
 
     @property
     def labels(self) -> list:

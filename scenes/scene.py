@@ -22,6 +22,7 @@ import brdfmodels
 from brdfmodels._io import check_input_file, parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, direction_in_sector, observer_points, shape_mesh, terrain_heightfield
+from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored
 from .spec import SceneSpec
 
 __all__ = ["Scene", "Target", "Observers", "SceneError", "load", "loads", "from_data", "examples", "example_path", "json_schema"]
@@ -75,26 +76,6 @@ class Target:
     @property
     def is_dynamic(self) -> bool:
         return self.material.is_dynamic
-
-
-@dataclass
-class Observers:
-    """All observer points (N, 3), local coordinates, with their group and the viewing
-    optics of each group (``optics[g]``: an OpticsSpec or None for the naked eye)."""
-
-    positions_m: np.ndarray
-    group: np.ndarray
-    index_in_group: np.ndarray
-    group_names: tuple
-    optics: tuple = ()
-
-    def __len__(self):
-        return self.positions_m.shape[0]
-
-    def labels(self) -> list:
-        """Point names: the group name for a one-point group, ``group[i]`` otherwise."""
-        sizes = np.bincount(self.group, minlength=len(self.group_names))
-        return [self.group_names[g] if sizes[g] == 1 else f"{self.group_names[g]}[{i}]" for g, i in zip(self.group, self.index_in_group)]
 
 
 @dataclass
@@ -291,6 +272,20 @@ def _history(spec, where, base_dir):
         raise SceneError(f"{where}: {exc}") from None
 
 
+def _check_series_cover(spec: SceneSpec, targets) -> None:
+    """A measured series with ``extrapolation = 'error'`` must cover the analysis times,
+    0 to ``time_end_s`` (default the exposure duration), or the run would stop there."""
+    t_end = spec.analysis.time_end_s or spec.exposure.duration_s
+    for i, t in enumerate(targets):
+        h = t.history
+        if h is None or spec.targets[i].history.extrapolation != "error":
+            continue
+        t0, t1 = float(h.times_s[0]), float(h.times_s[-1])
+        if t0 > 0.0 or t1 < t_end:
+            raise SceneError(f"targets[{i}].history: the series covers [{t0:g}, {t1:g}] s but the analysis runs from 0 to "
+                             f"{t_end:g} s; extend it, or set extrapolation = 'clamp' to hold its end states")
+
+
 def _inside_solid(p, spec) -> np.ndarray:
     """Points strictly inside a closed primitive (box, sphere, cylinder)."""
     if spec.shape not in ("box", "sphere", "cylinder"):
@@ -339,6 +334,10 @@ def _warnings(spec: SceneSpec) -> list:
     vis = spec.atmosphere.visibility_km
     if vis is not None and vis < 0.05:
         out.append(f"atmosphere.visibility_km = {vis:g} km is under 50 m (dense fog): m meant?")
+    t_end = spec.analysis.time_end_s
+    if t_end is not None and t_end < spec.exposure.duration_s and any(t.history is not None for t in spec.targets):
+        out.append(f"analysis.time_end_s = {t_end:g} s ends before the exposure (exposure.duration_s = "
+                   f"{spec.exposure.duration_s:g} s): states after it are not seen, and a dynamic NOHD may be low")
     return out + _magnitude_warnings(spec)
 
 
@@ -417,18 +416,8 @@ def _target(i, ts, offset, base_dir, polarization="unknown") -> Target:
                   np.asarray(ts.center_m, float) - offset, ts, hist, back)
 
 
-def _group_points(g, ob, spec, offset, terrain) -> np.ndarray:
-    """One observer group's points (world coordinates), placed at eye height over the
-    terrain when asked, checked to be in open air (not in a solid, not underground)."""
-    p = observer_points(ob)
-    if ob.eye_height_m is not None:
-        if terrain is None:
-            raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
-        local = p - offset
-        if not np.all(terrain.contains_xy(local[:, 0], local[:, 1])):
-            raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
-        p = p.copy()
-        p[:, 2] = terrain.height_at(local[:, 0], local[:, 1]) + offset[2] + ob.eye_height_m
+def _check_open_air(g, ob, spec, p) -> None:
+    """Points ``p`` (world) of observer group ``g`` must not lie inside a closed solid."""
     for solid_list, label in ((spec.targets, "targets"), (spec.occluders, "occluders")):
         for j, s in enumerate(solid_list):
             inside = _inside_solid(p, s)
@@ -438,27 +427,112 @@ def _group_points(g, ob, spec, offset, terrain) -> np.ndarray:
                     f"observers[{g}] ({ob.name}): point {p[k].tolist()} is inside {label}[{j}] ({s.shape}); "
                     f"expected observers in open air"
                 )
-    if terrain is not None and ob.eye_height_m is None:  # eye-height points stand on it by construction
+
+
+def _check_above_terrain(g, ob, local, offset, terrain) -> None:
+    """Points placed by height (not at eye height) must not lie below the terrain."""
+    on = terrain.contains_xy(local[:, 0], local[:, 1])
+    below = on & (local[:, 2] < terrain.height_at(local[:, 0], local[:, 1]) - 1e-6)
+    if np.any(below):
+        k = int(np.argmax(below))
+        raise SceneError(f"observers[{g}] ({ob.name}): point {(local[k] + offset).tolist()} is below the terrain; use eye_height_m")
+
+
+def _group_points(g, ob, spec, offset, terrain) -> np.ndarray:
+    """One observer group's points (world coordinates), placed at eye height over the
+    terrain when asked, checked to be in open air (not in a solid, not underground)."""
+    p = observer_points(ob)
+    if ob.eye_height_m is not None:
         local = p - offset
-        on = terrain.contains_xy(local[:, 0], local[:, 1])
-        below = on & (local[:, 2] < terrain.height_at(local[:, 0], local[:, 1]) - 1e-6)
-        if np.any(below):
-            k = int(np.argmax(below))
-            raise SceneError(f"observers[{g}] ({ob.name}): point {p[k].tolist()} is below the terrain; use eye_height_m")
+        if not np.all(terrain.contains_xy(local[:, 0], local[:, 1])):
+            raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
+        p = p.copy()
+        p[:, 2] = terrain.height_at(local[:, 0], local[:, 1]) + offset[2] + ob.eye_height_m
+    _check_open_air(g, ob, spec, p)
+    if terrain is not None and ob.eye_height_m is None:  # eye-height points stand on it by construction
+        _check_above_terrain(g, ob, p - offset, offset, terrain)
     return p
 
 
+def _solid_radius_m(s) -> float:
+    """Radius [m] of a sphere about a closed primitive's centre that holds it."""
+    size = np.asarray(s.size_m, float)
+    if s.shape == "box":
+        return float(np.linalg.norm(size)) / 2
+    if s.shape == "sphere":
+        return float(size[0]) / 2
+    return float(np.hypot(size[0] / 2, size[1] / 2))
+
+
+def _grid_candidates(ob, centre_m, radius_m) -> np.ndarray | None:
+    """Rows of a grid group whose points may lie within ``radius_m`` of ``centre_m``
+    (world): the index window around the ellipse that the sphere's disk maps to in the
+    grid's (a, b) coordinates (xy only when placed at eye height); None when u and v are
+    (nearly) parallel, so every row must be checked."""
+    nu, nv = ob.counts
+    o, u, v = (np.asarray(x, float) for x in (ob.origin_m, ob.u_m, ob.v_m))
+    dims = slice(0, 2) if ob.eye_height_m is not None else slice(0, 3)
+    m = np.stack([u[dims], v[dims]], axis=1)
+    gram = m.T @ m
+    if nu < 2 or nv < 2 or np.linalg.det(gram) <= 1e-12 * gram[0, 0] * gram[1, 1]:
+        return None
+    inv = np.linalg.inv(gram)
+    ab = inv @ (m.T @ (np.asarray(centre_m, float)[dims] - o[dims]))
+    half = radius_m * np.sqrt(np.diag(inv))
+    iu = np.arange(max(int(np.floor((ab[0] - half[0]) * (nu - 1))), 0), min(int(np.ceil((ab[0] + half[0]) * (nu - 1))), nu - 1) + 1)
+    iv = np.arange(max(int(np.floor((ab[1] - half[1]) * (nv - 1))), 0), min(int(np.ceil((ab[1] + half[1]) * (nv - 1))), nv - 1) + 1)
+    return (iv[:, None] * nu + iu[None, :]).ravel()
+
+
+def _grid_corners_on_terrain(g, ob, offset, terrain) -> None:
+    """A grid at eye height lies within the terrain's extent when its four corners do
+    (a parallelogram inside a rectangle)."""
+    o, u, v = (np.asarray(x, float) for x in (ob.origin_m, ob.u_m, ob.v_m))
+    c = np.array([o, o + u, o + v, o + u + v]) - offset
+    if not np.all(terrain.contains_xy(c[:, 0], c[:, 1])):
+        raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
+
+
+def _grid_part(g, ob, spec, offset, terrain, start) -> GroupPoints:
+    """A grid group as generated points (see :mod:`scenes.observers`), checked at load:
+    the corners on the terrain, no point inside a solid (only the rows near each solid
+    are generated), none below the terrain (every row, block by block)."""
+    if ob.eye_height_m is not None:
+        _grid_corners_on_terrain(g, ob, offset, terrain)
+    at = grid_generator(ob, offset, terrain)
+    n = ob.counts[0] * ob.counts[1]
+    for solid in list(spec.targets) + list(spec.occluders):
+        if solid.shape not in ("box", "sphere", "cylinder"):
+            continue
+        rows = _grid_candidates(ob, solid.center_m, _solid_radius_m(solid))
+        for a0 in range(0, n if rows is None else len(rows), BLOCK):
+            idx = np.arange(a0, min(a0 + BLOCK, n)) if rows is None else rows[a0:a0 + BLOCK]
+            _check_open_air(g, ob, spec, at(idx) + offset)
+    if terrain is not None and ob.eye_height_m is None:
+        for a0 in range(0, n, BLOCK):
+            _check_above_terrain(g, ob, at(np.arange(a0, min(a0 + BLOCK, n))), offset, terrain)
+    return GroupPoints(start, n, at, is_stored=False)
+
+
 def _observers(spec, offset, terrain) -> Observers:
-    """Every observer group's points in local coordinates, with their group and index."""
-    pos, grp, idx = [], [], []
+    """Every observer group's points in local coordinates, with their group and index;
+    grids generated where they are used (:mod:`scenes.observers`)."""
+    parts, grp, idx, start = [], [], [], 0
     for g, ob in enumerate(spec.observers):
-        p = _group_points(g, ob, spec, offset, terrain)
-        pos.append(p - offset)
-        grp.append(np.full(len(p), g))
-        idx.append(np.arange(len(p)))
-    if not pos:
-        return Observers(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), ())
-    return Observers(np.vstack(pos), np.concatenate(grp), np.concatenate(idx),
+        if ob.eye_height_m is not None and terrain is None:
+            raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
+        if ob.layout == "grid":
+            part = _grid_part(g, ob, spec, offset, terrain, start)
+        else:
+            p = _group_points(g, ob, spec, offset, terrain) - offset
+            part = GroupPoints(start, len(p), stored(p))
+        parts.append(part)
+        grp.append(np.full(part.count, g))
+        idx.append(np.arange(part.count))
+        start += part.count
+    if not parts:
+        return Observers.from_points(np.empty((0, 3)), np.empty(0, int), np.empty(0, int), ())
+    return Observers(tuple(parts), np.concatenate(grp), np.concatenate(idx),
                      tuple(o.name for o in spec.observers), tuple(o.optics for o in spec.observers))
 
 
@@ -469,9 +543,15 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         d = np.asarray(spec.laser.aim_m, float) - lp
     else:
         d = np.asarray(spec.laser.direction, float)
-    d = d / np.linalg.norm(d)
+    norm = float(np.linalg.norm(d))
+    if not (math.isfinite(norm) and norm > 1e-6):
+        which = "aim_m" if spec.laser.aim_m is not None else "direction"
+        raise SceneError(f"laser.{which}: the beam direction is undefined ({norm:.3g} m from the laser; expected an aim point "
+                         f"at least 1 um away, or a non-zero direction)")
+    d = d / norm
 
     targets = [_target(i, ts, offset, base_dir, spec.laser.polarization) for i, ts in enumerate(spec.targets)]
+    _check_series_cover(spec, targets)
     occluders = []
     for i, os_ in enumerate(spec.occluders):
         try:

@@ -253,17 +253,45 @@ def _on_line(fn, line, floor, rays=(), beam=None):
     return [(v, line.at(np.array([x]))[0]) for v, x in _maxima(lambda s: fn(line.at(s)), t, floor)]
 
 
-def _new_crossings(fn, found, group_points):
+def _group_near(scene, g):
+    """``near(point)``: points of observer group ``g`` among which its ``NEIGHBOURS``
+    nearest to ``point`` are. A grid's are generated in the index window around the
+    point's grid coordinates (a grid's points are not stored: scenes.observers); other
+    groups give all their points."""
+    obs, spec = scene.observers, scene.spec.observers[g]
+    rows = obs.group_rows(g)
+    if spec.layout != "grid" or min(spec.counts) < 2:
+        pts = obs.take(rows)
+        return lambda point: pts
+    nu, nv = spec.counts
+    o, u, v = (np.asarray(x, float) for x in (spec.origin_m, spec.u_m, spec.v_m))
+    o = o - scene.offset_m
+    dims = slice(0, 2) if spec.eye_height_m is not None else slice(0, 3)
+    m = np.stack([u[dims], v[dims]], axis=1)
+    reach = int(np.ceil(np.sqrt(NEIGHBOURS))) + 1  # a window holding the nearest NEIGHBOURS nodes
+
+    def near(point):
+        a, b = np.linalg.lstsq(m, np.asarray(point, float)[dims] - o[dims], rcond=None)[0]
+        iu0, iv0 = int(round(a * (nu - 1))), int(round(b * (nv - 1)))
+        iu = np.arange(max(iu0 - reach, 0), min(iu0 + reach, nu - 1) + 1)
+        iv = np.arange(max(iv0 - reach, 0), min(iv0 + reach, nv - 1) + 1)
+        return obs.take(rows[(iv[:, None] * nu + iu[None, :]).ravel()])
+    return near
+
+
+def _new_crossings(fn, found, near):
     """The maxima of ``found`` ((value, point), highest first) that beat the group's
-    ``NEIGHBOURS`` nearest points by more than ``GAIN`` and are not a higher one seen
-    again (closer to it than a quarter of the way to the group's nearest point)."""
+    ``NEIGHBOURS`` nearest points (among ``near(point)``) by more than ``GAIN`` and are
+    not a higher one seen again (closer to it than a quarter of the way to the group's
+    nearest point)."""
     kept = []
     for value, point in sorted(found, key=lambda x: -x[0]):
+        group_points = near(point)
         d2 = np.einsum("ij,ij->i", group_points - point, group_points - point)
-        near = np.argsort(d2)[:NEIGHBOURS]
-        if value <= GAIN * float(fn(group_points[near]).max()):
+        nearest = np.argsort(d2)[:NEIGHBOURS]
+        if value <= GAIN * float(fn(group_points[nearest]).max()):
             continue
-        if all(np.linalg.norm(point - p) > 0.25 * np.sqrt(d2[near[0]]) for p in kept):
+        if all(np.linalg.norm(point - p) > 0.25 * np.sqrt(d2[nearest[0]]) for p in kept):
             kept.append(point)
     return kept
 
@@ -281,10 +309,10 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2, tracer, spill_s=None):
     surfaces, left_out = observer_surfaces(scene)
     added, said = [], []
     for g, name, surface in surfaces:
-        pts = obs.positions_m[obs.group == g]
+        near = _group_near(scene, g)
         for label, fn, rays in _sources(beam, spots, mu, tracer, spill_s):
             found = (_on_line(fn, surface, floor, rays, beam) if isinstance(surface, Polyline) else _on_surface(fn, surface, rays, beam, floor))
-            for point in _new_crossings(fn, found, pts):
+            for point in _new_crossings(fn, found, near):
                 added.append((g, name, point))
                 said.append(f"{name}: the {label} crosses between its points at "
                             f"[{point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}] m (local; its value is the map's)")
@@ -297,18 +325,8 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2, tracer, spill_s=None):
 def _with_points(obs, added):
     """``obs`` with the points of ``added`` ((line group, line name, point) each), one new
     group per line, named ``<line>:crossing``, with the line's optics."""
-    names, optics = list(obs.group_names), list(obs.optics)
-    pos, grp, idx = [obs.positions_m], [obs.group], [obs.index_in_group]
-    new_group, count = {}, {}
-    for g, name, point in added:
-        if g not in new_group:
-            new_group[g] = len(names)
-            names.append(f"{name}:crossing")
-            optics.append(obs.optics[g] if g < len(obs.optics) else None)
-        k = new_group[g]
-        pos.append(point[None])
-        grp.append(np.array([k]))
-        idx.append(np.array([count.get(k, 0)]))
-        count[k] = count.get(k, 0) + 1
-    return dataclasses.replace(obs, positions_m=np.vstack(pos), group=np.concatenate(grp), index_in_group=np.concatenate(idx),
-                               group_names=tuple(names), optics=tuple(optics))
+    for g in dict.fromkeys(g for g, _, _ in added):  # in order of first appearance
+        name = next(n for gg, n, _ in added if gg == g)
+        points = [p for gg, _, p in added if gg == g]
+        obs = obs.with_group(f"{name}:crossing", np.array(points), obs.optics[g] if g < len(obs.optics) else None)
+    return obs

@@ -58,7 +58,7 @@ def with_pointing(d: DirectBeam, scene, observers, mu, ray_scene) -> DirectBeam:
     def gain(rows, diameter_m):
         return _beam_gain(observers.optics, observers.group[rows], diameter_m)
 
-    worst = pointing_worst_w_m2(scene, observers.positions_m, mu, ray_scene, gain)
+    worst = pointing_worst_w_m2(scene, observers, mu, ray_scene, gain)
     total = np.maximum(d.irradiance_w_m2, worst)
     return DirectBeam(total, int(np.count_nonzero(total)), d.blocked, d.irradiance_w_m2, int((worst > d.irradiance_w_m2).sum()))
 
@@ -111,15 +111,24 @@ def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:
     return ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
 
 
+BLOCK = 1 << 16  # observers per block of the direct stage (points generated per block: scenes.observers)
+
+
 def direct_beam(beam, observers, tracer, mu) -> DirectBeam:
-    """The direct beam at every observer (see the module notes); ``tracer`` answers
-    ``first_hit(origins, directions)`` against every object in the scene."""
-    p = observers.positions_m
-    out = np.zeros(len(p))
-    if not len(p):
-        return DirectBeam(out, 0, 0)
-    at = beam_at(beam, p, mu)
-    clear = clear_of_objects(at, p, tracer)
-    gain = _beam_gain(observers.optics, observers.group[at.rows], beam.diameter_at(at.axial_m))
-    out[at.rows] = np.where(clear, at.irradiance_w_m2 * gain, 0.0)
-    return DirectBeam(out, int(np.count_nonzero(out)), int((~clear).sum()))
+    """The direct beam at every observer (see the module notes), in blocks of observers
+    on threads; ``tracer`` answers ``first_hit(origins, directions)`` against every
+    object in the scene."""
+    from brdfmodels.parallel import map_blocks
+
+    out = np.zeros(len(observers))
+
+    def block(a0, a1):
+        p = observers.block(a0, a1)
+        at = beam_at(beam, p, mu)
+        clear = clear_of_objects(at, p, tracer)
+        gain = _beam_gain(observers.optics, observers.group[a0 + at.rows], beam.diameter_at(at.axial_m))
+        out[a0 + at.rows] = np.where(clear, at.irradiance_w_m2 * gain, 0.0)
+        return int((~clear).sum())
+
+    blocked = sum(map_blocks(block, len(observers), BLOCK))
+    return DirectBeam(out, int(np.count_nonzero(out)), blocked)

@@ -32,7 +32,8 @@ MAP_CHUNK = 32768  # observers per block of the map (measured with 2 threads: 40
 @dataclass
 class MapInputs:
     """What the map needs: the spots, their states over ``times_s`` (target index ->
-    states; empty for a static map), the observers' positions [m] and optical gains,
+    states; empty for a static map), the observers (``points.block(a0, a1)``: their
+    positions [m], generated per block: scenes.observers) and optical gains,
     attenuation [1/m], the exposure (duration [s], wavelength [nm], standard, MPE
     [W/m^2]), the ray scene for lines of sight (None: every line is clear) and how to run.
     """
@@ -41,7 +42,7 @@ class MapInputs:
     beam: object
     states: dict
     times_s: np.ndarray
-    positions_m: np.ndarray
+    points: object
     gain: np.ndarray
     attenuation_per_m: float
     duration_s: float
@@ -160,7 +161,7 @@ class _MapRun:
     threads (NumPy, BLAS and Embree release the GIL)."""
 
     def __init__(self, inp: MapInputs):
-        m, n_t = len(inp.positions_m), len(inp.times_s)
+        m, n_t = len(inp.points), len(inp.times_s)
         self.inp = inp
         self.out = MapOutputs(np.zeros(m), np.zeros(m), np.zeros(m), np.zeros(m), np.full(m, np.nan), np.zeros(m, bool),
                               np.zeros(m), np.ones((len(inp.spots), m), bool), np.zeros((m, n_t)) if inp.keep_history else None)
@@ -168,12 +169,12 @@ class _MapRun:
         self.dynamic = bool(inp.states)
         self.one_spot = len(inp.spots) == 1 and not inp.spots[0].material.has_specular
 
-    def line_of_sight(self, sl):
-        """Line of sight from each spot to observers ``sl``: one occlusion query per spot.
-        Far-field observers behind a spot's surface receive nothing whatever is in between
-        (the map evaluates them with the mean frame): no ray needed. Returns seconds."""
+    def line_of_sight(self, sl, p):
+        """Line of sight from each spot to observers ``sl`` at ``p``: one occlusion query per
+        spot. Far-field observers behind a spot's surface receive nothing whatever is in
+        between (the map evaluates them with the mean frame): no ray needed. Returns seconds."""
         t0 = time.perf_counter()
-        rs, p, n_seg = self.inp.ray_scene, self.inp.positions_m[sl], 0
+        rs, n_seg = self.inp.ray_scene, 0
         for k, sp in enumerate(self.inp.spots):
             c, nrm = sp.centroid, sp.mean_frame[2]
             start = rs.off_surface(c, nrm)
@@ -188,15 +189,15 @@ class _MapRun:
         self.out.segments.append(n_seg)  # list.append is atomic: blocks run on threads
         return time.perf_counter() - t0
 
-    def _spot_rows(self, k, sp, sl):
-        """Irradiance of one spot at observers ``sl``: (rows x T) or (rows,)."""
+    def _spot_rows(self, k, sp, sl, p):
+        """Irradiance of one spot at observers ``sl`` at ``p``: (rows x T) or (rows,)."""
         inp, out = self.inp, self.out
         sk = inp.states.get(sp.target.index) if self.dynamic else None
         los = out.line_of_sight[k, sl]
-        e, far = spot_irradiance(sp, inp.positions_m[sl], inp.gain[sl], inp.attenuation_per_m, sk, los)
+        e, far = spot_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, sk, los)
         out.far_field[sl] |= far
         if sp.material.has_specular:
-            es = specular_irradiance(sp, inp.positions_m[sl], inp.gain[sl], inp.attenuation_per_m, inp.beam, sk)
+            es = specular_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, inp.beam, sk)
             es = es * (los if sk is None else los[:, None])
             out.specular_w_m2[sl] = np.maximum(out.specular_w_m2[sl], es if es.ndim == 1 else es.max(axis=1))
             e = e + es
@@ -216,11 +217,12 @@ class _MapRun:
         """Line of sight, irradiance and exposure of observers [a0, a1); returns the
         seconds spent on line of sight and on exposure."""
         inp, out, sl = self.inp, self.out, slice(a0, a1)
-        t_los = self.line_of_sight(sl) if inp.ray_scene is not None else 0.0
+        p = inp.points.block(a0, a1)  # generated here, in this block's thread
+        t_los = self.line_of_sight(sl, p) if inp.ray_scene is not None else 0.0
         if self.one_spot:  # only observers the spot reaches are evaluated
             sp = inp.spots[0]
             sk = inp.states.get(sp.target.index) if self.dynamic else None
-            (live, ev), far = spot_irradiance(sp, inp.positions_m[sl], inp.gain[sl], inp.attenuation_per_m, sk,
+            (live, ev), far = spot_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, sk,
                                               out.line_of_sight[0, sl], sparse=True)
             out.far_field[sl] = far
             ev, rows = (ev if ev.ndim == 2 else ev[:, None]), sl.start + live
@@ -228,7 +230,7 @@ class _MapRun:
         else:
             ev = np.zeros((a1 - a0, len(inp.times_s)))
             for k, sp in enumerate(inp.spots):
-                e = self._spot_rows(k, sp, sl)
+                e = self._spot_rows(k, sp, sl, p)
                 ev += e if e.ndim == 2 else e[:, None]
             rows = np.arange(a0, a1)
             if inp.direct_w_m2 is not None and inp.direct_w_m2[sl].any():
@@ -243,7 +245,7 @@ class _MapRun:
 def irradiance_map(inp: MapInputs) -> MapOutputs:
     """E(observer, t) summed over the spots, with lines of sight and exposure, in blocks."""
     run = _MapRun(inp)
-    m = len(inp.positions_m)
+    m = len(inp.points)
     chunk = block_rows(len(inp.times_s), inp.chunk)  # long histories: fewer observers per block
     workers = max(1, min(inp.threads, -(-m // chunk)))
     t0 = time.perf_counter()

@@ -110,11 +110,28 @@ def beam_at_offset_w_m2(laser, power_w, distance_m, delta_rad, mu) -> tuple[np.n
     return np.where(delta < np.pi / 2, e, 0.0), 2 * w
 
 
-def pointing_worst_w_m2(scene, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
-    """The largest direct-beam irradiance [W/m^2] at each point (N, 3) over the
-    directions the beam may point in; ``gain_fn(rows, beam_diameter_m)`` gives the
-    optical gain of those observers; ``ray_scene`` (None: nothing blocks) answers the
-    line from the aperture to each eye through the targets."""
+def pointing_worst_w_m2(scene, observers, mu, ray_scene, gain_fn) -> np.ndarray:
+    """The largest direct-beam irradiance [W/m^2] at each observer over the directions
+    the beam may point in, in blocks on threads (``observers.block(a0, a1)``: their
+    points); ``gain_fn(rows, beam_diameter_m)`` gives the optical gain of those
+    observers; ``ray_scene`` (None: nothing blocks) answers the line from the aperture
+    to each eye through the targets."""
+    from brdfmodels.parallel import map_blocks
+
+    out = np.zeros(len(observers))
+
+    def block(a0, a1):
+        out[a0:a1] = _worst(scene, observers.block(a0, a1), mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d))
+
+    map_blocks(block, len(observers), BLOCK)
+    return out
+
+
+BLOCK = 1 << 16  # observers per block
+
+
+def _worst(scene, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
+    """:func:`pointing_worst_w_m2` at points (N, 3)."""
     from .sdz import first_backstop_rays
 
     laser = scene.spec.laser

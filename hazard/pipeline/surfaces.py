@@ -104,16 +104,16 @@ class Hemisphere:
         return self.center_m + np.array([[-r, -r, 0.0], [r, r, r]])
 
 
-def _grid_surface(spec, offset_m, terrain, points_m):
-    """A grid's surface, or its points as a polyline when it is one row or column (or
-    its u and v are parallel)."""
+def _grid_surface(spec, offset_m, terrain, points_fn):
+    """A grid's surface, or its points (``points_fn()``) as a polyline when it is one row
+    or column (or its u and v are parallel)."""
     nu, nv = spec.counts
     o, u, v = (np.asarray(x, float) for x in (spec.origin_m, spec.u_m, spec.v_m))
     plane = Plane(o - offset_m, u, v)
     uv = (u[:2], v[:2]) if spec.eye_height_m is not None else (u, v)
     area = np.linalg.norm(np.cross(uv[0], uv[1])) if spec.eye_height_m is None else abs(uv[0][0] * uv[1][1] - uv[0][1] * uv[1][0])
     if nu == 1 or nv == 1 or area <= 1e-12 * np.dot(uv[0], uv[0]) ** 0.5 * np.dot(uv[1], uv[1]) ** 0.5:
-        return Polyline(points_m)
+        return Polyline(points_fn())
     if spec.eye_height_m is not None:
         return Draped(plane, terrain, float(spec.eye_height_m))
     return plane
@@ -124,14 +124,13 @@ def observer_surfaces(scene):
     a surface with at least two points; and the names of the groups left out with why."""
     obs, out, left = scene.observers, [], []
     for g, spec in enumerate(scene.spec.observers):
-        rows = np.flatnonzero(obs.group == g)
+        rows = obs.group_rows(g)
         if spec.layout == "points" or len(rows) < 2:
             continue
-        pts = obs.positions_m[rows[np.argsort(obs.index_in_group[rows])]]
         if spec.layout == "line":
-            out.append((g, spec.name, Polyline(pts)))
+            out.append((g, spec.name, Polyline(obs.take(rows))))
         elif spec.layout == "grid":
-            out.append((g, spec.name, _grid_surface(spec, scene.offset_m, scene.terrain, pts)))
+            out.append((g, spec.name, _grid_surface(spec, scene.offset_m, scene.terrain, lambda rows=rows: obs.take(rows))))
         elif spec.eye_height_m is None:
             out.append((g, spec.name, Hemisphere(np.asarray(spec.center_m, float) - scene.offset_m, float(spec.radius_m))))
         else:
