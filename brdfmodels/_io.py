@@ -26,7 +26,10 @@ LIMITS = {
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
     "SCENARIOS": (1_000_000, "scenarios of a study"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
+    "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 4e6 took 43 s and 5 GB)"),
 }
+LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
+DEPTH_CEILING = 200  # nesting the parsers can follow (Python's recursion limit is 1000)
 
 
 def limit(name: str) -> float:
@@ -39,8 +42,9 @@ def limit(name: str) -> float:
         value = float(text)
     except ValueError:
         raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a number") from None
-    if not value > 0:
-        raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a positive number")
+    ceiling = DEPTH_CEILING if name == "DEPTH" else LIMIT_CEILING
+    if not 0 < value <= ceiling:
+        raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a positive number up to {ceiling:g}")
     return value
 
 
@@ -161,8 +165,9 @@ def parse_toml(text: str, source: str) -> dict:
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{source}: not valid TOML: {' '.join(str(exc).split())}") from None
     except RecursionError:
-        raise ValueError(f"{source}: nesting too deep (the limit is {limit('DEPTH'):g} levels; "
-                         f"raise it with HAZARD_MAX_DEPTH)") from None
+        raise ValueError(f"{source}: nesting too deep for the parser (at most {DEPTH_CEILING} levels)") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise ValueError(f"{source}: not valid TOML: {' '.join(str(exc).split()[:12])} (a number with too many digits?)") from None
     depth = data_depth(data)
     if depth > limit("DEPTH") + 1:  # tables add one level to the arrays counted above
         check_limit("DEPTH", depth, f"{source}: nesting depth")

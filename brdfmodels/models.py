@@ -22,7 +22,7 @@ import numpy as np
 
 from ._checks import directions, finite_array, finite_scalar
 from .geometry import _half_diff_parts, _normalize_sum
-from .optics import POLARIZATIONS, fresnel_reflectance, optical_constants
+from .optics import N_MAX, N_MIN, POLARIZATIONS, fresnel_reflectance, optical_constants
 from .parallel import map_blocks
 from .registry import model_from_dict, register
 from .sh import SHBasis
@@ -308,8 +308,8 @@ class Specular(BRDFModel):
             self.polarization = None
         else:
             self.reflectance = None
-            self.n = finite_scalar("n", n, minimum=0.0, strict_min=True)
-            self.k = finite_scalar("k", 0.0 if k is None else k, minimum=0.0)
+            self.n = finite_scalar("n", n, minimum=N_MIN, maximum=N_MAX)
+            self.k = finite_scalar("k", 0.0 if k is None else k, minimum=0.0, maximum=N_MAX)
             self.polarization = "unpolarized" if polarization is None else polarization
             if self.polarization not in POLARIZATIONS:
                 raise ValueError(f"polarization={polarization!r}: expected one of {list(POLARIZATIONS)}")

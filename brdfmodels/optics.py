@@ -32,6 +32,7 @@ _TABLES = {"cu": "cu_nk.csv", "al": "al_nk.csv"}
 
 
 POLARIZATIONS = ("unpolarized", "worst")
+N_MIN, N_MAX = 1e-4, 1e5  # refractive index bounds (n, and k up to N_MAX): N^2 neither under- nor overflows
 
 
 def fresnel_reflectance(cos_incidence, n: float, k: float = 0.0, polarization: str = "unpolarized") -> np.ndarray:
@@ -53,8 +54,8 @@ def fresnel_reflectance(cos_incidence, n: float, k: float = 0.0, polarization: s
     ndarray
         Reflectance in [0, 1] (dimensionless).
     """
-    n = finite_scalar("n", n, minimum=0.0, strict_min=True)
-    k = finite_scalar("k", k, minimum=0.0)
+    n = finite_scalar("n", n, minimum=N_MIN, maximum=N_MAX)
+    k = finite_scalar("k", k, minimum=0.0, maximum=N_MAX)
     ci = np.clip(np.asarray(cos_incidence, dtype=float), 0.0, 1.0)
     big_n = complex(n, k)
     sin2 = 1.0 - ci * ci

@@ -109,6 +109,8 @@ def loads(text: str):
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"not a brdfmodels JSON document: {exc}") from None
+    except RecursionError:  # arrays nested thousands deep
+        raise ValueError("not a brdfmodels JSON document: nesting too deep") from None
     if not isinstance(doc, dict):
         raise ValueError("not a brdfmodels JSON document: expected an object at the top level")
     unknown = set(doc) - {"format", "version", "model"}

@@ -82,17 +82,25 @@ class Spot:
         return float(self.power_w.sum())
 
     @property
+    def _weights(self) -> np.ndarray:
+        """Per sample weights for the spot's means: its power scaled to a largest of 1
+        (a spot of 1e-300 W has means too), equal weights when every power is 0."""
+        top = float(np.max(self.power_w)) if len(self.power_w) else 0.0
+        return self.power_w / top if top > 0 else np.ones(len(self.power_w))
+
+    @property
     def centroid(self) -> np.ndarray:
-        return (self.points * self.power_w[:, None]).sum(0) / self.total_power_w
+        w = self._weights
+        return (self.points * w[:, None]).sum(0) / w.sum()
 
     @property
     def mean_incoming(self) -> np.ndarray:
-        d = (self.incoming * self.power_w[:, None]).sum(0)
+        d = (self.incoming * self._weights[:, None]).sum(0)
         return d / np.linalg.norm(d)
 
     @property
     def mean_frame(self) -> np.ndarray:
-        f = (self.frames * self.power_w[:, None, None]).sum(0)
+        f = (self.frames * self._weights[:, None, None]).sum(0)
         z = f[2] / np.linalg.norm(f[2])
         x = f[0] - np.dot(f[0], z) * z
         x /= np.linalg.norm(x)

@@ -132,7 +132,7 @@ def _mesh_file(spec, frame, base_dir):
         path = Path(base_dir) / path
     check_input_file(path, "mesh file")
     try:
-        m = trimesh.load(str(path), force="mesh")
+        m = trimesh.load(str(path), force="mesh", process=False)  # processing merged (and dropped) non-finite vertices
     except Exception as exc:  # trimesh raises many kinds
         raise ValueError(f"file={spec.file!r}: cannot read the mesh ({exc})") from None
     if len(m.faces) == 0:
@@ -186,21 +186,31 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     if spec.kind == "heightmap":
         from pathlib import Path
 
-        from brdfmodels._io import check_input_file
+        from brdfmodels._io import check_input_file, check_limit
 
         path = Path(spec.file)
         if not path.is_absolute() and base_dir is not None:
             path = Path(base_dir) / path
         check_input_file(path, "terrain.file")
         try:
-            h = np.load(path, allow_pickle=False)
+            h = np.load(path, allow_pickle=False, mmap_mode="r")  # the header first: its size is checked before reading
         except (OSError, ValueError) as exc:
+            raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({exc})") from None
+        if not isinstance(h, np.ndarray):  # an .npz archive
+            raise ValueError(f"terrain.file={spec.file!r}: expected a .npy file holding one 2-d array of heights, got an archive")
+        check_limit("TERRAIN_NODES", int(h.size), f"terrain.file={spec.file!r}: nodes")
+        try:
+            h = np.array(h)
+        except (OSError, ValueError) as exc:  # a header that promises more than the file holds
             raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({exc})") from None
         if h.dtype.kind not in "iuf" or h.ndim != 2 or min(h.shape) < 2 or not np.all(np.isfinite(h)) or np.abs(h).max() > 1e5:
             raise ValueError(f"terrain.file={spec.file!r}: expected a 2-d array of finite heights [m], got shape {h.shape}")
         return Heightfield(spec.origin_m[0], spec.origin_m[1], spec.spacing_m, np.asarray(h, float))
+    from brdfmodels._io import check_limit
+
     cx, cy, cz = spec.center_m
     n = int(math.ceil(spec.extent_m / spec.resolution_m))
+    check_limit("TERRAIN_NODES", (2 * n + 1) ** 2, "terrain: nodes ((2 extent_m / resolution_m + 1)^2)")
     xs = cx + spec.resolution_m * np.arange(-n, n + 1)
     ys = cy + spec.resolution_m * np.arange(-n, n + 1)
     xx, yy = np.meshgrid(xs, ys)
