@@ -26,7 +26,7 @@ LIMITS = {
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
     "SCENARIOS": (1_000_000, "scenarios of a study"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
-    "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 4e6 took 43 s and 5 GB)"),
+    "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
 DEPTH_CEILING = 200  # nesting the parsers can follow (Python's recursion limit is 1000)

@@ -9,7 +9,8 @@ refinement. Timed: ``scenes.load(path)`` + ``hazard.analyze`` (every stage, the
 extended-source pass included), the ray cache emptied before each run so that every run
 builds its Embree scene. Floor, measured in the same run, each part on its own (best of
 3): reading and parsing the scene file and the material file; the Embree build of the
-same triangles; the map's (1e6 x 37) @ (37 x 100) matrix product; the occlusion query of
+same triangles; the observers' points (the grid formula and the terrain heights, made
+once); the map's (1e6 x 37) @ (37 x 100) matrix product; the occlusion query of
 the same 1e6 segments; and one BRDF evaluation of the keep-out lobes' 2x2 Gauss points on
 the initial grid (static and dynamic). Reported: time, floor, ratio (no goal yet), and
 where the time above the floor goes.
@@ -32,7 +33,7 @@ from hazard.engine import projected_brdf, spot_directions
 from hazard.keepout import _cell_points, _grid_cells
 from hazard.rays import RayScene
 
-from .bench_engine import SCENE
+from .bench_engine import SCENE, points_seconds
 
 
 def _write_scene(folder: Path, rows=1000, n_states=100) -> Path:
@@ -79,6 +80,7 @@ def _floor_parts(path, scene, res) -> dict:
     """Each part of the floor [s], best of 3."""
     parts = {}
     parts["read"], _ = _best(lambda: (tomllib.loads(path.read_text()), bm.load(path.parent / "material.json")))
+    parts["points"] = points_seconds(scene)  # the grid at eye height (made block by block inside the run)
     meshes = [(t.mesh.vertices, t.mesh.faces, t.index) for t in scene.targets]
     terrain = scene.terrain.mesh()
     meshes.append((terrain.vertices, terrain.faces, len(scene.targets)))
