@@ -83,3 +83,16 @@ def test_json_lists_the_highest_ratios_above_the_limit_and_says_so(monkeypatch, 
     assert order == sorted(order)  # in the scene's order
     with open(tmp_path / "o" / "observers.csv", newline="") as fh:
         assert len(list(csv.DictReader(fh))) == m  # the table still has every observer
+
+
+def test_a_target_the_beam_misses_is_said_to_get_only_its_wing(tmp_path):
+    """A plate whose near edge is 0.15 m off the axis of a beam of 1/e radius 27.5 mm at
+    50 m takes ~exp(-(0.15 / 0.0275)^2) ~ 1e-13 of it: report.json says "wing only" and
+    the answer says the beam misses it (it read as an ordinary lit target)."""
+    text = SCENE.replace("center_m = [0.0, 0.0, 0.0]", "center_m = [0.65, 0.0, 0.0]")
+    res = hazard.analyze(scenes.loads(text))
+    doc = report.report_dict(res)
+    frac = res.targets[0].spot_power_w / res.beam_power_w
+    assert 0 < frac < report.WING_FRACTION and doc["targets"][0]["hit"] == "wing only"
+    assert "the beam misses it; only its Gaussian wing reaches it" in report.answer_text(res)
+    assert report.report_dict(hazard.analyze(scenes.loads(SCENE)))["targets"][0]["hit"] == "beam"
