@@ -1,6 +1,7 @@
 """brdfmodels: how a surface reflects.
 
-Pluggable BRDF models (Lambertian, ideal mirror, five-parameter Torrance-Sparrow,
+Pluggable BRDF models (Lambertian, ideal mirror, five-parameter Torrance-Sparrow, ABg and
+Gaussian scatter lobes,
 spherical-harmonic in halfway/difference coordinates, dynamic over a state table,
 conservative envelopes, sums and scaled models), their registry and JSON persistence,
 surface state histories (oxidation, thin-plate heating) and integrals over a BRDF.
@@ -37,6 +38,7 @@ from .models import (
     TorranceSparrow5,
 )
 from .optics import fresnel_reflectance, optical_constants
+from .scatter import ABg, GaussianLobe
 from .registry import available_models, create, dumps, load, loads, model_from_dict, register, save
 from .sh import SHBasis, fan_out, real_sph_harm
 from .states import StateTable
@@ -44,7 +46,7 @@ from .states import StateTable
 __version__ = "0.1.0"
 
 __all__ = [
-    "BRDFModel", "DHRResult", "DynamicBRDF", "Envelope", "EnvelopeReport", "FR_MAX", "HeatingResult",
+    "ABg", "BRDFModel", "DHRResult", "DynamicBRDF", "Envelope", "EnvelopeReport", "FR_MAX", "GaussianLobe", "HeatingResult",
     "History", "Lambertian", "OxidationModel", "SHBasis", "Scaled", "Specular", "SphericalHarmonicBRDF",
     "StateTable", "Sum", "ThinPlateHeating", "TorranceSparrow5", "available_models", "create", "dumps",
     "envelope_report", "fan_out", "fresnel_reflectance", "half_diff", "half_diff_to_directions",

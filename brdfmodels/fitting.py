@@ -488,8 +488,26 @@ def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local=
     if progress is not None:
         progress(budget, budget)
     model = TorranceSparrow5(**_ts5_params(x))
+    unc = _ts5_uncertainty(wi, wo, f, w, _ts5_params(x))
     return FitResult(model, e, e, math.nan, 0, len(f), 5, count[0], time.perf_counter() - start, f"nlopt {method} + {local}",
-                     {"global_error": e_global, "global_evaluations": ev_global, **{f"p_{k}": v for k, v in _ts5_params(x).items()}})
+                     {"global_error": e_global, "global_evaluations": ev_global, **{f"p_{k}": v for k, v in _ts5_params(x).items()},
+                      **{f"stderr_{k}": float(v) for k, v in zip(unc.names, unc.stderr)}, "uncertainty": unc.to_dict()})
+
+
+def _ts5_uncertainty(wi, wo, f, w, params):
+    """Standard errors of (kb, kr, a, b, kd) from the Jacobian of the relative residuals
+    (the objective's) at the optimum (:mod:`brdfmodels.uncertainty`)."""
+    from .uncertainty import jacobian_uncertainty
+
+    names = ("kb", "kr", "a", "b", "kd")
+    sw = np.sqrt(w / w.sum())
+
+    def residuals(p):
+        q = dict(zip(names, p))
+        q = {k: (max(v, 1e-300) if k != "b" else v) for k, v in q.items()}
+        return sw * (TorranceSparrow5(**q).evaluate(wi, wo) - f) / f
+
+    return jacobian_uncertainty(residuals, [params[k] for k in names], names)
 
 
 def compare_ts5_methods(wi, wo, brdf_per_sr, *, budgets=(2000, 8000), seeds=(0, 1, 2), methods=None, progress=None) -> list:

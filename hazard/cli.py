@@ -16,6 +16,7 @@ Verbs:
   hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
   hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
   hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
+  hazard fit abg SAMPLES.csv -o BRDF.json         ABg scatter lobe (nlopt), with parameter uncertainties
   hazard fit oxidation SERIES.csv -o OX.json      oxidation law from a reflectance series
   hazard mpe   --wavelength-nm L --duration-s T [--standard S] [--skin] [--json]
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
@@ -168,6 +169,15 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--seed", type=int, default=0)
     q.add_argument("--maxeval", type=int, default=20000, help="global-stage budget")
     q.add_argument("--report", action="store_true", help="print the algorithm comparison table")
+    q.add_argument("--force", action="store_true")
+    q.add_argument("--json", action="store_true")
+    q.add_argument("--quiet", action="store_true", help="no progress bars")
+    q = fsub.add_parser("abg", help="fit an ABg scatter lobe A / (B + |beta - beta0|^g) to a samples table (CSV)")
+    q.add_argument("inputs", nargs=1, help="samples table (CSV)")
+    q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
+    q.add_argument("--method", default="crs2", help="global nlopt method: crs2 (default), esch, isres, direct-l, mlsl")
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--maxeval", type=int, default=4000, help="global-stage budget")
     q.add_argument("--force", action="store_true")
     q.add_argument("--json", action="store_true")
     q.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -475,7 +485,8 @@ def _cmd_fit(args, out, err):
         if args.fit_kind == "oxidation":
             return _fit_oxidation(args, out)
         samples = _fit_samples(args)
-        return _fit_ts5(args, out, samples) if args.fit_kind == "ts5" else _fit_sh(args, out, samples)
+        fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
+        return fit(args, out, samples)
 
 
 def _fit_oxidation(args, out):
@@ -545,6 +556,21 @@ def _fit_ts5(args, out, samples):
                         progress=progress_callback("five-parameter fit", unit="eval"))
     brdfmodels.save(r.model, args.output)
     _print_report(out, "five-parameter fit", [r.summary()], args.json, {"wrote": str(args.output)})
+    return EXIT_OK
+
+
+def _fit_abg(args, out, samples):
+    import brdfmodels
+    from brdfmodels.fit_scatter import fit_abg
+
+    r = fit_abg(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval,
+                weights=samples.weight)
+    brdfmodels.save(r.model, args.output)
+    d = r.details
+    extra = {"A": f"{d['p_a']:.6g} +- {d['stderr_a']:.3g} (1 sigma, from the Jacobian at the optimum)",
+             "B": f"{d['p_b']:.6g} +- {d['stderr_b']:.3g}", "g": f"{d['p_g']:.6g} +- {d['stderr_g']:.3g}",
+             "at a bound of the search box": ", ".join(d["at_bound"]) or "none", "wrote": str(args.output)}
+    _print_report(out, "ABg fit (log residuals)", [r.summary()], args.json, extra)
     return EXIT_OK
 
 

@@ -54,6 +54,10 @@ def examples():
         ("sum", bm.Sum([bm.Lambertian(0.2), bm.Specular(0.3), sh]), None, False),
         ("scaled-const", bm.Scaled(bm.Lambertian(0.8), 0.5), None, True),
         ("scaled-table", bm.Scaled(dyn, table), 700.0, False),
+        ("abg-fred-defaults", bm.ABg(0.0025, 0.001, 1.8), None, True),
+        ("abg-g0", bm.ABg(0.2, 0.0, 0.0), None, True),
+        ("gaussian-lobe", bm.GaussianLobe(2.0, 0.1), None, True),
+        ("hel-metal", bm.Sum([bm.GaussianLobe(20.0, 0.05), bm.ABg(0.002, 0.001, 2.0), bm.Lambertian(0.05)]), None, True),
     ]
     for name, p in TS5_PUBLISHED.items():
         out.append((f"ts5-{name}", bm.TorranceSparrow5(**p), None, name in ("cement", "khaki_paint", "forged_steel")))
