@@ -111,8 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="scene TOML file, or a bundled example's name")
     p.add_argument("--json", action="store_true", help="print JSON")
 
-    p = sub.add_parser("models", help="list the registered BRDF models")
+    p = sub.add_parser("models", help="list the registered BRDF models (--materials: the material library)")
     p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--materials", action="store_true", help="list the material library (scenes: material = { library = NAME })")
 
     p = sub.add_parser("schema", help="print the JSON schema of scene files")
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
@@ -431,6 +432,18 @@ def _cmd_validate(args, out, err):
 def _cmd_models(args, out, err):
     import brdfmodels
 
+    if args.materials:
+        from brdfmodels.library import LIBRARY
+
+        rows = {k: {"kind": e.kind, "params": e.params, "source": e.source, "wavelength_nm": e.wavelength_nm, "note": e.note}
+                for k, e in sorted(LIBRARY.items())}
+        if args.json:
+            out.write(json.dumps(rows, indent=1) + "\n")
+        else:
+            for k, e in rows.items():
+                at = f" at {e['wavelength_nm']:g} nm" if e["wavelength_nm"] else ""
+                out.write(f"{k}: {e['kind']} {e['params']}{at}\n    source: {e['source']}" + (f"\n    {e['note']}" if e["note"] else "") + "\n")
+        return EXIT_OK
     names = brdfmodels.available_models()
     out.write((json.dumps(names) if args.json else "\n".join(names)) + "\n")
     return EXIT_OK

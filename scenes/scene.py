@@ -172,11 +172,15 @@ def _with_polarization(data, polarization):
     return data
 
 
-def _material(spec, where, base_dir, polarization="unpolarized"):
+def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=None):
     """A target's (or the terrain's) BRDF; Fresnel mirrors take the laser's polarisation:
     ``"unknown"`` -> the larger of s and p (:func:`brdfmodels.optics.fresnel_reflectance`)."""
     try:
-        if spec.file is not None:
+        if spec.library is not None:
+            from brdfmodels.library import material
+
+            model = material(spec.library, wavelength_nm)
+        elif spec.file is not None:
             p = Path(spec.file)
             if not p.is_absolute() and base_dir is not None:
                 p = base_dir / p
@@ -233,7 +237,7 @@ def _terrain_target(spec, terrain, index, base_dir) -> Target:
     if ms is None:
         material = brdfmodels.create("lambertian", reflectance=TERRAIN_DEFAULT_REFLECTANCE)
     else:
-        material = _material(ms, "terrain.material", base_dir, spec.laser.polarization)
+        material = _material(ms, "terrain.material", base_dir, spec.laser.polarization, spec.laser.wavelength_nm)
         if material.is_dynamic:
             raise SceneError(f"terrain.material: depends on {material.state_name!r}; expected a static material (the ground has no history)")
     h = terrain.heights
@@ -334,6 +338,7 @@ def _warnings(spec: SceneSpec) -> list:
     vis = spec.atmosphere.visibility_km
     if vis is not None and vis < 0.05:
         out.append(f"atmosphere.visibility_km = {vis:g} km is under 50 m (dense fog): m meant?")
+    out += _library_wavelength_warnings(spec)
     t_end = spec.analysis.time_end_s
     if t_end is not None and t_end < spec.exposure.duration_s and any(t.history is not None for t in spec.targets):
         out.append(f"analysis.time_end_s = {t_end:g} s ends before the exposure (exposure.duration_s = "
@@ -345,6 +350,21 @@ def _warnings(spec: SceneSpec) -> list:
 # a power in mW or kW typed as W. (exposure.duration_s beyond the MPE tables' 3e4 s is
 # already an error of the schema.)
 POWER_PLAUSIBLE_W = (1e-3, 1e7)
+
+
+def _library_wavelength_warnings(spec: SceneSpec) -> list:
+    """A library material measured at another wavelength than the laser's (more than 5 %
+    off): its reflectance there is not known."""
+    from brdfmodels.library import LIBRARY
+
+    out, wl = [], spec.laser.wavelength_nm
+    for i, t in enumerate(spec.targets):
+        for key, m in (("material", t.material), ("back", t.back)):
+            lib = None if m is None else LIBRARY.get(m.library or "")
+            if lib is not None and lib.wavelength_nm is not None and abs(wl / lib.wavelength_nm - 1) > 0.05:
+                out.append(f"targets[{i}].{key}: library {m.library!r} was measured at {lib.wavelength_nm:g} nm, "
+                           f"the laser is at {wl:g} nm: its reflectance there is not known")
+    return out
 
 
 def _magnitude_warnings(spec: SceneSpec) -> list:
@@ -372,7 +392,7 @@ def _check_laser_in_open_air(spec: SceneSpec, lp, offset, terrain) -> None:
                              f"(ground at {float(terrain.height_at(x, y)[0] + offset[2]):.6g} m); expected the laser above it")
 
 
-def _target(i, ts, offset, base_dir, polarization="unknown") -> Target:
+def _target(i, ts, offset, base_dir, polarization="unknown", wavelength_nm=None) -> Target:
     """Target ``i`` of the scene in local coordinates: its mesh, material (checked against
     its history) and back material."""
     where = f"targets[{i}]"
@@ -383,7 +403,7 @@ def _target(i, ts, offset, base_dir, polarization="unknown") -> Target:
     mesh.vertices = mesh.vertices - offset
     if mesh.analytic is not None:
         mesh.analytic = (mesh.analytic[0], mesh.analytic[1] - offset, *mesh.analytic[2:])
-    material = _material(ts.material, f"{where}.material", base_dir, polarization)
+    material = _material(ts.material, f"{where}.material", base_dir, polarization, wavelength_nm)
     hist = _history(ts.history, f"{where}.history", base_dir)
     if ts.history is not None:
         state = ts.history.state
@@ -407,7 +427,7 @@ def _target(i, ts, offset, base_dir, polarization="unknown") -> Target:
         raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
     back = None
     if ts.back is not None:
-        back = _material(ts.back, f"{where}.back", base_dir, polarization)
+        back = _material(ts.back, f"{where}.back", base_dir, polarization, wavelength_nm)
         if back.is_dynamic:
             raise SceneError(f"{where}.back: the back material depends on {back.state_name!r}; "
                              f"expected a static material (the history drives the front face only)")
@@ -550,7 +570,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
                          f"at least 1 um away, or a non-zero direction)")
     d = d / norm
 
-    targets = [_target(i, ts, offset, base_dir, spec.laser.polarization) for i, ts in enumerate(spec.targets)]
+    targets = [_target(i, ts, offset, base_dir, spec.laser.polarization, spec.laser.wavelength_nm) for i, ts in enumerate(spec.targets)]
     _check_series_cover(spec, targets)
     occluders = []
     for i, os_ in enumerate(spec.occluders):

@@ -206,7 +206,8 @@ class HistorySpec(_Strict):
 
 
 class MaterialSpec(BaseModel):
-    """A BRDF: ``model`` plus its parameters inline, or a saved model ``file`` (JSON).
+    """A BRDF: ``model`` plus its parameters inline, a saved model ``file`` (JSON), or a
+    ``library`` material (:mod:`brdfmodels.library`, with provenance).
 
     Extra keys are the model's parameters; they are checked by building the model, so a
     misspelled parameter is an error that lists the model's parameters.
@@ -216,15 +217,23 @@ class MaterialSpec(BaseModel):
 
     model: Name | None = None
     file: Name | None = None
+    library: Name | None = None
     groove_angle_deg: float = Field(default=0.0, ge=-360.0, le=360.0,
                                     description="angle of the material grooves from the target tangent [deg]")
 
     @model_validator(mode="after")
     def _check(self):
-        if (self.model is None) == (self.file is None):
-            raise ValueError("give either model (with its parameters inline) or file, not both")
-        if self.file is not None and self.model_extra:
-            raise ValueError(f"unexpected keys {sorted(self.model_extra)} next to file")
+        given = [k for k in ("model", "file", "library") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give one of model (with its parameters inline), file or library"
+                             + (f"; got {', '.join(given)}" if given else ""))
+        if self.model is None and self.model_extra:
+            raise ValueError(f"unexpected keys {sorted(self.model_extra)} next to {given[0]}")
+        if self.library is not None:
+            from brdfmodels.library import LIBRARY, library_names
+
+            if self.library not in LIBRARY:
+                raise ValueError(f"library={self.library!r}: expected one of {library_names()}")
         if self.model is not None:
             import brdfmodels
 
