@@ -157,7 +157,7 @@ def report_dict(result) -> dict:
         "sdz": getattr(result, "sdz", None) or None,
         "stages": [s.to_dict() for s in result.stages],
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
-        "targets": [{**t.to_dict(), "hit": target_hit(t, result.beam_power_w)} for t in result.targets],
+        "targets": [{**t.to_dict(), "hit": target_hit(t)} for t in result.targets],
         "footprint": fp or None,
         "observers": listed,
         "observers_listed": which,
@@ -366,16 +366,19 @@ def _observer_lines(result, max_observers) -> list:
     return lines
 
 
-WING_FRACTION = 1e-6  # a target taking less of the beam than this is reached by its Gaussian wing only
+WING_FRACTION = 1e-6  # a target where the beam's profile is below this of its on-axis value is in its wing only
 
 
-def target_hit(t, beam_power_w) -> str:
+def target_hit(t) -> str:
     """How the beam meets a target (report.json ``targets[i].hit``): ``"beam"``,
-    ``"wing only"`` (less than ``WING_FRACTION`` of it: the Gaussian's tail; its NOHDs are
-    still computed from that power, conservative) or ``"not hit"``."""
-    if t.static_lobe is None or not t.spot_power_w > 0:
-        return "not hit"
-    return "wing only" if t.spot_power_w < WING_FRACTION * beam_power_w else "beam"
+    ``"wing only"`` (its hottest point sees less than ``WING_FRACTION`` of the beam's
+    on-axis irradiance at that range: the Gaussian's tail, 3.7 1/e radii off the axis or
+    more; its NOHDs are still computed from that power, conservative), ``"not
+    reflected"`` (power reaches it, nothing is reflected: ``lit_side`` says why) or
+    ``"not hit"``."""
+    if t.static_lobe is None:
+        return "not reflected" if t.spot_power_w > 0 else "not hit"
+    return "wing only" if getattr(t, "beam_profile_fraction", 1.0) < WING_FRACTION else "beam"
 
 
 def _nohd_lines(result) -> list:
@@ -386,9 +389,9 @@ def _nohd_lines(result) -> list:
         if t.static_lobe is None:
             lines.append(f"  {t.name}: nothing reflected ({t.lit_side})")
             continue
-        if target_hit(t, result.beam_power_w) == "wing only":
-            lines.append(f"  {t.name}: the beam misses it; only its Gaussian wing reaches it ({t.spot_power_w:.3g} W, "
-                         f"{t.spot_power_w / result.beam_power_w:.2g} of the beam)")
+        if target_hit(t) == "wing only":
+            lines.append(f"  {t.name}: the beam misses it; only its Gaussian wing reaches it ({t.spot_power_w:.3g} W; "
+                         f"at most {t.beam_profile_fraction:.2g} of the beam's on-axis irradiance there)")
         spec = ("no mirror beam" if t.specular_nohd_static_m is None else
                 f"specular static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m")
         lines.append(f"  {t.name}: diffuse static {d['nohd_static_m']:.4g} m, dynamic {d['nohd_dynamic_m']:.4g} m; {spec}")

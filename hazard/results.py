@@ -44,6 +44,7 @@ class TargetResult:
     mean_irradiance_w_m2: float = 0.0  # spot power over its lit area normal to the beam
     lit_side: str = "front"
     aided: list = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
+    beam_profile_fraction: float = 1.0  # hottest incident irradiance / the beam's on-axis value there (hazard.pipeline.lobes)
 
     def to_dict(self):
         def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side

@@ -88,10 +88,10 @@ class LaserSpec(_Strict):
     wavelength_nm: float = Field(ge=400.0, le=1.0e6, description=(
         "wavelength [nm], 400 nm to 1 mm (the MPE's UV rows, 180-400 nm, are not implemented: refused here, "
         "as the analysis would refuse them)"))
-    power_w: float | None = Field(default=None, gt=0, le=1e9, description="CW power [W]")
-    pulse_energy_j: float | None = Field(default=None, gt=0, le=1e7, description="energy per pulse [J]")
+    power_w: float | None = Field(default=None, ge=1e-9, le=1e9, description="CW power [W], 1 nW to 1 GW")
+    pulse_energy_j: float | None = Field(default=None, ge=1e-15, le=1e7, description="energy per pulse [J], 1 fJ to 10 MJ")
     pulse_duration_s: float | None = Field(default=None, ge=1e-13, le=3e4, description="pulse duration [s] (the MPE tables start at 1e-13 s)")
-    prf_hz: float | None = Field(default=None, gt=0, le=1e12, description="pulse repetition frequency [Hz]")
+    prf_hz: float | None = Field(default=None, ge=1e-6, le=1e12, description="pulse repetition frequency [Hz], 1e-6 to 1e12")
     beam_diameter_m: float = Field(ge=1e-6, le=100.0, description="beam diameter at the aperture, 1/e points [m] (at least 1 um)")
     divergence_rad: float = Field(ge=0, le=math.pi, description="full-angle divergence, 1/e points [rad]")
     position_m: Vec3
@@ -459,8 +459,8 @@ class SceneSpec(_Strict):
     occluders: list[OccluderSpec] = []
     terrain: TerrainSpec | None = None
     observers: list[ObserverSpec] = []
-    atmosphere: AtmosphereSpec = AtmosphereSpec()
-    analysis: AnalysisSpec = AnalysisSpec()
+    atmosphere: AtmosphereSpec = Field(default_factory=AtmosphereSpec)
+    analysis: AnalysisSpec = Field(default_factory=AnalysisSpec)  # built per scene: its limit checks read HAZARD_MAX_* then
     range: RangeSpec | None = None
 
     @model_validator(mode="after")

@@ -3,6 +3,8 @@ dynamic) and the specular NOHD, gathered into the report's target rows."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..keepout import hazard_lobe
@@ -46,15 +48,36 @@ def _hazards(sp, states, mpe_w_m2, mu, analysis, gain=1.0):
     return (static_lobe, dynamic_lobe) + _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain)
 
 
+def profile_fraction(sp, mu) -> float:
+    """How far into the beam's profile the target reaches: its hottest incident
+    irradiance over the beam's on-axis irradiance at that point's axial range, both
+    attenuated along the same path (1: the target holds the axis; 1e-6: its nearest
+    point is 3.7 1/e radii off it). In logarithms: no underflow for tiny powers or
+    thick air."""
+    beam = sp.beam
+    if sp.peak_irradiance_w_m2 is None or beam is None or not len(sp.peak_irradiance_w_m2):
+        return 1.0
+    k = int(np.argmax(sp.peak_irradiance_w_m2))
+    e = float(sp.peak_irradiance_w_m2[k])
+    if not e > 0:
+        return 0.0
+    z = float((np.asarray(sp.points[k], float) - beam.position_m) @ beam.axis)
+    w = float(beam.diameter_at(max(z, 0.0))) / 2
+    log_axis = math.log(beam.power_w) - math.log(math.pi * w * w) - mu * float(sp.range_from_laser_m[k])
+    return float(min(math.exp(min(math.log(e) - log_axis, 0.0)), 1.0))
+
+
 def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
     """One lit target's row: spot, naked-eye lobes and specular NOHDs, state range."""
     t = sp.target
-    return TargetResult(
+    row = TargetResult(
         t.name, sp.total_power_w, sp.size_m, *_hazards(sp, states, mpe_w_m2, mu, analysis),
         t.material.state_name if t.material.is_dynamic else None,
         [float(states[t.index].min()), float(states[t.index].max())] if t.index in states else None,
         sp.power_error_w, sp.exact, sp.max_irradiance_w_m2, sp.mean_irradiance_w_m2, sp.side,
     )
+    row.beam_profile_fraction = profile_fraction(sp, mu)
+    return row
 
 
 def scene_aids(scene) -> list:

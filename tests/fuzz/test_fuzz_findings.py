@@ -65,6 +65,7 @@ def _one_line_error(stderr, *words):
 
 CASES = {
     "aim 1e-300 m from the laser": (BASE.replace("aim_m = [0.0, 0.0, 1.0]", "aim_m = [1e-300, -50.0, 1.0]"), ["laser.aim_m", "undefined"]),
+    "a laser of 1e-300 W": (BASE.replace("power_w = 100.0", "power_w = 1e-300"), ["laser.power_w", "greater than or equal to 0.000000001"]),
     "UV wavelength": (BASE.replace("wavelength_nm = 1064.0", "wavelength_nm = 180.0"), ["laser.wavelength_nm", "400"]),
     "a beam of 1e-300 m": (BASE.replace("beam_diameter_m = 0.01", "beam_diameter_m = 1e-300"), ["laser.beam_diameter_m"]),
     "a series shorter than the analysis": (BASE.replace('material = { model = "lambertian", reflectance = 0.5 }',
@@ -112,10 +113,11 @@ def test_bad_height_maps_and_material_files_are_input_errors(tmp_path):
         _one_line_error(ve, *words)
 
 
-@pytest.mark.parametrize("power, mu", [(1e-300, 0.0), (100.0, 10.0)])
+@pytest.mark.parametrize("power, mu", [(1e-9, 0.0), (100.0, 10.0)])
 def test_a_spot_of_underflowed_power_is_analysed(power, mu, tmp_path):
-    """1e-300 W, or 100 W through 50 m at 10 /m (e^-500): the spot's means were 0/0 and
-    the run crashed in several lines; now it runs and reports a safe, finite answer."""
+    """1 nW (the least power a scene takes; 1e-300 W is refused), or 100 W through 50 m
+    at 10 /m (e^-500): the spot's means were 0/0 and the run crashed in several lines;
+    now it runs and reports a safe, finite answer, the plate still in the beam."""
     text = BASE.replace("power_w = 100.0", f"power_w = {power!r}") + f"[atmosphere]\nattenuation_per_m = {mu!r}\n"
     path = tmp_path / "s.toml"
     path.write_text(text)
@@ -123,6 +125,7 @@ def test_a_spot_of_underflowed_power_is_analysed(power, mu, tmp_path):
     assert code == 0 and "Warning" not in err and "Traceback" not in err
     doc = json.loads((tmp_path / "o" / "report.json").read_text())
     assert [t["name"] for t in doc["targets"]] == ["plate"] and not doc["observers"][0]["hazardous"]
+    assert doc["targets"][0]["hit"] == "beam"  # thick air is not a miss
 
 
 @pytest.mark.parametrize("name, value, words", [("FILE_MB", "1e308", ["HAZARD_MAX_FILE_MB", "up to"]),

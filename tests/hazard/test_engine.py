@@ -260,7 +260,7 @@ def test_cli_bad_scene_one_line(tmp_path):
     bad.write_text(PLATE.format(power=-1.0, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=16, grid=2.0, levels=1))
     code, out, err = run("run", str(bad), "-o", str(tmp_path / "o"))
     assert code == 2 and out == "" and err.count("\n") == 1
-    assert "laser.power_w: Input should be greater than 0" in err
+    assert "laser.power_w: Input should be greater than or equal to 0.000000001 (got -1.0)" in err
     assert not (tmp_path / "o").exists()
 
 

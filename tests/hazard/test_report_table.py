@@ -87,12 +87,18 @@ def test_json_lists_the_highest_ratios_above_the_limit_and_says_so(monkeypatch, 
 
 def test_a_target_the_beam_misses_is_said_to_get_only_its_wing(tmp_path):
     """A plate whose near edge is 0.15 m off the axis of a beam of 1/e radius 27.5 mm at
-    50 m takes ~exp(-(0.15 / 0.0275)^2) ~ 1e-13 of it: report.json says "wing only" and
-    the answer says the beam misses it (it read as an ordinary lit target)."""
+    50 m sees at most exp(-(0.15 / 0.0275)^2) ~ 1e-13 of the beam's on-axis irradiance:
+    report.json says "wing only" and the answer says the beam misses it (it read as an
+    ordinary lit target). A beam far wider than its target, or thick air, is still
+    "beam": the profile, not the power, decides."""
     text = SCENE.replace("center_m = [0.0, 0.0, 0.0]", "center_m = [0.65, 0.0, 0.0]")
     res = hazard.analyze(scenes.loads(text))
     doc = report.report_dict(res)
-    frac = res.targets[0].spot_power_w / res.beam_power_w
-    assert 0 < frac < report.WING_FRACTION and doc["targets"][0]["hit"] == "wing only"
+    frac = res.targets[0].beam_profile_fraction  # exp(-(0.15 / 0.0275)^2) = 1.2e-13 at the plate's near edge
+    assert frac == pytest.approx(np.exp(-(0.15 / 0.0275) ** 2), rel=0.05) and doc["targets"][0]["hit"] == "wing only"
     assert "the beam misses it; only its Gaussian wing reaches it" in report.answer_text(res)
     assert report.report_dict(hazard.analyze(scenes.loads(SCENE)))["targets"][0]["hit"] == "beam"
+    thick = SCENE.replace("[exposure]", "[exposure]\n").replace("[[targets]]", "[atmosphere]\nattenuation_per_m = 10.0\n[[targets]]")
+    assert report.report_dict(hazard.analyze(scenes.loads(thick)))["targets"][0]["hit"] == "beam"  # e^-500 of air, on axis
+    far = SCENE.replace("position_m = [0.0, -50.0, 0.0]", "position_m = [0.0, -1e8, 0.0]")
+    assert report.report_dict(hazard.analyze(scenes.loads(far)))["targets"][0]["hit"] == "beam"  # a 1e5 m beam on a 1 m plate
