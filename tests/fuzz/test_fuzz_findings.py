@@ -129,6 +129,7 @@ def test_a_spot_of_underflowed_power_is_analysed(power, mu, tmp_path):
 
 
 @pytest.mark.parametrize("name, value, words", [("FILE_MB", "1e308", ["HAZARD_MAX_FILE_MB", "up to"]),
+                                                  ("KEEPOUT_CELLS", "inf", ["HAZARD_MAX_KEEPOUT_CELLS='inf'", "up to"]),
                                                   ("DEPTH", "100000", ["HAZARD_MAX_DEPTH", "up to 200"])])
 def test_absurd_limits_are_refused_in_one_line(name, value, words, tmp_path, monkeypatch):
     monkeypatch.setenv(f"HAZARD_MAX_{name}", value)
