@@ -542,7 +542,9 @@ def _fit_samples(args):
     from .progress import terminal_bar
 
     if args.fit_kind != "screen":
-        return screen.Samples.read(args.inputs[0])
+        from brdfmodels.io import read_samples
+
+        return read_samples(args.inputs[0])  # own samples CSV/Parquet, Zemax .bsdf, ASTM E1392, generic angle CSV
     parts = []
     with terminal_bar(len(args.inputs), "reducing screen tests", unit="test", leave=True) as bar:
         for p in args.inputs:

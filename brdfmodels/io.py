@@ -1,0 +1,264 @@
+"""Readers of measured BRDF files into :class:`brdfmodels.screen.Samples` (so every fit,
+``hazard fit sh|ts5|abg FILE``, takes them). Each reader names the file and the line of a
+malformed entry.
+
+- :func:`read_bsdf`: the Zemax / Radiant "BSDF data interchange" ASCII layout (``*.bsdf``;
+  spec `range-safety.md` section 9, [C] Rykowski 2008, Zemax KB 229, libbsdf's
+  ZemaxBsdfReader). Keywords case-insensitive: ``Symmetry`` (PlaneSymmetrical,
+  Asymmetrical, Asymmetrical4D), ``SpectralContent`` (Monochrome only here),
+  ``ScatterType`` (BRDF only), ``SampleRotation`` (one rotation: isotropic, as the
+  OpticStudio DLL), ``AngleOfIncidence`` (a misnomer: the *specular* angle, deg),
+  ``ScatterAzimuth`` and ``ScatterRadial`` (deg), then ``DataBegin``, per angle of
+  incidence a ``TIS <value>`` line followed by nAzimuth x nRadial values (azimuth outer,
+  radial inner), ``DataEnd``. The scattered direction is the specular direction turned
+  by the radial angle, in the plane at the scatter azimuth; azimuth 0 points from the
+  specular direction toward the sample normal. PlaneSymmetrical data (0-180 deg) are
+  mirrored to the other half. Directions at or below the horizon are dropped.
+- :func:`read_astm_e1392`: ASTM E1392-96 scatter tables ([C] libbsdf's AstmReader):
+  ``NUM_POINTS <n>`` and ``VARS <names>`` header keywords, then comma-separated rows
+  ``theta_i, phi_i, theta_s, phi_s`` [rad] and one BRDF column [1/sr] (read here as the
+  spherical angles of the directions from the sample to the source and to the receiver;
+  the standard's own text on the columns was not read). Duplicate angle tuples are
+  skipped.
+- :func:`read_brdf_csv`: a documented generic CSV: columns ``theta_i_deg, phi_i_deg,
+  theta_r_deg, phi_r_deg`` (spherical angles of the directions to the source and to the
+  observer in the sample frame, z the normal, x the grooves) and exactly one value
+  column, ``brdf_per_sr`` (BRDF [1/sr]) or ``reflectance_factor`` (R = pi f_r, converted
+  as f_r = R / pi); optional ``time_s``, ``temperature_k``, ``test_id``, ``weight``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ._io import read_input_text
+
+__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_samples"]
+
+
+def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=None):
+    from .screen import Samples
+
+    n = len(f)
+    return Samples(np.asarray(wi, float), np.asarray(wo, float), np.asarray(f, float),
+                   np.zeros(n) if time_s is None else np.asarray(time_s, float),
+                   np.full(n, np.nan) if temperature_k is None else np.asarray(temperature_k, float),
+                   np.array(["0"] * n) if test_id is None else np.asarray(test_id).astype(str),
+                   np.zeros(n, int), np.ones(n) if weight is None else np.asarray(weight, float))
+
+
+def _unit(theta, phi):
+    theta, phi = np.asarray(theta, float), np.asarray(phi, float)
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
+
+
+# -- Zemax / Radiant .bsdf -------------------------------------------------------------
+_BSDF_LISTS = ("samplerotation", "angleofincidence", "scatterazimuth", "scatterradial")
+
+
+def _numbers(tokens, path, line_no, what):
+    try:
+        return [float(t) for t in tokens]
+    except ValueError:
+        raise ValueError(f"{path}: line {line_no}: {what}: expected numbers, got {' '.join(tokens)[:60]!r}") from None
+
+
+def _bsdf_header(lines, path):
+    """Header keywords -> values, and the index of the line after ``DataBegin``."""
+    head, i = {}, 0
+    while i < len(lines):
+        no, toks = lines[i]
+        key = toks[0].lower()
+        if key == "databegin":
+            return head, i + 1
+        if key in _BSDF_LISTS:
+            n = int(_numbers(toks[1:2], path, no, toks[0])[0]) if len(toks) > 1 else -1
+            vals = toks[2:]
+            while len(vals) < n and i + 1 < len(lines) and lines[i + 1][1][0].lower() not in _BSDF_LISTS + ("databegin",):
+                i += 1
+                vals += lines[i][1]
+            if n < 1 or len(vals) != n:
+                raise ValueError(f"{path}: line {no}: {toks[0]}: expected a count and that many angles")
+            head[key] = np.array(_numbers(vals, path, no, toks[0]))
+        else:
+            head[key] = " ".join(toks[1:])
+        i += 1
+    raise ValueError(f"{path}: no DataBegin line")
+
+
+def _scatter_directions(theta_spec, az, rad):
+    """Unit scattered directions (nAz, nRad, 3) about the specular direction at
+    ``theta_spec`` [rad] in the x-z plane (incidence from +x: the source direction is
+    (sin t, 0, cos t))."""
+    s = np.array([-math.sin(theta_spec), 0.0, math.cos(theta_spec)])
+    toward = np.array([0.0, 0.0, 1.0]) - s[2] * s  # from the specular direction toward the normal
+    nt = np.linalg.norm(toward)
+    e1 = toward / nt if nt > 1e-12 else np.array([1.0, 0.0, 0.0])
+    e2 = np.cross(s, e1)
+    a, r = np.meshgrid(az, rad, indexing="ij")
+    return (np.cos(r)[..., None] * s + np.sin(r)[..., None] * (np.cos(a)[..., None] * e1 + np.sin(a)[..., None] * e2))
+
+
+def _block_values(block, tokens, start, path) -> np.ndarray:
+    """The values of a data block as floats; the first bad one named with its line."""
+    try:
+        v = np.array(block, dtype=float)
+    except ValueError:
+        v = None
+    if v is None or not np.all(np.isfinite(v)) or np.any(v < 0):
+        for j, x in enumerate(block):
+            try:
+                ok = math.isfinite(float(x)) and float(x) >= 0
+            except ValueError:
+                ok = False
+            if not ok:
+                raise ValueError(f"{path}: line {tokens[start + j][0]}: data: expected a finite BRDF >= 0, got {x!r}")
+    return v
+
+
+def read_bsdf(path):
+    """Samples from a Zemax / Radiant ASCII ``.bsdf`` file (see the module notes)."""
+    path = Path(path)
+    lines = [(k + 1, ln.split()) for k, ln in enumerate(read_input_text(path, "BSDF file").splitlines())
+             if ln.strip() and not ln.lstrip().startswith("#")]
+    head, i = _bsdf_header(lines, path)
+    for key, want in (("spectralcontent", "monochrome"), ("scattertype", "brdf")):
+        if head.get(key, want).lower() != want:
+            raise ValueError(f"{path}: {key} = {head[key]!r}: only {want} data are read")
+    sym = head.get("symmetry", "").lower()
+    if sym not in ("planesymmetrical", "asymmetrical", "asymmetrical4d"):
+        raise ValueError(f"{path}: Symmetry = {head.get('symmetry')!r}: expected PlaneSymmetrical, Asymmetrical or Asymmetrical4D")
+    if len(head.get("samplerotation", [0.0])) != 1:
+        raise ValueError(f"{path}: SampleRotation: one rotation is read (isotropic samples)")
+    for key in _BSDF_LISTS[1:]:
+        if key not in head:
+            raise ValueError(f"{path}: missing the {key} list")
+    aoi, az, rad = (np.radians(head[k]) for k in _BSDF_LISTS[1:])
+    tokens = [(no, t) for no, toks in lines[i:] for t in toks]
+    values = [t for _, t in tokens]
+    wi, wo, f, tid = [], [], [], []
+    pos = 0
+    need = len(az) * len(rad)
+    for t in aoi:
+        if pos >= len(values) or values[pos].lower() != "tis":
+            where = f"line {tokens[pos][0]}: " if pos < len(tokens) else ""
+            raise ValueError(f"{path}: {where}expected 'TIS <value>' before the block of AngleOfIncidence {math.degrees(t):g} deg")
+        block = values[pos + 2:pos + 2 + need]
+        if len(block) != need or any(x.lower() in ("tis", "dataend") for x in block):
+            raise ValueError(f"{path}: line {tokens[pos][0]}: the block of AngleOfIncidence {math.degrees(t):g} deg holds "
+                             f"fewer than {len(az)} x {len(rad)} values")
+        v = _block_values(block, tokens, pos + 2, path).reshape(len(az), len(rad))
+        pos += 2 + need
+        d = _scatter_directions(t, az, rad)
+        if sym == "planesymmetrical":  # mirror the 0-180 deg half
+            d = np.concatenate([d, d * [1.0, -1.0, 1.0]])
+            v = np.concatenate([v, v])
+        keep = d[..., 2] > 0
+        wo.append(d[keep])
+        f.append(v[keep])
+        wi.append(np.broadcast_to([math.sin(t), 0.0, math.cos(t)], (int(keep.sum()), 3)))
+        tid += [f"aoi{math.degrees(t):g}"] * int(keep.sum())
+    if values[pos:] and values[pos].lower() != "dataend":
+        raise ValueError(f"{path}: unexpected values after the last block ({values[pos][:20]!r})")
+    return _samples(np.vstack(wi), np.vstack(wo), np.concatenate(f), tid)
+
+
+# -- ASTM E1392 -----------------------------------------------------------------------
+def read_astm_e1392(path):
+    """Samples from an ASTM E1392 scatter table (see the module notes)."""
+    path = Path(path)
+    text = read_input_text(path, "ASTM E1392 file")
+    n_points, names, rows, seen, n_rows = None, None, [], set(), 0
+    for k, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        key = s.split(None, 1)[0].upper()
+        if key == "NUM_POINTS":
+            n_points = int(_numbers(s.split()[1:2], path, k, "NUM_POINTS")[0])
+        elif key == "VARS":
+            names = [x.strip().lower() for x in s.split(None, 1)[1].split(",")]
+        elif s[0].isdigit() or s[0] in "+-.":
+            vals = _numbers([x for x in s.split(",") if x.strip()], path, k, "data row")
+            if names is None or len(vals) != len(names):
+                raise ValueError(f"{path}: line {k}: expected {len(names) if names else 'VARS before the'} columns")
+            n_rows += 1
+            key4 = tuple(vals[:4])
+            if key4 not in seen:
+                seen.add(key4)
+                rows.append(vals)
+    if names is None or len(names) < 5:
+        raise ValueError(f"{path}: expected VARS with theta_i, phi_i, theta_s, phi_s and a BRDF column")
+    if len(names) != 5:
+        raise ValueError(f"{path}: VARS {names}: one BRDF column is read (monochrome)")
+    if not rows:
+        raise ValueError(f"{path}: no data rows")
+    if n_points is not None and n_points != n_rows:
+        raise ValueError(f"{path}: NUM_POINTS {n_points} but {n_rows} data rows")
+    a = np.array(rows)
+    keep = (np.cos(a[:, 0]) > 0) & (np.cos(a[:, 2]) > 0)
+    return _samples(_unit(a[keep, 0], a[keep, 1]), _unit(a[keep, 2], a[keep, 3]), a[keep, 4])
+
+
+# -- generic CSV ---------------------------------------------------------------------
+_ANGLES = ("theta_i_deg", "phi_i_deg", "theta_r_deg", "phi_r_deg")
+
+
+def read_brdf_csv(path):
+    """Samples from the generic angle CSV (see the module notes)."""
+    path = Path(path)
+    rows = list(csv.reader(read_input_text(path, "BRDF CSV").splitlines()))
+    if not rows:
+        raise ValueError(f"{path}: empty file")
+    cols = [c.strip() for c in rows[0]]
+    missing = [c for c in _ANGLES if c not in cols]
+    value = [c for c in ("brdf_per_sr", "reflectance_factor") if c in cols]
+    if missing or len(value) != 1:
+        raise ValueError(f"{path}: line 1: expected columns {list(_ANGLES)} and one of brdf_per_sr or reflectance_factor, "
+                         f"got {cols}")
+    idx = {c: cols.index(c) for c in cols}
+    data = {c: [] for c in cols if c != "test_id"}
+    tid = []
+    for k, r in enumerate(rows[1:], start=2):
+        if not any(x.strip() for x in r):
+            continue
+        if len(r) != len(cols):
+            raise ValueError(f"{path}: line {k}: {len(r)} cells, expected {len(cols)}")
+        for c in data:
+            try:
+                v = float(r[idx[c]])
+            except ValueError:
+                raise ValueError(f"{path}: line {k}: {c} = {r[idx[c]]!r} is not a number") from None
+            if not math.isfinite(v):
+                raise ValueError(f"{path}: line {k}: {c} = {r[idx[c]]!r} is not finite")
+            data[c].append(v)
+        tid.append(r[idx["test_id"]] if "test_id" in idx else "0")
+    if not tid:
+        raise ValueError(f"{path}: no data rows")
+    f = np.array(data[value[0]]) / (math.pi if value[0] == "reflectance_factor" else 1.0)
+    wi = _unit(np.radians(data["theta_i_deg"]), np.radians(data["phi_i_deg"]))
+    wo = _unit(np.radians(data["theta_r_deg"]), np.radians(data["phi_r_deg"]))
+    return _samples(wi, wo, f, tid, data.get("time_s"), data.get("temperature_k"), data.get("weight"))
+
+
+def read_samples(path):
+    """Measured samples by the file's form: ``.bsdf`` (Zemax), ``.astm`` / ``.e1392``
+    (ASTM E1392), a CSV with ``theta_i_deg`` columns (generic), else this package's own
+    samples CSV / Parquet (:meth:`brdfmodels.screen.Samples.read`)."""
+    from .screen import Samples
+
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix == ".bsdf":
+        return read_bsdf(p)
+    if suffix in (".astm", ".e1392"):
+        return read_astm_e1392(p)
+    if suffix == ".csv":
+        first = read_input_text(p, "samples").split("\n", 1)[0]
+        if "theta_i_deg" in first:
+            return read_brdf_csv(p)
+    return Samples.read(p)
