@@ -20,6 +20,14 @@ malformed entry.
   spherical angles of the directions from the sample to the source and to the receiver;
   the standard's own text on the columns was not read). Duplicate angle tuples are
   skipped.
+- :func:`read_merl`: MERL ``.binary`` (Matusik et al. 2003; the format of its reference
+  reader BRDFRead.cpp): three int32 dimensions (90, 90, 180 for the database: theta_h,
+  theta_d, phi_d), then each colour channel's values as float64 (R block, G block, B
+  block), scaled by 1/1500, 1.15/1500, 1.66/1500. theta_h is sampled as
+  ``index = sqrt(theta_h / (pi/2)) n_h``, theta_d and phi_d (over [0, pi): reciprocity)
+  uniformly; negative values mark cells without data. Samples are taken at each cell's
+  centre (phi_h = 0: isotropic), one channel or the channels' mean. MERL data are
+  visible-light RGB: shapes of real lobes, not reflectances at a laser's wavelength.
 - :func:`read_brdf_csv`: a documented generic CSV: columns ``theta_i_deg, phi_i_deg,
   theta_r_deg, phi_r_deg`` (spherical angles of the directions to the source and to the
   observer in the sample frame, z the normal, x the grooves) and exactly one value
@@ -37,7 +45,7 @@ import numpy as np
 
 from ._io import read_input_text
 
-__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_samples"]
+__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "read_samples", "MERL_SCALE"]
 
 
 def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=None):
@@ -245,9 +253,43 @@ def read_brdf_csv(path):
     return _samples(wi, wo, f, tid, data.get("time_s"), data.get("temperature_k"), data.get("weight"))
 
 
+MERL_SCALE = {"R": 1.0 / 1500.0, "G": 1.15 / 1500.0, "B": 1.66 / 1500.0}
+
+
+def read_merl(path, channel="mean"):
+    """Samples from a MERL ``.binary`` file (see the module notes); ``channel``: "R",
+    "G", "B" or "mean"."""
+    from .geometry import half_diff_to_directions
+    from ._io import check_input_file
+
+    path = check_input_file(path, "MERL file")
+    raw = path.read_bytes()
+    if len(raw) < 12:
+        raise ValueError(f"{path}: not a MERL file (shorter than its 12-byte header)")
+    dims = np.frombuffer(raw[:12], dtype="<i4")
+    n = int(np.prod(dims.astype(np.int64)))
+    if np.any(dims < 1) or len(raw) != 12 + 3 * 8 * n:
+        raise ValueError(f"{path}: header dims {dims.tolist()} need {12 + 24 * n} bytes, the file has {len(raw)}")
+    if channel not in ("R", "G", "B", "mean"):
+        raise ValueError(f"channel={channel!r}: expected R, G, B or mean")
+    data = np.frombuffer(raw[12:], dtype="<f8").reshape(3, n)
+    vals = {c: data[k] * MERL_SCALE[c] for k, c in enumerate("RGB")}
+    v = (vals["R"] + vals["G"] + vals["B"]) / 3 if channel == "mean" else vals[channel]
+    used = [0, 1, 2] if channel == "mean" else ["RGB".index(channel)]
+    valid = np.all(data[used] >= 0, axis=0) & np.isfinite(v)  # negative: no data in that cell
+    nh, nd, nphi = (int(x) for x in dims)
+    ih, idd, ip = np.unravel_index(np.arange(n), (nh, nd, nphi))
+    th = ((ih + 0.5) / nh) ** 2 * (np.pi / 2)
+    td = (idd + 0.5) / nd * (np.pi / 2)
+    pd = (ip + 0.5) / nphi * np.pi
+    wi, wo = half_diff_to_directions(th, np.zeros(n), td, pd)
+    keep = valid & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    return _samples(wi[keep], wo[keep], v[keep])
+
+
 def read_samples(path):
     """Measured samples by the file's form: ``.bsdf`` (Zemax), ``.astm`` / ``.e1392``
-    (ASTM E1392), a CSV with ``theta_i_deg`` columns (generic), else this package's own
+    (ASTM E1392), ``.binary`` (MERL, the channels' mean), a CSV with ``theta_i_deg`` columns (generic), else this package's own
     samples CSV / Parquet (:meth:`brdfmodels.screen.Samples.read`)."""
     from .screen import Samples
 
@@ -257,6 +299,8 @@ def read_samples(path):
         return read_bsdf(p)
     if suffix in (".astm", ".e1392"):
         return read_astm_e1392(p)
+    if suffix == ".binary":
+        return read_merl(p)
     if suffix == ".csv":
         first = read_input_text(p, "samples").split("\n", 1)[0]
         if "theta_i_deg" in first:

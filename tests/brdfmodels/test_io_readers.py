@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import brdfmodels as bm
-from brdfmodels.io import read_astm_e1392, read_brdf_csv, read_bsdf, read_samples
+from brdfmodels.io import read_astm_e1392, read_brdf_csv, read_bsdf, read_merl, read_samples
 
 TRUTH = bm.TorranceSparrow5(kb=0.0698, kr=0.478, a=0.777, b=-28.935, kd=0.107)  # khaki paint (Zhang et al. 2010)
 
@@ -132,3 +132,39 @@ def test_hazard_fit_takes_a_bsdf_file(tmp_path):
                 stdout=out, stderr=io.StringIO()) == 0
     row = json.loads(out.getvalue())["rows"][0]
     assert row["p_a"] == pytest.approx(0.0025, rel=1e-6) and row["p_g"] == pytest.approx(1.8, rel=1e-6)
+
+
+def _merl_bytes(dims, truth, scale=(1 / 1500, 1.15 / 1500, 1.66 / 1500)):
+    """A MERL .binary by its reference reader's definition: int32 dims (theta_h, theta_d,
+    phi_d), then R, G, B blocks of float64 value / scale; theta_h at index i is
+    (i / n_h)^2 pi / 2, theta_d and phi_d uniform (phi_d over [0, pi)); cells sampled at
+    their centres; a cell whose directions dip below the horizon holds -1 (no data)."""
+    nh, nd, npd = dims
+    vals = np.empty((nh, nd, npd))
+    for i in range(nh):
+        th = ((i + 0.5) / nh) ** 2 * math.pi / 2
+        h = np.array([math.sin(th), 0.0, math.cos(th)])
+        for j in range(nd):
+            td = (j + 0.5) / nd * math.pi / 2
+            for k in range(npd):
+                pd = (k + 0.5) / npd * math.pi
+                d = np.array([math.sin(td) * math.cos(pd), math.sin(td) * math.sin(pd), math.cos(td)])
+                wi = np.array([math.cos(th) * d[0] + math.sin(th) * d[2], d[1], -math.sin(th) * d[0] + math.cos(th) * d[2]])
+                wo = 2 * (wi @ h) * h - wi
+                vals[i, j, k] = float(truth.evaluate(wi, wo)) if wi[2] > 0 and wo[2] > 0 else -1.0
+    out = np.asarray(dims, "<i4").tobytes()
+    for s in scale:
+        out += np.where(vals >= 0, vals / s, -1.0).astype("<f8").tobytes()
+    return out
+
+
+def test_merl_reads_back_the_analytic_brdf(tmp_path):
+    (tmp_path / "m.binary").write_bytes(_merl_bytes((9, 9, 18), TRUTH))
+    for channel in ("R", "B", "mean"):
+        s = read_merl(tmp_path / "m.binary", channel)
+        assert 0 < len(s) < 9 * 9 * 18  # the cells below the horizon are dropped
+        np.testing.assert_allclose(s.brdf_per_sr, TRUTH.evaluate(s.wi, s.wo), rtol=1e-9)
+    assert len(read_samples(tmp_path / "m.binary")) == len(s)
+    (tmp_path / "short.binary").write_bytes(_merl_bytes((9, 9, 18), TRUTH)[:-8])
+    with pytest.raises(ValueError, match=r"header dims \[9, 9, 18\] need"):
+        read_merl(tmp_path / "short.binary")
