@@ -256,10 +256,9 @@ def read_brdf_csv(path):
 MERL_SCALE = {"R": 1.0 / 1500.0, "G": 1.15 / 1500.0, "B": 1.66 / 1500.0}
 
 
-def read_merl(path, channel="mean"):
-    """Samples from a MERL ``.binary`` file (see the module notes); ``channel``: "R",
-    "G", "B" or "mean"."""
-    from .geometry import half_diff_to_directions
+def _merl_table(path):
+    """(dims (3,), raw channel values (3, n)) of a MERL ``.binary`` file, its size checked
+    against the header."""
     from ._io import check_input_file
 
     path = check_input_file(path, "MERL file")
@@ -270,14 +269,23 @@ def read_merl(path, channel="mean"):
     n = int(np.prod(dims.astype(np.int64)))
     if np.any(dims < 1) or len(raw) != 12 + 3 * 8 * n:
         raise ValueError(f"{path}: header dims {dims.tolist()} need {12 + 24 * n} bytes, the file has {len(raw)}")
+    return tuple(int(x) for x in dims), np.frombuffer(raw[12:], dtype="<f8").reshape(3, n)
+
+
+def read_merl(path, channel="mean"):
+    """Samples from a MERL ``.binary`` file (see the module notes); ``channel``: "R",
+    "G", "B" or "mean"."""
+    from .geometry import half_diff_to_directions
+
     if channel not in ("R", "G", "B", "mean"):
         raise ValueError(f"channel={channel!r}: expected R, G, B or mean")
-    data = np.frombuffer(raw[12:], dtype="<f8").reshape(3, n)
+    dims, data = _merl_table(path)
+    n = data.shape[1]
     vals = {c: data[k] * MERL_SCALE[c] for k, c in enumerate("RGB")}
     v = (vals["R"] + vals["G"] + vals["B"]) / 3 if channel == "mean" else vals[channel]
     used = [0, 1, 2] if channel == "mean" else ["RGB".index(channel)]
     valid = np.all(data[used] >= 0, axis=0) & np.isfinite(v)  # negative: no data in that cell
-    nh, nd, nphi = (int(x) for x in dims)
+    nh, nd, nphi = dims
     ih, idd, ip = np.unravel_index(np.arange(n), (nh, nd, nphi))
     th = ((ih + 0.5) / nh) ** 2 * (np.pi / 2)
     td = (idd + 0.5) / nd * (np.pi / 2)

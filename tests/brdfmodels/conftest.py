@@ -37,6 +37,14 @@ def make_dynamic(basis=None, states=(300.0, 600.0, 900.0)):
     return bm.DynamicBRDF(basis, list(states), np.array(rows[: len(states)]), "temperature_k")
 
 
+def _small_table():
+    """A tabulated Lambertian-plus-lobe on a coarse grid (envelope outside its range)."""
+    th, td, pd = np.linspace(0, 70, 8), np.linspace(0, 80, 9), np.linspace(0, 150, 6)
+    h = np.radians(th)[:, None, None]
+    v = 0.1 + 2.0 * np.exp(-(h / 0.2) ** 2) + 0.0 * np.radians(td)[None, :, None] + 0.0 * np.radians(pd)[None, None, :]
+    return bm.TabulatedBRDF(th, td, pd, v, outside="envelope")
+
+
 def examples():
     """(id, model, state, physical) for every registered model."""
     basis = bm.SHBasis(8, 2, 2, 0)
@@ -58,6 +66,7 @@ def examples():
         ("abg-g0", bm.ABg(0.2, 0.0, 0.0), None, True),
         ("gaussian-lobe", bm.GaussianLobe(2.0, 0.1), None, True),
         ("hel-metal", bm.Sum([bm.GaussianLobe(20.0, 0.05), bm.ABg(0.002, 0.001, 2.0), bm.Lambertian(0.05)]), None, True),
+        ("table", _small_table(), None, False),
     ]
     for name, p in TS5_PUBLISHED.items():
         out.append((f"ts5-{name}", bm.TorranceSparrow5(**p), None, name in ("cement", "khaki_paint", "forged_steel")))
