@@ -172,6 +172,22 @@ def _with_polarization(data, polarization):
     return data
 
 
+def _table_material(spec, base_dir):
+    """``{ model = "table", file = ... }``: a MERL ``.binary`` measurement, or a saved
+    table (JSON), with its ``outside`` policy (default "envelope": conservative)."""
+    p = Path(spec.file)
+    if not p.is_absolute() and base_dir is not None:
+        p = base_dir / p
+    outside = spec.params.get("outside", "envelope")
+    if p.suffix.lower() == ".binary":
+        return brdfmodels.TabulatedBRDF.from_merl(p, channel=spec.params.get("channel", "mean"), outside=outside)
+    model = brdfmodels.loads(read_input_text(p, "material file"))
+    if not isinstance(model, brdfmodels.TabulatedBRDF):
+        raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")
+    d = model.to_dict()["params"]
+    return brdfmodels.TabulatedBRDF(d["theta_h_deg"], d["theta_d_deg"], d["phi_d_deg"], d["values"], outside)
+
+
 def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=None):
     """A target's (or the terrain's) BRDF; Fresnel mirrors take the laser's polarisation:
     ``"unknown"`` -> the larger of s and p (:func:`brdfmodels.optics.fresnel_reflectance`)."""
@@ -180,6 +196,8 @@ def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=N
             from brdfmodels.library import material
 
             model = material(spec.library, wavelength_nm)
+        elif spec.model == "table":
+            model = _table_material(spec, base_dir)
         elif spec.file is not None:
             p = Path(spec.file)
             if not p.is_absolute() and base_dir is not None:

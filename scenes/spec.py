@@ -223,6 +223,13 @@ class MaterialSpec(BaseModel):
 
     @model_validator(mode="after")
     def _check(self):
+        if self.model == "table" and self.file is not None:  # a measured table: { model = "table", file = ..., outside = ... }
+            extra = set(self.model_extra or {}) - {"outside", "channel"}
+            if extra:
+                raise ValueError(f"unexpected keys {sorted(extra)} next to model = 'table' and file (expected outside, channel)")
+            if self.params.get("outside", "envelope") not in ("error", "envelope", "fit"):
+                raise ValueError(f"outside={self.params['outside']!r}: expected 'error', 'envelope' or 'fit'")
+            return self
         given = [k for k in ("model", "file", "library") if getattr(self, k) is not None]
         if len(given) != 1:
             raise ValueError("give one of model (with its parameters inline), file or library"

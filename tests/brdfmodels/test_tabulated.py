@@ -117,3 +117,20 @@ def test_from_merl(tmp_path):
     t = bm.TabulatedBRDF.from_merl(tmp_path / "m.binary", channel="R")
     s = read_merl(tmp_path / "m.binary", channel="R")
     np.testing.assert_allclose(t.evaluate(s.wi, s.wo), s.brdf_per_sr, rtol=1e-9)  # the cell centres are its nodes
+
+
+def test_a_scene_names_a_measured_table_by_model_and_file(tmp_path):
+    from tests._scene_text import PLATE_AT_50M
+
+    (tmp_path / "m.binary").write_bytes(_merl_bytes((9, 9, 18), TRUTH))
+    bm.save(bm.TabulatedBRDF(TH, TD, PD, VALUES, "error"), tmp_path / "t.json")
+    for mat, outside in (('{ model = "table", file = "m.binary" }', "envelope"),
+                         ('{ model = "table", file = "m.binary", outside = "fit", channel = "G" }', "fit"),
+                         ('{ model = "table", file = "t.json", outside = "envelope" }', "envelope")):
+        (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', mat))
+        m = scenes.load(tmp_path / "s.toml").targets[0].material
+        assert isinstance(m, bm.TabulatedBRDF) and m.outside == outside
+    (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }',
+                                                          '{ model = "table", file = "m.binary", outside = "maybe" }'))
+    with pytest.raises(scenes.SceneError, match="outside='maybe'"):
+        scenes.load(tmp_path / "s.toml")
