@@ -17,7 +17,8 @@ an explicit policy, ``outside``:
   tacking for the directions no data reach; :func:`brdfmodels.fitting.fit_sh`), made on
   first use.
 
-:meth:`TabulatedBRDF.from_merl` builds one from a MERL ``.binary`` file. Save and load it
+:meth:`TabulatedBRDF.from_merl` builds one from a MERL ``.binary`` file,
+:meth:`TabulatedBRDF.from_samples` grids scattered samples (any reader's) onto nodes. Save and load it
 like any model (its values travel in the JSON), so a scene takes it as
 ``material = { file = "table.json" }``.
 """
@@ -43,6 +44,39 @@ def _nodes(name, deg, lo, hi):
     if v.size < 1 or np.any(np.diff(v) <= 0) or v[0] < lo or v[-1] > hi:
         raise ValueError(f"{name}: expected strictly increasing angles within [{lo:g}, {hi:g}] deg")
     return np.radians(v)
+
+
+def _coordinates(wi, wo):
+    """(theta_h, theta_d, phi_d folded to [0, pi)) [rad] of direction pairs: reciprocity
+    makes phi_d and phi_d + pi one."""
+    th, _, _, td, cpd, spd = _half_diff_parts(wi, wo)
+    return th, td, np.mod(np.arctan2(spd, cpd), np.pi)
+
+
+def _nearest_node(nodes, x, periodic=False) -> np.ndarray:
+    """Index of the node nearest each x (the cell of half a spacing each side); periodic
+    over pi for phi_d."""
+    if len(nodes) == 1:
+        return np.zeros(len(x), np.intp)
+    ext = np.append(nodes, nodes[0] + np.pi) if periodic else nodes
+    i = np.clip(np.searchsorted(ext, x), 1, len(ext) - 1)
+    nearer = np.where(np.abs(x - ext[i - 1]) <= np.abs(ext[i] - x), i - 1, i)
+    return nearer % len(nodes) if periodic else nearer
+
+
+def _fit_at_nodes(wi, wo, f, axes, empty) -> np.ndarray:
+    """A spherical-harmonic fit of the samples (log, horizon tacking) at the empty nodes
+    (those whose directions dip below the horizon take the fit at the nearest ones above)."""
+    from .fitting import fit_sh
+    from .geometry import half_diff_to_directions
+    from .sh import SHBasis
+
+    keep = f > 0
+    model = fit_sh(wi[keep], wo[keep], f[keep], SHBasis(8, 4, 2, 0)).model
+    h, d, p = (g[empty] for g in np.meshgrid(*axes, indexing="ij"))
+    a, b = half_diff_to_directions(h, np.zeros(h.size), d, p)
+    a[:, 2], b[:, 2] = np.maximum(a[:, 2], 1e-3), np.maximum(b[:, 2], 1e-3)
+    return model.evaluate(a, b)
 
 
 def _axis_weights(nodes, x):
@@ -110,9 +144,34 @@ class TabulatedBRDF(BRDFModel):
         sl = slice(None, None, step)
         return cls(th[sl], td[sl], pd[sl], v[sl, sl, sl], outside)
 
-    def _coordinates(self, wi, wo):
-        th, _, _, td, cpd, spd = _half_diff_parts(wi, wo)
-        return th, td, np.mod(np.arctan2(spd, cpd), np.pi)  # reciprocity: phi_d and phi_d + pi are one
+    @classmethod
+    def from_samples(cls, wi, wo, brdf_per_sr, theta_h_deg, theta_d_deg, phi_d_deg, *, fill="envelope",
+                     outside="envelope") -> "TabulatedBRDF":
+        """A table gridded from scattered samples (any reader's, :mod:`brdfmodels.io`):
+        each node takes the largest sample in its cell, the box of half a node spacing
+        each side on every axis (conservative: a peak between nodes is not averaged
+        away); a node no sample reaches takes ``fill``: ``"envelope"`` (the samples'
+        largest value, conservative) or ``"fit"`` (a spherical-harmonic fit of the
+        samples with horizon tacking, :func:`brdfmodels.fitting.fit_sh`)."""
+        from ._checks import directions
+
+        wi = directions("wi", wi).reshape(-1, 3)
+        wo = directions("wo", wo).reshape(-1, 3)
+        f = finite_array("brdf_per_sr", brdf_per_sr).ravel()
+        if not (len(wi) == len(wo) == len(f)) or not len(f) or np.any(f < 0):
+            raise ValueError("wi, wo, brdf_per_sr: expected as many directions as values (finite, >= 0), at least one")
+        if fill not in ("envelope", "fit"):
+            raise ValueError(f"fill={fill!r}: expected 'envelope' or 'fit'")
+        axes = [_nodes(n, a, 0.0, hi) for n, a, hi in (("theta_h_deg", theta_h_deg, 90.0), ("theta_d_deg", theta_d_deg, 90.0),
+                                                        ("phi_d_deg", phi_d_deg, 180.0 - 1e-12))]
+        coords = _coordinates(wi, wo)
+        cells = [_nearest_node(ax, x, periodic=(k == 2)) for k, (ax, x) in enumerate(zip(axes, coords))]
+        values = np.full(tuple(len(a) for a in axes), -1.0)
+        np.maximum.at(values, tuple(cells), f)
+        empty = values < 0
+        if empty.any():
+            values[empty] = f.max() if fill == "envelope" else _fit_at_nodes(wi, wo, f, axes, empty)
+        return cls(*(np.degrees(a) for a in axes), values, outside)
 
     def _interpolate(self, th, td, pd):
         ih, th_t = _axis_weights(self.theta_h, th)
@@ -136,7 +195,7 @@ class TabulatedBRDF(BRDFModel):
         return out
 
     def _fr(self, wi, wo, state):
-        th, td, pd = self._coordinates(wi, wo)
+        th, td, pd = _coordinates(wi, wo)
         tol = 1e-12
         inside = ((th >= self.theta_h[0] - tol) & (th <= self.theta_h[-1] + tol)
                   & (td >= self.theta_d[0] - tol) & (td <= self.theta_d[-1] + tol))

@@ -173,14 +173,24 @@ def _with_polarization(data, polarization):
 
 
 def _table_material(spec, base_dir):
-    """``{ model = "table", file = ... }``: a MERL ``.binary`` measurement, or a saved
-    table (JSON), with its ``outside`` policy (default "envelope": conservative)."""
+    """``{ model = "table", file = ... }``: a MERL ``.binary`` measurement, scattered
+    samples (``.bsdf``, ``.astm``, angle ``.csv``) gridded every ``grid_deg`` (default
+    [2, 2, 10] deg in theta_h, theta_d, phi_d; empty nodes per ``fill``), or a saved table
+    (JSON), with its ``outside`` policy (default "envelope": conservative)."""
     p = Path(spec.file)
     if not p.is_absolute() and base_dir is not None:
         p = base_dir / p
     outside = spec.params.get("outside", "envelope")
     if p.suffix.lower() == ".binary":
         return brdfmodels.TabulatedBRDF.from_merl(p, channel=spec.params.get("channel", "mean"), outside=outside)
+    if p.suffix.lower() in (".bsdf", ".astm", ".e1392", ".csv"):  # scattered samples, gridded (conservative max per node)
+        from brdfmodels.io import read_samples
+
+        s = read_samples(p)
+        dh, dd, dp = spec.params.get("grid_deg", [2.0, 2.0, 10.0])
+        return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
+                                                     np.arange(0.0, 90.0 - 1e-9, dd), np.arange(0.0, 180.0 - 1e-9, dp),
+                                                     fill=spec.params.get("fill", "envelope"), outside=outside)
     model = brdfmodels.loads(read_input_text(p, "material file"))
     if not isinstance(model, brdfmodels.TabulatedBRDF):
         raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")

@@ -224,9 +224,16 @@ class MaterialSpec(BaseModel):
     @model_validator(mode="after")
     def _check(self):
         if self.model == "table" and self.file is not None:  # a measured table: { model = "table", file = ..., outside = ... }
-            extra = set(self.model_extra or {}) - {"outside", "channel"}
+            extra = set(self.model_extra or {}) - {"outside", "channel", "fill", "grid_deg"}
             if extra:
-                raise ValueError(f"unexpected keys {sorted(extra)} next to model = 'table' and file (expected outside, channel)")
+                raise ValueError(f"unexpected keys {sorted(extra)} next to model = 'table' and file "
+                                 f"(expected outside, channel, fill, grid_deg)")
+            g = self.params.get("grid_deg", [2.0, 2.0, 10.0])
+            if (not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                                  and 0.1 <= x <= 45 for x in g)):
+                raise ValueError(f"grid_deg={g!r}: expected three node spacings [theta_h, theta_d, phi_d] of 0.1 to 45 deg")
+            if self.params.get("fill", "envelope") not in ("envelope", "fit"):
+                raise ValueError(f"fill={self.params['fill']!r}: expected 'envelope' or 'fit'")
             if self.params.get("outside", "envelope") not in ("error", "envelope", "fit"):
                 raise ValueError(f"outside={self.params['outside']!r}: expected 'error', 'envelope' or 'fit'")
             return self

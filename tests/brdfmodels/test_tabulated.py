@@ -134,3 +134,45 @@ def test_a_scene_names_a_measured_table_by_model_and_file(tmp_path):
                                                           '{ model = "table", file = "m.binary", outside = "maybe" }'))
     with pytest.raises(scenes.SceneError, match="outside='maybe'"):
         scenes.load(tmp_path / "s.toml")
+
+
+def _random_pairs(n, seed):
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        a = _directions(rng.uniform(0, 1.5), rng.uniform(0, 1.5), rng.uniform(0, 2 * math.pi))
+        if a[0][2] > 1e-3 and a[1][2] > 1e-3:
+            out.append(a)
+    return np.array([p[0] for p in out]), np.array([p[1] for p in out])
+
+
+def test_gridding_scattered_samples_keeps_each_cells_largest():
+    """Each node holds the largest sample whose (theta_h, theta_d, phi_d mod 180) is
+    nearest to it (brute force here with the angles from the definition); nodes no
+    sample reaches hold the samples' largest value (envelope)."""
+    wi, wo = _random_pairs(6000, 7)
+    f = TRUTH.evaluate(wi, wo)
+    th, td, pd = np.arange(0, 90, 10.0), np.arange(0, 90, 10.0), np.arange(0, 180, 30.0)
+    m = bm.TabulatedBRDF.from_samples(wi, wo, f, th, td, pd)
+    want = np.full((len(th), len(td), len(pd)), -1.0)
+    for a, b, v in zip(wi, wo, f):
+        h, d, p = np.degrees(_angles(a, b))
+        i, j = int(np.argmin(np.abs(th - h))), int(np.argmin(np.abs(td - d)))
+        k = int(np.argmin(np.minimum(np.abs(pd - p), 180.0 - np.abs(pd - p))))  # periodic over 180 deg
+        want[i, j, k] = max(want[i, j, k], v)
+    want[want < 0] = f.max()
+    np.testing.assert_allclose(m.values, want, rtol=1e-12)
+    assert (m.values == f.max()).sum() > 0  # some nodes (below the horizon) were empty
+
+
+def test_a_scene_grids_a_bsdf_file_into_a_table(tmp_path):
+    from tests._scene_text import PLATE_AT_50M
+
+    from .test_io_readers import _bsdf_text
+
+    text, _ = _bsdf_text([0, 20, 40, 60], list(range(0, 181, 30)), [0, 2, 5, 10, 20, 40, 60, 80])
+    (tmp_path / "m.bsdf").write_text(text)
+    mat = '{ model = "table", file = "m.bsdf", grid_deg = [5.0, 5.0, 30.0], fill = "fit" }'
+    (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', mat))
+    m = scenes.load(tmp_path / "s.toml").targets[0].material
+    assert isinstance(m, bm.TabulatedBRDF) and m.values.shape == (18, 18, 6) and np.all(np.isfinite(m.values))
