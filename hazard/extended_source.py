@@ -399,19 +399,15 @@ def _summary(spec, ext, known, n_above, n_spec, t_exp) -> dict:
     }
 
 
-SUBTENSE_BLOCK = 1 << 16  # observers per block (their points generated per block: scenes.observers)
-
-
 def _subtense_by_block(result, observers, whole) -> np.ndarray:
-    """:func:`observer_subtense_rad` of every observer, in blocks on threads."""
-    from brdfmodels.parallel import map_blocks
-
+    """:func:`observer_subtense_rad` of every observer, in blocks on threads (their
+    points generated per block: scenes.observers)."""
     alpha = np.zeros(len(observers))
 
-    def block(a0, a1):
-        alpha[a0:a1] = observer_subtense_rad(result.spots, observers.block(a0, a1), result.beam, whole)
+    def block(a0, a1, p):
+        alpha[a0:a1] = observer_subtense_rad(result.spots, p, result.beam, whole)
 
-    map_blocks(block, len(observers), SUBTENSE_BLOCK)
+    observers.map_blocks(block)
     return alpha
 
 

@@ -21,6 +21,7 @@ import numpy as np
 __all__ = ["Observers", "GroupPoints", "stored", "grid_generator"]
 
 BLOCK = 1 << 18  # rows generated at a time when a whole table is needed (bounded memory)
+THREAD_BLOCK = 1 << 16  # rows per block of a per-observer pass run on threads (Observers.map_blocks)
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,14 @@ class Observers:
             if lo < hi:
                 out[lo - a0:hi - a0] = g.at(np.arange(lo - g.start, hi - g.start))
         return out
+
+    def map_blocks(self, fn, size: int = THREAD_BLOCK) -> list:
+        """``[fn(a0, a1, points) for each block of rows]``, the blocks side by side on
+        threads (:func:`brdfmodels.parallel.map_blocks`), each generating its own points;
+        ``fn`` writes disjoint rows of its outputs."""
+        from brdfmodels.parallel import map_blocks
+
+        return map_blocks(lambda a0, a1: fn(a0, a1, self.block(a0, a1)), len(self), size)
 
     def blocks(self, size: int = BLOCK):
         """(a0, a1, points) over the whole table, ``size`` rows at a time."""

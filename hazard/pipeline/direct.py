@@ -111,24 +111,18 @@ def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:
     return ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
 
 
-BLOCK = 1 << 16  # observers per block of the direct stage (points generated per block: scenes.observers)
-
-
 def direct_beam(beam, observers, tracer, mu) -> DirectBeam:
     """The direct beam at every observer (see the module notes), in blocks of observers
     on threads; ``tracer`` answers ``first_hit(origins, directions)`` against every
     object in the scene."""
-    from brdfmodels.parallel import map_blocks
-
     out = np.zeros(len(observers))
 
-    def block(a0, a1):
-        p = observers.block(a0, a1)
+    def block(a0, a1, p):
         at = beam_at(beam, p, mu)
         clear = clear_of_objects(at, p, tracer)
         gain = _beam_gain(observers.optics, observers.group[a0 + at.rows], beam.diameter_at(at.axial_m))
         out[a0 + at.rows] = np.where(clear, at.irradiance_w_m2 * gain, 0.0)
         return int((~clear).sum())
 
-    blocked = sum(map_blocks(block, len(observers), BLOCK))
+    blocked = sum(observers.map_blocks(block))
     return DirectBeam(out, int(np.count_nonzero(out)), blocked)

@@ -116,18 +116,13 @@ def pointing_worst_w_m2(scene, observers, mu, ray_scene, gain_fn) -> np.ndarray:
     points); ``gain_fn(rows, beam_diameter_m)`` gives the optical gain of those
     observers; ``ray_scene`` (None: nothing blocks) answers the line from the aperture
     to each eye through the targets."""
-    from brdfmodels.parallel import map_blocks
-
     out = np.zeros(len(observers))
 
-    def block(a0, a1):
-        out[a0:a1] = _worst(scene, observers.block(a0, a1), mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d))
+    def block(a0, a1, p):
+        out[a0:a1] = _worst(scene, p, mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d))
 
-    map_blocks(block, len(observers), BLOCK)
+    observers.map_blocks(block)
     return out
-
-
-BLOCK = 1 << 16  # observers per block
 
 
 def _worst(scene, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
