@@ -101,7 +101,7 @@ def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
         d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
         laser = scene.spec.laser
         if laser.pointing_buffer_rad > 0 or laser.sector is not None:
-            d = direct.with_pointing(d, scene, scene.observers, mu, ray_scene)
+            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene)
         st.detail = d.detail
     return d
 

@@ -50,7 +50,7 @@ class DirectBeam:
         return text
 
 
-def with_pointing(d: DirectBeam, scene, observers, mu, ray_scene) -> DirectBeam:
+def with_pointing(d: DirectBeam, scene, beam, observers, mu, ray_scene) -> DirectBeam:
     """``d`` with each observer's direct beam raised to its worst over the directions the
     beam may point in (:func:`hazard.pipeline.pointing.pointing_worst_w_m2`)."""
     from .pointing import pointing_worst_w_m2
@@ -58,7 +58,7 @@ def with_pointing(d: DirectBeam, scene, observers, mu, ray_scene) -> DirectBeam:
     def gain(rows, diameter_m):
         return _beam_gain(observers.optics, observers.group[rows], diameter_m)
 
-    worst = pointing_worst_w_m2(scene, observers, mu, ray_scene, gain)
+    worst = pointing_worst_w_m2(scene, beam, observers, mu, ray_scene, gain)
     total = np.maximum(d.irradiance_w_m2, worst)
     return DirectBeam(total, int(np.count_nonzero(total)), d.blocked, d.irradiance_w_m2, int((worst > d.irradiance_w_m2).sum()))
 

@@ -40,13 +40,9 @@ import numpy as np
 
 from scenes.geometry import direction_in_sector
 
+from .sdz import bearing_vectors, first_backstop_rays
+
 __all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2"]
-
-
-def _unit(az, el) -> np.ndarray:
-    """Unit vectors from bearings az (clockwise from +y) and elevations el [rad]."""
-    az, el = np.broadcast_arrays(np.asarray(az, float), np.asarray(el, float))
-    return np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1)
 
 
 def _angle(u, v) -> np.ndarray:
@@ -73,13 +69,13 @@ def angle_to_sector_rad(u, sector) -> np.ndarray:
     inside = in_az & (el >= e0) & (el <= e1)
     best = np.full(len(u), np.inf)
     for e in (e0, e1):  # circles of elevation: at u's azimuth when it is in the sector
-        best = np.where(in_az, np.minimum(best, _angle(u, _unit(az, e))), best)
+        best = np.where(in_az, np.minimum(best, _angle(u, bearing_vectors(az, e))), best)
     if not full:
         for a in (a0, a1):  # meridian arcs: the foot of u on the great circle, clamped; and the ends
             h = np.array([math.sin(a), math.cos(a), 0.0])
             foot = np.clip(np.arctan2(u[:, 2], u @ h), e0, e1)
             for e in (foot, e0, e1):
-                best = np.minimum(best, _angle(u, _unit(a, e)))
+                best = np.minimum(best, _angle(u, bearing_vectors(a, e)))
     return np.where(inside, 0.0, best)
 
 
@@ -98,39 +94,36 @@ def pointing_offset_rad(scene, u) -> np.ndarray:
     return np.maximum(core - b, 0.0)
 
 
-def beam_at_offset_w_m2(laser, power_w, distance_m, delta_rad, mu) -> tuple[np.ndarray, np.ndarray]:
-    """Irradiance [W/m^2] at distance L from the aperture, angle delta off the beam's
-    axis (see the module notes), and the beam's 1/e diameter there [m]."""
+def beam_at_offset_w_m2(beam, distance_m, delta_rad, mu) -> tuple[np.ndarray, np.ndarray]:
+    """Irradiance [W/m^2] at distance L from the aperture, angle delta off the axis of
+    ``beam`` (:class:`hazard.beam.BeamGeometry`, turned toward the point; see the module
+    notes), and the beam's 1/e diameter there [m]."""
     L, delta = np.asarray(distance_m, float), np.asarray(delta_rad, float)
-    z = L * np.cos(delta)
-    r = L * np.sin(delta)
-    w = (laser.beam_diameter_m + np.maximum(z, 0.0) * laser.divergence_rad) / 2
-    s2 = (r / w) ** 2
-    e = power_w / (math.pi * w * w) * np.exp(-s2) * np.sqrt(1.0 + s2 * (laser.divergence_rad / 2) ** 2) * np.exp(-mu * L)
-    return np.where(delta < np.pi / 2, e, 0.0), 2 * w
+    z = np.maximum(L * np.cos(delta), 0.0)
+    diameter = beam.diameter_at(z)
+    s = np.stack([L * np.sin(delta) / (diameter / 2), np.zeros_like(z)], axis=-1)
+    e = beam.irradiance_w_m2(s, z) * np.exp(-mu * L)
+    return np.where(delta < np.pi / 2, e, 0.0), diameter
 
 
-def pointing_worst_w_m2(scene, observers, mu, ray_scene, gain_fn) -> np.ndarray:
-    """The largest direct-beam irradiance [W/m^2] at each observer over the directions
-    the beam may point in, in blocks on threads (``observers.block(a0, a1)``: their
-    points); ``gain_fn(rows, beam_diameter_m)`` gives the optical gain of those
-    observers; ``ray_scene`` (None: nothing blocks) answers the line from the aperture
-    to each eye through the targets."""
+def pointing_worst_w_m2(scene, beam, observers, mu, ray_scene, gain_fn) -> np.ndarray:
+    """The largest irradiance [W/m^2] of ``beam`` (the laser's, at its aim) at each
+    observer over the directions it may point in, in blocks on threads
+    (:meth:`scenes.Observers.map_blocks`); ``gain_fn(rows, beam_diameter_m)`` gives the
+    optical gain of those observers; ``ray_scene`` (None: nothing blocks) answers the
+    line from the aperture to each eye through the targets."""
     out = np.zeros(len(observers))
 
     def block(a0, a1, p):
-        out[a0:a1] = _worst(scene, p, mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d))
+        out[a0:a1] = _worst(scene, beam, p, mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d))
 
     observers.map_blocks(block)
     return out
 
 
-def _worst(scene, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
+def _worst(scene, beam, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
     """:func:`pointing_worst_w_m2` at points (N, 3)."""
-    from .sdz import first_backstop_rays
-
-    laser = scene.spec.laser
-    o = np.asarray(scene.laser_position_m, float)
+    o = np.asarray(beam.position_m, float)
     rel = np.asarray(points_m, float).reshape(-1, 3) - o
     dist = np.linalg.norm(rel, axis=1)
     out = np.zeros(len(rel))
@@ -138,7 +131,7 @@ def _worst(scene, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
     if not len(live):
         return out
     u = rel[live] / dist[live, None]
-    e, diameter = beam_at_offset_w_m2(laser, laser.average_power_w, dist[live], pointing_offset_rad(scene, u), mu)
+    e, diameter = beam_at_offset_w_m2(beam, dist[live], pointing_offset_rad(scene, u), mu)
     hit = np.flatnonzero(e > 0)
     if ray_scene is not None and len(hit):
         stop = first_backstop_rays(np.broadcast_to(o, (len(hit), 3)), u[hit], ray_scene, len(scene.targets))

@@ -67,8 +67,9 @@ class Directions:
 
 
 def bearing_vectors(azimuth_rad, elevation_rad) -> np.ndarray:
-    """Unit vectors (N, 3) from compass bearings (clockwise from +y, north) and elevations."""
-    az, el = np.asarray(azimuth_rad, float), np.asarray(elevation_rad, float)
+    """Unit vectors (N, 3) from compass bearings (clockwise from +y, north) and elevations
+    (broadcast against each other)."""
+    az, el = np.broadcast_arrays(np.asarray(azimuth_rad, float), np.asarray(elevation_rad, float))
     return np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1).reshape(-1, 3)
 
 
