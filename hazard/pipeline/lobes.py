@@ -52,7 +52,7 @@ def profile_fraction(sp, mu) -> float:
     """How far into the beam's profile the target reaches: its hottest incident
     irradiance over the beam's on-axis irradiance at that point's axial range, both
     attenuated along the same path (1: the target holds the axis; 1e-6: its nearest
-    point is 3.7 1/e radii off it). In logarithms: no underflow for tiny powers or
+    point is 3.7 1/e radii off it). The attenuation in logarithms: no underflow in
     thick air."""
     beam = sp.beam
     if sp.peak_irradiance_w_m2 is None or beam is None or not len(sp.peak_irradiance_w_m2):
@@ -61,9 +61,9 @@ def profile_fraction(sp, mu) -> float:
     e = float(sp.peak_irradiance_w_m2[k])
     if not e > 0:
         return 0.0
-    z = float((np.asarray(sp.points[k], float) - beam.position_m) @ beam.axis)
-    w = float(beam.diameter_at(max(z, 0.0))) / 2
-    log_axis = math.log(beam.power_w) - math.log(math.pi * w * w) - mu * float(sp.range_from_laser_m[k])
+    z = max(float((np.asarray(sp.points[k], float) - beam.position_m) @ beam.axis), 0.0)
+    on_axis = float(beam.irradiance_w_m2(np.zeros((1, 2)), np.array([z]))[0])  # P >= 1 nW (the schema): no underflow
+    log_axis = math.log(on_axis) - mu * float(sp.range_from_laser_m[k])
     return float(min(math.exp(min(math.log(e) - log_axis, 0.0)), 1.0))
 
 
