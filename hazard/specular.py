@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd"]
+__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
 
 _ITERATIONS = 80
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
@@ -325,7 +325,7 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
 
     hot = e0 >= mpe_w_m2
     if not np.any(hot):
-        return SpecularNohd(0.0, _unit(_mirror(spot)[int(np.argmax(e0))]).tolist())
+        return SpecularNohd(0.0, _unit(mirror_directions(spot)[int(np.argmax(e0))]).tolist())
     far = 1e9
     beyond = hot & (level(np.full_like(e0, far)) >= mpe_w_m2)
     lo = np.full_like(e0, 1e-9)
@@ -339,9 +339,11 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
             break
     root = np.where(beyond, np.inf, np.where(hot, lo, 0.0))
     i = int(np.argmax(root))
-    return SpecularNohd(float(root[i]), _unit(_mirror(spot)[i]).tolist())
+    return SpecularNohd(float(root[i]), _unit(mirror_directions(spot)[i]).tolist())
 
 
-def _mirror(spot):
+def mirror_directions(spot):
+    """Reflected directions (N, 3) of a spot's samples: ``d - 2 (d . n) n`` on each
+    sample's normal (unit when ``d`` and ``n`` are)."""
     n, d = spot.frames[:, 2], spot.incoming
     return d - 2 * (d * n).sum(1)[:, None] * n

@@ -20,9 +20,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..specular import mirror_directions
 from .sdz import UNBOUNDED_DRAW_M, boundary_polygon, first_backstop_rays
 
-__all__ = ["mirror_beams", "any_escapes", "summary"]
+__all__ = ["mirror_beams", "summary"]
 
 
 def _longest_nohd(row) -> tuple[float, float]:
@@ -34,8 +35,7 @@ def _longest_nohd(row) -> tuple[float, float]:
 
 def _rays(spot) -> tuple[np.ndarray, np.ndarray]:
     """Origins (N, 3) and unit reflected directions (N, 3) of a spot's samples."""
-    n, d = spot.frames[:, 2], spot.incoming
-    r = d - 2 * np.einsum("ij,ij->i", d, n)[:, None] * n
+    r = mirror_directions(spot)
     r /= np.linalg.norm(r, axis=1, keepdims=True)
     return np.asarray(spot.points, float) + 1e-6 * max(spot.size_m, 1e-3) * r, r
 
@@ -47,10 +47,9 @@ def _one(scene, spot, nohd_m, ray_scene, boundary) -> dict:
     o, r = _rays(spot)
     stop = first_backstop_rays(o, r, ray_scene, len(scene.targets))
     reach = np.minimum(stop, nohd_m)
-    contained = bool(np.all(np.isfinite(stop) & (stop <= nohd_m))) if nohd_m > 0 else True
-    escaping = ~(np.isfinite(stop) & (stop <= nohd_m))
+    stopped = np.isfinite(stop) & (stop <= nohd_m)
     out = {"target": spot.target.name, "nohd_m": nohd_m, "max_reach_m": float(reach.max()), "rays": int(len(r)),
-           "contained": contained, "above_horizon": bool(nohd_m > 0 and np.any(escaping & (r[:, 2] > 0)))}
+           "contained": bool(nohd_m <= 0 or stopped.all()), "above_horizon": bool(nohd_m > 0 and np.any(~stopped & (r[:, 2] > 0)))}
     if boundary is not None and nohd_m > 0:
         ends = o + r * np.minimum(reach, UNBOUNDED_DRAW_M)[:, None]
         lines = MultiLineString([LineString([a[:2], b[:2]]) for a, b in zip(o, ends) if np.hypot(*(b - a)[:2]) > 0])
@@ -76,11 +75,6 @@ def mirror_beams(scene, rows, spots, ray_scene) -> list:
             entry["aided"] = {k: a[k] for k in a if k not in ("target", "rays")}
         out.append(entry)
     return out
-
-
-def any_escapes(entries) -> bool:
-    """Whether some mirror beam reaches its NOHD without a backstop or leaves the range."""
-    return any(not e["contained"] or e.get("leaves_boundary", False) for e in entries)
 
 
 def summary(entries) -> str:
