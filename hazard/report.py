@@ -52,13 +52,12 @@ def observer_columns(result) -> dict:
     m = len(obs)
     mpe_h = (obs.mpe_radiant_exposure_j_m2 if obs.mpe_radiant_exposure_j_m2 is not None
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
+    direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
     return {
         "position_m": np.asarray(obs.position_m, float).reshape(m, 3),
         "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
-        "direct_irradiance_w_m2": obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m),
-        "direct_at_aim_irradiance_w_m2": (obs.direct_at_aim_irradiance_w_m2 if getattr(obs, "direct_at_aim_irradiance_w_m2", None)
-                                          is not None else obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None
-                                          else np.zeros(m)),
+        "direct_irradiance_w_m2": direct,
+        "direct_at_aim_irradiance_w_m2": obs.direct_at_aim_irradiance_w_m2 if obs.direct_at_aim_irradiance_w_m2 is not None else direct,
         "reflected_irradiance_w_m2": (obs.reflected_irradiance_w_m2 if obs.reflected_irradiance_w_m2 is not None
                                       else obs.peak_irradiance_w_m2),
         "peak_time_s": obs.peak_time_s,
@@ -128,9 +127,10 @@ def _json_safe(obj):
     return obj
 
 
-def report_dict(result) -> dict:
+def report_dict(result, cols=None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
-    stages, per-target NOHD and keep-out summaries, per-observer verdicts."""
+    stages, per-target NOHD and keep-out summaries, per-observer verdicts
+    (``cols``: :func:`observer_columns` of ``result`` when the caller has them)."""
     from .analysis import versions
 
     scene = result.scene
@@ -138,8 +138,7 @@ def report_dict(result) -> dict:
     for key, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
-    cols = observer_columns(result)
-    listed, which = observers_listed(result, cols)
+    listed, which = observers_listed(result, observer_columns(result) if cols is None else cols)
     return _json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
@@ -258,10 +257,11 @@ def write_outputs(result, outdir, *, force=False, extra=None) -> list:
     existing = [p for p in targets if p.exists()]
     if existing and not force:
         raise OutputExistsError(f"{existing[0]} exists: pass --force to overwrite")
-    doc = report_dict(result)
+    cols = observer_columns(result)  # once, for the report and the table
+    doc = report_dict(result, cols)
     if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
         doc["warnings"] = list(getattr(result.scene, "warnings", None) or [])
-    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, observer_columns(result)).encode(),
+    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
              **extra}
     parent = out.parent if str(out.parent) else Path(".")
     parent.mkdir(parents=True, exist_ok=True)
@@ -327,7 +327,7 @@ def _cause(result, i) -> str:
     else:
         spec = float(obs.specular_irradiance_w_m2[i])
         kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * (peak - direct) else "diffuse + specular")
-    at_aim = getattr(obs, "direct_at_aim_irradiance_w_m2", None)
+    at_aim = obs.direct_at_aim_irradiance_w_m2
     beam = "direct beam" if at_aim is None or float(at_aim[i]) >= direct else "direct beam within its pointing error"
     if direct >= 0.5 * peak and direct > 0:
         kind = beam
@@ -378,7 +378,7 @@ def target_hit(t) -> str:
     ``"not hit"``."""
     if t.static_lobe is None:
         return "not reflected" if t.spot_power_w > 0 else "not hit"
-    return "wing only" if getattr(t, "beam_profile_fraction", 1.0) < WING_FRACTION else "beam"
+    return "wing only" if t.beam_profile_fraction < WING_FRACTION else "beam"
 
 
 def _nohd_lines(result) -> list:
