@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -98,6 +99,13 @@ def _cylinder(d, h, n=96):
     return v, np.vstack([side, cap_b, cap_t])
 
 
+def input_path(name, base_dir=None) -> Path:
+    """A file a scene names: absolute as given, else relative to the scene's folder
+    ``base_dir`` (when the scene came from a file)."""
+    path = Path(name)
+    return path if path.is_absolute() or base_dir is None else Path(base_dir) / path
+
+
 def shape_mesh(spec, base_dir=None) -> Mesh:
     """Mesh of a target or occluder spec (world coordinates, float64)."""
     frame = _frame(spec.normal, spec.tangent)
@@ -123,13 +131,9 @@ def shape_mesh(spec, base_dir=None) -> Mesh:
 def _mesh_file(spec, frame, base_dir):
     import trimesh  # only for scenes with mesh files
 
-    from pathlib import Path
-
     from brdfmodels._io import check_input_file
 
-    path = Path(spec.file)
-    if not path.is_absolute() and base_dir is not None:
-        path = Path(base_dir) / path
+    path = input_path(spec.file, base_dir)
     check_input_file(path, "mesh file")
     try:
         m = trimesh.load(str(path), force="mesh", process=False)  # processing merged (and dropped) non-finite vertices
@@ -184,13 +188,9 @@ class Heightfield:
 def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     """Heightfield of a terrain spec."""
     if spec.kind == "heightmap":
-        from pathlib import Path
-
         from brdfmodels._io import check_input_file, check_limit
 
-        path = Path(spec.file)
-        if not path.is_absolute() and base_dir is not None:
-            path = Path(base_dir) / path
+        path = input_path(spec.file, base_dir)
         check_input_file(path, "terrain.file")
         try:
             h = np.load(path, allow_pickle=False, mmap_mode="r")  # the header first: its size is checked before reading

@@ -21,7 +21,7 @@ from pydantic import ValidationError
 import brdfmodels
 from brdfmodels._io import check_input_file, parse_toml, read_input_text
 
-from .geometry import Heightfield, Mesh, direction_in_sector, observer_points, shape_mesh, terrain_heightfield
+from .geometry import Heightfield, Mesh, direction_in_sector, input_path, observer_points, shape_mesh, terrain_heightfield
 from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored
 from .spec import SceneSpec
 
@@ -177,9 +177,7 @@ def _table_material(spec, base_dir):
     samples (``.bsdf``, ``.astm``, angle ``.csv``) gridded every ``grid_deg`` (default
     [2, 2, 10] deg in theta_h, theta_d, phi_d; empty nodes per ``fill``), or a saved table
     (JSON), with its ``outside`` policy (default "envelope": conservative)."""
-    p = Path(spec.file)
-    if not p.is_absolute() and base_dir is not None:
-        p = base_dir / p
+    p = input_path(spec.file, base_dir)
     outside = spec.params.get("outside", "envelope")
     if p.suffix.lower() == ".binary":
         return brdfmodels.TabulatedBRDF.from_merl(p, channel=spec.params.get("channel", "mean"), outside=outside)
@@ -209,10 +207,7 @@ def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=N
         elif spec.model == "table":
             model = _table_material(spec, base_dir)
         elif spec.file is not None:
-            p = Path(spec.file)
-            if not p.is_absolute() and base_dir is not None:
-                p = base_dir / p
-            model = brdfmodels.loads(read_input_text(p, "material file"))
+            model = brdfmodels.loads(read_input_text(input_path(spec.file, base_dir), "material file"))
         else:
             model = brdfmodels.create(spec.model, **spec.params)
         if model.has_specular:
@@ -280,9 +275,7 @@ def _history(spec, where, base_dir):
     if spec is None or spec.kind != "series":
         return None
     if spec.file is not None:
-        p = Path(spec.file)
-        if not p.is_absolute() and base_dir is not None:
-            p = base_dir / p
+        p = input_path(spec.file, base_dir)
         try:
             check_input_file(p, f"{where}.file")
             data = np.genfromtxt(p, delimiter=",", names=True)
