@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .fitting import TS5_METHODS, FitResult, _check_data
+from .fitting import TS5_METHODS, TS5_POLISH_MAXEVAL, FitResult, _check_data, nlopt_stage
 from .scatter import ABg, direction_cosine_offset
 from .uncertainty import jacobian_uncertainty
 
@@ -71,23 +71,8 @@ def fit_abg(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=4000, weights
     lo = np.array([math.log(ABG_BOUNDS["a"][0]), math.log(ABG_BOUNDS["b"][0]), ABG_BOUNDS["g"][0]])
     hi = np.array([math.log(ABG_BOUNDS["a"][1]), math.log(ABG_BOUNDS["b"][1]), ABG_BOUNDS["g"][1]])
     nlopt.srand(int(seed))
-    x = 0.5 * (lo + hi)
-    for algo, budget, tol in ((getattr(nlopt, TS5_METHODS[method]), int(maxeval), None), (nlopt.LN_BOBYQA, 20000, xtol_rel)):
-        opt = nlopt.opt(algo, 3)
-        if method == "mlsl" and tol is None:
-            loc = nlopt.opt(nlopt.LN_BOBYQA, 3)
-            loc.set_xtol_rel(1e-6)
-            opt.set_local_optimizer(loc)
-        opt.set_lower_bounds(lo)
-        opt.set_upper_bounds(hi)
-        opt.set_min_objective(fun)
-        opt.set_maxeval(budget)
-        if tol is not None:
-            opt.set_xtol_rel(tol)
-        try:
-            x = np.array(opt.optimize(x))
-        except nlopt.RoundoffLimited:
-            pass
+    x = nlopt_stage(TS5_METHODS[method], lo, hi, fun, 0.5 * (lo + hi), maxeval)
+    x = nlopt_stage("LN_BOBYQA", lo, hi, fun, x, TS5_POLISH_MAXEVAL, xtol_rel)
     p = np.array([math.exp(x[0]), math.exp(x[1]), x[2]])
     model = ABg(*p)
     unc = jacobian_uncertainty(residuals, p, ("a", "b", "g"))

@@ -409,6 +409,31 @@ TS5_POLISH_MAXEVAL = 20000  # budget of the local polish after the global stage
 PROGRESS_EVERY = 100  # objective evaluations between two progress calls of fit_ts5
 
 
+def nlopt_stage(algorithm: str, lo, hi, fun, x0, maxeval, xtol_rel=None) -> np.ndarray:
+    """One bounded nlopt minimisation of ``fun(x, grad)`` from ``x0``: ``algorithm`` an
+    nlopt name (``G_MLSL_LDS`` gets a BOBYQA local optimiser at xtol 1e-6), at most
+    ``maxeval`` evaluations, and ``xtol_rel`` when given. Returns x (``x0`` when nlopt
+    stops on round-off before it moves)."""
+    import nlopt
+
+    n = len(lo)
+    opt = nlopt.opt(getattr(nlopt, algorithm), n)
+    if algorithm == "G_MLSL_LDS":
+        loc = nlopt.opt(nlopt.LN_BOBYQA, n)
+        loc.set_xtol_rel(1e-6)
+        opt.set_local_optimizer(loc)
+    opt.set_lower_bounds(lo)
+    opt.set_upper_bounds(hi)
+    opt.set_min_objective(fun)
+    opt.set_maxeval(int(maxeval))
+    if xtol_rel is not None:
+        opt.set_xtol_rel(xtol_rel)
+    try:
+        return np.array(opt.optimize(x0))
+    except nlopt.RoundoffLimited:
+        return np.array(x0, float)
+
+
 def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local="bobyqa", weights=None, xtol_rel=1e-10,
             progress=None) -> FitResult:
     """Fit the five-parameter model: a global nlopt stage, then a local polish.
@@ -459,31 +484,9 @@ def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local=
     lo = np.array([math.log(TS5_BOUNDS["kb"][0]), math.log(TS5_BOUNDS["kr"][0]), math.log(TS5_BOUNDS["a"][0]), TS5_BOUNDS["b"][0], math.log(TS5_BOUNDS["kd"][0])])
     hi = np.array([math.log(TS5_BOUNDS["kb"][1]), math.log(TS5_BOUNDS["kr"][1]), math.log(TS5_BOUNDS["a"][1]), TS5_BOUNDS["b"][1], math.log(TS5_BOUNDS["kd"][1])])
     nlopt.srand(int(seed))
-    opt = nlopt.opt(getattr(nlopt, TS5_METHODS[method]), 5)
-    if method == "mlsl":
-        loc = nlopt.opt(nlopt.LN_BOBYQA, 5)
-        loc.set_xtol_rel(1e-6)
-        opt.set_local_optimizer(loc)
-    opt.set_lower_bounds(lo)
-    opt.set_upper_bounds(hi)
-    opt.set_min_objective(fun)
-    opt.set_maxeval(int(maxeval))
-    x0 = 0.5 * (lo + hi)
-    try:
-        x = opt.optimize(x0)
-    except nlopt.RoundoffLimited:
-        x = x0
-    x_global, e_global, ev_global = np.array(x), obj(x), count[0]
-    pol = nlopt.opt(nlopt.LN_BOBYQA if local == "bobyqa" else nlopt.LN_NELDERMEAD, 5)
-    pol.set_lower_bounds(lo)
-    pol.set_upper_bounds(hi)
-    pol.set_min_objective(fun)
-    pol.set_xtol_rel(xtol_rel)
-    pol.set_maxeval(TS5_POLISH_MAXEVAL)
-    try:
-        x = pol.optimize(x_global)
-    except nlopt.RoundoffLimited:
-        x = x_global
+    x_global = nlopt_stage(TS5_METHODS[method], lo, hi, fun, 0.5 * (lo + hi), maxeval)
+    e_global, ev_global = obj(x_global), count[0]
+    x = nlopt_stage("LN_BOBYQA" if local == "bobyqa" else "LN_NELDERMEAD", lo, hi, fun, x_global, TS5_POLISH_MAXEVAL, xtol_rel)
     e = obj(x)
     if progress is not None:
         progress(budget, budget)
