@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 from .models import Lambertian, Specular, TorranceSparrow5
 
-__all__ = ["LibraryEntry", "LIBRARY", "material", "library_names"]
+__all__ = ["LibraryEntry", "LIBRARY", "entry", "material", "library_names"]
 
 ZHANG_2010 = "Zhang et al., Optica Applicata 40(1), 2010, tables of fitted parameters (1.06 um; spec five-parameter-brdf.md)"
 
@@ -73,8 +73,13 @@ def library_names() -> list:
     return sorted(LIBRARY)
 
 
-def material(name: str, wavelength_nm: float | None = None):
-    """The library's model ``name`` (at ``wavelength_nm`` for Fresnel mirrors)."""
+def entry(name: str) -> LibraryEntry:
+    """The library's entry ``name``; ValueError listing the names otherwise."""
     if name not in LIBRARY:
         raise ValueError(f"library={name!r}: expected one of {library_names()}")
-    return LIBRARY[name].build(wavelength_nm)
+    return LIBRARY[name]
+
+
+def material(name: str, wavelength_nm: float | None = None):
+    """The library's model ``name`` (at ``wavelength_nm`` for Fresnel mirrors)."""
+    return entry(name).build(wavelength_nm)

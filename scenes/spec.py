@@ -244,10 +244,9 @@ class MaterialSpec(BaseModel):
         if self.model is None and self.model_extra:
             raise ValueError(f"unexpected keys {sorted(self.model_extra)} next to {given[0]}")
         if self.library is not None:
-            from brdfmodels.library import LIBRARY, library_names
+            from brdfmodels.library import entry
 
-            if self.library not in LIBRARY:
-                raise ValueError(f"library={self.library!r}: expected one of {library_names()}")
+            entry(self.library)  # raises ValueError listing the names
         if self.model is not None:
             import brdfmodels
 
