@@ -44,8 +44,9 @@ from pathlib import Path
 import numpy as np
 
 from ._io import read_input_text
+from .geometry import spherical_to_vector
 
-__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "read_samples", "MERL_SCALE"]
+__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "merl_grid", "read_samples", "MERL_SCALE"]
 
 
 def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=None):
@@ -57,11 +58,6 @@ def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=No
                    np.full(n, np.nan) if temperature_k is None else np.asarray(temperature_k, float),
                    np.array(["0"] * n) if test_id is None else np.asarray(test_id).astype(str),
                    np.zeros(n, int), np.ones(n) if weight is None else np.asarray(weight, float))
-
-
-def _unit(theta, phi):
-    theta, phi = np.asarray(theta, float), np.asarray(phi, float)
-    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], axis=-1)
 
 
 # -- Zemax / Radiant .bsdf -------------------------------------------------------------
@@ -209,7 +205,7 @@ def read_astm_e1392(path):
         raise ValueError(f"{path}: NUM_POINTS {n_points} but {n_rows} data rows")
     a = np.array(rows)
     keep = (np.cos(a[:, 0]) > 0) & (np.cos(a[:, 2]) > 0)
-    return _samples(_unit(a[keep, 0], a[keep, 1]), _unit(a[keep, 2], a[keep, 3]), a[keep, 4])
+    return _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
 
 
 # -- generic CSV ---------------------------------------------------------------------
@@ -248,8 +244,8 @@ def read_brdf_csv(path):
     if not tid:
         raise ValueError(f"{path}: no data rows")
     f = np.array(data[value[0]]) / (math.pi if value[0] == "reflectance_factor" else 1.0)
-    wi = _unit(np.radians(data["theta_i_deg"]), np.radians(data["phi_i_deg"]))
-    wo = _unit(np.radians(data["theta_r_deg"]), np.radians(data["phi_r_deg"]))
+    wi = spherical_to_vector(np.radians(data["theta_i_deg"]), np.radians(data["phi_i_deg"]))
+    wo = spherical_to_vector(np.radians(data["theta_r_deg"]), np.radians(data["phi_r_deg"]))
     return _samples(wi, wo, f, tid, data.get("time_s"), data.get("temperature_k"), data.get("weight"))
 
 
@@ -272,26 +268,31 @@ def _merl_table(path):
     return tuple(int(x) for x in dims), np.frombuffer(raw[12:], dtype="<f8").reshape(3, n)
 
 
+def merl_grid(path, channel="mean"):
+    """The cells of a MERL ``.binary`` file: their centres (theta_h_deg, theta_d_deg,
+    phi_d_deg; theta_h on the square-root scale) and f_r [1/sr] (n_h, n_d, n_phi) of
+    ``channel`` ("R", "G", "B" or "mean"), NaN where a used channel has no data."""
+    if channel not in ("R", "G", "B", "mean"):
+        raise ValueError(f"channel={channel!r}: expected R, G, B or mean")
+    dims, data = _merl_table(path)
+    used = [0, 1, 2] if channel == "mean" else ["RGB".index(channel)]
+    v = sum(data[k] * MERL_SCALE["RGB"[k]] for k in used) / len(used)
+    v = np.where(np.all(data[used] >= 0, axis=0) & np.isfinite(v), v, np.nan)  # negative: no data in that cell
+    nh, nd, nphi = dims
+    nodes = (((np.arange(nh) + 0.5) / nh) ** 2 * 90.0, (np.arange(nd) + 0.5) / nd * 90.0, (np.arange(nphi) + 0.5) / nphi * 180.0)
+    return nodes, v.reshape(dims)
+
+
 def read_merl(path, channel="mean"):
     """Samples from a MERL ``.binary`` file (see the module notes); ``channel``: "R",
     "G", "B" or "mean"."""
     from .geometry import half_diff_to_directions
 
-    if channel not in ("R", "G", "B", "mean"):
-        raise ValueError(f"channel={channel!r}: expected R, G, B or mean")
-    dims, data = _merl_table(path)
-    n = data.shape[1]
-    vals = {c: data[k] * MERL_SCALE[c] for k, c in enumerate("RGB")}
-    v = (vals["R"] + vals["G"] + vals["B"]) / 3 if channel == "mean" else vals[channel]
-    used = [0, 1, 2] if channel == "mean" else ["RGB".index(channel)]
-    valid = np.all(data[used] >= 0, axis=0) & np.isfinite(v)  # negative: no data in that cell
-    nh, nd, nphi = dims
-    ih, idd, ip = np.unravel_index(np.arange(n), (nh, nd, nphi))
-    th = ((ih + 0.5) / nh) ** 2 * (np.pi / 2)
-    td = (idd + 0.5) / nd * (np.pi / 2)
-    pd = (ip + 0.5) / nphi * np.pi
-    wi, wo = half_diff_to_directions(th, np.zeros(n), td, pd)
-    keep = valid & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    nodes, v = merl_grid(path, channel)
+    th, td, pd = (np.radians(g).ravel() for g in np.meshgrid(*nodes, indexing="ij"))
+    wi, wo = half_diff_to_directions(th, np.zeros(th.size), td, pd)
+    v = v.ravel()
+    keep = np.isfinite(v) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
     return _samples(wi[keep], wo[keep], v[keep])
 
 

@@ -128,19 +128,10 @@ class TabulatedBRDF(BRDFModel):
     def from_merl(cls, path, channel="mean", outside="envelope", step=1) -> "TabulatedBRDF":
         """The table of a MERL ``.binary`` file (cell centres as nodes; cells without
         data take the largest of the file, conservative), every ``step``-th node."""
-        from .io import MERL_SCALE, _merl_table
+        from .io import merl_grid
 
-        dims, data = _merl_table(path)
-        scale = {c: MERL_SCALE[c] for c in "RGB"}
-        chans = [data[k] * scale[c] for k, c in enumerate("RGB")]
-        v = (chans[0] + chans[1] + chans[2]) / 3 if channel == "mean" else chans["RGB".index(channel)]
-        v = v.reshape(dims)
-        missing = ~np.isfinite(v) | (v < 0)
-        v = np.where(missing, np.nanmax(np.where(missing, np.nan, v)), v)
-        nh, nd, nphi = dims
-        th = (((np.arange(nh) + 0.5) / nh) ** 2) * 90.0
-        td = (np.arange(nd) + 0.5) / nd * 90.0
-        pd = (np.arange(nphi) + 0.5) / nphi * 180.0
+        (th, td, pd), v = merl_grid(path, channel)
+        v = np.where(np.isnan(v), np.nanmax(v), v)
         sl = slice(None, None, step)
         return cls(th[sl], td[sl], pd[sl], v[sl, sl, sl], outside)
 
