@@ -57,8 +57,6 @@ class ABg(BRDFModel):
         self.a = finite_scalar("a", a, minimum=0.0, maximum=1e12)
         self.g = finite_scalar("g", g, minimum=0.0, maximum=10.0)
         self.b = finite_scalar("b", b, minimum=0.0 if self.g == 0.0 else 1e-12, maximum=1e12)
-        if self.g == 0.0 and self.b + 1.0 <= 0.0:  # pragma: no cover - b >= 0 already
-            raise ValueError(f"b={b!r}: B + 1 must be > 0")
         self._freeze()
 
     def _fr(self, wi, wo, state):
