@@ -174,19 +174,29 @@ class HeatingResult:
     melt_fraction: np.ndarray
     solver_steps: int
     wall_time_s: float
+    melt_onset_s: float | None = None  # first time the plate reaches T_melt [s] (None: not in the run)
+    full_melt_s: float | None = None  # first time all of it is molten [s]
 
-    def history(self, state: str = "extinction", extrapolation: str = "error") -> "History":
-        """A :class:`History` of one of the outputs: ``"extinction"``, ``"temperature_k"``,
-        ``"reflectance_factor"`` or ``"time_s"``."""
+    def history(self, state="extinction", extrapolation: str = "error") -> "History":
+        """A :class:`History` of one output, ``"extinction"``, ``"temperature_k"``,
+        ``"reflectance_factor"``, ``"melt_fraction"`` or ``"time_s"``, or of two of them
+        as a two-state history (``["extinction", "melt_fraction"]``)."""
         choices = {
             "extinction": self.extinction,
             "temperature_k": self.temperature_k,
             "reflectance_factor": self.reflectance_factor,
+            "melt_fraction": self.melt_fraction,
             "time_s": self.times_s,
         }
-        if state not in choices:
-            raise ValueError(f"state={state!r}: expected one of {sorted(choices)}")
-        return History(self.times_s, choices[state], state, extrapolation=extrapolation)
+        names = [state] if isinstance(state, str) else list(state)
+        for name in names:
+            if name not in choices:
+                raise ValueError(f"state={name!r}: expected one of {sorted(choices)}, or a list of two of them")
+        if len(names) == 1:
+            return History(self.times_s, choices[names[0]], names[0], extrapolation=extrapolation)
+        if len(names) != 2 or names[0] == names[1]:
+            raise ValueError(f"state={state!r}: expected one name or two different names")
+        return History(self.times_s, np.stack([choices[n] for n in names], axis=1), names, extrapolation=extrapolation)
 
 
 class ThinPlateHeating:
@@ -378,13 +388,18 @@ class ThinPlateHeating:
         steps = 0
         from scipy.integrate import solve_ivp  # here: scipy.integrate costs 0.27 s at import
 
+        events = self._melt_events()
+        crossed = [None, None]  # melt onset, full melt [s]: the enthalpy reaching H_s, H_s + H_l
         start = time.perf_counter()
         for a, b in zip(knots[:-1], knots[1:]):
             sel = np.flatnonzero((t > a) & (t <= b))
             t_eval = np.unique(np.append(t[sel], b))  # always end at the knot
-            res = solve_ivp(rhs, (a, b), y, method=method, t_eval=t_eval, rtol=rtol, atol=atol)
+            res = solve_ivp(rhs, (a, b), y, method=method, t_eval=t_eval, rtol=rtol, atol=atol, events=events)
             if not res.success:
                 raise RuntimeError(f"heating integration failed on [{a}, {b}] s: {res.message}")
+            for k, te in enumerate(res.t_events):
+                if crossed[k] is None and len(te):
+                    crossed[k] = float(te[0])
             steps += int(res.nfev)
             sol_h[sel] = res.y[0, : sel.size]
             sol_q[sel] = res.y[1, : sel.size]
@@ -402,41 +417,79 @@ class ThinPlateHeating:
             melt_fraction=frac,
             solver_steps=steps,
             wall_time_s=wall,
+            melt_onset_s=crossed[0],
+            full_melt_s=crossed[1],
         )
+
+    def _melt_events(self):
+        """``solve_ivp`` events at the enthalpies where melting starts and ends (located by
+        the solver's root finding, not by the output grid)."""
+        hs, hl = self._h_solid, self._h_latent
+
+        def onset(t, y):
+            return y[0] - hs
+
+        def full(t, y):
+            return y[0] - (hs + hl)
+
+        for ev in (onset, full):
+            ev.direction = 1.0
+        return [onset, full]
 
 
 class History:
-    """A material history: time -> state, piecewise linear.
+    """A material history: time -> state (or a pair of states), piecewise linear.
 
     Parameters
     ----------
     times_s : array_like, shape (N,)
         Strictly increasing times [s].
-    states : array_like, shape (N,)
-        State values at those times (e.g. extinction, temperature_k).
-    state_name : str
-        Name and unit of the state; must match the dynamic model it drives.
+    states : array_like, shape (N,) or (N, 2)
+        State values at those times (e.g. extinction, temperature_k); two columns for a
+        two-state history.
+    state_name : str or [str, str]
+        Name and unit of the state (two names for two states, e.g.
+        ``["extinction", "melt_fraction"]``); must match the dynamic model it drives.
     extrapolation : {"error", "clamp"}
         Outside [times_s[0], times_s[-1]]: raise (default) or hold the end states.
     """
 
     def __init__(self, times_s, states, state_name, extrapolation="error"):
-        self._table = StateTable(times_s, states, "time_s", check_policy(extrapolation))
-        if not isinstance(state_name, str) or not state_name:
-            raise ValueError(f"state_name={state_name!r}: expected a non-empty string such as 'extinction'")
-        self.state_name = state_name
+        policy = check_policy(extrapolation)
+        if isinstance(state_name, str) and state_name:
+            self._tables = (StateTable(times_s, states, "time_s", policy),)
+            self.state_name = state_name
+            return
+        names = list(state_name) if isinstance(state_name, (list, tuple)) else []
+        if len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
+            raise ValueError(f"state_name={state_name!r}: expected a non-empty string such as 'extinction', "
+                             f"or two different names such as ['extinction', 'melt_fraction']")
+        v = finite_array("states", states, ndim=2)
+        if v.shape[1:] != (2,):
+            raise ValueError(f"states: expected shape (N, 2) (one column per state of {names}), got {v.shape}")
+        self._tables = tuple(StateTable(times_s, v[:, d], "time_s", policy) for d in range(2))
+        self.state_name = tuple(names)
 
     @property
     def times_s(self) -> np.ndarray:
-        return self._table.states
+        return self._tables[0].states
 
     @property
     def states(self) -> np.ndarray:
-        return self._table.values
+        """States at ``times_s``: (N,), or (N, 2) for two states."""
+        if len(self._tables) == 1:
+            return self._tables[0].values
+        return np.stack([t.values for t in self._tables], axis=1)
+
+    @property
+    def state_dim(self) -> int:
+        return len(self._tables)
 
     def state_at(self, times_s) -> np.ndarray:
-        """State at the given times [s] (linear interpolation)."""
-        return self._table(times_s)
+        """State at the given times [s] (linear interpolation; (..., 2) for two states)."""
+        if len(self._tables) == 1:
+            return self._tables[0](times_s)
+        return np.stack([t(times_s) for t in self._tables], axis=-1)
 
     @classmethod
     def from_temperature_series(cls, times_s, temperatures_k, oxidation=None, state_name="temperature_k"):
@@ -454,8 +507,8 @@ class History:
         return {
             "times_s": self.times_s.tolist(),
             "states": self.states.tolist(),
-            "state_name": self.state_name,
-            "extrapolation": self._table.extrapolation,
+            "state_name": self.state_name if isinstance(self.state_name, str) else list(self.state_name),
+            "extrapolation": self._tables[0].extrapolation,
         }
 
     def __repr__(self):

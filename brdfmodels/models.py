@@ -28,11 +28,16 @@ from .registry import model_from_dict, register
 from .sh import SHBasis
 from .states import (
     StateTable,
+    bilinear_rows,
+    bilinear_weights,
     check_in_range,
+    check_in_range_2d,
     check_nodes,
     check_policy,
     interpolation_weights,
     interpolate_rows,
+    path_pieces,
+    quadratic_max,
     segment_extremes,
 )
 
@@ -105,15 +110,33 @@ class BRDFModel:
         """States at which tabulated quantities change slope (empty for static models)."""
         return np.empty(0)
 
+    @property
+    def state_dim(self) -> int:
+        """How many states the model depends on: 0 (static), 1, or 2 (a pair)."""
+        return 1 if self.is_dynamic else 0
+
+    def _single_state(self, st) -> bool:
+        """True when a checked state is one state for all rows (or there is none)."""
+        return st is None or np.ndim(st) == max(self.state_dim - 1, 0)
+
     def _check_state(self, state, shape):
         if not self.is_dynamic:
             return None
         if state is None:
-            lo, hi = self.state_range
             raise ValueError(
-                f"state: {type(self).__name__} depends on {self.state_name}; pass state=<value in [{lo!r}, {hi!r}]>"
+                f"state: {type(self).__name__} depends on {self.state_name}; pass state=<value in {_range_text(self.state_range)}>"
             )
         s = np.asarray(state, dtype=float)
+        if self.state_dim == 2:
+            if s.shape[-1:] != (2,):
+                raise ValueError(f"state: {type(self).__name__} depends on the pair {list(self.state_name)}; "
+                                 f"expected [value, value] (or an array of pairs), got shape {s.shape}")
+            if s.ndim == 1:
+                return s
+            try:
+                return np.broadcast_to(s, shape + (2,)).reshape(-1, 2)
+            except ValueError:
+                raise ValueError(f"state: shape {s.shape} does not broadcast to the direction shape {shape} + (2,)") from None
         if s.ndim == 0:
             return float(s)
         try:
@@ -136,7 +159,7 @@ class BRDFModel:
         if np.any(valid):
             all_valid = bool(valid.all())
             a, b = (wi, wo) if all_valid else (wi[valid], wo[valid])
-            s = st if (st is None or np.ndim(st) == 0 or all_valid) else st[valid]
+            s = st if (self._single_state(st) or all_valid) else st[valid]
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 v = fn(a, b, s)
             v = np.minimum(np.nan_to_num(v, nan=FR_MAX, posinf=FR_MAX), FR_MAX)
@@ -241,6 +264,12 @@ class BRDFModel:
     def __repr__(self):
         items = ", ".join(f"{k}={_short_repr(v)}" for k, v in self._params().items())
         return f"{type(self).__name__}({items})"
+
+
+def _range_text(r) -> str:
+    if r is not None and isinstance(r[0], tuple):
+        return "[" + ", ".join(f"[{lo!r}, {hi!r}]" for lo, hi in r) + "] (per state)"
+    return f"[{r[0]!r}, {r[1]!r}]"
 
 
 def _short_repr(v):
@@ -499,46 +528,64 @@ class SphericalHarmonicBRDF(_SHMixin, BRDFModel):
         }
 
 
+def _state_axes(states, state_name):
+    """``(axes, names)``: one or two checked node arrays and their state names."""
+    if isinstance(state_name, str):
+        if not state_name:
+            raise ValueError("state_name='': expected a non-empty string such as 'temperature_k'")
+        return (check_nodes("states", states),), (state_name,)
+    names = tuple(state_name) if isinstance(state_name, (list, tuple)) else None
+    if names is None or len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
+        raise ValueError(f"state_name={state_name!r}: expected a non-empty string, or two different ones "
+                         f"such as ['extinction', 'melt_fraction']")
+    if not isinstance(states, (list, tuple)) or len(states) != 2:
+        raise ValueError(f"states: expected two node arrays [nodes of {names[0]}, nodes of {names[1]}] for two states")
+    return tuple(check_nodes(f"states[{d}] ({names[d]})", states[d]) for d in range(2)), names
+
+
 @register("dynamic-spherical-harmonic")
 class DynamicBRDF(_SHMixin, BRDFModel):
-    """Spherical-harmonic BRDF over a table of material states (paper Sec. IV H).
+    """Spherical-harmonic BRDF over a table of one or two material states (paper Sec. IV H).
 
-    Each coefficient is interpolated linearly in the state, so ``ln f~`` (or ``f~``) is
-    linear in the state between two tabulated states and its maximum over a segment is at
-    a node (spec section 9): the exact envelope over a history is a max over nodes.
+    Each coefficient is interpolated linearly in the state (per axis: bilinearly over two
+    states, the paper's rule applied along each), so ``ln f~`` (or ``f~``) is a convex
+    blend of the tabulated corners: its maximum over the table is at a node (spec
+    section 9), and along a straight path inside one cell it is a quadratic in the path
+    parameter (linear for one state), which :meth:`evaluate_many` maximises exactly.
 
     Parameters
     ----------
     basis : SHBasis
-    states : array_like, shape (T,)
-        Strictly increasing state values.
-    coefficients : array_like, shape (T, K)
-        One coefficient row per state.
-    state_name : str
+    states : array_like, shape (T,), or [nodes_1 (n1,), nodes_2 (n2,)]
+        Strictly increasing state values; two arrays for a two-state table.
+    coefficients : array_like, shape (T, K) or (n1, n2, K)
+        One coefficient row per state (per state pair).
+    state_name : str or [str, str]
         What the state is, with its unit: ``"temperature_k"``, ``"time_s"``,
-        ``"extinction"``.
+        ``"extinction"``; two names for two states, e.g. ``["extinction", "melt_fraction"]``.
     fanout : float
         Fan-out exponent of the fits.
     log : bool
         Whether the expansion is of ln f~.
     extrapolation : {"error", "clamp"}
-        Outside the table: ValueError naming the range (default), or hold the end states.
+        Outside the table: ValueError naming the range (default), or hold the end states
+        (per axis).
     """
 
     def __init__(self, basis, states, coefficients, state_name, fanout=0.6, log=True, extrapolation="error"):
         self.basis = _check_basis(basis)
-        self.states = check_nodes("states", states)
-        c = finite_array("coefficients", coefficients, ndim=2)
-        if c.shape != (self.states.size, self.basis.size):
-            raise ValueError(
-                f"coefficients: expected shape ({self.states.size}, {self.basis.size}) (states x basis size), got {c.shape}"
-            )
+        axes, names = _state_axes(states, state_name)
+        object.__setattr__(self, "_axes", axes)
+        object.__setattr__(self, "_names", names)
+        self.states = axes[0] if len(axes) == 1 else axes
+        c = finite_array("coefficients", coefficients, ndim=len(axes) + 1)
+        want = tuple(a.size for a in axes) + (self.basis.size,)
+        if c.shape != want:
+            what = "states x basis size" if len(axes) == 1 else "nodes_1 x nodes_2 x basis size"
+            raise ValueError(f"coefficients: expected shape {want} ({what}), got {c.shape}")
         c = c.copy()
         c.setflags(write=False)
         self.coefficients = c
-        if not isinstance(state_name, str) or not state_name:
-            raise ValueError(f"state_name={state_name!r}: expected a non-empty string such as 'temperature_k'")
-        object.__setattr__(self, "_state_name", state_name)
         self.fanout = _check_fanout("fanout", fanout)
         self.log = bool(log)
         self.extrapolation = check_policy(extrapolation)
@@ -553,25 +600,49 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         return True
 
     @property
+    def state_dim(self) -> int:
+        return len(self._axes)
+
+    @property
     def state_name(self):
-        return self._state_name
+        return self._names[0] if len(self._names) == 1 else self._names
 
     @property
     def state_range(self):
-        return (float(self.states[0]), float(self.states[-1]))
+        r = tuple((float(a[0]), float(a[-1])) for a in self._axes)
+        return r[0] if len(r) == 1 else r
 
     def state_nodes(self):
-        return self.states
+        if len(self._axes) == 1:
+            return self.states
+        g1, g2 = np.meshgrid(*self._axes, indexing="ij")
+        return np.stack([g1.ravel(), g2.ravel()], axis=1)
+
+    def _checked(self, state) -> np.ndarray:
+        if len(self._axes) == 1:
+            return check_in_range(state, self._axes[0], self._names[0], self.extrapolation)
+        return check_in_range_2d(state, self._axes, self._names, self.extrapolation)
+
+    def _weights(self, q) -> np.ndarray:
+        """Interpolation weights (nodes, Q) at checked states."""
+        if len(self._axes) == 1:
+            return interpolation_weights(self._axes[0], q)
+        return bilinear_weights(self._axes, q)
 
     def coefficients_at(self, state) -> np.ndarray:
-        """Interpolated coefficients (K,) at a scalar state, or (Q, K) at an array."""
-        q = check_in_range(state, self.states, self.state_name, self.extrapolation)
-        rows = interpolate_rows(self.states, self.coefficients, np.atleast_1d(q))
-        return rows[0] if np.ndim(q) == 0 else rows
+        """Interpolated coefficients (K,) at one state (a scalar, or a pair for two
+        states), or (Q, K) at an array of them."""
+        q = self._checked(state)
+        single = np.ndim(q) == len(self._axes) - 1
+        if len(self._axes) == 1:
+            rows = interpolate_rows(self._axes[0], self.coefficients, np.atleast_1d(q))
+        else:
+            rows = bilinear_rows(self._axes, self.coefficients, q)
+        return rows[0] if single else rows
 
     def at_state(self, state) -> SphericalHarmonicBRDF:
-        """The one-state model at a scalar state."""
-        return SphericalHarmonicBRDF(self.basis, self.coefficients_at(float(state)), self.fanout, self.log)
+        """The one-state model at one state (a scalar, or a pair for two states)."""
+        return SphericalHarmonicBRDF(self.basis, self.coefficients_at(state), self.fanout, self.log)
 
     def _fr(self, wi, wo, state, fanout_h=None, divide_r=True):
         coef = self.coefficients_at(state)
@@ -583,6 +654,32 @@ class DynamicBRDF(_SHMixin, BRDFModel):
     def _fr_segment_max(self, wi, wo, s_lo, s_hi, fanout_h):
         return np.maximum(self._fr(wi, wo, s_lo, fanout_h), self._fr(wi, wo, s_hi, fanout_h))
 
+    def _query(self, states, reduce):
+        """``(columns, reducer)``: the states to evaluate (as interpolation weights, nodes x
+        Q') and how the reduction combines the Q' exponents of a row block into one."""
+        if len(self._axes) == 1:
+            q = self._checked(np.atleast_1d(np.asarray(states, dtype=float)).ravel())
+            if reduce == "path-max":
+                # the path covers [min, max]: add the nodes inside it
+                nodes = self._axes[0]
+                q = np.concatenate([q, nodes[(nodes > q.min()) & (nodes < q.max())]])
+            if reduce:
+                # linear in the state between nodes: only the first and last state of each
+                # node interval can hold the max (exact, not a bound)
+                q = segment_extremes(self._axes[0], q)
+            return self._weights(q), _row_max
+        q = self._checked(np.asarray(states, dtype=float).reshape(-1, 2))
+        if reduce != "path-max":
+            return self._weights(q), _row_max
+        starts, ends = path_pieces(self._axes, q)
+        m = starts.shape[0]
+        cols = np.concatenate([starts, 0.5 * (starts + ends), ends])
+
+        def reducer(prod):  # exact max of each piece's quadratic, then over the pieces
+            return quadratic_max(prod[:, :m], prod[:, m:2 * m], prod[:, 2 * m:]).max(axis=1)
+
+        return self._weights(cols), reducer
+
     def evaluate_many(self, wi, wo, states, *, projected=False, row_scale=None, reduce=None, chunk_rows=16384, out=None,
                       threads=None) -> np.ndarray:
         """BRDF at N direction pairs and Q states as one basis evaluation and one GEMM.
@@ -591,21 +688,25 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         ----------
         wi, wo : array_like, shape (..., 3)
             Direction pairs (flattened to N rows).
-        states : array_like, shape (Q,)
-            States (policy ``extrapolation`` applies).
+        states : array_like, shape (Q,) or (Q, 2)
+            States (pairs for a two-state table; policy ``extrapolation`` applies).
         projected : bool
             Return ``f_r cos(theta_r)`` instead of ``f_r``.
         row_scale : array_like, shape (N,), optional
             Non-negative factor per row (e.g. power / range^2 of an irradiance map). For
             log models it enters the exponent (no extra pass over the output); a zero
             row gives exactly 0.
-        reduce : {None, "max"}
-            ``"max"``: only the maximum over the states, shape (N,), reduced inside each
-            block before the monotone steps (exp, clipping, the cosine division), so a
-            log model takes N exponentials instead of N x Q and no (N, Q) array exists.
+        reduce : {None, "max", "path-max"}
+            ``"max"``: only the maximum over the given states, shape (N,), reduced inside
+            each block before the monotone steps (exp, clipping, the cosine division),
+            so a log model takes N exponentials instead of N x Q and no (N, Q) array
+            exists. ``"path-max"``: the maximum over the continuous path that joins the
+            states in order by straight lines (a history sampled in time): exact, from
+            the nodes inside the path's range (one state), or from each path piece's
+            quadratic inside one grid cell, ends and vertex (two states).
         chunk_rows : int
             Rows per fused block (basis, GEMM, exp); tune for cache, not accuracy.
-        out : ndarray, shape (N, Q) (or (N,) with ``reduce="max"``), optional
+        out : ndarray, shape (N, Q) (or (N,) with ``reduce``), optional
             Output buffer.
         threads : int, optional
             Blocks run side by side on this many threads (default
@@ -616,29 +717,30 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         ndarray, shape (N, Q) or (N,)
             f_r [1/sr] (0 below the horizon).
         """
-        if reduce not in (None, "max"):
-            raise ValueError(f"reduce={reduce!r}: expected None or 'max'")
+        if reduce not in (None, "max", "path-max"):
+            raise ValueError(f"reduce={reduce!r}: expected None, 'max' or 'path-max'")
         wi, wo, _ = _prepare(wi, wo)
         if row_scale is not None:
             row_scale = finite_array("row_scale", row_scale, ndim=1, minimum=0.0)
             if row_scale.shape != (wi.shape[0],):
                 raise ValueError(f"row_scale: expected shape ({wi.shape[0]},), got {row_scale.shape}")
-        q = check_in_range(np.atleast_1d(np.asarray(states, dtype=float)).ravel(), self.states, self.state_name, self.extrapolation)
-        if reduce:
-            # the exponent (or f~) is linear in the state between nodes: only the first and
-            # last state of each node interval can hold the max (exact, not a bound)
-            q = segment_extremes(self.states, q)
-        coef = self.coefficients.T @ interpolation_weights(self.states, q)  # (K, Q)
-        n, nq = wi.shape[0], q.size
-        shape = (n,) if reduce else (n, nq)
+        weights, reducer = self._query(states, reduce)
+        coef = self.coefficients.reshape(-1, self.basis.size).T @ weights  # (K, Q)
+        n = wi.shape[0]
+        shape = (n,) if reduce else (n, coef.shape[1])
         if out is None:
             out = np.empty(shape)
         elif out.shape != shape:
             raise ValueError(f"out: expected shape {shape}, got {out.shape}")
-        k = self.basis.size
+        map_blocks(self._block_fn(wi, wo, coef, projected, row_scale, reducer if reduce else None, out), n, chunk_rows, threads)
+        return out
+
+    def _block_fn(self, wi, wo, coef, projected, row_scale, reducer, out):
+        """The fused work on rows [s, e): basis, one GEMM, (reduce), exp or clip-divide."""
+        k, nq = self.basis.size, coef.shape[1]
         if self.log:
             # augmented row -ln(cos i cos r) with coefficient 1: exp() gives f_r directly
-            coef_aug = np.vstack([coef, np.ones((1, nq))])
+            coef = np.vstack([coef, np.ones((1, nq))])
         guard = self._exponent_bound + 2.0 * -math.log(_COS_FLOOR) > _LOG_FR_MAX
         # a finite stand-in for log(0): exp() of it underflows to exactly 0 whatever Y c is
         log_zero = -(self._exponent_bound + 1000.0)
@@ -646,10 +748,8 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         def block(s, e):
             a, b = wi[s:e], wo[s:e]
             yb = np.empty((k + 1, e - s))
-            parts = _half_diff_parts(a, b)
-            self.basis.design_transposed(*parts, self.fanout, self.fanout, out=yb[:k])
-            ci = a[:, 2]
-            cr = b[:, 2]
+            self.basis.design_transposed(*_half_diff_parts(a, b), self.fanout, self.fanout, out=yb[:k])
+            ci, cr = a[:, 2], b[:, 2]
             valid = (ci > 0.0) & (cr > 0.0)
             if self.log:
                 lc = np.log(np.maximum(ci, _COS_FLOOR))
@@ -660,24 +760,21 @@ class DynamicBRDF(_SHMixin, BRDFModel):
                     rs = row_scale[s:e]
                     with np.errstate(divide="ignore"):
                         yb[k] += np.where(rs > 0, np.log(np.where(rs > 0, rs, 1.0)), log_zero)
-            if reduce:
+            ys = yb if self.log else yb[:k]
+            if reducer is not None:
                 # max over states commutes with the monotone steps below (exp, clipping,
                 # multiplying by a non-negative row factor): reduce the GEMM first
-                prod = yb.T @ coef_aug if self.log else yb[:k].T @ coef
-                np.max(prod, axis=1, out=out[s:e])
+                out[s:e] = reducer(ys.T @ coef)
                 blk = out[s:e, None]
             else:
                 blk = out[s:e]
+                np.matmul(ys.T, coef, out=blk)
             if self.log:
-                if not reduce:
-                    np.matmul(yb.T, coef_aug, out=blk)
                 # clip only when this block's exponent could pass ln(FR_MAX)
                 if guard or (row_scale is not None and self._exponent_bound + yb[k].max() > _LOG_FR_MAX):
                     np.minimum(blk, _LOG_FR_MAX, out=blk)
                 np.exp(blk, out=blk)
             else:
-                if not reduce:
-                    np.matmul(yb[:k].T, coef, out=blk)
                 np.maximum(blk, 0.0, out=blk)
                 den = np.maximum(ci, _COS_FLOOR) * (1.0 if projected else np.maximum(cr, _COS_FLOOR))
                 blk /= den[:, None]
@@ -687,27 +784,54 @@ class DynamicBRDF(_SHMixin, BRDFModel):
             if not valid.all():
                 blk[~valid] = 0.0
 
-        map_blocks(block, n, chunk_rows, threads)
-        return out
+        return block
 
     def _params(self):
         return {
             "basis": self.basis.to_dict(),
-            "states": self.states.tolist(),
+            "states": self.states.tolist() if len(self._axes) == 1 else [a.tolist() for a in self._axes],
             "coefficients": self.coefficients.tolist(),
-            "state_name": self.state_name,
+            "state_name": self.state_name if len(self._axes) == 1 else list(self._names),
             "fanout": self.fanout,
             "log": self.log,
             "extrapolation": self.extrapolation,
         }
 
 
+def _row_max(prod: np.ndarray) -> np.ndarray:
+    return prod.max(axis=1)
+
+
 # ----------------------------------------------------------------------------------------
 def _state_names(models):
     names = {m.state_name for m in models if m.is_dynamic}
     if len(names) > 1:
-        raise ValueError(f"models depend on different states {sorted(names)}: a combination needs one state")
+        raise ValueError(f"models depend on different states {sorted(map(str, names))}: a combination needs one state")
     return next(iter(names)) if names else None
+
+
+def _intersect_ranges(ranges):
+    """The common part of state ranges: (lo, hi), or one (lo, hi) per state of a pair."""
+    if not ranges:
+        return None
+    if isinstance(ranges[0][0], tuple):
+        return tuple(_intersect_ranges([r[d] for r in ranges]) for d in range(len(ranges[0])))
+    return (max(r[0] for r in ranges), min(r[1] for r in ranges))
+
+
+def _empty_range(r) -> bool:
+    return any(_empty_range(x) for x in r) if isinstance(r[0], tuple) else r[0] > r[1]
+
+
+def _union_nodes(node_sets, dim):
+    """Nodes where any part's table changes slope: sorted values (one state), or the
+    grid of the per-axis unions (two states: every part is bilinear inside its cells)."""
+    sets = [n for n in node_sets if len(n)]
+    if dim < 2:
+        return np.unique(np.concatenate(sets)) if sets else np.empty(0)
+    axes = [np.unique(np.concatenate([n[:, d] for n in sets])) for d in range(2)]
+    g1, g2 = np.meshgrid(*axes, indexing="ij")
+    return np.stack([g1.ravel(), g2.ravel()], axis=1)
 
 
 @register("sum")
@@ -728,11 +852,9 @@ class Sum(BRDFModel):
         self.models = tuple(models)
         object.__setattr__(self, "_state_name", _state_names(self.models))
         self.reciprocal = all(m.reciprocal for m in self.models)
-        if self.is_dynamic:
+        if self.is_dynamic and _empty_range(self.state_range):
             ranges = [m.state_range for m in self.models if m.is_dynamic]
-            lo, hi = max(r[0] for r in ranges), min(r[1] for r in ranges)
-            if lo > hi:
-                raise ValueError(f"models: the dynamic parts' state ranges {ranges} do not overlap")
+            raise ValueError(f"models: the dynamic parts' state ranges {ranges} do not overlap")
         self._freeze()
 
     @property
@@ -744,13 +866,15 @@ class Sum(BRDFModel):
         return self._state_name
 
     @property
+    def state_dim(self):
+        return max(m.state_dim for m in self.models)
+
+    @property
     def state_range(self):
-        ranges = [m.state_range for m in self.models if m.is_dynamic]
-        return (max(r[0] for r in ranges), min(r[1] for r in ranges)) if ranges else None
+        return _intersect_ranges([m.state_range for m in self.models if m.is_dynamic])
 
     def state_nodes(self):
-        nodes = [m.state_nodes() for m in self.models]
-        return np.unique(np.concatenate(nodes)) if nodes else np.empty(0)
+        return _union_nodes([m.state_nodes() for m in self.models if m.is_dynamic], self.state_dim)
 
     def _fr(self, wi, wo, state):
         return sum(m._fr(wi, wo, state) for m in self.models)
@@ -823,14 +947,17 @@ class Scaled(BRDFModel):
         return self.factor.state_name if self._table else self.model.state_name
 
     @property
+    def state_dim(self):
+        return 1 if self._table else self.model.state_dim
+
+    @property
     def state_range(self):
         r = [x.state_range for x in (self.factor, self.model) if getattr(x, "state_range", None) is not None]
-        r = [x for x in r if x is not None]
-        return (max(a for a, _ in r), min(b for _, b in r)) if r else None
+        return _intersect_ranges(r)
 
     def state_nodes(self):
-        own = self.factor.states if self._table else np.empty(0)
-        return np.unique(np.concatenate([own, self.model.state_nodes()]))
+        own = [self.factor.states] if self._table else []
+        return _union_nodes(own + [self.model.state_nodes()], self.state_dim)
 
     def _f(self, state):
         return self.factor(state) if self._table else self.factor
@@ -899,7 +1026,14 @@ class Envelope(BRDFModel):
         self.multiplier = finite_scalar("multiplier", multiplier, minimum=1.0)
         self.fanout_h = None if fanout_h is None else _check_fanout("fanout_h", fanout_h)
         self.reciprocal = model.reciprocal
-        if model.is_dynamic:
+        if model.state_dim == 2:
+            # bilinear inside each cell: a convex blend of its corners, so the max over
+            # the whole table is a max over the grid points (in the common range)
+            (lo1, hi1), (lo2, hi2) = model.state_range
+            g = model.state_nodes()
+            g = np.clip(g, [lo1, lo2], [hi1, hi2])
+            nodes = np.unique(g, axis=0)
+        elif model.is_dynamic:
             lo, hi = model.state_range
             nodes = model.state_nodes()
             nodes = nodes[(nodes >= lo) & (nodes <= hi)]
@@ -913,6 +1047,8 @@ class Envelope(BRDFModel):
     def _exact(self, wi, wo, fanout_h):
         if self._nodes.size == 0:
             return self.model._fr_segment_max(wi, wo, None, None, fanout_h)
+        if self._nodes.ndim == 2:
+            return np.max([self.model._fr_segment_max(wi, wo, p, p, fanout_h) for p in self._nodes], axis=0)
         if self._nodes.size == 1:
             s = float(self._nodes[0])
             return self.model._fr_segment_max(wi, wo, s, s, fanout_h)
@@ -936,7 +1072,7 @@ class Envelope(BRDFModel):
         if self._nodes.size == 0:
             return self.multiplier * self.model._spec(wi, None)
         # delta-lobe reflectances are linear in the state between nodes: max at a node
-        return self.multiplier * np.max([self.model._spec(wi, float(s)) for s in self._nodes], axis=0)
+        return self.multiplier * np.max([self.model._spec(wi, s if self._nodes.ndim == 2 else float(s)) for s in self._nodes], axis=0)
 
     @classmethod
     def _decode(cls, params):

@@ -158,3 +158,125 @@ class StateTable:
     def __repr__(self):
         lo, hi = self.state_range
         return f"StateTable({self.state_name}: {self.states.size} nodes in [{lo:g}, {hi:g}])"
+
+
+# -- two states (bilinear tables) ------------------------------------------------------------
+def check_in_range_2d(query, axes, names, policy: str) -> np.ndarray:
+    """The policy of :func:`check_in_range` per axis of (..., 2) states."""
+    q = np.asarray(query, dtype=float)
+    if q.shape[-1:] != (2,):
+        raise ValueError(f"state: expected pairs ({names[0]}, {names[1]}) in the last axis, got shape {q.shape}")
+    cols = [check_in_range(q[..., d], axes[d], names[d], policy) for d in range(2)]
+    return np.stack(cols, axis=-1)
+
+
+def bilinear_weights(axes, query: np.ndarray) -> np.ndarray:
+    """Weights W (n1 n2, Q) with ``table.reshape(n1 n2, K).T @ W`` = the bilinear
+    interpolation at in-range ``query`` (Q, 2): linear per axis (Bailey et al. 2008,
+    Sec. IV H: "each of the harmonic coefficients would be separately linearly
+    interpolated"), the product of the two axes' weights, so every weight is >= 0 and
+    they sum to 1 (a convex blend of the four corners of the query's cell)."""
+    q = np.asarray(query, dtype=float).reshape(-1, 2)
+    w1 = interpolation_weights(axes[0], q[:, 0])
+    w2 = interpolation_weights(axes[1], q[:, 1])
+    return (w1[:, None, :] * w2[None, :, :]).reshape(axes[0].size * axes[1].size, q.shape[0])
+
+
+def _cell(nodes: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return np.clip(np.searchsorted(nodes, v, side="right") - 1, 0, max(nodes.size - 2, 0))
+
+
+def _split_segment(axes, a: np.ndarray, b: np.ndarray) -> list:
+    """Parameters in [0, 1] where the segment a -> b crosses a grid line, with 0 and 1."""
+    cuts = [0.0, 1.0]
+    for d in range(2):
+        lo, hi = sorted((a[d], b[d]))
+        inner = axes[d][(axes[d] > lo) & (axes[d] < hi)]
+        if inner.size:
+            cuts.extend(((inner - a[d]) / (b[d] - a[d])).tolist())
+    return sorted(set(cuts))
+
+
+def path_pieces(axes, path) -> tuple:
+    """Split a polyline of states (P, 2) into straight pieces that each lie in one cell of
+    the grid ``axes``: returns ``(starts, ends)``, each (M, 2).
+
+    Along such a piece every bilinearly interpolated quantity is a quadratic in the
+    piece's parameter (exactly: the two axis weights are linear in it), so its maximum
+    over the piece is at an end or at the vertex. Consecutive pieces on one grid-parallel
+    line inside one cell are merged (a quantity is linear there: the two outermost
+    states bound it). A one-point path gives one piece of length 0.
+    """
+    p = np.asarray(path, dtype=float).reshape(-1, 2)
+    starts, ends = [], []
+    for a, b in zip(p[:-1], p[1:]):
+        if np.array_equal(a, b):
+            continue
+        cuts = _split_segment(axes, a, b)
+        for t0, t1 in zip(cuts[:-1], cuts[1:]):
+            starts.append(a + (b - a) * t0)
+            ends.append(a + (b - a) * t1)
+    if not starts:
+        return p[:1].copy(), p[:1].copy()
+    return _merge_straight(axes, np.array(starts), np.array(ends))
+
+
+def _merge_straight(axes, starts: np.ndarray, ends: np.ndarray) -> tuple:
+    """Merge runs of consecutive pieces that share one grid-parallel line and one cell."""
+    mids = 0.5 * (starts + ends)
+    cell = np.stack([_cell(axes[d], mids[:, d]) for d in range(2)], axis=1)
+    flat = starts == ends  # (M, 2): the coordinate that does not change
+    out_s, out_e = [starts[0].copy()], [ends[0].copy()]
+    for i in range(1, len(starts)):
+        prev = i - 1
+        same_line = any(flat[i, d] and flat[prev, d] and starts[i, d] == starts[prev, d] for d in range(2))
+        if same_line and np.array_equal(cell[i], cell[prev]):
+            lo = np.minimum(np.minimum(out_s[-1], out_e[-1]), np.minimum(starts[i], ends[i]))
+            hi = np.maximum(np.maximum(out_s[-1], out_e[-1]), np.maximum(starts[i], ends[i]))
+            out_s[-1], out_e[-1] = lo, hi
+        else:
+            out_s.append(starts[i].copy())
+            out_e.append(ends[i].copy())
+    return np.array(out_s), np.array(out_e)
+
+
+def quadratic_max(e0: np.ndarray, em: np.ndarray, e1: np.ndarray) -> np.ndarray:
+    """Maximum over t in [0, 1] of the quadratic through (0, e0), (1/2, em), (1, e1).
+
+    ``q(t) = e0 + beta t + gamma t^2`` with ``gamma = 2 (e0 + e1 - 2 em)`` and
+    ``beta = e1 - e0 - gamma``; a concave q (gamma < 0) with its vertex
+    ``t* = -beta / (2 gamma)`` inside (0, 1) peaks at ``e0 - beta^2 / (4 gamma)``.
+    """
+    gamma = 2.0 * (e0 + e1 - 2.0 * em)
+    beta = e1 - e0 - gamma
+    out = np.maximum(e0, e1)
+    concave = gamma < 0.0
+    if np.any(concave):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t = -beta / (2.0 * gamma)
+            top = e0 - beta * beta / (4.0 * gamma)
+        inside = concave & (t > 0.0) & (t < 1.0) & np.isfinite(top)
+        out = np.where(inside, np.maximum(out, top), out)
+    return out
+
+
+def bilinear_rows(axes, table: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of ``table`` (n1, n2, K) at in-range ``query`` (Q, 2) ->
+    (Q, K), from the four corners of each query's cell (no dense weight matrix)."""
+    q = np.asarray(query, dtype=float).reshape(-1, 2)
+    idx, frac = [], []
+    for d in range(2):
+        nodes = axes[d]
+        if nodes.size == 1:
+            idx.append(np.zeros(q.shape[0], int))
+            frac.append(np.zeros(q.shape[0]))
+            continue
+        j = _cell(nodes, q[:, d])
+        idx.append(j)
+        frac.append((q[:, d] - nodes[j]) / (nodes[j + 1] - nodes[j]))
+    (i, j), (x, y) = idx, frac
+    i1 = np.minimum(i + 1, axes[0].size - 1)
+    j1 = np.minimum(j + 1, axes[1].size - 1)
+    x, y = x[:, None], y[:, None]
+    return (table[i, j] * ((1 - x) * (1 - y)) + table[i1, j] * (x * (1 - y))
+            + table[i, j1] * ((1 - x) * y) + table[i1, j1] * (x * y))

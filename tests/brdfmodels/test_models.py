@@ -181,7 +181,7 @@ def test_evaluate_many_max_over_states_equals_max_of_the_full_array(log, project
     assert top.shape == (700,)
     np.testing.assert_allclose(top, full.max(axis=1), rtol=1e-14, atol=0)
     assert np.all(top[:20] == 0) and np.any(top > 0)
-    with pytest.raises(ValueError, match="reduce='min': expected None or 'max'"):
+    with pytest.raises(ValueError, match="reduce='min': expected None, 'max' or 'path-max'"):
         dyn.evaluate_many(wi, wo, states, reduce="min")
 
 
