@@ -132,18 +132,20 @@ def _sdz(scene, exposure, mu, log, ray_scene) -> dict:
     return out
 
 
-def _histories(scene, spots, log, the_plan):
-    """Stage ``history``: analysis times and the dynamic spots' states over them."""
-    dynamic_spots = [sp for sp in spots if sp.material.is_dynamic]
+def _histories(scene, traced, log, the_plan):
+    """Stage ``history``: analysis times, the dynamic spots' states over them and their
+    melting (the spots of slumping targets get their tilt over the times)."""
+    dynamic_spots = [sp for sp in traced.built.spots if sp.material.is_dynamic]
     times = history.analysis_times(scene.spec, bool(dynamic_spots))
     if not dynamic_spots:
         log.skip("history", the_plan.skipped("history") or "no lit target has a dynamic material")
-        return times, {}
+        return times, {}, {}
     t_end = scene.spec.analysis.time_end_s or scene.spec.exposure.duration_s
     with log.run("history") as st:
         hist = history.state_histories(dynamic_spots, times, t_end)
-        st.detail = hist.detail
-    return times, hist.states
+        traced.built.spots, notes = history.with_slumps(traced.built.spots, hist.melt)
+        st.detail = "; ".join([hist.detail] + notes)
+    return times, hist.states, hist.melt
 
 
 def _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan) -> MapInputs:
@@ -213,6 +215,14 @@ def _targets(scene, traced, states, exposure, mu, log):
     return rows + beam_stage.unlit_targets(scene.targets, spots, traced.built.unreflected)
 
 
+def _melt_row(melt) -> dict | None:
+    """The report's melt entry of a target: onset and full-melt times [s] (None: not
+    within the run), or None when its history does not know its melting."""
+    if melt is None:
+        return None
+    return {"onset_s": melt.onset_s, "full_melt_s": melt.full_s, "max_fraction": float(np.max(melt.fraction))}
+
+
 def _mirror_beams(scene, rows, spots, ray_scene, zone, log, the_plan) -> None:
     """Stage ``mirror_beams``: each mirror beam's reach and containment, into ``zone``
     (report.json ``sdz.mirror_beams``)."""
@@ -248,7 +258,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan, ray_scene)
     spill_part = _spill(scene, traced, mu, exposure, log)
     zone = _sdz(scene, exposure, mu, log, ray_scene)
-    times, states = _histories(scene, traced.built.spots, log, the_plan)
+    times, states, melts = _histories(scene, traced, log, the_plan)
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
         inp.direct_w_m2 = direct_beam.irradiance_w_m2
@@ -259,6 +269,9 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     out = irradiance_map.irradiance_map(inp)
     _log_map(log, inp, out, the_plan)
     rows = _targets(scene, traced, states, exposure, mu, log)
+    melt_by_name = {scene.targets[k].name: m for k, m in melts.items()}
+    for row in rows:
+        row.melt = _melt_row(melt_by_name.get(row.name))
     _mirror_beams(scene, rows, traced.built.spots, ray_scene, zone, log, the_plan)
     fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
     built = traced.built

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdfmodels import DynamicBRDF, Scaled, StateTable
+from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
 __all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES"]
 
@@ -62,6 +62,7 @@ class Spot:
     ray_faces: tuple | None = None  # the target's triangles in the tracer: (ids, normals, a vertex each)
     outline_s: np.ndarray | None = None  # exact lit outline in beam coordinates (flat targets hit whole)
     spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
+    slump: object = None  # hazard.pipeline.slump.SpotSlump: the molten surface's tilt per analysis time, if any
 
     def __post_init__(self):
         if self.material is None:
@@ -540,7 +541,11 @@ def projected_brdf(model, wi, wo, states=None, row_scale=None, reduce=None) -> n
     multiplies; other models loop over the states. ``reduce="max"`` returns the maximum
     over the states (N,) without forming (N, T) where the model allows: inside the
     dynamic SH evaluation, and as ``f x max(factor)`` for a static model scaled by a
-    (non-negative) state-table factor.
+    (non-negative) state-table factor. ``reduce="path-max"``: the maximum over the path
+    joining the states in time order (a dynamic SH model finds it exactly, see
+    :meth:`brdfmodels.DynamicBRDF.evaluate_many`; for one state the caller adds the
+    table's nodes inside the path's range, so the max over the states is the path's);
+    a two-state sum takes the sum of its parts' maxima (conservative).
     """
     if states is None:
         f = model.evaluate_cos(wi, wo)
@@ -564,10 +569,26 @@ def projected_brdf(model, wi, wo, states=None, row_scale=None, reduce=None) -> n
         f = model.evaluate_cos(wi, wo)
         if row_scale is not None:
             f = f * row_scale
-        return f if reduce else np.repeat(f[:, None], states.size, axis=1)
-    f = np.stack([model.evaluate_cos(wi, wo, state=float(s)) for s in states], axis=-1)
+        return f if reduce else np.repeat(f[:, None], len(states), axis=1)
+    if reduce and isinstance(model, Sum) and model.state_dim == 2:
+        # the max of a sum <= the sum of the parts' maxima (exact when one part varies)
+        return sum(projected_brdf(m, wi, wo, states if m.is_dynamic else None, row_scale, reduce) for m in model.models)
+    f = np.stack([model.evaluate_cos(wi, wo, state=s) for s in states], axis=-1)
     f = f if row_scale is None else f * row_scale[:, None]
     return f.max(axis=1) if reduce else f
+
+
+def path_states(model, states) -> np.ndarray:
+    """The states that give a model's exact maximum over a history's path: for one state
+    the sorted states with the model's nodes inside their range (the path covers that
+    range; between nodes a table is linear), for two states the path itself in time
+    order (:meth:`brdfmodels.DynamicBRDF.evaluate_many` with ``reduce="path-max"``)."""
+    s = np.asarray(states, float)
+    if s.ndim == 2:
+        return s
+    nodes = np.asarray(model.state_nodes(), float)
+    lo, hi = s.min(), s.max()
+    return np.unique(np.concatenate([s, nodes[(nodes >= lo) & (nodes <= hi)]]))
 
 
 def _to_local(frames, v):
@@ -587,6 +608,10 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     far field only the rows that receive light (maps skip everyone behind the surface or
     out of sight), otherwise all rows.
     """
+    if spot.slump is not None and states is not None:
+        from .pipeline.slump import slumped_irradiance
+
+        return slumped_irradiance(spot_irradiance, spot, observers_m, gain, attenuation_per_m, states, visible, sparse)
     obs = np.asarray(observers_m, float)
     m = len(obs)
     model = spot.material
@@ -640,7 +665,7 @@ def specular_power_w(spot: Spot, states=None):
     wi = _to_local(spot.frames, -spot.incoming)
     if states is None:
         return float((model.specular_reflectance(wi) * spot.power_w).sum())
-    return np.array([(model.specular_reflectance(wi, state=float(s)) * spot.power_w).sum() for s in states])
+    return np.array([(model.specular_reflectance(wi, state=s) * spot.power_w).sum() for s in states])
 
 
 def mirror_axis(spot: Spot) -> np.ndarray:
@@ -665,4 +690,4 @@ def spot_directions(spot: Spot):
     return _to_local(spot.mean_frame, -spot.mean_incoming)
 
 
-__all__ += ["specular_power_w", "mirror_axis", "spot_directions", "SpotBuild"]
+__all__ += ["specular_power_w", "mirror_axis", "spot_directions", "SpotBuild", "path_states"]

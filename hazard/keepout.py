@@ -24,7 +24,7 @@ import numpy as np
 import brdfmodels
 from brdfmodels.parallel import block_rows, map_blocks
 
-from .engine import Spot, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
+from .engine import Spot, path_states, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
 from .nohd import range_from_intensity
 from .progress import terminal_bar
 
@@ -66,13 +66,25 @@ class Lobe:
         }
 
 
-def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states):
+def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None):
+    """``fn(wo (N, 3)) -> NOHD [m]`` in the spot's mean frame: the max over the history's
+    path of states (:func:`hazard.engine.path_states`) and, for a slumping spot over the
+    whole history, over the normals the molten surface may take
+    (:func:`hazard.pipeline.slump.union_range_fn`)."""
     model = spot.material
-    wi = spot_directions(spot)
     power = spot.total_power_w * gain
+    if states is not None and spot.slump is not None and spot.slump.moves and len(states) == len(spot.slump.tilt_rad):
+        from .pipeline.slump import union_range_fn
+
+        def range_of(wi, wo, st):
+            return range_from_intensity(projected_brdf(model, wi, wo, st, reduce="path-max") * power, mpe_w_m2, mu)
+
+        return union_range_fn(spot, states, range_of, lambda s: path_states(model, s), slump_step_rad)
+    wi = spot_directions(spot)
+    st = None if states is None else path_states(model, states)
 
     def fn(wo):
-        f = projected_brdf(model, wi[None, :], wo, states, reduce="max")  # the lobe: max over the states
+        f = projected_brdf(model, wi[None, :], wo, st, reduce="path-max")  # the lobe: max over the history
         return range_from_intensity(f * power, mpe_w_m2, mu)
 
     return fn
@@ -315,6 +327,9 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
     fn = _range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states)
     wi = spot_directions(spot)
     special = np.stack([wi * np.array([-1, -1, 1]), wi])  # mirror, retro
+    extra = getattr(fn, "special", None)  # a slumping spot: the mirror directions of its tilted normals
+    if extra is not None and len(extra):
+        special = np.concatenate([special, extra])
     r_special = fn(special)
     what = f"keep-out lobe {spot.target.name}" + (" (dynamic)" if states is not None and np.size(states) > 1 else "")
     with terminal_bar(refine_levels + 1, what, unit="level") as bar:  # terminals only

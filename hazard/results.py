@@ -45,6 +45,8 @@ class TargetResult:
     lit_side: str = "front"
     aided: list = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
     beam_profile_fraction: float = 1.0  # hottest incident irradiance / the beam's on-axis value there (hazard.pipeline.lobes)
+    melt: dict | None = None  # melt onset and full-melt times [s] where the history knows them (hazard.pipeline.history)
+    slump: dict | None = None  # the slump the dynamic lobe covers, with its sampling (hazard.pipeline.lobes)
 
     def to_dict(self):
         def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side
@@ -69,6 +71,8 @@ class TargetResult:
             "specular_direction": self.specular_direction,
             "state_name": self.state_name,
             "state_range": self.state_range,
+            "melt": self.melt,
+            "slump": self.slump,
             "aided": list(self.aided),
         }
 

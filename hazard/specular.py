@@ -57,7 +57,7 @@ def _reflectance(spot, wi_local, states):
     model = spot.material
     if states is None:
         return model.specular_reflectance(wi_local)
-    return np.stack([model.specular_reflectance(wi_local, state=float(s)) for s in np.atleast_1d(states)], axis=-1)
+    return np.stack([model.specular_reflectance(wi_local, state=s) for s in np.atleast_1d(states)], axis=-1)
 
 
 def _target_faces(spot):

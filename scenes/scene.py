@@ -72,10 +72,24 @@ class Target:
     spec: object
     history: brdfmodels.History | None = None
     back_material: brdfmodels.BRDFModel | None = None  # the back face's material (static), if given
+    slump: "Slump | None" = None  # how melting tilts the front face's normal, if the material says
 
     @property
     def is_dynamic(self) -> bool:
         return self.material.is_dynamic
+
+
+@dataclass(frozen=True)
+class Slump:
+    """How melting moves the specular peak (material ``melt_tilt_deg``,
+    ``melt_tilt_direction``, ``melt_wander_deg``): the mean normal tilts by
+    ``tilt_rad x melt fraction`` towards ``direction`` (a unit vector perpendicular to the
+    nominal normal, world frame), and wanders within ``wander_rad`` of that once melting
+    has begun."""
+
+    tilt_rad: float
+    direction: np.ndarray
+    wander_rad: float
 
 
 @dataclass
@@ -260,6 +274,7 @@ def _terrain_target(spec, terrain, index, base_dir) -> Target:
     if ms is None:
         material = brdfmodels.create("lambertian", reflectance=TERRAIN_DEFAULT_REFLECTANCE)
     else:
+        _no_slump(ms, "terrain.material")
         material = _material(ms, "terrain.material", base_dir, spec.laser.polarization, spec.laser.wavelength_nm)
         if material.is_dynamic:
             raise SceneError(f"terrain.material: depends on {material.state_name!r}; expected a static material (the ground has no history)")
@@ -284,15 +299,19 @@ def _history(spec, where, base_dir):
         except ValueError as exc:
             raise SceneError(f"{where}.file={spec.file!r}: {exc}") from None
         names = data.dtype.names or ()
-        if "time_s" not in names or spec.state not in names:
-            raise SceneError(f"{where}.file={spec.file!r}: expected CSV columns time_s and {spec.state}, got {list(names)}")
-        times, states = np.atleast_1d(data["time_s"]), np.atleast_1d(data[spec.state])
+        want = spec.state_names
+        if "time_s" not in names or any(w not in names for w in want):
+            raise SceneError(f"{where}.file={spec.file!r}: expected CSV columns time_s and {', '.join(want)}, got {list(names)}")
+        times = np.atleast_1d(data["time_s"])
+        cols = [np.atleast_1d(data[w]) for w in want]
+        states = cols[0] if len(cols) == 1 else np.stack(cols, axis=1)
         if not (np.all(np.isfinite(times)) and np.all(np.isfinite(states))):
-            raise SceneError(f"{where}.file={spec.file!r}: expected finite numbers in columns time_s and {spec.state}")
+            raise SceneError(f"{where}.file={spec.file!r}: expected finite numbers in columns time_s and {', '.join(want)}")
     else:
         times, states = spec.times_s, spec.states
     try:
-        return brdfmodels.History(times, states, spec.state, extrapolation=spec.extrapolation)
+        return brdfmodels.History(times, states, spec.state if isinstance(spec.state, str) else list(spec.state),
+                                  extrapolation=spec.extrapolation)
     except ValueError as exc:
         raise SceneError(f"{where}: {exc}") from None
 
@@ -427,34 +446,84 @@ def _target(i, ts, offset, base_dir, polarization="unknown", wavelength_nm=None)
     material = _material(ts.material, f"{where}.material", base_dir, polarization, wavelength_nm)
     hist = _history(ts.history, f"{where}.history", base_dir)
     if ts.history is not None:
-        state = ts.history.state
-        if state == "reflectance_factor" and not material.is_dynamic:
-            material = _identity_factor(material)
-        elif not material.is_dynamic:
-            raise SceneError(
-                f"{where}.history: the material is static; a history needs a dynamic material, "
-                f"or state = 'reflectance_factor' to scale it"
-            )
-        elif material.state_name != state:
-            raise SceneError(f"{where}.history.state={state!r}: the material depends on {material.state_name!r}")
-        if hist is not None:  # the series' states must lie where the material is defined
-            s_lo, s_hi = float(np.min(hist.states)), float(np.max(hist.states))
-            for s_ in (s_lo, s_hi):
-                try:
-                    material.evaluate([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], state=s_)
-                except ValueError as exc:
-                    raise SceneError(f"{where}.history: states span [{s_lo:g}, {s_hi:g}]: {exc}") from None
+        material = _material_for_history(material, ts.history, hist, where)
     elif material.is_dynamic:
-        raise SceneError(f"{where}.history: the material depends on {material.state_name!r}; give a history")
+        raise SceneError(f"{where}.history: the material depends on {_names_text(material.state_name)}; give a history")
     back = None
     if ts.back is not None:
+        _no_slump(ts.back, f"{where}.back")
         back = _material(ts.back, f"{where}.back", base_dir, polarization, wavelength_nm)
         if back.is_dynamic:
             raise SceneError(f"{where}.back: the back material depends on {back.state_name!r}; "
                              f"expected a static material (the history drives the front face only)")
     frame = brdfmodels.local_frame(ts.normal, ts.tangent)
     return Target(ts.name, i, mesh, material, math.radians(ts.material.groove_angle_deg), frame[2], frame[0],
-                  np.asarray(ts.center_m, float) - offset, ts, hist, back)
+                  np.asarray(ts.center_m, float) - offset, ts, hist, back, _slump(ts, frame, material, where))
+
+
+def _no_slump(ms, where) -> None:
+    if ms.melt_tilt_deg or ms.melt_wander_deg:
+        raise SceneError(f"{where}: melt_tilt_deg / melt_wander_deg are for a target's front material "
+                         f"(the one its history drives)")
+
+
+def _names_text(name) -> str:
+    return repr(name) if isinstance(name, str) else repr(list(name))
+
+
+def _material_for_history(material, hs, hist, where):
+    """The material a history drives: checked against the history's state names and,
+    for a series, its states' span (a static material with ``reflectance_factor`` is
+    wrapped in an identity factor table)."""
+    state = hs.state if isinstance(hs.state, str) else tuple(hs.state)
+    if state == "reflectance_factor" and not material.is_dynamic:
+        material = _identity_factor(material)
+    elif not material.is_dynamic:
+        raise SceneError(
+            f"{where}.history: the material is static; a history needs a dynamic material, "
+            f"or state = 'reflectance_factor' to scale it"
+        )
+    elif material.state_name != state:
+        raise SceneError(f"{where}.history.state={_names_text(state)}: the material depends on {_names_text(material.state_name)}")
+    if hist is not None:  # the series' states must lie where the material is defined
+        lo, hi = np.min(hist.states, axis=0), np.max(hist.states, axis=0)
+        for s_ in (lo, hi):
+            try:
+                material.evaluate([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], state=s_)
+            except ValueError as exc:
+                raise SceneError(f"{where}.history: states span [{_fmt(lo)}, {_fmt(hi)}]: {exc}") from None
+    return material
+
+
+def _fmt(v) -> str:
+    return f"{float(v):g}" if np.ndim(v) == 0 else "(" + ", ".join(f"{float(x):g}" for x in v) + ")"
+
+
+def _slump(ts, frame, material, where):
+    """The target's :class:`Slump`, or None; its melt fraction must come from the
+    history (a heating history, or a series with a ``melt_fraction`` state)."""
+    ms = ts.material
+    if ms.melt_tilt_deg == 0.0 and ms.melt_wander_deg == 0.0:
+        return None
+    hs = ts.history
+    if hs is None or (hs.kind == "series" and "melt_fraction" not in hs.state_names):
+        raise SceneError(f"{where}.material.melt_tilt_deg / melt_wander_deg: the slump follows the melt fraction; "
+                         f"expected a heating history, or a series with state 'melt_fraction'")
+    if material.has_specular:
+        raise SceneError(f"{where}.material.melt_tilt_deg / melt_wander_deg: the material has an ideal-mirror (delta) lobe, "
+                         f"traced on the target's geometry, which the slump would not tilt; expected a material without one "
+                         f"(a measured or fitted BRDF)")
+    n = frame[2]
+    if ms.melt_tilt_direction == "up":
+        d, label = np.array([0.0, 0.0, 1.0]), "world up"
+    else:  # target frame (x = tangent, y = n x t, z = normal) -> world
+        d, label = np.asarray(ms.melt_tilt_direction, float) @ frame, f"target-frame {ms.melt_tilt_direction}"
+    d = d - (d @ n) * n
+    if ms.melt_tilt_deg > 0 and not np.linalg.norm(d) > 1e-9:
+        raise SceneError(f"{where}.material.melt_tilt_direction: {label} is along the normal; "
+                         f"expected a direction with a part across the surface to tilt towards")
+    d = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array(frame[0])
+    return Slump(math.radians(ms.melt_tilt_deg), d, math.radians(ms.melt_wander_deg))
 
 
 def _check_open_air(g, ob, spec, p) -> None:

@@ -163,18 +163,24 @@ class OxidationSpec(_Strict):
     initial_extinction: float = Field(ge=0, le=1e3)
 
 
+_StateName = Literal["temperature_k", "extinction", "time_s", "reflectance_factor", "melt_fraction"]
+
+
 class HistorySpec(_Strict):
     """How the target's state evolves.
 
     ``kind = "series"``: a measured series (``times_s`` and ``states`` inline, or a CSV
     ``file`` with columns ``time_s`` and the state). ``kind = "heating"``: a thin-plate
-    heating model driven by the laser's peak irradiance on the spot.
+    heating model driven by the laser's peak irradiance on the spot. ``state`` may name two
+    states (``["extinction", "melt_fraction"]``) for a two-state material; a series then
+    gives ``states`` as pairs (or a CSV with both columns).
     """
 
     kind: Literal["series", "heating"]
-    state: Literal["temperature_k", "extinction", "time_s", "reflectance_factor"] = "temperature_k"
+    state: _StateName | Annotated[list[_StateName], Field(min_length=2, max_length=2)] = "temperature_k"
     times_s: list[Annotated[float, Field(ge=-1e9, le=1e9)]] | None = None
-    states: list[Annotated[float, Field(ge=-1e9, le=1e9)]] | None = None
+    states: (list[Annotated[float, Field(ge=-1e9, le=1e9)]]
+             | list[Annotated[list[Annotated[float, Field(ge=-1e9, le=1e9)]], Field(min_length=2, max_length=2)]] | None) = None
     file: Name | None = None
     plate: Literal["stainless_steel", "copper"] | None = None
     thickness_m: float | None = Field(default=None, ge=1e-6, le=1.0, description="plate thickness [m], 1 um to 1 m")
@@ -183,8 +189,22 @@ class HistorySpec(_Strict):
     rtol: float = Field(default=1e-7, ge=1e-14, le=0.1, description="heating ODE tolerance (1e-14 to 0.1)")
     extrapolation: Literal["error", "clamp"] = "clamp"
 
+    @property
+    def state_names(self) -> list:
+        """The state's name, or the two names of a two-state history."""
+        return [self.state] if isinstance(self.state, str) else list(self.state)
+
     @model_validator(mode="after")
     def _check(self):
+        names = self.state_names
+        if len(names) == 2:
+            if names[0] == names[1]:
+                raise ValueError(f"state={names!r}: expected two different state names")
+            if "reflectance_factor" in names:
+                raise ValueError("state: 'reflectance_factor' scales a static material; it cannot be one of two states")
+        if self.states is not None and self.states and isinstance(self.states[0], list) != (len(names) == 2):
+            raise ValueError(f"states: expected {'pairs [' + ', '.join(names) + ']' if len(names) == 2 else 'numbers'} "
+                             f"for state = {self.state!r}")
         if self.kind == "series":
             inline = self.times_s is not None or self.states is not None
             if inline == (self.file is not None):
@@ -200,8 +220,9 @@ class HistorySpec(_Strict):
             extra = [k for k in ("times_s", "states", "file") if getattr(self, k) is not None]
             if extra:
                 raise ValueError(f"{', '.join(extra)}: only for kind = 'series' (a heating history computes its states)")
-            if self.state == "time_s":
-                raise ValueError("state='time_s' is for series histories; a heating history gives temperature_k, extinction or reflectance_factor")
+            if "time_s" in names:
+                raise ValueError("state='time_s' is for series histories; a heating history gives temperature_k, extinction, "
+                                 "melt_fraction or reflectance_factor")
         return self
 
 
@@ -220,6 +241,12 @@ class MaterialSpec(BaseModel):
     library: Name | None = None
     groove_angle_deg: float = Field(default=0.0, ge=-360.0, le=360.0,
                                     description="angle of the material grooves from the target tangent [deg]")
+    melt_tilt_deg: float = Field(default=0.0, ge=0.0, le=45.0,
+                                 description="mean tilt of the surface normal at full melt (the slump) [deg], 0 to 45")
+    melt_tilt_direction: Literal["up"] | Vec3 = Field(
+        default="up", description="where the slump tilts the normal: 'up' (world +z) or a vector in the target frame")
+    melt_wander_deg: float = Field(default=0.0, ge=0.0, le=30.0,
+                                   description="bound on the random wander of the molten surface's normal [deg], 0 to 30")
 
     @model_validator(mode="after")
     def _check(self):

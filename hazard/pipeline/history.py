@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -13,11 +13,24 @@ __all__ = ["StateHistories", "analysis_times", "state_histories"]
 
 @dataclass
 class StateHistories:
-    """``states``: target index -> material state at each analysis time; ``detail``: what
-    drove each (measured series, or heating at the spot's peak irradiance)."""
+    """``states``: target index -> material state at each analysis time ((T,), or (T, 2)
+    for two states); ``detail``: what drove each (measured series, or heating at the
+    spot's peak irradiance); ``melt``: target index -> :class:`Melt`, where known (a
+    heating history, or a series with a ``melt_fraction`` state)."""
 
     states: dict
     detail: str
+    melt: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Melt:
+    """A target's melt fraction at the analysis times and when melting starts and ends
+    [s] (None: not within the run)."""
+
+    fraction: np.ndarray
+    onset_s: float | None
+    full_s: float | None
 
 
 def analysis_times(spec, dynamic: bool) -> np.ndarray:
@@ -47,19 +60,72 @@ def _heated_history(sp, times, t_end):
     irr = sp.max_irradiance_w_m2
     res = plate.solve(times if len(times) > 1 else np.array([0.0, t_end]), irr, rtol=hs.rtol)
     detail = (f"{t.name}: heating at the spot's peak {irr:.4g} W/m^2 (spot mean {sp.mean_irradiance_w_m2:.4g} W/m^2), "
-              f"T_max {res.temperature_k.max():.0f} K")
-    return res.history(hs.state, extrapolation="clamp"), detail
+              f"T_max {res.temperature_k.max():.0f} K" + _melt_text(res.melt_onset_s, res.full_melt_s))
+    melt = Melt(np.interp(times, res.times_s, res.melt_fraction), res.melt_onset_s, res.full_melt_s)
+    return res.history(hs.state, extrapolation="clamp"), detail, melt
+
+
+def _melt_text(onset_s, full_s) -> str:
+    if onset_s is None:
+        return ", no melting"
+    return f", melting from {onset_s:.4g} s" + (f", all molten at {full_s:.4g} s" if full_s is not None else ", not all molten")
+
+
+def series_melt(hist, times) -> Melt | None:
+    """The melt fraction of a series history that carries one (None otherwise): onset is
+    the last time the series is 0 before it rises (it is linear between its points),
+    full melt the first time it reaches 1 (interpolated)."""
+    names = [hist.state_name] if isinstance(hist.state_name, str) else list(hist.state_name)
+    if "melt_fraction" not in names:
+        return None
+    k = names.index("melt_fraction")
+    t_s = hist.times_s
+    f_s = hist.states if hist.state_dim == 1 else hist.states[:, k]
+    frac = np.asarray(hist.state_at(times), float)
+    frac = frac if frac.ndim == 1 else frac[:, k]
+    up = np.flatnonzero(f_s > 0)
+    onset = None if not len(up) else float(t_s[up[0] - 1] if up[0] > 0 else t_s[0])
+    full_i = np.flatnonzero(f_s >= 1)
+    full = None
+    if len(full_i):
+        j = full_i[0]
+        full = float(t_s[0]) if j == 0 else float(np.interp(1.0, [f_s[j - 1], f_s[j]], [t_s[j - 1], t_s[j]]))
+    return Melt(frac, onset, full)
 
 
 def state_histories(dynamic_spots, times, t_end) -> StateHistories:
     """States over ``times`` of each dynamic spot's material (measured series or heating)."""
-    states, parts = {}, []
+    states, parts, melts = {}, [], {}
     for sp in dynamic_spots:
         t = sp.target
         if t.spec.history.kind == "heating":
-            hist, detail = _heated_history(sp, times, t_end)
+            hist, detail, melt = _heated_history(sp, times, t_end)
         else:
-            hist, detail = t.history, f"{t.name}: measured series"
+            hist, melt = t.history, series_melt(t.history, times)
+            detail = f"{t.name}: measured series" + ("" if melt is None else _melt_text(melt.onset_s, melt.full_s))
         parts.append(detail)
         states[t.index] = hist.state_at(times)
-    return StateHistories(states, "; ".join(parts))
+        if melt is not None:
+            melts[t.index] = melt
+    return StateHistories(states, "; ".join(parts), melts)
+
+
+def with_slumps(spots, melts: dict):
+    """The spots, each whose target's material declares a slump given its
+    :class:`~hazard.pipeline.slump.SpotSlump` over the analysis times; and a note per
+    slumping target for the stage record."""
+    from dataclasses import replace
+
+    from .slump import spot_slump
+
+    out, notes = [], []
+    for sp in spots:
+        melt = melts.get(sp.target.index)
+        sl = spot_slump(sp.target, melt.fraction, sp.mean_frame[2]) if melt is not None else None
+        if sl is not None and sl.moves:
+            s = sp.target.slump
+            notes.append(f"{sp.target.name}: slump tilts the normal up to {np.degrees(s.tilt_rad):.3g} deg (with the melt "
+                         f"fraction), wander within {np.degrees(s.wander_rad):.3g} deg once molten")
+            sp = replace(sp, slump=sl)
+        out.append(sp)
+    return out, notes

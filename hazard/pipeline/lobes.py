@@ -7,7 +7,8 @@ import math
 
 import numpy as np
 
-from ..keepout import hazard_lobe
+from ..engine import path_states
+from ..keepout import _range_fn, hazard_lobe
 from ..nohd import optical_gain
 from ..results import TargetResult
 from ..specular import specular_nohd
@@ -16,14 +17,41 @@ __all__ = ["target_results"]
 
 
 def _dynamic_states(target, states):
-    """States a dynamic target passes through: its history plus the material's nodes
-    inside that range (so no peak between nodes is missed); None for a static target."""
+    """States a dynamic target passes through (:func:`hazard.engine.path_states`: for
+    one state its history plus the material's nodes inside that range, so no peak
+    between nodes is missed; for two states the path in time order); None for a static
+    target."""
     if target.index not in states:
         return None
-    s_hist = states[target.index]
-    nodes = target.material.state_nodes()
-    lo, hi = s_hist.min(), s_hist.max()
-    return np.unique(np.concatenate([s_hist, nodes[(nodes >= lo) & (nodes <= hi)]]))
+    return path_states(target.material, states[target.index])
+
+
+def _state_range(states):
+    """[lo, hi] of a one-state history, [[lo, hi], [lo, hi]] of a two-state one."""
+    s = np.asarray(states, float)
+    if s.ndim == 1:
+        return [float(s.min()), float(s.max())]
+    return [[float(s[:, d].min()), float(s[:, d].max())] for d in range(s.shape[1])]
+
+
+def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
+    """The slump a dynamic lobe covers, and the estimate of its sampling error: the
+    union sampled at half the step, at the lobe's farthest direction (the largest of
+    the two is the reported NOHD: never the smaller)."""
+    sl = sp.slump
+    t = sp.target
+    if sl is None or not sl.moves or lobe is None or t.index not in states:
+        return None
+    half = _range_fn(sp, mpe_w_m2, mu, gain, states[t.index], sl.step_rad / 2)
+    r_half = float(half(lobe.max_direction_local[None, :])[0])
+    err = max(r_half - lobe.max_range_m, 0.0)
+    lobe.max_range_m = max(lobe.max_range_m, r_half)
+    return {"tilt_deg": float(np.degrees(t.slump.tilt_rad)), "wander_deg": float(np.degrees(t.slump.wander_rad)),
+            "tilt_direction": t.slump.direction.tolist(), "step_deg": float(np.degrees(sl.step_rad)),
+            "normals_sampled": int(getattr(half, "samples", 0)), "max_nohd_half_step_m": r_half,
+            "sampling_error_estimate_m": err,
+            "method": "irradiance map: the mean tilted normal at each time; keep-out lobe: union over the tilts and the "
+                      "wander disk of each part of the history, paired with that part's states"}
 
 
 def _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain):
@@ -44,8 +72,10 @@ def _hazards(sp, states, mpe_w_m2, mu, analysis, gain=1.0):
     dyn_states = _dynamic_states(t, states)
     grid = dict(gain=gain, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
     static_lobe = hazard_lobe(sp, mpe_w_m2, mu, states=initial, **grid)
-    dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(sp, mpe_w_m2, mu, states=dyn_states, **grid)
-    return (static_lobe, dynamic_lobe) + _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain)
+    # the lobe takes the history in time order (a slump pairs each part of it with its normals)
+    dynamic_lobe = static_lobe if dyn_states is None else hazard_lobe(sp, mpe_w_m2, mu, states=states[t.index], **grid)
+    slump = slump_summary(sp, states, mpe_w_m2, mu, dynamic_lobe, gain)  # raises the lobe's max to the half-step value
+    return (static_lobe, dynamic_lobe) + _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain) + (slump,)
 
 
 def profile_fraction(sp, mu) -> float:
@@ -70,14 +100,20 @@ def profile_fraction(sp, mu) -> float:
 def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
     """One lit target's row: spot, naked-eye lobes and specular NOHDs, state range."""
     t = sp.target
+    *hz, slump = _hazards(sp, states, mpe_w_m2, mu, analysis)
     row = TargetResult(
-        t.name, sp.total_power_w, sp.size_m, *_hazards(sp, states, mpe_w_m2, mu, analysis),
-        t.material.state_name if t.material.is_dynamic else None,
-        [float(states[t.index].min()), float(states[t.index].max())] if t.index in states else None,
+        t.name, sp.total_power_w, sp.size_m, *hz,
+        _name_list(t.material.state_name) if t.material.is_dynamic else None,
+        _state_range(states[t.index]) if t.index in states else None,
         sp.power_error_w, sp.exact, sp.max_irradiance_w_m2, sp.mean_irradiance_w_m2, sp.side,
     )
     row.beam_profile_fraction = profile_fraction(sp, mu)
+    row.slump = slump
     return row
+
+
+def _name_list(name):
+    return name if isinstance(name, str) else list(name)
 
 
 def scene_aids(scene) -> list:
@@ -99,7 +135,7 @@ def aided_nohds(sp, states, mpe_w_m2, mu, analysis, aid) -> dict:
     diffuse light fills the objective; for the mirror beam the beam-size limit is not
     taken, an upper bound)."""
     k = optical_gain(aid.magnification, aid.objective_diameter_m, aid.transmission)
-    static_lobe, dynamic_lobe, spec_static, spec_dyn, _ = _hazards(sp, states, mpe_w_m2, mu, analysis, gain=k)
+    static_lobe, dynamic_lobe, spec_static, spec_dyn, _, _ = _hazards(sp, states, mpe_w_m2, mu, analysis, gain=k)
     return {"magnification": aid.magnification, "objective_diameter_m": aid.objective_diameter_m,
             "transmission": aid.transmission, "gain": k, "nohd_static_m": static_lobe.max_range_m,
             "nohd_dynamic_m": dynamic_lobe.max_range_m, "specular_nohd_static_m": spec_static, "specular_nohd_dynamic_m": spec_dyn}
