@@ -43,6 +43,7 @@ from .tabulated import TabulatedBRDF
 from .registry import available_models, create, dumps, load, loads, model_from_dict, register, save
 from .sh import SHBasis, fan_out, real_sph_harm
 from .states import StateTable
+from .variability import VariabilityResult, sample_variability
 
 __version__ = "0.1.0"
 
@@ -54,4 +55,5 @@ __all__ = [
     "hemispherical_reflectance", "load", "loads", "local_frame", "local_to_world", "mirror_direction",
     "model_from_dict", "optical_constants", "real_sph_harm", "register", "rotate_about_normal", "save",
     "spherical_to_vector", "to_material_frame", "vector_to_spherical", "world_to_local",
+    "VariabilityResult", "sample_variability",
 ]

@@ -218,13 +218,21 @@ def envelope_report(envelope, model, wi, wo, states=None, *, rtol=1e-12) -> Enve
     """
     env = envelope.evaluate(wi, wo)
     if model.is_dynamic:
-        if states is None:
+        if states is None and model.state_dim == 2:
+            # bilinear cells: their corners (the nodes) and centres
+            g = model.state_nodes()
+            axes = [np.unique(g[:, d]) for d in range(2)]
+            mids = [0.5 * (a[1:] + a[:-1]) if a.size > 1 else a for a in axes]
+            m1, m2 = np.meshgrid(*mids, indexing="ij")
+            states = np.concatenate([g, np.stack([m1.ravel(), m2.ravel()], axis=1)])
+        elif states is None:
             lo, hi = model.state_range
             nodes = model.state_nodes()
             nodes = nodes[(nodes >= lo) & (nodes <= hi)]
             mids = 0.5 * (nodes[1:] + nodes[:-1])
             states = np.unique(np.concatenate([nodes, mids, np.linspace(lo, hi, 64)]))
-        states = np.atleast_1d(np.asarray(states, dtype=float))
+        states = np.asarray(states, dtype=float)
+        states = states if model.state_dim == 2 else np.atleast_1d(states)
         vals = np.stack([model.evaluate(wi, wo, state=s) for s in states], axis=-1)
     else:
         states = np.array([np.nan])
@@ -239,5 +247,5 @@ def envelope_report(envelope, model, wi, wo, states=None, *, rtol=1e-12) -> Enve
         max_ratio=float(ratio.max()) if ratio.size else float("nan"),
         min_ratio=float(ratio.min()) if ratio.size else float("nan"),
         pairs=int(np.prod(vals.shape[:-1])),
-        states=int(states.size),
+        states=int(len(states)),
     )

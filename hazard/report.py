@@ -381,8 +381,26 @@ def target_hit(t) -> str:
     return "wing only" if t.beam_profile_fraction < WING_FRACTION else "beam"
 
 
+def _melt_lines(t) -> list:
+    """A target's melting (onset, full melt) and the slump its dynamic lobe covers."""
+    out = []
+    m = t.melt
+    if m is not None:
+        when = ("no melting in the run" if m["onset_s"] is None else f"melting from {m['onset_s']:.4g} s"
+                + (f", all molten at {m['full_melt_s']:.4g} s" if m["full_melt_s"] is not None else
+                   f", {m['max_fraction']:.2g} molten at the end"))
+        out.append(f"    {when}")
+    sl = t.slump
+    if sl is not None:
+        out.append(f"    slump: normal tilted up to {sl['tilt_deg']:.3g} deg with the melt fraction, wander within "
+                   f"{sl['wander_deg']:.3g} deg once molten; the dynamic lobe covers their union ({sl['normals_sampled']} normals "
+                   f"every {sl['step_deg']:.3g} deg; at half the step the NOHD changes by {sl['sampling_error_estimate_m']:.3g} m)")
+    return out
+
+
 def _nohd_lines(result) -> list:
-    """NOHD per target: diffuse (BRDF lobe) and specular (mirror beam), static and dynamic."""
+    """NOHD per target: diffuse (BRDF lobe) and specular (mirror beam), static and dynamic,
+    with melting and the slump where the history knows them."""
     lines = ["NOHD per target (diffuse: BRDF lobe; specular: mirror beam beyond the target):"]
     for t in result.targets:
         d = t.to_dict()
@@ -395,6 +413,7 @@ def _nohd_lines(result) -> list:
         spec = ("no mirror beam" if t.specular_nohd_static_m is None else
                 f"specular static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m")
         lines.append(f"  {t.name}: diffuse static {d['nohd_static_m']:.4g} m, dynamic {d['nohd_dynamic_m']:.4g} m; {spec}")
+        lines += _melt_lines(t)
         for a in t.aided:
             spec_a = "" if a["specular_nohd_dynamic_m"] is None else f"; specular {a['specular_nohd_dynamic_m']:.4g} m"
             lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics (gain {a['gain']:.3g}): "

@@ -138,6 +138,19 @@ DHR_INCIDENCES_DEG = (0.0, 20.0, 40.0, 60.0)
 _DHR_CACHE: dict = {}
 
 
+def _dhr_states(model) -> list:
+    """States where :func:`_check_dhr` looks: the ends and the middle of the range (for
+    two states, the four corners and the middle); [None] for a static model."""
+    if not model.is_dynamic:
+        return [None]
+    r = model.state_range
+    if model.state_dim == 2:
+        (a, b), (c, d) = r
+        return [np.array(p) for p in ((a, c), (b, c), (a, d), (b, d), (0.5 * (a + b), 0.5 * (c + d)))]
+    lo, hi = r
+    return [lo, 0.5 * (lo + hi), hi] if math.isfinite(lo) and math.isfinite(hi) else [None]
+
+
 def _check_dhr(model, where):
     """SceneError if the directional-hemispherical reflectance exceeds 1 (energy from
     nowhere: ``kd = 22``) at one of :data:`DHR_INCIDENCES_DEG` (and, for a dynamic model,
@@ -146,10 +159,7 @@ def _check_dhr(model, where):
     if key in _DHR_CACHE:
         bad = _DHR_CACHE[key]
     else:
-        states = [None]
-        if model.is_dynamic:
-            lo, hi = model.state_range
-            states = [lo, 0.5 * (lo + hi), hi] if math.isfinite(lo) and math.isfinite(hi) else [None]
+        states = _dhr_states(model)
         bad = None
         for st in states:
             for th in DHR_INCIDENCES_DEG:
@@ -169,7 +179,7 @@ def _check_dhr(model, where):
         _DHR_CACHE[key] = bad
     if bad:
         th, st, v = bad
-        at = f" at state {st:g}" if st is not None else ""
+        at = f" at state {_fmt(st)}" if st is not None else ""
         raise SceneError(f"{where}: hemispherical reflectance {v:.4g} > 1 at {th:g} deg incidence{at}: "
                          f"the material reflects more than it receives; check its parameters")
 
