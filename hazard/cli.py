@@ -375,6 +375,13 @@ def _cmd_run(args, out, err):
     return _finish(args, result)
 
 
+def _state_span(name, span) -> str:
+    """``state extinction in [a, b]``, or both states of a two-state history."""
+    if isinstance(name, str):
+        return f"state {name} in [{span[0]:.4g}, {span[1]:.4g}]"
+    return "states " + ", ".join(f"{n} in [{lo:.4g}, {hi:.4g}]" for n, (lo, hi) in zip(name, span))
+
+
 def _cmd_compare(args, out, err):
     result = _analyse(args, err)
     rows = []
@@ -398,7 +405,7 @@ def _cmd_compare(args, out, err):
             line = f"  {r['target']}: NOHD static {r['nohd_static_m']:.4g} m -> dynamic {r['nohd_dynamic_m']:.4g} m; " \
                    f"keep-out volume {r['keepout_volume_static_m3']:.4g} -> {r['keepout_volume_dynamic_m3']:.4g} m^3"
             if r["state"]:
-                line += f" (state {r['state']} in [{r['state_range'][0]:.4g}, {r['state_range'][1]:.4g}])"
+                line += f" ({_state_span(r['state'], r['state_range'])})"
             out.write(line + "\n")
             if r["specular_nohd_static_m"] is not None:
                 out.write(f"    mirror lobe beyond the target: {r['specular_nohd_static_m']:.4g} m -> {r['specular_nohd_dynamic_m']:.4g} m\n")

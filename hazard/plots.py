@@ -39,6 +39,13 @@ class _Display:
         return path
 
 
+def _state_label(name, s) -> str:
+    """``extinction = 0.8``, or ``(extinction, melt_fraction) = (0.8, 0.5)``."""
+    if isinstance(name, str):
+        return f"{name} = {float(s):g}"
+    return f"({', '.join(name)}) = ({', '.join(f'{float(x):g}' for x in s)})"
+
+
 @dataclass
 class BRDFPlaneDisplay(_Display):
     """BRDF in the plane of incidence: model curves (per state) and measured samples."""
@@ -56,7 +63,7 @@ class BRDFPlaneDisplay(_Display):
         wo = brdfmodels.spherical_to_vector(np.radians(np.abs(ang)), np.where(ang < 0, 0.0, np.pi))
         curves = {}
         for s in ([None] if states is None else list(states)):
-            label = "model" if s is None else f"{model.state_name} = {s:g}"
+            label = "model" if s is None else _state_label(model.state_name, s)
             curves[label] = model.evaluate(np.broadcast_to(wi, wo.shape), wo, state=s)
         sd = sf = None
         if samples is not None:
