@@ -259,19 +259,54 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
 
 @dataclass(frozen=True)
 class DynamicFitResult:
+    """Outcome of :func:`fit_dynamic_sh`.
+
+    Attributes
+    ----------
+    model : DynamicBRDF
+    fits : dict
+        State node -> :class:`FitResult` of its group (for two states the key is the
+        pair ``(s1, s2)``).
+    fit_time_s : float
+    """
+
     model: DynamicBRDF
-    fits: dict  # state -> FitResult
+    fits: dict  # state (or state pair) -> FitResult
     fit_time_s: float
 
 
 def fit_dynamic_sh(samples, basis: SHBasis, states, *, state="temperature_k", fanout=0.6, log=True, extrapolation="error",
                    progress=None, **kwargs) -> DynamicFitResult:
-    """One SH fit per state group (samples grouped to the nearest of ``states``).
+    """One SH fit per state group -> a :class:`DynamicBRDF` (paper Sec. IV H: one
+    coefficient set per tabulated state, interpolated linearly per coefficient).
 
-    ``samples`` is a :class:`brdfmodels.screen.Samples` table; each state needs enough
-    samples for the basis. ``progress``, if given, is called with (states fitted, states)
-    after each fit.
+    Parameters
+    ----------
+    samples : brdfmodels.screen.Samples
+        The measured table; each state group needs enough samples for the basis.
+    basis : SHBasis
+    states : array_like (T,), or [nodes_1 (n1,), nodes_2 (n2,)]
+        The state nodes (in the state's unit); each sample joins its nearest node (per
+        axis for two states, :func:`brdfmodels.screen.group_by_states`).
+    state : str or [str, str]
+        The state column: ``"temperature_k"``, ``"time_s"`` or a named column of
+        ``samples.states``; two names (e.g. ``["extinction", "melt_fraction"]``) fit a
+        two-state model with coefficients (n1, n2, K), bilinear between the nodes.
+    fanout, log, extrapolation
+        As :class:`DynamicBRDF`.
+    progress : callable, optional
+        Called with (states fitted, states) after each fit.
+    **kwargs
+        Passed to :func:`fit_sh`.
+
+    Raises
+    ------
+    ValueError
+        A node (or grid node) without samples, listing them; a group that cannot be fitted.
     """
+    if not isinstance(state, str):
+        return _fit_dynamic_sh_2(samples, basis, states, state, fanout=fanout, log=log, extrapolation=extrapolation,
+                                 progress=progress, **kwargs)
     from .screen import group_by_state
 
     start = time.perf_counter()
@@ -279,17 +314,47 @@ def fit_dynamic_sh(samples, basis: SHBasis, states, *, state="temperature_k", fa
     missing = [float(s) for s in np.asarray(states, float) if float(s) not in groups]
     if missing:
         raise ValueError(f"states {missing}: no samples near them; expected samples for every state")
+    fits = _fit_groups(groups, basis, state, fanout, log, progress, kwargs)
+    nodes = np.array(sorted(fits))
+    coef = np.array([fits[s].model.coefficients for s in nodes])
+    model = DynamicBRDF(basis, nodes, coef, state, fanout=fanout, log=log, extrapolation=extrapolation)
+    return DynamicFitResult(model, fits, time.perf_counter() - start)
+
+
+def _fit_groups(groups: dict, basis, state, fanout, log, progress, kwargs) -> dict:
+    """:func:`fit_sh` of every group (node -> Samples), in sorted node order."""
     fits = {}
     for s_val, g in sorted(groups.items()):
         try:
             fits[s_val] = fit_sh(g.wi, g.wo, g.brdf_per_sr, basis, fanout=fanout, log=log, weights=g.weight, **kwargs)
         except ValueError as exc:
-            raise ValueError(f"state {state}={s_val:g}: {exc}") from None
+            where = f"{state}={s_val:g}" if isinstance(state, str) else ", ".join(f"{n}={v:g}" for n, v in zip(state, s_val))
+            raise ValueError(f"state {where}: {exc}") from None
         if progress is not None:
             progress(len(fits), len(groups))
-    nodes = np.array(sorted(fits))
-    coef = np.array([fits[s].model.coefficients for s in nodes])
-    model = DynamicBRDF(basis, nodes, coef, state, fanout=fanout, log=log, extrapolation=extrapolation)
+    return fits
+
+
+def _fit_dynamic_sh_2(samples, basis, states, names, *, fanout, log, extrapolation, progress, **kwargs) -> DynamicFitResult:
+    """The two-state branch of :func:`fit_dynamic_sh`: one fit per grid node (s1, s2)."""
+    from .screen import group_by_states
+    from .states import check_nodes
+
+    start = time.perf_counter()
+    given, names = names, list(names) if isinstance(names, (list, tuple)) else []
+    if len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
+        raise ValueError(f"state={given!r}: expected a state name, or two different ones such as ['extinction', 'melt_fraction']")
+    if not isinstance(states, (list, tuple)) or len(states) != 2:
+        raise ValueError(f"states: expected two node arrays [nodes of {names[0]}, nodes of {names[1]}] for state={names}")
+    axes = [check_nodes(f"states[{d}] ({names[d]})", states[d]) for d in range(2)]
+    groups = group_by_states(samples, names, axes)
+    missing = [(float(a), float(b)) for a in axes[0] for b in axes[1] if (float(a), float(b)) not in groups]
+    if missing:
+        raise ValueError(f"state nodes ({names[0]}, {names[1]}) {missing}: no samples near them; "
+                         f"expected samples for every node of the {axes[0].size} x {axes[1].size} grid")
+    fits = _fit_groups(groups, basis, names, fanout, log, progress, kwargs)
+    coef = np.array([[fits[(float(a), float(b))].model.coefficients for b in axes[1]] for a in axes[0]])
+    model = DynamicBRDF(basis, [axes[0], axes[1]], coef, names, fanout=fanout, log=log, extrapolation=extrapolation)
     return DynamicFitResult(model, fits, time.perf_counter() - start)
 
 

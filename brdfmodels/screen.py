@@ -45,6 +45,8 @@ __all__ = [
     "simulate_test",
     "save_test",
     "group_by_state",
+    "group_by_states",
+    "state_column",
     "SpotSizeWarning",
 ]
 
@@ -159,7 +161,25 @@ class ScreenTest:
 
 @dataclass
 class Samples:
-    """Reduced samples: directions in the sample's surface frame (z = normal, x = grooves)."""
+    """Reduced samples: directions in the sample's surface frame (z = normal, x = grooves).
+
+    Attributes
+    ----------
+    wi, wo : ndarray, shape (N, 3)
+        Unit directions to the source and to the observer (surface frame).
+    brdf_per_sr : ndarray, shape (N,)
+        f_r [1/sr].
+    time_s, temperature_k : ndarray, shape (N,)
+        Time since irradiation start [s] and pyrometer temperature [K] (nan: none).
+    test_id, frame_id, weight : ndarray, shape (N,)
+        Test, frame within the test, relative fit weight.
+    info : dict
+        Free-form notes of the reduction.
+    states : dict of str -> ndarray, shape (N,)
+        Further named state columns (e.g. ``"extinction"``, ``"melt_fraction"``), in the
+        unit their name gives; nan where a sample has none. Written after the fixed
+        :attr:`COLUMNS` in CSV and Parquet; files without them still load.
+    """
 
     wi: np.ndarray
     wo: np.ndarray
@@ -170,34 +190,60 @@ class Samples:
     frame_id: np.ndarray
     weight: np.ndarray
     info: dict = field(default_factory=dict)
+    states: dict = field(default_factory=dict)
 
     COLUMNS = ("wi_x", "wi_y", "wi_z", "wo_x", "wo_y", "wo_z", "brdf_per_sr", "time_s", "temperature_k", "test_id", "frame_id", "weight")
+
+    def __post_init__(self):
+        self.states = _check_state_columns(self.states, len(self.brdf_per_sr))
 
     def __len__(self):
         return len(self.brdf_per_sr)
 
+    def with_states(self, columns) -> "Samples":
+        """A copy with the named state columns added or replaced.
+
+        Parameters
+        ----------
+        columns : dict of str -> array_like, shape (N,) (or a scalar, one value for all)
+            State values per sample, e.g. ``{"extinction": xi, "melt_fraction": m}``.
+        """
+        n = len(self)
+        full = {k: np.full(n, v, dtype=object) if np.ndim(v) == 0 else v for k, v in dict(columns).items()}
+        return Samples(self.wi, self.wo, self.brdf_per_sr, self.time_s, self.temperature_k, self.test_id, self.frame_id,
+                       self.weight, dict(self.info), {**self.states, **full})
+
     def select(self, mask) -> "Samples":
         m = np.asarray(mask)
         return Samples(self.wi[m], self.wo[m], self.brdf_per_sr[m], self.time_s[m], self.temperature_k[m], self.test_id[m],
-                       self.frame_id[m], self.weight[m], dict(self.info))
+                       self.frame_id[m], self.weight[m], dict(self.info), {k: v[m] for k, v in self.states.items()})
 
     @staticmethod
     def concatenate(parts) -> "Samples":
+        """One table of ``parts``; a state column missing from some parts is nan there."""
         parts = list(parts)
         cat = lambda name: np.concatenate([getattr(p, name) for p in parts])
+        names = list(dict.fromkeys(k for p in parts for k in p.states))
+        states = {k: np.concatenate([p.states.get(k, np.full(len(p), np.nan)) for p in parts]) for k in names}
         return Samples(cat("wi"), cat("wo"), cat("brdf_per_sr"), cat("time_s"), cat("temperature_k"), cat("test_id"),
-                       cat("frame_id"), cat("weight"))
+                       cat("frame_id"), cat("weight"), states=states)
+
+    @property
+    def header(self) -> tuple:
+        """Column names of the table files: :attr:`COLUMNS`, then the state columns."""
+        return self.COLUMNS + tuple(self.states)
 
     def to_csv(self, path) -> Path:
         import io
 
         buf = io.StringIO()
         w = csv.writer(buf)
-        w.writerow(self.COLUMNS)
+        w.writerow(self.header)
+        extra = list(self.states.values())
         for k in range(len(self)):
             w.writerow([*map(repr, self.wi[k].tolist()), *map(repr, self.wo[k].tolist()), repr(float(self.brdf_per_sr[k])),
                         repr(float(self.time_s[k])), repr(float(self.temperature_k[k])), self.test_id[k], int(self.frame_id[k]),
-                        repr(float(self.weight[k]))])
+                        repr(float(self.weight[k])), *(repr(float(col[k])) for col in extra)])
         return atomic_write_text(path, buf.getvalue())
 
     def to_parquet(self, path) -> Path:
@@ -210,7 +256,8 @@ class Samples:
         cols = dict(zip(self.COLUMNS[:6], np.hstack([self.wi, self.wo]).T))
         cols.update(brdf_per_sr=self.brdf_per_sr, time_s=self.time_s, temperature_k=self.temperature_k,
                     test_id=np.asarray(self.test_id, str), frame_id=np.asarray(self.frame_id, np.int64), weight=self.weight)
-        return atomic_write(path, lambda tmp: pq.write_table(pa.table({k: cols[k] for k in self.COLUMNS}), tmp))
+        cols.update({k: np.asarray(v, float) for k, v in self.states.items()})
+        return atomic_write(path, lambda tmp: pq.write_table(pa.table({k: cols[k] for k in self.header}), tmp))
 
     @classmethod
     def from_parquet(cls, path) -> "Samples":
@@ -223,8 +270,14 @@ class Samples:
         if missing:
             raise ValueError(f"{path}: missing columns {missing}")
         g = lambda k: np.asarray(t[k], float)
+        extra = _extra_columns(path, list(t))
+        try:
+            states = {k: g(k) for k in extra}
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}: state columns {extra}: expected numbers") from None
         return cls(np.stack([g("wi_x"), g("wi_y"), g("wi_z")], 1), np.stack([g("wo_x"), g("wo_y"), g("wo_z")], 1), g("brdf_per_sr"),
-                   g("time_s"), g("temperature_k"), np.asarray(t["test_id"]), np.asarray(t["frame_id"], int), g("weight"))
+                   g("time_s"), g("temperature_k"), np.asarray(t["test_id"]), np.asarray(t["frame_id"], int), g("weight"),
+                   states=states)
 
     @classmethod
     def read(cls, path) -> "Samples":
@@ -250,14 +303,50 @@ class Samples:
                 rows = list(csv.reader(fh))
         except OSError as exc:
             raise ValueError(f"{path}: cannot read the samples ({exc.strerror})") from None
-        if not rows or tuple(rows[0]) != cls.COLUMNS:
-            raise ValueError(f"{path}: expected the columns {list(cls.COLUMNS)}")
+        ncol = len(cls.COLUMNS)
+        if not rows or tuple(rows[0][:ncol]) != cls.COLUMNS:
+            raise ValueError(f"{path}: expected the columns {list(cls.COLUMNS)} (then any state columns)")
+        extra = _extra_columns(path, rows[0])
         body = rows[1:]
         if not body:
             raise ValueError(f"{path}: no samples")
-        num = np.array([[float(r[k]) for k in (0, 1, 2, 3, 4, 5, 6, 7, 8, 11)] for r in body])
+        width = ncol + len(extra)
+        short = next((i for i, r in enumerate(body) if len(r) != width), None)
+        if short is not None:
+            raise ValueError(f"{path}: line {short + 2}: expected {width} values, got {len(body[short])}")
+        num = np.array([[float(r[k]) for k in (0, 1, 2, 3, 4, 5, 6, 7, 8, 11, *range(ncol, width))] for r in body])
+        states = {name: num[:, 10 + i] for i, name in enumerate(extra)}
         return cls(num[:, 0:3], num[:, 3:6], num[:, 6], num[:, 7], num[:, 8], np.array([r[9] for r in body]),
-                   np.array([int(r[10]) for r in body]), num[:, 9])
+                   np.array([int(r[10]) for r in body]), num[:, 9], states=states)
+
+
+def _extra_columns(path, header) -> list:
+    """The state columns of a table file: those after :attr:`Samples.COLUMNS`."""
+    extra = [c for c in header if c not in Samples.COLUMNS]
+    dup = sorted({c for c in header if list(header).count(c) > 1})
+    if dup:
+        raise ValueError(f"{path}: columns {dup} appear more than once; expected each column once")
+    return extra
+
+
+def _check_state_columns(states, n: int) -> dict:
+    """Named state columns as float arrays of length ``n`` (names not among COLUMNS)."""
+    if not isinstance(states, dict):
+        raise ValueError(f"states={type(states).__name__}: expected a dict of name -> values")
+    out = {}
+    for name, values in states.items():
+        if not isinstance(name, str) or not name or name in Samples.COLUMNS or name in ("wi", "wo"):
+            raise ValueError(f"states: column name {name!r}: expected a non-empty name other than {list(Samples.COLUMNS)}")
+        try:
+            v = np.asarray(values, float)
+        except (TypeError, ValueError):
+            raise ValueError(f"states[{name!r}]: expected numbers (nan for none)") from None
+        if v.shape != (n,):
+            raise ValueError(f"states[{name!r}]: expected shape ({n},) (one value per sample), got {v.shape}")
+        if np.any(np.isinf(v)):
+            raise ValueError(f"states[{name!r}] contains {float(v[np.isinf(v)][0])!r}: expected finite values (nan for none)")
+        out[name] = v
+    return out
 
 
 def reduce_test(test: ScreenTest) -> Samples:
@@ -569,7 +658,8 @@ def simulate_test(model, *, test_id="sim", incidence_deg=20.0, groove_angle_deg=
     The sample sits at the origin with its normal at ``incidence_deg`` from the incoming
     beam (+y) in the horizontal plane, grooves at ``groove_angle_deg`` from horizontal;
     the screen (``screen_size_m`` square) faces the sample ``distance_m`` away, centred on
-    the specular direction. The camera's responsivity varies smoothly across the image
+    the specular direction. ``state_of_time(t)`` gives the model's state at each frame
+    time: a number, or a pair for a two-state model (``[extinction, melt_fraction]``). The camera's responsivity varies smoothly across the image
     (vignetting, ``gain_counts`` counts per W/m^2 at the centre); counts get multiplicative
     Gaussian noise (``noise``), a ``background`` and clip at ``saturation``.
     """
@@ -612,7 +702,7 @@ def simulate_test(model, *, test_id="sim", incidence_deg=20.0, groove_angle_deg=
     wo_local = (rhat @ frame.T).reshape(-1, 3)
     frames = []
     for t in times_s:
-        state = None if state_of_time is None else float(state_of_time(t))
+        state = None if state_of_time is None else _frame_state(state_of_time(t))
         f = model.evaluate(np.broadcast_to(wi_local, wo_local.shape), wo_local, state=state).reshape(h_px, w_px)
         e_is = f * power_w * np.maximum(cos_rt, 0) * cos_is / r**2
         frames.append(camera(e_is))
@@ -625,14 +715,79 @@ def simulate_test(model, *, test_id="sim", incidence_deg=20.0, groove_angle_deg=
                       spot_size_m=spot_size_m)
 
 
-def group_by_state(samples: Samples, state: str, nodes) -> dict:
-    """Group samples by the nearest of the state ``nodes`` (``"temperature_k"`` or
-    ``"time_s"``): returns node -> Samples (nodes with no samples are left out)."""
-    if state not in ("temperature_k", "time_s"):
-        raise ValueError(f"state={state!r}: expected 'temperature_k' or 'time_s'")
-    values = getattr(samples, state)
+def _frame_state(value):
+    """One frame's model state: a float, or a float pair for a two-state model."""
+    v = np.asarray(value, float)
+    return float(v) if v.ndim == 0 else v
+
+
+def state_column(samples: Samples, state: str) -> np.ndarray:
+    """The values (N,) of one state column: ``"temperature_k"``, ``"time_s"`` or a named
+    column of ``samples.states``; ValueError when it is unknown or some sample lacks it."""
+    if state in ("temperature_k", "time_s"):
+        values = getattr(samples, state)
+    elif isinstance(state, str) and state in samples.states:
+        values = samples.states[state]
+    else:
+        raise ValueError(f"state={state!r}: expected 'temperature_k', 'time_s' or a state column of the samples "
+                         f"({sorted(samples.states) or 'none'})")
     if np.any(np.isnan(values)):
-        raise ValueError(f"state={state!r}: some samples have no {state} (no pyrometer series?)")
-    nodes = np.asarray(nodes, float)
-    nearest = np.abs(values[:, None] - nodes[None, :]).argmin(axis=1)
+        why = " (no pyrometer series?)" if state == "temperature_k" else ""
+        raise ValueError(f"state={state!r}: {int(np.isnan(values).sum())} samples have no {state}{why}")
+    return values
+
+
+def _nearest_node(values: np.ndarray, nodes, name: str) -> tuple:
+    """``(nodes, index of the nearest node per value)``; ties go to the lower node."""
+    nodes = finite_array(f"nodes of {name}", nodes, ndim=1)
+    if nodes.size == 0:
+        raise ValueError(f"nodes of {name}: expected at least one value, got an empty array")
+    return nodes, np.abs(values[:, None] - nodes[None, :]).argmin(axis=1)
+
+
+def group_by_state(samples: Samples, state: str, nodes) -> dict:
+    """Group samples by the nearest of the state ``nodes``.
+
+    Parameters
+    ----------
+    samples : Samples
+    state : str
+        ``"temperature_k"``, ``"time_s"`` or a named state column of ``samples.states``
+        (e.g. ``"extinction"``).
+    nodes : array_like, shape (T,)
+        State values of the groups (in the state's unit).
+
+    Returns
+    -------
+    dict
+        node -> Samples (nodes with no samples are left out).
+    """
+    nodes, nearest = _nearest_node(state_column(samples, state), nodes, state)
     return {float(nodes[k]): samples.select(nearest == k) for k in range(nodes.size) if np.any(nearest == k)}
+
+
+def group_by_states(samples: Samples, names, nodes_pair) -> dict:
+    """Group samples on two states at once: each sample goes to the grid node whose
+    coordinates are the nearest node of each state (per axis).
+
+    Parameters
+    ----------
+    samples : Samples
+    names : [str, str]
+        Two state columns (see :func:`group_by_state`), e.g. ``["extinction", "melt_fraction"]``.
+    nodes_pair : [array_like (n1,), array_like (n2,)]
+        The nodes of each state.
+
+    Returns
+    -------
+    dict
+        (node_1, node_2) -> Samples, only for grid nodes that received samples.
+    """
+    names = list(names) if isinstance(names, (list, tuple)) else [names]
+    if len(names) != 2 or names[0] == names[1]:
+        raise ValueError(f"names={names!r}: expected two different state names such as ['extinction', 'melt_fraction']")
+    if not isinstance(nodes_pair, (list, tuple)) or len(nodes_pair) != 2:
+        raise ValueError(f"nodes_pair: expected two node arrays [nodes of {names[0]}, nodes of {names[1]}]")
+    (n1, i1), (n2, i2) = (_nearest_node(state_column(samples, nm), nd, nm) for nm, nd in zip(names, nodes_pair))
+    cell = i1 * n2.size + i2
+    return {(float(n1[c // n2.size]), float(n2[c % n2.size])): samples.select(cell == c) for c in np.unique(cell)}

@@ -394,7 +394,7 @@ def _melt_lines(t) -> list:
     if sl is not None:
         out.append(f"    slump: normal tilted up to {sl['tilt_deg']:.3g} deg with the melt fraction, wander within "
                    f"{sl['wander_deg']:.3g} deg once molten; the dynamic lobe covers their union ({sl['normals_sampled']} normals "
-                   f"every {sl['step_deg']:.3g} deg; at half the step the NOHD changes by {sl['sampling_error_estimate_m']:.3g} m)")
+                   f"every {sl['step_deg']:.3g} deg; half the step gives {sl['max_nohd_half_step_m']:.4g} m there, the larger is reported)")
     return out
 
 

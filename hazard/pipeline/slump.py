@@ -1,7 +1,7 @@
 """The slump of a melting target: its surface normal over the analysis times.
 
 Molten metal slumps under gravity and tilts the surface normal (Bailey et al., J. Laser
-Appl. 20(1), 2008, Sec. VII: the specular peak of melting stainless steel moves upward and
+Appl. 20(1), 2008, Secs. V B 2 and VI A: the specular peak of melting stainless steel moves upward and
 wanders). A target's material may declare it (``melt_tilt_deg``, ``melt_tilt_direction``,
 ``melt_wander_deg``, :class:`scenes.scene.Slump`):
 
