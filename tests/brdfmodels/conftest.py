@@ -37,6 +37,15 @@ def make_dynamic(basis=None, states=(300.0, 600.0, 900.0)):
     return bm.DynamicBRDF(basis, list(states), np.array(rows[: len(states)]), "temperature_k")
 
 
+def make_two_state(basis=None):
+    """A two-state (extinction x melt fraction) table: 3 x 2 nodes of glossy lobes."""
+    basis = basis or bm.SHBasis(8, 2, 2, 0)
+    rows = [glossy_log_coefficients(basis, peak_sr=p, width_rad=w, diffuse_sr=d)
+            for p, w, d in [(40.0, 0.10, 0.03), (15.0, 0.16, 0.05), (60.0, 0.09, 0.02)]]
+    coef = np.array([[rows[(i + j) % 3] for j in range(2)] for i in range(3)])
+    return bm.DynamicBRDF(basis, [[0.311, 0.8, 1.5], [0.0, 1.0]], coef, ["extinction", "melt_fraction"])
+
+
 def _small_table():
     """A tabulated Lambertian-plus-lobe on a coarse grid (envelope outside its range)."""
     th, td, pd = np.linspace(0, 70, 8), np.linspace(0, 80, 9), np.linspace(0, 150, 6)
@@ -67,6 +76,9 @@ def examples():
         ("gaussian-lobe", bm.GaussianLobe(2.0, 0.1), None, True),
         ("hel-metal", bm.Sum([bm.GaussianLobe(20.0, 0.05), bm.ABg(0.002, 0.001, 2.0), bm.Lambertian(0.05)]), None, True),
         ("table", _small_table(), None, False),
+        ("dynamic-two-state", make_two_state(basis), [0.9, 0.3], False),
+        ("envelope-two-state", bm.Envelope(make_two_state(basis), base=0.001), None, False),
+        ("sum-two-state", bm.Sum([bm.Lambertian(0.1), bm.Scaled(make_two_state(basis), 0.5)]), [1.2, 0.7], False),
     ]
     for name, p in TS5_PUBLISHED.items():
         out.append((f"ts5-{name}", bm.TorranceSparrow5(**p), None, name in ("cement", "khaki_paint", "forged_steel")))
