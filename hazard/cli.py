@@ -154,8 +154,10 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
         q.add_argument("--basis", default="8,4,2,0", help="lh_max,mh_max,ld_max,md_max (default 8,4,2,0: 37 harmonics)")
         q.add_argument("--fanout", type=float, default=0.6, help="fan-out exponent s_e (default 0.6)")
-        q.add_argument("--state", choices=["time_s", "temperature_k"], help="fit one model per state: the state label")
-        q.add_argument("--states", help="comma-separated state values to group the samples at (with --state)")
+        q.add_argument("--state", help="fit one model per state: time_s, temperature_k or a state column of the samples; "
+                                       "two names (extinction,melt_fraction) fit a two-state model")
+        q.add_argument("--states", help="comma-separated state values to group the samples at (with --state); for two "
+                                        "states the two lists separated by ';', e.g. '0.311,0.8,1.5;0,0.5,1'")
         q.add_argument("--envelope", choices=["paper", "sh"], help="also write a conservative envelope bounding every sample")
         q.add_argument("--envelope-output", help="envelope model file (JSON)")
         q.add_argument("--samples-output", help="write the reduced samples table (.csv, or .parquet with pyarrow)" if kind == "screen" else argparse.SUPPRESS)
@@ -497,6 +499,24 @@ def _print_report(out, title, rows, as_json, extra=None):
             out.write(f"  {k}: {v}\n")
 
 
+def _state_nodes_args(state_text, states_text):
+    """``--state`` and ``--states`` as fit_dynamic_sh takes them: one name and its nodes,
+    or two names and a node list for each (``--states 'a,b;c,d'``)."""
+    names = [n.strip() for n in state_text.split(",")]
+    if len(names) > 2 or not all(names):
+        raise ValueError(f"--state={state_text!r}: expected a state name, or two separated by a comma")
+    if not states_text:
+        raise ValueError("--states: give the state values to group at, e.g. --states 0,5,10 (two states: '0,1;0,0.5,1')")
+    parts = states_text.split(";")
+    if len(parts) != len(names):
+        raise ValueError(f"--states={states_text!r}: expected {len(names)} node list(s) separated by ';' for --state={state_text!r}")
+    try:
+        nodes = [[float(x) for x in p.split(",")] for p in parts]
+    except ValueError:
+        raise ValueError(f"--states={states_text!r}: expected numbers separated by commas") from None
+    return (names[0], nodes[0]) if len(names) == 1 else (names, nodes)
+
+
 def _cmd_fit(args, out, err):
     from .progress import progress_to
 
@@ -609,10 +629,8 @@ def _fit_sh(args, out, samples):
         best, table = validation.choose_sh_basis(samples, progress=progress_callback("leave-one-test-out settings", unit="setting"))
         _print_report(out, "leave-one-test-out: basis orders and fan-out", table, args.json, {"best": best})
     if args.state:
-        if not args.states:
-            raise ValueError("--states: give the state values to group at, e.g. --states 0,5,10")
-        nodes = [float(x) for x in args.states.split(",")]
-        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=args.state, fanout=args.fanout,
+        state, nodes = _state_nodes_args(args.state, args.states)
+        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=state, fanout=args.fanout,
                                      progress=progress_callback("SH fit per state", unit="state"))
         model = res.model
         rows = [{"state": k, **v.summary()} for k, v in res.fits.items()]

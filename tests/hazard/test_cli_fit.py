@@ -89,3 +89,23 @@ def test_fit_errors_are_one_line(tests_folder, tmp_path):
     (tmp_path / "exists.json").write_text("{}")
     code, _, err = run("fit", "screen", paths[0], "-o", tmp_path / "exists.json")
     assert code == 2 and "pass --force" in err
+
+
+def test_fit_sh_two_states_from_named_columns(tests_folder, tmp_path):
+    """``--state extinction,melt_fraction --states 'a,b;c,d'`` fits a two-state model from
+    a samples table's named state columns (each sample tagged with its grid node here)."""
+    folder, paths = tests_folder
+    run("fit", "screen", *paths, "-o", folder / "tmp2.json", "--samples-output", folder / "s3.csv", "--force")
+    s = screen.Samples.from_csv(folder / "s3.csv")
+    k = np.arange(len(s))
+    tagged = s.with_states({"extinction": np.where(k % 2, 1.5, 0.311), "melt_fraction": np.where((k // 2) % 2, 1.0, 0.0)})
+    tagged.to_csv(tmp_path / "tagged.csv")
+    code, out, err = run("fit", "sh", tmp_path / "tagged.csv", "-o", tmp_path / "two.json", "--basis", "4,2,2,0",
+                         "--state", "extinction,melt_fraction", "--states", "0.311,1.5;0,1", "--force")
+    assert code == 0, err
+    model = bm.load(tmp_path / "two.json")
+    assert model.state_dim == 2 and model.state_name == ("extinction", "melt_fraction")
+    assert model.coefficients.shape == (2, 2, model.basis.size)
+    code, _, err = run("fit", "sh", tmp_path / "tagged.csv", "-o", tmp_path / "bad.json", "--state", "extinction,melt_fraction",
+                       "--states", "0.311,1.5", "--force")
+    assert code == 2 and "--states" in err and "2 node list(s)" in err
