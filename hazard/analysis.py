@@ -143,7 +143,7 @@ def _histories(scene, traced, log, the_plan):
     t_end = scene.spec.analysis.time_end_s or scene.spec.exposure.duration_s
     with log.run("history") as st:
         hist = history.state_histories(dynamic_spots, times, t_end)
-        traced.built.spots, notes = history.with_slumps(traced.built.spots, hist.melt)
+        traced.built.spots, notes = history.with_slumps(traced.built.spots, hist.melt, scene.spec.analysis.slump_step_deg)
         st.detail = "; ".join([hist.detail] + notes)
     return times, hist.states, hist.melt
 

@@ -36,6 +36,7 @@ KNOB_LEVELS = {
     "beam_rtol": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6),
     "time_step_fraction": (0.1, 0.05, 0.02, 0.01, 0.005),  # of the analysis window
     "heating_rtol": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
+    "slump_step_deg": (4.0, 2.0, 1.0, 0.5, 0.25),
 }
 QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2", "spot_power_w")
 # column of each quantity's relative error against the finest run: unitless, so no unit suffix
@@ -63,7 +64,7 @@ class ConvergenceReport:
 def _apply(data, knob, value):
     d = copy.deepcopy(data)
     a = d.setdefault("analysis", {})
-    if knob in ("direction_grid_deg", "refine_levels", "beam_samples", "beam_rtol"):
+    if knob in ("direction_grid_deg", "refine_levels", "beam_samples", "beam_rtol", "slump_step_deg"):
         a[knob] = value
     elif knob == "time_step_fraction":
         t_end = a.get("time_end_s", d["exposure"]["duration_s"])
@@ -92,6 +93,9 @@ def knobs_used(data) -> list:
         knobs.append("time_step_fraction")
     if any(t.get("history", {}).get("kind") == "heating" for t in data.get("targets", [])):
         knobs.append("heating_rtol")
+    if any(isinstance(t.get("material"), dict) and (t["material"].get("melt_tilt_deg") or t["material"].get("melt_wander_deg"))
+           for t in data.get("targets", [])):
+        knobs.append("slump_step_deg")
     return knobs
 
 

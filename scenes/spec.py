@@ -461,6 +461,9 @@ class AnalysisSpec(_Strict):
     beam_rtol: float = Field(default=1e-3, ge=1e-7, le=0.1, description=(
         "bound on the beam power left in cells that straddle an edge, relative to the beam power"))
     footprint_eye_height_m: float = Field(default=1.7, ge=0, le=1e4, description="eye height above the terrain for the ground footprint [m]")
+    slump_step_deg: float = Field(default=2.0, ge=0.05, le=10.0, description=(
+        "step of the normals a slumping target's keep-out lobe samples over its tilt and wander [deg] "
+        "(table in README 'Accuracy and speed')"))
 
     @model_validator(mode="after")
     def _work(self):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
 
 import brdfmodels
@@ -110,10 +112,10 @@ def state_histories(dynamic_spots, times, t_end) -> StateHistories:
     return StateHistories(states, "; ".join(parts), melts)
 
 
-def with_slumps(spots, melts: dict):
+def with_slumps(spots, melts: dict, step_deg: float = 2.0):
     """The spots, each whose target's material declares a slump given its
-    :class:`~hazard.pipeline.slump.SpotSlump` over the analysis times; and a note per
-    slumping target for the stage record."""
+    :class:`~hazard.pipeline.slump.SpotSlump` over the analysis times (the lobe's union
+    sampled every ``step_deg``); and a note per slumping target for the stage record."""
     from dataclasses import replace
 
     from .slump import spot_slump
@@ -121,7 +123,7 @@ def with_slumps(spots, melts: dict):
     out, notes = [], []
     for sp in spots:
         melt = melts.get(sp.target.index)
-        sl = spot_slump(sp.target, melt.fraction, sp.mean_frame[2]) if melt is not None else None
+        sl = spot_slump(sp.target, melt.fraction, sp.mean_frame[2], math.radians(step_deg)) if melt is not None else None
         if sl is not None and sl.moves:
             s = sp.target.slump
             notes.append(f"{sp.target.name}: slump tilts the normal up to {np.degrees(s.tilt_rad):.3g} deg (with the melt "

@@ -25,7 +25,7 @@ import numpy as np
 
 __all__ = ["SpotSlump", "spot_slump", "slumped_irradiance", "union_range_fn", "rotation", "SLUMP_STEP_RAD"]
 
-SLUMP_STEP_RAD = math.radians(1.0)  # default sampling step of the wander disk and tilt range [rad]
+SLUMP_STEP_RAD = math.radians(2.0)  # default sampling step of the wander disk and tilt range [rad] ([analysis] slump_step_deg)
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ def rotation(axis, angle_rad: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle_rad) * kx + (1.0 - math.cos(angle_rad)) * (kx @ kx)
 
 
-def spot_slump(target, melt_fraction: np.ndarray, normal: np.ndarray) -> SpotSlump | None:
+def spot_slump(target, melt_fraction: np.ndarray, normal: np.ndarray, step_rad: float = SLUMP_STEP_RAD) -> SpotSlump | None:
     """The :class:`SpotSlump` of a target's spot from its melt fraction over the times
     (None when the target's material declares no slump). The wander bound applies in
     full from the first time any of the plate is molten (conservative)."""
@@ -61,7 +61,7 @@ def spot_slump(target, melt_fraction: np.ndarray, normal: np.ndarray) -> SpotSlu
     axis = np.cross(normal, sl.direction)
     norm = np.linalg.norm(axis)
     axis = axis / norm if norm > 1e-12 else np.array(target.tangent, float)
-    return SpotSlump(sl.tilt_rad * f, np.where(f > 0, sl.wander_rad, 0.0), axis)
+    return SpotSlump(sl.tilt_rad * f, np.where(f > 0, sl.wander_rad, 0.0), axis, step_rad)
 
 
 def _tilted(spot, angle_rad: float):
