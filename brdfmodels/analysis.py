@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._checks import directions, finite_scalar
+from .states import grid_points
 
 __all__ = ["hemispherical_reflectance", "DHRResult", "envelope_report", "EnvelopeReport"]
 
@@ -222,9 +223,7 @@ def envelope_report(envelope, model, wi, wo, states=None, *, rtol=1e-12) -> Enve
             # bilinear cells: their corners (the nodes) and centres
             g = model.state_nodes()
             axes = [np.unique(g[:, d]) for d in range(2)]
-            mids = [0.5 * (a[1:] + a[:-1]) if a.size > 1 else a for a in axes]
-            m1, m2 = np.meshgrid(*mids, indexing="ij")
-            states = np.concatenate([g, np.stack([m1.ravel(), m2.ravel()], axis=1)])
+            states = np.concatenate([g, grid_points([0.5 * (a[1:] + a[:-1]) if a.size > 1 else a for a in axes])])
         elif states is None:
             lo, hi = model.state_range
             nodes = model.state_nodes()

@@ -124,6 +124,20 @@ def _check_data(wi, wo, brdf, weights):
     return wi, wo, f, w
 
 
+def check_nlopt_data(wi, wo, brdf, weights, n_params: int, method: str, nonpositive: str):
+    """:func:`_check_data` for a parametric nlopt fit (TS5, ABg): positive values (what a
+    value <= 0 cannot do: ``nonpositive``), at least ``n_params`` samples, a known global
+    ``method``."""
+    wi, wo, f, w = _check_data(wi, wo, brdf, weights)
+    if np.any(f <= 0):
+        raise ValueError(f"brdf_per_sr: values <= 0 {nonpositive}; mask them first")
+    if len(f) < n_params:
+        raise ValueError(f"underdetermined fit: {len(f)} samples for {n_params} parameters")
+    if method not in TS5_METHODS:
+        raise ValueError(f"method={method!r}: expected one of {sorted(TS5_METHODS)}")
+    return wi, wo, f, w
+
+
 def horizon_directions(n_incidence=6, n_azimuth=24, theta_deg=89.5):
     """Direction pairs on the observer's horizon used to tack a fit down (spec section 8)."""
     ti = np.radians(np.linspace(0, 80, n_incidence))
@@ -338,15 +352,11 @@ def _fit_groups(groups: dict, basis, state, fanout, log, progress, kwargs) -> di
 def _fit_dynamic_sh_2(samples, basis, states, names, *, fanout, log, extrapolation, progress, **kwargs) -> DynamicFitResult:
     """The two-state branch of :func:`fit_dynamic_sh`: one fit per grid node (s1, s2)."""
     from .screen import group_by_states
-    from .states import check_nodes
+    from .states import state_axes, state_names
 
     start = time.perf_counter()
-    given, names = names, list(names) if isinstance(names, (list, tuple)) else []
-    if len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
-        raise ValueError(f"state={given!r}: expected a state name, or two different ones such as ['extinction', 'melt_fraction']")
-    if not isinstance(states, (list, tuple)) or len(states) != 2:
-        raise ValueError(f"states: expected two node arrays [nodes of {names[0]}, nodes of {names[1]}] for state={names}")
-    axes = [check_nodes(f"states[{d}] ({names[d]})", states[d]) for d in range(2)]
+    names = list(state_names(names, "state"))
+    axes = state_axes(states, tuple(names))
     groups = group_by_states(samples, names, axes)
     missing = [(float(a), float(b)) for a in axes[0] for b in axes[1] if (float(a), float(b)) not in groups]
     if missing:
@@ -527,13 +537,7 @@ def fit_ts5(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=20000, local=
     import nlopt
 
     start = time.perf_counter()
-    wi, wo, f, w = _check_data(wi, wo, brdf_per_sr, weights)
-    if np.any(f <= 0):
-        raise ValueError("brdf_per_sr: values <= 0 cannot enter the relative error; mask them first")
-    if len(f) < 5:
-        raise ValueError(f"underdetermined fit: {len(f)} samples for 5 parameters")
-    if method not in TS5_METHODS:
-        raise ValueError(f"method={method!r}: expected one of {sorted(TS5_METHODS)}")
+    wi, wo, f, w = check_nlopt_data(wi, wo, brdf_per_sr, weights, 5, method, "cannot enter the relative error")
     if local not in ("bobyqa", "neldermead"):
         raise ValueError(f"local={local!r}: expected 'bobyqa' or 'neldermead'")
     obj = _ts5_objective(wi, wo, f, w)

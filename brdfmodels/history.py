@@ -23,7 +23,7 @@ import numpy as np
 from scipy import special
 
 from ._checks import finite_array, finite_scalar
-from .states import StateTable, check_policy
+from .states import StateTable, check_policy, state_names
 
 __all__ = ["OxidationModel", "ThinPlateHeating", "HeatingResult", "History", "STEFAN_BOLTZMANN_W_M2_K4"]
 
@@ -456,19 +456,16 @@ class History:
 
     def __init__(self, times_s, states, state_name, extrapolation="error"):
         policy = check_policy(extrapolation)
-        if isinstance(state_name, str) and state_name:
+        names = state_names(state_name)
+        if len(names) == 1:
             self._tables = (StateTable(times_s, states, "time_s", policy),)
-            self.state_name = state_name
+            self.state_name = names[0]
             return
-        names = list(state_name) if isinstance(state_name, (list, tuple)) else []
-        if len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
-            raise ValueError(f"state_name={state_name!r}: expected a non-empty string such as 'extinction', "
-                             f"or two different names such as ['extinction', 'melt_fraction']")
         v = finite_array("states", states, ndim=2)
         if v.shape[1:] != (2,):
             raise ValueError(f"states: expected shape (N, 2) (one column per state of {names}), got {v.shape}")
         self._tables = tuple(StateTable(times_s, v[:, d], "time_s", policy) for d in range(2))
-        self.state_name = tuple(names)
+        self.state_name = names
 
     @property
     def times_s(self) -> np.ndarray:
@@ -484,6 +481,11 @@ class History:
     @property
     def state_dim(self) -> int:
         return len(self._tables)
+
+    @property
+    def state_names(self) -> tuple:
+        """The state's name, or the two names of a two-state history."""
+        return (self.state_name,) if isinstance(self.state_name, str) else self.state_name
 
     def state_at(self, times_s) -> np.ndarray:
         """State at the given times [s] (linear interpolation; (..., 2) for two states)."""

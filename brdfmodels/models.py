@@ -32,13 +32,15 @@ from .states import (
     bilinear_weights,
     check_in_range,
     check_in_range_2d,
-    check_nodes,
     check_policy,
+    grid_points,
     interpolation_weights,
     interpolate_rows,
     path_pieces,
     quadratic_max,
     segment_extremes,
+    state_axes,
+    state_names,
 )
 
 __all__ = [
@@ -528,21 +530,6 @@ class SphericalHarmonicBRDF(_SHMixin, BRDFModel):
         }
 
 
-def _state_axes(states, state_name):
-    """``(axes, names)``: one or two checked node arrays and their state names."""
-    if isinstance(state_name, str):
-        if not state_name:
-            raise ValueError("state_name='': expected a non-empty string such as 'temperature_k'")
-        return (check_nodes("states", states),), (state_name,)
-    names = tuple(state_name) if isinstance(state_name, (list, tuple)) else None
-    if names is None or len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
-        raise ValueError(f"state_name={state_name!r}: expected a non-empty string, or two different ones "
-                         f"such as ['extinction', 'melt_fraction']")
-    if not isinstance(states, (list, tuple)) or len(states) != 2:
-        raise ValueError(f"states: expected two node arrays [nodes of {names[0]}, nodes of {names[1]}] for two states")
-    return tuple(check_nodes(f"states[{d}] ({names[d]})", states[d]) for d in range(2)), names
-
-
 @register("dynamic-spherical-harmonic")
 class DynamicBRDF(_SHMixin, BRDFModel):
     """Spherical-harmonic BRDF over a table of one or two material states (paper Sec. IV H).
@@ -574,7 +561,8 @@ class DynamicBRDF(_SHMixin, BRDFModel):
 
     def __init__(self, basis, states, coefficients, state_name, fanout=0.6, log=True, extrapolation="error"):
         self.basis = _check_basis(basis)
-        axes, names = _state_axes(states, state_name)
+        names = state_names(state_name)
+        axes = state_axes(states, names)
         object.__setattr__(self, "_axes", axes)
         object.__setattr__(self, "_names", names)
         self.states = axes[0] if len(axes) == 1 else axes
@@ -613,10 +601,7 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         return r[0] if len(r) == 1 else r
 
     def state_nodes(self):
-        if len(self._axes) == 1:
-            return self.states
-        g1, g2 = np.meshgrid(*self._axes, indexing="ij")
-        return np.stack([g1.ravel(), g2.ravel()], axis=1)
+        return self.states if len(self._axes) == 1 else grid_points(self._axes)
 
     def _checked(self, state) -> np.ndarray:
         if len(self._axes) == 1:
@@ -829,9 +814,7 @@ def _union_nodes(node_sets, dim):
     sets = [n for n in node_sets if len(n)]
     if dim < 2:
         return np.unique(np.concatenate(sets)) if sets else np.empty(0)
-    axes = [np.unique(np.concatenate([n[:, d] for n in sets])) for d in range(2)]
-    g1, g2 = np.meshgrid(*axes, indexing="ij")
-    return np.stack([g1.ravel(), g2.ravel()], axis=1)
+    return grid_points([np.unique(np.concatenate([n[:, d] for n in sets])) for d in range(2)])
 
 
 @register("sum")

@@ -53,6 +53,22 @@ def check_in_range(query: np.ndarray, nodes: np.ndarray, state_name: str, policy
     return np.clip(q, lo, hi)
 
 
+def cell_fraction(nodes: np.ndarray, x) -> tuple:
+    """``(j, frac)``: the lower node of each value's cell (the last cell for values at or
+    past the last node) and the value's fraction across it; both 0 for a one-node table."""
+    x = np.asarray(x, dtype=float)
+    if nodes.size == 1:
+        return np.zeros(x.shape, np.intp), np.zeros(x.shape)
+    j = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, nodes.size - 2)
+    return j, (x - nodes[j]) / (nodes[j + 1] - nodes[j])
+
+
+def grid_points(axes) -> np.ndarray:
+    """Every node pair (n1 n2, 2) of a two-state grid, the second state varying fastest."""
+    g1, g2 = np.meshgrid(*axes, indexing="ij")
+    return np.stack([g1.ravel(), g2.ravel()], axis=1)
+
+
 def interpolation_weights(nodes: np.ndarray, query: np.ndarray) -> np.ndarray:
     """Weights W (T, Q) with ``table.T @ W`` = linear interpolation at ``query`` (in range)."""
     q = np.asarray(query, dtype=float).ravel()
@@ -61,8 +77,7 @@ def interpolation_weights(nodes: np.ndarray, query: np.ndarray) -> np.ndarray:
     if t == 1:
         w[0] = 1.0
         return w
-    j = np.clip(np.searchsorted(nodes, q, side="right") - 1, 0, t - 2)
-    frac = (q - nodes[j]) / (nodes[j + 1] - nodes[j])
+    j, frac = cell_fraction(nodes, q)
     cols = np.arange(q.size)
     w[j, cols] = 1.0 - frac
     w[j + 1, cols] += frac
@@ -91,8 +106,8 @@ def interpolate_rows(nodes: np.ndarray, table: np.ndarray, query: np.ndarray) ->
     q = np.asarray(query, dtype=float).ravel()
     if nodes.size == 1:
         return np.repeat(table[:1], q.size, axis=0)
-    j = np.clip(np.searchsorted(nodes, q, side="right") - 1, 0, nodes.size - 2)
-    frac = ((q - nodes[j]) / (nodes[j + 1] - nodes[j]))[:, None]
+    j, frac = cell_fraction(nodes, q)
+    frac = frac[:, None]
     return table[j] * (1.0 - frac) + table[j + 1] * frac
 
 
@@ -161,6 +176,27 @@ class StateTable:
 
 
 # -- two states (bilinear tables) ------------------------------------------------------------
+def state_names(value, field: str = "state_name") -> tuple:
+    """One state name, or two different ones, as a tuple; ValueError naming ``field``."""
+    if isinstance(value, str) and value:
+        return (value,)
+    names = tuple(value) if isinstance(value, (list, tuple)) else ()
+    if len(names) != 2 or not all(isinstance(n, str) and n for n in names) or names[0] == names[1]:
+        raise ValueError(f"{field}={value!r}: expected a non-empty string such as 'extinction', or two different ones "
+                         f"such as ['extinction', 'melt_fraction']")
+    return names
+
+
+def state_axes(states, names: tuple) -> tuple:
+    """The checked node array of each state in ``names`` (:func:`state_names`): ``states``
+    itself for one state, ``[nodes_1, nodes_2]`` for two."""
+    if len(names) == 1:
+        return (check_nodes("states", states),)
+    if not isinstance(states, (list, tuple)) or len(states) != 2:
+        raise ValueError(f"states: expected two node arrays [nodes of {names[0]}, nodes of {names[1]}] for two states")
+    return tuple(check_nodes(f"states[{d}] ({names[d]})", states[d]) for d in range(2))
+
+
 def check_in_range_2d(query, axes, names, policy: str) -> np.ndarray:
     """The policy of :func:`check_in_range` per axis of (..., 2) states."""
     q = np.asarray(query, dtype=float)
@@ -180,10 +216,6 @@ def bilinear_weights(axes, query: np.ndarray) -> np.ndarray:
     w1 = interpolation_weights(axes[0], q[:, 0])
     w2 = interpolation_weights(axes[1], q[:, 1])
     return (w1[:, None, :] * w2[None, :, :]).reshape(axes[0].size * axes[1].size, q.shape[0])
-
-
-def _cell(nodes: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return np.clip(np.searchsorted(nodes, v, side="right") - 1, 0, max(nodes.size - 2, 0))
 
 
 def _split_segment(axes, a: np.ndarray, b: np.ndarray) -> list:
@@ -224,7 +256,7 @@ def path_pieces(axes, path) -> tuple:
 def _merge_straight(axes, starts: np.ndarray, ends: np.ndarray) -> tuple:
     """Merge runs of consecutive pieces that share one grid-parallel line and one cell."""
     mids = 0.5 * (starts + ends)
-    cell = np.stack([_cell(axes[d], mids[:, d]) for d in range(2)], axis=1)
+    cell = np.stack([cell_fraction(axes[d], mids[:, d])[0] for d in range(2)], axis=1)
     flat = starts == ends  # (M, 2): the coordinate that does not change
     out_s, out_e = [starts[0].copy()], [ends[0].copy()]
     for i in range(1, len(starts)):
@@ -264,17 +296,7 @@ def bilinear_rows(axes, table: np.ndarray, query: np.ndarray) -> np.ndarray:
     """Bilinear interpolation of ``table`` (n1, n2, K) at in-range ``query`` (Q, 2) ->
     (Q, K), from the four corners of each query's cell (no dense weight matrix)."""
     q = np.asarray(query, dtype=float).reshape(-1, 2)
-    idx, frac = [], []
-    for d in range(2):
-        nodes = axes[d]
-        if nodes.size == 1:
-            idx.append(np.zeros(q.shape[0], int))
-            frac.append(np.zeros(q.shape[0]))
-            continue
-        j = _cell(nodes, q[:, d])
-        idx.append(j)
-        frac.append((q[:, d] - nodes[j]) / (nodes[j + 1] - nodes[j]))
-    (i, j), (x, y) = idx, frac
+    (i, x), (j, y) = (cell_fraction(axes[d], q[:, d]) for d in range(2))
     i1 = np.minimum(i + 1, axes[0].size - 1)
     j1 = np.minimum(j + 1, axes[1].size - 1)
     x, y = x[:, None], y[:, None]

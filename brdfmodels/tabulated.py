@@ -33,6 +33,7 @@ from ._checks import finite_array
 from .geometry import _half_diff_parts
 from .models import BRDFModel
 from .registry import register
+from .states import cell_fraction
 
 __all__ = ["TabulatedBRDF", "OUTSIDE_POLICIES"]
 
@@ -81,11 +82,8 @@ def _fit_at_nodes(wi, wo, f, axes, empty) -> np.ndarray:
 
 def _axis_weights(nodes, x):
     """Lower node index and weight of the upper one, for x inside [nodes[0], nodes[-1]]."""
-    if len(nodes) == 1:
-        return np.zeros(len(x), np.intp), np.zeros(len(x))
-    i = np.clip(np.searchsorted(nodes, x, side="right") - 1, 0, len(nodes) - 2)
-    t = np.clip((x - nodes[i]) / (nodes[i + 1] - nodes[i]), 0.0, 1.0)
-    return i, t
+    i, t = cell_fraction(nodes, x)
+    return i, np.clip(t, 0.0, 1.0)
 
 
 @register("table")

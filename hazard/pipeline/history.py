@@ -34,6 +34,10 @@ class Melt:
     onset_s: float | None
     full_s: float | None
 
+    def summary(self) -> dict:
+        """The report's entry (``targets[i].melt``): onset and full-melt times [s]."""
+        return {"onset_s": self.onset_s, "full_melt_s": self.full_s, "max_fraction": float(np.max(self.fraction))}
+
 
 def analysis_times(spec, dynamic: bool) -> np.ndarray:
     """Times [s] of the map: 0 .. ``time_end_s`` (default: the exposure duration) every
@@ -77,7 +81,7 @@ def series_melt(hist, times) -> Melt | None:
     """The melt fraction of a series history that carries one (None otherwise): onset is
     the last time the series is 0 before it rises (it is linear between its points),
     full melt the first time it reaches 1 (interpolated)."""
-    names = [hist.state_name] if isinstance(hist.state_name, str) else list(hist.state_name)
+    names = list(hist.state_names)
     if "melt_fraction" not in names:
         return None
     k = names.index("melt_fraction")
