@@ -215,14 +215,6 @@ def _targets(scene, traced, states, exposure, mu, log):
     return rows + beam_stage.unlit_targets(scene.targets, spots, traced.built.unreflected)
 
 
-def _melt_row(melt) -> dict | None:
-    """The report's melt entry of a target: onset and full-melt times [s] (None: not
-    within the run), or None when its history does not know its melting."""
-    if melt is None:
-        return None
-    return {"onset_s": melt.onset_s, "full_melt_s": melt.full_s, "max_fraction": float(np.max(melt.fraction))}
-
-
 def _mirror_beams(scene, rows, spots, ray_scene, zone, log, the_plan) -> None:
     """Stage ``mirror_beams``: each mirror beam's reach and containment, into ``zone``
     (report.json ``sdz.mirror_beams``)."""
@@ -271,7 +263,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     rows = _targets(scene, traced, states, exposure, mu, log)
     melt_by_name = {scene.targets[k].name: m for k, m in melts.items()}
     for row in rows:
-        row.melt = _melt_row(melt_by_name.get(row.name))
+        row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None
     _mirror_beams(scene, rows, traced.built.spots, ray_scene, zone, log, the_plan)
     fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
     built = traced.built

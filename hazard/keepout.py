@@ -54,6 +54,7 @@ class Lobe:
     max_direction_world: np.ndarray
     evaluations: int
     cells: int
+    normals: int = 1  # surface normals each direction's range is the max over (a slumping spot's union)
 
     def summary(self) -> dict:
         return {
@@ -352,6 +353,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         max_direction_world=best_dir @ spot.mean_frame,
         evaluations=evals + n_polish + 2,
         cells=len(cells),
+        normals=getattr(fn, "samples", 1),
     )
 
 

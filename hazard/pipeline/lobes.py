@@ -43,13 +43,12 @@ def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
     if sl is None or not sl.moves or lobe is None or t.index not in states:
         return None
     half = _range_fn(sp, mpe_w_m2, mu, gain, states[t.index], sl.step_rad / 2)
-    used = _range_fn(sp, mpe_w_m2, mu, gain, states[t.index])  # built, not evaluated: how many normals the lobe took
     r_half = float(half(lobe.max_direction_local[None, :])[0])
     err = max(r_half - lobe.max_range_m, 0.0)
     lobe.max_range_m = max(lobe.max_range_m, r_half)
     return {"tilt_deg": float(np.degrees(t.slump.tilt_rad)), "wander_deg": float(np.degrees(t.slump.wander_rad)),
             "tilt_direction": t.slump.direction.tolist(), "step_deg": float(np.degrees(sl.step_rad)),
-            "normals_sampled": int(used.samples), "normals_sampled_half_step": int(half.samples), "max_nohd_half_step_m": r_half,
+            "normals_sampled": lobe.normals, "normals_sampled_half_step": int(half.samples), "max_nohd_half_step_m": r_half,
             "sampling_error_estimate_m": err,
             "method": "irradiance map: the mean tilted normal at each time; keep-out lobe: union over the tilts and the "
                       "wander disk of each part of the history, paired with that part's states"}
