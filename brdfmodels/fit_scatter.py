@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from .fitting import TS5_METHODS, TS5_POLISH_MAXEVAL, FitResult, _check_data, nlopt_stage
+from .fitting import TS5_METHODS, TS5_POLISH_MAXEVAL, FitResult, check_nlopt_data, nlopt_stage
 from .scatter import ABg, direction_cosine_offset
 from .uncertainty import jacobian_uncertainty
 
@@ -48,13 +48,7 @@ def fit_abg(wi, wo, brdf_per_sr, *, method="crs2", seed=0, maxeval=4000, weights
     import nlopt
 
     start = time.perf_counter()
-    wi, wo, f, w = _check_data(wi, wo, brdf_per_sr, weights)
-    if np.any(f <= 0):
-        raise ValueError("brdf_per_sr: values <= 0 have no logarithm; mask them first")
-    if len(f) < 3:
-        raise ValueError(f"underdetermined fit: {len(f)} samples for 3 parameters")
-    if method not in TS5_METHODS:
-        raise ValueError(f"method={method!r}: expected one of {sorted(TS5_METHODS)}")
+    wi, wo, f, w = check_nlopt_data(wi, wo, brdf_per_sr, weights, 3, method, "have no logarithm")
     xd = direction_cosine_offset(wi, wo)
     lf, sw = np.log(f), np.sqrt(w / w.sum())
     count = [0]

@@ -165,25 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--force", action="store_true", help="overwrite existing outputs")
         q.add_argument("--json", action="store_true", help="print the fit report as JSON")
         q.add_argument("--quiet", action="store_true", help="no progress bars")
-    q = fsub.add_parser("ts5", help="fit the five-parameter Torrance-Sparrow model to a samples table (CSV)")
-    q.add_argument("inputs", nargs=1, help="samples table (CSV)")
-    q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
-    q.add_argument("--method", default="crs2", help="global nlopt method: crs2 (default), esch, isres, direct-l, mlsl")
-    q.add_argument("--seed", type=int, default=0)
-    q.add_argument("--maxeval", type=int, default=20000, help="global-stage budget")
+    q = _nlopt_fit_parser(fsub, "ts5", "fit the five-parameter Torrance-Sparrow model to a samples table (CSV)", 20000)
     q.add_argument("--report", action="store_true", help="print the algorithm comparison table")
-    q.add_argument("--force", action="store_true")
-    q.add_argument("--json", action="store_true")
-    q.add_argument("--quiet", action="store_true", help="no progress bars")
-    q = fsub.add_parser("abg", help="fit an ABg scatter lobe A / (B + |beta - beta0|^g) to a samples table (CSV)")
-    q.add_argument("inputs", nargs=1, help="samples table (CSV)")
-    q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
-    q.add_argument("--method", default="crs2", help="global nlopt method: crs2 (default), esch, isres, direct-l, mlsl")
-    q.add_argument("--seed", type=int, default=0)
-    q.add_argument("--maxeval", type=int, default=4000, help="global-stage budget")
-    q.add_argument("--force", action="store_true")
-    q.add_argument("--json", action="store_true")
-    q.add_argument("--quiet", action="store_true", help="no progress bars")
+    _nlopt_fit_parser(fsub, "abg", "fit an ABg scatter lobe A / (B + |beta - beta0|^g) to a samples table (CSV)", 4000)
     q = fsub.add_parser("oxidation", help="fit the oxidation law to a series CSV (time_s, temperature_k, reflectance)")
     q.add_argument("inputs", nargs=1, help="series CSV with columns time_s, temperature_k, reflectance")
     q.add_argument("-o", "--output", required=True, help="result file to write (JSON)")
@@ -497,6 +481,21 @@ def _print_report(out, title, rows, as_json, extra=None):
         out.write(format_table(rows, title) + "\n")
         for k, v in (extra or {}).items():
             out.write(f"  {k}: {v}\n")
+
+
+def _nlopt_fit_parser(fsub, name, helptext, maxeval):
+    """A ``hazard fit`` subcommand of a parametric nlopt fit (ts5, abg): input table,
+    output, global method, seed, budget, and the output switches."""
+    q = fsub.add_parser(name, help=helptext)
+    q.add_argument("inputs", nargs=1, help="samples table (CSV)")
+    q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
+    q.add_argument("--method", default="crs2", help="global nlopt method: crs2 (default), esch, isres, direct-l, mlsl")
+    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--maxeval", type=int, default=maxeval, help="global-stage budget")
+    q.add_argument("--force", action="store_true")
+    q.add_argument("--json", action="store_true")
+    q.add_argument("--quiet", action="store_true", help="no progress bars")
+    return q
 
 
 def _state_nodes_args(state_text, states_text):
