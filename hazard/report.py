@@ -395,6 +395,7 @@ def _melt_lines(t) -> list:
         out.append(f"    slump: normal tilted up to {sl['tilt_deg']:.3g} deg with the melt fraction, wander within "
                    f"{sl['wander_deg']:.3g} deg once molten; the dynamic lobe covers their union ({sl['normals_sampled']} normals "
                    f"every {sl['step_deg']:.3g} deg; half the step gives {sl['max_nohd_half_step_m']:.4g} m there, the larger is reported)")
+        out.append(f"    slump left out: {sl['left_out']}")
     return out
 
 

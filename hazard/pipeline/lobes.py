@@ -34,6 +34,11 @@ def _state_range(states):
     return [[float(s[:, d].min()), float(s[:, d].max())] for d in range(s.shape[1])]
 
 
+SLUMP_LEFT_OUT = ("the wander at the observers (their irradiance follows the mean tilted normal; clear by the dynamic "
+                  "lobe's NOHD), and directions behind the plate within tilt + wander of its plane (outside the lobe's "
+                  "hemisphere)")
+
+
 def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
     """The slump a dynamic lobe covers, and the estimate of its sampling error: the
     union sampled at half the step, at the lobe's farthest direction (the largest of
@@ -51,7 +56,8 @@ def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
             "normals_sampled": lobe.normals, "normals_sampled_half_step": int(half.samples), "max_nohd_half_step_m": r_half,
             "sampling_error_estimate_m": err,
             "method": "irradiance map: the mean tilted normal at each time; keep-out lobe: union over the tilts and the "
-                      "wander disk of each part of the history, paired with that part's states"}
+                      "wander disk of each part of the history, paired with that part's states",
+            "left_out": SLUMP_LEFT_OUT}
 
 
 def _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain):

@@ -86,3 +86,22 @@ def test_series_melt_times():
     assert series_melt(bm.History([0.0, 1.0], [0.3, 0.5], "extinction"), np.array([0.0])) is None
     one = series_melt(bm.History([0.0, 1.0, 3.0], [0.0, 0.4, 0.8], "melt_fraction"), np.array([0.0, 3.0]))
     assert one.onset_s == 0.0 and one.full_s is None
+
+
+def test_slumping_target_reports_melt_times_sampling_and_what_is_left_out():
+    """stainless_melt: the target row says when it melts, how the slump was sampled
+    (with the half-step check, never below it) and what the slump leaves out."""
+    import hazard
+    import scenes
+
+    res = hazard.analyze(scenes.load(scenes.examples()["stainless_melt"]))
+    row = res.targets[0].to_dict()
+    assert 0 < row["melt"]["onset_s"] < row["melt"]["full_melt_s"] < 10.0
+    sl = row["slump"]
+    assert sl["tilt_deg"] == pytest.approx(6.0) and sl["wander_deg"] == pytest.approx(2.0)
+    assert sl["normals_sampled"] > 1 and sl["normals_sampled_half_step"] > sl["normals_sampled"]
+    assert row["nohd_dynamic_m"] >= sl["max_nohd_half_step_m"]
+    assert "wander at the observers" in sl["left_out"] and "behind the plate" in sl["left_out"]
+    from hazard.report import summary_text
+
+    assert "slump left out: the wander at the observers" in summary_text(res)
