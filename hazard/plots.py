@@ -4,6 +4,9 @@ matplotlib is imported when a Display draws, never by ``import hazard``."""
 
 from __future__ import annotations
 
+import io
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -11,7 +14,7 @@ import numpy as np
 
 import brdfmodels
 
-__all__ = ["BRDFPlaneDisplay", "NOHDTimeDisplay", "ExposureDisplay", "ErrorTableDisplay"]
+__all__ = ["BRDFPlaneDisplay", "NOHDTimeDisplay", "ExposureDisplay", "ErrorTableDisplay", "time_figures"]
 
 
 def _axes(ax):
@@ -31,12 +34,24 @@ class _Display:
         fig, _ = self.plot(**plot_kw)
         path = Path(path)
         tmp = path.with_name("." + path.name + ".tmp" + path.suffix)
-        fig.savefig(tmp, dpi=110)
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")  # a legend beside or below the axes stays whole
         tmp.replace(path)
         import matplotlib.pyplot as plt
 
         plt.close(fig)
         return path
+
+    def png_bytes(self, **plot_kw) -> bytes:
+        """The figure as PNG bytes (the figure is closed)."""
+        import matplotlib.pyplot as plt
+
+        fig, _ = self.plot(**plot_kw)
+        buf = io.BytesIO()
+        try:
+            fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # a legend below the axes stays whole
+        finally:
+            plt.close(fig)
+        return buf.getvalue()
 
 
 def _state_label(name, s) -> str:
@@ -94,15 +109,19 @@ class BRDFPlaneDisplay(_Display):
 
 @dataclass
 class NOHDTimeDisplay(_Display):
-    """Max NOHD of a target over the history: the static line against the dynamic curve."""
+    """Max NOHD of a target over the history: the static line against the dynamic curve
+    (a target whose material does not change: one flat line over the window)."""
 
     times_s: np.ndarray
     nohd_dynamic_m: np.ndarray
     nohd_static_m: float
     target: str
+    mpe_w_m2: float | None = None  # the MPE the NOHD is the distance to (point source)
+    dynamic: bool = True  # the target's material changes over the times
 
     @classmethod
     def from_result(cls, result, target=0, *, grid_deg=5.0):
+        """``target``: index into ``result.spots`` (the lit targets)."""
         from .keepout import _range_fn
 
         spot = result.spots[target]
@@ -112,20 +131,33 @@ class NOHDTimeDisplay(_Display):
         ph = np.radians(np.arange(-180, 180, grid_deg))
         tt, pp = np.meshgrid(th, ph)
         dirs = np.vstack([brdfmodels.spherical_to_vector(tt.ravel(), pp.ravel()), wi * [-1, -1, 1], wi])
+        mpe = float(result.mpe_w_m2)
         if states is None:
             r = float(_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, None)(dirs).max())
-            return cls(result.times_s, np.full(len(result.times_s), r), r, spot.target.name)
+            t = np.asarray(result.times_s, float)
+            if len(t) < 2:  # a static analysis has one time: the line spans the exposure window
+                t = np.array([t[0], t[0] + result.scene.spec.exposure.duration_s])
+            return cls(t, np.full(len(t), r), r, spot.target.name, mpe, False)
         per_t = np.array([_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, states[j:j + 1])(dirs).max() for j in range(len(states))])
-        return cls(result.times_s, per_t, float(per_t[0]), spot.target.name)
+        return cls(result.times_s, per_t, float(per_t[0]), spot.target.name, mpe, True)
 
     def plot(self, ax=None):
         fig, ax = _axes(ax)
-        ax.plot(self.times_s, self.nohd_dynamic_m, label="dynamic")
-        ax.axhline(self.nohd_static_m, ls="--", c="k", label="static (initial state)")
+        if self.dynamic:
+            ax.plot(self.times_s, self.nohd_dynamic_m, c="tab:blue", label="dynamic")
+            ax.axhline(self.nohd_static_m, ls="--", c="k", label="static (initial state)")
+        else:
+            ax.plot(self.times_s, self.nohd_dynamic_m, c="tab:blue", label="static material (no change over time)")
+        j = int(np.argmax(self.nohd_dynamic_m))
+        top = float(self.nohd_dynamic_m[j])
+        where = f"at t = {float(self.times_s[j]):.4g} s" if self.dynamic else "(constant)"
+        ax.plot([self.times_s[j]], [top], "o", c="tab:red", label=f"max {top:.4g} m {where}")
+        ax.set_ylim(0.0, 1.1 * max(top, self.nohd_static_m) or 1.0)
         ax.set_xlabel("time [s]")
-        ax.set_ylabel("max NOHD [m]")
-        ax.set_title(f"target {self.target}")
-        ax.legend()
+        mpe = "" if self.mpe_w_m2 is None else f" to E = MPE = {self.mpe_w_m2:.4g} W/m^2"
+        ax.set_ylabel(f"max NOHD{mpe} [m]")
+        ax.set_title(f"target {self.target}: diffuse-lobe NOHD vs time")
+        ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
         return fig, ax
 
@@ -139,33 +171,61 @@ class ExposureDisplay(_Display):
     exposure_j_m2: np.ndarray
     mpe_exposure_j_m2: np.ndarray
     observer: str
+    mpe_w_m2: float | None = None  # the observer's MPE [W/m^2] (the hazard ratio's limit, with C_E when applied)
+    first_exceedance_s: float = math.nan  # from the analysis (NaN: none in the window)
+    hazard_ratio: float | None = None
 
     @classmethod
-    def from_result(cls, result, observer=0):
+    def from_result(cls, result, observer=0, *, irradiance_w_m2=None):
+        """``irradiance_w_m2``: the observer's history over ``result.times_s`` when the
+        result kept none (:func:`time_figures` recomputes it)."""
         from . import mpe as _mpe
 
-        e = result.observers.irradiance_w_m2
-        if e is None:
-            raise ValueError("the result kept no irradiance history: analyze(scene, keep_history=True)")
-        t = result.times_s
-        row = e[observer]
-        cum = np.concatenate([[0.0], np.cumsum(0.5 * (row[1:] + row[:-1]) * np.diff(t))]) if len(t) > 1 else row * 0
+        if irradiance_w_m2 is None:
+            e = result.observers.irradiance_w_m2
+            if e is None:
+                raise ValueError("the result kept no irradiance history: analyze(scene, keep_history=True)")
+            irradiance_w_m2 = e[observer]
+        t = np.asarray(result.times_s, float)
+        row = np.asarray(irradiance_w_m2, float)
         spec = result.scene.spec
+        if len(t) < 2:  # static: the irradiance holds over the exposure window
+            t = t[0] + np.linspace(0.0, spec.exposure.duration_s, 201)
+            row = np.full(len(t), row[0])
+        cum = np.concatenate([[0.0], np.cumsum(0.5 * (row[1:] + row[:-1]) * np.diff(t))])
         el = np.clip(t - t[0], _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)
         limit = np.array([_mpe.ocular_mpe(spec.laser.wavelength_nm, x, standard=spec.exposure.standard).radiant_exposure_j_m2 for x in el])
-        return cls(t, row, cum, limit, result.observers.labels[observer])
+        obs = result.observers
+        mpe = np.broadcast_to(np.asarray(result.observer_mpe_w_m2, float), (len(obs),))[observer] if len(obs) else result.mpe_w_m2
+        return cls(t, row, cum, limit, obs.labels[observer], float(mpe), float(obs.first_exceedance_s[observer]),
+                   float(result.hazard_ratio[observer]))
 
     def plot(self, ax=None):
         fig, ax = _axes(ax)
-        ax.semilogy(self.times_s[1:], np.maximum(self.exposure_j_m2[1:], 1e-12), label="accumulated exposure H(t)")
-        ax.semilogy(self.times_s[1:], self.mpe_exposure_j_m2[1:], "k--", label="MPE for the elapsed time")
+        ax.semilogy(self.times_s[1:], np.maximum(self.exposure_j_m2[1:], 1e-12), c="tab:blue", label="accumulated exposure H(t) [J/m^2]")
+        ax.semilogy(self.times_s[1:], self.mpe_exposure_j_m2[1:], "k--", label="MPE for the elapsed time [J/m^2]")
+        if np.isfinite(self.first_exceedance_s):
+            ax.axvline(self.first_exceedance_s, c="tab:red", lw=1.2, label=f"first exceedance t = {self.first_exceedance_s:.4g} s")
+        else:
+            ax.plot([], [], " ", label="no exceedance in the window")
         ax2 = ax.twinx()
-        ax2.plot(self.times_s, self.irradiance_w_m2, c="tab:orange", alpha=0.6, label="irradiance")
+        e = np.asarray(self.irradiance_w_m2, float)
+        levels = e[e > 0].tolist() + ([] if self.mpe_w_m2 is None else [self.mpe_w_m2])
+        if levels:  # log: the MPE stays visible beside a peak orders of magnitude above it
+            ax2.set_yscale("log")
+            ax2.set_ylim(min(levels) / 2.0, max(levels) * 2.0)
+        ax2.plot(self.times_s, np.maximum(e, min(levels) / 4.0) if levels else e, c="tab:orange", alpha=0.7,
+                 label="irradiance E(t) [W/m^2]")
+        if self.mpe_w_m2 is not None:
+            ax2.axhline(self.mpe_w_m2, c="tab:orange", ls=":", lw=1.2, label=f"MPE {self.mpe_w_m2:.4g} W/m^2 (hazard ratio's limit)")
         ax2.set_ylabel("irradiance [W/m^2]", color="tab:orange")
         ax.set_xlabel("time [s]")
         ax.set_ylabel("radiant exposure [J/m^2]")
-        ax.set_title(f"observer {self.observer}")
-        ax.legend(loc="lower right", fontsize=8)
+        ratio = "" if self.hazard_ratio is None else f" (peak E / MPE = {self.hazard_ratio:.3g})"
+        ax.set_title(f"observer {self.observer}{ratio}")
+        h1, l1 = ax.get_legend_handles_labels()
+        h2, l2 = ax2.get_legend_handles_labels()
+        ax.legend(h1 + h2, l1 + l2, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=7)
         ax.grid(alpha=0.3, which="both")
         return fig, ax
 
@@ -198,3 +258,93 @@ class ErrorTableDisplay(_Display):
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3, which="both")
         return fig, ax
+
+
+def _file_part(name) -> str:
+    """``name`` as part of a file name: runs of other characters than letters, digits,
+    ``.``, ``-`` and ``_`` become one ``_`` (``shell-20m:crossing[0]`` ->
+    ``shell-20m_crossing_0``)."""
+    return re.sub(r"[^A-Za-z0-9.-]+", "_", str(name)).strip("_.") or "unnamed"
+
+
+def _unique(name, taken) -> str:
+    stem, ext = name.rsplit(".", 1)
+    out, k = name, 2
+    while out in taken:
+        out, k = f"{stem}_{k}.{ext}", k + 1
+    return out
+
+
+def _observer_histories(result, rows):
+    """Irradiance histories (len(rows), T) [W/m^2] of observers ``rows`` over
+    ``result.times_s``, recomputed by the analysis's own irradiance map
+    (:func:`hazard.pipeline.irradiance_map.irradiance_map`) on just those points, with the
+    result's spots, states, beam, direct beam and (when the scene needs one) the cached
+    ray scene for lines of sight. Returns (histories, None) or (None, reason) when the
+    recomputed peaks do not reproduce the result's."""
+    from scenes.observers import Observers
+
+    from .nohd import optical_gain
+    from .pipeline import spots as beam_stage
+    from .pipeline.irradiance_map import MapInputs, irradiance_map
+    from .pipeline.plan import plan
+
+    scene, obs, rows = result.scene, result.observers, np.asarray(rows, np.int64)
+    table = obs.observers
+    gain = np.array([1.0 if o is None else optical_gain(o.magnification, o.objective_diameter_m, o.transmission)
+                     for o in table.optics])[table.group[rows]]
+    points = Observers.from_points(table.take(rows), table.group[rows], table.index_in_group[rows], table.group_names, table.optics)
+    ray_scene = None
+    if plan(scene).line_of_sight and result.spots:
+        backend = result.stage("rays").detail.split(":", 1)[0]
+        ray_scene = beam_stage.ray_scene(scene, backend if backend in ("embree", "numpy") else "embree", 1)
+    spec = scene.spec
+    direct = obs.direct_irradiance_w_m2
+    inp = MapInputs(result.spots, result.beam, result.states, result.times_s, points, gain, result.attenuation_per_m,
+                    spec.exposure.duration_s, spec.laser.wavelength_nm, spec.exposure.standard, float(result.mpe_w_m2),
+                    ray_scene, True, 1, direct_w_m2=direct[rows] if direct is not None and direct[rows].any() else None)
+    out = irradiance_map(inp)
+    if not np.allclose(out.peak_w_m2, obs.peak_irradiance_w_m2[rows], rtol=1e-9, atol=0.0):
+        return None, "the recomputed irradiance does not reproduce the analysis's peak irradiance"
+    return out.history_w_m2, None
+
+
+def time_figures(result, *, worst=3) -> dict:
+    """Pictures over time of an analysis (:func:`hazard.analyze`) as PNG bytes by file name.
+
+    * ``nohd_time_<target>.png``: :class:`NOHDTimeDisplay` for every lit target (every
+      spot: a target with a reflection lobe); a target whose material does not change
+      gets a flat line over the window.
+    * ``exposure_<observer>.png``: :class:`ExposureDisplay` for the ``worst`` observers
+      with the highest hazard ratio (``result.hazard_ratio``; ties: the first row). When
+      the result kept no irradiance history their histories are recomputed on just those
+      points with the analysis's own irradiance map, checked against the result's peak
+      irradiance; if that check fails, ``exposure_omitted.txt`` says which observers,
+      why, and how to get them (``analyze(scene, keep_history=True)``).
+
+    Names are made file-safe (``_file_part``) and kept unique. matplotlib is needed (the
+    ``[render]`` extra); it is imported here, not by ``import hazard``.
+    """
+    out = {}
+    for k, spot in enumerate(result.spots):
+        name = _unique(f"nohd_time_{_file_part(spot.target.name)}.png", out)
+        out[name] = NOHDTimeDisplay.from_result(result, k).png_bytes()
+    ratio = np.asarray(result.hazard_ratio, float)
+    if worst <= 0 or not len(ratio):
+        return out
+    rows = np.argsort(-ratio, kind="stable")[:worst]
+    hist = result.observers.irradiance_w_m2
+    if hist is not None:
+        histories = hist[rows]
+    else:
+        histories, why = _observer_histories(result, rows)
+        if histories is None:
+            labels = ", ".join(result.observers.labels[i] for i in rows)
+            out["exposure_omitted.txt"] = (
+                f"exposure plots of the {len(rows)} worst observer(s) by hazard ratio ({labels}) omitted: the analysis kept "
+                f"no irradiance history and {why}; run analyze(scene, keep_history=True) to get them\n").encode()
+            return out
+    for i, e in zip(rows, histories):
+        d = ExposureDisplay.from_result(result, int(i), irradiance_w_m2=e)
+        out[_unique(f"exposure_{_file_part(d.observer)}.png", out)] = d.png_bytes()
+    return out

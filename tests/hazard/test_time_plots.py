@@ -1,0 +1,130 @@
+"""hazard.plots.time_figures: NOHD vs time per lit target and exposure vs time for the
+worst observers, as PNG bytes (checked in their pixels), with or without a kept history."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import io
+
+import numpy as np
+import pytest
+
+import hazard
+import scenes
+from hazard import plots
+
+pytest.importorskip("matplotlib")
+
+BLUE = (31, 119, 180)  # tab:blue: the NOHD curve, the accumulated exposure
+RED = (214, 39, 40)  # tab:red: the NOHD maximum, the first exceedance
+
+
+def _analyze(name, keep_history):
+    return hazard.analyze(scenes.load(scenes.example_path(name)), keep_history=keep_history)
+
+
+@pytest.fixture(scope="module")
+def full():
+    return _analyze("steel_vs_copper", True)
+
+
+@pytest.fixture(scope="module")
+def lean():
+    return _analyze("steel_vs_copper", False)
+
+
+@pytest.fixture(scope="module")
+def figures(full):
+    return plots.time_figures(full)
+
+
+def _pixels(png):
+    from matplotlib.image import imread
+
+    img = imread(io.BytesIO(png), format="png")
+    assert img.ndim == 3 and img.shape[0] > 200 and img.shape[1] > 300
+    return np.round(img[..., :3] * 255).astype(int)
+
+
+def _count(img, rgb, tol=12):
+    return int(np.all(np.abs(img - np.array(rgb)) <= tol, axis=-1).sum())
+
+
+def _worst(result, k=3):
+    ratio = result.hazard_ratio
+    return np.argsort(-ratio, kind="stable")[:k]
+
+
+def test_one_nohd_figure_per_lit_target(figures, full):
+    names = [sp.target.name for sp in full.spots]
+    assert names == ["stainless", "copper"]
+    for n in names:
+        img = _pixels(figures[f"nohd_time_{n}.png"])
+        assert _count(img, BLUE) > 200  # the curve
+        assert _count(img, RED) > 20  # the maximum's marker
+        assert (img.sum(axis=-1) < 3 * 250).mean() > 0.02  # not a blank page
+
+
+def test_worst_observers_by_hazard_ratio(figures, full):
+    rows = _worst(full)
+    assert np.all(full.hazard_ratio[rows][:-1] >= full.hazard_ratio[rows][1:])
+    assert full.hazard_ratio[rows].min() >= np.sort(full.hazard_ratio)[-3]
+    expected = {f"exposure_{plots._file_part(full.observers.labels[i])}.png" for i in rows}
+    assert expected == {"exposure_shell-20m_crossing_0.png", "exposure_arc-10m_crossing.png", "exposure_shell-20m_crossing_1.png"}
+    assert set(figures) == {"nohd_time_stainless.png", "nohd_time_copper.png"} | expected
+    for name in expected:
+        img = _pixels(figures[name])
+        assert _count(img, BLUE) > 200  # H(t)
+        assert _count(img, RED, tol=30) > 200  # these observers exceed the MPE: the first exceedance's line
+    assert len(plots.time_figures(full, worst=1)) == 3
+    assert len(plots.time_figures(full, worst=0)) == 2
+
+
+def test_displays_carry_what_the_figures_mark(full):
+    d = plots.ExposureDisplay.from_result(full, int(_worst(full, 1)[0]))
+    assert d.first_exceedance_s == pytest.approx(0.1) and d.mpe_w_m2 == pytest.approx(50.0)
+    assert d.hazard_ratio == pytest.approx(full.hazard_ratio.max())
+    n = plots.NOHDTimeDisplay.from_result(full, 1)
+    assert n.dynamic and n.mpe_w_m2 == pytest.approx(50.0) and n.target == "copper"
+
+
+def test_without_history_the_worst_observers_are_recomputed_exactly(full, lean, figures):
+    assert lean.observers.irradiance_w_m2 is None
+    rows = _worst(lean)
+    np.testing.assert_array_equal(rows, _worst(full))
+    hist, why = plots._observer_histories(lean, rows)
+    assert why is None
+    np.testing.assert_allclose(hist, full.observers.irradiance_w_m2[rows], rtol=1e-12, atol=0.0)
+    assert plots.time_figures(lean) == figures  # the same pictures, byte for byte
+
+
+def test_without_history_an_irreproducible_recomputation_is_said(lean):
+    obs = dataclasses.replace(lean.observers, peak_irradiance_w_m2=lean.observers.peak_irradiance_w_m2 * 1.01)
+    bad = copy.copy(lean)
+    bad.observers = obs
+    out = plots.time_figures(bad)
+    assert not any(k.startswith("exposure_") and k.endswith(".png") for k in out)
+    text = out["exposure_omitted.txt"].decode()
+    assert text.count("\n") == 1 and "keep_history=True" in text
+    for i in _worst(bad):
+        assert bad.observers.labels[i] in text
+
+
+def test_static_scene_draws_flat_lines_over_the_window():
+    r = _analyze("plate", None)
+    assert len(r.times_s) == 1
+    out = plots.time_figures(r)
+    assert set(out) == {"nohd_time_plate.png", "exposure_east.png", "exposure_west-behind-box.png"}
+    n = plots.NOHDTimeDisplay.from_result(r, 0)
+    assert not n.dynamic and n.times_s[-1] == pytest.approx(10.0) and np.ptp(n.nohd_dynamic_m) == 0
+    assert _count(_pixels(out["nohd_time_plate.png"]), BLUE) > 200
+    east = _pixels(out["exposure_east.png"])  # below the MPE: H(t) drawn, no exceedance line
+    assert _count(east, BLUE) > 200 and _count(east, RED, tol=30) < 20
+
+
+def test_file_names_are_safe():
+    assert plots._file_part("shell-20m:crossing[0]") == "shell-20m_crossing_0"
+    assert plots._file_part("a b/c") == "a_b_c"
+    assert plots._file_part("../") == "unnamed"
+    assert plots._unique("x.png", {"x.png": b""}) == "x_2.png"
