@@ -100,7 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, help="output folder")
     p.add_argument("--force", action="store_true", help="overwrite existing outputs")
     p.add_argument("--verbose", action="store_true", help="after the answer, print the stage log (every stage, ran or skipped, with its run time)")
-    p.add_argument("--plot", action="store_true", help="also write plan.png: the plan view (danger zone, beams, hazard circles, observers by verdict)")
+    p.add_argument("--plot", action="store_true", help="also write the pictures: plan.png and elevation.png (danger zone, beams, lobe outlines, "
+                   "range rings, observers by verdict), nohd_time_<target>.png and exposure_<observer>.png")
     _add_run_args(p)
 
     p = sub.add_parser("compare", help="static vs dynamic reflectance: NOHD per target and observer verdicts")
@@ -343,15 +344,17 @@ def _finish(args, result):
 def _cmd_run(args, out, err):
     from .report import report_dict, summary_text, write_outputs
 
-    _check_outdir(args.output, ("report.json", "observers.csv") + (("plan.png",) if args.plot else ()), args.force)
+    from .figures import FIXED_NAMES
+
+    _check_outdir(args.output, ("report.json", "observers.csv") + (FIXED_NAMES if args.plot else ()), args.force)
     if args.plot:
         _needs("matplotlib", "render")
     result = _analyse(args, err)
     extra = {}
     if args.plot:
-        from .plan_view import plan_png
+        from .figures import run_figures
 
-        extra["plan.png"] = plan_png(result)
+        extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
     paths = write_outputs(result, args.output, force=args.force, extra=extra)
     if args.json:
         out.write(json.dumps(report_dict(result), indent=1) + "\n")
@@ -680,9 +683,10 @@ def _cmd_render(args, out, err):
         except FileExistsError as exc:
             raise ValueError(str(exc)) from None
         lines = [f"  wrote {p}" for k, p in paths.items() if k != "png"]
-        from .plan_view import PlanViewDisplay
+        from .figures import run_figures, write_figures
 
-        lines.append(f"  wrote {PlanViewDisplay.from_result(result).save(Path(args.output) / 'plan.png')}")
+        say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
+        lines += [f"  wrote {p}" for p in write_figures(run_figures(result, progress=say), args.output)]
         if not args.no_animation and result.states:
             anim = render.animate_lobe(result, args.output)
             lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")

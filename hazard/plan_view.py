@@ -6,21 +6,28 @@ outlined), the aim line, the range boundary, the targets with their diffuse haza
 circles (radius: the target's longest diffuse NOHD, a plan-view bound of its lobe) and
 mirror beams (the specular NOHD along the mirror axis, projected), the hazardous ground
 at eye height (terrain footprints), terrain contours and the observers coloured by
-verdict. Written by ``hazard run --plot`` (``plan.png`` with the other outputs, as one
-unit) and by ``hazard render``. matplotlib is imported when it draws.
+verdict, the worst hazardous ones labelled. Issue 18 adds the outline of every
+keep-out lobe (static and dynamic, :mod:`hazard.lobe_outline`: the section at the
+footprint's eye height over terrain, else the plan projection of the lobe at any height)
+and range rings about the laser (the range panel) and the targets (the site panel).
+Colours: :mod:`hazard.palette`. Written by ``hazard run --plot`` (``plan.png`` with the
+other outputs, as one unit) and by ``hazard render``. matplotlib is imported when it
+draws.
 """
 
 from __future__ import annotations
 
-import io
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import palette as C
 from .plots import _Display
 
-__all__ = ["PlanViewDisplay", "plan_png"]
+__all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
+
+LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
 
 
 @dataclass
@@ -44,6 +51,9 @@ class PlanViewDisplay(_Display):
     hazardous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     aided: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # observers with optics
     occluders: list = field(default_factory=list)  # (K, 2) plan outlines (convex hulls)
+    lobes: list = field(default_factory=list)  # (target, kind, cut, [exterior rings (K, 2)], [holes]) world x, y
+    labels: list = field(default_factory=list)  # (xy, text): the worst hazardous observers
+    unlabelled: int = 0  # hazardous observers not named in the picture
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -66,7 +76,8 @@ class PlanViewDisplay(_Display):
                    np.asarray(obs.position_m, float)[:, :2] if len(obs.position_m) else np.zeros((0, 2)),
                    np.asarray(result.hazardous, bool),
                    with_optics[obs.observers.group] if len(obs.position_m) and len(with_optics) else np.zeros(len(obs.position_m), bool),
-                   _occluders(scene, off))
+                   _occluders(scene, off), lobe_rings(result, off[:2]), *hazardous_labels(result, np.asarray(obs.position_m, float)[:, :2]
+                                                                                            if len(obs.position_m) else np.zeros((0, 2))))
 
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
@@ -82,6 +93,7 @@ class PlanViewDisplay(_Display):
         for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
             self._draw_ground(ax)
             self._draw_zones(ax)
+            self._draw_lobes(ax)
             self._draw_objects(ax)
             ax.set_aspect("equal", adjustable="box" if limits is not None else "datalim")
             if limits is not None:
@@ -90,12 +102,16 @@ class PlanViewDisplay(_Display):
             ax.set_xlabel("x (east) [m]")
             ax.set_ylabel("y (north) [m]")
             ax.set_title(f"{self.title}: {title}")
+        label_points(axes[1], self.labels)
         axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
         fig.tight_layout()
         fig.canvas.draw()  # settle the limits before the scale bars and the arrows
         for ax in axes:
             _scale_bar(ax)
             _north_arrow(ax)
+        _range_rings(axes[0], [self.laser_xy], "from the laser")
+        framed = [xy for name, xy, r, ra, f in self.targets if f]
+        _range_rings(axes[1], _distinct(framed) or [self.laser_xy], "from the targets" if framed else "from the laser")
         return fig, axes
 
     def site_limits(self) -> tuple:
@@ -106,6 +122,7 @@ class PlanViewDisplay(_Display):
                for name, xy, r, ra, framed in self.targets if framed] or [self.laser_xy[None]]
         pts += [self.observers_xy[self.hazardous]] if self.hazardous.any() else []
         pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
+        pts += [ring for lobe in self.lobes for ring in lobe[3]]
         p = np.vstack(pts)
         lo, hi = p.min(axis=0), p.max(axis=0)
         c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
@@ -120,8 +137,8 @@ class PlanViewDisplay(_Display):
                 ax.clabel(cs, fontsize=6, fmt="%.0f m")
         if self.footprint_xy is not None and len(self.footprint_xy):
             s = self.footprint_cell_m
-            ax.scatter(*self.footprint_xy.T, s=4, marker="s", c="#ff8c00", alpha=0.6, lw=0,
-                       label=f"hazardous ground at eye height ({s:g} m cells)")
+            ax.scatter(*self.footprint_xy.T, s=4, marker="s", c=C.FOOTPRINT, alpha=0.6, lw=0,
+                       label=f"hazardous ground at eye height, every spot summed ({s:g} m cells)")
         if self.boundary is not None:
             ring = np.vstack([self.boundary, self.boundary[:1]])
             ax.plot(*ring.T, c="k", lw=1.5, label="range boundary")
@@ -135,6 +152,21 @@ class PlanViewDisplay(_Display):
             ax.plot(*ring.T, c="#984ea3", lw=1.0, ls=ls, label=label)
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
 
+    def _draw_lobes(self, ax):
+        seen = set()
+        for target, kind, cut, rings, holes in self.lobes:
+            colour = C.STATIC if kind == "static" else C.DYNAMIC
+            label = None if (kind, cut) in seen else f"{kind} keep-out lobe, {cut}"
+            seen.add((kind, cut))
+            for ring in rings:
+                if kind == "static":
+                    ax.fill(*ring.T, fc=colour, alpha=0.25, ec=colour, lw=1.2, label=label)
+                else:
+                    ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
+                label = None
+            for ring in holes:
+                ax.plot(*ring.T, c=colour, lw=0.8, ls=":")
+
     def _draw_objects(self, ax):
         ax.plot(*self.laser_xy, marker="^", ms=10, c="k", ls="", label="laser")
         for i, ring in enumerate(self.occluders):
@@ -144,38 +176,98 @@ class PlanViewDisplay(_Display):
             else:  # a wall edge-on, or a rod: drawn thick so it shows at any scale
                 ax.plot(*ring.T, c="#555555", lw=3.0, marker="s" if len(ring) == 1 else None, ms=4, label=label)
         for i, (name, xy, nohd, aided, _) in enumerate(self.targets):
-            ax.plot(*xy, marker="s", ms=6, c="#377eb8", ls="", label="targets" if i == 0 else None)
+            ax.plot(*xy, marker="s", ms=6, mfc="white", mec=C.TARGET, ls="", label="targets" if i == 0 else None)
             if nohd > 0:
-                ax.add_patch(matplotlib_circle(xy, nohd, "#377eb8", ":", "target's diffuse NOHD (naked eye)" if i == 0 else None))
+                ax.add_patch(matplotlib_circle(xy, nohd, C.DIFFUSE, ":", "target's longest diffuse NOHD, any direction" if i == 0 else None))
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
-            ax.plot([a[0], b[0]], [a[1], b[1]], c="#ff7f00", lw=1.2, label="mirror beams (specular NOHD)" if i == 0 else None)
+            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
         if len(self.observers_xy):
             safe = ~self.hazardous
-            ax.scatter(*self.observers_xy[safe].T, s=6, c="#4daf4a", lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
             if self.aided.any():
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
-            ax.scatter(*self.observers_xy[self.hazardous].T, s=70, c="#e41a1c", marker="X", edgecolors="k", lw=0.6, zorder=10,
-                       label=f"observers at or above the MPE ({int(self.hazardous.sum())})")
-
-    def png_bytes(self) -> bytes:
-        """The figure as PNG bytes (for outputs written as one unit)."""
-        import matplotlib.pyplot as plt
-
-        fig, _ = self.plot()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # the legend beside the panels stays whole
-        plt.close(fig)
-        return buf.getvalue()
+            more = f"; {self.unlabelled} more unnamed, see observers.csv" if self.unlabelled else ""
+            ax.scatter(*self.observers_xy[self.hazardous].T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
+                       label=f"observers at or above the MPE ({int(self.hazardous.sum())}{more})")
 
 
-def matplotlib_circle(xy, r, colour, style, label=None):
+def lobe_rings(result, off_xy) -> list:
+    """(target, kind, cut, exterior rings, holes) of every lobe's plan outline, world x, y."""
+    from .lobe_outline import lobe_outlines
+
+    return [(o.target, o.kind, o.cut, [r + off_xy for r in o.rings()], [r + off_xy for r in o.holes()])
+            for o in lobe_outlines(result)]
+
+
+def hazardous_labels(result, xy) -> tuple:
+    """The ``LABELLED`` worst hazardous observers as (xy, "name (ratio)") at ``xy`` (their
+    2-D positions in the picture), and how many hazardous ones are left unnamed."""
+    ratio = np.asarray(result.hazard_ratio, float)
+    idx = np.flatnonzero(np.asarray(result.hazardous, bool))
+    idx = idx[np.argsort(-ratio[idx], kind="stable")]
+    labels = [(xy[i], f"{result.observers.labels[i]} ({ratio[i]:.3g} x MPE)") for i in idx[:LABELLED]]
+    return labels, max(0, len(idx) - LABELLED)
+
+
+def label_points(ax, labels):
+    """Name points with boxed labels in two columns at the panel's sides (points left of
+    the middle on the left), each in its points' top-to-bottom order with a leader line,
+    so that clustered points do not hide each other's names."""
+    if not labels:
+        return
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    mid = (x0 + x1) / 2
+    for side, xa, ha in ((True, 0.02, "left"), (False, 0.98, "right")):
+        group = sorted([lb for lb in labels if (lb[0][0] < mid) == side], key=lambda lb: -lb[0][1])
+        for k, (xy, text) in enumerate(group):
+            ax.annotate(text, xy, xytext=(xa, 0.78 - 0.06 * k), textcoords="axes fraction", fontsize=6, ha=ha,
+                        va="center", zorder=12, annotation_clip=False,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=C.HAZARDOUS, lw=0.6, alpha=0.9),
+                        arrowprops=dict(arrowstyle="-", color=C.HAZARDOUS, lw=0.5, alpha=0.8))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+
+
+def _distinct(points, tol_m=1.0) -> list:
+    """Points more than ``tol_m`` apart (the first of each cluster)."""
+    out = []
+    for p in points:
+        if all(np.hypot(*(np.asarray(p) - q)) > tol_m for q in out):
+            out.append(np.asarray(p, float))
+    return out
+
+
+def _range_rings(ax, centres, what):
+    """Labelled circles about each centre at a round spacing (1, 2 or 5 x 10^k m), about a
+    quarter of the panel."""
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    step = _nice_length(max(x1 - x0, y1 - y0) * 1.25)  # about a quarter of the panel
+    for n, c in enumerate(centres):
+        corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]]) - c
+        far = float(np.hypot(corners[:, 0], corners[:, 1]).max())
+        for k in range(1, int(far // step) + 1):
+            r = k * step
+            ax.add_patch(matplotlib_circle(c, r, C.RINGS, "-", f"range rings {what}" if n == 0 and k == 1 else None, lw=0.5))
+            for a in (np.pi / 4, -3 * np.pi / 4):
+                p = c + r * np.array([np.cos(a), np.sin(a)])
+                if x0 < p[0] < x1 and y0 < p[1] < y1:
+                    ax.text(*p, f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m", fontsize=6, color="#555555", ha="center",
+                            va="center", bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.7), zorder=3)
+                    break
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+
+
+def matplotlib_circle(xy, r, colour, style, label=None, lw=0.8):
     from matplotlib.patches import Circle
 
-    return Circle(xy, r, fill=False, ec=colour, lw=0.8, ls=style, label=label)
+    return Circle(xy, r, fill=False, ec=colour, lw=lw, ls=style, label=label)
 
 
 def _zone_label(z) -> str:
@@ -221,7 +313,9 @@ def _finite_or_0(x) -> float:
     return float(x) if math.isfinite(x) else 0.0
 
 
-def _mirrors(result, off) -> list:
+def mirror_segments(result) -> list:
+    """(target, start, end) of every mirror beam to its dynamic specular NOHD (at most
+    100 km drawn), scene-local 3-D points [m]."""
     from .engine import mirror_axis
 
     out = []
@@ -231,9 +325,12 @@ def _mirrors(result, off) -> list:
         if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
             continue
         length = min(float(row.specular_nohd_dynamic_m), 1e5)
-        a = sp.centroid + off
-        out.append((sp.target.name, a[:2], (a + mirror_axis(sp) * length)[:2]))
+        out.append((sp.target.name, sp.centroid, sp.centroid + mirror_axis(sp) * length))
     return out
+
+
+def _mirrors(result, off) -> list:
+    return [(name, (a + off)[:2], (b + off)[:2]) for name, a, b in mirror_segments(result)]
 
 
 def _footprint(result, off):
@@ -264,20 +361,15 @@ def _nice_length(span) -> float:
     return max(m * e for m in (1, 2, 5) if m * e <= raw) if raw >= e else e
 
 
-def _scale_bar(ax):
+def _scale_bar(ax, loc="lower left"):
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
     x0, x1 = ax.get_xlim()
     length = _nice_length(x1 - x0)
     label = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
-    ax.add_artist(AnchoredSizeBar(ax.transData, length, label, "lower left", pad=0.5, frameon=True, size_vertical=0))
+    ax.add_artist(AnchoredSizeBar(ax.transData, length, label, loc, pad=0.5, frameon=True, size_vertical=0))
 
 
 def _north_arrow(ax):
     ax.annotate("N", xy=(0.06, 0.95), xytext=(0.06, 0.83), xycoords="axes fraction", ha="center", va="center",
                 fontsize=11, fontweight="bold", arrowprops=dict(arrowstyle="-|>", color="k", lw=1.5))
-
-
-def plan_png(result) -> bytes:
-    """The plan view of ``result`` as PNG bytes."""
-    return PlanViewDisplay.from_result(result).png_bytes()

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from hazard.cli import main
+from hazard import palette as C
+from hazard.palette import rgb
 from hazard.plan_view import PlanViewDisplay, _nice_length
 
 pytest.importorskip("matplotlib")
@@ -29,15 +31,17 @@ def run_with_plot(tmp_path_factory):
 
 def test_run_plot_writes_the_plan_with_the_other_outputs(run_with_plot):
     out, text = run_with_plot
-    assert sorted(p.name for p in out.iterdir()) == ["observers.csv", "plan.png", "report.json"]
-    assert "wrote " + str(out / "plan.png") in text
+    want = ["elevation.png", "exposure_arc-10m_crossing.png", "exposure_shell-20m_crossing_0.png", "exposure_shell-20m_crossing_1.png",
+            "nohd_time_copper.png", "nohd_time_stainless.png", "observers.csv", "plan.png", "report.json"]
+    assert sorted(p.name for p in out.iterdir()) == want
+    assert all("wrote " + str(out / n) in text for n in want)
 
 
 def test_the_plan_shows_the_zone_the_mirror_beam_and_both_verdicts(run_with_plot):
     img = imageio.imread(run_with_plot[0] / "plan.png")
     zone_fill = _near(img, (249, 197, 198))  # #e41a1c at alpha 0.25 over white
-    mirror = _near(img, (255, 127, 0), 30)  # the copper mirror beam, #ff7f00
-    green = _near(img, (77, 175, 74), 30)  # observers below the MPE
+    mirror = _near(img, rgb(C.MIRROR), 30)  # the copper mirror beam
+    green = _near(img, rgb(C.SAFE), 30)  # observers below the MPE
     red = _near(img, (228, 26, 28), 30)  # hazardous observers' crosses, the aim line and the zone's edge
     assert zone_fill.sum() > 5000 and mirror.sum() > 300 and green.sum() > 300 and red.sum() > 300
 

@@ -1,0 +1,164 @@
+"""The elevation view of a run (issue 18): the side view that says how high the hazard
+reaches, for masts, towers, hillsides and aircraft.
+
+Horizontal axis: distance along the aim's azimuth from the laser [m] (the view of
+:func:`hazard.lobe_outline.elevation_frame`); vertical axis: height [m] in the scene's
+world frame. Everything is projected across the aim onto that vertical plane: the aim
+line to the danger zone's range, the terrain profile under the aim line and the eye
+height above it (scenes with ground), the targets, the projection of every keep-out lobe
+(static and dynamic, exact in radius, drawn outward between sampled angles), the mirror
+beams to their NOHD, and the observers coloured by verdict with the worst hazardous ones
+named. A projection keeps every height and loses the lateral offset: the plan view says
+where across the aim a thing is. Two panels as in the plan view: the whole range (its
+vertical scale exaggerated, said on the axis) and the site at equal scale. Colours:
+:mod:`hazard.palette`. Written by ``hazard run --plot`` (``elevation.png``) and by
+``hazard render``. matplotlib is imported when it draws.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import palette as C
+from .plan_view import _finite_or_0, _scale_bar, hazardous_labels, label_points, mirror_segments
+from .plots import _Display
+
+__all__ = ["ElevationViewDisplay"]
+
+
+@dataclass
+class ElevationViewDisplay(_Display):
+    """Elevation-view data in (distance along the aim's azimuth, height) [m]."""
+
+    title: str
+    laser_sz: np.ndarray  # (2,)
+    aim_sz: np.ndarray  # (2, 2) the aim line from the laser to the zone's range
+    targets: list = field(default_factory=list)  # (name, sz)
+    lobes: list = field(default_factory=list)  # (target, kind, [rings (K, 2)])
+    mirrors: list = field(default_factory=list)  # (name, sz start, sz end)
+    profile: tuple | None = None  # (s (n,), ground height (n,), eye height above it [m])
+    observers_sz: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    hazardous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    labels: list = field(default_factory=list)
+    unlabelled: int = 0
+
+    @classmethod
+    def from_result(cls, result) -> "ElevationViewDisplay":
+        from .lobe_outline import elevation_frame, lobe_outlines
+
+        scene = result.scene
+        view = elevation_frame(scene.laser_position_m, scene.laser_direction)
+        up = np.array([0.0, float(scene.offset_m[2])])  # local z -> world height
+
+        def sz(points):
+            return view.to_2d(points) + up
+
+        reach = _finite_or_0(result.sdz.get("max_range_m", 0.0)) if result.sdz else 0.0
+        spots = {sp.target.name: sp.centroid for sp in result.spots}
+        reach = max(reach, 2.0 * max([float(np.linalg.norm(c - scene.laser_position_m)) for c in spots.values()] + [1.0]))
+        reach = min(reach, 1e5)
+        aim = sz(np.array([scene.laser_position_m, scene.laser_position_m + scene.laser_direction * reach]))
+        targets = [(t.name, sz(spots.get(t.name, t.center_m))) for t in scene.targets]
+        lobes = [(o.target, o.kind, [r + up for r in o.rings()]) for o in lobe_outlines(result, view)]
+        mirrors = [(name, sz(a), sz(b)) for name, a, b in mirror_segments(result)]
+        obs = np.asarray(result.observers.position_m, float).reshape(-1, 3)
+        obs_sz = sz(obs) if len(obs) else np.zeros((0, 2))
+        labels, more = hazardous_labels(result, obs_sz)
+        return cls(f"{scene.name}: elevation view", sz(scene.laser_position_m), aim, targets, lobes, mirrors,
+                   _profile(scene, view, aim, obs_sz, up), obs_sz, np.asarray(result.hazardous, bool), labels, more)
+
+    def plot(self, axes=None):
+        """Two panels: the whole range and the site. Returns (figure, axes)."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        if axes is None:
+            fig, axes = plt.subplots(1, 2, figsize=(15, 6.5))
+        fig = axes[0].figure
+        for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
+            self._draw(ax)
+            if limits is not None:
+                ax.set_aspect("equal", adjustable="box")
+                ax.set_xlim(limits[0], limits[1])
+                ax.set_ylim(limits[2], limits[3])
+            ax.set_xlabel("distance along the aim's azimuth from the laser [m]")
+            ax.set_title(f"{self.title}: {title}")
+            ax.grid(alpha=0.25)
+        axes[1].set_ylabel("height [m] (equal scale)")
+        fig.tight_layout()
+        fig.canvas.draw()
+        x0, x1 = axes[0].get_xlim()
+        y0, y1 = axes[0].get_ylim()
+        box = axes[0].get_window_extent()
+        exaggeration = (box.height / (y1 - y0)) / (box.width / (x1 - x0))
+        axes[0].set_ylabel(f"height [m] (vertical scale x{exaggeration:.3g})" if abs(exaggeration - 1) > 0.05 else "height [m]")
+        label_points(axes[1], self.labels)
+        axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
+        for ax in axes:
+            _scale_bar(ax, "lower right")
+        return fig, axes
+
+    def site_limits(self) -> tuple:
+        """s0, s1, z0, z1 [m] around the targets, their lobes and the hazardous observers
+        (at least 20 m about each target), 10 % wider; equal scale."""
+        pts = [sz[None] + 20.0 * np.array([[-1.0, -1.0], [1.0, 1.0]]) for _, sz in self.targets] or [self.laser_sz[None]]
+        pts += [r for _, _, rings in self.lobes for r in rings]
+        pts += [self.observers_sz[self.hazardous]] if self.hazardous.any() else []
+        p = np.vstack(pts)
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
+        return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+
+    def _draw(self, ax):
+        if self.profile is not None:
+            s, ground, eye = self.profile
+            floor = ground.min() - max(1.0, 0.2 * float(np.ptp(ground)))
+            ax.fill_between(s, ground, floor, color=C.GROUND, lw=0, label="terrain under the aim line")
+            ax.plot(s, ground + eye, c="#4d7a3a", lw=0.8, ls=":", label=f"eye height ({eye:g} m) above it")
+        ax.plot(*self.aim_sz.T, c=C.ZONE, lw=0.9, ls="--", label="aim line (to the danger zone's range)")
+        seen = set()
+        for target, kind, rings in self.lobes:
+            colour = C.STATIC if kind == "static" else C.DYNAMIC
+            label = None if kind in seen else f"{kind} keep-out lobe (projected)"
+            seen.add(kind)
+            for ring in rings:
+                if kind == "static":
+                    ax.fill(*ring.T, fc=colour, alpha=0.25, ec=colour, lw=1.2, label=label)
+                else:
+                    ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
+                label = None
+        for i, (name, a, b) in enumerate(self.mirrors):
+            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
+        ax.plot(*self.laser_sz, marker="^", ms=10, c="k", ls="", label="laser")
+        for i, (name, sz) in enumerate(self.targets):
+            ax.plot(*sz, marker="s", ms=6, mfc="white", mec=C.TARGET, ls="", label="targets" if i == 0 else None)
+            ax.annotate(name, sz, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
+        if len(self.observers_sz):
+            safe = ~self.hazardous
+            ax.scatter(*self.observers_sz[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            more = f"; {self.unlabelled} more unnamed, see observers.csv" if self.unlabelled else ""
+            ax.scatter(*self.observers_sz[self.hazardous].T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
+                       label=f"observers at or above the MPE ({int(self.hazardous.sum())}{more})")
+
+
+def _profile(scene, view, aim, obs_sz, up):
+    """The terrain height under the aim line over the panel's distances, where the terrain
+    grid reaches (or None)."""
+    t = scene.terrain
+    if t is None:
+        return None
+    s_all = np.concatenate([aim[:, 0], obs_sz[:, 0] if len(obs_sz) else [], [0.0]])
+    s = np.linspace(min(0.0, s_all.min()) - 0.05 * np.ptp(s_all), s_all.max() + 0.05 * np.ptp(s_all), 2001)
+    xy = view.origin_m[:2] + s[:, None] * view.a[:2]
+    ny, nx = t.heights.shape
+    inside = ((xy[:, 0] >= t.x0) & (xy[:, 0] <= t.x0 + t.dx * (nx - 1)) & (xy[:, 1] >= t.y0)
+              & (xy[:, 1] <= t.y0 + t.dx * (ny - 1)))  # the terrain is not drawn past its edge
+    if not inside.any():
+        return None
+    s = s[inside]
+    ground = t.height_at(xy[inside, 0], xy[inside, 1]) + up[1]
+    return s, ground, float(scene.spec.analysis.footprint_eye_height_m)
