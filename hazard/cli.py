@@ -682,7 +682,7 @@ def _cmd_render(args, out, err):
             paths = render.keepout(result, args.output, lobe_resolution_deg=args.resolution_deg, force=args.force)
         except FileExistsError as exc:
             raise ValueError(str(exc)) from None
-        lines = [f"  wrote {p}" for k, p in paths.items() if k != "png"]
+        lines = [f"  wrote {p}" for k, p in paths.items() if k not in ("png", "layout")]
         from .figures import run_figures, write_figures
 
         say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))

@@ -127,7 +127,7 @@ class ElevationViewDisplay(_Display):
             seen.add(kind)
             for ring in rings:
                 if kind == "static":
-                    ax.fill(*ring.T, fc=colour, alpha=0.25, ec=colour, lw=1.2, label=label)
+                    ax.fill(*ring.T, fc=colour + "40", ec=colour, lw=1.2, label=label)  # face 25 % opaque, edge the legend's colour
                 else:
                     ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
                 label = None

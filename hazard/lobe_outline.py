@@ -22,10 +22,14 @@ aimed upward and out crosses the eye-height surface in a band or a blob away fro
 so it is sampled on a polar grid about ``c``'s plan position.
 
 Sampling, drawn outward (never toward "safe"): angles on a uniform grid plus the
-azimuths of the lobe's maximum and of the mirror direction (where narrow lobes peak);
-between two sampled angles the wedge takes the larger of its two edges, on an arc of
-radius ``rho / cos(step / 2)`` (the chord never cuts inside); in a section every
-hazardous run of radii is widened by one radial step on each side. What is left is a
+azimuths of the lobe's maximum and of the mirror direction (where narrow lobes peak). In
+a projection the best out-of-plane angle is refined on a grid ten times finer about the
+best sample, and the curvature margin (second difference / 8) is added, so a smooth
+maximum between samples is not missed; between two sampled in-plane angles the wedge
+takes the larger of its two edges plus the same margin, on an arc of radius
+``rho / cos(step / 2)`` (the chord never cuts inside). In a section every hazardous run
+of radii is widened by one radial step on each side, and a wedge is hazardous where
+either of its edges is. What is left is a
 lobe narrower than the angle step *and* away from the lobe's own maximum: the outline's
 ``angle_step_deg`` says how fine the grid was.
 """
@@ -46,6 +50,7 @@ ANGLE_STEP_DEG = 1.0  # in-plane angle step of the outlines (plan and elevation 
 BETA_STEP_DEG = 0.5  # out-of-plane angle step of a projection
 RADIAL_SAMPLES = 320  # log-spaced radii of a section, from RADIAL_SPAN x the lobe's reach to it (2.2 % steps)
 RADIAL_SPAN = 1e-3
+REFINE = 10  # a projection's best out-of-plane angle is refined on a grid this many times finer
 CHUNK = 20000  # directions per evaluation (bounded memory for large bases)
 
 
@@ -143,7 +148,10 @@ def _star_polygon(alpha, rho, centre_2d):
     from shapely.geometry import Polygon
 
     a_next = np.append(alpha[1:], alpha[0] + 2 * np.pi)
-    r_wedge = np.maximum(rho, np.roll(rho, -1)) / np.cos((a_next - alpha) / 2)
+    ext = np.concatenate([rho[-1:], rho, rho[:2]])  # periodic, for the second differences
+    margin = np.abs(np.diff(ext, 2))[:-1] / 8.0  # at each angle; a wedge takes both of its ends'
+    margin = np.maximum(margin, np.roll(margin, -1))
+    r_wedge = (np.maximum(rho, np.roll(rho, -1)) + margin) / np.cos((a_next - alpha) / 2)
     if not np.any(r_wedge > 0):
         return Polygon()
     ang = np.stack([alpha, a_next], 1).ravel()
@@ -165,9 +173,37 @@ def projected_outline(spot, mpe_w_m2, mu, states, view, *, special=(), kind="sta
     cb, sb = np.cos(beta)[None, :, None], np.sin(beta)[None, :, None]
     w = cb * (ca * view.a + sa * view.b) + sb * view.n  # (A, B, 3)
     r = fn(w.reshape(-1, 3)).reshape(len(alpha), len(beta))
-    rho = (r * np.cos(beta)[None, :]).max(axis=1)
+    rho = _refined_max(fn, view, alpha, beta, r * np.cos(beta)[None, :])
     geom = _star_polygon(alpha, rho, view.to_2d(spot.centroid))
     return Outline(spot.target.name, kind, "projection", geom, float(angle_step_deg))
+
+
+def _curvature_margin(f) -> np.ndarray:
+    """Bound on how far a smooth sampled function's maximum between its samples exceeds
+    the larger sample: the second difference / 8 (the maximum is within half a step of a
+    sample and ``f - f(sample) <= f'' (h/2)^2 / 2``), at each sample (rows: last axis)."""
+    d2 = np.abs(np.diff(f, 2, axis=-1)) / 8.0
+    pad = np.zeros(f.shape[:-1] + (1,))
+    d2 = np.concatenate([pad, d2, pad], axis=-1)
+    return np.maximum(d2, np.maximum(np.roll(d2, 1, axis=-1), np.roll(d2, -1, axis=-1)))
+
+
+def _refined_max(fn, view, alpha, beta, g) -> np.ndarray:
+    """max over beta of ``g`` (A, B) per alpha, refined: a grid ``REFINE`` times finer over
+    the step either side of each row's best sample, plus the curvature margin of the
+    fine grid (so the answer is not below the true maximum of a smooth ``g``)."""
+    j = np.argmax(g, axis=1)
+    lo = beta[np.maximum(j - 1, 0)]
+    hi = beta[np.minimum(j + 1, len(beta) - 1)]
+    t = np.linspace(0.0, 1.0, 2 * REFINE + 1)
+    b = lo[:, None] + (hi - lo)[:, None] * t[None, :]  # (A, F)
+    ca, sa = np.cos(alpha)[:, None, None], np.sin(alpha)[:, None, None]
+    w = np.cos(b)[..., None] * (ca * view.a + sa * view.b) + np.sin(b)[..., None] * view.n
+    fine = fn(w.reshape(-1, 3)).reshape(b.shape) * np.cos(b)
+    k = np.argmax(fine, axis=1)
+    rows = np.arange(len(alpha))
+    best = fine[rows, k] + _curvature_margin(fine)[rows, k]
+    return np.maximum(best, g.max(axis=1))
 
 
 def section_outline(spot, mpe_w_m2, mu, states, height_fn, eye_height_m, reach_m, *, special=(), kind="static",

@@ -6,7 +6,8 @@ danger zone, the aim line and the hazardous observers keep the red a range map u
 STATIC = "#0072B2"  # static keep-out lobe (blue)
 DYNAMIC = "#E69F00"  # dynamic keep-out lobe (orange)
 MIRROR = "#CC79A7"  # mirror (specular) beams to their NOHD (reddish purple)
-ZONE = "#e41a1c"  # laser surface danger zone, aim line, laser beam
+ZONE = "#e41a1c"  # laser surface danger zone, the laser beam
+AIM = "#99000d"  # the aim line past the targets (dark red)
 HAZARDOUS = "#e41a1c"  # observers at or above the MPE (drawn large, black-edged)
 SAFE = "#009E73"  # observers below the MPE (bluish green)
 AIDED = "#984ea3"  # danger zones through optical aids

@@ -160,7 +160,7 @@ class PlanViewDisplay(_Display):
             seen.add((kind, cut))
             for ring in rings:
                 if kind == "static":
-                    ax.fill(*ring.T, fc=colour, alpha=0.25, ec=colour, lw=1.2, label=label)
+                    ax.fill(*ring.T, fc=colour + "40", ec=colour, lw=1.2, label=label)  # face 25 % opaque, edge the legend's colour
                 else:
                     ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
                 label = None
@@ -315,7 +315,8 @@ def _finite_or_0(x) -> float:
 
 def mirror_segments(result) -> list:
     """(target, start, end) of every mirror beam to its dynamic specular NOHD (at most
-    100 km drawn), scene-local 3-D points [m]."""
+    100 km drawn) along the direction the report gives (else the mirror axis of the
+    spot's mean normal), scene-local 3-D points [m]."""
     from .engine import mirror_axis
 
     out = []
@@ -325,7 +326,8 @@ def mirror_segments(result) -> list:
         if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
             continue
         length = min(float(row.specular_nohd_dynamic_m), 1e5)
-        out.append((sp.target.name, sp.centroid, sp.centroid + mirror_axis(sp) * length))
+        axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
+        out.append((sp.target.name, sp.centroid, sp.centroid + axis * length))
     return out
 
 

@@ -57,6 +57,9 @@ class _NoBar:
     def set_description(self, desc):
         pass
 
+    def set_postfix_str(self, text):
+        pass
+
     def close(self):
         pass
 

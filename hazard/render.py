@@ -1,42 +1,59 @@
 """3-D renders of keep-out zones (pyvista, off-screen), VTK files for ParaView, animations.
 
 Imported only when a render is asked for (``hazard render``, ``hazard.render``): pyvista
-and VTK are heavy. What a render shows, in the scene's local coordinates (the float64
-offset to the file's coordinates is printed in the title):
+and VTK are heavy. Two pictures (issue 18), each the 3-D view with a title strip and a
+legend beside it (:mod:`hazard.picture`: the legend is never cut and its colours are the
+ones drawn, :mod:`hazard.palette`):
 
-* targets, occluders and terrain (terrain coloured by the hazardous ground footprint:
-  dynamic-only cells orange, cells hazardous in both analyses red; a cell is drawn
-  hazardous if any of its corners is - conservative at the terrain's resolution, while
-  the reported area counts nodes x spacing^2);
-* the laser beam up to each spot, and mirror beams up to their hazard distance;
-* the static (blue) and dynamic (orange, translucent) hazard lobes: the surface at the
-  NOHD in every reflection direction;
-* observers coloured by log10(hazard ratio) with a scale bar;
-* the maximum NOHD of each target, static and dynamic, annotated.
+* ``keepout.png``, the close view: framed on the lobes and targets, at true scale;
+* ``overview.png``: everything hazardous - the lobes, mirror beams to their NOHD, the aim
+  line to the danger zone's range, the hazardous ground and every observer. Where true
+  scale would shrink the lobes to dots (the farthest of these more than
+  ``COMPRESS_RATIO`` times the close view's radius from the site), distances beyond twice
+  that radius are drawn on a log scale, ``r0 (1 + ln(r / r0))``, and said in the title;
+  the range rings are labelled with true distances.
 
-The VTK multiblock (``keepout.vtm``) carries the same meshes with unit-suffixed arrays:
-``nohd_m`` on lobes, ``hazard_ratio`` and ``peak_irradiance_w_m2`` on observers,
-``hazardous_static``/``hazardous_dynamic`` on the terrain.
+What they show, in the scene's local coordinates (the offset to the file's coordinates in
+the title): the terrain coloured by the hazardous ground footprint at eye height (cells
+hazardous in both analyses dark red, dynamic-only orange; a cell is drawn hazardous if any
+of its corners is - conservative at the terrain's resolution, while the reported area
+counts nodes x spacing^2), or, for a scene without ground, a reference plane under it;
+range rings about the laser; targets, occluders, the laser beam up to each spot; the
+static lobe (solid blue) and the dynamic lobe (orange wire: the static one shows through
+it, the colours stay the legend's) - the surface at the NOHD in every reflection
+direction, the dynamic one over the history in time order (two states, slump); observers
+below the MPE small and green, those at or above it large and red, the worst named; each
+target's NOHDs at its lobe's tip.
+
+The VTK multiblock (``keepout.vtm``) carries the same meshes at true coordinates with
+unit-suffixed arrays: ``nohd_m`` on lobes and mirror beams, ``hazard_ratio``,
+``hazardous`` and ``peak_irradiance_w_m2`` on observers, ``hazardous_static`` /
+``hazardous_dynamic`` on the terrain.
 """
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 import pyvista as pv
 
+from . import palette as C
 from .beam import perp_basis as _perp_basis
 from .keepout import _range_fn
+from .picture import compose, write_png
+from .plan_view import hazardous_labels, mirror_segments
 from .progress import terminal_bar
 
-__all__ = ["keepout", "lobe_grid", "animate_lobe"]
+__all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii"]
 
 pv.OFF_SCREEN = True
-STATIC_COLOUR = "#1f77b4"
-DYNAMIC_COLOUR = "#ff7f0e"
+LINE_POINTS = 256  # points along a drawn line (a line bends on a log-distance picture)
+ISO_VIEW = np.array([1.0, 1.0, 1.0])  # from the focal point toward the camera (pyvista's "iso")
+COMPRESS_RATIO = 8.0  # the overview goes log-distance when everything lies this many close-view radii away
 
 
 def lobe_grid(spot, mpe_w_m2, mu, states=None, resolution_deg=3.0) -> pv.StructuredGrid:
@@ -67,7 +84,15 @@ def _mesh(vertices, faces):
     return pv.PolyData(np.asarray(vertices, float), f)
 
 
+def _time_ordered_states(result, sp):
+    """The dynamic lobe's states in time order, as the analysis takes them (a two-state
+    history and a slump need the order; ``np.unique`` would flatten or reorder them)."""
+    states = result.states.get(sp.target.index)
+    return None if states is None else np.asarray(states)
+
+
 def _scene_blocks(result, lobe_resolution_deg):
+    """Every mesh in the scene's local coordinates (true distances): the VTK multiblock."""
     scene = result.scene
     blocks = pv.MultiBlock()
     for t in scene.targets:
@@ -82,131 +107,370 @@ def _scene_blocks(result, lobe_resolution_deg):
             terr["hazardous_dynamic"] = result.footprint_dynamic.mask.ravel().astype(np.uint8)
         blocks["terrain"] = terr
     for sp in result.spots:
-        k = sp.target.index
-        states = result.states.get(k)
+        states = _time_ordered_states(result, sp)
         blocks[f"lobe_static_{sp.target.name}"] = lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m,
                                                             None if states is None else states[:1], lobe_resolution_deg)
         if states is not None:
-            blocks[f"lobe_dynamic_{sp.target.name}"] = lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, np.unique(states), lobe_resolution_deg)
-        blocks[f"beam_{sp.target.name}"] = pv.Line(scene.laser_position_m, sp.centroid)
+            blocks[f"lobe_dynamic_{sp.target.name}"] = lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, states, lobe_resolution_deg)
+        blocks[f"beam_{sp.target.name}"] = pv.Line(scene.laser_position_m, sp.centroid, resolution=LINE_POINTS)
+    for name, a, b in mirror_segments(result):
+        line = pv.Line(a, b, resolution=LINE_POINTS)
+        line["nohd_m"] = np.full(line.n_points, float(np.linalg.norm(b - a)))
+        blocks[f"mirror_{name}"] = line
+    reach = _aim_reach_m(result)
+    if reach > 0:
+        blocks["aim"] = pv.Line(scene.laser_position_m, scene.laser_position_m + scene.laser_direction * reach, resolution=LINE_POINTS)
+    blocks["laser"] = pv.PolyData(np.asarray(scene.laser_position_m, float)[None])
     if len(result.observers):
-        obs = pv.PolyData(scene.observers.positions_m)
+        obs = pv.PolyData(np.asarray(scene.observers.positions_m, float))
         obs["hazard_ratio"] = result.hazard_ratio
+        obs["hazardous"] = np.asarray(result.hazardous, np.uint8)
         obs["peak_irradiance_w_m2"] = result.observers.peak_irradiance_w_m2
         obs["static_irradiance_w_m2"] = result.observers.static_irradiance_w_m2
         blocks["observers"] = obs
     return blocks
 
 
-def _bounds_union(meshes):
-    b = np.array([m.bounds for m in meshes], float).reshape(len(meshes), 3, 2)
-    return np.array([b[:, :, 0].min(0), b[:, :, 1].max(0)]).T  # (3, 2)
+def _aim_reach_m(result) -> float:
+    """How far the aim line is drawn: the danger zone's range (at most 100 km), 0 without one."""
+    z = result.sdz or {}
+    r = float(z.get("max_range_m", 0.0) or 0.0)
+    return min(r, 1e5) if np.isfinite(r) else 1e5
 
 
-def _expand(bounds, factor, minimum):
-    c = bounds.mean(1)
-    half = np.maximum((bounds[:, 1] - bounds[:, 0]) / 2 * factor, minimum)
+@dataclass
+class Framing:
+    """What a picture frames, in drawn coordinates, and how distances are drawn: true
+    within ``r0_m`` of ``centre_m``, beyond it on a log scale
+    (``r0 (1 + ln(r / r0))``: continuous, with a continuous slope at ``r0``)."""
+
+    bounds: np.ndarray  # (3, 2) drawn coordinates
+    centre_m: np.ndarray
+    r0_m: float = np.inf
+    extent_m: float = 0.0  # the farthest framed point's true distance from the centre
+    points: np.ndarray | None = None  # the framed points, drawn coordinates
+
+    @property
+    def compressed(self) -> bool:
+        return bool(np.isfinite(self.r0_m))
+
+    def draw(self, points) -> np.ndarray:
+        p = np.asarray(points, float)
+        if not self.compressed:
+            return p
+        d = p - self.centre_m
+        r = np.linalg.norm(d, axis=-1, keepdims=True)
+        far = r > self.r0_m
+        scale = np.where(far, self.r0_m * (1.0 + np.log(np.maximum(r, self.r0_m) / self.r0_m)) / np.maximum(r, 1e-300), 1.0)
+        return self.centre_m + d * scale
+
+    def mesh(self, mesh):
+        if not self.compressed:
+            return mesh
+        out = mesh.copy()
+        out.points = self.draw(mesh.points)
+        return out
+
+
+def _points(mesh) -> np.ndarray:
+    return np.asarray(mesh.points, float).reshape(-1, 3)
+
+
+def _hazard_points(result, blocks) -> np.ndarray:
+    """Everything the overview must hold: lobes, targets, laser, mirror beams to their
+    NOHD, the aim line to the danger zone's range, the hazardous ground and every
+    observer (the hazardous ones among them)."""
+    keep = ("lobe_", "target_", "mirror_", "beam_", "aim", "laser", "observers")
+    pts = [_points(blocks[k]) for k in blocks.keys() if k.startswith(keep)]
+    if result.footprint_dynamic is not None and result.footprint_dynamic.mask.any():
+        t = result.scene.terrain
+        iy, ix = np.nonzero(result.footprint_dynamic.mask)
+        pts.append(np.stack([t.x0 + t.dx * ix, t.y0 + t.dx * iy, t.heights[iy, ix]], 1))
+    return np.vstack(pts)
+
+
+def _box(points, factor, minimum) -> np.ndarray:
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    c, half = (lo + hi) / 2, np.maximum((hi - lo) / 2 * factor, minimum)
     return np.stack([c - half, c + half], 1)
 
 
-def _draw(result, blocks, bounds, window_size, title):
-    scene = result.scene
-    p = pv.Plotter(off_screen=True, window_size=list(window_size))
-    p.set_background("white")
-    box = pv.Box(bounds.ravel())
-    labelled = set()
+def framings(result, blocks) -> dict:
+    """The close view (the lobes and targets, true scale) and the overview (everything in
+    :func:`_hazard_points`; on a log-distance scale beyond the close view's radius when
+    that holds everything only at more than ``COMPRESS_RATIO`` times it). The close view
+    holds the hazardous observers too."""
+    near = np.vstack([_points(blocks[k]) for k in blocks.keys() if k.startswith(("lobe_", "target_"))])
+    if "observers" in blocks.keys():  # hazardous observers near the lobes (not those far out on a mirror beam)
+        obs = _points(blocks["observers"])[np.asarray(result.hazardous, bool)]
+        c, r = near.mean(axis=0), float(np.ptp(near, axis=0).max())
+        near = np.vstack([near, obs[np.linalg.norm(obs - c, axis=1) <= 2.0 * r]])
+    focus = _box(near, 1.3, 0.05 * max(1e-3, float(np.ptp(near, axis=0).max())))
+    centre = focus.mean(axis=1)
+    r_focus = float(np.linalg.norm(focus[:, 1] - focus[:, 0]) / 2)
+    pts = _hazard_points(result, blocks)
+    extent = float(np.linalg.norm(pts - centre, axis=1).max())
+    over = Framing(np.zeros((3, 2)), centre, r_focus if extent > COMPRESS_RATIO * r_focus else np.inf, extent)
+    over.points = over.draw(pts)
+    over.bounds = _box(over.points, 1.05, 1e-3)
+    return {"keepout": Framing(focus, centre, np.inf, r_focus, near), "overview": over}
 
-    def label(text):
-        if text in labelled:
+
+def _nice(x) -> float:
+    e = 10 ** np.floor(np.log10(x))
+    return float(max(m * e for m in (1, 2, 5) if m * e <= x))
+
+
+def ring_radii(extent_m, compressed) -> list:
+    """Range-ring radii [m]: round steps (1, 2, 5 x 10^k) about a quarter of the extent,
+    or, on a log-distance picture, a 1-2-5 sequence up to the extent."""
+    if extent_m <= 0:
+        return []
+    if not compressed:
+        step = _nice(extent_m / 4)
+        return [k * step for k in range(1, int(extent_m // step) + 1)]
+    lo = _nice(extent_m / 1e4)
+    out, r = [], lo
+    while r <= extent_m:
+        out.append(r)
+        r = _nice(r * 2.6)  # 1 -> 2 -> 5 -> 10
+    return out[-6:]
+
+
+def _ground_z(result, framing) -> float:
+    """The height of the reference plane drawn under a scene without terrain: the lowest
+    framed point."""
+    return float(framing.bounds[2, 0])
+
+
+def _add_ground(p, result, blocks, framing, legend):
+    """The terrain coloured by the footprint (returns None), or a reference disc about the
+    laser that holds every framed point (returns its drawn radius: the rings stop there)."""
+    if "terrain" in blocks.keys():
+        m = framing.mesh(blocks["terrain"])
+        if not framing.compressed:
+            m = m.clip_box(pv.Box(framing.bounds.ravel()), invert=False)
+        if m.n_points == 0:
             return None
-        labelled.add(text)
-        return text
+        legend.append(("terrain", C.GROUND, "patch"))
+        if "hazardous_static" not in m.array_names:
+            p.add_mesh(m, color=C.GROUND, opacity=0.9)
+            return None
+        # categorical per cell, conservative: a cell is hazardous if any corner is
+        lvl_pt = m["hazardous_static"].astype(float) + m["hazardous_dynamic"].astype(float)
+        faces = m.faces.reshape(-1, 4)[:, 1:] if m.faces.size else np.empty((0, 3), int)
+        level = lvl_pt[faces].max(axis=1) if len(faces) else np.empty(0)
+        m.cell_data["footprint_level"] = level
+        p.add_mesh(m, scalars="footprint_level", preference="cell", cmap=[C.GROUND, C.DYNAMIC, C.FOOTPRINT], clim=[0, 2],
+                   n_colors=3, show_scalar_bar=False, opacity=0.9)
+        if (level == 2).any():
+            legend.append((f"hazardous ground at {result.footprint_dynamic.eye_height_m:g} m eye height", C.FOOTPRINT, "patch"))
+        if (level == 1).any():
+            legend.append(("hazardous ground, dynamic analysis only", C.DYNAMIC, "patch"))
+        return None
+    laser = framing.draw(np.asarray(result.scene.laser_position_m, float)[None])[0]
+    pts = framing.points if framing.points is not None else _points_box_corners(framing)
+    radius = 1.08 * float(np.hypot(*(pts[:, :2] - laser[:2]).T).max())
+    disc = pv.Disc(center=(laser[0], laser[1], _ground_z(result, framing)), inner=0.0, outer=max(radius, 1e-3), c_res=120)
+    p.add_mesh(disc, color=C.GROUND, opacity=0.45)
+    legend.append(("reference plane under the scene (the scene has no ground)", C.GROUND, "patch"))
+    return radius
 
-    extent = float(np.max(bounds[:, 1] - bounds[:, 0]))
-    tube = max(scene.spec.laser.beam_diameter_m, 2e-3 * extent)
+
+def _add_rings(p, result, framing, legend, limit=None):
+    """Range rings about the laser on the ground (true distances, drawn compressed), out
+    to the ground drawn."""
+    laser = np.asarray(result.scene.laser_position_m, float)
+    pts = framing.points if framing.points is not None else _points_box_corners(framing)
+    drawn_laser = framing.draw(laser[None])[0]
+    limit = limit or float(np.hypot(*(pts[:, :2] - drawn_laser[:2]).T).max())
+    extent = framing.extent_m + float(np.linalg.norm(laser - framing.centre_m)) if framing.compressed else limit
+    ang = np.linspace(0, 2 * np.pi, 241)
+    labels, where = [], []
+    for r in ring_radii(extent, framing.compressed):
+        ring = laser + r * np.stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)], 1)
+        if result.scene.terrain is None:
+            ring[:, 2] = _ground_z(result, framing)
+        else:
+            ring[:, 2] = result.scene.terrain.height_at(ring[:, 0], ring[:, 1]) + 0.2
+        drawn = framing.draw(ring)
+        if np.hypot(*(drawn[:, :2] - drawn_laser[:2]).T).max() > limit:
+            continue
+        p.add_mesh(pv.lines_from_points(drawn), color=C.RINGS, line_width=1.5)
+        labels.append(f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m")
+        where.append(drawn[30])
+    if labels:
+        p.add_point_labels(np.array(where), labels, font_size=11, text_color="#444444", shape_opacity=0.0, show_points=False,
+                           always_visible=True)
+        legend.append(("range rings about the laser" + (" (true distances)" if framing.compressed else ""), C.RINGS, "line"))
+
+
+def _points_box_corners(framing) -> np.ndarray:
+    b = framing.bounds
+    return np.array([[x, y, b[2, 0]] for x in b[0] for y in b[1]])
+
+
+def _cut_away(mesh, axis, centre, towards_camera):
+    """``mesh`` without its half toward the camera: cut by the plane through ``centre``
+    that holds the lobe's ``axis`` and faces the camera, so a lobe inside shows whole."""
+    n = towards_camera - np.dot(towards_camera, axis) * axis
+    if np.linalg.norm(n) < 1e-9:  # the axis points at the camera: cut across it instead
+        n = np.cross(axis, [0.0, 0.0, 1.0]) if abs(axis[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    return mesh.clip(normal=n / np.linalg.norm(n), origin=centre, invert=True)
+
+
+def _add_lobes(p, result, blocks, framing, legend):
+    """Static lobes solid blue; dynamic lobes orange with the half toward the camera cut
+    away, so the static lobe inside keeps its own colour (no blend the legend lacks)."""
+    toward = ISO_VIEW / np.linalg.norm(ISO_VIEW)
+    rows = {t.name: t for t in result.targets}
+    for name in blocks.keys():
+        if name.startswith("lobe_static_"):
+            p.add_mesh(framing.mesh(blocks[name]), color=C.STATIC, smooth_shading=True, ambient=0.45, diffuse=0.6, specular=0.0)
+            _once(legend, ("static keep-out lobe (NOHD surface)", C.STATIC, "patch"))
+        elif name.startswith("lobe_dynamic_"):
+            target = name[len("lobe_dynamic_"):]
+            sp = next(sp for sp in result.spots if sp.target.name == target)
+            axis = np.asarray(rows[target].dynamic_lobe.max_direction_world, float)
+            half = _cut_away(framing.mesh(blocks[name]), axis, framing.draw(sp.centroid[None])[0], toward)
+            if half.n_cells:
+                p.add_mesh(half, color=C.DYNAMIC, smooth_shading=True, ambient=0.45, diffuse=0.6, specular=0.0)
+            _once(legend, ("dynamic keep-out lobe (its near half cut away)", C.DYNAMIC, "patch"))
+
+
+def _add_objects(p, blocks, framing, tube, legend):
     for name in blocks.keys():
         mesh = blocks[name]
         if name.startswith("target_"):
-            p.add_mesh(mesh, color="#555555")
+            p.add_mesh(framing.mesh(mesh), color="#555555")
         elif name.startswith("occluder_"):
-            p.add_mesh(mesh, color="#8c6d31", opacity=0.8, label=label("occluder"))
-        elif name == "terrain":
-            m = mesh.clip_box(box, invert=False) if extent < np.ptp(np.array(mesh.bounds).reshape(3, 2), axis=1).max() else mesh
-            if m.n_points == 0:
-                continue
-            if "hazardous_static" in m.array_names:
-                # categorical per cell, conservative: a cell is hazardous if any corner is
-                lvl_pt = m["hazardous_static"].astype(float) + m["hazardous_dynamic"].astype(float)
-                faces = m.faces.reshape(-1, 4)[:, 1:] if m.faces.size else np.empty((0, 3), int)
-                m.cell_data["footprint_level"] = lvl_pt[faces].max(axis=1) if len(faces) else np.empty(0)
-                p.add_mesh(m, scalars="footprint_level", preference="cell", cmap=["#cfe3c3", "#ff9f40", "#d62728"], clim=[0, 2],
-                           n_colors=3, show_scalar_bar=False, opacity=0.9,
-                           label=label("ground at eye height (red: hazardous, orange: dynamic only)"))
-            else:
-                p.add_mesh(m, color="#cfe3c3", opacity=0.9)
-        elif name.startswith("lobe_static_"):
-            p.add_mesh(mesh, color=STATIC_COLOUR, opacity=0.85, label=label("static hazard lobe"))
-        elif name.startswith("lobe_dynamic_"):
-            p.add_mesh(mesh, color=DYNAMIC_COLOUR, opacity=0.35, label=label("dynamic hazard lobe"))
+            p.add_mesh(framing.mesh(mesh), color=C.OCCLUDER, opacity=0.8)
+            _once(legend, ("occluders", C.OCCLUDER, "patch"))
         elif name.startswith("beam_"):
-            p.add_mesh(mesh.tube(radius=tube), color="#d62728", label=label("laser beam"))
-        elif name == "observers":
-            mesh["log10_hazard_ratio"] = np.log10(np.maximum(mesh["hazard_ratio"], 1e-6))
-            p.add_mesh(mesh, scalars="log10_hazard_ratio", cmap="RdYlGn_r", clim=[-3, 1], point_size=9, render_points_as_spheres=True,
-                       scalar_bar_args={"title": "log10 hazard ratio (peak / MPE)", "color": "black"})
-    for sp, tr in zip(result.spots, result.targets):
-        if tr.specular_nohd_dynamic_m:
-            length = min(tr.specular_nohd_dynamic_m, 0.8 * extent)
-            end = sp.centroid + np.asarray(tr.specular_direction) * length
-            shown = "" if length >= tr.specular_nohd_dynamic_m else f" (drawn to {length:.3g} of {tr.specular_nohd_dynamic_m:.4g} m)"
-            p.add_mesh(pv.Line(sp.centroid, end).tube(radius=tube), color="#9467bd", label=label("mirror beam, to its NOHD" + shown))
-    labels, points = [], []
-    for sp, tr in zip(result.spots, result.targets):
+            p.add_mesh(framing.mesh(mesh).tube(radius=tube), color=C.ZONE, lighting=False)
+            _once(legend, ("laser beam to the targets", C.ZONE, "line"))
+        elif name == "aim":
+            p.add_mesh(framing.mesh(mesh), color=C.AIM, line_width=2.0, lighting=False)
+            _once(legend, ("aim line to the danger zone's range", C.AIM, "line"))
+        elif name.startswith("mirror_"):
+            p.add_mesh(framing.mesh(mesh).tube(radius=tube), color=C.MIRROR, lighting=False)
+            _once(legend, ("mirror beam to its NOHD", C.MIRROR, "line"))
+        elif name == "laser":
+            p.add_mesh(framing.mesh(mesh), color="black", point_size=16, render_points_as_spheres=True)
+            _once(legend, ("laser", "#000000", "marker"))
+
+
+def _add_observers(p, result, blocks, framing, legend):
+    """Safe observers small and green; hazardous ones large and red, the worst numbered in
+    the picture and named in the legend (a number is never cut at the picture's edge)."""
+    if "observers" not in blocks.keys():
+        return
+    obs = framing.mesh(blocks["observers"])
+    bad = np.asarray(result.hazardous, bool)
+    if (~bad).any():
+        p.add_mesh(pv.PolyData(obs.points[~bad]), color=C.SAFE, point_size=6, render_points_as_spheres=True, lighting=False)
+        legend.append((f"observers below the MPE ({int((~bad).sum())})", C.SAFE, "marker"))
+    if not bad.any():
+        return
+    p.add_mesh(pv.PolyData(obs.points[bad]), color=C.HAZARDOUS, point_size=18, render_points_as_spheres=True, lighting=False)
+    labels, more = hazardous_labels(result, obs.points)
+    p.add_point_labels(np.array([xy for xy, _ in labels]), [str(k + 1) for k in range(len(labels))], font_size=12, bold=True,
+                       text_color="black", shape_color="white", shape_opacity=0.85, show_points=False, always_visible=True)
+    extra = f"; {more} more in observers.csv" if more else ""
+    legend.append((f"observers at or above the MPE ({int(bad.sum())}{extra}), the worst numbered:", C.HAZARDOUS, "marker"))
+    legend += [(f"{k + 1}: {text}", None, "text") for k, (_, text) in enumerate(labels)]
+
+
+def _add_nohd_labels(p, result, framing, legend):
+    """Each target's name at its dynamic lobe's tip, and its NOHDs in the legend."""
+    names, points = [], []
+    rows = {t.name: t for t in result.targets}
+    for sp in result.spots:
+        tr = rows.get(sp.target.name)
+        if tr is None or tr.dynamic_lobe is None:
+            continue
         d = tr.to_dict()
-        labels.append(f"{tr.name}: NOHD static {d['nohd_static_m']:.3g} m, dynamic {d['nohd_dynamic_m']:.3g} m")
+        text = f"{tr.name}: NOHD static {d['nohd_static_m']:.3g} m, dynamic {d['nohd_dynamic_m']:.3g} m"
+        if tr.specular_nohd_dynamic_m:
+            text += f", mirror beam {tr.specular_nohd_dynamic_m:.4g} m"
+        legend.append((text, None, "text"))
+        names.append(tr.name)
         points.append(sp.centroid + tr.dynamic_lobe.max_direction_world * tr.dynamic_lobe.max_range_m)
     if points:
-        p.add_point_labels(np.array(points), labels, font_size=12, text_color="black", shape_opacity=0.6, always_visible=True)
-    p.add_text(f"{title}\nMPE {result.mpe_w_m2:.4g} W/m^2; local origin at {scene.offset_m.tolist()} m", font_size=10, color="black")
-    if labelled:
-        p.add_legend(bcolor="white", face="rectangle", size=(0.3, 0.12), loc="upper right")
+        p.add_point_labels(framing.draw(np.array(points)), names, font_size=12, text_color="black", shape_color="white",
+                           shape_opacity=0.8, always_visible=True, show_points=False)
+
+
+def _once(legend, entry):
+    if entry not in legend:
+        legend.append(entry)
+
+
+def _draw(result, blocks, framing, window_size):
+    """The 3-D scene (no text but short tags at points) and its legend entries."""
+    p = pv.Plotter(off_screen=True, window_size=list(window_size))
+    p.set_background("white")
+    legend = []
+    extent = float(np.max(framing.bounds[:, 1] - framing.bounds[:, 0]))
+    tube = max(result.scene.spec.laser.beam_diameter_m, 2.5e-3 * extent)
+    limit = _add_ground(p, result, blocks, framing, legend)
+    _add_rings(p, result, framing, legend, limit)
+    _add_lobes(p, result, blocks, framing, legend)
+    _add_objects(p, blocks, framing, tube, legend)
+    _add_observers(p, result, blocks, framing, legend)
+    _add_nohd_labels(p, result, framing, legend)
     p.show_axes()
-    p.camera_position = "iso"
-    p.reset_camera(bounds=bounds.ravel())
-    return p
+    c = framing.bounds.mean(axis=1)
+    p.camera_position = [tuple(c + ISO_VIEW), tuple(c), (0.0, 0.0, 1.0)]
+    p.reset_camera(bounds=framing.bounds.ravel())
+    return p, legend
+
+
+def _title_lines(result, framing, title) -> list:
+    scene = result.scene
+    lines = [title, f"MPE {result.mpe_w_m2:.4g} W/m^2; local origin at {np.round(scene.offset_m, 3).tolist()} m (world = local + origin)"]
+    if framing.compressed:
+        lines.append(f"distances beyond {framing.r0_m:.3g} m from the site are drawn on a log scale (r0 (1 + ln(r / r0))): "
+                     f"the rings give true distances; everything hazardous is in the picture, out to {framing.extent_m:.4g} m")
+    return lines
 
 
 def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900), vtk=True, force=False) -> dict:
     """Render the keep-out zones of an analysis (off-screen) to ``outdir/keepout.png`` -
-    framed on the hazard lobes - and ``outdir/overview.png`` - the whole scene with every
-    observer -, plus ``outdir/keepout.vtm`` for ParaView. Returns the paths written."""
+    the close view, framed on the lobes - and ``outdir/overview.png`` - everything
+    hazardous (mirror beams to their NOHD, the aim line to the danger zone's range, the
+    hazardous ground, every observer), on a log-distance scale where true scale would
+    shrink the lobes to dots -, plus ``outdir/keepout.vtm`` for ParaView (true
+    coordinates). Each picture is the 3-D view with a title strip above and its legend
+    beside it (never cut; :func:`hazard.picture.compose`). Returns the paths written and,
+    under ``"layout"``, where the scene and the legend are in each picture [px]."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     png = out / "keepout.png"
     if png.exists() and not force:
         raise FileExistsError(f"{png} exists: pass --force to overwrite")
-    blocks = _scene_blocks(result, lobe_resolution_deg)
-    lobes = [blocks[k] for k in blocks.keys() if k.startswith("lobe_")]
-    targets = [blocks[k] for k in blocks.keys() if k.startswith("target_")]
-    focus = _expand(_bounds_union(lobes + targets), 1.3, 0.05 * max(1e-3, max(float(np.max(np.ptp(np.array(m.bounds).reshape(3, 2), axis=1))) for m in lobes + targets)))
-    everything = [blocks[k] for k in blocks.keys() if not k.startswith("terrain")]
-    if "terrain" in blocks.keys():
-        everything.append(blocks["terrain"])
-    whole = _expand(_bounds_union(everything), 1.05, 1e-3)
-    paths = {}
-    for name, bounds, title in (("keepout.png", focus, f"{result.scene.name}: keep-out zones (close view)"),
-                                ("overview.png", whole, f"{result.scene.name}: overview")):
-        p = _draw(result, blocks, bounds, window_size, title)
-        tmp = out / f".{name}.tmp.png"
-        p.screenshot(str(tmp))
-        p.close()
-        os.replace(tmp, out / name)
-        paths[name.split(".")[0]] = out / name
+    paths, layout = {}, {}
+    with terminal_bar(4 if vtk else 3, "renders", unit="step", leave=True) as bar:  # terminals only
+        bar.set_postfix_str("lobe surfaces")
+        blocks = _scene_blocks(result, lobe_resolution_deg)
+        frames = framings(result, blocks)
+        bar.update()
+        for name, title in (("keepout", f"{result.scene.name}: keep-out zones (close view)"), ("overview", f"{result.scene.name}: overview")):
+            bar.set_postfix_str(f"{name}.png")
+            p, legend = _draw(result, blocks, frames[name], window_size)
+            img = p.screenshot(None, return_img=True)
+            p.close()
+            picture, layout[name] = compose(img, legend, _title_lines(result, frames[name], title))
+            paths[name] = write_png(picture, out / f"{name}.png")
+            bar.update()
+        if vtk:
+            bar.set_postfix_str("keepout.vtm")
+            vtm = out / "keepout.vtm"
+            blocks.save(str(vtm))
+            paths["vtm"] = vtm
+            bar.update()
     paths["png"] = paths["keepout"]
-    if vtk:
-        vtm = out / "keepout.vtm"
-        blocks.save(str(vtm))
-        paths["vtm"] = vtm
+    paths["layout"] = layout
     return paths
 
 
@@ -220,7 +484,7 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
         raise ValueError("animate_lobe: the scene has no dynamic material (nothing changes over time)")
     idx = np.unique(np.linspace(0, len(result.times_s) - 1, min(max_frames, len(result.times_s))).astype(int))
     # fixed camera: fit the envelope of all frames
-    env = [lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, np.unique(result.states[sp.target.index]), lobe_resolution_deg) for sp in dyn]
+    env = [lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, _time_ordered_states(result, sp), lobe_resolution_deg) for sp in dyn]
     bounds = pv.MultiBlock(env).bounds
     paths = []
     with terminal_bar(len(idx), "lobe animation frames", unit="frame", leave=True) as bar:  # terminals only
