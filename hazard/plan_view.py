@@ -111,7 +111,7 @@ class PlanViewDisplay(_Display):
             _north_arrow(ax)
         _range_rings(axes[0], [self.laser_xy], "from the laser")
         framed = [xy for name, xy, r, ra, f in self.targets if f]
-        _range_rings(axes[1], _distinct(framed) or [self.laser_xy], "from the targets" if framed else "from the laser")
+        _range_rings(axes[1], framed or [self.laser_xy], "from the targets" if framed else "from the laser")
         return fig, axes
 
     def site_limits(self) -> tuple:
@@ -233,7 +233,7 @@ def label_points(ax, labels):
     ax.set_ylim(y0, y1)
 
 
-def _distinct(points, tol_m=1.0) -> list:
+def _distinct(points, tol_m) -> list:
     """Points more than ``tol_m`` apart (the first of each cluster)."""
     out = []
     for p in points:
@@ -248,7 +248,7 @@ def _range_rings(ax, centres, what):
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
     step = _nice_length(max(x1 - x0, y1 - y0) * 1.25)  # about a quarter of the panel
-    for n, c in enumerate(centres):
+    for n, c in enumerate(_distinct(centres, step / 2)):  # targets closer than half a step share their rings
         corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]]) - c
         far = float(np.hypot(corners[:, 0], corners[:, 1]).max())
         for k in range(1, int(far // step) + 1):

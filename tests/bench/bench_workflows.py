@@ -8,7 +8,8 @@
 * keep-out lobe at 0.25 deg (no refinement) of the glossy copper panel (`binoculars`).
   Floor: one BRDF evaluation call over the same number of directions.
 * render: `hazard.render.keepout` of `steel_vs_copper` (close view + overview + VTK).
-  Floor: two screenshots of the same meshes added as one MultiBlock, no styling.
+  Floor: the same meshes made (the lobe surfaces) and two screenshots of them added as
+  one MultiBlock, no styling, no legend, no log-distance copy.
 """
 
 from __future__ import annotations
@@ -76,8 +77,8 @@ def bench_render():
         t0 = time.perf_counter()
         render.keepout(res, tmp, force=True)
         t = time.perf_counter() - t0
-        blocks = render._scene_blocks(res, 3.0)
         t0 = time.perf_counter()
+        blocks = render._scene_blocks(res, 3.0)  # the lobe surfaces, as the real path makes them
         for k in range(2):
             p = pv.Plotter(off_screen=True, window_size=[1280, 900])
             p.add_mesh(blocks)
