@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
-from .plan_view import _finite_or_0, _scale_bar, hazardous_labels, label_points, mirror_segments
+from .plan_view import (_finite_or_0, _scale_bar, draw_hazardous, draw_lobe, hazardous_labels, label_points, mirror_segments,
+                        square_limits, two_panels)
 from .plots import _Display
 
 __all__ = ["ElevationViewDisplay"]
@@ -71,14 +72,7 @@ class ElevationViewDisplay(_Display):
 
     def plot(self, axes=None):
         """Two panels: the whole range and the site. Returns (figure, axes)."""
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        if axes is None:
-            fig, axes = plt.subplots(1, 2, figsize=(15, 6.5))
-        fig = axes[0].figure
+        fig, axes = two_panels(axes, (15, 6.5))
         for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
             self._draw(ax)
             if limits is not None:
@@ -108,10 +102,7 @@ class ElevationViewDisplay(_Display):
         pts = [sz[None] + 20.0 * np.array([[-1.0, -1.0], [1.0, 1.0]]) for _, sz in self.targets] or [self.laser_sz[None]]
         pts += [r for _, _, rings in self.lobes for r in rings]
         pts += [self.observers_sz[self.hazardous]] if self.hazardous.any() else []
-        p = np.vstack(pts)
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
-        return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+        return square_limits(pts)
 
     def _draw(self, ax):
         if self.profile is not None:
@@ -122,15 +113,8 @@ class ElevationViewDisplay(_Display):
         ax.plot(*self.aim_sz.T, c=C.ZONE, lw=0.9, ls="--", label="aim line (to the danger zone's range)")
         seen = set()
         for target, kind, rings in self.lobes:
-            colour = C.STATIC if kind == "static" else C.DYNAMIC
-            label = None if kind in seen else f"{kind} keep-out lobe (projected)"
+            draw_lobe(ax, kind, rings, None if kind in seen else f"{kind} keep-out lobe (projected)")
             seen.add(kind)
-            for ring in rings:
-                if kind == "static":
-                    ax.fill(*ring.T, fc=colour + "40", ec=colour, lw=1.2, label=label)  # face 25 % opaque, edge the legend's colour
-                else:
-                    ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
-                label = None
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
         ax.plot(*self.laser_sz, marker="^", ms=10, c="k", ls="", label="laser")
@@ -140,9 +124,7 @@ class ElevationViewDisplay(_Display):
         if len(self.observers_sz):
             safe = ~self.hazardous
             ax.scatter(*self.observers_sz[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
-            more = f"; {self.unlabelled} more unnamed, see observers.csv" if self.unlabelled else ""
-            ax.scatter(*self.observers_sz[self.hazardous].T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
-                       label=f"observers at or above the MPE ({int(self.hazardous.sum())}{more})")
+            draw_hazardous(ax, self.observers_sz[self.hazardous], self.unlabelled)
 
 
 def _profile(scene, view, aim, obs_sz, up):

@@ -82,14 +82,7 @@ class PlanViewDisplay(_Display):
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
         targets, observers, hazardous ground). Returns (figure, axes)."""
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        if axes is None:
-            fig, axes = plt.subplots(1, 2, figsize=(15, 7.5))
-        fig = axes[0].figure
+        fig, axes = two_panels(axes, (15, 7.5))
         for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
             self._draw_ground(ax)
             self._draw_zones(ax)
@@ -123,10 +116,7 @@ class PlanViewDisplay(_Display):
         pts += [self.observers_xy[self.hazardous]] if self.hazardous.any() else []
         pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
         pts += [ring for lobe in self.lobes for ring in lobe[3]]
-        p = np.vstack(pts)
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
-        return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+        return square_limits(pts)
 
     def _draw_ground(self, ax):
         if self.contours is not None:
@@ -155,17 +145,10 @@ class PlanViewDisplay(_Display):
     def _draw_lobes(self, ax):
         seen = set()
         for target, kind, cut, rings, holes in self.lobes:
-            colour = C.STATIC if kind == "static" else C.DYNAMIC
-            label = None if (kind, cut) in seen else f"{kind} keep-out lobe, {cut}"
+            draw_lobe(ax, kind, rings, None if (kind, cut) in seen else f"{kind} keep-out lobe, {cut}")
             seen.add((kind, cut))
-            for ring in rings:
-                if kind == "static":
-                    ax.fill(*ring.T, fc=colour + "40", ec=colour, lw=1.2, label=label)  # face 25 % opaque, edge the legend's colour
-                else:
-                    ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
-                label = None
             for ring in holes:
-                ax.plot(*ring.T, c=colour, lw=0.8, ls=":")
+                ax.plot(*ring.T, c=C.STATIC if kind == "static" else C.DYNAMIC, lw=0.8, ls=":")
 
     def _draw_objects(self, ax):
         ax.plot(*self.laser_xy, marker="^", ms=10, c="k", ls="", label="laser")
@@ -190,9 +173,47 @@ class PlanViewDisplay(_Display):
             if self.aided.any():
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
-            more = f"; {self.unlabelled} more unnamed, see observers.csv" if self.unlabelled else ""
-            ax.scatter(*self.observers_xy[self.hazardous].T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
-                       label=f"observers at or above the MPE ({int(self.hazardous.sum())}{more})")
+            draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled)
+
+
+def square_limits(points) -> tuple:
+    """x0, x1, y0, y1 [m]: a square about the points (a list of (K, 2) arrays), 10 % wider,
+    at least 20 m across."""
+    p = np.vstack(points)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
+    return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+
+
+def two_panels(axes, figsize) -> tuple:
+    """(figure, axes): the two panels given, or new ones (matplotlib, Agg)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if axes is None:
+        _, axes = plt.subplots(1, 2, figsize=figsize)
+    return axes[0].figure, axes
+
+
+def draw_lobe(ax, kind, rings, label):
+    """A lobe's outline rings: static filled blue (face 25 % opaque, the edge the legend's
+    colour), dynamic dashed orange."""
+    colour = C.STATIC if kind == "static" else C.DYNAMIC
+    for ring in rings:
+        if kind == "static":
+            ax.fill(*ring.T, fc=colour + "40", ec=colour, lw=1.2, label=label)
+        else:
+            ax.plot(*ring.T, c=colour, lw=1.6, ls="--", label=label)
+        label = None
+
+
+def draw_hazardous(ax, xy, unlabelled):
+    """Observers at or above the MPE: large red crosses on top, counted in the legend."""
+    more = f"; {unlabelled} more unnamed, see observers.csv" if unlabelled else ""
+    ax.scatter(*np.asarray(xy).reshape(-1, 2).T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
+               label=f"observers at or above the MPE ({len(xy)}{more})")
 
 
 def lobe_rings(result, off_xy) -> list:
