@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
-from .plan_view import (_finite_or_0, _scale_bar, draw_hazardous, draw_lobe, hazardous_labels, label_points, mirror_segments,
+from .plan_view import (_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mirror_segments,
                         square_limits, two_panels)
 from .plots import _Display
 
@@ -56,7 +56,7 @@ class ElevationViewDisplay(_Display):
         def sz(points):
             return view.to_2d(points) + up
 
-        reach = _finite_or_0(result.sdz.get("max_range_m", 0.0)) if result.sdz else 0.0
+        reach = aim_reach_m(result)
         spots = {sp.target.name: sp.centroid for sp in result.spots}
         reach = max(reach, 2.0 * max([float(np.linalg.norm(c - scene.laser_position_m)) for c in spots.values()] + [1.0]))
         reach = min(reach, 1e5)

@@ -61,8 +61,7 @@ class PlanViewDisplay(_Display):
         off = np.asarray(scene.offset_m, float)
         z = getattr(result, "sdz", None) or {}
         laser = np.asarray(scene.laser_position_m, float) + off
-        reach = z.get("max_range_m", 0.0)
-        reach = min(reach, 1e5) if math.isfinite(reach) else 1e5
+        reach = aim_reach_m(result)
         aim = np.array([laser[:2], laser[:2] + np.asarray(scene.laser_direction, float)[:2] * reach])
         zone = np.asarray(z["polygon_m"], float) if z.get("polygon_m") else None
         aided = [(f"LSDZ through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", np.asarray(a["polygon_m"], float))
@@ -174,6 +173,13 @@ class PlanViewDisplay(_Display):
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
             draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled)
+
+
+def aim_reach_m(result) -> float:
+    """How far the aim line is drawn [m]: the danger zone's range, at most 100 km (an
+    unbounded zone is drawn to 100 km, never to 0); 0 without a zone."""
+    r = float((result.sdz or {}).get("max_range_m", 0.0) or 0.0)
+    return min(r, 1e5) if math.isfinite(r) else 1e5
 
 
 def square_limits(points) -> tuple:

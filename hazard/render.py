@@ -45,7 +45,7 @@ from . import palette as C
 from .beam import perp_basis as _perp_basis
 from .keepout import _range_fn
 from .picture import compose, write_png
-from .plan_view import hazardous_labels, mirror_segments
+from .plan_view import _nice_length, aim_reach_m, hazardous_labels, mirror_segments
 from .progress import terminal_bar
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii"]
@@ -117,7 +117,7 @@ def _scene_blocks(result, lobe_resolution_deg):
         line = pv.Line(a, b, resolution=LINE_POINTS)
         line["nohd_m"] = np.full(line.n_points, float(np.linalg.norm(b - a)))
         blocks[f"mirror_{name}"] = line
-    reach = _aim_reach_m(result)
+    reach = aim_reach_m(result)
     if reach > 0:
         blocks["aim"] = pv.Line(scene.laser_position_m, scene.laser_position_m + scene.laser_direction * reach, resolution=LINE_POINTS)
     blocks["laser"] = pv.PolyData(np.asarray(scene.laser_position_m, float)[None])
@@ -131,13 +131,6 @@ def _scene_blocks(result, lobe_resolution_deg):
     return blocks
 
 
-def _aim_reach_m(result) -> float:
-    """How far the aim line is drawn: the danger zone's range (at most 100 km), 0 without one."""
-    z = result.sdz or {}
-    r = float(z.get("max_range_m", 0.0) or 0.0)
-    return min(r, 1e5) if np.isfinite(r) else 1e5
-
-
 @dataclass
 class Framing:
     """What a picture frames, in drawn coordinates, and how distances are drawn: true
@@ -148,7 +141,7 @@ class Framing:
     centre_m: np.ndarray
     r0_m: float = np.inf
     extent_m: float = 0.0  # the farthest framed point's true distance from the centre
-    points: np.ndarray | None = None  # the framed points, drawn coordinates
+    points: np.ndarray | None = None  # the framed points, drawn coordinates (set by :func:`framings`)
 
     @property
     def compressed(self) -> bool:
@@ -217,8 +210,8 @@ def framings(result, blocks) -> dict:
 
 
 def _nice(x) -> float:
-    e = 10 ** np.floor(np.log10(x))
-    return float(max(m * e for m in (1, 2, 5) if m * e <= x))
+    """The largest 1, 2 or 5 x 10^k not above ``x``."""
+    return _nice_length(5.0 * x)
 
 
 def ring_radii(extent_m, compressed) -> list:
@@ -237,7 +230,7 @@ def ring_radii(extent_m, compressed) -> list:
     return out[-6:]
 
 
-def _ground_z(result, framing) -> float:
+def _ground_z(framing) -> float:
     """The height of the reference plane drawn under a scene without terrain: the lowest
     framed point."""
     return float(framing.bounds[2, 0])
@@ -269,9 +262,9 @@ def _add_ground(p, result, blocks, framing, legend):
             legend.append(("hazardous ground, dynamic analysis only", C.DYNAMIC, "patch"))
         return None
     laser = framing.draw(np.asarray(result.scene.laser_position_m, float)[None])[0]
-    pts = framing.points if framing.points is not None else _points_box_corners(framing)
+    pts = framing.points
     radius = 1.08 * float(np.hypot(*(pts[:, :2] - laser[:2]).T).max())
-    disc = pv.Disc(center=(laser[0], laser[1], _ground_z(result, framing)), inner=0.0, outer=max(radius, 1e-3), c_res=120)
+    disc = pv.Disc(center=(laser[0], laser[1], _ground_z(framing)), inner=0.0, outer=max(radius, 1e-3), c_res=120)
     p.add_mesh(disc, color=C.GROUND, opacity=0.45)
     legend.append(("reference plane under the scene (the scene has no ground)", C.GROUND, "patch"))
     return radius
@@ -281,7 +274,7 @@ def _add_rings(p, result, framing, legend, limit=None):
     """Range rings about the laser on the ground (true distances, drawn compressed), out
     to the ground drawn."""
     laser = np.asarray(result.scene.laser_position_m, float)
-    pts = framing.points if framing.points is not None else _points_box_corners(framing)
+    pts = framing.points
     drawn_laser = framing.draw(laser[None])[0]
     limit = limit or float(np.hypot(*(pts[:, :2] - drawn_laser[:2]).T).max())
     extent = framing.extent_m + float(np.linalg.norm(laser - framing.centre_m)) if framing.compressed else limit
@@ -290,7 +283,7 @@ def _add_rings(p, result, framing, legend, limit=None):
     for r in ring_radii(extent, framing.compressed):
         ring = laser + r * np.stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)], 1)
         if result.scene.terrain is None:
-            ring[:, 2] = _ground_z(result, framing)
+            ring[:, 2] = _ground_z(framing)
         else:
             ring[:, 2] = result.scene.terrain.height_at(ring[:, 0], ring[:, 1]) + 0.2
         drawn = framing.draw(ring)
@@ -303,11 +296,6 @@ def _add_rings(p, result, framing, legend, limit=None):
         p.add_point_labels(np.array(where), labels, font_size=11, text_color="#444444", shape_opacity=0.0, show_points=False,
                            always_visible=True)
         legend.append(("range rings about the laser" + (" (true distances)" if framing.compressed else ""), C.RINGS, "line"))
-
-
-def _points_box_corners(framing) -> np.ndarray:
-    b = framing.bounds
-    return np.array([[x, y, b[2, 0]] for x in b[0] for y in b[1]])
 
 
 def _cut_away(mesh, axis, centre, towards_camera):
