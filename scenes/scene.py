@@ -111,6 +111,8 @@ class Scene:
     terrain_target: Target | None = None
     # plausibility warnings (values typical of unit mistakes); not errors
     warnings: list = field(default_factory=list)
+    # the [site]: exact ENU frame, DEM and the geodetic positions converted (None: a local frame)
+    site: object = None
 
     @property
     def name(self) -> str:
@@ -656,7 +658,7 @@ def _observers(spec, offset, terrain) -> Observers:
                      tuple(o.name for o in spec.observers), tuple(o.optics for o in spec.observers))
 
 
-def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> Scene:
+def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, site=None) -> Scene:
     offset = np.asarray(spec.targets[0].center_m, float)
     lp = np.asarray(spec.laser.position_m, float)
     if spec.laser.aim_m is not None:
@@ -683,7 +685,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
     terrain = terrain_target = None
     if spec.terrain is not None:
         try:
-            hf = terrain_heightfield(spec.terrain, base_dir)
+            hf = site.heightfield if site is not None else terrain_heightfield(spec.terrain, base_dir)
         except ValueError as exc:
             raise SceneError(str(exc)) from None
         terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
@@ -705,7 +707,27 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str) -> 
         observers=observers,
         terrain_target=terrain_target,
         warnings=_warnings(spec) + _buried_targets(targets, terrain),
+        site=site,
     )
+
+
+def _resolve_geo(data: dict, source: str, base_dir):
+    """``*_geo`` positions converted to the site frame (:mod:`scenes.geo_input`); errors
+    name the key."""
+    from .geo import GeoError
+    from .geo_input import resolve_geo
+
+    def validate(cls, value, path):
+        try:
+            return cls.model_validate(value)
+        except ValidationError as exc:
+            msg = _format_validation(exc, source).removeprefix(f"{source}: ")
+            raise SceneError(f"{source}: {path}{'' if msg.startswith('(scene)') else '.'}{msg.removeprefix('(scene)')}") from None
+
+    try:
+        return resolve_geo(data, None if base_dir is None else Path(base_dir), validate)
+    except GeoError as exc:
+        raise SceneError(f"{source}: {exc}") from None
 
 
 def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
@@ -721,10 +743,13 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
     """Scene from already-parsed TOML data (a dict), e.g. a study's modified base scene."""
     if not isinstance(data, dict):
         raise SceneError(f"{source}: expected a table of scene keys, got {type(data).__name__}")
+    if text is None:
+        text = json.dumps(data, sort_keys=True, default=str)
     try:
-        if text is None:
-            text = json.dumps(data, sort_keys=True, default=str)
+        data, site = _resolve_geo(data, source, base_dir)
         spec = SceneSpec.model_validate(data)
+    except SceneError:
+        raise
     except ValidationError as exc:
         raise SceneError(_format_validation(exc, source)) from None
     except RecursionError:
@@ -732,7 +757,7 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
     except ValueError as exc:  # limits checked outside pydantic's own validators
         raise SceneError(f"{source}: {' '.join(str(exc).split())}") from None
     try:
-        return _compile(spec, source, None if base_dir is None else Path(base_dir), text)
+        return _compile(spec, source, None if base_dir is None else Path(base_dir), text, site)
     except SceneError as exc:
         msg = str(exc)
         raise SceneError(msg if msg.startswith(source) else f"{source}: {msg}") from None

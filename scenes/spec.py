@@ -34,6 +34,7 @@ __all__ = [
     "AnalysisSpec",
     "SectorSpec",
     "RangeSpec",
+    "SiteSpec",
     "STANDARD_KEYS",
 ]
 
@@ -44,6 +45,12 @@ STANDARD_KEYS = ("ansi-z136.1-2014", "iec-60825-1-2014", "ansi-z136.1-2007", "ie
 Coord = Annotated[float, Field(ge=-1e8, le=1e8)]
 Vec3 = Annotated[list[Coord], Field(min_length=3, max_length=3)]
 Name = Annotated[str, Field(min_length=1, max_length=200)]
+# a geodetic position (scenes.geo_input converts it to *_m before validation; needs a [site]):
+# [lat_deg, lon_deg, height_m] (or [easting_m, northing_m, height_m] in a projected site.crs), or
+# [lat_deg, lon_deg] standing on the terrain
+GeoPos = Annotated[list[float], Field(min_length=2, max_length=3)]
+_GEO = "geodetic form of {0}: [lat_deg, lon_deg, height_m], or [lat_deg, lon_deg] on the terrain (needs a [site])"
+_AGL = "height above the terrain [m] of a two-number {0} (needs a [site] and a terrain)"
 
 
 class _Strict(BaseModel):
@@ -94,8 +101,12 @@ class LaserSpec(_Strict):
     prf_hz: float | None = Field(default=None, ge=1e-6, le=1e12, description="pulse repetition frequency [Hz], 1e-6 to 1e12")
     beam_diameter_m: float = Field(ge=1e-6, le=100.0, description="beam diameter at the aperture, 1/e points [m] (at least 1 um)")
     divergence_rad: float = Field(ge=0, le=math.pi, description="full-angle divergence, 1/e points [rad]")
-    position_m: Vec3
-    aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m]")
+    position_m: Vec3 | None = Field(default=None, description="the aperture [m] (or position_geo)")
+    position_geo: GeoPos | None = Field(default=None, description=_GEO.format("position_m"))
+    height_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("position_geo"))
+    aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m] (or aim_geo)")
+    aim_geo: GeoPos | None = Field(default=None, description=_GEO.format("aim_m"))
+    aim_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("aim_geo"))
     direction: Vec3 | None = Field(default=None, description="beam direction (alternative to aim_m)")
     polarization: Literal["unknown", "unpolarized"] = Field(default="unknown", description=(
         "the beam's polarisation for Fresnel mirrors (materials given by n and k): 'unknown' (default) takes the "
@@ -129,8 +140,10 @@ class LaserSpec(_Strict):
             raise ValueError("give either power_w (CW) or the pulse keys, not both")
         if self.pulse_duration_s is not None and self.pulse_duration_s * self.prf_hz >= 1:
             raise ValueError(f"pulse_duration_s * prf_hz = {self.pulse_duration_s * self.prf_hz:g}: expected < 1")
+        if self.position_m is None:
+            raise ValueError("position_m: the laser's position is required (or position_geo with a [site])")
         if (self.aim_m is None) == (self.direction is None):
-            raise ValueError("give exactly one of aim_m or direction")
+            raise ValueError("give exactly one of aim_m (or aim_geo) or direction")
         if self.aim_m is not None and math.dist(self.aim_m, self.position_m) <= 0:
             raise ValueError(f"aim_m={self.aim_m!r} equals position_m: expected an aim point away from the laser")
         if self.direction is not None:
@@ -291,6 +304,8 @@ _SHAPES = Literal["plate", "disk", "box", "sphere", "cylinder", "mesh"]
 class _Shape(_Strict):
     shape: _SHAPES
     center_m: Vec3 = [0.0, 0.0, 0.0]
+    center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m"))
+    height_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("center_geo"))
     normal: Vec3 = [0.0, 0.0, 1.0]
     tangent: Vec3 = [1.0, 0.0, 0.0]
     size_m: list[Annotated[float, Field(gt=0, le=1e6)]] | None = None
@@ -334,15 +349,49 @@ class OccluderSpec(_Shape):
     name: Name = "occluder"
 
 
+class SiteSpec(_Strict):
+    """Where the scene is on the earth: the origin of its exact east-north-up frame
+    (:mod:`scenes.geo`). With a site, every ``*_m`` position may be given in geodetic form
+    ``*_geo`` and the terrain may be a DEM."""
+
+    origin: list[float] = Field(min_length=3, max_length=3, description=(
+        "[lat_deg, lon_deg, height_m] (WGS 84; the height in the vertical datum) of the frame's origin"))
+    vertical: Literal["ellipsoid", "egm96"] = Field(default="ellipsoid", description=(
+        "datum of every height given: 'ellipsoid' (WGS 84) or 'egm96' (orthometric, converted with PROJ's geoid grid "
+        "us_nga_egm96_15.tif; an error names it when it is missing)"))
+    crs: Name = Field(default="EPSG:4326", description=(
+        "how *_geo positions are read: a geographic CRS takes [lat_deg, lon_deg, height_m], a projected one (e.g. UTM "
+        "'EPSG:32611') [easting_m, northing_m, height_m]"))
+    refraction_k: float = Field(default=0.13, ge=0.0, lt=1.0, description=(
+        "atmospheric refraction coefficient: the ground falls (1 - k) d^2 / (2 R) below the beam instead of d^2 / (2 R) "
+        "(an apparent rise k d^2 / (2 R) seen from the laser; 0.13: standard atmosphere; 0 switches it off). Beams reach "
+        "past the geometric horizon, conservative for observers beyond it"))
+
+    @field_validator("origin")
+    @classmethod
+    def _origin(cls, v):
+        lat, lon, h = v
+        if not (-90 < lat < 90 and -180 <= lon <= 360 and -1.2e4 <= h <= 1e5):
+            raise ValueError(f"expected [lat_deg, lon_deg, height_m] with |lat| < 90, lon in [-180, 360], height in "
+                             f"[-12 km, 100 km], got {v!r} (a pole has no east and north)")
+        return v
+
+
 class TerrainSpec(_Strict):
-    """Ground: a heightmap (``file`` .npy of heights [m], ``origin_m`` and ``spacing_m``) or a
+    """Ground: a heightmap (``file`` .npy of heights [m], ``origin_m`` and ``spacing_m``), a
+    ``dem`` (``file`` any raster GDAL reads, GeoTIFF or DTED, in its own CRS; needs a
+    ``[site]``; resampled to ``resolution_m`` over ``extent_m`` about ``center_m``) or a
     procedural ``hill`` / ``valley`` (Gaussian bump) / ``flat`` ground."""
 
-    kind: Literal["heightmap", "hill", "valley", "flat"]
+    kind: Literal["heightmap", "dem", "hill", "valley", "flat"]
     file: Name | None = None
+    nodata: Literal["error", "fill"] = Field(default="error", description=(
+        "a DEM's missing cells in the analysis area: 'error', or 'fill' by GDAL's inverse-distance interpolation "
+        "(rasterio.fill.fillnodata; the report gives how many were filled)"))
     origin_m: list[Coord] = Field(default=[0.0, 0.0], min_length=2, max_length=2)
     spacing_m: float | None = Field(default=None, gt=0, le=1e5)
     center_m: Vec3 = [0.0, 0.0, 0.0]
+    center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m") + "; a dem's grid centre")
     height_m: float = Field(default=10.0, ge=-1e5, le=1e5)
     radius_m: float = Field(default=100.0, gt=0, le=1e7)
     extent_m: float = Field(default=500.0, gt=0, le=1e7, description="half-width of the procedural ground [m]")
@@ -355,6 +404,10 @@ class TerrainSpec(_Strict):
     def _check(self):
         if self.kind == "heightmap" and (self.file is None or self.spacing_m is None):
             raise ValueError("a heightmap terrain needs file (.npy) and spacing_m")
+        if self.kind == "dem" and self.file is None:
+            raise ValueError("a dem terrain needs file (a GeoTIFF, DTED or any raster GDAL reads)")
+        if self.kind != "dem" and self.nodata != "error":
+            raise ValueError("nodata: only for kind = 'dem'")
         if self.kind != "heightmap" and self.extent_m / self.resolution_m > 2000:
             raise ValueError(f"extent_m / resolution_m = {self.extent_m / self.resolution_m:g}: at most 2000 cells per half-width")
         return self
@@ -382,6 +435,11 @@ class ObserverSpec(_Strict):
     counts: list[Annotated[int, Field(ge=1)]] | None = Field(default=None, min_length=2, max_length=2)
     center_m: Vec3 | None = None
     radius_m: float | None = Field(default=None, gt=0, le=1e8)
+    points_geo: list[GeoPos] | None = Field(default=None, description=_GEO.format("each of points_m"))
+    start_geo: GeoPos | None = Field(default=None, description=_GEO.format("start_m"))
+    end_geo: GeoPos | None = Field(default=None, description=_GEO.format("end_m"))
+    origin_geo: GeoPos | None = Field(default=None, description=_GEO.format("origin_m"))
+    center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m"))
     eye_height_m: float | None = Field(default=None, ge=0, le=1e5, description="height above the terrain [m]; replaces z")
     optics: OpticsSpec | None = None
 
@@ -478,11 +536,17 @@ class AnalysisSpec(_Strict):
 class RangeSpec(_Strict):
     """The range: its boundary, a polygon of [x, y] points [m] (world coordinates)."""
 
-    boundary_m: list[Annotated[list[Coord], Field(min_length=2, max_length=2)]] = Field(min_length=3, max_length=100_000)
+    boundary_m: list[Annotated[list[Coord], Field(min_length=2, max_length=2)]] | None = Field(
+        default=None, min_length=3, max_length=100_000, description="the boundary [[x, y], ...] [m] (or boundary_geo)")
+    boundary_geo: list[Annotated[list[float], Field(min_length=2, max_length=2)]] | None = Field(
+        default=None, min_length=3, max_length=100_000, description="the boundary as [[lat_deg, lon_deg], ...] (needs a [site])")
 
     @model_validator(mode="after")
     def _simple(self):
         from shapely.geometry import Polygon
+
+        if self.boundary_m is None:
+            raise ValueError("boundary_m: the range boundary is required (or boundary_geo with a [site])")
 
         poly = Polygon(self.boundary_m)
         if not poly.is_valid or poly.area <= 0:
@@ -505,6 +569,7 @@ class SceneSpec(_Strict):
     atmosphere: AtmosphereSpec = Field(default_factory=AtmosphereSpec)
     analysis: AnalysisSpec = Field(default_factory=AnalysisSpec)  # built per scene: its limit checks read HAZARD_MAX_* then
     range: RangeSpec | None = None
+    site: SiteSpec | None = None
 
     @model_validator(mode="after")
     def _names(self):
@@ -517,6 +582,9 @@ class SceneSpec(_Strict):
         obs = [o.name for o in self.observers]
         if len(set(obs)) != len(obs):
             raise ValueError(f"observers: names must be unique, got {obs}")
+        if self.terrain is not None and self.terrain.kind == "dem" and self.site is None:
+            raise ValueError("terrain.kind = 'dem' needs a [site] table (origin = [lat_deg, lon_deg, height_m]) to place "
+                             "the DEM in the scene's frame")
         return self
 
     @model_validator(mode="after")

@@ -1,0 +1,177 @@
+"""DEM terrain: a raster of ground heights (GeoTIFF, DTED, anything GDAL reads) placed in
+the site's exact ENU frame.
+
+The analysis grid is regular in the local frame: nodes every ``resolution_m`` over
+``[cx - extent_m, cx + extent_m]`` (and the same in y). For each node the DEM surface point
+straight below it is found exactly: its geodetic latitude and longitude (pyproj), the
+DEM's height there (bilinear between the raster's cell centres, in the DEM's own CRS),
+converted to the ellipsoid and back to ENU. The horizontal position of a point depends
+slightly on its height (1.6 m per km of height at 10 km), so the node's geodetic position
+is iterated until the point lies on the node's vertical to 1 mm. The earth's curvature is
+thus in the geometry; the refraction rise (:mod:`scenes.geo`) is then added.
+
+Memory is bounded by the analysis grid, not the DEM: only the window over the analysis
+area is read (GDAL reads just those blocks), decimated by GDAL's bilinear resampling to no
+coarser than half the grid's resolution.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geo import GeoError, SiteFrame
+from .geometry import Heightfield, input_path
+
+__all__ = ["DemInfo", "dem_heightfield"]
+
+_TOL_M = 1e-3  # the node's point lies on its vertical to this [m]
+
+
+@dataclass(frozen=True)
+class DemInfo:
+    """What the report says of a DEM terrain."""
+
+    file: str
+    crs: str
+    pixel_m: float  # the DEM's native cell size (along its rows) [m]
+    read_pixel_m: float  # the cell size of the window as read [m]
+    window_cells: int  # cells read
+    dem_cells: int  # cells in the whole file
+    filled_cells: int  # nodata cells filled (nodata = "fill")
+    nodes: int  # analysis grid nodes
+    iterations: int
+
+
+def _grid(spec, frame: SiteFrame, centre_xy):
+    n = int(math.ceil(spec.extent_m / spec.resolution_m))
+    from brdfmodels._io import check_limit
+
+    check_limit("TERRAIN_NODES", (2 * n + 1) ** 2, "terrain: nodes ((2 extent_m / resolution_m + 1)^2)")
+    xs = centre_xy[0] + spec.resolution_m * np.arange(-n, n + 1)
+    ys = centre_xy[1] + spec.resolution_m * np.arange(-n, n + 1)
+    return xs, ys
+
+
+def _open(spec, base_dir):
+    import rasterio
+
+    from brdfmodels._io import check_input_file
+
+    path = input_path(spec.file, base_dir)
+    try:
+        check_input_file(path, "terrain.file")
+        ds = rasterio.open(path)
+    except (OSError, ValueError, rasterio.errors.RasterioError) as exc:
+        raise GeoError(f"terrain.file={spec.file!r}: cannot read the DEM ({' '.join(str(exc).split())})") from None
+    if ds.crs is None:
+        ds.close()
+        raise GeoError(f"terrain.file={spec.file!r}: the DEM has no CRS; expected a georeferenced raster (GeoTIFF, DTED)")
+    return ds
+
+
+def _to_dem(ds, lat, lon):
+    """DEM-CRS coordinates -> fractional (row, col) of the raster's cell centres."""
+    import pyproj
+
+    t = pyproj.Transformer.from_crs("EPSG:4326", ds.crs, always_xy=True)
+    x, y = t.transform(lon, lat)
+    inv = ~ds.transform
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    col, row = inv.a * x + inv.b * y + inv.c, inv.d * x + inv.e * y + inv.f
+    return row - 0.5, col - 0.5
+
+
+def _pixel_m(ds) -> float:
+    """The DEM's cell size in metres (degrees converted at the raster's centre latitude)."""
+    a, e = ds.transform.a, ds.transform.e
+    if ds.crs.is_geographic:
+        lat = (ds.bounds.top + ds.bounds.bottom) / 2
+        return min(abs(a) * 111_320.0 * math.cos(math.radians(lat)), abs(e) * 110_574.0)
+    return min(abs(a), abs(e)) * ds.crs.linear_units_factor[1]
+
+
+def _read_window(ds, spec, rows, cols):
+    """The raster window over the analysis area (2 cells of margin), decimated to no coarser
+    than half the grid's resolution; returns (heights with NaN for nodata, row0, col0, step)."""
+    from rasterio.enums import Resampling
+    from rasterio.windows import Window
+
+    r0, r1 = int(math.floor(np.min(rows))) - 2, int(math.ceil(np.max(rows))) + 3
+    c0, c1 = int(math.floor(np.min(cols))) - 2, int(math.ceil(np.max(cols))) + 3
+    if r0 < -2 or c0 < -2 or r1 > ds.height + 2 or c1 > ds.width + 2:
+        raise GeoError(f"terrain: the analysis area (extent_m = {spec.extent_m:g} m about center) reaches past the DEM "
+                       f"{spec.file!r} (rows {r0 + 2}..{r1 - 3}, columns {c0 + 2}..{c1 - 3} of {ds.height} x {ds.width}); "
+                       f"reduce extent_m or use a larger DEM")
+    r0, c0, r1, c1 = max(r0, 0), max(c0, 0), min(r1, ds.height), min(c1, ds.width)
+    step = max(1, int(spec.resolution_m / (2 * _pixel_m(ds))))
+    out_shape = (max(2, math.ceil((r1 - r0) / step)), max(2, math.ceil((c1 - c0) / step)))
+    win = Window(c0, r0, c1 - c0, r1 - r0)
+    a = ds.read(1, window=win, out_shape=out_shape, resampling=Resampling.bilinear, masked=True)
+    h = np.ma.filled(a.astype(float), np.nan)
+    return h, r0, c0, ((r1 - r0) / out_shape[0], (c1 - c0) / out_shape[1])
+
+
+def _fill(h, spec) -> int:
+    """Nodata cells: an error, or filled by GDAL's interpolation; the count filled."""
+    bad = ~np.isfinite(h)
+    if not bad.any():
+        return 0
+    if spec.nodata == "error":
+        raise GeoError(f"terrain.file={spec.file!r}: {int(bad.sum())} of {h.size} DEM cells over the analysis area have no "
+                       f"data; set terrain.nodata = 'fill' to interpolate them (stated in the report), or use a complete DEM")
+    from rasterio.fill import fillnodata
+
+    filled = fillnodata(np.where(bad, 0.0, h).astype("float32"), mask=(~bad).astype("uint8"), max_search_distance=max(h.shape))
+    if not np.all(np.isfinite(filled)) or bad.all():
+        raise GeoError(f"terrain.file={spec.file!r}: no DEM data over the analysis area to fill from")
+    h[bad] = filled[bad]
+    return int(bad.sum())
+
+
+def _sample(h, rows, cols) -> np.ndarray:
+    """Bilinear heights at fractional (row, col) of the read window's cell centres."""
+    from scipy.ndimage import map_coordinates
+
+    return map_coordinates(h, [rows, cols], order=1, mode="nearest")
+
+
+def _surface_enu(frame, xx, yy, sample_height):
+    """ENU z of the DEM surface straight below the nodes (xx, yy): iterate the node's
+    geodetic position until its surface point lies on the node's vertical."""
+    z = np.zeros_like(xx)
+    for it in range(1, 9):
+        lat, lon, _ = frame.geodetic(np.stack([xx, yy, z], -1))
+        h = frame.ellipsoidal_height_m(lat, lon, sample_height(lat, lon))
+        p = frame.enu_m(lat, lon, h)
+        off = np.hypot(p[:, 0] - xx, p[:, 1] - yy)
+        dz, z = np.max(np.abs(p[:, 2] - z)), p[:, 2]
+        if dz < _TOL_M and np.max(off) < _TOL_M:
+            return z, it
+    raise GeoError("terrain: the DEM surface did not converge onto the grid's verticals (a DEM with cliffs of "
+                   "kilometres between cells?)")
+
+
+def dem_heightfield(spec, frame: SiteFrame, base_dir=None, centre_xy=(0.0, 0.0)) -> tuple[Heightfield, DemInfo]:
+    """The DEM terrain ``spec`` as a heightfield in the site's apparent ENU frame [m]."""
+    xs, ys = _grid(spec, frame, centre_xy)
+    xx, yy = (a.ravel() for a in np.meshgrid(xs, ys))
+    with _open(spec, base_dir) as ds:
+        lat, lon, _ = frame.geodetic(np.stack([xx, yy, np.zeros_like(xx)], -1))
+        rows, cols = _to_dem(ds, lat, lon)
+        h, r0, c0, step = _read_window(ds, spec, rows, cols)
+        filled = _fill(h, spec)
+
+        def at(lat_, lon_):
+            r, c = _to_dem(ds, lat_, lon_)
+            return _sample(h, (r + 0.5 - r0) / step[0] - 0.5, (c + 0.5 - c0) / step[1] - 0.5)
+
+        z, iterations = _surface_enu(frame, xx, yy, at)
+        info = DemInfo(str(spec.file), ds.crs.to_string(), _pixel_m(ds), _pixel_m(ds) * max(step), int(h.size),
+                       int(ds.width * ds.height), filled, int(xx.size), iterations)
+    if np.abs(z).max() > 1e5:
+        raise GeoError(f"terrain.file={spec.file!r}: heights beyond 100 km; expected metres")
+    z = z + frame.refraction_rise_m(xx, yy)
+    return Heightfield(float(xs[0]), float(ys[0]), spec.resolution_m, z.reshape(len(ys), len(xs))), info

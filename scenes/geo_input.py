@@ -1,0 +1,193 @@
+"""Geodetic positions in a scene file: every ``*_m`` position may be given as ``*_geo``.
+
+``X_geo = [lat_deg, lon_deg, height_m]`` (read in ``site.crs``; the height in the site's
+vertical datum) is converted exactly to the site's ENU frame and replaces ``X_m`` before the
+scene is validated. ``X_geo = [lat_deg, lon_deg]`` (two numbers) stands on the terrain,
+raised by the table's ``height_agl_m`` (the laser's aim by ``aim_agl_m``; default 0; observers
+use their ``eye_height_m``).
+Errors name the ``*_geo`` key; the conversions are kept for the report.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .geo import GeoError, SiteFrame
+
+__all__ = ["GeoSite", "resolve_geo"]
+
+# table -> position stems that take a *_geo form (observers' points is a list of positions)
+_STEMS = {"laser": ("position", "aim"), "target": ("center",), "occluder": ("center",), "terrain": ("center",),
+          "observer": ("points", "start", "end", "origin", "center")}
+
+
+@dataclass
+class GeoSite:
+    """The site frame of a scene, its terrain as built for placing points, and what was converted."""
+
+    frame: SiteFrame
+    heightfield: object = None  # scenes.geometry.Heightfield in the site frame (before re-centring)
+    dem: object = None  # scenes.dem.DemInfo
+    conversions: list = field(default_factory=list)
+
+    def describe(self) -> dict:
+        out = self.frame.describe()
+        if self.dem is not None:
+            out["dem"] = dict(self.dem.__dict__)
+        out["converted"] = self.conversions
+        return out
+
+
+def _tables(data: dict):
+    """(kind, path, table) of every table that may hold positions."""
+    if isinstance(data.get("laser"), dict):
+        yield "laser", "laser", data["laser"]
+    for key, kind in (("targets", "target"), ("occluders", "occluder"), ("observers", "observer")):
+        for i, t in enumerate(data.get(key) if isinstance(data.get(key), list) else []):
+            if isinstance(t, dict):
+                yield kind, f"{key}[{i}]", t
+    if isinstance(data.get("terrain"), dict):
+        yield "terrain", "terrain", data["terrain"]
+
+
+def _geo_keys(data: dict) -> list:
+    found = [f"{path}.{k}" for kind, path, t in _tables(data) for k in t if k.endswith("_geo") or k.endswith("_agl_m")]
+    if isinstance(data.get("range"), dict) and "boundary_geo" in data["range"]:
+        found.append("range.boundary_geo")
+    return found
+
+
+def _rows(value, where: str, many: bool) -> np.ndarray:
+    rows = value if many else [value]
+    if (not isinstance(rows, list) or not rows or not all(isinstance(r, list) and len(r) in (2, 3) for r in rows)
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for r in rows for x in r)):
+        shape = "a list of [lat_deg, lon_deg(, height_m)]" if many else "[lat_deg, lon_deg, height_m] or [lat_deg, lon_deg]"
+        raise GeoError(f"{where}: expected {shape}, got {value!r}")
+    if len({len(r) for r in rows}) != 1:
+        raise GeoError(f"{where}: expected all points with a height or all without, got {value!r}")
+    a = np.asarray(rows, float)
+    if not np.all(np.isfinite(a)):
+        raise GeoError(f"{where}: expected finite numbers, got {value!r}")
+    return a
+
+
+def _on_terrain(site: GeoSite, lat, lon, agl, where: str) -> np.ndarray:
+    """ENU of points at ``agl`` above the terrain at (lat, lon): the point's horizontal
+    position depends on its height, so iterate (mm in two steps)."""
+    hf, frame = site.heightfield, site.frame
+    if hf is None:
+        raise GeoError(f"{where}: two numbers [lat_deg, lon_deg] stand on the terrain, and the scene has none; "
+                       f"give [lat_deg, lon_deg, height_m]")
+    h = np.full(len(lat), frame.h0_m)
+    for _ in range(4):
+        p = frame.enu_m(lat, lon, h)
+        if not np.all(hf.contains_xy(p[:, 0], p[:, 1])):
+            raise GeoError(f"{where}: a point lies outside the terrain's extent")
+        z = hf.height_at(p[:, 0], p[:, 1]) - frame.refraction_rise_m(p[:, 0], p[:, 1]) + agl
+        h = frame.geodetic(np.stack([p[:, 0], p[:, 1], z], -1))[2]
+    p[:, 2] = z + frame.refraction_rise_m(p[:, 0], p[:, 1])
+    return p
+
+
+def _convert(site: GeoSite, value, where: str, many: bool, agl: float, keep_z: bool) -> list:
+    a = _rows(value, where, many)
+    lat, lon, h = site.frame.input_to_geodetic(a, where)
+    if a.shape[1] == 3:
+        p = site.frame.enu_m(lat, lon, site.frame.ellipsoidal_height_m(lat, lon, h))
+    else:
+        p = _on_terrain(site, lat, lon, 0.0 if keep_z else agl, where)
+    out = p.tolist()
+    site.conversions.append({"key": where, "given": value, "m": out if many else out[0]})
+    return out if many else out[0]
+
+
+def _agl(t: dict, key: str, path: str):
+    v = t.pop(key, None)
+    if v is not None and (not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 <= v <= 1e5):
+        raise GeoError(f"{path}.{key}: expected a height above the terrain of 0 to 1e5 m, got {v!r}")
+    return v
+
+
+def _resolve_table(site: GeoSite, kind: str, path: str, t: dict) -> None:
+    """Replace the table's ``*_geo`` positions by ``*_m``; a two-number one stands on the
+    terrain raised by its height key (``height_agl_m``; the laser's aim ``aim_agl_m``)."""
+    agl_keys = {"position": "height_agl_m", "center": "height_agl_m", "aim": "aim_agl_m"} if kind != "observer" else {}
+    agl = {k: _agl(t, k, path) for k in set(agl_keys.values()) if kind in ("laser", "target", "occluder")}
+    for stem in _STEMS[kind]:
+        key = f"{stem}_geo"
+        if key not in t:
+            continue
+        if f"{stem}_m" in t:
+            raise GeoError(f"{path}: give {stem}_m or {key}, not both")
+        keep_z = kind == "observer" and t.get("eye_height_m") is not None
+        height = agl.pop(agl_keys.get(stem), None) or 0.0
+        t[f"{stem}_m"] = _convert(site, t.pop(key), f"{path}.{key}", stem == "points", float(height), keep_z)
+    for k, v in agl.items():
+        if v is not None:
+            raise GeoError(f"{path}.{k}: only with a two-number {'aim' if k == 'aim_agl_m' else 'position/center'}_geo "
+                           f"([lat_deg, lon_deg] on the terrain)")
+
+
+def _boundary(site: GeoSite, rng: dict) -> None:
+    if "boundary_m" in rng:
+        raise GeoError("range: give boundary_m or boundary_geo, not both")
+    a = _rows(rng.pop("boundary_geo"), "range.boundary_geo", True)
+    lat, lon, _ = site.frame.input_to_geodetic(a, "range.boundary_geo")
+    p = site.frame.enu_m(lat, lon, np.full(len(lat), site.frame.h0_m))
+    rng["boundary_m"] = p[:, :2].tolist()
+    site.conversions.append({"key": "range.boundary_geo", "given": a.tolist(), "m": rng["boundary_m"]})
+
+
+def _laser_xy(frame: SiteFrame, laser: dict) -> tuple:
+    if isinstance(laser.get("position_m"), list) and len(laser["position_m"]) == 3:
+        return float(laser["position_m"][0]), float(laser["position_m"][1])
+    a = _rows(laser.get("position_geo"), "laser.position_geo", False)
+    lat, lon, _ = frame.input_to_geodetic(a, "laser.position_geo")
+    p = frame.enu_m(lat, lon, np.full(1, frame.h0_m))  # the horizontal position the refraction rise is measured from (m-exact)
+    return float(p[0, 0]), float(p[0, 1])
+
+
+def _terrain(site: GeoSite, data: dict, base_dir, validate) -> None:
+    from .geometry import terrain_heightfield
+    from .spec import TerrainSpec
+
+    t = data["terrain"]
+    _resolve_table(site, "terrain", "terrain", t)
+    spec = validate(TerrainSpec, t, "terrain")
+    if spec.kind == "dem":
+        from .dem import dem_heightfield
+
+        site.heightfield, site.dem = dem_heightfield(spec, site.frame, base_dir, spec.center_m[:2])
+    else:
+        site.heightfield = terrain_heightfield(spec, base_dir)
+
+
+def resolve_geo(data: dict, base_dir, validate) -> tuple[dict, GeoSite | None]:
+    """``data`` with every ``*_geo`` position converted to ``*_m`` in the site frame, and the
+    site (None without a ``[site]`` table). ``validate(cls, value, path)`` validates a table."""
+    keys = _geo_keys(data)
+    if "site" not in data:
+        if keys:
+            raise GeoError(f"{keys[0]}: a geodetic position or height above the terrain needs a [site] table "
+                           f"(origin = [lat_deg, lon_deg, height_m])")
+        return data, None
+    from .spec import SiteSpec
+
+    data = copy.deepcopy(data)
+    s = validate(SiteSpec, data["site"], "site")
+    laser = data.get("laser") if isinstance(data.get("laser"), dict) else {}
+    frame = SiteFrame(tuple(s.origin), s.vertical, s.crs, s.refraction_k)
+    if "position_m" in laser or "position_geo" in laser:
+        frame.laser_xy_m = _laser_xy(frame, laser)
+    site = GeoSite(frame)
+    if isinstance(data.get("terrain"), dict):
+        _terrain(site, data, base_dir, validate)
+    for kind, path, t in _tables(data):
+        if kind != "terrain":
+            _resolve_table(site, kind, path, t)
+    if isinstance(data.get("range"), dict) and "boundary_geo" in data["range"]:
+        _boundary(site, data["range"])
+    return data, site
