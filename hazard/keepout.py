@@ -359,11 +359,19 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
 
 @dataclass
 class Footprint:
-    """Where the reflected irradiance at eye height reaches the MPE on the terrain grid."""
+    """Where the reflected irradiance at eye height reaches the MPE on the terrain grid.
+
+    ``ratio``: the peak reflected hazard ratio (irradiance / MPE) at each node's eye-height
+    point; with the line of sight traced where the unoccluded sum reaches the MPE, the
+    unoccluded sum elsewhere (an upper bound, below 1); NaN where not evaluated (beyond the
+    longest NOHD of a single spot: below 1). ``direct_ratio``: the laser's own beam there
+    (nominal aim, naked eye, line of sight traced), when computed."""
 
     mask: np.ndarray  # (ny, nx) over the terrain heightfield
     area_m2: float
     eye_height_m: float
+    ratio: np.ndarray | None = None
+    direct_ratio: np.ndarray | None = None
 
 
 def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
@@ -384,18 +392,20 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     xs = terrain.x0 + terrain.dx * np.arange(nx)
     ys = terrain.y0 + terrain.dx * np.arange(ny)
     mask = np.zeros((ny, nx), bool)
+    ratio = np.full((ny, nx), np.nan, np.float32)
     if not spots:
-        return Footprint(mask, 0.0, eye_height_m)
+        return Footprint(mask, 0.0, eye_height_m, ratio)
     ix, iy = np.arange(nx), np.arange(ny)
     if len(spots) == 1 and np.isfinite(max_range_m):
         c = spots[0].centroid
         ix = np.flatnonzero(np.abs(xs - c[0]) <= max_range_m)
         iy = np.flatnonzero(np.abs(ys - c[1]) <= max_range_m)
     if not len(ix) or not len(iy):
-        return Footprint(mask, 0.0, eye_height_m)
+        return Footprint(mask, 0.0, eye_height_m, ratio)
     gx, gy = np.meshgrid(xs[ix], ys[iy])
     pts = np.stack([gx.ravel(), gy.ravel(), terrain.heights[np.ix_(iy, ix)].ravel() + eye_height_m], 1)
     hot = np.zeros(len(pts), bool)
+    peak = np.zeros(len(pts))
     n_t = max([len(v) for v in states_by_target.values()] + [1])
 
     def block(a, b):
@@ -408,7 +418,8 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
             if spot.material.has_specular:
                 e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states)
             parts.append(e if e.ndim == 2 else e[:, None])
-        over = sum(parts).max(axis=1) >= mpe_w_m2  # as for observers: ratio >= 1
+        top = sum(parts).max(axis=1)
+        over = top >= mpe_w_m2  # as for observers: ratio >= 1
         if ray_scene is not None and over.any():
             for spot, e in zip(spots, parts):
                 idx = np.flatnonzero(over & (e.max(axis=1) > 0))
@@ -416,9 +427,11 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
                     start = ray_scene.off_surface(spot.centroid, spot.mean_frame[2])
                     e[idx[ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])]] = 0.0
             rows = np.flatnonzero(over)
-            over[rows] = sum(e[rows] for e in parts).max(axis=1) >= mpe_w_m2
-        hot[a:b] = over
+            top[rows] = sum(e[rows] for e in parts).max(axis=1)
+            over[rows] = top[rows] >= mpe_w_m2
+        hot[a:b], peak[a:b] = over, top / mpe_w_m2
 
     map_blocks(block, len(pts), block_rows(n_t * len(spots), max(1, len(pts))))
     mask[np.ix_(iy, ix)] = hot.reshape(len(iy), len(ix))
-    return Footprint(mask, float(mask.sum() * terrain.dx**2), eye_height_m)
+    ratio[np.ix_(iy, ix)] = peak.reshape(len(iy), len(ix))
+    return Footprint(mask, float(mask.sum() * terrain.dx**2), eye_height_m, ratio)

@@ -127,6 +127,15 @@ def _json_safe(obj):
     return obj
 
 
+def _frame(scene) -> dict:
+    """The coordinate frame the report's positions are in (:mod:`scenes.geo` for a site)."""
+    site = getattr(scene, "site", None)
+    if site is None:
+        return {"kind": "local", "statement": "the scene's local frame: x, y, z [m] as the scene file gives them "
+                "(no [site]: not placed on the earth)"}
+    return site.describe()
+
+
 def report_dict(result, cols=None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
@@ -145,6 +154,7 @@ def report_dict(result, cols=None) -> dict:
         "versions": versions(),
         "scene": {"name": scene.name, "source": scene.source, "sha256": scene.text_sha256,
                   "offset_m": scene.offset_m.tolist(), "echo": scene.echo()},
+        "frame": _frame(scene),
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),
         "mpe_w_m2": result.mpe_w_m2,
@@ -186,12 +196,34 @@ def _csv_name(label: str) -> str:
     return label
 
 
+GEO_COLUMNS = ["lat_deg", "lon_deg", "height_m"]  # after z_m, in scenes with a [site]
+
+
+def observer_geodetic(result, pos) -> np.ndarray:
+    """(M, 3) latitude, longitude [deg] and height in the site's vertical datum [m] of the
+    observers at world ``pos``; eye-height points stand on the terrain, whose apparent
+    refraction rise (:mod:`scenes.geo`) is taken off their height."""
+    frame = result.scene.site.frame
+    groups = result.observers.observers.group
+    on_ground = np.array([o.eye_height_m is not None for o in result.scene.spec.observers] + [False], bool)[groups]
+    true = pos.copy()
+    true[on_ground, 2] -= frame.refraction_rise_m(pos[on_ground, 0], pos[on_ground, 1])
+    lat, lon, h = frame.geodetic(true)
+    return np.column_stack([lat, lon, frame.datum_height_m(lat, lon, h)])
+
+
 def _csv_text(result, cols) -> str:
-    """observers.csv: every observer, one row each (columns computed once, joined as text)."""
+    """observers.csv: every observer, one row each (columns computed once, joined as text);
+    with a [site], each position also as latitude, longitude and height."""
     pos = cols["position_m"]
+    names = CSV_COLUMNS[:4]
     text = [[_csv_name(x) for x in result.observers.labels]] + [_csv_cell(pos[:, k], "x") for k in range(3)]
+    if getattr(result.scene, "site", None) is not None and len(pos):
+        geo = observer_geodetic(result, pos)
+        text += [_csv_cell(geo[:, k], "x") for k in range(3)]
+        names = names + GEO_COLUMNS
     text += [_csv_cell(cols[k], k) for k in CSV_COLUMNS[4:]]
-    lines = [",".join(CSV_COLUMNS)] + [",".join(r) for r in zip(*text)]
+    lines = [",".join(names + CSV_COLUMNS[4:])] + [",".join(r) for r in zip(*text)]
     return "\r\n".join(lines) + "\r\n"
 
 
@@ -237,9 +269,10 @@ def _swap_folder(tmp: Path, out: Path, names, parent: Path) -> bool:
     return True
 
 
-def write_outputs(result, outdir, *, force=False, extra=None) -> list:
+def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> list:
     """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit,
-    with the files of ``extra`` (name -> bytes, e.g. ``plan.png``) in the same unit.
+    with the files of ``extra`` (name -> bytes, e.g. ``plan.png``) in the same unit, and
+    the report's further ``sections`` (key -> data, e.g. ``map_outputs``).
 
     Both files are written (and fsynced) into a temporary folder beside ``outdir``, which
     is then renamed into place: a new ``outdir`` appears whole, and an existing one that
@@ -261,6 +294,7 @@ def write_outputs(result, outdir, *, force=False, extra=None) -> list:
     doc = report_dict(result, cols)
     if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
         doc["warnings"] = list(getattr(result.scene, "warnings", None) or [])
+    doc.update(_json_safe(dict(sections or {})))
     texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
              **extra}
     parent = out.parent if str(out.parent) else Path(".")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from ..keepout import Footprint, ground_footprint
+from .direct import beam_at, clear_of_objects
 
 __all__ = ["Footprints", "footprints"]
 
@@ -30,6 +33,23 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
     if states:
         fp_dyn = ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, states_by_target=states,
                                   max_range_m=rmax)
+    direct = direct_ratio(beam, terrain, ray_scene, mu, eye_height_m, mpe_w_m2)
+    fp_static, fp_dyn = replace(fp_static, direct_ratio=direct), replace(fp_dyn, direct_ratio=direct)
     detail = (f"hazardous ground at {eye_height_m:g} m eye height: static {fp_static.area_m2:.4g} m^2, "
               f"dynamic {fp_dyn.area_m2:.4g} m^2")
     return Footprints(fp_static, fp_dyn, detail)
+
+
+def direct_ratio(beam, terrain, ray_scene, mu, eye_height_m, mpe_w_m2) -> np.ndarray:
+    """The laser's own beam at each terrain node's eye-height point, as a hazard ratio
+    (nominal aim, naked eye, :func:`hazard.pipeline.direct.beam_at`; zero where an object
+    stands between the aperture and the eye)."""
+    ny, nx = terrain.heights.shape
+    gx, gy = np.meshgrid(terrain.x0 + terrain.dx * np.arange(nx), terrain.y0 + terrain.dx * np.arange(ny))
+    pts = np.stack([gx.ravel(), gy.ravel(), terrain.heights.ravel() + eye_height_m], 1)
+    at = beam_at(beam, pts, mu)
+    out = np.zeros(len(pts), np.float32)
+    if len(at.rows):
+        clear = clear_of_objects(at, pts, ray_scene) if ray_scene is not None else np.ones(len(at.rows), bool)
+        out[at.rows] = np.where(clear, at.irradiance_w_m2 / mpe_w_m2, 0.0)
+    return out.reshape(ny, nx)

@@ -32,7 +32,8 @@ def run_with_plot(tmp_path_factory):
 def test_run_plot_writes_the_plan_with_the_other_outputs(run_with_plot):
     out, text = run_with_plot
     want = ["elevation.png", "exposure_arc-10m_crossing.png", "exposure_shell-20m_crossing_0.png", "exposure_shell-20m_crossing_1.png",
-            "nohd_time_copper.png", "nohd_time_stainless.png", "observers.csv", "plan.png", "report.json"]
+            "nohd_time_copper.png", "nohd_time_stainless.png", "observers.csv", "plan.png", "report.json",
+            "zones_local_frame.json"]
     assert sorted(p.name for p in out.iterdir()) == want
     assert all("wrote " + str(out / n) in text for n in want)
 

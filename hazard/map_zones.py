@@ -1,0 +1,198 @@
+"""The zones of a run as plan-view geometry in world x (east), y (north) [m], for maps.
+
+Each :class:`Zone` is a shapely geometry with the properties a map shows (kind, target,
+NOHD, standard, exposure). :mod:`hazard.map_outputs` writes them as GeoJSON, KML and a
+GeoTIFF. Every kind the run has is exported; :data:`ZONE_KINDS` lists them all, and a kind
+a run does not have is named in the file's ``absent`` list with the reason, never left out
+silently:
+
+- ``footprint``: the hazardous ground at eye height (static and dynamic), the union of
+  the terrain cells whose node reaches the MPE (cell = node +- dx/2: its area equals the
+  area the report gives);
+- ``sdz``: the laser surface danger zone of the direct beam over the aim or sector with
+  the pointing buffer; ``sdz_nominal`` without the buffer; ``sdz_aided`` through each
+  optical aid;
+- ``keepout_lobe``: the plan outline of each target's keep-out lobe (static, dynamic) at
+  eye height over terrain, else its plan projection (:mod:`hazard.lobe_outline`);
+- ``mirror_beam``: each target's mirror beam out to its specular NOHD;
+- ``observer``: every observer point with its verdict and hazard ratio;
+- ``range_boundary``, ``laser``, ``target``: the range and what stands on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Zone", "ZONE_KINDS", "zones"]
+
+ZONE_KINDS = ("footprint", "sdz", "sdz_nominal", "sdz_aided", "keepout_lobe", "mirror_beam", "observer",
+              "range_boundary", "laser", "target")
+
+
+@dataclass
+class Zone:
+    """One map feature: a shapely geometry in world x, y [m], the heights [m] of its
+    vertices' ground (for the geodetic conversion) and its properties."""
+
+    kind: str
+    geometry: object
+    properties: dict = field(default_factory=dict)
+    z_m: float | None = None  # one world height for a point (None: the terrain / eye height below each vertex)
+
+
+def _common(result) -> dict:
+    m = result.mpe
+    return {"standard": m.standard, "exposure_duration_s": float(m.duration_s), "mpe_w_m2": float(result.mpe_w_m2),
+            "wavelength_nm": float(m.wavelength_nm), "scene": result.scene.name}
+
+
+def _cells_polygon(mask, x0, y0, dx):
+    """Union of the squares (node +- dx/2) of the True nodes of ``mask`` (ny, nx), world [m]."""
+    import shapely
+
+    iy, ix = np.nonzero(mask)
+    if not len(ix):
+        return None
+    x, y = x0 + dx * ix, y0 + dx * iy
+    boxes = shapely.box(x - dx / 2, y - dx / 2, x + dx / 2, y + dx / 2)
+    return shapely.coverage_union_all(boxes)
+
+
+def _footprints(result, off) -> list:
+    out = []
+    t = result.scene.terrain
+    for variant, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
+        if f is None:
+            continue
+        g = _cells_polygon(f.mask, t.x0 + off[0], t.y0 + off[1], t.dx)
+        if g is not None:
+            out.append(Zone("footprint", g, {"variant": variant, "eye_height_m": f.eye_height_m, "area_m2": f.area_m2,
+                                             "cell_m": t.dx, "hazard": "naked eye",
+                                             "what": f"hazardous ground from the reflections at {f.eye_height_m:g} m eye height"}))
+    return out
+
+
+def _sdz(result) -> list:
+    from shapely.geometry import Polygon
+
+    z = getattr(result, "sdz", None) or {}
+    out = []
+    if z.get("polygon_m"):
+        out.append(Zone("sdz", Polygon(z["polygon_m"]), {
+            "nohd_m": z.get("nohd_m"), "max_range_m": z.get("max_range_m"), "area_m2": z.get("area_m2"),
+            "unbounded": z.get("unbounded"), "buffer_rad": (z.get("directions") or {}).get("buffer_rad"),
+            "hazard": "naked eye", "what": "laser surface danger zone of the direct beam (with the pointing buffer)"}))
+    if (z.get("nominal") or {}).get("polygon_m"):
+        out.append(Zone("sdz_nominal", Polygon(z["nominal"]["polygon_m"]), {
+            "hazard": "naked eye", "what": "the danger zone without the pointing buffer"}))
+    for a in z.get("aided") or []:
+        if a.get("polygon_m"):
+            out.append(Zone("sdz_aided", Polygon(a["polygon_m"]), {
+                "magnification": a.get("magnification"), "objective_diameter_m": a.get("objective_diameter_m"),
+                "nohd_m": a.get("nohd_m"), "hazard": "aided only", "what": "danger zone through optics"}))
+    return out
+
+
+def _lobes(result, off) -> list:
+    from .plan_view import lobe_rings
+    from shapely.geometry import Polygon
+
+    rows = {t.name: t for t in result.targets}
+    out = []
+    for target, kind, cut, rings, holes in lobe_rings(result, off[:2]):
+        lobe = None if rows.get(target) is None else getattr(rows[target], f"{kind}_lobe", None)
+        nohd = None if lobe is None else float(lobe.max_range_m)
+        for ring in rings:
+            inner = [h for h in holes if Polygon(ring).contains(Polygon(h))]
+            out.append(Zone("keepout_lobe", Polygon(ring, inner), {"target": target, "variant": kind, "cut": cut,
+                                                                  "nohd_m": nohd, "hazard": "naked eye"}))
+    return out
+
+
+def _mirrors(result, off) -> list:
+    from shapely.geometry import LineString
+
+    from .plan_view import mirror_segments
+
+    rows = {t.name: t for t in result.targets}
+    out = []
+    for target, start, end in mirror_segments(result):
+        row = rows.get(target)
+        nohd = None if row is None else row.specular_nohd_dynamic_m
+        a, b = np.asarray(start) + off, np.asarray(end) + off
+        out.append(Zone("mirror_beam", LineString([a[:2], b[:2]]), {"target": target, "nohd_m": nohd, "hazard": "naked eye",
+                                                                     "start_height_m": float(a[2]), "end_height_m": float(b[2])}))
+    return out
+
+
+MAP_OBSERVERS_MAX = 20_000  # observer points on a map: every hazardous one, then the highest ratios (all in observers.csv)
+
+
+def observers_on_map(result) -> tuple[np.ndarray, str]:
+    """Which observers a map shows: all up to :data:`MAP_OBSERVERS_MAX`, else every
+    hazardous one and then the highest hazard ratios; and a statement of which."""
+    ratio = np.nan_to_num(np.asarray(result.hazard_ratio, float), nan=np.inf)
+    m = len(ratio)
+    if m <= MAP_OBSERVERS_MAX:
+        return np.arange(m), "all"
+    haz = np.asarray(result.hazardous, bool)
+    order = np.lexsort((-ratio, ~haz))[: max(MAP_OBSERVERS_MAX, int(haz.sum()))]
+    return np.sort(order), f"{len(order)} of {m}: every hazardous one, then the highest hazard ratios (all in observers.csv)"
+
+
+def _observers(result) -> list:
+    from shapely.geometry import Point
+
+    obs = result.observers
+    rows, _ = observers_on_map(result)
+    p = np.asarray(obs.position_m, float).reshape(-1, 3)  # world
+    ratio = np.asarray(result.hazard_ratio, float)
+    haz = np.asarray(result.hazardous, bool)
+    groups = obs.observers
+    aided = np.array([groups.optics[g] is not None for g in groups.group], bool) if len(p) else np.zeros(0, bool)
+    h_exp = np.asarray(obs.radiant_exposure_j_m2, float)
+    labels = obs.labels
+    out = []
+    for i in rows.tolist():
+        verdict = ("hazardous, aided" if aided[i] else "hazardous") if haz[i] else "below the MPE"
+        out.append(Zone("observer", Point(p[i, :2]), {
+            "name": labels[i], "verdict": verdict, "hazard_ratio": float(ratio[i]),
+            "radiant_exposure_j_m2": float(h_exp[i]), "hazard": ("aided only" if aided[i] else "naked eye") if haz[i] else "none",
+            "height_m": float(p[i, 2])}, z_m=float(p[i, 2])))
+    return out
+
+
+def _things(result, off) -> list:
+    from shapely.geometry import Point, Polygon
+
+    scene = result.scene
+    lp = np.asarray(scene.laser_position_m, float) + off
+    out = [Zone("laser", Point(lp[:2]), {"name": "laser", "power_w": float(scene.spec.laser.average_power_w)}, z_m=float(lp[2]))]
+    for t in scene.spec.targets:
+        c = np.asarray(t.center_m, float)
+        out.append(Zone("target", Point(c[:2]), {"name": t.name}, z_m=float(c[2])))
+    if scene.spec.range is not None:
+        out.append(Zone("range_boundary", Polygon(scene.spec.range.boundary_m), {"what": "the range boundary"}))
+    return out
+
+
+def zones(result) -> tuple[list, dict]:
+    """Every zone of ``result`` (world x, y [m]) and the kinds absent with the reason."""
+    off = np.asarray(result.scene.offset_m, float)
+    parts = {"footprint": _footprints(result, off) if result.scene.terrain is not None else [],
+             "sdz": _sdz(result), "keepout_lobe": _lobes(result, off), "mirror_beam": _mirrors(result, off),
+             "observer": _observers(result), "things": _things(result, off)}
+    common = _common(result)
+    out = [z for zs in parts.values() for z in zs]
+    for z in out:
+        z.properties = {"kind": z.kind, **z.properties, **common}
+    present = {z.kind for z in out}
+    why = {"footprint": "no terrain (the ground footprint needs one)" if result.scene.terrain is None
+           else "no hazardous ground at eye height",
+           "sdz": "no danger zone computed", "sdz_nominal": "no sector with a pointing buffer (only then is the sector without the buffer drawn apart)",
+           "sdz_aided": "no optical aids", "keepout_lobe": "no lobe with a hazardous reach", "mirror_beam": "no mirror beam",
+           "observer": "no observers", "range_boundary": "no [range] boundary", "laser": "", "target": ""}
+    absent = {k: why[k] for k in ZONE_KINDS if k not in present}
+    return out, absent
