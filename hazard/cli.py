@@ -13,6 +13,7 @@ Verbs:
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
   hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
   hazard render SCENE -o OUTDIR   keep-out renders (PNG), VTK for ParaView, lobe animation
+  hazard report OUTDIR [--pdf]  the report for the review board: OUTDIR/report.html (self-contained)
   hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
   hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
   hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
@@ -102,6 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--verbose", action="store_true", help="after the answer, print the stage log (every stage, ran or skipped, with its run time)")
     p.add_argument("--plot", action="store_true", help="also write the pictures: plan.png and elevation.png (danger zone, beams, lobe outlines, "
                    "range rings, observers by verdict), nohd_time_<target>.png and exposure_<observer>.png")
+    p.add_argument("--report", action="store_true", help="also write report.html, the report for the review board "
+                   "(after the pictures of --plot; see hazard report)")
     _add_run_args(p)
 
     p = sub.add_parser("compare", help="static vs dynamic reflectance: NOHD per target and observer verdicts")
@@ -128,6 +131,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("report", help="the report for the review board: one self-contained HTML file (and a PDF) "
+                                      "from an output folder of hazard run")
+    p.add_argument("out_dir", metavar="OUT_DIR", help="output folder of hazard run (holding report.json; its pictures are embedded)")
+    p.add_argument("--pdf", action="store_true", help="also print report.pdf with headless Chromium")
+    p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = sub.add_parser("render", help="3-D renders of the keep-out zones (PNG), a VTK multiblock and a lobe animation")
     p.add_argument("scene", help="scene TOML file, or a bundled example's name")
@@ -342,11 +351,13 @@ def _finish(args, result):
 
 
 def _cmd_run(args, out, err):
-    from .report import report_dict, summary_text, write_outputs
+    from .report import _json_safe, report_dict, summary_text, write_outputs
 
     from .figures import FIXED_NAMES
 
-    _check_outdir(args.output, ("report.json", "observers.csv") + (FIXED_NAMES if args.plot else ()), args.force)
+    from .map_outputs import MAP_NAMES, map_files
+
+    _check_outdir(args.output, ("report.json", "observers.csv") + MAP_NAMES + (FIXED_NAMES if args.plot else ()), args.force)
     if args.plot:
         _needs("matplotlib", "render")
     result = _analyse(args, err)
@@ -355,9 +366,14 @@ def _cmd_run(args, out, err):
         from .figures import run_figures
 
         extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
-    paths = write_outputs(result, args.output, force=args.force, extra=extra)
+    if not args.quiet:
+        err.write("hazard: map outputs...\n")
+    maps, section = map_files(result)
+    paths = write_outputs(result, args.output, force=args.force, extra={**extra, **maps}, sections={"map_outputs": section})
+    if args.report:  # the review page embeds the pictures just written
+        paths += _write_review(args.output, args, err)
     if args.json:
-        out.write(json.dumps(report_dict(result), indent=1) + "\n")
+        out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
     else:
         out.write(summary_text(result, verbose=args.verbose) + "\n")
         out.write("".join(f"wrote {p}\n" for p in paths))
@@ -716,7 +732,27 @@ def _cmd_convergence(args, out, err):
     return EXIT_OK
 
 
-_COMMANDS = {"render": _cmd_render, "convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+def _write_review(out_dir, args, err, pdf=False) -> list:
+    """hazard.review.write_review with the stage lines of the other verbs on ``err``."""
+    from .review import write_review
+
+    return write_review(out_dir, pdf=pdf, progress=_stage_lines(args, err))
+
+
+def _cmd_report(args, out, err):
+    from .review import PdfError
+
+    try:
+        paths = _write_review(args.out_dir, args, err, pdf=args.pdf)
+    except PdfError as exc:  # the HTML is written; the PDF is not
+        out.write(f"wrote {exc.html}\n")
+        err.write(f"hazard report: error: {_one_line(exc)}\n")
+        return EXIT_INTERNAL
+    out.write("".join(f"wrote {p}\n" for p in paths))
+    return EXIT_OK
+
+
+_COMMANDS = {"report": _cmd_report, "render": _cmd_render, "convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
              "models": _cmd_models, "schema": _cmd_schema}
 
 
