@@ -242,6 +242,8 @@ def hazard_tiff(result, frame_info) -> bytes | None:
     transform = from_origin(t.x0 + off[0] - t.dx / 2, t.y0 + off[1] + t.dx * (ny - 1) + t.dx / 2, t.dx, t.dx)
     crs = _tif_crs(result)
     tags = {"frame": frame_info["statement"], "nan": "not evaluated: beyond every target's NOHD (ratio below 1)",
+            "sampling": (f"the ratio at each terrain node (every {t.dx:g} m) at eye height: a zone smaller than a cell can "
+                         f"fall between nodes; the keepout_lobe outlines of zones.geojson are drawn from the lobes themselves"),
             "eye_height_m": str(result.footprint_dynamic.eye_height_m), "scene": result.scene.name,
             "scene_sha256": result.scene.text_sha256, "mpe_w_m2": repr(float(result.mpe_w_m2))}
     if crs is not None:

@@ -189,8 +189,10 @@ def zones(result) -> tuple[list, dict]:
     for z in out:
         z.properties = {"kind": z.kind, **z.properties, **common}
     present = {z.kind for z in out}
-    why = {"footprint": "no terrain (the ground footprint needs one)" if result.scene.terrain is None
-           else "no hazardous ground at eye height",
+    t = result.scene.terrain
+    why = {"footprint": "no terrain (the ground footprint needs one)" if t is None
+           else (f"no terrain node reaches the MPE at eye height (nodes every {t.dx:g} m: a zone smaller than that can fall "
+                 f"between them; the keepout_lobe outlines, drawn from the lobes themselves, show it)"),
            "sdz": "no danger zone computed", "sdz_nominal": "no sector with a pointing buffer (only then is the sector without the buffer drawn apart)",
            "sdz_aided": "no optical aids", "keepout_lobe": "no lobe with a hazardous reach", "mirror_beam": "no mirror beam",
            "observer": "no observers", "range_boundary": "no [range] boundary", "laser": "", "target": ""}

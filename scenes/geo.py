@@ -191,7 +191,8 @@ class SiteFrame:
         lat, lon, h = self.origin_deg_m
         return {
             "kind": "site",
-            "statement": (f"exact east-north-up frame of the WGS 84 point {lat:.7f} N, {lon:.7f} E, {h:.3f} m "
+            "statement": (f"exact east-north-up frame of the WGS 84 point {abs(lat):.7f} {'N' if lat >= 0 else 'S'}, "
+                          f"{abs(lon):.7f} {'E' if lon >= 0 else 'W'}, {h:.3f} m "
                           f"({'above the ellipsoid' if self.vertical == 'ellipsoid' else 'EGM96 orthometric'}); "
                           f"x east, y north, z up [m]. The terrain includes the earth's curvature and atmospheric "
                           f"refraction as an apparent rise k d^2 / (2 R) of the ground, k = {self.refraction_k:g}, "
