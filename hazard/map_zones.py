@@ -160,7 +160,7 @@ def _observers(result) -> list:
         out.append(Zone("observer", Point(p[i, :2]), {
             "name": labels[i], "verdict": verdict, "hazard_ratio": float(ratio[i]),
             "radiant_exposure_j_m2": float(h_exp[i]), "hazard": ("aided only" if aided[i] else "naked eye") if haz[i] else "none",
-            "height_m": float(p[i, 2])}, z_m=float(p[i, 2])))
+            "z_m": float(p[i, 2])}, z_m=float(p[i, 2])))
     return out
 
 

@@ -201,13 +201,11 @@ GEO_COLUMNS = ["lat_deg", "lon_deg", "height_m"]  # after z_m, in scenes with a 
 
 def observer_geodetic(result, pos) -> np.ndarray:
     """(M, 3) latitude, longitude [deg] and height in the site's vertical datum [m] of the
-    observers at world ``pos``; eye-height points stand on the terrain, whose apparent
-    refraction rise (:mod:`scenes.geo`) is taken off their height."""
+    observers at world ``pos``: the true positions, the apparent refraction rise of the
+    analysis frame (:mod:`scenes.geo`) taken off."""
     frame = result.scene.site.frame
-    groups = result.observers.observers.group
-    on_ground = np.array([o.eye_height_m is not None for o in result.scene.spec.observers] + [False], bool)[groups]
     true = pos.copy()
-    true[on_ground, 2] -= frame.refraction_rise_m(pos[on_ground, 0], pos[on_ground, 1])
+    true[:, 2] -= frame.refraction_rise_m(pos[:, 0], pos[:, 1])
     lat, lon, h = frame.geodetic(true)
     return np.column_stack([lat, lon, frame.datum_height_m(lat, lon, h)])
 

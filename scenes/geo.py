@@ -21,11 +21,14 @@ rise of the terrain by ``k d^2 / (2 R)`` over its exact ENU height, with d from 
 (the beam's origin) and R the Gaussian mean radius of curvature at the origin. The
 horizon of an eye at height h then lies at sqrt(2 R h / (1 - k)) instead of sqrt(2 R h):
 the beam reaches past the geometric horizon, the conservative side for observers beyond
-it. (A ridge that backstops the beam is raised by the same amount and stops slightly more
-of it; the report gives the largest rise, and ``refraction_k = 0`` switches refraction off
-to check a backstop without it.) Only the terrain is raised, and what stands on it
-(heights above the terrain, eye heights); positions given with an absolute height are
-placed at their exact ENU height.
+it. Every position goes into this apparent frame: the terrain and what stands on it, and
+the points given with an absolute height (laser, aim, target and occluder centres, observer
+points), so a mast behind a ridge is seen as a refracted beam sees it. (A ridge that
+backstops the beam rises as the rest does: the geometry between them is the refracted
+one; ``refraction_k = 0`` checks a backstop without refraction.) Directions (normals, the
+beam's ``direction``, grid vectors) are not turned by the rise's slope, k d / R (2e-4 rad
+at 10 km). Positions in report.json are in the apparent frame; observers.csv's latitude,
+longitude and height are of the true positions.
 
 **Vertical datum.** ``vertical = "ellipsoid"`` takes heights above the WGS 84 ellipsoid;
 ``"egm96"`` takes orthometric heights above the EGM96 geoid and converts them with PROJ's

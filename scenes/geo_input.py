@@ -1,5 +1,10 @@
 """Geodetic positions in a scene file: every ``*_m`` position may be given as ``*_geo``.
 
+In a site scene every position then goes into the *apparent* frame of refraction
+(:mod:`scenes.geo`): the exact ENU point raised by k d^2 / (2 R), as the terrain is, so the
+straight rays of the analysis see the geometry a refracted beam sees. ``conversions``
+keep the exact ENU points.
+
 ``X_geo = [lat_deg, lon_deg, height_m]`` (read in ``site.crs``; the height in the site's
 vertical datum) is converted exactly to the site's ENU frame and replaces ``X_m`` before the
 scene is validated. ``X_geo = [lat_deg, lon_deg]`` (two numbers) stands on the terrain,
@@ -32,6 +37,7 @@ class GeoSite:
     heightfield: object = None  # scenes.geometry.Heightfield in the site frame (before re-centring)
     dem: object = None  # scenes.dem.DemInfo
     conversions: list = field(default_factory=list)
+    on_terrain: set = field(default_factory=set)  # "path.stem" of positions placed on the (raised) terrain
 
     def describe(self) -> dict:
         out = self.frame.describe()
@@ -123,12 +129,37 @@ def _resolve_table(site: GeoSite, kind: str, path: str, t: dict) -> None:
         if f"{stem}_m" in t:
             raise GeoError(f"{path}: give {stem}_m or {key}, not both")
         keep_z = kind == "observer" and t.get("eye_height_m") is not None
+        if kind == "observer" and not keep_z and isinstance(t[key], list) and _two_numbers(t[key], stem == "points"):
+            raise GeoError(f"{path}.{key}: two numbers [lat_deg, lon_deg] stand on the terrain: give the group's eye_height_m "
+                           f"(or [lat_deg, lon_deg, height_m])")
         height = agl.pop(agl_keys.get(stem), None) or 0.0
+        if _two_numbers(t[key], stem == "points"):
+            site.on_terrain.add(f"{path}.{stem}")
         t[f"{stem}_m"] = _convert(site, t.pop(key), f"{path}.{key}", stem == "points", float(height), keep_z)
     for k, v in agl.items():
         if v is not None:
             raise GeoError(f"{path}.{k}: only with a two-number {'aim' if k == 'aim_agl_m' else 'position/center'}_geo "
                            f"([lat_deg, lon_deg] on the terrain)")
+
+
+def _two_numbers(value, many: bool) -> bool:
+    rows = value if many else [value]
+    return isinstance(rows, list) and bool(rows) and all(isinstance(r, list) and len(r) == 2 for r in rows)
+
+
+def _raise_points(site: GeoSite, data: dict) -> None:
+    """The apparent frame of refraction: the laser's and the objects' positions with an
+    absolute height go up by k d^2 / (2 R) as the terrain does (what stands on the terrain
+    is there already; observers are raised as their points are made)."""
+    for kind, path, t in _tables(data):
+        if kind not in ("laser", "target", "occluder"):
+            continue
+        for stem in _STEMS[kind]:
+            v = t.get(f"{stem}_m")
+            if f"{path}.{stem}" in site.on_terrain or not (isinstance(v, list) and len(v) == 3):
+                continue
+            if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+                t[f"{stem}_m"] = [v[0], v[1], v[2] + float(site.frame.refraction_rise_m(v[0], v[1]))]
 
 
 def _boundary(site: GeoSite, rng: dict) -> None:
@@ -142,11 +173,16 @@ def _boundary(site: GeoSite, rng: dict) -> None:
 
 
 def _laser_xy(frame: SiteFrame, laser: dict) -> tuple:
+    """The laser's horizontal ENU position, which the refraction rise is measured from: exact
+    for a point given with its height; for one on the terrain (not built yet) at the
+    origin's height, which moves it h d / R (0.5 m for 300 m at 10 km: the rise 10 km away
+    then moves 0.1 mm)."""
     if isinstance(laser.get("position_m"), list) and len(laser["position_m"]) == 3:
         return float(laser["position_m"][0]), float(laser["position_m"][1])
     a = _rows(laser.get("position_geo"), "laser.position_geo", False)
-    lat, lon, _ = frame.input_to_geodetic(a, "laser.position_geo")
-    p = frame.enu_m(lat, lon, np.full(1, frame.h0_m))  # the horizontal position the refraction rise is measured from (m-exact)
+    lat, lon, h = frame.input_to_geodetic(a, "laser.position_geo")
+    h = frame.ellipsoidal_height_m(lat, lon, h) if a.shape[1] == 3 else np.full(1, frame.h0_m)
+    p = frame.enu_m(lat, lon, h)
     return float(p[0, 0]), float(p[0, 1])
 
 
@@ -190,4 +226,5 @@ def resolve_geo(data: dict, base_dir, validate) -> tuple[dict, GeoSite | None]:
             _resolve_table(site, kind, path, t)
     if isinstance(data.get("range"), dict) and "boundary_geo" in data["range"]:
         _boundary(site, data["range"])
+    _raise_points(site, data)
     return data, site

@@ -41,9 +41,10 @@ def stored(points_m) -> Callable:
     return lambda rows: pts[rows]
 
 
-def grid_generator(spec, offset_m, terrain) -> Callable:
+def grid_generator(spec, offset_m, terrain, rise=None) -> Callable:
     """Points of a grid group (:func:`scenes.geometry.observer_points`' grid, by index),
-    local coordinates; at ``terrain + eye_height_m`` when the group says so."""
+    local coordinates; at ``terrain + eye_height_m`` when the group says so, else raised
+    by a site's refraction ``rise(x, y)`` (world [m] -> dz [m], :mod:`scenes.geo`)."""
     nu, nv = spec.counts
     o, u, v = (np.asarray(x, float) for x in (spec.origin_m, spec.u_m, spec.v_m))
     off = np.asarray(offset_m, float)
@@ -52,6 +53,8 @@ def grid_generator(spec, offset_m, terrain) -> Callable:
     def at(rows):
         iv, iu = np.divmod(np.asarray(rows, np.int64), nu)
         p = o + (iv / max(nv - 1, 1))[:, None] * v + (iu / max(nu - 1, 1))[:, None] * u  # as observer_points
+        if eye is None and rise is not None:
+            p[:, 2] += rise(p[:, 0], p[:, 1])
         p -= off
         if eye is not None:
             p[:, 2] = terrain.height_at(p[:, 0], p[:, 1]) + eye

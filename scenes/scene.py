@@ -560,10 +560,14 @@ def _check_above_terrain(g, ob, local, offset, terrain) -> None:
         raise SceneError(f"observers[{g}] ({ob.name}): point {(local[k] + offset).tolist()} is below the terrain; use eye_height_m")
 
 
-def _group_points(g, ob, spec, offset, terrain) -> np.ndarray:
+def _group_points(g, ob, spec, offset, terrain, rise=None) -> np.ndarray:
     """One observer group's points (world coordinates), placed at eye height over the
-    terrain when asked, checked to be in open air (not in a solid, not underground)."""
+    terrain when asked, else raised by the site's refraction ``rise`` (x, y) -> dz,
+    checked to be in open air (not in a solid, not underground)."""
     p = observer_points(ob)
+    if ob.eye_height_m is None and rise is not None:
+        p = p.copy()
+        p[:, 2] += rise(p[:, 0], p[:, 1])
     if ob.eye_height_m is not None:
         local = p - offset
         if not np.all(terrain.contains_xy(local[:, 0], local[:, 1])):
@@ -615,13 +619,13 @@ def _grid_corners_on_terrain(g, ob, offset, terrain) -> None:
         raise SceneError(f"observers[{g}] ({ob.name}): some points lie outside the terrain's extent")
 
 
-def _grid_part(g, ob, spec, offset, terrain, start) -> GroupPoints:
+def _grid_part(g, ob, spec, offset, terrain, start, rise=None) -> GroupPoints:
     """A grid group as generated points (see :mod:`scenes.observers`), checked at load:
     the corners on the terrain, no point inside a solid (only the rows near each solid
     are generated), none below the terrain (every row, block by block)."""
     if ob.eye_height_m is not None:
         _grid_corners_on_terrain(g, ob, offset, terrain)
-    at = grid_generator(ob, offset, terrain)
+    at = grid_generator(ob, offset, terrain, rise)
     n = ob.counts[0] * ob.counts[1]
     for solid in list(spec.targets) + list(spec.occluders):
         if solid.shape not in ("box", "sphere", "cylinder"):
@@ -636,7 +640,7 @@ def _grid_part(g, ob, spec, offset, terrain, start) -> GroupPoints:
     return GroupPoints(start, n, at, is_stored=False)
 
 
-def _observers(spec, offset, terrain) -> Observers:
+def _observers(spec, offset, terrain, rise=None) -> Observers:
     """Every observer group's points in local coordinates, with their group and index;
     grids generated where they are used (:mod:`scenes.observers`)."""
     parts, grp, idx, start = [], [], [], 0
@@ -644,9 +648,9 @@ def _observers(spec, offset, terrain) -> Observers:
         if ob.eye_height_m is not None and terrain is None:
             raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
         if ob.layout == "grid":
-            part = _grid_part(g, ob, spec, offset, terrain, start)
+            part = _grid_part(g, ob, spec, offset, terrain, start, rise)
         else:
-            p = _group_points(g, ob, spec, offset, terrain) - offset
+            p = _group_points(g, ob, spec, offset, terrain, rise) - offset
             part = GroupPoints(start, len(p), stored(p))
         parts.append(part)
         grp.append(np.full(part.count, g))
@@ -692,7 +696,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         terrain_target = _terrain_target(spec, terrain, len(targets) + len(occluders), base_dir)
     _check_laser_in_open_air(spec, lp, offset, terrain)
 
-    observers = _observers(spec, offset, terrain)
+    observers = _observers(spec, offset, terrain, None if site is None else site.frame.refraction_rise_m)
     return Scene(
         spec=spec,
         source=source,
