@@ -11,8 +11,8 @@ is iterated until the point lies on the node's vertical to 1 mm. The earth's cur
 thus in the geometry; the refraction rise (:mod:`scenes.geo`) is then added.
 
 Memory is bounded by the analysis grid, not the DEM: only the window over the analysis
-area is read (GDAL reads just those blocks), decimated by GDAL's bilinear resampling to no
-coarser than half the grid's resolution.
+area is read (GDAL reads just those blocks), in strips of rows, keeping every step-th cell
+(no coarser than half the grid's resolution).
 """
 
 from __future__ import annotations
@@ -94,9 +94,11 @@ def _pixel_m(ds) -> float:
 
 
 def _read_window(ds, spec, rows, cols):
-    """The raster window over the analysis area (2 cells of margin), decimated to no coarser
-    than half the grid's resolution; returns (heights with NaN for nodata, row0, col0, step)."""
-    from rasterio.enums import Resampling
+    """The raster window over the analysis area (2 cells of margin), every ``step``-th cell
+    in each direction (no coarser than half the grid's resolution), read in strips of rows
+    so that memory follows the grid; returns (heights with NaN for nodata, row0, col0,
+    (step, step)). Cells are taken as they are, not resampled: GDAL's decimating bilinear
+    read was measured 4 mm off on a 3.6 % plane, the cells themselves are exact."""
     from rasterio.windows import Window
 
     r0, r1 = int(math.floor(np.min(rows))) - 2, int(math.ceil(np.max(rows))) + 3
@@ -107,11 +109,15 @@ def _read_window(ds, spec, rows, cols):
                        f"reduce extent_m or use a larger DEM")
     r0, c0, r1, c1 = max(r0, 0), max(c0, 0), min(r1, ds.height), min(c1, ds.width)
     step = max(1, int(spec.resolution_m / (2 * _pixel_m(ds))))
-    out_shape = (max(2, math.ceil((r1 - r0) / step)), max(2, math.ceil((c1 - c0) / step)))
-    win = Window(c0, r0, c1 - c0, r1 - r0)
-    a = ds.read(1, window=win, out_shape=out_shape, resampling=Resampling.bilinear, masked=True)
-    h = np.ma.filled(a.astype(float), np.nan)
-    return h, r0, c0, ((r1 - r0) / out_shape[0], (c1 - c0) / out_shape[1])
+    r1, c1 = r0 + step * ((r1 - 1 - r0) // step + 1), c0 + step * ((c1 - 1 - c0) // step + 1)  # whole steps
+    r1, c1 = min(r1, r0 + step * ((ds.height - 1 - r0) // step) + 1), min(c1, c0 + step * ((ds.width - 1 - c0) // step) + 1)
+    strip = max(step, (1 << 22) // max(c1 - c0, 1) // step * step)  # ~4e6 cells per read
+    parts = []
+    for a in range(r0, r1, strip):
+        w = Window(c0, a, c1 - c0, min(strip, r1 - a))
+        block = ds.read(1, window=w, masked=True)[::step, ::step]
+        parts.append(np.ma.filled(block.astype(float), np.nan))
+    return np.vstack(parts), r0, c0, (float(step), float(step))
 
 
 def _fill(h, spec) -> int:
@@ -166,7 +172,7 @@ def dem_heightfield(spec, frame: SiteFrame, base_dir=None, centre_xy=(0.0, 0.0))
 
         def at(lat_, lon_):
             r, c = _to_dem(ds, lat_, lon_)
-            return _sample(h, (r + 0.5 - r0) / step[0] - 0.5, (c + 0.5 - c0) / step[1] - 0.5)
+            return _sample(h, (r - r0) / step[0], (c - c0) / step[1])  # kept cell i: source cell r0 + i step
 
         z, iterations = _surface_enu(frame, xx, yy, at)
         info = DemInfo(str(spec.file), ds.crs.to_string(), _pixel_m(ds), _pixel_m(ds) * max(step), int(h.size),

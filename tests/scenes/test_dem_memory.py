@@ -1,9 +1,9 @@
 """A 1e7-cell DEM loads and builds its ray scene in bounded memory (issue 14 item 2).
 
 Slow (writes a 1e7-cell GeoTIFF, two fresh processes): ``pytest -m slow``. Measured here
-(tests/bench/bench_dem.py): peak resident memory 201 MB at 160 801 nodes, 360 MB at 641 601
-and 766 MB at the 2e6-node limit, whatever the DEM's size: the window over the analysis
-area is read, decimated by GDAL, never the whole file at full resolution.
+(tests/bench/bench_dem.py): peak resident memory 201 MB at 160 801 nodes, 353 MB at 641 601
+and 735 MB at the 2e6-node limit, whatever the DEM's size: the window over the analysis
+area is read in strips keeping every step-th cell, never the whole file at once.
 """
 
 from __future__ import annotations
