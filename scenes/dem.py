@@ -43,6 +43,7 @@ class DemInfo:
     filled_cells: int  # nodata cells filled (nodata = "fill")
     nodes: int  # analysis grid nodes
     iterations: int
+    driver: str = ""  # GDAL's driver of the file (GTiff, DTED, ...)
 
 
 def _grid(spec, frame: SiteFrame, centre_xy):
@@ -176,7 +177,7 @@ def dem_heightfield(spec, frame: SiteFrame, base_dir=None, centre_xy=(0.0, 0.0))
 
         z, iterations = _surface_enu(frame, xx, yy, at)
         info = DemInfo(str(spec.file), ds.crs.to_string(), _pixel_m(ds), _pixel_m(ds) * max(step), int(h.size),
-                       int(ds.width * ds.height), filled, int(xx.size), iterations)
+                       int(ds.width * ds.height), filled, int(xx.size), iterations, ds.driver)
     if np.abs(z).max() > 1e5:
         raise GeoError(f"terrain.file={spec.file!r}: heights beyond 100 km; expected metres")
     z = z + frame.refraction_rise_m(xx, yy)

@@ -39,6 +39,16 @@ class GeoSite:
     conversions: list = field(default_factory=list)
     on_terrain: set = field(default_factory=set)  # "path.stem" of positions placed on the (raised) terrain
 
+    @property
+    def warnings(self) -> list:
+        """Odd but usable inputs: a DTED (heights above mean sea level by its specification,
+        MIL-PRF-89020B) read as ellipsoidal heights."""
+        if self.dem is not None and self.dem.driver == "DTED" and self.frame.vertical == "ellipsoid":
+            return [f"terrain.file={self.dem.file!r} is DTED, whose heights are above mean sea level (EGM96), but "
+                    f"site.vertical = 'ellipsoid' reads them as heights above the ellipsoid (the geoid is tens of metres "
+                    f"away): set vertical = 'egm96' if the file follows its specification"]
+        return []
+
     def describe(self) -> dict:
         out = self.frame.describe()
         if self.dem is not None:

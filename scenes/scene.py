@@ -710,7 +710,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         terrain=terrain,
         observers=observers,
         terrain_target=terrain_target,
-        warnings=_warnings(spec) + _buried_targets(targets, terrain),
+        warnings=_warnings(spec) + _buried_targets(targets, terrain) + ([] if site is None else site.warnings),
         site=site,
     )
 

@@ -82,6 +82,7 @@ def test_a_dted_tile_is_read_in_its_own_crs(tmp_path):
     (tmp_path / "s.toml").write_text(SCENE)
     err = io.StringIO()
     assert main(["run", str(tmp_path / "s.toml"), "-o", str(tmp_path / "o"), "--quiet"], stdout=io.StringIO(), stderr=err) == 0, err.getvalue()
+    assert "DTED" in err.getvalue() and "vertical = 'egm96'" in err.getvalue()  # read as ellipsoidal here: said, not refused
     with open(tmp_path / "o" / "observers.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     lat = np.array([float(r["lat_deg"]) for r in rows])
