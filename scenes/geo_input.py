@@ -142,9 +142,10 @@ def _resolve_table(site: GeoSite, kind: str, path: str, t: dict) -> None:
         if kind == "observer" and not keep_z and isinstance(t[key], list) and _two_numbers(t[key], stem == "points"):
             raise GeoError(f"{path}.{key}: two numbers [lat_deg, lon_deg] stand on the terrain: give the group's eye_height_m "
                            f"(or [lat_deg, lon_deg, height_m])")
-        height = agl.pop(agl_keys.get(stem), None) or 0.0
-        if _two_numbers(t[key], stem == "points"):
+        height = 0.0
+        if _two_numbers(t[key], stem == "points"):  # a height above the terrain is used only here; else said below
             site.on_terrain.add(f"{path}.{stem}")
+            height = agl.pop(agl_keys.get(stem), None) or 0.0
         t[f"{stem}_m"] = _convert(site, t.pop(key), f"{path}.{key}", stem == "points", float(height), keep_z)
     for k, v in agl.items():
         if v is not None:
