@@ -253,9 +253,18 @@ def _runs(mask) -> list:
 def lobe_outlines(result, view=None) -> list:
     """Outlines of every target's static and dynamic lobe in ``view``: the section at
     ``analysis.footprint_eye_height_m`` over the terrain for the plan view of a scene with
-    ground, else the projection. Lobes with no reach are left out (nothing to draw)."""
+    ground, else the projection. Lobes with no reach are left out (nothing to draw).
+    The plan view's (``view`` None) are made once per result: the plan picture and the map
+    outputs both draw them (2 s for ``stainless_melt``)."""
+    if view is None:
+        if getattr(result, "_plan_lobe_outlines", None) is None:
+            result._plan_lobe_outlines = _outlines(result, plan_view_frame())
+        return list(result._plan_lobe_outlines)
+    return _outlines(result, view)
+
+
+def _outlines(result, view) -> list:
     scene = result.scene
-    view = plan_view_frame() if view is None else view
     rows = {t.name: t for t in result.targets}
     out = []
     for sp in result.spots:
