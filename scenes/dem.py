@@ -73,12 +73,10 @@ def _open(spec, base_dir):
     return ds
 
 
-def _to_dem(ds, lat, lon):
-    """DEM-CRS coordinates -> fractional (row, col) of the raster's cell centres."""
-    import pyproj
-
-    t = pyproj.Transformer.from_crs("EPSG:4326", ds.crs, always_xy=True)
-    x, y = t.transform(lon, lat)
+def _to_dem(ds, to_crs, lat, lon):
+    """Geodetic positions -> fractional (row, col) of the raster's cell centres
+    (``to_crs``: pyproj transformer from EPSG:4326 to the DEM's CRS, always_xy)."""
+    x, y = to_crs.transform(lon, lat)
     inv = ~ds.transform
     x, y = np.asarray(x, float), np.asarray(y, float)
     col, row = inv.a * x + inv.b * y + inv.c, inv.d * x + inv.e * y + inv.f
@@ -166,13 +164,16 @@ def dem_heightfield(spec, frame: SiteFrame, base_dir=None, centre_xy=(0.0, 0.0))
     xs, ys = _grid(spec, frame, centre_xy)
     xx, yy = (a.ravel() for a in np.meshgrid(xs, ys))
     with _open(spec, base_dir) as ds:
+        import pyproj
+
+        to_crs = pyproj.Transformer.from_crs("EPSG:4326", ds.crs, always_xy=True)
         lat, lon, _ = frame.geodetic(np.stack([xx, yy, np.zeros_like(xx)], -1))
-        rows, cols = _to_dem(ds, lat, lon)
+        rows, cols = _to_dem(ds, to_crs, lat, lon)
         h, r0, c0, step = _read_window(ds, spec, rows, cols)
         filled = _fill(h, spec)
 
         def at(lat_, lon_):
-            r, c = _to_dem(ds, lat_, lon_)
+            r, c = _to_dem(ds, to_crs, lat_, lon_)
             return _sample(h, (r - r0) / step[0], (c - c0) / step[1])  # kept cell i: source cell r0 + i step
 
         z, iterations = _surface_enu(frame, xx, yy, at)

@@ -38,6 +38,7 @@ error naming the grid (PROJ's fallback would silently ignore the geoid, tens of 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -77,9 +78,11 @@ def gaussian_radius_m(lat_deg: float) -> float:
     return WGS84_A_M * math.sqrt(1 - e2) / (1 - e2 * s2)
 
 
+@functools.lru_cache(maxsize=8)
 def _vertical_transformer(vertical: str, to_ellipsoid: bool):
     """pyproj transformer between the datum's heights and ellipsoidal heights, or a GeoError
-    naming the missing grid (PROJ's ballpark fallback would drop the geoid)."""
+    naming the missing grid (PROJ's ballpark fallback would drop the geoid); made once per
+    datum and direction (a DEM's load asks for it at every iteration)."""
     from pyproj.transformer import TransformerGroup
 
     src, dst = _VERTICAL_CRS[vertical], "EPSG:4979"
@@ -132,6 +135,8 @@ class SiteFrame:
             raise GeoError(f"site.crs = {self.crs!r}: not a coordinate reference system PROJ knows ({exc})") from None
         if self._input_crs.is_geocentric:
             raise GeoError(f"site.crs = {self.crs!r}: expected a geographic or projected CRS, got a geocentric one")
+        self._from_input = (None if self._input_crs.is_geographic
+                            else pyproj.Transformer.from_crs(self._input_crs, "EPSG:4326", always_xy=True))
 
     # --- heights -------------------------------------------------------------------------
     def ellipsoidal_height_m(self, lat_deg, lon_deg, height_m) -> np.ndarray:
@@ -179,10 +184,7 @@ class SiteFrame:
                 k = int(np.argmax(bad))
                 raise GeoError(f"{where}: {a[k].tolist()} is not [lat_deg, lon_deg, ...] (|lat| <= 90, |lon| <= 180)")
         else:
-            import pyproj
-
-            t = pyproj.Transformer.from_crs(self._input_crs, "EPSG:4326", always_xy=True)
-            lon, lat = t.transform(a[:, 0], a[:, 1], errcheck=False)
+            lon, lat = self._from_input.transform(a[:, 0], a[:, 1], errcheck=False)
             lon, lat = np.asarray(lon, float), np.asarray(lat, float)
             if not (np.all(np.isfinite(lat)) and np.all(np.isfinite(lon))):
                 raise GeoError(f"{where}: some [easting_m, northing_m] lie outside {self.crs}'s area")
