@@ -100,7 +100,7 @@ def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
     with log.run("direct") as st:
         d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
         laser = scene.spec.laser
-        if laser.pointing_buffer_rad > 0 or laser.sector is not None:
+        if laser.pointing_buffer_rad > 0 or laser.sector is not None or laser.aim_track is not None:
             d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene)
         st.detail = d.detail
     return d
@@ -238,6 +238,44 @@ def _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_p
     return fps
 
 
+def _motion(scene, first, states, times, mu, exposure, backend, threads, log):
+    """Stage ``motion``: moving observers, a moving beam or targets, firing windows
+    (:mod:`hazard.pipeline.motion`); None when nothing moves."""
+    from scenes.motion import motion_of
+
+    motion = motion_of(scene)
+    if motion is None:
+        log.skip("motion", "nothing moves and lasing never stops (no track, aim_track, target track or windows)")
+        return None
+    from .pipeline.motion_stage import run_motion
+
+    with log.run("motion") as st:
+        out = run_motion(scene, motion, first, states, times, mu, exposure, backend, threads)
+        st.detail = (f"{len(out.tracks())} track(s), {len(out.fixed())} fixed observer(s) over [{out.span_s[0]:g}, "
+                     f"{out.span_s[1]:g}] s; {out.key_step_text}; {sum(p.summary['samples'] for p in out.paths)} samples"
+                     + "".join(f"; {n}" for n in out.notes))
+    return out
+
+
+def _airspace(result, log, first):
+    """Stage ``airspace``: the visual-interference distances (visible lasers) and the
+    flight zones' checks (:mod:`hazard.visual`, :mod:`hazard.pipeline.airspace`)."""
+    from .visual import visual_interference
+
+    spec = result.scene.spec
+    with log.run("airspace") as st:
+        result.visual_interference = visual_interference(result)
+        d = result.visual_interference["direct"]
+        st.detail = (("visual levels apply: " if result.visual_interference["applies"] else "not a visible laser: ")
+                     + ", ".join(f"{k} {v:.4g}" for k, v in d.items() if v is not None))
+        if spec.airspace is not None and spec.airspace.zones:
+            from .pipeline.airspace import check_zones
+
+            result.airspace = check_zones(result, first)
+            held = sum(z["holds"] for z in result.airspace["zones"])
+            st.detail += f"; {held} of {len(result.airspace['zones'])} flight zone(s) hold their limit"
+
+
 def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     the_plan, log = plan(scene), StageLog(progress)
     with log.run("mpe") as st:
@@ -266,13 +304,17 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
         row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None
     _mirror_beams(scene, rows, traced.built.spots, ray_scene, zone, log, the_plan)
     fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
+    moving = _motion(scene, (traced, tracer, ray_scene), states, times, mu, exposure, backend, threads, log)
     built = traced.built
-    return HazardResult(scene, exposure.mpe, exposure.irradiance_w_m2, exposure.radiant_exposure_j_m2, exposure.pulse, mu, times,
-                        log.stages(), rows, _observers(scene, out, direct_beam),
-                        built.spill_w, built.blocked_w, traced.beam.power_w,
-                        None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
-                        traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
-                        spill=spill_part, sdz=zone)
+    result = HazardResult(scene, exposure.mpe, exposure.irradiance_w_m2, exposure.radiant_exposure_j_m2, exposure.pulse, mu, times,
+                          [], rows, _observers(scene, out, direct_beam),
+                          built.spill_w, built.blocked_w, traced.beam.power_w,
+                          None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
+                          traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
+                          spill=spill_part, sdz=zone, motion=moving)
+    _airspace(result, log, (traced, tracer, ray_scene))
+    result.stages = log.stages()
+    return result
 
 
 def versions() -> dict:

@@ -302,6 +302,7 @@ def _zone_label(z) -> str:
         return "LSDZ"
     d = z["directions"]
     what = {"aim": "aim only", "cone": f"pointing cone {d['buffer_rad']:.2g} rad", "sector": "sector + buffer"}[d["kind"]]
+    what += " + aim track" if d.get("aim_track") else ""
     state = "contained" if z["contained"] else "NOT contained"
     return f"laser surface danger zone ({what}; {state})"
 

@@ -53,7 +53,7 @@ def observer_columns(result) -> dict:
     mpe_h = (obs.mpe_radiant_exposure_j_m2 if obs.mpe_radiant_exposure_j_m2 is not None
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
     direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
-    return {
+    cols = {
         "position_m": np.asarray(obs.position_m, float).reshape(m, 3),
         "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
         "direct_irradiance_w_m2": direct,
@@ -76,6 +76,24 @@ def observer_columns(result) -> dict:
         "line_of_sight": obs.line_of_sight,
         "far_field": obs.far_field,
     }
+    return _with_tracks(result, cols, m)
+
+
+def _with_tracks(result, cols, m) -> dict:
+    """The fixed observers' columns with the moving observers' rows after them (at each
+    one's worst point, :mod:`hazard.motion_outputs`) and the ``motion_*`` columns; the
+    row names under ``labels``."""
+    from .motion_outputs import motion_columns, track_columns
+
+    cols["labels"] = list(result.observers.labels)
+    if getattr(result, "motion", None) is None:
+        return cols
+    tracks = track_columns(result, float(result.mpe_w_m2))
+    extra = motion_columns(result, m, tracks)
+    for k in list(cols):
+        cols[k] = list(cols[k]) + tracks[k] if k == "labels" else np.concatenate([np.asarray(cols[k]), tracks[k]])
+    cols.update(extra)
+    return cols
 
 
 def _listed(cols, m) -> np.ndarray:
@@ -90,11 +108,11 @@ def _listed(cols, m) -> np.ndarray:
 def observer_rows(result, rows=None, cols=None) -> list:
     """One dict per observer (``rows``: which; default all) for report.json."""
     cols = observer_columns(result) if cols is None else cols
-    labels = result.observers.labels
-    rows = np.arange(len(result.observers)) if rows is None else rows
-    plain = {k: np.asarray(v)[rows].tolist() for k, v in cols.items()}  # Python floats and bools, once
-    maybe = {"angular_subtense_rad", "first_exceedance_s"}  # NaN: not applicable (JSON null)
-    keys = [k for k in cols if k != "position_m"]
+    labels = cols["labels"]
+    rows = np.arange(len(labels)) if rows is None else rows
+    plain = {k: np.asarray(v)[rows].tolist() for k, v in cols.items() if k != "labels"}  # Python floats and bools, once
+    maybe = {"angular_subtense_rad", "first_exceedance_s"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
+    keys = [k for k in cols if k not in ("position_m", "labels")]
     out = []
     for j, i in enumerate(rows.tolist()):
         row = {"name": labels[i], "position_m": plain["position_m"][j]}
@@ -107,7 +125,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
 
 def observers_listed(result, cols) -> tuple[list, dict]:
     """report.json's observer rows and a statement of which are listed."""
-    m = len(result.observers)
+    m = len(cols["labels"])
     rows = _listed(cols, m)
     said = {"count": m, "listed": int(len(rows)),
             "which": "all" if len(rows) == m else
@@ -141,6 +159,7 @@ def report_dict(result, cols=None) -> dict:
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
     (``cols``: :func:`observer_columns` of ``result`` when the caller has them)."""
     from .analysis import versions
+    from .motion_outputs import motion_sections
 
     scene = result.scene
     fp = {}
@@ -173,10 +192,12 @@ def report_dict(result, cols=None) -> dict:
         "verdict_changes": result.verdict_changes(),
         "any_hazard": result.any_hazard,
         "notes": list(result.notes),
+        **motion_sections(result),
     })
 
 
-_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s"}  # NaN there means "not applicable": an empty cell
+_MOTION_BLANK = ("motion_peak_irradiance_w_m2", "motion_radiant_exposure_j_m2", "motion_first_exceedance_s")
+_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
 
 
 def _csv_cell(values, key) -> list:
@@ -215,13 +236,14 @@ def _csv_text(result, cols) -> str:
     with a [site], each position also as latitude, longitude and height."""
     pos = cols["position_m"]
     names = CSV_COLUMNS[:4]
-    text = [[_csv_name(x) for x in result.observers.labels]] + [_csv_cell(pos[:, k], "x") for k in range(3)]
+    text = [[_csv_name(x) for x in cols["labels"]]] + [_csv_cell(pos[:, k], "x") for k in range(3)]
     if getattr(result.scene, "site", None) is not None and len(pos):
         geo = observer_geodetic(result, pos)
         text += [_csv_cell(geo[:, k], "x") for k in range(3)]
         names = names + GEO_COLUMNS
-    text += [_csv_cell(cols[k], k) for k in CSV_COLUMNS[4:]]
-    lines = [",".join(names + CSV_COLUMNS[4:])] + [",".join(r) for r in zip(*text)]
+    rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
+    text += [_csv_cell(cols[k], k) for k in rest]
+    lines = [",".join(names + rest)] + [",".join(r) for r in zip(*text)]
     return "\r\n".join(lines) + "\r\n"
 
 
@@ -279,8 +301,10 @@ def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> 
     in last, so a report present is always the one matching the table. Nothing temporary
     is left behind after an exception.
     """
+    from .motion_outputs import track_files
+
     out = Path(outdir)
-    extra = dict(extra or {})
+    extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
     targets = [out / n for n in names]
     if out.exists() and not out.is_dir():
@@ -360,7 +384,7 @@ def _cause(result, i) -> str:
         spec = float(obs.specular_irradiance_w_m2[i])
         kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * (peak - direct) else "diffuse + specular")
     at_aim = obs.direct_at_aim_irradiance_w_m2
-    beam = "direct beam" if at_aim is None or float(at_aim[i]) >= direct else "direct beam within its pointing error"
+    beam = "direct beam" if at_aim is None or float(at_aim[i]) >= direct else "direct beam within its pointing error / sector / aim track"
     if direct >= 0.5 * peak and direct > 0:
         kind = beam
     elif direct > 0:
@@ -382,7 +406,11 @@ def _observer_lines(result, max_observers) -> list:
     hazardous = np.flatnonzero(result.hazardous)
     static = f"; with the static material: {int(np.sum(result.hazardous_static))}" if result.states else ""
     if not len(hazardous):
-        return [f"{head}no observer point reaches the MPE ({mpe}): 0 of {m} hazardous{static}.",
+        tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
+        n_t = sum(p.summary["hazardous"] for p in tracks)
+        moving = f"; {n_t} of {len(tracks)} moving observer(s) HAZARDOUS (below)" if n_t else (
+            f"; 0 of {len(tracks)} moving observer(s) hazardous" if tracks else "")
+        return [f"{head}no {'fixed ' if tracks else ''}observer point reaches the MPE ({mpe}): 0 of {m} hazardous{static}{moving}.",
                 "  The observers are only the points the scene lists: anyone inside a NOHD below is at risk."]
     ratio = result.hazard_ratio
     order = hazardous[np.argsort(-ratio[hazardous], kind="stable")][:max_observers]
@@ -478,6 +506,8 @@ def _sdz_lines(z) -> list:
              "cone": f"the pointing cone of {d['buffer_rad']:.3g} rad"
                      + (f" ({d['pointing_error_sigmas']:g} sigma)" if d["pointing_error_kind"] == "sigma" else " (bound)"),
              "sector": f"the sector widened by {d['buffer_rad']:.3g} rad"}[d["kind"]]
+    if d.get("aim_track"):
+        where += " and the aim track (the beam may stop anywhere along its slew)"
     size = ("unbounded (a collimated beam in clear air: its NOHD is infinite; the polygon is drawn to 100 km)" if z.get("unbounded")
             else f"{z['area_m2']:.4g} m^2")
     lines = [f"  laser surface danger zone over {where}: {size}, out to {z['max_range_m']:.4g} m "
@@ -534,8 +564,35 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
         material); the NOHD [m] of every target (diffuse and specular, static and
         dynamic); the skipped stages, notes and what the tool never models.
     """
-    lines = _observer_lines(result, max_observers) + _nohd_lines(result) + _not_modelled_lines(result)
+    lines = _observer_lines(result, max_observers) + _motion_lines(result) + _nohd_lines(result) + _not_modelled_lines(result)
     return "\n".join(lines)
+
+
+def _motion_lines(result) -> list:
+    """Moving observers, fixed ones under a moving beam, and the flight zones."""
+    out = []
+    m = getattr(result, "motion", None)
+    for p in ([] if m is None else m.tracks()):
+        s = p.summary
+        first = "" if s["first_exceedance_s"] is None else f", first over the MPE at t = {s['first_exceedance_s']:.6g} s"
+        out.append(f"  track {p.name}: {'HAZARD' if s['hazardous'] else 'below the MPE'} (exposure ratio "
+                   f"{s['exposure_ratio']:.3g} in its worst {s['worst_window']['duration_s']:.3g} s window{first}); peak "
+                   f"{s['peak_irradiance_w_m2']:.4g} W/m^2 at t = {s['peak_time_s']:.6g} s; {s['samples']} samples, "
+                   f"smallest step {s['min_step_s']:.3g} s")
+    fixed = [] if m is None else m.fixed()
+    if fixed:
+        n = sum(p.summary["hazardous"] for p in fixed)
+        out.append(f"  over time (the beam or a target moves): {n} of {len(fixed)} fixed observer(s) hazardous")
+    for z in (getattr(result, "airspace", None) or {}).get("zones", []):
+        out.append(f"  flight zone {z['name']} ({z['limit']}): " + ("holds" if z["holds"] else
+                   f"EXCEEDED: {z['worst_effective_irradiance_w_m2']:.4g} W/m^2 effective at t = {z['worst_time_s']:.6g} s "
+                   f"(limit {z['limit_w_m2']:.4g}, {z['worst_path']})"))
+    vi = getattr(result, "visual_interference", None) or {}
+    if vi.get("applies"):
+        d = vi["direct"]
+        out.append(f"  visual interference, direct beam (VCF {vi['vcf']:.4g}): LFED {d['lfed_m']:.5g} m, CZED {d['czed_m']:.5g} m, "
+                   f"SZED {d['szed_m']:.5g} m, NOHD {d['nohd_m']:.5g} m")
+    return (["Over time and in the airspace:"] + out) if out else []
 
 
 def stages_text(result) -> str:

@@ -154,6 +154,17 @@ class HazardResult:
     beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
     spill: dict = field(default_factory=dict)  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill)
     sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
+    motion: object = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
+    visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.visual)
+    airspace: dict = field(default_factory=dict)  # the flight zones' checks (hazard.pipeline.airspace)
+
+    @property
+    def motion_hazardous(self) -> np.ndarray | None:
+        """Per fixed observer: hazardous over time (a moving beam or target); None when not evaluated."""
+        fixed = [] if self.motion is None else self.motion.fixed()
+        if not fixed:
+            return None
+        return np.array([p.summary["hazardous"] for p in fixed], bool)
 
     @property
     def observer_mpe_w_m2(self):
@@ -167,7 +178,10 @@ class HazardResult:
 
     @property
     def hazardous(self) -> np.ndarray:
-        return self.hazard_ratio >= 1.0
+        """Per observer: over the MPE in the static analysis, or over time (a moving beam)."""
+        h = self.hazard_ratio >= 1.0
+        over_time = self.motion_hazardous
+        return h if over_time is None or len(over_time) != len(h) else h | over_time
 
     @property
     def hazardous_static(self) -> np.ndarray:
@@ -180,7 +194,10 @@ class HazardResult:
         def positive(x):
             return x is not None and x > 0
 
+        tracks = [] if self.motion is None else self.motion.tracks()
+        zones = (self.airspace or {}).get("zones") or []
         return bool(np.any(self.hazardous)) or positive((self.sdz or {}).get("nohd_m")) or any(
+            p.summary["hazardous"] for p in tracks) or any(not z["holds"] for z in zones) or any(
             (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
             or positive(t.specular_nohd_static_m) or positive(t.specular_nohd_dynamic_m)
             for t in self.targets

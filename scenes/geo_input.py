@@ -38,6 +38,7 @@ class GeoSite:
     dem: object = None  # scenes.dem.DemInfo
     conversions: list = field(default_factory=list)
     on_terrain: set = field(default_factory=set)  # "path.stem" of positions placed on the (raised) terrain
+    tracks: dict = field(default_factory=dict)  # observer track name -> (K, 3) lat, lon [deg], ellipsoidal height [m]
 
     @property
     def warnings(self) -> list:
@@ -69,8 +70,28 @@ def _tables(data: dict):
         yield "terrain", "terrain", data["terrain"]
 
 
+def _moving(data: dict):
+    """(path, table, key) of the positions of things that move (absolute heights only):
+    an aim track's aim points, a target track's centres, an observer track's positions,
+    and the airspace zones' outlines."""
+    laser = data.get("laser") if isinstance(data.get("laser"), dict) else {}
+    if isinstance(laser.get("aim_track"), dict):
+        yield "laser.aim_track", laser["aim_track"], "aim"
+    for i, t in enumerate(data.get("targets") if isinstance(data.get("targets"), list) else []):
+        if isinstance(t, dict) and isinstance(t.get("track"), dict):
+            yield f"targets[{i}].track", t["track"], "center"
+    for i, t in enumerate(data.get("observers") if isinstance(data.get("observers"), list) else []):
+        if isinstance(t, dict) and "positions_geo" in t:
+            yield f"observers[{i}]", t, "positions"
+    air = data.get("airspace") if isinstance(data.get("airspace"), dict) else {}
+    for i, z in enumerate(air.get("zones") if isinstance(air.get("zones"), list) else []):
+        if isinstance(z, dict):
+            yield f"airspace.zones[{i}]", z, "boundary"
+
+
 def _geo_keys(data: dict) -> list:
     found = [f"{path}.{k}" for kind, path, t in _tables(data) for k in t if k.endswith("_geo") or k.endswith("_agl_m")]
+    found += [f"{path}.{stem}_geo" for path, t, stem in _moving(data) if f"{stem}_geo" in t]
     if isinstance(data.get("range"), dict) and "boundary_geo" in data["range"]:
         found.append("range.boundary_geo")
     return found
@@ -170,17 +191,59 @@ def _raise_points(site: GeoSite, data: dict) -> None:
             if f"{path}.{stem}" in site.on_terrain or not (isinstance(v, list) and len(v) == 3):
                 continue
             if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                t[f"{stem}_m"] = [v[0], v[1], v[2] + float(site.frame.refraction_rise_m(v[0], v[1]))]
+                t[f"{stem}_m"] = _raised(site, v)
+    for path, t, stem in _moving(data):  # an aim track's points and a target track's centres (observer tracks: as made)
+        rows = t.get(f"{stem}_m")
+        if stem in ("aim", "center") and isinstance(rows, list):
+            t[f"{stem}_m"] = [_raised(site, v) if _numbers3(v) else v for v in rows]
+
+
+def _numbers3(v) -> bool:
+    return isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)
+
+
+def _raised(site: GeoSite, v) -> list:
+    return [v[0], v[1], v[2] + float(site.frame.refraction_rise_m(v[0], v[1]))]
 
 
 def _boundary(site: GeoSite, rng: dict) -> None:
     if "boundary_m" in rng:
         raise GeoError("range: give boundary_m or boundary_geo, not both")
-    a = _rows(rng.pop("boundary_geo"), "range.boundary_geo", True)
-    lat, lon, _ = site.frame.input_to_geodetic(a, "range.boundary_geo")
+    rng["boundary_m"] = _outline(site, rng.pop("boundary_geo"), "range.boundary_geo")
+
+
+def _resolve_moving(site: GeoSite, data: dict) -> None:
+    """Moving things' ``*_geo`` rows to ``*_m`` (three numbers: absolute heights; outlines:
+    two). An observer track keeps its geodetic rows too (``site.tracks``): it is
+    interpolated along the geodesic, not the chord (:mod:`scenes.motion`)."""
+    for path, t, stem in _moving(data):
+        key = f"{stem}_geo"
+        if key not in t:
+            continue
+        if f"{stem}_m" in t:
+            raise GeoError(f"{path}: give {stem}_m or {key}, not both")
+        if stem == "boundary":
+            p = _outline(site, t.pop(key), f"{path}.{key}")
+            t["boundary_m"] = p
+            continue
+        a = _rows(t[key], f"{path}.{key}", True)
+        if a.shape[1] != 3:
+            raise GeoError(f"{path}.{key}: a moving position needs its height: [[lat_deg, lon_deg, height_m], ...]")
+        lat, lon, h = site.frame.input_to_geodetic(a, f"{path}.{key}")
+        h = site.frame.ellipsoidal_height_m(lat, lon, h)
+        if stem == "positions":
+            site.tracks[str(t.get("name"))] = np.column_stack([lat, lon, h])
+        t[f"{stem}_m"] = _convert(site, t.pop(key), f"{path}.{key}", True, 0.0, False)
+
+
+def _outline(site: GeoSite, value, where: str) -> list:
+    """[[lat, lon], ...] to [[x, y], ...] in the site frame (at the origin's height)."""
+    a = _rows(value, where, True)
+    lat, lon, _ = site.frame.input_to_geodetic(a, where)
     p = site.frame.enu_m(lat, lon, np.full(len(lat), site.frame.h0_m))
-    rng["boundary_m"] = p[:, :2].tolist()
-    site.conversions.append({"key": "range.boundary_geo", "given": a.tolist(), "m": rng["boundary_m"]})
+    out = p[:, :2].tolist()
+    site.conversions.append({"key": where, "given": a.tolist(), "m": out})
+    return out
 
 
 def _laser_xy(frame: SiteFrame, laser: dict) -> tuple:
@@ -237,5 +300,6 @@ def resolve_geo(data: dict, base_dir, validate) -> tuple[dict, GeoSite | None]:
             _resolve_table(site, kind, path, t)
     if isinstance(data.get("range"), dict) and "boundary_geo" in data["range"]:
         _boundary(site, data["range"])
+    _resolve_moving(site, data)
     _raise_points(site, data)
     return data, site

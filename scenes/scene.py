@@ -331,6 +331,9 @@ def _history(spec, where, base_dir):
 def _check_series_cover(spec: SceneSpec, targets) -> None:
     """A measured series with ``extrapolation = 'error'`` must cover the analysis times,
     0 to ``time_end_s`` (default the exposure duration), or the run would stop there."""
+    if spec.motion is not None and not spec.has_motion:
+        out.append("motion: the scene has nothing that moves (no track, aim_track, target track or windows): the table is "
+                   "not used")
     t_end = spec.analysis.time_end_s or spec.exposure.duration_s
     for i, t in enumerate(targets):
         h = t.history
@@ -391,6 +394,9 @@ def _warnings(spec: SceneSpec) -> list:
     if vis is not None and vis < 0.05:
         out.append(f"atmosphere.visibility_km = {vis:g} km is under 50 m (dense fog): m meant?")
     out += _library_wavelength_warnings(spec)
+    if spec.motion is not None and not spec.has_motion:
+        out.append("motion: the scene has nothing that moves (no track, aim_track, target track or windows): the table is "
+                   "not used")
     t_end = spec.analysis.time_end_s
     if t_end is not None and t_end < spec.exposure.duration_s and any(t.history is not None for t in spec.targets):
         out.append(f"analysis.time_end_s = {t_end:g} s ends before the exposure (exposure.duration_s = "
@@ -647,7 +653,9 @@ def _observers(spec, offset, terrain, rise=None) -> Observers:
     for g, ob in enumerate(spec.observers):
         if ob.eye_height_m is not None and terrain is None:
             raise SceneError(f"observers[{g}].eye_height_m: needs a terrain to stand on")
-        if ob.layout == "grid":
+        if ob.layout == "track":  # evaluated over time (hazard.pipeline.motion): no static points
+            part = GroupPoints(start, 0, stored(np.empty((0, 3))))
+        elif ob.layout == "grid":
             part = _grid_part(g, ob, spec, offset, terrain, start, rise)
         else:
             p = _group_points(g, ob, spec, offset, terrain, rise) - offset

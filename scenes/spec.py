@@ -35,6 +35,11 @@ __all__ = [
     "SectorSpec",
     "RangeSpec",
     "SiteSpec",
+    "AimTrackSpec",
+    "TargetTrackSpec",
+    "MotionSpec",
+    "AirZoneSpec",
+    "AirspaceSpec",
     "STANDARD_KEYS",
 ]
 
@@ -69,6 +74,62 @@ def _nonzero(v, name):
     if math.fsum(x * x for x in v) <= 0:
         raise ValueError(f"{name}: expected a non-zero direction vector, got {v!r}")
     return v
+
+
+Time = Annotated[float, Field(ge=-1e9, le=1e9)]  # scenario time [s]
+
+
+def _increasing(times, where):
+    if any(b <= a for a, b in zip(times, times[1:])):
+        raise ValueError(f"{where}={times!r}: expected strictly increasing times [s]")
+    return times
+
+
+def _rows_match(times, rows, key):
+    if rows is not None and len(rows) != len(times):
+        raise ValueError(f"{key}: expected one row per time of times_s ({len(times)}), got {len(rows)}")
+
+
+class AimTrackSpec(_Strict):
+    """The laser's aim over scenario time: ``aim_m`` points at ``times_s`` (the aim point
+    linear in time between them), or constant ``azimuth_rate_deg_s`` (clockwise from +y)
+    and ``elevation_rate_deg_s`` from the ``[laser]`` aim over ``times_s = [t0, t1]``. Before
+    the first and after the last time the aim holds."""
+
+    times_s: list[Time] = Field(min_length=1, max_length=100_000)
+    aim_m: list[Vec3] | None = Field(default=None, description="aim points [m] at times_s (or aim_geo)")
+    aim_geo: list[GeoPos] | None = Field(default=None, description="aim points [[lat_deg, lon_deg, height_m], ...] (needs a [site])")
+    azimuth_rate_deg_s: float | None = Field(default=None, ge=-3600.0, le=3600.0, description="slew rate in bearing [deg/s], clockwise from +y")
+    elevation_rate_deg_s: float | None = Field(default=None, ge=-3600.0, le=3600.0, description="slew rate in elevation [deg/s]")
+
+    @model_validator(mode="after")
+    def _one_form(self):
+        _increasing(self.times_s, "times_s")
+        rates = self.azimuth_rate_deg_s is not None or self.elevation_rate_deg_s is not None
+        if (self.aim_m is not None) == rates:
+            raise ValueError("give aim_m (aim points at times_s) or azimuth_rate_deg_s / elevation_rate_deg_s (rates from the "
+                             "[laser] aim over times_s = [t0, t1]), exactly one")
+        if rates and len(self.times_s) != 2:
+            raise ValueError(f"times_s={self.times_s!r}: with rates, expected the span [t0, t1]")
+        _rows_match(self.times_s, self.aim_m, "aim_m")
+        return self
+
+
+class TargetTrackSpec(_Strict):
+    """A target moving: its ``center_m`` at ``times_s`` (linear between; held before and after;
+    the shape keeps its orientation)."""
+
+    times_s: list[Time] = Field(min_length=1, max_length=100_000)
+    center_m: list[Vec3] | None = Field(default=None, description="the centre [m] at times_s (or center_geo)")
+    center_geo: list[GeoPos] | None = Field(default=None, description="the centre as [[lat_deg, lon_deg, height_m], ...] (needs a [site])")
+
+    @model_validator(mode="after")
+    def _rows(self):
+        _increasing(self.times_s, "times_s")
+        if self.center_m is None:
+            raise ValueError("center_m: the track's centres are required (or center_geo with a [site])")
+        _rows_match(self.times_s, self.center_m, "center_m")
+        return self
 
 
 class SectorSpec(_Strict):
@@ -120,6 +181,9 @@ class LaserSpec(_Strict):
         "with pointing_error_kind = 'sigma': the buffer is this many standard deviations (required: no default is assumed)"))
     pointing_error_source: str = Field(default="", max_length=1000, description="where the pointing error comes from (recorded in the report)")
     sector: SectorSpec | None = Field(default=None, description="the directions the beam may point in (default: the aim alone)")
+    aim_track: AimTrackSpec | None = Field(default=None, description="the aim over scenario time (a slewing beam)")
+    windows: list[Annotated[list[Time], Field(min_length=2, max_length=2)]] | None = Field(
+        default=None, min_length=1, max_length=100_000, description="[[t0_s, t1_s], ...]: when lasing is allowed (scenario time)")
 
     @property
     def pointing_buffer_rad(self) -> float:
@@ -151,6 +215,9 @@ class LaserSpec(_Strict):
         if self.pointing_error_kind == "sigma" and self.pointing_error_sigmas is None:
             raise ValueError("pointing_error_kind = 'sigma' needs pointing_error_sigmas (the buffer in standard deviations, "
                              "from your range's rules: no default is assumed)")
+        for i, w in enumerate(self.windows or ()):
+            if not w[1] > w[0]:
+                raise ValueError(f"windows[{i}]={w!r}: expected [t0_s, t1_s] with t1_s > t0_s")
         if self.pointing_error_kind == "bound" and self.pointing_error_sigmas is not None:
             raise ValueError("pointing_error_sigmas: only used with pointing_error_kind = 'sigma'; remove it")
         return self
@@ -343,6 +410,7 @@ class TargetSpec(_Shape):
     back: MaterialSpec | None = Field(default=None, description=(
         "material of the back face (plates, disks, open meshes); without it a beam on the back reflects nothing, and the report says so"))
     history: HistorySpec | None = None
+    track: TargetTrackSpec | None = Field(default=None, description="the target's centre over scenario time (a moving target)")
 
 
 class OccluderSpec(_Shape):
@@ -442,9 +510,24 @@ class ObserverSpec(_Strict):
     center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m"))
     eye_height_m: float | None = Field(default=None, ge=0, le=1e5, description="height above the terrain [m]; replaces z")
     optics: OpticsSpec | None = None
+    kind: Literal["track"] | None = Field(default=None, description=(
+        "'track': one observer moving (an aircraft): times_s with positions_m (or positions_geo), or start_m, "
+        "velocity_m_s and duration_s"))
+    times_s: list[Time] | None = Field(default=None, min_length=1, max_length=1_000_000, description="a track's times [s]")
+    positions_m: list[Vec3] | None = Field(default=None, description="a track's positions [m] at times_s (linear between)")
+    positions_geo: list[GeoPos] | None = Field(default=None, description=(
+        "a track's positions [[lat_deg, lon_deg, height_m], ...] at times_s (along the geodesic between; needs a [site])"))
+    velocity_m_s: Vec3 | None = Field(default=None, description="a straight flight line's velocity [m/s] from start_m")
+    duration_s: float | None = Field(default=None, gt=0, le=1e7, description="a straight flight line's duration [s]")
+    start_time_s: Time | None = Field(default=None, description="a straight flight line's start time [s] (default 0)")
 
     @model_validator(mode="after")
     def _one_layout(self):
+        if self.kind == "track":
+            return self._track()
+        for key in ("times_s", "positions_m", "velocity_m_s", "duration_s", "start_time_s"):
+            if getattr(self, key) is not None:
+                raise ValueError(f"{key}: only for a moving observer (kind = 'track')")
         layouts = {
             "points_m": self.points_m is not None,
             "line": self.start_m is not None or self.end_m is not None,
@@ -474,9 +557,39 @@ class ObserverSpec(_Strict):
         check_limit("OBSERVERS", self.n_points, f"observer points of {self.name!r}")
         return self
 
+    def _track(self):
+        others = [k for k in ("points_m", "end_m", "count", "origin_m", "u_m", "v_m", "counts", "center_m", "radius_m",
+                              "eye_height_m") if getattr(self, k) is not None]
+        if others:
+            raise ValueError(f"{others[0]}: not used by a track (times_s with positions_m, or start_m, velocity_m_s and "
+                             f"duration_s; heights are absolute)")
+        line = [k for k in ("start_m", "velocity_m_s", "duration_s") if getattr(self, k) is not None]
+        if self.positions_m is not None or self.times_s is not None:
+            if line or self.start_time_s is not None:
+                raise ValueError("give times_s with positions_m, or start_m with velocity_m_s and duration_s, not both")
+            if self.positions_m is None or self.times_s is None:
+                raise ValueError("a track needs times_s and positions_m (or positions_geo with a [site])")
+            _increasing(self.times_s, "times_s")
+            _rows_match(self.times_s, self.positions_m, "positions_m")
+        elif len(line) != 3:
+            raise ValueError("a track needs times_s with positions_m, or start_m, velocity_m_s and duration_s; "
+                             f"got {line or 'none of them'}")
+        return self
+
+    def track_keys(self) -> tuple[list, list]:
+        """A track's times [s] and positions [m] (a straight line: its two ends)."""
+        if self.positions_m is not None:
+            return list(self.times_s), [list(p) for p in self.positions_m]
+        t0 = self.start_time_s or 0.0
+        end = [a + b * self.duration_s for a, b in zip(self.start_m, self.velocity_m_s)]
+        return [t0, t0 + self.duration_s], [list(self.start_m), end]
+
     @property
     def n_points(self) -> int:
-        """Number of points this group makes (without building them)."""
+        """Number of points this group makes (without building them; a track makes none:
+        it is evaluated over time, :mod:`hazard.pipeline.motion`)."""
+        if self.kind == "track":
+            return 0
         if self.points_m is not None:
             return len(self.points_m)
         if self.counts is not None and self.origin_m is not None:
@@ -485,6 +598,8 @@ class ObserverSpec(_Strict):
 
     @property
     def layout(self) -> str:
+        if self.kind == "track":
+            return "track"
         if self.points_m is not None:
             return "points"
         if self.start_m is not None:
@@ -557,6 +672,72 @@ class RangeSpec(_Strict):
         return self
 
 
+class MotionSpec(_Strict):
+    """How things that move are evaluated over scenario time (:mod:`hazard.pipeline.motion`):
+    a base step, refined near beam crossings so that a narrow beam is not stepped over."""
+
+    time_start_s: Time | None = Field(default=None, description="start [s] (default: the earliest time of the tracks, aim track and windows)")
+    time_end_s: Time | None = Field(default=None, description="end [s] (default: the latest of them)")
+    time_step_s: float = Field(default=0.1, gt=0, le=1e5, description="base time step [s]")
+    adaptive: bool = Field(default=True, description=(
+        "refine the step near beam crossings (a step of the 1/e radius / relative speed / samples_per_width); "
+        "false: the base step only (it can step over a narrow beam)"))
+    samples_per_width: int = Field(default=8, ge=2, le=1000, description="samples per 1/e beam radius crossed")
+
+    @model_validator(mode="after")
+    def _span(self):
+        if self.time_start_s is not None and self.time_end_s is not None and not self.time_end_s > self.time_start_s:
+            raise ValueError(f"time_end_s={self.time_end_s!r}: expected after time_start_s={self.time_start_s!r}")
+        return self
+
+
+class AirZoneSpec(_Strict):
+    """A flight zone: a polygon extruded from ``floor_agl_m`` to ``ceiling_agl_m`` above the
+    terrain (above z = 0 without one), where the effective irradiance must stay below its
+    ``limit`` (FAA levels, range-safety.md section 5)."""
+
+    name: Name
+    limit: Literal["lfed", "czed", "szed", "nohd"] = Field(description=(
+        "lfed: 50 nW/cm^2 (laser-free), czed: 5 uW/cm^2 (critical), szed: 100 uW/cm^2 (sensitive), nohd: the MPE"))
+    boundary_m: list[Annotated[list[Coord], Field(min_length=2, max_length=2)]] | None = Field(
+        default=None, min_length=3, max_length=100_000, description="the zone's outline [[x, y], ...] [m] (or boundary_geo)")
+    boundary_geo: list[Annotated[list[float], Field(min_length=2, max_length=2)]] | None = Field(
+        default=None, min_length=3, max_length=100_000, description="the outline as [[lat_deg, lon_deg], ...] (needs a [site])")
+    floor_agl_m: float = Field(default=0.0, ge=0, le=1e5, description="floor above the terrain [m]")
+    ceiling_agl_m: float = Field(gt=0, le=1e5, description="ceiling above the terrain [m] (2,000 ft = 609.6 m)")
+
+    @model_validator(mode="after")
+    def _shape(self):
+        from shapely.geometry import Polygon
+
+        if self.boundary_m is None:
+            raise ValueError("boundary_m: the zone's outline is required (or boundary_geo with a [site])")
+        if not self.ceiling_agl_m > self.floor_agl_m:
+            raise ValueError(f"ceiling_agl_m={self.ceiling_agl_m!r}: expected above floor_agl_m={self.floor_agl_m!r}")
+        poly = Polygon(self.boundary_m)
+        if not poly.is_valid or poly.area <= 0:
+            raise ValueError(f"boundary_m: expected a simple polygon with an area, got {self.boundary_m!r}")
+        return self
+
+
+class AirspaceSpec(_Strict):
+    """Visual interference in the airspace (visible lasers): the weighting of the FAA
+    levels and the flight zones to check."""
+
+    visual_correction: Literal["photopic", "none"] = Field(default="photopic", description=(
+        "photopic: the CIE 1924 V(lambda) visual correction factor; none: VCF = 1 (the most conservative)"))
+    credit_attenuation: bool = Field(default=False, description=(
+        "credit the atmosphere's attenuation for the visual-interference distances (the FAA zones usually do not)"))
+    zones: list[AirZoneSpec] = Field(default_factory=list, max_length=1000)
+
+    @model_validator(mode="after")
+    def _names(self):
+        names = [z.name for z in self.zones]
+        if len(set(names)) != len(names):
+            raise ValueError(f"zones: names must be unique, got {names}")
+        return self
+
+
 class SceneSpec(_Strict):
     name: Name
     description: str = Field(default="", max_length=100_000)
@@ -570,6 +751,15 @@ class SceneSpec(_Strict):
     analysis: AnalysisSpec = Field(default_factory=AnalysisSpec)  # built per scene: its limit checks read HAZARD_MAX_* then
     range: RangeSpec | None = None
     site: SiteSpec | None = None
+    motion: MotionSpec | None = None
+    airspace: AirspaceSpec | None = None
+
+    @property
+    def has_motion(self) -> bool:
+        """Something moves or lasing stops: a track, an aim track, a target track or firing windows."""
+        la = self.laser
+        return (la.aim_track is not None or la.windows is not None or any(t.track is not None for t in self.targets)
+                or any(o.kind == "track" for o in self.observers))
 
     @model_validator(mode="after")
     def _names(self):

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 __all__ = ["Plan", "plan", "STAGES"]
 
 STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "sdz", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
-          "mirror_beams", "footprint", "extended_source")
+          "mirror_beams", "footprint", "motion", "airspace", "extended_source")
 
 
 @dataclass(frozen=True)

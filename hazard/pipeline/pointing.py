@@ -26,6 +26,13 @@ its edges, the two meridian arcs (the foot of u on each arc's great circle, or a
 ends) and the two circles of elevation (at u's azimuth when it lies in [A0, A1], else
 at their ends).
 
+A slewing beam (``[laser] aim_track``) may stop anywhere along its track (a fault, a
+hold): its directions join the core. They are sampled every ``AIM_TRACK_STEP_RAD`` or
+finer (:func:`aim_track_directions`), and the distance to the continuous track is taken
+as the least angle to a sample less half the largest gap between samples (the track
+passes within half a gap of every sample's neighbourhood: never farther than the
+estimate), so the core is never smaller than the track's.
+
 What blocks it: the terrain and the occluders on the straight line from the aperture to
 the eye (targets do not: within its pointing error the beam can slip off them, as the
 danger zone assumes). The reflections are computed for the nominal aim only (said in
@@ -42,7 +49,10 @@ from scenes.geometry import direction_in_sector
 
 from .sdz import bearing_vectors, first_backstop_rays
 
-__all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2"]
+__all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2", "aim_track_directions"]
+
+AIM_TRACK_STEP_RAD = 2e-4  # the aim track's directions: at most this apart (0.2 mrad; finer with a small buffer)
+AIM_TRACK_MAX = 20000  # directions of an aim track (a longer track gets a coarser step, said by the gap)
 
 
 def _angle(u, v) -> np.ndarray:
@@ -79,6 +89,37 @@ def angle_to_sector_rad(u, sector) -> np.ndarray:
     return np.where(inside, 0.0, best)
 
 
+def aim_track_directions(scene, step_rad=None) -> tuple[np.ndarray, float]:
+    """The aim track's directions (K, 3), consecutive ones at most ``step_rad`` apart
+    (default: ``AIM_TRACK_STEP_RAD``, or a quarter of the pointing buffer if smaller), and
+    the largest gap between them [rad]. Empty without an aim track."""
+    from scenes.motion import motion_of
+
+    motion = motion_of(scene)
+    if motion is None or motion.aim is None:
+        return np.empty((0, 3)), 0.0
+    b = scene.spec.laser.pointing_buffer_rad
+    step = step_rad or min(AIM_TRACK_STEP_RAD, b / 4 if b > 0 else AIM_TRACK_STEP_RAD)
+    t0, t1 = motion.aim.span_s
+    fine = np.linspace(t0, t1, 20001) if t1 > t0 else np.array([t0])
+    u = motion.aim.direction(fine)
+    turn = np.concatenate([[0.0], np.cumsum(_angle(u[1:], u[:-1]))])
+    n = min(int(math.ceil(turn[-1] / step)) + 1, AIM_TRACK_MAX)
+    idx = np.unique(np.searchsorted(turn, np.linspace(0.0, turn[-1], n)).clip(0, len(fine) - 1))
+    d = u[idx]
+    gap = float(_angle(d[1:], d[:-1]).max()) if len(d) > 1 else 0.0
+    fine_gap = float(_angle(u[1:], u[:-1]).max()) if len(u) > 1 else 0.0
+    return d, max(gap, fine_gap)
+
+
+def _to_track_rad(u, track, gap) -> np.ndarray:
+    """Least angle from u (N, 3) to the sampled track, less half the largest gap (>= 0)."""
+    best = np.full(len(u), np.inf)
+    for a0 in range(0, len(track), 512):
+        best = np.minimum(best, np.arccos(np.clip(u @ track[a0:a0 + 512].T, -1.0, 1.0)).min(axis=1))
+    return np.maximum(best - gap / 2, 0.0)
+
+
 def pointing_offset_rad(scene, u) -> np.ndarray:
     """Angle delta [rad] from unit directions u (N, 3) (laser to observer) to the nearest
     direction the beam may point in (see the module notes)."""
@@ -87,10 +128,14 @@ def pointing_offset_rad(scene, u) -> np.ndarray:
     axis = np.asarray(scene.laser_direction, float)
     to_aim = _angle(u, axis[None])
     if laser.sector is None:
-        return np.maximum(to_aim - b, 0.0)
-    core = angle_to_sector_rad(u, laser.sector)
-    if not direction_in_sector(axis, laser.sector, b):  # the aim's cone is added to an aim outside the sector
-        core = np.minimum(core, to_aim)
+        core = to_aim
+    else:
+        core = angle_to_sector_rad(u, laser.sector)
+        if not direction_in_sector(axis, laser.sector, b):  # the aim's cone is added to an aim outside the sector
+            core = np.minimum(core, to_aim)
+    track, gap = aim_track_directions(scene)
+    if len(track):
+        core = np.minimum(core, _to_track_rad(u, track, gap))
     return np.maximum(core - b, 0.0)
 
 

@@ -64,6 +64,7 @@ class Directions:
     step_rad: float
     kind: str
     buffer_rad: float
+    aim_track: bool = False  # a slewing beam's track is among the directions
 
 
 def bearing_vectors(azimuth_rad, elevation_rad) -> np.ndarray:
@@ -124,10 +125,33 @@ def pointing_directions(scene) -> Directions:
         unit, step = _sector(laser.sector, b)
         if not direction_in_sector(axis, laser.sector, b):  # the aim must be in the zone whatever the sector says
             unit = np.vstack([unit, _cone(axis, b, CONE_STEP * b) if b > 0 else axis[None]])
-        return Directions(unit, step, "sector", b)
+        return _with_aim_track(scene, Directions(unit, step, "sector", b))
     if b <= 0:
-        return Directions(axis[None], 0.0, "aim", 0.0)
-    return Directions(_cone(axis, b, CONE_STEP * b), CONE_STEP * b, "cone", b)
+        return _with_aim_track(scene, Directions(axis[None], 0.0, "aim", 0.0))
+    return _with_aim_track(scene, Directions(_cone(axis, b, CONE_STEP * b), CONE_STEP * b, "cone", b))
+
+
+def _with_aim_track(scene, d: Directions) -> Directions:
+    """``d`` and a slewing beam's track (:func:`hazard.pipeline.pointing.aim_track_directions`),
+    each track direction widened across the track by the buffer (the band the cones of
+    the track's directions sweep), the track's ends by their cones."""
+    from .pointing import aim_track_directions
+
+    b = d.buffer_rad
+    track, gap = aim_track_directions(scene, max(CONE_STEP * b, 1e-5) if b > 0 else None)
+    if not len(track):
+        return d
+    parts = [d.unit, track]
+    if b > 0 and len(track) > 1:
+        along = np.gradient(track, axis=0)
+        across = np.cross(along, track)
+        across /= np.maximum(np.linalg.norm(across, axis=1, keepdims=True), 1e-300)
+        for f in np.linspace(-1.0, 1.0, 2 * max(2, math.ceil(1 / CONE_STEP / 4)) + 1):
+            v = np.cos(f * b) * track + np.sin(f * b) * across
+            parts.append(v / np.linalg.norm(v, axis=1, keepdims=True))
+        parts += [_cone(track[0], b, CONE_STEP * b), _cone(track[-1], b, CONE_STEP * b)]
+    unit = np.vstack(parts)
+    return Directions(unit, max(d.step_rad, gap), d.kind, b, aim_track=True)
 
 
 def _envelope(phi, reach) -> tuple[np.ndarray, bool]:
@@ -346,7 +370,7 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
     origin = np.asarray(scene.laser_position_m, float)
     backstop_m = beam_stop_m(laser, origin, d.unit, ray_scene, len(scene.targets), s_max)
     boundary = boundary_polygon(scene)
-    out = {"directions": {"kind": d.kind, "count": int(len(d.unit)), "step_rad": d.step_rad, "buffer_rad": d.buffer_rad,
+    out = {"directions": {"kind": d.kind, "aim_track": d.aim_track, "count": int(len(d.unit)), "step_rad": d.step_rad, "buffer_rad": d.buffer_rad,
                           "pointing_error_rad": laser.pointing_error_rad, "pointing_error_kind": laser.pointing_error_kind,
                           "pointing_error_sigmas": laser.pointing_error_sigmas, "pointing_error_source": laser.pointing_error_source}}
     out.update(_zone_dict(scene, _zone(scene, d.unit, backstop_m, naked, power, mpe_w_m2, mu), d.unit, boundary))

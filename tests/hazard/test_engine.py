@@ -112,7 +112,7 @@ def test_plan_leaves_out_what_the_scene_does_not_need():
     ran = {s.name: s.ran for s in res.stages}
     assert ran == {"mpe": True, "rays": False, "beam": True, "crossings": False, "direct": True, "spill": True, "sdz": True, "history": False, "static": True, "dynamic": False,
                    "specular": False, "line_of_sight": False, "keepout": True, "mirror_beams": False, "footprint": False, "exposure": True,
-                   "extended_source": False}
+                   "motion": False, "airspace": True, "extended_source": False}
     assert "analytically" in res.stage("rays").detail
 
 

@@ -1,0 +1,235 @@
+"""Stage ``airspace``: whether each flight zone of ``[airspace]`` holds its limit.
+
+A zone is a polygon extruded from ``floor_agl_m`` to ``ceiling_agl_m`` above the ground
+(the terrain under each point, or z = 0 without one; range-safety.md section 5: "the zone
+is a volume: test the beam path against the zone polyhedra, not a ground distance"). Its
+limit is an effective irradiance VCF x E (``lfed``, ``czed``, ``szed``;
+:mod:`hazard.visual`) or the MPE (``nohd``, no VCF). It holds when the largest effective
+irradiance inside it, at every time the laser lases, stays below the limit.
+
+Where the largest value is looked for, at each analysed time (every beam state's time
+and, for a slewing beam, the base time grid, at most ``TIMES_MAX`` of them):
+
+- the direct beam: along its axis up to the zone's level distance (beyond it the axis
+  is below the limit, and off the axis less still), the first point inside the zone
+  (sampled, then bisected to 1e-9 of the distance): on the axis the irradiance falls
+  with range, so that is the axis's largest value in the zone; blocked where something
+  stands between the aperture and it;
+- each mirror beam (an ideal-mirror target): along its axis, sampled, inside the zone;
+- every reflection and the beam's off-axis edge: a lattice of points filling the zone
+  (``LATTICE`` x ``LATTICE`` over its outline, ``LEVELS`` heights), with the lines of
+  sight of the irradiance map.
+
+The beam's edge grazing a zone the axis misses is found only at lattice points: the
+lattice spacing is reported. Attenuation: credited for the visual levels only with
+``[airspace] credit_attenuation = true``; the NOHD zones take the scene's.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..engine import mirror_axis, specular_irradiance, spot_irradiance
+from ..visual import level_limit_w_m2
+
+__all__ = ["check_zones", "TIMES_MAX", "LATTICE", "LEVELS"]
+
+TIMES_MAX = 2000
+LATTICE = 24
+LEVELS = 6
+AXIS_SAMPLES = 512
+
+
+class _Zone:
+    """A zone in local coordinates: outline, floor and ceiling heights over the ground."""
+
+    def __init__(self, zs, scene):
+        from shapely.geometry import Polygon
+        from shapely.prepared import prep
+
+        off = np.asarray(scene.offset_m, float)
+        self.spec = zs
+        self.xy = np.asarray(zs.boundary_m, float) - off[:2]
+        self.poly = Polygon(self.xy)
+        self._prep = prep(self.poly)
+        self.terrain = scene.terrain
+        self.z0 = -off[2]
+
+    def ground(self, x, y) -> np.ndarray:
+        if self.terrain is None:
+            return np.full(np.shape(x), self.z0)
+        return self.terrain.height_at(x, y)
+
+    def inside(self, p) -> np.ndarray:
+        from shapely import contains_xy
+
+        p = np.asarray(p, float).reshape(-1, 3)
+        g = self.ground(p[:, 0], p[:, 1])
+        band = (p[:, 2] >= g + self.spec.floor_agl_m) & (p[:, 2] <= g + self.spec.ceiling_agl_m)
+        return band & contains_xy(self.poly, p[:, 0], p[:, 1])
+
+    def lattice(self) -> tuple[np.ndarray, float]:
+        """Points filling the zone, and their horizontal spacing [m]."""
+        from shapely import contains_xy
+
+        x0, y0, x1, y1 = self.poly.bounds
+        step = max(x1 - x0, y1 - y0) / LATTICE
+        xs = np.arange(x0 + step / 2, x1, step)
+        ys = np.arange(y0 + step / 2, y1, step)
+        gx, gy = (a.ravel() for a in np.meshgrid(xs, ys))
+        keep = contains_xy(self.poly, gx, gy)
+        gx, gy = gx[keep], gy[keep]
+        if not len(gx):  # a thin zone: its vertices
+            gx, gy = self.xy[:, 0], self.xy[:, 1]
+        g = self.ground(gx, gy)
+        f = np.linspace(self.spec.floor_agl_m, self.spec.ceiling_agl_m, LEVELS)
+        pts = np.concatenate([np.column_stack([gx, gy, g + h]) for h in f])
+        return pts, step
+
+
+def _times(result):
+    """(time, direction, spots, tracer, ray_scene) at each analysed lasing time."""
+    m = result.motion
+    if m is None:
+        return None
+    run = m.run
+    if run.motion.aim is None:
+        t = np.asarray([bs.time_s for bs in run.states_list])
+    else:
+        from .motion import base_grid
+
+        t = base_grid(run.motion, run.motion.t_start_s, run.motion.t_end_s)
+        t = np.unique(np.concatenate([t[:: max(1, len(t) // TIMES_MAX)], run.key_times_s]))
+    t = t[run.motion.windows.lased(t)]
+    return [(float(ti), run.direction(ti)[0], run.states_list[int(run.state_index(np.array([ti]))[0])]) for ti in t]
+
+
+def _axis_entry(zone, o, u, reach_m) -> np.ndarray | None:
+    """The first point of the ray o + s u (0 <= s <= reach) inside the zone, or None."""
+    s = np.linspace(0.0, reach_m, AXIS_SAMPLES)
+    inside = zone.inside(o + s[:, None] * u)
+    if not inside.any():
+        return None
+    k = int(np.argmax(inside))
+    if k == 0:
+        return o.copy()
+    lo, hi = s[k - 1], s[k]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if zone.inside(o + mid * u)[0]:
+            hi = mid
+        else:
+            lo = mid
+        if hi - lo <= 1e-9 * max(hi, 1.0):
+            break
+    return o + hi * u
+
+
+def _direct_at(result, p, u, tracer, mu) -> np.ndarray:
+    """The direct beam along direction ``u`` at points ``p`` (N, 3), blocked by objects."""
+    la = result.scene.spec.laser
+    o = np.asarray(result.scene.laser_position_m, float)
+    rel = p - o
+    z = rel @ u
+    d = np.linalg.norm(rel, axis=1)
+    r2 = np.maximum(d * d - z * z, 0.0)
+    w = (la.beam_diameter_m + np.maximum(z, 0.0) * la.divergence_rad) / 2
+    e = np.where(z > 0, la.average_power_w / (math.pi * w * w) * np.exp(-r2 / (w * w)) * np.exp(-mu * d), 0.0)
+    live = np.flatnonzero(e > 0)
+    if len(live) and tracer is not None:
+        hits = tracer.first_hit(np.broadcast_to(o, (len(live), 3)), p[live] - o)
+        e[live] = np.where(hits.hit & (hits.t < d[live] * (1 - 1e-9)), 0.0, e[live])
+    return e
+
+
+def _reflected_at(spots, p, mu, ray_scene, states) -> np.ndarray:
+    """Every spot's reflection at points ``p`` (the largest over the history's states)."""
+    e = np.zeros(len(p))
+    for sp in spots:
+        st = states.get(sp.target.index)
+        los = np.ones(len(p))
+        if ray_scene is not None:
+            start = ray_scene.off_surface(sp.centroid, sp.mean_frame[2])
+            los = (~ray_scene.occluded(np.broadcast_to(start, (len(p), 3)), p)).astype(float)
+        g = np.ones(len(p))
+        r, _ = spot_irradiance(sp, p, g, mu, st, los)
+        if sp.material.has_specular:
+            r = r + specular_irradiance(sp, p, g, mu, None, st) * (los if st is None else los[:, None])
+        e += r if r.ndim == 1 else r.max(axis=1)
+    return e
+
+
+def _mirror_points(zone, spots, reach_m) -> np.ndarray:
+    """Points along each mirror beam's axis inside the zone."""
+    out = []
+    for sp in spots:
+        if sp.material.has_specular:
+            s = np.linspace(0.0, reach_m, AXIS_SAMPLES)
+            q = sp.centroid + s[:, None] * mirror_axis(sp)
+            out.append(q[zone.inside(q)])
+    return np.concatenate(out) if out else np.empty((0, 3))
+
+
+def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
+    """The worst effective irradiance in one zone over the analysed times."""
+    from ..visual import zone_distances_m
+
+    la = result.scene.spec.laser
+    key = zone.spec.limit
+    e_lim = level_limit_w_m2(key, result.mpe_w_m2, vcf)
+    eff = 1.0 if key == "nohd" else vcf
+    reach = zone_distances_m(la.average_power_w, la.beam_diameter_m, la.divergence_rad, result.mpe_w_m2, vcf, mu)[f"{key}_m"]
+    reach = min(reach if math.isfinite(reach) else 1e7, 1e7)
+    pts, spacing = lattice
+    best = (0.0, None, None, None)
+    for t, u, spots, tracer, ray_scene in steps:
+        entry = _axis_entry(zone, np.asarray(result.scene.laser_position_m, float), u, reach)
+        cand = [pts] + ([entry[None]] if entry is not None else []) + [_mirror_points(zone, spots, reach)]
+        p = np.concatenate(cand)
+        direct = _direct_at(result, p, u, tracer, mu)
+        refl = _reflected_at(spots, p, mu, ray_scene, result.states)
+        total = (direct + refl) * eff
+        k = int(np.argmax(total))
+        if total[k] > best[0]:
+            best = (float(total[k]), p[k], t, "direct" if direct[k] >= refl[k] else _which(spots, p[k], mu, ray_scene, result.states))
+    off = np.asarray(result.scene.offset_m, float)
+    worst, point, t, path = best
+    return {"name": zone.spec.name, "limit": key, "limit_w_m2": e_lim * eff if math.isfinite(e_lim) else None,
+            "floor_agl_m": zone.spec.floor_agl_m, "ceiling_agl_m": zone.spec.ceiling_agl_m,
+            "holds": bool(worst < (e_lim * eff if math.isfinite(e_lim) else math.inf)),
+            "worst_effective_irradiance_w_m2": worst, "worst_point_m": None if point is None else (point + off).tolist(),
+            "worst_time_s": t, "worst_path": path, "vcf_applied": eff, "lattice_spacing_m": spacing,
+            "times_checked": len(steps)}
+
+
+def _which(spots, p, mu, ray_scene, states) -> str | None:
+    vals = [float(_reflected_at([sp], p[None], mu, ray_scene, states)[0]) for sp in spots]
+    return spots[int(np.argmax(vals))].target.name if vals else None
+
+
+def check_zones(result, first) -> dict:
+    """report.json ``airspace``: per zone whether it holds, with the worst point and time
+    (see the module notes). ``first``: (traced, tracer, ray_scene) of the analysis."""
+    spec = result.scene.spec
+    vi = result.visual_interference
+    vcf_levels = vi["vcf"] if vi["applies"] else 0.0
+    traced, tracer, ray_scene = first
+    timed = _times(result)
+    if timed is None:
+        steps = [(0.0, np.asarray(result.scene.laser_direction, float), result.spots, tracer, ray_scene)]
+    else:
+        steps = [(t, u, bs.spots, bs.tracer, bs.ray_scene) for t, u, bs in timed]
+    zones = []
+    for zs in spec.airspace.zones:
+        z = _Zone(zs, result.scene)
+        mu = result.attenuation_per_m if zs.limit == "nohd" else vi["attenuation_per_m"]
+        zones.append(_zone_check(result, z, steps, 1.0 if zs.limit == "nohd" else vcf_levels, mu, z.lattice()))
+    out = {"zones": zones, "method": "hazard.pipeline.airspace: the direct beam's axis entry, each mirror beam's axis and a "
+                                      f"lattice of {LATTICE} x {LATTICE} x {LEVELS} points per zone, at every lased analysed time",
+            "visual_correction_factor": vcf_levels}
+    if not vi["applies"]:
+        out["note"] = (f"{spec.laser.wavelength_nm:g} nm is not visible: the visual levels (lfed, czed, szed) cannot be "
+                       f"exceeded; 'nohd' zones are checked against the MPE")
+    return out

@@ -1,0 +1,357 @@
+"""Stage ``motion``: the beam and its reflections over scenario time at moving observers
+(aircraft tracks) and, when the beam or a target moves, at the fixed observers.
+
+What one path (an observer's position over time) receives at time t:
+
+- **direct beam** (range-safety.md sections 1-2): the Gaussian beam along the aim at t,
+  ``E = P / (pi w^2) exp(-r^2 / w^2) sqrt(1 + r^2 phi^2 / (4 w^2)) exp(-mu L)``, w = (a +
+  z phi) / 2 the 1/e radius at the axial distance z, r the distance from the axis, L from
+  the aperture; zero where something lies on the segment from the aperture to the eye
+  (terrain, occluders and the targets where they are at t) or the laser is not lasing
+  (``[laser] windows``); times the optical gain of the group's optics with the beam's
+  diameter there (:func:`hazard.pipeline.direct._beam_gain`).
+- **reflections**: the spots of the beam at t (:func:`hazard.pipeline.spots.trace_beam`
+  on the scene with the aim and target positions of t: a *beam state*), evaluated as the
+  irradiance map does (:func:`hazard.engine.spot_irradiance`, the mirror lobes by
+  :func:`hazard.engine.specular_irradiance`), with the line of sight from each spot.
+  When the beam moves, beam states are traced at key times chosen so that the spot moves
+  at most half the beam's 1/e diameter at the target between them (at most
+  ``BEAM_STATES_MAX``; a coarser step is said), and each time takes its nearest state.
+- **dynamic materials**: the state at the *dwell time* of the spot, the lased time during
+  which the surface under the spot's centre has been under the spot (for a beam held on
+  a target: the lased time since lasing began; windows pause it, cooling between them is
+  not modelled: the state is held), read off the target's history (the static analysis's
+  ``history`` stage), taking the larger of the two bracketing history states.
+
+Time steps. The path's own grid is the base step (``[motion] time_step_s``) with every
+knot of the tracks, the aim track and the windows' edges (both sides of an edge). With
+``adaptive = true`` it is refined, a priori, where the path comes within
+``CROSSING_REACH`` 1/e radii of a beam axis (the direct beam and each mirror beam): the
+transverse offset from the axis is linear across a step, its closest approach is exact,
+and the part of the step within reach gets a step of w / (n |dr/dt|) (n =
+``samples_per_width``), so a fast aircraft crossing a narrow beam is sampled across it;
+and a posteriori, where E changes by more than ``REL_CHANGE`` between neighbours (the
+wide lobes of diffuse and glossy reflections), by halving, ``REFINE_PASSES`` times.
+
+Exposure along a path: the peak; the radiant exposure as the largest integral of E over
+any window of ``[exposure] duration_s`` (trapezoids); the path's whole integral; and the
+verdict: the largest ratio of the exposure in any window of length T to the MPE at T
+(:func:`hazard.mpe.ocular_mpe`, as radiant exposure), over T from the smallest step to
+the exposure duration (``WINDOW_DURATIONS`` log-spaced): for a crossing this includes its
+effective duration sqrt(pi) w / v (range-safety.md section 2). The integral's error is
+estimated by comparing the trapezoid sum with the sum over every second sample (its
+Richardson estimate, a third of the difference) and added to the exposure the verdict
+uses, never subtracted. Pulsed lasers also take the per-pulse rule on the peak.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import mpe as _mpe
+from ..engine import spot_irradiance, specular_irradiance
+from ..nohd import optical_gain
+from .direct import _beam_gain
+
+__all__ = ["PathResult", "MotionRun", "run_motion", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
+
+BEAM_STATES_MAX = 200  # beam states traced when the beam or a target moves (a coarser key step is said)
+FIXED_OBSERVERS_MAX = 2000  # fixed observers evaluated over time when the beam moves (beyond: said, static verdict only)
+SAMPLES_MAX = 2_000_000  # samples per path
+CROSSING_REACH = 5.0  # 1/e radii from an axis where the a-priori refinement applies (exp(-25) beyond)
+REL_CHANGE = 0.25  # a-posteriori refinement: neighbours differing by more than this fraction
+REFINE_PASSES = 12
+MIN_STEP_S = 1e-7
+WINDOW_DURATIONS = 48
+
+
+@dataclass
+class BeamState:
+    """The beam at a key time: its direction, the scene as it is then, its spots and the
+    tracer that answers lines through that scene."""
+
+    time_s: float
+    direction: np.ndarray
+    scene: object
+    spots: list
+    tracer: object
+    ray_scene: object | None
+
+
+@dataclass
+class PathResult:
+    """One path's samples and what they mean."""
+
+    name: str
+    group: int
+    kind: str  # "track" or "fixed"
+    times_s: np.ndarray
+    positions_m: np.ndarray
+    lased: np.ndarray
+    direct_w_m2: np.ndarray
+    reflected_w_m2: np.ndarray
+    base_step_s: float
+    adaptive: bool
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def irradiance_w_m2(self) -> np.ndarray:
+        return self.direct_w_m2 + self.reflected_w_m2
+
+    @property
+    def cumulative_j_m2(self) -> np.ndarray:
+        e = self.irradiance_w_m2
+        return np.concatenate([[0.0], np.cumsum(0.5 * (e[1:] + e[:-1]) * np.diff(self.times_s))])
+
+
+@dataclass
+class MotionRun:
+    """Everything the motion stage needs, built once."""
+
+    scene: object
+    motion: object
+    mu: float
+    mpe_w_m2: float
+    pulse_limit_w_m2: float | None
+    states: dict
+    history_times_s: np.ndarray
+    states_list: list  # BeamState per key time
+    key_times_s: np.ndarray
+    backend: str
+    threads: int
+    notes: list = field(default_factory=list)
+    key_step_text: str = ""
+
+    # -- the schedule ----------------------------------------------------------------
+    def direction(self, t) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, float))
+        if self.motion.aim is None:
+            return np.broadcast_to(np.asarray(self.scene.laser_direction, float), (len(t), 3))
+        return self.motion.aim.direction(t)
+
+    def state_index(self, t) -> np.ndarray:
+        """The beam state each time takes (the nearest key time)."""
+        k = self.key_times_s
+        if len(k) == 1:
+            return np.zeros(np.shape(t), int)
+        i = np.clip(np.searchsorted(k, t), 1, len(k) - 1)
+        return np.where(np.abs(t - k[i - 1]) <= np.abs(k[i] - t), i - 1, i)
+
+
+# -- time grids ------------------------------------------------------------------------
+def base_grid(motion, t0: float, t1: float) -> np.ndarray:
+    """The base step over [t0, t1] with every knot and both sides of each window edge."""
+    step = motion.spec.time_step_s
+    n = int(math.floor((t1 - t0) / step))
+    if n + 1 > SAMPLES_MAX:
+        raise ValueError(f"motion.time_step_s = {step:g} s gives {n + 1} samples over [{t0:g}, {t1:g}] s (the limit is "
+                         f"{SAMPLES_MAX}): give a larger step")
+    t = [t0 + step * np.arange(n + 1), [t1], motion.knots()]
+    edges = motion.windows.edges()
+    t += [edges, np.nextafter(edges, -np.inf), np.nextafter(edges, np.inf)]
+    t = np.unique(np.concatenate([np.asarray(x, float).ravel() for x in t]))
+    return t[(t >= t0) & (t <= t1)]
+
+
+def _lased_time(run: MotionRun, t) -> np.ndarray:
+    """Lased seconds from the scenario's start to each time (sorted times)."""
+    t = np.asarray(t, float)
+    w = run.motion.windows
+    if w.intervals is None:
+        return t - run.motion.t_start_s
+    a, b = w.intervals[:, 0], w.intervals[:, 1]
+    return np.clip(t[:, None] - a[None], 0.0, (b - a)[None]).sum(axis=1)
+
+
+# -- beam states -------------------------------------------------------------------------
+def _moved_target(t, d):
+    """Target ``t`` displaced by ``d`` [m] (mesh, centre and analytic centre)."""
+    mesh = dataclasses.replace(t.mesh, vertices=t.mesh.vertices + d)
+    if mesh.analytic is not None:
+        mesh.analytic = (mesh.analytic[0], np.asarray(mesh.analytic[1], float) + d, *mesh.analytic[2:])
+    return dataclasses.replace(t, mesh=mesh, center_m=np.asarray(t.center_m, float) + d)
+
+
+def _scene_at(scene, motion, t: float, direction):
+    """The scene with the aim and the targets' positions at time t."""
+    targets = list(scene.targets)
+    for tt in motion.target_tracks:
+        targets[tt.index] = _moved_target(targets[tt.index], tt.at(t)[0])
+    return dataclasses.replace(scene, laser_direction=np.asarray(direction, float), targets=targets)
+
+
+def _key_times(run: MotionRun, grid: np.ndarray) -> tuple[np.ndarray, str]:
+    """Key times where the beam is traced: the spot moves at most half its 1/e diameter at
+    the target between them (aim turn x range, and the targets' displacement)."""
+    motion, scene = run.motion, run.scene
+    if not motion.beam_moves:
+        return np.array([motion.t_start_s]), "the beam and targets do not move: one beam state"
+    la = scene.spec.laser
+    rng = min((float(np.linalg.norm(t.center_m - scene.laser_position_m)) for t in scene.targets), default=1.0)
+    allow = 0.5 * max(la.beam_diameter_m + rng * la.divergence_rad, 1e-6)
+    u = run.direction(grid)
+    turn = np.concatenate([[0.0], np.arccos(np.clip(np.einsum("ij,ij->i", u[1:], u[:-1]), -1, 1))]) * rng
+    for tt in motion.target_tracks:
+        turn = turn + np.concatenate([[0.0], np.linalg.norm(np.diff(tt.at(grid), axis=0), axis=1)])
+    moved = np.cumsum(turn)
+    n = int(math.ceil(moved[-1] / allow)) + 1
+    coarse = n > BEAM_STATES_MAX
+    n = min(n, BEAM_STATES_MAX)
+    marks = np.linspace(0.0, moved[-1], n) if moved[-1] > 0 else np.zeros(1)
+    idx = np.unique(np.searchsorted(moved, marks).clip(0, len(grid) - 1))
+    step = moved[-1] / max(len(idx) - 1, 1)
+    text = (f"{len(idx)} beam state(s) traced; the spot moves {step:.3g} m between them "
+            f"({step / (2 * allow):.3g} 1/e beam diameters at the nearest target, {rng:.4g} m)")
+    if coarse:
+        text += f" - capped at {BEAM_STATES_MAX} states: coarser than the half-diameter step asked"
+    return grid[idx], text
+
+
+def beam_states(run: MotionRun, grid: np.ndarray, first) -> None:
+    """Trace the beam at the key times (``first``: the static analysis's own trace, used
+    when nothing moves)."""
+    from . import spots as beam_stage
+
+    run.key_times_s, run.key_step_text = _key_times(run, grid)
+    if not run.motion.beam_moves:
+        traced, tracer, ray_scene = first
+        run.states_list = [BeamState(float(run.key_times_s[0]), np.asarray(run.scene.laser_direction, float), run.scene,
+                                     traced.built.spots, tracer, ray_scene)]
+        return
+    out = []
+    moving = bool(run.motion.target_tracks)
+    _, tracer0, ray0 = first
+    for t in run.key_times_s:
+        u = run.direction(t)[0]
+        sc = _scene_at(run.scene, run.motion, float(t), u)
+        ray_scene, tracer = ray0, tracer0
+        if moving:
+            ray_scene = beam_stage.ray_scene(sc, run.backend, run.threads) if ray0 is not None else None
+            tracer = ray_scene if ray_scene is not None else beam_stage.FlatScene(sc.targets)
+        traced = beam_stage.trace_beam(sc, tracer, run.mu)
+        out.append(BeamState(float(t), u, sc, traced.built.spots, tracer, ray_scene))
+    run.states_list = out
+
+
+def check_sector(run: MotionRun, t: np.ndarray) -> None:
+    """An aim outside ``[laser] sector`` at any analysed time is an error naming the time."""
+    sector = run.scene.spec.laser.sector
+    if sector is None or run.motion.aim is None:
+        return
+    from .pointing import angle_to_sector_rad
+
+    off = angle_to_sector_rad(run.direction(t), sector)
+    bad = np.flatnonzero(off > 1e-9)
+    if len(bad):
+        i = bad[0]
+        raise ValueError(f"laser.aim_track: at t = {t[i]:.6g} s the aim is {math.degrees(off[i]):.4g} deg outside laser.sector "
+                         f"(azimuth {sector.azimuth_deg} deg, elevation {sector.elevation_deg} deg)")
+
+
+# -- irradiance at samples -------------------------------------------------------------
+def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
+    """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes)."""
+    la = run.scene.spec.laser
+    o = np.asarray(run.scene.laser_position_m, float)
+    u = run.direction(t)
+    rel = p - o
+    z = np.einsum("ij,ij->i", rel, u)
+    dist = np.linalg.norm(rel, axis=1)
+    r2 = np.maximum(dist**2 - z**2, 0.0)
+    w = (la.beam_diameter_m + np.maximum(z, 0.0) * la.divergence_rad) / 2
+    s2 = r2 / (w * w)
+    e = la.average_power_w / (math.pi * w * w) * np.exp(-s2) * np.sqrt(1 + s2 * (la.divergence_rad / 2) ** 2)
+    e = np.where((z > 0) & run.motion.windows.lased(t), e * np.exp(-run.mu * dist), 0.0)
+    live = np.flatnonzero(e > 0)
+    for k in np.unique(state_idx[live]):
+        rows = live[state_idx[live] == k]
+        hits = run.states_list[k].tracer.first_hit(np.broadcast_to(o, (len(rows), 3)), p[rows] - o)
+        e[rows] = np.where(hits.hit & (hits.t < dist[rows] * (1 - 1e-9)), 0.0, e[rows])
+    if optics is not None:
+        e = e * _beam_gain([optics], np.zeros(len(e), int), 2 * w)
+    return e
+
+
+def _state_columns(run: MotionRun, index: int, tau) -> tuple[np.ndarray, np.ndarray]:
+    """For dwell times ``tau``: the two bracketing history rows (clamped to the history)."""
+    ht = run.history_times_s
+    j1 = np.clip(np.searchsorted(ht, tau), 0, len(ht) - 1)
+    return np.maximum(j1 - 1, 0), j1
+
+
+def _spot_w_m2(run: MotionRun, sp, p, gain, tau, los) -> np.ndarray:
+    """One spot's irradiance at points (N, 3) with dwell times ``tau`` (N,)."""
+    st = run.states.get(sp.target.index)
+    g = np.full(len(p), gain)
+    if st is None:
+        e, _ = spot_irradiance(sp, p, g, run.mu, None, los)
+        if sp.material.has_specular:
+            e = e + specular_irradiance(sp, p, g, run.mu, None, None) * los
+        return e
+    j0, j1 = _state_columns(run, sp.target.index, tau)
+    cols = np.unique(np.concatenate([j0, j1]))
+    e, _ = spot_irradiance(sp, p, g, run.mu, st[cols], los)
+    if sp.material.has_specular:
+        e = e + specular_irradiance(sp, p, g, run.mu, None, st[cols]) * los[:, None]
+    pos = {c: i for i, c in enumerate(cols.tolist())}
+    rows = np.arange(len(p))
+    return np.maximum(e[rows, [pos[c] for c in j0.tolist()]], e[rows, [pos[c] for c in j1.tolist()]])
+
+
+def _reflected_w_m2(run: MotionRun, p, t, state_idx, gain, tau) -> np.ndarray:
+    """Every spot's reflection at points ``p`` at times ``t`` (lased only)."""
+    out = np.zeros(len(p))
+    lased = run.motion.windows.lased(t)
+    for k in np.unique(state_idx[lased]):
+        rows = np.flatnonzero(lased & (state_idx == k))
+        bs = run.states_list[k]
+        for sp in bs.spots:
+            if bs.ray_scene is not None:
+                start = bs.ray_scene.off_surface(sp.centroid, sp.mean_frame[2])
+                los = ~bs.ray_scene.occluded(np.broadcast_to(start, (len(rows), 3)), p[rows])
+            else:
+                los = np.ones(len(rows), bool)
+            out[rows] += _spot_w_m2(run, sp, p[rows], gain, tau[rows], los.astype(float))
+    return out
+
+
+def _dwell_s(run: MotionRun, t) -> np.ndarray:
+    """Dwell time [s] of the spot at each time (see the module notes)."""
+    lased = _lased_time(run, t)
+    if not run.motion.beam_moves or not run.states:
+        return lased
+    k = run.state_index(t)
+    lk = _lased_time(run, run.key_times_s)
+    dwell = np.zeros(len(run.states_list))
+    for i, bs in enumerate(run.states_list):  # time under the spot of the surface now at its centre
+        c_i, r_i = _spot_centre(run, bs), _spot_radius(bs)
+        near = [j for j in range(i + 1) if np.linalg.norm(_spot_centre(run, run.states_list[j]) - c_i) <= r_i]
+        first = min(near) if near else i
+        dwell[i] = lk[i] - lk[first]
+    return dwell[k] + np.maximum(lased - lk[k], 0.0)
+
+
+def _spot_centre(run, bs) -> np.ndarray:
+    """The first spot's centroid in its target's own frame (the target's displacement taken off)."""
+    if not bs.spots:
+        return np.full(3, np.nan)
+    sp = bs.spots[0]
+    d = next((tt.at(bs.time_s)[0] for tt in run.motion.target_tracks if tt.index == sp.target.index), np.zeros(3))
+    return np.asarray(sp.centroid, float) - d
+
+
+def _spot_radius(bs) -> float:
+    return 0.5 * max(bs.spots[0].size_m, 1e-9) if bs.spots else 0.0
+
+
+def evaluate(run: MotionRun, positions, t, optics) -> tuple[np.ndarray, np.ndarray]:
+    """Direct and reflected irradiance [W/m^2] at ``positions`` (N, 3) at times ``t``."""
+    k = run.state_index(t)
+    gain = 1.0 if optics is None else optical_gain(optics.magnification, optics.objective_diameter_m, optics.transmission)
+    direct = _direct_w_m2(run, positions, t, k, optics)
+    reflected = _reflected_w_m2(run, positions, t, k, gain, _dwell_s(run, t)) if any(bs.spots for bs in run.states_list) else np.zeros(len(t))
+    return direct, reflected

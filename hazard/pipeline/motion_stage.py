@@ -1,0 +1,175 @@
+"""Stage ``motion`` run: every moving observer's path (and, when the beam or a target
+moves, every fixed observer's) sampled, refined and summarised (see
+:mod:`hazard.pipeline.motion` for the physics and the time steps)."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import mpe as _mpe
+from .motion import (FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, base_grid, beam_states, check_sector,
+                     evaluate)
+from .motion_steps import crossing_times, refine_by_change
+
+__all__ = ["MotionResult", "run_motion", "path_summary"]
+
+
+@dataclass
+class MotionResult:
+    """The paths evaluated over time, how, and what was left out."""
+
+    paths: list
+    span_s: tuple
+    beam_states: int
+    key_step_text: str
+    notes: list = field(default_factory=list)
+    seconds: float = 0.0
+    run: object = None  # the MotionRun (its beam states serve the airspace checks)
+
+    def tracks(self) -> list:
+        return [p for p in self.paths if p.kind == "track"]
+
+    def fixed(self) -> list:
+        return [p for p in self.paths if p.kind == "fixed"]
+
+
+def _richardson_j_m2(t, e) -> float:
+    """Error estimate of the trapezoid integral: a third of its difference from the sum
+    over every second sample (exact for a quadratic; 0 for fewer than 3 samples)."""
+    if len(t) < 3:
+        return 0.0
+    full = float(np.sum(0.5 * (e[1:] + e[:-1]) * np.diff(t)))
+    ts, es = t[::2], e[::2]
+    if ts[-1] != t[-1]:
+        ts, es = np.append(ts, t[-1]), np.append(es, e[-1])
+    half = float(np.sum(0.5 * (es[1:] + es[:-1]) * np.diff(ts)))
+    return abs(full - half) / 3.0
+
+
+def _windows(t, cum, duration_s):
+    """Largest exposure [J/m^2] over windows of each length T (log-spaced up to
+    ``duration_s``), windows starting or ending at a sample; and, per T, the exposure of
+    the window ending at each sample."""
+    span = t[-1] - t[0]
+    dt = np.diff(t)
+    t_min = max(float(dt[dt > 0].min()) if np.any(dt > 0) else duration_s, _mpe.DURATION_MIN_S)
+    lengths = np.unique(np.append(np.geomspace(min(t_min, duration_s), duration_s, WINDOW_DURATIONS), duration_s))
+    best, ends = [], []
+    for T in lengths:
+        start = np.interp(np.minimum(t + T, t[-1]), t, cum) - cum
+        end = cum - np.interp(np.maximum(t - T, t[0]), t, cum)
+        best.append(max(float(start.max()), float(end.max())) if span > 0 else float(cum[-1]))
+        ends.append(end)
+    return lengths, np.asarray(best), ends
+
+
+def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limit_w_m2=None) -> dict:
+    """Peak, radiant exposure (largest over windows of ``duration_s``), the whole path's,
+    the verdict over every window length and the first exceedance of one path."""
+    t, e = pr.times_s, pr.irradiance_w_m2
+    cum = pr.cumulative_j_m2
+    err = _richardson_j_m2(t, e)
+    k = int(np.argmax(e)) if len(e) else 0
+    lengths, best, ends = _windows(t, cum, duration_s)
+    mpe_h = np.array([_mpe.ocular_mpe(wavelength_nm, float(np.clip(T, _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)),
+                                      standard=standard).radiant_exposure_j_m2 for T in lengths])
+    ratio = (best + err) / mpe_h
+    w = int(np.argmax(ratio))
+    first = [t[np.argmax(end > m)] for end, m in zip(ends, mpe_h) if np.any(end > m)]
+    if pulse_limit_w_m2 is not None and np.any(e >= pulse_limit_w_m2):
+        first.append(t[np.argmax(e >= pulse_limit_w_m2)])
+    hazardous = bool(ratio[w] >= 1.0 or (pulse_limit_w_m2 is not None and e[k] >= pulse_limit_w_m2))
+    dt = np.diff(t)
+    return {
+        "name": pr.name, "kind": pr.kind,
+        "peak_irradiance_w_m2": float(e[k]), "peak_time_s": float(t[k]), "worst_point_m": pr.positions_m[k].tolist(),
+        "peak_direct_w_m2": float(pr.direct_w_m2[k]), "peak_reflected_w_m2": float(pr.reflected_w_m2[k]),
+        "radiant_exposure_j_m2": float(best[lengths == duration_s][0]), "path_exposure_j_m2": float(cum[-1]),
+        "exposure_error_estimate_j_m2": err,
+        "worst_window": {"duration_s": float(lengths[w]), "exposure_j_m2": float(best[w]), "mpe_radiant_exposure_j_m2": float(mpe_h[w]),
+                         "ratio": float(ratio[w])},
+        "exposure_ratio": float(ratio[w]), "hazardous": hazardous,
+        "first_exceedance_s": float(min(first)) if first else None,
+        "time_span_s": [float(t[0]), float(t[-1])], "samples": int(len(t)), "base_step_s": pr.base_step_s,
+        "min_step_s": float(dt[dt > 0].min()) if np.any(dt > 0) else pr.base_step_s, "adaptive": pr.adaptive,
+        "lased_s": float(np.sum(dt * (pr.lased[1:] & pr.lased[:-1]))) if len(t) > 1 else 0.0,
+    }
+
+
+def _floor_w_m2(run: MotionRun) -> float:
+    """Irradiance below which the a-posteriori refinement stops: far under the MPE and the
+    laser-free level."""
+    return min(1e-3 * run.mpe_w_m2, 5e-5)
+
+
+def _sample_path(run: MotionRun, name, group, kind, at, span, optics) -> PathResult | None:
+    ms = run.motion.spec
+    t0, t1 = max(span[0], run.motion.t_start_s), min(span[1], run.motion.t_end_s)
+    if t1 < t0:
+        return None
+    t = base_grid(run.motion, t0, t1) if t1 > t0 else np.array([t0])
+    if ms.adaptive and len(t) > 1:
+        t = np.unique(np.concatenate([t, crossing_times(run, at, t, ms.samples_per_width)]))
+
+    def parts_at(ts):
+        return np.stack(evaluate(run, at(ts), ts, optics))
+
+    parts = parts_at(t)
+    if ms.adaptive and len(t) > 1:
+        t, parts, _ = refine_by_change(t, parts, parts_at, _floor_w_m2(run))
+    return PathResult(name, group, kind, t, at(t), run.motion.windows.lased(t), parts[0], parts[1], ms.time_step_s, ms.adaptive)
+
+
+def _fixed_paths(run: MotionRun, notes) -> list:
+    """The fixed observers' paths when the beam or a target moves."""
+    obs = run.scene.observers
+    m = len(obs) if obs is not None else 0
+    if not run.motion.beam_moves or m == 0:
+        return []
+    if m > FIXED_OBSERVERS_MAX:
+        notes.append(f"the {m} fixed observers are not evaluated over time (more than {FIXED_OBSERVERS_MAX}): their verdicts "
+                     f"are the static analysis's, with the beam held at any aim of the aim track (the direct stage)")
+        return []
+    pos, labels = obs.positions_m, obs.labels()
+    out = []
+    span = (run.motion.t_start_s, run.motion.t_end_s)
+    for i in range(m):
+        p = pos[i]
+        optics = obs.optics[obs.group[i]]
+        out.append(_sample_path(run, labels[i], int(obs.group[i]), "fixed",
+                                lambda ts, p=p: np.broadcast_to(p, (len(np.atleast_1d(ts)), 3)).copy(), span, optics))
+    return out
+
+
+def run_motion(scene, motion, first, states, history_times_s, mu, limits, backend, threads) -> MotionResult:
+    """Evaluate every path (see the module notes). ``first``: (traced, tracer, ray_scene)
+    of the static analysis; ``limits``: its :class:`~hazard.pipeline.limits.ExposureLimits`."""
+    t_start = time.perf_counter()
+    spec = scene.spec
+    pulse = None if limits.pulse is None else limits.pulse.per_pulse_radiant_exposure_j_m2 * spec.laser.prf_hz
+    run = MotionRun(scene, motion, mu, limits.irradiance_w_m2, pulse, states, np.asarray(history_times_s, float),
+                    [], np.zeros(1), backend, threads)
+    grid = base_grid(motion, motion.t_start_s, motion.t_end_s)
+    check_sector(run, grid)
+    beam_states(run, grid, first)
+    notes = []
+    paths = [_sample_path(run, tr.name, tr.group, "track", tr.at, tr.span_s, tr.optics) for tr in motion.tracks]
+    paths = [p for p in paths if p is not None] + _fixed_paths(run, notes)
+    for p in paths:
+        p.summary = path_summary(p, spec.exposure.duration_s, spec.laser.wavelength_nm, spec.exposure.standard, pulse)
+    if states and len(history_times_s) and _max_dwell(run) > history_times_s[-1]:
+        notes.append(f"lased time beyond the history's end ({history_times_s[-1]:g} s): the last state is held")
+    if math.isfinite(run.mpe_w_m2) and spec.laser.pulse_energy_j is not None:
+        notes.append("pulsed laser: tracks take the average-power rule over every window and the per-pulse rule on the peak")
+    return MotionResult(paths, (motion.t_start_s, motion.t_end_s), len(run.states_list), run.key_step_text, notes,
+                        time.perf_counter() - t_start, run)
+
+
+def _max_dwell(run: MotionRun) -> float:
+    from .motion import _lased_time
+
+    return float(_lased_time(run, np.array([run.motion.t_end_s]))[0])
