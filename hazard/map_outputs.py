@@ -60,7 +60,10 @@ def _to_lonlat(geom, frame, height, z_m=None):
     import shapely
 
     def fn(xy):
-        z = np.full(len(xy), z_m) if z_m is not None else height(xy)
+        if z_m is None:
+            z = height(xy)
+        else:
+            z = np.asarray(z_m, float) if np.ndim(z_m) else np.full(len(xy), z_m)
         lat, lon, _ = frame.geodetic(np.column_stack([xy, z]))
         return np.round(np.column_stack([lon, lat]), DEGREE_DECIMALS)
 
@@ -121,8 +124,10 @@ def _style(z) -> str:
         return "boundary"
     if k in ("laser", "target"):
         return "thing"
-    if k == "observer":
+    if k in ("observer", "track", "airspace_zone"):
         return {"naked eye": "hazardous", "aided only": "aided"}.get(p.get("hazard"), "safe")
+    if k == "visual_zone":
+        return "aided"
     return "aided" if p.get("hazard") == "aided only" else "hazardous"
 
 

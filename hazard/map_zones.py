@@ -16,7 +16,12 @@ silently:
   eye height over terrain, else its plan projection (:mod:`hazard.lobe_outline`);
 - ``mirror_beam``: each target's mirror beam out to its specular NOHD;
 - ``observer``: every observer point with its verdict and hazard ratio;
-- ``range_boundary``, ``laser``, ``target``: the range and what stands on it.
+- ``range_boundary``, ``laser``, ``target``: the range and what stands on it;
+- ``track``: each moving observer's path (a 3-D line: each vertex at its own height)
+  with its verdict; ``airspace_zone``: each ``[airspace]`` flight zone's outline with its
+  floor, ceiling, limit and whether it holds; ``visual_zone``: the plan outline of the
+  direct beam's SZED, CZED and LFED volumes (visible lasers; over a slewing beam's
+  track), :mod:`hazard.airspace_geometry`.
 """
 
 from __future__ import annotations
@@ -28,7 +33,7 @@ import numpy as np
 __all__ = ["Zone", "ZONE_KINDS", "zones"]
 
 ZONE_KINDS = ("footprint", "sdz", "sdz_nominal", "sdz_aided", "keepout_lobe", "mirror_beam", "observer",
-              "range_boundary", "laser", "target")
+              "range_boundary", "laser", "target", "track", "airspace_zone", "visual_zone")
 
 
 @dataclass
@@ -39,7 +44,7 @@ class Zone:
     kind: str
     geometry: object
     properties: dict = field(default_factory=dict)
-    z_m: float | None = None  # one world height for a point (None: the terrain / eye height below each vertex)
+    z_m: float | np.ndarray | None = None  # world height of a point, or of each vertex (None: the terrain / eye height below each)
 
 
 def _common(result) -> dict:
@@ -178,12 +183,45 @@ def _things(result, off) -> list:
     return out
 
 
+def _airspace(result) -> list:
+    """Tracks, flight zones and the direct beam's visual-interference outlines."""
+    from shapely.geometry import LineString, Point, Polygon
+
+    from .airspace_geometry import track_polyline, visual_outline_xy
+
+    out = []
+    for p in ([] if result.motion is None else result.motion.tracks()):
+        xyz = track_polyline(result, p)
+        s = p.summary
+        geom = LineString(xyz[:, :2]) if len(xyz) > 1 else Point(xyz[0, :2])
+        out.append(Zone("track", geom, {"name": p.name, "verdict": "hazardous" if s["hazardous"] else "below the MPE",
+                                        "hazard": "naked eye" if s["hazardous"] else "none", "exposure_ratio": s["exposure_ratio"],
+                                        "peak_time_s": s["peak_time_s"], "first_exceedance_s": s["first_exceedance_s"]},
+                        z_m=xyz[:, 2] if len(xyz) > 1 else float(xyz[0, 2])))
+    zone_rows = {z["name"]: z for z in (result.airspace or {}).get("zones", [])}
+    for zs in ([] if result.scene.spec.airspace is None else result.scene.spec.airspace.zones):
+        row = zone_rows.get(zs.name, {})
+        out.append(Zone("airspace_zone", Polygon(zs.boundary_m), {
+            "name": zs.name, "limit": zs.limit, "floor_agl_m": zs.floor_agl_m, "ceiling_agl_m": zs.ceiling_agl_m,
+            "holds": row.get("holds"), "worst_effective_irradiance_w_m2": row.get("worst_effective_irradiance_w_m2"),
+            "worst_time_s": row.get("worst_time_s"), "hazard": "none" if row.get("holds", True) else "naked eye"}, z_m=0.0))
+    if (result.visual_interference or {}).get("applies"):
+        for level in ("szed", "czed", "lfed"):
+            g = visual_outline_xy(result, level)
+            if g is not None and not g.is_empty:
+                out.append(Zone("visual_zone", g, {"level": level, "distance_m": result.visual_interference["direct"][f"{level}_m"],
+                                                   "limit_w_m2": result.visual_interference["levels_w_m2"][level],
+                                                   "vcf": result.visual_interference["vcf"], "path": "direct",
+                                                   "hazard": "visual interference"}, z_m=0.0))
+    return out
+
+
 def zones(result) -> tuple[list, dict]:
     """Every zone of ``result`` (world x, y [m]) and the kinds absent with the reason."""
     off = np.asarray(result.scene.offset_m, float)
     parts = {"footprint": _footprints(result, off) if result.scene.terrain is not None else [],
              "sdz": _sdz(result), "keepout_lobe": _lobes(result, off), "mirror_beam": _mirrors(result, off),
-             "observer": _observers(result), "things": _things(result, off)}
+             "observer": _observers(result), "things": _things(result, off), "airspace": _airspace(result)}
     common = _common(result)
     out = [z for zs in parts.values() for z in zs]
     for z in out:
@@ -195,6 +233,9 @@ def zones(result) -> tuple[list, dict]:
                  f"between them; the keepout_lobe outlines, drawn from the lobes themselves, show it)"),
            "sdz": "no danger zone computed", "sdz_nominal": "no sector with a pointing buffer (only then is the sector without the buffer drawn apart)",
            "sdz_aided": "no optical aids", "keepout_lobe": "no lobe with a hazardous reach", "mirror_beam": "no mirror beam",
-           "observer": "no observers", "range_boundary": "no [range] boundary", "laser": "", "target": ""}
+           "observer": "no observers", "range_boundary": "no [range] boundary", "laser": "", "target": "",
+           "track": "no moving observer (kind = 'track')", "airspace_zone": "no [airspace] zones",
+           "visual_zone": ("not a visible laser (400-700 nm): the FAA visual levels do not apply"
+                           if not (result.visual_interference or {}).get("applies") else "no level reached")}
     absent = {k: why[k] for k in ZONE_KINDS if k not in present}
     return out, absent

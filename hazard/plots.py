@@ -174,6 +174,7 @@ class ExposureDisplay(_Display):
     mpe_w_m2: float | None = None  # the observer's MPE [W/m^2] (the hazard ratio's limit, with C_E when applied)
     first_exceedance_s: float = math.nan  # from the analysis (NaN: none in the window)
     hazard_ratio: float | None = None
+    ratio_text: str = "peak E / MPE"
 
     @classmethod
     def from_result(cls, result, observer=0, *, irradiance_w_m2=None):
@@ -200,6 +201,23 @@ class ExposureDisplay(_Display):
         return cls(t, row, cum, limit, obs.labels[observer], float(mpe), float(obs.first_exceedance_s[observer]),
                    float(result.hazard_ratio[observer]))
 
+    @classmethod
+    def from_path(cls, result, path):
+        """A moving observer's samples (:class:`hazard.pipeline.motion.PathResult`) over its
+        own time steps; the hazard ratio is its worst window's exposure ratio."""
+        from . import mpe as _mpe
+
+        spec = result.scene.spec
+        t = np.asarray(path.times_s, float)
+        el = np.clip(t - t[0], _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)
+        limit = np.array([_mpe.ocular_mpe(spec.laser.wavelength_nm, x, standard=spec.exposure.standard).radiant_exposure_j_m2
+                          for x in el])
+        s = path.summary
+        first = math.nan if s.get("first_exceedance_s") is None else float(s["first_exceedance_s"])
+        return cls(t, path.irradiance_w_m2, path.cumulative_j_m2, limit, f"{path.name} ({path.kind})",
+                   float(result.mpe_w_m2), first, float(s["exposure_ratio"]),
+                   f"worst {s['worst_window']['duration_s']:.3g} s window's H / MPE")
+
     def plot(self, ax=None):
         fig, ax = _axes(ax)
         ax.semilogy(self.times_s[1:], np.maximum(self.exposure_j_m2[1:], 1e-12), c="tab:blue", label="accumulated exposure H(t) [J/m^2]")
@@ -221,7 +239,7 @@ class ExposureDisplay(_Display):
         ax2.set_ylabel("irradiance [W/m^2]", color="tab:orange")
         ax.set_xlabel("time [s]")
         ax.set_ylabel("radiant exposure [J/m^2]")
-        ratio = "" if self.hazard_ratio is None else f" (peak E / MPE = {self.hazard_ratio:.3g})"
+        ratio = "" if self.hazard_ratio is None else f" ({self.ratio_text} = {self.hazard_ratio:.3g})"
         ax.set_title(f"observer {self.observer}{ratio}")
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
@@ -315,6 +333,8 @@ def time_figures(result, *, worst=3) -> dict:
     * ``nohd_time_<target>.png``: :class:`NOHDTimeDisplay` for every lit target (every
       spot: a target with a reflection lobe); a target whose material does not change
       gets a flat line over the window.
+    * ``exposure_track_<name>.png``: every moving observer's irradiance and exposure over
+      its own time steps (:meth:`ExposureDisplay.from_path`).
     * ``exposure_<observer>.png``: :class:`ExposureDisplay` for the ``worst`` observers
       with the highest hazard ratio (``result.hazard_ratio``; ties: the first row). When
       the result kept no irradiance history their histories are recomputed on just those
@@ -329,6 +349,8 @@ def time_figures(result, *, worst=3) -> dict:
     for k, spot in enumerate(result.spots):
         name = _unique(f"nohd_time_{_file_part(spot.target.name)}.png", out)
         out[name] = NOHDTimeDisplay.from_result(result, k).png_bytes()
+    for p in ([] if getattr(result, "motion", None) is None else result.motion.tracks()):
+        out[_unique(f"exposure_track_{_file_part(p.name)}.png", out)] = ExposureDisplay.from_path(result, p).png_bytes()
     ratio = np.asarray(result.hazard_ratio, float)
     if worst <= 0 or not len(ratio):
         return out

@@ -120,6 +120,7 @@ def _scene_blocks(result, lobe_resolution_deg):
     reach = aim_reach_m(result)
     if reach > 0:
         blocks["aim"] = pv.Line(scene.laser_position_m, scene.laser_position_m + scene.laser_direction * reach, resolution=LINE_POINTS)
+    _airspace_blocks(result, blocks)
     blocks["laser"] = pv.PolyData(np.asarray(scene.laser_position_m, float)[None])
     if len(result.observers):
         obs = pv.PolyData(np.asarray(scene.observers.positions_m, float))
@@ -129,6 +130,33 @@ def _scene_blocks(result, lobe_resolution_deg):
         obs["static_irradiance_w_m2"] = result.observers.static_irradiance_w_m2
         blocks["observers"] = obs
     return blocks
+
+
+def _airspace_blocks(result, blocks) -> None:
+    """Tracks (irradiance and cumulative exposure per vertex), flight zones as prisms and
+    the direct beam's visual-interference volumes, in the scene's local coordinates
+    (:mod:`hazard.airspace_geometry`)."""
+    from .airspace_geometry import track_polyline, visual_surface, zone_prism
+
+    off = np.asarray(result.scene.offset_m, float)
+    for p in ([] if result.motion is None else result.motion.tracks()):
+        xyz = track_polyline(result, p) - off
+        line = pv.lines_from_points(xyz) if len(xyz) > 1 else pv.PolyData(xyz)
+        line["irradiance_w_m2"] = p.irradiance_w_m2
+        line["cumulative_exposure_j_m2"] = p.cumulative_j_m2
+        line["time_s"] = p.times_s
+        blocks[f"track_{p.name}"] = line
+    rows = {z["name"]: z for z in (result.airspace or {}).get("zones", [])}
+    for zs in ([] if result.scene.spec.airspace is None else result.scene.spec.airspace.zones):
+        v, faces = zone_prism(result, zs)
+        mesh = pv.PolyData(v - off, np.concatenate([[len(f), *f] for f in faces]))
+        mesh["holds"] = np.full(mesh.n_cells, int(bool(rows.get(zs.name, {}).get("holds", True))), np.uint8)
+        blocks[f"airspace_{zs.name}"] = mesh
+    if (result.visual_interference or {}).get("applies"):
+        for level in ("szed", "czed", "lfed"):
+            surf = visual_surface(result, level)
+            if surf is not None:
+                blocks[f"visual_{level}"] = _mesh(surf[0] - off, surf[1])
 
 
 @dataclass

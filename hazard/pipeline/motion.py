@@ -276,7 +276,7 @@ def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
     return e
 
 
-def _state_columns(run: MotionRun, index: int, tau) -> tuple[np.ndarray, np.ndarray]:
+def _state_columns(run: MotionRun, tau) -> tuple[np.ndarray, np.ndarray]:
     """For dwell times ``tau``: the two bracketing history rows (clamped to the history)."""
     ht = run.history_times_s
     j1 = np.clip(np.searchsorted(ht, tau), 0, len(ht) - 1)
@@ -292,14 +292,13 @@ def _spot_w_m2(run: MotionRun, sp, p, gain, tau, los) -> np.ndarray:
         if sp.material.has_specular:
             e = e + specular_irradiance(sp, p, g, run.mu, None, None) * los
         return e
-    j0, j1 = _state_columns(run, sp.target.index, tau)
-    cols = np.unique(np.concatenate([j0, j1]))
-    e, _ = spot_irradiance(sp, p, g, run.mu, st[cols], los)
+    j0, j1 = _state_columns(run, tau)
+    # the whole history (a slumping spot pairs each state with its own tilt), then each row's two columns
+    e, _ = spot_irradiance(sp, p, g, run.mu, st, los)
     if sp.material.has_specular:
-        e = e + specular_irradiance(sp, p, g, run.mu, None, st[cols]) * los[:, None]
-    pos = {c: i for i, c in enumerate(cols.tolist())}
+        e = e + specular_irradiance(sp, p, g, run.mu, None, st) * los[:, None]
     rows = np.arange(len(p))
-    return np.maximum(e[rows, [pos[c] for c in j0.tolist()]], e[rows, [pos[c] for c in j1.tolist()]])
+    return np.maximum(e[rows, j0], e[rows, j1])
 
 
 def _reflected_w_m2(run: MotionRun, p, t, state_idx, gain, tau) -> np.ndarray:

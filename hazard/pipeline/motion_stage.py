@@ -84,6 +84,7 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
         first.append(t[np.argmax(e >= pulse_limit_w_m2)])
     hazardous = bool(ratio[w] >= 1.0 or (pulse_limit_w_m2 is not None and e[k] >= pulse_limit_w_m2))
     dt = np.diff(t)
+    steps = dt[dt > 1e-9 * pr.base_step_s]  # not the zero-width pairs at the windows' edges
     return {
         "name": pr.name, "kind": pr.kind,
         "peak_irradiance_w_m2": float(e[k]), "peak_time_s": float(t[k]), "worst_point_m": pr.positions_m[k].tolist(),
@@ -95,7 +96,7 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
         "exposure_ratio": float(ratio[w]), "hazardous": hazardous,
         "first_exceedance_s": float(min(first)) if first else None,
         "time_span_s": [float(t[0]), float(t[-1])], "samples": int(len(t)), "base_step_s": pr.base_step_s,
-        "min_step_s": float(dt[dt > 0].min()) if np.any(dt > 0) else pr.base_step_s, "adaptive": pr.adaptive,
+        "min_step_s": float(steps.min()) if len(steps) else pr.base_step_s, "adaptive": pr.adaptive,
         "lased_s": float(np.sum(dt * (pr.lased[1:] & pr.lased[:-1]))) if len(t) > 1 else 0.0,
     }
 
