@@ -2,13 +2,14 @@
 
 For each knob the scene uses - direction-grid resolution and refinement depth of the
 keep-out lobe, beam samples, time step of a dynamic analysis, ODE tolerance of a heating
-history - the analysis runs at increasing cost with the other knobs at the scene's
+history, and for things that move the base step and the samples per beam radius of
+:mod:`hazard.pipeline.motion` - the analysis runs at increasing cost with the other knobs at the scene's
 values. The quantities of interest (max NOHD, keep-out volume, peak irradiance over the
 observers, all dynamic) are compared with the finest run; the report recommends the
 cheapest setting whose errors are all within the tolerance.
 
 Columns of a row: ``knob``, ``value``, each quantity in its unit (``max_nohd_m``,
-``keepout_volume_m3``, ``peak_irradiance_w_m2``, ``spot_power_w``), its relative error
+``keepout_volume_m3``, ``peak_irradiance_w_m2``, ``spot_power_w``, ``max_path_exposure_j_m2``), its relative error
 against the finest run (``rel_error_max_nohd``, ... : unitless, ``|q - q_ref| / |q_ref|``;
 0 when both are 0 and inf when only the reference is 0) and the run time ``time_s``.
 """
@@ -37,11 +38,14 @@ KNOB_LEVELS = {
     "time_step_fraction": (0.1, 0.05, 0.02, 0.01, 0.005),  # of the analysis window
     "heating_rtol": (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
     "slump_step_deg": (4.0, 2.0, 1.0, 0.5, 0.25),
+    "motion_samples_per_width": (2, 4, 8, 16, 64),  # [motion] samples per 1/e radius crossed
+    "motion_time_step_s": (1.0, 0.3, 0.1, 0.03, 0.01),  # [motion] base step
 }
-QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2", "spot_power_w")
+QUANTITIES = ("max_nohd_m", "keepout_volume_m3", "peak_irradiance_w_m2", "spot_power_w", "max_path_exposure_j_m2")
 # column of each quantity's relative error against the finest run: unitless, so no unit suffix
 REL_ERROR_COLUMNS = {"max_nohd_m": "rel_error_max_nohd", "keepout_volume_m3": "rel_error_keepout_volume",
-                     "peak_irradiance_w_m2": "rel_error_peak_irradiance", "spot_power_w": "rel_error_spot_power"}
+                     "peak_irradiance_w_m2": "rel_error_peak_irradiance", "spot_power_w": "rel_error_spot_power",
+                     "max_path_exposure_j_m2": "rel_error_path_exposure"}
 
 
 def _rel_error(q, ref) -> float:
@@ -69,6 +73,8 @@ def _apply(data, knob, value):
     elif knob == "time_step_fraction":
         t_end = a.get("time_end_s", d["exposure"]["duration_s"])
         a["time_step_s"] = t_end * value
+    elif knob.startswith("motion_"):
+        d.setdefault("motion", {})[knob[len("motion_"):]] = value
     elif knob == "heating_rtol":
         for t in d["targets"]:
             if t.get("history", {}).get("kind") == "heating":
@@ -83,6 +89,9 @@ def _quantities(res):
         "keepout_volume_m3": sum(t["keepout_dynamic"]["volume_m3"] for t in tr),
         "peak_irradiance_w_m2": float(np.max(res.observers.peak_irradiance_w_m2)) if len(res.observers) else 0.0,
         "spot_power_w": sum(t["spot_power_w"] for t in tr),
+        # the largest radiant exposure along a moving observer's path (or a fixed one under a moving beam)
+        "max_path_exposure_j_m2": max((p.summary["radiant_exposure_j_m2"] for p in res.motion.paths), default=0.0)
+        if res.motion is not None else 0.0,
     }
 
 
@@ -96,6 +105,10 @@ def knobs_used(data) -> list:
     if any(isinstance(t.get("material"), dict) and (t["material"].get("melt_tilt_deg") or t["material"].get("melt_wander_deg"))
            for t in data.get("targets", [])):
         knobs.append("slump_step_deg")
+    laser = data.get("laser", {})
+    if ("aim_track" in laser or "windows" in laser or any("track" in t for t in data.get("targets", []))
+            or any(o.get("kind") == "track" for o in data.get("observers", []))):
+        knobs += ["motion_samples_per_width", "motion_time_step_s"]
     return knobs
 
 

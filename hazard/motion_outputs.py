@@ -28,8 +28,19 @@ def _world(result, p) -> np.ndarray:
     return np.asarray(p, float) + np.asarray(result.scene.offset_m, float)
 
 
+def visual_levels(result, peak_w_m2: float) -> tuple[float | None, list]:
+    """The effective peak VCF x E [W/m^2] of a path and the FAA levels it reaches
+    (visible lasers; None and [] otherwise)."""
+    vi = result.visual_interference or {}
+    if not vi.get("applies"):
+        return None, []
+    eff = vi["vcf"] * float(peak_w_m2)
+    return eff, [k for k in ("szed", "czed", "lfed") if eff >= vi["levels_w_m2"][k]]
+
+
 def _track_dict(result, p) -> dict:
     s = dict(p.summary)
+    s["peak_effective_irradiance_w_m2"], s["visual_levels_reached"] = visual_levels(result, s["peak_irradiance_w_m2"])
     s["worst_point_m"] = _world(result, s["worst_point_m"]).tolist()
     s["csv"] = track_file_name(p.name)
     s["group"] = result.scene.spec.observers[p.group].name

@@ -568,6 +568,16 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
     return "\n".join(lines)
 
 
+def _levels_text(result, s) -> str:
+    from .motion_outputs import visual_levels
+
+    eff, reached = visual_levels(result, s["peak_irradiance_w_m2"])
+    if eff is None:
+        return ""
+    return (f"; effective {eff:.4g} W/m^2: inside the {'/'.join(x.upper() for x in reached)} level(s)" if reached
+            else f"; effective {eff:.4g} W/m^2: below the FAA levels")
+
+
 def _motion_lines(result) -> list:
     """Moving observers, fixed ones under a moving beam, and the flight zones."""
     out = []
@@ -578,7 +588,7 @@ def _motion_lines(result) -> list:
         out.append(f"  track {p.name}: {'HAZARD' if s['hazardous'] else 'below the MPE'} (exposure ratio "
                    f"{s['exposure_ratio']:.3g} in its worst {s['worst_window']['duration_s']:.3g} s window{first}); peak "
                    f"{s['peak_irradiance_w_m2']:.4g} W/m^2 at t = {s['peak_time_s']:.6g} s; {s['samples']} samples, "
-                   f"smallest step {s['min_step_s']:.3g} s")
+                   f"smallest step {s['min_step_s']:.3g} s" + _levels_text(result, s))
     fixed = [] if m is None else m.fixed()
     if fixed:
         n = sum(p.summary["hazardous"] for p in fixed)

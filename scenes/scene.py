@@ -331,9 +331,6 @@ def _history(spec, where, base_dir):
 def _check_series_cover(spec: SceneSpec, targets) -> None:
     """A measured series with ``extrapolation = 'error'`` must cover the analysis times,
     0 to ``time_end_s`` (default the exposure duration), or the run would stop there."""
-    if spec.motion is not None and not spec.has_motion:
-        out.append("motion: the scene has nothing that moves (no track, aim_track, target track or windows): the table is "
-                   "not used")
     t_end = spec.analysis.time_end_s or spec.exposure.duration_s
     for i, t in enumerate(targets):
         h = t.history

@@ -10,11 +10,11 @@ irradiance inside it, at every time the laser lases, stays below the limit.
 Where the largest value is looked for, at each analysed time (every beam state's time
 and, for a slewing beam, the base time grid, at most ``TIMES_MAX`` of them):
 
-- the direct beam: along its axis up to the zone's level distance (beyond it the axis
-  is below the limit, and off the axis less still), the first point inside the zone
-  (sampled, then bisected to 1e-9 of the distance): on the axis the irradiance falls
-  with range, so that is the axis's largest value in the zone; blocked where something
-  stands between the aperture and it;
+- the direct beam: along its axis over the distances the zone's bounding box spans
+  (``AXIS_SAMPLES`` samples), the first point inside the zone, bisected to 1e-9 of the
+  distance: on the axis the irradiance falls with range, so that is the axis's largest
+  value in the zone (reported whether the zone holds or not: the margin); blocked where
+  something stands between the aperture and it;
 - each mirror beam (an ideal-mirror target): along its axis, sampled, inside the zone;
 - every reflection and the beam's off-axis edge: a lattice of points filling the zone
   (``LATTICE`` x ``LATTICE`` over its outline, ``LEVELS`` heights), with the lines of
@@ -70,6 +70,17 @@ class _Zone:
         band = (p[:, 2] >= g + self.spec.floor_agl_m) & (p[:, 2] <= g + self.spec.ceiling_agl_m)
         return band & contains_xy(self.poly, p[:, 0], p[:, 1])
 
+    def distance_span_m(self, o) -> tuple[float, float]:
+        """Nearest and farthest distance [m] from ``o`` to the zone's bounding box (from
+        the lowest ground under it to the highest ceiling)."""
+        x0, y0, x1, y1 = self.poly.bounds
+        g = self.ground(self.xy[:, 0], self.xy[:, 1])
+        lo = np.array([x0, y0, g.min() + self.spec.floor_agl_m - (0 if self.terrain is None else np.ptp(self.terrain.heights))])
+        hi = np.array([x1, y1, g.max() + self.spec.ceiling_agl_m + (0 if self.terrain is None else np.ptp(self.terrain.heights))])
+        near = float(np.linalg.norm(np.clip(o, lo, hi) - o))
+        corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1]) for c in (lo[2], hi[2])])
+        return near, float(np.linalg.norm(corners - o, axis=1).max())
+
     def lattice(self) -> tuple[np.ndarray, float]:
         """Points filling the zone, and their horizontal spacing [m]."""
         from shapely import contains_xy
@@ -106,9 +117,9 @@ def _times(result):
     return [(float(ti), run.direction(ti)[0], run.states_list[int(run.state_index(np.array([ti]))[0])]) for ti in t]
 
 
-def _axis_entry(zone, o, u, reach_m) -> np.ndarray | None:
-    """The first point of the ray o + s u (0 <= s <= reach) inside the zone, or None."""
-    s = np.linspace(0.0, reach_m, AXIS_SAMPLES)
+def _axis_entry(zone, o, u, span_m) -> np.ndarray | None:
+    """The first point of the ray o + s u (span[0] <= s <= span[1]) inside the zone, or None."""
+    s = np.linspace(span_m[0], span_m[1], AXIS_SAMPLES)
     inside = zone.inside(o + s[:, None] * u)
     if not inside.any():
         return None
@@ -161,6 +172,11 @@ def _reflected_at(spots, p, mu, ray_scene, states) -> np.ndarray:
     return e
 
 
+def _reach_past(spots, o) -> float:
+    """The farthest spot from the laser [m] (a mirror beam starts there)."""
+    return max((float(np.linalg.norm(sp.centroid - o)) for sp in spots), default=0.0)
+
+
 def _mirror_points(zone, spots, reach_m) -> np.ndarray:
     """Points along each mirror beam's axis inside the zone."""
     out = []
@@ -174,19 +190,16 @@ def _mirror_points(zone, spots, reach_m) -> np.ndarray:
 
 def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
     """The worst effective irradiance in one zone over the analysed times."""
-    from ..visual import zone_distances_m
-
-    la = result.scene.spec.laser
     key = zone.spec.limit
     e_lim = level_limit_w_m2(key, result.mpe_w_m2, vcf)
     eff = 1.0 if key == "nohd" else vcf
-    reach = zone_distances_m(la.average_power_w, la.beam_diameter_m, la.divergence_rad, result.mpe_w_m2, vcf, mu)[f"{key}_m"]
-    reach = min(reach if math.isfinite(reach) else 1e7, 1e7)
+    o = np.asarray(result.scene.laser_position_m, float)
+    span = zone.distance_span_m(o)  # the axis's part that can lie in the zone (its worst value is reported even where it holds)
     pts, spacing = lattice
     best = (0.0, None, None, None)
     for t, u, spots, tracer, ray_scene in steps:
-        entry = _axis_entry(zone, np.asarray(result.scene.laser_position_m, float), u, reach)
-        cand = [pts] + ([entry[None]] if entry is not None else []) + [_mirror_points(zone, spots, reach)]
+        entry = _axis_entry(zone, o, u, span)
+        cand = [pts] + ([entry[None]] if entry is not None else []) + [_mirror_points(zone, spots, span[1] + _reach_past(spots, o))]
         p = np.concatenate(cand)
         direct = _direct_at(result, p, u, tracer, mu)
         refl = _reflected_at(spots, p, mu, ray_scene, result.states)
