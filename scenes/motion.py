@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["TrackPath", "AimSchedule", "Windows", "TargetTrack", "Motion", "motion_of", "bearing_elevation"]
+__all__ = ["TrackPath", "AimSchedule", "Windows", "TargetTrack", "Motion", "motion_of", "bearing_elevation", "check_aim_sector"]
 
 
 def _segment(times, t):
@@ -262,6 +262,29 @@ def _tracks(spec, offset_m, site) -> list:
                              geo, None if site is None else site.frame, np.asarray(offset_m, float),
                              raise_local=site is not None))
     return out
+
+
+SECTOR_CHECK_SAMPLES = 20001  # aim directions checked against [laser] sector over the aim track's span (and its knots)
+
+
+def check_aim_sector(spec, aim: AimSchedule | None) -> None:
+    """An aim outside ``[laser] sector`` at any time of the aim track is an error naming
+    the first such time (the track sampled at ``SECTOR_CHECK_SAMPLES`` times and its
+    knots; between linear aim points the direction follows a great-circle arc)."""
+    sector = spec.laser.sector
+    if sector is None or aim is None:
+        return
+    t = np.unique(np.concatenate([np.linspace(*aim.span_s, SECTOR_CHECK_SAMPLES), aim.times_s]))
+    az, el = (np.degrees(x) for x in bearing_elevation(aim.direction(t)))
+    a0, a1 = sector.azimuth_deg
+    eps = 1e-9
+    in_az = (a1 - a0 >= 360.0) | ((az - a0) % 360.0 <= (a1 - a0) + eps)
+    ok = in_az & (el >= sector.elevation_deg[0] - eps) & (el <= sector.elevation_deg[1] + eps)
+    if not ok.all():
+        i = int(np.argmin(ok))
+        raise ValueError(f"laser.aim_track: at t = {t[i]:.6g} s the aim points at bearing {az[i]:.4g} deg, elevation "
+                         f"{el[i]:.4g} deg: outside laser.sector (azimuth {sector.azimuth_deg} deg, elevation "
+                         f"{sector.elevation_deg} deg)")
 
 
 def motion_of(scene) -> Motion | None:

@@ -667,6 +667,16 @@ def _observers(spec, offset, terrain, rise=None) -> Observers:
                      tuple(o.name for o in spec.observers), tuple(o.optics for o in spec.observers))
 
 
+def _check_aim_track(spec, laser_local, direction, offset) -> None:
+    """A slewing beam's aim stays in ``[laser] sector`` (:func:`scenes.motion.check_aim_sector`)."""
+    from .motion import _aim, check_aim_sector
+
+    try:
+        check_aim_sector(spec, _aim(spec, laser_local, direction, offset))
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+
+
 def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, site=None) -> Scene:
     offset = np.asarray(spec.targets[0].center_m, float)
     lp = np.asarray(spec.laser.position_m, float)
@@ -702,6 +712,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
     _check_laser_in_open_air(spec, lp, offset, terrain)
 
     observers = _observers(spec, offset, terrain, None if site is None else site.frame.refraction_rise_m)
+    _check_aim_track(spec, lp - offset, d, offset)
     return Scene(
         spec=spec,
         source=source,

@@ -237,21 +237,6 @@ def beam_states(run: MotionRun, grid: np.ndarray, first) -> None:
     run.states_list = out
 
 
-def check_sector(run: MotionRun, t: np.ndarray) -> None:
-    """An aim outside ``[laser] sector`` at any analysed time is an error naming the time."""
-    sector = run.scene.spec.laser.sector
-    if sector is None or run.motion.aim is None:
-        return
-    from .pointing import angle_to_sector_rad
-
-    off = angle_to_sector_rad(run.direction(t), sector)
-    bad = np.flatnonzero(off > 1e-9)
-    if len(bad):
-        i = bad[0]
-        raise ValueError(f"laser.aim_track: at t = {t[i]:.6g} s the aim is {math.degrees(off[i]):.4g} deg outside laser.sector "
-                         f"(azimuth {sector.azimuth_deg} deg, elevation {sector.elevation_deg} deg)")
-
-
 # -- irradiance at samples -------------------------------------------------------------
 def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
     """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes)."""

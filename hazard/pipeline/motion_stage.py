@@ -11,8 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import mpe as _mpe
-from .motion import (FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, base_grid, beam_states, check_sector,
-                     evaluate)
+from .motion import FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, base_grid, beam_states, evaluate
 from .motion_steps import crossing_times, refine_by_change
 
 __all__ = ["MotionResult", "run_motion", "path_summary"]
@@ -155,7 +154,6 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
     run = MotionRun(scene, motion, mu, limits.irradiance_w_m2, pulse, states, np.asarray(history_times_s, float),
                     [], np.zeros(1), backend, threads)
     grid = base_grid(motion, motion.t_start_s, motion.t_end_s)
-    check_sector(run, grid)
     beam_states(run, grid, first)
     notes = []
     paths = [_sample_path(run, tr.name, tr.group, "track", tr.at, tr.span_s, tr.optics) for tr in motion.tracks]
