@@ -20,7 +20,9 @@ and, for a slewing beam, the base time grid, at most ``TIMES_MAX`` of them):
   (``LATTICE`` x ``LATTICE`` over its outline, ``LEVELS`` heights), with the lines of
   sight of the irradiance map.
 
-The beam's edge grazing a zone the axis misses is found only at lattice points: the
+With a pointing error (``[laser] pointing_error_rad``, the buffer b) the axis is also
+searched along ``POINTING_RING`` directions on the cone of half-angle b about the aim.
+The beam's edge grazing a zone the axes miss is found only at lattice points: the
 lattice spacing is reported. Attenuation: credited for the visual levels only with
 ``[airspace] credit_attenuation = true``; the NOHD zones take the scene's.
 """
@@ -114,7 +116,7 @@ def _times(result):
         t = base_grid(run.motion, run.motion.t_start_s, run.motion.t_end_s)
         t = np.unique(np.concatenate([t[:: max(1, len(t) // TIMES_MAX)], run.key_times_s]))
     t = t[run.motion.windows.lased(t)]
-    return [(float(ti), run.direction(ti)[0], run.states_list[int(run.state_index(np.array([ti]))[0])]) for ti in t]
+    return [(float(ti), run.nominal_direction(ti)[0], run.states_list[int(run.state_index(np.array([ti]))[0])]) for ti in t]
 
 
 def _axis_entry(zone, o, u, span_m) -> np.ndarray | None:
@@ -197,11 +199,12 @@ def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
     span = zone.distance_span_m(o)  # the axis's part that can lie in the zone (its worst value is reported even where it holds)
     pts, spacing = lattice
     best = (0.0, None, None, None)
-    for t, u, spots, tracer, ray_scene in steps:
-        entry = _axis_entry(zone, o, u, span)
-        cand = [pts] + ([entry[None]] if entry is not None else []) + [_mirror_points(zone, spots, span[1] + _reach_past(spots, o))]
-        p = np.concatenate(cand)
-        direct = _direct_at(result, p, u, tracer, mu)
+    b = result.scene.spec.laser.pointing_buffer_rad
+    for t, u0, spots, tracer, ray_scene in steps:
+        ring = _pointing_ring(u0, b)
+        entries = [e[None] for e in (_axis_entry(zone, o, u, span) for u in ring) if e is not None]
+        p = np.concatenate([pts, _mirror_points(zone, spots, span[1] + _reach_past(spots, o))] + entries)
+        direct = np.max([_direct_at(result, p, u, tracer, mu) for u in ring], axis=0)
         refl = _reflected_at(spots, p, mu, ray_scene, result.states)
         total = (direct + refl) * eff
         k = int(np.argmax(total))
@@ -215,6 +218,21 @@ def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
             "worst_effective_irradiance_w_m2": worst, "worst_point_m": None if point is None else (point + off).tolist(),
             "worst_time_s": t, "worst_path": path, "vcf_applied": eff, "lattice_spacing_m": spacing,
             "times_checked": len(steps)}
+
+
+POINTING_RING = 8  # directions on the pointing buffer's cone added to the aim's
+
+
+def _pointing_ring(u, b) -> list:
+    """The aim, and with a pointing buffer b > 0 ``POINTING_RING`` directions on the cone
+    of half-angle b about it (the beam may point anywhere within it)."""
+    if b <= 0:
+        return [u]
+    from .motion import bias_frame
+
+    e1, e2 = (x[0] for x in bias_frame(u))
+    ang = np.linspace(0.0, 2 * np.pi, POINTING_RING, endpoint=False)
+    return [u] + [math.cos(b) * u + math.sin(b) * (math.cos(a) * e1 + math.sin(a) * e2) for a in ang]
 
 
 def _which(spots, p, mu, ray_scene, states) -> str | None:

@@ -33,6 +33,14 @@ and the part of the step within reach gets a step of w / (n |dr/dt|) (n =
 and a posteriori, where E changes by more than ``REL_CHANGE`` between neighbours (the
 wide lobes of diffuse and glossy reflections), by halving, ``REFINE_PASSES`` times.
 
+Pointing error (``[laser] pointing_error_rad``, the buffer b, a bound or k sigma): a
+track is sampled again under constant biases of the aim across itself, each toward one
+of the track's closest approaches to the aim (at most ``BIAS_CANDIDATES``, clipped to b),
+and the worst is kept (``pointing_bias_rad`` in its summary): a track passing within b of
+the beam may be crossed through the axis. The reflections stay those of the scheduled
+aim. Fixed observers' pointing error is the static analysis's (the beam held anywhere
+within it, :mod:`hazard.pipeline.pointing`).
+
 Exposure along a path: the peak; the radiant exposure as the largest integral of E over
 any window of ``[exposure] duration_s`` (trapezoids); the path's whole integral; and the
 verdict: the largest ratio of the exposure in any window of length T to the MPE at T
@@ -57,7 +65,7 @@ from ..engine import spot_irradiance, specular_irradiance
 from ..nohd import optical_gain
 from .direct import _beam_gain
 
-__all__ = ["PathResult", "MotionRun", "run_motion", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
+__all__ = ["PathResult", "MotionRun", "bias_frame", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
 
 BEAM_STATES_MAX = 200  # beam states traced when the beam or a target moves (a coarser key step is said)
 FIXED_OBSERVERS_MAX = 2000  # fixed observers evaluated over time when the beam moves (beyond: said, static verdict only)
@@ -97,6 +105,7 @@ class PathResult:
     base_step_s: float
     adaptive: bool
     summary: dict = field(default_factory=dict)
+    bias_rad: tuple = (0.0, 0.0)  # the pointing bias it was sampled under (the worst within the buffer)
 
     @property
     def irradiance_w_m2(self) -> np.ndarray:
@@ -127,11 +136,24 @@ class MotionRun:
     key_step_text: str = ""
 
     # -- the schedule ----------------------------------------------------------------
-    def direction(self, t) -> np.ndarray:
+    bias_rad: tuple = (0.0, 0.0)  # a constant pointing bias across the aim (bias_frame): the worst within the buffer
+
+    def nominal_direction(self, t) -> np.ndarray:
+        """The scheduled aim (N, 3) at times ``t``."""
         t = np.atleast_1d(np.asarray(t, float))
         if self.motion.aim is None:
             return np.broadcast_to(np.asarray(self.scene.laser_direction, float), (len(t), 3))
         return self.motion.aim.direction(t)
+
+    def direction(self, t) -> np.ndarray:
+        """The beam's direction (N, 3): the scheduled aim turned by ``bias_rad``."""
+        u = self.nominal_direction(t)
+        theta = math.hypot(*self.bias_rad)
+        if theta == 0.0:
+            return u
+        e1, e2 = bias_frame(u)
+        across = (self.bias_rad[0] * e1 + self.bias_rad[1] * e2) / theta
+        return math.cos(theta) * u + math.sin(theta) * across
 
     def state_index(self, t) -> np.ndarray:
         """The beam state each time takes (the nearest key time)."""
@@ -140,6 +162,16 @@ class MotionRun:
             return np.zeros(np.shape(t), int)
         i = np.clip(np.searchsorted(k, t), 1, len(k) - 1)
         return np.where(np.abs(t - k[i - 1]) <= np.abs(k[i] - t), i - 1, i)
+
+
+def bias_frame(u) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors across aims u (N, 3): e1 horizontal (to the right of the aim), e2
+    = e1 x u (upward); for a vertical aim e1 = +x."""
+    u = np.asarray(u, float).reshape(-1, 3)
+    e1 = np.cross(u, [0.0, 0.0, 1.0])
+    n = np.linalg.norm(e1, axis=1)
+    e1 = np.where(n[:, None] > 1e-12, e1 / np.maximum(n, 1e-300)[:, None], [1.0, 0.0, 0.0])
+    return e1, np.cross(e1, u)
 
 
 # -- time grids ------------------------------------------------------------------------
@@ -193,7 +225,7 @@ def _key_times(run: MotionRun, grid: np.ndarray) -> tuple[np.ndarray, str]:
     la = scene.spec.laser
     rng = min((float(np.linalg.norm(t.center_m - scene.laser_position_m)) for t in scene.targets), default=1.0)
     allow = 0.5 * max(la.beam_diameter_m + rng * la.divergence_rad, 1e-6)
-    u = run.direction(grid)
+    u = run.nominal_direction(grid)
     turn = np.concatenate([[0.0], np.arccos(np.clip(np.einsum("ij,ij->i", u[1:], u[:-1]), -1, 1))]) * rng
     for tt in motion.target_tracks:
         turn = turn + np.concatenate([[0.0], np.linalg.norm(np.diff(tt.at(grid), axis=0), axis=1)])
@@ -226,7 +258,7 @@ def beam_states(run: MotionRun, grid: np.ndarray, first) -> None:
     moving = bool(run.motion.target_tracks)
     _, tracer0, ray0 = first
     for t in run.key_times_s:
-        u = run.direction(t)[0]
+        u = run.nominal_direction(t)[0]
         sc = _scene_at(run.scene, run.motion, float(t), u)
         ray_scene, tracer = ray0, tracer0
         if moving:

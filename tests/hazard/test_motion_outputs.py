@@ -10,6 +10,7 @@ import csv
 import io
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -254,3 +255,19 @@ ceiling_agl_m = 100.0
     vi = res.visual_interference
     assert not vi["applies"] and vi["direct"]["lfed_m"] is None and vi["direct"]["nohd_m"] > 0
     assert res.airspace["zones"][0]["holds"] and "not visible" in res.airspace["note"]
+
+
+def test_a_track_within_the_pointing_error_of_the_beam_is_crossed_through_its_axis():
+    """An aircraft at 100 m/s passes 3 m beside a beam of 1/e radius w = 0.25 m at 5 km:
+    at the nominal aim it receives exp(-(3/w)^2) H ~ 0; with a 1 mrad pointing bound (5 m
+    there) the beam may sit on it: H = P exp(-mu R) / (sqrt(pi) w v) (range-safety.md 2)."""
+    path = Path(__file__).resolve().parents[2] / "examples" / "accuracy" / "aircraft_crossing.toml"
+    text = path.read_text().replace("start_m = [-1000.0, 5000.0, 0.0]", "start_m = [-1000.0, 5000.0, 3.0]")  # 3 m above the axis
+    h = 10.0 * math.exp(-1e-4 * 5000) / (math.sqrt(math.pi) * 0.25 * 100.0)
+    nominal = hazard.analyze(scenes.loads(text)).motion.tracks()[0].summary
+    biased = hazard.analyze(scenes.loads(text.replace("aim_m = [0.0, 20000.0, 0.0]", "aim_m = [0.0, 20000.0, 0.0]\npointing_error_rad = 0.001")))
+    s = biased.motion.tracks()[0].summary
+    assert nominal["radiant_exposure_j_m2"] < 1e-6 * h
+    assert s["radiant_exposure_j_m2"] == pytest.approx(h, rel=1e-3)
+    assert math.hypot(*s["pointing_bias_rad"]) == pytest.approx(3.0 / 5000.0, rel=1e-3)
+    assert "worst constant pointing bias" in biased.stage("motion").detail
