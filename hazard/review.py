@@ -27,14 +27,16 @@ from pathlib import Path
 
 from brdfmodels._io import atomic_write, atomic_write_text, check_input_file
 
+from .plots import _file_part
 from .report import NEVER_MODELLED, REPORT_FORMAT, REPORT_VERSION
 
 __all__ = ["write_review", "review_html", "read_report", "find_chromium", "PdfError", "fmt_number", "fmt_distance",
-           "HTML_NAME", "PDF_NAME", "OBSERVERS_SHOWN", "SECTIONS"]
+           "HTML_NAME", "PDF_NAME", "OBSERVERS_SHOWN", "FIXED_OVER_TIME_SHOWN", "SECTIONS"]
 
 HTML_NAME = "report.html"
 PDF_NAME = "report.pdf"
 OBSERVERS_SHOWN = 30  # observer rows on the page (the worst, hazardous first); the rest are counted
+FIXED_OVER_TIME_SHOWN = 10  # fixed observers evaluated over time shown (the worst); the rest are counted
 VERDICT_CHANGES_SHOWN = 20  # observer names whose verdict changes static -> dynamic, listed by name
 ECHO_MAX_CHARS = 20_000  # the scene echo appendix is cut here (said on the page; all of it is in report.json)
 CHROMIUM_PATHS = ("/usr/bin/chromium",)
@@ -51,6 +53,7 @@ PICTURE_GROUPS = (
     ("elevation", ("elevation.png",)),
     ("renders", ("keepout.png", "overview.png", "lobe.gif")),
     ("nohd_time", ("nohd_time_*",)),
+    ("exposure_track", ("exposure_track_*",)),
     ("exposure", ("exposure_*",)),
 )
 CAPTIONS = {
@@ -74,6 +77,7 @@ SECTIONS = {  # id -> heading, in page order
     "renders": "3-D renders",
     "time": "Time plots",
     "observers": "Observers",
+    "airspace": "Airspace and moving observers",
     "stages": "Stages run and skipped",
     "assumptions": "Assumptions and limits",
     "files": "Files and map outputs",
@@ -290,6 +294,9 @@ def _caption(name: str) -> str:
     stem = Path(name).stem
     if stem.startswith("nohd_time_"):
         return f"Diffuse lobe's maximum NOHD against time: {stem[len('nohd_time_'):]}"
+    if stem.startswith("exposure_track_"):
+        return (f"Irradiance and accumulated exposure against time along its path, in its own time steps: "
+                f"moving observer {stem[len('exposure_track_'):]}")
     if stem.startswith("exposure_"):
         return f"Accumulated exposure and irradiance against the MPE: observer {stem[len('exposure_'):]}"
     return stem.replace("_", " ")
@@ -363,6 +370,154 @@ def observers_section(doc: dict, shown: int = OBSERVERS_SHOWN) -> dict:
     return {"rows": [_observer_row(r) for r in page], "shown": len(page), "listed": n_listed, "total": total,
             "hazardous": n_haz, "hazardous_static": n_haz_static, "more": more, "partial": partial,
             "at_least": bool(partial) and n_haz == n_listed}
+
+
+# -- airspace and moving observers ---------------------------------------------------
+MOTION_KEYS = ("tracks", "motion", "visual_interference", "airspace")
+VISUAL_LEVELS = ("lfed", "czed", "szed")  # the FAA levels, farthest-reaching first (report.json's key order)
+
+
+def _sorted_paths(rows: list) -> list:
+    """Paths over time (``tracks``, ``motion.fixed_observers``) hazardous first, then by
+    exposure ratio, highest first (NaN counts as highest)."""
+    def key(r):
+        ratio = _value(r.get("exposure_ratio"))
+        ratio = math.inf if not isinstance(ratio, float) or math.isnan(ratio) else ratio
+        return (not r.get("hazardous"), -ratio)
+
+    return sorted(rows, key=key)
+
+
+def _levels_reached(s: dict) -> str:
+    """The FAA visual levels a path's effective peak reaches (``visual_levels_reached``)."""
+    if s.get("peak_effective_irradiance_w_m2") is None:
+        return "not a visible laser"
+    reached = [str(x).upper() for x in s.get("visual_levels_reached") or []]
+    return ", ".join(reached) if reached else "below the FAA levels"
+
+
+def _path_row(s: dict, csv_present=None, plot=None) -> dict:
+    """One path evaluated over time (a track, or a fixed observer under a moving beam) as
+    the page's tables show it (every value from report.json)."""
+    w = s.get("worst_window") or {}
+    step = fmt_number(s.get("min_step_s"), "s", sig=3)
+    base = fmt_number(s.get("base_step_s"), "s", sig=3)
+    csv = s.get("csv")
+    return {
+        "name": s.get("name", "?"), "hazardous": bool(s.get("hazardous")),
+        "verdict": "HAZARD" if s.get("hazardous") else "below the MPE",
+        "ratio": fmt_number(s.get("exposure_ratio")),
+        "window": (f"{fmt_number(w.get('duration_s'), 's')}: {fmt_number(w.get('exposure_j_m2'), 'J/m²')} of "
+                   f"{fmt_number(w.get('mpe_radiant_exposure_j_m2'), 'J/m²')}" if w else "not stated"),
+        "peak": fmt_number(s.get("peak_irradiance_w_m2"), "W/m²"), "peak_time": fmt_number(s.get("peak_time_s"), "s"),
+        "point": fmt_vector(s.get("worst_point_m"), sig=4),
+        "first_exceedance": fmt_number(s.get("first_exceedance_s"), "s", none="never"),
+        "effective": fmt_number(s.get("peak_effective_irradiance_w_m2"), "W/m²", none="not visible"),
+        "levels": _levels_reached(s),
+        "exposure": fmt_number(s.get("radiant_exposure_j_m2"), "J/m²"),
+        "path_exposure": fmt_number(s.get("path_exposure_j_m2"), "J/m²"),
+        "error": fmt_number(s.get("exposure_error_estimate_j_m2"), "J/m²", sig=2),
+        "samples": fmt_number(s.get("samples"), none="not stated"),
+        "steps": f"smallest {step} (base {base}, {'adaptive' if s.get('adaptive') else 'fixed steps'})",
+        "csv": csv, "csv_present": csv_present, "plot": plot,
+    }
+
+
+def _track_plots(tracks: list, pictures: dict) -> list:
+    """Each track's ``exposure_track_<name>.png`` if embedded, else None; the names as
+    :func:`hazard.plots.time_figures` makes them (file-safe, ``_2`` on a clash)."""
+    taken, found = set(), {p["name"] for p in pictures.get("exposure_track", [])}
+    out = []
+    for t in tracks:
+        name = f"exposure_track_{_file_part(t.get('name', ''))}.png"
+        k = 2
+        while name in taken:
+            name, k = f"exposure_track_{_file_part(t.get('name', ''))}_{k}.png", k + 1
+        taken.add(name)
+        out.append(name if name in found else None)
+    return out
+
+
+def _zone_row(z: dict, i: int) -> dict:
+    """One flight zone's check (``airspace.zones[i]``)."""
+    holds = z.get("holds")
+    return {
+        "name": z.get("name", f"zone {i}"), "limit": str(z.get("limit", "?")).upper(),
+        "limit_value": fmt_number(z.get("limit_w_m2"), "W/m²", none="none (cannot be exceeded)"),
+        "band": (f"{fmt_distance(z.get('floor_agl_m'), none='ground')} to "
+                 f"{fmt_distance(z.get('ceiling_agl_m'), none='no ceiling')}"),
+        "holds": holds, "verdict": "holds" if holds else ("EXCEEDED" if holds is False else "not stated"),
+        "worst": fmt_number(z.get("worst_effective_irradiance_w_m2"), "W/m²"),
+        "time": fmt_number(z.get("worst_time_s"), "s", none="not lased"),
+        "point": fmt_vector(z.get("worst_point_m"), sig=4), "path": z.get("worst_path") or "none",
+        "vcf": fmt_number(z.get("vcf_applied"), sig=7),
+        "spacing": fmt_distance(z.get("lattice_spacing_m"), none="not stated"),
+        "times": fmt_number(z.get("times_checked"), none="not stated"),
+    }
+
+
+def _visual_view(vi) -> dict | None:
+    """``visual_interference``: the FAA levels and their distances, for the direct beam and
+    per target; for a non-visible laser the levels are not applicable (the reason said)."""
+    if not isinstance(vi, dict):
+        return None
+    applies = bool(vi.get("applies"))
+    limits = dict(vi.get("levels_w_m2") or {}) | {"nohd": vi.get("mpe_w_m2")}
+    texts = vi.get("levels") or {}
+    levels = [{"name": k.upper(), "limit": fmt_number(limits.get(k), "W/m²", none="not stated"),
+               "text": texts.get(k, "")} for k in (*VISUAL_LEVELS, "nohd")]
+
+    def cells(d: dict) -> list:
+        out = [fmt_distance(d.get(f"{k}_m"), none="not stated") if applies else "not applicable" for k in VISUAL_LEVELS]
+        return out + [fmt_distance(d.get("nohd_m"), none="not stated")]
+
+    rows = [{"path": "direct beam (from the laser)", "key": "visual_interference.direct",
+             "cells": cells(vi.get("direct") or {})}]
+    rows += [{"path": f"target {name} (from the target)", "key": f"visual_interference.targets.{name}",
+              "cells": cells(d or {})} for name, d in (vi.get("targets") or {}).items()]
+    atten = fmt_number(vi.get("attenuation_per_m"), "1/m")
+    return {"applies": applies, "reason": vi.get("reason") or "not stated", "levels": levels, "rows": rows,
+            "wavelength": fmt_number(vi.get("wavelength_nm"), "nm", sig=6), "vcf": fmt_number(vi.get("vcf"), sig=7),
+            "weighting": vi.get("weighting") or "not stated",
+            "attenuation": (f"credited ({atten})" if vi.get("attenuation_credited") else "not credited (clear air)"),
+            "source": vi.get("source"), "nohd_attenuation": vi.get("nohd_attenuation")}
+
+
+def motion_section(doc: dict, out: Path, pictures: dict, shown: int = FIXED_OVER_TIME_SHOWN) -> dict:
+    """Airspace and moving observers: the tracks (``tracks``), the fixed observers
+    evaluated over time (``motion.fixed_observers``, the ``shown`` worst), the flight
+    zones (``airspace``), the visual-interference distances (``visual_interference``) and
+    the motion stage's method and notes (``motion``). ``moving``: anything moves or a
+    flight zone was given (else the page says so in one line)."""
+    tracks = list(doc.get("tracks") or [])
+    motion = doc.get("motion") if isinstance(doc.get("motion"), dict) else None
+    air = doc.get("airspace") if isinstance(doc.get("airspace"), dict) else None
+    zones = list((air or {}).get("zones") or [])
+    plots = _track_plots(tracks, pictures)  # named in report.json's order, as the pictures were
+    plot_of = {id(t): plot for t, plot in zip(tracks, plots)}
+    rows = [_path_row(t, (out / str(t["csv"])).is_file() if t.get("csv") else None, plot_of[id(t)])
+            for t in _sorted_paths(tracks)]
+    fixed = _sorted_paths(list((motion or {}).get("fixed_observers") or []))
+    page, rest = fixed[:shown], fixed[shown:]
+    rest_haz = sum(1 for r in rest if r.get("hazardous"))
+    more = (f"... and {len(rest)} more fixed observer(s) not shown here ({rest_haz} hazardous, {len(rest) - rest_haz} "
+            "below the MPE): all are in report.json motion.fixed_observers and the motion_* columns of observers.csv."
+            if rest else "")
+    notes = [{"text": str(n), "key": f"motion.notes[{i}]"} for i, n in enumerate((motion or {}).get("notes") or [])]
+    return {
+        "present": [k for k in MOTION_KEYS if k in doc], "moving": bool(tracks) or motion is not None or air is not None,
+        "tracks": rows, "tracks_hazardous": sum(1 for t in tracks if t.get("hazardous")),
+        "motion": motion,  # motion.seconds, its run time, is in the stages table
+        "motion_rows": kv_rows(motion, "motion", skip=("fixed_observers", "notes", "method", "seconds")),
+        "method": (motion or {}).get("method"), "notes": notes,
+        "fixed": {"rows": [_path_row(r) for r in page], "total": len(fixed), "shown": len(page),
+                  "hazardous": sum(1 for r in fixed if r.get("hazardous")), "more": more},
+        "airspace": air, "zones": [_zone_row(z, i) for i, z in enumerate(zones)],
+        "zones_held": sum(1 for z in zones if z.get("holds")),
+        "air_rows": kv_rows(air, "airspace", skip=("zones",), sig=7),
+        "visual": _visual_view(doc.get("visual_interference")),
+        "plots": [p for p in plots if p],
+    }
 
 
 def _melt_text(m: dict | None) -> str:
@@ -608,6 +763,11 @@ def assumptions(doc: dict) -> list:
     listed = doc.get("observers_listed") or {}
     if listed.get("which", "all") != "all":
         items.append({"text": f"observers listed: {listed['which']}", "source": "observers_listed.which"})
+    motion = doc.get("motion") if isinstance(doc.get("motion"), dict) else {}
+    items += [{"text": f"motion: {n}", "source": f"motion.notes[{i}]"} for i, n in enumerate(motion.get("notes") or [])]
+    air = doc.get("airspace") if isinstance(doc.get("airspace"), dict) else {}
+    if air.get("note"):
+        items.append({"text": f"flight zones: {air['note']}", "source": "airspace.note"})
     maps = doc.get("map_outputs")
     for name, why in ((maps.get("not_written") or {}) if isinstance(maps, dict) else {}).items():
         items.append({"text": f"map output {name} not written: {why}", "source": f"map_outputs.not_written.{name}"})
@@ -617,11 +777,34 @@ def assumptions(doc: dict) -> list:
 
 
 def _verdict(doc: dict, obs: dict) -> dict:
-    """The headline: any hazard, and which kinds (observers, lobes, mirror beams, beam)."""
+    """The headline: any hazard, and which kinds (observers, moving observers, flight
+    zones, lobes, mirror beams, beam). A hazardous track or a flight zone that does not
+    hold is a hazard even when report.json's ``any_hazard`` says otherwise (said)."""
     lines = []
     at_least = "at least " if obs["at_least"] else ""
     lines.append(f"{at_least}{obs['hazardous']} of {obs['total']} observer point(s) at or above the MPE "
                  f"(static material: {obs['hazardous_static']})")
+    tracks = list(doc.get("tracks") or [])
+    bad_tracks = [t for t in tracks if t.get("hazardous")]
+    if tracks:
+        lines.append(f"{len(bad_tracks)} of {len(tracks)} moving observer(s) (tracks) at or above the MPE over time")
+    for t in bad_tracks:
+        lines.append(f"track {t.get('name', '?')}: HAZARD, exposure ratio {fmt_number(t.get('exposure_ratio'))}"
+                     + (f", first over the MPE at {fmt_number(t['first_exceedance_s'], 's')}"
+                        if t.get("first_exceedance_s") is not None else ""))
+    fixed = ((doc.get("motion") or {}) if isinstance(doc.get("motion"), dict) else {}).get("fixed_observers") or []
+    if fixed:
+        lines.append(f"over time (the beam or a target moves): {sum(1 for r in fixed if r.get('hazardous'))} of "
+                     f"{len(fixed)} fixed observer(s) hazardous")
+    zones = ((doc.get("airspace") or {}) if isinstance(doc.get("airspace"), dict) else {}).get("zones") or []
+    bad_zones = [z for z in zones if z.get("holds") is False]
+    if zones:
+        lines.append(f"{len(zones) - len(bad_zones)} of {len(zones)} flight zone(s) hold their limit")
+    for z in bad_zones:
+        lines.append(f"flight zone {z.get('name', '?')} ({str(z.get('limit', '?')).upper()}): EXCEEDED, "
+                     f"{fmt_number(z.get('worst_effective_irradiance_w_m2'), 'W/m²')} effective at "
+                     f"{fmt_number(z.get('worst_time_s'), 's')} (limit {fmt_number(z.get('limit_w_m2'), 'W/m²')}, "
+                     f"{z.get('worst_path') or 'path not stated'})")
     for t in doc.get("targets") or []:
         n = _value(t.get("nohd_dynamic_m"))
         if isinstance(n, float) and n > 0:
@@ -638,7 +821,12 @@ def _verdict(doc: dict, obs: dict) -> dict:
         if isinstance(ratio, float) and not ratio < 1:
             lines.append(f"{fmt_number(s.get('power_w'), 'W')} of the beam stopped by {s.get('object')} at "
                          f"{fmt_distance(s.get('range_m'))}: hazard ratio {fmt_number(ratio)} on its way")
-    return {"any_hazard": doc.get("any_hazard"), "lines": lines}
+    any_hazard = doc.get("any_hazard")
+    if any_hazard is not True and (bad_tracks or bad_zones):
+        lines.append(f"report.json any_hazard = {json.dumps(any_hazard)}, but a moving observer is hazardous or a flight "
+                     "zone does not hold: counted as a hazard here")
+        any_hazard = True
+    return {"any_hazard": any_hazard, "lines": lines}
 
 
 def _frame_view(doc: dict) -> dict | None:
@@ -668,7 +856,9 @@ def _map_outputs_view(maps, out: Path) -> dict | None:
 def _files_view(doc: dict, out: Path, report_path: Path, pictures: dict) -> dict:
     """The files of the folder this page was built from, and the map outputs listed."""
     embedded = [p["name"] for g in pictures.values() for p in g]
-    return {"report": report_path.name, "csv": (out / "observers.csv").exists(),
+    tracks = [{"name": str(t["csv"]), "present": (out / str(t["csv"])).is_file()}
+              for t in doc.get("tracks") or [] if t.get("csv")]
+    return {"report": report_path.name, "csv": (out / "observers.csv").exists(), "track_csvs": tracks,
             "maps": _map_outputs_view(doc.get("map_outputs"), out),
             "embedded": embedded, "report_sha256": hashlib.sha256(report_path.read_bytes()).hexdigest()}
 
@@ -687,7 +877,7 @@ def review_context(doc: dict, out: Path, report_path: Path, pictures: dict) -> d
         "footprint": _footprint_rows(doc.get("footprint")),
         "targets": [_target_view(t, i) for i, t in enumerate(doc.get("targets") or [])],
         "verdict_changes": list(doc.get("verdict_changes") or []), "changes_shown": VERDICT_CHANGES_SHOWN,
-        "pictures": pictures, "observers": obs,
+        "pictures": pictures, "observers": obs, "moving": motion_section(doc, out, pictures),
         "ran": [s for s in stages if s.get("ran")], "skipped": [s for s in stages if not s.get("ran")],
         "skip_reason": {s.get("name"): s.get("detail", "") for s in stages if not s.get("ran")},
         "assumptions": assumptions(doc), "versions": doc.get("versions") or {},

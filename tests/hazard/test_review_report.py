@@ -289,6 +289,101 @@ def test_pdf_without_chromium_says_so_and_keeps_the_html(plate, tmp_path, monkey
     assert (out / "report.html").exists() and not (out / "report.pdf").exists()
 
 
+# -- airspace and moving observers ---------------------------------------------------
+@pytest.fixture(scope="module")
+def airspace(tmp_path_factory):
+    """The airspace example: a helicopter track, a slewing beam with firing windows, two
+    flight zones the beam enters, a 532 nm laser (visual levels apply)."""
+    out = tmp_path_factory.mktemp("airspace") / "out"
+    code, _, err = run("run", "airspace", "-o", out, "--quiet", "--report", *(["--plot"] if HAS_MPL else []))
+    assert code == 0, err
+    return {"out": out, "doc": json.loads((out / "report.json").read_text()),
+            "html": (out / "report.html").read_text(encoding="utf-8")}
+
+
+def section(page: str, sid: str) -> str:
+    m = re.search(rf'<section id="{sid}">(.*?)</section>', page, re.S)
+    assert m, f"no section {sid}"
+    return m.group(1)
+
+
+def rows_of(page: str, table_id: str) -> list:
+    return table(page, table_id).split("<tbody>", 1)[1].split("<tr>")[1:]
+
+
+def test_airspace_tracks_zones_and_visual_distances(airspace):
+    page, doc = airspace["html"], airspace["doc"]
+    track = doc["tracks"][0]
+    assert track["name"] == "helicopter" and not track["hazardous"] and track["first_exceedance_s"] is None
+    (row,) = rows_of(page, "tracks-table")
+    cells = row.split("</td>")
+    assert cells[0].endswith(">helicopter") and cells[1] == '<td class="safe">below the MPE'  # the verdict first
+    assert f">{fmt_number(track['exposure_ratio'])}<" in row and ">never<" in row and "SZED, CZED, LFED" in row
+    assert fmt_number(track["peak_irradiance_w_m2"], "W/m\u00b2") in row and track["csv"] in row
+    assert ("exposure_track_helicopter.png</a>" in row) == HAS_MPL
+    zones = {z["name"]: z for z in doc["airspace"]["zones"]}
+    assert zones["airfield LFZ"]["holds"] is False
+    (lfz,) = [r for r in rows_of(page, "zones-table") if "<td>airfield LFZ</td>" in r]
+    assert '<td class="hazard">EXCEEDED</td>' in lfz and "LFED 5\u00d710\u207b\u2074\u00a0W/m\u00b2" in lfz
+    assert fmt_number(zones["airfield LFZ"]["worst_effective_irradiance_w_m2"], "W/m\u00b2") in lfz
+    szed = doc["visual_interference"]["direct"]["szed_m"]
+    assert fmt_distance(szed) == "4737\u00a0m"
+    direct = [r for r in rows_of(page, "visual-table") if "direct beam" in r][0]
+    assert direct.split("</td>")[3] == '<td class="num">4737\u00a0m'  # path, LFED, CZED, SZED
+    assert "0 of 1 fixed observer(s) hazardous over time" in page and "<td>post</td>" in table(page, "fixed-over-time-table")
+    assert esc(doc["motion"]["beam_state_step"]) in section(page, "airspace") and "motion.windows_s" in page
+    verdict = section(page, "verdict")
+    assert 'class="verdict bad"' in verdict and "0 of 1 moving observer(s) (tracks) at or above the MPE" in verdict
+    assert "flight zone airfield LFZ (LFED): EXCEEDED" in verdict and "0 of 2 flight zone(s) hold their limit" in verdict
+    if HAS_MPL:
+        assert 'title="exposure_track_helicopter.png"' in section(page, "time")
+
+
+def test_a_hazardous_track_and_a_broken_zone_make_the_verdict(airspace, tmp_path):
+    doc = airspace["doc"]
+    tracks = [dict(doc["tracks"][0], hazardous=True, first_exceedance_s=15.19, exposure_ratio=2.5)]
+    zones = [dict(z, holds=True) for z in doc["airspace"]["zones"]]
+    zones[1]["holds"] = False
+    out = copy_out(airspace["out"], tmp_path / "o", tracks=tracks, airspace=dict(doc["airspace"], zones=zones),
+                   any_hazard=False)  # a report whose any_hazard missed them: the page still counts them
+    write_review(out)
+    page = (out / "report.html").read_text(encoding="utf-8")
+    verdict = section(page, "verdict")
+    assert 'class="verdict bad"' in verdict and "No hazard found" not in verdict
+    assert "1 of 1 moving observer(s) (tracks) at or above the MPE" in verdict
+    assert "track helicopter: HAZARD, exposure ratio 2.5, first over the MPE at 15.19\u00a0s" in verdict
+    assert "1 of 2 flight zone(s) hold their limit" in verdict and "flight zone range CFZ (CZED): EXCEEDED" in verdict
+    assert "airfield LFZ" not in verdict and "report.json any_hazard = false" in verdict
+    assert '<td class="hazard">HAZARD</td>' in rows_of(page, "tracks-table")[0]
+    assert '<td>airfield LFZ</td><td class="safe">holds</td>' in table(page, "zones-table")
+
+
+def test_no_motion_is_one_line_and_invisible_light_has_no_visual_levels(plate):
+    page, doc = plate["html"], plate["doc"]
+    assert doc["tracks"] == [] and doc["motion"] is None and doc["airspace"] is None
+    part = section(page, "airspace")
+    assert part.count("Nothing moves and no flight zones were given") == 1
+    assert re.search(r'<p id="airspace-none">Nothing moves and no flight zones were given[^\n<]*</p>\n', part)
+    for tid in ("tracks-table", "zones-table", "fixed-over-time-table"):
+        assert f'id="{tid}"' not in page
+    vi = doc["visual_interference"]
+    assert not vi["applies"] and f"<strong>Not applicable</strong>: {esc(vi['reason'])}" in part
+    direct = [r for r in rows_of(page, "visual-table") if "direct beam" in r][0]
+    assert direct.count("not applicable") == 3 and fmt_distance(vi["direct"]["nohd_m"]) in direct
+    assert "moving observer" not in section(page, "verdict")
+
+
+def test_a_report_without_the_motion_keys_says_so(collimated, tmp_path):
+    out = copy_out(collimated, tmp_path / "o")
+    doc = json.loads((out / "report.json").read_text())
+    for key in ("tracks", "motion", "visual_interference", "airspace"):
+        doc.pop(key, None)
+    (out / "report.json").write_text(json.dumps(doc))
+    write_review(out)
+    part = section((out / "report.html").read_text(encoding="utf-8"), "airspace")
+    assert "report.json has no tracks, motion, visual_interference or airspace keys" in part and "<table" not in part
+
+
 # -- the page in a real browser ------------------------------------------------------
 BROWSER_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
                 "--disable-sync", "--no-first-run"]
