@@ -318,11 +318,11 @@ def collect_pictures(out: Path, report_mtime: float) -> dict:
 
 
 # -- sections ------------------------------------------------------------------------
-def _sorted_observers(rows: list) -> list:
-    """Observer rows hazardous first, then by hazard ratio, highest first (NaN counts as
-    highest: never rounded toward safe)."""
+def _sorted_observers(rows: list, ratio_key: str = "hazard_ratio") -> list:
+    """Observer rows (or paths over time, by ``exposure_ratio``) hazardous first, then by
+    the ratio, highest first (NaN counts as highest: never rounded toward safe)."""
     def key(r):
-        ratio = _value(r.get("hazard_ratio"))
+        ratio = _value(r.get(ratio_key))
         ratio = math.inf if not isinstance(ratio, float) or math.isnan(ratio) else ratio
         return (not r.get("hazardous"), -ratio)
 
@@ -375,17 +375,6 @@ def observers_section(doc: dict, shown: int = OBSERVERS_SHOWN) -> dict:
 # -- airspace and moving observers ---------------------------------------------------
 MOTION_KEYS = ("tracks", "motion", "visual_interference", "airspace")
 VISUAL_LEVELS = ("lfed", "czed", "szed")  # the FAA levels, farthest-reaching first (report.json's key order)
-
-
-def _sorted_paths(rows: list) -> list:
-    """Paths over time (``tracks``, ``motion.fixed_observers``) hazardous first, then by
-    exposure ratio, highest first (NaN counts as highest)."""
-    def key(r):
-        ratio = _value(r.get("exposure_ratio"))
-        ratio = math.inf if not isinstance(ratio, float) or math.isnan(ratio) else ratio
-        return (not r.get("hazardous"), -ratio)
-
-    return sorted(rows, key=key)
 
 
 def _levels_reached(s: dict) -> str:
@@ -496,8 +485,8 @@ def motion_section(doc: dict, out: Path, pictures: dict, shown: int = FIXED_OVER
     plots = _track_plots(tracks, pictures)  # named in report.json's order, as the pictures were
     plot_of = {id(t): plot for t, plot in zip(tracks, plots)}
     rows = [_path_row(t, (out / str(t["csv"])).is_file() if t.get("csv") else None, plot_of[id(t)])
-            for t in _sorted_paths(tracks)]
-    fixed = _sorted_paths(list((motion or {}).get("fixed_observers") or []))
+            for t in _sorted_observers(tracks, "exposure_ratio")]
+    fixed = _sorted_observers(list((motion or {}).get("fixed_observers") or []), "exposure_ratio")
     page, rest = fixed[:shown], fixed[shown:]
     rest_haz = sum(1 for r in rest if r.get("hazardous"))
     more = (f"... and {len(rest)} more fixed observer(s) not shown here ({rest_haz} hazardous, {len(rest) - rest_haz} "
