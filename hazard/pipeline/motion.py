@@ -134,6 +134,7 @@ class MotionRun:
     threads: int
     notes: list = field(default_factory=list)
     key_step_text: str = ""
+    dwell_keys_s: np.ndarray | None = None  # per beam state: lased time of the surface under its spot before it (made once)
 
     # -- the schedule ----------------------------------------------------------------
     bias_rad: tuple = (0.0, 0.0)  # a constant pointing bias across the aim (bias_frame): the worst within the buffer
@@ -342,13 +343,25 @@ def _dwell_s(run: MotionRun, t) -> np.ndarray:
         return lased
     k = run.state_index(t)
     lk = _lased_time(run, run.key_times_s)
-    dwell = np.zeros(len(run.states_list))
-    for i, bs in enumerate(run.states_list):  # time under the spot of the surface now at its centre
-        c_i, r_i = _spot_centre(run, bs), _spot_radius(bs)
-        near = [j for j in range(i + 1) if np.linalg.norm(_spot_centre(run, run.states_list[j]) - c_i) <= r_i]
-        first = min(near) if near else i
-        dwell[i] = lk[i] - lk[first]
-    return dwell[k] + np.maximum(lased - lk[k], 0.0)
+    return _key_dwell_s(run)[k] + np.maximum(lased - lk[k], 0.0)
+
+
+def _key_dwell_s(run: MotionRun) -> np.ndarray:
+    """Per beam state, the lased time the surface now under the spot's centre has spent
+    under the spot before this state: the earlier states whose centre lies within the
+    spot's radius of it, each for its own lased interval (made once per run)."""
+    if run.dwell_keys_s is not None:
+        return run.dwell_keys_s
+    lk = _lased_time(run, run.key_times_s)
+    held = np.diff(lk)  # lased seconds each state is held for, up to the next key time
+    c = np.array([_spot_centre(run, bs) for bs in run.states_list])
+    r = np.array([_spot_radius(bs) for bs in run.states_list])
+    dwell = np.zeros(len(c))
+    for i in range(1, len(c)):
+        near = np.linalg.norm(c[:i] - c[i], axis=1) <= r[i]  # NaN (no spot then) is never near
+        dwell[i] = float(held[:i][near].sum())
+    run.dwell_keys_s = dwell
+    return dwell
 
 
 def _spot_centre(run, bs) -> np.ndarray:

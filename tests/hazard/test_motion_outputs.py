@@ -271,3 +271,23 @@ def test_a_track_within_the_pointing_error_of_the_beam_is_crossed_through_its_ax
     assert s["radiant_exposure_j_m2"] == pytest.approx(h, rel=1e-3)
     assert math.hypot(*s["pointing_bias_rad"]) == pytest.approx(3.0 / 5000.0, rel=1e-3)
     assert "worst constant pointing bias" in biased.stage("motion").detail
+
+
+def test_the_dwell_time_counts_only_the_time_the_surface_was_under_the_spot():
+    """A spot (radius 0.5 m) at x = 0 for 2 s, away at x = 5 m for 3 s, back at x = 0:
+    the surface at x = 0 has been lit 2 s when the spot returns, not 5 s; the one at
+    x = 5 m 0 s when the spot arrives there (windows: none, key times 0, 2, 5)."""
+    from types import SimpleNamespace as NS
+
+    from hazard.pipeline.motion import MotionRun, _dwell_s
+    from scenes.motion import Windows
+
+    target = NS(index=0)
+
+    def state(t, x):
+        return NS(time_s=t, spots=[NS(centroid=np.array([x, 0.0, 0.0]), size_m=1.0, target=target)])
+
+    motion = NS(windows=Windows(None), t_start_s=0.0, target_tracks=[], beam_moves=True)
+    run = MotionRun(None, motion, 0.0, 1.0, None, {0: np.zeros((3, 1))}, np.array([0.0, 1.0, 2.0]),
+                    [state(0.0, 0.0), state(2.0, 5.0), state(5.0, 0.0)], np.array([0.0, 2.0, 5.0]), "embree", 1)
+    np.testing.assert_allclose(_dwell_s(run, np.array([0.0, 1.0, 2.0, 4.0, 5.0, 6.0])), [0.0, 1.0, 0.0, 2.0, 2.0, 3.0])
