@@ -49,21 +49,43 @@ def _richardson_j_m2(t, e) -> float:
     return abs(full - half) / 3.0
 
 
-def _windows(t, cum, duration_s):
-    """Largest exposure [J/m^2] over windows of each length T (log-spaced up to
-    ``duration_s``), windows starting or ending at a sample; and, per T, the exposure of
-    the window ending at each sample."""
-    span = t[-1] - t[0]
+def _hot(e, floor_w_m2: float) -> np.ndarray:
+    """Samples where E is above ``floor_w_m2`` (and 1e-12 of its peak), and their
+    neighbours: the only places a window's largest exposure need start or end, or an
+    exceedance first happen (elsewhere the integral grows by less than the floor per
+    second)."""
+    if not len(e) or not e.max() > 0:
+        return np.zeros(0, int)
+    hot = e > max(1e-12 * e.max(), floor_w_m2)
+    hot[1:] |= hot[:-1]
+    hot[:-1] |= hot[1:]
+    return np.flatnonzero(hot)
+
+
+def _lengths(t, duration_s) -> np.ndarray:
+    """Window lengths [s]: log-spaced from the smallest step to the exposure duration."""
     dt = np.diff(t)
     t_min = max(float(dt[dt > 0].min()) if np.any(dt > 0) else duration_s, _mpe.DURATION_MIN_S)
-    lengths = np.unique(np.append(np.geomspace(min(t_min, duration_s), duration_s, WINDOW_DURATIONS), duration_s))
+    return np.unique(np.append(np.geomspace(min(t_min, duration_s), duration_s, WINDOW_DURATIONS), duration_s))
+
+
+def _windows(t, cum, lengths, idx):
+    """Largest exposure [J/m^2] over windows of each length, starting or ending at the
+    samples ``idx`` (:func:`_hot`); and the times and exposures of the windows ending at
+    those samples, per length."""
+    span = t[-1] - t[0]
+    th, ch = t[idx], cum[idx]
     best, ends = [], []
     for T in lengths:
-        start = np.interp(np.minimum(t + T, t[-1]), t, cum) - cum
-        end = cum - np.interp(np.maximum(t - T, t[0]), t, cum)
+        if not len(idx):
+            best.append(0.0)
+            ends.append(np.zeros(0))
+            continue
+        start = np.interp(np.minimum(th + T, t[-1]), t, cum) - ch
+        end = ch - np.interp(np.maximum(th - T, t[0]), t, cum)
         best.append(max(float(start.max()), float(end.max())) if span > 0 else float(cum[-1]))
         ends.append(end)
-    return lengths, np.asarray(best), ends
+    return np.asarray(best), (th, ends)
 
 
 def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limit_w_m2=None) -> dict:
@@ -73,12 +95,14 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
     cum = pr.cumulative_j_m2
     err = _richardson_j_m2(t, e)
     k = int(np.argmax(e)) if len(e) else 0
-    lengths, best, ends = _windows(t, cum, duration_s)
+    lengths = _lengths(t, duration_s)
     mpe_h = np.array([_mpe.ocular_mpe(wavelength_nm, float(np.clip(T, _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)),
                                       standard=standard).radiant_exposure_j_m2 for T in lengths])
+    # windows need only start or end where E is above 1e-9 of the lowest MPE irradiance of any window length
+    best, (t_end, ends) = _windows(t, cum, lengths, _hot(e, 1e-9 * float(np.min(mpe_h / lengths))))
     ratio = (best + err) / mpe_h
     w = int(np.argmax(ratio))
-    first = [t[np.argmax(end > m)] for end, m in zip(ends, mpe_h) if np.any(end > m)]
+    first = [t_end[np.argmax(end > m)] for end, m in zip(ends, mpe_h) if np.any(end > m)]
     if pulse_limit_w_m2 is not None and np.any(e >= pulse_limit_w_m2):
         first.append(t[np.argmax(e >= pulse_limit_w_m2)])
     hazardous = bool(ratio[w] >= 1.0 or (pulse_limit_w_m2 is not None and e[k] >= pulse_limit_w_m2))

@@ -43,3 +43,9 @@ def test_bench_ray_cache():
     from .bench_ray_cache import run
 
     print(run())
+
+
+def test_bench_motion():
+    from .bench_motion import run
+
+    print(run())
