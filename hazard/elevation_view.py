@@ -64,7 +64,7 @@ class ElevationViewDisplay(_Display):
         targets = [(t.name, sz(spots.get(t.name, t.center_m))) for t in scene.targets]
         lobes = [(o.target, o.kind, [r + up for r in o.rings()]) for o in lobe_outlines(result, view)]
         mirrors = [(name, sz(a), sz(b)) for name, a, b in mirror_segments(result)]
-        obs = np.asarray(result.observers.position_m, float).reshape(-1, 3)
+        obs = np.asarray(result.observers.position_m, float).reshape(-1, 3) - scene.offset_m  # world -> local, as sz takes
         obs_sz = sz(obs) if len(obs) else np.zeros((0, 2))
         labels, more = hazardous_labels(result, obs_sz)
         return cls(f"{scene.name}: elevation view", sz(scene.laser_position_m), aim, targets, lobes, mirrors,

@@ -228,7 +228,9 @@ class ExposureDisplay(_Display):
             ax.plot([], [], " ", label="no exceedance in the window")
         ax2 = ax.twinx()
         e = np.asarray(self.irradiance_w_m2, float)
-        levels = e[e > 0].tolist() + ([] if self.mpe_w_m2 is None else [self.mpe_w_m2])
+        top = float(e.max()) if len(e) else 0.0
+        # the axis spans what matters: from 1e-9 of the peak (a Gaussian's far tail, 1e-300, would squash it) and the MPE
+        levels = e[e > 1e-9 * top].tolist() + ([] if self.mpe_w_m2 is None else [self.mpe_w_m2])
         if levels:  # log: the MPE stays visible beside a peak orders of magnitude above it
             ax2.set_yscale("log")
             ax2.set_ylim(min(levels) / 2.0, max(levels) * 2.0)

@@ -27,7 +27,9 @@ R = (sqrt(4 P VCF / (pi E_lim)) - a) / phi without attenuation (range-safety.md 
 derived from section 1), :func:`hazard.nohd.nohd_direct` with P VCF and E_lim. A
 reflection: the largest range of the target's hazard lobe (diffuse and glossy part,
 :func:`hazard.keepout.hazard_lobe`, over the target's whole state history) and of its
-mirror beam (:func:`hazard.specular.specular_nohd`) at E_lim / VCF. Attenuation is not
+mirror beam (:func:`hazard.specular.specular_nohd`) at E_lim / VCF; for a moving beam or
+target, the largest over the static spot and the ``SPOTS_PER_TARGET`` most powerful
+spots of its beam states (``beam_states`` counts them). Attenuation is not
 credited unless ``[airspace] credit_attenuation = true`` (FAA practice per the spec,
 not confirmed: an explicit flag).
 """
@@ -107,24 +109,46 @@ def _row_nohd_m(row) -> float:
     return float(max(vals))
 
 
-def _target_distances(sp, states, mpe_w_m2, vcf, mu, analysis) -> dict:
-    """A lit target's visual distances: its lobe and mirror beam at each level (the
-    history's states: the largest over it)."""
+def _spot_reach_m(sp, e_w_m2, mu, states, analysis) -> float:
+    """How far [m] a spot's reflection stays at or above ``e_w_m2``: its lobe (over the
+    history's states) and its mirror beam."""
     from .keepout import hazard_lobe
     from .specular import specular_nohd
 
+    if not np.isfinite(e_w_m2):
+        return 0.0
     st = states.get(sp.target.index)
+    lobe = hazard_lobe(sp, e_w_m2, mu, states=st, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
+    r = float(lobe.max_range_m)
+    if sp.material.has_specular:
+        r = max(r, float(specular_nohd(sp, e_w_m2, mu, st).nohd_m))
+    return r
+
+
+def _target_distances(sp, states, mpe_w_m2, vcf, mu, analysis) -> dict:
+    """A lit target's visual distances: its lobe and mirror beam at each level."""
+    return {f"{key}_m": _spot_reach_m(sp, level_limit_w_m2(key, mpe_w_m2, vcf), mu, states, analysis)
+            for key in ("lfed", "czed", "szed")}
+
+
+SPOTS_PER_TARGET = 3  # a moving beam's spots per target whose distances are computed (the most powerful ones)
+
+
+def _lit_spots(result) -> dict:
+    """Target name -> the spots whose distances are computed: the static analysis's, and
+    for a moving beam or target the ``SPOTS_PER_TARGET`` most powerful of its beam states
+    (a target the sweep lights but the nominal aim misses is not left out)."""
     out = {}
-    for key in ("lfed", "czed", "szed"):
-        e = level_limit_w_m2(key, mpe_w_m2, vcf)
-        if not np.isfinite(e):
-            out[f"{key}_m"] = 0.0
-            continue
-        lobe = hazard_lobe(sp, e, mu, states=st, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
-        r = float(lobe.max_range_m)
-        if sp.material.has_specular:
-            r = max(r, float(specular_nohd(sp, e, mu, st).nohd_m))
-        out[f"{key}_m"] = r
+    for sp in result.spots:
+        out.setdefault(sp.target.name, []).append(sp)
+    run = None if result.motion is None else result.motion.run
+    if run is not None and run.motion.beam_moves:
+        moving = {}
+        for bs in run.states_list:
+            for sp in bs.spots:
+                moving.setdefault(sp.target.name, []).append(sp)
+        for name, sps in moving.items():
+            out.setdefault(name, []).extend(sorted(sps, key=lambda x: -x.total_power_w)[:SPOTS_PER_TARGET])
     return out
 
 
@@ -150,11 +174,17 @@ def visual_interference(result) -> dict:
     out["direct"] = zone_distances_m(la.average_power_w, la.beam_diameter_m, la.divergence_rad, result.mpe_w_m2, vcf, mu)
     rows = {t.name: t for t in result.targets}
     out["targets"] = {}
-    for sp in result.spots:  # the NOHD is the keepout stage's (the scene's attenuation); the levels only for visible light
-        name = sp.target.name
-        levels = (_target_distances(sp, result.states, result.mpe_w_m2, vcf, mu, spec.analysis) if vis
-                  else {"lfed_m": None, "czed_m": None, "szed_m": None})
-        out["targets"][name] = {**levels, "nohd_m": _row_nohd_m(rows[name]) if name in rows else None}
+    for name, spots in _lit_spots(result).items():  # the NOHD is the keepout stage's (the scene's attenuation); levels: visible only
+        levels = {"lfed_m": None, "czed_m": None, "szed_m": None}
+        if vis:
+            each = [_target_distances(sp, result.states, result.mpe_w_m2, vcf, mu, spec.analysis) for sp in spots]
+            levels = {k: max(d[k] for d in each) for k in levels}
+        row = rows.get(name)
+        static = [_row_nohd_m(row)] if row is not None and row.spot_power_w else []
+        static_ids = {id(x) for x in result.spots}
+        moving = [_spot_reach_m(sp, result.mpe_w_m2, result.attenuation_per_m, result.states, spec.analysis)
+                  for sp in spots if id(sp) not in static_ids]
+        out["targets"][name] = {**levels, "nohd_m": max(static + moving), "beam_states": len(spots)}
     if not vis:
         out["direct"].update(lfed_m=None, czed_m=None, szed_m=None)
     out["nohd_attenuation"] = "targets: the scene's attenuation (the keepout stage's NOHD); direct: as the levels"

@@ -282,8 +282,8 @@ def check_aim_sector(spec, aim: AimSchedule | None) -> None:
     ok = in_az & (el >= sector.elevation_deg[0] - eps) & (el <= sector.elevation_deg[1] + eps)
     if not ok.all():
         i = int(np.argmin(ok))
-        raise ValueError(f"laser.aim_track: at t = {t[i]:.6g} s the aim points at bearing {az[i]:.4g} deg, elevation "
-                         f"{el[i]:.4g} deg: outside laser.sector (azimuth {sector.azimuth_deg} deg, elevation "
+        raise ValueError(f"laser.aim_track: at t = {t[i]:.6g} s the aim points at bearing {az[i]:.8g} deg, elevation "
+                         f"{el[i]:.8g} deg: outside laser.sector (azimuth {sector.azimuth_deg} deg, elevation "
                          f"{sector.elevation_deg} deg)")
 
 

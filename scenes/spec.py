@@ -195,6 +195,14 @@ class LaserSpec(_Strict):
     def _finite_vec(cls, v, info):
         return None if v is None else _finite(v, info.field_name)
 
+    @field_validator("windows")
+    @classmethod
+    def _windows(cls, v):
+        for i, w in enumerate(v or ()):
+            if not w[1] > w[0]:
+                raise ValueError(f"window {i} = {w!r}: expected [t0_s, t1_s] with t1_s > t0_s")
+        return v
+
     @model_validator(mode="after")
     def _check(self):
         pulsed = [self.pulse_energy_j, self.pulse_duration_s, self.prf_hz]
@@ -215,9 +223,6 @@ class LaserSpec(_Strict):
         if self.pointing_error_kind == "sigma" and self.pointing_error_sigmas is None:
             raise ValueError("pointing_error_kind = 'sigma' needs pointing_error_sigmas (the buffer in standard deviations, "
                              "from your range's rules: no default is assumed)")
-        for i, w in enumerate(self.windows or ()):
-            if not w[1] > w[0]:
-                raise ValueError(f"windows[{i}]={w!r}: expected [t0_s, t1_s] with t1_s > t0_s")
         if self.pointing_error_kind == "bound" and self.pointing_error_sigmas is not None:
             raise ValueError("pointing_error_sigmas: only used with pointing_error_kind = 'sigma'; remove it")
         return self

@@ -48,8 +48,8 @@ verdict: the largest ratio of the exposure in any window of length T to the MPE 
 the exposure duration (``WINDOW_DURATIONS`` log-spaced): for a crossing this includes its
 effective duration sqrt(pi) w / v (range-safety.md section 2). The integral's error is
 estimated by comparing the trapezoid sum with the sum over every second sample (its
-Richardson estimate, a third of the difference) and added to the exposure the verdict
-uses, never subtracted. Pulsed lasers also take the per-pulse rule on the peak.
+Richardson estimate, a third of the difference); its relative size raises every
+window's exposure the verdict uses, never lowers it. Pulsed lasers also take the per-pulse rule on the peak.
 """
 
 from __future__ import annotations

@@ -62,10 +62,12 @@ def _hot(e, floor_w_m2: float) -> np.ndarray:
     return np.flatnonzero(hot)
 
 
-def _lengths(t, duration_s) -> np.ndarray:
-    """Window lengths [s]: log-spaced from the smallest step to the exposure duration."""
+def _lengths(t, duration_s, base_step_s) -> np.ndarray:
+    """Window lengths [s]: log-spaced from the smallest step (not the zero-width pairs at
+    the windows' edges) to the exposure duration."""
     dt = np.diff(t)
-    t_min = max(float(dt[dt > 0].min()) if np.any(dt > 0) else duration_s, _mpe.DURATION_MIN_S)
+    dt = dt[dt > 1e-9 * base_step_s]
+    t_min = max(float(dt.min()) if len(dt) else duration_s, _mpe.DURATION_MIN_S)
     return np.unique(np.append(np.geomspace(min(t_min, duration_s), duration_s, WINDOW_DURATIONS), duration_s))
 
 
@@ -95,12 +97,13 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
     cum = pr.cumulative_j_m2
     err = _richardson_j_m2(t, e)
     k = int(np.argmax(e)) if len(e) else 0
-    lengths = _lengths(t, duration_s)
+    lengths = _lengths(t, duration_s, pr.base_step_s)
     mpe_h = np.array([_mpe.ocular_mpe(wavelength_nm, float(np.clip(T, _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)),
                                       standard=standard).radiant_exposure_j_m2 for T in lengths])
     # windows need only start or end where E is above 1e-9 of the lowest MPE irradiance of any window length
     best, (t_end, ends) = _windows(t, cum, lengths, _hot(e, 1e-9 * float(np.min(mpe_h / lengths))))
-    ratio = (best + err) / mpe_h
+    rel_err = err / cum[-1] if cum[-1] > 0 else 0.0  # the integral's relative error, applied to every window
+    ratio = best * (1.0 + rel_err) / mpe_h
     w = int(np.argmax(ratio))
     first = [t_end[np.argmax(end > m)] for end, m in zip(ends, mpe_h) if np.any(end > m)]
     if pulse_limit_w_m2 is not None and np.any(e >= pulse_limit_w_m2):

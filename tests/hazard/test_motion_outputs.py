@@ -291,3 +291,18 @@ def test_the_dwell_time_counts_only_the_time_the_surface_was_under_the_spot():
     run = MotionRun(None, motion, 0.0, 1.0, None, {0: np.zeros((3, 1))}, np.array([0.0, 1.0, 2.0]),
                     [state(0.0, 0.0), state(2.0, 5.0), state(5.0, 0.0)], np.array([0.0, 2.0, 5.0]), "embree", 1)
     np.testing.assert_allclose(_dwell_s(run, np.array([0.0, 1.0, 2.0, 4.0, 5.0, 6.0])), [0.0, 1.0, 0.0, 2.0, 2.0, 3.0])
+
+
+def test_the_elevation_view_puts_observers_where_they_are():
+    """The observers were drawn with the scene's offset added twice (a scene whose first
+    target is not at the origin: the post of `airspace`, 20 m up, was drawn 120 m up)."""
+    pytest.importorskip("matplotlib")
+    from hazard.elevation_view import ElevationViewDisplay
+
+    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    d = ElevationViewDisplay.from_result(res)
+    laser = np.array([0.0, 0.0, 2.0])
+    u = np.array([-30.0, 2000.0, 98.0]) / np.linalg.norm([-30.0, 2000.0, 98.0])
+    h = u[:2] / np.linalg.norm(u[:2])  # the view's horizontal axis: along the aim's bearing
+    s_post = float((np.array([60.0, 1900.0]) - laser[:2]) @ h)
+    np.testing.assert_allclose(d.observers_sz[0], [s_post, 20.0], rtol=0, atol=1e-6)

@@ -49,7 +49,7 @@ def test_keys_that_cannot_be_meant_are_errors_naming_them(extra, words):
 
 def test_windows_that_end_before_they_begin_are_an_error():
     text = PLATE_AT_50M.replace("aim_m = [0.0, 0.0, 1.0]", "aim_m = [0.0, 0.0, 1.0]\nwindows = [[5.0, 5.0]]")
-    with pytest.raises(ValueError, match=r"windows\[0\]=\[5.0, 5.0\]: expected \[t0_s, t1_s\] with t1_s > t0_s"):
+    with pytest.raises(ValueError, match=r"laser.windows: window 0 = \[5.0, 5.0\]: expected \[t0_s, t1_s\] with t1_s > t0_s"):
         scenes.loads(text)
 
 
