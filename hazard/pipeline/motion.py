@@ -60,7 +60,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import mpe as _mpe
 from ..engine import spot_irradiance, specular_irradiance
 from ..nohd import optical_gain
 from .direct import _beam_gain
