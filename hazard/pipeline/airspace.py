@@ -21,7 +21,7 @@ and, for a slewing beam, the base time grid, at most ``TIMES_MAX`` of them):
   sight of the irradiance map.
 
 With a pointing error (``[laser] pointing_error_rad``, the buffer b) the axis is also
-searched along ``POINTING_RING`` directions on the cone of half-angle b about the aim.
+searched along the directions of one ring (8 for a small buffer) on the cone of half-angle b about the aim.
 The beam's edge grazing a zone the axes miss is found only at lattice points: the
 lattice spacing is reported. Attenuation: credited for the visual levels only with
 ``[airspace] credit_attenuation = true``; the NOHD zones take the scene's.
@@ -142,18 +142,12 @@ def _axis_entry(zone, o, u, span_m) -> np.ndarray | None:
 
 def _direct_at(result, p, u, tracer, mu) -> np.ndarray:
     """The direct beam along direction ``u`` at points ``p`` (N, 3), blocked by objects."""
-    la = result.scene.spec.laser
-    o = np.asarray(result.scene.laser_position_m, float)
-    rel = p - o
-    z = rel @ u
-    d = np.linalg.norm(rel, axis=1)
-    r2 = np.maximum(d * d - z * z, 0.0)
-    w = (la.beam_diameter_m + np.maximum(z, 0.0) * la.divergence_rad) / 2
-    e = np.where(z > 0, la.average_power_w / (math.pi * w * w) * np.exp(-r2 / (w * w)) * np.exp(-mu * d), 0.0)
+    from .motion import blocked, gaussian_along_w_m2
+
+    e, _, dist = gaussian_along_w_m2(result.beam, u, p, mu)
     live = np.flatnonzero(e > 0)
     if len(live) and tracer is not None:
-        hits = tracer.first_hit(np.broadcast_to(o, (len(live), 3)), p[live] - o)
-        e[live] = np.where(hits.hit & (hits.t < d[live] * (1 - 1e-9)), 0.0, e[live])
+        e[live] = np.where(blocked(tracer, result.beam.position_m, p[live], dist[live]), 0.0, e[live])
     return e
 
 
@@ -220,19 +214,15 @@ def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
             "times_checked": len(steps)}
 
 
-POINTING_RING = 8  # directions on the pointing buffer's cone added to the aim's
-
-
 def _pointing_ring(u, b) -> list:
-    """The aim, and with a pointing buffer b > 0 ``POINTING_RING`` directions on the cone
-    of half-angle b about it (the beam may point anywhere within it)."""
+    """The aim, and with a pointing buffer b > 0 directions on the cone of half-angle b
+    about it (the beam may point anywhere within it): the danger zone's cone at one ring
+    (:func:`hazard.pipeline.sdz._cone`, 8 directions for a small buffer)."""
     if b <= 0:
         return [u]
-    from .motion import bias_frame
+    from .sdz import _cone
 
-    e1, e2 = (x[0] for x in bias_frame(u))
-    ang = np.linspace(0.0, 2 * np.pi, POINTING_RING, endpoint=False)
-    return [u] + [math.cos(b) * u + math.sin(b) * (math.cos(a) * e1 + math.sin(a) * e2) for a in ang]
+    return list(_cone(np.asarray(u, float), b, b))
 
 
 def _which(spots, p, mu, ray_scene, states) -> str | None:

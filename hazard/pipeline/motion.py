@@ -134,6 +134,7 @@ class MotionRun:
     notes: list = field(default_factory=list)
     key_step_text: str = ""
     dwell_keys_s: np.ndarray | None = None  # per beam state: lased time of the surface under its spot before it (made once)
+    beam: object = None  # hazard.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
 
     # -- the schedule ----------------------------------------------------------------
     bias_rad: tuple = (0.0, 0.0)  # a constant pointing bias across the aim (bias_frame): the worst within the buffer
@@ -270,24 +271,34 @@ def beam_states(run: MotionRun, grid: np.ndarray, first) -> None:
 
 
 # -- irradiance at samples -------------------------------------------------------------
+def gaussian_along_w_m2(beam, u, p, mu) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The Gaussian beam of ``beam`` (:class:`hazard.beam.BeamGeometry`: power, diameter,
+    divergence, aperture) pointed along unit directions ``u`` (N, 3) or (3,), at points
+    ``p`` (N, 3): its irradiance [W/m^2] (:meth:`~hazard.beam.BeamGeometry.irradiance_w_m2`,
+    attenuated along the path; 0 behind the aperture), 1/e radius [m] and path [m]."""
+    rel = np.asarray(p, float) - beam.position_m
+    z = rel @ u if np.ndim(u) == 1 else np.einsum("ij,ij->i", rel, u)
+    dist = np.linalg.norm(rel, axis=1)
+    w = beam.diameter_at(np.maximum(z, 0.0)) / 2
+    s = np.stack([np.sqrt(np.maximum(dist**2 - z**2, 0.0)) / w, np.zeros_like(z)], axis=1)
+    e = beam.irradiance_w_m2(s, np.maximum(z, 0.0)) * np.exp(-mu * dist)
+    return np.where(z > 0, e, 0.0), w, dist
+
+
+def blocked(tracer, origin, p, dist) -> np.ndarray:
+    """Whether something of ``tracer`` lies on the segment from ``origin`` to each point."""
+    hits = tracer.first_hit(np.broadcast_to(origin, (len(p), 3)), p - origin)
+    return hits.hit & (hits.t < dist * (1 - 1e-9))
+
+
 def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
     """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes)."""
-    la = run.scene.spec.laser
-    o = np.asarray(run.scene.laser_position_m, float)
-    u = run.direction(t)
-    rel = p - o
-    z = np.einsum("ij,ij->i", rel, u)
-    dist = np.linalg.norm(rel, axis=1)
-    r2 = np.maximum(dist**2 - z**2, 0.0)
-    w = (la.beam_diameter_m + np.maximum(z, 0.0) * la.divergence_rad) / 2
-    s2 = r2 / (w * w)
-    e = la.average_power_w / (math.pi * w * w) * np.exp(-s2) * np.sqrt(1 + s2 * (la.divergence_rad / 2) ** 2)
-    e = np.where((z > 0) & run.motion.windows.lased(t), e * np.exp(-run.mu * dist), 0.0)
+    e, w, dist = gaussian_along_w_m2(run.beam, run.direction(t), p, run.mu)
+    e = np.where(run.motion.windows.lased(t), e, 0.0)
     live = np.flatnonzero(e > 0)
     for k in np.unique(state_idx[live]):
         rows = live[state_idx[live] == k]
-        hits = run.states_list[k].tracer.first_hit(np.broadcast_to(o, (len(rows), 3)), p[rows] - o)
-        e[rows] = np.where(hits.hit & (hits.t < dist[rows] * (1 - 1e-9)), 0.0, e[rows])
+        e[rows] = np.where(blocked(run.states_list[k].tracer, run.beam.position_m, p[rows], dist[rows]), 0.0, e[rows])
     if optics is not None:
         e = e * _beam_gain([optics], np.zeros(len(e), int), 2 * w)
     return e

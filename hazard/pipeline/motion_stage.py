@@ -227,7 +227,7 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
     spec = scene.spec
     pulse = None if limits.pulse is None else limits.pulse.per_pulse_radiant_exposure_j_m2 * spec.laser.prf_hz
     run = MotionRun(scene, motion, mu, limits.irradiance_w_m2, pulse, states, np.asarray(history_times_s, float),
-                    [], np.zeros(1), backend, threads)
+                    [], np.zeros(1), backend, threads, beam=first[0].beam)
     grid = base_grid(motion, motion.t_start_s, motion.t_end_s)
     beam_states(run, grid, first)
     notes = []
