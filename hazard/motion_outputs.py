@@ -72,25 +72,20 @@ def motion_sections(result) -> dict:
     return out
 
 
-def _cell(v) -> str:
-    if isinstance(v, (bool, np.bool_)):
-        return "True" if v else "False"
-    return repr(float(v))
-
-
 def _track_text(result, p) -> str:
+    """One track's table, each column formatted as observers.csv's (:func:`hazard.report._csv_cell`)."""
+    from .report import GEO_COLUMNS, _csv_cell, observer_geodetic
+
     pos = _world(result, p.positions_m)
     cols = [p.times_s, pos[:, 0], pos[:, 1], pos[:, 2]]
     names = TRACK_CSV_COLUMNS[:4]
     if getattr(result.scene, "site", None) is not None:
-        from .report import GEO_COLUMNS, observer_geodetic
-
         geo = observer_geodetic(result, pos)
         cols += [geo[:, 0], geo[:, 1], geo[:, 2]]
         names = names + GEO_COLUMNS
     cols += [p.lased, p.direct_w_m2, p.reflected_w_m2, p.irradiance_w_m2, p.cumulative_j_m2]
-    lines = [",".join(names + TRACK_CSV_COLUMNS[4:])]
-    lines += [",".join(_cell(c[i]) for c in cols) for i in range(len(p.times_s))]
+    text = [_csv_cell(c, "x") for c in cols]
+    lines = [",".join(names + TRACK_CSV_COLUMNS[4:])] + [",".join(r) for r in zip(*text)]
     return "\r\n".join(lines) + "\r\n"
 
 

@@ -19,6 +19,8 @@ import numpy as np
 
 from brdfmodels._io import atomic_write_text
 
+from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
+
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
            "summary_text", "answer_text", "stages_text"]
 
@@ -83,8 +85,6 @@ def _with_tracks(result, cols, m) -> dict:
     """The fixed observers' columns with the moving observers' rows after them (at each
     one's worst point, :mod:`hazard.motion_outputs`) and the ``motion_*`` columns; the
     row names under ``labels``."""
-    from .motion_outputs import motion_columns, track_columns
-
     cols["labels"] = list(result.observers.labels)
     if getattr(result, "motion", None) is None:
         return cols
@@ -159,7 +159,6 @@ def report_dict(result, cols=None) -> dict:
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
     (``cols``: :func:`observer_columns` of ``result`` when the caller has them)."""
     from .analysis import versions
-    from .motion_outputs import motion_sections
 
     scene = result.scene
     fp = {}
@@ -196,7 +195,7 @@ def report_dict(result, cols=None) -> dict:
     })
 
 
-_MOTION_BLANK = ("motion_peak_irradiance_w_m2", "motion_radiant_exposure_j_m2", "motion_first_exceedance_s")
+_MOTION_BLANK = MOTION_COLUMNS  # the motion_* columns: NaN where a fixed observer was not evaluated over time
 _CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
 
 
@@ -301,8 +300,6 @@ def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> 
     in last, so a report present is always the one matching the table. Nothing temporary
     is left behind after an exception.
     """
-    from .motion_outputs import track_files
-
     out = Path(outdir)
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
@@ -569,8 +566,6 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
 
 
 def _levels_text(result, s) -> str:
-    from .motion_outputs import visual_levels
-
     eff, reached = visual_levels(result, s["peak_irradiance_w_m2"])
     if eff is None:
         return ""

@@ -222,16 +222,24 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     return Heightfield(xs[0], ys[0], spec.resolution_m, h)
 
 
-def direction_in_sector(direction, sector, buffer_rad=0.0) -> bool:
-    """Whether ``direction`` (3,) points within ``sector`` (compass bearings clockwise from
-    +y and elevations, [deg]) widened by ``buffer_rad`` on every side."""
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    b = math.degrees(buffer_rad)
-    el = math.degrees(math.asin(max(-1.0, min(1.0, float(d[2])))))
-    az = math.degrees(math.atan2(float(d[0]), float(d[1])))
+def directions_in_sector(directions, sector, buffer_rad=0.0, tolerance_deg=0.0) -> np.ndarray:
+    """Per direction (N, 3): whether it points within ``sector`` (compass bearings
+    clockwise from +y and elevations, [deg]) widened by ``buffer_rad`` (and
+    ``tolerance_deg``, for rounding) on every side."""
+    d = np.asarray(directions, float).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    b = math.degrees(buffer_rad) + tolerance_deg
+    el = np.degrees(np.arcsin(np.clip(d[:, 2], -1.0, 1.0)))
+    az = np.degrees(np.arctan2(d[:, 0], d[:, 1]))
     a0, a1 = sector.azimuth_deg
-    inside_az = a1 - a0 + 2 * b >= 360.0 or (az - (a0 - b)) % 360.0 <= (a1 - a0) + 2 * b
-    return inside_az and sector.elevation_deg[0] - b <= el <= sector.elevation_deg[1] + b
+    inside_az = (a1 - a0 + 2 * b >= 360.0) | ((az - (a0 - b)) % 360.0 <= (a1 - a0) + 2 * b)
+    return inside_az & (el >= sector.elevation_deg[0] - b) & (el <= sector.elevation_deg[1] + b)
+
+
+def direction_in_sector(direction, sector, buffer_rad=0.0) -> bool:
+    """Whether ``direction`` (3,) points within ``sector`` widened by ``buffer_rad``
+    (:func:`directions_in_sector` of one direction)."""
+    return bool(directions_in_sector(direction, sector, buffer_rad)[0])
 
 
 def observer_points(spec) -> np.ndarray:

@@ -274,14 +274,14 @@ def check_aim_sector(spec, aim: AimSchedule | None) -> None:
     sector = spec.laser.sector
     if sector is None or aim is None:
         return
+    from .geometry import directions_in_sector
+
     t = np.unique(np.concatenate([np.linspace(*aim.span_s, SECTOR_CHECK_SAMPLES), aim.times_s]))
-    az, el = (np.degrees(x) for x in bearing_elevation(aim.direction(t)))
-    a0, a1 = sector.azimuth_deg
-    eps = 1e-9
-    in_az = (a1 - a0 >= 360.0) | ((az - a0) % 360.0 <= (a1 - a0) + eps)
-    ok = in_az & (el >= sector.elevation_deg[0] - eps) & (el <= sector.elevation_deg[1] + eps)
+    u = aim.direction(t)
+    ok = directions_in_sector(u, sector, tolerance_deg=1e-9)
     if not ok.all():
         i = int(np.argmin(ok))
+        az, el = (np.degrees(x) for x in bearing_elevation(u))
         raise ValueError(f"laser.aim_track: at t = {t[i]:.6g} s the aim points at bearing {az[i]:.8g} deg, elevation "
                          f"{el[i]:.8g} deg: outside laser.sector (azimuth {sector.azimuth_deg} deg, elevation "
                          f"{sector.elevation_deg} deg)")

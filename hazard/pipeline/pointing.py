@@ -120,9 +120,10 @@ def _to_track_rad(u, track, gap) -> np.ndarray:
     return np.maximum(best - gap / 2, 0.0)
 
 
-def pointing_offset_rad(scene, u) -> np.ndarray:
+def pointing_offset_rad(scene, u, track=None) -> np.ndarray:
     """Angle delta [rad] from unit directions u (N, 3) (laser to observer) to the nearest
-    direction the beam may point in (see the module notes)."""
+    direction the beam may point in (see the module notes); ``track``: the aim track's
+    :func:`aim_track_directions` when the caller has them (made here otherwise)."""
     laser = scene.spec.laser
     b = laser.pointing_buffer_rad
     axis = np.asarray(scene.laser_direction, float)
@@ -133,7 +134,7 @@ def pointing_offset_rad(scene, u) -> np.ndarray:
         core = angle_to_sector_rad(u, laser.sector)
         if not direction_in_sector(axis, laser.sector, b):  # the aim's cone is added to an aim outside the sector
             core = np.minimum(core, to_aim)
-    track, gap = aim_track_directions(scene)
+    track, gap = aim_track_directions(scene) if track is None else track
     if len(track):
         core = np.minimum(core, _to_track_rad(u, track, gap))
     return np.maximum(core - b, 0.0)
@@ -158,15 +159,16 @@ def pointing_worst_w_m2(scene, beam, observers, mu, ray_scene, gain_fn) -> np.nd
     optical gain of those observers; ``ray_scene`` (None: nothing blocks) answers the
     line from the aperture to each eye through the targets."""
     out = np.zeros(len(observers))
+    track = aim_track_directions(scene)  # once, not per block
 
     def block(a0, a1, p):
-        out[a0:a1] = _worst(scene, beam, p, mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d))
+        out[a0:a1] = _worst(scene, beam, p, mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d), track)
 
     observers.map_blocks(block)
     return out
 
 
-def _worst(scene, beam, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
+def _worst(scene, beam, points_m, mu, ray_scene, gain_fn, track=None) -> np.ndarray:
     """:func:`pointing_worst_w_m2` at points (N, 3)."""
     o = np.asarray(beam.position_m, float)
     rel = np.asarray(points_m, float).reshape(-1, 3) - o
@@ -176,7 +178,7 @@ def _worst(scene, beam, points_m, mu, ray_scene, gain_fn) -> np.ndarray:
     if not len(live):
         return out
     u = rel[live] / dist[live, None]
-    e, diameter = beam_at_offset_w_m2(beam, dist[live], pointing_offset_rad(scene, u), mu)
+    e, diameter = beam_at_offset_w_m2(beam, dist[live], pointing_offset_rad(scene, u, track), mu)
     hit = np.flatnonzero(e > 0)
     if ray_scene is not None and len(hit):
         stop = first_backstop_rays(np.broadcast_to(o, (len(hit), 3)), u[hit], ray_scene, len(scene.targets))
