@@ -584,6 +584,7 @@ def _motion_lines(result) -> list:
                    f"{s['exposure_ratio']:.3g} in its worst {s['worst_window']['duration_s']:.3g} s window{first}); peak "
                    f"{s['peak_irradiance_w_m2']:.4g} W/m^2 at t = {s['peak_time_s']:.6g} s; {s['samples']} samples, "
                    f"smallest step {s['min_step_s']:.3g} s" + _levels_text(result, s))
+    out += [f"  note: {n}" for n in ([] if m is None else m.notes)]
     fixed = [] if m is None else m.fixed()
     if fixed:
         n = sum(p.summary["hazardous"] for p in fixed)

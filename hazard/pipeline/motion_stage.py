@@ -199,6 +199,29 @@ def _worst_over_bias(run: MotionRun, pr: PathResult, sample, summarise) -> PathR
     return best
 
 
+def _track_notes(run: MotionRun, tr, p: PathResult | None) -> list:
+    """What a track's evaluation left out, said: times outside the analysed span
+    (``[motion] time_start_s`` / ``time_end_s``), and samples under the terrain (the
+    terrain blocks the beam there: a height in the wrong unit or datum would read safe)."""
+    a, b = run.motion.t_start_s, run.motion.t_end_s
+    if p is None:
+        return [f"track {tr.name} ([{tr.span_s[0]:g}, {tr.span_s[1]:g}] s) lies outside the analysed span [{a:g}, {b:g}] s: "
+                f"NOT evaluated"]
+    out = []
+    if tr.span_s[0] < a or tr.span_s[1] > b:
+        out.append(f"track {tr.name}: only [{max(tr.span_s[0], a):g}, {min(tr.span_s[1], b):g}] s of its "
+                   f"[{tr.span_s[0]:g}, {tr.span_s[1]:g}] s lie in the analysed span: the rest is NOT evaluated")
+    terrain = run.scene.terrain
+    if terrain is not None:
+        x, y, z = p.positions_m.T
+        inside = terrain.contains_xy(x, y)
+        under = inside & (z < terrain.height_at(x, y))
+        if under.any():
+            out.append(f"track {tr.name}: {int(under.sum())} of {len(z)} samples lie under the terrain (first at t = "
+                       f"{p.times_s[np.argmax(under)]:.6g} s), where the terrain blocks every beam: check its heights")
+    return out
+
+
 def _fixed_paths(run: MotionRun, notes) -> list:
     """The fixed observers' paths when the beam or a target moves."""
     obs = run.scene.observers
@@ -240,6 +263,7 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
         def sample(tr=tr):
             return _sample_path(run, tr.name, tr.group, "track", tr.at, tr.span_s, tr.optics)
         p = sample()
+        notes += _track_notes(run, tr, p)
         if p is not None:
             paths.append(_worst_over_bias(run, p, sample, summarise))
     for p in _fixed_paths(run, notes):  # their pointing error is the static analysis's (the beam held anywhere in it)

@@ -306,3 +306,42 @@ def test_the_elevation_view_puts_observers_where_they_are():
     h = u[:2] / np.linalg.norm(u[:2])  # the view's horizontal axis: along the aim's bearing
     s_post = float((np.array([60.0, 1900.0]) - laser[:2]) @ h)
     np.testing.assert_allclose(d.observers_sz[0], [s_post, 20.0], rtol=0, atol=1e-6)
+
+
+def test_a_track_outside_the_analysed_span_is_said_not_dropped_silently():
+    text = PLATE_AT_50M + """
+[[observers]]
+name = "early"
+kind = "track"
+times_s = [0.0, 10.0]
+positions_m = [[-100.0, -20.0, 5.0], [100.0, -20.0, 5.0]]
+[[observers]]
+name = "late"
+kind = "track"
+times_s = [50.0, 60.0]
+positions_m = [[-100.0, -20.0, 5.0], [100.0, -20.0, 5.0]]
+[motion]
+time_start_s = 0.0
+time_end_s = 5.0
+"""
+    res = hazard.analyze(scenes.loads(text))
+    assert [p.name for p in res.motion.tracks()] == ["early"]
+    notes = " ".join(res.motion.notes)
+    assert "track late ([50, 60] s) lies outside the analysed span [0, 5] s: NOT evaluated" in notes
+    assert "track early: only [0, 5] s of its [0, 10] s" in notes
+    from hazard.report import answer_text
+
+    assert "track late" in answer_text(res)
+
+
+def test_a_track_under_the_terrain_is_said():
+    p = scenes.example_path("range_terrain")
+    text = p.read_text() + """
+[[observers]]
+name = "mole"
+kind = "track"
+times_s = [0.0, 5.0]
+positions_m = [[0.0, 0.0, -500.0], [10.0, 0.0, -500.0]]
+"""
+    res = hazard.analyze(scenes.loads(text, base_dir=p.parent))
+    assert any("track mole:" in n and "under the terrain" in n for n in res.motion.notes)
