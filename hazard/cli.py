@@ -79,6 +79,16 @@ def _positive_int(text):
     return value
 
 
+def _nonnegative_int(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 0")
+    return value
+
+
 def _add_run_args(p):
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.add_argument("--fail-on-hazard", action="store_true", help="exit with code 3 if any hazard is found")
@@ -130,6 +140,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--serial", action="store_true", help="run in this process without Dask")
     p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("risk", help="probabilistic risk: the chance each observer's exposure exceeds the MPE over the scene's "
+                                    "[uncertainty] (risk.json, risk.csv, probability map), on Dask")
+    p.add_argument("scene", help="scene TOML file with an [uncertainty] table, or a bundled example's name")
+    p.add_argument("-o", "--output", required=True, help="output folder (a restarted run resumes there)")
+    p.add_argument("--draws", type=_positive_int, help="simulated operations (default: [uncertainty] draws)")
+    p.add_argument("--seed", type=_nonnegative_int, help="random seed (default: [uncertainty] seed); the same seed gives the same results")
+    p.add_argument("--sampling", choices=("auto", "plain", "importance"), help="override [uncertainty] sampling")
+    p.add_argument("--sensitivity-draws", type=_nonnegative_int, help="base draws of the Sobol indices (0: none)")
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
+    p.add_argument("--workers", type=_positive_int, default=2, help="worker processes of the embedded cluster (default 2)")
+    p.add_argument("--serial", action="store_true", help="run in this process without Dask (identical results)")
+    p.add_argument("--force", action="store_true", help="start over if the folder holds another risk analysis")
+    p.add_argument("--json", action="store_true", help="print risk.json's observers as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
     p = sub.add_parser("report", help="the report for the review board: one self-contained HTML file (and a PDF) "
@@ -688,6 +713,31 @@ def _cmd_study(args, out, err):
     return EXIT_OK
 
 
+def _cmd_risk(args, out, err):
+    from .progress import progress_callback
+    from .risk import run_risk
+
+    scene = _load_scene(args.scene, err)
+    res = run_risk(scene, args.output, draws=args.draws, seed=args.seed, sampling=args.sampling, sensitivity_draws=args.sensitivity_draws,
+                   serial=args.serial, workers=args.workers, scheduler=args.scheduler, force=args.force,
+                   progress=None if args.quiet else progress_callback("risk chunks", unit="chunk", leave=True, stream=err))
+    doc = res.doc
+    if args.json:
+        out.write(json.dumps(doc["observers"], indent=1) + "\n")
+        return EXIT_OK
+    out.write(f"risk {scene.name!r}: {doc['draws']:,} draws ({doc['sampling']} sampling), MPE {doc['mpe_w_m2']:.4g} W/m^2; "
+              f"{doc['run']['ran']} chunk(s) run now, {doc['run']['reused']} reused\n")
+    for r in sorted(doc["observers"], key=lambda r: -r["probability_ci_high"])[:20]:
+        drv = r["sensitivity"]["driver"] if r["sensitivity"] else None
+        out.write(f"  {r['name']}: {r['statement']}" + (f"; driven by {drv}" if drv else "") + "\n")
+    if len(doc["observers"]) > 20:
+        out.write(f"  ... {len(doc['observers']) - 20} more observer point(s) in risk.csv\n")
+    for n in doc["notes"]:
+        out.write(f"  note: {n}\n")
+    out.write(f"  wrote {', '.join(str(res.outdir / f) for f in doc['files'])}\n")
+    return EXIT_OK
+
+
 def _cmd_render(args, out, err):
     from . import render
     from .progress import progress_to
@@ -752,7 +802,7 @@ def _cmd_report(args, out, err):
     return EXIT_OK
 
 
-_COMMANDS = {"report": _cmd_report, "render": _cmd_render, "convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
+_COMMANDS = {"risk": _cmd_risk, "report": _cmd_report, "render": _cmd_render, "convergence": _cmd_convergence, "study": _cmd_study, "fit": _cmd_fit, "mpe": _cmd_mpe, "nohd": _cmd_nohd, "run": _cmd_run, "compare": _cmd_compare, "validate": _cmd_validate,
              "models": _cmd_models, "schema": _cmd_schema}
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from .map_zones import ZONE_KINDS, observers_on_map, zones
 
-__all__ = ["MAP_NAMES", "map_files", "map_names", "geojson_document", "kml_document", "hazard_tiff"]
+__all__ = ["MAP_NAMES", "map_files", "map_names", "geojson_document", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
 
 DEGREE_DECIMALS = 8  # 1e-8 deg = 1.1 mm: below any outline's own resolution
 
@@ -55,7 +55,7 @@ def _height_fn(result, eye_m):
     return lambda xy: scene.terrain.height_at(xy[:, 0] - off[0], xy[:, 1] - off[1]) + off[2] + eye_m
 
 
-def _to_lonlat(geom, frame, height, z_m=None):
+def to_lonlat(geom, frame, height, z_m=None):
     """``geom`` (world x, y) in lon/lat [deg], rings oriented by RFC 7946 section 3.1.6."""
     import shapely
 
@@ -94,7 +94,7 @@ def geojson_document(result, zs, absent, frame_info) -> dict:
     height = _height_fn(result, result.scene.spec.analysis.footprint_eye_height_m)
     feats = []
     for z in zs:
-        g = _to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else _local(z.geometry)
+        g = to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else _local(z.geometry)
         feats.append({"type": "Feature", "geometry": mapping(g),
                       "properties": {k: _jsonable(v) for k, v in z.properties.items()}})
     _, which = observers_on_map(result)
@@ -214,7 +214,13 @@ def _bands(result) -> tuple[np.ndarray, list] | None:
 
 
 def _tif_crs(result):
-    site = result.scene.site
+    return site_crs(result.scene)
+
+
+def site_crs(scene):
+    """The PROJ string of the ellipsoidal orthographic projection about ``scene``'s site
+    origin (its x, y are the ENU frame's on the ellipsoid); None without a site."""
+    site = scene.site
     if site is None:
         return None
     lat, lon, _ = site.frame.origin_deg_m

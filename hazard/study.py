@@ -502,8 +502,10 @@ def _plot(study, rows, outdir):
 
 
 def local_cluster(n_workers=2):
-    """The embedded ``LocalCluster`` of :func:`run_study`: ``n_workers`` single-threaded
-    worker processes on loopback, no dashboard.
+    """The embedded ``LocalCluster`` of :func:`run_study` (and of ``hazard risk``):
+    ``n_workers`` single-threaded worker processes on loopback. The scheduler's HTTP
+    server always starts; it takes a free port (``:0``), so a second cluster on this
+    machine does not clash on 8787.
 
     Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which hands every
     freed NumPy temporary back to the OS and page-faults it in again: measured 0.12 s per
@@ -514,7 +516,7 @@ def local_cluster(n_workers=2):
     from distributed import LocalCluster
 
     with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
-        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0")
 
 
 def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2, force=False, progress=None) -> StudyResult:

@@ -7,6 +7,7 @@ output is reported in the file's own coordinates.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -113,6 +114,8 @@ class Scene:
     warnings: list = field(default_factory=list)
     # the [site]: exact ENU frame, DEM and the geodetic positions converted (None: a local frame)
     site: object = None
+    # the scene's keys as given (parsed TOML), to load it again elsewhere (a Dask worker)
+    source_data: dict | None = field(default=None, repr=False)
 
     @property
     def name(self) -> str:
@@ -458,12 +461,8 @@ def _target(i, ts, offset, base_dir, polarization="unknown", wavelength_nm=None)
     mesh.vertices = mesh.vertices - offset
     if mesh.analytic is not None:
         mesh.analytic = (mesh.analytic[0], mesh.analytic[1] - offset, *mesh.analytic[2:])
-    material = _material(ts.material, f"{where}.material", base_dir, polarization, wavelength_nm)
     hist = _history(ts.history, f"{where}.history", base_dir)
-    if ts.history is not None:
-        material = _material_for_history(material, ts.history, hist, where)
-    elif material.is_dynamic:
-        raise SceneError(f"{where}.history: the material depends on {_names_text(material.state_name)}; give a history")
+    material = _front_material(ts, ts.material, hist, where, f"{where}.material", base_dir, polarization, wavelength_nm)
     back = None
     if ts.back is not None:
         _no_slump(ts.back, f"{where}.back")
@@ -474,6 +473,24 @@ def _target(i, ts, offset, base_dir, polarization="unknown", wavelength_nm=None)
     frame = brdfmodels.local_frame(ts.normal, ts.tangent)
     return Target(ts.name, i, mesh, material, math.radians(ts.material.groove_angle_deg), frame[2], frame[0],
                   np.asarray(ts.center_m, float) - offset, ts, hist, back, _slump(ts, frame, material, where))
+
+
+def _front_material(ts, ms, hist, where, what, base_dir, polarization, wavelength_nm):
+    """The front face's material ``ms`` of target ``ts`` (checked against its history)."""
+    material = _material(ms, what, base_dir, polarization, wavelength_nm)
+    if ts.history is not None:
+        return _material_for_history(material, ts.history, hist, where)
+    if material.is_dynamic:
+        raise SceneError(f"{where}.history: the material depends on {_names_text(material.state_name)}; give a history")
+    return material
+
+
+def alternative_material(scene: "Scene", target_index: int, ms, what: str):
+    """Material ``ms`` (a MaterialSpec) built as target ``target_index``'s front face
+    would be: same polarization and wavelength, checked against its history."""
+    t, laser = scene.targets[target_index], scene.spec.laser
+    return _front_material(t.spec, ms, t.history, f"targets[{target_index}]", what, scene.base_dir, laser.polarization,
+                           laser.wavelength_nm)
 
 
 def _no_slump(ms, where) -> None:
@@ -765,6 +782,7 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
         raise SceneError(f"{source}: expected a table of scene keys, got {type(data).__name__}")
     if text is None:
         text = json.dumps(data, sort_keys=True, default=str)
+    raw = copy.deepcopy(data)
     try:
         data, site = _resolve_geo(data, source, base_dir)
         spec = SceneSpec.model_validate(data)
@@ -777,7 +795,9 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
     except ValueError as exc:  # limits checked outside pydantic's own validators
         raise SceneError(f"{source}: {' '.join(str(exc).split())}") from None
     try:
-        return _compile(spec, source, None if base_dir is None else Path(base_dir), text, site)
+        scene = _compile(spec, source, None if base_dir is None else Path(base_dir), text, site)
+        scene.source_data = raw
+        return scene
     except SceneError as exc:
         msg = str(exc)
         raise SceneError(msg if msg.startswith(source) else f"{source}: {msg}") from None

@@ -743,6 +743,135 @@ class AirspaceSpec(_Strict):
         return self
 
 
+class VisibilityDistributionSpec(_Strict):
+    """How the meteorological visibility varies between operations (the attenuation per
+    draw follows from it by the Kruse model, :func:`hazard.nohd.attenuation_from_visibility`)."""
+
+    distribution: Literal["lognormal", "uniform", "discrete"] = Field(description=(
+        "lognormal: median_km and sigma (of ln V); uniform: low_km to high_km; discrete: values_km with weights"))
+    median_km: float | None = Field(default=None, ge=1e-3, le=1e4, description="median visibility [km] (lognormal)")
+    sigma: float | None = Field(default=None, gt=0, le=5, description="standard deviation of ln(visibility) (lognormal)")
+    low_km: float | None = Field(default=None, ge=1e-3, le=1e4, description="lowest visibility [km] (uniform)")
+    high_km: float | None = Field(default=None, ge=1e-3, le=1e4, description="highest visibility [km] (uniform)")
+    values_km: list[Annotated[float, Field(ge=1e-3, le=1e4)]] | None = Field(default=None, min_length=1, max_length=1000,
+                                                                            description="visibilities [km] (discrete)")
+    weights: list[Annotated[float, Field(ge=0, le=1e12)]] | None = Field(default=None, min_length=1, max_length=1000,
+                                                                       description="their relative frequencies (discrete)")
+
+    @model_validator(mode="after")
+    def _keys(self):
+        need = {"lognormal": ("median_km", "sigma"), "uniform": ("low_km", "high_km"), "discrete": ("values_km", "weights")}
+        for k in need[self.distribution]:
+            if getattr(self, k) is None:
+                raise ValueError(f"{k}: required for distribution = {self.distribution!r}")
+        other = [k for d, ks in need.items() if d != self.distribution for k in ks if getattr(self, k) is not None]
+        if other:
+            raise ValueError(f"{other[0]}: not used by distribution = {self.distribution!r} (it takes {', '.join(need[self.distribution])})")
+        if self.distribution == "uniform" and not self.high_km > self.low_km:
+            raise ValueError(f"high_km={self.high_km!r}: expected above low_km={self.low_km!r}")
+        if self.distribution == "discrete":
+            if len(self.weights) != len(self.values_km):
+                raise ValueError(f"weights: {len(self.weights)} weight(s) for {len(self.values_km)} value(s); expected one per value")
+            if not sum(self.weights) > 0:
+                raise ValueError("weights: expected at least one positive weight")
+        return self
+
+
+class ScintillationSpec(_Strict):
+    """Scintillation of the direct and mirror beams: log-normal irradiance with mean 1 and
+    the Rytov variance of the path (range-safety.md section 6)."""
+
+    cn2_m23: float | None = Field(default=None, gt=0, le=1e-10, description="refractive-index structure constant Cn^2 [m^(-2/3)]")
+    turbulence: Literal["weak", "moderate", "strong"] | None = Field(default=None, description=(
+        "a class instead of cn2_m23: weak 1e-16, moderate 1e-14, strong 1e-13 m^(-2/3) (the upper end of each class)"))
+    wave: Literal["plane", "spherical"] = Field(default="plane", description=(
+        "plane: sigma_R^2 = 1.23 Cn^2 k^(7/6) L^(11/6); spherical: 0.407 of it (the plane wave is the larger)"))
+    aperture_m: float = Field(default=0.007, gt=0, le=1.0, description=(
+        "receiving aperture for aperture averaging [m]; the eye's 7 mm pupil (binocular objectives are not credited)"))
+
+    @model_validator(mode="after")
+    def _one(self):
+        if (self.cn2_m23 is None) == (self.turbulence is None):
+            raise ValueError("give cn2_m23 or turbulence (a class), exactly one")
+        return self
+
+
+class MaterialChoiceSpec(_Strict):
+    """A target whose material is one of several (measured or fitted samples), drawn per
+    operation with the given weights."""
+
+    target: Name
+    materials: list[MaterialSpec] = Field(min_length=1, max_length=1000)
+    weights: list[Annotated[float, Field(ge=0, le=1e12)]] | None = Field(default=None, description="relative weights (default: equal)")
+
+    @model_validator(mode="after")
+    def _weights(self):
+        if self.weights is not None:
+            if len(self.weights) != len(self.materials):
+                raise ValueError(f"weights: {len(self.weights)} weight(s) for {len(self.materials)} material(s); expected one per material")
+            if not sum(self.weights) > 0:
+                raise ValueError("weights: expected at least one positive weight")
+        return self
+
+
+class ProbabilityMapSpec(_Strict):
+    """The ground grid of the probability map (local metres), at eye height."""
+
+    extent_m: Annotated[list[Coord], Field(min_length=4, max_length=4)] = Field(description="[x_min, x_max, y_min, y_max] [m]")
+    spacing_m: float = Field(gt=0, le=1e6, description="cell size [m]")
+    eye_height_m: float = Field(default=1.7, ge=0, le=1e4, description=(
+        "height of the eye above the terrain [m]; without terrain, above z = 0"))
+
+    @model_validator(mode="after")
+    def _extent(self):
+        x0, x1, y0, y1 = self.extent_m
+        if not (x1 > x0 and y1 > y0):
+            raise ValueError(f"extent_m={self.extent_m!r}: expected [x_min, x_max, y_min, y_max] with max > min")
+        cells = math.ceil((x1 - x0) / self.spacing_m) * math.ceil((y1 - y0) / self.spacing_m)
+        check_limit("OBSERVERS", cells, f"probability map cells ({cells})")
+        return self
+
+
+class UncertaintySpec(_Strict):
+    """The random inputs of a probabilistic risk analysis (``hazard risk``) and how many
+    operations are drawn. Every input is off (zero) unless given."""
+
+    draws: int = Field(default=20_000, ge=1, le=100_000_000, description="simulated operations (Monte Carlo draws)")
+    seed: int = Field(default=0, ge=0, le=2**63 - 1, description="random seed (the same seed gives the same results, serial or on a cluster)")
+    sampling: Literal["auto", "plain", "importance"] = Field(default="auto", description=(
+        "auto: importance sampling on pointing and tilt toward the hazardous directions when either is uncertain, "
+        "else plain; plain: draws from the stated distributions only"))
+    sensitivity_draws: int = Field(default=512, ge=0, le=10_000_000, description=(
+        "base draws of the first-order Sobol indices (pick-freeze, one more set per uncertain input); 0: none"))
+    pointing_sigma_rad: float = Field(default=0.0, ge=0, le=0.5, description="pointing error and jitter: 1-sigma per axis of a 2-D Gaussian [rad]")
+    pointing_bias_rad: Annotated[list[Annotated[float, Field(ge=-0.5, le=0.5)]], Field(min_length=2, max_length=2)] = Field(
+        default=[0.0, 0.0], description="boresight bias [right, up] of the beam axis [rad]")
+    brdf_scale_sigma: float = Field(default=0.0, ge=0, le=5, description="log-normal BRDF scale per target: standard deviation of its ln (median 1)")
+    brdf_scale_correlation: float = Field(default=0.0, ge=0, le=1, description="correlation of ln(scale) between targets (1: one draw for all)")
+    materials: list[MaterialChoiceSpec] = Field(default_factory=list, max_length=1000)
+    normal_tilt_sigma_deg: float = Field(default=0.0, ge=0, le=30, description=(
+        "surface-normal wander of plate and disk targets: 1-sigma per axis of a 2-D Gaussian tilt [deg]"))
+    normal_wander_correlation_time_s: float | None = Field(default=None, gt=0, le=1e6, description=(
+        "with it, the tilt wanders over the exposure as a random walk (Ornstein-Uhlenbeck, stationary sigma) with this correlation time [s]"))
+    wander_nodes: int = Field(default=16, ge=2, le=256, description="times at which a wandering tilt is evaluated (at most)")
+    visibility: VisibilityDistributionSpec | None = None
+    scintillation: ScintillationSpec | None = None
+    observer_position_sigma_m: float = Field(default=0.0, ge=0, le=1e5, description="observer position: 1-sigma per horizontal axis [m]")
+    observer_height_sigma_m: float = Field(default=0.0, ge=0, le=1e4, description="observer height: 1-sigma [m]")
+    operations: float | None = Field(default=None, gt=0, le=1e12, description=(
+        "operations (shots) per year: the chance of at least one exceedance per year, Poisson"))
+    map: ProbabilityMapSpec | None = None
+
+    @model_validator(mode="after")
+    def _choices(self):
+        names = [m.target for m in self.materials]
+        if len(set(names)) != len(names):
+            raise ValueError(f"materials: one entry per target, got {names}")
+        if self.normal_wander_correlation_time_s is not None and self.normal_tilt_sigma_deg == 0:
+            raise ValueError("normal_wander_correlation_time_s: given without normal_tilt_sigma_deg (the wander's size)")
+        return self
+
+
 class SceneSpec(_Strict):
     name: Name
     description: str = Field(default="", max_length=100_000)
@@ -758,6 +887,7 @@ class SceneSpec(_Strict):
     site: SiteSpec | None = None
     motion: MotionSpec | None = None
     airspace: AirspaceSpec | None = None
+    uncertainty: UncertaintySpec | None = None
 
     @property
     def has_motion(self) -> bool:
@@ -780,6 +910,9 @@ class SceneSpec(_Strict):
         if self.terrain is not None and self.terrain.kind == "dem" and self.site is None:
             raise ValueError("terrain.kind = 'dem' needs a [site] table (origin = [lat_deg, lon_deg, height_m]) to place "
                              "the DEM in the scene's frame")
+        for i, m in enumerate(self.uncertainty.materials if self.uncertainty is not None else ()):
+            if m.target not in names:
+                raise ValueError(f"uncertainty.materials[{i}].target: {m.target!r} is not a target (targets: {names})")
         return self
 
     @model_validator(mode="after")

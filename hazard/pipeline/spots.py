@@ -16,7 +16,7 @@ from ..beam import BeamGeometry, sample_cells
 from ..engine import build_spots, flat_outlines
 from ..results import TargetResult
 
-__all__ = ["BeamStage", "ray_scene", "trace_beam", "unlit_targets"]
+__all__ = ["BeamStage", "ray_scene", "scene_beam", "trace_beam", "unlit_targets"]
 
 
 class FlatScene:
@@ -88,11 +88,18 @@ class BeamStage:
     outlines: dict  # flat targets' projected outlines: index -> (upper, lower) polygons in s
 
 
-def trace_beam(scene, tracer, mu) -> BeamStage:
-    """Sample the beam against every object and build the targets' spots."""
+def scene_beam(scene, direction=None) -> BeamGeometry:
+    """The laser's beam from the scene (along ``direction``, unit; default: the aim)."""
+    laser = scene.spec.laser
+    return BeamGeometry.create(scene.laser_position_m, scene.laser_direction if direction is None else direction,
+                               laser.average_power_w, laser.beam_diameter_m, laser.divergence_rad)
+
+
+def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
+    """Sample the beam (default: :func:`scene_beam`) against every object and build the
+    targets' spots."""
     spec, laser = scene.spec, scene.spec.laser
-    beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, laser.average_power_w, laser.beam_diameter_m,
-                               laser.divergence_rad)
+    beam = scene_beam(scene) if beam is None else beam
     outlines = flat_outlines(beam, scene.targets)
     cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})

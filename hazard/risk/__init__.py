@@ -1,0 +1,140 @@
+"""Probabilistic risk: the chance that an observer's exposure exceeds the MPE
+(``hazard risk SCENE -o OUT``; spec `range-safety.md` sections 6 and 8).
+
+A scene's ``[uncertainty]`` names every random input and its distribution
+(:mod:`hazard.risk.inputs`). Each draw is one simulated operation evaluated by the
+engine's own beam, reflection and direct-beam pieces (:mod:`hazard.risk.evaluate`);
+rare events are reached by importance sampling toward the hazardous directions
+(:mod:`hazard.risk.importance`); the draws run in chunks on Dask, resumable
+(:mod:`hazard.risk.run`); the statistics (:mod:`hazard.risk.stats`) give per observer
+and map cell the probability with its exact interval, quantiles, the risk over a year's
+operations and which input drives it; the files are :mod:`hazard.risk.outputs`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["run_risk", "RiskResult"]
+
+
+@dataclass
+class RiskResult:
+    """risk.json's content (``doc``), the output folder and the map (None without one)."""
+
+    doc: dict
+    outdir: Path
+    map: dict | None
+
+    @property
+    def observers(self) -> list:
+        return self.doc["observers"]
+
+
+def _describe_inputs(ev) -> list:
+    """Every input group with its stated distribution, or why it is off."""
+    u, m, scene = ev.scene.spec.uncertainty, ev.model, ev.scene
+    names = [t.name for t in scene.targets]
+    tilted = [names[k] for k in m.tilt_targets]
+    d = {
+        "pointing": (f"axis error = bias [{u.pointing_bias_rad[0]:g}, {u.pointing_bias_rad[1]:g}] rad (right, up) + "
+                     f"N(0, ({u.pointing_sigma_rad:g} rad)^2) per axis"),
+        "material": "; ".join([f"BRDF scale exp(N(0, {u.brdf_scale_sigma:g}^2)) per target (median 1), correlation "
+                               f"{u.brdf_scale_correlation:g} between targets"] * (u.brdf_scale_sigma > 0)
+                              + [f"{c.target}: one of {len(c.materials)} materials, weights "
+                                 f"{[round(x, 4) for x in (c.weights or [1.0] * len(c.materials))]}" for c in u.materials]),
+        "tilt": (f"surface normal tilt N(0, ({u.normal_tilt_sigma_deg:g} deg)^2) per axis on {tilted}"
+                 + (f", wandering (Ornstein-Uhlenbeck, correlation time {u.normal_wander_correlation_time_s:g} s) at "
+                    f"{m.n_nodes} times" if m.wander_times_s else ", one tilt per operation")),
+        "visibility": None if u.visibility is None else f"visibility {u.visibility.model_dump(exclude_none=True)} (Kruse attenuation)",
+        "scintillation": None if u.scintillation is None else (
+            f"log-normal irradiance factor, mean 1, on the direct and mirror beams: {u.scintillation.model_dump(exclude_none=True)}"),
+        "observer_position": f"offset N(0, ({u.observer_position_sigma_m:g} m)^2) per horizontal axis, N(0, ({u.observer_height_sigma_m:g} m)^2) in height",
+    }
+    active = m.active()
+    return [{"name": g, "active": g in active, "distribution": d[g] if g in active else "not uncertain (not given)"} for g in d]
+
+
+def _notes(ev, s, prop) -> tuple[list, list]:
+    """What the run says about itself, and what the model leaves out."""
+    u, scene, notes = ev.scene.spec.uncertainty, ev.scene, []
+    left = ["C_E (extended source) is not credited: the point-source MPE, the smaller (conservative)",
+            "the heating history of a dynamic target follows a drawn pointing error, but not a drawn visibility or BRDF scale "
+            "(the nominal attenuation's history)",
+            "scintillation path lengths and variances are the nominal geometry's (not redrawn with an observer's offset)",
+            "the observer's optics multiply the naked-eye irradiance by their fixed gain (tau M^2 or tau (D_o/7 mm)^2): the "
+            "beam-diameter limit of the direct beam is not taken (an upper bound)"]
+    if u.normal_tilt_sigma_deg > 0:
+        others = [t.name for t in scene.targets if t.index not in ev.model.tilt_targets]
+        if others:
+            left.append(f"targets {others} are not plates or disks: their normals are not tilted")
+    if ev.model.wander_times_s:
+        left.append(f"a wandering tilt is evaluated at {ev.model.n_nodes} times; a peak between them is not searched")
+    if ev.s2_direct is not None and len(ev.s2_direct):
+        big = float(np.expm1(ev.s2_direct).max())
+        if big > 1.0:
+            notes.append(f"strong turbulence (scintillation index up to {big:.3g}): the log-normal model understates the tails "
+                         f"in saturation (gamma-gamma is heavier)")
+    if s.sampling == "importance":
+        notes.append(f"importance sampling: {len(prop.components)} component(s) toward hazardous directions, "
+                     f"{100 * prop.alpha0:g} % of draws from the stated distributions (weights <= {1 / prop.alpha0:g})")
+    if s.sensitivity_draws == 0:
+        notes.append("no sensitivity sample: " + ("fewer than two uncertain inputs" if len(ev.model.active()) < 2 else
+                                                  "sensitivity_draws = 0" if ev.n_observers else "no observers"))
+    if ev.n_observers == 0:
+        notes.append("the scene has no observers: no per-observer rows")
+    if scene.spec.uncertainty.map is None:
+        notes.append("no [uncertainty.map]: no probability map")
+    return notes, left
+
+
+def _map_summary(mp) -> dict | None:
+    if mp is None:
+        return None
+    hi = np.asarray(mp["ci_high"])
+    return {"shape": list(mp["shape"]), "spacing_m": mp["spacing_m"], "extent_m": mp["extent_m"], "eye_height_m": mp["eye_height_m"],
+            "max_probability": float(np.max(mp["probability"])), "method": mp["method"],
+            "cells_upper_at_least": {f"{lv:g}": int((hi >= lv).sum()) for lv in (1e-6, 1e-4, 1e-2)}}
+
+
+def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity_draws=None, serial=False, workers=2,
+             scheduler=None, force=False, progress=None, backend="embree") -> RiskResult:
+    """Run the probabilistic risk analysis of ``scene`` (it needs ``[uncertainty]``) into
+    ``outdir``; finished chunks there are reused (resume). Arguments override the scene's
+    ``[uncertainty]`` (draws, seed, sampling "plain" | "importance" | "auto").
+    ``serial``: in this process, without Dask (identical results)."""
+    from .outputs import write_outputs
+    from .results import map_result, observer_rows, sensitivity
+    from .run import run_chunks, settings, shared
+
+    if scene.spec.uncertainty is None:
+        raise ValueError(f"{scene.source}: no [uncertainty] table: nothing is random (give pointing_sigma_rad, brdf_scale_sigma, ...)")
+    t0 = time.perf_counter()
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    ev, prop = shared(scene, backend)
+    active = ev.model.active()
+    s = settings(scene, len(ev.points_m), ev.n_observers, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws,
+                 active=active, can_import=bool(prop.components))
+    chunks = run_chunks(scene, s, outdir, backend=backend, serial=serial, workers=workers, scheduler=scheduler, force=force, progress=progress)
+    sens = sensitivity(chunks.sensitivity, ev.own_gain()[: s.n_observers], active)
+    mp = map_result(ev, s, chunks)
+    notes, left = _notes(ev, s, prop)
+    doc = {"scene": scene.name, "scene_sha256": scene.text_sha256, "mpe_w_m2": ev.mpe_w_m2, "mpe": ev.exposure.detail,
+           "standard": scene.spec.exposure.standard, "duration_s": scene.spec.exposure.duration_s,
+           "draws": s.draws, "seed": s.seed, "sampling": s.sampling, "sensitivity_draws": s.sensitivity_draws, "chunk_draws": s.chunk_draws,
+           "criterion": "per draw the peak irradiance over the analysis times (direct beam + reflections, the observer's optics) >= the MPE",
+           "inputs": _describe_inputs(ev), "inputs_active": active,
+           "importance": None if s.sampling != "importance" else {"alpha0": prop.alpha0, "components": [c.why for c in prop.components]},
+           "operations": scene.spec.uncertainty.operations,
+           "observers": observer_rows(ev, s, chunks, sens), "map": _map_summary(mp), "notes": notes, "left_out": left,
+           "run": {"chunks": len(chunks.main) + len(chunks.sensitivity), "ran": chunks.ran, "reused": chunks.reused,
+                   "mode": "serial" if serial else (f"scheduler {scheduler}" if scheduler else f"LocalCluster, {workers} workers"),
+                   "seconds": round(time.perf_counter() - t0, 3)}}
+    write_outputs(outdir, doc, scene, mp)
+    return RiskResult(doc, outdir, mp)
+

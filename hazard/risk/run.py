@@ -1,0 +1,221 @@
+"""Running a risk analysis: chunks of draws on Dask (or serially), resumable.
+
+The draws are cut into chunks of a fixed size (set by the number of points, not by the
+workers). Chunk c of the main sample draws from its own generator,
+``SeedSequence([seed, 0, c])``; the sensitivity sample's chunk j draws its A and B sets
+from ``[seed, 1, j]`` and ``[seed, 2, j]``. A chunk is a pure function of (scene,
+settings, chunk), each process builds the shared work once (ray scene, nominal trace,
+proposal: :class:`hazard.risk.evaluate.Evaluator`) and runs one thread, and the results
+are combined in chunk order: the same seed gives identical results serially, on an
+embedded ``LocalCluster`` or on an existing scheduler.
+
+Each finished chunk is written atomically to ``OUT/.risk/`` as it arrives; a restarted
+run with the same scene and settings skips them (``meta.json`` holds the digest; a
+different analysis in the same folder is an error unless ``force``).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from brdfmodels._io import atomic_write, atomic_write_text
+
+__all__ = ["RiskSettings", "settings", "tasks", "run_task", "run_chunks", "Chunks"]
+
+VERSION = "risk-1"
+POINT_VALUES_PER_CHUNK = 2_000_000  # draws x points held at once by one task (16 MB of float64)
+
+
+@dataclass(frozen=True)
+class RiskSettings:
+    """A run's settings resolved from ``[uncertainty]`` and the command line."""
+
+    draws: int
+    seed: int
+    sampling: str  # "plain" | "importance"
+    sensitivity_draws: int
+    chunk_draws: int
+    n_points: int
+    n_observers: int
+
+
+def settings(scene, n_points: int, n_observers: int, *, draws=None, seed=None, sampling=None, sensitivity_draws=None,
+             active=(), can_import=False) -> RiskSettings:
+    """The run's settings: the scene's ``[uncertainty]`` overridden by the arguments;
+    sampling "auto" is importance sampling when a proposal exists (``can_import``)."""
+    u = scene.spec.uncertainty
+    mode = sampling or u.sampling
+    if mode == "auto":
+        mode = "importance" if can_import else "plain"
+    sens = u.sensitivity_draws if sensitivity_draws is None else sensitivity_draws
+    if len(active) < 2 or n_observers == 0:
+        sens = 0  # one uncertain input drives everything: nothing to apportion
+    chunk = int(np.clip(POINT_VALUES_PER_CHUNK // max(n_points, 1), 16, 500))
+    return RiskSettings(int(draws or u.draws), int(u.seed if seed is None else seed), mode, int(sens), chunk, n_points, n_observers)
+
+
+def tasks(s: RiskSettings) -> list:
+    """(kind, index, draws) of every chunk: "m" the main sample, "s" the sensitivity sample."""
+    out = []
+    for kind, total in (("m", s.draws), ("s", s.sensitivity_draws)):
+        for c, a in enumerate(range(0, total, s.chunk_draws)):
+            out.append((kind, c, min(s.chunk_draws, total - a)))
+    return out
+
+
+_SHARED: dict = {}  # per process: scene key -> (evaluator, proposal)
+
+
+def scene_key(scene, backend: str) -> str:
+    """What a process's shared work depends on: the scene's text and the ray backend."""
+    return f"{scene.text_sha256}:{backend}"
+
+
+def shared(scene, backend: str):
+    """The (evaluator, proposal) of ``scene`` in this process, built once."""
+    key = scene_key(scene, backend)
+    if key not in _SHARED:
+        from .evaluate import Evaluator
+        from .importance import proposal
+
+        ev = Evaluator(scene, backend)
+        _SHARED.clear()
+        _SHARED[key] = (ev, proposal(ev))
+    return _SHARED[key]
+
+
+def _shared(key, payload):
+    if key not in _SHARED:
+        import scenes
+
+        from .evaluate import Evaluator
+        from .importance import proposal
+
+        data, source, base_dir, backend = payload
+        ev = Evaluator(scenes.from_data(copy.deepcopy(data), source=source, base_dir=base_dir), backend)
+        _SHARED.clear()  # one analysis per process at a time
+        _SHARED[key] = (ev, proposal(ev))
+    return _SHARED[key]
+
+
+def _main_chunk(ev, prop, s: RiskSettings, index: int, n: int) -> dict:
+    rng = np.random.default_rng(np.random.SeedSequence([s.seed, 0, index]))
+    d = prop.draw(ev.model, rng, n) if s.sampling == "importance" else ev.model.draw(rng, n)
+    r = ev.ratios(d)
+    w = np.exp(d.log_weight)
+    over = r[:, s.n_observers:] >= 1.0
+    return {"ratio": r[:, : s.n_observers], "log_weight": d.log_weight, "component": d.component,
+            "map_hits": over.sum(axis=0), "map_sum_w": (w[:, None] * over).sum(axis=0), "map_sum_w2": ((w * w)[:, None] * over).sum(axis=0)}
+
+
+def _sensitivity_chunk(ev, s: RiskSettings, index: int, n: int) -> dict:
+    a = ev.model.draw(np.random.default_rng(np.random.SeedSequence([s.seed, 1, index])), n)
+    b = ev.model.draw(np.random.default_rng(np.random.SeedSequence([s.seed, 2, index])), n)
+    out = {"A": ev.ratios(a)[:, : s.n_observers]}
+    for g in ev.model.active():
+        out[f"C_{g}"] = ev.ratios(b.with_group(a, g))[:, : s.n_observers]
+    return out
+
+
+def run_task(key: str, payload, s: RiskSettings, task) -> dict:
+    """One chunk (see the module notes); arrays by name."""
+    from brdfmodels.parallel import thread_limit
+
+    ev, prop = _shared(key, payload)
+    kind, index, n = task
+    with thread_limit(1):
+        return _main_chunk(ev, prop, s, index, n) if kind == "m" else _sensitivity_chunk(ev, s, index, n)
+
+
+def _save(path: Path, arrays: dict) -> None:
+    def write(tmp):
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+
+    atomic_write(path, write)
+
+
+def digest_of(scene, s: RiskSettings, backend: str) -> str:
+    text = json.dumps({"version": VERSION, "scene": scene.text_sha256, "settings": asdict(s), "backend": backend}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _prepare(outdir: Path, digest: str, force: bool) -> Path:
+    cdir = outdir / ".risk"
+    cdir.mkdir(parents=True, exist_ok=True)
+    meta = cdir / "meta.json"
+    if meta.exists():
+        old = json.loads(meta.read_text()).get("digest")
+        if old != digest:
+            if not force:
+                raise ValueError(f"{outdir} holds chunks of another risk analysis (digest {old}); pass --force to start over")
+            for p in cdir.glob("*.npz"):
+                p.unlink()
+    atomic_write_text(meta, json.dumps({"digest": digest}))
+    return cdir
+
+
+@dataclass
+class Chunks:
+    """Every chunk's arrays in order, and how many ran now and were found done."""
+
+    main: list
+    sensitivity: list
+    ran: int
+    reused: int
+
+
+def _name(task) -> str:
+    return f"{task[0]}{task[1]:06d}.npz"
+
+
+def _run_pending(pending, key, payload, s, serial, workers, scheduler, record):
+    if serial:
+        for t in pending:
+            record(t, run_task(key, payload, s, t))
+        return
+    from distributed import Client, as_completed
+
+    from ..study import local_cluster
+
+    cluster = local_cluster(workers) if scheduler is None else None
+    client = Client(cluster) if cluster is not None else Client(scheduler, timeout="20s")
+    try:
+        pay = client.scatter(payload, broadcast=True)
+        futures = {client.submit(run_task, key, pay, s, t, pure=False): t for t in pending}
+        for fut in as_completed(futures):
+            record(futures[fut], fut.result())
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False, workers=2, scheduler=None, force=False,
+               progress=None) -> Chunks:
+    """Every chunk of the run, computing the ones not yet in ``outdir``."""
+    outdir = Path(outdir)
+    digest = digest_of(scene, s, backend)
+    cdir = _prepare(outdir, digest, force)
+    todo = tasks(s)
+    pending = [t for t in todo if not (cdir / _name(t)).exists()]
+    say = progress or (lambda d, t: None)
+    done = [len(todo) - len(pending)]
+    say(done[0], len(todo))
+
+    def record(task, arrays):
+        _save(cdir / _name(task), arrays)
+        done[0] += 1
+        say(done[0], len(todo))
+
+    if pending:
+        payload = (scene.source_data, scene.source, None if scene.base_dir is None else str(scene.base_dir), backend)
+        _run_pending(pending, scene_key(scene, backend), payload, s, serial, workers, scheduler, record)
+    loaded = {t: dict(np.load(cdir / _name(t))) for t in todo}
+    return Chunks([loaded[t] for t in todo if t[0] == "m"], [loaded[t] for t in todo if t[0] == "s"], len(pending), len(todo) - len(pending))
