@@ -11,6 +11,11 @@ Every value on the page is read from report.json (each section names the keys it
 nothing is recomputed. Absent optional pieces (no plan view, no renders, no coordinate
 frame) are said on the page, never silently left out. The page is rendered with jinja2
 from ``hazard/templates/review.html.j2`` with autoescape on.
+
+When ``OUT/risk.json`` (``hazard risk SCENE -o OUT``) is there, a section "Probabilistic
+risk" shows its statement table (the worst rows), inputs, map picture
+(``OUT/probability_map.png``) and notes, with a warning when it is of another scene text
+than report.json (:func:`risk_section`; the pieces come from :mod:`hazard.risk.page`).
 """
 
 from __future__ import annotations
@@ -31,7 +36,8 @@ from .plots import _file_part
 from .report import NEVER_MODELLED, REPORT_FORMAT, REPORT_VERSION
 
 __all__ = ["write_review", "review_html", "read_report", "find_chromium", "PdfError", "fmt_number", "fmt_distance",
-           "HTML_NAME", "PDF_NAME", "OBSERVERS_SHOWN", "FIXED_OVER_TIME_SHOWN", "SECTIONS"]
+           "HTML_NAME", "PDF_NAME", "OBSERVERS_SHOWN", "FIXED_OVER_TIME_SHOWN", "SECTIONS",
+           "read_risk", "risk_section", "RISK_NAME", "RISK_SECTION", "RISK_ROWS_SHOWN"]
 
 HTML_NAME = "report.html"
 PDF_NAME = "report.pdf"
@@ -55,6 +61,7 @@ PICTURE_GROUPS = (
     ("nohd_time", ("nohd_time_*",)),
     ("exposure_track", ("exposure_track_*",)),
     ("exposure", ("exposure_*",)),
+    ("risk", ("probability_map.png",)),  # hazard risk's map: in the "Probabilistic risk" section
 )
 CAPTIONS = {
     "plan.png": "Plan view (x east, y north): danger zone, aim line, keep-out lobe outlines, mirror beams, "
@@ -63,6 +70,7 @@ CAPTIONS = {
     "keepout.png": "3-D close view of the keep-out lobes at true scale",
     "overview.png": "3-D overview of everything hazardous",
     "lobe.gif": "The dynamic lobe over the history (animation; a PDF shows its first frame)",
+    "probability_map.png": "Probabilistic risk (hazard risk): the 95 % upper bound of P(E > MPE) per map cell, observers overlaid",
 }
 MIME = {".png": "image/png", ".gif": "image/gif"}
 SECTIONS = {  # id -> heading, in page order
@@ -84,6 +92,10 @@ SECTIONS = {  # id -> heading, in page order
     "versions": "Versions and scene hash",
     "echo": "Appendix: the scene as analysed",
 }
+RISK_NAME = "risk.json"  # written by `hazard risk SCENE -o OUT` into the same folder: then a section of its own
+RISK_SECTION = ("risk", "Probabilistic risk")  # placed after RISK_AFTER, only when OUT/risk.json exists
+RISK_AFTER = "airspace"
+RISK_ROWS_SHOWN = 20  # observers of risk.json on this page (the highest upper bound first); all are in risk.csv
 
 
 class PdfError(RuntimeError):
@@ -852,10 +864,85 @@ def _files_view(doc: dict, out: Path, report_path: Path, pictures: dict) -> dict
             "embedded": embedded, "report_sha256": hashlib.sha256(report_path.read_bytes()).hexdigest()}
 
 
+# -- probabilistic risk (hazard risk) ------------------------------------------------
+def read_risk(out: Path) -> tuple[dict | None, str | None, Path]:
+    """``OUT/risk.json`` as (doc, None), (None, why it cannot be shown) or (None, None)
+    when the folder has none (no risk analysis: no section)."""
+    path = Path(out) / RISK_NAME
+    if not path.exists():
+        return None, None, path
+    try:
+        doc = json.loads(Path(check_input_file(path, RISK_NAME)).read_text(encoding="utf-8", errors="replace"))
+    except ValueError as exc:  # unreadable, not a regular file, or not JSON
+        return None, f"{path.name} cannot be read: {exc}", path
+    if not isinstance(doc, dict) or not isinstance(doc.get("observers"), list):
+        return None, f"{path.name} is not the output of hazard risk (no observers list)", path
+    return doc, None, path
+
+
+def _risk_scene_check(risk: dict, report: dict) -> str:
+    """A warning when risk.json is not of the scene text report.json analysed, else ""."""
+    ours, theirs = (report.get("scene") or {}).get("sha256"), risk.get("scene_sha256")
+    if theirs is None or ours is None:
+        return (f"{RISK_NAME} or report.json states no scene hash: it cannot be checked that the probabilistic risk "
+                "below is of the scene this page reports.")
+    if theirs != ours:
+        return (f"{RISK_NAME} is of a DIFFERENT scene text (sha256 {theirs}) than report.json (sha256 {ours}): the "
+                "probabilistic risk below is not of the scene this page reports. Run hazard risk on this scene again.")
+    return ""
+
+
+def _risk_picture(risk: dict, pictures: list, risk_path: Path) -> tuple[dict | None, str]:
+    """The embedded probability_map.png (stale: older than risk.json), or why there is none."""
+    if risk.get("map") is None:
+        return None, "No probability map: the risk analysis has no [uncertainty.map] (map: null)."
+    if not pictures:
+        return None, ("No probability_map.png in the folder: it is drawn with risk.html "
+                      "(hazard.risk.page.write_risk_page); the map's numbers are in probability_map.csv.")
+    p = pictures[0]
+    stale = (risk_path.parent / p["name"]).stat().st_mtime < risk_path.stat().st_mtime - 1.0
+    return p | {"stale": stale}, ""
+
+
+def risk_section(out: Path, report: dict, pictures: list) -> dict | None:
+    """The "Probabilistic risk" section from ``OUT/risk.json`` (None without one): the
+    run, the statement table (the ``RISK_ROWS_SHOWN`` worst), the inputs, the map summary
+    and picture (``pictures``: probability_map.png, embedded), the notes and what is left
+    out, and a warning when risk.json is of another scene text than report.json."""
+    from .risk.page import inputs_rows, map_summary, statement_section
+
+    risk, problem, path = read_risk(out)
+    if risk is None:
+        return None if problem is None else {"problem": problem}
+    picture, absent = _risk_picture(risk, pictures, path)
+    return {"problem": "", "mismatch": _risk_scene_check(risk, report), "scene": str(risk.get("scene", "?")),
+            "sha256": str(risk.get("scene_sha256", "not stated")), "draws": fmt_number(risk.get("draws"), sig=10),
+            "seed": str(risk.get("seed")), "sampling": str(risk.get("sampling", "not stated")),
+            "mpe": f"{fmt_number(risk.get('mpe_w_m2'), 'W/m²', sig=6)} ({risk.get('standard', 'standard not stated')})",
+            "criterion": str(risk.get("criterion", "not stated")), "statements": statement_section(risk, RISK_ROWS_SHOWN),
+            "inputs": inputs_rows(risk), "map": map_summary(risk), "picture": picture, "picture_absent": absent,
+            "notes": [str(n) for n in risk.get("notes") or []], "left_out": [str(n) for n in risk.get("left_out") or []]}
+
+
+def _sections(risk) -> dict:
+    """The page's sections in order: SECTIONS, with the risk section after RISK_AFTER when shown."""
+    if risk is None:
+        return dict(SECTIONS)
+    out = {}
+    for sid, title in SECTIONS.items():
+        out[sid] = title
+        if sid == RISK_AFTER:
+            out[RISK_SECTION[0]] = RISK_SECTION[1]
+    return out
+
+
 def review_context(doc: dict, out: Path, report_path: Path, pictures: dict) -> dict:
     """Everything the template shows, each part from its report.json keys."""
     obs = observers_section(doc)
     stages = doc.get("stages") or []
+    risk = risk_section(out, doc, pictures.get("risk", []))
+    if (risk is None or risk["problem"]) and pictures.get("risk"):  # a map without a readable risk.json: with the others
+        pictures = pictures | {"other": pictures["other"] + pictures["risk"], "risk": []}
     return {
         "title": f"Laser reflection hazard: {(doc.get('scene') or {}).get('name', '?')}",
         "verdict": _verdict(doc, obs), "scene": _scene_view(doc), "echo": _echo_rows(doc),
@@ -871,7 +958,7 @@ def review_context(doc: dict, out: Path, report_path: Path, pictures: dict) -> d
         "skip_reason": {s.get("name"): s.get("detail", "") for s in stages if not s.get("ran")},
         "assumptions": assumptions(doc), "versions": doc.get("versions") or {},
         "frame": _frame_view(doc), "files": _files_view(doc, out, report_path, pictures),
-        "sections": SECTIONS, "report_format": doc.get("format"), "report_version": doc.get("version"),
+        "risk": risk, "sections": _sections(risk), "report_format": doc.get("format"), "report_version": doc.get("version"),
         "fmt": fmt_number, "dist": fmt_distance,
     }
 

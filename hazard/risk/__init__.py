@@ -136,5 +136,8 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
                    "mode": "serial" if serial else (f"scheduler {scheduler}" if scheduler else f"LocalCluster, {workers} workers"),
                    "seconds": round(time.perf_counter() - t0, 3)}}
     write_outputs(outdir, doc, scene, mp)
+    from .page import write_risk_page
+
+    write_risk_page(doc, outdir)
     return RiskResult(doc, outdir, mp)
 

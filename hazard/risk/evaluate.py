@@ -129,6 +129,15 @@ class Evaluator:
         self._scint_sigma()
 
     # -- shared per process --------------------------------------------------------------
+    def point_name(self, j: int) -> str:
+        """Observer j's label, or the map cell's position."""
+        if j < self.n_observers:
+            if not hasattr(self, "_labels"):
+                self._labels = self.scene.observers.labels()
+            return repr(self._labels[j])
+        x, y, _ = self.points_m[j] + self.scene.offset_m
+        return f"map cell ({x:.6g}, {y:.6g})"
+
     def own_gain(self) -> np.ndarray:
         """Per point the fixed optical gain of its observer group (map cells: 1, the naked eye)."""
         g = np.ones(len(self.points_m))

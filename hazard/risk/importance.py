@@ -16,9 +16,12 @@ which the beam lands on a point:
   to the point).
 
 A component's spread is the angular size of the hazardous region (the beam's 1/e angle
-times sqrt(ln(E0/MPE)), a tilt half of it), at most the stated sigma. Only points whose
-on-axis irradiance could exceed the MPE (with the strongest optics of the scene) and that
-lie 1.5 to 6.5 sigma from the mean get one; nearby directions share one (at most 64).
+times sqrt(ln(E0/MPE)), a tilt half of it, widened by an observer's position uncertainty),
+at most the stated sigma. Only points whose on-axis irradiance could exceed the MPE (with
+the strongest optics of the scene), that plain draws would rarely reach (the Rice chance
+of landing within the spread, ``ncx2.cdf((sd/sigma)^2, 2, (d/sigma)^2)``, below 1e-2) and
+that lie within 6.5 sigma of the mean get one; nearby directions share one; at most 64, the
+observers' first (the map's cells take at most 8 beside them).
 
 Each draw carries the weight ``w = p(x) / q(x) = 1 / (alpha_0 + sum_c alpha_c N_c(x_b)/p(x_b))``
 over the moved input: the estimate ``mean(w 1{E > MPE})`` is unbiased whatever the
@@ -40,7 +43,8 @@ __all__ = ["Component", "Proposal", "proposal"]
 
 ALPHA0 = 0.5
 MAX_COMPONENTS = 64
-NEAR_SIGMAS, FAR_SIGMAS = 1.5, 6.5
+MAP_COMPONENTS_BESIDE_OBSERVERS = 8  # the map's share when observers have components of their own
+RARE_BELOW, FAR_SIGMAS = 1e-2, 6.5  # a component where plain draws would rarely land (Rice), out to 6.5 sigma
 
 
 @dataclass(frozen=True)
@@ -101,12 +105,20 @@ def _in_tangent(v, axis, right, up):
     return None if c <= 1e-9 else np.array([v @ right, v @ up]) / c
 
 
-def _spread(theta_w, e0, limit, sigma):
-    """Angular size of the hazardous region (at most sigma); None when it cannot be hazardous."""
+def _spread(theta_w, e0, limit, sigma, theta_pos=0.0):
+    """Angular size of the hazardous region, widened by the observer's position
+    uncertainty ``theta_pos`` seen at its distance (at most sigma); None when it cannot
+    be hazardous."""
     if not e0 > limit:
         return None
     theta_h = theta_w * math.sqrt(math.log(e0 / limit))
-    return min(sigma, max(theta_h, 0.5 * theta_w))
+    return min(sigma, math.hypot(max(theta_h, 0.5 * theta_w), theta_pos))
+
+
+def _position_angle(ev, j, distance_m) -> float:
+    """The observer's position uncertainty [rad] seen from ``distance_m`` (0 for map cells)."""
+    m = ev.model
+    return math.hypot(m.position_sigma_m, m.height_sigma_m) / max(distance_m, 1e-9) if j < ev.n_observers else 0.0
 
 
 def _direct(ev, p, limit) -> list:
@@ -116,9 +128,10 @@ def _direct(ev, p, limit) -> list:
         r = float(np.linalg.norm(rel))
         mean = _in_tangent(rel / r, beam.axis, ev.right, ev.up)
         w = float(beam.diameter_at(r)) / 2
-        sd = _spread(w / r, beam.power_w / (math.pi * w * w) * math.exp(-ev.mu0 * r), limit, ev.model.pointing_sigma_rad)
+        sd = _spread(w / r, beam.power_w / (math.pi * w * w) * math.exp(-ev.mu0 * r), limit, ev.model.pointing_sigma_rad,
+                     _position_angle(ev, j, r))
         if mean is not None and sd is not None:
-            out.append(("pointing", -1, mean, sd, f"direct beam on point {j}"))
+            out.append(("pointing", -1, mean, sd, f"direct beam on {ev.point_name(j)}", j))
     return out
 
 
@@ -151,37 +164,53 @@ def _mirror(ev, p, limit) -> list:
             if ev.model.pointing_sigma_rad > 0 and abs(den) > 1e-12:
                 hit = lp + rel * (float((c - lp) @ n) / den)
                 mean = _in_tangent(rel / L, beam.axis, ev.right, ev.up)
-                sd = _spread(w / L, e0, limit, ev.model.pointing_sigma_rad)
+                sd = _spread(w / L, e0, limit, ev.model.pointing_sigma_rad, _position_angle(ev, j, L))
                 if mean is not None and sd is not None and _on_plate(t, hit):
-                    out.append(("pointing", -1, mean, sd, f"{t.name}'s mirror beam on point {j} (pointing)"))
+                    out.append(("pointing", -1, mean, sd, f"{t.name}'s mirror beam on {ev.point_name(j)} (pointing)", j))
             if t.index in ev.model.tilt_targets and ev.model.tilt_sigma_rad > 0 and ev.model.wander_times_s is None:
                 u = (q - c) / np.linalg.norm(q - c)
                 n2 = u - sp.mean_incoming
                 n2 /= np.linalg.norm(n2)
                 n2 = n2 if n2 @ n > 0 else -n2
                 delta = np.array([n2 @ t.tangent, n2 @ np.cross(n, t.tangent)]) / float(n2 @ n)
-                sd = _spread(w / max(float(np.linalg.norm(q - c)), 1e-9), e0, limit, 2 * ev.model.tilt_sigma_rad)
+                l2 = max(float(np.linalg.norm(q - c)), 1e-9)
+                sd = _spread(w / l2, e0, limit, 2 * ev.model.tilt_sigma_rad, _position_angle(ev, j, l2))
                 if sd is not None:
-                    out.append(("tilt", t.index, delta, sd / 2, f"{t.name}'s mirror beam on point {j} (tilt)"))
+                    out.append(("tilt", t.index, delta, sd / 2, f"{t.name}'s mirror beam on {ev.point_name(j)} (tilt)", j))
     return out
 
 
-def _keep(cands, model) -> list:
-    """Candidates 1.5 to 6.5 sigma from the mean, one per cell of their own spread, at most 64."""
+def _keep(cands, model, n_observers: int) -> list:
+    """Candidates plain draws would rarely reach (Rice chance of landing within the spread
+    below 1e-2) out to 6.5 sigma, one per cell of their own spread, at most 64: the
+    observers' first (they are people), then the map's, evenly over the distance."""
+    people = _pick(_distinct([c for c in cands if c[5] < n_observers], model), MAX_COMPONENTS)
+    room = MAX_COMPONENTS - len(people) if not people else min(MAP_COMPONENTS_BESIDE_OBSERVERS, MAX_COMPONENTS - len(people))
+    return people + _pick(_distinct([c for c in cands if c[5] >= n_observers], model), room)
+
+
+def _pick(kept, n) -> list:
+    if len(kept) > n:
+        kept = [kept[i] for i in np.unique(np.linspace(0, len(kept) - 1, n).round().astype(int))] if n > 0 else []
+    return [c for _, c in kept]
+
+
+def _distinct(cands, model) -> list:
+    from scipy.stats import ncx2
+
     kept, seen = [], set()
-    for block, k, mean, sd, why in cands:
+    for block, k, mean, sd, why, _ in cands:
         m0, s0 = (np.asarray(model.pointing_bias_rad), model.pointing_sigma_rad) if block == "pointing" else (np.zeros(2), model.tilt_sigma_rad)
         dist = float(np.linalg.norm(np.asarray(mean) - m0)) / s0
-        if not NEAR_SIGMAS <= dist <= FAR_SIGMAS:
+        rough = float(ncx2.cdf((sd / s0) ** 2, 2, dist**2))  # the chance of landing within sd of the mean (spec section 8)
+        if not (RARE_BELOW > rough and dist <= FAR_SIGMAS):
             continue
         key = (block, k, int(round(mean[0] / sd)), int(round(mean[1] / sd)))
         if key not in seen:
             seen.add(key)
             kept.append((dist, Component(block, k, (float(mean[0]), float(mean[1])), float(sd), why)))
     kept.sort(key=lambda x: x[0])
-    if len(kept) > MAX_COMPONENTS:
-        kept = [kept[i] for i in np.unique(np.linspace(0, len(kept) - 1, MAX_COMPONENTS).round().astype(int))]
-    return [c for _, c in kept]
+    return kept
 
 
 def proposal(ev) -> Proposal:
@@ -194,4 +223,4 @@ def proposal(ev) -> Proposal:
         cands += _direct(ev, ev.points_m, limit)
     if (m.pointing_sigma_rad > 0 or m.tilt_sigma_rad > 0) and ev.nominal.spots:
         cands += _mirror(ev, ev.points_m, limit)
-    return Proposal(tuple(_keep(cands, m)))
+    return Proposal(tuple(_keep(cands, m, ev.n_observers)))

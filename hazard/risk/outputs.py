@@ -150,7 +150,7 @@ def write_outputs(outdir, doc: dict, scene, mp: dict | None) -> list:
     inputs = doc["inputs_active"]
     atomic_write_text(outdir / "risk.csv", risk_csv(doc["observers"], doc["draws"], inputs))
     written.insert(0, "risk.csv")
-    doc["files"] = ["risk.json", *written]
+    doc["files"] = ["risk.json", *written, "risk.html"] + (["probability_map.png"] if mp is not None else [])
     atomic_write_text(outdir / "risk.json", json.dumps(doc, indent=1, allow_nan=False, default=_json_default))
     return doc["files"]
 

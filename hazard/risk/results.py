@@ -47,8 +47,9 @@ def sensitivity(chunks, gains: np.ndarray, active: list) -> list | None:
         src = ind if use_ind else logs
         first = {g: (None if not np.isfinite(src[g][j]) else float(src[g][j])) for g in active}
         known = {g: v for g, v in first.items() if v is not None}
-        out.append({"of": "exceedance" if use_ind else "log_ratio", "draws": int(a.shape[0]), "first_order": first,
-                    "driver": max(known, key=known.get) if known else None})
+        of = ("exceedance" if use_ind else "log_ratio") if known else (
+            f"none: the irradiance does not vary over the {a.shape[0]} sensitivity draws (raise sensitivity_draws)")
+        out.append({"of": of, "draws": int(a.shape[0]), "first_order": first, "driver": max(known, key=known.get) if known else None})
     return out
 
 

@@ -141,8 +141,10 @@ def _save(path: Path, arrays: dict) -> None:
     atomic_write(path, write)
 
 
-def digest_of(scene, s: RiskSettings, backend: str) -> str:
-    text = json.dumps({"version": VERSION, "scene": scene.text_sha256, "settings": asdict(s), "backend": backend}, sort_keys=True)
+def digest_of(scene, s: RiskSettings, backend: str, prop) -> str:
+    """What the chunks depend on: the scene text, the settings, the backend and the proposal."""
+    text = json.dumps({"version": VERSION, "scene": scene.text_sha256, "settings": asdict(s), "backend": backend,
+                       "proposal": repr(prop)}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -201,7 +203,7 @@ def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False
                progress=None) -> Chunks:
     """Every chunk of the run, computing the ones not yet in ``outdir``."""
     outdir = Path(outdir)
-    digest = digest_of(scene, s, backend)
+    digest = digest_of(scene, s, backend, shared(scene, backend)[1])
     cdir = _prepare(outdir, digest, force)
     todo = tasks(s)
     pending = [t for t in todo if not (cdir / _name(t)).exists()]

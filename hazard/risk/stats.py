@@ -5,10 +5,11 @@
   nominal level), ``beta.ppf(a/2, k, n-k+1)`` to ``beta.ppf(1-a/2, k+1, n-k)``.
 - **Importance sampling**: the estimate ``mean(w 1{E > MPE})`` is unbiased; its interval
   is Clopper-Pearson at the effective sample size ``n_eff = p(1-p)/se^2`` (Kish's design
-  effect; k_eff = p n_eff, real-valued beta quantiles). With no hit at all the upper bound
-  is the zero-hit Clopper-Pearson bound ``1 - (a/2)^(1/n)`` divided by the defensive
-  share ``alpha_0``: every draw comes from a mixture holding the stated distribution with
-  weight alpha_0, so the chance of a hit per draw is at least alpha_0 P.
+  effect; k_eff = p n_eff, real-valued beta quantiles) when at least 10 draws hit. With
+  fewer, the weighted variance is itself unreliable, and the interval is [0, U / alpha_0]
+  with U the Clopper-Pearson upper bound of the hits among all n draws: every draw comes
+  from a mixture holding the stated distribution with weight alpha_0, so the chance of a
+  hit per draw is at least alpha_0 P (a rigorous bound, wide by 1/alpha_0).
 - Quantiles: the inverse of the (weighted) empirical CDF (Hyndman & Fan definition 1):
   the smallest value with at least the fraction q at or below it.
 - Operations: P(at least one exceedance in N) = 1 - (1 - p)^N, and the Poisson form
@@ -28,6 +29,7 @@ import numpy as np
 __all__ = ["clopper_pearson", "wilson", "estimate", "Estimate", "weighted_quantiles", "at_least_one", "sobol_first_order", "QUANTILES"]
 
 QUANTILES = (0.50, 0.95, 0.99)
+MIN_IMPORTANCE_HITS = 10  # fewer hits: the rigorous mixture bound instead of the effective-size interval
 LEVEL = 0.95
 
 
@@ -76,9 +78,10 @@ def estimate(hits, sum_w, sum_w2, n: int, importance: bool, alpha0: float) -> Es
         n_eff = np.where(var > 0, p * (1 - p) / var, float(n))
     n_eff = np.clip(np.nan_to_num(n_eff, nan=float(n)), 1.0, None)
     lo, hi = clopper_pearson(np.clip(p * n_eff, 0, n_eff), n_eff)
-    _, hi0 = clopper_pearson(0.0, n)
-    hi = np.where(hits > 0, hi, np.minimum(1.0, hi0 / alpha0))
-    return Estimate(p, np.where(hits > 0, lo, 0.0), hi, hits, n_eff, "clopper-pearson-effective")
+    _, hi_mix = clopper_pearson(hits, n)
+    few = hits < MIN_IMPORTANCE_HITS
+    hi = np.where(few, np.minimum(1.0, hi_mix / alpha0), hi)
+    return Estimate(p, np.where(few, 0.0, lo), hi, hits, n_eff, "clopper-pearson-effective")
 
 
 def weighted_quantiles(values: np.ndarray, weights: np.ndarray | None, qs=QUANTILES) -> np.ndarray:
@@ -115,6 +118,7 @@ def sobol_first_order(y_a: np.ndarray, y_c: dict) -> dict:
         mean = ((y_a + yc) / 2).mean(axis=0)
         num = (y_a * yc).mean(axis=0) - mean**2
         den = ((y_a**2 + yc**2) / 2).mean(axis=0) - mean**2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            out[name] = np.where(den > 1e-300, num / den, np.nan)
+        scale = ((y_a**2 + yc**2) / 2).mean(axis=0)
+        with np.errstate(divide="ignore", invalid="ignore"):  # Y (nearly) constant: nothing to apportion
+            out[name] = np.where(den > 1e-12 * scale + 1e-300, num / den, np.nan)
     return out

@@ -49,3 +49,9 @@ def test_bench_motion():
     from .bench_motion import run
 
     print(run())
+
+
+def test_bench_risk():
+    from .bench_risk import run
+
+    print(run())
