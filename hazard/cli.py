@@ -89,6 +89,16 @@ def _nonnegative_int(text):
     return value
 
 
+def _add_dask_args(p, what: str, json_help: str) -> None:
+    """Where a Dask job runs and how it resumes (hazard study, hazard risk)."""
+    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
+    p.add_argument("--workers", type=_positive_int, default=2, help="worker processes of the embedded cluster (default 2)")
+    p.add_argument("--serial", action="store_true", help="run in this process without Dask (identical results)")
+    p.add_argument("--force", action="store_true", help=f"start over if the folder holds another {what}")
+    p.add_argument("--json", action="store_true", help=json_help)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def _add_run_args(p):
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
     p.add_argument("--fail-on-hazard", action="store_true", help="exit with code 3 if any hazard is found")
@@ -135,12 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
     p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars)")
     p.add_argument("-o", "--output", required=True, help="output folder (a restarted study resumes there)")
-    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
-    p.add_argument("--workers", type=_positive_int, default=2, help="worker processes of the embedded cluster (default 2)")
-    p.add_argument("--serial", action="store_true", help="run in this process without Dask")
-    p.add_argument("--force", action="store_true", help="start over if the folder holds another study")
-    p.add_argument("--json", action="store_true", help="print the summary as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_dask_args(p, "study", "print the summary as JSON")
 
     p = sub.add_parser("risk", help="probabilistic risk: the chance each observer's exposure exceeds the MPE over the scene's "
                                     "[uncertainty] (risk.json, risk.csv, probability map), on Dask")
@@ -150,12 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_nonnegative_int, help="random seed (default: [uncertainty] seed); the same seed gives the same results")
     p.add_argument("--sampling", choices=("auto", "plain", "importance"), help="override [uncertainty] sampling")
     p.add_argument("--sensitivity-draws", type=_nonnegative_int, help="base draws of the Sobol indices (0: none)")
-    p.add_argument("--scheduler", help="address of an existing Dask scheduler (default: an embedded LocalCluster)")
-    p.add_argument("--workers", type=_positive_int, default=2, help="worker processes of the embedded cluster (default 2)")
-    p.add_argument("--serial", action="store_true", help="run in this process without Dask (identical results)")
-    p.add_argument("--force", action="store_true", help="start over if the folder holds another risk analysis")
-    p.add_argument("--json", action="store_true", help="print risk.json's observers as JSON")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_dask_args(p, "risk analysis", "print risk.json's observers as JSON")
 
     p = sub.add_parser("report", help="the report for the review board: one self-contained HTML file (and a PDF) "
                                       "from an output folder of hazard run")

@@ -743,6 +743,14 @@ class AirspaceSpec(_Strict):
         return self
 
 
+def _check_weights(weights, n: int, what: str) -> None:
+    """Relative weights: one per ``what``, at least one positive."""
+    if len(weights) != n:
+        raise ValueError(f"weights: {len(weights)} weight(s) for {n} {what}(s); expected one per {what}")
+    if not sum(weights) > 0:
+        raise ValueError("weights: expected at least one positive weight")
+
+
 class VisibilityDistributionSpec(_Strict):
     """How the meteorological visibility varies between operations (the attenuation per
     draw follows from it by the Kruse model, :func:`hazard.nohd.attenuation_from_visibility`)."""
@@ -770,10 +778,7 @@ class VisibilityDistributionSpec(_Strict):
         if self.distribution == "uniform" and not self.high_km > self.low_km:
             raise ValueError(f"high_km={self.high_km!r}: expected above low_km={self.low_km!r}")
         if self.distribution == "discrete":
-            if len(self.weights) != len(self.values_km):
-                raise ValueError(f"weights: {len(self.weights)} weight(s) for {len(self.values_km)} value(s); expected one per value")
-            if not sum(self.weights) > 0:
-                raise ValueError("weights: expected at least one positive weight")
+            _check_weights(self.weights, len(self.values_km), "value")
         return self
 
 
@@ -807,10 +812,7 @@ class MaterialChoiceSpec(_Strict):
     @model_validator(mode="after")
     def _weights(self):
         if self.weights is not None:
-            if len(self.weights) != len(self.materials):
-                raise ValueError(f"weights: {len(self.weights)} weight(s) for {len(self.materials)} material(s); expected one per material")
-            if not sum(self.weights) > 0:
-                raise ValueError("weights: expected at least one positive weight")
+            _check_weights(self.weights, len(self.materials), "material")
         return self
 
 

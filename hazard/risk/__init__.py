@@ -72,6 +72,9 @@ def _notes(ev, s, prop) -> tuple[list, list]:
         others = [t.name for t in scene.targets if t.index not in ev.model.tilt_targets]
         if others:
             left.append(f"targets {others} are not plates or disks: their normals are not tilted")
+    if scene.spec.has_motion:
+        left.append("things that move are not simulated: the [laser] aim is held (no aim track, target track or firing "
+                    "windows) and moving observers (tracks) are not evaluated; hazard run's motion stage covers them")
     if ev.model.wander_times_s:
         left.append(f"a wandering tilt is evaluated at {ev.model.n_nodes} times; a peak between them is not searched")
     if ev.s2_direct is not None and len(ev.s2_direct):

@@ -219,7 +219,10 @@ class Evaluator:
             kw["frames"] = sp.frames @ rot.T
             kw["target"] = replace(sp.target, normal=n2, tangent=rot @ sp.target.tangent)
         if mu != self.mu0:
-            kw["power_w"] = sp.power_w * np.exp(-(mu - self.mu0) * sp.range_from_laser_m)
+            f = np.exp(-(mu - self.mu0) * sp.range_from_laser_m)
+            kw["power_w"] = sp.power_w * f
+            if sp.peak_irradiance_w_m2 is not None:
+                kw["peak_irradiance_w_m2"] = sp.peak_irradiance_w_m2 * f
         return replace(sp, **kw) if kw else sp
 
     def _factors(self, d: Draws, i: int):
