@@ -22,7 +22,7 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads, thread_limit
 
-from .nohd import optical_gain
+from .nohd import group_gains
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
@@ -135,15 +135,13 @@ def _sdz(scene, exposure, mu, log, ray_scene) -> dict:
 def _histories(scene, traced, log, the_plan):
     """Stage ``history``: analysis times, the dynamic spots' states over them and their
     melting (the spots of slumping targets get their tilt over the times)."""
-    dynamic_spots = [sp for sp in traced.built.spots if sp.material.is_dynamic]
-    times = history.analysis_times(scene.spec, bool(dynamic_spots))
-    if not dynamic_spots:
+    dynamic = any(sp.material.is_dynamic for sp in traced.built.spots)
+    times = history.analysis_times(scene.spec, dynamic)
+    if not dynamic:
         log.skip("history", the_plan.skipped("history") or "no lit target has a dynamic material")
         return times, {}, {}
-    t_end = scene.spec.analysis.time_end_s or scene.spec.exposure.duration_s
     with log.run("history") as st:
-        hist = history.state_histories(dynamic_spots, times, t_end)
-        traced.built.spots, notes = history.with_slumps(traced.built.spots, hist.melt, scene.spec.analysis.slump_step_deg)
+        traced.built.spots, hist, notes = history.spot_states(scene.spec, traced.built.spots, times)
         st.detail = "; ".join([hist.detail] + notes)
     return times, hist.states, hist.melt
 
@@ -151,14 +149,12 @@ def _histories(scene, traced, log, the_plan):
 def _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan) -> MapInputs:
     obs = scene.observers
     m = len(obs)
-    group_gain = np.array([1.0 if o is None else optical_gain(o.magnification, o.objective_diameter_m, o.transmission)
-                           for o in obs.optics])
     n_t = len(times)
     keep = (m * n_t <= HISTORY_KEEP_MAX) if keep_history is None else bool(keep_history)
     spots = traced.built.spots
     los_scene = ray_scene if (the_plan.line_of_sight and spots) else None
     spec = scene.spec
-    return MapInputs(spots, traced.beam, states, times, obs, group_gain[obs.group] if m else np.ones(0), mu,
+    return MapInputs(spots, traced.beam, states, times, obs, group_gains(obs.optics, obs.group), mu,
                      spec.exposure.duration_s, spec.laser.wavelength_nm, spec.exposure.standard, exposure.irradiance_w_m2,
                      los_scene, keep, threads, MAP_CHUNK)
 

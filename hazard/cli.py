@@ -716,6 +716,7 @@ def _cmd_study(args, out, err):
 def _cmd_risk(args, out, err):
     from .progress import progress_callback
     from .risk import run_risk
+    from .risk.page import worst_first
 
     scene = _load_scene(args.scene, err)
     res = run_risk(scene, args.output, draws=args.draws, seed=args.seed, sampling=args.sampling, sensitivity_draws=args.sensitivity_draws,
@@ -727,7 +728,7 @@ def _cmd_risk(args, out, err):
         return EXIT_OK
     out.write(f"risk {scene.name!r}: {doc['draws']:,} draws ({doc['sampling']} sampling), MPE {doc['mpe_w_m2']:.4g} W/m^2; "
               f"{doc['run']['ran']} chunk(s) run now, {doc['run']['reused']} reused\n")
-    for r in sorted(doc["observers"], key=lambda r: -r["probability_ci_high"])[:20]:
+    for r in sorted(doc["observers"], key=worst_first)[:20]:
         drv = r["sensitivity"]["driver"] if r["sensitivity"] else None
         out.write(f"  {r['name']}: {r['statement']}" + (f"; driven by {drv}" if drv else "") + "\n")
     if len(doc["observers"]) > 20:

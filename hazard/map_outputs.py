@@ -213,10 +213,6 @@ def _bands(result) -> tuple[np.ndarray, list] | None:
     return np.stack([total, reflected, static, direct]).astype("float32")[:, ::-1, :], names  # rows north to south
 
 
-def _tif_crs(result):
-    return site_crs(result.scene)
-
-
 def site_crs(scene):
     """The PROJ string of the ellipsoidal orthographic projection about ``scene``'s site
     origin (its x, y are the ENU frame's on the ellipsoid); None without a site."""
@@ -251,7 +247,7 @@ def hazard_tiff(result, frame_info) -> bytes | None:
     t, off = result.scene.terrain, np.asarray(result.scene.offset_m, float)
     ny, nx = t.heights.shape
     transform = from_origin(t.x0 + off[0] - t.dx / 2, t.y0 + off[1] + t.dx * (ny - 1) + t.dx / 2, t.dx, t.dx)
-    crs = _tif_crs(result)
+    crs = site_crs(result.scene)
     tags = {"frame": frame_info["statement"], "nan": "not evaluated: beyond every target's NOHD (ratio below 1)",
             "sampling": (f"the ratio at each terrain node (every {t.dx:g} m) at eye height: a zone smaller than a cell can "
                          f"fall between nodes; the keepout_lobe outlines of zones.geojson are drawn from the lobes themselves"),

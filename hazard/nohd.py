@@ -46,6 +46,7 @@ __all__ = [
     "nohd_from_intensity",
     "hazard_distance",
     "optical_gain",
+    "group_gains",
     "attenuation_from_visibility",
     "range_from_intensity",
     "PUPIL_DIAMETER_M",
@@ -348,6 +349,13 @@ def optical_gain(magnification, objective_diameter_m, transmission=1.0, beam_dia
     if beam_diameter_m is not None:
         terms.append(tau * (_num("beam_diameter_m", beam_diameter_m, minimum=0.0) / PUPIL_DIAMETER_M) ** 2)
     return min(max(t, 1.0) for t in terms)
+
+
+def group_gains(optics, group) -> np.ndarray:
+    """Per observer the fixed gain (:func:`optical_gain` without the beam term) of its
+    group's optics; ``optics[g]`` is an OpticsSpec, or None for the naked eye (gain 1)."""
+    per = np.array([1.0 if o is None else optical_gain(o.magnification, o.objective_diameter_m, o.transmission) for o in optics] or [1.0])
+    return per[np.asarray(group, np.int64)]
 
 
 def attenuation_from_visibility(visibility_km, wavelength_nm) -> float:

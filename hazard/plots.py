@@ -304,15 +304,14 @@ def _observer_histories(result, rows):
     recomputed peaks do not reproduce the result's."""
     from scenes.observers import Observers
 
-    from .nohd import optical_gain
+    from .nohd import group_gains
     from .pipeline import spots as beam_stage
     from .pipeline.irradiance_map import MapInputs, irradiance_map
     from .pipeline.plan import plan
 
     scene, obs, rows = result.scene, result.observers, np.asarray(rows, np.int64)
     table = obs.observers
-    gain = np.array([1.0 if o is None else optical_gain(o.magnification, o.objective_diameter_m, o.transmission)
-                     for o in table.optics])[table.group[rows]]
+    gain = group_gains(table.optics, table.group[rows])
     points = Observers.from_points(table.take(rows), table.group[rows], table.index_in_group[rows], table.group_names, table.optics)
     ray_scene = None
     if plan(scene).line_of_sight and result.spots:

@@ -10,7 +10,7 @@ import numpy as np
 
 import brdfmodels
 
-__all__ = ["StateHistories", "analysis_times", "state_histories"]
+__all__ = ["StateHistories", "analysis_times", "spot_states", "state_histories"]
 
 
 @dataclass
@@ -114,6 +114,18 @@ def state_histories(dynamic_spots, times, t_end) -> StateHistories:
         if melt is not None:
             melts[t.index] = melt
     return StateHistories(states, "; ".join(parts), melts)
+
+
+def spot_states(spec, spots, times):
+    """The spots' dynamic targets over ``times``: ``(spots, hist, notes)`` with the spots
+    given their slumps (:func:`with_slumps`), the :class:`StateHistories` and the slump
+    notes; ``(spots, None, [])`` when no spot is dynamic."""
+    dynamic = [sp for sp in spots if sp.material.is_dynamic]
+    if not dynamic:
+        return spots, None, []
+    hist = state_histories(dynamic, times, spec.analysis.time_end_s or spec.exposure.duration_s)
+    spots, notes = with_slumps(spots, hist.melt, spec.analysis.slump_step_deg)
+    return spots, hist, notes
 
 
 def with_slumps(spots, melts: dict, step_deg: float = 2.0):

@@ -30,13 +30,14 @@ nominal geometry's.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..engine import spot_irradiance, specular_irradiance
-from ..nohd import attenuation_from_visibility, optical_gain
+from ..nohd import attenuation_from_visibility, group_gains
 from ..pipeline import history, limits
 from ..pipeline import spots as beam_stage
 from ..pipeline.direct import beam_at, clear_of_objects
@@ -45,7 +46,7 @@ from ..pipeline.plan import plan
 from .inputs import Draws, input_model
 from .physics import scintillation_sigma2
 
-__all__ = ["Evaluator", "map_points", "turned_axis", "pointing_basis"]
+__all__ = ["Evaluator", "map_points", "map_shape", "turned_axis", "pointing_basis"]
 
 CONE_RADII = 5.0  # a beam is taken to reach a target when its axis passes within 5 1/e radii of it (exp(-25) of the peak)
 
@@ -81,14 +82,20 @@ def tilted_normal(target, delta) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+def map_shape(m) -> tuple[int, int]:
+    """(rows, columns) of the map's cells (a :class:`scenes.spec.ProbabilityMapSpec`)."""
+    x0, x1, y0, y1 = m.extent_m
+    return math.ceil((y1 - y0) / m.spacing_m), math.ceil((x1 - x0) / m.spacing_m)
+
+
 def map_points(scene) -> np.ndarray:
     """Cell centres (N, 3) of ``[uncertainty.map]`` at eye height over the terrain (over z = 0 without one)."""
     m = scene.spec.uncertainty.map
     if m is None:
         return np.empty((0, 3))
-    x0, x1, y0, y1 = (v - o for v, o in zip(m.extent_m, (scene.offset_m[0], scene.offset_m[0], scene.offset_m[1], scene.offset_m[1])))
-    xs = x0 + m.spacing_m * (np.arange(math.ceil((x1 - x0) / m.spacing_m)) + 0.5)
-    ys = y0 + m.spacing_m * (np.arange(math.ceil((y1 - y0) / m.spacing_m)) + 0.5)
+    ny, nx = map_shape(m)
+    xs = m.extent_m[0] - scene.offset_m[0] + m.spacing_m * (np.arange(nx) + 0.5)
+    ys = m.extent_m[2] - scene.offset_m[1] + m.spacing_m * (np.arange(ny) + 0.5)
     gx, gy = np.meshgrid(xs, ys)
     ground = scene.terrain.height_at(gx.ravel(), gy.ravel()) if scene.terrain is not None else np.full(gx.size, -scene.offset_m[2])
     return np.column_stack([gx.ravel(), gy.ravel(), np.asarray(ground, float) + m.eye_height_m])
@@ -129,22 +136,23 @@ class Evaluator:
         self._scint_sigma()
 
     # -- shared per process --------------------------------------------------------------
+    @functools.cached_property
+    def labels(self) -> list:
+        """The observers' labels (risk.csv's names)."""
+        return self.scene.observers.labels() if self.n_observers else []
+
     def point_name(self, j: int) -> str:
         """Observer j's label, or the map cell's position."""
         if j < self.n_observers:
-            if not hasattr(self, "_labels"):
-                self._labels = self.scene.observers.labels()
-            return repr(self._labels[j])
+            return repr(self.labels[j])
         x, y, _ = self.points_m[j] + self.scene.offset_m
         return f"map cell ({x:.6g}, {y:.6g})"
 
     def own_gain(self) -> np.ndarray:
         """Per point the fixed optical gain of its observer group (map cells: 1, the naked eye)."""
         g = np.ones(len(self.points_m))
-        obs = self.scene.observers
-        for k, o in enumerate(() if obs is None else obs.optics):
-            if o is not None:
-                g[: self.n_observers][obs.group == k] = optical_gain(o.magnification, o.objective_diameter_m, o.transmission)
+        if self.n_observers:
+            g[: self.n_observers] = group_gains(self.scene.observers.optics, self.scene.observers.group)
         return g
 
     def _alternatives(self) -> dict:
@@ -170,16 +178,9 @@ class Evaluator:
 
     def trace(self, beam) -> Traced:
         """The spots of ``beam`` and the dynamic targets' states under it (the engine's beam and history stages)."""
-        scene = self.scene
-        tr = beam_stage.trace_beam(scene, self.tracer, self.mu0, beam)
-        spots, states = tr.built.spots, {}
-        dyn = [sp for sp in spots if sp.material.is_dynamic]
-        if dyn:
-            t_end = scene.spec.analysis.time_end_s or scene.spec.exposure.duration_s
-            hist = history.state_histories(dyn, self.times_s, t_end)
-            spots, _ = history.with_slumps(spots, hist.melt, scene.spec.analysis.slump_step_deg)
-            states = hist.states
-        return Traced(beam, spots, states)
+        tr = beam_stage.trace_beam(self.scene, self.tracer, self.mu0, beam)
+        spots, hist, _ = history.spot_states(self.scene.spec, tr.built.spots, self.times_s)
+        return Traced(beam, spots, {} if hist is None else hist.states)
 
     def _reaches_any(self, beam) -> bool:
         if self.scene.terrain_target is not None:

@@ -79,11 +79,9 @@ def map_tiff(scene, mp: dict) -> bytes:
 
     from ..map_outputs import site_crs
 
-    x0, _, _, y1 = mp["extent_m"]
     ny, nx = mp["shape"]
     d = mp["spacing_m"]
-    top = mp["extent_m"][2] + ny * d
-    transform = from_origin(x0, top, d, d)
+    transform = from_origin(mp["extent_m"][0], mp["extent_m"][2] + ny * d, d, d)  # the top edge of the last row
     bands = np.stack([_grid(mp, "probability"), _grid(mp, "ci_high"), _grid(mp, "ci_low")])
     with MemoryFile() as mem:
         with mem.open(driver="GTiff", width=nx, height=ny, count=3, dtype="float32", crs=site_crs(scene), transform=transform,

@@ -70,7 +70,7 @@ def _interval(d: dict, p="probability_exceed", lo="probability_ci_low", hi="prob
 
 
 # -- the statement table -------------------------------------------------------------
-def _worst_first(r: dict) -> tuple:
+def worst_first(r: dict) -> tuple:
     """Sort key: highest upper bound first, then highest estimate (null and NaN count as worst)."""
     def v(k):
         x = _value(r.get(k))
@@ -125,7 +125,7 @@ def statement_row(r: dict, draws=None) -> dict:
 def statement_section(doc: dict, shown: int = ROWS_SHOWN) -> dict:
     """The statement table: the ``shown`` worst observers (highest 95 % upper bound first)
     and a line counting the rest, all of which are in risk.csv."""
-    rows = sorted(doc.get("observers") or [], key=_worst_first)
+    rows = sorted(doc.get("observers") or [], key=worst_first)
     page, rest = rows[:shown], rows[shown:]
     more = (f"... and {len(rest)} more observer point(s) not shown here (lower upper bounds): all {len(rows)} are in "
             "risk.csv and risk.json observers." if rest else "")
@@ -232,7 +232,7 @@ def _draw_observers(ax, observers: list, xe, ye) -> dict:
     """Observer points inside the map as black dots, the ``MAP_LABELS_SHOWN`` worst named."""
     import matplotlib.patheffects as pe
 
-    inside = [r for r in sorted(observers, key=_worst_first)
+    inside = [r for r in sorted(observers, key=worst_first)
               if len(r.get("position_m") or []) >= 2 and xe[0] <= r["position_m"][0] <= xe[-1] and ye[0] <= r["position_m"][1] <= ye[-1]]
     if inside:
         xy = np.array([r["position_m"][:2] for r in inside], float)

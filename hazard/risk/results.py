@@ -4,12 +4,11 @@ probability, its interval, quantiles, the risk over operations and the sensitivi
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..nohd import optical_gain
 from . import stats
+from .evaluate import map_shape
 from .importance import ALPHA0
 
 __all__ = ["observer_rows", "map_result", "statement", "sensitivity"]
@@ -26,7 +25,7 @@ def statement(p: float, lo: float, hi: float, n: int, what: str = "E > MPE") -> 
 
 
 def _estimate(over: np.ndarray, w: np.ndarray, importance: bool, n: int) -> stats.Estimate:
-    return stats.estimate(over.sum(axis=0), (w[:, None] * over).sum(axis=0), ((w * w)[:, None] * over).sum(axis=0), n, importance, ALPHA0)
+    return stats.estimate(*stats.weighted_counts(over, w), n, importance, ALPHA0)
 
 
 def sensitivity(chunks, gains: np.ndarray, active: list) -> list | None:
@@ -83,7 +82,7 @@ def observer_rows(ev, s, chunks, sens) -> list:
     q = stats.weighted_quantiles(own, w if imp else None)
     aided = [(a, g, _estimate(r * g >= 1.0, w, imp, s.draws)) for a, g in _aids(ev.scene)]
     ops = _operations(est, ev.scene.spec.uncertainty.operations)
-    labels = ev.scene.observers.labels()
+    labels = ev.labels
     pos = ev.points_m[:m] + ev.scene.offset_m
     rows = []
     for j in range(m):
@@ -113,7 +112,6 @@ def map_result(ev, s, chunks) -> dict | None:
     est = stats.estimate(hits, sw, sw2, s.draws, s.sampling == "importance", ALPHA0)
     spec = ev.scene.spec.uncertainty.map
     pts = ev.points_m[s.n_observers:] + ev.scene.offset_m
-    nx = math.ceil((spec.extent_m[1] - spec.extent_m[0]) / spec.spacing_m)
-    return {"points_m": pts, "shape": (len(pts) // nx, nx), "probability": est.p, "ci_low": est.lo, "ci_high": est.hi,
+    return {"points_m": pts, "shape": map_shape(spec), "probability": est.p, "ci_low": est.lo, "ci_high": est.hi,
             "hits": est.hits, "spacing_m": spec.spacing_m, "extent_m": list(spec.extent_m), "eye_height_m": spec.eye_height_m,
             "method": est.method}

@@ -26,6 +26,8 @@ import numpy as np
 
 from brdfmodels._io import atomic_write, atomic_write_text
 
+from .stats import weighted_counts
+
 __all__ = ["RiskSettings", "settings", "tasks", "run_task", "run_chunks", "Chunks"]
 
 VERSION = "risk-1"
@@ -77,28 +79,21 @@ def scene_key(scene, backend: str) -> str:
     return f"{scene.text_sha256}:{backend}"
 
 
-def shared(scene, backend: str):
-    """The (evaluator, proposal) of ``scene`` in this process, built once."""
-    key = scene_key(scene, backend)
+def shared(scene, backend: str, key: str | None = None):
+    """The (evaluator, proposal) of ``scene`` in this process, built once. ``scene`` may
+    be a loaded scene or a payload ``(data, source, base_dir)`` to load (a Dask worker),
+    then with its ``key``."""
+    key = key or scene_key(scene, backend)
     if key not in _SHARED:
         from .evaluate import Evaluator
         from .importance import proposal
 
+        if isinstance(scene, tuple):
+            import scenes
+
+            data, source, base_dir = scene
+            scene = scenes.from_data(copy.deepcopy(data), source=source, base_dir=base_dir)
         ev = Evaluator(scene, backend)
-        _SHARED.clear()
-        _SHARED[key] = (ev, proposal(ev))
-    return _SHARED[key]
-
-
-def _shared(key, payload):
-    if key not in _SHARED:
-        import scenes
-
-        from .evaluate import Evaluator
-        from .importance import proposal
-
-        data, source, base_dir, backend = payload
-        ev = Evaluator(scenes.from_data(copy.deepcopy(data), source=source, base_dir=base_dir), backend)
         _SHARED.clear()  # one analysis per process at a time
         _SHARED[key] = (ev, proposal(ev))
     return _SHARED[key]
@@ -108,10 +103,9 @@ def _main_chunk(ev, prop, s: RiskSettings, index: int, n: int) -> dict:
     rng = np.random.default_rng(np.random.SeedSequence([s.seed, 0, index]))
     d = prop.draw(ev.model, rng, n) if s.sampling == "importance" else ev.model.draw(rng, n)
     r = ev.ratios(d)
-    w = np.exp(d.log_weight)
-    over = r[:, s.n_observers:] >= 1.0
+    hits, sw, sw2 = weighted_counts(r[:, s.n_observers:] >= 1.0, np.exp(d.log_weight))
     return {"ratio": r[:, : s.n_observers], "log_weight": d.log_weight, "component": d.component,
-            "map_hits": over.sum(axis=0), "map_sum_w": (w[:, None] * over).sum(axis=0), "map_sum_w2": ((w * w)[:, None] * over).sum(axis=0)}
+            "map_hits": hits, "map_sum_w": sw, "map_sum_w2": sw2}
 
 
 def _sensitivity_chunk(ev, s: RiskSettings, index: int, n: int) -> dict:
@@ -127,7 +121,7 @@ def run_task(key: str, payload, s: RiskSettings, task) -> dict:
     """One chunk (see the module notes); arrays by name."""
     from brdfmodels.parallel import thread_limit
 
-    ev, prop = _shared(key, payload)
+    ev, prop = shared(payload[:3], payload[3], key)
     kind, index, n = task
     with thread_limit(1):
         return _main_chunk(ev, prop, s, index, n) if kind == "m" else _sensitivity_chunk(ev, s, index, n)

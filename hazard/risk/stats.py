@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-__all__ = ["clopper_pearson", "wilson", "estimate", "Estimate", "weighted_quantiles", "at_least_one", "sobol_first_order", "QUANTILES"]
+__all__ = ["clopper_pearson", "wilson", "weighted_counts", "estimate", "Estimate", "weighted_quantiles", "at_least_one", "sobol_first_order", "QUANTILES"]
 
 QUANTILES = (0.50, 0.95, 0.99)
 MIN_IMPORTANCE_HITS = 10  # fewer hits: the rigorous mixture bound instead of the effective-size interval
@@ -62,6 +62,12 @@ class Estimate:
 
     def __init__(self, p, lo, hi, hits, n_eff, method):
         self.p, self.lo, self.hi, self.hits, self.n_eff, self.method = p, lo, hi, hits, n_eff, method
+
+
+def weighted_counts(over: np.ndarray, w: np.ndarray) -> tuple:
+    """Per column of ``over`` (n, M) booleans: the hits and the sums of the weights ``w``
+    (n,) and of their squares over the hits."""
+    return over.sum(axis=0), (w[:, None] * over).sum(axis=0), ((w * w)[:, None] * over).sum(axis=0)
 
 
 def estimate(hits, sum_w, sum_w2, n: int, importance: bool, alpha0: float) -> Estimate:
