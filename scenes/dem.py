@@ -1,4 +1,4 @@
-"""DEM terrain: a raster of ground heights (GeoTIFF, DTED, anything GDAL reads) placed in
+"""DEM terrain: a raster of ground heights (a local GeoTIFF or DTED file, nothing else) placed in
 the site's exact ENU frame.
 
 The analysis grid is regular in the local frame: nodes every ``resolution_m`` over
@@ -18,6 +18,7 @@ area is read (GDAL reads just those blocks), in strips of rows, keeping every st
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,7 +26,7 @@ import numpy as np
 from .geo import GeoError, SiteFrame
 from .geometry import Heightfield, input_path
 
-__all__ = ["DemInfo", "dem_heightfield"]
+__all__ = ["DemInfo", "dem_heightfield", "dem_path", "GDAL_CLOSED", "DEM_DRIVERS"]
 
 _TOL_M = 1e-3  # the node's point lies on its vertical to this [m]
 
@@ -56,21 +57,102 @@ def _grid(spec, frame: SiteFrame, centre_xy):
     return xs, ys
 
 
-def _open(spec, base_dir):
-    import rasterio
+# GDAL configuration while a DEM is open: a DEM is data read from a local file, never a
+# recipe for fetching others. Only the GTiff and DTED drivers open it (a VRT, which can point
+# at a URL or at any file's bytes, never does); on top of that nothing can reach the network
+# (/vsicurl/ accepts no file name, no HTTP retries, no proxy), a VRT could not run Python nor
+# (GDAL >= 3.12, which honours the option) read raw bands of other files, and no .aux.xml
+# sidecar is read or written (GDAL_PAM_ENABLED).
+GDAL_CLOSED = {
+    "CPL_VSIL_CURL_ALLOWED_EXTENSIONS": ".hazard-no-network",  # /vsicurl/ refuses every name before any request
+    "GDAL_HTTP_MAX_RETRY": "0",
+    "GDAL_HTTP_TIMEOUT": "1",
+    "GDAL_HTTP_CONNECTTIMEOUT": "1",
+    "GDAL_HTTP_PROXY": "",
+    "GDAL_HTTP_NETRC": "NO",
+    "GDAL_VRT_ENABLE_RAWRASTERBAND": "NO",
+    "GDAL_VRT_RAWRASTERBAND_ALLOWED_SOURCE": "ONLY_REMOTE",  # and remote is closed above
+    "GDAL_VRT_ENABLE_PYTHON": "NO",
+    "GDAL_PAM_ENABLED": "NO",
+    "GDAL_DISABLE_READDIR_ON_OPEN": "EMPTY_DIR",  # no directory listing (local or remote) to find sidecars
+    "CPL_VSIL_CURL_USE_HEAD": "NO",
+}
+DEM_DRIVERS = ("GTiff", "DTED")
+_MAGIC = ((b"II*\0", "GTiff"), (b"MM\0*", "GTiff"), (b"II+\0", "GTiff"), (b"MM\0+", "GTiff"), (b"UHL1", "DTED"))
+_PIXEL_DEG_MAX = 1.0  # a DEM's cell: at most 1 deg (coarse global DEMs: 5 arc-min) ...
+_PIXEL_M_MAX = 1e5  # ... or 100 km in a projected CRS
 
+
+def dem_path(file: str, base_dir=None):
+    """The local regular file a scene's ``terrain.file`` names, and the GDAL driver its
+    first bytes show (GTiff or DTED); GeoError for anything else: a URL, a GDAL virtual
+    path (``/vsi...``), a subdataset name (``DRIVER:...``), a VRT or any other format."""
     from brdfmodels._io import check_input_file
 
-    path = input_path(spec.file, base_dir)
+    name = str(file)
+    if "://" in name or name.startswith("/vsi") or re.match(r"^[A-Za-z][A-Za-z0-9_]+:", name):
+        raise GeoError(f"terrain.file={name!r}: expected the path of a local GeoTIFF or DTED file; URLs, GDAL virtual "
+                       f"file systems (/vsi...) and subdataset names are refused (a DEM is read only as a local file)")
+    path = input_path(name, base_dir).absolute()
+    check_input_file(path, "terrain.file")
     try:
-        check_input_file(path, "terrain.file")
-        ds = rasterio.open(path)
-    except (OSError, ValueError, rasterio.errors.RasterioError) as exc:
-        raise GeoError(f"terrain.file={spec.file!r}: cannot read the DEM ({' '.join(str(exc).split())})") from None
-    if ds.crs is None:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        raise GeoError(f"terrain.file={name!r}: cannot read the DEM ({exc.strerror})") from None
+    driver = next((d for magic, d in _MAGIC if head == magic), None)
+    if driver is None:
+        raise GeoError(f"terrain.file={name!r}: not a GeoTIFF or DTED file (its first bytes are neither a TIFF nor a DTED "
+                       f"header); other formats, VRT included, are refused: convert with gdal_translate -of GTiff")
+    return path, driver
+
+
+def _open(spec, base_dir):
+    """The DEM opened by its own driver only (call inside ``rasterio.Env(**GDAL_CLOSED)``),
+    its georeferencing and cells checked (:func:`_check_raster`)."""
+    import rasterio
+
+    path, driver = dem_path(spec.file, base_dir)
+    try:
+        ds = rasterio.open(path, driver=driver)
+    except (OSError, ValueError, rasterio.errors.RasterioError):
+        raise GeoError(f"terrain.file={spec.file!r}: cannot read the DEM as {driver} (a damaged or truncated file?)") from None
+    try:
+        _check_raster(ds, spec, driver)
+    except BaseException:
         ds.close()
-        raise GeoError(f"terrain.file={spec.file!r}: the DEM has no CRS; expected a georeferenced raster (GeoTIFF, DTED)")
+        raise
     return ds
+
+
+def _check_raster(ds, spec, driver) -> None:
+    """A DEM the grid can be read from: its own driver, one real-valued band, a CRS, a
+    north-up invertible geotransform and cells of a plausible size."""
+    where = f"terrain.file={spec.file!r}"
+    if ds.driver != driver or ds.driver not in DEM_DRIVERS:
+        raise GeoError(f"{where}: opened by GDAL's {ds.driver} driver; expected {driver} (only GeoTIFF and DTED are read)")
+    if ds.count < 1 or ds.subdatasets:
+        raise GeoError(f"{where}: expected one band of heights, got {ds.count} band(s) and {len(ds.subdatasets)} subdataset(s)")
+    if np.dtype(ds.dtypes[0]).kind not in "iuf":
+        raise GeoError(f"{where}: band 1 holds {ds.dtypes[0]} values; expected real heights (integers or floats), "
+                       f"not complex numbers")
+    if ds.crs is None:
+        raise GeoError(f"{where}: the DEM has no CRS; expected a georeferenced raster (GeoTIFF, DTED)")
+    t = ds.transform
+    if not all(math.isfinite(x) for x in (t.a, t.b, t.c, t.d, t.e, t.f)) or t.a * t.e - t.b * t.d == 0:
+        raise GeoError(f"{where}: its geotransform {tuple(t)[:6]} is not invertible; expected a north-up grid (pixel sizes != 0)")
+    if t.b != 0 or t.d != 0:
+        raise GeoError(f"{where}: its geotransform is rotated or sheared (terms {t.b:g}, {t.d:g}); expected a north-up grid: "
+                       f"warp it first (gdalwarp -t_srs <its CRS> in.tif out.tif)")
+    size = max(abs(t.a), abs(t.e))
+    if ds.crs.is_geographic:
+        lo, hi = sorted((ds.bounds.bottom, ds.bounds.top))
+        if size > _PIXEL_DEG_MAX or lo < -90 or hi > 90:
+            raise GeoError(f"{where}: cells of {size:g} deg covering latitudes {lo:g} to {hi:g}; expected cells of at most "
+                           f"{_PIXEL_DEG_MAX:g} deg within -90 to 90 (is the geotransform in the CRS's units?)")
+    elif size * ds.crs.linear_units_factor[1] > _PIXEL_M_MAX:
+        raise GeoError(f"{where}: cells of {size * ds.crs.linear_units_factor[1]:g} m; expected at most {_PIXEL_M_MAX:g} m "
+                       f"(is the geotransform in the CRS's units?)")
 
 
 def _to_dem(ds, to_crs, lat, lon):
@@ -163,7 +245,9 @@ def dem_heightfield(spec, frame: SiteFrame, base_dir=None, centre_xy=(0.0, 0.0))
     """The DEM terrain ``spec`` as a heightfield in the site's apparent ENU frame [m]."""
     xs, ys = _grid(spec, frame, centre_xy)
     xx, yy = (a.ravel() for a in np.meshgrid(xs, ys))
-    with _open(spec, base_dir) as ds:
+    import rasterio
+
+    with rasterio.Env(**GDAL_CLOSED), _open(spec, base_dir) as ds:
         import pyproj
 
         to_crs = pyproj.Transformer.from_crs("EPSG:4326", ds.crs, always_xy=True)
