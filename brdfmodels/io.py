@@ -46,7 +46,8 @@ import numpy as np
 from ._io import read_input_text
 from .geometry import spherical_to_vector
 
-__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "merl_grid", "read_samples", "MERL_SCALE"]
+__all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "merl_grid", "read_samples", "read_csv_columns",
+           "MERL_SCALE"]
 
 
 def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=None):
@@ -64,11 +65,44 @@ def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=No
 _BSDF_LISTS = ("samplerotation", "angleofincidence", "scatterazimuth", "scatterradial")
 
 
-def _numbers(tokens, path, line_no, what):
-    try:
-        return [float(t) for t in tokens]
-    except ValueError:
-        raise ValueError(f"{path}: line {line_no}: {what}: expected numbers, got {' '.join(tokens)[:60]!r}") from None
+def _numbers(tokens, path, line_no, what, first_column=1):
+    """The tokens as floats; the first that is not a number is named by its line and column
+    (never quoted: an input file's contents stay out of error messages)."""
+    out = []
+    for j, t in enumerate(tokens):
+        try:
+            out.append(float(t))
+        except ValueError:
+            raise ValueError(f"{path}: line {line_no}, column {first_column + j}: {what}: expected a number") from None
+    return out
+
+
+def _count(tokens, path, line_no, what) -> int:
+    """A header count: a whole number >= 1 (3.7 is refused, not truncated)."""
+    if not tokens:
+        return -1
+    x = _numbers(tokens[:1], path, line_no, what, 2)[0]
+    if not (math.isfinite(x) and x == int(x) and x >= 1):
+        raise ValueError(f"{path}: line {line_no}, column 2: {what}: expected a whole number of values >= 1")
+    return int(x)
+
+
+# the angle lists of a .bsdf header: (name in messages, lowest, highest) [deg]
+_BSDF_RANGES = {"samplerotation": ("SampleRotation", -360.0, 360.0), "angleofincidence": ("AngleOfIncidence", 0.0, 90.0),
+                "scatterazimuth": ("ScatterAzimuth", 0.0, 360.0), "scatterradial": ("ScatterRadial", 0.0, 180.0)}
+
+
+def _angles(vals, path, line_no, key) -> np.ndarray:
+    """A header's angle list [deg], each finite and within its range (an incidence below 90)."""
+    name, lo, hi = _BSDF_RANGES[key]
+    a = np.array(_numbers(vals, path, line_no, name, 3))
+    bad = ~(np.isfinite(a) & (a >= lo) & (a <= hi)) | ((a >= 90.0) if key == "angleofincidence" else False)
+    if bad.any():
+        j = int(np.flatnonzero(bad)[0])
+        upper = "below 90" if key == "angleofincidence" else f"at most {hi:g}"
+        raise ValueError(f"{path}: line {line_no}: {name}: angle {j + 1} of {len(a)} is {'not finite' if not np.isfinite(a[j]) else 'out of range'}; "
+                         f"expected finite angles of {lo:g} to {upper} deg")
+    return a
 
 
 def _bsdf_header(lines, path):
@@ -80,14 +114,15 @@ def _bsdf_header(lines, path):
         if key == "databegin":
             return head, i + 1
         if key in _BSDF_LISTS:
-            n = int(_numbers(toks[1:2], path, no, toks[0])[0]) if len(toks) > 1 else -1
+            name = _BSDF_RANGES[key][0]
+            n = _count(toks[1:2], path, no, name)
             vals = toks[2:]
             while len(vals) < n and i + 1 < len(lines) and lines[i + 1][1][0].lower() not in _BSDF_LISTS + ("databegin",):
                 i += 1
                 vals += lines[i][1]
             if n < 1 or len(vals) != n:
-                raise ValueError(f"{path}: line {no}: {toks[0]}: expected a count and that many angles")
-            head[key] = np.array(_numbers(vals, path, no, toks[0]))
+                raise ValueError(f"{path}: line {no}: {name}: expected a count and that many angles")
+            head[key] = _angles(vals, path, no, key)
         else:
             head[key] = " ".join(toks[1:])
         i += 1
@@ -108,7 +143,8 @@ def _scatter_directions(theta_spec, az, rad):
 
 
 def _block_values(block, tokens, start, path) -> np.ndarray:
-    """The values of a data block as floats; the first bad one named with its line."""
+    """The values of a data block as floats; the first bad one named by its line and
+    column (``tokens``: (line, column, text))."""
     try:
         v = np.array(block, dtype=float)
     except ValueError:
@@ -120,7 +156,8 @@ def _block_values(block, tokens, start, path) -> np.ndarray:
             except ValueError:
                 ok = False
             if not ok:
-                raise ValueError(f"{path}: line {tokens[start + j][0]}: data: expected a finite BRDF >= 0, got {x!r}")
+                no, col, _ = tokens[start + j]
+                raise ValueError(f"{path}: line {no}, column {col}: data: expected a finite BRDF >= 0")
     return v
 
 
@@ -130,20 +167,20 @@ def read_bsdf(path):
     lines = [(k + 1, ln.split()) for k, ln in enumerate(read_input_text(path, "BSDF file").splitlines())
              if ln.strip() and not ln.lstrip().startswith("#")]
     head, i = _bsdf_header(lines, path)
-    for key, want in (("spectralcontent", "monochrome"), ("scattertype", "brdf")):
-        if head.get(key, want).lower() != want:
-            raise ValueError(f"{path}: {key} = {head[key]!r}: only {want} data are read")
+    for key, name, want in (("spectralcontent", "SpectralContent", "Monochrome"), ("scattertype", "ScatterType", "BRDF")):
+        if head.get(key, want).lower() != want.lower():
+            raise ValueError(f"{path}: {name}: only {want} data are read (expected {name} {want})")
     sym = head.get("symmetry", "").lower()
     if sym not in ("planesymmetrical", "asymmetrical", "asymmetrical4d"):
-        raise ValueError(f"{path}: Symmetry = {head.get('symmetry')!r}: expected PlaneSymmetrical, Asymmetrical or Asymmetrical4D")
+        raise ValueError(f"{path}: Symmetry: expected PlaneSymmetrical, Asymmetrical or Asymmetrical4D")
     if len(head.get("samplerotation", [0.0])) != 1:
         raise ValueError(f"{path}: SampleRotation: one rotation is read (isotropic samples)")
     for key in _BSDF_LISTS[1:]:
         if key not in head:
             raise ValueError(f"{path}: missing the {key} list")
     aoi, az, rad = (np.radians(head[k]) for k in _BSDF_LISTS[1:])
-    tokens = [(no, t) for no, toks in lines[i:] for t in toks]
-    values = [t for _, t in tokens]
+    tokens = [(no, j + 1, t) for no, toks in lines[i:] for j, t in enumerate(toks)]
+    values = [t for _, _, t in tokens]
     wi, wo, f, tid = [], [], [], []
     pos = 0
     need = len(az) * len(rad)
@@ -167,7 +204,7 @@ def read_bsdf(path):
         wi.append(np.broadcast_to([math.sin(t), 0.0, math.cos(t)], (int(keep.sum()), 3)))
         tid += [f"aoi{math.degrees(t):g}"] * int(keep.sum())
     if values[pos:] and values[pos].lower() != "dataend":
-        raise ValueError(f"{path}: unexpected values after the last block ({values[pos][:20]!r})")
+        raise ValueError(f"{path}: line {tokens[pos][0]}, column {tokens[pos][1]}: expected DataEnd after the last block")
     return _samples(np.vstack(wi), np.vstack(wo), np.concatenate(f), tid)
 
 
@@ -183,22 +220,25 @@ def read_astm_e1392(path):
             continue
         key = s.split(None, 1)[0].upper()
         if key == "NUM_POINTS":
-            n_points = int(_numbers(s.split()[1:2], path, k, "NUM_POINTS")[0])
+            n_points = _count(s.split()[1:2], path, k, "NUM_POINTS")
         elif key == "VARS":
-            names = [x.strip().lower() for x in s.split(None, 1)[1].split(",")]
+            names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
+            if len(names) != 5:
+                raise ValueError(f"{path}: line {k}: VARS: expected five names (theta_i, phi_i, theta_s, phi_s and one BRDF "
+                                 f"column: monochrome), got {len(names)}")
         elif s[0].isdigit() or s[0] in "+-.":
             vals = _numbers([x for x in s.split(",") if x.strip()], path, k, "data row")
             if names is None or len(vals) != len(names):
                 raise ValueError(f"{path}: line {k}: expected {len(names) if names else 'VARS before the'} columns")
+            if not all(math.isfinite(v) for v in vals) or vals[4] < 0:
+                raise ValueError(f"{path}: line {k}: data row: expected finite angles [rad] and a finite BRDF >= 0")
             n_rows += 1
             key4 = tuple(vals[:4])
             if key4 not in seen:
                 seen.add(key4)
                 rows.append(vals)
-    if names is None or len(names) < 5:
+    if names is None:
         raise ValueError(f"{path}: expected VARS with theta_i, phi_i, theta_s, phi_s and a BRDF column")
-    if len(names) != 5:
-        raise ValueError(f"{path}: VARS {names}: one BRDF column is read (monochrome)")
     if not rows:
         raise ValueError(f"{path}: no data rows")
     if n_points is not None and n_points != n_rows:
@@ -222,8 +262,8 @@ def read_brdf_csv(path):
     missing = [c for c in _ANGLES if c not in cols]
     value = [c for c in ("brdf_per_sr", "reflectance_factor") if c in cols]
     if missing or len(value) != 1:
-        raise ValueError(f"{path}: line 1: expected columns {list(_ANGLES)} and one of brdf_per_sr or reflectance_factor, "
-                         f"got {cols}")
+        raise ValueError(f"{path}: line 1: expected columns {list(_ANGLES)} and one of brdf_per_sr or reflectance_factor"
+                         f"{'; missing ' + ', '.join(missing) if missing else ''} (the header has {len(cols)} column(s))")
     idx = {c: cols.index(c) for c in cols}
     data = {c: [] for c in cols if c != "test_id"}
     tid = []
@@ -236,9 +276,9 @@ def read_brdf_csv(path):
             try:
                 v = float(r[idx[c]])
             except ValueError:
-                raise ValueError(f"{path}: line {k}: {c} = {r[idx[c]]!r} is not a number") from None
+                raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected a number") from None
             if not math.isfinite(v):
-                raise ValueError(f"{path}: line {k}: {c} = {r[idx[c]]!r} is not finite")
+                raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected a finite number")
             data[c].append(v)
         tid.append(r[idx["test_id"]] if "test_id" in idx else "0")
     if not tid:
@@ -247,6 +287,51 @@ def read_brdf_csv(path):
     wi = spherical_to_vector(np.radians(data["theta_i_deg"]), np.radians(data["phi_i_deg"]))
     wo = spherical_to_vector(np.radians(data["theta_r_deg"]), np.radians(data["phi_r_deg"]))
     return _samples(wi, wo, f, tid, data.get("time_s"), data.get("temperature_k"), data.get("weight"))
+
+
+def read_csv_columns(path, columns, what: str = "CSV file") -> dict:
+    """Named numeric columns of a CSV file whose first line names them: ``{name: (N,) array}``
+    for each of ``columns`` (others ignored). Every error is one line naming the file, the
+    line and the column and what was expected; nothing of the file is quoted (an empty
+    file, a missing column, a short row, a cell that is not a finite number, no rows)."""
+    path = Path(path)
+    lines = read_input_text(path, what).splitlines()
+    start = next((k for k, ln in enumerate(lines) if ln.strip()), None)
+    if start is None:
+        raise ValueError(f"{path}: empty file; expected a header line naming the columns {', '.join(columns)}")
+    names = [c.strip() for c in next(csv.reader([lines[start]]))]
+    missing = [c for c in columns if c not in names]
+    if missing:
+        raise ValueError(f"{path}: line {start + 1}: expected CSV columns {', '.join(columns)}; missing {', '.join(missing)} "
+                         f"(the header has {len(names)} column(s))")
+    twice = [c for c in columns if names.count(c) > 1]
+    if twice:
+        raise ValueError(f"{path}: line {start + 1}: column {twice[0]} appears {names.count(twice[0])} times; expected once")
+    rows = [(k + 1, r) for k, r in enumerate(csv.reader(lines[start + 1:]), start=start + 1) if any(x.strip() for x in r)]
+    if not rows:
+        raise ValueError(f"{path}: no data rows after the header (line {start + 1})")
+    short = next(((no, r) for no, r in rows if len(r) != len(names)), None)
+    if short is not None:
+        raise ValueError(f"{path}: line {short[0]}: {len(short[1])} cells, expected {len(names)} (one per header column)")
+    out = {}
+    for c in columns:
+        j = names.index(c)
+        try:
+            v = np.array([r[j] for _, r in rows], dtype=float)
+        except ValueError:
+            v = None
+        if v is None or not np.all(np.isfinite(v)):
+            bad = next(no for no, r in rows if not _finite(r[j]))
+            raise ValueError(f"{path}: line {bad}, column {j + 1} ({c}): expected a finite number")
+        out[c] = v
+    return out
+
+
+def _finite(text) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
 
 
 MERL_SCALE = {"R": 1.0 / 1500.0, "G": 1.15 / 1500.0, "B": 1.66 / 1500.0}

@@ -113,13 +113,17 @@ def loads(text: str):
         raise ValueError("not a brdfmodels JSON document: nesting too deep") from None
     if not isinstance(doc, dict):
         raise ValueError("not a brdfmodels JSON document: expected an object at the top level")
+    # the format is checked first and no value is quoted: a JSON file that is not a model file
+    # (a credentials file, say) must not see its contents echoed in the error
+    if doc.get("format") != FORMAT_NAME:
+        raise ValueError(f"format: expected {FORMAT_NAME!r} (not a brdfmodels model file)")
+    if doc.get("version") != FORMAT_VERSION:
+        raise ValueError(f"version: this library reads version {FORMAT_VERSION} of {FORMAT_NAME!r} files")
     unknown = set(doc) - {"format", "version", "model"}
     if unknown:
         raise ValueError(f"unknown keys {sorted(unknown)} in model file; expected format, version, model")
-    if doc.get("format") != FORMAT_NAME:
-        raise ValueError(f"format={doc.get('format')!r}: expected {FORMAT_NAME!r}")
-    if doc.get("version") != FORMAT_VERSION:
-        raise ValueError(f"version={doc.get('version')!r}: this library reads version {FORMAT_VERSION}")
+    if "model" not in doc:
+        raise ValueError("missing 'model' (the model's type and params)")
     return model_from_dict(doc["model"])
 
 

@@ -314,10 +314,24 @@ class Samples:
         short = next((i for i, r in enumerate(body) if len(r) != width), None)
         if short is not None:
             raise ValueError(f"{path}: line {short + 2}: expected {width} values, got {len(body[short])}")
-        num = np.array([[float(r[k]) for k in (0, 1, 2, 3, 4, 5, 6, 7, 8, 11, *range(ncol, width))] for r in body])
+        cols = (0, 1, 2, 3, 4, 5, 6, 7, 8, 11, *range(ncol, width))
+        try:
+            num = np.array([[float(r[k]) for k in cols] for r in body])
+            frame = np.array([int(r[10]) for r in body])
+        except ValueError:  # name the cell, quote nothing of the file
+            line, col = next((i + 2, k + 1) for i, r in enumerate(body) for k in (*cols, 10) if not _is_number(r[k], k == 10))
+            raise ValueError(f"{path}: line {line}, column {col}: expected {'an integer' if col == 11 else 'a number'}") from None
         states = {name: num[:, 10 + i] for i, name in enumerate(extra)}
         return cls(num[:, 0:3], num[:, 3:6], num[:, 6], num[:, 7], num[:, 8], np.array([r[9] for r in body]),
-                   np.array([int(r[10]) for r in body]), num[:, 9], states=states)
+                   frame, num[:, 9], states=states)
+
+
+def _is_number(text, integer=False) -> bool:
+    try:
+        (int if integer else float)(text)
+        return True
+    except ValueError:
+        return False
 
 
 def _extra_columns(path, header) -> list:
@@ -564,16 +578,10 @@ def load_test(path) -> ScreenTest:
     pyro_t = pyro_k = None
     if "pyrometer" in d:
         pf = base / _need(d["pyrometer"], "file", "pyrometer")
-        from ._io import check_input_file
+        from .io import read_csv_columns
 
-        check_input_file(pf, "pyrometer file")
-        try:
-            data = np.genfromtxt(pf, delimiter=",", names=True)
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read pyrometer file ({exc.strerror})") from None
-        if data.dtype.names is None or not {"time_s", "temperature_k"} <= set(data.dtype.names):
-            raise ValueError(f"{pf}: expected CSV columns time_s, temperature_k")
-        pyro_t, pyro_k = np.atleast_1d(data["time_s"]), np.atleast_1d(data["temperature_k"])
+        data = read_csv_columns(pf, ["time_s", "temperature_k"], "pyrometer file")
+        pyro_t, pyro_k = data["time_s"], data["temperature_k"]
     return ScreenTest(
         test_id=str(d.get("test_id", path.stem)),
         geometry=geom,

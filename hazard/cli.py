@@ -576,19 +576,9 @@ def _fit_oxidation(args, out):
     from brdfmodels import fitting
     from brdfmodels._io import atomic_write_text
 
-    from brdfmodels._io import check_input_file
+    from brdfmodels.io import read_csv_columns
 
-    path = check_input_file(args.inputs[0], "oxidation series")
-    try:
-        data = np.genfromtxt(path, delimiter=",", names=True)
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
-    if data.dtype.names is None or not {"time_s", "temperature_k", "reflectance"} <= set(data.dtype.names):
-        raise ValueError(f"{path}: expected CSV columns time_s, temperature_k, reflectance")
-    for col in ("time_s", "temperature_k", "reflectance"):
-        bad = np.flatnonzero(~np.isfinite(np.atleast_1d(data[col])))
-        if len(bad):
-            raise ValueError(f"{path}: {col} in data row {int(bad[0]) + 1} is not a finite number")
+    data = read_csv_columns(args.inputs[0], ["time_s", "temperature_k", "reflectance"], "oxidation series")
     r = fitting.fit_oxidation(data["time_s"], data["temperature_k"], data["reflectance"])
     doc = {**r.model.to_dict(), "reflectance0": r.reflectance0, "reference_temperature_k": r.reference_temperature_k,
            "rate_at_reference_per_s": r.rate_at_reference_per_s, "ci95": {k: list(map(float, v)) for k, v in r.ci95.items()},

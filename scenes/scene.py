@@ -20,7 +20,7 @@ import numpy as np
 from pydantic import ValidationError
 
 import brdfmodels
-from brdfmodels._io import check_input_file, parse_toml, read_input_text
+from brdfmodels._io import parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, direction_in_sector, input_path, observer_points, shape_mesh, terrain_heightfield
 from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored
@@ -201,6 +201,15 @@ def _with_polarization(data, polarization):
     return data
 
 
+def _model_file(file, base_dir):
+    """A saved model (brdfmodels JSON) named by a material's ``file``; errors name it."""
+    text = read_input_text(input_path(file, base_dir), "material file")
+    try:
+        return brdfmodels.loads(text)
+    except ValueError as exc:
+        raise ValueError(f"file={file!r}: {exc}") from None
+
+
 def _table_material(spec, base_dir):
     """``{ model = "table", file = ... }``: a MERL ``.binary`` measurement, scattered
     samples (``.bsdf``, ``.astm``, angle ``.csv``) gridded every ``grid_deg`` (default
@@ -218,7 +227,7 @@ def _table_material(spec, base_dir):
         return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
                                                      np.arange(0.0, 90.0 - 1e-9, dd), np.arange(0.0, 180.0 - 1e-9, dp),
                                                      fill=spec.params.get("fill", "envelope"), outside=outside)
-    model = brdfmodels.loads(read_input_text(p, "material file"))
+    model = _model_file(spec.file, base_dir)
     if not isinstance(model, brdfmodels.TabulatedBRDF):
         raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")
     d = model.to_dict()["params"]
@@ -236,7 +245,7 @@ def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=N
         elif spec.model == "table":
             model = _table_material(spec, base_dir)
         elif spec.file is not None:
-            model = brdfmodels.loads(read_input_text(input_path(spec.file, base_dir), "material file"))
+            model = _model_file(spec.file, base_dir)
         else:
             model = brdfmodels.create(spec.model, **spec.params)
         if model.has_specular:
@@ -305,23 +314,15 @@ def _history(spec, where, base_dir):
     if spec is None or spec.kind != "series":
         return None
     if spec.file is not None:
-        p = input_path(spec.file, base_dir)
-        try:
-            check_input_file(p, f"{where}.file")
-            data = np.genfromtxt(p, delimiter=",", names=True)
-        except OSError as exc:
-            raise SceneError(f"{where}.file={spec.file!r}: cannot read ({exc.strerror})") from None
+        from brdfmodels.io import read_csv_columns
+
+        want = list(spec.state_names)
+        try:  # a CSV with a header line: time_s and the states (errors name the line and column, quote nothing)
+            data = read_csv_columns(input_path(spec.file, base_dir), ["time_s", *want], f"{where}.file")
         except ValueError as exc:
             raise SceneError(f"{where}.file={spec.file!r}: {exc}") from None
-        names = data.dtype.names or ()
-        want = spec.state_names
-        if "time_s" not in names or any(w not in names for w in want):
-            raise SceneError(f"{where}.file={spec.file!r}: expected CSV columns time_s and {', '.join(want)}, got {list(names)}")
-        times = np.atleast_1d(data["time_s"])
-        cols = [np.atleast_1d(data[w]) for w in want]
-        states = cols[0] if len(cols) == 1 else np.stack(cols, axis=1)
-        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(states))):
-            raise SceneError(f"{where}.file={spec.file!r}: expected finite numbers in columns time_s and {', '.join(want)}")
+        times = data["time_s"]
+        states = data[want[0]] if len(want) == 1 else np.stack([data[w] for w in want], axis=1)
     else:
         times, states = spec.times_s, spec.states
     try:

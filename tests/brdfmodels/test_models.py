@@ -303,8 +303,12 @@ def test_bad_reflectance(bad):
 
 def test_loads_rejects_unknown_version_and_keys():
     doc = json.loads(bm.dumps(bm.Lambertian(0.5)))
-    with pytest.raises(ValueError, match="version=2: this library reads version 1"):
+    with pytest.raises(ValueError, match="version: this library reads version 1"):
         bm.loads(json.dumps({**doc, "version": 2}))
+    with pytest.raises(ValueError, match="missing 'model'"):  # was a KeyError (issue 30)
+        bm.loads(json.dumps({"format": doc["format"], "version": 1}))
+    with pytest.raises(ValueError, match=r"^format: expected 'brdfmodels.model' \(not a brdfmodels model file\)$"):
+        bm.loads(json.dumps({"format": "SECRET-abc", "token": "SECRET-def"}))  # nothing of the file is quoted
     with pytest.raises(ValueError, match=r"unknown keys \['extra'\]"):
         bm.loads(json.dumps({**doc, "extra": 1}))
     doc["model"]["params"]["colour"] = "red"

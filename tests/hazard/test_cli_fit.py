@@ -66,7 +66,8 @@ def test_fit_oxidation_cli(tmp_path):
     assert doc["activation_temperature_k"] == pytest.approx(9060, rel=1e-4) and "95 % CI" in out
     (tmp_path / "bad.csv").write_text("time_s,temperature_k,reflectance\n0,300,0.9\n1,abc,0.8\n")
     code, _, err = run("fit", "oxidation", tmp_path / "bad.csv", "-o", tmp_path / "b.json")
-    assert code == 2 and "temperature_k in data row 2 is not a finite number" in err and err.count("\n") == 1
+    assert code == 2 and "line 3, column 2 (temperature_k): expected a finite number" in err and err.count("\n") == 1
+    assert "abc" not in err  # the file's contents are not quoted (issue 30)
     code, _, err = run("fit", "oxidation", tmp_path, "-o", tmp_path / "b.json")
     assert code == 2 and "a folder; expected a regular file (oxidation series)" in err
 
