@@ -27,6 +27,7 @@ LIMITS = {
     "SCENARIOS": (1_000_000, "scenarios of a study"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
     "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
+    "TABLE_NODES": (20_000_000, "nodes of a BRDF table gridded from samples (grid_deg; 11.7e6 nodes at 0.5 deg took 0.25 s and 264 MB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
 DEPTH_CEILING = 200  # nesting the parsers can follow (Python's recursion limit is 1000)

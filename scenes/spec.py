@@ -79,9 +79,16 @@ def _nonzero(v, name):
 Time = Annotated[float, Field(ge=-1e9, le=1e9)]  # scenario time [s]
 
 
+MOTION_STEP_MIN_S = 1e-6  # the least time between a moving thing's key times, or a firing window's length [s]
+
+
 def _increasing(times, where):
     if any(b <= a for a, b in zip(times, times[1:])):
         raise ValueError(f"{where}={times!r}: expected strictly increasing times [s]")
+    short = next((i for i, (a, b) in enumerate(zip(times, times[1:])) if b - a < MOTION_STEP_MIN_S), None)
+    if short is not None:
+        raise ValueError(f"{where}: times {short} and {short + 1} are {times[short + 1] - times[short]:.3g} s apart; expected at "
+                         f"least {MOTION_STEP_MIN_S:g} s between the key times of a motion (a shorter one cannot be resolved)")
     return times
 
 
@@ -201,6 +208,9 @@ class LaserSpec(_Strict):
         for i, w in enumerate(v or ()):
             if not w[1] > w[0]:
                 raise ValueError(f"window {i} = {w!r}: expected [t0_s, t1_s] with t1_s > t0_s")
+            if w[1] - w[0] < MOTION_STEP_MIN_S:
+                raise ValueError(f"window {i} = {w!r}: lasts {w[1] - w[0]:.3g} s; expected at least {MOTION_STEP_MIN_S:g} s "
+                                 f"(a shorter burst is a pulse: pulse_energy_j, pulse_duration_s, prf_hz)")
         return v
 
     @model_validator(mode="after")
@@ -344,6 +354,8 @@ class MaterialSpec(BaseModel):
             if (not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                                                   and 0.1 <= x <= 45 for x in g)):
                 raise ValueError(f"grid_deg={g!r}: expected three node spacings [theta_h, theta_d, phi_d] of 0.1 to 45 deg")
+            nodes = math.prod(math.ceil((span - 1e-9) / x) for span, x in zip((90.0, 90.0, 180.0), g))
+            check_limit("TABLE_NODES", nodes, f"grid_deg={g!r}: table nodes ((90/theta_h) x (90/theta_d) x (180/phi_d))")
             if self.params.get("fill", "envelope") not in ("envelope", "fit"):
                 raise ValueError(f"fill={self.params['fill']!r}: expected 'envelope' or 'fit'")
             if self.params.get("outside", "envelope") not in ("error", "envelope", "fit"):
@@ -380,9 +392,9 @@ class _Shape(_Strict):
     height_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("center_geo"))
     normal: Vec3 = [0.0, 0.0, 1.0]
     tangent: Vec3 = [1.0, 0.0, 0.0]
-    size_m: list[Annotated[float, Field(gt=0, le=1e6)]] | None = None
+    size_m: list[Annotated[float, Field(ge=1e-6, le=1e6)]] | None = None  # at least 1 um, as a beam
     file: Name | None = None
-    scale: float = Field(default=1.0, gt=0, le=1e6)
+    scale: float = Field(default=1.0, ge=1e-6, le=1e6)
 
     @field_validator("center_m", "normal", "tangent")
     @classmethod
@@ -462,13 +474,13 @@ class TerrainSpec(_Strict):
         "a DEM's missing cells in the analysis area: 'error', or 'fill' by GDAL's inverse-distance interpolation "
         "(rasterio.fill.fillnodata; the report gives how many were filled)"))
     origin_m: list[Coord] = Field(default=[0.0, 0.0], min_length=2, max_length=2)
-    spacing_m: float | None = Field(default=None, gt=0, le=1e5)
+    spacing_m: float | None = Field(default=None, ge=1e-3, le=1e5)
     center_m: Vec3 = [0.0, 0.0, 0.0]
     center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m") + "; a dem's grid centre")
     height_m: float = Field(default=10.0, ge=-1e5, le=1e5)
-    radius_m: float = Field(default=100.0, gt=0, le=1e7)
-    extent_m: float = Field(default=500.0, gt=0, le=1e7, description="half-width of the procedural ground [m]")
-    resolution_m: float = Field(default=5.0, gt=0, le=1e6)
+    radius_m: float = Field(default=100.0, ge=1e-3, le=1e7)
+    extent_m: float = Field(default=500.0, ge=1e-3, le=1e7, description="half-width of the procedural ground [m]")
+    resolution_m: float = Field(default=5.0, ge=1e-3, le=1e6)
     material: MaterialSpec | None = Field(default=None, description=(
         "how the ground reflects the beam that lands on it (static); default Lambertian of reflectance "
         "TERRAIN_DEFAULT_REFLECTANCE = 1, the most any diffuse ground can return (snow at 1 um reaches 0.8-0.9)"))
@@ -523,7 +535,7 @@ class ObserverSpec(_Strict):
     positions_geo: list[GeoPos] | None = Field(default=None, description=(
         "a track's positions [[lat_deg, lon_deg, height_m], ...] at times_s (along the geodesic between; needs a [site])"))
     velocity_m_s: Vec3 | None = Field(default=None, description="a straight flight line's velocity [m/s] from start_m")
-    duration_s: float | None = Field(default=None, gt=0, le=1e7, description="a straight flight line's duration [s]")
+    duration_s: float | None = Field(default=None, ge=MOTION_STEP_MIN_S, le=1e7, description="a straight flight line's duration [s]")
     start_time_s: Time | None = Field(default=None, description="a straight flight line's start time [s] (default 0)")
 
     @model_validator(mode="after")
