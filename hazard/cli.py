@@ -366,6 +366,8 @@ def _analyse(args, err):
     from .analysis import analyze
     from .progress import progress_to
 
+    if getattr(args, "backend", "embree") == "numpy":  # before any work, whatever the scene needs (issue 30)
+        _needs("rtree", "numpy-backend")
     scene = _load_scene(args.scene, err)
     with progress_to(None if args.quiet else err):
         return analyze(scene, backend=args.backend, progress=_stage_lines(args, err), threads=getattr(args, "threads", None))

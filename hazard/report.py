@@ -539,6 +539,7 @@ def _not_modelled_lines(result) -> list:
     lines = ["Skipped in this run, and notes:"]
     lines += [f"  skipped {s.name}: {s.detail}" for s in result.stages if not s.ran]
     lines += [f"  note: {n}" for n in result.notes]
+    lines += [f"  warning: {w}" for w in getattr(result.scene, "warnings", None) or []]  # also report.json 'warnings'
     lines.append(f"  never modelled: {', '.join(NEVER_MODELLED)}")
     return lines
 

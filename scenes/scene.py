@@ -378,6 +378,10 @@ def _warnings(spec: SceneSpec) -> list:
     la = spec.laser
     if la.divergence_rad > 0.05:
         out.append(f"laser.divergence_rad = {la.divergence_rad:g} rad is a very wide beam (> 0.05 rad): mrad meant?")
+    if la.divergence_rad == 0:
+        out.append("laser.divergence_rad = 0: an ideal collimated beam never spreads, so its direct-beam NOHD (and the danger "
+                   "zone's) is infinite where the atmosphere does not attenuate it (report.json 'inf'); give the measured "
+                   "full-angle divergence for a finite one")
     if la.sector is not None and la.aim_m is not None and not direction_in_sector(
             np.asarray(la.aim_m, float) - np.asarray(la.position_m, float), la.sector, la.pointing_buffer_rad):
         out.append(f"laser.sector = {la.sector.azimuth_deg} deg bearing, {la.sector.elevation_deg} deg elevation does not hold "
@@ -433,6 +437,31 @@ def _magnitude_warnings(spec: SceneSpec) -> list:
     if p is not None and p < POWER_PLAUSIBLE_W[0]:
         return [f"laser.power_w = {p:g} W is under 1 mW for a high-energy laser range: W or kW meant?"]
     return []
+
+
+NEAR_APERTURE_M = 1.0  # observer points this close to the laser aperture are named in a warning [m]
+
+
+def _near_aperture(observers, laser_m, direction) -> list:
+    """Observer points within ``NEAR_APERTURE_M`` of the aperture, said explicitly: on or in
+    front of the aperture plane they are in the beam as it leaves (its full exit
+    irradiance inside its diameter); behind it they are out of the beam (the laser emits
+    forward only), not 0 W/m^2 by accident."""
+    front, behind, names = 0, 0, []
+    for a0, a1, p in observers.blocks():
+        rel = p - laser_m
+        near = np.flatnonzero(np.einsum("ij,ij->i", rel, rel) < NEAR_APERTURE_M ** 2)
+        if len(near):
+            ahead = rel[near] @ direction >= 0
+            front, behind = front + int(ahead.sum()), behind + int((~ahead).sum())
+            names += [a0 + int(i) for i in near[:3 - len(names)]] if len(names) < 3 else []
+    if not front + behind:
+        return []
+    labels = observers.labels()
+    shown = ", ".join(labels[i] for i in names) + (", ..." if front + behind > len(names) else "")
+    return [f"observers: {front + behind} point(s) within {NEAR_APERTURE_M:g} m of the laser aperture ({shown}): {front} on or "
+            f"in front of the aperture plane are in the beam as it leaves (the exit irradiance inside its diameter), {behind} "
+            f"behind it are out of the beam (the laser emits forward only; direct beam 0 W/m^2 there)"]
 
 
 def _check_laser_in_open_air(spec: SceneSpec, lp, offset, terrain) -> None:
@@ -744,7 +773,8 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         terrain=terrain,
         observers=observers,
         terrain_target=terrain_target,
-        warnings=_warnings(spec) + _buried_targets(targets, terrain) + ([] if site is None else site.warnings),
+        warnings=(_warnings(spec) + _buried_targets(targets, terrain) + ([] if site is None else site.warnings)
+                  + _near_aperture(observers, lp - offset, d)),
         site=site,
     )
 

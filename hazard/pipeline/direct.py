@@ -79,8 +79,8 @@ def _beam_gain(optics, group, beam_diameter_m):
 
 @dataclass
 class BeamAt:
-    """The unobstructed beam at points: ``rows`` of the points it reaches (in front of
-    the aperture, irradiance above floating-point zero), their irradiance [W/m^2] with
+    """The unobstructed beam at points: ``rows`` of the points it reaches (on or in front
+    of the aperture plane, irradiance above floating-point zero), their irradiance [W/m^2] with
     attenuation along the ray, the ray's aperture point [m], its path to the point [m]
     and the axial distance [m]."""
 
@@ -95,7 +95,9 @@ def beam_at(beam, points_m, mu) -> BeamAt:
     """The Gaussian beam at points (N, 3), nothing in the way (see the module notes)."""
     p = np.asarray(points_m, float).reshape(-1, 3)
     s, z = beam.to_s(p)
-    idx = np.flatnonzero(np.isfinite(z) & (z > 0) & np.all(np.isfinite(s), axis=1))
+    # z >= 0: a point on the aperture plane is in the beam as it leaves (z = 0, irradiance
+    # P / (pi w0^2) exp(-|s|^2)); behind it (z < 0) the laser emits nothing
+    idx = np.flatnonzero(np.isfinite(z) & (z >= 0) & np.all(np.isfinite(s), axis=1))
     e = beam.irradiance_w_m2(s[idx], z[idx])
     live = e > 0  # exp(-|s|^2) underflows to 0 only far outside the beam
     idx, e = idx[live], e[live]
@@ -107,8 +109,12 @@ def beam_at(beam, points_m, mu) -> BeamAt:
 def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:
     """Per row of ``at``: no object stands between the ray's origin and the point."""
     p = np.asarray(points_m, float).reshape(-1, 3)[at.rows]
-    hits = tracer.first_hit(at.origin_m, p - at.origin_m)
-    return ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
+    clear = np.ones(len(p), bool)  # a point on the aperture itself (no path) has nothing in between
+    far = np.flatnonzero(at.path_m > 0)
+    if len(far):
+        hits = tracer.first_hit(at.origin_m[far], p[far] - at.origin_m[far])
+        clear[far] = ~(hits.hit & (hits.t < at.path_m[far] * (1 - 1e-9)))
+    return clear
 
 
 def direct_beam(beam, observers, tracer, mu) -> DirectBeam:
