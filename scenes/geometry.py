@@ -128,17 +128,26 @@ def shape_mesh(spec, base_dir=None) -> Mesh:
     return _mesh_file(spec, frame, base_dir)
 
 
+MESH_TYPES = ("stl", "obj", "ply", "off")  # self-contained mesh formats a shape file may be
+
+
 def _mesh_file(spec, frame, base_dir):
     import trimesh  # only for scenes with mesh files
 
     from brdfmodels._io import check_input_file
 
     path = input_path(spec.file, base_dir)
+    kind = path.suffix.lower().lstrip(".")
+    if kind not in MESH_TYPES:
+        raise ValueError(f"file={spec.file!r}: expected a mesh file of type {', '.join(MESH_TYPES)} (by its suffix); "
+                         f"formats that refer to other files or URLs (glTF, ...) are refused")
     check_input_file(path, "mesh file")
-    try:
-        m = trimesh.load(str(path), force="mesh", process=False)  # processing merged (and dropped) non-finite vertices
-    except Exception as exc:  # trimesh raises many kinds
-        raise ValueError(f"file={spec.file!r}: cannot read the mesh ({exc})") from None
+    try:  # from an open file, with no resolver: the mesh is read alone (an OBJ's mtllib or textures are not followed)
+        with open(path, "rb") as fh:
+            m = trimesh.load(fh, file_type=kind, force="mesh", process=False)  # processing merged (and dropped) non-finite vertices
+    except Exception as exc:  # trimesh raises many kinds; their text may quote the file, so only the kind is named
+        raise ValueError(f"file={spec.file!r}: cannot read the mesh as {kind.upper()} ({type(exc).__name__}; "
+                         f"a damaged file, or another format?)") from None
     if len(m.faces) == 0:
         raise ValueError(f"file={spec.file!r}: the mesh has no triangles")
     v = np.asarray(m.vertices, float) * spec.scale

@@ -197,3 +197,13 @@ def test_a_zero_divergence_says_why_its_nohd_is_infinite(tmp_path):
     reason = [w for w in doc["warnings"] if w.startswith("laser.divergence_rad = 0")]
     assert len(reason) == 1 and "infinite" in reason[0]
     assert f"warning: {reason[0]}" in out
+
+
+@pytest.mark.parametrize("name, content, words", [
+    ("m.gltf", '{"buffers": [{"uri": "/etc/passwd"}]}', ["expected a mesh file of type stl, obj, ply, off", "refused"]),
+    ("m.obj", f"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 {SECRET}\n", ["cannot read the mesh as OBJ"]),
+])
+def test_mesh_files_are_read_alone_and_not_echoed(name, content, words, tmp_path):
+    (tmp_path / name).write_text(content)
+    text = BASE.replace('shape = "plate"', f'shape = "mesh"\nfile = "{name}"').replace("size_m = [1.0, 1.0]\n", "")
+    _refused(tmp_path, text, "targets[0]", *words, verbs=("validate",))
