@@ -464,7 +464,7 @@ class SiteSpec(_Strict):
 
 class TerrainSpec(_Strict):
     """Ground: a heightmap (``file`` .npy of heights [m], ``origin_m`` and ``spacing_m``), a
-    ``dem`` (``file`` any raster GDAL reads, GeoTIFF or DTED, in its own CRS; needs a
+    ``dem`` (``file`` a local GeoTIFF or DTED file, in its own CRS; needs a
     ``[site]``; resampled to ``resolution_m`` over ``extent_m`` about ``center_m``) or a
     procedural ``hill`` / ``valley`` (Gaussian bump) / ``flat`` ground."""
 
@@ -490,7 +490,7 @@ class TerrainSpec(_Strict):
         if self.kind == "heightmap" and (self.file is None or self.spacing_m is None):
             raise ValueError("a heightmap terrain needs file (.npy) and spacing_m")
         if self.kind == "dem" and self.file is None:
-            raise ValueError("a dem terrain needs file (a GeoTIFF, DTED or any raster GDAL reads)")
+            raise ValueError("a dem terrain needs file (a local GeoTIFF or DTED file)")
         if self.kind != "dem" and self.nodata != "error":
             raise ValueError("nodata: only for kind = 'dem'")
         if self.kind != "heightmap" and self.extent_m / self.resolution_m > 2000:
