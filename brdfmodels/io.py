@@ -348,8 +348,9 @@ def _merl_table(path):
         raise ValueError(f"{path}: not a MERL file (shorter than its 12-byte header)")
     dims = np.frombuffer(raw[:12], dtype="<i4")
     n = int(np.prod(dims.astype(np.int64)))
-    if np.any(dims < 1) or len(raw) != 12 + 3 * 8 * n:
-        raise ValueError(f"{path}: header dims {dims.tolist()} need {12 + 24 * n} bytes, the file has {len(raw)}")
+    if np.any(dims < 1) or len(raw) != 12 + 3 * 8 * n:  # the dims are not quoted: they are the file's first 12 bytes
+        raise ValueError(f"{path}: not a MERL file of the size its header gives (12 + 24 n_h n_d n_phi bytes; the file has "
+                         f"{len(raw)})")
     return tuple(int(x) for x in dims), np.frombuffer(raw[12:], dtype="<f8").reshape(3, n)
 
 

@@ -339,7 +339,8 @@ def _extra_columns(path, header) -> list:
     extra = [c for c in header if c not in Samples.COLUMNS]
     dup = sorted({c for c in header if list(header).count(c) > 1})
     if dup:
-        raise ValueError(f"{path}: columns {dup} appear more than once; expected each column once")
+        raise ValueError(f"{path}: line 1: column {list(header).index(dup[0]) + 1} and another have the same name; "
+                         f"expected each column once")
     return extra
 
 
@@ -560,8 +561,8 @@ def load_test(path) -> ScreenTest:
         check_input_file(p, f"image file of {path}")
         try:
             arr = np.load(p, allow_pickle=False)
-        except (OSError, ValueError, EOFError) as exc:
-            raise ValueError(f"{path}: cannot read {name} ({exc})") from None
+        except (OSError, ValueError, EOFError) as exc:  # NumPy's text may quote the file: only its kind is named
+            raise ValueError(f"{path}: cannot read {name} ({type(exc).__name__}: not a .npy / .npz file of plain numbers?)") from None
         if key is not None:
             if key not in arr:
                 raise ValueError(f"{path}: {name} has no array {key!r}")

@@ -203,15 +203,17 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
         check_input_file(path, "terrain.file")
         try:
             h = np.load(path, allow_pickle=False, mmap_mode="r")  # the header first: its size is checked before reading
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({exc})") from None
+        except (OSError, ValueError) as exc:  # NumPy's text may quote the header: only its kind is named
+            raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({type(exc).__name__}: not a .npy file of "
+                             f"plain numbers?)") from None
         if not isinstance(h, np.ndarray):  # an .npz archive
             raise ValueError(f"terrain.file={spec.file!r}: expected a .npy file holding one 2-d array of heights, got an archive")
         check_limit("TERRAIN_NODES", int(h.size), f"terrain.file={spec.file!r}: nodes")
         try:
             h = np.array(h)
         except (OSError, ValueError) as exc:  # a header that promises more than the file holds
-            raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({exc})") from None
+            raise ValueError(f"terrain.file={spec.file!r}: cannot read the heightmap ({type(exc).__name__}: the file holds "
+                             f"less than its header promises?)") from None
         if h.dtype.kind not in "iuf" or h.ndim != 2 or min(h.shape) < 2 or not np.all(np.isfinite(h)) or np.abs(h).max() > 1e5:
             raise ValueError(f"terrain.file={spec.file!r}: expected a 2-d array of finite heights [m], got shape {h.shape}")
         return Heightfield(spec.origin_m[0], spec.origin_m[1], spec.spacing_m, np.asarray(h, float))

@@ -166,5 +166,5 @@ def test_merl_reads_back_the_analytic_brdf(tmp_path):
         np.testing.assert_allclose(s.brdf_per_sr, TRUTH.evaluate(s.wi, s.wo), rtol=1e-9)
     assert len(read_samples(tmp_path / "m.binary")) == len(s)
     (tmp_path / "short.binary").write_bytes(_merl_bytes((9, 9, 18), TRUTH)[:-8])
-    with pytest.raises(ValueError, match=r"header dims \[9, 9, 18\] need"):
+    with pytest.raises(ValueError, match=r"not a MERL file of the size its header gives .* the file has 34996\)$"):
         read_merl(tmp_path / "short.binary")

@@ -207,3 +207,14 @@ def test_mesh_files_are_read_alone_and_not_echoed(name, content, words, tmp_path
     (tmp_path / name).write_text(content)
     text = BASE.replace('shape = "plate"', f'shape = "mesh"\nfile = "{name}"').replace("size_m = [1.0, 1.0]\n", "")
     _refused(tmp_path, text, "targets[0]", *words, verbs=("validate",))
+
+
+def test_binary_headers_are_not_echoed(tmp_path):
+    """A .npy header and a MERL file's first 12 bytes (its dims) were quoted by the errors."""
+    header = b'{"descr": "' + SECRET.encode() + b'", "fortran_order": False, "shape": (2, 2), }'
+    (tmp_path / "h.npy").write_bytes(b"\x93NUMPY\x01\x00" + len(header + b"\n").to_bytes(2, "little") + header + b"\n")
+    _refused(tmp_path, BASE + '[terrain]\nkind = "heightmap"\nfile = "h.npy"\nspacing_m = 1.0\n',
+             "terrain.file='h.npy'", "cannot read the heightmap")
+    (tmp_path / "m.binary").write_bytes(SECRET.encode()[:12] + b"\0" * 20)
+    line = _refused(tmp_path, _table("m.binary"), "not a MERL file", verbs=("validate",))
+    assert str(int.from_bytes(SECRET.encode()[:4], "little")) not in line
