@@ -452,7 +452,7 @@ def _near_aperture(observers, laser_m, direction) -> list:
         rel = p - laser_m
         near = np.flatnonzero(np.einsum("ij,ij->i", rel, rel) < NEAR_APERTURE_M ** 2)
         if len(near):
-            ahead = rel[near] @ direction >= 0
+            ahead = rel[near] @ direction >= -1e-9  # on the plane within 1 nm (hazard.pipeline.direct.APERTURE_PLANE_TOL_M)
             front, behind = front + int(ahead.sum()), behind + int((~ahead).sum())
             names += [a0 + int(i) for i in near[:3 - len(names)]] if len(names) < 3 else []
     if not front + behind:

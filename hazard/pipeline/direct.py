@@ -22,6 +22,8 @@ from ..nohd import PUPIL_DIAMETER_M, optical_gain
 
 __all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam", "with_pointing"]
 
+APERTURE_PLANE_TOL_M = 1e-9  # a point this close to the aperture plane is on it [m]
+
 
 @dataclass
 class DirectBeam:
@@ -96,7 +98,9 @@ def beam_at(beam, points_m, mu) -> BeamAt:
     p = np.asarray(points_m, float).reshape(-1, 3)
     s, z = beam.to_s(p)
     # z >= 0: a point on the aperture plane is in the beam as it leaves (z = 0, irradiance
-    # P / (pi w0^2) exp(-|s|^2)); behind it (z < 0) the laser emits nothing
+    # P / (pi w0^2) exp(-|s|^2)); behind it (z < 0) the laser emits nothing. "On the plane"
+    # within APERTURE_PLANE_TOL_M: rounding puts a point given on it 1e-17 m either side.
+    z = np.where(np.abs(z) <= APERTURE_PLANE_TOL_M, 0.0, z)
     idx = np.flatnonzero(np.isfinite(z) & (z >= 0) & np.all(np.isfinite(s), axis=1))
     e = beam.irradiance_w_m2(s[idx], z[idx])
     live = e > 0  # exp(-|s|^2) underflows to 0 only far outside the beam
@@ -110,7 +114,7 @@ def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:
     """Per row of ``at``: no object stands between the ray's origin and the point."""
     p = np.asarray(points_m, float).reshape(-1, 3)[at.rows]
     clear = np.ones(len(p), bool)  # a point on the aperture itself (no path) has nothing in between
-    far = np.flatnonzero(at.path_m > 0)
+    far = np.flatnonzero(at.path_m > APERTURE_PLANE_TOL_M)
     if len(far):
         hits = tracer.first_hit(at.origin_m[far], p[far] - at.origin_m[far])
         clear[far] = ~(hits.hit & (hits.t < at.path_m[far] * (1 - 1e-9)))
