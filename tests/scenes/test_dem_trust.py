@@ -215,3 +215,11 @@ def test_nonsense_rasters_are_refused(case, words, tmp_path):
           "100-degree cells, projected": dict(transform=Affine(1e7, 0.0, 0.0, 0.0, -1e7, 0.0), crs="EPSG:32613")}[case]
     _tif(tmp_path / "dem.tif", h + (5j if case == "complex" else 0), **kw)
     _refused(tmp_path, "dem.tif", *words)
+
+
+def test_a_truncated_geotiff_is_an_input_error(tmp_path):
+    """Its header reads, its cells do not: was RasterioIOError, exit 1."""
+    _tif(tmp_path / "full.tif", np.full((N, N), 1600.0))
+    data = (tmp_path / "full.tif").read_bytes()
+    (tmp_path / "dem.tif").write_bytes(data[: len(data) // 2])
+    _refused(tmp_path, "dem.tif", "cannot read the DEM's cells", "truncated")
