@@ -129,6 +129,8 @@ class TabulatedBRDF(BRDFModel):
         from .io import merl_grid
 
         (th, td, pd), v = merl_grid(path, channel)
+        if not np.any(np.isfinite(v)):
+            raise ValueError(f"{path}: no cell of the MERL file has data (every value negative or not finite)")
         v = np.where(np.isnan(v), np.nanmax(v), v)
         sl = slice(None, None, step)
         return cls(th[sl], td[sl], pd[sl], v[sl, sl, sl], outside)

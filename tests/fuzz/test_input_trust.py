@@ -218,3 +218,9 @@ def test_binary_headers_are_not_echoed(tmp_path):
     (tmp_path / "m.binary").write_bytes(SECRET.encode()[:12] + b"\0" * 20)
     line = _refused(tmp_path, _table("m.binary"), "not a MERL file", verbs=("validate",))
     assert str(int.from_bytes(SECRET.encode()[:4], "little")) not in line
+
+
+def test_a_merl_file_without_data_is_an_input_error(tmp_path):
+    """Every cell NaN: a raw NumPy 'All-NaN slice' warning, then an error naming no file."""
+    (tmp_path / "m.binary").write_bytes(b"\x01\x00\x00\x00" * 3 + b"\xff" * 24)
+    _refused(tmp_path, _table("m.binary"), "m.binary", "no cell of the MERL file has data", verbs=("validate",))
