@@ -20,6 +20,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import warnings
 
 import pytest
 
@@ -37,8 +38,13 @@ SERIES = '\n[targets.history]\nkind = "series"\nstate = "reflectance_factor"\nfi
 
 
 def _cli(*argv):
+    """(exit code, stdout, stderr); a raw NumPy / Python warning on the way fails the test."""
     out, err = io.StringIO(), io.StringIO()
-    code = main([str(a) for a in argv], stdout=out, stderr=err)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code = main([str(a) for a in argv], stdout=out, stderr=err)
+    raw = [str(w.message) for w in caught if issubclass(w.category, (RuntimeWarning, UserWarning))]
+    assert not raw, raw
     return code, out.getvalue(), err.getvalue()
 
 
