@@ -90,7 +90,7 @@ def dem_path(file: str, base_dir=None):
     from brdfmodels._io import check_input_file
 
     name = str(file)
-    if "://" in name or name.startswith("/vsi") or re.match(r"^[A-Za-z][A-Za-z0-9_]+:", name):
+    if "://" in name or name.startswith("/vsi") or re.match(r"^[A-Z][A-Z0-9_]+:", name):  # GDAL subdatasets: NETCDF:, GTIFF_DIR:
         raise GeoError(f"terrain.file={name!r}: expected the path of a local GeoTIFF or DTED file; URLs, GDAL virtual "
                        f"file systems (/vsi...) and subdataset names are refused (a DEM is read only as a local file)")
     path = input_path(name, base_dir).absolute()
