@@ -21,8 +21,9 @@ pointed there gives (range-safety.md section 1; :class:`hazard.beam.BeamGeometry
 its largest value over A (E falls with delta wherever 4 L / (a + L phi) > phi, i.e.
 beyond micrometres of the aperture), times the optical gain of the observer's group
 with the beam's diameter there. The distance from u to the sector (azimuth [A0, A1]
-clockwise from +y, elevation [E0, E1]) is exact: inside it is 0; else the least angle to
-its edges, the two meridian arcs (the foot of u on each arc's great circle, or an arc's
+clockwise from +y, elevation [E0, E1]) is exact (:func:`scenes.geometry.angle_to_sector_rad`,
+shared with the danger zone's directions): inside it is 0; else the least angle to its
+edges, the two meridian arcs (the foot of u on each arc's great circle, or an arc's
 ends) and the two circles of elevation (at u's azimuth when it lies in [A0, A1], else
 at their ends).
 

@@ -11,9 +11,14 @@ segments, widened by the beam's own hazardous half-width.
 
 How it is computed, and what is conservative:
 
-- directions: a pointing cone in rings every theta_b / 32; a sector on an azimuth x
-  elevation lattice every theta_b / 4 (the spec's "azimuth steps of at most theta_b /
-  4"), at most ``MAX_RAYS`` (a coarser step is said);
+- directions: a pointing cone in rings every theta_b / 32; a sector widened by theta_b
+  on the sphere (every direction within the angle theta_b of the sector, the buffer
+  about every edge) in rows of elevation every theta_b / 4, each row from its exact
+  first to its last bearing every theta_b / 4 in bearing (the spec's "azimuth steps of
+  at most theta_b / 4"; :func:`scenes.geometry.widened_azimuths_rad`: beside a meridian
+  arc at elevation E the row reaches asin(sin theta_b / cos E) beyond it, about
+  theta_b / cos E, not theta_b), plus the rows where the caps about the corners are
+  widest; at most ``MAX_RAYS`` (a coarser step is said);
 - each direction is ray-cast (Embree) against the terrain and the occluders. Targets
   are not backstops: within its pointing error the beam can miss them;
 - the zone is star-shaped about the laser's foot: around it, in bins of the largest
