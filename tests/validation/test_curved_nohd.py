@@ -171,3 +171,65 @@ def test_cylinder_nohd_property(**kw):
 def test_curved_nohd_sweep(kind, **kw):
     """Larger sweep of the two properties."""
     _check(kind, **kw)
+
+
+def off_centre_reference(kind, P, r, rho, a, phi, R1, x_off, mu):
+    """The longest NOHD [m] of a mirror (axis / centre at the origin) lit by a beam along
+    +y whose axis passes x_off from it, in the plane z = 0, and its ray: the ray at
+    impact parameter h hits P = (h, -sqrt(r^2 - h^2)) with cos_i = sqrt(r^2 - h^2) / r,
+    carries E(h) = 4 P / (pi D^2) exp(-4 (h - x_off)^2 / D^2) (D = a + z phi, z = R1 -
+    sqrt(r^2 - h^2) from the aperture) and spreads as (1 + D/p + 2D/(r cos_i)) times
+    (1 + D/p + 2D cos_i / r) for a sphere, (1 + D/p) for a cylinder (Coddington), p =
+    z + a / phi; the root of E = MPE maximised over h here (bounded Brent). By symmetry
+    the sphere's worst ray lies in that plane. Returns (NOHD, P, unit ray)."""
+    from scipy.optimize import brentq, minimize_scalar
+
+    def ray(h):
+        c = math.sqrt(r * r - h * h) / r
+        z = R1 - r * c
+        Db = a + z * phi
+        e = rho * 4 * P / (math.pi * Db * Db) * math.exp(-4 * (h - x_off) ** 2 / (Db * Db)) * math.exp(-mu * z)
+        p = z + a / phi
+        sag = (lambda D: 1 + D / p + 2 * D * c / r) if kind == "sphere" else (lambda D: 1 + D / p)
+        return e, c, p, sag
+
+    def nohd(h):
+        e, c, p, sag = ray(h)
+        f = lambda D: math.log(e / MPE) - mu * D - math.log(1 + D / p + 2 * D / (r * c)) - math.log(sag(D))
+        return brentq(f, 0.0, 1e7, xtol=1e-14, rtol=1e-13) if e > MPE else 0.0
+
+    res = minimize_scalar(lambda h: -nohd(h), bounds=(-0.999 * r, 0.999 * r), method="bounded", options={"xatol": 1e-10 * r})
+    h = float(res.x)
+    point = np.array([h, -math.sqrt(r * r - h * h), 0.0])
+    n = point / r
+    d = np.array([0.0, 1.0, 0.0])
+    return nohd(h), point, d - 2 * (d @ n) * n
+
+
+@pytest.mark.parametrize("kind", ["sphere", "cylinder"])
+@pytest.mark.parametrize("x_off_w", [0.4, 1.2])
+def test_off_centre_beam(kind, x_off_w):
+    """A nearly collimated beam (phi 1 urad) 5 cm wide, its axis 0.4 or 1.2 of its 1/e
+    radius beside a 10 cm mirror's centre, 300 m away, mu = 1e-4 /m, 20 kW on the sphere,
+    50 W on the cylinder (2 m long): the NOHD is the
+    longest root over the impact parameter (``off_centre_reference``), not the vertex's;
+    the direction is that ray's, and observers on it at 0.99 / 1.01 of it are / are not
+    hazardous. 1e-4."""
+    r, R1, a, phi, rho, mu = 0.1, 300.0, 0.05, 1e-6, 0.8, 1e-4
+    w = (a + R1 * phi) / 2
+    x_off = x_off_w * w
+    P = 2e4 if kind == "sphere" else 50.0  # NOHDs of some 20 m
+    nohd, point, u = off_centre_reference(kind, P, r, rho, a, phi, R1, x_off, mu)
+    assert 50 * r < nohd < 1e5
+    size = (2 * r,) if kind == "sphere" else (2 * r, 2.0)
+    target = dict(name="mirror", shape=kind, center=np.zeros(3), normal=[0.0, 0.0, 1.0], tangent=[1.0, 0.0, 0.0],
+                  size=size, material=ref.specular(rho))
+    obs = [(f"f{f}", point + f * nohd * u, None) for f in (0.99, 1.01)]
+    res = hazard.analyze(scenes.loads(ref.scene_text(power=P, a=a, phi=phi, position=[x_off, -R1, 0.0],
+                                                    aim=[x_off, 0.0, 0.0], targets=[target], observers=obs, mu=mu)))
+    row = res.targets[0]
+    assert row.specular_nohd_static_m >= nohd * (1 - 1e-4)
+    assert row.specular_nohd_static_m == pytest.approx(nohd, rel=1e-4)
+    assert np.degrees(math.acos(min(1.0, float(np.dot(row.specular_direction, u))))) < 0.5
+    ratio = res.observers.reflected_irradiance_w_m2 / MPE
+    assert ratio[0] >= 1.0 > ratio[1]
