@@ -5,7 +5,8 @@ The beam may point anywhere within the pointing buffer b of the sector (bearings
 [A0, A1], elevations [E0, E1]): the set of directions whose great-circle angle to the
 sector is at most b (range-safety.md section 3, the buffer about every edge). Here:
 
-- observers are put just inside and just outside that set: from a point Q on an edge
+- observers are put on the edge of that set (b (1 - 1e-6)) and just outside it
+  (where the nearest beam is clear of them): from a point Q on an edge
   of the sector (a meridian arc, a circle of elevation, a corner) along a great circle
   leaving the sector at right angles (at a corner: between its two edges' normals), by
   an angle d; their angle to the sector is measured here by brute force, the least
@@ -18,9 +19,10 @@ sector is at most b (range-safety.md section 3, the buffer about every edge). He
   drawn zone polygon (report.json ``sdz.polygon_m``), and the verdicts are those of
   the formulas;
 - tightness: the widest bearing of the set is asin(sin b / cos E1) beyond A1, at
-  elevation asin(sin E1 / cos b) (the cap about the corner); observers there at twice
-  that angle from the corner are outside the polygon (it is an outer envelope, not a
-  disk about the laser).
+  elevation asin(sin E1 / cos b) (the cap about the corner); observers at the widest
+  bearing of the cap of radius 2 b about each top corner, half the NOHD out, are
+  outside the polygon and not hazardous (it is an outer envelope, not a disk about the
+  laser).
 
 Widening the bearings by b instead (a flat map) leaves out the band between b and
 asin(sin b / cos E): at E = 60-75 deg the first two checks fail on it.
@@ -99,8 +101,8 @@ def outside_offset(L, b):
 
 def _observers(a0, a1, e0, e1, b, t, L):
     """(point, angle to the sector by brute force, expected hazardous) for observers
-    inside (d = 0.9 b) and outside (d = b + outside_offset) each edge and corner, and
-    the two tightness observers (None for the verdict: only the polygon is checked)."""
+    on the buffer's edge (d = b (1 - 1e-6)) and outside it (d = b + outside_offset) at
+    each edge and corner, and the two tightness observers (None: outside the polygon)."""
     laser = np.array([0.0, 0.0, HEIGHT])
     am, em = a0 + t * (a1 - a0), e0 + t * (e1 - e0)
     starts = [(bearing(a1, em), east(a1)), (bearing(a0, em), -east(a0)),
@@ -110,7 +112,7 @@ def _observers(a0, a1, e0, e1, b, t, L):
             starts.append((bearing(a, e), sa * east(a) + se * north(a, e)))
     out = []
     for q, tan in starts:
-        for d, hazardous in ((0.9 * b, True), (b + outside_offset(L, b), False)):
+        for d, hazardous in ((b * (1 - 1e-6), True), (b + outside_offset(L, b), False)):
             u = along(q, tan, d)
             out.append((laser + L * u, angle_to_sector(u, a0, a1, e0, e1), hazardous))
     for a, sa in ((a0, -1.0), (a1, 1.0)):  # beyond the widest bearing of the cap about each top corner
@@ -142,7 +144,7 @@ def _check(az0, width, e0, rise, b, t, L):
             assert not inside and not verdict[i], f"observer {i} beyond the widest bearing is inside the drawn zone"
             continue
         if want:
-            assert dist <= b * 0.95, f"observer {i}: built {0.9 * b:.6g} rad from the sector, measured {dist:.6g}"
+            assert dist <= b * (1 + 1e-5), f"observer {i}: built {b:.6g} rad from the sector, measured {dist:.6g}"
             assert irradiance(L, 0.0) >= MPE * 2
         else:
             assert dist >= b * 1.05
