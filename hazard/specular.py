@@ -181,9 +181,12 @@ def _specular_point(spot, obs):
             rho_o = np.linalg.norm(rel - (rel @ ax)[:, None] * ax - r * na, axis=1)
             dax = d @ ax
             target = rel @ ax - rho_o * dax / np.sqrt(np.maximum(1 - dax * dax, 1e-300))
-            along[active] = (1 - k) * along[active] + k * target
+            step = k * (target - along[active])
+            along[active] += step
         n_new = _unit((1 - k) * na + k * _unit(u))
         moved = np.max(np.abs(n_new - na), axis=1)
+        if ax is not None:  # a row settles when its point along the axis does too
+            moved = np.maximum(moved, np.abs(step) / r)
         n[active] = n_new
         active = active[moved > 1e-14]
     p = c + r * n if ax is None else c + along[:, None] * ax + r * n
