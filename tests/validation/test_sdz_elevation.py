@@ -19,7 +19,8 @@ sector is at most b (range-safety.md section 3, the buffer about every edge). He
   drawn zone polygon (report.json ``sdz.polygon_m``), and the verdicts are those of
   the formulas;
 - tightness: the widest bearing of the set is asin(sin b / cos E1) beyond A1, at
-  elevation asin(sin E1 / cos b) (the cap about the corner); observers at the widest
+  elevation asin(sin E1 / cos b) (the cap about the corner): observers there are
+  hazardous and inside the polygon; observers at the widest
   bearing of the cap of radius 2 b about each top corner, half the NOHD out, are
   outside the polygon and not hazardous (it is an outer envelope, not a disk about the
   laser).
@@ -102,7 +103,8 @@ def outside_offset(L, b):
 def _observers(a0, a1, e0, e1, b, t, L):
     """(point, angle to the sector by brute force, expected hazardous) for observers
     on the buffer's edge (d = b (1 - 1e-6)) and outside it (d = b + outside_offset) at
-    each edge and corner, and the two tightness observers (None: outside the polygon)."""
+    each edge and corner, at the widest bearing of the cap of radius b about each top
+    corner, and the two tightness observers (None: outside the polygon)."""
     laser = np.array([0.0, 0.0, HEIGHT])
     am, em = a0 + t * (a1 - a0), e0 + t * (e1 - e0)
     starts = [(bearing(a1, em), east(a1)), (bearing(a0, em), -east(a0)),
@@ -115,8 +117,11 @@ def _observers(a0, a1, e0, e1, b, t, L):
         for d, hazardous in ((b * (1 - 1e-6), True), (b + outside_offset(L, b), False)):
             u = along(q, tan, d)
             out.append((laser + L * u, angle_to_sector(u, a0, a1, e0, e1), hazardous))
-    for a, sa in ((a0, -1.0), (a1, 1.0)):  # beyond the widest bearing of the cap about each top corner
-        el_tip = math.asin(math.sin(e1) / math.cos(2 * b))
+    for a, sa in ((a0, -1.0), (a1, 1.0)):  # the widest bearing of the cap about each top corner
+        bi = b * (1 - 1e-6)
+        u = bearing(a + sa * math.asin(math.sin(bi) / math.cos(e1)), math.asin(math.sin(e1) / math.cos(bi)))
+        out.append((laser + L * u, angle_to_sector(u, a0, a1, e0, e1), True))
+        el_tip = math.asin(math.sin(e1) / math.cos(2 * b))  # and beyond it, the cap of 2 b
         az = a + sa * math.asin(math.sin(2 * b) / math.cos(e1))
         out.append((laser + 0.5 * NOHD * bearing(az, el_tip), None, None))
     return out
