@@ -18,10 +18,14 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   tangential, ``1/p + 2 kappa_n cos(theta)`` sagittal, p the incident wavefront radius),
   so ``E(D) = rho E_inc(P) / ((1 + D/q_t)(1 + D/q_s))`` at distance D. Far away this is
   ``rho E r^2 / (4 D^2)`` for a sphere and ``rho E r cos(theta) / (2 D)`` for a cylinder
-  whose axis is normal to the plane of incidence (spec section 4). For a cylinder hit
-  obliquely only the normal curvature in the plane of incidence, ``cos^2(beta) / r``, is
-  applied (tangential), the sagittal spread not: less spread than the true one, the
-  conservative side.
+  whose axis is normal to the plane of incidence (spec section 4). A cylinder hit
+  obliquely (the plane of incidence at beta to its cross-section) spreads by its one
+  curvature 1/r along the circumference: the generalised Coddington equations
+  (Deschamps, Proc. IEEE 60:1022 (1972), eq. for reflection Q_r = Q_i + 2 cos_i
+  Theta^-1 C Theta^-1) give the ray tube's area factor exactly as
+  ``(1 + D/p)(1 + D/p + 2 D (cos^2(beta) / cos_i + sin^2(beta) cos_i) / r)``.
+* The specular NOHD of a sphere or cylinder is solved on that same function along the
+  worst reflected ray (:func:`specular_nohd`), so the observers and the NOHD agree.
 * Attenuation once per leg: ``exp(-mu (R1 + D))``, R1 from the aperture to the mirror.
 """
 
@@ -177,9 +181,12 @@ def _specular_point(spot, obs):
             rho_o = np.linalg.norm(rel - (rel @ ax)[:, None] * ax - r * na, axis=1)
             dax = d @ ax
             target = rel @ ax - rho_o * dax / np.sqrt(np.maximum(1 - dax * dax, 1e-300))
-            along[active] = (1 - k) * along[active] + k * target
+            step = k * (target - along[active])
+            along[active] += step
         n_new = _unit((1 - k) * na + k * _unit(u))
         moved = np.max(np.abs(n_new - na), axis=1)
+        if ax is not None:  # a row settles when its point along the axis does too
+            moved = np.maximum(moved, np.abs(step) / r)
         n[active] = n_new
         active = active[moved > 1e-14]
     p = c + r * n if ax is None else c + along[:, None] * ax + r * n
@@ -193,18 +200,44 @@ def _specular_point(spot, obs):
 
 
 def _vergences(kind, n, d, p_src, ax=None, r=1.0):
-    """Reflected wavefront vergences (1/q_t, 1/q_s) [1/m] (Coddington, reflection)."""
+    """Reflected wavefront vergences (1/q_t, 1/q_s) [1/m] (Coddington, reflection); for a
+    cylinder the two eigenvalues of its vergence matrix (their area factor
+    ``(1 + D/q_t)(1 + D/q_s)`` is exact)."""
     cos_i = np.clip(-(n * d).sum(1), 1e-12, 1.0)
     v_in = np.where(np.isfinite(p_src), 1.0 / np.where(np.isfinite(p_src), p_src, 1.0), 0.0)
     if kind == "flat":
         return v_in, v_in
     if kind == "sphere":
         return v_in + 2.0 / (r * cos_i), v_in + 2.0 * cos_i / r
+    # a cylinder curves along the circumference c only (curvature tensor c c^T / r): the
+    # reflected vergence matrix v_in I + 2 M, M = [[k_tt / cos_i, k_ts], [k_ts, k_ss cos_i]]
+    # (generalised Coddington), has det M = 0, so det(I + D V) = (1 + D v_in)(1 + D v_in +
+    # 2 D tr M) exactly, tr M = (cos^2(beta) / cos_i + sin^2(beta) cos_i) / r = (cos_i +
+    # (t_in . c)^2 / cos_i) / r, t_in the incoming ray's part along the surface (|t_in| =
+    # sin_i): smooth through normal incidence, where the plane of incidence is undefined
     tin = d - (d * n).sum(1)[:, None] * n
-    norm = np.linalg.norm(tin, axis=1)
     circ = np.cross(ax, n)
-    cos_b = np.where(norm > 1e-12, np.abs((tin * circ).sum(1)) / np.maximum(norm, 1e-300), 1.0)
-    return v_in + 2.0 * cos_b**2 / (r * cos_i), v_in
+    return v_in + 2.0 * (cos_i + (tin * circ).sum(1) ** 2 / cos_i) / r, v_in
+
+
+def _curved_source(spot, p, n, d, ok):
+    """At specular points P (M, 3) of a convex sphere / cylinder side with unit normals n
+    and unit incoming rays d: the incident irradiance [W/m^2] (unattenuated, 0 where not
+    ``ok``) and the reflected wavefront's vergences (1/q_t, 1/q_s) [1/m], so that the
+    mirror beam at distance D from P is ``E_inc / ((1 + D/q_t)(1 + D/q_s))`` (before
+    reflectance, attenuation and gain). One piece for the observers
+    (:func:`_curved_geometry`) and the NOHD (:func:`_curved_roots`)."""
+    beam = spot.beam
+    an = spot.target.mesh.analytic
+    s, z = beam.to_s(p)
+    s = np.nan_to_num(s)
+    e_inc = np.where(ok, beam.irradiance_w_m2(s, np.where(ok, z, 1.0)), 0.0)
+    p_src = beam.source_distance_m(z) * np.sqrt(1 + (s ** 2).sum(1) * (beam.divergence_rad / 2) ** 2)
+    if an[0] == "sphere":
+        vt, vs = _vergences("sphere", n, d, p_src, r=an[2])
+    else:
+        vt, vs = _vergences("cylinder", n, d, p_src, an[2], an[3])
+    return e_inc, vt, vs
 
 
 def _curved_geometry(spot, obs):
@@ -235,10 +268,7 @@ def _curved_geometry(spot, obs):
     s, z = beam.to_s(p)
     front = (n * d).sum(1) < 0
     ok = settled & on_surface & front & _lit(spot, np.nan_to_num(s, nan=1e9)) & (z > 0)
-    e_inc = np.where(ok, beam.irradiance_w_m2(np.nan_to_num(s), np.where(ok, z, 1.0)), 0.0)
-    p_src = beam.source_distance_m(z) * np.sqrt(1 + (np.nan_to_num(s) ** 2).sum(1) * (beam.divergence_rad / 2) ** 2)
-    an = spot.target.mesh.analytic
-    vt, vs = _vergences(kind, n, d, p_src, None if kind == "sphere" else an[2], an[2] if kind == "sphere" else an[3])
+    e_inc, vt, vs = _curved_source(spot, p, n, d, ok)
     dist = np.linalg.norm(obs - p, axis=1)
     geo = margin * e_inc / ((1 + dist * vt) * (1 + dist * vs))
     return ok, geo, p, n, d, ~settled & near
@@ -291,55 +321,180 @@ class SpecularNohd:
         self.direction = direction
 
 
-def _sample_vergences(spot):
-    """Per spot sample: the reflected wavefront vergences (1/q_t, 1/q_s)."""
+def _level_roots(e0, vt, vs, mu, mpe_w_m2) -> np.ndarray:
+    """Per row: the distance D [m] at which ``e0 exp(-mu D) / ((1 + D vt)(1 + D vs))``
+    falls to ``mpe_w_m2``; 0 where e0 < MPE, inf where it is still above the MPE at
+    1e9 m (collimated and unattenuated). For vt, vs, mu >= 0 (flat and convex mirrors)
+    f(D) = ln(e0 / MPE) - mu D - ln(1 + D vt) - ln(1 + D vs) falls and is convex, so
+    Newton's steps from D = 0 climb to the root from below without passing it; stopped
+    at 1e-13 relative (rows not settled in 100 steps: log bisection, 1e-12)."""
+    e0, vt, vs = np.broadcast_arrays(*(np.asarray(x, float) for x in (e0, vt, vs)))
+    hot = e0 >= mpe_w_m2
+    if not np.any(hot):
+        return np.zeros(e0.shape)
+    c = np.log(np.where(hot, e0, mpe_w_m2) / mpe_w_m2)
+
+    def f(dist):
+        return c - mu * dist - np.log1p(dist * vt) - np.log1p(dist * vs)
+
+    beyond = hot & (f(np.full(e0.shape, 1e9)) >= 0)
+    live = hot & ~beyond
+    d = np.zeros(e0.shape)
+    for _ in range(100):
+        slope = -mu - vt / (1 + d * vt) - vs / (1 + d * vs)
+        step = np.where(live, -f(d) / np.where(live, slope, -1.0), 0.0)
+        d = d + np.maximum(step, 0.0)
+        if not np.any(live & (step > 1e-13 * d)):
+            break
+    else:
+        slow = live & (np.abs(f(d)) > 1e-12)
+        lo, hi = np.where(slow, np.maximum(d, 1e-9), 1.0), np.full(e0.shape, 1e9)
+        for _ in range(200):
+            mid = np.sqrt(lo * hi)
+            above = f(mid) >= 0
+            lo, hi = np.where(above, mid, lo), np.where(above, hi, mid)
+            if np.all((hi / lo - 1 < 1e-12) | ~slow):
+                break
+        d = np.where(slow, lo, d)
+    return np.where(beyond, np.inf, np.where(hot, d, 0.0))
+
+
+def _max_over_states(rho):
+    return rho if rho.ndim == 1 else rho.max(axis=1)
+
+
+def _flat_sample_roots(spot, mpe_w_m2, mu, states, gain):
+    """NOHD [m] per spot sample on a flat facet (a plate, disk, box or mesh facet, a
+    cylinder's cap; 0 for samples on a curved side): the unfolded beam's peak
+    ``rho E_peak,i exp(-mu D) / (1 + D / p)^2`` (``E_peak,i`` the highest incident
+    irradiance in the sample's cells after laser -> mirror attenuation, p the incident
+    wavefront radius), and ``rho E_peak,i`` per sample."""
+    rho = _max_over_states(_reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states))
+    e0 = rho * spot.peak_irradiance_w_m2 * gain
     n, d, p_src = spot.frames[:, 2], spot.incoming, spot.source_distance_m
     an = spot.target.mesh.analytic
-    if an is None:
-        return _vergences("flat", n, d, p_src)
-    if an[0] == "sphere":
-        return _vergences("sphere", n, d, p_src, r=an[2])
-    vt, vs = _vergences("cylinder", n, d, p_src, an[2], an[3])
-    cap = np.abs(n @ an[2]) > 0.5
-    fv = _vergences("flat", n, d, p_src)
-    return np.where(cap, fv[0], vt), np.where(cap, fv[1], vs)
+    flat = np.ones(len(e0), bool) if an is None else (
+        np.zeros(len(e0), bool) if an[0] == "sphere" else np.abs(n @ an[2]) > 0.5)
+    vt, vs = _vergences("flat", n, d, p_src)
+    return np.where(flat, _level_roots(np.where(flat, e0, 0.0), vt, vs, mu, mpe_w_m2), 0.0), e0
+
+
+def _curved_hit(spot, s):
+    """Where the beam's rays at transverse coordinates s (K, 2) first meet the spot's
+    sphere / cylinder side from outside: (P, unit outward normal, unit incoming ray,
+    hit)."""
+    an = spot.target.mesh.analytic
+    o, d = spot.beam.rays(s)
+    d = _unit(d)
+    rel = o - an[1]
+    ax = None if an[0] == "sphere" else an[2]
+    r = an[2] if ax is None else an[3]
+    oc, dd = (rel, d) if ax is None else (rel - (rel @ ax)[:, None] * ax, d - (d @ ax)[:, None] * ax)
+    qa, qb, qc = (dd * dd).sum(1), (oc * dd).sum(1), (oc * oc).sum(1) - r * r
+    disc = qb * qb - qa * qc
+    t = (-qb - np.sqrt(np.maximum(disc, 0.0))) / np.maximum(qa, 1e-300)
+    hit = (disc > 0) & (qa > 1e-300) & (qc > 0) & (t > 0)
+    p = o + t[:, None] * d
+    rad = p - an[1] if ax is None else p - an[1] - ((p - an[1]) @ ax)[:, None] * ax
+    if ax is not None:
+        hit &= np.abs((p - an[1]) @ ax) <= an[4]
+    return p, _unit(rad), d, hit
+
+
+def _curved_roots(spot, s, mpe_w_m2, mu, states, gain):
+    """Per beam coordinate s (K, 2): the point P where its ray meets the curved side, the
+    reflected direction u there, and the distance D [m] from P along u at which the
+    observers' irradiance (:func:`_curved_source`, reflectance, attenuation, gain) falls
+    to the MPE (0: not lit or below the MPE at P)."""
+    p, n, d, hit = _curved_hit(spot, s)
+    ok = hit & _lit(spot, s)
+    e_inc, vt, vs = _curved_source(spot, p, n, d, ok)
+    rho = _max_over_states(_reflectance(spot, _local(n, spot.target.tangent, -d), states))
+    e0 = np.where(ok, rho * e_inc * np.exp(-mu * np.linalg.norm(p - spot.beam.position_m, axis=1)) * gain, 0.0)
+    u = _unit(d - 2 * (d * n).sum(1)[:, None] * n)
+    return _level_roots(e0, vt, vs, mu, mpe_w_m2), p, u
+
+
+CURVED_GRID = 49  # beam coordinates per side of the grid searched over a curved side's lit part
+CURVED_STARTS = 3  # best grid points refined by Nelder-Mead
+
+
+def _curved_nohd(spot, mpe_w_m2, mu, states, gain):
+    """The curved side's NOHD [m], from the point P along the direction u (or None):
+    the largest root of :func:`_curved_roots` over the lit part, searched on a grid of
+    beam coordinates (the samples' bounding box widened by a tenth, the samples and the
+    axis) and refined by Nelder-Mead from the best ``CURVED_STARTS``; then solved on the
+    observers' own function :func:`specular_irradiance` along u (:func:`_observer_root`)."""
+    from scipy.optimize import minimize
+
+    s_pts = spot.beam.to_s(spot.points)[0]
+    s_pts = s_pts[np.all(np.isfinite(s_pts), axis=1)]
+    if not len(s_pts):
+        return 0.0, None, None
+    lo, hi = s_pts.min(axis=0), s_pts.max(axis=0)
+    pad = 0.1 * (hi - lo) + 0.05
+    g = [np.linspace(a - b, c + b, CURVED_GRID) for a, b, c in zip(lo, pad, hi)]
+    cand = np.vstack([np.stack(np.meshgrid(*g), axis=-1).reshape(-1, 2), s_pts, [[0.0, 0.0]]])
+    roots, _, _ = _curved_roots(spot, cand, mpe_w_m2, mu, states, gain)
+    if not np.any(roots > 0):
+        return 0.0, None, None
+    if np.isinf(roots).any():
+        i = int(np.argmax(roots))
+        _, p, u = _curved_roots(spot, cand[i:i + 1], mpe_w_m2, mu, states, gain)
+        return math.inf, p[0], u[0]
+    best_s, best = cand[int(np.argmax(roots))], float(roots.max())
+    for i in np.argsort(-roots)[:CURVED_STARTS]:
+        res = minimize(lambda x: -_curved_roots(spot, x[None, :], mpe_w_m2, mu, states, gain)[0][0] / best, cand[i],
+                       method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-11, "maxiter": 400})
+        if -res.fun * best > best:
+            best_s, best = res.x, -float(res.fun) * best
+    root, p, u = _curved_roots(spot, best_s[None, :], mpe_w_m2, mu, states, gain)
+    return _observer_root(spot, p[0], u[0], float(root[0]), mpe_w_m2, mu, states, gain), p[0], u[0]
+
+
+def _observer_root(spot, p, u, guess_m, mpe_w_m2, mu, states, gain) -> float:
+    """The farthest distance D [m] along ``p + D u`` at which :func:`specular_irradiance`
+    (the observers' function, largest over ``states``) still reaches the MPE: scanned
+    on 65 log-spaced distances over [guess / 2, 2 guess] (widened while the far end is
+    still above), then bisected to 1e-12 relative. Never below ``guess_m`` (the closed
+    form of the same pieces: a disagreement keeps the longer)."""
+    def above(dist):
+        e = specular_irradiance(spot, p + np.atleast_1d(dist)[:, None] * u, gain, mu, states)
+        return (e if e.ndim == 1 else e.max(axis=1)) >= mpe_w_m2
+
+    lo_m, hi_m = guess_m / 2, guess_m * 2
+    while above(hi_m)[0] and hi_m < 1e9:
+        hi_m *= 4
+    grid = np.geomspace(lo_m, hi_m, 65)
+    ok = np.flatnonzero(above(grid))
+    if not len(ok) or ok[-1] == len(grid) - 1:
+        return guess_m if not len(ok) else max(guess_m, hi_m)
+    a, b = grid[ok[-1]], grid[ok[-1] + 1]
+    while b / a - 1 > 1e-12:
+        mid = math.sqrt(a * b)
+        a, b = (mid, b) if above(mid)[0] else (a, mid)
+    return max(a, guess_m)
 
 
 def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> SpecularNohd:
-    """Solve ``rho E_peak,i exp(-mu D) / ((1 + D/q_t)(1 + D/q_s)) = MPE`` for D per spot
-    sample (the left side falls monotonically with D for flat and convex mirrors: log
-    bisection to 1e-12 relative) and return the largest root. ``E_peak,i`` is the highest
-    incident irradiance in the sample's cells (after laser -> mirror attenuation); rho
-    the highest reflectance over ``states``. ``inf`` where the beam stays above the MPE
-    past 1e9 m (collimated and unattenuated)."""
+    """The mirror beam's NOHD: the largest distance beyond the mirror [m] at which the
+    observers' irradiance still reaches ``mpe_w_m2``, over the flat facets' samples
+    (:func:`_flat_sample_roots`) and a sphere's or cylinder's curved side
+    (:func:`_curved_nohd`: the same Coddington spreading as at the observers, solved
+    along the worst reflected ray), and its direction (unit). ``rho``: the highest
+    reflectance over ``states``; ``gain`` the eye's optical gain; ``inf`` where the beam
+    stays above the MPE past 1e9 m."""
     if not spot.material.has_specular:
         return SpecularNohd(None, None)
-    rho = _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states)
-    rho = rho if states is None else rho.max(axis=1)
-    e0 = rho * spot.peak_irradiance_w_m2 * gain
-    vt, vs = _sample_vergences(spot)
     mu = attenuation_per_m
-
-    def level(dist):
-        return e0 * np.exp(-mu * dist) / ((1 + dist * vt) * (1 + dist * vs))
-
-    hot = e0 >= mpe_w_m2
-    if not np.any(hot):
-        return SpecularNohd(0.0, _unit(mirror_directions(spot)[int(np.argmax(e0))]).tolist())
-    far = 1e9
-    beyond = hot & (level(np.full_like(e0, far)) >= mpe_w_m2)
-    lo = np.full_like(e0, 1e-9)
-    hi = np.full_like(e0, far)
-    for _ in range(200):
-        mid = np.sqrt(lo * hi)
-        above = level(mid) >= mpe_w_m2
-        lo = np.where(above, mid, lo)
-        hi = np.where(above, hi, mid)
-        if np.all((hi / lo - 1 < 1e-12) | ~hot):
-            break
-    root = np.where(beyond, np.inf, np.where(hot, lo, 0.0))
-    i = int(np.argmax(root))
-    return SpecularNohd(float(root[i]), _unit(mirror_directions(spot)[i]).tolist())
+    roots, e0 = _flat_sample_roots(spot, mpe_w_m2, mu, states, gain)
+    i = int(np.argmax(roots))
+    nohd, direction = float(roots[i]), _unit(mirror_directions(spot)[i if roots[i] > 0 else int(np.argmax(e0))])
+    if spot.target.mesh.analytic is not None:
+        curved, _, u = _curved_nohd(spot, mpe_w_m2, mu, states, gain)
+        if curved > nohd:
+            nohd, direction = curved, u
+    return SpecularNohd(nohd, np.asarray(direction, float).tolist())
 
 
 def mirror_directions(spot):

@@ -15,7 +15,8 @@ import numpy as np
 
 import brdfmodels
 
-__all__ = ["Mesh", "shape_mesh", "terrain_heightfield", "observer_points", "Heightfield"]
+__all__ = ["Mesh", "shape_mesh", "terrain_heightfield", "observer_points", "Heightfield", "angle_to_sector_rad",
+           "widened_azimuths_rad", "directions_in_sector", "direction_in_sector"]
 
 
 @dataclass
@@ -233,18 +234,84 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     return Heightfield(xs[0], ys[0], spec.resolution_m, h)
 
 
+def _bearing_vectors(az, el) -> np.ndarray:
+    """Unit vectors (N, 3) of compass bearings az (clockwise from +y) and elevations [rad]."""
+    az, el = np.broadcast_arrays(np.asarray(az, float), np.asarray(el, float))
+    return np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1).reshape(-1, 3)
+
+
+def _angle(u, v) -> np.ndarray:
+    """Angle [rad] between unit vectors (rows), accurate near 0 and pi."""
+    return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.einsum("...i,...i->...", u, v))
+
+
+def angle_to_sector_rad(u, sector) -> np.ndarray:
+    """Angle [rad] on the sphere from unit directions u (N, 3) to the nearest direction of
+    ``sector`` (bearings [A0, A1] clockwise from +y, elevations [E0, E1], [deg]); 0
+    inside. Exact: the least angle to its edges, the two meridian arcs (the foot of u on
+    each arc's great circle, or the arc's ends) and the two circles of elevation (at u's
+    bearing when it lies in [A0, A1], else at their ends, the arcs' ends)."""
+    u = np.asarray(u, float).reshape(-1, 3)
+    u = u / np.linalg.norm(u, axis=1, keepdims=True)
+    az = np.arctan2(u[:, 0], u[:, 1])
+    el = np.arctan2(u[:, 2], np.hypot(u[:, 0], u[:, 1]))
+    e0, e1 = (math.radians(x) for x in sector.elevation_deg)
+    a0, a1 = (math.radians(x) for x in sector.azimuth_deg)
+    full = a1 - a0 >= 2 * np.pi
+    in_az = np.ones(len(u), bool) if full else (az - a0) % (2 * np.pi) <= (a1 - a0) + 1e-15
+    inside = in_az & (el >= e0) & (el <= e1)
+    best = np.full(len(u), np.inf)
+    for e in (e0, e1):  # circles of elevation: along u's meridian when u's bearing is in the sector
+        best = np.where(in_az, np.minimum(best, np.abs(el - e)), best)
+    if not full:
+        for a in (a0, a1):  # meridian arcs: the foot of u on the great circle, clamped; and the ends
+            h = np.array([math.sin(a), math.cos(a), 0.0])
+            foot = np.clip(np.arctan2(u[:, 2], u @ h), e0, e1)
+            for e in (foot, e0, e1):
+                best = np.minimum(best, _angle(u, _bearing_vectors(a, e)))
+    return np.where(inside, 0.0, best)
+
+
+def widened_azimuths_rad(sector, buffer_rad, elevation_rad) -> tuple[np.ndarray, np.ndarray]:
+    """Per elevation el [rad]: the bearings [lo, hi] [rad] of the directions at el within
+    the angle ``buffer_rad`` = b of ``sector`` on the sphere (hi - lo >= 2 pi: the whole
+    circle; hi < lo: none). Beyond each meridian arc (bearing A, elevations [E0, E1]) the
+    row reaches A + delta (the angle to the sector grows with delta along a row), delta
+    the largest of
+      - the band: sin(delta) = sin(b) / cos(el), where its foot on the arc's great circle,
+        atan2(sin el, cos el cos delta), lies in [E0, E1] (near the pole also for rows
+        below E0);
+      - the caps about the corners (A, E): cos(delta) = (cos b - sin el sin E) / (cos el cos E)
+        (the whole circle where that is <= -1, as near the pole);
+    and rows with el in [E0 - b, E1 + b] hold [A0, A1] (the circles of elevation). The
+    widest row of a cap is at el = asin(sin E / cos b), where sin(delta) = sin b / cos E:
+    widening the bearings by b, as a flat map would, is short by about b (1 / cos E - 1)."""
+    el = np.clip(np.asarray(elevation_rad, float), -np.pi / 2, np.pi / 2)
+    e0, e1 = (math.radians(x) for x in sector.elevation_deg)
+    a0, a1 = (math.radians(x) for x in sector.azimuth_deg)
+    b = float(buffer_rad)
+    in_band = (el >= e0 - b - 1e-15) & (el <= e1 + b + 1e-15)
+    ext = np.where(in_band, 0.0, -np.inf)
+    cos_el = np.maximum(np.cos(el), 1e-300)
+    ratio = math.sin(b) / cos_el
+    d_band = np.arcsin(np.minimum(ratio, 1.0))
+    foot = np.arctan2(np.sin(el), cos_el * np.cos(d_band))
+    band = in_band & (ratio <= 1.0) & (foot >= e0) & (foot <= e1)  # the foot, not the row, on the arc
+    ext = np.where(band, np.maximum(ext, d_band), ext)
+    for e in (e0, e1):
+        c = (math.cos(b) - np.sin(el) * math.sin(e)) / np.maximum(cos_el * math.cos(e), 1e-300)
+        ext = np.where(c <= 1.0, np.maximum(ext, np.arccos(np.clip(c, -1.0, 1.0))), ext)
+    whole = (ext >= np.pi) | (np.isfinite(ext) & (a1 - a0 + 2 * ext >= 2 * np.pi))
+    lo, hi = a0 - ext, a1 + ext
+    return np.where(whole, a0, lo), np.where(whole, a0 + 2 * np.pi, hi)
+
+
 def directions_in_sector(directions, sector, buffer_rad=0.0, tolerance_deg=0.0) -> np.ndarray:
     """Per direction (N, 3): whether it points within ``sector`` (compass bearings
     clockwise from +y and elevations, [deg]) widened by ``buffer_rad`` (and
-    ``tolerance_deg``, for rounding) on every side."""
-    d = np.asarray(directions, float).reshape(-1, 3)
-    d = d / np.linalg.norm(d, axis=1, keepdims=True)
-    b = math.degrees(buffer_rad) + tolerance_deg
-    el = np.degrees(np.arcsin(np.clip(d[:, 2], -1.0, 1.0)))
-    az = np.degrees(np.arctan2(d[:, 0], d[:, 1]))
-    a0, a1 = sector.azimuth_deg
-    inside_az = (a1 - a0 + 2 * b >= 360.0) | ((az - (a0 - b)) % 360.0 <= (a1 - a0) + 2 * b)
-    return inside_az & (el >= sector.elevation_deg[0] - b) & (el <= sector.elevation_deg[1] + b)
+    ``tolerance_deg``, for rounding): within that angle of it on the sphere
+    (:func:`angle_to_sector_rad`)."""
+    return angle_to_sector_rad(directions, sector) <= buffer_rad + math.radians(tolerance_deg)
 
 
 def direction_in_sector(direction, sector, buffer_rad=0.0) -> bool:

@@ -21,8 +21,9 @@ pointed there gives (range-safety.md section 1; :class:`hazard.beam.BeamGeometry
 its largest value over A (E falls with delta wherever 4 L / (a + L phi) > phi, i.e.
 beyond micrometres of the aperture), times the optical gain of the observer's group
 with the beam's diameter there. The distance from u to the sector (azimuth [A0, A1]
-clockwise from +y, elevation [E0, E1]) is exact: inside it is 0; else the least angle to
-its edges, the two meridian arcs (the foot of u on each arc's great circle, or an arc's
+clockwise from +y, elevation [E0, E1]) is exact (:func:`scenes.geometry.angle_to_sector_rad`,
+shared with the danger zone's directions): inside it is 0; else the least angle to its
+edges, the two meridian arcs (the foot of u on each arc's great circle, or an arc's
 ends) and the two circles of elevation (at u's azimuth when it lies in [A0, A1], else
 at their ends).
 
@@ -45,9 +46,9 @@ import math
 
 import numpy as np
 
-from scenes.geometry import direction_in_sector
+from scenes.geometry import angle_to_sector_rad, direction_in_sector
 
-from .sdz import bearing_vectors, first_backstop_rays
+from .sdz import first_backstop_rays
 
 __all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2", "aim_track_directions"]
 
@@ -59,34 +60,6 @@ def _angle(u, v) -> np.ndarray:
     """Angle [rad] between unit vectors (rows), accurate near 0 and pi (atan2 of the
     cross and dot products)."""
     return np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.einsum("...i,...i->...", u, v))
-
-
-def _in_azimuth(az, a0, a1) -> np.ndarray:
-    """az within the clockwise arc from a0 to a1 [rad] (a1 - a0 < 2 pi)."""
-    return (az - a0) % (2 * np.pi) <= (a1 - a0) + 1e-15
-
-
-def angle_to_sector_rad(u, sector) -> np.ndarray:
-    """Angle [rad] from unit directions u (N, 3) to the sector's set of directions (0
-    inside; see the module notes)."""
-    u = np.asarray(u, float).reshape(-1, 3)
-    az = np.arctan2(u[:, 0], u[:, 1])
-    el = np.arctan2(u[:, 2], np.hypot(u[:, 0], u[:, 1]))
-    e0, e1 = (math.radians(x) for x in sector.elevation_deg)
-    a0, a1 = (math.radians(x) for x in sector.azimuth_deg)
-    full = a1 - a0 >= 2 * np.pi
-    in_az = np.ones(len(u), bool) if full else _in_azimuth(az, a0, a1)
-    inside = in_az & (el >= e0) & (el <= e1)
-    best = np.full(len(u), np.inf)
-    for e in (e0, e1):  # circles of elevation: at u's azimuth when it is in the sector
-        best = np.where(in_az, np.minimum(best, _angle(u, bearing_vectors(az, e))), best)
-    if not full:
-        for a in (a0, a1):  # meridian arcs: the foot of u on the great circle, clamped; and the ends
-            h = np.array([math.sin(a), math.cos(a), 0.0])
-            foot = np.clip(np.arctan2(u[:, 2], u @ h), e0, e1)
-            for e in (foot, e0, e1):
-                best = np.minimum(best, _angle(u, bearing_vectors(a, e)))
-    return np.where(inside, 0.0, best)
 
 
 def aim_track_directions(scene, step_rad=None) -> tuple[np.ndarray, float]:

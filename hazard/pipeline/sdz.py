@@ -11,9 +11,14 @@ segments, widened by the beam's own hazardous half-width.
 
 How it is computed, and what is conservative:
 
-- directions: a pointing cone in rings every theta_b / 32; a sector on an azimuth x
-  elevation lattice every theta_b / 4 (the spec's "azimuth steps of at most theta_b /
-  4"), at most ``MAX_RAYS`` (a coarser step is said);
+- directions: a pointing cone in rings every theta_b / 32; a sector widened by theta_b
+  on the sphere (every direction within the angle theta_b of the sector, the buffer
+  about every edge) in rows of elevation every theta_b / 4, each row from its exact
+  first to its last bearing every theta_b / 4 in bearing (the spec's "azimuth steps of
+  at most theta_b / 4"; :func:`scenes.geometry.widened_azimuths_rad`: beside a meridian
+  arc at elevation E the row reaches asin(sin theta_b / cos E) beyond it, about
+  theta_b / cos E, not theta_b), plus the rows where the caps about the corners are
+  widest; at most ``MAX_RAYS`` (a coarser step is said);
 - each direction is ray-cast (Embree) against the terrain and the occluders. Targets
   are not backstops: within its pointing error the beam can miss them;
 - the zone is star-shaped about the laser's foot: around it, in bins of the largest
@@ -40,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes.geometry import direction_in_sector
+from scenes.geometry import direction_in_sector, widened_azimuths_rad
 
 from ..beam import perp_basis
 from .spill import direct_nohds
@@ -98,22 +103,38 @@ def _cone(axis, half_angle, step) -> np.ndarray:
     return np.vstack(out)
 
 
+def _sector_elevations(sector, b, step) -> np.ndarray:
+    """Rows of elevation [rad] of the sector widened by b: every ``step`` over [E0 - b,
+    E1 + b] (within +-90 deg), plus the rows where its corners' caps are widest in
+    bearing, asin(sin E / cos b) (:func:`scenes.geometry.widened_azimuths_rad`)."""
+    e0, e1 = (math.radians(x) for x in sector.elevation_deg)
+    lo, hi = max(e0 - b, -np.pi / 2), min(e1 + b, np.pi / 2)
+    rows = np.linspace(lo, hi, max(2, math.ceil((hi - lo) / step) + 1)) if hi > lo else np.array([lo])
+    tips = [math.asin(max(-1.0, min(1.0, math.sin(e) / math.cos(b)))) for e in (e0, e1)] if b > 0 else []
+    return np.unique(np.concatenate([rows, [t for t in tips if lo <= t <= hi]]))
+
+
 def _sector(sector, buffer_rad) -> tuple[np.ndarray, float]:
-    """The sector widened by ``buffer_rad`` on an azimuth x elevation lattice, and its step."""
-    b = math.degrees(buffer_rad)
-    a0, a1 = sector.azimuth_deg[0] - b, sector.azimuth_deg[1] + b
-    e0, e1 = max(sector.elevation_deg[0] - b, -90.0), min(sector.elevation_deg[1] + b, 90.0)
-    full = a1 - a0 >= 360.0
-    span_a, span_e = (2 * np.pi if full else math.radians(a1 - a0)), math.radians(e1 - e0)
-    step = SECTOR_STEP * buffer_rad if buffer_rad > 0 else SECTOR_STEP_NO_BUFFER_RAD
-    n = (span_a / step + 1) * (span_e / step + 1)
-    if n > MAX_RAYS:
-        step *= math.sqrt(n / MAX_RAYS)
-    az = (np.linspace(0.0, span_a, max(1, math.ceil(span_a / step)), endpoint=False) if full
-          else np.linspace(0.0, span_a, max(2, math.ceil(span_a / step) + 1))) + math.radians(a0)
-    el = np.linspace(math.radians(e0), math.radians(e1), max(2, math.ceil(span_e / step) + 1)) if span_e > 0 else np.array([math.radians(e0)])
-    aa, ee = np.meshgrid(az, el)
-    return bearing_vectors(aa.ravel(), ee.ravel()), step
+    """The directions within ``buffer_rad`` of the sector on the sphere, and the step: rows
+    of elevation (:func:`_sector_elevations`), each from its exact first to its last
+    bearing (:func:`scenes.geometry.widened_azimuths_rad`) every ``step`` in bearing. A
+    lattice over more than ``MAX_RAYS`` directions gets a coarser step."""
+    b = buffer_rad
+    step = SECTOR_STEP * b if b > 0 else SECTOR_STEP_NO_BUFFER_RAD
+    for _ in range(3):
+        el = _sector_elevations(sector, b, step)
+        lo, hi = widened_azimuths_rad(sector, b, el)
+        keep = hi >= lo
+        el, lo, span = el[keep], lo[keep], np.minimum(hi[keep] - lo[keep], 2 * np.pi)
+        whole = span >= 2 * np.pi
+        count = np.where(whole, np.maximum(4, np.ceil(span / step)), np.maximum(1, np.ceil(span / step)) + 1).astype(int)
+        if count.sum() <= MAX_RAYS:
+            break
+        step *= math.sqrt(count.sum() / MAX_RAYS) * 1.01
+    row = np.repeat(np.arange(len(el)), count)
+    k = np.arange(len(row)) - np.repeat(np.cumsum(count) - count, count)
+    frac = k / np.where(whole, count, np.maximum(count - 1, 1))[row]
+    return bearing_vectors(lo[row] + span[row] * frac, el[row]), step
 
 
 def pointing_directions(scene) -> Directions:
