@@ -22,6 +22,7 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads, thread_limit
 
+from .aperture import observer_apertures
 from .nohd import group_gains
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
@@ -98,10 +99,12 @@ def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
         log.skip("direct", the_plan.skipped("direct"))
         return None
     with log.run("direct") as st:
-        d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
         laser = scene.spec.laser
+        apertures = observer_apertures(scene.observers.optics, scene.observers.group, laser.wavelength_nm,
+                                       scene.spec.exposure.duration_s)
+        d = direct.direct_beam(traced.beam, scene.observers, tracer, mu, apertures)
         if laser.pointing_buffer_rad > 0 or laser.sector is not None or laser.aim_track is not None:
-            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene)
+            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene, apertures)
         st.detail = d.detail
     return d
 
@@ -197,6 +200,8 @@ def _observers(scene, out, direct_beam) -> ObserverResults:
         far_field=out.far_field, irradiance_w_m2=out.history_w_m2, specular_irradiance_w_m2=out.specular_w_m2,
         direct_irradiance_w_m2=direct_w_m2, reflected_irradiance_w_m2=np.maximum(out.peak_w_m2 - direct_w_m2, 0.0),
         direct_at_aim_irradiance_w_m2=at_aim,
+        direct_point_irradiance_w_m2=None if direct_beam is None else direct_beam.point_w_m2,
+        aperture_diameter_m=None if direct_beam is None else direct_beam.aperture_m,
     )
 
 

@@ -43,7 +43,7 @@ JSON_OBSERVERS_MAX = 100_000  # observers listed in report.json (highest hazard 
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
                "direct_at_aim_irradiance_w_m2", "reflected_irradiance_w_m2", "peak_time_s",
                "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
-               "first_exceedance_s", "line_of_sight", "far_field"]
+               "first_exceedance_s", "line_of_sight", "far_field", "direct_point_irradiance_w_m2", "aperture_diameter_m"]
 
 
 def observer_columns(result) -> dict:
@@ -77,6 +77,11 @@ def observer_columns(result) -> dict:
         "first_exceedance_s": obs.first_exceedance_s,
         "line_of_sight": obs.line_of_sight,
         "far_field": obs.far_field,
+        # the direct beam at the eye's centre and the aperture its verdict value is collected over (hazard.aperture)
+        "direct_point_irradiance_w_m2": (obs.direct_point_irradiance_w_m2 if getattr(obs, "direct_point_irradiance_w_m2", None)
+                                         is not None else direct),
+        "aperture_diameter_m": (obs.aperture_diameter_m if getattr(obs, "aperture_diameter_m", None) is not None
+                                else np.full(m, np.nan)),
     }
     return _with_tracks(result, cols, m)
 
@@ -111,7 +116,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
     labels = cols["labels"]
     rows = np.arange(len(labels)) if rows is None else rows
     plain = {k: np.asarray(v)[rows].tolist() for k, v in cols.items() if k != "labels"}  # Python floats and bools, once
-    maybe = {"angular_subtense_rad", "first_exceedance_s"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
+    maybe = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
     keys = [k for k in cols if k not in ("position_m", "labels")]
     out = []
     for j, i in enumerate(rows.tolist()):
@@ -196,7 +201,7 @@ def report_dict(result, cols=None) -> dict:
 
 
 _MOTION_BLANK = MOTION_COLUMNS  # the motion_* columns: NaN where a fixed observer was not evaluated over time
-_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
+_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
 
 
 def _csv_cell(values, key) -> list:

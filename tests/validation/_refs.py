@@ -466,6 +466,20 @@ def optical_gain(magnification, objective_diameter_m, transmission=1.0, beam_dia
     return min(max(x, 1.0) for x in terms)
 
 
+def aperture_irradiance(power, w, d, optics=None, aperture_m=7e-3):
+    """What the MPE is compared with (range-safety.md section 10): the power of a Gaussian
+    beam (1/e radius w, power ``power`` at the range) through a disk of diameter D_f
+    (``aperture_m``) centred d off its axis, over the disk's area; with optics
+    {magnification M, objective_diameter_m D_o, transmission tau} the larger of that and
+    tau P F(min(D_o, 7 mm M) / 2) / (pi (3.5 mm)^2)."""
+    a = aperture_m / 2
+    eye = power * disk_fraction(a, d, w) / (math.pi * a * a)
+    if not optics:
+        return eye
+    a_c = min(optics["objective_diameter_m"], 7e-3 * optics["magnification"]) / 2
+    return max(eye, optics.get("transmission", 1.0) * power * disk_fraction(a_c, d, w) / (math.pi * 3.5e-3**2))
+
+
 # --------------------------------------------------------------------------- scene text
 
 
