@@ -148,6 +148,31 @@ def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:
     return ~(hits.hit & (hits.t < at.path_m * (1 - 1e-9)))
 
 
+RIM_POINTS = 8  # points on the aperture's rim tried when the line to its centre is blocked
+
+
+def rim_clear(origin_m, points_m, radius_m, tracer, n=RIM_POINTS) -> np.ndarray:
+    """Per eye whose own line is blocked: is the line from the beam's origin to any of
+    ``n`` points on its aperture's rim (radius ``radius_m``, normal to the line) clear?
+    Then part of the aperture is lit and the eye is taken as unshadowed (the full
+    aperture value: an upper bound; an obstacle whose gaps fall between the rim points
+    is taken as closed)."""
+    line = points_m - origin_m
+    u = line / np.linalg.norm(line, axis=1, keepdims=True)
+    helper = np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    e1 = np.cross(u, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(u, e1)
+    ang = 2 * np.pi * np.arange(n) / n
+    rim = points_m[:, None, :] + radius_m[:, None, None] * (np.cos(ang)[None, :, None] * e1[:, None, :]
+                                                           + np.sin(ang)[None, :, None] * e2[:, None, :])
+    o = np.repeat(origin_m, n, axis=0)
+    d = rim.reshape(-1, 3) - o
+    hits = tracer.first_hit(o, d)
+    ok = ~(hits.hit & (hits.t < np.linalg.norm(d, axis=1) * (1 - 1e-9)))
+    return ok.reshape(-1, n).any(axis=1)
+
+
 def direct_beam(beam, observers, tracer, mu, apertures: Apertures) -> DirectBeam:
     """The direct beam at every observer (see the module notes), in blocks of observers
     on threads; ``tracer`` answers ``first_hit(origins, directions)`` against every
@@ -159,7 +184,12 @@ def direct_beam(beam, observers, tracer, mu, apertures: Apertures) -> DirectBeam
         at = beam_at(beam, p, mu, apertures.reach_m)
         clear = clear_of_objects(at, p, tracer)
         rows = a0 + at.rows
-        through = gaussian_aperture_w_m2(beam, at.axial_m, at.offset_m, at.path_m, mu, apertures.take(rows))
+        ap = apertures.take(rows)
+        through = gaussian_aperture_w_m2(beam, at.axial_m, at.offset_m, at.path_m, mu, ap)
+        edge = np.flatnonzero(~clear & (through > 0))
+        if len(edge):  # a shadow's edge across the aperture: partly lit counts as lit (an upper bound)
+            radius = np.maximum(ap.eye_radius_m, np.where(ap.aided, ap.collect_radius_m, 0.0))[edge]
+            clear[edge] = rim_clear(at.origin_m[edge], np.asarray(p, float).reshape(-1, 3)[at.rows[edge]], radius, tracer)
         out[rows] = np.where(clear, through, 0.0)
         point[rows] = np.where(clear, at.irradiance_w_m2, 0.0)
         return int((~clear & (through > 0)).sum())

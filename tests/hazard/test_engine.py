@@ -62,6 +62,11 @@ def test_lambertian_plate_far_field_oracle():
     # 4 P / (pi (a + R phi)^2) comes on top (range-safety.md 2)
     direct = np.zeros(len(pts))
     direct[0] = 4 * 100.0 / (math.pi * (0.005 + 20.0 * 0.001) ** 2)
+    np.testing.assert_allclose(res.observers.direct_point_irradiance_w_m2, direct, rtol=1e-9)
+    # the verdict's value: the power through the 7 mm aperture on the axis of the 25 mm
+    # beam, P (1 - exp(-a^2 / w^2)) / (pi a^2) (range-safety.md 1 and 10)
+    w, a = (0.005 + 20.0 * 0.001) / 2, 3.5e-3
+    direct[0] = 100.0 * -math.expm1(-(a / w) ** 2) / (math.pi * a * a)
     np.testing.assert_allclose(res.observers.direct_irradiance_w_m2, direct, rtol=1e-9)
     np.testing.assert_allclose(res.observers.static_irradiance_w_m2, expected + direct, rtol=1e-9)
     # its lobe maximum is the diffuse NHZ of the same power and MPE
