@@ -186,12 +186,12 @@ def direct_beam(beam, observers, tracer, mu, apertures: Apertures) -> DirectBeam
         rows = a0 + at.rows
         ap = apertures.take(rows)
         through = gaussian_aperture_w_m2(beam, at.axial_m, at.offset_m, at.path_m, mu, ap)
+        point[rows] = np.where(clear, at.irradiance_w_m2, 0.0)
         edge = np.flatnonzero(~clear & (through > 0))
         if len(edge):  # a shadow's edge across the aperture: partly lit counts as lit (an upper bound)
             radius = np.maximum(ap.eye_radius_m, np.where(ap.aided, ap.collect_radius_m, 0.0))[edge]
             clear[edge] = rim_clear(at.origin_m[edge], np.asarray(p, float).reshape(-1, 3)[at.rows[edge]], radius, tracer)
         out[rows] = np.where(clear, through, 0.0)
-        point[rows] = np.where(clear, at.irradiance_w_m2, 0.0)
         return int((~clear & (through > 0)).sum())
 
     blocked = sum(observers.map_blocks(block))
