@@ -100,13 +100,18 @@ def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
         return None
     with log.run("direct") as st:
         laser = scene.spec.laser
-        apertures = observer_apertures(scene.observers.optics, scene.observers.group, laser.wavelength_nm,
-                                       scene.spec.exposure.duration_s)
+        apertures = _apertures(scene)
         d = direct.direct_beam(traced.beam, scene.observers, tracer, mu, apertures)
         if laser.pointing_buffer_rad > 0 or laser.sector is not None or laser.aim_track is not None:
             d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene, apertures)
         st.detail = d.detail
     return d
+
+
+def _apertures(scene):
+    """Per observer the limiting aperture and the aid's collecting disk (:mod:`hazard.aperture`)."""
+    return observer_apertures(scene.observers.optics, scene.observers.group, scene.spec.laser.wavelength_nm,
+                              scene.spec.exposure.duration_s)
 
 
 def _spill(scene, traced, mu, exposure, log) -> dict:
@@ -293,6 +298,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
         inp.direct_w_m2 = direct_beam.irradiance_w_m2
+    if any(sp.material.has_specular for sp in inp.spots):
+        inp.apertures = _apertures(scene)
     if exposure.pulse is not None:
         inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
     if not inp.keep_history:

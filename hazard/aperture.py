@@ -206,7 +206,7 @@ def observer_apertures(optics, group, wavelength_nm, duration_s) -> Apertures:
     return Apertures(np.full(len(group), eye), coll.astype(float), tau.astype(float), aided.astype(bool))
 
 
-def aperture_irradiance_w_m2(power_w, beam_radius_m, offset_m, apertures: Apertures) -> np.ndarray:
+def aperture_irradiance_w_m2(power_w, beam_radius_m, offset_m, apertures: Apertures, fraction=None) -> np.ndarray:
     """The irradiance the MPE is compared with [W/m^2] for a Gaussian beam at observers.
 
     Naked eye: ``P F(a_f, d, w) / (pi a_f^2)``; with an aid the larger of that and
@@ -222,16 +222,23 @@ def aperture_irradiance_w_m2(power_w, beam_radius_m, offset_m, apertures: Apertu
         The eye's distance from the beam axis [m].
     apertures : Apertures
         The observers' apertures (same length).
+    fraction : callable, optional
+        ``fraction(radius_m, rows)``: the power fraction through disks of those radii
+        about observers ``rows`` when part of the beam is cut off (a mirror smaller than
+        the beam); default :func:`disk_fraction` of the whole Gaussian.
     """
     p = np.asarray(power_w, float)
-    eye = p * disk_fraction(apertures.eye_radius_m, offset_m, beam_radius_m) / (math.pi * apertures.eye_radius_m ** 2)
+    if fraction is None:
+        def fraction(radius_m, rows):
+            return disk_fraction(radius_m, np.broadcast_to(np.asarray(offset_m, float), p.shape)[rows],
+                                 np.broadcast_to(np.asarray(beam_radius_m, float), p.shape)[rows])
+    every = np.arange(len(apertures.eye_radius_m))
+    eye = p * fraction(apertures.eye_radius_m, every) / (math.pi * apertures.eye_radius_m ** 2)
     if not np.any(apertures.aided):
         return eye
     out = eye.copy()
     k = np.flatnonzero(apertures.aided)
     pk = np.broadcast_to(p, eye.shape)[k]
-    w_k = np.broadcast_to(np.asarray(beam_radius_m, float), eye.shape)[k]
-    d_k = np.broadcast_to(np.asarray(offset_m, float), eye.shape)[k]
-    aid = apertures.transmission[k] * pk * disk_fraction(apertures.collect_radius_m[k], d_k, w_k) / (math.pi * PUPIL_RADIUS_M ** 2)
+    aid = apertures.transmission[k] * pk * fraction(apertures.collect_radius_m[k], k) / (math.pi * PUPIL_RADIUS_M ** 2)
     out[k] = np.maximum(eye[k], aid)
     return out
