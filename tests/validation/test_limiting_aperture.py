@@ -280,3 +280,75 @@ def test_report_json_and_csv_carry_point_aperture_and_diameter(tmp_path):
         assert float(got["direct_point_irradiance_w_m2"]) == float(res.observers.direct_point_irradiance_w_m2[0])
         assert float(got["direct_irradiance_w_m2"]) == float(res.observers.direct_irradiance_w_m2[0])
     assert float(row["direct_irradiance_w_m2"]) > 1e3 * float(row["direct_point_irradiance_w_m2"])
+
+
+def test_the_mirror_reference_agrees_with_the_disk_and_rectangle_formulas():
+    """``_refs.disk_polygon_fraction`` (used for mirrors) against ncx2 (a polygon holding
+    the whole disk) and against the erf rectangle (a rectangle inside the disk)."""
+    big = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    for c, a, w in [((3e-3, 0.0), 3.5e-3, 5e-3), ((2e-3, -3e-3), 3.5e-3, 1e-3), ((0.0, 0.0), 3.5e-3, 3.5e-3)]:
+        assert ref.disk_polygon_fraction(big, c, a, w) == pytest.approx(ref.disk_fraction(a, math.hypot(*c), w), rel=1e-6)
+    rect = np.array([[-1e-3, -0.5e-3], [1.5e-3, -0.5e-3], [1.5e-3, 1e-3], [-1e-3, 1e-3]])
+    assert ref.disk_polygon_fraction(rect[::-1], (0.0, 0.0), 3.5e-3, 2e-3) == pytest.approx(
+        ref.rect_fraction(-1e-3, 1.5e-3, -0.5e-3, 1e-3, 2e-3), rel=1e-6)
+
+
+def _mirror_scene(observers, *, power, size, a=2e-3, phi=1e-6, rho=0.9):
+    """The beam along +y from (0, -R_T, 0) onto a flat mirror at the origin at 45 deg,
+    sending it along -x."""
+    n = np.array([-1.0, -1.0, 0.0]) / math.sqrt(2)
+    mirror = dict(name="mirror", shape="plate", center=np.zeros(3), normal=n, tangent=np.array([0.0, 0.0, 1.0]),
+                  size=size, material=ref.specular(rho))
+    return scenes.loads(ref.scene_text(power=power, a=a, phi=phi, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3),
+                                       targets=[mirror], observers=observers)), n
+
+
+def test_narrow_mirror_beam_beside_the_eye_and_a_mirror_smaller_than_the_aperture():
+    """A 2 mm beam off a 45 deg mirror: eyes 0-6 mm beside the reflected axis 20 m past
+    the mirror get rho x the unfolded Gaussian through the 7 mm aperture (a 5 cm mirror
+    cuts nothing); a 0.5 mm mirror sends all it reflects into an aperture on its axis:
+    rho P_mirror / (pi (3.5 mm)^2), P_mirror the Gaussian over the mirror's projection
+    (erf rectangle: 0.5 mm x 0.5 mm cos 45 deg), far below the point value rho E0."""
+    mpe = _mpe_1064_10s()
+    R2 = 20.0
+    w = (2e-3 + (R_T + R2) * 1e-6) / 2
+    offsets = [0.0, 3e-3, 4.5e-3, 6e-3]
+    power = 3 * mpe * math.pi * 3.5e-3**2 / (0.9 * ref.disk_fraction(3.5e-3, 6e-3, w))
+    obs = [(f"d{k}", np.array([-R2, 0.0, d]), None) for k, d in enumerate(offsets)]
+    scene, _ = _mirror_scene(obs, power=power, size=(0.05, 0.05))
+    res = hazard.analyze(scene)
+    want = [0.9 * ref.aperture_irradiance(power, w, d) for d in offsets]
+    np.testing.assert_allclose(res.observers.specular_irradiance_w_m2, want, rtol=1e-6)
+    assert all(res.hazardous) and all(0.9 * power / (math.pi * w * w) * math.exp(-(d / w) ** 2) < mpe for d in offsets[2:])
+    # the small mirror: its projection along the beam is 0.5 mm (z) x 0.5 cos 45 mm (x)
+    scene, _ = _mirror_scene([("axis", np.array([-R2, 0.0, 0.0]), None)], power=1.0, size=(0.5e-3, 0.5e-3))
+    got = hazard.analyze(scene).observers.specular_irradiance_w_m2[0]
+    w_m = (2e-3 + R_T * 1e-6) / 2
+    h = 0.25e-3 * math.cos(math.pi / 4)
+    p_mirror = ref.rect_fraction(-h, h, -0.25e-3, 0.25e-3, w_m)
+    assert got == pytest.approx(0.9 * p_mirror / (math.pi * 3.5e-3**2), rel=1e-3)
+    assert got < 0.01 * 0.9 / (math.pi * w * w)
+
+
+def test_a_diffuse_field_is_its_own_aperture_average():
+    """A Lambertian plate's reflection 1.5 m from its spot varies slowly across 7 mm: the
+    mean of the engine's reflected irradiance over the aperture (polar Gauss-Legendre, 4 x
+    16 points) equals its value at the centre to 4 (a / R)^2 = 2e-5 (the module notes:
+    the disk mean is f + a^2 Laplacian(f) / 8 + ...), so diffuse fields keep their point
+    values."""
+    a, R = 3.5e-3, 1.5
+    centre = np.array([0.3, -R, 0.2])
+    u = ref.unit(centre)
+    e1, e2 = ref.transverse_basis(u)
+    x, wx = np.polynomial.legendre.leggauss(4)
+    rho_n, w_r = a * (x + 1) / 2, a / 2 * wx
+    th = 2 * math.pi * np.arange(16) / 16
+    pts = [centre] + [centre + r * (math.cos(t) * e1 + math.sin(t) * e2) for r in rho_n for t in th]
+    target = dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                  tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))
+    text = ref.scene_text(power=100.0, a=0.05, phi=1e-4, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3),
+                          targets=[target], observers=[(f"p{k}", p, None) for k, p in enumerate(pts)])
+    e = hazard.analyze(scenes.loads(text)).observers.reflected_irradiance_w_m2
+    ring = e[1:].reshape(len(rho_n), len(th)).mean(axis=1) * 2 * math.pi
+    mean = float(np.sum(ring * rho_n * w_r)) / (math.pi * a * a)
+    assert e[0] > 0 and abs(mean - e[0]) <= 4 * (a / R) ** 2 * e[0]
