@@ -22,7 +22,7 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads, thread_limit
 
-from .aperture import observer_apertures
+from .aperture import limiting_aperture_m, observer_apertures
 from .nohd import group_gains
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
@@ -239,7 +239,8 @@ def _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_p
         return None
     with log.run("footprint") as st:
         fps = ground.footprints(spots, traced.beam, scene.terrain, ray_scene, exposure.irradiance_w_m2, mu,
-                                scene.spec.analysis.footprint_eye_height_m, states, rows)
+                                scene.spec.analysis.footprint_eye_height_m, states, rows,
+                                aperture_m=limiting_aperture_m(scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s))
         st.detail = fps.detail
     return fps
 

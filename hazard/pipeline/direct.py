@@ -23,7 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..aperture import Apertures, aperture_irradiance_w_m2
-from ..nohd import PUPIL_DIAMETER_M, optical_gain
 
 __all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam", "with_pointing"]
 
@@ -87,20 +86,6 @@ def gaussian_aperture_w_m2(beam, axial_m, offset_m, path_m, mu, apertures: Apert
     s2 = (np.asarray(offset_m, float) / w) ** 2
     power = beam.power_w * np.exp(-mu * np.asarray(path_m, float)) * np.sqrt(1.0 + s2 * (beam.divergence_rad / 2) ** 2)
     return aperture_irradiance_w_m2(power, w, offset_m, apertures)
-
-
-def _beam_gain(optics, group, beam_diameter_m):
-    """Optical gain per observer: 1 for the naked eye; for a group's optics the smallest
-    of ``tau M^2``, ``tau (D_o / 7 mm)^2`` and ``tau (D_b / 7 mm)^2``, each clipped to
-    >= 1 (:func:`hazard.nohd.optical_gain`, vectorised over the beam diameter D_b)."""
-    gain = np.ones(len(group))
-    for g, o in enumerate(optics):
-        rows = np.flatnonzero(group == g)
-        if o is None or not len(rows):
-            continue
-        fixed = optical_gain(o.magnification, o.objective_diameter_m, o.transmission)  # the first two terms
-        gain[rows] = np.minimum(fixed, np.maximum(o.transmission * (beam_diameter_m[rows] / PUPIL_DIAMETER_M) ** 2, 1.0))
-    return gain
 
 
 @dataclass
