@@ -14,16 +14,17 @@ Table 8; IEC 60825-1:2014 Table A.5). Ocular D_f, values as in the spec:
 ``P = E0 pi w^2``) and a disk of radius a centred at distance d from the axis, the power
 fraction is ``F = 1 - Q_1(sqrt(2) d / w, sqrt(2) a / w)`` (Marcum Q), i.e. the CDF at
 ``2 a^2 / w^2`` of a non-central chi-square with 2 degrees of freedom and non-centrality
-``2 d^2 / w^2`` (:func:`scipy.stats.ncx2`); the aperture-averaged irradiance is
-``P F / (pi a^2)``. Numerics: the CDF where F <= 1/2 and ``1 - sf`` above (no
-cancellation); F = 0 where the whole disk lies more than 38 w from the axis and the
-bound ``(a / w)^2 exp(-(d - a)^2 / w^2)`` underflows, F = 1 where the disk holds the
-beam to ``exp(-(a - d)^2 / w^2) < 1e-627``; where a / w or d / w exceed 300 (beams
-thinner than 1/300 of the aperture: scipy's Boost kernel can overflow there) the
+``2 d^2 / w^2`` (:func:`scipy.stats.ncx2`, here its kernel :func:`scipy.special.chndtr`);
+the aperture-averaged irradiance is ``P F / (pi a^2)``. Numerics: F = 0 where the
+whole disk lies more than 38 w beyond the axis (``exp(-38^2)`` underflows), F = 1 where
+it holds the beam to ``exp(-(a - d)^2 / w^2) < 1e-627``; where a / w or d / w exceed 300
+(beams thinner than 1/300 of the aperture, where scipy's Boost kernel can overflow) the
 1-D integral ``F = int_{-a}^{a} exp(-(x - d)^2 / w^2) erf(sqrt(a^2 - x^2) / w) dx /
-(sqrt(pi) w)``, with ``x = a sin(theta)`` (smooth at the rim), on 80 panels of at most
-w each and 12 Gauss-Legendre nodes (relative error below 1e-10, measured against ncx2
-in the tests). Never NaN.
+(sqrt(pi) w)`` with ``x = a sin(theta)`` (smooth at the rim), 80 panels in theta over
+the part of [-a, a] within 40 w of d, 12 Gauss-Legendre nodes each. Measured: the two
+agree to 1e-13 where F > 1e-10 and 1e-11 where F > 1e-100 (20 000 random cases); the
+quadrature matches a 40-digit mpmath integral at F = 1.7e-142 to 1e-9, where the CDF
+is 0.4 % off (immaterial there). Never NaN.
 
 **Optical aids.** An aid of objective diameter D_o, magnification M and transmission
 tau collects the power through a disk of diameter ``min(D_o, 7 mm M)`` about the eye's
@@ -126,16 +127,13 @@ def disk_fraction(radius_m, offset_m, beam_radius_m) -> np.ndarray:
 
 
 def _ncx2_fraction(ra, rd) -> np.ndarray:
-    """F from scipy's non-central chi-square (a / w, d / w moderate): the CDF where it is
-    at most 1/2, ``1 - sf`` above."""
-    from scipy.stats import ncx2
+    """F from the non-central chi-square CDF (a / w, d / w moderate):
+    :func:`scipy.special.chndtr`, the kernel of :func:`scipy.stats.ncx2` (importing
+    scipy.stats costs a second); any non-finite value goes to the quadrature."""
+    from scipy.special import chndtr
 
-    x, nc = 2 * ra * ra, 2 * rd * rd
     with np.errstate(all="ignore"):
-        f = ncx2.cdf(x, 2, nc)
-        hi = f > 0.5
-        if np.any(hi):
-            f[hi] = 1.0 - ncx2.sf(x[hi], 2, nc[hi])
+        f = chndtr(2 * ra * ra, 2, 2 * rd * rd)
     bad = ~np.isfinite(f)
     if np.any(bad):
         f[bad] = _quadrature_fraction(ra[bad], rd[bad])
