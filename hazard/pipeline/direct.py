@@ -24,7 +24,7 @@ import numpy as np
 
 from ..aperture import Apertures, aperture_irradiance_w_m2
 
-__all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam", "with_pointing"]
+__all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam", "gaussian_aperture_w_m2", "rim_clear", "with_pointing"]
 
 
 @dataclass
