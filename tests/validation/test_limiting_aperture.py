@@ -235,6 +235,10 @@ def test_direct_beam_through_the_aperture_property(a, k, psi, R, aided, m, d_o):
     """Random beam diameters 0.5-50 mm, eyes up to 4 (w + 3.5 mm) off the axis at random
     ranges, naked or with random optics: report.json's verdict value equals the
     aperture formula (1e-6), the point value the Gaussian."""
+    _direct_property(a, k, psi, R, aided, m, d_o)
+
+
+def _direct_property(a, k, psi, R, aided, m, d_o):
     phi = 1e-5
     w = (a + R * phi) / 2
     d = k * (w + 3.5e-3)
@@ -352,3 +356,33 @@ def test_a_diffuse_field_is_its_own_aperture_average():
     ring = e[1:].reshape(len(rho_n), len(th)).mean(axis=1) * 2 * math.pi
     mean = float(np.sum(ring * rho_n * w_r)) / (math.pi * a * a)
     assert e[0] > 0 and abs(mean - e[0]) <= 4 * (a / R) ** 2 * e[0]
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(a=ref.log_uniform(5e-4, 0.05), k=st.floats(0.0, 4.0), psi=st.floats(0.0, 2 * math.pi), R=st.floats(5.0, 95.0),
+       aided=st.booleans(), m=st.floats(1.0, 15.0), d_o=ref.log_uniform(5e-3, 0.08))
+def test_direct_beam_through_the_aperture_property_slow(a, k, psi, R, aided, m, d_o):
+    _direct_property(a, k, psi, R, aided, m, d_o)
+
+
+def test_pointing_error_judges_the_nearest_direction_through_the_aperture():
+    """A 2 mm beam (phi 1e-6) that may point anywhere within 1 mrad of its aim: an eye
+    50 m out at 1 mrad + 4 mm / 50 m from the aim is 4 mm beside the nearest direction's
+    axis: the verdict's value is the aperture formula there (point value 3e-7 of it)."""
+    b, R, d = 1e-3, 50.0, 4e-3
+    theta = b + d / R
+    q = np.array([R * math.sin(theta), R * math.cos(theta) - R_T, 0.0])
+    text = ref.scene_text(power=1.0, a=2e-3, phi=1e-6, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3),
+                          targets=[dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                                        tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))],
+                          observers=[("o", q, None)])
+    res = hazard.analyze(scenes.loads(text.replace("[exposure]", f"pointing_error_rad = {ref.fmt(b)}\n[exposure]")))
+    # the nearest direction is at angle b: the eye is at L = R cos(d/R)-ish range, r = L sin(d / R) off its axis
+    L = float(np.linalg.norm(q - np.array([0.0, -R_T, 0.0])))
+    delta = theta - b
+    z, r = L * math.cos(delta), L * math.sin(delta)
+    w = (2e-3 + z * 1e-6) / 2
+    assert res.observers.direct_irradiance_w_m2[0] == pytest.approx(ref.aperture_irradiance(1.0, w, r), rel=1e-6)
+    assert res.observers.direct_point_irradiance_w_m2[0] == pytest.approx(
+        1.0 / (math.pi * w * w) * math.exp(-(r / w) ** 2), rel=1e-6)
