@@ -196,12 +196,12 @@ def observer_apertures(optics, group, wavelength_nm, duration_s) -> Apertures:
     eye): D_f from :func:`limiting_aperture_m`; an aid collects over
     ``min(D_o, 7 mm M)``."""
     eye = limiting_aperture_m(wavelength_nm, duration_s) / 2
-    group = np.asarray(group, np.int64)
-    per = [(eye, 1.0, False) if o is None else
-           (min(o.objective_diameter_m, 2 * PUPIL_RADIUS_M * o.magnification) / 2, float(o.transmission), True)
-           for o in optics] or [(eye, 1.0, False)]
-    coll, tau, aided = (np.array([p[k] for p in per])[group] for k in range(3))
-    return Apertures(np.full(len(group), eye), coll.astype(float), tau.astype(float), aided.astype(bool))
+    group = np.asarray(group, np.intp)
+    optics = list(optics) or [None]
+    coll = np.array([eye if o is None else min(o.objective_diameter_m, 2 * PUPIL_RADIUS_M * o.magnification) / 2 for o in optics])
+    tau = np.array([1.0 if o is None else float(o.transmission) for o in optics])
+    aided = np.array([o is not None for o in optics], bool)
+    return Apertures(np.full(len(group), eye), coll[group], tau[group], aided[group])
 
 
 def aperture_irradiance_w_m2(power_w, beam_radius_m, offset_m, apertures: Apertures, fraction=None) -> np.ndarray:
