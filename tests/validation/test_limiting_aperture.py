@@ -386,3 +386,21 @@ def test_pointing_error_judges_the_nearest_direction_through_the_aperture():
     assert res.observers.direct_irradiance_w_m2[0] == pytest.approx(ref.aperture_irradiance(1.0, w, r), rel=1e-6)
     assert res.observers.direct_point_irradiance_w_m2[0] == pytest.approx(
         1.0 / (math.pi * w * w) * math.exp(-(r / w) ** 2), rel=1e-6)
+
+
+def test_a_track_beside_a_narrow_beam_is_judged_through_the_aperture():
+    """A track hovering 4 mm beside the 2 mm beam 50 m out (motion stage): its peak direct
+    irradiance is the aperture formula (range-safety.md 10), not the point value (which
+    is 2.4e-7 of the on-axis peak: 1.3e-5 of the aperture value)."""
+    p = [4e-3, -50.0, 0.0]
+    track = ('[[observers]]\nname = "hover"\nkind = "track"\ntimes_s = [0.0, 10.0]\n'
+             f'positions_m = [{ref.vec(p)}, {ref.vec(p)}]\n')
+    target = dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                  tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))
+    text = ref.scene_text(power=1.0, a=2e-3, phi=1e-6, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3), targets=[target])
+    res = hazard.analyze(scenes.loads(text.replace("[analysis]", track + "[analysis]")))
+    (path,) = res.motion.tracks()
+    w = (2e-3 + 50.0 * 1e-6) / 2
+    want = ref.aperture_irradiance(1.0, w, 4e-3)
+    assert path.summary["peak_direct_w_m2"] == pytest.approx(want, rel=1e-6)
+    assert want > 1e4 * 1.0 / (math.pi * w * w) * math.exp(-(4e-3 / w) ** 2)
