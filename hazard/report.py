@@ -159,6 +159,19 @@ def _frame(scene) -> dict:
     return site.describe()
 
 
+def _limiting_aperture(scene) -> dict:
+    """What the MPE is compared with (:mod:`hazard.aperture`), for report.json."""
+    from .aperture import limiting_aperture_m
+
+    spec = scene.spec
+    return {"diameter_m": limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s),
+            "source": "ANSI Z136.1-2014 sec. 8.3 / Table 8; IEC 60825-1:2014 Table A.5",
+            "optical_aids": "collect over min(D_o, 7 mm M), delivered into the 7 mm pupil (tau P / (pi (3.5 mm)^2)); "
+                            "the naked eye's value if larger",
+            "applies_to": "the direct beam and flat mirrors' beams (exact Gaussian power through the disk); diffuse "
+                          "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
+
+
 def report_dict(result, cols=None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
@@ -183,6 +196,7 @@ def report_dict(result, cols=None) -> dict:
         "mpe_w_m2": result.mpe_w_m2,
         "extended_source": getattr(result, "extended_source", None) or {"applied": False},
         "attenuation_per_m": result.attenuation_per_m,
+        "limiting_aperture": _limiting_aperture(scene),
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
                  "sampling": getattr(result, "beam_sampling", None) or None,
                  "spill": getattr(result, "spill", None) or None},

@@ -404,3 +404,12 @@ def test_a_track_beside_a_narrow_beam_is_judged_through_the_aperture():
     want = ref.aperture_irradiance(1.0, w, 4e-3)
     assert path.summary["peak_direct_w_m2"] == pytest.approx(want, rel=1e-6)
     assert want > 1e4 * 1.0 / (math.pi * w * w) * math.exp(-(4e-3 / w) ** 2)
+
+
+def test_report_json_names_the_limiting_aperture():
+    """report.json says which aperture the verdict used and where it comes from."""
+    from hazard.report import report_dict
+
+    res = hazard.analyze(_scene([("d", np.array([4e-3, -50.0, 0.0]), None)], power=1.0))
+    la = report_dict(res)["limiting_aperture"]
+    assert la["diameter_m"] == 7e-3 and "Z136.1-2014" in la["source"] and "60825-1:2014" in la["source"]
