@@ -27,7 +27,8 @@ What one path (an observer's position over time) receives at time t:
 Time steps. The path's own grid is the base step (``[motion] time_step_s``) with every
 knot of the tracks, the aim track and the windows' edges (both sides of an edge). With
 ``adaptive = true`` it is refined, a priori, where the path comes within
-``CROSSING_REACH`` 1/e radii of a beam axis (the direct beam and each mirror beam): the
+``CROSSING_REACH`` 1/e radii, plus the largest aperture radius (an aperture collects
+power that far from the eye), of a beam axis (the direct beam and each mirror beam): the
 transverse offset from the axis is linear across a step, its closest approach is exact,
 and the part of the step within reach gets a step of w / (n |dr/dt|) (n =
 ``samples_per_width``), so a fast aircraft crossing a narrow beam is sampled across it;
@@ -136,6 +137,7 @@ class MotionRun:
     key_step_text: str = ""
     dwell_keys_s: np.ndarray | None = None  # per beam state: lased time of the surface under its spot before it (made once)
     beam: object = None  # hazard.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
+    aperture_reach_m: float = 0.0  # the largest collecting radius of any path's eye or aid (hazard.aperture)
 
     # -- the schedule ----------------------------------------------------------------
     bias_rad: tuple = (0.0, 0.0)  # a constant pointing bias across the aim (bias_frame): the worst within the buffer
