@@ -22,6 +22,7 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads, thread_limit
 
+from .aperture import limiting_aperture_m, observer_apertures
 from .nohd import group_gains
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
@@ -98,12 +99,19 @@ def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
         log.skip("direct", the_plan.skipped("direct"))
         return None
     with log.run("direct") as st:
-        d = direct.direct_beam(traced.beam, scene.observers, tracer, mu)
         laser = scene.spec.laser
+        apertures = _apertures(scene)
+        d = direct.direct_beam(traced.beam, scene.observers, tracer, mu, apertures)
         if laser.pointing_buffer_rad > 0 or laser.sector is not None or laser.aim_track is not None:
-            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene)
+            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene, apertures)
         st.detail = d.detail
     return d
+
+
+def _apertures(scene):
+    """Per observer the limiting aperture and the aid's collecting disk (:mod:`hazard.aperture`)."""
+    return observer_apertures(scene.observers.optics, scene.observers.group, scene.spec.laser.wavelength_nm,
+                              scene.spec.exposure.duration_s)
 
 
 def _spill(scene, traced, mu, exposure, log) -> dict:
@@ -197,6 +205,8 @@ def _observers(scene, out, direct_beam) -> ObserverResults:
         far_field=out.far_field, irradiance_w_m2=out.history_w_m2, specular_irradiance_w_m2=out.specular_w_m2,
         direct_irradiance_w_m2=direct_w_m2, reflected_irradiance_w_m2=np.maximum(out.peak_w_m2 - direct_w_m2, 0.0),
         direct_at_aim_irradiance_w_m2=at_aim,
+        direct_point_irradiance_w_m2=None if direct_beam is None else direct_beam.point_w_m2,
+        aperture_diameter_m=None if direct_beam is None else direct_beam.aperture_m,
     )
 
 
@@ -229,7 +239,8 @@ def _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_p
         return None
     with log.run("footprint") as st:
         fps = ground.footprints(spots, traced.beam, scene.terrain, ray_scene, exposure.irradiance_w_m2, mu,
-                                scene.spec.analysis.footprint_eye_height_m, states, rows)
+                                scene.spec.analysis.footprint_eye_height_m, states, rows,
+                                aperture_m=limiting_aperture_m(scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s))
         st.detail = fps.detail
     return fps
 
@@ -288,6 +299,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():
         inp.direct_w_m2 = direct_beam.irradiance_w_m2
+    if any(sp.material.has_specular for sp in inp.spots):
+        inp.apertures = _apertures(scene)
     if exposure.pulse is not None:
         inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
     if not inp.keep_history:

@@ -675,14 +675,15 @@ def mirror_axis(spot: Spot) -> np.ndarray:
     return r / np.linalg.norm(r)
 
 
-def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None):
+def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None, apertures=None):
     """Irradiance [W/m^2] of the reflected (delta-lobe) beam at observers (M,) or (M, T),
     by geometric optics from the part of the beam that really hits the mirror (see
     :func:`hazard.specular.specular_irradiance`; ``beam`` is not used: the spot carries
-    its beam)."""
+    its beam; ``apertures``: flat mirrors' beams through the observers' limiting
+    apertures, :mod:`hazard.aperture`)."""
     from .specular import specular_irradiance as _specular
 
-    return _specular(spot, observers_m, gain, attenuation_per_m, states)
+    return _specular(spot, observers_m, gain, attenuation_per_m, states, apertures)
 
 
 def spot_directions(spot: Spot):

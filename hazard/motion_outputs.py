@@ -119,6 +119,7 @@ def track_columns(result, mpe_w_m2: float) -> dict:
         "exposure_ratio": col("exposure_ratio"), "hazardous": np.array([x["hazardous"] for x in s], bool),
         "hazardous_static": np.zeros(n, bool), "first_exceedance_s": col("first_exceedance_s"),
         "line_of_sight": np.ones(n, bool), "far_field": np.zeros(n, bool),
+        "direct_point_irradiance_w_m2": col("peak_direct_point_w_m2"), "aperture_diameter_m": col("aperture_diameter_m"),
     }
 
 

@@ -304,6 +304,7 @@ def _observer_histories(result, rows):
     recomputed peaks do not reproduce the result's."""
     from scenes.observers import Observers
 
+    from .aperture import observer_apertures
     from .nohd import group_gains
     from .pipeline import spots as beam_stage
     from .pipeline.irradiance_map import MapInputs, irradiance_map
@@ -321,7 +322,8 @@ def _observer_histories(result, rows):
     direct = obs.direct_irradiance_w_m2
     inp = MapInputs(result.spots, result.beam, result.states, result.times_s, points, gain, result.attenuation_per_m,
                     spec.exposure.duration_s, spec.laser.wavelength_nm, spec.exposure.standard, float(result.mpe_w_m2),
-                    ray_scene, True, 1, direct_w_m2=direct[rows] if direct is not None and direct[rows].any() else None)
+                    ray_scene, True, 1, direct_w_m2=direct[rows] if direct is not None and direct[rows].any() else None,
+                    apertures=observer_apertures(table.optics, table.group[rows], spec.laser.wavelength_nm, spec.exposure.duration_s))
     out = irradiance_map(inp)
     if not np.allclose(out.peak_w_m2, obs.peak_irradiance_w_m2[rows], rtol=1e-9, atol=0.0):
         return None, "the recomputed irradiance does not reproduce the analysis's peak irradiance"

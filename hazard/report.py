@@ -43,7 +43,7 @@ JSON_OBSERVERS_MAX = 100_000  # observers listed in report.json (highest hazard 
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
                "direct_at_aim_irradiance_w_m2", "reflected_irradiance_w_m2", "peak_time_s",
                "radiant_exposure_j_m2", "angular_subtense_rad", "c_e", "mpe_w_m2", "hazard_ratio", "exposure_ratio", "hazardous", "hazardous_static",
-               "first_exceedance_s", "line_of_sight", "far_field"]
+               "first_exceedance_s", "line_of_sight", "far_field", "direct_point_irradiance_w_m2", "aperture_diameter_m"]
 
 
 def observer_columns(result) -> dict:
@@ -77,6 +77,11 @@ def observer_columns(result) -> dict:
         "first_exceedance_s": obs.first_exceedance_s,
         "line_of_sight": obs.line_of_sight,
         "far_field": obs.far_field,
+        # the direct beam at the eye's centre and the aperture its verdict value is collected over (hazard.aperture)
+        "direct_point_irradiance_w_m2": (obs.direct_point_irradiance_w_m2 if getattr(obs, "direct_point_irradiance_w_m2", None)
+                                         is not None else direct),
+        "aperture_diameter_m": (obs.aperture_diameter_m if getattr(obs, "aperture_diameter_m", None) is not None
+                                else np.full(m, np.nan)),
     }
     return _with_tracks(result, cols, m)
 
@@ -111,7 +116,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
     labels = cols["labels"]
     rows = np.arange(len(labels)) if rows is None else rows
     plain = {k: np.asarray(v)[rows].tolist() for k, v in cols.items() if k != "labels"}  # Python floats and bools, once
-    maybe = {"angular_subtense_rad", "first_exceedance_s"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
+    maybe = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
     keys = [k for k in cols if k not in ("position_m", "labels")]
     out = []
     for j, i in enumerate(rows.tolist()):
@@ -154,6 +159,19 @@ def _frame(scene) -> dict:
     return site.describe()
 
 
+def _limiting_aperture(scene) -> dict:
+    """What the MPE is compared with (:mod:`hazard.aperture`), for report.json."""
+    from .aperture import limiting_aperture_m
+
+    spec = scene.spec
+    return {"diameter_m": limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s),
+            "source": "ANSI Z136.1-2014 sec. 8.3 / Table 8; IEC 60825-1:2014 Table A.5",
+            "optical_aids": "collect over min(D_o, 7 mm M), delivered into the 7 mm pupil (tau P / (pi (3.5 mm)^2)); "
+                            "the naked eye's value if larger",
+            "applies_to": "the direct beam and flat mirrors' beams (exact Gaussian power through the disk); diffuse "
+                          "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
+
+
 def report_dict(result, cols=None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
@@ -178,6 +196,7 @@ def report_dict(result, cols=None) -> dict:
         "mpe_w_m2": result.mpe_w_m2,
         "extended_source": getattr(result, "extended_source", None) or {"applied": False},
         "attenuation_per_m": result.attenuation_per_m,
+        "limiting_aperture": _limiting_aperture(scene),
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
                  "sampling": getattr(result, "beam_sampling", None) or None,
                  "spill": getattr(result, "spill", None) or None},
@@ -196,7 +215,7 @@ def report_dict(result, cols=None) -> dict:
 
 
 _MOTION_BLANK = MOTION_COLUMNS  # the motion_* columns: NaN where a fixed observer was not evaluated over time
-_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
+_CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
 
 
 def _csv_cell(values, key) -> list:

@@ -109,6 +109,11 @@ class ObserverResults:
     # the direct beam at the nominal aim [W/m^2]; direct_irradiance_w_m2 is the worst over
     # the pointing error / sector when the scene gives one (else the two are equal)
     direct_at_aim_irradiance_w_m2: np.ndarray | None = None
+    # the direct beam's point value at the eye [W/m^2] (no aperture, no aid; the worst over
+    # the pointing error when given) and the aperture its verdict value is collected over
+    # (diameter [m]: D_f, or an aid's min(D_o, 7 mm M); hazard.aperture); None if not computed
+    direct_point_irradiance_w_m2: np.ndarray | None = None
+    aperture_diameter_m: np.ndarray | None = None
 
     def __len__(self):
         return len(self.observers)

@@ -105,9 +105,20 @@ def _planes(spot):
     return planes
 
 
-def _lit(spot, s, faces=None):
+def _lit(spot, s, faces=None, reach_s=None):
     """Observers whose incident ray (transverse coordinates s) lands on the spot's target
-    (on one of ``faces``): any of the five rays of the cell holding s (conservative)."""
+    (on one of ``faces``): any of the five rays of the cell holding s (conservative).
+    ``reach_s`` (per row, units of w): an aperture of that radius about s - lit when its
+    disk overlaps the outline (expanded by it), or when s or one of 8 points on its rim
+    is lit (cells)."""
+    if reach_s is not None:
+        if spot.outline_s is not None:
+            from .beam import inside_convex
+
+            return _inside_expanded(s, spot.outline_s, reach_s, inside_convex)
+        ang = 2 * np.pi * np.arange(8) / 8
+        ring = s[:, None, :] + reach_s[:, None, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)[None]
+        return _lit(spot, s, faces) | _lit(spot, ring.reshape(-1, 2), faces).reshape(-1, 8).any(axis=1)
     if spot.outline_s is not None:  # a flat target nothing shadows: its exact outline
         from .beam import inside_convex
 
@@ -125,8 +136,21 @@ def _lit(spot, s, faces=None):
     return out
 
 
-def _flat_geometry(spot, plane, obs):
-    """Per observer through one flat facet: (mask, E_geo, point X, unit incoming d)."""
+def _inside_expanded(s, outline, reach_s, inside_convex):
+    """Points s (N, 2) within ``reach_s`` (N,) of a convex outline (its edges moved out
+    by reach_s: a superset of the disks that overlap it), grouped by equal reach."""
+    out = np.zeros(len(s), bool)
+    for r in np.unique(reach_s):
+        rows = np.flatnonzero(reach_s == r)
+        out[rows] = inside_convex(s[rows], outline, margin=-float(r))
+    return out
+
+
+def _flat_geometry(spot, plane, obs, reach_m=None):
+    """Per observer through one flat facet: (mask, E_geo, point X, unit incoming d,
+    the image's s and axial z). ``reach_m`` (per observer, [m]): the radius of the
+    aperture about the eye; an eye is lit when its aperture's image overlaps the lit
+    part of the facet (:func:`_lit`)."""
     beam = spot.beam
     n, p0, faces = plane
     h = (obs - p0) @ n
@@ -138,9 +162,12 @@ def _flat_geometry(spot, plane, obs):
         t = ((p0 - o) @ n) / den
     x = o + np.nan_to_num(t)[:, None] * d
     ok = (h > 0) & np.all(np.isfinite(s), axis=1) & (den < 0) & (t > 0) & (z > 0)
-    ok &= _lit(spot, np.nan_to_num(s, nan=1e9), faces)
+    reach_s = None
+    if reach_m is not None:
+        reach_s = np.asarray(reach_m, float) / (beam.diameter_at(np.where(ok, z, 1.0)) / 2)
+    ok &= _lit(spot, np.nan_to_num(s, nan=1e9), faces, reach_s)
     e = np.where(ok, beam.irradiance_w_m2(np.nan_to_num(s), np.where(ok, z, 1.0)), 0.0)
-    return ok, e, x, _unit(d)
+    return ok, e, x, _unit(d), s, z
 
 
 def _specular_point(spot, obs):
@@ -274,13 +301,25 @@ def _curved_geometry(spot, obs):
     return ok, geo, p, n, d, ~settled & near
 
 
-def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None):
+def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None, apertures=None):
     """Irradiance [W/m^2] of a spot's mirror lobe at observers: (M,) or (M, T) with states.
 
     Sum over the spot's lit flat facets and, for a sphere or cylinder, its curved
     surface (module notes). Observers near a curved mirror where the specular point
     cannot be found (the iteration does not converge: within a few radii) get the
     mirror's highest possible irradiance, ``rho E_peak`` (conservative).
+
+    ``apertures`` (:class:`hazard.aperture.Apertures`, one row per observer): flat facets
+    give the power of the unfolded Gaussian through each eye's limiting aperture or its
+    aid's collecting disk (:func:`hazard.aperture.aperture_irradiance_w_m2`, ``gain`` not
+    applied there) instead of the point value times ``gain``. A mirror with an exact
+    outline (a plate or disk the beam reaches whole) counts only the part of each disk
+    whose rays reach it (a 256-gon clipped to the outline: above the exact value by at
+    most 1.5e-4 of the disk's area); other flat facets integrate the whole unfolded beam
+    over the disk, as if the mirror did not cut it (an upper bound, exact where the
+    disk's image lies inside the lit part; an eye is lit when its disk's image overlaps
+    that part at all). Curved facets keep the point value times
+    ``gain`` (their beams spread from the mirror: wide at any eye beyond a few radii).
     """
     obs = np.asarray(observers_m, float)
     m = len(obs)
@@ -289,13 +328,17 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
     if m == 0 or not spot.material.has_specular:
         return out
     pos, mu, tangent = spot.beam.position_m, attenuation_per_m, spot.target.tangent
+    reach = None if apertures is None else np.maximum(apertures.eye_radius_m, np.where(apertures.aided, apertures.collect_radius_m, 0.0))
     for plane in _planes(spot):
-        ok, e, x, d = _flat_geometry(spot, plane, obs)
+        ok, e, x, d, s, z = _flat_geometry(spot, plane, obs, reach)
         if not np.any(ok):
             continue
         path = np.linalg.norm(x[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - x[ok], axis=1)
         rho = _reflectance(spot, _local(plane[0], tangent, -d[ok]), states)
-        geo = e[ok] * np.exp(-mu * path) * gain[ok]
+        if apertures is None:
+            geo = e[ok] * np.exp(-mu * path) * gain[ok]
+        else:
+            geo = _flat_aperture_w_m2(spot.beam, s[ok], z[ok], path, mu, apertures.take(np.flatnonzero(ok)), spot.outline_s)
         out[ok] += rho * (geo if states is None else geo[:, None])
     an = spot.target.mesh.analytic
     if an is not None:
@@ -309,6 +352,63 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
             rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
             cap = spot.max_irradiance_w_m2 * gain[near]
             out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
+    return out
+
+
+CUT_SIDES = 256  # the aperture's disk as a circumscribed polygon when the mirror's outline cuts it
+
+
+def _flat_aperture_w_m2(beam, s, z, path_m, mu, apertures, outline_s=None):
+    """The unfolded Gaussian (image at transverse s, axial z) through the apertures, with
+    the ray tilt of the point value and attenuation along the folded path. With the
+    mirror's exact outline (``outline_s``, s coordinates: the rays that reach the mirror)
+    only the part of each disk's image inside it counts (:func:`_cut_fraction`), else
+    the whole Gaussian over the disk (an upper bound)."""
+    from .aperture import aperture_irradiance_w_m2, disk_fraction
+
+    w = beam.diameter_at(z) / 2
+    s2 = (s * s).sum(axis=1)
+    power = beam.power_w * np.exp(-mu * path_m) * np.sqrt(1.0 + s2 * (beam.divergence_rad / 2) ** 2)
+    if outline_s is None:
+        return aperture_irradiance_w_m2(power, w, np.sqrt(s2) * w, apertures)
+
+    def fraction(radius_m, rows):
+        from .beam import inside_convex
+
+        f = disk_fraction(radius_m, np.sqrt(s2[rows]) * w[rows], w[rows])
+        r_s = np.asarray(radius_m, float) / w[rows]
+        cut = np.flatnonzero(~_inside_by(s[rows], outline_s, r_s, inside_convex) & (f > 0))
+        if len(cut):
+            f[cut] = np.minimum(f[cut], _cut_fraction(outline_s, s[rows][cut], r_s[cut]))
+        return f
+
+    return aperture_irradiance_w_m2(power, w, np.sqrt(s2) * w, apertures, fraction)
+
+
+def _inside_by(s, outline, r_s, inside_convex):
+    """Disks (centres s, radii r_s; units of w) wholly inside a convex outline."""
+    out = np.zeros(len(s), bool)
+    for r in np.unique(r_s):
+        rows = np.flatnonzero(r_s == r)
+        out[rows] = inside_convex(s[rows], outline, margin=float(r))
+    return out
+
+
+def _cut_fraction(outline_s, centres_s, radii_s, sides=CUT_SIDES) -> np.ndarray:
+    """Gaussian power fraction (density ``exp(-|s|^2) / pi``) in each disk cut by the
+    convex outline: the disk's circumscribed ``sides``-gon clipped to the outline
+    (Sutherland-Hodgman) and integrated exactly (Owen's T, :func:`hazard.beam.polygon_moments`).
+    An upper bound: the polygon exceeds the disk by ``1/cos^2(pi/sides) - 1`` = 1.5e-4
+    of its area."""
+    from .beam import clip_convex, polygon_moments
+
+    ang = 2 * np.pi * (np.arange(sides) + 0.5) / sides
+    ring = np.stack([np.cos(ang), np.sin(ang)], axis=1) / np.cos(np.pi / sides)
+    polys = [clip_convex(c + r * ring, outline_s) for c, r in zip(centres_s, radii_s)]
+    out = np.zeros(len(polys))
+    live = [k for k, q in enumerate(polys) if len(q) >= 3]
+    if live:
+        out[live] = polygon_moments([polys[k] for k in live]).fraction
     return out
 
 

@@ -55,6 +55,7 @@ class MapInputs:
     chunk: int = MAP_CHUNK
     direct_w_m2: np.ndarray | None = None  # the laser's own beam at each observer (constant in time), added to the map
     pulse_limit_w_m2: float | None = None  # pulsed: per-pulse MPE x PRF (the first pulse above it is an exceedance)
+    apertures: object | None = None  # hazard.aperture.Apertures per observer: flat mirrors' beams through them (None: point x gain)
 
 
 @dataclass
@@ -189,7 +190,8 @@ class _MapRun:
         e, far = spot_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, sk, los)
         out.far_field[sl] |= far
         if sp.material.has_specular:
-            es = specular_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, inp.beam, sk)
+            ap = None if inp.apertures is None else inp.apertures.take(np.arange(sl.start, sl.stop))
+            es = specular_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, inp.beam, sk, ap)
             es = es * (los if sk is None else los[:, None])
             out.specular_w_m2[sl] = np.maximum(out.specular_w_m2[sl], es if es.ndim == 1 else es.max(axis=1))
             e = e + es

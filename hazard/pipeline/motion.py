@@ -8,8 +8,9 @@ What one path (an observer's position over time) receives at time t:
   z phi) / 2 the 1/e radius at the axial distance z, r the distance from the axis, L from
   the aperture; zero where something lies on the segment from the aperture to the eye
   (terrain, occluders and the targets where they are at t) or the laser is not lasing
-  (``[laser] windows``); times the optical gain of the group's optics with the beam's
-  diameter there (:func:`hazard.pipeline.direct._beam_gain`).
+  (``[laser] windows``). The verdict's value is the power through the limiting aperture
+  about the eye, or through the group's aid's collecting disk (:mod:`hazard.aperture`,
+  as for fixed observers; the line to the eye's centre decides what blocks it).
 - **reflections**: the spots of the beam at t (:func:`hazard.pipeline.spots.trace_beam`
   on the scene with the aim and target positions of t: a *beam state*), evaluated as the
   irradiance map does (:func:`hazard.engine.spot_irradiance`, the mirror lobes by
@@ -26,7 +27,8 @@ What one path (an observer's position over time) receives at time t:
 Time steps. The path's own grid is the base step (``[motion] time_step_s``) with every
 knot of the tracks, the aim track and the windows' edges (both sides of an edge). With
 ``adaptive = true`` it is refined, a priori, where the path comes within
-``CROSSING_REACH`` 1/e radii of a beam axis (the direct beam and each mirror beam): the
+``CROSSING_REACH`` 1/e radii, plus the largest aperture radius (an aperture collects
+power that far from the eye), of a beam axis (the direct beam and each mirror beam): the
 transverse offset from the axis is linear across a step, its closest approach is exact,
 and the part of the step within reach gets a step of w / (n |dr/dt|) (n =
 ``samples_per_width``), so a fast aircraft crossing a narrow beam is sampled across it;
@@ -62,7 +64,7 @@ import numpy as np
 
 from ..engine import spot_irradiance, specular_irradiance
 from ..nohd import optical_gain
-from .direct import _beam_gain
+from ..aperture import aperture_irradiance_w_m2, observer_apertures
 
 __all__ = ["PathResult", "MotionRun", "bias_frame", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
 
@@ -135,6 +137,7 @@ class MotionRun:
     key_step_text: str = ""
     dwell_keys_s: np.ndarray | None = None  # per beam state: lased time of the surface under its spot before it (made once)
     beam: object = None  # hazard.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
+    aperture_reach_m: float = 0.0  # the largest collecting radius of any path's eye or aid (hazard.aperture)
 
     # -- the schedule ----------------------------------------------------------------
     bias_rad: tuple = (0.0, 0.0)  # a constant pointing bias across the aim (bias_frame): the worst within the buffer
@@ -292,15 +295,21 @@ def blocked(tracer, origin, p, dist) -> np.ndarray:
 
 
 def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
-    """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes)."""
-    e, w, dist = gaussian_along_w_m2(run.beam, run.direction(t), p, run.mu)
-    e = np.where(run.motion.windows.lased(t), e, 0.0)
+    """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes),
+    through the limiting aperture or the aid's collecting disk (:mod:`hazard.aperture`)."""
+    u = run.direction(t)
+    e, w, dist = gaussian_along_w_m2(run.beam, u, p, run.mu)
+    z = np.einsum("ij,ij->i", np.asarray(p, float) - run.beam.position_m, np.broadcast_to(u, np.shape(p)))
+    r = np.sqrt(np.maximum(dist**2 - z**2, 0.0))
+    spec = run.scene.spec
+    ap = observer_apertures([optics], np.zeros(len(e), int), spec.laser.wavelength_nm, spec.exposure.duration_s)
+    tilt = np.sqrt(1.0 + (r / w) ** 2 * (run.beam.divergence_rad / 2) ** 2)
+    through = aperture_irradiance_w_m2(run.beam.power_w * np.exp(-run.mu * dist) * tilt, w, r, ap)
+    e = np.where(run.motion.windows.lased(t) & (z > 0), through, 0.0)
     live = np.flatnonzero(e > 0)
     for k in np.unique(state_idx[live]):
         rows = live[state_idx[live] == k]
         e[rows] = np.where(blocked(run.states_list[k].tracer, run.beam.position_m, p[rows], dist[rows]), 0.0, e[rows])
-    if optics is not None:
-        e = e * _beam_gain([optics], np.zeros(len(e), int), 2 * w)
     return e
 
 

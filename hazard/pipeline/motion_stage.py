@@ -243,6 +243,16 @@ def _fixed_paths(run: MotionRun, notes) -> list:
     return out
 
 
+def _aperture_reach_m(scene, motion) -> float:
+    """The largest radius [m] over which an eye or an aid of any path collects the direct
+    beam (:mod:`hazard.aperture`): the crossing refinement reaches that much farther."""
+    from ..aperture import observer_apertures
+
+    optics = list(scene.observers.optics) + [tr.optics for tr in motion.tracks] + [None]  # None: the naked eye
+    ap = observer_apertures(optics, np.arange(len(optics)), scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s)
+    return ap.reach_m
+
+
 def run_motion(scene, motion, first, states, history_times_s, mu, limits, backend, threads) -> MotionResult:
     """Evaluate every path (see the module notes). ``first``: (traced, tracer, ray_scene)
     of the static analysis; ``limits``: its :class:`~hazard.pipeline.limits.ExposureLimits`."""
@@ -251,6 +261,7 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
     pulse = None if limits.pulse is None else limits.pulse.per_pulse_radiant_exposure_j_m2 * spec.laser.prf_hz
     run = MotionRun(scene, motion, mu, limits.irradiance_w_m2, pulse, states, np.asarray(history_times_s, float),
                     [], np.zeros(1), backend, threads, beam=first[0].beam)
+    run.aperture_reach_m = _aperture_reach_m(scene, motion)
     grid = base_grid(motion, motion.t_start_s, motion.t_end_s)
     beam_states(run, grid, first)
     notes = []

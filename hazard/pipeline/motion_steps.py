@@ -68,7 +68,7 @@ def crossing_times(run, path_at, t, samples_per_width: int) -> np.ndarray:
         seg = np.flatnonzero(ok[:-1] & ok[1:])
         dr = r[seg + 1] - r[seg]
         wmin = np.minimum(w[seg], w[seg + 1])
-        reach = CROSSING_REACH * wmin
+        reach = CROSSING_REACH * wmin + run.aperture_reach_m  # an aperture collects the beam from that far beside it
         # closest approach of the (linear) transverse offset within each step
         tau = np.clip(-np.einsum("ij,ij->i", r[seg], dr) / np.maximum(np.einsum("ij,ij->i", dr, dr), 1e-300), 0, 1)
         dmin = np.linalg.norm(r[seg] + tau[:, None] * dr, axis=1)

@@ -19,11 +19,13 @@ pointed there gives (range-safety.md section 1; :class:`hazard.beam.BeamGeometry
     z = L cos delta, r = L sin delta, w = (a + z phi) / 2, s = r / w,
 
 its largest value over A (E falls with delta wherever 4 L / (a + L phi) > phi, i.e.
-beyond micrometres of the aperture), times the optical gain of the observer's group
-with the beam's diameter there. The distance from u to the sector (azimuth [A0, A1]
-clockwise from +y, elevation [E0, E1]) is exact (:func:`scenes.geometry.angle_to_sector_rad`,
-shared with the danger zone's directions): inside it is 0; else the least angle to its
-edges, the two meridian arcs (the foot of u on each arc's great circle, or an arc's
+beyond micrometres of the aperture); the verdict's value is the power through the
+observer's limiting aperture or its aid's collecting disk at offset ``r`` from that
+axis (:mod:`hazard.aperture`), also largest at the smallest ``r``. The distance from u to
+the sector (azimuth [A0, A1] clockwise from +y, elevation [E0, E1]) is exact
+(:func:`scenes.geometry.angle_to_sector_rad`, shared with the danger zone's directions):
+inside it is 0; else the least angle to its edges, the two meridian arcs (the foot of u
+on each arc's great circle, or an arc's
 ends) and the two circles of elevation (at u's azimuth when it lies in [A0, A1], else
 at their ends).
 
@@ -125,36 +127,45 @@ def beam_at_offset_w_m2(beam, distance_m, delta_rad, mu) -> tuple[np.ndarray, np
     return np.where(delta < np.pi / 2, e, 0.0), diameter
 
 
-def pointing_worst_w_m2(scene, beam, observers, mu, ray_scene, gain_fn) -> np.ndarray:
+def pointing_worst_w_m2(scene, beam, observers, mu, ray_scene, aperture_fn) -> tuple[np.ndarray, np.ndarray]:
     """The largest irradiance [W/m^2] of ``beam`` (the laser's, at its aim) at each
     observer over the directions it may point in, in blocks on threads
-    (:meth:`scenes.Observers.map_blocks`); ``gain_fn(rows, beam_diameter_m)`` gives the
-    optical gain of those observers; ``ray_scene`` (None: nothing blocks) answers the
-    line from the aperture to each eye through the targets."""
-    out = np.zeros(len(observers))
+    (:meth:`scenes.Observers.map_blocks`): (the aperture value the verdict uses, the point
+    value at the eye). ``aperture_fn(rows, point_w_m2, axial_m, offset_m, path_m)`` gives
+    the aperture value of those observers (:mod:`hazard.aperture`; the power through a
+    disk about the eye falls as the axis moves away, so the nearest direction is the
+    worst for it too); ``ray_scene`` (None: nothing blocks) answers the line from the
+    aperture to each eye through the targets."""
+    out, point = np.zeros(len(observers)), np.zeros(len(observers))
     track = aim_track_directions(scene)  # once, not per block
 
     def block(a0, a1, p):
-        out[a0:a1] = _worst(scene, beam, p, mu, ray_scene, lambda rows, d: gain_fn(a0 + rows, d), track)
+        out[a0:a1], point[a0:a1] = _worst(scene, beam, p, mu, ray_scene, lambda rows, *a: aperture_fn(a0 + rows, *a), track)
 
     observers.map_blocks(block)
-    return out
+    return out, point
 
 
-def _worst(scene, beam, points_m, mu, ray_scene, gain_fn, track=None) -> np.ndarray:
+def _worst(scene, beam, points_m, mu, ray_scene, aperture_fn, track=None) -> tuple[np.ndarray, np.ndarray]:
     """:func:`pointing_worst_w_m2` at points (N, 3)."""
     o = np.asarray(beam.position_m, float)
     rel = np.asarray(points_m, float).reshape(-1, 3) - o
     dist = np.linalg.norm(rel, axis=1)
-    out = np.zeros(len(rel))
+    out, point = np.zeros(len(rel)), np.zeros(len(rel))
     live = np.flatnonzero(dist > 0)
     if not len(live):
-        return out
+        return out, point
     u = rel[live] / dist[live, None]
-    e, diameter = beam_at_offset_w_m2(beam, dist[live], pointing_offset_rad(scene, u, track), mu)
-    hit = np.flatnonzero(e > 0)
+    delta = pointing_offset_rad(scene, u, track)
+    e, _diameter = beam_at_offset_w_m2(beam, dist[live], delta, mu)
+    ahead = delta < np.pi / 2
+    ap = np.zeros(len(live))
+    ap[ahead] = aperture_fn(live[ahead], e[ahead], dist[live[ahead]] * np.cos(delta[ahead]),
+                            dist[live[ahead]] * np.sin(delta[ahead]), dist[live[ahead]])
+    hit = np.flatnonzero((ap > 0) | (e > 0))
     if ray_scene is not None and len(hit):
         stop = first_backstop_rays(np.broadcast_to(o, (len(hit), 3)), u[hit], ray_scene, len(scene.targets))
-        e[hit] = np.where(stop >= dist[live[hit]] * (1 - 1e-9), e[hit], 0.0)
-    out[live] = e * gain_fn(live, diameter)
-    return out
+        clear = stop >= dist[live[hit]] * (1 - 1e-9)
+        e[hit], ap[hit] = np.where(clear, e[hit], 0.0), np.where(clear, ap[hit], 0.0)
+    out[live], point[live] = ap, e
+    return out, point

@@ -66,8 +66,9 @@ def _notes(ev, s, prop) -> tuple[list, list]:
             "the heating history of a dynamic target follows a drawn pointing error, but not a drawn visibility or BRDF scale "
             "(the nominal attenuation's history)",
             "scintillation path lengths and variances are the nominal geometry's (not redrawn with an observer's offset)",
-            "the observer's optics multiply the naked-eye irradiance by their fixed gain (tau M^2 or tau (D_o/7 mm)^2): the "
-            "beam-diameter limit of the direct beam is not taken (an upper bound)"]
+            "the observer's optics multiply the naked eye's value (the direct beam through the 7 mm limiting aperture) by "
+            "their fixed gain (tau M^2 or tau (D_o/7 mm)^2): an upper bound in a beam wider than the objective, NOT beside a "
+            "beam narrower than it, whose power the aid collects over min(D_o, 7 mm M) (hazard run's verdict does)"]
     if u.normal_tilt_sigma_deg > 0:
         others = [t.name for t in scene.targets if t.index not in ev.model.tilt_targets]
         if others:

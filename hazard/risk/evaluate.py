@@ -273,11 +273,20 @@ class Evaluator:
         return e if tr.states else np.max(peak_nodes, axis=0)[:, None]
 
     def _direct(self, beam, p, mu) -> np.ndarray:
+        """The direct beam through the naked eye's limiting aperture at points p (as the
+        analysis's verdict, :mod:`hazard.aperture`)."""
+        from ..aperture import Apertures, limiting_aperture_m
+        from ..pipeline.direct import gaussian_aperture_w_m2
+
         out = np.zeros(len(p))
-        at = beam_at(beam, p, mu)
+        half = limiting_aperture_m(self.scene.spec.laser.wavelength_nm, self.scene.spec.exposure.duration_s) / 2
+        at = beam_at(beam, p, mu, half)
         if len(at.rows):
             clear = clear_of_objects(at, p, self.tracer)
-            out[at.rows[clear]] = at.irradiance_w_m2[clear]
+            n = len(at.rows)
+            eye = Apertures(np.full(n, half), np.full(n, half), np.ones(n), np.zeros(n, bool))
+            through = gaussian_aperture_w_m2(beam, at.axial_m, at.offset_m, at.path_m, mu, eye)
+            out[at.rows[clear]] = through[clear]
         return out
 
     def peak_ratio(self, d: Draws, i: int) -> np.ndarray:

@@ -62,6 +62,11 @@ def test_lambertian_plate_far_field_oracle():
     # 4 P / (pi (a + R phi)^2) comes on top (range-safety.md 2)
     direct = np.zeros(len(pts))
     direct[0] = 4 * 100.0 / (math.pi * (0.005 + 20.0 * 0.001) ** 2)
+    np.testing.assert_allclose(res.observers.direct_point_irradiance_w_m2, direct, rtol=1e-9)
+    # the verdict's value: the power through the 7 mm aperture on the axis of the 25 mm
+    # beam, P (1 - exp(-a^2 / w^2)) / (pi a^2) (range-safety.md 1 and 10)
+    w, a = (0.005 + 20.0 * 0.001) / 2, 3.5e-3
+    direct[0] = 100.0 * -math.expm1(-(a / w) ** 2) / (math.pi * a * a)
     np.testing.assert_allclose(res.observers.direct_irradiance_w_m2, direct, rtol=1e-9)
     np.testing.assert_allclose(res.observers.static_irradiance_w_m2, expected + direct, rtol=1e-9)
     # its lobe maximum is the diffuse NHZ of the same power and MPE
@@ -90,10 +95,15 @@ def test_flat_mirror_is_the_direct_beam_at_the_folded_range():
     scene = scenes.loads(scene_text)
     res = hazard.analyze(scene)
     d = 0.005 + 150 * 0.001
-    on_axis = 0.9 * 4 * 100 / (math.pi * d * d)
+    # the verdict's value: the unfolded beam through the 7 mm aperture, rho P F / (pi a^2),
+    # F = ncx2.cdf(2 a^2 / w^2, 2, 2 r^2 / w^2) (range-safety.md 10; 1e-3 below the peak here)
+    from scipy.stats import ncx2
+
+    w, a = d / 2, 3.5e-3
+    on_axis = 0.9 * 100 * -math.expm1(-(a / w) ** 2) / (math.pi * a * a)
     e = res.observers.static_irradiance_w_m2
     assert e[0] == pytest.approx(on_axis, rel=1e-3)
-    assert e[1] == pytest.approx(on_axis * math.exp(-4 * 0.01 / d**2), rel=1e-3)
+    assert e[1] == pytest.approx(0.9 * 100 * ncx2.cdf(2 * a * a / w**2, 2, 2 * 0.01 / w**2) / (math.pi * a * a), rel=1e-3)
     # the mirror lobe's NOHD beyond the mirror = folded direct-beam NOHD minus the 50 m to it
     folded = hazard.nohd_specular(100.0, 50.0, 0.005, 0.001, 0.9).nohd_m
     assert res.targets[0].specular_nohd_static_m == pytest.approx(folded - 50.0, rel=1e-3)

@@ -75,7 +75,7 @@ def test_back_face_material_reflects_from_the_lit_side():
 
 
 def test_mirror_attenuated_once_per_leg():
-    """On the mirror axis at R2: rho 4P exp(-mu (R1 + R2)) / (pi D(R1 + R2)^2) exactly
+    """On the mirror axis at R2: rho 4P exp(-mu (R1 + R2)) / (pi D(R1 + R2)^2), averaged over the aperture
     (the old engine took exp(-mu R1) twice: -33 % at mu 2e-3 over 200 m)."""
     power, a, phi, r1, r2, mu = 100.0, 0.01, 0.0005, 200.0, 50.0, 2e-3
     # plate tilted 45 deg about z: the mirror axis leaves along +x
@@ -86,7 +86,10 @@ def test_mirror_attenuated_once_per_leg():
     text = text.replace("tangent = [1.0, 0.0, 0.0]", "tangent = [0.7071067811865476, 0.7071067811865476, 0.0]")
     res = hazard.analyze(scenes.loads(text))
     d = a + (r1 + r2) * phi
-    ref = 0.8 * 4 * power * math.exp(-mu * (r1 + r2)) / (math.pi * d * d)
+    # through the 7 mm limiting aperture on the axis (range-safety.md 10): the power in the
+    # centred disk, P (1 - exp(-r^2 / w^2)), over its area (1.3e-3 below the peak here)
+    w, r = d / 2, 3.5e-3
+    ref = 0.8 * power * -math.expm1(-(r / w) ** 2) * math.exp(-mu * (r1 + r2)) / (math.pi * r * r)
     assert res.observers.peak_irradiance_w_m2[0] == pytest.approx(ref, rel=1e-6)
 
 

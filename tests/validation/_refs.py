@@ -466,6 +466,71 @@ def optical_gain(magnification, objective_diameter_m, transmission=1.0, beam_dia
     return min(max(x, 1.0) for x in terms)
 
 
+def aperture_irradiance(power, w, d, optics=None, aperture_m=7e-3):
+    """What the MPE is compared with (range-safety.md section 10): the power of a Gaussian
+    beam (1/e radius w, power ``power`` at the range) through a disk of diameter D_f
+    (``aperture_m``) centred d off its axis, over the disk's area; with optics
+    {magnification M, objective_diameter_m D_o, transmission tau} the larger of that and
+    tau P F(min(D_o, 7 mm M) / 2) / (pi (3.5 mm)^2)."""
+    a = aperture_m / 2
+    eye = power * disk_fraction(a, d, w) / (math.pi * a * a)
+    if not optics:
+        return eye
+    a_c = min(optics["objective_diameter_m"], 7e-3 * optics["magnification"]) / 2
+    return max(eye, optics.get("transmission", 1.0) * power * disk_fraction(a_c, d, w) / (math.pi * 3.5e-3**2))
+
+
+def disk_polygon_fraction(poly, centre, radius, w, n_theta=2048, n_rho=24):
+    """Fraction of a centred circular Gaussian (1/e radius w) inside the intersection of
+    the disk (centre, radius) and a convex polygon (vertices (N, 2) in order, either
+    orientation): polar coordinates about the disk's centre; along each direction the
+    polygon is an interval of the radius (intersection of its edges' half-planes), the
+    radial integral by Gauss-Legendre over that interval, the angular one by the
+    trapezoid rule (kinks where the interval's ends switch edges: error O(n_theta^-2))."""
+    poly = np.asarray(poly, float)
+    c = np.asarray(centre, float)
+    area2 = np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+    if area2 < 0:
+        poly = poly[::-1]
+    edge = np.roll(poly, -1, axis=0) - poly
+    nrm = np.stack([edge[:, 1], -edge[:, 0]], axis=1)  # outward for counter-clockwise
+    b = np.sum(nrm * poly, axis=1) - nrm @ c  # inside: nrm . (c + rho u) <= nrm . vertex
+    th = 2 * math.pi * (np.arange(n_theta) + 0.5) / n_theta
+    u = np.stack([np.cos(th), np.sin(th)], axis=1)
+    k = u @ nrm.T  # (T, E): rho k <= b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lim = b[None, :] / k
+    hi = np.min(np.where(k > 0, lim, np.inf), axis=1)
+    lo = np.max(np.where(k < 0, lim, -np.inf), axis=1)
+    blocked = np.any((k == 0) & (b[None, :] < 0), axis=1)
+    lo, hi = np.maximum(lo, 0.0), np.minimum(hi, radius)
+    ok = (hi > lo) & ~blocked
+    x, wt = np.polynomial.legendre.leggauss(n_rho)
+    rho = lo[:, None] + (hi - lo)[:, None] * (x[None, :] + 1) / 2
+    pts = c[None, None, :] + rho[:, :, None] * u[:, None, :]
+    g = np.exp(-np.sum(pts * pts, axis=2) / (w * w)) / (math.pi * w * w) * rho
+    inner = np.sum(g * wt[None, :], axis=1) * (hi - lo) / 2
+    return float(np.sum(np.where(ok, inner, 0.0)) * 2 * math.pi / n_theta)
+
+
+def mirror_aperture_irradiance(beam, corners, observer, mirror_point, normal, aperture_m=7e-3):
+    """The flat mirror's reflected beam through an eye's aperture (range-safety.md 4 and
+    10): unfold at the mirror (the eye's image in the mirror plane), and integrate the
+    incident Gaussian over the part of the aperture's disk (normal to the axis at the
+    image's range, centred on the image) whose rays from the virtual source reach the
+    mirror: the mirror's corners projected centrally onto that plane (``beam.project``),
+    cut with the disk (:func:`disk_polygon_fraction`). Returns P F / (pi a^2), before the
+    reflectance and attenuation."""
+    o = np.asarray(observer, float)
+    n = unit(normal)
+    image = o - 2 * np.dot(o - np.asarray(mirror_point, float), n) * n
+    R = float(np.dot(image - beam.pos, beam.u))
+    quad = beam.project(np.asarray(corners, float), R)
+    centre = beam.project(image[None], R)[0]
+    a = aperture_m / 2
+    return beam.P * disk_polygon_fraction(quad, centre, a, beam.w(R)) / (math.pi * a * a)
+
+
 # --------------------------------------------------------------------------- scene text
 
 

@@ -99,7 +99,7 @@ def test_a_tilted_grid_finds_the_direct_beam_between_its_points(R, yaw, pitch, f
     e_max, at = _max_on_plane(c, u / cell, v / cell, np.array([0.0, -R_T, 0.0]), np.array([0.0, 1.0, 0.0]))
     assert _e_axis(R) * (1 - 1e-12) <= e_max <= _e_axis(R) * (1 + 3e-6)  # the reference's own check: on the axis, and a little above
     assert np.linalg.norm(p - at) < 1e-3
-    assert res.observers.direct_irradiance_w_m2[k] == pytest.approx(e_max, rel=1e-7)
+    assert res.observers.direct_point_irradiance_w_m2[k] == pytest.approx(e_max, rel=1e-7)
     assert res.hazardous[k]
     grid = [i for i, n in enumerate(labels) if n.startswith("screen[")]
     assert len(grid) == 49 and res.observers.direct_irradiance_w_m2[grid].max() < 1e-6 * _e_axis(R)
@@ -134,7 +134,7 @@ def test_a_shell_finds_the_beam_leaving_it(rise):
     res, labels = _run(text, shell)
     k, p = _crossing(res, labels, "dome")
     np.testing.assert_allclose(p, np.array([0.0, -R_T, 0.0]) + 300.0 * d, atol=1e-3)
-    assert res.observers.direct_irradiance_w_m2[k] == pytest.approx(_e_axis(300.0), rel=1e-6)
+    assert res.observers.direct_point_irradiance_w_m2[k] == pytest.approx(_e_axis(300.0), rel=1e-6)
 
 
 def test_a_grid_draped_over_a_hill_finds_where_the_beam_comes_down_to_eye_height():
@@ -170,7 +170,7 @@ def test_a_grid_draped_over_a_hill_finds_where_the_beam_comes_down_to_eye_height
     terrain = '[terrain]\nkind = "hill"\nheight_m = 10.0\nradius_m = 60.0\nextent_m = 250.0\nresolution_m = 1.0\n'
     res, labels = _run(text, terrain + _grid("range", [-95.0, -190.0, 0.0], [200.0, 0.0, 0.0], [0.0, 300.0, 0.0], (11, 16), EYE))
     k, p = _crossing(res, labels, "range")
-    value = res.observers.direct_irradiance_w_m2[k]
+    value = res.observers.direct_point_irradiance_w_m2[k]
     assert abs(float(np.dot(p - o, d)) - t_cross) < 0.05 and abs(p[2] - ground(p[0], p[1]) - EYE) < 1e-3
     assert value == pytest.approx(_e_at(p, o, d), rel=1e-9)
     assert _e_axis(t_cross) * (1 - slack) <= value <= _e_axis(t_cross) * (1 + PHI**2 / (4 * math.tan(theta) ** 2) + slack)

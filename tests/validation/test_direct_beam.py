@@ -5,8 +5,10 @@
 - off the axis by r (perpendicular to the axis at axial range R): times exp(-r^2 / w^2),
   w = (a + R phi) / 2 the 1/e radius (the ray tilt adds a factor 1 + O(phi^2 r^2 / w^2),
   below 1e-9 here);
-- through optics: K = min(tau M^2, tau (D_o / 7 mm)^2, tau (D_b / 7 mm)^2), each term
-  clipped to >= 1, D_b = a + R phi the beam diameter at the observer;
+- the point value at the eye (``direct_point_irradiance_w_m2``) is that Gaussian; the
+  verdict's value (``direct_irradiance_w_m2``) is the power through the 7 mm limiting
+  aperture, and through optics the power an aid collects over min(D_o, 7 mm M) into the
+  7 mm pupil (range-safety.md section 10; ``_refs.aperture_irradiance``, ncx2);
 - nothing where a target or occluder stands between the aperture and the eye; the part
   of the beam that misses a small target (the spill) goes on.
 The total irradiance is the direct plus the reflected part. Tolerance 1e-6 (the
@@ -69,9 +71,13 @@ def test_on_axis_off_axis_and_through_binoculars():
     res = hazard.analyze(_scene(obs))
     r2 = [0.0, w * w, (0.6 * w) ** 2 + (1.6 * w) ** 2, w * w]
     want = [_e_axis(R) * math.exp(-q / w**2) for q in r2]
-    want[3] *= _gain(7.0, 0.05, 0.9, R)
+    np.testing.assert_allclose(res.observers.direct_point_irradiance_w_m2, want, rtol=1e-6)
     got = res.observers.direct_irradiance_w_m2
-    np.testing.assert_allclose(got, want, rtol=1e-6)
+    through = [ref.aperture_irradiance(P, w, math.sqrt(q), o) for q, o in zip(r2, [None] * 3 + [optics])]
+    np.testing.assert_allclose(got, through, rtol=1e-6)
+    # a beam much wider than the aid's disk: the usual gain (to (24.5 mm / w)^2 = 2.3e-2)
+    assert got[3] == pytest.approx(want[3] * _gain(7.0, 0.05, 0.9, R), rel=0.03)
+    np.testing.assert_allclose(res.observers.aperture_diameter_m, [7e-3] * 3 + [0.049], rtol=1e-12)
     # the total is direct + reflected, and the verdict uses it
     np.testing.assert_allclose(res.observers.peak_irradiance_w_m2, got + res.observers.reflected_irradiance_w_m2, rtol=1e-12)
     assert res.hazardous[0] and res.stage("direct").ran
@@ -81,7 +87,7 @@ def test_on_axis_off_axis_and_through_binoculars():
 def test_attenuation_once_along_the_path(mu):
     R = 500.0
     res = hazard.analyze(_scene([("axis", _at(R), None)], mu=mu))
-    assert res.observers.direct_irradiance_w_m2[0] == pytest.approx(_e_axis(R, mu), rel=1e-6)
+    assert res.observers.direct_point_irradiance_w_m2[0] == pytest.approx(_e_axis(R, mu), rel=1e-6)
 
 
 def test_target_shadow_spill_and_occluder():
@@ -92,7 +98,7 @@ def test_target_shadow_spill_and_occluder():
     box = (np.array([3.0, -500.0, 0.0]), (1.0, 1.0, 1.0))  # at 300 m from the laser, 3 m off the axis
     obs = [("shadow", _at(R), None), ("spill", _at(R, x=0.8 * w), None), ("behind-box", _at(600.0, x=3.0 * 600 / 300), None)]
     res = hazard.analyze(_scene(obs, occluder=box))
-    got = res.observers.direct_irradiance_w_m2
+    got = res.observers.direct_point_irradiance_w_m2
     assert got[0] == 0.0 and got[2] == 0.0
     assert got[1] == pytest.approx(_e_axis(R) * math.exp(-0.64), rel=1e-6)
 
@@ -124,7 +130,7 @@ def test_direct_beam_property(R, x, z, mu):
     k = (R_T + A / PHI) / (R + A / PHI)
     behind_plate = R > R_T and abs(x * w) * k < 0.25 and abs(z * w) * k < 0.25
     want = 0.0 if behind_plate else _e_axis(R, mu) * math.exp(-(x * x + z * z))
-    got = res.observers.direct_irradiance_w_m2[0]
+    got = res.observers.direct_point_irradiance_w_m2[0]
     # the one convention between the engine and this reference: the path along the ray
     # is longer than the axial range by about r^2 / (2R)
     path_excess = mu * ((x * x + z * z) * w * w) / (2 * R)
@@ -186,7 +192,7 @@ def test_a_road_sampled_every_10_m_finds_the_beam_between_its_points(offset):
     labels = obs.labels
     k = labels.index("road:crossing")
     assert obs.position_m[k][0] == pytest.approx(0.0, abs=1e-6)
-    assert obs.direct_irradiance_w_m2[k] == pytest.approx(_e_axis(R), rel=1e-6)
+    assert obs.direct_point_irradiance_w_m2[k] == pytest.approx(_e_axis(R), rel=1e-6)
     assert res.hazardous[k] and "direct beam" in res.stage("crossings").detail
     road = [i for i, n in enumerate(labels) if n.startswith("road[")]
     assert len(road) == 101 and np.all(obs.direct_irradiance_w_m2[road] < 1e-6 * _e_axis(R))

@@ -520,7 +520,7 @@ def test_line_of_sight_over_a_dem_ridge_at_eye_height(ridge):
         assert np.all(np.abs(clear) > 0.25), clear  # the references are unambiguous
         lit = clear > 0
         res = hazard.analyze(scene)
-        direct = np.asarray(res.observers.direct_irradiance_w_m2)
+        direct = np.asarray(res.observers.direct_point_irradiance_w_m2)
         assert np.array_equal(direct > 0, lit), (k, clear, direct)
         dist = np.linalg.norm(want - laser, axis=1)
         np.testing.assert_allclose(direct[lit], [_direct_on_axis(d) for d in dist[lit]], rtol=1e-6)

@@ -160,19 +160,26 @@ def _mirror_property(R1, a, phi, theta_i, chi, spin, fw, fh, rho, mu, R2, alpha,
     assume(all(ref.off_incident_beam(beam, p) for p in (on_axis, O_lit, O_miss)))
     res = hazard.analyze(_scene(beam, n, t, size, rho, [on_axis, O_lit, O_miss]))
     got = res.observers.reflected_irradiance_w_m2  # the reflection alone (the direct beam's Gaussian wings may add to the total)
+    # the verdict's value: the power through the 7 mm aperture of the rays that reach the
+    # mirror (range-safety.md 10; a mirror smaller than the aperture's image gives its
+    # whole reflected power over the aperture, far below the point value rho E_beam)
+    corners = ref.plate_corners(np.zeros(3), n, t, size)
+    want = [rho * ref.mirror_aperture_irradiance(beam, corners, o, np.zeros(3), n)
+            * math.exp(-mu * np.linalg.norm(o - 2 * np.dot(o, n) * n - pos)) for o in (on_axis, O_lit, O_miss)]
     want_axis = rho * beam.peak(R1 + R2) * math.exp(-mu * (R1 + R2))
-    assert got[0] == pytest.approx(want_axis, rel=0.01), "on the reflected axis"
-    assert got[1] == pytest.approx(rho * e_lit, rel=0.01), "off axis, unfolded ray through the mirror"
-    assert got[2] <= 1e-3 * want_axis, "unfolded ray misses the mirror"
+    assert want[0] <= want_axis * (1 + 1e-6) and want[1] <= rho * e_lit * (1 + 1e-2)  # the references: never above the point
+    assert got[0] == pytest.approx(want[0], rel=0.01), "on the reflected axis"
+    assert got[1] == pytest.approx(want[1], rel=0.01), "off axis, unfolded ray through the mirror"
+    assert got[2] == pytest.approx(want[2], rel=0.01, abs=1e-3 * want[0]), "unfolded ray misses the mirror"
 
 
 @ref.FAST
 @given(**MIRROR_ARGS)
 def test_mirror_irradiance_property(**kw):
     """Random small mirrors (0.05-0.5 D per side, 10-60 deg incidence, any orientation,
-    R1 and R2 5 m - 2 km, mu in {0, 1e-4, 2e-3}, rho 0.3-1): on-axis rho E_beam(R1+R2)
-    exp(-mu(R1+R2)); off-axis through the mirror rho E_beam(image); missed ~0
-    (range-safety.md 4, unfolded path). 1 %."""
+    R1 and R2 5 m - 2 km, mu in {0, 1e-4, 2e-3}, rho 0.3-1): on-axis, off-axis through the
+    mirror and beside it, rho x the unfolded beam through the 7 mm aperture, cut by the
+    mirror's projection (range-safety.md 4 and 10, ``_refs.mirror_aperture_irradiance``). 1 %."""
     _mirror_property(**kw)
 
 
