@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.stats import ncx2
 
 import hazard
 import scenes
@@ -36,9 +37,17 @@ def _check(az, el, s, psi, behind_m):
                           observers=[("plane", on_plane, None), ("behind", behind, None)])
     scene = scenes.loads(text)
     res = hazard.analyze(scene)
-    want = P / (math.pi * w0 * w0) * math.exp(-s * s) * math.sqrt(1 + (s * PHI / 2) ** 2)
+    tilt = math.sqrt(1 + (s * PHI / 2) ** 2)
+    want = P / (math.pi * w0 * w0) * math.exp(-s * s) * tilt
+    point = res.observers.direct_point_irradiance_w_m2
+    assert point[0] == pytest.approx(want, rel=1e-9)
+    assert point[1] == 0.0
+    # the verdict's value: the power through the 7 mm pupil centred s w0 off the axis
+    # (1064 nm; the Marcum-Q disk fraction, range-safety.md section 10)
+    rho = 3.5e-3
+    frac = ncx2.cdf(2 * rho**2 / w0**2, 2, 2 * (s * w0) ** 2 / w0**2)
     got = res.observers.direct_irradiance_w_m2
-    assert got[0] == pytest.approx(want, rel=1e-9)
+    assert got[0] == pytest.approx(P * tilt * frac / (math.pi * rho**2), rel=1e-9)
     assert got[1] == 0.0
     assert any("laser aperture" in w and "1 behind it are out of the beam" in w for w in scene.warnings)
 
