@@ -190,8 +190,11 @@ def test_an_observer_at_the_aperture_is_in_the_beam(tmp_path):
     out, err, doc = _run(tmp_path, text)
     at, behind = doc["observers"][:2]
     exit_w_m2 = 100.0 / (math.pi * 0.005 ** 2)
-    assert at["direct_irradiance_w_m2"] == pytest.approx(exit_w_m2, rel=1e-9)
-    assert behind["direct_irradiance_w_m2"] == 0.0
+    assert at["direct_point_irradiance_w_m2"] == pytest.approx(exit_w_m2, rel=1e-9)
+    # the verdict's value: the power through the centred 7 mm pupil, 1 - exp(-rho^2 / w0^2)
+    pupil = 100.0 * (1 - math.exp(-(3.5e-3 / 0.005) ** 2)) / (math.pi * 3.5e-3 ** 2)
+    assert at["direct_irradiance_w_m2"] == pytest.approx(pupil, rel=1e-9)
+    assert behind["direct_irradiance_w_m2"] == 0.0 and behind["direct_point_irradiance_w_m2"] == 0.0
     warning = [w for w in doc["warnings"] if "laser aperture" in w]
     assert len(warning) == 1 and "1 on or in front" in warning[0] and "1 behind it are out of the beam" in warning[0]
     assert "warning: observers: 2 point(s) within 1 m of the laser aperture" in out
