@@ -30,7 +30,10 @@ import numpy as np
 
 from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
-__all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES"]
+from .rays import own_object
+
+__all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES",
+           "spot_line_of_sight"]
 
 FAR_FIELD_SPOT_SIZES = 20.0  # witness-screen rule: >= 20 spot sizes for ~1 % point-source error
 
@@ -659,6 +662,23 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     return ((np.arange(m), e), far) if sparse else (e, far)
 
 
+def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
+    """Line of sight from ``spot`` to points ``p`` (N, 3): one occlusion query from just
+    off the spot's centroid, in which a convex target's own triangles do not block (the
+    centroid of a curved spot lies inside the tessellation); far-field points behind the
+    spot's surface receive nothing whatever is in between (evaluated with the mean
+    frame): no ray needed, False. Returns (mask, segments traced)."""
+    c, nrm = spot.centroid, spot.mean_frame[2]
+    start = ray_scene.off_surface(c, nrm)
+    rel = p - c
+    far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
+    need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular
+    idx = np.flatnonzero(need)
+    row = np.zeros(len(p), bool)
+    row[idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx], transparent=own_object(spot.target))
+    return row, len(idx)
+
+
 def specular_power_w(spot: Spot, states=None):
     """Power [W] in the delta (mirror) lobe of a spot, per state."""
     model = spot.material
@@ -675,14 +695,15 @@ def mirror_axis(spot: Spot) -> np.ndarray:
     return r / np.linalg.norm(r)
 
 
-def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None):
+def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None, ray_scene=None):
     """Irradiance [W/m^2] of the reflected (delta-lobe) beam at observers (M,) or (M, T),
     by geometric optics from the part of the beam that really hits the mirror (see
     :func:`hazard.specular.specular_irradiance`; ``beam`` is not used: the spot carries
-    its beam)."""
+    its beam). With ``ray_scene`` each observer's line of sight is traced from its own
+    reflection point (the spot's line of sight is not applied to the result)."""
     from .specular import specular_irradiance as _specular
 
-    return _specular(spot, observers_m, gain, attenuation_per_m, states)
+    return _specular(spot, observers_m, gain, attenuation_per_m, states, ray_scene=ray_scene)
 
 
 def spot_directions(spot: Spot):

@@ -31,6 +31,8 @@ import math
 
 import numpy as np
 
+from .rays import own_object
+
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
 
 _ITERATIONS = 80
@@ -244,13 +246,27 @@ def _curved_geometry(spot, obs):
     return ok, geo, p, n, d, ~settled & near
 
 
-def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None):
+def _seen(ray_scene, spot, points, normals, obs, mask):
+    """Clear ``mask`` (in place) where the segment from the reflection point (just off
+    the surface along its normal) to the observer is blocked; nothing without a ray scene."""
+    idx = np.flatnonzero(mask)
+    if ray_scene is None or not len(idx):
+        return
+    nrm = normals if np.ndim(normals) == 1 else normals[idx]
+    start = ray_scene.off_surface(points[idx], nrm)
+    mask[idx] = ~ray_scene.occluded(start, obs[idx], transparent=own_object(spot.target))
+
+
+def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None, ray_scene=None):
     """Irradiance [W/m^2] of a spot's mirror lobe at observers: (M,) or (M, T) with states.
 
     Sum over the spot's lit flat facets and, for a sphere or cylinder, its curved
     surface (module notes). Observers near a curved mirror where the specular point
     cannot be found (the iteration does not converge: within a few radii) get the
     mirror's highest possible irradiance, ``rho E_peak`` (conservative).
+    ``ray_scene`` (optional, :class:`hazard.rays.RayScene`): each observer's line of
+    sight is traced from its own reflection point (just off the surface there; the
+    mirror's own triangles never block when it is convex); without it every line is clear.
     """
     obs = np.asarray(observers_m, float)
     m = len(obs)
@@ -261,6 +277,7 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
     pos, mu, tangent = spot.beam.position_m, attenuation_per_m, spot.target.tangent
     for plane in _planes(spot):
         ok, e, x, d = _flat_geometry(spot, plane, obs)
+        _seen(ray_scene, spot, x, plane[0], obs, ok)
         if not np.any(ok):
             continue
         path = np.linalg.norm(x[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - x[ok], axis=1)
@@ -270,6 +287,8 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
     an = spot.target.mesh.analytic
     if an is not None:
         ok, geo, p, n, d, near = _curved_geometry(spot, obs)
+        _seen(ray_scene, spot, p, n, obs, ok)
+        _seen(ray_scene, spot, p, n, obs, near)
         if np.any(ok):
             path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
             rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
