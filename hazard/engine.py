@@ -44,7 +44,12 @@ class Spot:
 
     ``power_w`` is after the laser -> target attenuation; ``peak_irradiance_w_m2`` per
     sample is the highest incident irradiance (normal to the beam, attenuated) in its
-    cells; ``source_distance_m`` the incident wavefront radius (inf when collimated).
+    cells; ``source_distance_m`` the incident wavefront radius (inf when collimated) at
+    the sample's nearest range to the laser, where ``peak_irradiance_w_m2`` bounds the
+    beam (the two make one bound: a mirror beam from the sample never exceeds the whole
+    beam's irradiance at the unfolded range, however long a grazing sample is);
+    ``aperture_m`` the limiting aperture over which a mirror beam's power is averaged
+    (:func:`hazard.specular.specular_irradiance`; default the smallest of any band).
     """
 
     target: object
@@ -66,6 +71,7 @@ class Spot:
     outline_s: np.ndarray | None = None  # exact lit outline in beam coordinates (flat targets hit whole)
     spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
     slump: object = None  # hazard.pipeline.slump.SpotSlump: the molten surface's tilt per analysis time, if any
+    aperture_m: float = 1e-3  # limiting aperture [m] (set from the scene's wavelength by the beam stage)
 
     def __post_init__(self):
         if self.material is None:
@@ -290,6 +296,7 @@ class ExactSamples:
     area_s: np.ndarray  # piece areas in s (units of w^2)
     error_w: float  # disk polygon bound + attenuation spread + nothing else
     total_w: float  # the unattenuated outline integral
+    near_axial_m: np.ndarray | None = None  # smallest axial distance over each piece [m] (where its peak bound holds)
 
 
 def _hole_cells(outline, fronts, n0):
@@ -365,7 +372,7 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
         w = beam.diameter_at(zmin) / 2
     peak = beam.power_w / (math.pi * w * w) * np.exp(-r2) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
     err = disk_err + beam.power_w * slack + float((power * (up - down)).sum())
-    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total)
+    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total, zmin)
 
 
 def _aggregate(keys, weights, values):
@@ -400,6 +407,22 @@ def _leaf_geometry(beam, cells, rows, pts, dirs, normals):
     return shifted, spread, s_c, z, w
 
 
+def _leaf_near_axial(beam, cells, rows, z, w, dirs, normals):
+    """Smallest axial distance [m] of each leaf's footprint on the surface: its centre's
+    less the axial spread of the cell's half-widths through the hit Jacobian (a linear
+    bound; a grazing cell's footprint stretches far along the beam), never below 0."""
+    s0, s1, t0, t1 = cells.bounds(rows)
+    jac = _surface_jacobian(beam, w, dirs, normals)
+    spread = 0.5 * (np.abs(jac[0] @ beam.axis) * (s1 - s0) + np.abs(jac[1] @ beam.axis) * (t1 - t0))
+    return np.maximum(z - np.nan_to_num(spread, nan=np.inf, posinf=np.inf), 0.0)
+
+
+def _nearest_axial(beam, target) -> float:
+    """The target's smallest axial distance from the laser [m] (over its vertices)."""
+    v = np.asarray(target.mesh.vertices, float)
+    return float(((v - beam.position_m) @ beam.axis).min()) if len(v) else 0.0
+
+
 def _target_ray_faces(tracer, target):
     if not hasattr(tracer, "face_object"):
         return None
@@ -416,6 +439,7 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     atten = np.exp(-mu * t)
     power = cells.power_w[rows] * scale * atten
     pts, spread, s_c, z, w = _leaf_geometry(beam, cells, rows, pts, dirs, normals)
+    near = np.maximum(_leaf_near_axial(beam, cells, rows, z, w, dirs, normals), _nearest_axial(beam, target))
     peak = beam.power_w / (math.pi * w * w) * cells.max_profile(rows) * atten * np.sqrt(1 + (s_c * s_c).sum(1) * (beam.divergence_rad / 2) ** 2)
     area = float(np.sum(cells.size(cells.level[rows]) ** 2 * w * w))
     lv = cells.level[rows]
@@ -423,14 +447,19 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     wts = np.maximum(power, 1e-300)
     inv, psum, means = _aggregate(key, wts, np.concatenate([pts, dirs, normals, t[:, None], z[:, None]], axis=1))
     n_g = len(psum)
+    z_near = np.full(n_g, np.inf)
+    np.minimum.at(z_near, inv, near)
+    # each leaf's bound carried to its sample's nearest range: the beam there is narrower by (p_leaf / p_near)
+    p_leaf, p_near = beam.source_distance_m(z), beam.source_distance_m(z_near)
+    ratio = np.where(np.isfinite(p_leaf), p_leaf / np.where(np.isfinite(p_near[inv]), p_near[inv], 1.0), 1.0)
     pk = np.zeros(n_g)
-    np.maximum.at(pk, inv, peak)
+    np.maximum.at(pk, inv, peak * ratio**2)
     # second moment about each sample's centroid: within-leaf spread + leaves' scatter
     scatter = np.bincount(inv, wts * (spread + ((pts - means[inv, 0:3]) ** 2).sum(1)), n_g) / np.maximum(psum, 1e-300)
     nrm = means[:, 6:9] / np.linalg.norm(means[:, 6:9], axis=1, keepdims=True)
     inc = means[:, 3:6] / np.linalg.norm(means[:, 3:6], axis=1, keepdims=True)
     return Spot(target, means[:, 0:3], np.bincount(inv, power, n_g), inc, _frames(target, nrm), means[:, 9], pk,
-                beam.source_distance_m(means[:, 10]), material, side, float(error_w), exact, area, cells, beam,
+                p_near, material, side, float(error_w), exact, area, cells, beam,
                 _target_ray_faces(tracer, target), spread_m2=scatter)
 
 
@@ -445,7 +474,7 @@ def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_
         for c in range(2):
             spread += ex.cov_s[:, r, c] * np.einsum("ij,ij->i", jac[r], jac[c])
     return Spot(target, ex.points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
-                beam.source_distance_m(ex.axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
+                beam.source_distance_m(ex.axial_m if ex.near_axial_m is None else ex.near_axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
                 cells, beam, _target_ray_faces(tracer, target), outline_s, spread)
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from .rays import own_object
 
-__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
+__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w"]
 
 _ITERATIONS = 80
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
@@ -298,7 +298,29 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
             rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
             cap = spot.max_irradiance_w_m2 * gain[near]
             out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
-    return out
+    return np.minimum(out, _power_cap(spot, obs, gain, mu, states))
+
+
+def reflected_power_w(spot, states=None):
+    """Power [W] in the spot's mirror lobe, ``sum rho_i P_i`` over its samples (per state):
+    all a mirror beam can carry."""
+    rho = _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states)
+    return (rho * (spot.power_w if states is None else spot.power_w[:, None])).sum(axis=0)
+
+
+def _power_cap(spot, obs, gain, mu, states):
+    """The most a mirror beam can deliver averaged over the limiting aperture (M,) or
+    (M, T): its whole power ``sum rho_i P_i`` through the aperture's area, attenuated from
+    the spot's farthest sample to the observer, times the optical gain (an upper bound
+    for aided eyes too: the gain is at least the transmission)."""
+    c = spot.centroid
+    extent = float(np.sqrt(((spot.points - c) ** 2).sum(1).max()))
+    if spot.spread_m2 is not None and len(spot.spread_m2):
+        extent += 3.0 * math.sqrt(max(float(np.max(spot.spread_m2)), 0.0))
+    leg = np.maximum(np.linalg.norm(obs - c, axis=1) - extent, 0.0)
+    cap = np.exp(-mu * leg) * gain / (math.pi * (spot.aperture_m / 2) ** 2)
+    p_refl = reflected_power_w(spot, states)
+    return cap * p_refl if states is None else cap[:, None] * p_refl[None, :]
 
 
 class SpecularNohd:
@@ -325,24 +347,29 @@ def _sample_vergences(spot):
 
 
 def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> SpecularNohd:
-    """Solve ``rho E_peak,i exp(-mu D) / ((1 + D/q_t)(1 + D/q_s)) = MPE`` for D per spot
-    sample (the left side falls monotonically with D for flat and convex mirrors: log
-    bisection to 1e-12 relative) and return the largest root. ``E_peak,i`` is the highest
-    incident irradiance in the sample's cells (after laser -> mirror attenuation); rho
-    the highest reflectance over ``states``. ``inf`` where the beam stays above the MPE
-    past 1e9 m (collimated and unattenuated)."""
+    """Solve ``min(rho E_peak,i / ((1 + D/q_t)(1 + D/q_s)), P_refl / A) exp(-mu D) = MPE``
+    for D per spot sample (the left side falls monotonically with D for flat and convex
+    mirrors: log bisection to 1e-12 relative) and return the largest root. ``E_peak,i``
+    bounds the incident irradiance over the sample (after laser -> mirror attenuation) at
+    its nearest range, where its wavefront radius ``1/q`` is taken, so the root never
+    passes the whole beam's reach (``rho E_beam`` at the unfolded range); ``P_refl / A``
+    the mirror lobe's whole power over the limiting aperture (a mirror at grazing
+    incidence intercepts little of the beam); rho the highest reflectance over
+    ``states``. ``inf`` where the beam stays above the MPE past 1e9 m (collimated and
+    unattenuated)."""
     if not spot.material.has_specular:
         return SpecularNohd(None, None)
     rho = _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states)
     rho = rho if states is None else rho.max(axis=1)
     e0 = rho * spot.peak_irradiance_w_m2 * gain
+    cap = _aperture_power(spot, states) * gain
     vt, vs = _sample_vergences(spot)
     mu = attenuation_per_m
 
     def level(dist):
-        return e0 * np.exp(-mu * dist) / ((1 + dist * vt) * (1 + dist * vs))
+        return np.minimum(e0 / ((1 + dist * vt) * (1 + dist * vs)), cap) * np.exp(-mu * dist)
 
-    hot = e0 >= mpe_w_m2
+    hot = np.minimum(e0, cap) >= mpe_w_m2
     if not np.any(hot):
         return SpecularNohd(0.0, _unit(mirror_directions(spot)[int(np.argmax(e0))]).tolist())
     far = 1e9
@@ -359,6 +386,12 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
     root = np.where(beyond, np.inf, np.where(hot, lo, 0.0))
     i = int(np.argmax(root))
     return SpecularNohd(float(root[i]), _unit(mirror_directions(spot)[i]).tolist())
+
+
+def _aperture_power(spot, states=None) -> float:
+    """The mirror lobe's whole power (largest over ``states``) over the limiting
+    aperture's area [W/m^2]: no mirror beam can average more over the aperture."""
+    return float(np.max(reflected_power_w(spot, states))) / (math.pi * (spot.aperture_m / 2) ** 2)
 
 
 def mirror_directions(spot):

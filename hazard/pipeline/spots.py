@@ -95,6 +95,16 @@ def scene_beam(scene, direction=None) -> BeamGeometry:
                                laser.average_power_w, laser.beam_diameter_m, laser.divergence_rad)
 
 
+def mirror_aperture_m(spec) -> float:
+    """The limiting aperture [m] a mirror beam's power is averaged over
+    (:func:`hazard.mpe.ocular_mpe`): the smallest of the exposure duration's and the
+    shortest pulse's (it grows with duration above 1400 nm: the smaller is conservative)."""
+    from ..mpe import DURATION_MIN_S, ocular_mpe
+
+    wl, std = spec.laser.wavelength_nm, spec.exposure.standard
+    return min(ocular_mpe(wl, t, standard=std).limiting_aperture_m for t in (DURATION_MIN_S, spec.exposure.duration_s))
+
+
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     """Sample the beam (default: :func:`scene_beam`) against every object and build the
     targets' spots."""
@@ -104,6 +114,9 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
     built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
+    aperture_m = mirror_aperture_m(spec)
+    for sp in built.spots:
+        sp.aperture_m = aperture_m
     notes = []
     if built.spill_w > 1e-3 * laser.average_power_w:
         notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")
