@@ -96,13 +96,14 @@ def scene_beam(scene, direction=None) -> BeamGeometry:
 
 
 def mirror_aperture_m(spec) -> float:
-    """The limiting aperture [m] a mirror beam's power is averaged over
-    (:func:`hazard.mpe.ocular_mpe`): the smallest of the exposure duration's and the
-    shortest pulse's (it grows with duration above 1400 nm: the smaller is conservative)."""
-    from ..mpe import DURATION_MIN_S, ocular_mpe
+    """The limiting aperture [m] a mirror beam's power is averaged over: the exposure's
+    (:func:`hazard.mpe.ocular_mpe`) when it is the retina's 7 mm, else 1 mm, the cornea's
+    below 0.3 s and the smallest any band uses (the corneal aperture grows with the
+    elapsed time the map checks: the smallest is the conservative one)."""
+    from ..mpe import ocular_mpe
 
-    wl, std = spec.laser.wavelength_nm, spec.exposure.standard
-    return min(ocular_mpe(wl, t, standard=std).limiting_aperture_m for t in (DURATION_MIN_S, spec.exposure.duration_s))
+    aperture = ocular_mpe(spec.laser.wavelength_nm, spec.exposure.duration_s, standard=spec.exposure.standard).limiting_aperture_m
+    return aperture if aperture >= 7e-3 else 1e-3
 
 
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
