@@ -72,6 +72,8 @@ class Spot:
     spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
     slump: object = None  # hazard.pipeline.slump.SpotSlump: the molten surface's tilt per analysis time, if any
     aperture_m: float = 1e-3  # limiting aperture [m] (set from the scene's wavelength by the beam stage)
+    edge_peak_w_m2: float | None = None  # sampled faceted targets: incident bound over the whole target (see _edge_bound)
+    edge_source_m: float = math.inf  # the wavefront radius where edge_peak_w_m2 holds [m]
 
     def __post_init__(self):
         if self.material is None:
@@ -417,6 +419,20 @@ def _leaf_near_axial(beam, cells, rows, z, w, dirs, normals):
     return np.maximum(z - np.nan_to_num(spread, nan=np.inf, posinf=np.inf), 0.0)
 
 
+def _edge_bound(beam, cells, target, rows, mu):
+    """A bound on the incident irradiance [W/m^2] anywhere on a sampled faceted target, and
+    the wavefront radius [m] where it holds: the Gaussian's largest value over every leaf
+    touching it (mixed ones too: a sliver lit at grazing incidence may hold no leaf centre
+    near its nearest end) at the target's nearest range. (None, inf) for the terrain and
+    curved targets (their samples' own bounds hold)."""
+    if getattr(target.spec, "shape", None) is None or target.mesh.analytic is not None or not len(rows):
+        return None, math.inf
+    z = max(_nearest_axial(beam, target), 0.0)
+    w = float(beam.diameter_at(z)) / 2
+    peak = beam.power_w / (math.pi * w * w) * float(cells.max_profile(rows).max()) * math.exp(-mu * z)
+    return peak, float(beam.source_distance_m(z))
+
+
 def _nearest_axial(beam, target) -> float:
     """The target's smallest axial distance from the laser [m] (over its vertices)."""
     v = np.asarray(target.mesh.vertices, float)
@@ -524,7 +540,9 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     if material is None:
         out.unreflected.append((target.name, side, float(cells.power_w[use].sum() * scale)))
     else:
-        out.spots.append(_spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False))
+        sp = _spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False)
+        sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([use, touch]), mu)
+        out.spots.append(sp)
     return whole + err
 
 

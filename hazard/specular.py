@@ -359,19 +359,25 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
     unattenuated)."""
     if not spot.material.has_specular:
         return SpecularNohd(None, None)
-    rho = _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states)
+    rho = _edge_reflectance(spot, _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states),
+                            states)
     rho = rho if states is None else rho.max(axis=1)
     e0 = rho * spot.peak_irradiance_w_m2 * gain
     cap = _aperture_power(spot, states) * gain
     vt, vs = _sample_vergences(spot)
     mu = attenuation_per_m
+    if spot.edge_peak_w_m2 is not None:  # a sampled faceted target: the whole-target bound as one more sample
+        i = int(np.argmax(e0))
+        e0 = np.append(e0, _facet_reflectance_max(spot, rho, states) * spot.edge_peak_w_m2 * gain)
+        v = 1.0 / spot.edge_source_m
+        vt, vs = np.append(vt, v), np.append(vs, v)
 
     def level(dist):
         return np.minimum(e0 / ((1 + dist * vt) * (1 + dist * vs)), cap) * np.exp(-mu * dist)
 
     hot = np.minimum(e0, cap) >= mpe_w_m2
     if not np.any(hot):
-        return SpecularNohd(0.0, _unit(mirror_directions(spot)[int(np.argmax(e0))]).tolist())
+        return SpecularNohd(0.0, _unit(mirror_directions(spot)[int(np.argmax(e0[:len(spot.power_w)]))]).tolist())
     far = 1e9
     beyond = hot & (level(np.full_like(e0, far)) >= mpe_w_m2)
     lo = np.full_like(e0, 1e-9)
@@ -385,7 +391,40 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
             break
     root = np.where(beyond, np.inf, np.where(hot, lo, 0.0))
     i = int(np.argmax(root))
-    return SpecularNohd(float(root[i]), _unit(mirror_directions(spot)[i]).tolist())
+    n_s = len(spot.power_w)  # the whole-target bound, if last, points along the hottest sample's mirror direction
+    j = i if i < n_s else int(np.argmax(e0[:n_s]))
+    return SpecularNohd(float(root[i]), _unit(mirror_directions(spot)[j]).tolist())
+
+
+def _edge_reflectance(spot, rho, states):
+    """Reflectance of each sample for its NOHD: a sample of a faceted target (box, plate,
+    disk, mesh) whose normal is none of its lit facets' straddles an edge (its mean normal
+    blends two faces: at grazing incidence a far lower Fresnel reflectance than either
+    face's), so it takes the largest over those facets as well (conservative)."""
+    if spot.target.mesh.analytic is not None or spot.outline_s is not None:
+        return rho
+    planes = _planes(spot)
+    if not planes:
+        return rho
+    normals = np.array([p[0] for p in planes])
+    blended = np.max(spot.frames[:, 2] @ normals.T, axis=1) < 1 - 1e-9
+    if not np.any(blended):
+        return rho
+    d = spot.incoming[blended]
+    faces = [_reflectance(spot, _local(n, spot.target.tangent, -d), states) for n in normals]
+    out = rho.copy()
+    out[blended] = np.maximum(rho[blended], np.max(faces, axis=0))
+    return out
+
+
+def _facet_reflectance_max(spot, rho, states) -> float:
+    """The highest reflectance of a faceted spot: over its samples (``rho``) and its lit
+    facets at the mean incidence (largest over ``states``)."""
+    best = float(np.max(rho)) if len(rho) else 0.0
+    for n, _, _ in _planes(spot):
+        r = _reflectance(spot, _local(n, spot.target.tangent, -spot.mean_incoming[None, :]), states)
+        best = max(best, float(np.max(r)))
+    return best
 
 
 def _aperture_power(spot, states=None) -> float:
