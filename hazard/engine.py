@@ -30,7 +30,10 @@ import numpy as np
 
 from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
-__all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES"]
+from .rays import own_object
+
+__all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES",
+           "spot_line_of_sight"]
 
 FAR_FIELD_SPOT_SIZES = 20.0  # witness-screen rule: >= 20 spot sizes for ~1 % point-source error
 
@@ -41,7 +44,12 @@ class Spot:
 
     ``power_w`` is after the laser -> target attenuation; ``peak_irradiance_w_m2`` per
     sample is the highest incident irradiance (normal to the beam, attenuated) in its
-    cells; ``source_distance_m`` the incident wavefront radius (inf when collimated).
+    cells; ``source_distance_m`` the incident wavefront radius (inf when collimated) at
+    the sample's nearest range to the laser, where ``peak_irradiance_w_m2`` bounds the
+    beam (the two make one bound: a mirror beam from the sample never exceeds the whole
+    beam's irradiance at the unfolded range, however long a grazing sample is);
+    ``aperture_m`` the limiting aperture over which a mirror beam's power is averaged
+    (:func:`hazard.specular.specular_irradiance`; default the smallest of any band).
     """
 
     target: object
@@ -63,6 +71,9 @@ class Spot:
     outline_s: np.ndarray | None = None  # exact lit outline in beam coordinates (flat targets hit whole)
     spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
     slump: object = None  # hazard.pipeline.slump.SpotSlump: the molten surface's tilt per analysis time, if any
+    aperture_m: float = 1e-3  # limiting aperture [m] (set from the scene's wavelength by the beam stage)
+    edge_peak_w_m2: float | None = None  # sampled faceted targets: incident bound over the whole target (see _edge_bound)
+    edge_source_m: float = math.inf  # the wavefront radius where edge_peak_w_m2 holds [m]
 
     def __post_init__(self):
         if self.material is None:
@@ -287,6 +298,7 @@ class ExactSamples:
     area_s: np.ndarray  # piece areas in s (units of w^2)
     error_w: float  # disk polygon bound + attenuation spread + nothing else
     total_w: float  # the unattenuated outline integral
+    near_axial_m: np.ndarray | None = None  # smallest axial distance over each piece [m] (where its peak bound holds)
 
 
 def _hole_cells(outline, fronts, n0):
@@ -362,7 +374,7 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
         w = beam.diameter_at(zmin) / 2
     peak = beam.power_w / (math.pi * w * w) * np.exp(-r2) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
     err = disk_err + beam.power_w * slack + float((power * (up - down)).sum())
-    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total)
+    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total, zmin)
 
 
 def _aggregate(keys, weights, values):
@@ -397,6 +409,36 @@ def _leaf_geometry(beam, cells, rows, pts, dirs, normals):
     return shifted, spread, s_c, z, w
 
 
+def _leaf_near_axial(beam, cells, rows, z, w, dirs, normals):
+    """Smallest axial distance [m] of each leaf's footprint on the surface: its centre's
+    less the axial spread of the cell's half-widths through the hit Jacobian (a linear
+    bound; a grazing cell's footprint stretches far along the beam), never below 0."""
+    s0, s1, t0, t1 = cells.bounds(rows)
+    jac = _surface_jacobian(beam, w, dirs, normals)
+    spread = 0.5 * (np.abs(jac[0] @ beam.axis) * (s1 - s0) + np.abs(jac[1] @ beam.axis) * (t1 - t0))
+    return np.maximum(z - np.nan_to_num(spread, nan=np.inf, posinf=np.inf), 0.0)
+
+
+def _edge_bound(beam, cells, target, rows, mu):
+    """A bound on the incident irradiance [W/m^2] anywhere on a sampled faceted target, and
+    the wavefront radius [m] where it holds: the Gaussian's largest value over every leaf
+    touching it (mixed ones too: a sliver lit at grazing incidence may hold no leaf centre
+    near its nearest end) at the target's nearest range. (None, inf) for the terrain and
+    curved targets (their samples' own bounds hold)."""
+    if getattr(target.spec, "shape", None) is None or target.mesh.analytic is not None or not len(rows):
+        return None, math.inf
+    z = max(_nearest_axial(beam, target), 0.0)
+    w = float(beam.diameter_at(z)) / 2
+    peak = beam.power_w / (math.pi * w * w) * float(cells.max_profile(rows).max()) * math.exp(-mu * z)
+    return peak, float(beam.source_distance_m(z))
+
+
+def _nearest_axial(beam, target) -> float:
+    """The target's smallest axial distance from the laser [m] (over its vertices)."""
+    v = np.asarray(target.mesh.vertices, float)
+    return float(((v - beam.position_m) @ beam.axis).min()) if len(v) else 0.0
+
+
 def _target_ray_faces(tracer, target):
     if not hasattr(tracer, "face_object"):
         return None
@@ -413,6 +455,7 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     atten = np.exp(-mu * t)
     power = cells.power_w[rows] * scale * atten
     pts, spread, s_c, z, w = _leaf_geometry(beam, cells, rows, pts, dirs, normals)
+    near = np.maximum(_leaf_near_axial(beam, cells, rows, z, w, dirs, normals), _nearest_axial(beam, target))
     peak = beam.power_w / (math.pi * w * w) * cells.max_profile(rows) * atten * np.sqrt(1 + (s_c * s_c).sum(1) * (beam.divergence_rad / 2) ** 2)
     area = float(np.sum(cells.size(cells.level[rows]) ** 2 * w * w))
     lv = cells.level[rows]
@@ -420,14 +463,19 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     wts = np.maximum(power, 1e-300)
     inv, psum, means = _aggregate(key, wts, np.concatenate([pts, dirs, normals, t[:, None], z[:, None]], axis=1))
     n_g = len(psum)
+    z_near = np.full(n_g, np.inf)
+    np.minimum.at(z_near, inv, near)
+    # each leaf's bound carried to its sample's nearest range: the beam there is narrower by (p_leaf / p_near)
+    p_leaf, p_near = beam.source_distance_m(z), beam.source_distance_m(z_near)
+    ratio = np.where(np.isfinite(p_leaf), p_leaf / np.where(np.isfinite(p_near[inv]), p_near[inv], 1.0), 1.0)
     pk = np.zeros(n_g)
-    np.maximum.at(pk, inv, peak)
+    np.maximum.at(pk, inv, peak * ratio**2)
     # second moment about each sample's centroid: within-leaf spread + leaves' scatter
     scatter = np.bincount(inv, wts * (spread + ((pts - means[inv, 0:3]) ** 2).sum(1)), n_g) / np.maximum(psum, 1e-300)
     nrm = means[:, 6:9] / np.linalg.norm(means[:, 6:9], axis=1, keepdims=True)
     inc = means[:, 3:6] / np.linalg.norm(means[:, 3:6], axis=1, keepdims=True)
     return Spot(target, means[:, 0:3], np.bincount(inv, power, n_g), inc, _frames(target, nrm), means[:, 9], pk,
-                beam.source_distance_m(means[:, 10]), material, side, float(error_w), exact, area, cells, beam,
+                p_near, material, side, float(error_w), exact, area, cells, beam,
                 _target_ray_faces(tracer, target), spread_m2=scatter)
 
 
@@ -442,7 +490,7 @@ def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_
         for c in range(2):
             spread += ex.cov_s[:, r, c] * np.einsum("ij,ij->i", jac[r], jac[c])
     return Spot(target, ex.points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
-                beam.source_distance_m(ex.axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
+                beam.source_distance_m(ex.axial_m if ex.near_axial_m is None else ex.near_axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
                 cells, beam, _target_ray_faces(tracer, target), outline_s, spread)
 
 
@@ -492,7 +540,9 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     if material is None:
         out.unreflected.append((target.name, side, float(cells.power_w[use].sum() * scale)))
     else:
-        out.spots.append(_spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False))
+        sp = _spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False)
+        sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([use, touch]), mu)
+        out.spots.append(sp)
     return whole + err
 
 
@@ -659,6 +709,23 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     return ((np.arange(m), e), far) if sparse else (e, far)
 
 
+def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
+    """Line of sight from ``spot`` to points ``p`` (N, 3): one occlusion query from just
+    off the spot's centroid, in which a convex target's own triangles do not block (the
+    centroid of a curved spot lies inside the tessellation); far-field points behind the
+    spot's surface receive nothing whatever is in between (evaluated with the mean
+    frame): no ray needed, False. Returns (mask, segments traced)."""
+    c, nrm = spot.centroid, spot.mean_frame[2]
+    start = ray_scene.off_surface(c, nrm)
+    rel = p - c
+    far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
+    need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular
+    idx = np.flatnonzero(need)
+    row = np.zeros(len(p), bool)
+    row[idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx], transparent=own_object(spot.target))
+    return row, len(idx)
+
+
 def specular_power_w(spot: Spot, states=None):
     """Power [W] in the delta (mirror) lobe of a spot, per state."""
     model = spot.material
@@ -675,15 +742,18 @@ def mirror_axis(spot: Spot) -> np.ndarray:
     return r / np.linalg.norm(r)
 
 
-def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None, apertures=None):
+def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=None, states=None, apertures=None,
+                        ray_scene=None):
     """Irradiance [W/m^2] of the reflected (delta-lobe) beam at observers (M,) or (M, T),
     by geometric optics from the part of the beam that really hits the mirror (see
     :func:`hazard.specular.specular_irradiance`; ``beam`` is not used: the spot carries
     its beam; ``apertures``: flat mirrors' beams through the observers' limiting
-    apertures, :mod:`hazard.aperture`)."""
+    apertures, :mod:`hazard.aperture`). With ``ray_scene`` each observer's line of sight
+    is traced from its own reflection point (the spot's line of sight is not applied to
+    the result)."""
     from .specular import specular_irradiance as _specular
 
-    return _specular(spot, observers_m, gain, attenuation_per_m, states, apertures)
+    return _specular(spot, observers_m, gain, attenuation_per_m, states, apertures, ray_scene=ray_scene)
 
 
 def spot_directions(spot: Spot):

@@ -24,7 +24,7 @@ import numpy as np
 import brdfmodels
 from brdfmodels.parallel import block_rows, map_blocks
 
-from .engine import Spot, path_states, projected_brdf, spot_directions, spot_irradiance, specular_irradiance
+from .engine import Spot, path_states, projected_brdf, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
 from .nohd import range_from_intensity
 from .progress import terminal_bar
 
@@ -408,24 +408,27 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     peak = np.zeros(len(pts))
     n_t = max([len(v) for v in states_by_target.values()] + [1])
 
+    def one_spot(spot, p, gain, rays):
+        """A spot's irradiance (rows x T): BRDF lobe (its spot's line of sight) plus mirror
+        lobe (each observer's from its own reflection point), without lines with no ``rays``."""
+        states = states_by_target.get(spot.target.index)
+        los = spot_line_of_sight(rays, spot, p)[0] if rays is not None else None
+        e, _ = spot_irradiance(spot, p, gain, attenuation_per_m, states, los)
+        if spot.material.has_specular:
+            e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states, ray_scene=rays)
+        return e if e.ndim == 2 else e[:, None]
+
     def block(a, b):
         p = pts[a:b]
         gain = np.ones(b - a)
-        parts = []
-        for spot in spots:
-            states = states_by_target.get(spot.target.index)
-            e, _ = spot_irradiance(spot, p, gain, attenuation_per_m, states)
-            if spot.material.has_specular:
-                e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states)
-            parts.append(e if e.ndim == 2 else e[:, None])
+        parts = [one_spot(spot, p, gain, None) for spot in spots]
         top = sum(parts).max(axis=1)
         over = top >= mpe_w_m2  # as for observers: ratio >= 1
         if ray_scene is not None and over.any():
             for spot, e in zip(spots, parts):
                 idx = np.flatnonzero(over & (e.max(axis=1) > 0))
                 if len(idx):
-                    start = ray_scene.off_surface(spot.centroid, spot.mean_frame[2])
-                    e[idx[ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])]] = 0.0
+                    e[idx] = one_spot(spot, p[idx], gain[idx], ray_scene)
             rows = np.flatnonzero(over)
             top[rows] = sum(e[rows] for e in parts).max(axis=1)
             over[rows] = top[rows] >= mpe_w_m2

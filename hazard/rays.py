@@ -30,13 +30,25 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads
 
-__all__ = ["RayScene", "Hits", "BACKENDS", "cached_ray_scene", "ray_cache_info", "clear_ray_cache"]
+__all__ = ["RayScene", "Hits", "BACKENDS", "cached_ray_scene", "ray_cache_info", "clear_ray_cache", "CONVEX_SHAPES", "own_object"]
 
 BACKENDS = ("embree", "numpy")
 _CHUNK = 65536
 RAY_CACHE_ENTRIES = 4  # scenes kept by cached_ray_scene (least recently used dropped first)
 RAY_CACHE_MAX_BYTES = 1 << 30  # memory the cached scenes may hold in all [bytes]; larger scenes are not kept
 ENGINE_BYTES_PER_TRIANGLE = 64  # the ray engine's copy and BVH [bytes per triangle] (Embree measured: ~50)
+# target shapes whose own surface never shadows their reflection: a point of a convex
+# surface sees an observer exactly when the observer is above its tangent plane, which
+# the BRDF (zero below the horizon) and the mirror law already say
+CONVEX_SHAPES = ("plate", "disk", "box", "sphere", "cylinder")
+
+
+def own_object(target) -> int | None:
+    """The ray-scene object id of ``target`` (its index: targets come first) when it is
+    convex (:data:`CONVEX_SHAPES`): lines of sight leaving it pass through its own
+    triangles (``RayScene.occluded(..., transparent=)``); None for meshes and the
+    terrain, whose own relief can shadow their reflection."""
+    return target.index if getattr(target.spec, "shape", None) in CONVEX_SHAPES else None
 
 
 @dataclass
@@ -143,12 +155,17 @@ class RayScene:
         must not begin on it): ``point + normal * 1e-6 * max(scene size, 1 m)``."""
         return np.asarray(point_m, float) + np.asarray(normal, float) * 1e-6 * max(self.scale_m, 1.0)
 
-    def occluded(self, starts, ends, *, end_clearance_m=None) -> np.ndarray:
+    def occluded(self, starts, ends, *, end_clearance_m=None, transparent=None) -> np.ndarray:
         """True where the open segment start -> end crosses a triangle.
 
         ``end_clearance_m`` shortens each segment at its end (observers standing on a
         surface must not be blocked by it); the default is 1e-6 of the scene size.
         Callers start segments a little off the surface they leave (tnear is 0).
+        ``transparent``: an object id whose triangles do not block (the convex object the
+        segments leave: its own shadowing is its BRDF's business, and a start inside its
+        tessellation, e.g. a curved spot's centroid, must not block every observer);
+        an occluded segment is then traced back from its end, and only a first hit on
+        another object, within the segment, blocks it.
         """
         s = np.asarray(starts, float)
         e = np.asarray(ends, float)
@@ -160,7 +177,19 @@ class RayScene:
         length = np.linalg.norm(vec, axis=1)
         frac = np.clip(1.0 - clear / np.maximum(length, 1e-300), 0.0, 1.0)
         (occ,) = self._map(lambda a, b: (self._impl.occluded(s[a:b], vec[a:b], frac[a:b]),), n, 1)
+        if transparent is not None and occ.any():
+            idx = np.flatnonzero(occ)
+            occ[idx] = self._blocked_from_end(s[idx], e[idx], length[idx], clear, transparent)
         return occ
+
+    def _blocked_from_end(self, s, e, length, clear, own) -> np.ndarray:
+        """Segments s -> e blocked by an object other than ``own``: the first hit seen from
+        the end (moved ``clear`` towards the start) lies within the segment and is not
+        ``own``. With ``own`` convex and the start on or inside it, whatever lies between
+        ``own`` and the end is seen from the end before ``own``."""
+        back = (s - e) / np.maximum(length, 1e-300)[:, None]
+        hits = self.first_hit(e + back * np.minimum(clear, 0.5 * length)[:, None], back)
+        return hits.hit & (hits.t < length - clear) & (hits.obj != own)
 
     def _map(self, fn, n, n_out):
         threads = default_threads() if self.threads is None else min(self.threads, default_threads())  # 1 inside a block

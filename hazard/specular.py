@@ -35,7 +35,9 @@ import math
 
 import numpy as np
 
-__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
+from .rays import own_object
+
+__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w"]
 
 _ITERATIONS = 80
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
@@ -301,7 +303,18 @@ def _curved_geometry(spot, obs):
     return ok, geo, p, n, d, ~settled & near
 
 
-def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None, apertures=None):
+def _seen(ray_scene, spot, points, normals, obs, mask):
+    """Clear ``mask`` (in place) where the segment from the reflection point (just off
+    the surface along its normal) to the observer is blocked; nothing without a ray scene."""
+    idx = np.flatnonzero(mask)
+    if ray_scene is None or not len(idx):
+        return
+    nrm = normals if np.ndim(normals) == 1 else normals[idx]
+    start = ray_scene.off_surface(points[idx], nrm)
+    mask[idx] = ~ray_scene.occluded(start, obs[idx], transparent=own_object(spot.target))
+
+
+def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None, apertures=None, ray_scene=None):
     """Irradiance [W/m^2] of a spot's mirror lobe at observers: (M,) or (M, T) with states.
 
     Sum over the spot's lit flat facets and, for a sphere or cylinder, its curved
@@ -320,6 +333,10 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     disk's image lies inside the lit part; an eye is lit when its disk's image overlaps
     that part at all). Curved facets keep the point value times
     ``gain`` (their beams spread from the mirror: wide at any eye beyond a few radii).
+
+    ``ray_scene`` (optional, :class:`hazard.rays.RayScene`): each observer's line of
+    sight is traced from its own reflection point (just off the surface there; the
+    mirror's own triangles never block when it is convex); without it every line is clear.
     """
     obs = np.asarray(observers_m, float)
     m = len(obs)
@@ -331,6 +348,7 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     reach = None if apertures is None else np.maximum(apertures.eye_radius_m, np.where(apertures.aided, apertures.collect_radius_m, 0.0))
     for plane in _planes(spot):
         ok, e, x, d, s, z = _flat_geometry(spot, plane, obs, reach)
+        _seen(ray_scene, spot, x, plane[0], obs, ok)
         if not np.any(ok):
             continue
         path = np.linalg.norm(x[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - x[ok], axis=1)
@@ -343,6 +361,8 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     an = spot.target.mesh.analytic
     if an is not None:
         ok, geo, p, n, d, near = _curved_geometry(spot, obs)
+        _seen(ray_scene, spot, p, n, obs, ok)
+        _seen(ray_scene, spot, p, n, obs, near)
         if np.any(ok):
             path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
             rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
@@ -352,7 +372,29 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
             rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
             cap = spot.max_irradiance_w_m2 * gain[near]
             out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
-    return out
+    return np.minimum(out, _power_cap(spot, obs, gain, mu, states))
+
+
+def reflected_power_w(spot, states=None):
+    """Power [W] in the spot's mirror lobe, ``sum rho_i P_i`` over its samples (per state):
+    all a mirror beam can carry."""
+    rho = _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states)
+    return (rho * (spot.power_w if states is None else spot.power_w[:, None])).sum(axis=0)
+
+
+def _power_cap(spot, obs, gain, mu, states):
+    """The most a mirror beam can deliver averaged over the limiting aperture (M,) or
+    (M, T): its whole power ``sum rho_i P_i`` through the aperture's area, attenuated from
+    the spot's farthest sample to the observer, times the optical gain (an upper bound
+    for aided eyes too: the gain is at least the transmission)."""
+    c = spot.centroid
+    extent = float(np.sqrt(((spot.points - c) ** 2).sum(1).max()))
+    if spot.spread_m2 is not None and len(spot.spread_m2):
+        extent += 3.0 * math.sqrt(max(float(np.max(spot.spread_m2)), 0.0))
+    leg = np.maximum(np.linalg.norm(obs - c, axis=1) - extent, 0.0)
+    cap = np.exp(-mu * leg) * gain / (math.pi * (spot.aperture_m / 2) ** 2)
+    p_refl = reflected_power_w(spot, states)
+    return cap * p_refl if states is None else cap[:, None] * p_refl[None, :]
 
 
 CUT_SIDES = 256  # the aperture's disk as a circumscribed polygon when the mirror's outline cuts it
@@ -469,14 +511,29 @@ def _flat_sample_roots(spot, mpe_w_m2, mu, states, gain):
     ``rho E_peak,i exp(-mu D) / (1 + D / p)^2`` (``E_peak,i`` the highest incident
     irradiance in the sample's cells after laser -> mirror attenuation, p the incident
     wavefront radius), and ``rho E_peak,i`` per sample."""
-    rho = _max_over_states(_reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states))
+    rho = _max_over_states(_edge_reflectance(
+        spot, _reflectance(spot, _local(spot.frames[:, 2], spot.target.tangent, -spot.incoming), states), states))
     e0 = rho * spot.peak_irradiance_w_m2 * gain
     n, d, p_src = spot.frames[:, 2], spot.incoming, spot.source_distance_m
     an = spot.target.mesh.analytic
     flat = np.ones(len(e0), bool) if an is None else (
         np.zeros(len(e0), bool) if an[0] == "sphere" else np.abs(n @ an[2]) > 0.5)
     vt, vs = _vergences("flat", n, d, p_src)
-    return np.where(flat, _level_roots(np.where(flat, e0, 0.0), vt, vs, mu, mpe_w_m2), 0.0), e0
+    e_flat = np.where(flat, e0, 0.0)
+    if spot.edge_peak_w_m2 is not None:  # a sampled faceted target: the whole-target bound as one more sample
+        e_flat = np.append(e_flat, _facet_reflectance_max(spot, rho, states) * spot.edge_peak_w_m2 * gain)
+        v = 1.0 / spot.edge_source_m
+        vt, vs = np.append(vt, v), np.append(vs, v)
+    roots = _level_roots(e_flat, vt, vs, mu, mpe_w_m2)
+    return np.minimum(roots, _cap_root(_aperture_power(spot, states) * gain, mu, mpe_w_m2)), e0
+
+
+def _cap_root(cap_w_m2, mu, mpe_w_m2) -> float:
+    """The distance [m] at which ``cap exp(-mu D)`` (a mirror lobe's whole power over the
+    limiting aperture) falls to the MPE: 0 below it, inf without attenuation."""
+    if cap_w_m2 < mpe_w_m2:
+        return 0.0
+    return math.inf if mu <= 0 else math.log(cap_w_m2 / mpe_w_m2) / mu
 
 
 def _curved_hit(spot, s):
@@ -579,22 +636,62 @@ def _observer_root(spot, p, u, guess_m, mpe_w_m2, mu, states, gain) -> float:
 def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> SpecularNohd:
     """The mirror beam's NOHD: the largest distance beyond the mirror [m] at which the
     observers' irradiance still reaches ``mpe_w_m2``, over the flat facets' samples
-    (:func:`_flat_sample_roots`) and a sphere's or cylinder's curved side
-    (:func:`_curved_nohd`: the same Coddington spreading as at the observers, solved
-    along the worst reflected ray), and its direction (unit). ``rho``: the highest
-    reflectance over ``states``; ``gain`` the eye's optical gain; ``inf`` where the beam
-    stays above the MPE past 1e9 m."""
+    (:func:`_flat_sample_roots`: each sample's peak and wavefront radius at its nearest
+    range, bounded by the lobe's whole power over the limiting aperture) and a sphere's
+    or cylinder's curved side (:func:`_curved_nohd`: the same Coddington spreading and
+    power bound as at the observers, solved along the worst reflected ray), and its
+    direction (unit). ``rho``: the highest reflectance over ``states``; ``gain`` the eye's
+    optical gain; ``inf`` where the beam stays above the MPE past 1e9 m."""
     if not spot.material.has_specular:
         return SpecularNohd(None, None)
     mu = attenuation_per_m
     roots, e0 = _flat_sample_roots(spot, mpe_w_m2, mu, states, gain)
     i = int(np.argmax(roots))
-    nohd, direction = float(roots[i]), _unit(mirror_directions(spot)[i if roots[i] > 0 else int(np.argmax(e0))])
+    n_s = len(spot.power_w)  # the whole-target bound, if last, points along the hottest sample's mirror direction
+    j = i if (roots[i] > 0 and i < n_s) else int(np.argmax(e0[:n_s]))
+    nohd, direction = float(roots[i]), _unit(mirror_directions(spot)[j])
     if spot.target.mesh.analytic is not None:
         curved, _, u = _curved_nohd(spot, mpe_w_m2, mu, states, gain)
         if curved > nohd:
             nohd, direction = curved, u
     return SpecularNohd(nohd, np.asarray(direction, float).tolist())
+
+
+def _edge_reflectance(spot, rho, states):
+    """Reflectance of each sample for its NOHD: a sample of a faceted target (box, plate,
+    disk, mesh) whose normal is none of its lit facets' straddles an edge (its mean normal
+    blends two faces: at grazing incidence a far lower Fresnel reflectance than either
+    face's), so it takes the largest over those facets as well (conservative)."""
+    if spot.target.mesh.analytic is not None or spot.outline_s is not None:
+        return rho
+    planes = _planes(spot)
+    if not planes:
+        return rho
+    normals = np.array([p[0] for p in planes])
+    blended = np.max(spot.frames[:, 2] @ normals.T, axis=1) < 1 - 1e-9
+    if not np.any(blended):
+        return rho
+    d = spot.incoming[blended]
+    faces = [_reflectance(spot, _local(n, spot.target.tangent, -d), states) for n in normals]
+    out = rho.copy()
+    out[blended] = np.maximum(rho[blended], np.max(faces, axis=0))
+    return out
+
+
+def _facet_reflectance_max(spot, rho, states) -> float:
+    """The highest reflectance of a faceted spot: over its samples (``rho``) and its lit
+    facets at the mean incidence (largest over ``states``)."""
+    best = float(np.max(rho)) if len(rho) else 0.0
+    for n, _, _ in _planes(spot):
+        r = _reflectance(spot, _local(n, spot.target.tangent, -spot.mean_incoming[None, :]), states)
+        best = max(best, float(np.max(r)))
+    return best
+
+
+def _aperture_power(spot, states=None) -> float:
+    """The mirror lobe's whole power (largest over ``states``) over the limiting
+    aperture's area [W/m^2]: no mirror beam can average more over the aperture."""
+    return float(np.max(reflected_power_w(spot, states))) / (math.pi * (spot.aperture_m / 2) ** 2)
 
 
 def mirror_directions(spot):

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from ..engine import mirror_axis, specular_irradiance, spot_irradiance
+from ..engine import mirror_axis, specular_irradiance, spot_irradiance, spot_line_of_sight
 from ..visual import level_limit_w_m2
 
 __all__ = ["check_zones", "TIMES_MAX", "LATTICE", "LEVELS"]
@@ -156,14 +156,11 @@ def _reflected_at(spots, p, mu, ray_scene, states) -> np.ndarray:
     e = np.zeros(len(p))
     for sp in spots:
         st = states.get(sp.target.index)
-        los = np.ones(len(p))
-        if ray_scene is not None:
-            start = ray_scene.off_surface(sp.centroid, sp.mean_frame[2])
-            los = (~ray_scene.occluded(np.broadcast_to(start, (len(p), 3)), p)).astype(float)
+        los = spot_line_of_sight(ray_scene, sp, p)[0] if ray_scene is not None else None
         g = np.ones(len(p))
         r, _ = spot_irradiance(sp, p, g, mu, st, los)
-        if sp.material.has_specular:
-            r = r + specular_irradiance(sp, p, g, mu, None, st) * (los if st is None else los[:, None])
+        if sp.material.has_specular:  # each point's line of sight from its own reflection point
+            r = r + specular_irradiance(sp, p, g, mu, None, st, ray_scene=ray_scene)
         e += r if r.ndim == 1 else r.max(axis=1)
     return e
 

@@ -21,7 +21,7 @@ import numpy as np
 from brdfmodels.parallel import block_rows, map_blocks
 
 from .. import mpe as _mpe
-from ..engine import FAR_FIELD_SPOT_SIZES, spot_irradiance, specular_irradiance
+from ..engine import spot_irradiance, spot_line_of_sight, specular_irradiance
 
 __all__ = ["MapInputs", "MapOutputs", "irradiance_map", "spot_line_of_sight", "sliding_max_integral", "HISTORY_KEEP_MAX", "MAP_CHUNK"]
 
@@ -190,9 +190,9 @@ class _MapRun:
         e, far = spot_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, sk, los)
         out.far_field[sl] |= far
         if sp.material.has_specular:
+            # each observer's line of sight from its own reflection point (not the spot's)
             ap = None if inp.apertures is None else inp.apertures.take(np.arange(sl.start, sl.stop))
-            es = specular_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, inp.beam, sk, ap)
-            es = es * (los if sk is None else los[:, None])
+            es = specular_irradiance(sp, p, inp.gain[sl], inp.attenuation_per_m, inp.beam, sk, ap, ray_scene=inp.ray_scene)
             out.specular_w_m2[sl] = np.maximum(out.specular_w_m2[sl], es if es.ndim == 1 else es.max(axis=1))
             e = e + es
         return e
@@ -234,21 +234,6 @@ class _MapRun:
         t0 = time.perf_counter()
         self.exposure.post(ev, rows)
         return t_los, time.perf_counter() - t0
-
-
-def spot_line_of_sight(ray_scene, spot, p) -> tuple[np.ndarray, int]:
-    """Line of sight from ``spot`` to points ``p`` (N, 3): one occlusion query; far-field
-    points behind the spot's surface receive nothing whatever is in between (evaluated
-    with the mean frame): no ray needed, False. Returns (mask, segments traced)."""
-    c, nrm = spot.centroid, spot.mean_frame[2]
-    start = ray_scene.off_surface(c, nrm)
-    rel = p - c
-    far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
-    need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular
-    idx = np.flatnonzero(need)
-    row = np.zeros(len(p), bool)
-    row[idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])
-    return row, len(idx)
 
 
 def irradiance_map(inp: MapInputs) -> MapOutputs:

@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine import spot_irradiance, specular_irradiance
+from ..engine import spot_irradiance, spot_line_of_sight, specular_irradiance
 from ..nohd import optical_gain
 from ..aperture import aperture_irradiance_w_m2, observer_apertures
 
@@ -320,20 +320,22 @@ def _state_columns(run: MotionRun, tau) -> tuple[np.ndarray, np.ndarray]:
     return np.maximum(j1 - 1, 0), j1
 
 
-def _spot_w_m2(run: MotionRun, sp, p, gain, tau, los) -> np.ndarray:
-    """One spot's irradiance at points (N, 3) with dwell times ``tau`` (N,)."""
+def _spot_w_m2(run: MotionRun, sp, p, gain, tau, los, ray_scene) -> np.ndarray:
+    """One spot's irradiance at points (N, 3) with dwell times ``tau`` (N,): the BRDF lobe
+    with the spot's line of sight ``los``, the mirror lobe with each point's own from its
+    reflection point (``ray_scene``; None: every line clear)."""
     st = run.states.get(sp.target.index)
     g = np.full(len(p), gain)
     if st is None:
         e, _ = spot_irradiance(sp, p, g, run.mu, None, los)
         if sp.material.has_specular:
-            e = e + specular_irradiance(sp, p, g, run.mu, None, None) * los
+            e = e + specular_irradiance(sp, p, g, run.mu, None, None, ray_scene=ray_scene)
         return e
     j0, j1 = _state_columns(run, tau)
     # the whole history (a slumping spot pairs each state with its own tilt), then each row's two columns
     e, _ = spot_irradiance(sp, p, g, run.mu, st, los)
     if sp.material.has_specular:
-        e = e + specular_irradiance(sp, p, g, run.mu, None, st) * los[:, None]
+        e = e + specular_irradiance(sp, p, g, run.mu, None, st, ray_scene=ray_scene)
     rows = np.arange(len(p))
     return np.maximum(e[rows, j0], e[rows, j1])
 
@@ -347,11 +349,10 @@ def _reflected_w_m2(run: MotionRun, p, t, state_idx, gain, tau) -> np.ndarray:
         bs = run.states_list[k]
         for sp in bs.spots:
             if bs.ray_scene is not None:
-                start = bs.ray_scene.off_surface(sp.centroid, sp.mean_frame[2])
-                los = ~bs.ray_scene.occluded(np.broadcast_to(start, (len(rows), 3)), p[rows])
+                los = spot_line_of_sight(bs.ray_scene, sp, p[rows])[0]
             else:
                 los = np.ones(len(rows), bool)
-            out[rows] += _spot_w_m2(run, sp, p[rows], gain, tau[rows], los.astype(float))
+            out[rows] += _spot_w_m2(run, sp, p[rows], gain, tau[rows], los.astype(float), bs.ray_scene)
     return out
 
 

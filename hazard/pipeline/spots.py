@@ -95,6 +95,17 @@ def scene_beam(scene, direction=None) -> BeamGeometry:
                                laser.average_power_w, laser.beam_diameter_m, laser.divergence_rad)
 
 
+def mirror_aperture_m(spec) -> float:
+    """The limiting aperture [m] a mirror beam's power is averaged over: the exposure's
+    (:func:`hazard.mpe.ocular_mpe`) when it is the retina's 7 mm, else 1 mm, the cornea's
+    below 0.3 s and the smallest any band uses (the corneal aperture grows with the
+    elapsed time the map checks: the smallest is the conservative one)."""
+    from ..mpe import ocular_mpe
+
+    aperture = ocular_mpe(spec.laser.wavelength_nm, spec.exposure.duration_s, standard=spec.exposure.standard).limiting_aperture_m
+    return aperture if aperture >= 7e-3 else 1e-3
+
+
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     """Sample the beam (default: :func:`scene_beam`) against every object and build the
     targets' spots."""
@@ -104,6 +115,9 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
     built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
+    aperture_m = mirror_aperture_m(spec)
+    for sp in built.spots:
+        sp.aperture_m = aperture_m
     notes = []
     if built.spill_w > 1e-3 * laser.average_power_w:
         notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")

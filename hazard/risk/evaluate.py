@@ -259,10 +259,8 @@ class Evaluator:
                 los = spot_line_of_sight(self.ray_scene, sp, p)[0] if self.ray_scene is not None else None
                 diff, _ = spot_irradiance(sp, p, np.ones(m), mu, sk, los)
                 part += diff if diff.ndim == 2 else diff[:, None]
-                if sp.material.has_specular:
-                    spec = specular_irradiance(sp, p, np.ones(m), mu, None, sk)
-                    if los is not None:
-                        spec = spec * (los if spec.ndim == 1 else los[:, None])
+                if sp.material.has_specular:  # each observer's line of sight from its own reflection point
+                    spec = specular_irradiance(sp, p, np.ones(m), mu, None, sk, ray_scene=self.ray_scene)
                     if chi_m is not None:
                         spec = spec * (chi_m[sp.target.index] if spec.ndim == 1 else chi_m[sp.target.index][:, None])
                     part += spec if spec.ndim == 2 else spec[:, None]

@@ -394,6 +394,22 @@ def lambert_w_range(R0, mu):
     return float((2.0 / mu) * lambertw(mu * R0 / 2.0).real)
 
 
+def aperture_cap(reflected_power_w, aperture_m=7e-3):
+    """The most a reflected beam of power P can deliver averaged over the limiting
+    aperture (diameter d; 7 mm for 400-1400 nm, range-safety.md 10): P / (pi d^2 / 4),
+    whatever its shape. A mirror at grazing incidence, or much smaller than the aperture,
+    is bound by it rather than by rho E_beam."""
+    return reflected_power_w / (math.pi * aperture_m**2 / 4.0)
+
+
+def capped_range(cap_w_m2, mpe, mu):
+    """Distance over which a level ``cap`` attenuated as exp(-mu D) stays >= MPE:
+    ln(cap / MPE) / mu (inf without attenuation; 0 when cap < MPE)."""
+    if cap_w_m2 < mpe:
+        return 0.0
+    return math.inf if mu == 0 else math.log(cap_w_m2 / mpe) / mu
+
+
 # --------------------------------------------------------------------------- curved reflectors
 
 
