@@ -730,7 +730,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
 
     observers = _observers(spec, offset, terrain, None if site is None else site.frame.refraction_rise_m)
     _check_aim_track(spec, lp - offset, d, offset)
-    return Scene(
+    scene = Scene(
         spec=spec,
         source=source,
         base_dir=base_dir,
@@ -746,6 +746,27 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         warnings=_warnings(spec) + _buried_targets(targets, terrain) + ([] if site is None else site.warnings),
         site=site,
     )
+    _check_work(scene)
+    return scene
+
+
+def _check_work(scene: Scene) -> None:
+    """The checks of a loaded scene that every verb runs before work (so ``hazard validate``
+    refuses what ``run``, ``risk`` and ``study`` would): its motion within the limits and
+    its aim track clear of the aperture (:func:`scenes.motion.check_motion`), and every
+    material file of ``[uncertainty] materials`` readable and valid for its target."""
+    from .motion import check_motion
+
+    try:
+        check_motion(scene)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    u = scene.spec.uncertainty
+    names = [t.name for t in scene.targets]
+    for c in (u.materials if u is not None else ()):
+        k = names.index(c.target)
+        for j, ms in enumerate(c.materials):
+            alternative_material(scene, k, ms, f"uncertainty.materials[{c.target!r}].materials[{j}]")
 
 
 def _resolve_geo(data: dict, source: str, base_dir):
