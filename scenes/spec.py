@@ -49,6 +49,10 @@ __all__ = [
 # the standards hazard.mpe knows; kept here because scenes may not import hazard
 STANDARD_KEYS = ("ansi-z136.1-2014", "iec-60825-1-2014", "ansi-z136.1-2007", "iec-60825-1-2007")
 
+# the smallest non-zero divergence: a Gaussian beam's 1/e full angle is at least 2 lambda / (pi D) (D its 1/e diameter),
+# 2.5e-9 rad at 400 nm through a 100 m aperture (the schema's extremes); 1e-308 made NOHDs of 1e305 m
+DIVERGENCE_MIN_RAD = 1e-9
+
 # coordinates and direction components [m]: |x| <= 1e8 m (beyond the Moon's orbit is not a scene)
 Coord = Annotated[float, Field(ge=-1e8, le=1e8)]
 Vec3 = Annotated[list[Coord], Field(min_length=3, max_length=3)]
@@ -197,6 +201,15 @@ class LaserSpec(_Strict):
     @classmethod
     def _finite_vec(cls, v, info):
         return None if v is None else _finite(v, info.field_name)
+
+    @field_validator("divergence_rad")
+    @classmethod
+    def _divergence(cls, v):
+        if 0 < v < DIVERGENCE_MIN_RAD:
+            raise ValueError(f"{v!r} rad is below the diffraction limit of any beam a scene can describe (>= "
+                             f"{DIVERGENCE_MIN_RAD:g} rad for 400 nm through 100 m); give 0 for a collimated beam "
+                             f"(the infinite NOHD, conservative)")
+        return v
 
     @field_validator("windows")
     @classmethod
