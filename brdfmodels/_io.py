@@ -18,6 +18,7 @@ from pathlib import Path
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {
     "FILE_MB": (256, "size of an input file [MB]"),
+    "SCENE_MB": (32, "size of a scene's TOML text [MB] (parsing takes about 0.8 s of CPU and 26 MB of memory per MB)"),
     "DEPTH": (32, "nesting depth of arrays and tables in an input file"),
     "OBSERVERS": (1_000_000, "observer points of a scene"),
     "POINTS": (100_000, "explicit observer points (points_m): each is a feature of the map outputs"),
@@ -27,6 +28,7 @@ LIMITS = {
     "TIME_STEPS": (100_000, "time steps of a dynamic analysis (time_end_s / time_step_s)"),
     "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
     "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
+    "TABLE_NODES": (2_000_000, "nodes of a BRDF table gridded from samples (grid_deg; a MERL table has 1.46e6)"),
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
     "SCENARIOS": (1_000_000, "scenarios of a study"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),

@@ -360,6 +360,8 @@ class MaterialSpec(BaseModel):
             if (not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                                                   and 0.1 <= x <= 45 for x in g)):
                 raise ValueError(f"grid_deg={g!r}: expected three node spacings [theta_h, theta_d, phi_d] of 0.1 to 45 deg")
+            nodes = math.ceil((90 - 1e-9) / g[0]) * math.ceil((90 - 1e-9) / g[1]) * math.ceil((180 - 1e-9) / g[2])
+            check_limit("TABLE_NODES", nodes, f"grid_deg={g!r}: table nodes")
             if self.params.get("fill", "envelope") not in ("envelope", "fit"):
                 raise ValueError(f"fill={self.params['fill']!r}: expected 'envelope' or 'fit'")
             if self.params.get("outside", "envelope") not in ("error", "envelope", "fit"):
