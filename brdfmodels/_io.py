@@ -18,7 +18,7 @@ from pathlib import Path
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {
     "FILE_MB": (256, "size of an input file [MB]"),
-    "SCENE_MB": (32, "size of a scene's TOML text [MB] (parsing takes about 0.8 s of CPU and 26 MB of memory per MB)"),
+    "SCENE_MB": (32, "size of a scene's TOML text [MB] (parsing takes about 0.8 s of CPU per MB)"),
     "DEPTH": (32, "nesting depth of arrays and tables in an input file"),
     "OBSERVERS": (1_000_000, "observer points of a scene"),
     "POINTS": (100_000, "explicit observer points (points_m): each is a feature of the map outputs"),

@@ -791,7 +791,7 @@ def _resolve_geo(data: dict, source: str, base_dir):
 def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
     """Scene from TOML text; relative file names resolve against ``base_dir``."""
     try:
-        # parsing costs time and memory per byte (0.8 s of CPU and 26 MB per MB of scene: README, Input checks)
+        # parsing costs time and memory per byte (about 0.8 s of CPU per MB of scene: README, Input checks)
         check_limit("SCENE_MB", len(text) / 1e6, f"{source}: scene text size [MB]")
         data = parse_toml(text, source)  # bounded nesting; one-line errors
     except ValueError as exc:
