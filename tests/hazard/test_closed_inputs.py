@@ -231,3 +231,17 @@ def test_motion_samples_count_is_the_base_step_formula(tmp_path, monkeypatch):
     with pytest.raises(scenes.SceneError, match="= 102 exceeds the limit 101"):
         scenes.load(_write(tmp_path, bad))
     assert math.floor(10.0 / 0.099) + 1 == 102
+
+
+def test_every_limit_is_in_the_readme_table_with_its_default():
+    """The README's limits table lists every limit of brdfmodels._io.LIMITS at its default."""
+    import re
+    from pathlib import Path
+
+    from brdfmodels._io import LIMITS
+
+    text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    rows = dict(re.findall(r"^\| `HAZARD_MAX_([A-Z_]+)` \| ([0-9.e+]+) \|", text, flags=re.M))
+    assert set(rows) == set(LIMITS)
+    for name, (default, _) in LIMITS.items():
+        assert float(rows[name]) == float(default), name
