@@ -827,7 +827,10 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
 
 
 def load(path) -> Scene:
-    """Read, validate and convert a TOML scene file."""
+    """Read, validate and convert a TOML scene file. This is the one acceptance of a scene
+    for every verb (``hazard validate``, ``run``, ``compare``, ``render``, ``risk`` and a
+    study's scenarios): the schema, the limits, the files it names (``[uncertainty]``'s
+    too) and the motion's checks (:func:`_check_work`); SceneError otherwise."""
     path = Path(path)
     try:
         text = read_input_text(path, "scene")  # regular file of bounded size, UTF-8

@@ -6,8 +6,9 @@ nm. The classes only validate; :mod:`scenes.scene` converts them once to numpy a
 
 Types are strict (``power_w = true`` or ``"5"`` is an error, not 1 W or 5 W), every number
 must be finite and within a physical range, and the total work a scene asks for (observer
-points, beam rays, time steps, keep-out cells) is bounded by the limits of
-:data:`brdfmodels._io.LIMITS` (raise them with ``HAZARD_MAX_<NAME>``).
+points, explicit points, targets, beam rays, table nodes, time steps, keep-out cells, risk
+point evaluations) is bounded by the limits of :data:`brdfmodels._io.LIMITS` (raise them
+with ``HAZARD_MAX_<NAME>``), each chosen from a measured cost (README, Input checks).
 """
 
 from __future__ import annotations
