@@ -245,3 +245,23 @@ def test_every_limit_is_in_the_readme_table_with_its_default():
     assert set(rows) == set(LIMITS)
     for name, (default, _) in LIMITS.items():
         assert float(rows[name]) == float(default), name
+
+
+def test_validate_checks_a_study_as_study_does(tmp_path):
+    """A study file given to validate goes through the study's own checks before work:
+    a grid of 50 x 50 = 2500 scenarios is over HAZARD_MAX_SCENARIOS (1000) for both."""
+    study = tmp_path / "big.toml"
+    values = ", ".join(f"{100.0 + i:.1f}" for i in range(50))
+    diameters = ", ".join(f"{0.001 * (i + 1):.3f}" for i in range(50))
+    study.write_text(f'name = "big"\nscene = "plate"\n[sweep]\nkind = "grid"\n'
+                     f'[[sweep.parameters]]\npath = "laser.power_w"\nvalues = [{values}]\n'
+                     f'[[sweep.parameters]]\npath = "laser.beam_diameter_m"\nvalues = [{diameters}]\n')
+    messages = {}
+    for verb, extra in (("validate", []), ("study", ["-o", str(tmp_path / "out"), "--serial", "--quiet"])):
+        code, lines = _cli(verb, str(study), *extra)
+        assert code == 2 and len(lines) == 1 and "HAZARD_MAX_SCENARIOS" in lines[0] and "2500" in lines[0], lines
+        messages[verb] = lines[0].removeprefix(f"hazard {verb}: error: ")
+    assert messages["validate"] == messages["study"]
+    assert not (tmp_path / "out").exists()
+    code, lines = _cli("validate", "power_sweep")
+    assert code == 0 and not lines
