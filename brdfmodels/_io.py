@@ -18,16 +18,21 @@ from pathlib import Path
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {
     "FILE_MB": (256, "size of an input file [MB]"),
+    "SCENE_MB": (32, "size of a scene's TOML text [MB] (parsing takes about 0.8 s of CPU per MB)"),
     "DEPTH": (32, "nesting depth of arrays and tables in an input file"),
     "OBSERVERS": (1_000_000, "observer points of a scene"),
-    "BEAM_SAMPLES": (1_000_000, "rays across the beam cross-section (analysis.beam_samples)"),
+    "POINTS": (100_000, "explicit observer points (points_m): each is a feature of the map outputs"),
+    "TARGETS": (100, "targets of a scene"),
+    "RISK_EVALUATIONS": (1e8, "point evaluations of a risk analysis ((draws + sensitivity sets) x (points + map cells))"),
+    "BEAM_SAMPLES": (262_144, "rays across the beam cross-section (analysis.beam_samples)"),
     "TIME_STEPS": (100_000, "time steps of a dynamic analysis (time_end_s / time_step_s)"),
     "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
+    "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
+    "TABLE_NODES": (2_000_000, "nodes of a BRDF table gridded from samples (grid_deg; a MERL table has 1.46e6)"),
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
-    "SCENARIOS": (1_000_000, "scenarios of a study"),
+    "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
     "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
-    "TABLE_NODES": (20_000_000, "nodes of a BRDF table gridded from samples (grid_deg; 11.7e6 nodes at 0.5 deg took 0.25 s and 264 MB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
 DEPTH_CEILING = 200  # nesting the parsers can follow (Python's recursion limit is 1000)

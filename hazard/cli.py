@@ -7,7 +7,7 @@ Verbs:
   hazard run SCENE -o OUTDIR   analyse a scene; write report.json and observers.csv; print the
                                answer (hazardous observers, NOHDs, what was skipped) first
   hazard compare SCENE         static vs dynamic: NOHD per target, changed verdicts
-  hazard validate SCENE        check a scene file
+  hazard validate SCENE        check a scene file (or a study file) as run, risk and study would
   hazard models                registered BRDF models
   hazard schema                JSON schema of scene files
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
@@ -131,8 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scene", help="scene TOML file, or a bundled example's name")
     _add_run_args(p)
 
-    p = sub.add_parser("validate", help="check a scene file and print what it contains")
-    p.add_argument("scene", help="scene TOML file, or a bundled example's name")
+    p = sub.add_parser("validate", help="check a scene (or study) file as run, risk and study would, and print what it contains")
+    p.add_argument("scene", help="scene or study TOML file, or a bundled example's name")
     p.add_argument("--json", action="store_true", help="print JSON")
 
     p = sub.add_parser("models", help="list the registered BRDF models (--materials: the material library)")
@@ -445,8 +445,44 @@ def _cmd_compare(args, out, err):
     return _finish(args, result)
 
 
+def _as_study(name):
+    """The study ``name`` names (a study TOML: a ``scene`` key and no ``[laser]``, or a
+    bundled study), validated as ``hazard study`` would before work; None if it is not one."""
+    import scenes
+
+    from .study import examples, load_study
+
+    path = Path(name)
+    if not path.exists():
+        return load_study(name) if name in examples() and name not in scenes.examples() else None
+    from brdfmodels._io import read_toml
+
+    try:
+        d = read_toml(path)
+    except ValueError:
+        return None
+    return load_study(path) if isinstance(d, dict) and "scene" in d and "laser" not in d else None
+
+
+def _validate_study(study, args, out):
+    from .study import scenarios
+
+    info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study))}
+    out.write((json.dumps(info, indent=1) if args.json else
+               f"{args.scene}: valid study {study.name!r}: {info['scenarios']} scenario(s) over scene {study.scene!r}") + "\n")
+    return EXIT_OK
+
+
 def _cmd_validate(args, out, err):
-    scene = _load_scene(args.scene, err)
+    import scenes
+
+    try:
+        scene = _load_scene(args.scene, err)
+    except scenes.SceneError:  # a study file? then the checks of hazard study
+        study = _as_study(args.scene)
+        if study is None:
+            raise
+        return _validate_study(study, args, out)
     info = {
         "scene": scene.name,
         "source": scene.source,

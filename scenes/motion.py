@@ -287,6 +287,59 @@ def check_aim_sector(spec, aim: AimSchedule | None) -> None:
                          f"{sector.elevation_deg} deg)")
 
 
+def samples_max() -> int:
+    """Time samples a moving path may take (limit ``MOTION_SAMPLES``, ``HAZARD_MAX_MOTION_SAMPLES``)."""
+    from brdfmodels._io import limit
+
+    return int(limit("MOTION_SAMPLES"))
+
+
+def check_base_steps(motion: Motion, t0: float, t1: float) -> int:
+    """Samples of the base step over [t0, t1] (``floor((t1 - t0) / time_step_s) + 1``);
+    ValueError naming ``motion.time_step_s`` and the limit when they exceed it."""
+    from brdfmodels._io import check_limit
+
+    step = motion.spec.time_step_s
+    n = math.floor((t1 - t0) / step) + 1
+    check_limit("MOTION_SAMPLES", n, f"motion: samples of the base step (time_step_s = {step:g} s over [{t0:g}, {t1:g}] s)")
+    return n
+
+
+def check_aim_aperture(aim: AimSchedule | None) -> None:
+    """An aim track whose aim points pass within 1 um of the laser's aperture has no beam
+    direction there: ValueError naming the first such segment (linear between aim points)."""
+    if aim is None or aim.aims_m is None:
+        return
+    a = aim.aims_m - aim.position_m
+    if len(a) == 1:
+        d = np.linalg.norm(a, axis=1)
+        k = 0
+    else:
+        p, q = a[:-1], a[1:]
+        v = q - p
+        tau = np.clip(-np.einsum("ij,ij->i", p, v) / np.maximum(np.einsum("ij,ij->i", v, v), 1e-300), 0.0, 1.0)
+        d = np.linalg.norm(p + tau[:, None] * v, axis=1)
+        k = int(np.argmin(d))
+    if not np.all(d >= AIM_CLEARANCE_M):
+        t = aim.times_s
+        where = f"at t = {t[0]:.6g} s" if len(a) == 1 else f"between t = {t[k]:.6g} s and {t[k + 1]:.6g} s"
+        raise ValueError(f"laser.aim_track: the aim passes through the laser's aperture {where} ({d[k]:.3g} m from it; "
+                         f"expected at least {AIM_CLEARANCE_M:g} m: no beam direction there)")
+
+
+AIM_CLEARANCE_M = 1e-6  # an aim point closer than this to the laser gives no direction (as laser.aim_m)
+
+
+def check_motion(scene) -> None:
+    """Before any work: a scene's motion can be sampled within the limits and its aim
+    track always gives a direction (:func:`check_base_steps`, :func:`check_aim_aperture`)."""
+    motion = motion_of(scene)
+    if motion is None:
+        return
+    check_aim_aperture(motion.aim)
+    check_base_steps(motion, motion.t_start_s, motion.t_end_s)
+
+
 def motion_of(scene) -> Motion | None:
     """The scene's motion (None when nothing moves and lasing never stops)."""
     from .spec import MotionSpec

@@ -20,7 +20,7 @@ import numpy as np
 from pydantic import ValidationError
 
 import brdfmodels
-from brdfmodels._io import parse_toml, read_input_text
+from brdfmodels._io import check_input_file, check_limit, parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, direction_in_sector, input_path, observer_points, shape_mesh, terrain_heightfield
 from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored
@@ -760,7 +760,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
 
     observers = _observers(spec, offset, terrain, None if site is None else site.frame.refraction_rise_m)
     _check_aim_track(spec, lp - offset, d, offset)
-    return Scene(
+    scene = Scene(
         spec=spec,
         source=source,
         base_dir=base_dir,
@@ -777,6 +777,27 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
                   + _near_aperture(observers, lp - offset, d)),
         site=site,
     )
+    _check_work(scene)
+    return scene
+
+
+def _check_work(scene: Scene) -> None:
+    """The checks of a loaded scene that every verb runs before work (so ``hazard validate``
+    refuses what ``run``, ``risk`` and ``study`` would): its motion within the limits and
+    its aim track clear of the aperture (:func:`scenes.motion.check_motion`), and every
+    material file of ``[uncertainty] materials`` readable and valid for its target."""
+    from .motion import check_motion
+
+    try:
+        check_motion(scene)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    u = scene.spec.uncertainty
+    names = [t.name for t in scene.targets]
+    for c in (u.materials if u is not None else ()):
+        k = names.index(c.target)
+        for j, ms in enumerate(c.materials):
+            alternative_material(scene, k, ms, f"uncertainty.materials[{c.target!r}].materials[{j}]")
 
 
 def _resolve_geo(data: dict, source: str, base_dir):
@@ -801,6 +822,8 @@ def _resolve_geo(data: dict, source: str, base_dir):
 def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
     """Scene from TOML text; relative file names resolve against ``base_dir``."""
     try:
+        # parsing costs time and memory per byte (about 0.8 s of CPU per MB of scene: README, Input checks)
+        check_limit("SCENE_MB", len(text) / 1e6, f"{source}: scene text size [MB]")
         data = parse_toml(text, source)  # bounded nesting; one-line errors
     except ValueError as exc:
         raise SceneError(str(exc)) from None
@@ -835,7 +858,10 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
 
 
 def load(path) -> Scene:
-    """Read, validate and convert a TOML scene file."""
+    """Read, validate and convert a TOML scene file. This is the one acceptance of a scene
+    for every verb (``hazard validate``, ``run``, ``compare``, ``render``, ``risk`` and a
+    study's scenarios): the schema, the limits, the files it names (``[uncertainty]``'s
+    too) and the motion's checks (:func:`_check_work`); SceneError otherwise."""
     path = Path(path)
     try:
         text = read_input_text(path, "scene")  # regular file of bounded size, UTF-8

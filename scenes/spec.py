@@ -6,8 +6,9 @@ nm. The classes only validate; :mod:`scenes.scene` converts them once to numpy a
 
 Types are strict (``power_w = true`` or ``"5"`` is an error, not 1 W or 5 W), every number
 must be finite and within a physical range, and the total work a scene asks for (observer
-points, beam rays, time steps, keep-out cells) is bounded by the limits of
-:data:`brdfmodels._io.LIMITS` (raise them with ``HAZARD_MAX_<NAME>``).
+points, explicit points, targets, beam rays, table nodes, time steps, keep-out cells, risk
+point evaluations) is bounded by the limits of :data:`brdfmodels._io.LIMITS` (raise them
+with ``HAZARD_MAX_<NAME>``), each chosen from a measured cost (README, Input checks).
 """
 
 from __future__ import annotations
@@ -41,10 +42,17 @@ __all__ = [
     "AirZoneSpec",
     "AirspaceSpec",
     "STANDARD_KEYS",
+    "uncertain_inputs",
+    "risk_evaluations",
+    "check_risk",
 ]
 
 # the standards hazard.mpe knows; kept here because scenes may not import hazard
 STANDARD_KEYS = ("ansi-z136.1-2014", "iec-60825-1-2014", "ansi-z136.1-2007", "iec-60825-1-2007")
+
+# the smallest non-zero divergence: a Gaussian beam's 1/e full angle is at least 2 lambda / (pi D) (D its 1/e diameter),
+# 2.5e-9 rad at 400 nm through a 100 m aperture (the schema's extremes); 1e-308 made NOHDs of 1e305 m
+DIVERGENCE_MIN_RAD = 1e-9
 
 # coordinates and direction components [m]: |x| <= 1e8 m (beyond the Moon's orbit is not a scene)
 Coord = Annotated[float, Field(ge=-1e8, le=1e8)]
@@ -201,6 +209,15 @@ class LaserSpec(_Strict):
     @classmethod
     def _finite_vec(cls, v, info):
         return None if v is None else _finite(v, info.field_name)
+
+    @field_validator("divergence_rad")
+    @classmethod
+    def _divergence(cls, v):
+        if 0 < v < DIVERGENCE_MIN_RAD:
+            raise ValueError(f"{v!r} rad is below the diffraction limit of any beam a scene can describe (>= "
+                             f"{DIVERGENCE_MIN_RAD:g} rad for 400 nm through 100 m); give 0 for a collimated beam "
+                             f"(the infinite NOHD, conservative)")
+        return v
 
     @field_validator("windows")
     @classmethod
@@ -640,8 +657,9 @@ class AtmosphereSpec(_Strict):
 class AnalysisSpec(_Strict):
     """Accuracy knobs and outputs of an analysis."""
 
-    time_end_s: float | None = Field(default=None, gt=0, le=1e6, description="end of the history window [s] (default: exposure duration)")
-    time_step_s: float | None = Field(default=None, gt=0, le=1e6, description="time step of the dynamic analysis [s]")
+    # lower bounds: the MPE tables start at 1e-13 s; a 1e-308 s window overflowed the heating ODE's 1/h (no field named)
+    time_end_s: float | None = Field(default=None, ge=1e-13, le=1e6, description="end of the history window [s], 1e-13 to 1e6 (default: exposure duration)")
+    time_step_s: float | None = Field(default=None, ge=1e-15, le=1e6, description="time step of the dynamic analysis [s], 1e-15 to 1e6")
     direction_grid_deg: float = Field(default=2.0, gt=0, le=30, description="keep-out lobe grid resolution [deg]")
     refine_levels: int = Field(default=3, ge=0, le=8, description=(
         "most 4-way splits of a keep-out lobe cell; cells are split only where the volume error estimate asks "
@@ -886,6 +904,53 @@ class UncertaintySpec(_Strict):
         return self
 
 
+def uncertain_inputs(spec: "SceneSpec") -> list:
+    """The ``[uncertainty]`` input groups that vary between draws, in the order of
+    :data:`hazard.risk.inputs.GROUPS` (the rule of ``RiskModel.active``; the bias alone is
+    not random, a tilt needs a plate or disk target, an observer spread needs observers)."""
+    u = spec.uncertainty
+    if u is None:
+        return []
+    on = {"pointing": u.pointing_sigma_rad > 0, "material": u.brdf_scale_sigma > 0 or bool(u.materials),
+          "tilt": u.normal_tilt_sigma_deg > 0 and any(t.shape in ("plate", "disk") for t in spec.targets),
+          "visibility": u.visibility is not None, "scintillation": u.scintillation is not None,
+          "observer_position": (u.observer_position_sigma_m > 0 or u.observer_height_sigma_m > 0)
+          and any(o.n_points for o in spec.observers)}
+    return [g for g, v in on.items() if v]
+
+
+def risk_evaluations(spec: "SceneSpec", draws: int | None = None, sensitivity_draws: int | None = None) -> float:
+    """Point evaluations of a risk analysis: (draws + sensitivity_draws (1 + k)) x (observer
+    points + map cells), k the uncertain inputs (the pick-freeze sample evaluates one more
+    set per input, and only with k >= 2 and observers). ``draws`` and ``sensitivity_draws``
+    override the scene's (``hazard risk --draws``)."""
+    u = spec.uncertainty
+    k = len(uncertain_inputs(spec))
+    n_obs = sum(o.n_points for o in spec.observers)
+    sens = u.sensitivity_draws if sensitivity_draws is None else sensitivity_draws
+    sens = sens if (k >= 2 and n_obs > 0) else 0
+    cells = 0
+    if u.map is not None:
+        x0, x1, y0, y1 = u.map.extent_m
+        cells = math.ceil((x1 - x0) / u.map.spacing_m) * math.ceil((y1 - y0) / u.map.spacing_m)
+    return float((draws or u.draws) + sens * (1 + k)) * (n_obs + cells)
+
+
+def check_risk(spec: "SceneSpec", draws: int | None = None, sensitivity_draws: int | None = None) -> None:
+    """A risk analysis the scene (with the ``hazard risk`` overrides) asks for: something
+    random, and work within ``HAZARD_MAX_RISK_EVALUATIONS``; ValueError otherwise. Nothing to
+    check without ``[uncertainty]``."""
+    if spec.uncertainty is None:
+        return
+    if not uncertain_inputs(spec):
+        raise ValueError("uncertainty: nothing is random (an empty table, or every spread zero: give pointing_sigma_rad, "
+                         "brdf_scale_sigma, materials, normal_tilt_sigma_deg with a plate or disk, visibility, scintillation "
+                         "or an observer spread with observers)")
+    n = risk_evaluations(spec, draws, sensitivity_draws)
+    check_limit("RISK_EVALUATIONS", n, "uncertainty: point evaluations ((draws + sensitivity_draws (1 + inputs)) x "
+                                       "(observer points + map cells))")
+
+
 class SceneSpec(_Strict):
     name: Name
     description: str = Field(default="", max_length=100_000)
@@ -933,6 +998,10 @@ class SceneSpec(_Strict):
     def _work(self):
         n_obs = sum(o.n_points for o in self.observers)
         check_limit("OBSERVERS", n_obs, "observer points in all")
+        check_limit("POINTS", sum(len(o.points_m) for o in self.observers if o.points_m is not None and o.kind != "track"),
+                    "explicit observer points (points_m) in all")
+        check_limit("TARGETS", len(self.targets), "targets")
+        check_risk(self)
         if any(t.history is not None for t in self.targets):
             a = self.analysis
             t_end = a.time_end_s or self.exposure.duration_s

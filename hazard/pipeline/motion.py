@@ -70,7 +70,7 @@ __all__ = ["PathResult", "MotionRun", "bias_frame", "BEAM_STATES_MAX", "FIXED_OB
 
 BEAM_STATES_MAX = 200  # beam states traced when the beam or a target moves (a coarser key step is said)
 FIXED_OBSERVERS_MAX = 2000  # fixed observers evaluated over time when the beam moves (beyond: said, static verdict only)
-SAMPLES_MAX = 2_000_000  # samples per path
+SAMPLES_MAX = 2_000_000  # default samples per path: the limit is HAZARD_MAX_MOTION_SAMPLES (scenes.motion.samples_max)
 CROSSING_REACH = 5.0  # 1/e radii from an axis where the a-priori refinement applies (exp(-25) beyond)
 REL_CHANGE = 0.25  # a-posteriori refinement: neighbours differing by more than this fraction
 REFINE_PASSES = 12
@@ -181,11 +181,10 @@ def bias_frame(u) -> tuple[np.ndarray, np.ndarray]:
 # -- time grids ------------------------------------------------------------------------
 def base_grid(motion, t0: float, t1: float) -> np.ndarray:
     """The base step over [t0, t1] with every knot and both sides of each window edge."""
+    from scenes.motion import check_base_steps
+
     step = motion.spec.time_step_s
-    n = int(math.floor((t1 - t0) / step))
-    if n + 1 > SAMPLES_MAX:
-        raise ValueError(f"motion.time_step_s = {step:g} s gives {n + 1} samples over [{t0:g}, {t1:g}] s (the limit is "
-                         f"{SAMPLES_MAX}): give a larger step")
+    n = check_base_steps(motion, t0, t1) - 1  # checked at load over the whole span (scenes.motion.check_motion)
     t = [t0 + step * np.arange(n + 1), [t1], motion.knots()]
     edges = motion.windows.edges()
     t += [edges, np.nextafter(edges, -np.inf), np.nextafter(edges, np.inf)]

@@ -9,7 +9,9 @@ import math
 import numpy as np
 
 from ..engine import mirror_axis
-from .motion import CROSSING_REACH, MIN_STEP_S, REFINE_PASSES, REL_CHANGE, SAMPLES_MAX
+from scenes.motion import samples_max
+
+from .motion import CROSSING_REACH, MIN_STEP_S, REFINE_PASSES, REL_CHANGE
 
 __all__ = ["axes_at", "crossing_times", "refine_by_change"]
 
@@ -80,9 +82,9 @@ def crossing_times(run, path_at, t, samples_per_width: int) -> np.ndarray:
             n = int(math.ceil(np.linalg.norm(dr[j]) * (span[1] - span[0]) * samples_per_width / wmin[j]))
             if n < 1:
                 continue
-            if n > SAMPLES_MAX:
-                raise ValueError(f"motion: crossing a beam at t = {t[k]:.6g} s needs {n} samples (the limit is {SAMPLES_MAX}); "
-                                 f"lower motion.samples_per_width or time_step_s")
+            if n > samples_max():
+                raise ValueError(f"motion: crossing a beam at t = {t[k]:.6g} s needs {n} samples (the limit is {samples_max()}, "
+                                 f"HAZARD_MAX_MOTION_SAMPLES); lower motion.samples_per_width or time_step_s")
             extra.append(t[k] + (t[k + 1] - t[k]) * np.linspace(span[0], span[1], n + 1))
     return np.concatenate(extra) if extra else np.empty(0)
 
@@ -98,7 +100,7 @@ def refine_by_change(t, parts, evaluate, floor_w_m2: float) -> tuple[np.ndarray,
         hi = np.maximum(e[1:], e[:-1])
         big = (np.abs(e[1:] - e[:-1]) > REL_CHANGE * hi) & (hi > floor_w_m2) & (np.diff(t) > 2 * MIN_STEP_S)
         idx = np.flatnonzero(big)
-        if not len(idx) or len(t) + len(idx) > SAMPLES_MAX:
+        if not len(idx) or len(t) + len(idx) > samples_max():
             break
         passes += 1
         tm = 0.5 * (t[idx] + t[idx + 1])

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["run_risk", "RiskResult"]
+__all__ = ["run_risk", "check_risk_args", "RiskResult"]
 
 
 @dataclass
@@ -105,6 +105,21 @@ def _map_summary(mp) -> dict | None:
             "cells_upper_at_least": {f"{lv:g}": int((hi >= lv).sum()) for lv in (1e-6, 1e-4, 1e-2)}}
 
 
+def check_risk_args(scene, draws=None, sensitivity_draws=None) -> None:
+    """Before any work: the risk analysis ``hazard risk`` asks for (the scene's
+    ``[uncertainty]`` with ``--draws`` / ``--sensitivity-draws``) within the limits
+    (:func:`scenes.spec.check_risk`, the check the scene passed at load without them)."""
+    from scenes.spec import check_risk
+
+    if scene.spec.uncertainty is None:
+        raise ValueError(f"{scene.source}: no [uncertainty] table: nothing is random (give pointing_sigma_rad, brdf_scale_sigma, ...)")
+    try:
+        check_risk(scene.spec, draws, sensitivity_draws)
+    except ValueError as exc:
+        opts = [o for o, v in (("--draws", draws), ("--sensitivity-draws", sensitivity_draws)) if v is not None]
+        raise ValueError(f"{scene.source}: {exc}" + (f" (with {' and '.join(opts)})" if opts else "")) from None
+
+
 def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity_draws=None, serial=False, workers=2,
              scheduler=None, force=False, progress=None, backend="embree") -> RiskResult:
     """Run the probabilistic risk analysis of ``scene`` (it needs ``[uncertainty]``) into
@@ -115,8 +130,7 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
     from .results import map_result, observer_rows, sensitivity
     from .run import run_chunks, settings, shared
 
-    if scene.spec.uncertainty is None:
-        raise ValueError(f"{scene.source}: no [uncertainty] table: nothing is random (give pointing_sigma_rad, brdf_scale_sigma, ...)")
+    check_risk_args(scene, draws, sensitivity_draws)  # [uncertainty] present, something random, the work within the limit
     t0 = time.perf_counter()
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
