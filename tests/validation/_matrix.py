@@ -72,23 +72,26 @@ class Case:
     name: str
     build: Callable
     fast: tuple = ()  # the variants in the default run (the rest are slow)
+    variants: tuple = VARIANTS  # the variants that apply (e.g. no second ground under terrain)
     xfail: dict = field(default_factory=dict)  # (variant, part) -> reason (strict); part None: both parts
 
 
 CASES: dict = {}
 
 
-def register(name, build, *, fast=False, xfail=None):
+def register(name, build, *, fast=False, xfail=None, without=()):
     """Register a validation case (one line per case). ``fast``: True (every variant in
     the default run) or the variants that are; ``xfail``: {variant or (variant, part):
-    reason} for known engine defects (strict xfails: a fix makes them fail)."""
+    reason} for known engine defects (strict xfails: a fix makes them fail); ``without``:
+    variants that do not apply (said here, so a variant that cannot be built for a
+    registered case is a failure, never a silent skip)."""
     if name in CASES:
         raise ValueError(f"case {name!r} registered twice")
     fast = VARIANTS if fast is True else tuple(fast or ())
-    unknown = set(fast) - set(VARIANTS)
+    unknown = (set(fast) | set(without)) - set(VARIANTS)
     if unknown:
-        raise ValueError(f"case {name!r}: fast={sorted(unknown)} are not variants (expected some of {VARIANTS})")
-    CASES[name] = Case(name, build, fast, dict(xfail or {}))
+        raise ValueError(f"case {name!r}: {sorted(unknown)} are not variants (expected some of {VARIANTS})")
+    CASES[name] = Case(name, build, fast, tuple(v for v in VARIANTS if v not in without), dict(xfail or {}))
 
 
 # --------------------------------------------------------------------------- geometry of a scene's data

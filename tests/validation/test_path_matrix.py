@@ -134,24 +134,62 @@ def _slump(tmp):
     return mx.scenes.loads(ts.scene_text(material, history, pts, power=3000.0, time_end=3.0, time_step=0.25), base_dir=tmp)
 
 
+# --------------------------------------------------------------------------- known defects
+# Measured by this matrix (base -> rigidly moved run; the reference from the validation
+# modules' formulas in brackets). Root cause: the beam's cross-section is sampled on a
+# grid whose transverse axes come from the world axes (hazard.beam.perp_basis: e1 = axis x
+# world x, or world y), so a rotated scene puts the cells elsewhere on the target; the
+# target's peak irradiance and the specular NOHD (cell maxima paired with sample
+# positions) move with them, and the engine states no error for either. A rotation that
+# maps the basis onto itself (90 deg about z, beam along y) gives equal values to round-off.
+
+
+def _grid(numbers):
+    return f"issue 29 beam sampling grid fixed to the world axes: {numbers}"
+
+
+MOVED = {
+    "mirror-plate": "specular NOHD 3226.41391 -> 3226.40559 m (-2.6e-6) [3226.2776]",
+    "mirror-disk": "specular NOHD 3226.38903 -> 3226.39660 m (+2.3e-6) [3226.2776]",
+    "mirror-nohd-example": "peak 1200.67817 -> 1200.65914 W/m^2 (-1.6e-5) [1200.1504]; specular NOHD 375.79451 -> "
+                           "375.80673 m (+3.3e-5) [375.7307]",
+    "lambertian-plate": "peak 6828.5752 -> 6828.2624 W/m^2 (-4.6e-5) [6825.6380]",
+    "spot-tilted-45-cut": "peak 28918.481 -> 28918.816 W/m^2 (+1.2e-5) [28899.772]",
+    "mirror-beam-grid": "specular NOHD 9886.0200 -> 9886.6376 m (+6.2e-5) [9884.7447]",
+    "cylinder": "specular NOHD 4.7304 -> 4.8738 m (+3.0 %; 4.73 to 7.03 m over 8 orientations of the scene); "
+                "peak 12358.153 -> 12358.216 W/m^2",
+    "slump-heating": "target peak 2387758.8 -> 2387862.1 W/m^2 (+4.3e-5) drives the heating: melt onset 1.065240 -> "
+                     "1.065193 s, and the slumped lobe's flank moves: observer arc[4] peak 94.0898 -> 93.6900 W/m^2 "
+                     "(-0.43 %), arc[5] 662.6125 -> 663.0123 W/m^2",
+}
+
+
+def _known(name, parts=("targets",), more=None):
+    out = {("moved", part): _grid(MOVED[name]) for part in parts}
+    out.update(more or {})
+    return out
+
+
 # --------------------------------------------------------------------------- the register
 
-register("mirror-plate", _mirror, fast=True)
-register("mirror-disk", lambda tmp: _mirror(tmp, "disk"))
-register("mirror-nohd-example", _mirror_nohd)
-register("sphere", _sphere, fast=True, xfail=CURVED)
-register("cylinder", _cylinder, xfail=CURVED)
-register("lambertian-plate", _lambertian, fast=True)
-register("lambertian-back-face", lambda tmp: _lambertian(tmp, back_lit=True))
+FAST_NO_BACKEND = ("occluder", "second_target", "ground", "moved")  # the numpy backend traces spheres and terrain for 20-30 s
+
+register("mirror-plate", _mirror, fast=True, xfail=_known("mirror-plate"))
+register("mirror-disk", lambda tmp: _mirror(tmp, "disk"), xfail=_known("mirror-disk"))
+register("mirror-nohd-example", _mirror_nohd, xfail=_known("mirror-nohd-example"))
+register("sphere", _sphere, fast=FAST_NO_BACKEND, xfail=CURVED)
+register("cylinder", _cylinder, xfail=_known("cylinder", more=CURVED))
+register("lambertian-plate", _lambertian, fast=True, xfail=_known("lambertian-plate"))
+register("lambertian-back-face", lambda tmp: _lambertian(tmp, back_lit=True), xfail=_known("lambertian-plate"))
 register("direct-beam", _direct, fast=True)
 register("spot-spec-slot", _spot("spec-slot-10x4mm"))
-register("spot-tilted-45-cut", _spot("tilted-45-cut"))
+register("spot-tilted-45-cut", _spot("tilted-45-cut"), xfail=_known("spot-tilted-45-cut"))
 register("spot-shadowed-pair", _shadowed)
-register("terrain-reflection", _terrain, fast=True)
+register("terrain-reflection", _terrain, fast=FAST_NO_BACKEND, without=("ground",))
 register("pointing-cone", _pointing)
 register("sector", _sector)
-register("mirror-beam-grid", _mirror_grid)
-register("slump-heating", _slump)
+register("mirror-beam-grid", _mirror_grid, xfail=_known("mirror-beam-grid"))
+register("slump-heating", _slump, xfail=_known("slump-heating", parts=("observers", "targets")))
 
 
 # --------------------------------------------------------------------------- the tests
@@ -160,7 +198,7 @@ register("slump-heating", _slump)
 def _params(slow):
     out = []
     for case in mx.CASES.values():
-        for v in mx.VARIANTS:
+        for v in case.variants:
             if (v in case.fast) == slow:
                 continue
             for part in mx.PARTS:
@@ -171,10 +209,7 @@ def _params(slow):
 
 
 def _check(name, variant, part, tmp_path):
-    try:
-        diffs = mx.check(mx.CASES[name], variant, part, tmp_path)
-    except mx.NotApplicable as exc:
-        pytest.skip(f"{variant} does not apply to {name}: {exc}")
+    diffs = mx.check(mx.CASES[name], variant, part, tmp_path)  # NotApplicable: register the case ``without`` it
     assert not diffs, f"{name} / {variant} / {part}: {len(diffs)} values changed\n" + "\n".join(diffs[:20])
 
 
