@@ -27,13 +27,16 @@ independent references check); each *variant* changes something that must not ma
     180 deg with terrain, which maps the terrain grid and its triangles onto themselves)
     and the sector's bearings turn with it.
 
-Two parts are compared, each its own test: every observer's result (peak and static
-irradiance, radiant exposure, verdict), and every original target's spot (power, peak
-irradiance, specular NOHD). Each value must equal the base run's to ``RTOL`` = 1e-6
+Three parts are compared, each its own test: every observer's result (peak and static
+irradiance, radiant exposure, verdict), every original target's spot (power, peak
+irradiance, specular NOHD), and the direct beam's surface danger zone (NOHD, reach,
+hazardous half-width, contained or not; its area lies in the map's plane, which a tilted
+scene changes). Each value must equal the base run's to ``RTOL`` = 1e-6
 relative, plus the sampling error both runs state where the engine states one (the spot
-power's ``spot_power_error_w``), plus an absolute floor of ``ATOL_MPE`` = 1e-9 x the MPE
-for observers (values that are zero in one run and round-off in the other; a billionth
-of the MPE cannot change a verdict). A case registers with one line::
+power's ``spot_power_error_w``), plus an absolute floor for values that are zero in one
+run and round-off in the other: ``ATOL_MPE`` = 1e-9 x the MPE for observers and the
+target's peak irradiance (a billionth of the MPE cannot change a verdict), ``ATOL_POWER``
+= 1e-12 x the laser power for a spot's power. A case registers with one line::
 
     register("mirror-on-axis", lambda tmp: some_module._scene(...), fast=True)
 
@@ -57,6 +60,7 @@ import scenes
 
 RTOL = 1e-6
 ATOL_MPE = 1e-9
+ATOL_POWER = 1e-12  # x the laser power: the floor of a spot's power (an unlit target's Gaussian tail is round-off)
 VARIANTS = ("occluder", "second_target", "ground", "backend", "moved")
 CURVED_XFAIL = "issue 29 curved targets on the ray path"
 
@@ -299,7 +303,7 @@ def variant_scene(scene, variant):
 
 # --------------------------------------------------------------------------- comparison
 
-PARTS = ("observers", "targets")
+PARTS = ("observers", "targets", "beam")
 
 
 def summary(res, target_names):
@@ -325,7 +329,14 @@ def summary(res, target_names):
         "peak_irradiance_w_m2": (col("peak_irradiance_w_m2"), np.zeros(len(ts))),
         "specular_nohd_static_m": (col("specular_nohd_static_m"), np.zeros(len(ts))),
     }
-    return {"observers": obs, "targets": tgt}
+    sdz = res.sdz or {}
+
+    def one(key):
+        v = sdz.get(key)
+        return np.array([np.nan if v is None else v], bool if isinstance(v, bool) else float), np.zeros(1)
+
+    beam = {f"sdz {k}": one(k) for k in ("nohd_m", "max_range_m", "hazard_half_width_m", "contained")}
+    return {"observers": obs, "targets": tgt, "beam": beam}
 
 
 def differences(base, other, floors, who):
@@ -362,9 +373,10 @@ def run_pair(case, variant, tmp_path):
         except NotApplicable as exc:
             _RUNS[key] = exc
             raise
-        floors = {"peak_irradiance_w_m2": ATOL_MPE * float(base.mpe_w_m2),
+        floors = {"peak_irradiance_w_m2": ATOL_MPE * float(base.mpe_w_m2),  # observers' and targets' peaks
                   "static_irradiance_w_m2": ATOL_MPE * float(base.mpe_w_m2),
-                  "radiant_exposure_j_m2": ATOL_MPE * float(base.mpe_radiant_exposure_j_m2)}
+                  "radiant_exposure_j_m2": ATOL_MPE * float(base.mpe_radiant_exposure_j_m2),
+                  "spot_power_w": ATOL_POWER * float(base.beam_power_w)}
         _RUNS[key] = (summary(base, names), summary(other, names), base.observers.labels, names, floors,
                       len(base.observers), len(other.observers))
     got = _RUNS[key]
@@ -378,4 +390,5 @@ def check(case, variant, part, tmp_path):
     base, other, labels, names, floors, n_base, n_other = run_pair(case, variant, tmp_path)
     if n_base != n_other:
         return [f"observer count: {n_base} -> {n_other}"]
-    return differences(base[part], other[part], floors, labels if part == "observers" else names)
+    who = {"observers": labels, "targets": names, "beam": ["direct beam"]}[part]
+    return differences(base[part], other[part], floors, who)

@@ -23,6 +23,7 @@ from . import test_curved_reflectors as cr
 from . import test_diffuse_and_back_face as db
 from . import test_direct_beam as dbm
 from . import test_pointing_and_crossings as pc
+from . import test_sdz as sd
 from . import test_spot_power as sp
 from . import test_specular_mirror as sm
 from . import test_terrain_reflection as tr
@@ -116,6 +117,19 @@ def _sector(tmp):
     return pc._pointing_scene(pts, b=1e-3, sector=((-30.0, 40.0), (-2.0, 5.0)))
 
 
+def _sdz_level(tmp):
+    """test_sdz: a laser 30 m up aiming level with a 2 mrad pointing bound."""
+    return sd._scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=2e-3)
+
+
+def _sdz_down(tmp):
+    """test_sdz: a cone aimed 20 deg down over flat ground (contained by it)."""
+    o = np.array([10.0, -20.0, 40.0])
+    d0 = np.array([math.sin(0.6) * math.cos(0.35), math.cos(0.6) * math.cos(0.35), -math.sin(0.35)])
+    return sd._scene(o, o + 10.0 * d0, pointing=math.radians(2.0),
+                     extra='[terrain]\nkind = "flat"\nextent_m = 5000.0\nresolution_m = 250.0\n')
+
+
 def _mirror_grid(tmp):
     """test_crossings_surfaces: a mirror beam crossing a grid between its points."""
     n = np.array([-1.0, -1.0, 0.0]) / math.sqrt(2)
@@ -188,6 +202,8 @@ register("spot-shadowed-pair", _shadowed)
 register("terrain-reflection", _terrain, fast=FAST_NO_BACKEND, without=("ground",))
 register("pointing-cone", _pointing)
 register("sector", _sector)
+register("sdz-level-cone", _sdz_level)
+register("sdz-down-cone-over-ground", _sdz_down, without=("ground", "backend"))  # numpy over 5 km of ground: 260 s
 register("mirror-beam-grid", _mirror_grid, xfail=_known("mirror-beam-grid"))
 register("slump-heating", _slump, xfail=_known("slump-heating", parts=("observers", "targets")))
 
