@@ -79,7 +79,9 @@ def _lin_scene(power, R1, a, phi, f, tilt, az, mirror, mu, obs):
     D = a + R1 * phi
     size = (f * D, f * D)
     beam = ref.Beam(power, a, phi, [0.0, -R1, 0.0], np.zeros(3), mu=mu)
-    pts = _around(ref.reflect(beam.u, n) if mirror else n, [d for _, _, d in obs], [(th, p) for th, p, _ in obs])
+    # a mirror's observers within a few divergences of its reflected axis (in its beam)
+    spread = 2 * phi if mirror else 1.0
+    pts = _around(ref.reflect(beam.u, n) if mirror else n, [d for _, _, d in obs], [(th * spread, p) for th, p, _ in obs])
     pts.append(np.array([0.3 * D, 3 * R1, 0.0]))  # down the beam past the target (its spill, or its shadow)
     target = dict(name="t", shape="plate", center=np.zeros(3), normal=n, tangent=t, size=size,
                   material=ref.specular(0.9) if mirror else ref.lambertian(0.7))
@@ -267,10 +269,11 @@ STEP_ARGS = dict(
 
 
 def _history(kind, series, t_end):
-    if kind == "series":
-        times = np.linspace(0.0, t_end, len(series)) * np.linspace(1.0, 0.93, len(series))  # off the step grid
+    if kind == "series":  # nodes off the step grid, ending dark: the brightest moment falls between steps
+        states = list(series) + [0.0]
+        times = np.linspace(0.0, 0.9 * t_end, len(states)) * np.linspace(1.0, 0.93, len(states)) + 0.0137
         return ('[targets.history]\nkind = "series"\nstate = "reflectance_factor"\n'
-                f"times_s = {ref.vec(times)}\nstates = {ref.vec(series)}\n")
+                f"times_s = {ref.vec(times)}\nstates = {ref.vec(states)}\n")
     return ('[targets.history]\nkind = "heating"\nplate = "stainless_steel"\nthickness_m = 0.0002\n'
             'state = "reflectance_factor"\n')
 
@@ -298,8 +301,9 @@ def _finer_step(kind, R1, tilt, az, steps, series, obs):
 @FEW
 @given(**STEP_ARGS)
 def test_a_finer_time_step_never_lowers_a_peak(**kw):
-    """A Lambertian plate whose reflectance factor follows a measured series (off the
-    step grid) or the stainless-steel heating model; steps dt and dt/2: no peak lower."""
+    """A Lambertian plate whose reflectance factor follows a measured series (nodes off
+    the step grid, ending at 0, so its brightest moment falls between steps) or the
+    stainless-steel heating model; steps dt and dt/2: no peak lower."""
     _finer_step(**kw)
 
 
@@ -309,3 +313,21 @@ def test_a_finer_time_step_never_lowers_a_peak(**kw):
 def test_a_finer_time_step_never_lowers_a_peak_sweep(**kw):
     """Larger sweep of ``test_a_finer_time_step_never_lowers_a_peak``."""
     _finer_step(**kw)
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 29 peak between time steps: the dynamic peak is taken at the analysis steps only; a measured "
+    "reflectance-factor series whose brightest node (1.0 at t = 1.932 s) falls between steps gives 0.8858 of "
+    "that node's irradiance at dt = 0.5 s, 0.8858 at 0.25 s, 0.9703 at 0.05 s (non-conservative)"))
+def test_the_peak_holds_a_measured_series_brightest_moment():
+    """Reflectance factor linear between the series' nodes (0.1, 0.9, 0.2, 1.0, 0.0): the
+    brightest moment is the node at 1.0, so each observer's peak is at least its
+    irradiance under a constant factor 1.0 (the reflected irradiance is linear in the
+    factor), whatever the step."""
+    n, t = _frame(0.3, 1.0)
+    pts = _around(n, [50.0, 200.0], [(0.1, 0.0), (0.6, 1.0)])
+    one = hazard.analyze(_step_scene("series", 30.0, n, t, [1.0, 1.0, 1.0, 1.0], pts, 0.5))
+    got = hazard.analyze(_step_scene("series", 30.0, n, t, [0.1, 0.9, 0.2, 1.0], pts, 0.5))
+    full = np.asarray(one.observers.peak_irradiance_w_m2)
+    assert full.min() > 0
+    assert np.all(np.asarray(got.observers.peak_irradiance_w_m2) >= full * (1 - RTOL))
