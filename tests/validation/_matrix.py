@@ -77,7 +77,7 @@ class Case:
     build: Callable
     fast: tuple = ()  # the variants in the default run (the rest are slow)
     variants: tuple = VARIANTS  # the variants that apply (e.g. no second ground under terrain)
-    xfail: dict = field(default_factory=dict)  # (variant, part) -> reason (strict); part None: both parts
+    xfail: dict = field(default_factory=dict)  # variant (every part) or (variant, part) -> reason (strict)
 
 
 CASES: dict = {}
@@ -134,6 +134,8 @@ def key_points(data):
     pts += [np.asarray(p, float) for p in (la.get("aim_track") or {}).get("aim_m") or ()]
     for t in data.get("targets", []) + data.get("occluders", []):
         c = np.asarray(t.get("center_m", [0.0, 0.0, 0.0]), float)
+        if t.get("size_m") is None:
+            raise NotApplicable(f"{t.get('name', 'a mesh')}: a mesh's extent is not read here")
         ext = math.hypot(*t["size_m"]) * float(t.get("scale", 1.0))
         centres = [c] + [np.asarray(p, float) for p in (t.get("track") or {}).get("center_m") or ()]
         pts += [q + s * ext * e for q in centres for s in (-1, 1) for e in np.eye(3)]
