@@ -23,12 +23,14 @@ independent references check); each *variant* changes something that must not ma
     the whole scene rigidly rotated and moved: every position and direction of the scene
     text (laser, aim, targets' centres, normals and tangents, occluders, observers, aim
     and target tracks). A scene where "up" matters (terrain, sectors, eye heights,
-    shells, range boundaries, slumps toward 'up') turns about the vertical only (by
+    shells, range boundaries, slumps toward 'up', slew rates in bearing and elevation)
+    turns about the vertical only (by
     180 deg with terrain, which maps the terrain grid and its triangles onto themselves)
     and the sector's bearings turn with it.
 
 Three parts are compared, each its own test: every observer's result (peak and static
-irradiance, radiant exposure, verdict), every original target's spot (power, peak
+irradiance, radiant exposure, verdict; and over time, when things move, each fixed
+observer's and track's peak, exposure and verdict), every original target's spot (power, peak
 irradiance, specular NOHD), and the direct beam's surface danger zone (NOHD, reach,
 hazardous half-width, contained or not; its area lies in the map's plane, which a tilted
 scene changes). Each value must equal the base run's to ``RTOL`` = 1e-6
@@ -150,8 +152,7 @@ def beam_directions(data):
     p = np.asarray(la["position_m"], float)
     dirs = [_u(la["direction"]) if la.get("direction") is not None else _u(np.asarray(la["aim_m"], float) - p)]
     dirs += [_u(np.asarray(a, float) - p) for a in (la.get("aim_track") or {}).get("aim_m") or ()]
-    if (la.get("aim_track") or {}).get("azimuth_rate_deg_s") is not None:
-        raise NotApplicable("a slewing aim (rates): its directions are not bounded here")
+    dirs += _slew_directions(la, dirs[0])
     sec = la.get("sector")
     if sec:
         for az in np.linspace(*sec["azimuth_deg"], 9):
@@ -159,6 +160,18 @@ def beam_directions(data):
                 a, e = math.radians(az), math.radians(el)
                 dirs.append(np.array([math.sin(a) * math.cos(e), math.cos(a) * math.cos(e), math.sin(e)]))
     return np.array(dirs)
+
+
+def _slew_directions(la, d0):
+    """Directions of an aim track given by rates (bearing clockwise from +y, elevation)
+    over its times_s, every 1/64 of the span."""
+    tr = la.get("aim_track") or {}
+    if tr.get("azimuth_rate_deg_s") is None and tr.get("elevation_rate_deg_s") is None:
+        return []
+    t = np.linspace(tr["times_s"][0], tr["times_s"][-1], 65) - tr["times_s"][0]
+    az = math.atan2(d0[0], d0[1]) + np.radians(tr.get("azimuth_rate_deg_s") or 0.0) * t
+    el = math.asin(np.clip(d0[2], -1, 1)) + np.radians(tr.get("elevation_rate_deg_s") or 0.0) * t
+    return list(np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], 1))
 
 
 def _far_spot(data, standoff=1.0):
@@ -216,7 +229,8 @@ def add_ground(data):
 def _up_matters(data):
     la = data["laser"]
     slump = any((t.get("material") or {}).get("melt_tilt_deg") for t in data["targets"])
-    return bool(data.get("terrain") or la.get("sector") or data.get("range") or data.get("airspace") or slump
+    rates = any((la.get("aim_track") or {}).get(k) is not None for k in ("azimuth_rate_deg_s", "elevation_rate_deg_s"))
+    return bool(data.get("terrain") or la.get("sector") or data.get("range") or data.get("airspace") or slump or rates
                 or any(ob.get("eye_height_m") is not None or ob.get("radius_m") is not None for ob in data.get("observers", [])))
 
 
@@ -320,6 +334,7 @@ def summary(res, target_names):
         "radiant_exposure_j_m2": (np.asarray(o.radiant_exposure_j_m2, float), zero),
         "hazardous": (np.asarray(res.hazardous, bool), zero),
     }
+    obs.update(_motion(res))
     by_name = {t.name: t for t in res.targets}
     ts = [by_name[n] for n in target_names]
 
@@ -341,20 +356,45 @@ def summary(res, target_names):
     return {"observers": obs, "targets": tgt, "beam": beam}
 
 
+def _motion(res):
+    """Each evaluated path over time (fixed observers and tracks, in order): its peak
+    irradiance, radiant exposure and verdict, under keys 'motion ...' (the names: key
+    'motion names')."""
+    paths = [] if res.motion is None else res.motion.paths
+    if not paths:
+        return {}
+    zero = np.zeros(len(paths))
+
+    def col(key, kind=float):
+        return np.array([p.summary[key] for p in paths], kind), zero
+
+    return {"motion peak_irradiance_w_m2": col("peak_irradiance_w_m2"), "motion radiant_exposure_j_m2":
+            col("radiant_exposure_j_m2"), "motion hazardous": col("hazardous", bool),
+            "motion names": ([f"{p.kind} {p.name}" for p in paths], zero)}
+
+
 def differences(base, other, floors, who):
     """Every value of ``other`` (one part of :func:`summary`) that differs from ``base`` by
     more than RTOL relative plus the errors both runs state plus the floor (``floors``:
     quantity -> absolute floor): lines 'quantity [who]: base -> variant'."""
     lines = []
+    if base.keys() != other.keys():
+        return [f"quantities: {sorted(base)} -> {sorted(other)}"]
     for key, (b, eb) in base.items():
         v, ev = other[key]
+        if key == "motion names":
+            lines += [] if list(b) == list(v) else [f"motion paths: {b} -> {v}"]
+            continue
+        labels, floor = who, floors.get(key, 0.0)
+        if key.startswith("motion "):
+            labels, floor = base["motion names"][0], floors.get(key[len("motion "):], 0.0)
         if b.dtype == bool:
             bad = b != v
         else:
             both_nan = np.isnan(b) & np.isnan(v)
-            allowed = RTOL * np.maximum(np.abs(b), np.abs(v)) + eb + ev + floors.get(key, 0.0)
+            allowed = RTOL * np.maximum(np.abs(b), np.abs(v)) + eb + ev + floor
             bad = ~both_nan & ~(np.abs(v - b) <= allowed)
-        lines += [f"{key} [{who[i]}]: {b[i]!r} -> {v[i]!r}" for i in np.flatnonzero(bad)]
+        lines += [f"{key} [{labels[i]}]: {b[i]!r} -> {v[i]!r}" for i in np.flatnonzero(bad)]
     return lines
 
 
