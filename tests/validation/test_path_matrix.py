@@ -185,7 +185,7 @@ MOVED = {
                            "375.80673 m (+3.3e-5) [375.7307]",
     "lambertian-plate": "peak 6828.5752 -> 6828.2624 W/m^2 (-4.6e-5) [6825.6380]",
     "spot-tilted-45-cut": "peak 28918.481 -> 28918.816 W/m^2 (+1.2e-5) [28899.772]",
-    "fresnel-glass-45": "peak 52639.518 -> 52650.417 W/m^2 (+2.1e-4) [on the axis 4P/(pi D^2) = 52613.6]; specular "
+    "fresnel-glass-45": "peak 52639.518 -> 52650.417 W/m^2 (+2.1e-4) [on the axis 4P/(pi D^2) = 52613.2]; specular "
                         "NOHD 1945.2745 -> 1945.4861 m (+1.1e-4)",
     "mirror-beam-grid": "specular NOHD 9886.0200 -> 9886.6376 m (+6.2e-5) [9884.7447]",
     "cylinder": "specular NOHD 4.7304 -> 4.8738 m (+3.0 %; 4.73 to 7.03 m over 8 orientations of the scene); "
