@@ -1,11 +1,12 @@
 """The path matrix (issue 29, item 6): each validation case below, built by its own
 module's helpers (the scenes the independent references check), also runs with an
 unrelated far occluder, an unlit second target, flat ground far below, the other ray
-backend, and the whole scene rotated and moved; every observer's result and every
-original target's spot must equal the base run's to 1e-6 relative (see ``_matrix``).
+backend, and the whole scene rotated and moved; every observer's result (and over time,
+where things move), every original target's spot and the direct beam's danger zone must
+equal the base run's to 1e-6 relative (see ``_matrix``): three tests per case and variant.
 
-One line registers a case. ``fast=True`` cases run in the default suite (x the 5
-variants); the whole matrix is ``@pytest.mark.slow``. A known engine defect is a strict
+One line registers a case. ``fast`` cases run in the default suite (x their variants);
+the whole matrix is ``@pytest.mark.slow``. A known engine defect is a strict
 xfail carrying the numbers measured, so the integrator sees it flip when it is fixed.
 """
 
@@ -15,6 +16,8 @@ import math
 
 import numpy as np
 import pytest
+
+import scenes
 
 from . import _matrix as mx
 from . import _refs as ref
@@ -95,12 +98,12 @@ def _direct(tmp):
 
 def _spot(name):
     """test_spot_power: one of its named plates (no observers: the target's spot compares)."""
-    return lambda tmp: mx.scenes.loads(sp._named(name)[1][0])
+    return lambda tmp: scenes.loads(sp._named(name)[1][0])
 
 
 def _shadowed(tmp):
     """test_spot_power: a plate partly hidden by a plate in front of it."""
-    return mx.scenes.loads(sp._shadowed_pair(100.0, 150.0, 0.05, 1e-3, (-0.05, 0.2, -0.1, 0.1), (-0.3, 0.3, -0.3, 0.3), 1e-4))
+    return scenes.loads(sp._shadowed_pair(100.0, 150.0, 0.05, 1e-3, (-0.05, 0.2, -0.1, 0.1), (-0.3, 0.3, -0.3, 0.3), 1e-4))
 
 
 def _terrain(tmp):
@@ -138,7 +141,7 @@ def _slew(tmp):
     p = mo.LP + mo.R_X * mo.azel(90.0, 0.0)
     text = mo.scene(aim=mo.LP + 1000.0 * mo.azel(80.0, 0.0), aim_track={"times_s": [0.0, 20.0], "azimuth_rate_deg_s": 1.0},
                     observers=[mo.point_group("post", [p]), mo.track_rows("standing", [0.0, 20.0], [p, p])])
-    return mx.scenes.loads(text)
+    return scenes.loads(text)
 
 
 def _fresnel(tmp):
@@ -152,7 +155,7 @@ def _mirror_grid(tmp):
     target = cs._plate(normal=n, tangent=np.array([1.0, -1.0, 0.0]) / math.sqrt(2), material=ref.specular(0.9))
     text = ref.scene_text(power=cs.P, a=cs.A, phi=cs.PHI, position=np.array([0.0, -cs.R_T, 0.0]), aim=np.zeros(3), targets=[target])
     grid = cs._grid("wall", [-100.0, -53.0, -46.0], [0.0, 100.0, 0.0], [0.0, 0.0, 100.0], (11, 11))
-    return mx.scenes.loads(text.replace("[analysis]", grid + "[analysis]"))
+    return scenes.loads(text.replace("[analysis]", grid + "[analysis]"))
 
 
 def _slump(tmp):
@@ -161,7 +164,7 @@ def _slump(tmp):
                "thickness_m = 0.0002\nstate = \"melt_fraction\"")
     material = f'{{ file = "{ts.gaussian_lobe_file(tmp)}", melt_tilt_deg = 5.0 }}'
     pts = ts.R_ARC * ts.arc("up", 5.0 * ts.DEG)[::40]
-    return mx.scenes.loads(ts.scene_text(material, history, pts, power=3000.0, time_end=3.0, time_step=0.25), base_dir=tmp)
+    return scenes.loads(ts.scene_text(material, history, pts, power=3000.0, time_end=3.0, time_step=0.25), base_dir=tmp)
 
 
 # --------------------------------------------------------------------------- known defects
