@@ -8,6 +8,7 @@ import numpy as np
 
 from ..keepout import Footprint, ground_footprint
 from .direct import beam_at, clear_of_objects
+from .slump import held_slump
 
 __all__ = ["Footprints", "footprints"]
 
@@ -28,7 +29,8 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
     lit = [tr for tr in target_rows if tr.dynamic_lobe is not None]  # unlit targets' rows carry no lobe
     rmax = max([tr.dynamic_lobe.max_range_m for tr in lit] + [tr.specular_nohd_dynamic_m or 0.0 for tr in lit] + [0.0])
     initial = {k: v[:1] for k, v in states.items()}
-    fp_static = ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, states_by_target=initial,
+    held = [sp if sp.slump is None else held_slump(sp) for sp in spots]  # the initial state holds its initial tilt
+    fp_static = ground_footprint(held, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, states_by_target=initial,
                                  max_range_m=rmax)
     fp_dyn = fp_static
     if states:

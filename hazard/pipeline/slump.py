@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["SpotSlump", "spot_slump", "slumped_irradiance", "union_range_fn", "rotation", "SLUMP_STEP_RAD"]
+__all__ = ["SpotSlump", "spot_slump", "held_slump", "slumped_irradiance", "union_range_fn", "rotation", "SLUMP_STEP_RAD"]
 
 SLUMP_STEP_RAD = math.radians(2.0)  # default sampling step of the wander disk and tilt range [rad] ([analysis] slump_step_deg)
 
@@ -68,6 +68,13 @@ def _tilted(spot, angle_rad: float):
     """A copy of ``spot`` with every frame rotated by the tilt (no slump of its own)."""
     r = rotation(spot.slump.axis, angle_rad)
     return replace(spot, frames=spot.frames @ r.T, slump=None)
+
+
+def held_slump(spot):
+    """A slumping spot held in its initial state: its frames tilted by the slump at the
+    first analysis time, no slump of its own (the static footprint evaluates the first
+    state alone; :func:`slumped_irradiance` needs a state per analysis time)."""
+    return _tilted(spot, float(spot.slump.tilt_rad[0]))
 
 
 def slumped_irradiance(fn, spot, observers_m, gain, attenuation_per_m, states, visible=None, sparse=False):

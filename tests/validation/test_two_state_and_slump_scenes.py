@@ -401,3 +401,28 @@ def test_two_state_history_declarations_are_checked(tmp_path):
     one = "[targets.history]\nkind = \"series\"\nstate = \"melt_fraction\"\ntimes_s = [0.0, 10.0]\nstates = [0.0, 1.0]"
     with pytest.raises(scenes.SceneError, match="state"):
         _load(scene_text(f'{{ file = "{f}" }}', one, POINTS), tmp_path)  # two-state material, one-state history
+
+
+def test_a_slumping_target_over_terrain_holds_its_initial_tilt_in_the_static_footprint(tmp_path):
+    """A slumping target over flat ground (the matrix of test_path_matrix.py found the
+    footprint stage raising 'plate: 1 states but a slump over 13 times'): the static
+    footprint holds the initial state, melt fraction 0, so it is the footprint of the
+    same scene without a slump, node for node; the dynamic one sees the tilted lobe. The
+    laser stands 20 deg above the plate's normal, so the mirror lobe comes down to the
+    ground (non-empty footprints)."""
+    history = ("[targets.history]\nkind = \"heating\"\nplate = \"stainless_steel\"\n"
+               "thickness_m = 0.0002\nstate = \"melt_fraction\"")
+    lobe = gaussian_lobe_file(tmp_path)
+    up = [0.0, -L_LASER * math.cos(INC), L_LASER * math.sin(INC)]
+    ground = '[terrain]\nkind = "flat"\ncenter_m = [0.0, 0.0, -12.0]\nextent_m = 90.0\nresolution_m = 2.0\n'
+
+    def run_with(tilt_deg):
+        text = scene_text(f'{{ file = "{lobe}", melt_tilt_deg = {tilt_deg!r} }}', history, [[0.0, -18.0, 7.0]],
+                          power=3000.0, time_end=3.0, time_step=0.25, laser=up)
+        return hazard.analyze(scenes.loads(text.replace("[analysis]", ground + "[analysis]"), base_dir=tmp_path))
+
+    slumped, flat = run_with(5.0), run_with(0.0)
+    assert flat.footprint_static.area_m2 > 0
+    assert np.array_equal(slumped.footprint_static.mask, flat.footprint_static.mask)
+    np.testing.assert_array_equal(slumped.footprint_static.ratio, flat.footprint_static.ratio)
+    assert not np.array_equal(slumped.footprint_dynamic.mask, flat.footprint_dynamic.mask)
