@@ -144,7 +144,7 @@ def _histories(scene, traced, log, the_plan):
     """Stage ``history``: analysis times, the dynamic spots' states over them and their
     melting (the spots of slumping targets get their tilt over the times)."""
     dynamic = any(sp.material.is_dynamic for sp in traced.built.spots)
-    times = history.analysis_times(scene.spec, dynamic)
+    times = history.analysis_times(scene.spec, dynamic, history.series_nodes(scene.targets))
     if not dynamic:
         log.skip("history", the_plan.skipped("history") or "no lit target has a dynamic material")
         return times, {}, {}

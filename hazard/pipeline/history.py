@@ -39,16 +39,30 @@ class Melt:
         return {"onset_s": self.onset_s, "full_melt_s": self.full_s, "max_fraction": float(np.max(self.fraction))}
 
 
-def analysis_times(spec, dynamic: bool) -> np.ndarray:
+def analysis_times(spec, dynamic: bool, node_times_s=()) -> np.ndarray:
     """Times [s] of the map: 0 .. ``time_end_s`` (default: the exposure duration) every
-    ``time_step_s`` (default: 1/100 of it) for dynamic materials, else just 0."""
+    ``time_step_s`` (default: 1/100 of it) for dynamic materials, else just 0; with the
+    nodes of measured series (``node_times_s``) inside that span added: a series is linear
+    between its nodes, so its extremes fall on a node or a step and the peak over the
+    times is the peak over the whole run (a brightest node between steps was missed:
+    0.886 of its irradiance at 0.5 s and 0.25 s steps, 0.970 at 0.05 s)."""
     if not dynamic:
         return np.array([0.0])
     t_end = spec.analysis.time_end_s or spec.exposure.duration_s
     dt = spec.analysis.time_step_s or t_end / 100.0
     times = np.arange(0.0, t_end + 0.5 * dt, dt)
     times[-1] = min(times[-1], t_end) if len(times) > 1 else times[-1]
+    nodes = np.concatenate([np.ravel(np.asarray(t, float)) for t in node_times_s]) if len(node_times_s) else np.zeros(0)
+    nodes = nodes[(nodes > 0.0) & (nodes < times[-1])]
+    if len(nodes):
+        times = np.unique(np.concatenate([times, nodes]))
+        times = times[np.concatenate([[True], np.diff(times) > 1e-12 * max(t_end, 1e-300)])]
     return times
+
+
+def series_nodes(targets) -> list[np.ndarray]:
+    """The node times [s] of every target's measured series (for :func:`analysis_times`)."""
+    return [np.asarray(t.history.times_s, float) for t in targets if getattr(t, "history", None) is not None]
 
 
 def _heated_history(sp, times, t_end):

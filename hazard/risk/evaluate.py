@@ -123,7 +123,7 @@ class Evaluator:
         self.ray_scene = beam_stage.ray_scene(scene, backend, 1) if the_plan.rays else None
         self.tracer = self.ray_scene if self.ray_scene is not None else beam_stage.FlatScene(scene.targets)
         self.dynamic = any(t.material.is_dynamic for t in scene.targets)
-        self.times_s = history.analysis_times(spec, self.dynamic)
+        self.times_s = history.analysis_times(spec, self.dynamic, history.series_nodes(scene.targets))
         self.nominal = self.trace(beam_stage.scene_beam(scene))
         obs = scene.observers
         self.n_observers = 0 if obs is None else len(obs)

@@ -315,10 +315,6 @@ def test_a_finer_time_step_never_lowers_a_peak_sweep(**kw):
     _finer_step(**kw)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "issue 29 peak between time steps: the dynamic peak is taken at the analysis steps only; a measured "
-    "reflectance-factor series whose brightest node (1.0 at t = 1.932 s) falls between steps gives 0.8858 of "
-    "that node's irradiance at dt = 0.5 s, 0.8858 at 0.25 s, 0.9703 at 0.05 s (non-conservative)"))
 def test_the_peak_holds_a_measured_series_brightest_moment():
     """Reflectance factor linear between the series' nodes (0.1, 0.9, 0.2, 1.0, 0.0): the
     brightest moment is the node at 1.0, so each observer's peak is at least its
