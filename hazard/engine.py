@@ -63,6 +63,7 @@ class Spot:
     outline_s: np.ndarray | None = None  # exact lit outline in beam coordinates (flat targets hit whole)
     spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
     slump: object = None  # hazard.pipeline.slump.SpotSlump: the molten surface's tilt per analysis time, if any
+    aperture_m: float = 7e-3  # limiting aperture diameter [m] a curved mesh's mirror beam is averaged over (hazard.mesh_mirror)
 
     def __post_init__(self):
         if self.material is None:

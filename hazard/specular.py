@@ -31,6 +31,8 @@ import math
 
 import numpy as np
 
+from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, mirror_rays
+
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
 
 _ITERATIONS = 80
@@ -79,6 +81,7 @@ def _planes(spot):
     elif spot.ray_faces is not None:
         faces, normals, points = spot.ray_faces
         flat = np.isin(faces, _target_faces(spot))  # lit facets only
+        flat &= ~curved_face_mask(t)  # a curved mesh's facets are traced by hazard.mesh_mirror
         if t.mesh.analytic is not None:
             if t.mesh.analytic[0] == "sphere":
                 flat[:] = False
@@ -267,6 +270,8 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
         rho = _reflectance(spot, _local(plane[0], tangent, -d[ok]), states)
         geo = e[ok] * np.exp(-mu * path) * gain[ok]
         out[ok] += rho * (geo if states is None else geo[:, None])
+    if is_curved_mesh(spot.target):
+        out += _mesh_mirror(spot, obs, gain, mu, states).irradiance_w_m2
     an = spot.target.mesh.analytic
     if an is not None:
         ok, geo, p, n, d, near = _curved_geometry(spot, obs)
@@ -280,6 +285,24 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
             cap = spot.max_irradiance_w_m2 * gain[near]
             out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
     return out
+
+
+def _mesh_mirror(spot, obs, gain, mu, states):
+    """A curved mesh's reflection averaged over the limiting aperture
+    (:func:`hazard.mesh_mirror.aperture_irradiance`), its rays built once per spot and
+    attenuation."""
+    cache = spot.__dict__.setdefault("_mesh_rays_cache", {})
+    if mu not in cache:
+        cache[mu] = mirror_rays(spot, mu)
+    rays = cache[mu]
+    m = len(obs)
+    if rays is None:
+        from .mesh_mirror import ApertureIrradiance
+
+        z = np.zeros((m,) if states is None else (m, len(np.atleast_1d(states))))
+        return ApertureIrradiance(z, z, z, np.zeros(m, np.int64), np.zeros(m, bool))
+    rho = _reflectance(spot, _local(rays.normals, spot.target.tangent, -rays.incoming), states)
+    return aperture_irradiance(rays, rho, obs, gain, mu, getattr(spot, "aperture_m", 7e-3))
 
 
 class SpecularNohd:

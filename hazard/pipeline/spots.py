@@ -14,6 +14,7 @@ import numpy as np
 
 from ..beam import BeamGeometry, sample_cells
 from ..engine import build_spots, flat_outlines
+from ..mesh_mirror import limiting_aperture_m
 from ..results import TargetResult
 
 __all__ = ["BeamStage", "ray_scene", "scene_beam", "trace_beam", "unlit_targets"]
@@ -104,6 +105,9 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
     built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
+    aperture = limiting_aperture_m(laser.wavelength_nm)
+    for sp in built.spots:
+        sp.aperture_m = aperture
     notes = []
     if built.spill_w > 1e-3 * laser.average_power_w:
         notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")
