@@ -290,7 +290,7 @@ def aperture_irradiance(rays: MirrorRays, rho, observers_m, gain, attenuation_pe
     cols = rho2.shape[1]
     a = aperture_m / 2
     sums = {"binned": np.zeros((m, cols)), "tube": np.zeros((m, cols)), "tube_lo": np.full((m, cols), np.inf),
-            "count": np.zeros(m, np.int64), "q1": np.zeros(m), "q2": np.zeros(m)}
+            "count": np.zeros(m, np.int64), "q1": np.zeros(m), "q2": np.zeros(m), "wmax": np.zeros((m, cols))}
     rows, ray = _pairs(rays, obs, a)
     for c0 in range(0, len(rows), _PAIRS_PER_CHUNK):
         _bin_pairs(rays, rho2, obs, rows[c0:c0 + _PAIRS_PER_CHUNK], ray[c0:c0 + _PAIRS_PER_CHUNK], a, attenuation_per_m, sums)
@@ -316,6 +316,7 @@ def _bin_pairs(rays, rho2, obs, r_, k_, a, mu, sums):
     sums["q2"] += np.bincount(r_, q * q, m)
     for c in range(rho2.shape[1]):
         sums["binned"][:, c] += np.bincount(r_, q * rho2[k_, c], m)
+        np.maximum.at(sums["wmax"][:, c], r_, q * rho2[k_, c])
 
 
 def _tube_pairs(rays, rho2, obs, r_, k_, mu, sums):
@@ -331,6 +332,7 @@ def _tube_pairs(rays, rho2, obs, r_, k_, mu, sums):
     for c in range(rho2.shape[1]):
         val = factor[inside] * att[inside] * rho2[k_[inside], c]
         np.maximum.at(sums["tube"][:, c], r_[inside], val)
+        np.maximum.at(sums["wmax"][:, c], r_[inside], rays.power_w[k_[inside]] * att[inside] * rho2[k_[inside], c])
         np.minimum.at(sums["tube_lo"][:, c], r_[inside], val)
 
 
@@ -343,7 +345,10 @@ def _combine(rays, rho2, obs, gain, mu, area, sums, flat) -> ApertureIrradiance:
     use_bin = (count >= MIN_RAYS_IN_APERTURE) | ((tube.max(axis=1) <= 0) & (count > 0))
     rel = np.where(q1 > 0, 2 * np.sqrt(q2) / np.maximum(q1, 1e-300), 0.0)
     est_bin = sums["binned"] / area
-    tube_c = np.minimum(tube, cap)
+    # a tube cannot put more through the aperture than the rays that cross it carry, with a
+    # Poisson allowance for the few counted (n + 3 sqrt(n) + 3 rays of the heaviest weight)
+    few = (count + 3 * np.sqrt(count) + 3)[:, None] * sums["wmax"] / area
+    tube_c = np.minimum(np.minimum(tube, cap), few)
     est = np.where(use_bin[:, None], est_bin, tube_c)
     err = np.where(use_bin[:, None], est_bin * rel[:, None], np.where(np.isfinite(tube_lo), tube_c - np.minimum(tube_lo, tube_c), 0.0))
     g = gain.reshape(-1, 1)
@@ -352,3 +357,79 @@ def _combine(rays, rho2, obs, gain, mu, area, sums, flat) -> ApertureIrradiance:
     if flat:
         upper, est, err = upper[:, 0], est[:, 0], err[:, 0]
     return ApertureIrradiance(upper, est, err, count, use_bin)
+
+
+_NOHD_RAYS = 8192  # rays whose tubes are followed for the NOHD (evenly spaced, plus the hottest)
+_NOHD_GRID = np.geomspace(1e-3, 1e9, 241)  # distances [m] the tubes are evaluated at (20 per decade)
+_NOHD_PROBES = 8  # points per distance where the aperture average is checked (the hottest tubes)
+_NOHD_RTOL = 1e-4  # bisection tolerance of the NOHD (relative; the upper end is returned)
+
+
+def tube_nohd(rays: MirrorRays, rho, mpe_w_m2, attenuation_per_m, aperture_m, gain=1.0):
+    """Farthest distance [m] beyond the mirror, along the reflected rays, at which the
+    aperture-averaged irradiance still reaches ``mpe_w_m2``, and the direction there.
+
+    Along ray i the irradiance is at most its tube's, ``q_i rho_i exp(-mu D) / A_i(D)``
+    (A_i the tube's cross-section from the two grid neighbours: zero at a focus), and at
+    most all the reflected power over the aperture's area: the smaller of the two,
+    maximised over the rays, is evaluated at 20 distances per decade from 1 mm to 1e9 m.
+    From the farthest distance where it reaches the MPE inwards, the aperture average
+    (:func:`aperture_irradiance`, its upper value) is computed at the points of the
+    ``_NOHD_PROBES`` hottest tubes; the first distance where it reaches the MPE brackets
+    the NOHD with the next one, refined by bisection to ``_NOHD_RTOL`` (upper end
+    returned). ``inf`` when still reached at 1e9 m. ``rho`` (N,): the largest reflectance
+    over states. The probe points are where the tubes are hottest, not a search over
+    every point at that distance: a bound for a single-sheeted reflected beam (module notes).
+    """
+    has = np.flatnonzero(np.all(rays.neighbours >= 0, axis=1))
+    if not len(has):
+        return 0.0, None
+    weight = rays.power_w * rho
+    pick = has[:: max(1, len(has) // _NOHD_RAYS)]
+    pick = np.unique(np.concatenate([pick, has[np.argsort(weight[has])[-_NOHD_RAYS // 8:]]]))
+    cap_w = float(weight.sum()) * gain / (math.pi * (aperture_m / 2) ** 2)
+    r = rays.directions[pick]
+    edges = []
+    for k in range(2):
+        j = rays.neighbours[pick, k]
+        dp = rays.points[j] - rays.points[pick]
+        dr = rays.directions[j] - r
+        # transverse parts (normal to ray i): the tube's edge at D is dp_t + D dr_t
+        edges.append((dp - (dp * r).sum(1)[:, None] * r, dr - (dr * r).sum(1)[:, None] * r))
+    q = np.maximum(weight[pick], np.maximum(weight[rays.neighbours[pick, 0]], weight[rays.neighbours[pick, 1]])) * gain
+
+    def level(dist):
+        """(rays, distances) -> the bounded irradiance along each ray."""
+        d = np.asarray(dist, float)[None, :, None]
+        e1 = edges[0][0][:, None, :] + d * edges[0][1][:, None, :]
+        e2 = edges[1][0][:, None, :] + d * edges[1][1][:, None, :]
+        area = np.linalg.norm(np.cross(e1, e2), axis=2)
+        att = np.exp(-attenuation_per_m * d[..., 0])
+        return np.minimum(q[:, None] / np.maximum(area, 1e-300), cap_w) * att
+
+    best = level(_NOHD_GRID).max(axis=0)
+
+    def exceeds(dist):
+        """Whether the aperture average reaches the MPE at the hottest tubes' points at dist."""
+        lv = level([dist])[:, 0]
+        top = np.argsort(lv)[-_NOHD_PROBES:]
+        top = top[lv[top] >= mpe_w_m2]
+        if not len(top):
+            return False, None
+        pts = rays.points[pick[top]] + dist * r[top]
+        e = aperture_irradiance(rays, rho, pts, np.full(len(top), float(gain)), attenuation_per_m, aperture_m).irradiance_w_m2
+        return bool(e.max() >= mpe_w_m2), r[top[int(np.argmax(e))]]
+
+    for k in np.flatnonzero(best >= mpe_w_m2)[::-1]:
+        ok, direction = exceeds(_NOHD_GRID[k])
+        if not ok:
+            continue
+        if k == len(_NOHD_GRID) - 1:
+            return math.inf, direction
+        lo, hi = _NOHD_GRID[k], _NOHD_GRID[k + 1]
+        while hi / lo - 1 > _NOHD_RTOL:
+            mid = math.sqrt(lo * hi)
+            above, d_mid = exceeds(mid)
+            lo, hi, direction = (mid, hi, d_mid) if above else (lo, mid, direction)
+        return float(hi), direction
+    return 0.0, None

@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, mirror_rays
+from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, mirror_rays, tube_nohd
 
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
 
@@ -287,14 +287,20 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
     return out
 
 
+def _cached_rays(spot, mu):
+    """The spot's curved-facet rays (:func:`hazard.mesh_mirror.mirror_rays`), built once
+    per attenuation coefficient and kept on the spot."""
+    cache = spot.__dict__.setdefault("_mesh_rays_cache", {})
+    if mu not in cache:
+        cache[mu] = mirror_rays(spot, mu)
+    return cache[mu]
+
+
 def _mesh_mirror(spot, obs, gain, mu, states):
     """A curved mesh's reflection averaged over the limiting aperture
     (:func:`hazard.mesh_mirror.aperture_irradiance`), its rays built once per spot and
     attenuation."""
-    cache = spot.__dict__.setdefault("_mesh_rays_cache", {})
-    if mu not in cache:
-        cache[mu] = mirror_rays(spot, mu)
-    rays = cache[mu]
+    rays = _cached_rays(spot, mu)
     m = len(obs)
     if rays is None:
         from .mesh_mirror import ApertureIrradiance
@@ -329,6 +335,15 @@ def _sample_vergences(spot):
 
 
 def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> SpecularNohd:
+    """Specular NOHD of a spot (:func:`_samples_nohd`); for a curved mesh also through its
+    focus or caustic (:func:`_curved_mesh_nohd`), the larger taken."""
+    flat = _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states, gain)
+    if flat.nohd_m is None or not is_curved_mesh(spot.target):
+        return flat
+    return _curved_mesh_nohd(spot, mpe_w_m2, attenuation_per_m, states, gain, flat)
+
+
+def _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> SpecularNohd:
     """Solve ``rho E_peak,i exp(-mu D) / ((1 + D/q_t)(1 + D/q_s)) = MPE`` for D per spot
     sample (the left side falls monotonically with D for flat and convex mirrors: log
     bisection to 1e-12 relative) and return the largest root. ``E_peak,i`` is the highest
@@ -363,6 +378,20 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
     root = np.where(beyond, np.inf, np.where(hot, lo, 0.0))
     i = int(np.argmax(root))
     return SpecularNohd(float(root[i]), _unit(mirror_directions(spot)[i]).tolist())
+
+
+def _curved_mesh_nohd(spot, mpe_w_m2, mu, states, gain, flat: SpecularNohd) -> SpecularNohd:
+    """The larger of the samples' (flat-facet) NOHD and the curved facets' ray-tube NOHD
+    (:func:`hazard.mesh_mirror.tube_nohd`: through a focus, bounded by the aperture)."""
+    rays = _cached_rays(spot, mu)
+    if rays is None:
+        return flat
+    rho = _reflectance(spot, _local(rays.normals, spot.target.tangent, -rays.incoming), states)
+    rho = rho if states is None else rho.max(axis=1)
+    dist, direction = tube_nohd(rays, rho, mpe_w_m2, mu, getattr(spot, "aperture_m", 7e-3), gain)
+    if direction is None or (flat.nohd_m is not None and flat.nohd_m >= dist):
+        return flat
+    return SpecularNohd(dist, _unit(direction).tolist())
 
 
 def mirror_directions(spot):
