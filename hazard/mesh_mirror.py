@@ -152,9 +152,9 @@ def _grid(spot, n_rays):
     return np.stack([gi, gj], axis=-1), h
 
 
-def mirror_rays(spot, attenuation_per_m, n_rays=MESH_MIRROR_RAYS) -> MirrorRays | None:
+def mirror_rays(spot, attenuation_per_m, n_rays=None) -> MirrorRays | None:
     """The reflected rays of a spot's curved facets (:class:`MirrorRays`), None if the
-    beam lands on none. Rays in beam cells that do not reach the target (an occluder or
+    beam lands on none; about ``n_rays`` (default ``MESH_MIRROR_RAYS``) on the lit part. Rays in beam cells that do not reach the target (an occluder or
     another target in front) are left out; the cells the target shares with them are
     kept whole (conservative)."""
     from .beam import rectangle_fraction
@@ -162,7 +162,7 @@ def mirror_rays(spot, attenuation_per_m, n_rays=MESH_MIRROR_RAYS) -> MirrorRays 
 
     target, beam = spot.target, spot.beam
     curved = curved_face_mask(target)
-    grid, h = _grid(spot, n_rays)
+    grid, h = _grid(spot, MESH_MIRROR_RAYS if n_rays is None else int(n_rays))
     shape = grid.shape[:2]
     s = grid.reshape(-1, 2)
     keep = np.flatnonzero(_lit(spot, s))
@@ -361,8 +361,8 @@ def _combine(rays, rho2, obs, gain, mu, area, sums, flat) -> ApertureIrradiance:
 
 _NOHD_RAYS = 8192  # rays whose tubes are followed for the NOHD (evenly spaced, plus the hottest)
 _NOHD_GRID = np.geomspace(1e-3, 1e9, 241)  # distances [m] the tubes are evaluated at (20 per decade)
-_NOHD_PROBES = 8  # points per distance where the aperture average is checked (the hottest tubes)
-_NOHD_RTOL = 1e-4  # bisection tolerance of the NOHD (relative; the upper end is returned)
+_NOHD_PROBES = 8  # probe points per distance and kind (hottest tubes, heaviest rays; twice that spread over the rest)
+_NOHD_RTOL = 1e-3  # bisection tolerance of the NOHD (relative; the upper end is returned)
 
 
 def tube_nohd(rays: MirrorRays, rho, mpe_w_m2, attenuation_per_m, aperture_m, gain=1.0):
@@ -374,12 +374,14 @@ def tube_nohd(rays: MirrorRays, rho, mpe_w_m2, attenuation_per_m, aperture_m, ga
     most all the reflected power over the aperture's area: the smaller of the two,
     maximised over the rays, is evaluated at 20 distances per decade from 1 mm to 1e9 m.
     From the farthest distance where it reaches the MPE inwards, the aperture average
-    (:func:`aperture_irradiance`, its upper value) is computed at the points of the
-    ``_NOHD_PROBES`` hottest tubes; the first distance where it reaches the MPE brackets
+    (:func:`aperture_irradiance`, its upper value) is computed at probe points on the rays
+    whose bound reaches the MPE (the ``_NOHD_PROBES`` hottest tubes, as many of the
+    heaviest rays, twice as many spread over the rest in order of their bound: a rim's
+    thin caustic has hot tubes and little power, a focus both); the first distance where it reaches the MPE brackets
     the NOHD with the next one, refined by bisection to ``_NOHD_RTOL`` (upper end
     returned). ``inf`` when still reached at 1e9 m. ``rho`` (N,): the largest reflectance
-    over states. The probe points are where the tubes are hottest, not a search over
-    every point at that distance: a bound for a single-sheeted reflected beam (module notes).
+    over states. The probes are a sample of the points at that distance, not all of them:
+    the NOHD is that of the hottest of them (module notes).
     """
     has = np.flatnonzero(np.all(rays.neighbours >= 0, axis=1))
     if not len(has):
@@ -412,10 +414,12 @@ def tube_nohd(rays: MirrorRays, rho, mpe_w_m2, attenuation_per_m, aperture_m, ga
     def exceeds(dist):
         """Whether the aperture average reaches the MPE at the hottest tubes' points at dist."""
         lv = level([dist])[:, 0]
-        top = np.argsort(lv)[-_NOHD_PROBES:]
-        top = top[lv[top] >= mpe_w_m2]
-        if not len(top):
+        hot = np.flatnonzero(lv >= mpe_w_m2)
+        if not len(hot):
             return False, None
+        by_level = hot[np.argsort(lv[hot])]
+        top = np.unique(np.concatenate([by_level[-_NOHD_PROBES:], hot[np.argsort(q[hot])[-_NOHD_PROBES:]],
+                                        by_level[np.linspace(0, len(hot) - 1, 2 * _NOHD_PROBES).astype(int)]]))
         pts = rays.points[pick[top]] + dist * r[top]
         e = aperture_irradiance(rays, rho, pts, np.full(len(top), float(gain)), attenuation_per_m, aperture_m).irradiance_w_m2
         return bool(e.max() >= mpe_w_m2), r[top[int(np.argmax(e))]]

@@ -33,7 +33,7 @@ import numpy as np
 
 from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, mirror_rays, tube_nohd
 
-__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions"]
+__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "mesh_mirror_irradiance"]
 
 _ITERATIONS = 80
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
@@ -271,7 +271,7 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None)
         geo = e[ok] * np.exp(-mu * path) * gain[ok]
         out[ok] += rho * (geo if states is None else geo[:, None])
     if is_curved_mesh(spot.target):
-        out += _mesh_mirror(spot, obs, gain, mu, states).irradiance_w_m2
+        out += mesh_mirror_irradiance(spot, obs, gain, mu, states).irradiance_w_m2
     an = spot.target.mesh.analytic
     if an is not None:
         ok, geo, p, n, d, near = _curved_geometry(spot, obs)
@@ -296,10 +296,13 @@ def _cached_rays(spot, mu):
     return cache[mu]
 
 
-def _mesh_mirror(spot, obs, gain, mu, states):
-    """A curved mesh's reflection averaged over the limiting aperture
-    (:func:`hazard.mesh_mirror.aperture_irradiance`), its rays built once per spot and
-    attenuation."""
+def mesh_mirror_irradiance(spot, observers_m, gain, attenuation_per_m, states=None):
+    """A curved mesh's mirror reflection at observers (M, 3), averaged over the limiting
+    aperture ``spot.aperture_m``: :class:`hazard.mesh_mirror.ApertureIrradiance` (upper
+    value, estimate, stated error, rays through the aperture, binned or ray tubes); its
+    rays are built once per spot and attenuation coefficient [1/m]. ``gain`` (M,)."""
+    obs, mu = np.asarray(observers_m, float), attenuation_per_m
+    gain = np.broadcast_to(np.asarray(gain, float), (len(obs),))
     rays = _cached_rays(spot, mu)
     m = len(obs)
     if rays is None:
