@@ -227,23 +227,60 @@ class ApertureIrradiance:
     binned: np.ndarray
 
 
+_SHELL = 0.03  # observers are grouped in shells of this width in log distance from the rays' centre
+
+
 def _pairs(rays: MirrorRays, obs, aperture_r):
-    """(observer, ray) pairs that can matter: rays whose direction points within reach of
-    the observer's aperture or of a tube holding it (a superset; cone about the direction
-    from the rays' centre)."""
+    """(observer, ray) pairs that can matter: every ray that passes within reach of the
+    observer's aperture or of a tube holding it (a superset).
+
+    Observers within three mirror radii get every ray. The others are grouped in thin
+    shells of distance L from the rays' centre C; in each, every ray's crossing of the
+    sphere of radius L_mid about C is a unit vector f_i, and a ray passing within
+    ``reach`` of an observer at O = C + L u crosses the sphere |X - C| = L within
+    ``2 reach / cos(gamma)`` of O (gamma: the ray's angle to the radial direction, largest
+    at the shell's inner radius), then drifts by at most ``sin(gamma) ln(L_hi / L_lo)`` in
+    angle across the shell: the rays with f_i within that angle of u (KD-tree) are kept.
+    """
+    from scipy.spatial import cKDTree
+
     rel = obs - rays.centre_m
     dist = np.linalg.norm(rel, axis=1)
     u = rel / np.maximum(dist, 1e-300)[:, None]
-    r = rays.radius_m
-    far = dist > r + 2 * aperture_r + 2 * rays.step_m
-    gap = np.where(far, dist - r, 1.0)
-    theta = np.arcsin(np.clip(r / np.maximum(dist, 1e-300), 0, 1)) + np.arcsin(np.clip((aperture_r + 2 * rays.step_m) / gap, 0, 1))
-    theta = np.where(far, theta + 2 * rays.spread_rad + 1e-9, math.pi)
-    chord = 2 * np.sin(np.minimum(theta, math.pi) / 2) * (1 + 1e-9) + 1e-12
-    lists = rays.tree.query_ball_point(u, chord)
-    counts = np.fromiter((len(x) for x in lists), np.int64, len(lists))
-    ray = np.concatenate([np.asarray(x, np.int64) for x in lists]) if counts.sum() else np.empty(0, np.int64)
-    return np.repeat(np.arange(len(obs)), counts), ray
+    big_r = rays.radius_m + 2 * aperture_r + 2 * rays.step_m
+    near = dist <= 3 * big_r
+    rows = [np.repeat(np.flatnonzero(near), rays.count)]
+    idx = [np.tile(np.arange(rays.count), int(near.sum()))]
+    far = np.flatnonzero(~near)
+    if len(far):
+        shell = np.floor(np.log(dist[far]) / _SHELL).astype(np.int64)
+        p = rays.points - rays.centre_m
+        pr, pp = (p * rays.directions).sum(1), (p * p).sum(1)
+        for sh in np.unique(shell):
+            members = far[shell == sh]
+            lo, hi = math.exp(sh * _SHELL), math.exp((sh + 1) * _SHELL)
+            f_lo = _crossing(p, pr, pp, rays.directions, lo)
+            cos_g = (rays.directions * f_lo).sum(1)
+            cg = max(float(cos_g.min()), 1e-6)
+            sg = math.sqrt(max(0.0, 1 - cg * cg))
+            reach = aperture_r + 2 * (rays.step_m + hi * rays.spread_rad)
+            chord = 2 * reach / (cg * lo)  # |X - O| / L on the sphere: the angle is 2 asin(chord / 2) <= 1.05 chord below 1
+            theta = (1.05 * chord if chord < 1 else math.pi) + sg * _SHELL * 1.001 + 1e-12
+            f_mid = _crossing(p, pr, pp, rays.directions, math.sqrt(lo * hi))
+            found = cKDTree(f_mid).query_ball_point(u[members], min(theta, 2.0))
+            counts = np.fromiter((len(x) for x in found), np.int64, len(found))
+            if counts.sum():
+                rows.append(np.repeat(members, counts))
+                idx.append(np.concatenate([np.asarray(x, np.int64) for x in found]))
+    return np.concatenate(rows), np.concatenate(idx)
+
+
+def _crossing(p, pr, pp, dirs, radius):
+    """Unit vectors (N, 3) to where rays from p (relative to the centre, |p| < radius)
+    along dirs cross the sphere of ``radius`` about the centre."""
+    t = -pr + np.sqrt(np.maximum(pr * pr - pp + radius * radius, 0.0))
+    x = p + t[:, None] * dirs
+    return x / np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-300)
 
 
 def _tube_irradiance(rays, o, ray, v, t):
