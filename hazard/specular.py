@@ -22,6 +22,11 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   obliquely only the normal curvature in the plane of incidence, ``cos^2(beta) / r``, is
   applied (tangential), the sagittal spread not: less spread than the true one, the
   conservative side.
+* **Curved meshes** (mesh files whose facets approximate a curved surface): a smooth
+  surface with interpolated vertex normals, traced by dense rays and averaged over the
+  limiting aperture, through any focus or caustic (:mod:`hazard.mesh_mirror`); their flat
+  facets, if any, as above. The specular NOHD of such a spot is the larger of its
+  samples' and the rays' (through the focus).
 * Attenuation once per leg: ``exp(-mu (R1 + D))``, R1 from the aperture to the mirror.
 """
 

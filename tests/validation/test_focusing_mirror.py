@@ -337,3 +337,34 @@ def test_random_caps_against_the_exact_sphere(tmp_path_factory, rc, rim_over_w, 
 def test_random_caps_against_the_exact_sphere_slow(tmp_path_factory, rc, rim_over_w, w_m, x, off, sign):
     """As above with the default ray count and many more examples."""
     _check_random_cap(tmp_path_factory.mktemp("cap"), rc, rim_over_w, w_m, x, off, sign)
+
+
+# ------------------------------------------------------------------ the ray search is complete
+
+
+@settings(ref.FAST, max_examples=2, suppress_health_check=[*ref.FAST.suppress_health_check, HealthCheck.function_scoped_fixture])
+@given(seed=st.integers(0, 2**31 - 1), sign=st.sampled_from([1, -1]))
+def test_observer_ray_search_misses_nothing(tmp_path_factory, monkeypatch, seed, sign):
+    """The shells-and-KD-tree search for the rays near each observer gives the same
+    aperture averages as pairing every observer with every ray (observers anywhere from
+    the mirror's surface to 300 focal lengths, in and out of the reflected beam)."""
+    monkeypatch.setattr(mesh_mirror, "MESH_MIRROR_RAYS", 1 << 13)
+    rng = np.random.default_rng(seed)
+    rc = float(rng.uniform(3.0, 30.0))
+    beam = ref.Beam(1.0, 0.08, 2e-4, [0.0, -30.0, 0.0], [0.0, 0.0, 0.0])
+    path = write_mesh(tmp_path_factory.mktemp("search") / "cap.stl", *cap_vertices_faces(rc, 0.12, sign, n_r=8, n_t=24))
+    dist = np.exp(rng.uniform(np.log(0.01), np.log(150 * rc), 300))
+    dirs = np.array([0.0, -1.0, 0.0]) + rng.normal(scale=rng.choice([0.003, 0.03, 0.3], 300)[:, None], size=(300, 3))
+    obs = dist[:, None] * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    spot = engine_spot(mesh_scene(path, beam, obs[:1]))
+    got = mesh_mirror_irradiance(spot, obs, np.ones(len(obs)), 0.0)
+    n = spot._mesh_rays_cache[0.0].count
+
+    def every_pair(rays, o, a):
+        return np.repeat(np.arange(len(o)), n), np.tile(np.arange(n), len(o))
+
+    monkeypatch.setattr(mesh_mirror, "_pairs", every_pair)
+    want = mesh_mirror_irradiance(spot, obs, np.ones(len(obs)), 0.0)
+    assert np.count_nonzero(want.irradiance_w_m2) > 10
+    np.testing.assert_allclose(got.irradiance_w_m2, want.irradiance_w_m2, rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(got.rays_in_aperture, want.rays_in_aperture)
