@@ -402,6 +402,41 @@ _NOHD_PROBES = 8  # probe points per distance and kind (hottest tubes, heaviest 
 _NOHD_RTOL = 1e-3  # bisection tolerance of the NOHD (relative; the upper end is returned)
 
 
+class _Tubes:
+    """The ray tubes followed for the NOHD: ``pick`` (rays with both grid neighbours, every
+    k-th plus the heaviest), their directions ``r``, tube edges (transverse parts of the
+    neighbours' offsets and direction differences: the edge at D is ``dp + D dr``) and
+    weights ``q`` (the largest of the three rays' power x reflectance x gain)."""
+
+    def __init__(self, rays: MirrorRays, weight, gain):
+        has = np.flatnonzero(np.all(rays.neighbours >= 0, axis=1))
+        pick = has[:: max(1, len(has) // _NOHD_RAYS)]
+        self.pick = np.unique(np.concatenate([pick, has[np.argsort(weight[has])[-_NOHD_RAYS // 8:]]])).astype(np.int64)
+        r = self.r = rays.directions[self.pick]
+        self.edges = []
+        for k in range(2):
+            j = rays.neighbours[self.pick, k]
+            dp = rays.points[j] - rays.points[self.pick]
+            dr = rays.directions[j] - r
+            self.edges.append((dp - (dp * r).sum(1)[:, None] * r, dr - (dr * r).sum(1)[:, None] * r))
+        nb = rays.neighbours[self.pick]
+        self.q = np.maximum(weight[self.pick], np.maximum(weight[nb[:, 0]], weight[nb[:, 1]])) * gain
+
+    def level(self, dist, cap_w, mu):
+        """(tubes, distances): the tube irradiance along each ray, capped at ``cap_w``."""
+        d = np.asarray(dist, float)[None, :, None]
+        (p1, v1), (p2, v2) = self.edges
+        area = np.linalg.norm(np.cross(p1[:, None, :] + d * v1[:, None, :], p2[:, None, :] + d * v2[:, None, :]), axis=2)
+        return np.minimum(self.q[:, None] / np.maximum(area, 1e-300), cap_w) * np.exp(-mu * d[..., 0])
+
+    def foci(self, count=64):
+        """Distances [m] where the heaviest tubes' edges are shortest (their focal lines)."""
+        top = np.argsort(self.q)[-count:]
+        out = [-(p[top] * v[top]).sum(1) / np.maximum((v[top] * v[top]).sum(1), 1e-300) for p, v in self.edges]
+        d = np.concatenate(out)
+        return d[np.isfinite(d) & (d > _NOHD_GRID[0]) & (d < _NOHD_GRID[-1])]
+
+
 def tube_nohd(rays: MirrorRays, rho, mpe_w_m2, attenuation_per_m, aperture_m, gain=1.0):
     """Farthest distance [m] beyond the mirror, along the reflected rays, at which the
     aperture-averaged irradiance still reaches ``mpe_w_m2``, and the direction there.
@@ -409,68 +444,60 @@ def tube_nohd(rays: MirrorRays, rho, mpe_w_m2, attenuation_per_m, aperture_m, ga
     Along ray i the irradiance is at most its tube's, ``q_i rho_i exp(-mu D) / A_i(D)``
     (A_i the tube's cross-section from the two grid neighbours: zero at a focus), and at
     most all the reflected power over the aperture's area: the smaller of the two,
-    maximised over the rays, is evaluated at 20 distances per decade from 1 mm to 1e9 m.
-    From the farthest distance where it reaches the MPE inwards, the aperture average
-    (:func:`aperture_irradiance`, its upper value) is computed at probe points on the rays
-    whose bound reaches the MPE (the ``_NOHD_PROBES`` hottest tubes, as many of the
-    heaviest rays, twice as many spread over the rest in order of their bound: a rim's
-    thin caustic has hot tubes and little power, a focus both); the first distance where it reaches the MPE brackets
-    the NOHD with the next one, refined by bisection to ``_NOHD_RTOL`` (upper end
-    returned). ``inf`` when still reached at 1e9 m. ``rho`` (N,): the largest reflectance
-    over states. The probes are a sample of the points at that distance, not all of them:
-    the NOHD is that of the hottest of them (module notes).
+    maximised over the rays, is evaluated at 20 distances per decade from 1 mm to 1e9 m
+    and at the focal lines of the heaviest tubes. From the farthest of these where it
+    reaches the MPE inwards, the aperture average (:func:`aperture_irradiance`, its upper
+    value) is computed at probe points (:func:`_probes_exceed`); the first distance where
+    it reaches the MPE brackets the NOHD with the next one, refined by bisection to
+    ``_NOHD_RTOL`` (upper end returned). ``inf`` when still reached at 1e9 m. If no probe
+    reaches the MPE where the bound does, the bound's farthest distance is returned
+    (conservative). ``rho`` (N,): the largest reflectance over states.
     """
-    has = np.flatnonzero(np.all(rays.neighbours >= 0, axis=1))
-    if not len(has):
-        return 0.0, None
     weight = rays.power_w * rho
-    pick = has[:: max(1, len(has) // _NOHD_RAYS)]
-    pick = np.unique(np.concatenate([pick, has[np.argsort(weight[has])[-_NOHD_RAYS // 8:]]]))
+    if not np.any(np.all(rays.neighbours >= 0, axis=1)):
+        return 0.0, None
+    tubes = _Tubes(rays, weight, gain)
     cap_w = float(weight.sum()) * gain / (math.pi * (aperture_m / 2) ** 2)
-    r = rays.directions[pick]
-    edges = []
-    for k in range(2):
-        j = rays.neighbours[pick, k]
-        dp = rays.points[j] - rays.points[pick]
-        dr = rays.directions[j] - r
-        # transverse parts (normal to ray i): the tube's edge at D is dp_t + D dr_t
-        edges.append((dp - (dp * r).sum(1)[:, None] * r, dr - (dr * r).sum(1)[:, None] * r))
-    q = np.maximum(weight[pick], np.maximum(weight[rays.neighbours[pick, 0]], weight[rays.neighbours[pick, 1]])) * gain
-
-    def level(dist):
-        """(rays, distances) -> the bounded irradiance along each ray."""
-        d = np.asarray(dist, float)[None, :, None]
-        e1 = edges[0][0][:, None, :] + d * edges[0][1][:, None, :]
-        e2 = edges[1][0][:, None, :] + d * edges[1][1][:, None, :]
-        area = np.linalg.norm(np.cross(e1, e2), axis=2)
-        att = np.exp(-attenuation_per_m * d[..., 0])
-        return np.minimum(q[:, None] / np.maximum(area, 1e-300), cap_w) * att
-
-    best = level(_NOHD_GRID).max(axis=0)
+    dists = np.unique(np.concatenate([_NOHD_GRID, tubes.foci()]))
+    best = tubes.level(dists, cap_w, attenuation_per_m).max(axis=0)
+    above = np.flatnonzero(best >= mpe_w_m2)
 
     def exceeds(dist):
-        """Whether the aperture average reaches the MPE at the hottest tubes' points at dist."""
-        lv = level([dist])[:, 0]
-        hot = np.flatnonzero(lv >= mpe_w_m2)
-        if not len(hot):
-            return False, None
-        by_level = hot[np.argsort(lv[hot])]
-        top = np.unique(np.concatenate([by_level[-_NOHD_PROBES:], hot[np.argsort(q[hot])[-_NOHD_PROBES:]],
-                                        by_level[np.linspace(0, len(hot) - 1, 2 * _NOHD_PROBES).astype(int)]]))
-        pts = rays.points[pick[top]] + dist * r[top]
-        e = aperture_irradiance(rays, rho, pts, np.full(len(top), float(gain)), attenuation_per_m, aperture_m).irradiance_w_m2
-        return bool(e.max() >= mpe_w_m2), r[top[int(np.argmax(e))]]
+        return _probes_exceed(rays, rho, tubes, dist, mpe_w_m2, cap_w, attenuation_per_m, aperture_m, gain)
 
-    for k in np.flatnonzero(best >= mpe_w_m2)[::-1]:
-        ok, direction = exceeds(_NOHD_GRID[k])
+    for k in above[::-1]:
+        ok, direction = exceeds(dists[k])
         if not ok:
             continue
-        if k == len(_NOHD_GRID) - 1:
+        if k == len(dists) - 1:
             return math.inf, direction
-        lo, hi = _NOHD_GRID[k], _NOHD_GRID[k + 1]
+        lo, hi = dists[k], dists[k + 1]
         while hi / lo - 1 > _NOHD_RTOL:
             mid = math.sqrt(lo * hi)
-            above, d_mid = exceeds(mid)
-            lo, hi, direction = (mid, hi, d_mid) if above else (lo, mid, direction)
+            up, d_mid = exceeds(mid)
+            lo, hi, direction = (mid, hi, d_mid) if up else (lo, mid, direction)
         return float(hi), direction
-    return 0.0, None
+    if not len(above):
+        return 0.0, None
+    k = int(above[-1])
+    far = dists[min(k + 1, len(dists) - 1)]
+    i = int(np.argmax(tubes.level([dists[k]], cap_w, attenuation_per_m)[:, 0]))
+    return (math.inf if k == len(dists) - 1 else float(far)), tubes.r[i]
+
+
+def _probes_exceed(rays, rho, tubes, dist, mpe_w_m2, cap_w, mu, aperture_m, gain):
+    """Whether the aperture average reaches the MPE at ``dist`` along the probed rays, and
+    the direction of the hottest probe: the ``_NOHD_PROBES`` hottest tubes, as many of the
+    heaviest rays and twice as many spread over the rest, among the rays whose bound
+    reaches the MPE (a rim's thin caustic has hot tubes and little power, a focus both).
+    The probes are a sample of the points at that distance, not all of them."""
+    lv = tubes.level([dist], cap_w, mu)[:, 0]
+    hot = np.flatnonzero(lv >= mpe_w_m2)
+    if not len(hot):
+        return False, None
+    by_level = hot[np.argsort(lv[hot])]
+    top = np.unique(np.concatenate([by_level[-_NOHD_PROBES:], hot[np.argsort(tubes.q[hot])[-_NOHD_PROBES:]],
+                                    by_level[np.linspace(0, len(hot) - 1, 2 * _NOHD_PROBES).astype(int)]]))
+    pts = rays.points[tubes.pick[top]] + dist * tubes.r[top]
+    e = aperture_irradiance(rays, rho, pts, np.full(len(top), float(gain)), mu, aperture_m).irradiance_w_m2
+    return bool(e.max() >= mpe_w_m2), tubes.r[top[int(np.argmax(e))]]
