@@ -227,6 +227,7 @@ class ApertureIrradiance:
     binned: np.ndarray
 
 
+_FEW_OBSERVERS = 64  # a shell with at most this many observers is searched without a KD-tree
 _SHELL = 0.03  # observers are grouped in shells of this width in log distance from the rays' centre
 
 
@@ -267,7 +268,13 @@ def _pairs(rays: MirrorRays, obs, aperture_r):
             chord = 2 * reach / (cg * lo)  # |X - O| / L on the sphere: the angle is 2 asin(chord / 2) <= 1.05 chord below 1
             theta = (1.05 * chord if chord < 1 else math.pi) + sg * _SHELL * 1.001 + 1e-12
             f_mid = _crossing(p, pr, pp, rays.directions, math.sqrt(lo * hi))
-            found = cKDTree(f_mid).query_ball_point(u[members], min(theta, 2.0))
+            theta = min(theta, 2.0)
+            if len(members) <= _FEW_OBSERVERS:  # a few observers: one dot product per ray and observer
+                ray_i, obs_i = np.nonzero(f_mid @ u[members].T >= 1 - theta * theta / 2)
+                rows.append(members[obs_i])
+                idx.append(ray_i.astype(np.int64))
+                continue
+            found = cKDTree(f_mid).query_ball_point(u[members], theta)
             counts = np.fromiter((len(x) for x in found), np.int64, len(found))
             if counts.sum():
                 rows.append(np.repeat(members, counts))
@@ -398,8 +405,8 @@ def _combine(rays, rho2, obs, gain, mu, area, sums, flat) -> ApertureIrradiance:
 
 _NOHD_RAYS = 8192  # rays whose tubes are followed for the NOHD (evenly spaced, plus the hottest)
 _NOHD_GRID = np.geomspace(1e-3, 1e9, 241)  # distances [m] the tubes are evaluated at (20 per decade)
-_NOHD_PROBES = 8  # probe points per distance and kind (hottest tubes, heaviest rays; twice that spread over the rest)
-_NOHD_RTOL = 1e-3  # bisection tolerance of the NOHD (relative; the upper end is returned)
+_NOHD_PROBES = 6  # probe points per distance and kind (hottest tubes, heaviest rays; twice that spread over the rest)
+_NOHD_RTOL = 2e-3  # bisection tolerance of the NOHD (relative; the upper end is returned)
 
 
 class _Tubes:

@@ -215,6 +215,23 @@ def test_concave_mesh_specular_nohd_passes_the_focus(concave, tmp_path):
     assert got == pytest.approx(want, rel=0.02)
 
 
+def test_concave_mesh_nohd_when_only_the_focus_exceeds(concave, tmp_path):
+    """2.4 mW: only the focal region's 7 mm average (61 W/m^2 over about 1 m of depth)
+    exceeds the MPE (50 W/m^2). The engine's NOHD is where the exact sphere's average on
+    the axis falls through the MPE: above it 0.5 % before, below it 1 % beyond."""
+    c = concave
+    L, rc, rim = c["L"], c["rc"], c["rim"]
+    beam = ref.Beam(2.4e-3, 0.1, 1e-4, [0.0, -L, 0.0], [0.0, 0.0, 0.0])
+    path = write_mesh(tmp_path / "cap.stl", *cap_vertices_faces(rc, rim, +1))
+    res = hazard.analyze(mesh_scene(path, beam, [[0.0, -5.0, 3.0]]))
+    mpe = float(res.mpe_w_m2)
+    got = res.targets[0].specular_nohd_static_m
+    assert c["q"] < got < 2 * c["q"]
+    want, sd = sphere_cap_reference(beam, rc, rim, +1, [[0.0, -0.995 * got, 0.0], [0.0, -1.01 * got, 0.0]])
+    assert want[0] - 3 * sd[0] > mpe, f"reference {want[0]:.4g} at 0.995 x NOHD {got:.4g} m: not above the MPE {mpe:.4g}"
+    assert want[1] + 3 * sd[1] < mpe, f"reference {want[1]:.4g} at 1.01 x NOHD {got:.4g} m: not below the MPE {mpe:.4g}"
+
+
 # ------------------------------------------------------------------ convex cap
 
 
@@ -353,9 +370,12 @@ def test_observer_ray_search_misses_nothing(tmp_path_factory, monkeypatch, seed,
     rc = float(rng.uniform(3.0, 30.0))
     beam = ref.Beam(1.0, 0.08, 2e-4, [0.0, -30.0, 0.0], [0.0, 0.0, 0.0])
     path = write_mesh(tmp_path_factory.mktemp("search") / "cap.stl", *cap_vertices_faces(rc, 0.12, sign, n_r=8, n_t=24))
-    dist = np.exp(rng.uniform(np.log(0.01), np.log(150 * rc), 300))
+    dist = np.exp(rng.uniform(np.log(0.01), np.log(150 * rc), 300))  # a few per shell: searched directly
     dirs = np.array([0.0, -1.0, 0.0]) + rng.normal(scale=rng.choice([0.003, 0.03, 0.3], 300)[:, None], size=(300, 3))
     obs = dist[:, None] * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    # and 100 at one distance (one shell: searched by a KD-tree, a few are searched directly)
+    ring = np.array([0.0, -1.0, 0.0]) + rng.normal(scale=0.02, size=(100, 3))
+    obs = np.vstack([obs, 0.7 * rc * ring / np.linalg.norm(ring, axis=1, keepdims=True)])
     spot = engine_spot(mesh_scene(path, beam, obs[:1]))
     got = mesh_mirror_irradiance(spot, obs, np.ones(len(obs)), 0.0)
     n = spot._mesh_rays_cache[0.0].count
