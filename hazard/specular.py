@@ -389,17 +389,18 @@ def _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
 
 
 def _curved_mesh_nohd(spot, mpe_w_m2, mu, states, gain, flat: SpecularNohd) -> SpecularNohd:
-    """The larger of the samples' (flat-facet) NOHD and the curved facets' ray-tube NOHD
-    (:func:`hazard.mesh_mirror.tube_nohd`: through a focus, bounded by the aperture)."""
+    """The curved facets' ray-tube NOHD (:func:`hazard.mesh_mirror.tube_nohd`: through a
+    focus, bounded by the aperture); where the lit part also has flat facets, the larger
+    of it and the samples' NOHD (which takes every sample as flat: conservative)."""
     rays = _cached_rays(spot, mu)
     if rays is None:
         return flat
     rho = _reflectance(spot, _local(rays.normals, spot.target.tangent, -rays.incoming), states)
     rho = rho if states is None else rho.max(axis=1)
     dist, direction = tube_nohd(rays, rho, mpe_w_m2, mu, getattr(spot, "aperture_m", 7e-3), gain)
-    if direction is None or (flat.nohd_m is not None and flat.nohd_m >= dist):
+    if _planes(spot) and flat.nohd_m >= dist:  # flat facets lit too
         return flat
-    return SpecularNohd(dist, _unit(direction).tolist())
+    return SpecularNohd(dist, flat.direction if direction is None else _unit(direction).tolist())
 
 
 def mirror_directions(spot):
