@@ -9,8 +9,8 @@ SIGGRAPH 1999 (a ray tube's cross-section from neighbouring rays).
 
 * **The surface.** A mesh file's triangles stand for a smooth surface: at a hit the normal
   is the barycentric interpolation of the corner normals
-  (:meth:`scenes.geometry.Mesh.corner_normals`: angle-weighted over the triangles at the
-  vertex, edges sharper than ``CREASE_ANGLE_DEG`` kept). Facets whose corner normals equal
+  (:meth:`scenes.geometry.Mesh.corner_normals`: Max's weights over the triangles at the
+  vertex, exact for vertices on a sphere; edges sharper than ``CREASE_ANGLE_DEG`` kept). Facets whose corner normals equal
   their own normal are flat and keep the exact unfolded beam (:mod:`hazard.specular`);
   the others ("curved facets") are traced here.
 * **The rays.** A regular grid in the beam's transverse coordinates ``s`` over the part of
@@ -30,8 +30,9 @@ SIGGRAPH 1999 (a ray tube's cross-section from neighbouring rays).
   the tube's cross-section at the eye, from the ray's two grid neighbours (a ray
   differential; exact for a smooth wavefront as the grid refines). The eye takes the
   largest tube among the rays whose tube (one grid step either way) holds it, capped by
-  all the reflected power through the aperture (a tube narrower than the aperture cannot
-  put more in it). Where the reflected wavefront folds on itself (beyond a caustic) the
+  all the reflected power through the aperture and by the rays that do cross it with a
+  Poisson allowance, ``(n + 3 sqrt(n) + 3)`` rays of the heaviest weight near the eye (a
+  thin zone's own caustic, like a mesh rim's, cannot put more in it). Where the reflected wavefront folds on itself (beyond a caustic) the
   sheets' tubes are not summed, the largest is taken: only met by mirrors with several
   foci, far from them.
 * Not modelled: a second bounce on the same mesh (the reflected rays are not traced
@@ -120,7 +121,6 @@ class MirrorRays:
     spread_rad: float
     step_m: float
     grid_step_s: float
-    tree: object = None
 
     @property
     def count(self) -> int:
@@ -152,20 +152,21 @@ def _grid(spot, n_rays):
     return np.stack([gi, gj], axis=-1), h
 
 
-def mirror_rays(spot, attenuation_per_m, n_rays=None) -> MirrorRays | None:
+def mirror_rays(spot, attenuation_per_m, lit, n_rays=None) -> MirrorRays | None:
     """The reflected rays of a spot's curved facets (:class:`MirrorRays`), None if the
-    beam lands on none; about ``n_rays`` (default ``MESH_MIRROR_RAYS``) on the lit part. Rays in beam cells that do not reach the target (an occluder or
+    beam lands on none; about ``n_rays`` (default ``MESH_MIRROR_RAYS``) on the lit part.
+    ``lit(s)``: whether the beam cells at transverse coordinates s (N, 2) reach the
+    target (:func:`hazard.specular._lit`): rays in cells that do not (an occluder or
     another target in front) are left out; the cells the target shares with them are
     kept whole (conservative)."""
     from .beam import rectangle_fraction
-    from .specular import _lit
 
     target, beam = spot.target, spot.beam
     curved = curved_face_mask(target)
     grid, h = _grid(spot, MESH_MIRROR_RAYS if n_rays is None else int(n_rays))
     shape = grid.shape[:2]
     s = grid.reshape(-1, 2)
-    keep = np.flatnonzero(_lit(spot, s))
+    keep = np.flatnonzero(lit(s))
     o, d = beam.rays(s[keep])
     hits = _target_scene(target).first_hit(o, d)
     ok = hits.hit & curved[np.maximum(hits.face, 0)]
@@ -189,8 +190,6 @@ def mirror_rays(spot, attenuation_per_m, n_rays=None) -> MirrorRays | None:
 
 def _assemble(pts, refl, inc, nrm, power, idx, shape, h) -> MirrorRays:
     """:class:`MirrorRays` with the grid neighbours, bounding ball and ray spreads."""
-    from scipy.spatial import cKDTree
-
     where = np.full(shape[0] * shape[1], -1, np.int64)
     where[idx] = np.arange(len(idx))
     gi, gj = np.unravel_index(idx, shape)
@@ -206,7 +205,7 @@ def _assemble(pts, refl, inc, nrm, power, idx, shape, h) -> MirrorRays:
             cosang = np.clip((refl[has] * refl[nb[has, k]]).sum(1), -1.0, 1.0)
             spread = max(spread, float(np.arccos(cosang).max()))
             step = max(step, float(np.linalg.norm(pts[has] - pts[nb[has, k]], axis=1).max()))
-    return MirrorRays(pts, refl, inc, nrm, power, nb, centre, radius, spread, step, h, cKDTree(refl))
+    return MirrorRays(pts, refl, inc, nrm, power, nb, centre, radius, spread, step, h)
 
 
 @dataclass

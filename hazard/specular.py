@@ -297,7 +297,7 @@ def _cached_rays(spot, mu):
     per attenuation coefficient and kept on the spot."""
     cache = spot.__dict__.setdefault("_mesh_rays_cache", {})
     if mu not in cache:
-        cache[mu] = mirror_rays(spot, mu)
+        cache[mu] = mirror_rays(spot, mu, lambda s: _lit(spot, s))
     return cache[mu]
 
 
