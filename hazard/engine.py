@@ -109,6 +109,27 @@ class Spot:
         return np.stack([x, np.cross(z, x), z])
 
     @property
+    def sight_point_m(self) -> np.ndarray:
+        """Where lines of sight from the spot start: the centroid lifted along the mean normal
+        above every sample point and, on a solid or mesh target, above the target's vertices
+        within the spot's size of it. On a flat spot it is the centroid; a convex spot's
+        centroid lies behind its own surface, which would hide every observer from it."""
+        cached = self.__dict__.get("_sight_point")
+        if cached is not None:
+            return cached
+        n, c = self.mean_frame[2], self.centroid
+        lift = float(np.max((self.points - c) @ n))
+        if getattr(getattr(self.target, "spec", None), "shape", None) in ("box", "sphere", "cylinder", "mesh"):
+            rel = self.target.mesh.vertices - c
+            along = rel @ n
+            near = np.linalg.norm(rel - along[:, None] * n, axis=1) <= max(self.size_m, 1e-9)
+            if np.any(near):
+                lift = max(lift, float(along[near].max()))
+        out = c + max(0.0, lift) * n
+        self.__dict__["_sight_point"] = out
+        return out
+
+    @property
     def size_m(self) -> float:
         """Spot size: twice the power-weighted RMS radius (the 1/e diameter for a Gaussian)."""
         r2 = ((self.points - self.centroid) ** 2).sum(1)

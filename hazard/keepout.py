@@ -424,7 +424,7 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
             for spot, e in zip(spots, parts):
                 idx = np.flatnonzero(over & (e.max(axis=1) > 0))
                 if len(idx):
-                    start = ray_scene.off_surface(spot.centroid, spot.mean_frame[2])
+                    start = ray_scene.off_surface(spot.sight_point_m, spot.mean_frame[2])
                     e[idx[ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx])]] = 0.0
             rows = np.flatnonzero(over)
             top[rows] = sum(e[rows] for e in parts).max(axis=1)

@@ -158,7 +158,7 @@ def _reflected_at(spots, p, mu, ray_scene, states) -> np.ndarray:
         st = states.get(sp.target.index)
         los = np.ones(len(p))
         if ray_scene is not None:
-            start = ray_scene.off_surface(sp.centroid, sp.mean_frame[2])
+            start = ray_scene.off_surface(sp.sight_point_m, sp.mean_frame[2])
             los = (~ray_scene.occluded(np.broadcast_to(start, (len(p), 3)), p)).astype(float)
         g = np.ones(len(p))
         r, _ = spot_irradiance(sp, p, g, mu, st, los)

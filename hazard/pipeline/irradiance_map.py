@@ -239,7 +239,7 @@ def spot_line_of_sight(ray_scene, spot, p) -> tuple[np.ndarray, int]:
     points behind the spot's surface receive nothing whatever is in between (evaluated
     with the mean frame): no ray needed, False. Returns (mask, segments traced)."""
     c, nrm = spot.centroid, spot.mean_frame[2]
-    start = ray_scene.off_surface(c, nrm)
+    start = ray_scene.off_surface(spot.sight_point_m, nrm)
     rel = p - c
     far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
     need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular

@@ -338,7 +338,7 @@ def _reflected_w_m2(run: MotionRun, p, t, state_idx, gain, tau) -> np.ndarray:
         bs = run.states_list[k]
         for sp in bs.spots:
             if bs.ray_scene is not None:
-                start = bs.ray_scene.off_surface(sp.centroid, sp.mean_frame[2])
+                start = bs.ray_scene.off_surface(sp.sight_point_m, sp.mean_frame[2])
                 los = ~bs.ray_scene.occluded(np.broadcast_to(start, (len(rows), 3)), p[rows])
             else:
                 los = np.ones(len(rows), bool)
