@@ -268,16 +268,23 @@ def _pairs(rays: MirrorRays, obs, aperture_r):
             theta = (1.05 * chord if chord < 1 else math.pi) + sg * _SHELL * 1.001 + 1e-12
             f_mid = _crossing(p, pr, pp, rays.directions, math.sqrt(lo * hi))
             theta = min(theta, 2.0)
-            if len(members) <= _FEW_OBSERVERS:  # a few observers: one dot product per ray and observer
-                ray_i, obs_i = np.nonzero(f_mid @ u[members].T >= 1 - theta * theta / 2)
-                rows.append(members[obs_i])
-                idx.append(ray_i.astype(np.int64))
+            # first the rays within theta of the cap holding the shell's observers
+            u0 = u[members].sum(0)
+            u0 = u0 / max(float(np.linalg.norm(u0)), 1e-300)
+            cap = float(np.arccos(np.clip((u[members] @ u0).min(), -1.0, 1.0))) + 2 * math.asin(theta / 2)
+            sub = np.flatnonzero(f_mid @ u0 >= math.cos(min(cap, math.pi)))
+            if not len(sub):
                 continue
-            found = cKDTree(f_mid).query_ball_point(u[members], theta)
+            if len(members) <= _FEW_OBSERVERS:  # a few observers: one dot product per ray and observer
+                ray_i, obs_i = np.nonzero(f_mid[sub] @ u[members].T >= 1 - theta * theta / 2)
+                rows.append(members[obs_i])
+                idx.append(sub[ray_i])
+                continue
+            found = cKDTree(f_mid[sub]).query_ball_point(u[members], theta)
             counts = np.fromiter((len(x) for x in found), np.int64, len(found))
             if counts.sum():
                 rows.append(np.repeat(members, counts))
-                idx.append(np.concatenate([np.asarray(x, np.int64) for x in found]))
+                idx.append(sub[np.concatenate([np.asarray(x, np.int64) for x in found])])
     return np.concatenate(rows), np.concatenate(idx)
 
 
