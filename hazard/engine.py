@@ -71,7 +71,7 @@ class Spot:
     outline_s: np.ndarray | None = None  # exact lit outline in beam coordinates (flat targets hit whole)
     spread_m2: np.ndarray | None = None  # per sample: power-weighted variance of the beam within it [m^2]
     slump: object = None  # hazard.pipeline.slump.SpotSlump: the molten surface's tilt per analysis time, if any
-    aperture_m: float = 1e-3  # limiting aperture [m] (set from the scene's wavelength by the beam stage)
+    aperture_m: float = 7e-3  # limiting aperture diameter [m] of the mirror beams (set by the beam stage: pipeline.spots.mirror_aperture_m)
     edge_peak_w_m2: float | None = None  # sampled faceted targets: incident bound over the whole target (see _edge_bound)
     edge_source_m: float = math.inf  # the wavefront radius where edge_peak_w_m2 holds [m]
 
@@ -117,6 +117,27 @@ class Spot:
         x = f[0] - np.dot(f[0], z) * z
         x /= np.linalg.norm(x)
         return np.stack([x, np.cross(z, x), z])
+
+    @property
+    def sight_point_m(self) -> np.ndarray:
+        """Where lines of sight from the spot start: the centroid lifted along the mean normal
+        above every sample point and, on a solid or mesh target, above the target's vertices
+        within the spot's size of it. On a flat spot it is the centroid; a convex spot's
+        centroid lies behind its own surface, which would hide every observer from it."""
+        cached = self.__dict__.get("_sight_point")
+        if cached is not None:
+            return cached
+        n, c = self.mean_frame[2], self.centroid
+        lift = float(np.max((self.points - c) @ n))
+        if getattr(getattr(self.target, "spec", None), "shape", None) in ("box", "sphere", "cylinder", "mesh"):
+            rel = self.target.mesh.vertices - c
+            along = rel @ n
+            near = np.linalg.norm(rel - along[:, None] * n, axis=1) <= max(self.size_m, 1e-9)
+            if np.any(near):
+                lift = max(lift, float(along[near].max()))
+        out = c + max(0.0, lift) * n
+        self.__dict__["_sight_point"] = out
+        return out
 
     @property
     def size_m(self) -> float:
@@ -716,7 +737,7 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     spot's surface receive nothing whatever is in between (evaluated with the mean
     frame): no ray needed, False. Returns (mask, segments traced)."""
     c, nrm = spot.centroid, spot.mean_frame[2]
-    start = ray_scene.off_surface(c, nrm)
+    start = ray_scene.off_surface(spot.sight_point_m, nrm)  # in front of a convex mesh's own bulge too
     rel = p - c
     far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
     need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular

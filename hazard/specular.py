@@ -26,6 +26,11 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   ``(1 + D/p)(1 + D/p + 2 D (cos^2(beta) / cos_i + sin^2(beta) cos_i) / r)``.
 * The specular NOHD of a sphere or cylinder is solved on that same function along the
   worst reflected ray (:func:`specular_nohd`), so the observers and the NOHD agree.
+* **Curved meshes** (mesh files whose facets approximate a curved surface): a smooth
+  surface with interpolated vertex normals, traced by dense rays and averaged over the
+  limiting aperture, through any focus or caustic (:mod:`hazard.mesh_mirror`); their flat
+  facets, if any, as above. The specular NOHD of such a spot is the larger of its
+  samples' and the rays' (through the focus).
 * Attenuation once per leg: ``exp(-mu (R1 + D))``, R1 from the aperture to the mirror.
 """
 
@@ -35,9 +40,11 @@ import math
 
 import numpy as np
 
+from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, mirror_rays, tube_nohd
 from .rays import own_object
 
-__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w"]
+__all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w",
+           "mesh_mirror_irradiance"]
 
 _ITERATIONS = 80
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
@@ -85,6 +92,7 @@ def _planes(spot):
     elif spot.ray_faces is not None:
         faces, normals, points = spot.ray_faces
         flat = np.isin(faces, _target_faces(spot))  # lit facets only
+        flat &= ~curved_face_mask(t)  # a curved mesh's facets are traced by hazard.mesh_mirror
         if t.mesh.analytic is not None:
             if t.mesh.analytic[0] == "sphere":
                 flat[:] = False
@@ -358,6 +366,8 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
         else:
             geo = _flat_aperture_w_m2(spot.beam, s[ok], z[ok], path, mu, apertures.take(np.flatnonzero(ok)), spot.outline_s)
         out[ok] += rho * (geo if states is None else geo[:, None])
+    if is_curved_mesh(spot.target):
+        out += mesh_mirror_irradiance(spot, obs, gain, mu, states).irradiance_w_m2
     an = spot.target.mesh.analytic
     if an is not None:
         ok, geo, p, n, d, near = _curved_geometry(spot, obs)
@@ -452,6 +462,33 @@ def _cut_fraction(outline_s, centres_s, radii_s, sides=CUT_SIDES) -> np.ndarray:
     if live:
         out[live] = polygon_moments([polys[k] for k in live]).fraction
     return out
+
+
+def _cached_rays(spot, mu):
+    """The spot's curved-facet rays (:func:`hazard.mesh_mirror.mirror_rays`), built once
+    per attenuation coefficient and kept on the spot."""
+    cache = spot.__dict__.setdefault("_mesh_rays_cache", {})
+    if mu not in cache:
+        cache[mu] = mirror_rays(spot, mu, lambda s: _lit(spot, s))
+    return cache[mu]
+
+
+def mesh_mirror_irradiance(spot, observers_m, gain, attenuation_per_m, states=None):
+    """A curved mesh's mirror reflection at observers (M, 3), averaged over the limiting
+    aperture ``spot.aperture_m``: :class:`hazard.mesh_mirror.ApertureIrradiance` (upper
+    value, estimate, stated error, rays through the aperture, binned or ray tubes); its
+    rays are built once per spot and attenuation coefficient [1/m]. ``gain`` (M,)."""
+    obs, mu = np.asarray(observers_m, float), attenuation_per_m
+    gain = np.broadcast_to(np.asarray(gain, float), (len(obs),))
+    rays = _cached_rays(spot, mu)
+    m = len(obs)
+    if rays is None:
+        from .mesh_mirror import ApertureIrradiance
+
+        z = np.zeros((m,) if states is None else (m, len(np.atleast_1d(states))))
+        return ApertureIrradiance(z, z, z, np.zeros(m, np.int64), np.zeros(m, bool))
+    rho = _reflectance(spot, _local(rays.normals, spot.target.tangent, -rays.incoming), states)
+    return aperture_irradiance(rays, rho, obs, gain, mu, getattr(spot, "aperture_m", 7e-3))
 
 
 class SpecularNohd:
@@ -641,7 +678,16 @@ def specular_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
     or cylinder's curved side (:func:`_curved_nohd`: the same Coddington spreading and
     power bound as at the observers, solved along the worst reflected ray), and its
     direction (unit). ``rho``: the highest reflectance over ``states``; ``gain`` the eye's
-    optical gain; ``inf`` where the beam stays above the MPE past 1e9 m."""
+    optical gain; ``inf`` where the beam stays above the MPE past 1e9 m. A curved mesh is
+    also followed through its focus or caustic (:func:`_curved_mesh_nohd`), the larger taken."""
+    flat = _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states, gain)
+    if flat.nohd_m is None or not is_curved_mesh(spot.target):
+        return flat
+    return _curved_mesh_nohd(spot, mpe_w_m2, attenuation_per_m, states, gain, flat)
+
+
+def _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> SpecularNohd:
+    """The NOHD of the spot's samples and analytic curved side (:func:`specular_nohd`)."""
     if not spot.material.has_specular:
         return SpecularNohd(None, None)
     mu = attenuation_per_m
@@ -692,6 +738,21 @@ def _aperture_power(spot, states=None) -> float:
     """The mirror lobe's whole power (largest over ``states``) over the limiting
     aperture's area [W/m^2]: no mirror beam can average more over the aperture."""
     return float(np.max(reflected_power_w(spot, states))) / (math.pi * (spot.aperture_m / 2) ** 2)
+
+
+def _curved_mesh_nohd(spot, mpe_w_m2, mu, states, gain, flat: SpecularNohd) -> SpecularNohd:
+    """The curved facets' ray-tube NOHD (:func:`hazard.mesh_mirror.tube_nohd`: through a
+    focus, bounded by the aperture); where the lit part also has flat facets, the larger
+    of it and the samples' NOHD (which takes every sample as flat: conservative)."""
+    rays = _cached_rays(spot, mu)
+    if rays is None:
+        return flat
+    rho = _reflectance(spot, _local(rays.normals, spot.target.tangent, -rays.incoming), states)
+    rho = rho if states is None else rho.max(axis=1)
+    dist, direction = tube_nohd(rays, rho, mpe_w_m2, mu, getattr(spot, "aperture_m", 7e-3), gain)
+    if _planes(spot) and flat.nohd_m >= dist:  # flat facets lit too
+        return flat
+    return SpecularNohd(dist, flat.direction if direction is None else _unit(direction).tolist())
 
 
 def mirror_directions(spot):

@@ -118,7 +118,7 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     aperture_m = mirror_aperture_m(spec)
     for sp in built.spots:
         sp.aperture_m = aperture_m
-    notes = []
+    notes = _curved_mesh_notes(built.spots, aperture_m)
     if built.spill_w > 1e-3 * laser.average_power_w:
         notes.append(f"{100 * built.spill_w / laser.average_power_w:.3g} % of the beam misses every target (spill)")
     if built.blocked_w > 1e-3 * laser.average_power_w:
@@ -127,6 +127,21 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     notes.extend(_unreflected_notes(built.unreflected))
     return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w),
                      {k: v[0] for k, v in outlines.items()})
+
+
+def _curved_mesh_notes(spots, aperture_m) -> list:
+    """A note per spot on a curved mesh with a mirror lobe: how its reflection is computed."""
+    from ..mesh_mirror import MESH_MIRROR_RAYS, MIN_RAYS_IN_APERTURE, is_curved_mesh
+
+    out = []
+    for sp in spots:
+        if sp.material.has_specular and is_curved_mesh(sp.target):
+            curved = sp.target.mesh.curved_faces()
+            out.append(f"target {sp.target.name!r}: a curved mesh ({int(curved.sum())} of {len(curved)} facets curved): its mirror "
+                       f"beam is traced as a smooth surface (interpolated vertex normals) with about {MESH_MIRROR_RAYS} rays and "
+                       f"averaged over the {1e3 * aperture_m:.3g} mm limiting aperture: binned where at least "
+                       f"{MIN_RAYS_IN_APERTURE} rays cross it (two sampling standard deviations added), ray tubes elsewhere")
+    return out
 
 
 def _level0_cells(beam_samples: int) -> int:
