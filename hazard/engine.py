@@ -119,6 +119,16 @@ class Spot:
         return float(2 * math.sqrt(max((r2 * self.power_w).sum() / self.total_power_w, 0.0)))
 
     @property
+    def extent_m(self) -> float:
+        """Largest distance [m] from the centroid to any part of the spot: its triangles'
+        vertices, or (built without them) its samples plus 3 RMS radii of their spread."""
+        c = self.centroid
+        if self.patches is not None and len(self.patches.tri_x):
+            return float(np.sqrt(((self.patches.tri_x - c) ** 2).sum(-1)).max())
+        sd = np.sqrt(self.spread_m2) if self.spread_m2 is not None else 0.0
+        return float((np.linalg.norm(self.points - c, axis=1) + 3 * sd).max())
+
+    @property
     def mean_range_m(self) -> float:
         return float((self.range_from_laser_m * self.power_w).sum() / self.total_power_w)
 
@@ -697,7 +707,8 @@ def _near_field(spot: Spot, obs, weight, attenuation_per_m, states):
         return projected_brdf(model, wi_all[samples], wo, states, s)
 
     shape = (len(obs),) if states is None else (len(obs), len(states))
-    return near_field_irradiance(spot.patches, spot.points, spot.frames[:, 2], spot.power_w, obs, weight, kernel, shape)
+    return near_field_irradiance(spot.patches, spot.points, spot.spread_m2, spot.frames[:, 2], spot.power_w, obs, weight, kernel,
+                                 shape)
 
 
 def specular_power_w(spot: Spot, states=None):

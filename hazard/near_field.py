@@ -48,10 +48,11 @@ import numpy as np
 __all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_field_irradiance", "point_form_ok",
            "NEAR_FIELD_RTOL", "RULE_REACH", "MAX_DEPTH", "STATS"]
 
-NEAR_FIELD_RTOL = 1e-3  # error of the near-field integral, relative to P / d^2 of each sample
-RULE_REACH = 4.0  # the 7-point rule on a triangle only from >= this many triangle radii (see tests)
+NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
+RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
 MAX_DEPTH = 12  # four-way splits of a triangle at most (its size / 4096)
 _NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
+_PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
 
 # Dunavant degree-5 rule on a triangle: barycentric nodes and weights (sum 1)
 _A1, _B1, _W1 = 0.059715871789770, 0.470142064105115, 0.132394152788506
@@ -164,14 +165,16 @@ def patches_from_pieces(pieces, fraction, power_w, hit, centroids) -> SpotPatche
     return SpotPatches(tri_s, tri_x, dens, samp, np.asarray(power_w, float).copy(), _sample_radius(tri_x, samp, centroids))
 
 
-def point_form_ok(radius_m, distance_m, rtol=NEAR_FIELD_RTOL):
-    """True where a source of radius ``a`` seen from ``d`` is a point source to ``rtol``
-    of ``P / d^2`` (Lambertian kernel, Taylor remainder about the power centroid):
-    ``12 a^2 d^2 / (d - a)^4 <= rtol``."""
+def point_form_ok(radius_m, distance_m, rtol=NEAR_FIELD_RTOL, spread_m2=None):
+    """True where a source of radius ``a`` (and power-weighted variance ``sigma^2`` about
+    its power centroid, default ``a^2``) seen from ``d`` is a point source to ``rtol`` of
+    ``P / d^2``: the Taylor remainder of the Lambertian kernel ``n.y / |y|^3`` about the
+    centroid (no first-order term there) is at most ``1/2 max|Hessian| sigma^2 P`` with
+    ``|Hessian| <= 24 / (d - a)^4`` over the source, so ``12 sigma^2 d^2 / (d - a)^4 <= rtol``."""
     a, d = np.asarray(radius_m, float), np.asarray(distance_m, float)
+    var = a * a if spread_m2 is None else np.minimum(np.asarray(spread_m2, float), a * a)
     gap = np.maximum(d - a, 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return (gap > 0) & (12.0 * a * a * d * d <= rtol * gap ** 4)
+    return (gap > 0) & (12.0 * var * d * d <= rtol * gap ** 4)
 
 
 def _split(xs, ss):
@@ -206,16 +209,6 @@ def _rule(xs, ss, dens, oi, obs, kernel, samp, e):
     return len(o)
 
 
-def _sample_pairs(points, radius, obs, live, rtol):
-    """(observer, sample) pairs of ``live`` observers split into those the point form
-    serves to ``rtol`` and those to integrate: two (observer, sample) index pairs."""
-    d = np.linalg.norm(obs[live][:, None, :] - points[None, :, :], axis=-1)
-    ok = point_form_ok(radius[None, :], d, rtol)
-    po, ps = np.nonzero(ok)
-    io, is_ = np.nonzero(~ok)
-    return (live[po], ps), (live[io], is_)
-
-
 def _expand(patches, io, is_):
     """Each (observer, sample) pair as (observer, triangle) pairs over the sample's triangles."""
     order = np.argsort(patches.sample, kind="stable")
@@ -228,15 +221,18 @@ def _expand(patches, io, is_):
     return oi, order[first + offs]
 
 
-def near_field_irradiance(patches: SpotPatches, points, normals, power_w, obs, weight, kernel, shape, rtol=NEAR_FIELD_RTOL):
+def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, power_w, obs, weight, kernel, shape,
+                          rtol=NEAR_FIELD_RTOL):
     """Irradiance [W/m^2] of a spot at observers ``obs`` (M, 3), shape ``shape`` ((M,) or
     (M, T)): each (observer, sample) pair by the point form where :func:`point_form_ok`,
     else by the adaptive triangle rule (module notes).
 
-    ``points``, ``normals``, ``power_w``: the samples' power centroids, lit-side normals
-    and powers now; ``weight`` (M,) the observers' factor (gain x line of sight);
-    ``kernel(samples, x, o, scale)`` gives ``f_r cos(theta_r) exp(-mu R) scale / R^2``
-    for source points ``x`` of ``samples`` and observers ``o`` (rows, shape (N,) or (N, T)).
+    ``points``, ``spread_m2``, ``normals``, ``power_w``: the samples' power centroids,
+    variances about them [m^2], lit-side normals and powers now; ``weight`` (M,) the
+    observers' factor (gain x line of sight); ``kernel(samples, x, o, scale)`` gives
+    ``f_r cos(theta_r) exp(-mu R) scale / R^2`` for source points ``x`` of ``samples``
+    and observers ``o`` (rows, shape (N,) or (N, T)). Observers go in blocks (bounded
+    memory whatever the spot's number of triangles).
     """
     t0 = time.perf_counter()
     e = np.zeros(shape)
@@ -244,29 +240,61 @@ def near_field_irradiance(patches: SpotPatches, points, normals, power_w, obs, w
     if not len(live) or not len(power_w):
         return e
     ratio = np.where(patches.sample_power_w > 0, power_w / np.where(patches.sample_power_w > 0, patches.sample_power_w, 1.0), 0.0)
-    (po, ps), (io, is_) = _sample_pairs(points, patches.radius_m, obs, live, rtol)
+    spread = np.zeros(len(points)) if spread_m2 is None else np.asarray(spread_m2, float)
+    src = _Sources(patches, points, spread, normals, power_w, ratio, kernel)
+    counts = np.zeros(4, int)
+    block = max(1, _PAIR_BLOCK // max(len(points), len(patches.sample), 1))
+    for a in range(0, len(live), block):
+        counts += _near_block(src, obs, weight, live[a:a + block], e, rtol)
+    STATS.add(int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3]), time.perf_counter() - t0)
+    return e
+
+
+@dataclass
+class _Sources:
+    """A spot's samples and triangles as :func:`near_field_irradiance` uses them."""
+
+    patches: SpotPatches
+    points: np.ndarray
+    spread_m2: np.ndarray
+    normals: np.ndarray
+    power_w: np.ndarray
+    ratio: np.ndarray
+    kernel: object
+
+
+def _near_block(src: _Sources, obs, weight, rows, e, rtol):
+    """Observers ``rows``: the point form for the (observer, sample) pairs it serves, the
+    adaptive rule for the rest. Returns counts (observers integrated, pairs integrated,
+    kernel evaluations, pairs unresolved at ``MAX_DEPTH``)."""
+    pt = src.points
+    d = np.linalg.norm(obs[rows][:, None, :] - pt[None, :, :], axis=-1)
+    ok = point_form_ok(src.patches.radius_m[None, :], d, rtol, src.spread_m2[None, :])
+    po, ps = np.nonzero(ok)
+    io, is_ = np.nonzero(~ok)
+    po, io = rows[po], rows[io]
     n_eval = 0
-    step = max(1, _NODE_BLOCK // max(1, shape[1] if len(shape) == 2 else 1))
+    step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
     for a in range(0, len(po), step):
         o, s = po[a:a + step], ps[a:a + step]
-        np.add.at(e, o, kernel(s, points[s], obs[o], power_w[s] * weight[o]))
+        np.add.at(e, o, src.kernel(s, pt[s], obs[o], src.power_w[s] * weight[o]))
     n_eval += len(po)
-    oi, tri = _expand(patches, io, is_)
-    xs, ss, samp = patches.tri_x[tri], patches.tri_s[tri], patches.sample[tri]
-    dens = patches.density_w[tri] * ratio[samp] * weight[oi]
+    oi, tri = _expand(src.patches, io, is_)
+    p = src.patches
+    xs, ss, samp = p.tri_x[tri], p.tri_s[tri], p.sample[tri]
+    dens = p.density_w[tri] * src.ratio[samp] * weight[oi]
     unresolved = 0
     for depth in range(MAX_DEPTH + 1):
         if not len(oi):
             break
-        above = np.einsum("pvk,pk->pv", obs[oi][:, None, :] - xs, normals[samp]).max(axis=1) > 0
+        above = np.einsum("pvk,pk->pv", obs[oi][:, None, :] - xs, src.normals[samp]).max(axis=1) > 0
         xs, ss, samp, oi, dens = xs[above], ss[above], samp[above], oi[above], dens[above]
         rad, c = _triangle_radius(xs)
-        ok = np.linalg.norm(obs[oi] - c, axis=1) >= RULE_REACH * rad
+        good = np.linalg.norm(obs[oi] - c, axis=1) >= RULE_REACH * rad
         if depth == MAX_DEPTH:
-            unresolved += int((~ok).sum())
-            ok[:] = True
-        n_eval += _rule(xs[ok], ss[ok], dens[ok], oi[ok], obs, kernel, samp[ok], e)
-        xs, ss = _split(xs[~ok], ss[~ok])
-        samp, oi, dens = (np.tile(v[~ok], 4) for v in (samp, oi, dens))
-    STATS.add(len(np.unique(io)), len(io), n_eval, unresolved, time.perf_counter() - t0)
-    return e
+            unresolved += int((~good).sum())
+            good[:] = True
+        n_eval += _rule(xs[good], ss[good], dens[good], oi[good], obs, src.kernel, samp[good], e)
+        xs, ss = _split(xs[~good], ss[~good])
+        samp, oi, dens = (np.tile(v[~good], 4) for v in (samp, oi, dens))
+    return np.array([len(np.unique(io)), len(io), n_eval, unresolved])
