@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_field_irradiance", "point_form_ok",
-           "NEAR_FIELD_RTOL", "RULE_REACH", "MAX_DEPTH", "STATS"]
+           "stats_since", "describe", "NEAR_FIELD_RTOL", "RULE_REACH", "MAX_DEPTH", "STATS"]
 
 NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
 RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
@@ -103,6 +103,23 @@ class _Stats:
 
 
 STATS = _Stats()
+
+
+def stats_since(before: dict) -> dict:
+    """The near-field work done since ``before`` (a :meth:`_Stats.snapshot`)."""
+    now = STATS.snapshot()
+    return {k: now[k] - before[k] for k in now}
+
+
+def describe(counts: dict) -> str:
+    """One line for a stage's detail: how many observers needed the near-field integral and its cost."""
+    if not counts["pairs"]:
+        return "near field: none within reach of a spot's extent"
+    out = (f"near field: {counts['observers']} observer(s) integrated over the spot ({counts['pairs']} observer-sample "
+           f"pairs, {counts['evaluations']} kernel evaluations, {counts['seconds']:.3g} s summed over threads)")
+    if counts["unresolved"]:
+        out += f"; {counts['unresolved']} pair(s) not resolved after {MAX_DEPTH} splits (an observer on the spot's surface)"
+    return out
 
 
 def _triangle_radius(tri_x):
