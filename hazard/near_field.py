@@ -25,10 +25,11 @@ target for a collimated beam; the tangent plane of the leaf on a curved one). Fo
   ``P / d^2``: ``|Hessian| <= 24 / r^4`` gives ``12 a^2 d^2 / (d - a)^4 <= rtol`` with
   ``a`` the sample's radius on the surface and ``d`` the observer's distance;
 * otherwise its triangles with a 7-point degree-5 rule (Dunavant) where the observer is
-  at least ``RULE_REACH`` triangle radii away (measured: error below ``NEAR_FIELD_RTOL``
-  / 10 of the triangle's ``P / d^2`` for the Lambertian kernel at any orientation), and
-  four-way splits of the triangle in ``s`` (and on the surface) elsewhere, down to
-  ``MAX_DEPTH`` splits (pairs still unresolved there are counted in :data:`STATS`).
+  at least ``RULE_REACH`` triangle radii away (measured over random triangles and
+  directions: error <= 4e-5 of the triangle's ``P / d^2`` for the Lambertian kernel),
+  and bisection of the triangle's longest edge on the surface elsewhere (a long thin
+  spot is split along its length only), down to ``MAX_DEPTH`` bisections (pairs still
+  unresolved there are counted in :data:`STATS`).
 
 Observers behind a triangle's plane (in the sample's material frame) receive nothing
 from it and are dropped before any split. The bound is for the Lambertian kernel; a
@@ -50,7 +51,7 @@ __all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_fi
 
 NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
 RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
-MAX_DEPTH = 12  # four-way splits of a triangle at most (its size / 4096)
+MAX_DEPTH = 40  # bisections of a triangle at most (its area / 1e12)
 _NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
 _PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
 
@@ -195,11 +196,18 @@ def point_form_ok(radius_m, distance_m, rtol=NEAR_FIELD_RTOL, spread_m2=None):
 
 
 def _split(xs, ss):
-    """Four children of triangles (P, 3, k) by their edge midpoints: (4P, 3, k)."""
+    """Two children of triangles (P, 3, k) by bisecting each one's longest edge on the
+    surface (a spot stretched by grazing incidence is split along its length only):
+    (2P, 3, k) each, first children then second children."""
+    edge = np.stack([np.linalg.norm(xs[:, (i + 1) % 3] - xs[:, (i + 2) % 3], axis=1) for i in range(3)], axis=1)
+    k = edge.argmax(axis=1)  # the vertex opposite the longest edge goes first
+    perm = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1]])[k]
+    rows = np.arange(len(xs))[:, None]
+
     def kids(v):
-        m01, m12, m20 = 0.5 * (v[:, 0] + v[:, 1]), 0.5 * (v[:, 1] + v[:, 2]), 0.5 * (v[:, 2] + v[:, 0])
-        return np.concatenate([np.stack(t, axis=1) for t in ((v[:, 0], m01, m20), (m01, v[:, 1], m12),
-                                                             (m20, m12, v[:, 2]), (m01, m12, m20))])
+        v = v[rows, perm]
+        m = 0.5 * (v[:, 1] + v[:, 2])
+        return np.concatenate([np.stack((v[:, 0], v[:, 1], m), axis=1), np.stack((v[:, 0], m, v[:, 2]), axis=1)])
     return kids(xs), kids(ss)
 
 
@@ -313,5 +321,5 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
             good[:] = True
         n_eval += _rule(xs[good], ss[good], dens[good], oi[good], obs, src.kernel, samp[good], e)
         xs, ss = _split(xs[~good], ss[~good])
-        samp, oi, dens = (np.tile(v[~good], 4) for v in (samp, oi, dens))
+        samp, oi, dens = (np.tile(v[~good], 2) for v in (samp, oi, dens))
     return np.array([len(np.unique(io)), len(io), n_eval, unresolved])
