@@ -207,9 +207,9 @@ def _ground_reference(obs):
     u = np.array([0.0, GY, -GH]) / math.hypot(GY, GH)
     t1 = np.array([1.0, 0.0, 0.0])
     t2 = np.cross(t1, u)
-    xg, xw = np.polynomial.legendre.leggauss(40)
+    xg, xw = np.polynomial.legendre.leggauss(24)
     zg, zw = np.polynomial.legendre.leggauss(8)
-    edges = np.linspace(-5.0, 5.0, 401)
+    edges = np.linspace(-5.0, 5.0, 201)
     zc = ((edges[:-1] + edges[1:]) / 2)[:, None] + (np.diff(edges) / 2)[:, None] * zg[None, :]
     zc, zwt = zc.ravel(), (np.diff(edges)[:, None] / 2 * zw[None, :]).ravel()
     X, Z = np.meshgrid(5.0 * xg, zc, indexing="ij")
