@@ -115,7 +115,7 @@ def stats_since(before: dict) -> dict:
 def describe(counts: dict) -> str:
     """One line for a stage's detail: how many observers needed the near-field integral and its cost."""
     if not counts["pairs"]:
-        return "near field: none within reach of a spot's extent"
+        return "near field: no observer needed the integral over a spot"
     out = (f"near field: {counts['observers']} observer(s) integrated over the spot ({counts['pairs']} observer-sample "
            f"pairs, {counts['evaluations']} kernel evaluations, {counts['seconds']:.3g} s summed over threads)")
     if counts["unresolved"]:
