@@ -13,7 +13,9 @@ Physics (spec `dynamic-sh-brdf.md` section 3, `laser-safety.md` section 3.1,
   ``E = f_r(wi, wo, state) cos(theta_r) P exp(-mu R) K / R^2``, computed through
   ``f_r cos(theta_r)`` so grazing observers give no 0/0. Observers at least 20 spot sizes
   away see the spot as one point source (power-weighted centroid, mean direction and
-  normal); nearer ones sum over the samples.
+  normal); nearer ones get the integral over the spot's irradiance
+  (:mod:`hazard.near_field`: each sample a point source only where that is proven to
+  1 %, its triangles integrated elsewhere).
 * An ideal-mirror (delta) lobe is traced by geometric optics from what really hits the
   mirror (:mod:`hazard.specular`): the unfolded beam through the lit part of a flat
   mirror, the Coddington spread of a convex sphere or cylinder.
