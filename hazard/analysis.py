@@ -22,6 +22,7 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads, thread_limit
 
+from . import near_field
 from .aperture import limiting_aperture_m, observer_apertures
 from .nohd import group_gains
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
@@ -186,7 +187,8 @@ def _log_map(log, inp, out, the_plan):
     far = int(out.far_field.sum())
     name, other = ("dynamic", "static") if inp.states else ("static", "dynamic")
     log.ran(name, f"{m} observers x {n_t} time(s) in blocks of {out.chunk} on {out.workers} thread(s); {far} far-field "
-                  f"(spot as a point source), {m - far} summed over hits", out.map_seconds - out.exposure_seconds - out.los_seconds)
+                  f"(spot as a point source), {m - far} summed over hits; {near_field.describe(out.near_field)}",
+            out.map_seconds - out.exposure_seconds - out.los_seconds)
     log.skip(other, the_plan.skipped(other) or "no lit target has a dynamic material: no time loop")
     log.ran("exposure", f"window {inp.duration_s:g} s over {n_t} time(s) (computed per block inside the map; "
                         f"its time is the per-thread share of the map's wall time)", out.exposure_seconds)

@@ -13,7 +13,9 @@ Physics (spec `dynamic-sh-brdf.md` section 3, `laser-safety.md` section 3.1,
   ``E = f_r(wi, wo, state) cos(theta_r) P exp(-mu R) K / R^2``, computed through
   ``f_r cos(theta_r)`` so grazing observers give no 0/0. Observers at least 20 spot sizes
   away see the spot as one point source (power-weighted centroid, mean direction and
-  normal); nearer ones sum over the samples.
+  normal); nearer ones get the integral over the spot's irradiance
+  (:mod:`hazard.near_field`: each sample a point source only where that is proven to
+  1 %, its triangles integrated elsewhere).
 * An ideal-mirror (delta) lobe is traced by geometric optics from what really hits the
   mirror (:mod:`hazard.specular`): the unfolded beam through the lit part of a flat
   mirror, the Coddington spread of a convex sphere or cylinder.
@@ -30,6 +32,7 @@ import numpy as np
 
 from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
+from .near_field import near_field_irradiance, patches_from_leaves, patches_from_pieces
 from .rays import own_object
 
 __all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES",
@@ -74,6 +77,7 @@ class Spot:
     aperture_m: float = 7e-3  # limiting aperture diameter [m] of the mirror beams (set by the beam stage: pipeline.spots.mirror_aperture_m)
     edge_peak_w_m2: float | None = None  # sampled faceted targets: incident bound over the whole target (see _edge_bound)
     edge_source_m: float = math.inf  # the wavefront radius where edge_peak_w_m2 holds [m]
+    patches: object = None  # hazard.near_field.SpotPatches: the spot's triangles for the near-field integral
 
     def __post_init__(self):
         if self.material is None:
@@ -146,6 +150,16 @@ class Spot:
         if self.spread_m2 is not None:
             r2 = r2 + self.spread_m2
         return float(2 * math.sqrt(max((r2 * self.power_w).sum() / self.total_power_w, 0.0)))
+
+    @property
+    def extent_m(self) -> float:
+        """Largest distance [m] from the centroid to any part of the spot: its triangles'
+        vertices, or (built without them) its samples plus 3 RMS radii of their spread."""
+        c = self.centroid
+        if self.patches is not None and len(self.patches.tri_x):
+            return float(np.sqrt(((self.patches.tri_x - c) ** 2).sum(-1)).max())
+        sd = np.sqrt(self.spread_m2) if self.spread_m2 is not None else 0.0
+        return float((np.linalg.norm(self.points - c, axis=1) + 3 * sd).max())
 
     @property
     def mean_range_m(self) -> float:
@@ -320,6 +334,8 @@ class ExactSamples:
     error_w: float  # disk polygon bound + attenuation spread + nothing else
     total_w: float  # the unattenuated outline integral
     near_axial_m: np.ndarray | None = None  # smallest axial distance over each piece [m] (where its peak bound holds)
+    pieces: np.ndarray | None = None  # (n,) object: each sample's outline piece in s (None: holes cut from it)
+    fraction: np.ndarray | None = None  # the pieces' exact beam power fractions
 
 
 def _hole_cells(outline, fronts, n0):
@@ -395,7 +411,11 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
         w = beam.diameter_at(zmin) / 2
     peak = beam.power_w / (math.pi * w * w) * np.exp(-r2) * np.sqrt(1 + smax2 * (beam.divergence_rad / 2) ** 2) * up
     err = disk_err + beam.power_w * slack + float((power * (up - down)).sum())
-    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total, zmin)
+    pieces = None
+    if not holes:  # the pieces are what is lit (with holes only their moments are)
+        pieces = np.empty(len(oc.pieces), object)
+        pieces[:] = [np.asarray(p, float) for p in oc.pieces]
+    return ExactSamples(pts, unit, path, z, power * up, peak, m.cov, m.area, err, total, zmin, pieces, m.fraction)
 
 
 def _aggregate(keys, weights, values):
@@ -427,7 +447,7 @@ def _leaf_geometry(beam, cells, rows, pts, dirs, normals):
     jac = _surface_jacobian(beam, w, dirs, normals)
     shifted = pts + jac[0] * (mean[:, 0] - centre[:, 0])[:, None] + jac[1] * (mean[:, 1] - centre[:, 1])[:, None]
     spread = (jac[0] ** 2).sum(1) * var[:, 0] + (jac[1] ** 2).sum(1) * var[:, 1]
-    return shifted, spread, s_c, z, w
+    return shifted, spread, s_c, z, w, jac
 
 
 def _leaf_near_axial(beam, cells, rows, z, w, dirs, normals):
@@ -475,7 +495,8 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
         normals = -normals
     atten = np.exp(-mu * t)
     power = cells.power_w[rows] * scale * atten
-    pts, spread, s_c, z, w = _leaf_geometry(beam, cells, rows, pts, dirs, normals)
+    centre_x = pts
+    pts, spread, s_c, z, w, jac = _leaf_geometry(beam, cells, rows, pts, dirs, normals)
     near = np.maximum(_leaf_near_axial(beam, cells, rows, z, w, dirs, normals), _nearest_axial(beam, target))
     peak = beam.power_w / (math.pi * w * w) * cells.max_profile(rows) * atten * np.sqrt(1 + (s_c * s_c).sum(1) * (beam.divergence_rad / 2) ** 2)
     area = float(np.sum(cells.size(cells.level[rows]) ** 2 * w * w))
@@ -495,9 +516,13 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     scatter = np.bincount(inv, wts * (spread + ((pts - means[inv, 0:3]) ** 2).sum(1)), n_g) / np.maximum(psum, 1e-300)
     nrm = means[:, 6:9] / np.linalg.norm(means[:, 6:9], axis=1, keepdims=True)
     inc = means[:, 3:6] / np.linalg.norm(means[:, 3:6], axis=1, keepdims=True)
-    return Spot(target, means[:, 0:3], np.bincount(inv, power, n_g), inc, _frames(target, nrm), means[:, 9], pk,
+    s0, s1, t0, t1 = cells.bounds(rows)
+    sample_power = np.bincount(inv, power, n_g)
+    patches = patches_from_leaves(centre_x, jac, np.stack([s0, t0], 1), np.stack([s1, t1], 1), power, inv, means[:, 0:3],
+                                  sample_power)
+    return Spot(target, means[:, 0:3], sample_power, inc, _frames(target, nrm), means[:, 9], pk,
                 p_near, material, side, float(error_w), exact, area, cells, beam,
-                _target_ray_faces(tracer, target), spread_m2=scatter)
+                _target_ray_faces(tracer, target), spread_m2=scatter, patches=patches)
 
 
 def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_s):
@@ -510,9 +535,13 @@ def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_
     for r in range(2):
         for c in range(2):
             spread += ex.cov_s[:, r, c] * np.einsum("ij,ij->i", jac[r], jac[c])
+    patches = None
+    if ex.pieces is not None and len(ex.pieces):
+        patches = patches_from_pieces(list(ex.pieces), ex.fraction, ex.power_w, lambda s: _plane_hits(beam, target, s)[0],
+                                      ex.points)
     return Spot(target, ex.points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
                 beam.source_distance_m(ex.axial_m if ex.near_axial_m is None else ex.near_axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
-                cells, beam, _target_ray_faces(tracer, target), outline_s, spread)
+                cells, beam, _target_ray_faces(tracer, target), outline_s, spread, patches=patches)
 
 
 def _pick_side(target, power_w, back):
@@ -719,7 +748,9 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
         scale = spot.total_power_w * np.exp(-attenuation_per_m * rng[far]) * gain[far] * vis[far] / rng[far] ** 2
         e[far] = projected_brdf(model, wi, wo, states, scale)
     near = np.flatnonzero(~far & (vis > 0))
-    if len(near):
+    if len(near) and spot.patches is not None:
+        e[near] = _near_field(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
+    elif len(near):  # a spot built without its patches (by hand): its samples as point sources
         wi_all = _to_local(spot.frames, -spot.incoming)
         for i in range(len(spot.points)):
             v = obs[near] - spot.points[i]
@@ -745,6 +776,28 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     row = np.zeros(len(p), bool)
     row[idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx], transparent=own_object(spot.target))
     return row, len(idx)
+
+
+def _near_field(spot: Spot, obs, weight, attenuation_per_m, states):
+    """Irradiance [W/m^2] (M,) or (M, T) at near observers ``obs`` (M, 3) with factors
+    ``weight`` (gain x line of sight): the integral over the spot's patches
+    (:func:`hazard.near_field.near_field_irradiance`, ``f_r cos(theta_r)`` of each
+    sample's material frame and incidence)."""
+    model = spot.material
+    wi_all = _to_local(spot.frames, -spot.incoming)
+
+    def kernel(samples, x, o, scale):
+        v = o - x
+        r = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+        wo = _to_local(spot.frames[samples], v / r[:, None])
+        s = scale / (r * r)
+        if attenuation_per_m:
+            s = s * np.exp(-attenuation_per_m * r)
+        return projected_brdf(model, wi_all[samples], wo, states, s)
+
+    shape = (len(obs),) if states is None else (len(obs), len(states))
+    return near_field_irradiance(spot.patches, spot.points, spot.spread_m2, spot.frames[:, 2], spot.power_w, obs, weight, kernel,
+                                 shape)
 
 
 def specular_power_w(spot: Spot, states=None):

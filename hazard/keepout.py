@@ -381,8 +381,10 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     (``states_by_target``: target index -> states on one common time grid, absent for
     static materials).
 
-    ``max_range_m`` is how far one spot alone can exceed the MPE: with one spot only the
-    nodes within it are evaluated. With several spots their sum can exceed the MPE where
+    ``max_range_m`` is how far one spot alone can exceed the MPE (from a point source):
+    with one spot only the nodes within it of the spot's outline are evaluated (the box
+    about its centroid widened by :attr:`hazard.engine.Spot.extent_m`, so a spot
+    stretched by grazing incidence is covered along its whole length). With several spots their sum can exceed the MPE where
     none does alone, so every node is evaluated. Rays are traced only where the
     unoccluded sum exceeds the MPE (occlusion can only lower it). Nodes go in blocks
     (bounded memory, threads).
@@ -396,10 +398,10 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     if not spots:
         return Footprint(mask, 0.0, eye_height_m, ratio)
     ix, iy = np.arange(nx), np.arange(ny)
-    if len(spots) == 1 and np.isfinite(max_range_m):
-        c = spots[0].centroid
-        ix = np.flatnonzero(np.abs(xs - c[0]) <= max_range_m)
-        iy = np.flatnonzero(np.abs(ys - c[1]) <= max_range_m)
+    if len(spots) == 1 and np.isfinite(max_range_m):  # out to the NOHD from any point of the spot
+        c, reach = spots[0].centroid, max_range_m + spots[0].extent_m
+        ix = np.flatnonzero(np.abs(xs - c[0]) <= reach)
+        iy = np.flatnonzero(np.abs(ys - c[1]) <= reach)
     if not len(ix) or not len(iy):
         return Footprint(mask, 0.0, eye_height_m, ratio)
     gx, gy = np.meshgrid(xs[ix], ys[iy])

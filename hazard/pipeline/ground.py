@@ -6,6 +6,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .. import near_field as _near
 from ..keepout import Footprint, ground_footprint
 from .direct import beam_at, clear_of_objects
 from .slump import held_slump
@@ -26,6 +27,7 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
     """Ground cells at ``eye_height_m`` where the irradiance summed over every spot
     reaches the MPE, out to the longest NOHD of any target (diffuse or specular);
     ``aperture_m``: the limiting aperture the direct beam's ratio is taken through."""
+    before = _near.STATS.snapshot()
     lit = [tr for tr in target_rows if tr.dynamic_lobe is not None]  # unlit targets' rows carry no lobe
     rmax = max([tr.dynamic_lobe.max_range_m for tr in lit] + [tr.specular_nohd_dynamic_m or 0.0 for tr in lit] + [0.0])
     initial = {k: v[:1] for k, v in states.items()}
@@ -39,7 +41,7 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
     direct = direct_ratio(beam, terrain, ray_scene, mu, eye_height_m, mpe_w_m2, aperture_m)
     fp_static, fp_dyn = replace(fp_static, direct_ratio=direct), replace(fp_dyn, direct_ratio=direct)
     detail = (f"hazardous ground at {eye_height_m:g} m eye height: static {fp_static.area_m2:.4g} m^2, "
-              f"dynamic {fp_dyn.area_m2:.4g} m^2")
+              f"dynamic {fp_dyn.area_m2:.4g} m^2; {_near.describe(_near.stats_since(before))}")
     return Footprints(fp_static, fp_dyn, detail)
 
 

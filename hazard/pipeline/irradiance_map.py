@@ -21,6 +21,7 @@ import numpy as np
 from brdfmodels.parallel import block_rows, map_blocks
 
 from .. import mpe as _mpe
+from .. import near_field as _near
 from ..engine import spot_irradiance, spot_line_of_sight, specular_irradiance
 
 __all__ = ["MapInputs", "MapOutputs", "irradiance_map", "spot_line_of_sight", "sliding_max_integral", "HISTORY_KEEP_MAX", "MAP_CHUNK"]
@@ -79,6 +80,7 @@ class MapOutputs:
     exposure_seconds: float = 0.0
     map_seconds: float = 0.0
     chunk: int = 0  # observers per block
+    near_field: dict = field(default_factory=dict)  # hazard.near_field counts of this map
     workers: int = 1
     segments: list = field(default_factory=list)
 
@@ -242,8 +244,9 @@ def irradiance_map(inp: MapInputs) -> MapOutputs:
     m = len(inp.points)
     chunk = block_rows(len(inp.times_s), inp.chunk)  # long histories: fewer observers per block
     workers = max(1, min(inp.threads, -(-m // chunk)))
-    t0 = time.perf_counter()
+    t0, before = time.perf_counter(), _near.STATS.snapshot()
     parts = map_blocks(run.block, m, chunk, workers)
+    run.out.near_field = _near.stats_since(before)
     out = run.out
     out.map_seconds = time.perf_counter() - t0
     # per-thread shares of the wall time (the parts ran side by side on the workers)

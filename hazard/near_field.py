@@ -1,0 +1,325 @@
+"""Near field of an extended spot: the exact integral over the spot's irradiance.
+
+Spec `range-safety.md` section 10 ("Near field of an extended diffuse spot"): an observer
+within a few spot lengths receives
+
+    E = integral over the spot of f_r(wi, wo) cos(theta_r) exp(-mu R) / R^2 dP(x),
+
+with ``dP`` the power landing on the surface element at ``x`` (the incident Gaussian beam
+with its footprint stretched by the incidence, clipped by the target's outline) and
+``theta_o`` taken as 0 at the eye (worst case). Summing the spot's coarse samples as
+point sources (the engine before this module) puts a grazing spot, ``D / cos(i)`` long,
+into a few points ``~D / (16 cos(i))`` apart: an observer close beside it got up to
+hundreds of times too little.
+
+How it is integrated. The spot is cut into *patches*: the beam's leaf cells (squares in
+the beam's transverse coordinates ``s``, units of the 1/e radius) or, for flat targets
+hit whole, the exact outline pieces (convex polygons in ``s``), each split into
+triangles. In ``s`` the power density is ``c exp(-|s|^2)`` (``c`` makes each patch carry
+its exact power) and each triangle maps affinely onto the surface (exact on a flat
+target for a collimated beam; the tangent plane of the leaf on a curved one). For each
+(observer, sample) pair:
+
+* the sample as one point source (its power centroid) when the Taylor remainder of the
+  Lambertian kernel ``n.y / |y|^3`` proves the error below ``NEAR_FIELD_RTOL`` of
+  ``P / d^2``: ``|Hessian| <= 24 / r^4`` gives ``12 a^2 d^2 / (d - a)^4 <= rtol`` with
+  ``a`` the sample's radius on the surface and ``d`` the observer's distance;
+* otherwise its triangles with a 7-point degree-5 rule (Dunavant) where the observer is
+  at least ``RULE_REACH`` triangle radii away (measured over random triangles and
+  directions: error <= 4e-5 of the triangle's ``P / d^2`` for the Lambertian kernel),
+  and bisection of the triangle's longest edge on the surface elsewhere (a long thin
+  spot is split along its length only), down to ``MAX_DEPTH`` bisections (pairs still
+  unresolved there are counted in :data:`STATS`).
+
+Observers behind a triangle's plane (in the sample's material frame) receive nothing
+from it and are dropped before any split. The bound is for the Lambertian kernel; a
+glossy lobe narrower than the spot's angular size seen from the observer is resolved
+by the same splits only as far as ``RULE_REACH`` resolves it (not proven).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_field_irradiance", "point_form_ok",
+           "stats_since", "describe", "NEAR_FIELD_RTOL", "RULE_REACH", "MAX_DEPTH", "STATS"]
+
+NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
+RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
+MAX_DEPTH = 40  # bisections of a triangle at most (its area / 1e12)
+_NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
+_PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
+
+# Dunavant degree-5 rule on a triangle: barycentric nodes and weights (sum 1)
+_A1, _B1, _W1 = 0.059715871789770, 0.470142064105115, 0.132394152788506
+_A2, _B2, _W2 = 0.797426985353087, 0.101286507323456, 0.125939180544827
+RULE_BARY = np.array([[1 / 3, 1 / 3, 1 / 3],
+                      [_A1, _B1, _B1], [_B1, _A1, _B1], [_B1, _B1, _A1],
+                      [_A2, _B2, _B2], [_B2, _A2, _B2], [_B2, _B2, _A2]])
+RULE_W = np.array([0.225, _W1, _W1, _W1, _W2, _W2, _W2])
+
+
+@dataclass(frozen=True)
+class SpotPatches:
+    """A spot's triangles: vertices in beam coordinates ``tri_s`` (K, 3, 2) [units of
+    the 1/e radius] and on the surface ``tri_x`` (K, 3, 3) [m], the density factor
+    ``density_w`` (K,) [W per unit s-area at s = 0], the sample each belongs to
+    ``sample`` (K,), the samples' powers when built ``sample_power_w`` (n,) [W] (a spot
+    whose powers are later rescaled, e.g. for another attenuation, scales its
+    triangles alike) and each sample's radius on the surface ``radius_m`` (n,) [m]."""
+
+    tri_s: np.ndarray
+    tri_x: np.ndarray
+    density_w: np.ndarray
+    sample: np.ndarray
+    sample_power_w: np.ndarray
+    radius_m: np.ndarray
+
+
+class _Stats:
+    """Counts of the near-field work in this process (read as differences around a stage)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self.observers = self.pairs = self.evaluations = self.unresolved = 0
+        self.seconds = 0.0
+
+    def add(self, observers, pairs, evaluations, unresolved, seconds):
+        with self._lock:
+            self.observers += observers
+            self.pairs += pairs
+            self.evaluations += evaluations
+            self.unresolved += unresolved
+            self.seconds += seconds
+
+    def snapshot(self) -> dict:
+        with self._lock:
+            return dict(observers=self.observers, pairs=self.pairs, evaluations=self.evaluations,
+                        unresolved=self.unresolved, seconds=self.seconds)
+
+
+STATS = _Stats()
+
+
+def stats_since(before: dict) -> dict:
+    """The near-field work done since ``before`` (a :meth:`_Stats.snapshot`)."""
+    now = STATS.snapshot()
+    return {k: now[k] - before[k] for k in now}
+
+
+def describe(counts: dict) -> str:
+    """One line for a stage's detail: how many observers needed the near-field integral and its cost."""
+    if not counts["pairs"]:
+        return "near field: no observer needed the integral over a spot"
+    out = (f"near field: {counts['observers']} observer(s) integrated over the spot ({counts['pairs']} observer-sample "
+           f"pairs, {counts['evaluations']} kernel evaluations, {counts['seconds']:.3g} s summed over threads)")
+    if counts["unresolved"]:
+        out += f"; {counts['unresolved']} pair(s) not resolved after {MAX_DEPTH} splits (an observer on the spot's surface)"
+    return out
+
+
+def _triangle_radius(tri_x):
+    """Largest distance [m] of a triangle's vertices from its centroid (K,)."""
+    c = tri_x.mean(axis=1)
+    return np.sqrt(((tri_x - c[:, None, :]) ** 2).sum(-1)).max(axis=1), c
+
+
+def _sample_radius(tri_x, sample, centroids):
+    """Per sample: largest distance [m] of its triangles' vertices from its point."""
+    d = np.sqrt(((tri_x - centroids[sample][:, None, :]) ** 2).sum(-1)).max(axis=1)
+    out = np.zeros(len(centroids))
+    np.maximum.at(out, sample, d)
+    return out
+
+
+def _erf_box(lo, hi):
+    """Integral of exp(-|s|^2) over boxes [lo, hi] (N, 2): (pi / 4) product of erf differences."""
+    from scipy.special import erf
+
+    return (math.pi / 4) * (erf(hi[:, 0]) - erf(lo[:, 0])) * (erf(hi[:, 1]) - erf(lo[:, 1]))
+
+
+def patches_from_leaves(centre_x, jac, s_lo, s_hi, power_w, sample, centroids, sample_power_w) -> SpotPatches:
+    """Triangles of a spot made of leaf cells: leaf ``k`` spans ``[s_lo, s_hi]`` (L, 2)
+    in beam coordinates, its centre ray hits ``centre_x`` (L, 3) and ``jac`` (two (L, 3)
+    arrays, d x / d s) maps it onto the surface's tangent plane; ``power_w`` (L,) its
+    power (attenuated and scaled as the spot's), ``sample`` (L,) its sample."""
+    sc = 0.5 * (s_lo + s_hi)
+    corners_s = np.stack([np.stack([s_lo[:, 0], s_lo[:, 1]], 1), np.stack([s_hi[:, 0], s_lo[:, 1]], 1),
+                          np.stack([s_hi[:, 0], s_hi[:, 1]], 1), np.stack([s_lo[:, 0], s_hi[:, 1]], 1)], axis=1)
+    ds = corners_s - sc[:, None, :]
+    corners_x = centre_x[:, None, :] + ds[:, :, :1] * jac[0][:, None, :] + ds[:, :, 1:] * jac[1][:, None, :]
+    mass = _erf_box(s_lo, s_hi)
+    dens = np.where(mass > 0, power_w / np.where(mass > 0, mass, 1.0), 0.0)
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    tri_s = corners_s[:, tri].reshape(-1, 3, 2)
+    tri_x = corners_x[:, tri].reshape(-1, 3, 3)
+    samp = np.repeat(np.asarray(sample, int), 2)
+    return SpotPatches(tri_s, tri_x, np.repeat(dens, 2), samp, np.asarray(sample_power_w, float).copy(),
+                       _sample_radius(tri_x, samp, centroids))
+
+
+def patches_from_pieces(pieces, fraction, power_w, hit, centroids) -> SpotPatches:
+    """Triangles of a flat target's spot from its exact outline pieces (convex polygons
+    in beam coordinates, one per sample): fans from each piece's first vertex, mapped
+    onto the surface by ``hit(s (N, 2)) -> points (N, 3)`` (exact ray-plane hits);
+    ``fraction`` (n,) the pieces' exact beam power fractions, ``power_w`` (n,) their powers."""
+    tri_s, samp = [], []
+    for q, poly in enumerate(pieces):
+        p = np.asarray(poly, float)
+        for k in range(1, len(p) - 1):
+            tri_s.append(p[[0, k, k + 1]])
+            samp.append(q)
+    tri_s = np.asarray(tri_s, float).reshape(-1, 3, 2)
+    samp = np.asarray(samp, int)
+    tri_x = hit(tri_s.reshape(-1, 2)).reshape(-1, 3, 3)
+    mass = math.pi * np.asarray(fraction, float)
+    dens = np.where(mass > 0, np.asarray(power_w, float) / np.where(mass > 0, mass, 1.0), 0.0)[samp]
+    return SpotPatches(tri_s, tri_x, dens, samp, np.asarray(power_w, float).copy(), _sample_radius(tri_x, samp, centroids))
+
+
+def point_form_ok(radius_m, distance_m, rtol=NEAR_FIELD_RTOL, spread_m2=None):
+    """True where a source of radius ``a`` (and power-weighted variance ``sigma^2`` about
+    its power centroid, default ``a^2``) seen from ``d`` is a point source to ``rtol`` of
+    ``P / d^2``: the Taylor remainder of the Lambertian kernel ``n.y / |y|^3`` about the
+    centroid (no first-order term there) is at most ``1/2 max|Hessian| sigma^2 P`` with
+    ``|Hessian| <= 24 / (d - a)^4`` over the source, so ``12 sigma^2 d^2 / (d - a)^4 <= rtol``."""
+    a, d = np.asarray(radius_m, float), np.asarray(distance_m, float)
+    var = a * a if spread_m2 is None else np.minimum(np.asarray(spread_m2, float), a * a)
+    gap = np.maximum(d - a, 0.0)
+    return (gap > 0) & (12.0 * var * d * d <= rtol * gap ** 4)
+
+
+def _split(xs, ss):
+    """Two children of triangles (P, 3, k) by bisecting each one's longest edge on the
+    surface (a spot stretched by grazing incidence is split along its length only):
+    (2P, 3, k) each, first children then second children."""
+    edge = np.stack([np.linalg.norm(xs[:, (i + 1) % 3] - xs[:, (i + 2) % 3], axis=1) for i in range(3)], axis=1)
+    k = edge.argmax(axis=1)  # the vertex opposite the longest edge goes first
+    perm = np.array([[0, 1, 2], [1, 2, 0], [2, 0, 1]])[k]
+    rows = np.arange(len(xs))[:, None]
+
+    def kids(v):
+        v = v[rows, perm]
+        m = 0.5 * (v[:, 1] + v[:, 2])
+        return np.concatenate([np.stack((v[:, 0], v[:, 1], m), axis=1), np.stack((v[:, 0], m, v[:, 2]), axis=1)])
+    return kids(xs), kids(ss)
+
+
+def _area_s(ss):
+    e1, e2 = ss[:, 1] - ss[:, 0], ss[:, 2] - ss[:, 0]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
+def _rule(xs, ss, dens, oi, obs, kernel, samp, e):
+    """Add the 7-point rule of triangles (P, 3, .) to ``e`` at observers ``oi``; ``dens``
+    (P,) already holds the per-pair factors. Returns the number of nodes evaluated."""
+    if not len(oi):
+        return 0
+    x = np.einsum("jv,pvk->pjk", RULE_BARY, xs).reshape(-1, 3)
+    s = np.einsum("jv,pvk->pjk", RULE_BARY, ss)
+    w = (_area_s(ss) * dens)[:, None] * RULE_W[None, :] * np.exp(-(s * s).sum(-1))
+    o = np.repeat(oi, len(RULE_W))
+    smp = np.repeat(samp, len(RULE_W))
+    w = w.ravel()
+    step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
+    for a in range(0, len(o), step):
+        b = min(len(o), a + step)
+        np.add.at(e, o[a:b], kernel(smp[a:b], x[a:b], obs[o[a:b]], w[a:b]))
+    return len(o)
+
+
+def _expand(patches, io, is_):
+    """Each (observer, sample) pair as (observer, triangle) pairs over the sample's triangles."""
+    order = np.argsort(patches.sample, kind="stable")
+    counts = np.bincount(patches.sample, minlength=len(patches.sample_power_w))
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    reps = counts[is_]
+    oi = np.repeat(io, reps)
+    first = np.repeat(starts[is_], reps)
+    offs = np.arange(len(oi)) - np.repeat(np.cumsum(reps) - reps, reps)
+    return oi, order[first + offs]
+
+
+def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, power_w, obs, weight, kernel, shape,
+                          rtol=NEAR_FIELD_RTOL):
+    """Irradiance [W/m^2] of a spot at observers ``obs`` (M, 3), shape ``shape`` ((M,) or
+    (M, T)): each (observer, sample) pair by the point form where :func:`point_form_ok`,
+    else by the adaptive triangle rule (module notes).
+
+    ``points``, ``spread_m2``, ``normals``, ``power_w``: the samples' power centroids,
+    variances about them [m^2], lit-side normals and powers now; ``weight`` (M,) the
+    observers' factor (gain x line of sight); ``kernel(samples, x, o, scale)`` gives
+    ``f_r cos(theta_r) exp(-mu R) scale / R^2`` for source points ``x`` of ``samples``
+    and observers ``o`` (rows, shape (N,) or (N, T)). Observers go in blocks (bounded
+    memory whatever the spot's number of triangles).
+    """
+    t0 = time.perf_counter()
+    e = np.zeros(shape)
+    live = np.flatnonzero(np.asarray(weight) > 0)
+    if not len(live) or not len(power_w):
+        return e
+    ratio = np.where(patches.sample_power_w > 0, power_w / np.where(patches.sample_power_w > 0, patches.sample_power_w, 1.0), 0.0)
+    spread = np.zeros(len(points)) if spread_m2 is None else np.asarray(spread_m2, float)
+    src = _Sources(patches, points, spread, normals, power_w, ratio, kernel)
+    counts = np.zeros(4, int)
+    block = max(1, _PAIR_BLOCK // max(len(points), len(patches.sample), 1))
+    for a in range(0, len(live), block):
+        counts += _near_block(src, obs, weight, live[a:a + block], e, rtol)
+    STATS.add(int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3]), time.perf_counter() - t0)
+    return e
+
+
+@dataclass
+class _Sources:
+    """A spot's samples and triangles as :func:`near_field_irradiance` uses them."""
+
+    patches: SpotPatches
+    points: np.ndarray
+    spread_m2: np.ndarray
+    normals: np.ndarray
+    power_w: np.ndarray
+    ratio: np.ndarray
+    kernel: object
+
+
+def _near_block(src: _Sources, obs, weight, rows, e, rtol):
+    """Observers ``rows``: the point form for the (observer, sample) pairs it serves, the
+    adaptive rule for the rest. Returns counts (observers integrated, pairs integrated,
+    kernel evaluations, pairs unresolved at ``MAX_DEPTH``)."""
+    pt = src.points
+    d = np.linalg.norm(obs[rows][:, None, :] - pt[None, :, :], axis=-1)
+    ok = point_form_ok(src.patches.radius_m[None, :], d, rtol, src.spread_m2[None, :])
+    po, ps = np.nonzero(ok)
+    io, is_ = np.nonzero(~ok)
+    po, io = rows[po], rows[io]
+    n_eval = 0
+    step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
+    for a in range(0, len(po), step):
+        o, s = po[a:a + step], ps[a:a + step]
+        np.add.at(e, o, src.kernel(s, pt[s], obs[o], src.power_w[s] * weight[o]))
+    n_eval += len(po)
+    oi, tri = _expand(src.patches, io, is_)
+    p = src.patches
+    xs, ss, samp = p.tri_x[tri], p.tri_s[tri], p.sample[tri]
+    dens = p.density_w[tri] * src.ratio[samp] * weight[oi]
+    unresolved = 0
+    for depth in range(MAX_DEPTH + 1):
+        if not len(oi):
+            break
+        above = np.einsum("pvk,pk->pv", obs[oi][:, None, :] - xs, src.normals[samp]).max(axis=1) > 0
+        xs, ss, samp, oi, dens = xs[above], ss[above], samp[above], oi[above], dens[above]
+        rad, c = _triangle_radius(xs)
+        good = np.linalg.norm(obs[oi] - c, axis=1) >= RULE_REACH * rad
+        if depth == MAX_DEPTH:
+            unresolved += int((~good).sum())
+            good[:] = True
+        n_eval += _rule(xs[good], ss[good], dens[good], oi[good], obs, src.kernel, samp[good], e)
+        xs, ss = _split(xs[~good], ss[~good])
+        samp, oi, dens = (np.tile(v[~good], 2) for v in (samp, oi, dens))
+    return np.array([len(np.unique(io)), len(io), n_eval, unresolved])
