@@ -374,6 +374,27 @@ class Footprint:
     direct_ratio: np.ndarray | None = None
 
 
+def _spot_lobes(spot, p, gain, mu, states):
+    """A spot's BRDF and mirror lobes at points ``p`` (rows x T each; the mirror None
+    without one), every line of sight clear."""
+    e, _ = spot_irradiance(spot, p, gain, mu, states)
+    m = specular_irradiance(spot, p, gain, mu, None, states) if spot.material.has_specular else None
+    return (e if e.ndim == 2 else e[:, None]), (None if m is None else m if m.ndim == 2 else m[:, None])
+
+
+def _clip_to_sight(spot, lobe_pair, over, p, gain, mu, states, ray_scene):
+    """Lines of sight, in place, on the rows ``over`` the spot reaches: the BRDF lobe takes
+    the spot's, the mirror lobe each point's own from its reflection point."""
+    e, m = lobe_pair
+    idx = np.flatnonzero(over & ((e if m is None else e + m).max(axis=1) > 0))
+    if not len(idx):
+        return
+    e[idx] *= spot_line_of_sight(ray_scene, spot, p[idx])[0][:, None]
+    if m is not None:
+        mi = specular_irradiance(spot, p[idx], gain[idx], mu, None, states, ray_scene=ray_scene)
+        m[idx] = mi if mi.ndim == 2 else mi[:, None]
+
+
 def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
     """Hazardous ground area: terrain nodes whose eye-height point receives at least the
     MPE at some time, the irradiance summed over every spot (BRDF and specular lobes, each
@@ -410,29 +431,17 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     peak = np.zeros(len(pts))
     n_t = max([len(v) for v in states_by_target.values()] + [1])
 
-    def one_spot(spot, p, gain, rays):
-        """A spot's irradiance (rows x T): BRDF lobe (its spot's line of sight) plus mirror
-        lobe (each observer's from its own reflection point), without lines with no ``rays``."""
-        states = states_by_target.get(spot.target.index)
-        los = spot_line_of_sight(rays, spot, p)[0] if rays is not None else None
-        e, _ = spot_irradiance(spot, p, gain, attenuation_per_m, states, los)
-        if spot.material.has_specular:
-            e = e + specular_irradiance(spot, p, gain, attenuation_per_m, beam, states, ray_scene=rays)
-        return e if e.ndim == 2 else e[:, None]
-
     def block(a, b):
         p = pts[a:b]
         gain = np.ones(b - a)
-        parts = [one_spot(spot, p, gain, None) for spot in spots]
-        top = sum(parts).max(axis=1)
+        parts = [_spot_lobes(spot, p, gain, attenuation_per_m, states_by_target.get(spot.target.index)) for spot in spots]
+        top = sum(e if m is None else e + m for e, m in parts).max(axis=1)
         over = top >= mpe_w_m2  # as for observers: ratio >= 1
         if ray_scene is not None and over.any():
-            for spot, e in zip(spots, parts):
-                idx = np.flatnonzero(over & (e.max(axis=1) > 0))
-                if len(idx):
-                    e[idx] = one_spot(spot, p[idx], gain[idx], ray_scene)
+            for spot, lobe_pair in zip(spots, parts):
+                _clip_to_sight(spot, lobe_pair, over, p, gain, attenuation_per_m, states_by_target.get(spot.target.index), ray_scene)
             rows = np.flatnonzero(over)
-            top[rows] = sum(e[rows] for e in parts).max(axis=1)
+            top[rows] = sum(e[rows] if m is None else e[rows] + m[rows] for e, m in parts).max(axis=1)
             over[rows] = top[rows] >= mpe_w_m2
         hot[a:b], peak[a:b] = over, top / mpe_w_m2
 
