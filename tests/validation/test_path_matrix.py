@@ -35,7 +35,6 @@ from . import test_terrain_reflection as tr
 from . import test_two_state_and_slump_scenes as ts
 
 register = mx.register
-CURVED = {(v, "observers"): mx.CURVED_XFAIL for v in ("occluder", "second_target", "ground")}
 
 
 # --------------------------------------------------------------------------- case builders (module helpers, fixed draws)
@@ -182,17 +181,12 @@ def _grid(numbers):
 
 
 MOVED = {
-    "mirror-plate": "specular NOHD 3226.41391 -> 3226.40559 m (-2.6e-6) [3226.2776]",
-    "mirror-disk": "specular NOHD 3226.38903 -> 3226.39660 m (+2.3e-6) [3226.2776]",
     "mirror-nohd-example": "peak 1200.67817 -> 1200.65914 W/m^2 (-1.6e-5) [1200.1504]; specular NOHD 375.79451 -> "
                            "375.80673 m (+3.3e-5) [375.7307]",
     "lambertian-plate": "peak 6828.5752 -> 6828.2624 W/m^2 (-4.6e-5) [6825.6380]",
     "spot-tilted-45-cut": "peak 28918.481 -> 28918.816 W/m^2 (+1.2e-5) [28899.772]",
     "fresnel-glass-45": "peak 52639.518 -> 52650.417 W/m^2 (+2.1e-4) [on the axis 4P/(pi D^2) = 52613.2]; specular "
                         "NOHD 1945.2745 -> 1945.4861 m (+1.1e-4)",
-    "mirror-beam-grid": "specular NOHD 9886.0200 -> 9886.6376 m (+6.2e-5) [9884.7447]",
-    "cylinder": "specular NOHD 4.7304 -> 4.8738 m (+3.0 %; 4.73 to 7.03 m over 8 orientations of the scene); "
-                "peak 12358.153 -> 12358.216 W/m^2",
     "slump-heating": "target peak 2387758.8 -> 2387862.1 W/m^2 (+4.3e-5) drives the heating: melt onset 1.065240 -> "
                      "1.065193 s, and the slumped lobe's flank moves: observer arc[4] peak 94.0898 -> 93.6900 W/m^2 "
                      "(-0.43 %), arc[5] 662.6125 -> 663.0123 W/m^2",
@@ -209,11 +203,11 @@ def _known(name, parts=("targets",), more=None):
 
 FAST_NO_BACKEND = ("occluder", "second_target", "ground", "moved")  # the numpy backend traces spheres and terrain for 20-30 s
 
-register("mirror-plate", _mirror, fast=True, xfail=_known("mirror-plate"))
-register("mirror-disk", lambda tmp: _mirror(tmp, "disk"), xfail=_known("mirror-disk"))
+register("mirror-plate", _mirror, fast=True)
+register("mirror-disk", lambda tmp: _mirror(tmp, "disk"))
 register("mirror-nohd-example", _mirror_nohd, xfail=_known("mirror-nohd-example"))
 register("sphere", _sphere, fast=FAST_NO_BACKEND)
-register("cylinder", _cylinder, xfail=_known("cylinder"))
+register("cylinder", _cylinder)
 register("lambertian-plate", _lambertian, fast=True, xfail=_known("lambertian-plate"))
 register("lambertian-back-face", lambda tmp: _lambertian(tmp, back_lit=True), xfail=_known("lambertian-plate"))
 register("direct-beam", _direct, fast=True)
@@ -227,7 +221,7 @@ register("sdz-level-cone", _sdz_level)
 register("sdz-down-cone-over-ground", _sdz_down, without=("ground", "backend"))  # numpy over 5 km of ground: 260 s
 register("slewing-beam", _slew)
 register("fresnel-glass-45", _fresnel, xfail=_known("fresnel-glass-45"))
-register("mirror-beam-grid", _mirror_grid, xfail=_known("mirror-beam-grid"))
+register("mirror-beam-grid", _mirror_grid)
 register("slump-heating", _slump, xfail=_known("slump-heating", parts=("observers", "targets")))
 
 
