@@ -28,10 +28,6 @@ import math
 import sys
 from pathlib import Path
 
-_NUMERIC_OBS = ("hazard_ratio", "peak_irradiance_w_m2", "direct_irradiance_w_m2", "reflected_irradiance_w_m2",
-                "direct_point_irradiance_w_m2", "aperture_diameter_m")
-
-
 def _load(folder: Path):
     """report.json (dict) and observers.csv (dict name -> row dict of str) of one run, or None."""
     rep = folder / "report.json"
@@ -50,11 +46,9 @@ def _num(v):
     """A report value as float (``"inf"`` -> inf, None / "" -> None)."""
     if v is None or v == "":
         return None
-    if isinstance(v, str):
+    if isinstance(v, (str, bool, int, float)):
         return float(v)
-    if isinstance(v, bool):
-        return float(v)
-    return float(v) if isinstance(v, (int, float)) else None
+    return None
 
 
 def _fmt(v) -> str:
