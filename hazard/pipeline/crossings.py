@@ -35,6 +35,7 @@ import dataclasses
 
 import numpy as np
 
+from ..aperture import observer_apertures
 from ..engine import specular_irradiance
 from .direct import beam_at, clear_of_objects
 from .spill import hottest_spill_s
@@ -89,13 +90,18 @@ def _direct_rays(beam, spill_s) -> list:
     return rays
 
 
-def _mirror(spot, beam, mu):
-    """The mirror beam's irradiance; for a dynamic material the highest over its state
-    nodes (where the beam lands does not depend on the state, how bright it is does)."""
+def _mirror(spot, beam, mu, apertures=None):
+    """The mirror beam's value the verdict uses: through the limiting aperture (or the
+    group's aid) when ``apertures(n)`` gives the group's apertures for n points (the point
+    value peaks on the image of a mirror edge that cuts the beam near its axis, where the
+    aperture collects half the beam: the aperture's peak lies inside the lit side); for a
+    dynamic material the highest over its state nodes (where the beam lands does not
+    depend on the state, how bright it is does)."""
     states = spot.material.state_nodes() if spot.material.is_dynamic else None
 
     def fn(p):
-        e = specular_irradiance(spot, p, np.ones(len(p)), mu, beam, states)
+        ap = None if apertures is None else apertures(len(p))
+        e = specular_irradiance(spot, p, np.ones(len(p)), mu, beam, states, ap)
         return e if e.ndim == 1 else e.max(axis=1)
     return fn
 
@@ -112,13 +118,25 @@ def _mirror_rays(spot, beam):
     return rays
 
 
-def _sources(beam, spots, mu, tracer, spill_s):
-    """(label, irradiance function, axis rays) of the direct beam and each mirror beam."""
+def _sources(beam, spots, mu, tracer, spill_s, apertures=None):
+    """(label, irradiance function, axis rays) of the direct beam and each mirror beam;
+    ``apertures(n)``: the searched group's apertures for n points (mirror beams)."""
     out = [("direct beam", _direct(beam, mu, tracer), _direct_rays(beam, spill_s))]
     for sp in spots:
         if sp.material.has_specular:
-            out.append((f"mirror beam of {sp.target.name}", _mirror(sp, beam, mu), _mirror_rays(sp, beam)))
+            out.append((f"mirror beam of {sp.target.name}", _mirror(sp, beam, mu, apertures), _mirror_rays(sp, beam)))
     return out
+
+
+def _group_apertures(scene, g):
+    """n -> the apertures of n points of observer group ``g`` (its optics, the scene's
+    wavelength and exposure duration: :func:`hazard.aperture.observer_apertures`)."""
+    obs, spec = scene.observers, scene.spec
+    optics = [obs.optics[g] if g < len(obs.optics) else None]
+
+    def make(n):
+        return observer_apertures(optics, np.zeros(n, np.intp), spec.laser.wavelength_nm, spec.exposure.duration_s)
+    return make
 
 
 def _peaks(e, floor):
@@ -310,7 +328,7 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2, tracer, spill_s=None):
     added, said = [], []
     for g, name, surface in surfaces:
         near = _group_near(scene, g)
-        for label, fn, rays in _sources(beam, spots, mu, tracer, spill_s):
+        for label, fn, rays in _sources(beam, spots, mu, tracer, spill_s, _group_apertures(scene, g)):
             found = (_on_line(fn, surface, floor, rays, beam) if isinstance(surface, Polyline) else _on_surface(fn, surface, rays, beam, floor))
             for point in _new_crossings(fn, found, near):
                 added.append((g, name, point))
