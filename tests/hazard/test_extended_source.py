@@ -163,9 +163,11 @@ def test_extended_source_divides_the_ratio_by_c_e():
 def test_beyond_alpha_max_2014_short_exposure():
     t = 1e-3  # alpha_max = 200 t^0.5 mrad = 6.32 mrad
     a_max = 0.2 * math.sqrt(t)
-    pts = [on_normal(10.0), on_normal(40.0)]  # 10.1 mrad (> alpha_max), 2.5 mrad
+    # 7.3 mrad (> alpha_max), 2.5 mrad; the first beside the laser, behind its aperture plane
+    # (on the normal at 10 m it would stand on the aperture itself: in the beam, C_E = 1)
+    pts = [at_angle(12.0, 30.0), on_normal(40.0)]
     res = hazard.analyze(scene(pts, extended=True, t=t))
-    alpha = np.array([alpha_hand(10.0), alpha_hand(40.0)])
+    alpha = np.array([alpha_hand(12.0, 30.0), alpha_hand(40.0)])
     assert alpha[0] > a_max > alpha[1] > ALPHA_MIN
     c_e = np.array([a_max / ALPHA_MIN, alpha[1] / ALPHA_MIN])
     np.testing.assert_allclose(res.observers.c_e, c_e, rtol=1e-9)
