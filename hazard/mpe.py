@@ -22,6 +22,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from .aperture import limiting_aperture_m
+
 __all__ = [
     "STANDARDS",
     "DEFAULT_STANDARD",
@@ -235,11 +237,12 @@ class MPEResult:
 
 
 def _limiting_aperture_m(kind: str, wl: float, t: float, governing: str) -> float:
-    """Limiting aperture (spec section 2.4): retina 7 mm; skin 3.5 mm; cornea 1 mm
-    (t < 0.3 s), 1.5 t^0.375 mm (0.3-10 s), 3.5 mm (t > 10 s) [C]; applied above 1400 nm
-    and to the ANSI corneal limit."""
-    if kind == "skin":
-        return 3.5e-3
+    """Limiting aperture (spec section 2.4): the table of :func:`hazard.aperture.limiting_aperture_m`
+    (retina 7 mm; skin 3.5 mm; cornea 1 mm (t < 0.3 s), 1.5 t^0.375 mm (0.3-10 s), 3.5 mm
+    (t > 10 s) [C]), the corneal row applied above 1400 nm and to the ANSI corneal limit."""
+    if kind != "skin" and wl < 1400 and governing == "corneal":
+        return limiting_aperture_m(1400.0, t)
+    return limiting_aperture_m(wl, t, skin=(kind == "skin"))
     if wl < 1400 and governing != "corneal":
         return 7e-3
     if t < 0.3:
