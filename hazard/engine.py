@@ -751,14 +751,23 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     if len(near) and spot.patches is not None:
         e[near] = _near_field(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
     elif len(near):  # a spot built without its patches (by hand): its samples as point sources
-        wi_all = _to_local(spot.frames, -spot.incoming)
-        for i in range(len(spot.points)):
-            v = obs[near] - spot.points[i]
-            r = np.linalg.norm(v, axis=1)
-            wo = _to_local(spot.frames[i], v / np.maximum(r, 1e-300)[:, None])
-            scale = spot.power_w[i] * np.exp(-attenuation_per_m * r) * gain[near] * vis[near] / np.maximum(r, 1e-300) ** 2
-            e[near] += projected_brdf(model, np.broadcast_to(wi_all[i], wo.shape), wo, states, scale)
+        e[near] = _samples_as_points(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
     return ((np.arange(m), e), far) if sparse else (e, far)
+
+
+def _samples_as_points(spot: Spot, obs, weight, attenuation_per_m, states):
+    """Irradiance [W/m^2] (M,) or (M, T) at ``obs`` from each spot sample as a point source
+    (spots built without their near-field patches), ``weight`` the gain x line of sight."""
+    model = spot.material
+    e = np.zeros((len(obs),) if states is None else (len(obs), len(states)))
+    wi_all = _to_local(spot.frames, -spot.incoming)
+    for i in range(len(spot.points)):
+        v = obs - spot.points[i]
+        r = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+        wo = _to_local(spot.frames[i], v / r[:, None])
+        scale = spot.power_w[i] * np.exp(-attenuation_per_m * r) * weight / r**2
+        e += projected_brdf(model, np.broadcast_to(wi_all[i], wo.shape), wo, states, scale)
+    return e
 
 
 def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:

@@ -368,21 +368,28 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
         out[ok] += rho * (geo if states is None else geo[:, None])
     if is_curved_mesh(spot.target):
         out += mesh_mirror_irradiance(spot, obs, gain, mu, states).irradiance_w_m2
-    an = spot.target.mesh.analytic
-    if an is not None:
-        ok, geo, p, n, d, near = _curved_geometry(spot, obs)
-        _seen(ray_scene, spot, p, n, obs, ok)
-        _seen(ray_scene, spot, p, n, obs, near)
-        if np.any(ok):
-            path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
-            rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
-            g = geo[ok] * np.exp(-mu * path) * gain[ok]
-            out[ok] += rho * (g if states is None else g[:, None])
-        if np.any(near):
-            rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
-            cap = spot.max_irradiance_w_m2 * gain[near]
-            out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
+    if spot.target.mesh.analytic is not None:
+        _add_curved_side(spot, obs, gain, mu, states, ray_scene, out)
     return np.minimum(out, _power_cap(spot, obs, gain, mu, states))
+
+
+def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out) -> None:
+    """Add (in place) a sphere's or cylinder's curved side to ``out``: Coddington spreading
+    from each observer's specular point (module notes), and ``rho E_peak`` where that
+    point cannot be found (conservative)."""
+    pos, tangent = spot.beam.position_m, spot.target.tangent
+    ok, geo, p, n, d, near = _curved_geometry(spot, obs)
+    _seen(ray_scene, spot, p, n, obs, ok)
+    _seen(ray_scene, spot, p, n, obs, near)
+    if np.any(ok):
+        path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
+        rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
+        g = geo[ok] * np.exp(-mu * path) * gain[ok]
+        out[ok] += rho * (g if states is None else g[:, None])
+    if np.any(near):
+        rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
+        cap = spot.max_irradiance_w_m2 * gain[near]
+        out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
 
 
 def reflected_power_w(spot, states=None):
