@@ -378,7 +378,9 @@ def _finish(args, result):
 
 
 def _cmd_run(args, out, err):
-    from .report import _json_safe, report_dict, summary_text, write_outputs
+    from brdfmodels._unit import output_unit
+
+    from .report import _json_safe, report_dict, summary_text, write_set
 
     from .figures import FIXED_NAMES
 
@@ -387,18 +389,21 @@ def _cmd_run(args, out, err):
     _check_outdir(args.output, ("report.json", "observers.csv") + MAP_NAMES + (FIXED_NAMES if args.plot else ()), args.force)
     if args.plot:
         _needs("matplotlib", "render")
-    result = _analyse(args, err)
-    extra = {}
-    if args.plot:
-        from .figures import run_figures
+    with output_unit(args.output, command="run", overwrite=args.force, force=args.force) as unit:  # all outputs as one unit
+        result = _analyse(args, err)
+        extra = {}
+        if args.plot:
+            from .figures import run_figures
 
-        extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
-    if not args.quiet:
-        err.write("hazard: map outputs...\n")
-    maps, section = map_files(result)
-    paths = write_outputs(result, args.output, force=args.force, extra={**extra, **maps}, sections={"map_outputs": section})
-    if args.report:  # the review page embeds the pictures just written
-        paths += _write_review(args.output, args, err)
+            extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
+        if not args.quiet:
+            err.write("hazard: map outputs...\n")
+        maps, section = map_files(result)
+        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section})
+        if args.report:  # the review page embeds the pictures just written (and those of hazard render, carried over)
+            unit.carry()
+            names += [p.name for p in _write_review(unit.stage, args, err)]
+    paths = [Path(args.output) / n for n in names]
     if args.json:
         out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
     else:
