@@ -773,23 +773,23 @@ def _cmd_risk(args, out, err):
 
 
 def _cmd_render(args, out, err):
+    from brdfmodels._unit import output_unit
+
     from . import render
     from .progress import progress_to
 
-    result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
-    with progress_to(None if args.quiet else err):  # bars on a terminal only
-        try:
-            paths = render.keepout(result, args.output, lobe_resolution_deg=args.resolution_deg, force=args.force)
-        except FileExistsError as exc:
-            raise ValueError(str(exc)) from None
-        lines = [f"  wrote {p}" for k, p in paths.items() if k not in ("png", "layout")]
-        from .figures import run_figures, write_figures
+    with output_unit(args.output, command="render", overwrite=args.force, force=args.force) as unit:  # all renders as one unit
+        result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
+        with progress_to(None if args.quiet else err):  # bars on a terminal only
+            paths = render.keepout(result, unit.stage, lobe_resolution_deg=args.resolution_deg, force=args.force)
+            lines = [f"  wrote {unit.final(p)}" for k, p in paths.items() if k not in ("png", "layout")]
+            from .figures import run_figures, write_figures
 
-        say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
-        lines += [f"  wrote {p}" for p in write_figures(run_figures(result, progress=say), args.output)]
-        if not args.no_animation and result.states:
-            anim = render.animate_lobe(result, args.output)
-            lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")
+            say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
+            lines += [f"  wrote {unit.final(p)}" for p in write_figures(run_figures(result, progress=say), unit.stage)]
+            if not args.no_animation and result.states:
+                anim = render.animate_lobe(result, unit.stage)
+                lines.append(f"  wrote {unit.final(anim.get('gif', anim['frames'][0].parent))}")
     out.write(f"renders of {result.scene.name!r}\n" + "\n".join(lines) + "\n")
     return EXIT_OK
 
@@ -824,13 +824,22 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 
 
 def _cmd_report(args, out, err):
-    from .review import PdfError
+    from brdfmodels._unit import output_unit
 
-    try:
-        paths = _write_review(args.out_dir, args, err, pdf=args.pdf)
-    except PdfError as exc:  # the HTML is written; the PDF is not
-        out.write(f"wrote {exc.html}\n")
-        err.write(f"hazard report: error: {_one_line(exc)}\n")
+    from .review import PdfError, read_report
+
+    read_report(args.out_dir)  # a clear line naming the folder before anything is staged
+    failed = None
+    with output_unit(args.out_dir, command="report", overwrite=True, force=True) as unit:  # the run's files are kept
+        unit.carry()  # the page reads report.json and the pictures in the folder
+        try:
+            paths = _write_review(unit.stage, args, err, pdf=args.pdf)
+        except PdfError as exc:  # the HTML is written (and switched in); the PDF is not
+            failed, paths = exc, [exc.html]
+    paths = [unit.final(p) for p in paths]
+    if failed is not None:
+        out.write(f"wrote {paths[0]}\n")
+        err.write(f"hazard report: error: {_one_line(str(failed).replace(str(unit.stage), str(unit.out)))}\n")
         return EXIT_INTERNAL
     out.write("".join(f"wrote {p}\n" for p in paths))
     return EXIT_OK
