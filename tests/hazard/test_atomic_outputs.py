@@ -177,6 +177,23 @@ def test_own_outputs_need_overwrite_and_other_commands_files_are_kept(tmp_path):
     assert json.loads((out / MANIFEST).read_text())["files"] == {"keepout.png": "render", **{n: "run" for n in NEW}}
 
 
+def test_working_folder_is_kept_across_units_and_crashes(tmp_path, monkeypatch):
+    """A checkpoint folder written straight into OUT (``.risk``) survives every switch."""
+    out = tmp_path / "o"
+    (out / ".risk").mkdir(parents=True)
+    (out / ".risk" / "c0.npz").write_bytes(b"chunk")
+    write_set(out, OLD, command="risk", working=(".risk",))
+    with monkeypatch.context() as m:
+        crash_at_step(m, "moved")
+        with pytest.raises(Crash):
+            write_set(out, NEW, command="risk", overwrite=True, working=(".risk",))
+    recover(out)
+    assert snapshot(out) == {**OLD, ".risk/c0.npz": b"chunk"}
+    (out / ".risk" / "c1.npz").write_bytes(b"more")
+    write_set(out, NEW, command="risk", overwrite=True, working=(".risk",))
+    assert snapshot(out) == {**NEW, ".risk/c0.npz": b"chunk", ".risk/c1.npz": b"more"} and leftovers(out) == []
+
+
 def test_stale_temporaries_only_of_dead_processes_and_only_ours(tmp_path):
     out = tmp_path / "o"
     write_set(out, OLD)
@@ -275,3 +292,30 @@ def test_hazard_run_review_page_sees_render_pictures(tmp_path, monkeypatch, resu
     assert code == 0 and stdout == f"wrote {out / 'report.html'}\n", err
     files = json.loads((out / MANIFEST).read_text())["files"]
     assert files["report.html"] == "report" and files["report.json"] == "run"
+
+
+def _risk_view(out: Path):
+    """The final set of a risk run: its file names, risk.csv, and risk.json's seed."""
+    names = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+    return names, (out / "risk.csv").read_bytes(), json.loads((out / "risk.json").read_text())["seed"]
+
+
+@pytest.mark.slow  # about 15 s each (three risk runs)
+@pytest.mark.parametrize("how", [("step", "moved"), ("step", "switched"), ("rename", 2)])
+def test_hazard_risk_interrupted_keeps_one_whole_set(tmp_path, monkeypatch, how):
+    from tests.hazard.test_risk import _run, _small
+
+    _run(_small(tmp_path, seed=5), tmp_path, "ref")
+    out = tmp_path / "out"
+    _run(_small(tmp_path), tmp_path)
+    old, new = _risk_view(out), _risk_view(tmp_path / "ref")
+    assert old[1] != new[1] and "risk.html" in old[0]
+    with monkeypatch.context() as m:
+        (crash_at_step if how[0] == "step" else crash_at_rename)(m, how[1])
+        with pytest.raises(Crash):
+            _run(_small(tmp_path, seed=5), tmp_path, force=True)
+    recover(out)
+    assert _risk_view(out) == (new if how == ("step", "switched") else old) and leftovers(out) == []
+    assert (out / ".risk" / "meta.json").exists()  # the chunks (working files) are kept for a resume
+    again = _run(_small(tmp_path, seed=5), tmp_path)  # resumes: the interrupted run's chunks are reused
+    assert _risk_view(out) == new and again.doc["run"]["ran"] == 0
