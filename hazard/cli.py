@@ -714,15 +714,17 @@ def _fit_sh(args, out, samples):
         r = fitting.fit_sh(samples.wi, samples.wo, samples.brdf_per_sr, basis, fanout=args.fanout, weights=samples.weight)
         model = r.model
         rows = [r.summary()]
-    brdfmodels.save(model, args.output)
     extra = {"wrote": str(args.output)}
-    if args.envelope:
+    env = None
+    if args.envelope:  # computed before either file is written: a failed envelope leaves no new model beside an old envelope
         if not args.envelope_output:
             raise ValueError("--envelope-output: required with --envelope")
         _check_new(args.envelope_output, args.force)
         env = fitting.envelope_paper(model, samples) if args.envelope == "paper" else fitting.envelope_sh(samples, basis, fanout=args.fanout)
-        brdfmodels.save(env.model, args.envelope_output)
         extra.update({"envelope": env.summary(), "envelope_file": str(args.envelope_output)})
+    brdfmodels.save(model, args.output)
+    if env is not None:
+        brdfmodels.save(env.model, args.envelope_output)
     _print_report(out, "spherical-harmonic fit", rows, args.json, extra)
     return EXIT_OK
 
