@@ -494,11 +494,10 @@ def _plot(study, rows, outdir):
     ax.grid(alpha=0.3)
     fig.suptitle(f"study {study.name}: {len(ok)} scenarios")
     fig.tight_layout()
-    tmp = outdir / ".summary.png.tmp.png"
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(outdir / "summary.png")
-    return outdir / "summary.png"
+    try:
+        return atomic_write(outdir / "summary.png", lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)
+    finally:
+        plt.close(fig)
 
 
 def local_cluster(n_workers=2):
