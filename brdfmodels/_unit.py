@@ -154,15 +154,21 @@ class OutputUnit:
     working : tuple of str
         Names in ``out`` the command keeps across runs (checkpoints such as ``.risk``):
         carried into the new set.
+    claims : tuple of str
+        In a folder without a manifest (written before manifests existed), these exact
+        names count as this command's previous outputs: replaced, or dropped when not
+        written again (a stale picture never stays beside a new report).
     """
 
-    def __init__(self, out, *, command: str, overwrite: bool = False, force: bool = False, working=()):
+    def __init__(self, out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
         self.out = _target(out)
         self.command, self.working = command, tuple(working)
         if os.path.lexists(self.out) and not self.out.is_dir():
             raise OutputFolderError(f"{self.out}: exists and is not a folder")
         self.notes = recover(self.out)
         self.owners = read_manifest(self.out) if self.out.is_dir() else {}
+        if self.out.is_dir() and not (self.out / MANIFEST).exists():
+            self.owners = {n: command for n in claims if (self.out / n).is_file()}
         self._check(overwrite, force)
         parent = self.out.parent
         parent.mkdir(parents=True, exist_ok=True)
@@ -272,10 +278,10 @@ class OutputUnit:
 
 
 @contextmanager
-def output_unit(out, *, command: str, overwrite: bool = False, force: bool = False, working=()):
+def output_unit(out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
     """An :class:`OutputUnit`; the body writes into ``unit.stage``; committed on a normal
     exit, discarded on an exception (``out`` then keeps its previous set)."""
-    unit = OutputUnit(out, command=command, overwrite=overwrite, force=force, working=working)
+    unit = OutputUnit(out, command=command, overwrite=overwrite, force=force, working=working, claims=claims)
     try:
         yield unit
         unit.commit()

@@ -386,10 +386,12 @@ def _cmd_run(args, out, err):
 
     from .map_outputs import MAP_NAMES, map_files
 
-    _check_outdir(args.output, ("report.json", "observers.csv") + MAP_NAMES + (FIXED_NAMES if args.plot else ()), args.force)
+    names = ("report.json", "observers.csv") + MAP_NAMES
+    _check_outdir(args.output, names + (FIXED_NAMES if args.plot else ()), args.force)
     if args.plot:
         _needs("matplotlib", "render")
-    with output_unit(args.output, command="run", overwrite=args.force, force=args.force) as unit:  # all outputs as one unit
+    with output_unit(args.output, command="run", overwrite=args.force, force=args.force,  # all outputs as one unit
+                     claims=names + FIXED_NAMES) as unit:
         result = _analyse(args, err)
         extra = {}
         if args.plot:

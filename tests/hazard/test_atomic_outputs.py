@@ -319,3 +319,21 @@ def test_hazard_risk_interrupted_keeps_one_whole_set(tmp_path, monkeypatch, how)
     assert (out / ".risk" / "meta.json").exists()  # the chunks (working files) are kept for a resume
     again = _run(_small(tmp_path, seed=5), tmp_path)  # resumes: the interrupted run's chunks are reused
     assert _risk_view(out) == new and again.doc["run"]["ran"] == 0
+
+
+def test_folder_of_an_older_version_drops_its_stale_pictures(tmp_path, monkeypatch, results):
+    """A run folder without a manifest (older laser-hazard): with --force its named outputs
+    are replaced or dropped (no old plan.png beside a new report), other files kept."""
+    from hazard.figures import FIXED_NAMES
+
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
+    out = tmp_path / "o"
+    out.mkdir()
+    for n in ("report.json", "observers.csv", FIXED_NAMES[0], "notes.txt"):
+        (out / n).write_bytes(b"older " + n.encode())
+    code, _, err = run("run", "plate", "-o", out, "--quiet")
+    assert code == 2 and "exists: pass --force" in err
+    assert run("run", "plate", "-o", out, "--quiet", "--force")[0] == 0
+    names = set(os.listdir(out))
+    assert FIXED_NAMES[0] not in names and "notes.txt" in names and (out / "report.json").read_bytes()[:1] == b"{"
+    assert "notes.txt" not in json.loads((out / MANIFEST).read_text())["files"]
