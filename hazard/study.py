@@ -539,7 +539,8 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     outdir = Path(outdir)
     # results.csv/.parquet, summary.json and summary.png switch in as one unit; study.json and
     # scenarios/ are the resumable working files, kept across runs
-    with output_unit(outdir, command="study", overwrite=True, force=force, working=("study.json", "scenarios")) as unit:
+    with output_unit(outdir, command="study", overwrite=True, force=force, working=("study.json", "scenarios"),
+                     claims=("results.csv", "results.parquet", "summary.json", "summary.png")) as unit:
         return _run_study(study, outdir, unit.stage, scheduler=scheduler, serial=serial, n_workers=n_workers, force=force, progress=progress)
 
 

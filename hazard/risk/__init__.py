@@ -135,7 +135,9 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
     check_risk_args(scene, draws, sensitivity_draws)  # [uncertainty] present, something random, the work within the limit
     t0 = time.perf_counter()
     outdir = Path(outdir)
-    with output_unit(outdir, command="risk", overwrite=True, force=force, working=(".risk",)) as unit:
+    claims = ("risk.json", "risk.csv", "risk.html", "probability_map.csv", "probability_map.png", "probability_map.tif",
+              "probability_map_local_frame.tif", "probability_contours.geojson", "probability_contours_local_frame.json")
+    with output_unit(outdir, command="risk", overwrite=True, force=force, working=(".risk",), claims=claims) as unit:
         outdir.mkdir(parents=True, exist_ok=True)
         doc, mp = _risk_doc(scene, outdir, t0, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws, serial=serial,
                             workers=workers, scheduler=scheduler, force=force, progress=progress, backend=backend)
