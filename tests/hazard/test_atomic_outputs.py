@@ -218,15 +218,15 @@ def test_symlinked_output_folder_switches_its_target(tmp_path):
     assert link.is_symlink() and snapshot(link) == NEW and snapshot(real) == NEW
 
 
-@settings(derandomize=True, deadline=None, max_examples=15)
-@given(sets=st.lists(st.dictionaries(st.sampled_from(["report.json", "observers.csv", "plan.png", "zones.json"]),
-                                     st.binary(min_size=0, max_size=8), min_size=1), min_size=1, max_size=4),
-       crashes=st.lists(st.sampled_from(STEPS + ("rename1", "rename2", None)), min_size=4, max_size=4))
-def test_property_any_sequence_of_interrupted_runs(tmp_path_factory, sets, crashes):
+_SETS = st.lists(st.dictionaries(st.sampled_from(["report.json", "observers.csv", "plan.png", "zones.json"]),
+                                 st.binary(min_size=0, max_size=8), min_size=1), min_size=1, max_size=4)
+_CRASHES = st.lists(st.sampled_from(STEPS + ("rename1", "rename2", None)), min_size=4, max_size=4)
+
+
+def _check_sequence(out: Path, sets, crashes):
     """Random sets written in turn, each maybe interrupted anywhere: the folder always holds
     the last complete set (or the one before, when the last was interrupted before its
     switch), and nothing is left beside it."""
-    out = tmp_path_factory.mktemp("p") / "o"
     done = None
     for files, crash in zip(sets, crashes):
         mp = pytest.MonkeyPatch()
@@ -245,6 +245,19 @@ def test_property_any_sequence_of_interrupted_runs(tmp_path_factory, sets, crash
             mp.undo()
         recover(out)
         assert snapshot(out) == done and leftovers(out) == []
+
+
+@settings(derandomize=True, deadline=None, max_examples=15)
+@given(sets=_SETS, crashes=_CRASHES)
+def test_property_any_sequence_of_interrupted_runs(tmp_path_factory, sets, crashes):
+    _check_sequence(tmp_path_factory.mktemp("p") / "o", sets, crashes)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=300)
+@given(sets=_SETS, crashes=_CRASHES)
+def test_property_any_sequence_of_interrupted_runs_many(tmp_path_factory, sets, crashes):
+    _check_sequence(tmp_path_factory.mktemp("p") / "o", sets, crashes)
 
 
 # -- the commands -------------------------------------------------------------------------
