@@ -103,6 +103,7 @@ def recover(out) -> list:
         p = parent / e
         if m and p.is_dir() and not p.is_symlink() and p not in _ACTIVE and not _alive(int(m.group(1))):
             stale[m.group(3)].append(p)
+    said += _legacy(out)
     olds = sorted(stale["old"], key=lambda p: p.stat().st_mtime)
     if olds and not os.path.lexists(out):
         os.rename(olds.pop(), out)  # crash between the two renames: the old set comes back
@@ -112,6 +113,28 @@ def recover(out) -> list:
         said.append(f"{out}: removed the stale {p.name}")
     if said:
         _fsync_dir(parent)
+    return said
+
+
+def _legacy(out: Path) -> list:
+    """Put back / remove the leftovers of laser-hazard before 2026-11 (``tempfile.mkdtemp``
+    names ``.OUT.<8 chars>.tmp`` holding only files, ``.OUT.<8 chars>.old`` holding only the
+    old folder ``d``); anything else of that name is left alone."""
+    pat, said = re.compile(r"^\." + re.escape(out.name) + r"\.[a-z0-9_]{8}\.(tmp|old)$"), []
+    for e in sorted(os.listdir(out.parent)):
+        m, p = pat.match(e), out.parent / e
+        if not m or p.is_symlink() or not p.is_dir():
+            continue
+        inside = os.listdir(p)
+        if m.group(1) == "tmp" and all((p / n).is_file() and not (p / n).is_symlink() for n in inside):
+            shutil.rmtree(p, ignore_errors=True)
+            said.append(f"{out}: removed the stale {e}")
+        elif m.group(1) == "old" and set(inside) <= {"d"}:
+            if inside and not os.path.lexists(out):
+                os.rename(p / "d", out)
+                said.append(f"{out}: restored the previous outputs after an interrupted switch")
+            shutil.rmtree(p, ignore_errors=True)
+            said.append(f"{out}: removed the stale {e}")
     return said
 
 

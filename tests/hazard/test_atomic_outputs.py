@@ -350,3 +350,16 @@ def test_folder_of_an_older_version_drops_its_stale_pictures(tmp_path, monkeypat
     names = set(os.listdir(out))
     assert FIXED_NAMES[0] not in names and "notes.txt" in names and (out / "report.json").read_bytes()[:1] == b"{"
     assert "notes.txt" not in json.loads((out / MANIFEST).read_text())["files"]
+
+
+def test_leftovers_of_the_older_version_are_recovered(tmp_path):
+    """Before this helper, write_outputs left ``.o.<8 chars>.tmp`` (files) and
+    ``.o.<8 chars>.old/d`` (the old folder): put back when OUT is missing, then removed."""
+    out = tmp_path / "o"
+    (tmp_path / ".o.ab_cd123.old" / "d").mkdir(parents=True)
+    (tmp_path / ".o.ab_cd123.old" / "d" / "report.json").write_bytes(b"old")
+    (tmp_path / ".o.zz9_0000.tmp").mkdir()
+    (tmp_path / ".o.zz9_0000.tmp" / "report.json").write_bytes(b"new, unfinished")
+    (tmp_path / ".o.keepme00.tmp" / "sub").mkdir(parents=True)  # not what the old version left: untouched
+    recover(out)
+    assert snapshot(out) == {"report.json": b"old"} and leftovers(out) == [".o.keepme00.tmp"]
