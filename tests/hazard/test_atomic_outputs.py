@@ -363,3 +363,19 @@ def test_leftovers_of_the_older_version_are_recovered(tmp_path):
     (tmp_path / ".o.keepme00.tmp" / "sub").mkdir(parents=True)  # not what the old version left: untouched
     recover(out)
     assert snapshot(out) == {"report.json": b"old"} and leftovers(out) == [".o.keepme00.tmp"]
+
+
+@pytest.mark.parametrize("step", STEPS)
+def test_hazard_report_interrupted_keeps_the_run_whole(tmp_path, monkeypatch, results, step):
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
+    out = tmp_path / "o"
+    assert run("run", "plate", "-o", out, "--quiet")[0] == 0
+    old = snapshot(out)
+    with monkeypatch.context() as m:
+        crash_at_step(m, step)
+        with pytest.raises(Crash):
+            run("report", out, "--quiet")
+    recover(out)
+    now = snapshot(out)
+    assert leftovers(out) == [] and now == (old if step != "switched" else {**old, "report.html": now.get("report.html")})
+    assert ("report.html" in now) == (step == "switched")
