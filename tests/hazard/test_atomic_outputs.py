@@ -379,3 +379,28 @@ def test_hazard_report_interrupted_keeps_the_run_whole(tmp_path, monkeypatch, re
     now = snapshot(out)
     assert leftovers(out) == [] and now == (old if step != "switched" else {**old, "report.html": now.get("report.html")})
     assert ("report.html" in now) == (step == "switched")
+
+
+@pytest.mark.parametrize("step", ["moved", pytest.param("switched", marks=pytest.mark.slow)])
+def test_hazard_study_interrupted_keeps_one_whole_summary(tmp_path, monkeypatch, step):
+    from hazard.study import Parameter, Study, run_study
+
+    def study(powers):
+        return Study(name="t", scene="plate", kind="grid", parameters=(Parameter("laser.power_w", values=powers),))
+
+    def view(out):
+        return sorted(p.name for p in out.iterdir() if not p.name.startswith(".")), (out / "results.csv").read_bytes()
+
+    out = tmp_path / "o"
+    run_study(study((10.0,)), out, serial=True)
+    old = view(out)
+    with monkeypatch.context() as m:
+        crash_at_step(m, step)
+        with pytest.raises(Crash):
+            run_study(study((10.0, 1000.0)), out, serial=True, force=True)
+    recover(out)
+    assert leftovers(out) == [] and len(list((out / "scenarios").glob("*.json"))) == 2  # the scenarios stay for a resume
+    if step == "moved":
+        assert view(out) == old
+    run_study(study((10.0, 1000.0)), out, serial=True)  # resumes: nothing to run again
+    assert view(out)[1].count(b"\n") == old[1].count(b"\n") + 1
