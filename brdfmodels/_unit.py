@@ -55,6 +55,8 @@ def _pattern(name: str):
 def _alive(pid: int) -> bool:
     if pid == os.getpid():
         return False  # this process' leftovers of a failed unit (its live ones are in _ACTIVE)
+    if os.name == "nt":
+        return True  # os.kill would end the process there: another pid's folders are left alone
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -78,11 +80,14 @@ def _fsync_dir(path: Path) -> None:
 
 
 def _target(out) -> Path:
-    out = Path(out)
+    given = out
+    out = Path(os.path.abspath(out))
     if out.is_symlink():  # switch the folder the link points to; the link stays valid
         out = Path(os.path.realpath(out))
-    if not out.name:
-        raise OutputFolderError(f"{out}: expected an output folder with a name")
+    cwd = Path(os.path.realpath(os.getcwd()))
+    if not out.name or Path(os.path.realpath(out)) in (cwd, *cwd.parents):
+        raise OutputFolderError(f"-o {given}: the current folder (or one holding it) cannot be replaced as one unit; "
+                                "expected a folder for the outputs, e.g. -o out")
     return out
 
 
@@ -148,14 +153,22 @@ def read_manifest(out: Path) -> dict:
         return {}
 
 
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:  # a file system without hard links: a copy (the original is still not touched)
+        shutil.copy2(src, dst)
+
+
 def _link_copy(src: Path, dst: Path) -> None:
-    """``dst`` as hard links of ``src`` (a file, a symlink or a folder tree)."""
+    """``dst`` as hard links of ``src`` (a file, a symlink or a folder tree; copies where
+    the file system has no hard links)."""
     if src.is_symlink():
         os.symlink(os.readlink(src), dst)
     elif src.is_dir():
-        shutil.copytree(src, dst, symlinks=True, copy_function=os.link)
+        shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy)
     else:
-        os.link(src, dst)
+        _link_or_copy(src, dst)
 
 
 class OutputUnit:
@@ -184,7 +197,7 @@ class OutputUnit:
     """
 
     def __init__(self, out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
-        self.out = _target(out)
+        self.out, self.given = _target(out), Path(out)
         self.command, self.working = command, tuple(working)
         if os.path.lexists(self.out) and not self.out.is_dir():
             raise OutputFolderError(f"{self.out}: exists and is not a folder")
@@ -215,10 +228,10 @@ class OutputUnit:
             raise OutputFolderError(f"{self.out / own[0]} exists: pass --force to overwrite")
 
     def final(self, path) -> Path:
-        """Where ``path`` (in :attr:`stage`) will be once committed."""
+        """Where ``path`` (in :attr:`stage`) will be once committed, under the folder as given."""
         path = Path(path)
         try:
-            return self.out / path.relative_to(self.stage)
+            return self.given / path.relative_to(self.stage)
         except ValueError:
             return path
 

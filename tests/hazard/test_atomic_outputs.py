@@ -404,3 +404,28 @@ def test_hazard_study_interrupted_keeps_one_whole_summary(tmp_path, monkeypatch,
         assert view(out) == old
     run_study(study((10.0, 1000.0)), out, serial=True)  # resumes: nothing to run again
     assert view(out)[1].count(b"\n") == old[1].count(b"\n") + 1
+
+
+def test_without_hard_links_kept_files_are_copied(tmp_path, monkeypatch):
+    out = tmp_path / "o"
+    write_set(out, OLD)
+    write_set(out, {"keepout.png": b"k"}, command="render")
+
+    def no_link(a, b, **kw):
+        raise OSError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_link)
+    write_set(out, NEW, overwrite=True)
+    assert snapshot(out) == {**NEW, "keepout.png": b"k"} and leftovers(out) == []
+
+
+def test_current_folder_is_refused_with_a_clear_error(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for bad in (".", "..", str(tmp_path)):
+        with pytest.raises(OutputFolderError, match="current folder .* cannot be replaced as one unit"):
+            write_set(bad, NEW)
+    write_set("o", NEW)  # relative names work
+    assert snapshot(tmp_path / "o") == NEW and leftovers(tmp_path / "o") == []
+    with output_unit("o", command="run", overwrite=True) as unit:
+        (unit.stage / "a.csv").write_bytes(b"a")
+    assert unit.final(unit.stage / "a.csv") == Path("o") / "a.csv"  # printed as the user gave it
