@@ -843,7 +843,7 @@ def _cmd_report(args, out, err):
     paths = [unit.final(p) for p in paths]
     if failed is not None:
         out.write(f"wrote {paths[0]}\n")
-        err.write(f"hazard report: error: {_one_line(str(failed).replace(str(unit.stage), str(unit.out)))}\n")
+        err.write(f"hazard report: error: {_one_line(str(failed).replace(str(unit.stage), str(unit.given)))}\n")
         return EXIT_INTERNAL
     out.write("".join(f"wrote {p}\n" for p in paths))
     return EXIT_OK
