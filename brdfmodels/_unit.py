@@ -205,7 +205,10 @@ class OutputUnit:
         self.owners = read_manifest(self.out) if self.out.is_dir() else {}
         if self.out.is_dir() and not (self.out / MANIFEST).exists():
             self.owners = {n: command for n in claims if (self.out / n).is_file()}
-        self._check(overwrite, force)
+        try:
+            self._check(overwrite, force)
+        except OutputFolderError as exc:  # say what recovery did before the refusal
+            raise OutputFolderError("; ".join([*self.notes, str(exc)])) from None
         parent = self.out.parent
         parent.mkdir(parents=True, exist_ok=True)
         self.stage = parent / f".{self.out.name}.{os.getpid()}.{secrets.token_hex(8)}.tmp"

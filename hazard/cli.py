@@ -392,6 +392,7 @@ def _cmd_run(args, out, err):
         _needs("matplotlib", "render")
     with output_unit(args.output, command="run", overwrite=args.force, force=args.force,  # all outputs as one unit
                      claims=names + FIXED_NAMES) as unit:
+        err.write("".join(f"hazard: {n}\n" for n in unit.notes))  # a crash of an earlier run recovered: said
         result = _analyse(args, err)
         extra = {}
         if args.plot:
@@ -783,6 +784,7 @@ def _cmd_render(args, out, err):
     from .progress import progress_to
 
     with output_unit(args.output, command="render", overwrite=args.force, force=args.force) as unit:  # all renders as one unit
+        err.write("".join(f"hazard: {n}\n" for n in unit.notes))
         result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
         with progress_to(None if args.quiet else err):  # bars on a terminal only
             paths = render.keepout(result, unit.stage, lobe_resolution_deg=args.resolution_deg, force=args.force)
@@ -835,6 +837,7 @@ def _cmd_report(args, out, err):
     read_report(args.out_dir)  # a clear line naming the folder before anything is staged
     failed = None
     with output_unit(args.out_dir, command="report", overwrite=True, force=True) as unit:  # the run's files are kept
+        err.write("".join(f"hazard: {n}\n" for n in unit.notes))
         unit.carry()  # the page reads report.json and the pictures in the folder
         try:
             paths = _write_review(unit.stage, args, err, pdf=args.pdf)

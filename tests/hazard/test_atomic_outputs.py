@@ -429,3 +429,17 @@ def test_current_folder_is_refused_with_a_clear_error(tmp_path, monkeypatch):
     with output_unit("o", command="run", overwrite=True) as unit:
         (unit.stage / "a.csv").write_bytes(b"a")
     assert unit.final(unit.stage / "a.csv") == Path("o") / "a.csv"  # printed as the user gave it
+
+
+def test_hazard_run_says_what_it_recovered(tmp_path, monkeypatch, results):
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
+    out = tmp_path / "o"
+    assert run("run", "plate", "-o", out, "--quiet")[0] == 0
+    old = snapshot(out)
+    with monkeypatch.context() as m:
+        crash_at_step(m, "moved")
+        with pytest.raises(Crash):
+            run("run", "binoculars", "-o", out, "--quiet", "--force")
+    assert not out.exists()
+    code, _, err = run("run", "plate", "-o", out, "--quiet")  # recovered first, then refused: its outputs are back
+    assert code == 2 and "restored the previous outputs after an interrupted switch" in err and snapshot(out) == old
