@@ -141,6 +141,7 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
         outdir.mkdir(parents=True, exist_ok=True)
         doc, mp = _risk_doc(scene, outdir, t0, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws, serial=serial,
                             workers=workers, scheduler=scheduler, force=force, progress=progress, backend=backend)
+        doc["notes"][:0] = unit.notes  # a crash of an earlier run recovered: said in risk.json and by the CLI
         write_outputs(unit.stage, doc, scene, mp)
         from .page import write_risk_page
 
