@@ -186,12 +186,15 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write(path, write) -> Path:
+def atomic_write(path, write, *, keep_suffix: bool = False) -> Path:
     """Call ``write(tmp_path)`` on a temporary file beside ``path``, then rename it into
     place: readers see the old file or the whole new one, never a part. The file gets the
-    usual permissions (0666 minus the umask)."""
+    usual permissions (0666 minus the umask). ``keep_suffix``: the temporary ends with
+    ``.tmp`` plus ``path``'s suffix (for writers that choose the format by it, matplotlib).
+    The one write-then-rename of a file; a folder of outputs: :mod:`brdfmodels._unit`."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+    suffix = ".tmp" + (path.suffix if keep_suffix else "")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent if str(path.parent) else ".")
     os.close(fd)
     try:
         write(tmp)

@@ -378,27 +378,35 @@ def _finish(args, result):
 
 
 def _cmd_run(args, out, err):
-    from .report import _json_safe, report_dict, summary_text, write_outputs
+    from brdfmodels._unit import output_unit
+
+    from .report import _json_safe, report_dict, summary_text, write_set
 
     from .figures import FIXED_NAMES
 
     from .map_outputs import MAP_NAMES, map_files
 
-    _check_outdir(args.output, ("report.json", "observers.csv") + MAP_NAMES + (FIXED_NAMES if args.plot else ()), args.force)
+    names = ("report.json", "observers.csv") + MAP_NAMES
+    _check_outdir(args.output, names + (FIXED_NAMES if args.plot else ()), args.force)
     if args.plot:
         _needs("matplotlib", "render")
-    result = _analyse(args, err)
-    extra = {}
-    if args.plot:
-        from .figures import run_figures
+    with output_unit(args.output, command="run", overwrite=args.force, force=args.force,  # all outputs as one unit
+                     claims=names + FIXED_NAMES) as unit:
+        err.write("".join(f"hazard: {n}\n" for n in unit.notes))  # a crash of an earlier run recovered: said
+        result = _analyse(args, err)
+        extra = {}
+        if args.plot:
+            from .figures import run_figures
 
-        extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
-    if not args.quiet:
-        err.write("hazard: map outputs...\n")
-    maps, section = map_files(result)
-    paths = write_outputs(result, args.output, force=args.force, extra={**extra, **maps}, sections={"map_outputs": section})
-    if args.report:  # the review page embeds the pictures just written
-        paths += _write_review(args.output, args, err)
+            extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
+        if not args.quiet:
+            err.write("hazard: map outputs...\n")
+        maps, section = map_files(result)
+        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section})
+        if args.report:  # the review page embeds the pictures just written (and those of hazard render, carried over)
+            unit.carry()
+            names += [p.name for p in _write_review(unit.stage, args, err)]
+    paths = [Path(args.output) / n for n in names]
     if args.json:
         out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
     else:
@@ -709,15 +717,17 @@ def _fit_sh(args, out, samples):
         r = fitting.fit_sh(samples.wi, samples.wo, samples.brdf_per_sr, basis, fanout=args.fanout, weights=samples.weight)
         model = r.model
         rows = [r.summary()]
-    brdfmodels.save(model, args.output)
     extra = {"wrote": str(args.output)}
-    if args.envelope:
+    env = None
+    if args.envelope:  # computed before either file is written: a failed envelope leaves no new model beside an old envelope
         if not args.envelope_output:
             raise ValueError("--envelope-output: required with --envelope")
         _check_new(args.envelope_output, args.force)
         env = fitting.envelope_paper(model, samples) if args.envelope == "paper" else fitting.envelope_sh(samples, basis, fanout=args.fanout)
-        brdfmodels.save(env.model, args.envelope_output)
         extra.update({"envelope": env.summary(), "envelope_file": str(args.envelope_output)})
+    brdfmodels.save(model, args.output)
+    if env is not None:
+        brdfmodels.save(env.model, args.envelope_output)
     _print_report(out, "spherical-harmonic fit", rows, args.json, extra)
     return EXIT_OK
 
@@ -768,23 +778,24 @@ def _cmd_risk(args, out, err):
 
 
 def _cmd_render(args, out, err):
+    from brdfmodels._unit import output_unit
+
     from . import render
     from .progress import progress_to
 
-    result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
-    with progress_to(None if args.quiet else err):  # bars on a terminal only
-        try:
-            paths = render.keepout(result, args.output, lobe_resolution_deg=args.resolution_deg, force=args.force)
-        except FileExistsError as exc:
-            raise ValueError(str(exc)) from None
-        lines = [f"  wrote {p}" for k, p in paths.items() if k not in ("png", "layout")]
-        from .figures import run_figures, write_figures
+    with output_unit(args.output, command="render", overwrite=args.force, force=args.force) as unit:  # all renders as one unit
+        err.write("".join(f"hazard: {n}\n" for n in unit.notes))
+        result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
+        with progress_to(None if args.quiet else err):  # bars on a terminal only
+            paths = render.keepout(result, unit.stage, lobe_resolution_deg=args.resolution_deg, force=args.force)
+            lines = [f"  wrote {unit.final(p)}" for k, p in paths.items() if k not in ("png", "layout")]
+            from .figures import run_figures, write_figures
 
-        say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
-        lines += [f"  wrote {p}" for p in write_figures(run_figures(result, progress=say), args.output)]
-        if not args.no_animation and result.states:
-            anim = render.animate_lobe(result, args.output)
-            lines.append(f"  wrote {anim.get('gif', anim['frames'][0].parent)}")
+            say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
+            lines += [f"  wrote {unit.final(p)}" for p in write_figures(run_figures(result, progress=say), unit.stage)]
+            if not args.no_animation and result.states:
+                anim = render.animate_lobe(result, unit.stage)
+                lines.append(f"  wrote {unit.final(anim.get('gif', anim['frames'][0].parent))}")
     out.write(f"renders of {result.scene.name!r}\n" + "\n".join(lines) + "\n")
     return EXIT_OK
 
@@ -819,13 +830,23 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 
 
 def _cmd_report(args, out, err):
-    from .review import PdfError
+    from brdfmodels._unit import output_unit
 
-    try:
-        paths = _write_review(args.out_dir, args, err, pdf=args.pdf)
-    except PdfError as exc:  # the HTML is written; the PDF is not
-        out.write(f"wrote {exc.html}\n")
-        err.write(f"hazard report: error: {_one_line(exc)}\n")
+    from .review import PdfError, read_report
+
+    read_report(args.out_dir)  # a clear line naming the folder before anything is staged
+    failed = None
+    with output_unit(args.out_dir, command="report", overwrite=True, force=True) as unit:  # the run's files are kept
+        err.write("".join(f"hazard: {n}\n" for n in unit.notes))
+        unit.carry()  # the page reads report.json and the pictures in the folder
+        try:
+            paths = _write_review(unit.stage, args, err, pdf=args.pdf)
+        except PdfError as exc:  # the HTML is written (and switched in); the PDF is not
+            failed, paths = exc, [exc.html]
+    paths = [unit.final(p) for p in paths]
+    if failed is not None:
+        out.write(f"wrote {paths[0]}\n")
+        err.write(f"hazard report: error: {_one_line(str(failed).replace(str(unit.stage), str(unit.given)))}\n")
         return EXIT_INTERNAL
     out.write("".join(f"wrote {p}\n" for p in paths))
     return EXIT_OK

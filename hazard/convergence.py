@@ -204,9 +204,9 @@ def plot(report: ConvergenceReport, path) -> Path | None:
     ax.set_ylabel("max relative error vs the finest run")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
-    path = Path(path)
-    tmp = path.with_name("." + path.name + ".tmp.png")
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    from brdfmodels._io import atomic_write
+
+    try:
+        return atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)
+    finally:
+        plt.close(fig)

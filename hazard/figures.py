@@ -6,7 +6,6 @@ against time per target and the exposure against time of the worst observers
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 __all__ = ["run_figures", "write_figures", "FIXED_NAMES"]
@@ -36,10 +35,6 @@ def write_figures(figures: dict, outdir) -> list:
     """Write each file through a temporary beside it, then rename (never half a PNG)."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = []
-    for name, data in figures.items():
-        tmp = out / f".{name}.tmp"
-        tmp.write_bytes(data)
-        os.replace(tmp, out / name)
-        paths.append(out / name)
-    return paths
+    from brdfmodels._io import atomic_write
+
+    return [atomic_write(out / name, lambda tmp, data=data: Path(tmp).write_bytes(data)) for name, data in figures.items()]

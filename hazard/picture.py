@@ -6,7 +6,6 @@ the scene and the legend are. matplotlib is imported when a picture is composed.
 from __future__ import annotations
 
 import io
-import os
 from pathlib import Path
 
 import numpy as np
@@ -97,8 +96,6 @@ def write_png(picture, path) -> Path:
     """Write the picture through a temporary beside ``path``, then rename."""
     import matplotlib.image as mpimg
 
-    path = Path(path)
-    tmp = path.with_name("." + path.name + ".tmp.png")
-    mpimg.imsave(tmp, picture)
-    os.replace(tmp, path)
-    return path
+    from brdfmodels._io import atomic_write
+
+    return atomic_write(Path(path), lambda tmp: mpimg.imsave(tmp, picture, format="png"), keep_suffix=True)

@@ -33,9 +33,10 @@ class _Display:
     def save(self, path, **plot_kw) -> Path:
         fig, _ = self.plot(**plot_kw)
         path = Path(path)
-        tmp = path.with_name("." + path.name + ".tmp" + path.suffix)
-        fig.savefig(tmp, dpi=110, bbox_inches="tight")  # a legend beside or below the axes stays whole
-        tmp.replace(path)
+        from brdfmodels._io import atomic_write
+
+        # a legend beside or below the axes stays whole
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"), keep_suffix=True)
         import matplotlib.pyplot as plt
 
         plt.close(fig)

@@ -33,7 +33,6 @@ unit-suffixed arrays: ``nohd_m`` on lobes and mirror beams, ``hazard_ratio``,
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -528,8 +527,8 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
     except ImportError:
         return result_paths
     gif = out / "lobe.gif"
-    tmp = out / ".lobe.gif.tmp.gif"
-    imageio.mimsave(tmp, [imageio.imread(f) for f in paths], duration=0.15)
-    os.replace(tmp, gif)
+    from brdfmodels._io import atomic_write
+
+    atomic_write(gif, lambda tmp: imageio.mimsave(tmp, [imageio.imread(f) for f in paths], duration=0.15), keep_suffix=True)
     result_paths["gif"] = gif
     return result_paths

@@ -1,8 +1,9 @@
 """Outputs of an analysis: ``report.json`` (every step) and ``observers.csv``, atomically.
 
-Each file is written to a temporary name in the output folder and renamed into place, so
-a crash never leaves a half-written report. An existing report is never overwritten
-unless asked (``force=True``).
+The whole set is written into a staging folder beside the output folder and switched in
+as one unit (:mod:`brdfmodels._unit`), so a crash never leaves a half-written report nor
+a new report beside an old table. An existing report is never overwritten unless asked
+(``force=True``).
 """
 
 from __future__ import annotations
@@ -11,8 +12,6 @@ import io
 import json
 import math
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -272,62 +271,13 @@ def _write_synced(path: Path, data: bytes) -> None:
         os.fsync(fh.fileno())
 
 
-def _fsync_dir(path: Path) -> None:
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
-def _swap_folder(tmp: Path, out: Path, names, parent: Path) -> bool:
-    """Swap the new folder ``tmp`` in for ``out`` when ``out`` holds only these outputs
-    (two renames, the old one then removed); False when it cannot (other files, a
-    symlink, a mount point): the caller then renames the files one by one."""
-    if out.is_symlink() or not set(os.listdir(out)) <= set(names):
-        return False
-    os.chmod(tmp, os.stat(out).st_mode & 0o7777)
-    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-    try:
-        os.rename(out, old / "d")
-    except OSError:  # e.g. a mount point: fall back to file renames
-        os.rmdir(old)
-        return False
-    try:
-        os.rename(tmp, out)
-    except BaseException:
-        os.rename(old / "d", out)
-        raise
-    shutil.rmtree(old, ignore_errors=True)
-    return True
-
-
-def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> list:
-    """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit,
-    with the files of ``extra`` (name -> bytes, e.g. ``plan.png``) in the same unit, and
-    the report's further ``sections`` (key -> data, e.g. ``map_outputs``).
-
-    Both files are written (and fsynced) into a temporary folder beside ``outdir``, which
-    is then renamed into place: a new ``outdir`` appears whole, and an existing one that
-    holds only these outputs is swapped in two renames (never a new report beside an old
-    table). If ``outdir`` also holds other files, report.json is removed first and renamed
-    in last, so a report present is always the one matching the table. Nothing temporary
-    is left behind after an exception.
-    """
-    out = Path(outdir)
+def write_set(result, folder, *, extra=None, sections=None) -> list:
+    """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
+    ``folder`` (a staging folder of :class:`brdfmodels._unit.OutputUnit`), each fsynced;
+    returns the names written."""
+    folder = Path(folder)
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
-    targets = [out / n for n in names]
-    if out.exists() and not out.is_dir():
-        raise OutputExistsError(f"{out} exists and is not a folder")
-    existing = [p for p in targets if p.exists()]
-    if existing and not force:
-        raise OutputExistsError(f"{existing[0]} exists: pass --force to overwrite")
     cols = observer_columns(result)  # once, for the report and the table
     doc = report_dict(result, cols)
     if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
@@ -335,32 +285,35 @@ def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> 
     doc.update(_json_safe(dict(sections or {})))
     texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
              **extra}
-    parent = out.parent if str(out.parent) else Path(".")
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+    mask = os.umask(0)
+    os.umask(mask)
+    for n in names:
+        _write_synced(folder / n, texts[n])
+        os.chmod(folder / n, 0o666 & ~mask)
+    return list(names)
+
+
+def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> list:
+    """Write report.json and observers.csv into ``outdir`` (created if needed), as one unit,
+    with the files of ``extra`` (name -> bytes, e.g. ``plan.png``) in the same unit, and
+    the report's further ``sections`` (key -> data, e.g. ``map_outputs``).
+
+    The files are written into a staging folder beside ``outdir`` and switched in as one
+    unit (:mod:`brdfmodels._unit`): ``outdir`` holds the previous complete set or the new
+    one, never a mix. Previous outputs of ``hazard run`` need ``force``; files hazard did
+    not write need ``force`` too and are kept. Returns the paths of the outputs.
+    """
+    from brdfmodels._unit import OutputFolderError, output_unit
+
+    out = Path(outdir)
+    if out.exists() and not out.is_dir():
+        raise OutputExistsError(f"{out} exists and is not a folder")
     try:
-        mask = os.umask(0)
-        os.umask(mask)
-        for n in names:
-            _write_synced(tmp / n, texts[n])
-            os.chmod(tmp / n, 0o666 & ~mask)
-        _fsync_dir(tmp)
-        if not out.exists():
-            os.chmod(tmp, 0o777 & ~mask)
-            os.rename(tmp, out)  # one step: every output appears together
-        else:
-            if not _swap_folder(tmp, out, names, parent):
-                (out / "report.json").unlink(missing_ok=True)  # the report is the commit marker
-                for n in names[1:]:
-                    os.replace(tmp / n, out / n)
-                os.replace(tmp / "report.json", out / "report.json")
-                os.rmdir(tmp)
-            _fsync_dir(out)
-        _fsync_dir(parent)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return targets
+        with output_unit(out, command="run", overwrite=force, force=force) as unit:
+            names = write_set(result, unit.stage, extra=extra, sections=sections)
+    except OutputFolderError as exc:
+        raise OutputExistsError(str(exc)) from None
+    return [out / n for n in names]
 
 
 # -- the text summary of ``hazard run``: the answer first, the stage log on request ------

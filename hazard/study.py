@@ -494,11 +494,10 @@ def _plot(study, rows, outdir):
     ax.grid(alpha=0.3)
     fig.suptitle(f"study {study.name}: {len(ok)} scenarios")
     fig.tight_layout()
-    tmp = outdir / ".summary.png.tmp.png"
-    fig.savefig(tmp, dpi=100)
-    plt.close(fig)
-    tmp.replace(outdir / "summary.png")
-    return outdir / "summary.png"
+    try:
+        return atomic_write(outdir / "summary.png", lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)
+    finally:
+        plt.close(fig)
 
 
 def local_cluster(n_workers=2):
@@ -535,6 +534,18 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
         Called with (done, total) as scenarios finish (:func:`progress_bar` draws a bar
         on a terminal). The scenarios' own progress bars (keep-out lobes) are not drawn.
     """
+    from brdfmodels._unit import output_unit
+
+    outdir = Path(outdir)
+    # results.csv/.parquet, summary.json and summary.png switch in as one unit; study.json and
+    # scenarios/ are the resumable working files, kept across runs
+    with output_unit(outdir, command="study", overwrite=True, force=force, working=("study.json", "scenarios"),
+                     claims=("results.csv", "results.parquet", "summary.json", "summary.png")) as unit:
+        return _run_study(study, outdir, unit.stage, scheduler=scheduler, serial=serial, n_workers=n_workers, force=force, progress=progress)
+
+
+def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_workers, force, progress) -> StudyResult:
+    """:func:`run_study`: scenarios in ``outdir/scenarios``, the final files in ``stage``."""
     outdir = Path(outdir)
     sdir = outdir / "scenarios"
     sdir.mkdir(parents=True, exist_ok=True)
@@ -589,9 +600,9 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     rows = sorted((json.loads(p.read_text()) for p in sdir.glob("*.json")), key=lambda r: r["id"])
     rows = [r for r in rows if r["id"] < total]
     summary = _summary(study, rows)
-    _write_table(rows, outdir)
-    atomic_write_text(outdir / "summary.json", json.dumps(_safe(summary), indent=1))
-    _plot(study, rows, outdir)
+    _write_table(rows, stage)
+    atomic_write_text(stage / "summary.json", json.dumps(_safe(summary), indent=1))
+    _plot(study, rows, stage)
     return StudyResult(rows, summary, outdir, len(pending), total - len(pending), summary["failed"])
 
 

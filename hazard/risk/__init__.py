@@ -125,15 +125,35 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
     """Run the probabilistic risk analysis of ``scene`` (it needs ``[uncertainty]``) into
     ``outdir``; finished chunks there are reused (resume). Arguments override the scene's
     ``[uncertainty]`` (draws, seed, sampling "plain" | "importance" | "auto").
-    ``serial``: in this process, without Dask (identical results)."""
+    ``serial``: in this process, without Dask (identical results). The final files are
+    switched in as one unit (:mod:`brdfmodels._unit`); ``force`` also accepts files in
+    ``outdir`` hazard did not write (kept)."""
+    from brdfmodels._unit import output_unit
+
     from .outputs import write_outputs
-    from .results import map_result, observer_rows, sensitivity
-    from .run import run_chunks, settings, shared
 
     check_risk_args(scene, draws, sensitivity_draws)  # [uncertainty] present, something random, the work within the limit
     t0 = time.perf_counter()
     outdir = Path(outdir)
-    outdir.mkdir(parents=True, exist_ok=True)
+    claims = ("risk.json", "risk.csv", "risk.html", "probability_map.csv", "probability_map.png", "probability_map.tif",
+              "probability_map_local_frame.tif", "probability_contours.geojson", "probability_contours_local_frame.json")
+    with output_unit(outdir, command="risk", overwrite=True, force=force, working=(".risk",), claims=claims) as unit:
+        outdir.mkdir(parents=True, exist_ok=True)
+        doc, mp = _risk_doc(scene, outdir, t0, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws, serial=serial,
+                            workers=workers, scheduler=scheduler, force=force, progress=progress, backend=backend)
+        doc["notes"][:0] = unit.notes  # a crash of an earlier run recovered: said in risk.json and by the CLI
+        write_outputs(unit.stage, doc, scene, mp)
+        from .page import write_risk_page
+
+        write_risk_page(doc, unit.stage)  # risk.json, risk.csv, the map files and the page switch in together
+    return RiskResult(doc, outdir, mp)
+
+
+def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, serial, workers, scheduler, force, progress, backend):
+    """risk.json's content and the map of :func:`run_risk` (chunks computed or reused in ``outdir/.risk``)."""
+    from .results import map_result, observer_rows, sensitivity
+    from .run import run_chunks, settings, shared
+
     ev, prop = shared(scene, backend)
     active = ev.model.active()
     s = settings(scene, len(ev.points_m), ev.n_observers, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws,
@@ -153,9 +173,5 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
            "run": {"chunks": len(chunks.main) + len(chunks.sensitivity), "ran": chunks.ran, "reused": chunks.reused,
                    "mode": "serial" if serial else (f"scheduler {scheduler}" if scheduler else f"LocalCluster, {workers} workers"),
                    "seconds": round(time.perf_counter() - t0, 3)}}
-    write_outputs(outdir, doc, scene, mp)
-    from .page import write_risk_page
-
-    write_risk_page(doc, outdir)
-    return RiskResult(doc, outdir, mp)
+    return doc, mp
 

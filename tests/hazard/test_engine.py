@@ -234,7 +234,7 @@ def test_report_is_atomic_and_never_overwrites(tmp_path):
     with pytest.raises(FileExistsError, match="pass --force"):
         write_outputs(res, tmp_path)
     write_outputs(res, tmp_path, force=True)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["observers.csv", "report.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".laser-hazard.json", "observers.csv", "report.json"]  # + the manifest
     lines = (tmp_path / "observers.csv").read_text().splitlines()
     assert lines[0].startswith("name,x_m,y_m,z_m,static_irradiance_w_m2") and len(lines) == 3
     doc = json.loads((tmp_path / "report.json").read_text())

@@ -1,0 +1,331 @@
+"""Output folders replaced as one unit: the one helper every command writes through.
+
+A command writes its whole set of files into a staging folder ``.OUT.<pid>.<token>.tmp``
+beside the output folder ``OUT``; :meth:`OutputUnit.commit` then switches it in:
+
+* ``OUT`` absent: one rename (``tmp -> OUT``);
+* ``OUT`` present: ``OUT -> .OUT.<pid>.<token>.old``, ``tmp -> OUT``, the old folder removed.
+
+Before the switch, everything in ``OUT`` that the new set does not replace is carried into
+the staging folder as hard links (the same files, never copied or rewritten): the files
+of the tool's other commands (``hazard render`` pictures in a ``hazard run`` folder),
+working folders (``.risk/``, ``scenarios/``), and, with ``force``, files the tool did not
+write. Only the command's own previous outputs that it does not write again are dropped.
+
+A crash can leave ``.OUT.*.tmp`` (a set never switched in) and ``.OUT.*.old`` (between the
+two renames, or before the old folder was removed). :func:`recover` runs before every
+unit and puts the folder back: when ``OUT`` is missing it renames the newest ``.old`` back
+(the old complete set), then removes the stale ``.tmp``/``.old`` folders of dead
+processes. A reader that finds ``OUT`` missing beside an ``.OUT.*.old`` folder may rename
+that folder back itself: it is the previous complete set. ``OUT`` therefore always holds
+the old complete set or the new one, never a mix and never nothing once recovered.
+
+``OUT/.laser-hazard.json`` (the manifest) lists which command wrote each file; a folder
+with files not listed there is refused unless ``force``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import shutil
+from contextlib import contextmanager
+from pathlib import Path
+
+__all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "OutputFolderError"]
+
+MANIFEST = ".laser-hazard.json"
+_ACTIVE: set = set()  # staging folders of this process still being written
+
+
+class OutputFolderError(ValueError):
+    """The output folder cannot take the outputs (foreign files, outputs without --force)."""
+
+
+def _step(name: str) -> None:
+    """A no-op between the steps of a switch; fault-injection tests replace it to raise."""
+
+
+def _pattern(name: str):
+    return re.compile(r"^\." + re.escape(name) + r"\.(\d+)\.([0-9a-f]{16})\.(tmp|old)$")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return False  # this process' leftovers of a failed unit (its live ones are in _ACTIVE)
+    if os.name == "nt":
+        return True  # os.kill would end the process there: another pid's folders are left alone
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _target(out) -> Path:
+    given = out
+    out = Path(os.path.abspath(out))
+    if out.is_symlink():  # switch the folder the link points to; the link stays valid
+        out = Path(os.path.realpath(out))
+    cwd = Path(os.path.realpath(os.getcwd()))
+    if not out.name or Path(os.path.realpath(out)) in (cwd, *cwd.parents):
+        raise OutputFolderError(f"-o {given}: the current folder (or one holding it) cannot be replaced as one unit; "
+                                "expected a folder for the outputs, e.g. -o out")
+    return out
+
+
+def recover(out) -> list:
+    """Put ``out`` back to a complete set after a crash; returns lines saying what was done.
+
+    ``out`` missing beside a stale ``.out.*.old`` folder: the newest one is renamed back
+    (the old complete set). Stale staging (``.tmp``) and old (``.old``) folders of
+    processes no longer running are then removed. Nothing else is touched."""
+    out = _target(out)
+    parent = out.parent
+    if not parent.is_dir():
+        return []
+    pat, said = _pattern(out.name), []
+    stale = {"tmp": [], "old": []}
+    for e in os.listdir(parent):
+        m = pat.match(e)
+        p = parent / e
+        if m and p.is_dir() and not p.is_symlink() and p not in _ACTIVE and not _alive(int(m.group(1))):
+            stale[m.group(3)].append(p)
+    said += _legacy(out)
+    olds = sorted(stale["old"], key=lambda p: p.stat().st_mtime)
+    if olds and not os.path.lexists(out):
+        os.rename(olds.pop(), out)  # crash between the two renames: the old set comes back
+        said.append(f"{out}: restored the previous outputs after an interrupted switch")
+    for p in olds + stale["tmp"]:
+        shutil.rmtree(p, ignore_errors=True)
+        said.append(f"{out}: removed the stale {p.name}")
+    if said:
+        _fsync_dir(parent)
+    return said
+
+
+def _legacy(out: Path) -> list:
+    """Put back / remove the leftovers of laser-hazard before 2026-11 (``tempfile.mkdtemp``
+    names ``.OUT.<8 chars>.tmp`` holding only files, ``.OUT.<8 chars>.old`` holding only the
+    old folder ``d``); anything else of that name is left alone."""
+    pat, said = re.compile(r"^\." + re.escape(out.name) + r"\.[a-z0-9_]{8}\.(tmp|old)$"), []
+    for e in sorted(os.listdir(out.parent)):
+        m, p = pat.match(e), out.parent / e
+        if not m or p.is_symlink() or not p.is_dir():
+            continue
+        inside = os.listdir(p)
+        if m.group(1) == "tmp" and all((p / n).is_file() and not (p / n).is_symlink() for n in inside):
+            shutil.rmtree(p, ignore_errors=True)
+            said.append(f"{out}: removed the stale {e}")
+        elif m.group(1) == "old" and set(inside) <= {"d"}:
+            if inside and not os.path.lexists(out):
+                os.rename(p / "d", out)
+                said.append(f"{out}: restored the previous outputs after an interrupted switch")
+            shutil.rmtree(p, ignore_errors=True)
+            said.append(f"{out}: removed the stale {e}")
+    return said
+
+
+def read_manifest(out: Path) -> dict:
+    """name -> command that wrote it, from ``out``'s manifest ({} when none or unreadable)."""
+    try:
+        doc = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+        files = doc["files"]
+        return {str(k): str(v) for k, v in files.items()} if isinstance(files, dict) else {}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}
+
+
+def _link_or_copy(src, dst) -> None:
+    try:
+        os.link(src, dst)
+    except OSError:  # a file system without hard links: a copy (the original is still not touched)
+        shutil.copy2(src, dst)
+
+
+def _link_copy(src: Path, dst: Path) -> None:
+    """``dst`` as hard links of ``src`` (a file, a symlink or a folder tree; copies where
+    the file system has no hard links)."""
+    if src.is_symlink():
+        os.symlink(os.readlink(src), dst)
+    elif src.is_dir():
+        shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy)
+    else:
+        _link_or_copy(src, dst)
+
+
+class OutputUnit:
+    """A set of output files staged in :attr:`stage`, switched into :attr:`out` by
+    :meth:`commit` (see the module docstring).
+
+    Parameters
+    ----------
+    out : str or Path
+        The output folder (created if needed; a symlink to a folder switches that folder).
+    command : str
+        The command writing (``"run"``, ``"risk"``, ...): its previous files in ``out``
+        are replaced, other commands' files are kept.
+    overwrite : bool
+        Allow replacing this command's previous outputs; otherwise an ``OutputFolderError``.
+    force : bool
+        Accept files in ``out`` the tool did not write (kept as they are, never deleted;
+        a file of the same name as a new output is replaced).
+    working : tuple of str
+        Names in ``out`` the command keeps across runs (checkpoints such as ``.risk``):
+        carried into the new set.
+    claims : tuple of str
+        In a folder without a manifest (written before manifests existed), these exact
+        names count as this command's previous outputs: replaced, or dropped when not
+        written again (a stale picture never stays beside a new report).
+    """
+
+    def __init__(self, out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
+        self.out, self.given = _target(out), Path(out)
+        self.command, self.working = command, tuple(working)
+        if os.path.lexists(self.out) and not self.out.is_dir():
+            raise OutputFolderError(f"{self.out}: exists and is not a folder")
+        self.notes = recover(self.out)
+        self.owners = read_manifest(self.out) if self.out.is_dir() else {}
+        if self.out.is_dir() and not (self.out / MANIFEST).exists():
+            self.owners = {n: command for n in claims if (self.out / n).is_file()}
+        try:
+            self._check(overwrite, force)
+        except OutputFolderError as exc:  # say what recovery did before the refusal
+            raise OutputFolderError("; ".join([*self.notes, str(exc)])) from None
+        parent = self.out.parent
+        parent.mkdir(parents=True, exist_ok=True)
+        self.stage = parent / f".{self.out.name}.{os.getpid()}.{secrets.token_hex(8)}.tmp"
+        self.stage.mkdir()
+        _ACTIVE.add(self.stage)
+        self._carried: set = set()
+
+    def _present(self) -> list:
+        return sorted(os.listdir(self.out)) if self.out.is_dir() else []
+
+    def _check(self, overwrite: bool, force: bool) -> None:
+        names = [n for n in self._present() if n != MANIFEST and n not in self.working]
+        foreign = [n for n in names if n not in self.owners]
+        own = [n for n in names if self.owners.get(n) == self.command]
+        if foreign and not force:
+            shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+            raise OutputFolderError(f"{self.out} holds files hazard did not write ({shown}): choose another folder, or pass "
+                                    "--force (they are kept as they are; only files of the same names as the outputs are replaced)")
+        if own and not overwrite:
+            raise OutputFolderError(f"{self.out / own[0]} exists: pass --force to overwrite")
+
+    def final(self, path) -> Path:
+        """Where ``path`` (in :attr:`stage`) will be once committed, under the folder as given."""
+        path = Path(path)
+        try:
+            return self.given / path.relative_to(self.stage)
+        except ValueError:
+            return path
+
+    def carry(self) -> list:
+        """Hard-link into the stage the entries of ``out`` kept in the new set and not yet
+        written there (other commands' files, working folders, foreign files with
+        ``force``), e.g. so that a page written next can embed them; returns their names.
+        Write over a carried name only by renaming a new file onto it (never in place)."""
+        have, done = set(os.listdir(self.stage)), []
+        for n in self._present():
+            if n in have or n == MANIFEST or self.owners.get(n) == self.command and n not in self.working:
+                continue  # written anew, or this command's previous output it does not write again
+            _link_copy(self.out / n, self.stage / n)
+            self._carried.add(n)
+            done.append(n)
+        return done
+
+    def _owner(self, n: str) -> str:
+        p, q = self.stage / n, self.out / n
+        if n in self.working:
+            return self.command
+        if n in self._carried and (p.is_dir() or os.path.lexists(q) and os.path.samestat(os.lstat(p), os.lstat(q))):
+            return self.owners.get(n, "")
+        return self.command
+
+    def _complete(self) -> None:
+        """Carry the kept entries of ``out`` into the stage and write the manifest."""
+        self.carry()
+        owners = {n: self._owner(n) for n in os.listdir(self.stage) if n != MANIFEST}
+        owners = {n: o for n, o in owners.items() if o}  # foreign files stay unlisted
+        doc = {"tool": "laser-hazard", "note": "files written by laser-hazard in this folder and the command of each",
+               "files": dict(sorted(owners.items()))}
+        with open(self.stage / MANIFEST, "w", encoding="utf-8") as fh:
+            fh.write(json.dumps(doc, indent=1))
+            fh.flush()
+            os.fsync(fh.fileno())
+        for p in self.stage.iterdir():
+            if p.is_file() and not p.is_symlink() and owners.get(p.name) == self.command:
+                with open(p, "rb") as fh:
+                    os.fsync(fh.fileno())
+        _fsync_dir(self.stage)
+        if self.out.is_dir():
+            os.chmod(self.stage, os.stat(self.out).st_mode & 0o7777)
+        else:
+            mask = os.umask(0)
+            os.umask(mask)
+            os.chmod(self.stage, 0o777 & ~mask)
+
+    def commit(self) -> None:
+        """Switch the staged set in (see the module docstring)."""
+        self._complete()
+        _step("staged")
+        parent = self.out.parent
+        if not self.out.is_dir():
+            os.rename(self.stage, self.out)
+            _step("switched")
+        else:
+            old = self.stage.with_name(self.stage.name[:-4] + ".old")
+            try:
+                os.rename(self.out, old)
+            except OSError as exc:  # e.g. a mount point: nothing was changed
+                raise OutputFolderError(f"{self.out}: cannot be replaced as one unit ({exc.strerror}); "
+                                        "write to a folder inside it instead") from None
+            _step("moved")
+            try:
+                os.rename(self.stage, self.out)
+            except BaseException:
+                if not os.path.lexists(self.out):
+                    os.rename(old, self.out)
+                raise
+            _step("switched")
+            shutil.rmtree(old, ignore_errors=True)
+        _ACTIVE.discard(self.stage)
+        _fsync_dir(parent)
+
+    def discard(self) -> None:
+        """Remove the stage (nothing switched in)."""
+        _ACTIVE.discard(self.stage)
+        shutil.rmtree(self.stage, ignore_errors=True)
+
+
+@contextmanager
+def output_unit(out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
+    """An :class:`OutputUnit`; the body writes into ``unit.stage``; committed on a normal
+    exit, discarded on an exception (``out`` then keeps its previous set)."""
+    unit = OutputUnit(out, command=command, overwrite=overwrite, force=force, working=working, claims=claims)
+    try:
+        yield unit
+        unit.commit()
+    except BaseException:
+        _ACTIVE.discard(unit.stage)
+        if unit.stage.exists():
+            shutil.rmtree(unit.stage, ignore_errors=True)
+        raise
