@@ -37,7 +37,6 @@ import os
 import sys
 from pathlib import Path
 
-import numpy as np
 
 from . import mpe as _mpe
 from . import nohd as _nohd

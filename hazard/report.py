@@ -8,7 +8,6 @@ a new report beside an old table. An existing report is never overwritten unless
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
