@@ -103,10 +103,19 @@ def dumps(model) -> str:
     return json.dumps(doc, indent=1, allow_nan=False)
 
 
+def _unique_keys(pairs) -> dict:
+    """A JSON object whose keys are each given once (json keeps the last of a repeated key,
+    silently: ``"reflectance": 0.5, "reflectance": 0.05`` read as 0.05)."""
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        raise ValueError("not a brdfmodels JSON document: a key is given twice in one object; expected each key once")
+    return doc
+
+
 def loads(text: str):
     """Model from the JSON text written by :func:`dumps`."""
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, object_pairs_hook=_unique_keys)
     except json.JSONDecodeError as exc:
         raise ValueError(f"not a brdfmodels JSON document: {exc}") from None
     except RecursionError:  # arrays nested thousands deep

@@ -131,7 +131,7 @@ def _check_raster(ds, spec, driver) -> None:
     where = f"terrain.file={spec.file!r}"
     if ds.driver != driver or ds.driver not in DEM_DRIVERS:
         raise GeoError(f"{where}: opened by GDAL's {ds.driver} driver; expected {driver} (only GeoTIFF and DTED are read)")
-    if ds.count < 1 or ds.subdatasets:
+    if ds.count != 1 or ds.subdatasets:  # an RGB image or a stack is not a DEM: which band would be the heights?
         raise GeoError(f"{where}: expected one band of heights, got {ds.count} band(s) and {len(ds.subdatasets)} subdataset(s)")
     if np.dtype(ds.dtypes[0]).kind not in "iuf":
         raise GeoError(f"{where}: band 1 holds {ds.dtypes[0]} values; expected real heights (integers or floats), "
