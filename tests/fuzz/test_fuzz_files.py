@@ -25,7 +25,7 @@ from collections import Counter
 
 import pytest
 
-from tests.fuzz._file_corpus import all_cases, build_bases, run_case
+from tests.fuzz._file_corpus import SECRET, all_cases, build_bases, run_case
 
 SAMPLE = 400  # cases in the default run (seeded) of the 6-seed corpus; -m slow: every case of 20 seeds
 
@@ -90,6 +90,7 @@ def _one_line_refusal(tmp_path, scene, *words):
         lines = err.strip().splitlines()
         assert code == 2 and len(lines) == 1 and not raw and "Traceback" not in err, (verb, code, err, raw)
         assert all(w in lines[0] for w in words), lines[0]
+        assert SECRET not in err + out, lines[0]  # a data file is never quoted
 
 
 @pytest.mark.parametrize("row, words", [
@@ -151,3 +152,23 @@ def test_a_material_json_key_given_twice_is_refused(tmp_path):
                                      '"params": {"reflectance": 0.5, "reflectance": 0.05}}}')
     (tmp_path / "s.toml").write_text(_with_material('material = { file = "m.json" }'))
     _one_line_refusal(tmp_path, tmp_path / "s.toml", "targets[0].material", "m.json", "a key is given twice in one object")
+
+
+@pytest.mark.parametrize("model, words", [
+    ({"type": "zq9SECRETzq9", "params": {}}, ["model=(a string of the file) is unknown: expected one of"]),
+    ({"type": "lambertian", "params": {"reflectance": 0.5, "zq9SECRETzq9": 1}},
+     ["lambertian: unknown parameters [(a string of the file)]; expected some of ['reflectance']"]),
+    ({"type": "lambertian", "params": {}, "zq9SECRETzq9": 1}, ["model: unknown keys [(a string of the file)]"]),
+])
+def test_a_material_json_is_not_quoted(model, words, tmp_path):
+    """The model's type, its unknown keys and parameters were quoted from the file."""
+    import json
+
+    from tests.fuzz._file_corpus import _with_material
+
+    (tmp_path / "m.json").write_text(json.dumps({"format": "brdfmodels.model", "version": 1, "model": model}))
+    (tmp_path / "s.toml").write_text(_with_material('material = { file = "m.json" }'))
+    _one_line_refusal(tmp_path, tmp_path / "s.toml", "file='m.json'", *words)
+    (tmp_path / "m.json").write_text(json.dumps({"format": "brdfmodels.model", "version": 1, "model": model,
+                                                 "zq9SECRETzq9": 1}))
+    _one_line_refusal(tmp_path, tmp_path / "s.toml", "1 unknown key(s) in model file")
