@@ -155,7 +155,7 @@ def build_bases(tmp: Path) -> dict:
                              "h.csv": b"time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n"}, ("run",), ("h.csv",)),
         "track": Base({"s.toml": (BASE + TRACK).encode()}, ("run",), ("s.toml",)),
         "uncertainty": Base({"s.toml": (BASE + UNCERTAINTY).encode()}, ("risk",), ("s.toml",)),
-        "study": Base({"study.toml": STUDY.encode(), "s.toml": BASE.encode()}, (), ("study.toml", "s.toml")),
+        "study": Base({"study.toml": STUDY.encode(), "s.toml": BASE.encode()}, ("study",), ("study.toml", "s.toml")),
     }
     bases.update(_dem_bases(tmp))
     return bases
@@ -315,10 +315,9 @@ def run_case(bases, case, tmp: Path) -> str:
         assert SECRET not in shown, f"{label}: {verb}: quotes the file's contents: {err.strip()[:300]!r}"
         if code == 0:
             outcomes[verb] = "accepted"
-            if verb in ("run", "risk") and (folder / f"out_{verb}" / "report.json").exists():
-                doc = json.loads((folder / f"out_{verb}" / "report.json").read_text())
-                bad = _non_finite(doc)
-                assert not bad, f"{label}: {verb}: non-finite numbers at {bad[:5]}"
+            for written in sorted((folder / f"out_{verb}").glob("*.json")):  # report.json, the study's and risk's
+                bad = _non_finite(json.loads(written.read_text()))
+                assert not bad, f"{label}: {verb}: non-finite numbers in {written.name} at {bad[:5]}"
             continue
         assert code == 2, f"{label}: {verb}: exit {code}: {err.strip()[-300:]!r}"
         assert len(lines) == 1, f"{label}: {verb}: {len(lines)} error lines: {err.strip()[:300]!r}"
