@@ -123,6 +123,9 @@ def _bsdf_header(lines, path):
             if n < 1 or len(vals) != n:
                 raise ValueError(f"{path}: line {no}: {name}: expected a count and that many angles")
             head[key] = _angles(vals, path, no, key)
+        elif key[0].isdigit() or key[0] in "+-.":  # was dropped: a count smaller than the angles listed
+            raise ValueError(f"{path}: line {no}: numbers outside a keyword's list; expected a keyword (is the count "
+                             f"of the list above smaller than its angles?)")
         else:
             head[key] = " ".join(toks[1:])
         i += 1

@@ -172,3 +172,12 @@ def test_a_material_json_is_not_quoted(model, words, tmp_path):
     (tmp_path / "m.json").write_text(json.dumps({"format": "brdfmodels.model", "version": 1, "model": model,
                                                  "zq9SECRETzq9": 1}))
     _one_line_refusal(tmp_path, tmp_path / "s.toml", "1 unknown key(s) in model file")
+
+
+def test_bsdf_angles_past_their_count_are_refused(tmp_path):
+    """AngleOfIncidence 2 over "10 30" and then "50": the third angle was dropped silently."""
+    from tests.fuzz.test_input_trust import _bsdf
+
+    text = _bsdf(aoi="10 30").replace("AngleOfIncidence 2\n10 30\n", "AngleOfIncidence 2\n10 30\n50\n")
+    scene = _table_scene(tmp_path, "a.bsdf", text)
+    _one_line_refusal(tmp_path, scene, "a.bsdf", "line 9: numbers outside a keyword's list")
