@@ -7,12 +7,17 @@ rasters GDAL writes that are no DEM: complex, three bands, all NaN / nodata / in
 heights, one cell, no CRS, a UTM CRS over degree cells, 200 000 x 200 000 cells declared).
 Each case mutates one file with a seeded RNG (truncate, flip bits, delete / duplicate a
 line or a column, a number replaced by NaN / inf / -0 / 1e308 / a huge count / a negative /
-a string, empty, BOM, UTF-16, another delimiter, CRLF, garbage, a NUL, zeroed blocks) and
-runs ``hazard validate`` and then ``run`` / ``risk`` as the CLI does, in-process.
+a string, a quoted string or key replaced, empty, BOM, UTF-16, another delimiter, CRLF,
+garbage, a NUL, zeroed blocks) and runs ``hazard validate`` and then ``run`` / ``risk`` /
+``study --serial`` as the CLI does, in-process (a verb after a refusal is not run: that
+validate refuses what the others would is tests/fuzz/test_validate_equals_run.py).
 
 Good: exit 0 with finite results (warnings stated), or exit 2 with one line naming the
 mutated file. A defect: another exit code, a traceback, a raw NumPy / Python warning, a
-run over 120 s, non-finite numbers in report.json, an error that quotes the file.
+run over 120 s, non-finite numbers in a JSON the verb writes, an error or answer that
+quotes a data file (a scene or study TOML's bad value is echoed beside its field, by
+design). Accepted nonsense cannot be told apart automatically: the accepted cases were
+read, and what was nonsense is now refused, each with a regression test below.
 
 Default: a seeded sample of the corpus; ``-m slow``: all of it.
 """
