@@ -191,6 +191,9 @@ def read_bsdf(path):
         if pos >= len(values) or values[pos].lower() != "tis":
             where = f"line {tokens[pos][0]}: " if pos < len(tokens) else ""
             raise ValueError(f"{path}: {where}expected 'TIS <value>' before the block of AngleOfIncidence {math.degrees(t):g} deg")
+        tis = _numbers(values[pos + 1:pos + 2], path, tokens[pos][0], "TIS", tokens[pos][1] + 1)
+        if len(tis) != 1 or not math.isfinite(tis[0]) or tis[0] < 0:  # unused, but NaN / inf / missing is no file
+            raise ValueError(f"{path}: line {tokens[pos][0]}: TIS: expected a finite total integrated scatter >= 0")
         block = values[pos + 2:pos + 2 + need]
         if len(block) != need or any(x.lower() in ("tis", "dataend") for x in block):
             raise ValueError(f"{path}: line {tokens[pos][0]}: the block of AngleOfIncidence {math.degrees(t):g} deg holds "

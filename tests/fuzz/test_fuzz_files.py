@@ -186,3 +186,14 @@ def test_bsdf_angles_past_their_count_are_refused(tmp_path):
     text = _bsdf(aoi="10 30").replace("AngleOfIncidence 2\n10 30\n", "AngleOfIncidence 2\n10 30\n50\n")
     scene = _table_scene(tmp_path, "a.bsdf", text)
     _one_line_refusal(tmp_path, scene, "a.bsdf", "line 9: numbers outside a keyword's list")
+
+
+@pytest.mark.parametrize("tis, words", [("nan", "TIS: expected a finite total integrated scatter >= 0"),
+                                        ("inf", "TIS: expected a finite"), ("-0.5", "TIS: expected a finite"),
+                                        (SECRET, "line 14, column 2: TIS: expected a number")])
+def test_a_bsdf_tis_is_a_number(tis, words, tmp_path):
+    """TIS nan / inf / a word was accepted (the value is not used: the file was nonsense all the same)."""
+    from tests.fuzz.test_input_trust import _bsdf
+
+    scene = _table_scene(tmp_path, "a.bsdf", _bsdf().replace("TIS 0.5", f"TIS {tis}", 1))
+    _one_line_refusal(tmp_path, scene, "a.bsdf", words)
