@@ -197,3 +197,22 @@ def test_a_bsdf_tis_is_a_number(tis, words, tmp_path):
 
     scene = _table_scene(tmp_path, "a.bsdf", _bsdf().replace("TIS 0.5", f"TIS {tis}", 1))
     _one_line_refusal(tmp_path, scene, "a.bsdf", words)
+
+
+def test_a_dted_column_record_out_of_place_is_refused(tmp_path):
+    """A DTED level-0 column record (3428 header bytes, then per column 8 + 121 x 2 + 4 bytes)
+    whose longitude count is zeroed: GDAL logged a warning and read on (accepted, as heights)."""
+    pytest.importorskip("rasterio")
+    pytest.importorskip("pyproj")
+    from tests.fuzz._file_corpus import _argv, _cli
+    from tests.scenes.test_dem_formats import SCENE, _dted
+
+    _dted(tmp_path / "n32_w107.dt0")
+    (tmp_path / "s.toml").write_text(SCENE)
+    assert _cli(_argv("validate", tmp_path, tmp_path / "s.toml"))[0] == 0  # intact: read
+    data = bytearray((tmp_path / "n32_w107.dt0").read_bytes())
+    at = 3428 + 60 * 254  # column 60 (lon -106.5), inside the analysis area
+    assert data[at] == 0xAA and int.from_bytes(data[at + 4:at + 6], "big") == 60  # the record's sentinel and count
+    data[at + 4:at + 6] = b"\0\0"
+    (tmp_path / "n32_w107.dt0").write_bytes(bytes(data))
+    _one_line_refusal(tmp_path, tmp_path / "s.toml", "terrain.file='n32_w107.dt0'", "damaged record", "expected an intact DEM")
