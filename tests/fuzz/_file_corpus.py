@@ -314,6 +314,7 @@ def run_case(bases, case, tmp: Path) -> str:
         shown = "" if target.endswith(".toml") else err + out
         assert SECRET not in shown, f"{label}: {verb}: quotes the file's contents: {err.strip()[:300]!r}"
         if code == 0:
+            assert not lines, f"{label}: {verb}: exit 0 with stderr lines that are no warning: {lines[:2]!r}"
             outcomes[verb] = "accepted"
             for written in sorted((folder / f"out_{verb}").glob("*.json")):  # report.json, the study's and risk's
                 bad = _non_finite(json.loads(written.read_text()))
