@@ -123,6 +123,9 @@ def _bsdf_header(lines, path):
             if n < 1 or len(vals) != n:
                 raise ValueError(f"{path}: line {no}: {name}: expected a count and that many angles")
             head[key] = _angles(vals, path, no, key)
+        elif key[0].isdigit() or key[0] in "+-.":  # was dropped: a count smaller than the angles listed
+            raise ValueError(f"{path}: line {no}: numbers outside a keyword's list; expected a keyword (is the count "
+                             f"of the list above smaller than its angles?)")
         else:
             head[key] = " ".join(toks[1:])
         i += 1
@@ -188,6 +191,9 @@ def read_bsdf(path):
         if pos >= len(values) or values[pos].lower() != "tis":
             where = f"line {tokens[pos][0]}: " if pos < len(tokens) else ""
             raise ValueError(f"{path}: {where}expected 'TIS <value>' before the block of AngleOfIncidence {math.degrees(t):g} deg")
+        tis = _numbers(values[pos + 1:pos + 2], path, tokens[pos][0], "TIS", tokens[pos][1] + 1)
+        if len(tis) != 1 or not math.isfinite(tis[0]) or tis[0] < 0:  # unused, but NaN / inf / missing is no file
+            raise ValueError(f"{path}: line {tokens[pos][0]}: TIS: expected a finite total integrated scatter >= 0")
         block = values[pos + 2:pos + 2 + need]
         if len(block) != need or any(x.lower() in ("tis", "dataend") for x in block):
             raise ValueError(f"{path}: line {tokens[pos][0]}: the block of AngleOfIncidence {math.degrees(t):g} deg holds "
@@ -232,6 +238,9 @@ def read_astm_e1392(path):
                 raise ValueError(f"{path}: line {k}: expected {len(names) if names else 'VARS before the'} columns")
             if not all(math.isfinite(v) for v in vals) or vals[4] < 0:
                 raise ValueError(f"{path}: line {k}: data row: expected finite angles [rad] and a finite BRDF >= 0")
+            bad = _angle_out_of_range(vals[:4], math.pi)
+            if bad is not None:
+                raise ValueError(f"{path}: line {k}, column {bad + 1}: data row: expected {_ANGLE_RANGES[bad % 2]} [rad]")
             n_rows += 1
             key4 = tuple(vals[:4])
             if key4 not in seen:
@@ -250,6 +259,19 @@ def read_astm_e1392(path):
 
 # -- generic CSV ---------------------------------------------------------------------
 _ANGLES = ("theta_i_deg", "phi_i_deg", "theta_r_deg", "phi_r_deg")
+_ANGLE_RANGES = ("a polar angle from 0 to pi", "an azimuth from -2 pi to 2 pi")
+_ANGLE_RANGES_DEG = ("a polar angle from 0 to 180 deg", "an azimuth from -360 to 360 deg")
+
+
+def _angle_out_of_range(angles, half_turn) -> int | None:
+    """Index of the first of (theta, phi, theta, phi) that is no spherical angle (a polar
+    angle outside [0, half turn], an azimuth outside [-2, 2] half turns; 1e-9 of a half turn
+    of rounding allowed), else None. An angle of 1e308 rad or deg gave a garbage direction."""
+    tol = 1e-9 * half_turn
+    for j, a in enumerate(angles):
+        if (j % 2 == 0 and not -tol <= a <= half_turn + tol) or (j % 2 == 1 and not abs(a) <= 2 * half_turn + tol):
+            return j
+    return None
 
 
 def read_brdf_csv(path):
@@ -264,6 +286,9 @@ def read_brdf_csv(path):
     if missing or len(value) != 1:
         raise ValueError(f"{path}: line 1: expected columns {list(_ANGLES)} and one of brdf_per_sr or reflectance_factor"
                          f"{'; missing ' + ', '.join(missing) if missing else ''} (the header has {len(cols)} column(s))")
+    twice = next((c for c in cols if cols.count(c) > 1), None)
+    if twice is not None and (twice in _ANGLES or twice in value or twice in ("test_id", "time_s", "temperature_k", "weight")):
+        raise ValueError(f"{path}: line 1: column {twice} appears {cols.count(twice)} times; expected once")
     idx = {c: cols.index(c) for c in cols}
     data = {c: [] for c in cols if c != "test_id"}
     tid = []
@@ -279,6 +304,9 @@ def read_brdf_csv(path):
                 raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected a number") from None
             if not math.isfinite(v):
                 raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected a finite number")
+            if c in _ANGLES and _angle_out_of_range([v] if c.startswith("theta") else [0.0, v], 180.0) is not None:
+                raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected "
+                                 f"{_ANGLE_RANGES_DEG[c.startswith('phi')]}")
             data[c].append(v)
         tid.append(r[idx["test_id"]] if "test_id" in idx else "0")
     if not tid:

@@ -103,10 +103,19 @@ def dumps(model) -> str:
     return json.dumps(doc, indent=1, allow_nan=False)
 
 
+def _unique_keys(pairs) -> dict:
+    """A JSON object whose keys are each given once (json keeps the last of a repeated key,
+    silently: ``"reflectance": 0.5, "reflectance": 0.05`` read as 0.05)."""
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        raise ValueError("not a brdfmodels JSON document: a key is given twice in one object; expected each key once")
+    return doc
+
+
 def loads(text: str):
     """Model from the JSON text written by :func:`dumps`."""
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, object_pairs_hook=_unique_keys)
     except json.JSONDecodeError as exc:
         raise ValueError(f"not a brdfmodels JSON document: {exc}") from None
     except RecursionError:  # arrays nested thousands deep
@@ -121,10 +130,32 @@ def loads(text: str):
         raise ValueError(f"version: this library reads version {FORMAT_VERSION} of {FORMAT_NAME!r} files")
     unknown = set(doc) - {"format", "version", "model"}
     if unknown:
-        raise ValueError(f"unknown keys {sorted(unknown)} in model file; expected format, version, model")
+        raise ValueError(f"{len(unknown)} unknown key(s) in model file; expected only format, version, model")
     if "model" not in doc:
         raise ValueError("missing 'model' (the model's type and params)")
-    return model_from_dict(doc["model"])
+    try:
+        return model_from_dict(doc["model"])
+    except ValueError as exc:  # its messages quote names (right for a scene's own fields), not a file's
+        raise ValueError(_unquoted(str(exc), doc["model"])) from None
+
+
+def _unquoted(message: str, node) -> str:
+    """``message`` without the strings of the JSON ``node`` (keys and values) it quotes before
+    its "expected ...": a model file is data, and its error names the key, not the text."""
+    words, stack = set(), [node]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, dict):
+            words.update(k for k in x if isinstance(k, str))
+            stack.extend(x.values())
+        elif isinstance(x, list):
+            stack.extend(x)
+        elif isinstance(x, str):
+            words.add(x)
+    head, sep, tail = message.partition("expected")
+    for w in sorted(words, key=len, reverse=True):
+        head = head.replace(repr(w), "(a string of the file)")
+    return head + sep + tail
 
 
 def save(model, path) -> Path:

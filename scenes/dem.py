@@ -131,7 +131,7 @@ def _check_raster(ds, spec, driver) -> None:
     where = f"terrain.file={spec.file!r}"
     if ds.driver != driver or ds.driver not in DEM_DRIVERS:
         raise GeoError(f"{where}: opened by GDAL's {ds.driver} driver; expected {driver} (only GeoTIFF and DTED are read)")
-    if ds.count < 1 or ds.subdatasets:
+    if ds.count != 1 or ds.subdatasets:  # an RGB image or a stack is not a DEM: which band would be the heights?
         raise GeoError(f"{where}: expected one band of heights, got {ds.count} band(s) and {len(ds.subdatasets)} subdataset(s)")
     if np.dtype(ds.dtypes[0]).kind not in "iuf":
         raise GeoError(f"{where}: band 1 holds {ds.dtypes[0]} values; expected real heights (integers or floats), "
@@ -195,15 +195,43 @@ def _read_window(ds, spec, rows, cols):
     r1, c1 = min(r1, r0 + step * ((ds.height - 1 - r0) // step) + 1), min(c1, c0 + step * ((ds.width - 1 - c0) // step) + 1)
     strip = max(step, (1 << 22) // max(c1 - c0, 1) // step * step)  # ~4e6 cells per read
     parts = []
-    for a in range(r0, r1, strip):
-        w = Window(c0, a, c1 - c0, min(strip, r1 - a))
-        try:
-            block = ds.read(1, window=w, masked=True)[::step, ::step]
-        except rasterio.errors.RasterioError:
-            raise GeoError(f"terrain.file={spec.file!r}: cannot read the DEM's cells in rows {a}..{a + w.height - 1} "
-                           f"(a damaged or truncated file?)") from None
-        parts.append(np.ma.filled(block.astype(float), np.nan))
+    with _DamageReport() as damage:
+        for a in range(r0, r1, strip):
+            w = Window(c0, a, c1 - c0, min(strip, r1 - a))
+            try:
+                block = ds.read(1, window=w, masked=True)[::step, ::step]
+            except rasterio.errors.RasterioError:
+                raise GeoError(f"terrain.file={spec.file!r}: cannot read the DEM's cells in rows {a}..{a + w.height - 1} "
+                               f"(a damaged or truncated file?)") from None
+            parts.append(np.ma.filled(block.astype(float), np.nan))
+    if damage.seen:
+        raise GeoError(f"terrain.file={spec.file!r}: GDAL found a damaged record in the cells over the analysis area (a "
+                       f"DTED column whose header does not match its place); expected an intact DEM")
     return np.vstack(parts), r0, c0, (float(step), float(step))
+
+
+class _DamageReport:
+    """Within ``with``: whether GDAL logged a record that does not match its place (the DTED
+    driver's "... count (n) of column c doesn't match expected value", which it reads on from,
+    as heights). rasterio logs GDAL's warnings to the ``rasterio._err`` logger."""
+
+    def __enter__(self):
+        import logging
+
+        outer = self
+
+        class _Handler(logging.Handler):
+            def emit(self, record):
+                outer.seen = outer.seen or "doesn't match expected value" in record.getMessage()
+
+        self.seen, self._handler = False, _Handler(logging.WARNING)
+        self._logger = logging.getLogger("rasterio._err")
+        self._logger.addHandler(self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        self._logger.removeHandler(self._handler)
+        return False
 
 
 def _fill(h, spec) -> int:
