@@ -310,6 +310,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     out = irradiance_map.irradiance_map(inp)
     _log_map(log, inp, out, the_plan)
     rows = _targets(scene, traced, states, exposure, mu, log)
+    notes.extend(lobes.near_field_lobe_notes(traced.built.spots, rows))
     melt_by_name = {scene.targets[k].name: m for k, m in melts.items()}
     for row in rows:
         row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None

@@ -7,13 +7,13 @@ import math
 
 import numpy as np
 
-from ..engine import path_states
+from ..engine import FAR_FIELD_SPOT_SIZES, path_states
 from ..keepout import _range_fn, hazard_lobe
 from ..nohd import optical_gain
 from ..results import TargetResult
 from ..specular import specular_nohd
 
-__all__ = ["target_results"]
+__all__ = ["target_results", "near_field_lobe_notes"]
 
 
 def _dynamic_states(target, states):
@@ -156,3 +156,27 @@ def target_results(spots, states, mpe_w_m2, mu, analysis, aids=()) -> list:
         row.aided = [aided_nohds(sp, states, mpe_w_m2, mu, analysis, aid) for aid in aids]
         rows.append(row)
     return rows
+
+
+def near_field_lobe_notes(spots, rows) -> list[str]:
+    """A note for each lit target whose keep-out lobe ends within ``FAR_FIELD_SPOT_SIZES``
+    spot sizes (the map's far-field rule): the lobe is the point-source form from the spot's centroid,
+    which near a spot stretched by grazing incidence is short along the spot (a plate at
+    89.9 deg: 0.52 m where the exact integral reaches 6.30 m, 3 deg above it); the
+    observers and the hazardous-ground footprint there use the exact integral over the
+    spot (:mod:`hazard.near_field`)."""
+    by_name = {sp.target.name: sp for sp in spots}
+    out = []
+    for row in rows:
+        sp, lobe = by_name.get(row.name), row.dynamic_lobe
+        if sp is None or lobe is None or not lobe.max_range_m > 0:
+            continue
+        size = sp.size_m  # 2 RMS radii: the map's own far-field rule (engine.FAR_FIELD_SPOT_SIZES)
+        if lobe.max_range_m < FAR_FIELD_SPOT_SIZES * size:
+            out.append(f"{row.name}: its keep-out lobe reaches {lobe.max_range_m:.4g} m from the spot's centroid, within "
+                       f"{FAR_FIELD_SPOT_SIZES:g} spot sizes ({size:.4g} m each, 2 RMS radii) of the spot: there the lobe is the "
+                       f"point-source form, which is short along a spot stretched by grazing incidence (a plate at "
+                       f"89.9 deg: 0.52 m where the exact integral reaches 6.30 m), so it is not a keep-out distance "
+                       f"there; the observers and the hazardous-ground footprint use the exact integral over the spot: "
+                       f"place observers along the spot to map the zone")
+    return out

@@ -263,3 +263,21 @@ def test_flat_terrain_under_a_grazing_100_kW_beam():
 @pytest.mark.slow
 def test_flat_terrain_under_a_grazing_100_kW_beam_fine_grid():
     _check_ground(1.0)
+
+
+@pytest.mark.parametrize("inc_deg, said", [(0.0, False), (89.9, True)])
+def test_a_lobe_inside_its_spots_near_field_is_said(inc_deg, said):
+    """A keep-out lobe ending within 20 spot sizes of its spot is the point-source form
+    there (short along a grazing spot): the report says so, naming the target; a spot
+    at normal incidence, whose lobe reaches far past it, gets no such note."""
+    n, b, t = _frame(inc_deg)
+    half_len = 4 * _spot_length(inc_deg)
+    plate = dict(name="plate", shape="plate", center=np.zeros(3), normal=n, tangent=t, size=(1.0, 2 * half_len),
+                 material=ref.lambertian(LAMBERT))
+    text = ref.scene_text(power=P, a=A, phi=PHI, position=np.array([0.0, -R1, 0.0]), aim=np.zeros(3), targets=[plate],
+                          observers=[("o", 2.0 * n, None)])
+    res = hazard.analyze(scenes.loads(text))
+    row = next(r for r in res.targets if r.name == "plate")
+    notes = [x for x in res.notes if x.startswith("plate: its keep-out lobe")]
+    assert row.dynamic_lobe.max_range_m > 0
+    assert bool(notes) == said, (row.dynamic_lobe.max_range_m, res.notes)
