@@ -11,7 +11,6 @@ import copy
 import hashlib
 import json
 import math
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -20,7 +19,7 @@ import numpy as np
 from pydantic import ValidationError
 
 import brdfmodels
-from brdfmodels._io import check_input_file, check_limit, parse_toml, read_input_text
+from brdfmodels._io import check_limit, parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, direction_in_sector, input_path, observer_points, shape_mesh, terrain_heightfield
 from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored

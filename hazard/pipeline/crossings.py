@@ -38,7 +38,6 @@ import numpy as np
 from ..aperture import observer_apertures
 from ..engine import specular_irradiance
 from .direct import beam_at, clear_of_objects
-from .spill import hottest_spill_s
 from .surfaces import Polyline, observer_surfaces
 
 __all__ = ["add_crossings", "SUBSAMPLES", "GAIN", "STEP_DIAMETERS"]
@@ -323,7 +322,7 @@ def add_crossings(scene, beam, spots, mu, mpe_w_m2, tracer, spill_s=None):
     spill in beam coordinates (:func:`hazard.pipeline.spill.hottest_spill_s`)."""
     if scene.observers is None or not len(scene.observers):
         return scene, "no observers"
-    obs, floor = scene.observers, FLOOR * mpe_w_m2
+    floor = FLOOR * mpe_w_m2
     surfaces, left_out = observer_surfaces(scene)
     added, said = [], []
     for g, name, surface in surfaces:
