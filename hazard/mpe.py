@@ -243,13 +243,6 @@ def _limiting_aperture_m(kind: str, wl: float, t: float, governing: str) -> floa
     if kind != "skin" and wl < 1400 and governing == "corneal":
         return limiting_aperture_m(1400.0, t)
     return limiting_aperture_m(wl, t, skin=(kind == "skin"))
-    if wl < 1400 and governing != "corneal":
-        return 7e-3
-    if t < 0.3:
-        return 1e-3
-    if t <= 10:
-        return 1.5e-3 * t**0.375
-    return 3.5e-3
 
 
 # -- ocular rows ----------------------------------------------------------------------------
