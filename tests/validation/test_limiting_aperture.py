@@ -388,6 +388,16 @@ def test_pointing_error_judges_the_nearest_direction_through_the_aperture():
         1.0 / (math.pi * w * w) * math.exp(-(r / w) ** 2), rel=1e-6)
 
 
+def _track_run(track: str):
+    """The one track of the 1 W, 2 mm beam scene (a plate 50 m out) with ``track``'s keys."""
+    target = dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
+                  tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))
+    text = ref.scene_text(power=1.0, a=2e-3, phi=1e-6, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3), targets=[target])
+    res = hazard.analyze(scenes.loads(text.replace("[analysis]", track + "[analysis]")))
+    (path,) = res.motion.tracks()
+    return path
+
+
 def test_a_track_beside_a_narrow_beam_is_judged_through_the_aperture():
     """A track hovering 4 mm beside the 2 mm beam 50 m out (motion stage): its peak direct
     irradiance is the aperture formula (range-safety.md 10), not the point value (which
@@ -395,11 +405,7 @@ def test_a_track_beside_a_narrow_beam_is_judged_through_the_aperture():
     p = [4e-3, -50.0, 0.0]
     track = ('[[observers]]\nname = "hover"\nkind = "track"\ntimes_s = [0.0, 10.0]\n'
              f'positions_m = [{ref.vec(p)}, {ref.vec(p)}]\n')
-    target = dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
-                  tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))
-    text = ref.scene_text(power=1.0, a=2e-3, phi=1e-6, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3), targets=[target])
-    res = hazard.analyze(scenes.loads(text.replace("[analysis]", track + "[analysis]")))
-    (path,) = res.motion.tracks()
+    path = _track_run(track)
     w = (2e-3 + 50.0 * 1e-6) / 2
     want = ref.aperture_irradiance(1.0, w, 4e-3)
     assert path.summary["peak_direct_w_m2"] == pytest.approx(want, rel=1e-6)
@@ -424,11 +430,7 @@ def test_a_moving_track_passing_beside_a_narrow_beam_is_sampled_where_its_apertu
     track = ('[[observers]]\nname = "walker"\nkind = "track"\nstart_m = [-1.0093, -50.0, 0.0055]\n'
              'velocity_m_s = [0.2, 0.0, 0.0]\nduration_s = 10.0\n'
              '[motion]\ntime_start_s = 0.0\ntime_end_s = 10.0\ntime_step_s = 0.1\n')
-    target = dict(name="plate", shape="plate", center=np.zeros(3), normal=np.array([0.0, -1.0, 0.0]),
-                  tangent=np.array([1.0, 0.0, 0.0]), size=(0.5, 0.5), material=ref.lambertian(0.5))
-    text = ref.scene_text(power=1.0, a=2e-3, phi=1e-6, position=np.array([0.0, -R_T, 0.0]), aim=np.zeros(3), targets=[target])
-    res = hazard.analyze(scenes.loads(text.replace("[analysis]", track + "[analysis]")))
-    (path,) = res.motion.tracks()
+    path = _track_run(track)
     w = (2e-3 + 50.0 * 1e-6) / 2
     want = ref.aperture_irradiance(1.0, w, b)
     got = path.summary["peak_direct_w_m2"]
