@@ -240,7 +240,7 @@ def _limiting_aperture_m(kind: str, wl: float, t: float, governing: str) -> floa
     """Limiting aperture (spec section 2.4): the table of :func:`hazard.aperture.limiting_aperture_m`
     (retina 7 mm; skin 3.5 mm; cornea 1 mm (t < 0.3 s), 1.5 t^0.375 mm (0.3-10 s), 3.5 mm
     (t > 10 s) [C]), the corneal row applied above 1400 nm and to the ANSI corneal limit."""
-    if kind != "skin" and wl < 1400 and governing == "corneal":
+    if kind != "skin" and wl < 1400 and governing.startswith("corneal"):
         return limiting_aperture_m(1400.0, t)
     return limiting_aperture_m(wl, t, skin=(kind == "skin"))
 
@@ -340,6 +340,49 @@ def _corneal_ansi(wl, t, std):
         formula = f"E = 0.03 K + 0.07 = 0.03 * {k:.6g} + 0.07 W/cm^2; H = E t"
     return _Limit("corneal", h_cm2 * 1e4, "1200-1400 nm corneal dual limit, K = 10^(0.01 (1400 - l))",
                   formula + " (x 1e4 to J/m^2)", "[C] OLBtools Z136 (A)")
+
+
+def _anterior_dual(wl, t, f: CorrectionFactors, std):
+    """IEC 60825-1:2014, 1200-1400 nm: the anterior-segment (cornea/lens) dual limit.
+
+    Table A.1 of IEC 60825-1:2014 gives only the retinal row (C7) here; the edition applies
+    an anterior-segment limit in this band only through the Class 3B AEL used as a dual
+    limit for Class 1 (clause 4.3 / Table 3 notes, [P] - the text was not read), while
+    ICNIRP 2013, whose values the edition adopts, recommends the skin MPE as the dual limit
+    and ANSI Z136.1-2014 Table 5a prints the K_lambda corneal row. The text being unclear,
+    both readable candidates are applied and the lower governs (more protective):
+
+    * corneal, ANSI Z136.1-2014 Table 5a 1200-1400 nm row (K_lambda = 10^(0.01 (1400 - l))),
+      converted to J/m^2 - [M] for IEC;
+    * skin MPE, IEC 60825-1:2014 Table A.5 400-1400 nm rows (ICNIRP 2013's dual limit), [M].
+
+    The Class 3B AEL is not used: it is a power through the 7 mm aperture, not an exposure,
+    and is above both candidates for beams narrower than about 4 mm (Schulmeister et al.,
+    comparison of corneal injury thresholds with laser safety limits, abstract [P]).
+    ANSI Z136.1-2014 mode keeps its own corneal row; below 1e-9 s, where that row ends
+    and only the unverified sub-1e-11 s retinal row remains (1e-3 C_C: 990 J/m^2 at
+    1399.9 nm against 1 J/m^2 at 1400 nm), the skin-MPE candidate (E = 2e11 C_A W/m^2 =
+    the 1400-1500 nm sub-ns row) is applied too, [M], as the protective extension.
+    Returns the candidates (none outside 1200-1400 nm or for the 2007 editions).
+    """
+    if not (1200 <= wl < 1400 and std in ("iec-60825-1-2014", "ansi-z136.1-2014")):
+        return []
+    if std == "ansi-z136.1-2014":
+        if t >= 1e-9:
+            return []
+        skin = _skin_400_1400(wl, t, f, std)
+        return [_Limit("corneal: skin MPE", skin.radiant_exposure_j_m2, f"sub-ns corneal dual limit: skin MPE {skin.row}", skin.formula,
+                       "[M] ANSI Z136.1-2014 has no verified sub-ns corneal row: the skin/1400 nm sub-ns value applied (protective)")]
+    k = _corneal_ansi(wl, t, "ansi-z136.1-2014")
+    skin = _skin_400_1400(wl, t, f, std)
+    out = []
+    if k is not None:
+        out.append(_Limit("corneal", k.radiant_exposure_j_m2, f"IEC 2014 anterior-segment dual limit: {k.row} (ANSI Z136.1-2014 Table 5a row)",
+                          k.formula, "[M] ANSI/ICNIRP 2013 corneal row applied to IEC 2014 (IEC text unclear: lower of the candidates)"))
+    out.append(_Limit("corneal: skin MPE", skin.radiant_exposure_j_m2,
+                      f"IEC 2014 anterior-segment dual limit: skin MPE, IEC 60825-1:2014 Table A.5 {skin.row}", skin.formula,
+                      "[M] ICNIRP 2013 skin-MPE dual limit applied (IEC text unclear: lower of the candidates)"))
+    return out
 
 
 def _infrared(wl, t, std):
@@ -444,7 +487,8 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
     f = correction_factors(wl, t, alpha, std)
     if wl < 1400:
-        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std)]
+        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std),
+                 *_anterior_dual(wl, t, f, std)]
     else:
         cands = [_infrared(wl, t, std)]
     return _result("ocular", std, wl, t, alpha, f, cands)
