@@ -9,9 +9,10 @@ units) and, for comparison, the 2007 editions, as collected in the project's spe
 * ``[M]`` general knowledge, unverified against the standard's text: such rows are
   flagged in the result (``unverified=True``) and in the printed steps.
 
-Coverage: ocular and skin MPE from 400 nm to 1 mm and 1e-13 s to 3e4 s. The UV rows
-(180-400 nm) are not implemented: their values could not be verified for this tool, and
-a wrong MPE is worse than none; a UV wavelength raises ValueError saying so.
+Coverage: ocular and skin MPE from 180 nm to 1 mm and 1e-13 s to 3e4 s. The UV rows
+(180-400 nm: thermal and photochemical dual limits) are written from general knowledge of
+ANSI Z136.1-2014 Table 5a and IEC 60825-1:2014 Table A.1 and labelled [M] (flagged as
+unverified in every result), with the lower reading taken where the edges are uncertain.
 
 Units: SI throughout (J/m^2, W/m^2); ANSI's tables are in J/cm^2 (1 J/cm^2 = 1e4 J/m^2).
 Notation: ANSI C_A, C_B, C_C, C_E = IEC C4, C3, C7, C6.
@@ -78,11 +79,6 @@ def _check_inputs(wavelength_nm, duration_s, angular_subtense_rad):
     wl, t, a = float(wavelength_nm), float(duration_s), float(angular_subtense_rad)
     if not WAVELENGTH_MIN_NM <= wl <= WAVELENGTH_MAX_NM:
         raise ValueError(f"wavelength_nm={wl!r} is outside the standards' tables: expected 180 nm to 1 mm (1e6 nm)")
-    if wl < 400.0:
-        raise ValueError(
-            f"wavelength_nm={wl!r}: the UV rows (180-400 nm) are not implemented - their values are not "
-            f"verified for this tool; expected 400 nm to 1 mm"
-        )
     if not DURATION_MIN_S <= t <= DURATION_MAX_S:
         raise ValueError(f"duration_s={t!r} is outside the tables: expected 1e-13 s to 3e4 s")
     if a < 0:
@@ -140,14 +136,17 @@ def correction_factors(wavelength_nm, duration_s, angular_subtense_rad=0.0, stan
         c_c = 10 ** (0.018 * (wl - 1150))
     else:
         c_c = 8.0 + 10 ** (0.04 * (wl - 1250)) if _edition(std) >= 2014 else 8.0
-    t1 = 10.0 if wl < 450 else (10.0 * 10 ** (0.02 * (wl - 450)) if wl < 500 else 100.0)
+    if 302.5 <= wl < 315:
+        t1 = _uv_t1_s(wl)  # the UV T1 (thermal C1 below, photochemical C2 above)
+    else:
+        t1 = 10.0 if wl < 450 else (10.0 * 10 ** (0.02 * (wl - 450)) if wl < 500 else 100.0)
     a_mrad = alpha * 1e3
     t2 = 10.0 if a_mrad <= 1.5 else (10.0 * 10 ** ((a_mrad - 1.5) / 98.5) if a_mrad <= 100 else 100.0)
     if _edition(std) >= 2014:
         a_max = 5e-3 if t < 625e-6 else (200e-3 * math.sqrt(t) if t <= 0.25 else 0.1)
     else:
         a_max = 0.1
-    if alpha < ALPHA_MIN_RAD:
+    if alpha < ALPHA_MIN_RAD or wl < 400:  # C_E is a retinal factor: 1 in the UV
         c_e = 1.0
     elif alpha <= a_max:
         c_e = alpha / ALPHA_MIN_RAD
@@ -385,6 +384,68 @@ def _anterior_dual(wl, t, f: CorrectionFactors, std):
     return out
 
 
+def _uv_t1_s(wl):
+    """T1 = 10^(0.8 (l - 295)) * 1e-15 s, 302.5-315 nm (IEC 60825-1:2014 Table A.3 / Table 9
+    factors; ANSI Z136.1-2014 Table 6) [M]: 1e-9 s at 302.5 nm, 10 s at 315 nm, where the
+    thermal C1 = 5.6e3 t^0.25 J/m^2 meets the photochemical C2 = 10^(0.2 (l - 295)) J/m^2
+    to 0.43 % (5.6e3 * 10^-3.75 = 0.9957)."""
+    return 10 ** (0.8 * (wl - 295.0)) * 1e-15
+
+
+def _ultraviolet(wl, t, std):
+    """UV ocular (and skin) MPE, 180-400 nm: the thermal and photochemical dual limits.
+
+    Values from general knowledge of the tables, [M] (not read in the standards' text):
+
+    * IEC 60825-1:2014 (and 2007) Table A.1, rows 180-400 nm (same numbers in Table A.5 for
+      the skin): t < 1e-9 s: E = 3e10 W/m^2; 180-302.5 nm: H = 30 J/m^2 (1e-9 - 3e4 s);
+      302.5-315 nm: H = C1 = 5.6e3 t^0.25 J/m^2 for t < T1, H = C2 = 10^(0.2 (l - 295))
+      J/m^2 for T1 <= t <= 3e4 s; 315-400 nm: C1 (1e-9 - 10 s), 1e4 J/m^2 (10 - 1e3 s),
+      E = 10 W/m^2 (1e3 - 3e4 s).
+    * ANSI Z136.1-2014 (and 2007) Table 5a, rows 0.180-0.400 um: thermal H = 0.56 t^0.25 J/cm^2
+      (1e-9 - 10 s) and photochemical H = 3e-3 J/cm^2 (0.180-0.302 um), 10^(0.2 (l - 295))
+      1e-4 J/cm^2 (0.302-0.315 um), 1.0 J/cm^2 (0.315-0.400 um, 10 - 3e4 s), the lower
+      governing. Band edge 302 nm as ANSI prints it; from 302 to 302.5 nm the lower of 30
+      J/m^2 and C2 (the two readings of the edge). Below 1e-9 s ANSI has no verified UV row:
+      the IEC 3e10 W/m^2 is used.
+    """
+    iec = std.startswith("iec")
+    label = "[M] IEC 60825-1 Table A.1 UV row (general knowledge, unverified)" if iec else \
+        "[M] ANSI Z136.1 Table 5a UV row (general knowledge, unverified)"
+    table = "IEC Table A.1" if iec else "ANSI Table 5a"
+    if t < 1e-9:
+        return [_Limit("UV thermal/photochemical", 3e10 * t, "180-400 nm, < 1e-9 s", "E = 3e10 W/m^2; H = E t",
+                       label + ("" if iec else "; the IEC sub-ns value, ANSI row not verified"))]
+    c1 = 5.6e3 * t**0.25
+    thermal = _Limit("UV thermal", c1, "180-400 nm, 1e-9 - 10 s (thermal)", f"H = C1 = 5.6e3 t^0.25 = 5.6e3 * {t:.6g}^0.25 J/m^2"
+                     + ("" if iec else " (0.56 t^0.25 J/cm^2)"), label)
+    c2 = 10 ** (0.2 * (wl - 295.0))
+    if wl < 315.0:
+        edge = 302.5 if iec else 302.0
+        if wl < edge:
+            photo = _Limit("UV photochemical", 30.0, f"180-{edge:g} nm, 1e-9 - 3e4 s (photochemical)", "H = 30 J/m^2 (3e-3 J/cm^2)", label)
+        elif wl < 302.5:  # ANSI only: the two readings of the 302 / 302.5 nm band edge
+            hp = min(30.0, c2)
+            photo = _Limit("UV photochemical", hp, "302-302.5 nm (ANSI band edge 0.302 um), 1e-9 - 3e4 s (photochemical)",
+                           f"H = min(30, C2 = 10^(0.2 ({wl:g} - 295))) = min(30, {c2:.6g}) J/m^2 (lower of the two edge readings)", label)
+        else:
+            photo = _Limit("UV photochemical", c2, "302.5-315 nm, 1e-9 - 3e4 s (photochemical)" if not iec else "302.5-315 nm, T1 - 3e4 s (photochemical)",
+                           f"H = C2 = 10^(0.2 (l - 295)) = 10^(0.2 * ({wl:g} - 295)) = {c2:.6g} J/m^2", label)
+        if iec and wl >= 302.5:
+            # IEC Table A.1 switches at T1 (C1 below, C2 from T1 on), not a running minimum
+            t1 = _uv_t1_s(wl)
+            return [thermal] if t < t1 else [photo]
+        return [photo, thermal] if t < 10.0 else [photo]
+    # 315-400 nm
+    if t < 10.0:
+        return [thermal]
+    if not iec:
+        return [_Limit("UV photochemical", 1e4, "315-400 nm, 10 - 3e4 s (photochemical)", "H = 1.0 J/cm^2 = 1e4 J/m^2", label)]
+    if t < 1e3:
+        return [_Limit("UV photochemical", 1e4, "315-400 nm, 10 - 1e3 s (photochemical)", "H = 1e4 J/m^2", label)]
+    return [_Limit("UV photochemical", 10.0 * t, "315-400 nm, 1e3 - 3e4 s (photochemical)", "E = 10 W/m^2; H = E t", label)]
+
+
 def _infrared(wl, t, std):
     """1400 nm - 1 mm (cornea/skin), spec 2.3: IEC [C] Laser-Studio (2007 table); ANSI
     equivalents [M]."""
@@ -468,7 +529,7 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     Parameters
     ----------
     wavelength_nm : float
-        400 nm to 1 mm (1e6 nm).
+        180 nm to 1 mm (1e6 nm).
     duration_s : float
         Exposure duration, 1e-13 s to 3e4 s (the pulse duration for a single pulse).
     standard : str
@@ -486,7 +547,9 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     std = check_standard(standard)
     wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
     f = correction_factors(wl, t, alpha, std)
-    if wl < 1400:
+    if wl < 400:
+        cands = _ultraviolet(wl, t, std)
+    elif wl < 1400:
         cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std),
                  *_anterior_dual(wl, t, f, std)]
     else:
@@ -500,8 +563,11 @@ def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResu
     std = check_standard(standard)
     wl, t, _ = _check_inputs(wavelength_nm, duration_s, 0.0)
     f = correction_factors(wl, t, 0.0, std)
-    cand = _skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)
-    return _result("skin", std, wl, t, 0.0, f, [cand])
+    if wl < 400:
+        cands = _ultraviolet(wl, t, std)  # the UV skin rows equal the eye's (IEC Table A.5, ANSI Table 7) [M]
+    else:
+        cands = [_skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)]
+    return _result("skin", std, wl, t, 0.0, f, cands)
 
 
 # ----------------------------------------------------------------------------------------
