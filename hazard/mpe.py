@@ -231,6 +231,18 @@ class MPEResult:
             "steps": list(self.steps),
         }
 
+    def explain(self) -> str:
+        """Which limit governed and why: every candidate limit compared, lowest first."""
+        order = sorted(self.limits, key=lambda c: c[1])
+        lines = [f"Why: {STANDARDS[self.standard]} applies {len(order)} limit(s) here; the MPE is the lowest:"]
+        for name, h, label in order:
+            mark = "  <- governs" if name == self.governing_limit else f" ({h / order[0][1]:.4g}x the governing value)"
+            lines.append(f"  {name}: H = {h:.6g} J/m^2 {label}{mark}")
+        lines.append(f"  governing row: {self.table_row}")
+        if self.unverified:
+            lines.append("  the governing row is [M]: not verified against the standard's text (see hazard.mpe and the README)")
+        return "\n".join(lines)
+
     def __str__(self):
         return "\n".join(self.steps)
 
@@ -571,7 +583,7 @@ def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResu
 
 
 # ----------------------------------------------------------------------------------------
-PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014), spec section 2.4 [C]
+PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014 Table 2; ANSI Z136.1-2014 t_min), spec section 2.4 [C]
     (400.0, 1050.0, 5e-6),
     (1050.0, 1400.0, 13e-6),
     (1400.0, 1500.0, 1e-3),
@@ -579,18 +591,31 @@ PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014), spec section 2.4 [C]
     (1800.0, 2600.0, 1e-3),
     (2600.0, 1e6 + 1, 1e-7),
 )
+# the 2007 editions: 18 us (400-1050 nm) and 50 us (1050-1400 nm), the ends of their ns rows
+# (spec 2.2 [C]); the infrared values unchanged
+PULSE_SUMMING_TIME_2007_S = ((400.0, 1050.0, 18e-6), (1050.0, 1400.0, 50e-6)) + PULSE_SUMMING_TIME_S[2:]
 
 
-def _pulse_summing_time(wl):
-    for lo, hi, ti in PULSE_SUMMING_TIME_S:
+def _pulse_summing_time(wl, standard=DEFAULT_STANDARD):
+    """T_i [s] for the edition, or None in the UV (no T_i is tabulated below 400 nm: every
+    pulse is counted, the protective reading)."""
+    if wl < 400.0:
+        return None
+    table = PULSE_SUMMING_TIME_S if _edition(standard) >= 2014 else PULSE_SUMMING_TIME_2007_S
+    for lo, hi, ti in table:
         if lo <= wl < hi:
             return ti
-    return PULSE_SUMMING_TIME_S[-1][2]
+    return table[-1][2]
 
 
 @dataclass(frozen=True)
 class RepetitivePulseResult:
-    """Per-pulse MPE of a pulse train, with the three rules and the governing one."""
+    """Per-pulse MPE of a pulse train, with the three rules and the governing one.
+
+    ``c_p`` is the thermal rule's factor (ANSI C_P or IEC C5), ``c_p_rule`` the branch of
+    the standard that set it, ``pulse_groups`` the number of (effective) pulses counted for
+    it, ``counting_time_s`` the time they were counted over and ``pulse_summing_time_s`` T_i.
+    """
 
     per_pulse_radiant_exposure_j_m2: float
     governing_rule: str
@@ -599,6 +624,10 @@ class RepetitivePulseResult:
     pulse_groups: float
     c_p: float
     steps: tuple
+    c_p_rule: str = ""
+    counting_time_s: float = 0.0
+    pulse_summing_time_s: float | None = None
+    unverified: bool = False
 
     def to_dict(self):
         return {
@@ -608,11 +637,89 @@ class RepetitivePulseResult:
             "pulses": self.pulses,
             "pulse_groups": self.pulse_groups,
             "c_p": self.c_p,
+            "c_p_rule": self.c_p_rule,
+            "counting_time_s": self.counting_time_s,
+            "pulse_summing_time_s": self.pulse_summing_time_s,
+            "unverified": self.unverified,
             "steps": list(self.steps),
         }
 
+    def explain(self) -> str:
+        """Which rule governed and why: every rule's per-pulse value, lowest first."""
+        order = sorted(self.rules, key=lambda r: r[1])
+        lines = [f"Why: the per-pulse MPE is the lowest of the {len(order)} rules the standard applies to a pulse train:"]
+        for name, v in order:
+            ratio = f" ({v / order[0][1]:.4g}x the governing value)" if order[0][1] > 0 else ""
+            lines.append(f"  {name}: {v:.6g} J/m^2{'  <- governs' if name == self.governing_rule else ratio}")
+        lines.append(f"  thermal factor: {self.c_p_rule}")
+        return "\n".join(lines)
+
     def __str__(self):
         return "\n".join(self.steps)
+
+
+def _c5_iec_2014(wl, tau, n, window_s, alpha, f: CorrectionFactors, ti):
+    """C5 of IEC 60825-1:2014 clause 4.3 f) 3) (retinal thermal, 400-1400 nm), as transcribed
+    in akufcsak/laser_safety ``get_c5`` [C]; ``n`` counts the (effective) pulses within
+    ``window_s`` = min(T2, T). Returns (C5, the branch in words)."""
+    if tau > 0.25:
+        return 1.0, "C5 = 1: not applicable to pulses longer than 0.25 s (IEC 2014 4.3 f) 3))"
+    if tau <= ti:
+        if window_s <= 0.25:
+            return 1.0, f"C5 = 1: pulses <= T_i and counting time min(T2, T) = {window_s:g} s <= 0.25 s (IEC 2014 4.3 f) 3))"
+        if n <= 600:
+            return 1.0, f"C5 = 1: pulses <= T_i, N = {n:g} <= 600 (IEC 2014 4.3 f) 3))"
+        c5 = max(0.4, 5.0 * n**-0.25)
+        return c5, f"C5 = max(0.4, 5 N^-0.25) = max(0.4, 5 * {n:g}^-0.25) = {c5:.6g}: pulses <= T_i, N > 600 (IEC 2014 4.3 f) 3))"
+    a_max = f.alpha_max_rad
+    if alpha <= 5e-3:
+        return 1.0, f"C5 = 1: pulses > T_i, alpha = {1e3 * alpha:g} mrad <= 5 mrad (IEC 2014 4.3 f) 3))"
+    if alpha <= a_max:
+        c5 = n**-0.25 if n <= 40 else 0.4
+        return c5, f"C5 = {'N^-0.25' if n <= 40 else '0.4 (N > 40)'} = {c5:.6g}: pulses > T_i, 5 mrad < alpha <= alpha_max (IEC 2014 4.3 f) 3))"
+    c5 = n**-0.25 if n <= 625 else 0.2
+    return c5, (f"C5 = {'N^-0.25' if n <= 625 else '0.2 (N > 625)'} = {c5:.6g}: pulses > T_i, alpha > alpha_max = {1e3 * a_max:g} mrad "
+                "(IEC 2014 4.3 f) 3); the transcription's C5 = 1 above 100 mrad is not applied: unverified, 0.2 floor kept, protective)")
+
+
+def _thermal_rule(std, wl, tau, prf, big_t, alpha, rule1):
+    """Rule 3 (ANSI C_P) / requirement 3 (IEC C5): per-pulse value, factor, count, steps.
+
+    Pulses closer than T_i are grouped: a group is one pulse of duration T_i carrying all
+    its pulses' energy, its MPE H(T_i) shared among them. Counting: the whole train (ANSI
+    both editions, IEC 2007: C_P = C5 = N^-0.25 [M]), or min(T2, T) for IEC 2014 in 400-1400
+    nm (4.3 f) 3)). Outside 400-1400 nm the N^-0.25 reduction is applied to every standard as
+    a protective assumption [M] (the photochemical limits are covered by rule 2 anyway).
+    """
+    ti = _pulse_summing_time(wl, std)
+    grouped = ti is not None and 1.0 / prf < ti
+    per_group = max(prf * ti, 1.0) if grouped else 1.0
+    h_eff = ocular_mpe(wl, ti, standard=std, angular_subtense_rad=alpha).radiant_exposure_j_m2 if grouped else rule1
+    iec14 = std == "iec-60825-1-2014" and 400 <= wl < 1400
+    f = correction_factors(wl, tau, alpha, std)
+    window = min(f.T2_s, big_t) if iec14 else big_t
+    rate = min(prf, 1.0 / ti) if grouped else prf
+    n = max(window * rate, 1.0)
+    lines = []
+    if grouped:
+        lines.append(f"  pulses closer than T_i = {ti:g} s are grouped: {per_group:g} pulses per group of duration T_i, "
+                     f"H(T_i) = {h_eff:.6g} J/m^2 per group")
+    if iec14:
+        c_p, why = _c5_iec_2014(wl, ti if grouped else tau, n, window, alpha, f, ti)
+        name, label = "rule 3: thermal (C5)", "[C] akufcsak get_c5"
+        lines.append(f"  N = {n:g} (effective) pulses within min(T2, T) = min({f.T2_s:g}, {big_t:g}) s")
+    else:
+        c_p = n**-0.25
+        where = "" if 400 <= wl < 1400 else "; outside 400-1400 nm applied as a protective assumption"
+        why = f"C_P = N^-0.25 = {n:g}^-0.25 = {c_p:.6g} (N over the whole train{where})"
+        name, label = "rule 3: thermal (C_P)", "[M]"
+        lines.append(f"  N = {n:g} (effective) pulses in T = {big_t:g} s")
+    value = h_eff * c_p / per_group
+    src = "H(T_i)" if grouped else "H_1"
+    factor = "C5" if iec14 else "C_P"
+    lines.append(f"  rule 3 (thermal): {src} {factor} / n_group = {h_eff:.6g} * {c_p:.6g} / {per_group:g} = {value:.6g} J/m^2 {label}")
+    lines.append(f"    because {why}")
+    return name, value, c_p, why, n, window, ti, lines
 
 
 def repetitive_pulse_mpe(
@@ -621,11 +728,23 @@ def repetitive_pulse_mpe(
     """Per-pulse ocular MPE of a repetitively pulsed laser (ANSI rules 1-3 / IEC C5).
 
     Rule 1: no pulse exceeds the single-pulse MPE. Rule 2: the train's average does not
-    exceed the MPE for its duration (per pulse: H(T) / N). Rule 3 (thermal, 400-1400 nm):
-    the single-pulse MPE times C_P = N^-0.25 [M: classic ANSI rule; IEC 2014's C5 is never
-    lower than this for the same N, so the result is conservative for IEC too]. Pulses
-    closer than the summing time T_i (spec 2.4) are grouped: a group counts as one pulse
-    of duration T_i carrying all its energy.
+    exceed the MPE for its duration (per pulse: H(T) / N). Rule 3 (thermal): the single-pulse
+    MPE times the standard's factor: ANSI Z136.1 (both editions) C_P = N^-0.25 over the
+    train [M]; IEC 60825-1:2007 C5 = N^-0.25; IEC 60825-1:2014 C5 by clause 4.3 f) 3)
+    (1 for pulses <= T_i up to N = 600, then 5 N^-0.25 down to 0.4; for longer pulses 1 for
+    alpha <= 5 mrad, N^-0.25 down to 0.4 up to alpha_max, down to 0.2 beyond), N counted
+    within min(T2, T). Pulses closer than T_i (spec 2.4; 2007: 18 / 50 us) are grouped.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        180 nm to 1 mm.
+    pulse_duration_s, prf_hz, exposure_duration_s : float
+        Pulse duration [s], repetition frequency [Hz] and train duration T [s].
+    standard : str
+        One of :data:`STANDARDS`.
+    angular_subtense_rad : float
+        Apparent source size alpha [rad] (C_E, T2, and IEC 2014's C5 branch).
     """
     std = check_standard(standard)
     wl, tau, alpha = _check_inputs(wavelength_nm, pulse_duration_s, angular_subtense_rad)
@@ -641,32 +760,17 @@ def repetitive_pulse_mpe(
     train = ocular_mpe(wl, big_t, standard=std, angular_subtense_rad=alpha)
     rule1 = single.radiant_exposure_j_m2
     rule2 = train.radiant_exposure_j_m2 / n
-    ti = _pulse_summing_time(wl)
     steps = [
         f"Repetitive-pulse MPE per {STANDARDS[std]}: {wl:g} nm, pulse {tau:g} s at {prf:g} Hz for {big_t:g} s (N = {n:g})",
         f"  rule 1 (single pulse): H_1 = {rule1:.6g} J/m^2  [{single.table_row}: {single.formula}]",
-        f"  rule 2 (average): H(T) / N = {train.radiant_exposure_j_m2:.6g} / {n:g} = {rule2:.6g} J/m^2",
+        f"  rule 2 (average): H(T) / N = {train.radiant_exposure_j_m2:.6g} / {n:g} = {rule2:.6g} J/m^2  [{train.table_row}: {train.formula}]",
     ]
-    rules = [("rule 1: single pulse", rule1), ("rule 2: average power", rule2)]
-    groups, c_p = n, 1.0
-    if 400 <= wl < 1400:
-        if 1.0 / prf < ti:
-            per_group = max(prf * ti, 1.0)
-            groups = max(big_t / ti, 1.0)
-            grouped = ocular_mpe(wl, ti, standard=std, angular_subtense_rad=alpha)
-            c_p = groups**-0.25
-            rule3 = grouped.radiant_exposure_j_m2 * c_p / per_group
-            steps.append(
-                f"  pulses closer than T_i = {ti:g} s are grouped: {per_group:g} pulses per group, {groups:g} groups"
-            )
-            steps.append(
-                f"  rule 3 (thermal): H(T_i) C_P / n_group = {grouped.radiant_exposure_j_m2:.6g} * {groups:g}^-0.25 / {per_group:g} = {rule3:.6g} J/m^2 [M]"
-            )
-        else:
-            c_p = n**-0.25
-            rule3 = rule1 * c_p
-            steps.append(f"  rule 3 (thermal): H_1 C_P = {rule1:.6g} * {n:g}^-0.25 = {rule3:.6g} J/m^2 [M]")
-        rules.append(("rule 3: thermal (C_P)", rule3))
+    name3, rule3, c_p, why, groups, window, ti, lines = _thermal_rule(std, wl, tau, prf, big_t, alpha, rule1)
+    steps += lines
+    rules = (("rule 1: single pulse", rule1), ("rule 2: average power", rule2), (name3, rule3))
     gov = min(rules, key=lambda r: r[1])
     steps.append(f"  per-pulse MPE = {gov[1]:.6g} J/m^2 ({gov[0]} governs)")
-    return RepetitivePulseResult(gov[1], gov[0], tuple(rules), n, groups, c_p, tuple(steps))
+    unverified = single.unverified or train.unverified or not std.startswith("iec-60825-1-2014") or not 400 <= wl < 1400
+    if unverified:
+        steps.append("  WARNING: a row or rule used here is not verified against the standard's text ([M]); check it before relying on it")
+    return RepetitivePulseResult(gov[1], gov[0], rules, n, groups, c_p, tuple(steps), why, window, ti, unverified)
