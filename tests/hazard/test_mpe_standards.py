@@ -58,3 +58,113 @@ def test_iec_1200_1400_short_pulses_take_the_skin_candidate():
     assert r.governing_limit == "corneal: skin MPE" and r.unverified
     names = {n for n, _, _ in r.limits}
     assert names == {"retinal thermal", "corneal", "corneal: skin MPE"}
+
+
+# --- 2. conformance grid, typed from the tables ------------------------------------------
+# Hand-typed closed forms of the tables' correction factors (ANSI Table 6 / IEC Table 9 /
+# spec laser-safety.md 2.4), used only to write the expected values below.
+def C_A(wl):  # ANSI C_A = IEC C4, 700-1050 nm
+    return 10 ** (0.002 * (wl - 700))
+
+
+def C_C14(wl):  # ANSI C_C = IEC C7 (2014), 1200-1400 nm
+    return 8 + 10 ** (0.04 * (wl - 1250))
+
+
+def K(wl):  # ANSI Z136.1-2014 Table 5a, 1200-1400 nm corneal row
+    return 10 ** (0.01 * (1400 - wl))
+
+
+UP, DN = 1 + 1e-6, 1 - 1e-6  # breakpoints at +-1e-6 relative
+
+# (standard, wavelength_nm, duration_s, expected H [J/m^2], table row)
+GRID = [
+    # ANSI Z136.1-2014 Table 5a (J/cm^2 x 1e4) = IEC 60825-1:2014 Table A.1 (J/m^2), 400-700 nm
+    (ANSI, 532, 1e-12, 1e-3, "400-700, 1e-13 - 1e-11 s: 1.0e-7 J/cm^2"),
+    (ANSI, 532, 1e-11 * DN, 1e-3, "400-700, 1e-13 - 1e-11 s"),
+    (ANSI, 532, 1e-11 * UP, 2e-3, "400-700, 1e-11 - 5e-6 s: 2.0e-7 J/cm^2"),
+    (ANSI, 532, 1e-8, 2e-3, "400-700, 1e-11 - 5e-6 s"),
+    (ANSI, 532, 5e-6 * DN, 2e-3, "400-700, 1e-11 - 5e-6 s"),
+    (ANSI, 532, 5e-6 * UP, 18 * (5e-6 * UP) ** 0.75, "400-700, 5e-6 - 10 s: 1.8e-3 t^0.75 J/cm^2"),
+    (ANSI, 532, 0.25, 18 * 0.25**0.75, "400-700, 5e-6 - 10 s"),
+    (ANSI, 532, 10 * DN, 18 * (10 * DN) ** 0.75, "400-700, 5e-6 - 10 s"),
+    (ANSI, 532, 10 * UP, 10 * 10 * UP, "500-700, 10 - 3e4 s: E = 1.0e-3 W/cm^2"),
+    (ANSI, 532, 3e4, 10 * 3e4, "500-700, 10 - 3e4 s"),
+    (ANSI, 440, 50.0, 100.0, "400-450, 10 - 100 s photochemical: 1e-2 J/cm^2 (thermal 18 t^0.75 = 339 higher)"),
+    (ANSI, 440, 1000.0, 1.0 * 1000, "400-500, 100 - 3e4 s photochemical: E = 1e-4 C_B W/cm^2, C_B = 1"),
+    (ANSI, 475, 1000.0, 10 ** (0.02 * 25) * 1000, "400-500, 100 - 3e4 s: E = 1e-4 C_B W/cm^2, C_B = 10^(0.02 (475-450))"),
+    # 700-1050 nm (C_A), 1050-1400 nm (C_C)
+    (ANSI, 808, 1e-8, 2e-3 * C_A(808), "700-1050, 1e-11 - 5e-6 s: 2.0e-7 C_A J/cm^2"),
+    (ANSI, 905, 1e-7, 2e-3 * C_A(905), "700-1050, 1e-11 - 5e-6 s"),
+    (ANSI, 905, 1.0, 18 * C_A(905), "700-1050, 5e-6 - 10 s: 1.8e-3 C_A t^0.75 J/cm^2"),
+    (ANSI, 905, 100.0, 10 * C_A(905) * 100, "700-1050, 10 - 3e4 s: E = 1.0e-3 C_A W/cm^2"),
+    (ANSI, 1064, 1e-8, 2e-2, "1050-1400, 1e-11 - 1.3e-5 s: 2.0e-6 C_C J/cm^2, C_C = 1"),
+    (ANSI, 1064, 1.3e-5 * DN, 2e-2, "1050-1400, 1e-11 - 1.3e-5 s"),
+    (ANSI, 1064, 1.3e-5 * UP, 90 * (1.3e-5 * UP) ** 0.75, "1050-1400, 1.3e-5 - 10 s: 9.0e-3 C_C t^0.75 J/cm^2"),
+    (ANSI, 1064, 0.25, 90 * 0.25**0.75, "1050-1400, 1.3e-5 - 10 s"),
+    (ANSI, 1064, 100.0, 50 * 100, "1050-1400, 10 - 3e4 s: E = 5.0e-3 C_C W/cm^2"),
+    (ANSI, 1300, 1e-8, 2e-2 * C_C14(1300), "1050-1400, 2.0e-6 C_C J/cm^2 (corneal 0.3 K J/cm^2 higher)"),
+    (ANSI, 1300, 100.0, (0.03 * K(1300) + 0.07) * J_CM2 * 100, "1200-1400 corneal, > 10 s: E = 0.03 K + 0.07 W/cm^2"),
+    (ANSI, 1390, 1.0, (0.3 * K(1390) + 0.56 - 0.1) * J_CM2, "1200-1400 corneal, 1e-3 - 4 s: 0.3 K + 0.56 t^0.25 - 0.1 J/cm^2"),
+    (ANSI, 1390, 1e-4, 0.3 * K(1390) * J_CM2, "1200-1400 corneal, 1e-11 - 1e-3 s: 0.3 K J/cm^2"),
+    (ANSI, 1390, 4 * UP, (0.3 * K(1390) + 0.7) * J_CM2, "1200-1400 corneal, 4 - 10 s: 0.3 K + 0.7 J/cm^2"),
+    # infrared, 1400 nm - 1 mm (ANSI Table 5a J/cm^2 x 1e4 = IEC Table A.1)
+    (ANSI, 1550, 1e-8, 1e4, "1500-1800, 1e-9 - 10 s: 1.0 J/cm^2"),
+    (ANSI, 1550, 10 * UP, 1000 * 10 * UP, "1400 nm - 1 mm, 10 - 3e4 s: E = 0.1 W/cm^2"),
+    (ANSI, 1450, 1e-4, 1000.0, "1400-1500, 1e-9 - 1e-3 s: 0.1 J/cm^2"),
+    (ANSI, 1450, 0.1, 5600 * 0.1**0.25, "1400-1500, 1e-3 - 10 s: 0.56 t^0.25 J/cm^2"),
+    (ANSI, 2000, 1e-3 * UP, 5600 * (1e-3 * UP) ** 0.25, "1800-2600, 1e-3 - 10 s"),
+    (ANSI, 10600, 1e-8, 100.0, "2600 nm - 1 mm, 1e-9 - 1e-7 s: 1e-2 J/cm^2"),
+    (ANSI, 10600, 1.0, 5600.0, "2600 nm - 1 mm, 1e-7 - 10 s: 0.56 t^0.25 J/cm^2"),
+    (ANSI, 10600, 100.0, 1000 * 100, "1400 nm - 1 mm, 10 - 3e4 s: 0.1 W/cm^2"),
+    # ultraviolet, ANSI Z136.1-2014 Table 5a [M]: thermal 0.56 t^0.25 J/cm^2 (1e-9 - 10 s) and
+    # photochemical 3e-3 J/cm^2 (180-302 nm), 10^(0.2 (l - 295)) 1e-4 J/cm^2 (302-315 nm),
+    # 1.0 J/cm^2 (315-400 nm, 10 - 3e4 s); the lower governs
+    (ANSI, 193, 1e-8, 30.0, "180-302, photochemical 3e-3 J/cm^2"),
+    (ANSI, 266, 1e-9 * UP, 30.0, "180-302, photochemical 3e-3 J/cm^2 (thermal 31.5 higher)"),
+    (ANSI, 266, 3e4, 30.0, "180-302, photochemical, to 3e4 s"),
+    (ANSI, 302.2, 1.0, 10 ** (0.2 * 7.2), "302-315: 10^(0.2 (l - 295)) 1e-4 J/cm^2 (lower than 30 below 302.39 nm)"),
+    (ANSI, 308, 1e-8, 5600 * 1e-8**0.25, "180-400 thermal 0.56 t^0.25 J/cm^2 (photochemical 398 higher)"),
+    (ANSI, 308, 1.0, 10 ** (0.2 * 13), "302-315 photochemical (thermal 5600 higher)"),
+    (ANSI, 355, 1e-8, 56.0, "180-400 thermal: 0.56 (1e-8)^0.25 = 5.6e-3 J/cm^2"),
+    (ANSI, 355, 10 * DN, 5600 * (10 * DN) ** 0.25, "180-400 thermal, 1e-9 - 10 s"),
+    (ANSI, 355, 10 * UP, 1e4, "315-400, 10 - 3e4 s: 1.0 J/cm^2"),
+    (ANSI, 355, 3e4, 1e4, "315-400, 10 - 3e4 s: 1.0 J/cm^2"),
+    (ANSI, 355, 1e-12, 3e10 * 1e-12, "< 1e-9 s: E = 3e10 W/m^2 (the IEC row; ANSI's not verified)"),
+    # IEC 60825-1:2014 Table A.1: the SI twins of the rows above, and its own UV rows [M]
+    (IEC, 532, 1e-8, 2e-3, "400-700, 1e-11 - 5e-6 s: 2e-3 J/m^2"),
+    (IEC, 905, 1e-7, 2e-3 * C_A(905), "700-1050, 2e-3 C4 J/m^2"),
+    (IEC, 1064, 0.25, 90 * 0.25**0.75, "1050-1400, 90 C7 t^0.75 J/m^2"),
+    (IEC, 1064, 100.0, 50 * 100, "1050-1400, 10 - 3e4 s: 10 C4 C7 W/m^2"),
+    (IEC, 1550, 1.0, 1e4, "1500-1800, 1e-9 - 10 s: 1e4 J/m^2"),
+    (IEC, 193, 1e-8, 30.0, "180-302.5: 30 J/m^2"),
+    (IEC, 302.2, 1.0, 30.0, "180-302.5: 30 J/m^2 (IEC's edge at 302.5 nm)"),
+    (IEC, 310, 1e-3 * DN, 5600 * (1e-3 * DN) ** 0.25, "302.5-315, t < T1 = 10^(0.8 (310-295)) 1e-15 = 1e-3 s: C1 = 5.6e3 t^0.25"),
+    (IEC, 310, 1e-3 * UP, 10 ** (0.2 * 15), "302.5-315, t >= T1: C2 = 10^(0.2 (l - 295)) = 1000"),
+    (IEC, 355, 1e-8, 56.0, "315-400, 1e-9 - 10 s: C1 = 5.6e3 t^0.25"),
+    (IEC, 355, 500.0, 1e4, "315-400, 10 - 1e3 s: 1e4 J/m^2"),
+    (IEC, 355, 1e3 * UP, 10 * 1e3 * UP, "315-400, 1e3 - 3e4 s: E = 10 W/m^2"),
+    (IEC, 355, 3e4, 10 * 3e4, "315-400, 1e3 - 3e4 s"),
+    (IEC, 266, 1e-10, 3e10 * 1e-10, "180-400, < 1e-9 s: E = 3e10 W/m^2"),
+    # IEC 1200-1400 nm: lower of the retinal row, ANSI's corneal row and the skin MPE [M]
+    (IEC, 1390, 1e-8, 200 * 5, "Table A.5 skin, 1e-9 - 1e-7 s: 200 C4 J/m^2, C4 = 5"),
+    (IEC, 1380, 10.0, (0.03 * K(1380) + 0.07) * J_CM2 * 10, "ANSI corneal row, >= 10 s (skin 2000 C4 W/m^2 higher)"),
+    (IEC, 1300, 1e-8, 2e-2 * C_C14(1300), "Table A.1 1050-1400, 2e-2 C7 J/m^2 (retinal governs)"),
+]
+
+
+@pytest.mark.parametrize("std, wl, t, expected, row", GRID, ids=[f"{s[:4]}-{w}nm-{t:.6g}s" for s, w, t, _, _ in GRID])
+def test_conformance_grid(std, wl, t, expected, row):
+    assert h(wl, t, std) == pytest.approx(expected, rel=REL), row
+
+
+@pytest.mark.parametrize("wl", [266.0, 355.0])
+@pytest.mark.parametrize("t", [1e-8, 1.0, 100.0])
+def test_uv_skin_equals_eye_and_aperture(wl, t):
+    # IEC 60825-1:2014 Table A.5 / ANSI Table 7: the UV skin rows equal the eye's [M];
+    # limiting aperture (ANSI Table 8, IEC Table A.4): 1 mm below 0.3 s, 3.5 mm beyond 10 s (eye)
+    for std in (ANSI, IEC):
+        eye, skin = hz.ocular_mpe(wl, t, standard=std), hz.skin_mpe(wl, t, standard=std)
+        assert skin.radiant_exposure_j_m2 == eye.radiant_exposure_j_m2
+        assert eye.limiting_aperture_m == pytest.approx({1e-8: 1e-3, 1.0: 1.5e-3, 100.0: 3.5e-3}[t], rel=1e-12)
+        assert eye.unverified  # the UV rows are [M] and say so
