@@ -168,3 +168,63 @@ def test_uv_skin_equals_eye_and_aperture(wl, t):
         assert skin.radiant_exposure_j_m2 == eye.radiant_exposure_j_m2
         assert eye.limiting_aperture_m == pytest.approx({1e-8: 1e-3, 1.0: 1.5e-3, 100.0: 3.5e-3}[t], rel=1e-12)
         assert eye.unverified  # the UV rows are [M] and say so
+
+
+# --- 3. pulse trains: IEC 60825-1:2014 C5 and the ANSI rules, by hand ---------------------
+def rep(wl, tau, prf, T, std, alpha=0.0):
+    return hz.repetitive_pulse_mpe(wl, tau, prf, T, standard=std, angular_subtense_rad=alpha)
+
+
+# (standard, wl, tau, prf, T, alpha, expected per-pulse H [J/m^2], governing rule prefix, why)
+TRAINS = [
+    # IEC 2014 4.3 f) 3): pulses <= T_i (13 us at 1064 nm), N = 1e4 within min(T2 = 10 s, T) > 600:
+    # C5 = 5 N^-0.25 = 0.5 (not N^-0.25 = 0.1: the old tool's 5x too low)
+    (IEC, 1064, 1e-8, 1e3, 10.0, 0.0, 2e-2 * 5 * 1e4**-0.25, "rule 3", "5 N^-0.25"),
+    # N = 1000 > 600: C5 = 5 * 1000^-0.25 = 0.889
+    (IEC, 1064, 1e-8, 100.0, 10.0, 0.0, 2e-2 * 5 * 1000**-0.25, "rule 3", "5 N^-0.25"),
+    # N = 1e6 (period 10 us > T_i = 5 us: not grouped): C5 floor 0.4 -> 8e-4; rule 2: 10 W/m^2 * 10 s / 1e6 = 1e-4 governs
+    (IEC, 532, 1e-8, 1e5, 10.0, 0.0, 10 * 10 / 1e6, "rule 2", ") = 0.4: pulses <= T_i"),
+    # counting time 0.2 s <= 0.25 s: C5 = 1; rule 1 (2e-3) below rule 2 (18 * 0.2^0.75 / 200)
+    (IEC, 532, 1e-8, 1e3, 0.2, 0.0, 2e-3, "rule 1", "C5 = 1:"),
+    # pulses 1 ms > T_i, alpha = 10 mrad > alpha_max(1 ms) = 200 * 1e-3^0.5 = 6.32 mrad; N = 1000 > 625: C5 = 0.2;
+    # H_1 = 18 C6 t^0.75 with C6 = 6.3246 / 1.5
+    (IEC, 532, 1e-3, 100.0, 10.0, 10e-3, 18 * (200 * 1e-3**0.5 / 1.5) * 1e-3**0.75 * 0.2, "rule 3", "0.2 (N > 625)"),
+    # alpha = 5.5 mrad in (5 mrad, alpha_max]: N = 100 > 40: C5 = 0.4; C6 = 5.5 / 1.5
+    (IEC, 532, 1e-3, 10.0, 10.0, 5.5e-3, 18 * (5.5 / 1.5) * 1e-3**0.75 * 0.4, "rule 3", "0.4 (N > 40)"),
+    # alpha = 3 mrad <= 5 mrad, pulses > T_i: C5 = 1; rule 1 H_1 = 18 * 2 * 1e-3^0.75 governs
+    (IEC, 532, 1e-3, 50.0, 10.0, 3e-3, 18 * 2 * 1e-3**0.75, "rule 1", "C5 = 1:"),
+    # ANSI Z136.1-2014 rule 3: C_P = N^-0.25 over the train (N = 1e4): 2e-2 * 0.1
+    (ANSI, 1064, 1e-8, 1e3, 10.0, 0.0, 2e-2 * 1e4**-0.25, "rule 3", "C_P = N^-0.25"),
+    # IEC 60825-1:2007: C5 = N^-0.25 and the 2007 ns row 5e-2 J/m^2 (1050-1400 nm, 1e-9 - 5e-5 s)
+    ("iec-60825-1-2007", 1064, 1e-8, 1e3, 10.0, 0.0, 5e-2 * 1e4**-0.25, "rule 3", "C_P = N^-0.25"),
+]
+
+
+@pytest.mark.parametrize("std, wl, tau, prf, T, alpha, expected, rule, why", TRAINS)
+def test_pulse_trains(std, wl, tau, prf, T, alpha, expected, rule, why):
+    r = rep(wl, tau, prf, T, std, alpha)
+    assert r.per_pulse_radiant_exposure_j_m2 == pytest.approx(expected, rel=REL)
+    assert r.governing_rule.startswith(rule)
+    assert why in r.c_p_rule
+
+
+def test_grouped_pulses_905_nm_1_mhz():
+    # period 1 us < T_i = 5 us: groups of 5 pulses, each group a 5 us pulse with
+    # H(T_i) = 18 C_A (5e-6)^0.75 (Table A.1 5e-6 - 10 s row at its start); IEC 2014: N = 1 s / 5 us = 2e5
+    # effective pulses > 600: C5 = max(0.4, 5 N^-0.25) = 0.4; per pulse H(T_i) C5 / 5.
+    h_ti = 18 * C_A(905) * 5e-6**0.75
+    for std, c in ((IEC, 0.4), (ANSI, 2e5**-0.25)):
+        r = rep(905, 1e-7, 1e6, 1.0, std)
+        assert dict(r.rules)[r.rules[2][0]] == pytest.approx(h_ti * c / 5, rel=REL)
+        assert r.pulse_summing_time_s == 5e-6 and r.pulse_groups == pytest.approx(2e5)
+        # rule 2 governs: 18 C_A 1^0.75 / 1e6
+        assert r.per_pulse_radiant_exposure_j_m2 == pytest.approx(18 * C_A(905) / 1e6, rel=REL)
+
+
+def test_c5_is_3_to_7_times_the_old_n_to_the_minus_quarter_in_iec_2014():
+    # issue 33: C_P = N^-0.25 for every standard put the IEC 2014 per-pulse MPE 3.2-7.1x too low.
+    # 1064 nm, 10 ns: N = 1e4 -> C5 0.5 vs 0.1 (5x); N = 1e5 (10 kHz, 10 s) -> C5 0.4 vs 0.0562 (7.1x)
+    for prf, ratio in ((1e3, 5.0), (1e4, 0.4 / 1e5**-0.25)):
+        iec = dict(rep(1064, 1e-8, prf, 10.0, IEC).rules)["rule 3: thermal (C5)"]
+        ansi = dict(rep(1064, 1e-8, prf, 10.0, ANSI).rules)["rule 3: thermal (C_P)"]
+        assert iec / ansi == pytest.approx(ratio, rel=REL)
