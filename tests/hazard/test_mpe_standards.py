@@ -350,3 +350,110 @@ def test_worked_16_co2_10_6_um():
 def test_worked_17_nd_yag_skin():
     # akufcsak table_a5 (IEC 2014 Table A.5) [C]: skin, 1064 nm, >= 10 s: 2000 C4 = 1e4 W/m^2 (1.0 W/cm^2)
     assert hz.skin_mpe(1064, 100.0, standard=IEC).irradiance_w_m2 == pytest.approx(1.0 * J_CM2, rel=REL)
+
+
+# --- 5. continuity: no jump larger than the standards' own ------------------------------
+# Every step the 2014 tables print (point source, ocular), with the largest factor it can
+# make in the governing MPE, worked out by hand from the rows above; anything else must be
+# continuous to the scan's resolution. (standards, band [nm), breakpoint [s], max factor, why)
+def _uv_t1(wl):
+    return 10 ** (0.8 * (wl - 295)) * 1e-15  # IEC Table A.1 note: T1 for 302.5-315 nm
+
+
+BOTH = (ANSI, IEC)
+TIME_JUMPS = [
+    (BOTH, 400, 1400, 1e-11, 20.0, "1e-3 J/m^2 -> 2e-3 C_A (<= 10x) / 1e-3 C_C -> 2e-2 C_C (20x)"),
+    (BOTH, 400, 1050, 5e-6, 1.06, "2e-3 C_A vs 18 C_A (5e-6)^0.75 = 1.897e-3 C_A"),
+    (BOTH, 1050, 1400, 1.3e-5, 1.03, "2e-2 C_C vs 90 C_C (1.3e-5)^0.75 = 1.95e-2 C_C"),
+    (BOTH, 180, 1e6 + 1, 10.0, 1.03, "t^0.75 / t^0.25 rows meet the 10 s irradiance rows (<= 2.2 %)"),
+    (BOTH, 1200, 1400, 4.0, 1.012, "ANSI corneal 0.3 K + 0.56 * 4^0.25 - 0.1 vs 0.3 K + 0.7"),
+    ((IEC,), 1200, 1400, 1e-7, 1.03, "skin 200 C4 vs 1.1e4 C4 (1e-7)^0.25 (Table A.5)"),
+    ((ANSI,), 1200, 1400, 1e-9, 4.4, "[M] the protective sub-ns candidate (1e12 t) meets min(2e-2 C_C, 0.3 K J/cm^2): <= 4.38x"),
+    (BOTH, 180, 400, 1e-9, 1.06, "3e10 W/m^2 x 1e-9 s = 30 vs 5.6e3 (1e-9)^0.25 = 31.5 J/m^2"),
+    (BOTH, 1400, 1e6 + 1, 1e-3, 1.005, "1000 vs 5600 (1e-3)^0.25 = 995.8 J/m^2"),
+    (BOTH, 1400, 1e6 + 1, 1e-7, 1.005, "100 vs 5600 (1e-7)^0.25 = 99.6 J/m^2"),
+    ((IEC,), 302.5, 315, _uv_t1, 1.005, "C1(T1) = 0.9957 C2"),
+]
+WL_JUMPS = [
+    ((ANSI,), 302.0, 1.2, "30 J/m^2 -> 10^(0.2 * 7) = 25.1 J/m^2 (ANSI band edge 0.302 um)"),
+    (BOTH, 302.5, 1.06, "30 -> 10^1.5 = 31.6 J/m^2 (ANSI: where min(30, C2), the lower edge reading, ends)"),
+    ((IEC,), 315.0, 30.0, "C2(315) = 1e4 J/m^2 vs 10 W/m^2 x t up to 3e4 s"),
+    (BOTH, 400.0, 1.4e5, "the retina: 5.6e3 t^0.25 (cornea) vs 2e-3 J/m^2, largest at 5 us"),
+    (BOTH, 1050.0, 2.12, "2e-3 C_A (C_A -> 5) vs 2e-2 C_C; 18 C_A t^0.75 vs 2e-2 at 5 us"),
+    (BOTH, 1200.0, 1.01, "C_C: 10^(0.018 * 50) = 7.94 vs 8 + 10^-2"),
+    (BOTH, 1400.0, 3.01, "ANSI corneal 0.3 K + 0.56 t^0.25 - 0.1 vs 0.56 t^0.25 J/cm^2 (3.008x at 1e-3 s)"),
+    (BOTH, 1500.0, 10.01, "1000 / 5600 t^0.25 vs 1e4 J/m^2; 1e12 vs 1e13 W/m^2"),
+    (BOTH, 1800.0, 10.01, "the same, back"),
+    (BOTH, 2600.0, 10.01, "1000 vs 100 J/m^2; 1e12 vs 1e11 W/m^2"),
+]
+SMOOTH = 1 + 1e-9
+
+
+def _time_allowance(std, wl, ta, tb):
+    f = 1.0
+    for stds, lo, hi, tk, fac, _ in TIME_JUMPS:
+        if not (std in stds and lo <= wl < hi):
+            continue
+        t_break = tk(wl) if callable(tk) else tk
+        if ta < t_break <= tb * (1 + 1e-12):
+            f *= fac
+    return f
+
+
+def _wl_allowance(std, wa, wb):
+    f = 1.0
+    for stds, w, fac, _ in WL_JUMPS:
+        if std in stds and wa < w <= wb * (1 + 1e-12):
+            f *= fac
+    return f
+
+
+def _scan(std, wl0, t0, n=120):
+    """Scan t over [t0 / 30, 30 t0] and wavelength over wl0 +- 6 nm (+- 0.5 % beyond 2600 nm);
+    every neighbouring pair must differ by no more than the smooth variation of the rows
+    (H <= t ratio in time; 10^(0.2 dl) in wavelength, the steepest factor, C2 in the UV) times the
+    listed jumps between them."""
+    ts = np.clip(np.geomspace(max(t0 / 30, 1e-13), min(t0 * 30, 3e4), n), 1e-13, 3e4)
+    hs = np.array([h(wl0, t, std) for t in ts])
+    for (ta, tb), (ha, hb) in zip(zip(ts, ts[1:]), zip(hs, hs[1:])):
+        ratio = max(hb / ha, ha / hb)
+        assert ratio <= (tb / ta) * _time_allowance(std, wl0, ta, tb) * SMOOTH, (std, wl0, ta, tb, ha, hb)
+    half = 6.0 if wl0 < 2600 else wl0 * 5e-3
+    ws = np.linspace(max(wl0 - half, 180.0), min(wl0 + half, 1e6), n)
+    hs = np.array([h(w, t0, std) for w in ws])
+    for (wa, wb), (ha, hb) in zip(zip(ws, ws[1:]), zip(hs, hs[1:])):
+        ratio = max(hb / ha, ha / hb)
+        assert ratio <= 10 ** (0.2 * (wb - wa)) * _wl_allowance(std, wa, wb) * SMOOTH, (std, t0, wa, wb, ha, hb)
+
+
+import numpy as np  # noqa: E402
+
+_EDGES = [w for _, w, _, _ in WL_JUMPS] + [450.0, 500.0, 600.0, 700.0, 1150.0, 1250.0, 1390.0]
+_WL = st.one_of(st.sampled_from(_EDGES).flatmap(lambda w: st.floats(w - 5, w + 5)), st.floats(180, 3000), st.floats(3000, 1e6))
+_LOG_T = st.floats(-13, math.log10(3e4))
+
+
+@given(_WL, _LOG_T, st.sampled_from(BOTH))
+@settings(derandomize=True, deadline=None, max_examples=15)
+def test_property_no_jump_beyond_the_standards_own(wl, log_t, std):
+    _scan(std, wl, min(10**log_t, 3e4))
+
+
+@pytest.mark.slow
+@given(_WL, _LOG_T, st.sampled_from(BOTH))
+@settings(derandomize=True, deadline=None, max_examples=400)
+def test_property_no_jump_beyond_the_standards_own_slow(wl, log_t, std):
+    _scan(std, wl, min(10**log_t, 3e4), n=300)
+
+
+@pytest.mark.parametrize("std", BOTH)
+@pytest.mark.parametrize("w", sorted({w for _, w, _, _ in WL_JUMPS}))
+def test_every_listed_wavelength_jump_is_scanned(std, w):
+    # the listed jumps, crossed at seven durations spanning the tables
+    for t in (1e-12, 1e-8, 5e-6, 1e-3, 1.0, 100.0, 3e4):
+        _scan(std, w, t, n=40)
+
+
+def test_the_allowances_catch_a_jump():
+    # the scan is not vacuous: the old IEC 1400 nm jump (retinal 4.95e7 vs 1000 W/m^2) would fail it
+    assert _wl_allowance(IEC, 1399.95, 1400.0) * 10 ** (0.2 * 0.05) < 4.95e4
