@@ -457,3 +457,20 @@ def test_every_listed_wavelength_jump_is_scanned(std, w):
 def test_the_allowances_catch_a_jump():
     # the scan is not vacuous: the old IEC 1400 nm jump (retinal 4.95e7 vs 1000 W/m^2) would fail it
     assert _wl_allowance(IEC, 1399.95, 1400.0) * 10 ** (0.2 * 0.05) < 4.95e4
+
+
+@pytest.mark.parametrize("wl, expected_w_m2", [
+    # 355 nm: rule 3 (thermal, N^-0.25 applied in the UV as a protective assumption [M]):
+    # 0.56 (1e-8)^0.25 J/cm^2 = 56 J/m^2 x 200^-0.25 per pulse, x 20 Hz
+    (355.0, 56.0 * 200**-0.25 * 20),
+    # 266 nm: rule 2: 3e-3 J/cm^2 = 30 J/m^2 over the 10 s train / 200 pulses, x 20 Hz = 3 W/m^2
+    (266.0, 30.0 / 200 * 20),
+])
+def test_uv_scene_end_to_end(wl, expected_w_m2):
+    import scenes
+
+    path = scenes.example_path("plate")
+    text = path.read_text().replace("wavelength_nm = 1064.0", f"wavelength_nm = {wl}").replace(
+        "power_w = 100.0", "pulse_energy_j = 0.05\npulse_duration_s = 1e-8\nprf_hz = 20.0")
+    res = hz.analyze(scenes.loads(text, base_dir=path.parent))
+    assert res.mpe_w_m2 == pytest.approx(expected_w_m2, rel=REL)
