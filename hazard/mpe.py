@@ -118,10 +118,11 @@ def correction_factors(wavelength_nm, duration_s, angular_subtense_rad=0.0, stan
     C_B = 1 (400-450), 10^(0.02 (l - 450)) (450-600).
     C_C = 1 (< 1150), 10^(0.018 (l - 1150)) (1150-1200), 8 + 10^(0.04 (l - 1250)) (1200-1400;
     2007 editions: 8).
-    T1 = 10 s (< 450 nm), 10 * 10^(0.02 (l - 450)) s (450-500), 100 s (> 500).
+    T1 = 10 s (< 450 nm), 10 * 10^(0.02 (l - 450)) s (450-500), 100 s (> 500); in the UV,
+    302.5-315 nm, T1 = 10^(0.8 (l - 295)) 1e-15 s (the thermal / photochemical switch) [M].
     T2 = 10 * 10^((alpha - 1.5) / 98.5) s for alpha in mrad, clipped to [10, 100] s.
     alpha_max (2014) = 5 mrad (t < 625 us), 200 t^0.5 mrad, 100 mrad (t > 0.25 s); 2007: 100.
-    C_E = 1 (alpha < alpha_min), alpha / alpha_min, and above alpha_max: alpha_max/alpha_min
+    C_E = 1 (alpha < alpha_min, and in the UV), alpha / alpha_min, and above alpha_max: alpha_max/alpha_min
     (2014) or alpha^2 / (alpha_min alpha_max) (2007).
     """
     std = check_standard(standard)
@@ -424,7 +425,6 @@ def _ultraviolet(wl, t, std):
     iec = std.startswith("iec")
     label = "[M] IEC 60825-1 Table A.1 UV row (general knowledge, unverified)" if iec else \
         "[M] ANSI Z136.1 Table 5a UV row (general knowledge, unverified)"
-    table = "IEC Table A.1" if iec else "ANSI Table 5a"
     if t < 1e-9:
         return [_Limit("UV thermal/photochemical", 3e10 * t, "180-400 nm, < 1e-9 s", "E = 3e10 W/m^2; H = E t",
                        label + ("" if iec else "; the IEC sub-ns value, ANSI row not verified"))]
@@ -658,7 +658,7 @@ class RepetitivePulseResult:
         return "\n".join(self.steps)
 
 
-def _c5_iec_2014(wl, tau, n, window_s, alpha, f: CorrectionFactors, ti):
+def _c5_iec_2014(tau, n, window_s, alpha, f: CorrectionFactors, ti):
     """C5 of IEC 60825-1:2014 clause 4.3 f) 3) (retinal thermal, 400-1400 nm), as transcribed
     in akufcsak/laser_safety ``get_c5`` [C]; ``n`` counts the (effective) pulses within
     ``window_s`` = min(T2, T). Returns (C5, the branch in words)."""
@@ -705,7 +705,7 @@ def _thermal_rule(std, wl, tau, prf, big_t, alpha, rule1):
         lines.append(f"  pulses closer than T_i = {ti:g} s are grouped: {per_group:g} pulses per group of duration T_i, "
                      f"H(T_i) = {h_eff:.6g} J/m^2 per group")
     if iec14:
-        c_p, why = _c5_iec_2014(wl, ti if grouped else tau, n, window, alpha, f, ti)
+        c_p, why = _c5_iec_2014(ti if grouped else tau, n, window, alpha, f, ti)
         name, label = "rule 3: thermal (C5)", "[C] akufcsak get_c5"
         lines.append(f"  N = {n:g} (effective) pulses within min(T2, T) = min({f.T2_s:g}, {big_t:g}) s")
     else:

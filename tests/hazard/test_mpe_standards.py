@@ -9,6 +9,7 @@ Rows the project could not read in the standard's text are marked [M] as in
 
 import math
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -425,8 +426,6 @@ def _scan(std, wl0, t0, n=120):
         ratio = max(hb / ha, ha / hb)
         assert ratio <= 10 ** (0.2 * (wb - wa)) * _wl_allowance(std, wa, wb) * SMOOTH, (std, t0, wa, wb, ha, hb)
 
-
-import numpy as np  # noqa: E402
 
 _EDGES = [w for _, w, _, _ in WL_JUMPS] + [450.0, 500.0, 600.0, 700.0, 1150.0, 1250.0, 1390.0]
 _WL = st.one_of(st.sampled_from(_EDGES).flatmap(lambda w: st.floats(w - 5, w + 5)), st.floats(180, 3000), st.floats(3000, 1e6))
