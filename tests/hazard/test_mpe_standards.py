@@ -473,3 +473,24 @@ def test_uv_scene_end_to_end(wl, expected_w_m2):
         "power_w = 100.0", "pulse_energy_j = 0.05\npulse_duration_s = 1e-8\nprf_hz = 20.0")
     res = hz.analyze(scenes.loads(text, base_dir=path.parent))
     assert res.mpe_w_m2 == pytest.approx(expected_w_m2, rel=REL)
+
+
+def test_cli_explain_names_the_rule_and_the_candidates():
+    import io
+    import json
+
+    from hazard.cli import main
+
+    out = io.StringIO()
+    args = ["mpe", "--wavelength-nm", "1064", "--duration-s", "1e-8", "--prf-hz", "1000", "--exposure-duration-s", "10",
+            "--standard", IEC, "--explain", "--json"]
+    assert main(args, stdout=out) == 0
+    doc = json.loads(out.getvalue())
+    # IEC 2014 C5 = 5 N^-0.25 = 0.5 (N = 1e4): 2e-2 * 0.5 = 1e-2 J/m^2 governs over rule 1 (2e-2) and rule 2 (5e-2)
+    assert doc["per_pulse_radiant_exposure_j_m2"] == pytest.approx(1e-2, rel=REL) and doc["c_p"] == pytest.approx(0.5)
+    text = "\n".join(doc["explanation"])
+    assert "rule 3: thermal (C5): 0.01 J/m^2  <- governs" in text and "rule 1: single pulse: 0.02 J/m^2 (2x" in text
+    assert "5 N^-0.25" in doc["c_p_rule"] and doc["counting_time_s"] == 10.0 and doc["pulse_summing_time_s"] == 13e-6
+    # without --explain the output is as before (no new text)
+    plain = io.StringIO()
+    assert main(args[:-2], stdout=plain) == 0 and "Why:" not in plain.getvalue()
