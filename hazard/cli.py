@@ -62,7 +62,7 @@ class _UsageError(Exception):
 
 
 def _add_mpe_args(p, *, required):
-    p.add_argument("--wavelength-nm", type=float, required=required, help="laser wavelength [nm], 400 nm to 1 mm")
+    p.add_argument("--wavelength-nm", type=float, required=required, help="laser wavelength [nm], 180 nm to 1 mm")
     p.add_argument("--duration-s", type=float, required=required, help="exposure duration (or pulse duration) [s], 1e-13 to 3e4")
     p.add_argument("--standard", default=_mpe.DEFAULT_STANDARD, help=f"one of {sorted(_mpe.STANDARDS)} (default {_mpe.DEFAULT_STANDARD})")
     p.add_argument("--angular-subtense-rad", type=float, default=0.0, help="apparent source size [rad] (0: point source)")
@@ -213,6 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--skin", action="store_true", help="skin MPE instead of ocular")
     p.add_argument("--prf-hz", type=float, help="pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
     p.add_argument("--exposure-duration-s", type=float, help="duration of the pulse train [s] (with --prf-hz)")
+    p.add_argument("--explain", action="store_true", help="also say which rule governed and why (the candidate limits compared)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
     p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step")
@@ -250,7 +251,10 @@ def _cmd_mpe(args, out, err=None):
         res = _mpe.skin_mpe(args.wavelength_nm, args.duration_s, standard=args.standard)
     else:
         res = _mpe.ocular_mpe(args.wavelength_nm, args.duration_s, standard=args.standard, angular_subtense_rad=args.angular_subtense_rad)
-    out.write((json.dumps(res.to_dict(), indent=1) if args.json else str(res)) + "\n")
+    doc = res.to_dict()
+    if args.explain:
+        doc["explanation"] = res.explain().splitlines()
+    out.write((json.dumps(doc, indent=1) if args.json else str(res) + ("\n" + res.explain() if args.explain else "")) + "\n")
     return EXIT_OK
 
 

@@ -9,9 +9,10 @@ units) and, for comparison, the 2007 editions, as collected in the project's spe
 * ``[M]`` general knowledge, unverified against the standard's text: such rows are
   flagged in the result (``unverified=True``) and in the printed steps.
 
-Coverage: ocular and skin MPE from 400 nm to 1 mm and 1e-13 s to 3e4 s. The UV rows
-(180-400 nm) are not implemented: their values could not be verified for this tool, and
-a wrong MPE is worse than none; a UV wavelength raises ValueError saying so.
+Coverage: ocular and skin MPE from 180 nm to 1 mm and 1e-13 s to 3e4 s. The UV rows
+(180-400 nm: thermal and photochemical dual limits) are written from general knowledge of
+ANSI Z136.1-2014 Table 5a and IEC 60825-1:2014 Table A.1 and labelled [M] (flagged as
+unverified in every result), with the lower reading taken where the edges are uncertain.
 
 Units: SI throughout (J/m^2, W/m^2); ANSI's tables are in J/cm^2 (1 J/cm^2 = 1e4 J/m^2).
 Notation: ANSI C_A, C_B, C_C, C_E = IEC C4, C3, C7, C6.
@@ -78,11 +79,6 @@ def _check_inputs(wavelength_nm, duration_s, angular_subtense_rad):
     wl, t, a = float(wavelength_nm), float(duration_s), float(angular_subtense_rad)
     if not WAVELENGTH_MIN_NM <= wl <= WAVELENGTH_MAX_NM:
         raise ValueError(f"wavelength_nm={wl!r} is outside the standards' tables: expected 180 nm to 1 mm (1e6 nm)")
-    if wl < 400.0:
-        raise ValueError(
-            f"wavelength_nm={wl!r}: the UV rows (180-400 nm) are not implemented - their values are not "
-            f"verified for this tool; expected 400 nm to 1 mm"
-        )
     if not DURATION_MIN_S <= t <= DURATION_MAX_S:
         raise ValueError(f"duration_s={t!r} is outside the tables: expected 1e-13 s to 3e4 s")
     if a < 0:
@@ -122,10 +118,11 @@ def correction_factors(wavelength_nm, duration_s, angular_subtense_rad=0.0, stan
     C_B = 1 (400-450), 10^(0.02 (l - 450)) (450-600).
     C_C = 1 (< 1150), 10^(0.018 (l - 1150)) (1150-1200), 8 + 10^(0.04 (l - 1250)) (1200-1400;
     2007 editions: 8).
-    T1 = 10 s (< 450 nm), 10 * 10^(0.02 (l - 450)) s (450-500), 100 s (> 500).
+    T1 = 10 s (< 450 nm), 10 * 10^(0.02 (l - 450)) s (450-500), 100 s (> 500); in the UV,
+    302.5-315 nm, T1 = 10^(0.8 (l - 295)) 1e-15 s (the thermal / photochemical switch) [M].
     T2 = 10 * 10^((alpha - 1.5) / 98.5) s for alpha in mrad, clipped to [10, 100] s.
     alpha_max (2014) = 5 mrad (t < 625 us), 200 t^0.5 mrad, 100 mrad (t > 0.25 s); 2007: 100.
-    C_E = 1 (alpha < alpha_min), alpha / alpha_min, and above alpha_max: alpha_max/alpha_min
+    C_E = 1 (alpha < alpha_min, and in the UV), alpha / alpha_min, and above alpha_max: alpha_max/alpha_min
     (2014) or alpha^2 / (alpha_min alpha_max) (2007).
     """
     std = check_standard(standard)
@@ -140,14 +137,17 @@ def correction_factors(wavelength_nm, duration_s, angular_subtense_rad=0.0, stan
         c_c = 10 ** (0.018 * (wl - 1150))
     else:
         c_c = 8.0 + 10 ** (0.04 * (wl - 1250)) if _edition(std) >= 2014 else 8.0
-    t1 = 10.0 if wl < 450 else (10.0 * 10 ** (0.02 * (wl - 450)) if wl < 500 else 100.0)
+    if 302.5 <= wl < 315:
+        t1 = _uv_t1_s(wl)  # the UV T1 (thermal C1 below, photochemical C2 above)
+    else:
+        t1 = 10.0 if wl < 450 else (10.0 * 10 ** (0.02 * (wl - 450)) if wl < 500 else 100.0)
     a_mrad = alpha * 1e3
     t2 = 10.0 if a_mrad <= 1.5 else (10.0 * 10 ** ((a_mrad - 1.5) / 98.5) if a_mrad <= 100 else 100.0)
     if _edition(std) >= 2014:
         a_max = 5e-3 if t < 625e-6 else (200e-3 * math.sqrt(t) if t <= 0.25 else 0.1)
     else:
         a_max = 0.1
-    if alpha < ALPHA_MIN_RAD:
+    if alpha < ALPHA_MIN_RAD or wl < 400:  # C_E is a retinal factor: 1 in the UV
         c_e = 1.0
     elif alpha <= a_max:
         c_e = alpha / ALPHA_MIN_RAD
@@ -232,6 +232,18 @@ class MPEResult:
             "steps": list(self.steps),
         }
 
+    def explain(self) -> str:
+        """Which limit governed and why: every candidate limit compared, lowest first."""
+        order = sorted(self.limits, key=lambda c: c[1])
+        lines = [f"Why: {STANDARDS[self.standard]} applies {len(order)} limit(s) here; the MPE is the lowest:"]
+        for name, h, label in order:
+            mark = "  <- governs" if name == self.governing_limit else f" ({h / order[0][1]:.4g}x the governing value)"
+            lines.append(f"  {name}: H = {h:.6g} J/m^2 {label}{mark}")
+        lines.append(f"  governing row: {self.table_row}")
+        if self.unverified:
+            lines.append("  the governing row is [M]: not verified against the standard's text (see hazard.mpe and the README)")
+        return "\n".join(lines)
+
     def __str__(self):
         return "\n".join(self.steps)
 
@@ -240,7 +252,7 @@ def _limiting_aperture_m(kind: str, wl: float, t: float, governing: str) -> floa
     """Limiting aperture (spec section 2.4): the table of :func:`hazard.aperture.limiting_aperture_m`
     (retina 7 mm; skin 3.5 mm; cornea 1 mm (t < 0.3 s), 1.5 t^0.375 mm (0.3-10 s), 3.5 mm
     (t > 10 s) [C]), the corneal row applied above 1400 nm and to the ANSI corneal limit."""
-    if kind != "skin" and wl < 1400 and governing == "corneal":
+    if kind != "skin" and wl < 1400 and governing.startswith("corneal"):
         return limiting_aperture_m(1400.0, t)
     return limiting_aperture_m(wl, t, skin=(kind == "skin"))
 
@@ -342,6 +354,110 @@ def _corneal_ansi(wl, t, std):
                   formula + " (x 1e4 to J/m^2)", "[C] OLBtools Z136 (A)")
 
 
+def _anterior_dual(wl, t, f: CorrectionFactors, std):
+    """IEC 60825-1:2014, 1200-1400 nm: the anterior-segment (cornea/lens) dual limit.
+
+    Table A.1 of IEC 60825-1:2014 gives only the retinal row (C7) here; the edition applies
+    an anterior-segment limit in this band only through the Class 3B AEL used as a dual
+    limit for Class 1 (clause 4.3 / Table 3 notes, [P] - the text was not read), while
+    ICNIRP 2013, whose values the edition adopts, recommends the skin MPE as the dual limit
+    and ANSI Z136.1-2014 Table 5a prints the K_lambda corneal row. The text being unclear,
+    both readable candidates are applied and the lower governs (more protective):
+
+    * corneal, ANSI Z136.1-2014 Table 5a 1200-1400 nm row (K_lambda = 10^(0.01 (1400 - l))),
+      converted to J/m^2 - [M] for IEC;
+    * skin MPE, IEC 60825-1:2014 Table A.5 400-1400 nm rows (ICNIRP 2013's dual limit), [M].
+
+    The Class 3B AEL is not used: it is a power through the 7 mm aperture, not an exposure,
+    and is above both candidates for beams narrower than about 4 mm (Schulmeister et al.,
+    comparison of corneal injury thresholds with laser safety limits, abstract [P]).
+    ANSI Z136.1-2014 mode keeps its own corneal row; below 1e-9 s, where that row ends
+    and only the unverified sub-1e-11 s retinal row remains (1e-3 C_C: 990 J/m^2 at
+    1399.9 nm against 1 J/m^2 at 1400 nm), the skin-MPE candidate (E = 2e11 C_A W/m^2 =
+    the 1400-1500 nm sub-ns row) is applied too, [M], as the protective extension.
+    Returns the candidates (none outside 1200-1400 nm or for the 2007 editions).
+    """
+    if not (1200 <= wl < 1400 and std in ("iec-60825-1-2014", "ansi-z136.1-2014")):
+        return []
+    if std == "ansi-z136.1-2014":
+        if t >= 1e-9:
+            return []
+        skin = _skin_400_1400(wl, t, f, std)
+        return [_Limit("corneal: skin MPE", skin.radiant_exposure_j_m2, f"sub-ns corneal dual limit: skin MPE {skin.row}", skin.formula,
+                       "[M] ANSI Z136.1-2014 has no verified sub-ns corneal row: the skin/1400 nm sub-ns value applied (protective)")]
+    k = _corneal_ansi(wl, t, "ansi-z136.1-2014")
+    skin = _skin_400_1400(wl, t, f, std)
+    out = []
+    if k is not None:
+        out.append(_Limit("corneal", k.radiant_exposure_j_m2, f"IEC 2014 anterior-segment dual limit: {k.row} (ANSI Z136.1-2014 Table 5a row)",
+                          k.formula, "[M] ANSI/ICNIRP 2013 corneal row applied to IEC 2014 (IEC text unclear: lower of the candidates)"))
+    out.append(_Limit("corneal: skin MPE", skin.radiant_exposure_j_m2,
+                      f"IEC 2014 anterior-segment dual limit: skin MPE, IEC 60825-1:2014 Table A.5 {skin.row}", skin.formula,
+                      "[M] ICNIRP 2013 skin-MPE dual limit applied (IEC text unclear: lower of the candidates)"))
+    return out
+
+
+def _uv_t1_s(wl):
+    """T1 = 10^(0.8 (l - 295)) * 1e-15 s, 302.5-315 nm (IEC 60825-1:2014 Table A.3 / Table 9
+    factors; ANSI Z136.1-2014 Table 6) [M]: 1e-9 s at 302.5 nm, 10 s at 315 nm, where the
+    thermal C1 = 5.6e3 t^0.25 J/m^2 meets the photochemical C2 = 10^(0.2 (l - 295)) J/m^2
+    to 0.43 % (5.6e3 * 10^-3.75 = 0.9957)."""
+    return 10 ** (0.8 * (wl - 295.0)) * 1e-15
+
+
+def _ultraviolet(wl, t, std):
+    """UV ocular (and skin) MPE, 180-400 nm: the thermal and photochemical dual limits.
+
+    Values from general knowledge of the tables, [M] (not read in the standards' text):
+
+    * IEC 60825-1:2014 (and 2007) Table A.1, rows 180-400 nm (same numbers in Table A.5 for
+      the skin): t < 1e-9 s: E = 3e10 W/m^2; 180-302.5 nm: H = 30 J/m^2 (1e-9 - 3e4 s);
+      302.5-315 nm: H = C1 = 5.6e3 t^0.25 J/m^2 for t < T1, H = C2 = 10^(0.2 (l - 295))
+      J/m^2 for T1 <= t <= 3e4 s; 315-400 nm: C1 (1e-9 - 10 s), 1e4 J/m^2 (10 - 1e3 s),
+      E = 10 W/m^2 (1e3 - 3e4 s).
+    * ANSI Z136.1-2014 (and 2007) Table 5a, rows 0.180-0.400 um: thermal H = 0.56 t^0.25 J/cm^2
+      (1e-9 - 10 s) and photochemical H = 3e-3 J/cm^2 (0.180-0.302 um), 10^(0.2 (l - 295))
+      1e-4 J/cm^2 (0.302-0.315 um), 1.0 J/cm^2 (0.315-0.400 um, 10 - 3e4 s), the lower
+      governing. Band edge 302 nm as ANSI prints it; from 302 to 302.5 nm the lower of 30
+      J/m^2 and C2 (the two readings of the edge). Below 1e-9 s ANSI has no verified UV row:
+      the IEC 3e10 W/m^2 is used.
+    """
+    iec = std.startswith("iec")
+    label = "[M] IEC 60825-1 Table A.1 UV row (general knowledge, unverified)" if iec else \
+        "[M] ANSI Z136.1 Table 5a UV row (general knowledge, unverified)"
+    if t < 1e-9:
+        return [_Limit("UV thermal/photochemical", 3e10 * t, "180-400 nm, < 1e-9 s", "E = 3e10 W/m^2; H = E t",
+                       label + ("" if iec else "; the IEC sub-ns value, ANSI row not verified"))]
+    c1 = 5.6e3 * t**0.25
+    thermal = _Limit("UV thermal", c1, "180-400 nm, 1e-9 - 10 s (thermal)", f"H = C1 = 5.6e3 t^0.25 = 5.6e3 * {t:.6g}^0.25 J/m^2"
+                     + ("" if iec else " (0.56 t^0.25 J/cm^2)"), label)
+    c2 = 10 ** (0.2 * (wl - 295.0))
+    if wl < 315.0:
+        edge = 302.5 if iec else 302.0
+        if wl < edge:
+            photo = _Limit("UV photochemical", 30.0, f"180-{edge:g} nm, 1e-9 - 3e4 s (photochemical)", "H = 30 J/m^2 (3e-3 J/cm^2)", label)
+        elif wl < 302.5:  # ANSI only: the two readings of the 302 / 302.5 nm band edge
+            hp = min(30.0, c2)
+            photo = _Limit("UV photochemical", hp, "302-302.5 nm (ANSI band edge 0.302 um), 1e-9 - 3e4 s (photochemical)",
+                           f"H = min(30, C2 = 10^(0.2 ({wl:g} - 295))) = min(30, {c2:.6g}) J/m^2 (lower of the two edge readings)", label)
+        else:
+            photo = _Limit("UV photochemical", c2, "302.5-315 nm, 1e-9 - 3e4 s (photochemical)" if not iec else "302.5-315 nm, T1 - 3e4 s (photochemical)",
+                           f"H = C2 = 10^(0.2 (l - 295)) = 10^(0.2 * ({wl:g} - 295)) = {c2:.6g} J/m^2", label)
+        if iec and wl >= 302.5:
+            # IEC Table A.1 switches at T1 (C1 below, C2 from T1 on), not a running minimum
+            t1 = _uv_t1_s(wl)
+            return [thermal] if t < t1 else [photo]
+        return [photo, thermal] if t < 10.0 else [photo]
+    # 315-400 nm
+    if t < 10.0:
+        return [thermal]
+    if not iec:
+        return [_Limit("UV photochemical", 1e4, "315-400 nm, 10 - 3e4 s (photochemical)", "H = 1.0 J/cm^2 = 1e4 J/m^2", label)]
+    if t < 1e3:
+        return [_Limit("UV photochemical", 1e4, "315-400 nm, 10 - 1e3 s (photochemical)", "H = 1e4 J/m^2", label)]
+    return [_Limit("UV photochemical", 10.0 * t, "315-400 nm, 1e3 - 3e4 s (photochemical)", "E = 10 W/m^2; H = E t", label)]
+
+
 def _infrared(wl, t, std):
     """1400 nm - 1 mm (cornea/skin), spec 2.3: IEC [C] Laser-Studio (2007 table); ANSI
     equivalents [M]."""
@@ -425,7 +541,7 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     Parameters
     ----------
     wavelength_nm : float
-        400 nm to 1 mm (1e6 nm).
+        180 nm to 1 mm (1e6 nm).
     duration_s : float
         Exposure duration, 1e-13 s to 3e4 s (the pulse duration for a single pulse).
     standard : str
@@ -443,8 +559,11 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     std = check_standard(standard)
     wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
     f = correction_factors(wl, t, alpha, std)
-    if wl < 1400:
-        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std)]
+    if wl < 400:
+        cands = _ultraviolet(wl, t, std)
+    elif wl < 1400:
+        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std),
+                 *_anterior_dual(wl, t, f, std)]
     else:
         cands = [_infrared(wl, t, std)]
     return _result("ocular", std, wl, t, alpha, f, cands)
@@ -456,12 +575,15 @@ def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResu
     std = check_standard(standard)
     wl, t, _ = _check_inputs(wavelength_nm, duration_s, 0.0)
     f = correction_factors(wl, t, 0.0, std)
-    cand = _skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)
-    return _result("skin", std, wl, t, 0.0, f, [cand])
+    if wl < 400:
+        cands = _ultraviolet(wl, t, std)  # the UV skin rows equal the eye's (IEC Table A.5, ANSI Table 7) [M]
+    else:
+        cands = [_skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)]
+    return _result("skin", std, wl, t, 0.0, f, cands)
 
 
 # ----------------------------------------------------------------------------------------
-PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014), spec section 2.4 [C]
+PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014 Table 2; ANSI Z136.1-2014 t_min), spec section 2.4 [C]
     (400.0, 1050.0, 5e-6),
     (1050.0, 1400.0, 13e-6),
     (1400.0, 1500.0, 1e-3),
@@ -469,18 +591,31 @@ PULSE_SUMMING_TIME_S = (  # T_i (IEC 2014), spec section 2.4 [C]
     (1800.0, 2600.0, 1e-3),
     (2600.0, 1e6 + 1, 1e-7),
 )
+# the 2007 editions: 18 us (400-1050 nm) and 50 us (1050-1400 nm), the ends of their ns rows
+# (spec 2.2 [C]); the infrared values unchanged
+PULSE_SUMMING_TIME_2007_S = ((400.0, 1050.0, 18e-6), (1050.0, 1400.0, 50e-6)) + PULSE_SUMMING_TIME_S[2:]
 
 
-def _pulse_summing_time(wl):
-    for lo, hi, ti in PULSE_SUMMING_TIME_S:
+def _pulse_summing_time(wl, standard=DEFAULT_STANDARD):
+    """T_i [s] for the edition, or None in the UV (no T_i is tabulated below 400 nm: every
+    pulse is counted, the protective reading)."""
+    if wl < 400.0:
+        return None
+    table = PULSE_SUMMING_TIME_S if _edition(standard) >= 2014 else PULSE_SUMMING_TIME_2007_S
+    for lo, hi, ti in table:
         if lo <= wl < hi:
             return ti
-    return PULSE_SUMMING_TIME_S[-1][2]
+    return table[-1][2]
 
 
 @dataclass(frozen=True)
 class RepetitivePulseResult:
-    """Per-pulse MPE of a pulse train, with the three rules and the governing one."""
+    """Per-pulse MPE of a pulse train, with the three rules and the governing one.
+
+    ``c_p`` is the thermal rule's factor (ANSI C_P or IEC C5), ``c_p_rule`` the branch of
+    the standard that set it, ``pulse_groups`` the number of (effective) pulses counted for
+    it, ``counting_time_s`` the time they were counted over and ``pulse_summing_time_s`` T_i.
+    """
 
     per_pulse_radiant_exposure_j_m2: float
     governing_rule: str
@@ -489,6 +624,10 @@ class RepetitivePulseResult:
     pulse_groups: float
     c_p: float
     steps: tuple
+    c_p_rule: str = ""
+    counting_time_s: float = 0.0
+    pulse_summing_time_s: float | None = None
+    unverified: bool = False
 
     def to_dict(self):
         return {
@@ -498,11 +637,89 @@ class RepetitivePulseResult:
             "pulses": self.pulses,
             "pulse_groups": self.pulse_groups,
             "c_p": self.c_p,
+            "c_p_rule": self.c_p_rule,
+            "counting_time_s": self.counting_time_s,
+            "pulse_summing_time_s": self.pulse_summing_time_s,
+            "unverified": self.unverified,
             "steps": list(self.steps),
         }
 
+    def explain(self) -> str:
+        """Which rule governed and why: every rule's per-pulse value, lowest first."""
+        order = sorted(self.rules, key=lambda r: r[1])
+        lines = [f"Why: the per-pulse MPE is the lowest of the {len(order)} rules the standard applies to a pulse train:"]
+        for name, v in order:
+            ratio = f" ({v / order[0][1]:.4g}x the governing value)" if order[0][1] > 0 else ""
+            lines.append(f"  {name}: {v:.6g} J/m^2{'  <- governs' if name == self.governing_rule else ratio}")
+        lines.append(f"  thermal factor: {self.c_p_rule}")
+        return "\n".join(lines)
+
     def __str__(self):
         return "\n".join(self.steps)
+
+
+def _c5_iec_2014(tau, n, window_s, alpha, f: CorrectionFactors, ti):
+    """C5 of IEC 60825-1:2014 clause 4.3 f) 3) (retinal thermal, 400-1400 nm), as transcribed
+    in akufcsak/laser_safety ``get_c5`` [C]; ``n`` counts the (effective) pulses within
+    ``window_s`` = min(T2, T). Returns (C5, the branch in words)."""
+    if tau > 0.25:
+        return 1.0, "C5 = 1: not applicable to pulses longer than 0.25 s (IEC 2014 4.3 f) 3))"
+    if tau <= ti:
+        if window_s <= 0.25:
+            return 1.0, f"C5 = 1: pulses <= T_i and counting time min(T2, T) = {window_s:g} s <= 0.25 s (IEC 2014 4.3 f) 3))"
+        if n <= 600:
+            return 1.0, f"C5 = 1: pulses <= T_i, N = {n:g} <= 600 (IEC 2014 4.3 f) 3))"
+        c5 = max(0.4, 5.0 * n**-0.25)
+        return c5, f"C5 = max(0.4, 5 N^-0.25) = max(0.4, 5 * {n:g}^-0.25) = {c5:.6g}: pulses <= T_i, N > 600 (IEC 2014 4.3 f) 3))"
+    a_max = f.alpha_max_rad
+    if alpha <= 5e-3:
+        return 1.0, f"C5 = 1: pulses > T_i, alpha = {1e3 * alpha:g} mrad <= 5 mrad (IEC 2014 4.3 f) 3))"
+    if alpha <= a_max:
+        c5 = n**-0.25 if n <= 40 else 0.4
+        return c5, f"C5 = {'N^-0.25' if n <= 40 else '0.4 (N > 40)'} = {c5:.6g}: pulses > T_i, 5 mrad < alpha <= alpha_max (IEC 2014 4.3 f) 3))"
+    c5 = n**-0.25 if n <= 625 else 0.2
+    return c5, (f"C5 = {'N^-0.25' if n <= 625 else '0.2 (N > 625)'} = {c5:.6g}: pulses > T_i, alpha > alpha_max = {1e3 * a_max:g} mrad "
+                "(IEC 2014 4.3 f) 3); the transcription's C5 = 1 above 100 mrad is not applied: unverified, 0.2 floor kept, protective)")
+
+
+def _thermal_rule(std, wl, tau, prf, big_t, alpha, rule1):
+    """Rule 3 (ANSI C_P) / requirement 3 (IEC C5): per-pulse value, factor, count, steps.
+
+    Pulses closer than T_i are grouped: a group is one pulse of duration T_i carrying all
+    its pulses' energy, its MPE H(T_i) shared among them. Counting: the whole train (ANSI
+    both editions, IEC 2007: C_P = C5 = N^-0.25 [M]), or min(T2, T) for IEC 2014 in 400-1400
+    nm (4.3 f) 3)). Outside 400-1400 nm the N^-0.25 reduction is applied to every standard as
+    a protective assumption [M] (the photochemical limits are covered by rule 2 anyway).
+    """
+    ti = _pulse_summing_time(wl, std)
+    grouped = ti is not None and 1.0 / prf < ti
+    per_group = max(prf * ti, 1.0) if grouped else 1.0
+    h_eff = ocular_mpe(wl, ti, standard=std, angular_subtense_rad=alpha).radiant_exposure_j_m2 if grouped else rule1
+    iec14 = std == "iec-60825-1-2014" and 400 <= wl < 1400
+    f = correction_factors(wl, tau, alpha, std)
+    window = min(f.T2_s, big_t) if iec14 else big_t
+    rate = min(prf, 1.0 / ti) if grouped else prf
+    n = max(window * rate, 1.0)
+    lines = []
+    if grouped:
+        lines.append(f"  pulses closer than T_i = {ti:g} s are grouped: {per_group:g} pulses per group of duration T_i, "
+                     f"H(T_i) = {h_eff:.6g} J/m^2 per group")
+    if iec14:
+        c_p, why = _c5_iec_2014(ti if grouped else tau, n, window, alpha, f, ti)
+        name, label = "rule 3: thermal (C5)", "[C] akufcsak get_c5"
+        lines.append(f"  N = {n:g} (effective) pulses within min(T2, T) = min({f.T2_s:g}, {big_t:g}) s")
+    else:
+        c_p = n**-0.25
+        where = "" if 400 <= wl < 1400 else "; outside 400-1400 nm applied as a protective assumption"
+        why = f"C_P = N^-0.25 = {n:g}^-0.25 = {c_p:.6g} (N over the whole train{where})"
+        name, label = "rule 3: thermal (C_P)", "[M]"
+        lines.append(f"  N = {n:g} (effective) pulses in T = {big_t:g} s")
+    value = h_eff * c_p / per_group
+    src = "H(T_i)" if grouped else "H_1"
+    factor = "C5" if iec14 else "C_P"
+    lines.append(f"  rule 3 (thermal): {src} {factor} / n_group = {h_eff:.6g} * {c_p:.6g} / {per_group:g} = {value:.6g} J/m^2 {label}")
+    lines.append(f"    because {why}")
+    return name, value, c_p, why, n, window, ti, lines
 
 
 def repetitive_pulse_mpe(
@@ -511,11 +728,23 @@ def repetitive_pulse_mpe(
     """Per-pulse ocular MPE of a repetitively pulsed laser (ANSI rules 1-3 / IEC C5).
 
     Rule 1: no pulse exceeds the single-pulse MPE. Rule 2: the train's average does not
-    exceed the MPE for its duration (per pulse: H(T) / N). Rule 3 (thermal, 400-1400 nm):
-    the single-pulse MPE times C_P = N^-0.25 [M: classic ANSI rule; IEC 2014's C5 is never
-    lower than this for the same N, so the result is conservative for IEC too]. Pulses
-    closer than the summing time T_i (spec 2.4) are grouped: a group counts as one pulse
-    of duration T_i carrying all its energy.
+    exceed the MPE for its duration (per pulse: H(T) / N). Rule 3 (thermal): the single-pulse
+    MPE times the standard's factor: ANSI Z136.1 (both editions) C_P = N^-0.25 over the
+    train [M]; IEC 60825-1:2007 C5 = N^-0.25; IEC 60825-1:2014 C5 by clause 4.3 f) 3)
+    (1 for pulses <= T_i up to N = 600, then 5 N^-0.25 down to 0.4; for longer pulses 1 for
+    alpha <= 5 mrad, N^-0.25 down to 0.4 up to alpha_max, down to 0.2 beyond), N counted
+    within min(T2, T). Pulses closer than T_i (spec 2.4; 2007: 18 / 50 us) are grouped.
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        180 nm to 1 mm.
+    pulse_duration_s, prf_hz, exposure_duration_s : float
+        Pulse duration [s], repetition frequency [Hz] and train duration T [s].
+    standard : str
+        One of :data:`STANDARDS`.
+    angular_subtense_rad : float
+        Apparent source size alpha [rad] (C_E, T2, and IEC 2014's C5 branch).
     """
     std = check_standard(standard)
     wl, tau, alpha = _check_inputs(wavelength_nm, pulse_duration_s, angular_subtense_rad)
@@ -531,32 +760,17 @@ def repetitive_pulse_mpe(
     train = ocular_mpe(wl, big_t, standard=std, angular_subtense_rad=alpha)
     rule1 = single.radiant_exposure_j_m2
     rule2 = train.radiant_exposure_j_m2 / n
-    ti = _pulse_summing_time(wl)
     steps = [
         f"Repetitive-pulse MPE per {STANDARDS[std]}: {wl:g} nm, pulse {tau:g} s at {prf:g} Hz for {big_t:g} s (N = {n:g})",
         f"  rule 1 (single pulse): H_1 = {rule1:.6g} J/m^2  [{single.table_row}: {single.formula}]",
-        f"  rule 2 (average): H(T) / N = {train.radiant_exposure_j_m2:.6g} / {n:g} = {rule2:.6g} J/m^2",
+        f"  rule 2 (average): H(T) / N = {train.radiant_exposure_j_m2:.6g} / {n:g} = {rule2:.6g} J/m^2  [{train.table_row}: {train.formula}]",
     ]
-    rules = [("rule 1: single pulse", rule1), ("rule 2: average power", rule2)]
-    groups, c_p = n, 1.0
-    if 400 <= wl < 1400:
-        if 1.0 / prf < ti:
-            per_group = max(prf * ti, 1.0)
-            groups = max(big_t / ti, 1.0)
-            grouped = ocular_mpe(wl, ti, standard=std, angular_subtense_rad=alpha)
-            c_p = groups**-0.25
-            rule3 = grouped.radiant_exposure_j_m2 * c_p / per_group
-            steps.append(
-                f"  pulses closer than T_i = {ti:g} s are grouped: {per_group:g} pulses per group, {groups:g} groups"
-            )
-            steps.append(
-                f"  rule 3 (thermal): H(T_i) C_P / n_group = {grouped.radiant_exposure_j_m2:.6g} * {groups:g}^-0.25 / {per_group:g} = {rule3:.6g} J/m^2 [M]"
-            )
-        else:
-            c_p = n**-0.25
-            rule3 = rule1 * c_p
-            steps.append(f"  rule 3 (thermal): H_1 C_P = {rule1:.6g} * {n:g}^-0.25 = {rule3:.6g} J/m^2 [M]")
-        rules.append(("rule 3: thermal (C_P)", rule3))
+    name3, rule3, c_p, why, groups, window, ti, lines = _thermal_rule(std, wl, tau, prf, big_t, alpha, rule1)
+    steps += lines
+    rules = (("rule 1: single pulse", rule1), ("rule 2: average power", rule2), (name3, rule3))
     gov = min(rules, key=lambda r: r[1])
     steps.append(f"  per-pulse MPE = {gov[1]:.6g} J/m^2 ({gov[0]} governs)")
-    return RepetitivePulseResult(gov[1], gov[0], tuple(rules), n, groups, c_p, tuple(steps))
+    unverified = single.unverified or train.unverified or not std.startswith("iec-60825-1-2014") or not 400 <= wl < 1400
+    if unverified:
+        steps.append("  WARNING: a row or rule used here is not verified against the standard's text ([M]); check it before relying on it")
+    return RepetitivePulseResult(gov[1], gov[0], rules, n, groups, c_p, tuple(steps), why, window, ti, unverified)

@@ -168,9 +168,8 @@ class SectorSpec(_Strict):
 class LaserSpec(_Strict):
     """The laser: CW (``power_w``) or pulsed (``pulse_energy_j``, ``pulse_duration_s``, ``prf_hz``)."""
 
-    wavelength_nm: float = Field(ge=400.0, le=1.0e6, description=(
-        "wavelength [nm], 400 nm to 1 mm (the MPE's UV rows, 180-400 nm, are not implemented: refused here, "
-        "as the analysis would refuse them)"))
+    wavelength_nm: float = Field(ge=180.0, le=1.0e6, description=(
+        "wavelength [nm], 180 nm to 1 mm (the MPE tables' range; the UV rows, 180-400 nm, are [M]: see hazard.mpe)"))
     power_w: float | None = Field(default=None, ge=1e-9, le=1e9, description="CW power [W], 1 nW to 1 GW")
     pulse_energy_j: float | None = Field(default=None, ge=1e-15, le=1e7, description="energy per pulse [J], 1 fJ to 10 MJ")
     pulse_duration_s: float | None = Field(default=None, ge=1e-13, le=3e4, description="pulse duration [s] (the MPE tables start at 1e-13 s)")

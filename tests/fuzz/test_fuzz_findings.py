@@ -66,7 +66,7 @@ def _one_line_error(stderr, *words):
 CASES = {
     "aim 1e-300 m from the laser": (BASE.replace("aim_m = [0.0, 0.0, 1.0]", "aim_m = [1e-300, -50.0, 1.0]"), ["laser.aim_m", "undefined"]),
     "a laser of 1e-300 W": (BASE.replace("power_w = 100.0", "power_w = 1e-300"), ["laser.power_w", "greater than or equal to 0.000000001"]),
-    "UV wavelength": (BASE.replace("wavelength_nm = 1064.0", "wavelength_nm = 180.0"), ["laser.wavelength_nm", "400"]),
+    "below the UV rows": (BASE.replace("wavelength_nm = 1064.0", "wavelength_nm = 179.0"), ["laser.wavelength_nm", "180"]),
     "a beam of 1e-300 m": (BASE.replace("beam_diameter_m = 0.01", "beam_diameter_m = 1e-300"), ["laser.beam_diameter_m"]),
     "a series shorter than the analysis": (BASE.replace('material = { model = "lambertian", reflectance = 0.5 }',
                                                         'material = { model = "lambertian", reflectance = 0.5 }' + SERIES),

@@ -247,7 +247,6 @@ def test_repetitive_pulses_rules():
     "kwargs, match",
     [
         (dict(wavelength_nm=100, duration_s=1), r"wavelength_nm=100.0 is outside .*180 nm to 1 mm"),
-        (dict(wavelength_nm=300, duration_s=1), r"UV rows \(180-400 nm\) are not implemented"),
         (dict(wavelength_nm=1064, duration_s=1e5), r"duration_s=100000.0 is outside the tables: expected 1e-13 s to 3e4 s"),
         (dict(wavelength_nm=1064, duration_s=1, standard="ansi-2014"), r"standard='ansi-2014' is unknown: expected one of \['ansi-z136.1-2007'"),
         (dict(wavelength_nm=float("nan"), duration_s=1), "wavelength_nm=nan: expected a finite number"),

@@ -56,8 +56,8 @@ def test_examples_bundled_and_valid():
     "old, new, message",
     [
         ("power_w = 100.0", "power_w = -5.0", "laser.power_w: Input should be greater than or equal to 0.000000001"),
-        ("wavelength_nm = 1064.0", "wavelength_nm = 100.0", "laser.wavelength_nm: Input should be greater than or equal to 400"),
-        ("wavelength_nm = 1064.0", "wavelength_nm = 180.0", "laser.wavelength_nm: Input should be greater than or equal to 400"),
+        ("wavelength_nm = 1064.0", "wavelength_nm = 100.0", "laser.wavelength_nm: Input should be greater than or equal to 180"),
+        ("wavelength_nm = 1064.0", "wavelength_nm = 179.0", "laser.wavelength_nm: Input should be greater than or equal to 180"),
         ("wavelength_nm = 1064.0", "wavelength_nm = 2e6", "laser.wavelength_nm: Input should be less than or equal to 1000000"),
         ("aim_m = [0.0, 0.0, 0.0]", "aim_m = [0.0, -50.0, 0.0]", "aim_m=[0.0, -50.0, 0.0] equals position_m"),
         ("duration_s = 10.0", "duration_s = \"long\"", "exposure.duration_s: Input should be a valid number"),
