@@ -358,10 +358,20 @@ def group_gains(optics, group) -> np.ndarray:
     return per[np.asarray(group, np.int64)]
 
 
+UV_ATTENUATION_FLOOR_NM = 400.0
+"""Below this wavelength [nm] the Kruse attenuation is held at its 400 nm value (protective)."""
+
+
 def attenuation_from_visibility(visibility_km, wavelength_nm) -> float:
     """Atmospheric attenuation coefficient mu [1/m] from the meteorological visibility
-    (Kruse model, [M]; spec section 3.1)."""
+    (Kruse model, [M]; spec section 3.1).
+
+    The Kruse fit is made for the visible and near infrared. Below 400 nm it is not
+    extrapolated: its ``(550/lambda)^q`` growth would give the ultraviolet more attenuation,
+    hence a shorter NOHD, than any validated model supports, so the 400 nm value is used
+    (the lower attenuation: protective, [D]).
+    """
     v = _num("visibility_km", visibility_km, minimum=0.0, strict=True)
-    wl = _num("wavelength_nm", wavelength_nm, minimum=0.0, strict=True)
+    wl = max(_num("wavelength_nm", wavelength_nm, minimum=0.0, strict=True), UV_ATTENUATION_FLOOR_NM)
     q = 1.6 if v > 50 else (1.3 if v > 6 else 0.585 * v ** (1.0 / 3.0))
     return 3.91 / v * (550.0 / wl) ** q / 1000.0

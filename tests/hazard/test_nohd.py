@@ -139,6 +139,14 @@ def test_kruse(v, q):
     assert hz.attenuation_from_visibility(v, 1064) == pytest.approx(3.91 / v * (550 / 1064) ** q / 1000)
 
 
+@pytest.mark.parametrize("wl", [355.0, 266.0, 193.0])
+def test_kruse_not_extrapolated_into_the_uv(wl):
+    """Below 400 nm the attenuation stays at its 400 nm value (Kruse's fit would grow it and
+    shorten the NOHD without a validated model behind it): 23 km, q = 1.3."""
+    assert hz.attenuation_from_visibility(23.0, wl) == pytest.approx(3.91 / 23.0 * (550 / 400) ** 1.3 / 1000)
+    assert hz.attenuation_from_visibility(23.0, wl) < 3.91 / 23.0 * (550 / wl) ** 1.3 / 1000
+
+
 # --- properties -------------------------------------------------------------------------------
 finite_pos = st.floats(1e-6, 1e6)
 
