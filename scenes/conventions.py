@@ -116,6 +116,12 @@ def beam_notes(rec: dict | None) -> list:
         return ["beam convention: laser.beam_diameter_m and laser.divergence_rad read as the 1/e-irradiance diameter and "
                 "full angle (the ANSI Z136.1 / IEC 60825-1 form); for datasheet 1/e^2 values set laser.diameter_definition = "
                 "\"1/e2\" and laser.divergence_definition = \"full_1/e2\""]
-    steps = rec["steps"] or [f"beam convention: diameter {rec['diameter_definition'] or '1/e'}, divergence "
-                             f"{rec['divergence_definition'] or 'full_1/e'} (the standards' form; nothing converted)"]
-    return [s if s.startswith("beam convention") else f"beam convention: {s}" for s in steps]
+    out = [f"beam convention: {s}" for s in rec["steps"]]
+    if rec["diameter_definition"] is None:
+        out.append("beam convention: laser.beam_diameter_m read as the 1/e-irradiance diameter (the default: "
+                   "diameter_definition not given)")
+    if rec["divergence_definition"] is None:
+        out.append("beam convention: laser.divergence_rad read as the 1/e full angle (the default: divergence_definition "
+                   "not given)")
+    return out or [f"beam convention: diameter at {rec['diameter_definition']}, divergence {rec['divergence_definition']} "
+                   f"(the standards' form, nothing converted)"]

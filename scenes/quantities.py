@@ -28,7 +28,7 @@ import typing
 
 from pydantic import BaseModel
 
-__all__ = ["SUFFIX_UNITS", "QuantityError", "convert_units", "convert_value", "unit_of_key", "sibling_key", "as_written",
+__all__ = ["SUFFIX_UNITS", "IMPLIED_UNITS", "path_unit", "QuantityError", "convert_units", "convert_value", "unit_of_key", "sibling_key", "as_written",
            "as_written_lines", "other_forms"]
 
 # key suffix (after the last "_" or two) -> the unit of the number stored under the key
@@ -41,6 +41,8 @@ SUFFIX_UNITS = {
 NOT_UNITS = frozenset({"refraction_k"})
 _NUMBER = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*(\S.*?)?\s*")
 MAX_TEXT = 100  # characters of one quantity string
+# keys without a unit suffix whose numbers have a unit all the same (they take quantity strings too)
+IMPLIED_UNITS = {"windows": "s"}
 
 
 class QuantityError(ValueError):
@@ -156,7 +158,7 @@ def _walk(data, model, path: str, record: dict) -> None:
             if sub:
                 for i, item in (enumerate(value) if isinstance(value, list) else [(None, value)]):
                     _walk(item, sub[0], where if i is None else f"{where}[{i}]", record)
-            unit = unit_of_key(key)
+            unit = unit_of_key(key) or IMPLIED_UNITS.get(key)
             if unit is not None and _has_text(value):
                 data[key] = convert_value(value, unit, where, bare_ok=True)
                 record[where] = {"as_written": value, "key": where, "value": data[key], "unit": unit}
@@ -231,3 +233,29 @@ def as_written_lines(scene) -> list:
     """One line per value written with a unit: ``laser.power = "20 kW" -> laser.power_w = 20000 W``."""
     return [f"{k} = {_show(r['as_written']) if isinstance(r['as_written'], list) else repr(r['as_written'])} -> "
             f"{r['key']} = {_show(r['value'])} {r['unit']}" for k, r in as_written(scene).items()]
+
+
+def path_unit(parts: list, model=None) -> tuple[list, str | None, bool]:
+    """A scene field path (keys and list indices, as a study names it) resolved against
+    the schema: ``(parts with an unsuffixed last key replaced by its suffixed one, unit of
+    the last key or None, whether bare numbers mean that unit)``; ``["laser", "power"]`` ->
+    ``(["laser", "power_w"], "W", False)``."""
+    from .spec import SceneSpec
+
+    model = model or SceneSpec
+    keys = [p for p in parts if isinstance(p, str)]
+    for key in keys[:-1]:
+        f = model.model_fields.get(key)
+        sub = _models_of(f.annotation) if f is not None else []
+        if not sub:
+            return list(parts), None, True
+        model = sub[0]
+    last = keys[-1] if keys else None
+    if last is None or last in model.model_fields:
+        unit = None if last is None else unit_of_key(last) or IMPLIED_UNITS.get(last)
+        return list(parts), unit, True
+    target = sibling_key(last, model.model_fields)
+    if target is None:
+        return list(parts), None, True
+    i = max(j for j, p in enumerate(parts) if p == last)
+    return [*parts[:i], target, *parts[i + 1:]], unit_of_key(target), False
