@@ -135,8 +135,13 @@ def _suffix(unit: str) -> str:
     return next(s for s, u in SUFFIX_UNITS.items() if u == unit)
 
 
-def _has_text(value) -> bool:
-    return isinstance(value, str) or (isinstance(value, list) and any(_has_text(v) for v in value))
+def _has_quantity(value) -> bool:
+    """A string of the form "<number> <unit>" somewhere in ``value`` (other strings on a
+    suffixed key are left to the schema: ``duration_s = "long"`` is not a valid number)."""
+    if isinstance(value, str):
+        m = _NUMBER.fullmatch(value) if len(value) <= MAX_TEXT else None
+        return m is not None and m.group(2) is not None
+    return isinstance(value, list) and any(_has_quantity(v) for v in value)
 
 
 def _models_of(annotation) -> list:
@@ -159,7 +164,7 @@ def _walk(data, model, path: str, record: dict) -> None:
                 for i, item in (enumerate(value) if isinstance(value, list) else [(None, value)]):
                     _walk(item, sub[0], where if i is None else f"{where}[{i}]", record)
             unit = unit_of_key(key) or IMPLIED_UNITS.get(key)
-            if unit is not None and _has_text(value):
+            if unit is not None and _has_quantity(value):
                 data[key] = convert_value(value, unit, where, bare_ok=True)
                 record[where] = {"as_written": value, "key": where, "value": data[key], "unit": unit}
             continue
