@@ -29,7 +29,7 @@ import typing
 from pydantic import BaseModel
 
 __all__ = ["SUFFIX_UNITS", "IMPLIED_UNITS", "path_unit", "QuantityError", "convert_units", "convert_value", "unit_of_key", "sibling_key", "as_written",
-           "as_written_lines", "other_forms"]
+           "as_written_lines", "other_forms", "schema_with_units"]
 
 # key suffix (after the last "_" or two) -> the unit of the number stored under the key
 SUFFIX_UNITS = {
@@ -264,3 +264,46 @@ def path_unit(parts: list, model=None) -> tuple[list, str | None, bool]:
         return list(parts), None, True
     i = max(j for j, p in enumerate(parts) if p == last)
     return [*parts[:i], target, *parts[i + 1:]], unit_of_key(target), False
+
+
+def _unit_forms(model) -> dict:
+    """``{unsuffixed key: suffixed key}`` of one schema class."""
+    fields = model.model_fields
+    out = {}
+    for key in fields:
+        unit = unit_of_key(key)
+        if unit is not None:
+            base = key[: -len(_suffix(unit)) - 1]
+            if base and base not in fields and sibling_key(base, fields) == key:
+                out[base] = key
+    return out
+
+
+def schema_with_units(schema: dict, model=None) -> dict:
+    """The JSON schema of scene files with each unit-suffixed key's unsuffixed form
+    (``power`` beside ``power_w``) as a property of its table, so that editors accept
+    quantity strings (``power = "20 kW"``); ``schema`` is changed in place and returned."""
+    from .spec import SceneSpec
+
+    seen = set()
+    todo = [model or SceneSpec]
+    while todo:
+        m = todo.pop()
+        if m in seen:
+            continue
+        seen.add(m)
+        todo += [s for f in m.model_fields.values() for s in _models_of(f.annotation)]
+        node = schema if m is (model or SceneSpec) else schema.get("$defs", {}).get(m.__name__)
+        if not isinstance(node, dict) or "properties" not in node:
+            continue
+        for base, key in _unit_forms(m).items():
+            unit = unit_of_key(key)
+            node["properties"][base] = {
+                "anyOf": [{"type": "string"}, {"type": "array"}],
+                "description": (f"{key} written with a unit: a quantity string '<number> <unit>' (e.g. '{_example(unit)}'), "
+                                f"or a list of them where {key} is a list; converted to {unit} at load. Give {base} or {key}, "
+                                f"not both; a bare number here is an error (which unit?)")}
+            if key in node.get("required", ()):  # required: one of the two forms
+                node["required"] = [k for k in node["required"] if k != key]
+                node.setdefault("allOf", []).append({"anyOf": [{"required": [key]}, {"required": [base]}]})
+    return schema

@@ -911,7 +911,9 @@ def example_path(name: str) -> Path:
 
 def json_schema() -> dict:
     """JSON schema of scene files (for editors)."""
-    schema = SceneSpec.model_json_schema()
+    from .quantities import schema_with_units
+
+    schema = schema_with_units(SceneSpec.model_json_schema())  # power = "20 kW" beside power_w
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "laser-hazard scene"
     return schema

@@ -338,3 +338,16 @@ def test_uncertainty_table_takes_units():
 def test_firing_windows_take_units():
     sc = _load(_scene(laser=LASER + '\nwindows = [["0 s", "1.5 min"]]'))
     assert sc.spec.laser.windows == [[0.0, 90.0]]
+
+
+def test_json_schema_accepts_values_with_units():
+    import tomllib
+
+    import jsonschema
+
+    text = _scene(laser='wavelength = "1064 nm"\npower = "20 kW"\nbeam_diameter = "7 mm"\ndivergence = "0.5 mrad"\n'
+                        'diameter_definition = "1/e2"', size='size = ["1 m", "50 cm"]')
+    schema = scenes.json_schema()
+    jsonschema.validate(tomllib.loads(text), schema)
+    assert "power_w written with a unit" in schema["$defs"]["LaserSpec"]["properties"]["power"]["description"]
+    assert "refraction" not in schema["$defs"]["SiteSpec"]["properties"]  # refraction_k is a coefficient, not kelvin
