@@ -104,7 +104,15 @@ def conversion_lines(rec: dict) -> list:
             form = f"2 x {form}"
         out.append(f"divergence: {angle} angle at {level} {1e3 * rec['divergence_as_given_rad']:.6g} mrad -> full angle at 1/e "
                    f"= {form} = {1e3 * rec['divergence_rad']:.6g} mrad (Gaussian beam)")
+    if "fwhm" in (dd, vd):
+        out.append(FWHM_CAVEAT)
     return out
+
+
+# a top hat of diameter D has FWHM = D = its 1/e diameter, so the Gaussian conversion makes it 1/sqrt(ln 2) = 1.20 D
+FWHM_CAVEAT = ("FWHM read for a Gaussian beam: for a flatter beam (top hat, multimode) the 1/e diameter and angle are "
+               "smaller, down to the FWHM itself (a top hat): the irradiance may then be up to 1/ln 2 = 1.44 x the one used "
+               "and a NOHD up to 1.20 x longer; give the 1/e2 or d86 values of such a beam (conservative for it)")
 
 
 def beam_notes(rec: dict | None) -> list:

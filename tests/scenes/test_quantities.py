@@ -351,3 +351,12 @@ def test_json_schema_accepts_values_with_units():
     jsonschema.validate(tomllib.loads(text), schema)
     assert "power_w written with a unit" in schema["$defs"]["LaserSpec"]["properties"]["power"]["description"]
     assert "refraction" not in schema["$defs"]["SiteSpec"]["properties"]  # refraction_k is a coefficient, not kelvin
+
+
+def test_fwhm_says_it_is_not_conservative_for_a_flat_beam():
+    # a top hat of diameter D: FWHM = D = its 1/e diameter; read as Gaussian, d_1/e = D / sqrt(ln 2) (1.20 D) and the
+    # peak irradiance 4P / (pi d^2) is ln 2 = 0.693 of the top hat's: the note must say up to 1.44 x and 1.20 x
+    assert 1 / math.sqrt(math.log(2)) == pytest.approx(1.20, abs=0.005) and 1 / math.log(2) == pytest.approx(1.44, abs=0.005)
+    sc = _load(_scene(laser=LASER + '\ndiameter_definition = "fwhm"'))
+    assert any("1.44 x" in n and "1.20 x" in n and "top hat" in n for n in sc.notes), sc.notes
+    assert not any("top hat" in n for n in _load(_scene(laser=LASER + '\ndiameter_definition = "d86"')).notes)
