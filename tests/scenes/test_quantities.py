@@ -360,3 +360,15 @@ def test_fwhm_says_it_is_not_conservative_for_a_flat_beam():
     sc = _load(_scene(laser=LASER + '\ndiameter_definition = "fwhm"'))
     assert any("1.44 x" in n and "1.20 x" in n and "top hat" in n for n in sc.notes), sc.notes
     assert not any("top hat" in n for n in _load(_scene(laser=LASER + '\ndiameter_definition = "d86"')).notes)
+
+
+def test_loading_leaves_the_callers_data_as_written():
+    import copy
+    import tomllib
+
+    data = tomllib.loads(_scene(laser='wavelength = "1064 nm"\npower = "20 kW"\nbeam_diameter_m = 0.007\n'
+                                      'divergence = "0.5 mrad"\ndiameter_definition = "fwhm"'))
+    before = copy.deepcopy(data)
+    sc = scenes.from_data(data, source="t")
+    assert data == before and sc.source_data == before  # a Dask worker reloads source_data: converted once, there
+    assert sc.spec.laser.beam_diameter_m == pytest.approx(0.007 / math.sqrt(math.log(2)), rel=1e-15)
