@@ -39,7 +39,7 @@ SUFFIX_UNITS = {
 }
 # keys that end like a unit but are not one (site.refraction_k is a dimensionless coefficient)
 NOT_UNITS = frozenset({"refraction_k"})
-_NUMBER = re.compile(r"\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)\s*(\S.*?)?\s*")
+_NUMBER = re.compile(r"\s*([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?)\s*(\S.*?)?\s*")  # ASCII digits
 MAX_TEXT = 100  # characters of one quantity string
 # keys without a unit suffix whose numbers have a unit all the same (they take quantity strings too)
 IMPLIED_UNITS = {"windows": "s"}

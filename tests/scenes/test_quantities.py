@@ -372,3 +372,20 @@ def test_loading_leaves_the_callers_data_as_written():
     sc = scenes.from_data(data, source="t")
     assert data == before and sc.source_data == before  # a Dask worker reloads source_data: converted once, there
     assert sc.spec.laser.beam_diameter_m == pytest.approx(0.007 / math.sqrt(math.log(2)), rel=1e-15)
+
+
+@FAST
+@given(st.one_of(st.text(max_size=40), st.from_regex(r"[+-]?\d{1,4}(\.\d{0,3})?(e[+-]?\d{1,3})? ?[A-Za-z/*^()%0-9 ]{0,12}",
+                                                     fullmatch=True)))
+def test_any_text_is_a_value_or_an_error_naming_the_key(text):
+    import tomllib
+
+    data = tomllib.loads(_scene())
+    del data["laser"]["power_w"]
+    data["laser"]["power"] = text
+    try:
+        sc = scenes.from_data(data, source="t")
+    except scenes.SceneError as exc:
+        assert "laser.power" in str(exc), str(exc)
+        return
+    assert 1e-9 <= sc.spec.laser.power_w <= 1e9 and scenes.quantities.as_written(sc)["laser.power"]["as_written"] == text
