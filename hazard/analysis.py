@@ -292,7 +292,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
         st.detail = exposure.detail
     mu = limits.attenuation_per_m(scene.spec)
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
-    notes = list(traced.notes)
+    notes = list(getattr(scene, "notes", None) or []) + list(traced.notes)  # the beam's convention first (scenes.conventions)
     scene = _crossings(scene, traced, tracer, mu, exposure.irradiance_w_m2, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan, ray_scene)
     spill_part = _spill(scene, traced, mu, exposure, log)

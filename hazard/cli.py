@@ -506,12 +506,16 @@ def _cmd_validate(args, out, err):
         "offset_m": scene.offset_m.tolist(),
         "warnings": list(scene.warnings),
     }
+    from scenes.summary import summary_lines
+
+    info.update({"units_as_written": scene.units_as_written, "beam_conventions": scene.beam_conventions,
+                 "summary": summary_lines(scene)})
     if args.json:
         out.write(json.dumps(info, indent=1) + "\n")
     else:
         out.write(f"{scene.source}: valid scene {scene.name!r}: {len(scene.targets)} target(s), {len(scene.occluders)} occluder(s), "
                   f"{'terrain, ' if scene.terrain is not None else ''}{len(scene.observers)} observer point(s); "
-                  f"local origin {scene.offset_m.tolist()} m\n")
+                  f"local origin {scene.offset_m.tolist()} m\n" + "".join(f"  {line}\n" for line in info["summary"]))
     return EXIT_OK
 
 

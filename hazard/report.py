@@ -187,7 +187,9 @@ def report_dict(result, cols=None) -> dict:
         "version": REPORT_VERSION,
         "versions": versions(),
         "scene": {"name": scene.name, "source": scene.source, "sha256": scene.text_sha256,
-                  "offset_m": scene.offset_m.tolist(), "echo": scene.echo()},
+                  "offset_m": scene.offset_m.tolist(), "echo": scene.echo(),
+                  "units_as_written": dict(getattr(scene, "units_as_written", None) or {}),  # scenes.quantities.as_written
+                  "beam_conventions": getattr(scene, "beam_conventions", None)},
         "frame": _frame(scene),
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),

@@ -668,9 +668,14 @@ def _echo_rows(doc: dict) -> dict:
     echo = (doc.get("scene") or {}).get("echo") or {}
     laser = echo.get("laser") or {}
     pulsed = any(laser.get(k) is not None for k in ("pulse_energy_j", "pulse_duration_s", "prf_hz"))
+    sc = doc.get("scene") or {}
+    units = [{"key": f"scene.units_as_written.{k}", "label": k, "lines": None,
+              "value": f"{r.get('as_written')} -> {r.get('key')} = {r.get('value')} {r.get('unit')}"}
+             for k, r in (sc.get("units_as_written") or {}).items()]
     return {"laser": kv_rows(laser, "scene.echo.laser", skip_none=True), "pulsed": pulsed,
             "exposure": kv_rows(echo.get("exposure"), "scene.echo.exposure"),
-            "atmosphere": kv_rows(echo.get("atmosphere"), "scene.echo.atmosphere")}
+            "atmosphere": kv_rows(echo.get("atmosphere"), "scene.echo.atmosphere"),
+            "units": units, "beam": list((sc.get("beam_conventions") or {}).get("steps") or [])}
 
 
 def _scene_view(doc: dict) -> dict:

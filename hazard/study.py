@@ -71,7 +71,37 @@ def set_path(data: dict, path: str, value):
             raise ValueError(f"path={path!r}: index {last} is out of range (the list has {len(node) if isinstance(node, list) else 0} items)")
     elif not isinstance(node, dict):
         raise ValueError(f"path={path!r}: cannot set {last!r} on a {type(node).__name__}")
+    else:
+        from scenes.quantities import other_forms
+
+        for k in other_forms(node, last):  # power = "20 kW" in the base, laser.power_w swept: the sweep's value replaces it
+            del node[k]
     node[last] = value
+
+
+def _join(parts) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else (f".{p}" if i else p) for i, p in enumerate(parts))
+
+
+def _parameter_units(p, where: str) -> None:
+    """A swept parameter's values and range with units (``"20 kW"``) converted, in place, to
+    the unit of the scene key its path names; an unsuffixed path (``laser.power``) becomes the
+    suffixed key (``laser.power_w``), so the results' columns are numbers in that unit."""
+    from scenes.quantities import convert_value, path_unit
+
+    if not isinstance(p, dict) or not isinstance(p.get("path"), str):
+        return
+    try:
+        parts = _split(p["path"])
+    except ValueError:
+        return  # Parameter says what is wrong with the path
+    parts, unit, bare_ok = path_unit(parts)
+    if unit is None:
+        return
+    for key in ("values", "range"):
+        if isinstance(p.get(key), list):
+            p[key] = convert_value(p[key], unit, f"{where}.{key}", bare_ok=bare_ok)
+    p["path"] = _join(parts)
 
 
 @dataclass(frozen=True)
@@ -231,6 +261,10 @@ def load_study(path) -> Study:
         raise ValueError(f"{path}: sweep: unknown keys {sorted(set(sw) - {'kind', 'samples', 'parameters'})}")
     params = []
     for i, p in enumerate(sw.get("parameters", [])):
+        try:
+            _parameter_units(p, f"sweep.parameters[{i}]")
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
         if set(p) - {"path", "values", "range", "scale"}:
             raise ValueError(f"{path}: sweep.parameters[{i}]: unknown keys {sorted(set(p) - {'path', 'values', 'range', 'scale'})}")
         try:

@@ -115,6 +115,17 @@ class Scene:
     site: object = None
     # the scene's keys as given (parsed TOML), to load it again elsewhere (a Dask worker)
     source_data: dict | None = field(default=None, repr=False)
+    # values written with a unit: key path as written -> {as_written, key, value, unit} (scenes.quantities)
+    units_as_written: dict = field(default_factory=dict)
+    # the beam's diameter and divergence as given and converted to 1/e full angle (scenes.conventions)
+    beam_conventions: dict | None = None
+
+    @property
+    def notes(self) -> list:
+        """Notes every answer carries about how the scene was read (the beam's convention)."""
+        from .conventions import beam_notes
+
+        return beam_notes(self.beam_conventions)
 
     @property
     def name(self) -> str:
@@ -818,6 +829,21 @@ def _resolve_geo(data: dict, source: str, base_dir):
         raise SceneError(f"{source}: {exc}") from None
 
 
+def _read_units(data: dict, source: str):
+    """Quantity strings converted to the suffixed keys' units, then the beam's diameter and
+    divergence to 1/e full angle (:mod:`scenes.quantities`, :mod:`scenes.conventions`);
+    errors name the key."""
+    from .conventions import ConventionError, convert_beam
+    from .quantities import QuantityError, convert_units
+
+    try:
+        data, units = convert_units(data)
+        data, beam = convert_beam(data)
+    except (QuantityError, ConventionError) as exc:
+        raise SceneError(f"{source}: {exc}") from None
+    return data, units, beam
+
+
 def loads(text: str, *, source: str = "<scene>", base_dir=None) -> Scene:
     """Scene from TOML text; relative file names resolve against ``base_dir``."""
     try:
@@ -837,6 +863,7 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
         text = json.dumps(data, sort_keys=True, default=str)
     raw = copy.deepcopy(data)
     try:
+        data, units, beam = _read_units(data, source)
         data, site = _resolve_geo(data, source, base_dir)
         spec = SceneSpec.model_validate(data)
     except SceneError:
@@ -849,7 +876,7 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
         raise SceneError(f"{source}: {' '.join(str(exc).split())}") from None
     try:
         scene = _compile(spec, source, None if base_dir is None else Path(base_dir), text, site)
-        scene.source_data = raw
+        scene.source_data, scene.units_as_written, scene.beam_conventions = raw, units, beam
         return scene
     except SceneError as exc:
         msg = str(exc)
@@ -884,7 +911,9 @@ def example_path(name: str) -> Path:
 
 def json_schema() -> dict:
     """JSON schema of scene files (for editors)."""
-    schema = SceneSpec.model_json_schema()
+    from .quantities import schema_with_units
+
+    schema = schema_with_units(SceneSpec.model_json_schema())  # power = "20 kW" beside power_w
     schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     schema["title"] = "laser-hazard scene"
     return schema

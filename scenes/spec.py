@@ -176,6 +176,14 @@ class LaserSpec(_Strict):
     prf_hz: float | None = Field(default=None, ge=1e-6, le=1e12, description="pulse repetition frequency [Hz], 1e-6 to 1e12")
     beam_diameter_m: float = Field(ge=1e-6, le=100.0, description="beam diameter at the aperture, 1/e points [m] (at least 1 um)")
     divergence_rad: float = Field(ge=0, le=math.pi, description="full-angle divergence, 1/e points [rad]")
+    # scenes.conventions converts both values to these (the standards' form) at load, before validation
+    diameter_definition: Literal["1/e", "1/e2", "d86", "fwhm"] = Field(default="1/e", description=(
+        "level at which beam_diameter_m is given: '1/e' (default, the standards' irradiance 1/e points), '1/e2', 'd86' "
+        "(86.5 % power) or 'fwhm'; converted at load to 1/e for a Gaussian beam (the report shows the conversion)"))
+    divergence_definition: Literal["full_1/e", "full_1/e2", "full_d86", "full_fwhm", "half_1/e", "half_1/e2", "half_d86",
+                                   "half_fwhm"] = Field(default="full_1/e", description=(
+        "angle and level at which divergence_rad is given: '<full|half>_<1/e|1/e2|d86|fwhm>'; default 'full_1/e' (the "
+        "standards' form); converted at load to the 1/e full angle for a Gaussian beam"))
     position_m: Vec3 | None = Field(default=None, description="the aperture [m] (or position_geo)")
     position_geo: GeoPos | None = Field(default=None, description=_GEO.format("position_m"))
     height_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("position_geo"))
