@@ -827,7 +827,21 @@ def _verdict(doc: dict, obs: dict) -> dict:
         lines.append(f"report.json any_hazard = {json.dumps(any_hazard)}, but a moving observer is hazardous or a flight "
                      "zone does not hold: counted as a hazard here")
         any_hazard = True
-    return {"any_hazard": any_hazard, "lines": lines}
+    return {"any_hazard": any_hazard, "lines": lines, **_headline_view(doc, any_hazard)}
+
+
+def _headline_view(doc: dict, any_hazard) -> dict:
+    """report.json's ``verdict``: its headline as it is (the same text ``hazard run``
+    printed, :func:`hazard.verdict.verdict`), the zones not contained with why, the
+    plausibility ``warnings`` and the box's style (``bad``: a hazard at the observers or
+    in the zones; ``contained``: hazard zones exist, all contained; ``good``: none).
+    A report without ``verdict`` (older) gets ``headline`` None: the page says so."""
+    v = doc.get("verdict") if isinstance(doc.get("verdict"), dict) else {}
+    bad = bool(v.get("hazard_at_observers") or v.get("hazard_zones")) if v else bool(any_hazard)
+    style = "bad" if bad or (not v and any_hazard) else ("contained" if any_hazard else "good")
+    return {"headline": v.get("headline"), "zones": [str(z) for z in v.get("zones") or []],
+            "at_observers": bool(v.get("hazard_at_observers")) if v else bool(any_hazard),
+            "warnings": [str(w) for w in doc.get("warnings") or []], "style": style}
 
 
 def _frame_view(doc: dict) -> dict | None:
