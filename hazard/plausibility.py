@@ -49,18 +49,45 @@ def _short_nohd(result) -> list:
     beam = ("the direct beam is below the MPE from its aperture on (NOHD 0 m)" if nohd <= 0 else
             f"the direct beam's NOHD ({nohd:.4g} m) is under 1/{1 / NOHD_TARGET_FRACTION:g} of the distance to {where}")
     la = result.scene.spec.laser
-    return [f"{beam} ({dist:.4g} m away): on a high-energy laser range the beam is normally hazardous where it lands; "
+    return [f"{beam} ({dist:.6g} m away): on a high-energy laser range the beam is normally hazardous where it lands; "
             f"check the units of laser.power_w ({la.average_power_w:g} W: kW typed as W?), beam_diameter_m "
             f"({la.beam_diameter_m:g} m) and divergence_rad ({la.divergence_rad:g} rad: mrad or degrees typed as rad?)"]
+
+
+REFLECTS_NOTHING = 1e-12  # a lit material's directional-hemispherical reflectance at the spot's incidence under this: nothing
+
+
+def _spot_reflectance(sp):
+    """The directional-hemispherical reflectance [-] of a spot's lit material at its mean
+    incidence (delta lobes included; :func:`brdfmodels.analysis.hemispherical_reflectance`
+    to 1 %), None where it cannot be said (a dynamic material, grazing incidence)."""
+    from brdfmodels.analysis import hemispherical_reflectance
+
+    wi = np.asarray(sp.mean_frame, float) @ -np.asarray(sp.mean_incoming, float)
+    if getattr(sp.material, "is_dynamic", False) or not wi[2] > 1e-9:
+        return None
+    return hemispherical_reflectance(sp.material, wi / np.linalg.norm(wi), rtol=1e-2, atol=0.0, max_evaluations=200_000).value
+
+
+def _dark_targets(result) -> set:
+    """Names of the targets whose every lit spot's material reflects nothing there."""
+    dark, lit = set(), set()
+    for sp in result.spots:
+        if sp.total_power_w > 0:
+            rho = _spot_reflectance(sp)
+            (dark if rho is not None and rho < REFLECTS_NOTHING else lit).add(sp.target.name)
+    return dark - lit
 
 
 def _reflects_nothing(result) -> list:
     """Targets the beam reaches that reflect nothing, and a beam that reaches no target."""
     out = []
+    dark = _dark_targets(result)
     for i, t in enumerate(result.targets):
-        if t.static_lobe is None and t.spot_power_w > 0:
+        if t.spot_power_w > 0 and (t.static_lobe is None or t.name in dark):
+            why = t.lit_side if t.static_lobe is None else "its material's reflectance there is 0"
             out.append(f"targets[{i}] ({t.name}): the beam reaches it ({t.spot_power_w:.4g} W) but it reflects nothing "
-                       f"({t.lit_side}): its reflections are 0 in this answer; check its material (a reflectance of 0?) "
+                       f"({why}): its reflections are 0 in this answer; check its material (a reflectance of 0?) "
                        "and which side faces the laser")
     if result.targets and not any(t.spot_power_w > 0 for t in result.targets):
         out.append(f"the beam reaches none of the {len(result.targets)} target(s): no reflection is analysed; check "

@@ -399,6 +399,12 @@ def _warning_lines(warnings) -> list:
             + [f"  warning: {w}" for w in warnings])
 
 
+def _metres(d) -> str:
+    """A distance [m] for the table: whole metres from 100 m (no exponent: 11500, not
+    1.15e+04), three significant digits below."""
+    return f"{d:.0f}" if d >= 100 else f"{d:.3g}"
+
+
 def _observer_table(result, hazardous, max_observers) -> list:
     """The hazardous observers, highest hazard ratio first: distance from the laser and
     from the nearest spot, the spot, the cause with its shares."""
@@ -411,7 +417,8 @@ def _observer_table(result, hazardous, max_observers) -> list:
     lines = [f"  {'observer':{w_obs}s}  {'hazard ratio':>12s}  {'from laser [m]':>14s}  {'from spot [m]':>13s}  "
              f"{'nearest spot':{w_spot}s}  cause (share of the peak irradiance)"]
     for i, label, dl, d, name in zip(order, labels, laser, dist, near):
-        lines.append(f"  {label:{w_obs}s}  {ratio[i]:12.4g}  {dl:14.4g}  {d:13.4g}  {name:{w_spot}s}  {_cause(result, i)}")
+        lines.append(f"  {label:{w_obs}s}  {ratio[i]:12.4g}  {_metres(dl):>14s}  {_metres(d):>13s}  {name:{w_spot}s}  "
+                     f"{_cause(result, i)}")
     if len(hazardous) > len(order):
         lines.append(f"  ... and {len(hazardous) - len(order)} more hazardous observer point(s) (all in observers.csv)")
     return lines

@@ -87,7 +87,8 @@ def test_no_hazard_is_said_plainly_with_the_nohds(tmp_path):
     first = out.splitlines()[0]
     assert first == ("Scene 'plate': HAZARD in the zones: no listed observer at or above its limit (0 of 2 observer point(s) "
                      "at or above the MPE), but 2 hazard zone(s) NOT contained or beyond the range boundary.")
-    assert "  zone: the direct beam's danger zone (NOHD 1591 m) is NOT contained: 1 of 1 direction(s) toward bearing 0 deg, " \
+    nohd = (math.sqrt(4 * 100.0 / (math.pi * 50.0)) - 0.005) / 0.001  # ANSI eq. B: P 100 W, a 5 mm, phi 1 mrad, MPE 50 W/m^2
+    assert f"  zone: the direct beam's danger zone (NOHD {nohd:.4g} m) is NOT contained: 1 of 1 direction(s) toward bearing 0 deg, " \
            "elevation 0 deg reach the NOHD without a backstop: it meets target(s) 'plate' (100 % of the beam) first, but a " \
            "target is not a backstop" in out  # the plate is due north of the laser: bearing 0
     assert "  zone: the keep-out lobe of 'plate' (diffuse NOHD 0.5642 m) is not bounded: the scene has no [range]" in out
