@@ -11,7 +11,8 @@ Found from the results:
   likely a unit slip (a divergence in degrees or mrad typed as rad, kW typed as W);
 - a target the beam reaches (spot power > 0) that reflects nothing (its lit side or its
   material): its reflections are 0 in the answer;
-- a scene whose targets the beam reaches none of.
+- a scene whose targets the beam reaches none of (unless something moves: the static aim
+  of a slewing beam may miss them, and the motion results hold the reflections).
 """
 
 from __future__ import annotations
@@ -89,7 +90,8 @@ def _reflects_nothing(result) -> list:
             out.append(f"targets[{i}] ({t.name}): the beam reaches it ({t.spot_power_w:.4g} W) but it reflects nothing "
                        f"({why}): its reflections are 0 in this answer; check its material (a reflectance of 0?) "
                        "and which side faces the laser")
-    if result.targets and not any(t.spot_power_w > 0 for t in result.targets):
+    if result.targets and not any(t.spot_power_w > 0 for t in result.targets) and getattr(result, "motion", None) is None:
+        # (with a moving beam or target the static aim may miss them: the motion results hold the reflections)
         out.append(f"the beam reaches none of the {len(result.targets)} target(s): no reflection is analysed; check "
                    "laser.aim_m or direction and the targets' positions")
     return out

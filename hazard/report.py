@@ -18,10 +18,10 @@ import numpy as np
 from brdfmodels._io import atomic_write_text
 
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
-from .verdict import _way, verdict
+from .verdict import escape_way, verdict
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
-           "summary_text", "answer_text", "stages_text"]
+           "summary_text", "answer_text", "stages_text", "cause_shares"]
 
 REPORT_FORMAT = "laser-hazard.report"
 REPORT_VERSION = 1
@@ -527,7 +527,7 @@ def _sdz_lines(z) -> list:
     lines = [f"  laser surface danger zone over {where}: {size}, out to {z['max_range_m']:.4g} m "
              f"(direct-beam NOHD {z['nohd_m']:.4g} m); "
              + ("contained by backstops" if z["contained"] else
-                f"NOT contained: {z['escaping_directions']} of {d['count']} directions{_way(z)} reach the NOHD without a backstop "
+                f"NOT contained: {z['escaping_directions']} of {d['count']} directions{escape_way(z)} reach the NOHD without a backstop "
                 "(no terrain or occluder across them; targets are not backstops)"
                 + (", some above the horizon" if z["above_horizon"] else ""))]
     if z.get("leaves_boundary"):

@@ -29,7 +29,7 @@ import numpy as np
 
 from .plausibility import answer_warnings
 
-__all__ = ["verdict", "fails", "zone_findings", "FAIL_ON_CHOICES"]
+__all__ = ["verdict", "fails", "zone_findings", "escape_way", "FAIL_ON_CHOICES"]
 
 FAIL_ON_CHOICES = ("observers", "zones", "any")  # --fail-on-hazard WHICH (default observers)
 CIRCLE_SEGS = 16  # segments per quarter circle of a lobe's disc; the disc is drawn about the circle (never inside it)
@@ -47,13 +47,13 @@ def _observer_counts(result) -> dict:
 def _observers_text(c) -> str:
     text = f"{c['hazardous']} of {c['total']} observer point(s) at or above the MPE"
     if c["tracks"]:
-        text += f", {c['tracks_hazardous']} of {c['tracks']} moving observer(s)"
+        text += f", {c['tracks_hazardous']} of {c['tracks']} moving observer(s) over the MPE"
     if c["flight_zones"]:
         text += f", {c['flight_zones_exceeded']} of {c['flight_zones']} flight zone(s) over their limit"
     return text
 
 
-def _way(z) -> str:
+def escape_way(z) -> str:
     """Which way a zone escapes (``escaping_bearing_deg`` / ``escaping_elevation_deg``)."""
     b, e = z.get("escaping_bearing_deg"), z.get("escaping_elevation_deg")
     if not b:
@@ -87,7 +87,7 @@ def _sdz_findings(result) -> list:
             continue
         if not zone.get("contained", False):
             n, count = zone.get("escaping_directions", "?"), (z.get("directions") or {}).get("count", "?")
-            out.append(f"{label} (NOHD {nohd:.4g} m) is NOT contained: {n} of {count} direction(s){_way(zone)} reach the NOHD "
+            out.append(f"{label} (NOHD {nohd:.4g} m) is NOT contained: {n} of {count} direction(s){escape_way(zone)} reach the NOHD "
                        f"without a backstop{' (some above the horizon)' if zone.get('above_horizon') else ''}: "
                        f"{_not_backstops(result)}")
         if zone.get("leaves_boundary"):
