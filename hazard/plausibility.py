@@ -87,7 +87,8 @@ def _reflects_nothing(result) -> list:
     for i, t in enumerate(result.targets):
         if t.spot_power_w > 0 and (t.static_lobe is None or t.name in dark):
             why = t.lit_side if t.static_lobe is None else "its material's reflectance there is 0"
-            out.append(f"targets[{i}] ({t.name}): the beam reaches it ({t.spot_power_w:.4g} W) but it reflects nothing "
+            label = f"targets[{i}] ({t.name})" if i < len(result.scene.targets) else f"the {t.name}"  # the terrain: after the scene's
+            out.append(f"{label}: the beam reaches it ({t.spot_power_w:.4g} W) but it reflects nothing "
                        f"({why}): its reflections are 0 in this answer; check its material (a reflectance of 0?) "
                        "and which side faces the laser")
     if result.targets and not any(t.spot_power_w > 0 for t in result.targets) and getattr(result, "motion", None) is None:

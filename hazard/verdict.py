@@ -138,19 +138,21 @@ def _lobe_findings(result) -> list:
     scene = result.scene
     boundary = boundary_polygon(scene)
     centres = {}
-    for sp in result.spots:
+    for sp in result.spots:  # the terrain's spots too (a target of the results, not of the scene)
         centres.setdefault(sp.target.name, []).append(np.asarray(sp.centroid, float))
+    for spec in scene.targets:  # no spot: the target's centre
+        centres.setdefault(spec.name, [np.asarray(spec.center_m, float)])
     out = []
-    for t, spec in zip(result.targets, scene.targets):
+    for t in result.targets:
         r = _lobe_radius_m(t)
         if not r > 0:
             continue
-        if boundary is None:
-            out.append(f"the keep-out lobe of {t.name!r} (diffuse NOHD {r:.4g} m) is not bounded: the scene has no [range] "
-                       "boundary to contain it")
+        if boundary is None or t.name not in centres:
+            out.append(f"the keep-out lobe of {t.name!r} (diffuse NOHD {r:.4g} m) is not bounded: "
+                       + ("the scene has no [range] boundary to contain it" if boundary is None else "its spot is not known"))
             continue
         pad = r / math.cos(math.pi / (4 * CIRCLE_SEGS))
-        for c in centres.get(t.name) or [np.asarray(spec.center_m, float)]:
+        for c in centres[t.name]:
             if not boundary.contains(Point(float(c[0]), float(c[1])).buffer(pad, quad_segs=CIRCLE_SEGS)):
                 out.append(f"the keep-out lobe of {t.name!r} (diffuse NOHD {r:.4g} m about its spot) reaches beyond the "
                            "range boundary")

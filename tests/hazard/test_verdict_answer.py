@@ -305,3 +305,70 @@ def test_one_headline_on_stdout_report_json_and_the_review_page(name, tmp_path):
     if name == "range_geo":  # it said "no observer point reaches the MPE" on stdout and "HAZARD" on the page
         assert doc["hazard_at_observers"] is False and doc["hazard_zones"] is False and doc["any_hazard"] is True
         assert doc["verdict"]["headline"].startswith("No listed observer at or above its limit (0 of 29")
+
+
+# -- properties on random input nobody tuned -----------------------------------------------------
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from hazard.pipeline.sdz import escaping_span_deg  # noqa: E402
+
+FAST = settings(max_examples=25, derandomize=True, deadline=None, database=None)
+SLOW = settings(max_examples=300, derandomize=True, deadline=None, database=None)
+
+
+def _span_case(start, width, n, elevations):
+    """n bearings spread over [start, start + width] (clockwise, mod 360) and the
+    elevations: the span said must be [start, start + width] (the largest gap is the rest
+    of the circle, 360 - width > width / (n - 1) when width < 180)."""
+    b = np.radians((start + np.linspace(0.0, width, n)) % 360.0)
+    e = np.radians(np.resize(np.asarray(elevations, float), n))
+    dirs = np.stack([np.sin(b) * np.cos(e), np.cos(b) * np.cos(e), np.sin(e)], axis=1)
+    (first, last), (lo, hi) = escaping_span_deg(dirs)
+    assert first == pytest.approx(start % 360.0, abs=2e-3) or abs(first - start % 360.0) == pytest.approx(360.0, abs=2e-3)
+    assert (last - first) % 360.0 == pytest.approx(width, abs=3e-3)
+    assert lo == pytest.approx(min(np.resize(elevations, n)), abs=2e-3) and hi == pytest.approx(max(np.resize(elevations, n)), abs=2e-3)
+
+
+@FAST
+@given(start=st.floats(0.0, 720.0), width=st.floats(0.0, 170.0), n=st.integers(2, 40),
+       elevations=st.lists(st.floats(-80.0, 80.0), min_size=1, max_size=5))
+def test_the_escaping_span_holds_every_bearing_even_across_north(start, width, n, elevations):
+    _span_case(start, width, n, elevations)
+
+
+@pytest.mark.slow
+@SLOW
+@given(start=st.floats(0.0, 720.0), width=st.floats(0.0, 170.0), n=st.integers(2, 40),
+       elevations=st.lists(st.floats(-80.0, 80.0), min_size=1, max_size=5))
+def test_the_escaping_span_holds_every_bearing_even_across_north_slow(start, width, n, elevations):
+    _span_case(start, width, n, elevations)
+
+
+def _m2_case(a, phi, wl_nm):
+    text = scene_text(a=a, phi=phi).replace("wavelength_nm = 1064.0", f"wavelength_nm = {wl_nm!r}")
+    m2 = math.pi * (math.sqrt(2) * a) * (math.sqrt(2) * phi) / (4 * wl_nm * 1e-9)  # ISO 11146 with the 1/e^2 full quantities
+    warned = [w for w in scenes.loads(text).warnings if "imply M^2" in w]
+    if phi >= 0.01 or a > 1.0:  # the divergence or diameter warning names the slip already
+        assert warned == []
+    elif m2 < 1 or m2 > 50:
+        assert len(warned) == 1 and f"= {m2:.3g} (1/e quantities)" in warned[0]
+    elif not (0.999 < m2 < 1.001 or 49.95 < m2 < 50.05):  # the printed digits decide nothing at the edges
+        assert warned == []
+
+
+def _log(lo, hi):
+    return st.floats(math.log(lo), math.log(hi)).map(math.exp)
+
+
+@FAST
+@given(a=_log(1e-3, 2.0), phi=_log(1e-6, 0.02), wl_nm=st.floats(400.0, 11_000.0))
+def test_the_m2_warning_follows_the_formula(a, phi, wl_nm):
+    _m2_case(a, phi, wl_nm)
+
+
+@pytest.mark.slow
+@SLOW
+@given(a=_log(1e-3, 2.0), phi=_log(1e-6, 0.02), wl_nm=st.floats(400.0, 11_000.0))
+def test_the_m2_warning_follows_the_formula_slow(a, phi, wl_nm):
+    _m2_case(a, phi, wl_nm)
