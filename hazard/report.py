@@ -379,11 +379,14 @@ def cause_shares(result, i) -> list:
 def _cause(result, i) -> str:
     """Why observer ``i`` is hazardous: each contribution above 1 % of its peak with its
     share (``diffuse 99.9 %``, :func:`cause_shares`), and whether the dynamic material
-    raised the peak above the static one (or "over time": a moving beam or target)."""
+    raised the peak above the static one; "over time" when only the motion analysis
+    finds it hazardous (a moving beam or target)."""
     obs = result.observers
     peak, static = float(obs.peak_irradiance_w_m2[i]), float(obs.static_irradiance_w_m2[i])
     shares = cause_shares(result, i)
-    kind = " + ".join(f"{n} {100 * f:.3g} %" for n, f in shares) if shares else "over time (the beam or a target moves)"
+    kind = " + ".join(f"{n} {100 * f:.3g} %" for n, f in shares) if shares else "nothing at the static peak"
+    if not float(result.hazard_ratio[i]) >= 1.0:  # hazardous over time only (a moving beam or target)
+        return f"over time (the beam or a target moves; the static peak, under the MPE: {kind})"
     if peak > static:
         mpe = result.observer_mpe_w_m2
         ratio_static = static / float(mpe if np.ndim(mpe) == 0 else mpe[i])
