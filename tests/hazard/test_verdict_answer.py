@@ -372,3 +372,46 @@ def test_the_m2_warning_follows_the_formula(a, phi, wl_nm):
 @given(a=_log(1e-3, 2.0), phi=_log(1e-6, 0.02), wl_nm=st.floats(400.0, 11_000.0))
 def test_the_m2_warning_follows_the_formula_slow(a, phi, wl_nm):
     _m2_case(a, phi, wl_nm)
+
+
+# -- a keep-out lobe against the range boundary ----------------------------------------------
+@pytest.fixture(scope="module")
+def plate_result():
+    """The bundled plate: a 100 W beam centred on a Lambertian plate (rho 0.5) at the origin;
+    its keep-out lobe is the disc of NOHD sqrt(rho P / (pi MPE)) = 0.5642 m about the spot."""
+    import hazard
+
+    return hazard.analyze(scenes.load(scenes.example_path("plate")))
+
+
+def _lobe_case(plate_result, monkeypatch, edges):
+    """A rectangular range [x0, x1] x [y0, y1] about the spot: the lobe is said to reach
+    beyond it exactly when an edge is nearer than the NOHD (edges within 0.1 % of it are
+    not judged: the spot's centroid is sampled)."""
+    from shapely.geometry import box
+
+    import hazard.pipeline.sdz as sdz
+    from hazard.verdict import zone_findings
+
+    r = math.sqrt(0.5 * 100.0 / (math.pi * MPE))
+    assert r == pytest.approx(0.5642, abs=1e-4)
+    x0, x1, y0, y1 = -edges[0], edges[1], -edges[2], edges[3]
+    monkeypatch.setattr(sdz, "boundary_polygon", lambda scene: box(x0, y0, x1, y1))
+    said = [z for z in zone_findings(plate_result) if "keep-out lobe of 'plate'" in z]
+    nearest = min(edges)
+    if abs(nearest - r) > 1e-3 * r:
+        assert len(said) == (nearest < r)
+        if said:
+            assert said[0] == f"the keep-out lobe of 'plate' (diffuse NOHD {r:.4g} m about its spot) reaches beyond the range boundary"
+
+
+@pytest.mark.parametrize("edges", [(0.55, 5.0, 5.0, 5.0), (0.58, 5.0, 5.0, 5.0), (5.0, 5.0, 5.0, 0.5), (0.6, 0.6, 0.6, 0.6)])
+def test_a_keep_out_lobe_beyond_the_range_is_a_zone_hazard(edges, plate_result, monkeypatch):
+    _lobe_case(plate_result, monkeypatch, edges)
+
+
+@FAST
+@given(edges=st.tuples(*[st.floats(0.05, 3.0)] * 4))
+def test_a_keep_out_lobe_beyond_the_range_property(edges, plate_result):
+    with pytest.MonkeyPatch.context() as mp:
+        _lobe_case(plate_result, mp, edges)
