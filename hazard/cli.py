@@ -106,7 +106,7 @@ def _add_run_args(p):
                    help="exit with code 3 on a hazard: 'observers' (the default when no value is given) a listed observer, "
                         "track or flight zone at or above its limit (report.json hazard_at_observers); 'zones' a danger "
                         "zone, mirror beam or keep-out lobe not contained or beyond the range boundary (hazard_zones); "
-                        "'any' either. Put a value after it with '=' (--fail-on-hazard=zones) or before another option")
+                        "'any' either. Write a value as --fail-on-hazard=zones; a bare --fail-on-hazard goes after the scene")
     p.add_argument("--backend", default="embree", choices=["embree", "numpy"], help="ray engine (default embree)")
     p.add_argument("--threads", type=_positive_int, default=None,
                    help="threads for the map, BRDF evaluations and ray queries (default: every CPU this process may use)")
