@@ -70,9 +70,9 @@ def _not_backstops(result) -> str:
         return "no terrain or occluder stops it within the NOHD"
     total = max(float(result.beam_power_w), 1e-300)
     names = ", ".join(f"{t.name!r} ({100 * t.spot_power_w / total:.3g} % of the beam)" for t in lit[:3])
-    return (f"it meets target(s) {names}{', ...' if len(lit) > 3 else ''} first, but a target is not a backstop (within "
-            "the pointing error the beam can miss it; only the terrain and occluders stop the beam), and no terrain or "
-            "occluder stops it within the NOHD")
+    return (f"at the aim the beam meets target(s) {names}{', ...' if len(lit) > 3 else ''}, but a target is not a backstop "
+            "(within the pointing error the beam can miss it; only the terrain and occluders stop the beam), and no terrain "
+            "or occluder stops it within the NOHD")
 
 
 def _sdz_findings(result) -> list:
@@ -100,15 +100,16 @@ def _mirror_findings(result) -> list:
     """Mirror beams not contained or leaving the range, and mirror NOHDs not traced."""
     z = getattr(result, "sdz", None) or {}
     beams = z.get("mirror_beams") or []
+    way = {t.name: _mirror_way(t) for t in result.targets}
     out = []
     for m in beams:
         for label, e in ((f"the mirror beam of {m['target']!r}", m), (f"the mirror beam of {m['target']!r} through optics", m.get("aided"))):
             if not e or not (e.get("nohd_m") or 0) > 0:
                 continue
             if not e.get("contained", False):
-                out.append(f"{label} (specular NOHD {e['nohd_m']:.4g} m) is NOT contained: no terrain or occluder stops it "
-                           f"within its NOHD{' (it rises above the horizon)' if e.get('above_horizon') else ''}; a target "
-                           "is not a backstop")
+                out.append(f"{label} (specular NOHD {e['nohd_m']:.4g} m{way.get(m['target'], '')}) is NOT contained: no terrain "
+                           f"or occluder stops it within its NOHD{' (it rises above the horizon)' if e.get('above_horizon') else ''}; "
+                           "a target is not a backstop")
             if e.get("leaves_boundary"):
                 out.append(f"{label} (specular NOHD {e['nohd_m']:.4g} m) LEAVES the range boundary")
     traced = {m["target"] for m in beams}
@@ -118,6 +119,17 @@ def _mirror_findings(result) -> list:
             out.append(f"the mirror beam of {t.name!r} (specular NOHD {nohd:.4g} m) was not traced for containment: "
                        "counted as not contained")
     return out
+
+
+def _mirror_way(t) -> str:
+    """``, toward bearing B deg, elevation E deg``: a target's mirror beam direction
+    (``specular_direction``, world frame), or "" when it has none."""
+    d = getattr(t, "specular_direction", None)
+    if d is None or len(d) != 3 or not np.all(np.isfinite(d)) or not np.linalg.norm(d) > 0:
+        return ""
+    u = np.asarray(d, float) / np.linalg.norm(d)
+    bearing = math.degrees(math.atan2(u[0], u[1])) % 360.0
+    return f", toward bearing {bearing:.4g} deg, elevation {math.degrees(math.asin(max(-1.0, min(1.0, u[2])))):.3g} deg"
 
 
 def _lobe_radius_m(t) -> float:

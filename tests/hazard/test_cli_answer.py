@@ -89,8 +89,8 @@ def test_no_hazard_is_said_plainly_with_the_nohds(tmp_path):
                      "at or above the MPE), but 2 hazard zone(s) NOT contained or beyond the range boundary.")
     nohd = (math.sqrt(4 * 100.0 / (math.pi * 50.0)) - 0.005) / 0.001  # ANSI eq. B: P 100 W, a 5 mm, phi 1 mrad, MPE 50 W/m^2
     assert f"  zone: the direct beam's danger zone (NOHD {nohd:.4g} m) is NOT contained: 1 of 1 direction(s) toward bearing 0 deg, " \
-           "elevation 0 deg reach the NOHD without a backstop: it meets target(s) 'plate' (100 % of the beam) first, but a " \
-           "target is not a backstop" in out  # the plate is due north of the laser: bearing 0
+           "elevation 0 deg reach the NOHD without a backstop: at the aim the beam meets target(s) 'plate' (100 % of the " \
+           "beam), but a target is not a backstop" in out  # the plate is due north of the laser: bearing 0
     assert "  zone: the keep-out lobe of 'plate' (diffuse NOHD 0.5642 m) is not bounded: the scene has no [range]" in out
     assert observer_rows(out) == []
     r0 = hazard.nohd_diffuse(100.0, 50.0, 0.5).nohd_m  # the analytic Lambertian NOHD, 0.564 m

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 
 import numpy as np
 import pytest
@@ -108,6 +109,9 @@ def test_mirror_beam_hazard_exits_3_with_no_observer(tmp_path):
     code = main(["run", str(path), "-o", str(tmp_path / "o"), "--fail-on-hazard=zones"], stdout=out, stderr=io.StringIO())
     assert code == 3
     assert "zone: the mirror beam of 'mirror'" in out.getvalue() and "LEAVES the range boundary" in out.getvalue()
+    way = re.search(r"mirror beam of 'mirror' \(specular NOHD [0-9.e+]+ m, toward bearing ([0-9.e+-]+) deg, "
+                    r"elevation ([0-9.e+-]+) deg\) is NOT contained", out.getvalue())
+    assert float(way[1]) == pytest.approx(90.0, abs=0.1) and float(way[2]) == pytest.approx(0.0, abs=0.1)  # r = +x: east, level
     code = main(["run", str(path), "-o", str(tmp_path / "o"), "--force", "--fail-on-hazard"], stdout=io.StringIO(),
                 stderr=io.StringIO())
     assert code == 0  # no observer
