@@ -23,7 +23,8 @@ Verbs:
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
 
 SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
-Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard).
+Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard
+[observers|zones|any]: at the listed observers (default), in zones not contained, either).
 Every error is one line on stderr naming the input; ``--debug`` (anywhere on the command
 line) shows the traceback instead.
 """
@@ -100,7 +101,12 @@ def _add_dask_args(p, what: str, json_help: str) -> None:
 
 def _add_run_args(p):
     p.add_argument("--json", action="store_true", help="print the report as JSON on stdout")
-    p.add_argument("--fail-on-hazard", action="store_true", help="exit with code 3 if any hazard is found")
+    p.add_argument("--fail-on-hazard", nargs="?", const="observers", default=None, choices=("observers", "zones", "any"),
+                   metavar="{observers,zones,any}",
+                   help="exit with code 3 on a hazard: 'observers' (the default when no value is given) a listed observer, "
+                        "track or flight zone at or above its limit (report.json hazard_at_observers); 'zones' a danger "
+                        "zone, mirror beam or keep-out lobe not contained or beyond the range boundary (hazard_zones); "
+                        "'any' either. Write a value as --fail-on-hazard=zones; a bare --fail-on-hazard goes after the scene")
     p.add_argument("--backend", default="embree", choices=["embree", "numpy"], help="ray engine (default embree)")
     p.add_argument("--threads", type=_positive_int, default=None,
                    help="threads for the map, BRDF evaluations and ray queries (default: every CPU this process may use)")
@@ -377,7 +383,10 @@ def _analyse(args, err):
 
 
 def _finish(args, result):
-    return EXIT_HAZARD if (args.fail_on_hazard and result.any_hazard) else EXIT_OK
+    """EXIT_HAZARD when ``--fail-on-hazard WHICH`` finds its kind of hazard (:func:`hazard.verdict.fails`)."""
+    from .verdict import fails, verdict
+
+    return EXIT_HAZARD if (args.fail_on_hazard and fails(verdict(result), args.fail_on_hazard)) else EXIT_OK
 
 
 def _cmd_run(args, out, err):

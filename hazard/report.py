@@ -18,9 +18,10 @@ import numpy as np
 from brdfmodels._io import atomic_write_text
 
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
+from .verdict import escape_way, verdict
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
-           "summary_text", "answer_text", "stages_text"]
+           "summary_text", "answer_text", "stages_text", "cause_shares"]
 
 REPORT_FORMAT = "laser-hazard.report"
 REPORT_VERSION = 1
@@ -182,6 +183,8 @@ def report_dict(result, cols=None) -> dict:
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
     listed, which = observers_listed(result, observer_columns(result) if cols is None else cols)
+    v = verdict(result)
+    warnings = v.pop("warnings")  # report.json's top-level "warnings"
     return _json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
@@ -208,7 +211,11 @@ def report_dict(result, cols=None) -> dict:
         "observers": listed,
         "observers_listed": which,
         "verdict_changes": result.verdict_changes(),
-        "any_hazard": result.any_hazard,
+        "verdict": v,  # the headline stdout and the review page print (hazard.verdict)
+        "hazard_at_observers": v["hazard_at_observers"],  # a listed observer, track or flight zone at or above its limit
+        "hazard_zones": v["hazard_zones"],  # a danger zone, mirror beam or keep-out lobe not contained or beyond the range
+        "any_hazard": v["any_hazard"],  # either, or any NOHD > 0 even contained (the old flag, kept for compatibility)
+        "warnings": warnings,  # plausibility warnings (hazard.plausibility): each can change the verdict
         "notes": list(result.notes),
         **motion_sections(result),
     })
@@ -281,8 +288,6 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     names = ("report.json", "observers.csv") + tuple(extra)
     cols = observer_columns(result)  # once, for the report and the table
     doc = report_dict(result, cols)
-    if "warnings" not in doc:  # plausibility warnings of the scene (unit mistakes)
-        doc["warnings"] = list(getattr(result.scene, "warnings", None) or [])
     doc.update(_json_safe(dict(sections or {})))
     texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
              **extra}
@@ -340,25 +345,50 @@ def _nearest_spot(result, idx):
     return d[np.arange(len(idx)), k], [names[j] for j in k]
 
 
+def _from_laser(result, idx) -> np.ndarray:
+    """Distance [m] from observers ``idx`` to the laser's aperture."""
+    laser = np.asarray(result.scene.to_world(result.scene.laser_position_m), float)
+    return np.linalg.norm(result.observers.position_m[idx] - laser, axis=1)
+
+
+CAUSE_SHARE_MIN = 0.01  # a contribution under this fraction of an observer's peak irradiance is left out of "cause"
+
+
+def cause_shares(result, i) -> list:
+    """Observer ``i``'s peak irradiance by cause: ``[(name, fraction of the peak), ...]``
+    for the direct beam, the diffuse reflection (BRDF lobes, glossy included) and the
+    specular one (mirror beams), largest first, each above ``CAUSE_SHARE_MIN``. The
+    reflection is split at its peak: specular = min(mirror lobes' peak, reflected
+    peak), diffuse = the rest; "reflection" when the split was not computed."""
+    obs = result.observers
+    peak = float(obs.peak_irradiance_w_m2[i])
+    if not peak > 0:
+        return []
+    direct = 0.0 if obs.direct_irradiance_w_m2 is None else min(float(obs.direct_irradiance_w_m2[i]), peak)
+    reflected = peak - direct
+    at_aim = obs.direct_at_aim_irradiance_w_m2
+    beam = ("direct beam" if at_aim is None or float(at_aim[i]) >= direct
+            else "direct beam within its pointing error / sector / aim track")
+    if obs.specular_irradiance_w_m2 is None:
+        parts = [(beam, direct), ("reflection", reflected)]
+    else:
+        spec = min(max(float(obs.specular_irradiance_w_m2[i]), 0.0), reflected)
+        parts = [(beam, direct), ("diffuse", reflected - spec), ("specular", spec)]
+    parts = [(n, e / peak) for n, e in parts if e / peak > CAUSE_SHARE_MIN]
+    return sorted(parts, key=lambda p: -p[1])
+
+
 def _cause(result, i) -> str:
-    """Why observer ``i`` is hazardous: the laser's own beam ("direct beam", the larger
-    part), the reflection ("diffuse": BRDF lobe, glossy included; "specular": mirror beam,
-    the larger part; "diffuse + specular") and whether
-    the dynamic material raised its peak above the static one."""
+    """Why observer ``i`` is hazardous: each contribution above 1 % of its peak with its
+    share (``diffuse 99.9 %``, :func:`cause_shares`), and whether the dynamic material
+    raised the peak above the static one; "over time" when only the motion analysis
+    finds it hazardous (a moving beam or target)."""
     obs = result.observers
     peak, static = float(obs.peak_irradiance_w_m2[i]), float(obs.static_irradiance_w_m2[i])
-    direct = 0.0 if obs.direct_irradiance_w_m2 is None else float(obs.direct_irradiance_w_m2[i])
-    if obs.specular_irradiance_w_m2 is None:
-        kind = "reflection not split"
-    else:
-        spec = float(obs.specular_irradiance_w_m2[i])
-        kind = "diffuse" if spec <= 0 else ("specular" if spec >= 0.5 * (peak - direct) else "diffuse + specular")
-    at_aim = obs.direct_at_aim_irradiance_w_m2
-    beam = "direct beam" if at_aim is None or float(at_aim[i]) >= direct else "direct beam within its pointing error / sector / aim track"
-    if direct >= 0.5 * peak and direct > 0:
-        kind = beam
-    elif direct > 0:
-        kind = f"{beam} + {kind}"
+    shares = cause_shares(result, i)
+    kind = " + ".join(f"{n} {100 * f:.3g} %" for n, f in shares) if shares else "nothing at the static peak"
+    if not float(result.hazard_ratio[i]) >= 1.0:  # hazardous over time only (a moving beam or target)
+        return f"over time (the beam or a target moves; the static peak, under the MPE: {kind})"
     if peak > static:
         mpe = result.observer_mpe_w_m2
         ratio_static = static / float(mpe if np.ndim(mpe) == 0 else mpe[i])
@@ -366,34 +396,53 @@ def _cause(result, i) -> str:
     return f"{kind}, static"
 
 
-def _observer_lines(result, max_observers) -> list:
-    """The verdict line and the hazardous observers, highest hazard ratio first."""
-    obs = result.observers
-    m = len(obs)
-    head = f"Scene {result.scene.name!r}: "
-    mpe = (f"{result.mpe_w_m2:.6g} W/m^2, {result.mpe.standard}, {result.mpe.duration_s:g} s"
-           + (", C_E per observer" if (getattr(result, "extended_source", None) or {}).get("applied") else ""))
-    hazardous = np.flatnonzero(result.hazardous)
-    static = f"; with the static material: {int(np.sum(result.hazardous_static))}" if result.states else ""
-    if not len(hazardous):
-        tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
-        n_t = sum(p.summary["hazardous"] for p in tracks)
-        moving = f"; {n_t} of {len(tracks)} moving observer(s) HAZARDOUS (below)" if n_t else (
-            f"; 0 of {len(tracks)} moving observer(s) hazardous" if tracks else "")
-        return [f"{head}no {'fixed ' if tracks else ''}observer point reaches the MPE ({mpe}): 0 of {m} hazardous{static}{moving}.",
-                "  The observers are only the points the scene lists: anyone inside a NOHD below is at risk."]
-    ratio = result.hazard_ratio
+def _warning_lines(warnings) -> list:
+    """The plausibility warnings, above the verdict (each can change it)."""
+    if not warnings:
+        return []
+    return ([f"CHECK FIRST: {len(warnings)} warning(s) that can change the verdict (also in report.json 'warnings'):"]
+            + [f"  warning: {w}" for w in warnings])
+
+
+def _metres(d) -> str:
+    """A distance [m] for the table: whole metres from 100 m (no exponent: 11500, not
+    1.15e+04), three significant digits below."""
+    return f"{d:.0f}" if d >= 100 else f"{d:.3g}"
+
+
+def _observer_table(result, hazardous, max_observers) -> list:
+    """The hazardous observers, highest hazard ratio first: distance from the laser and
+    from the nearest spot, the spot, the cause with its shares."""
+    obs, ratio = result.observers, result.hazard_ratio
     order = hazardous[np.argsort(-ratio[hazardous], kind="stable")][:max_observers]
     dist, near = _nearest_spot(result, order)
+    laser = _from_laser(result, order)
     labels = [obs.labels[i] for i in order]
     w_obs, w_spot = max(map(len, labels + ["observer"])), max(map(len, near + ["nearest spot"]))
-    lines = [f"{head}HAZARD: {len(hazardous)} of {m} observer point(s) at or above the MPE ({mpe}){static}.",
-             f"  {'observer':{w_obs}s}  {'hazard ratio':>12s}  {'distance [m]':>12s}  {'nearest spot':{w_spot}s}  cause"]
-    for i, label, d, name in zip(order, labels, dist, near):
-        lines.append(f"  {label:{w_obs}s}  {ratio[i]:12.4g}  {d:12.4g}  {name:{w_spot}s}  {_cause(result, i)}")
+    lines = [f"  {'observer':{w_obs}s}  {'hazard ratio':>12s}  {'from laser [m]':>14s}  {'from spot [m]':>13s}  "
+             f"{'nearest spot':{w_spot}s}  cause (share of the peak irradiance)"]
+    for i, label, dl, d, name in zip(order, labels, laser, dist, near):
+        lines.append(f"  {label:{w_obs}s}  {ratio[i]:12.4g}  {_metres(dl):>14s}  {_metres(d):>13s}  {name:{w_spot}s}  "
+                     f"{_cause(result, i)}")
     if len(hazardous) > len(order):
         lines.append(f"  ... and {len(hazardous) - len(order)} more hazardous observer point(s) (all in observers.csv)")
     return lines
+
+
+def _observer_lines(result, max_observers, v=None) -> list:
+    """The warnings, the verdict's headline (:func:`hazard.verdict.verdict`: the same text
+    as report.json's and the review page's), the MPE, the zones not contained and the
+    hazardous observers."""
+    v = verdict(result) if v is None else v
+    mpe = (f"{result.mpe_w_m2:.6g} W/m^2, {result.mpe.standard}, {result.mpe.duration_s:g} s"
+           + (", C_E per observer" if (getattr(result, "extended_source", None) or {}).get("applied") else ""))
+    static = f"; hazardous with the static material: {int(np.sum(result.hazardous_static))}" if result.states else ""
+    lines = _warning_lines(v["warnings"]) + [f"Scene {result.scene.name!r}: {v['headline']}.", f"  MPE {mpe}{static}"]
+    lines += [f"  zone: {z}" for z in v["zones"]]
+    hazardous = np.flatnonzero(result.hazardous)
+    if not len(hazardous):
+        return lines + ["  The observers are only the points the scene lists: anyone inside a NOHD below is at risk."]
+    return lines + _observer_table(result, hazardous, max_observers)
 
 
 WING_FRACTION = 1e-6  # a target where the beam's profile is below this of its on-axis value is in its wing only
@@ -483,7 +532,8 @@ def _sdz_lines(z) -> list:
     lines = [f"  laser surface danger zone over {where}: {size}, out to {z['max_range_m']:.4g} m "
              f"(direct-beam NOHD {z['nohd_m']:.4g} m); "
              + ("contained by backstops" if z["contained"] else
-                f"NOT contained: {z['escaping_directions']} of {d['count']} directions reach the NOHD without a backstop"
+                f"NOT contained: {z['escaping_directions']} of {d['count']} directions{escape_way(z)} reach the NOHD without a backstop "
+                "(no terrain or occluder across them; targets are not backstops)"
                 + (", some above the horizon" if z["above_horizon"] else ""))]
     if z.get("leaves_boundary"):
         lines.append(f"    it LEAVES the range boundary: {z['outside_boundary_m2']:.4g} m^2 outside")
@@ -499,7 +549,8 @@ def _sdz_lines(z) -> list:
 def _mirror_line(m) -> str:
     """One mirror beam's fate (report.json ``sdz.mirror_beams``)."""
     fate = ("contained by backstops" if m["contained"] else
-            "NOT contained: it reaches its NOHD without a backstop" + (", above the horizon" if m["above_horizon"] else ""))
+            "NOT contained: it reaches its NOHD without a backstop (no terrain or occluder across it; targets are not "
+            "backstops)" + (", above the horizon" if m["above_horizon"] else ""))
     if m.get("leaves_boundary"):
         fate += "; it LEAVES the range boundary"
     a = m.get("aided")
@@ -512,7 +563,6 @@ def _not_modelled_lines(result) -> list:
     lines = ["Skipped in this run, and notes:"]
     lines += [f"  skipped {s.name}: {s.detail}" for s in result.stages if not s.ran]
     lines += [f"  note: {n}" for n in result.notes]
-    lines += [f"  warning: {w}" for w in getattr(result.scene, "warnings", None) or []]  # also report.json 'warnings'
     lines.append(f"  never modelled: {', '.join(NEVER_MODELLED)}")
     return lines
 
@@ -530,10 +580,14 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
     Returns
     -------
     str
-        The verdict; the hazardous observers with their hazard ratio, distance [m] to the
-        nearest spot and cause (diffuse or specular; static, or raised by the dynamic
-        material); the NOHD [m] of every target (diffuse and specular, static and
-        dynamic); the skipped stages, notes and what the tool never models.
+        The plausibility warnings (above the verdict: each can change it); the verdict's
+        headline (:func:`hazard.verdict.verdict`, the same text as report.json's
+        ``verdict.headline`` and the review page's); the zones not contained, each with
+        why; the hazardous observers with their hazard ratio, distance [m] from the laser
+        and from the nearest spot, and cause (each contribution above 1 % of the peak
+        with its share; static, or raised by the dynamic material); the NOHD [m] of
+        every target (diffuse and specular, static and dynamic); the skipped stages,
+        notes and what the tool never models.
     """
     lines = _observer_lines(result, max_observers) + _motion_lines(result) + _nohd_lines(result) + _not_modelled_lines(result)
     return "\n".join(lines)

@@ -195,7 +195,10 @@ class HazardResult:
     @property
     def any_hazard(self) -> bool:
         """A hazard anywhere: a hazardous observer, a target's diffuse lobe or mirror beam
-        with a NOHD > 0, or the direct beam hazardous past the aperture (its NOHD > 0)."""
+        with a NOHD > 0, or the direct beam hazardous past the aperture (its NOHD > 0),
+        contained or not (so true for practically every scene). Kept for compatibility
+        (report.json ``any_hazard``); :func:`hazard.verdict.verdict` separates a hazard
+        at the listed observers from hazard zones not contained."""
         def positive(x):
             return x is not None and x > 0
 

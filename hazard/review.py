@@ -34,6 +34,7 @@ from brdfmodels._io import atomic_write, atomic_write_text, check_input_file
 
 from .plots import _file_part
 from .report import NEVER_MODELLED, REPORT_FORMAT, REPORT_VERSION
+from .verdict import escape_way
 
 __all__ = ["write_review", "review_html", "read_report", "find_chromium", "PdfError", "fmt_number", "fmt_distance",
            "HTML_NAME", "PDF_NAME", "OBSERVERS_SHOWN", "FIXED_OVER_TIME_SHOWN", "SECTIONS",
@@ -606,7 +607,7 @@ def _sdz_view(z: dict | None) -> dict | None:
         "directions": kv_rows(d, "sdz.directions"), "nohd": fmt_distance(z.get("nohd_m")), "unbounded": bool(z.get("unbounded")),
         "area": fmt_number(z.get("area_m2"), "m\u00b2", inf="unbounded"), "reach": fmt_distance(z.get("max_range_m")),
         "half_width": fmt_distance(z.get("hazard_half_width_m")), "contained": bool(z.get("contained")),
-        "escaping": z.get("escaping_directions"), "count": d.get("count"),
+        "escaping": z.get("escaping_directions"), "count": d.get("count"), "way": escape_way(z),
         "above_horizon": bool(z.get("above_horizon")), "boundary": boundary, "aided": aided,
         "mirrors": [_mirror_view(m) for m in z.get("mirror_beams") or []],
     }
@@ -821,7 +822,9 @@ def _verdict(doc: dict, obs: dict) -> dict:
     if z:
         aided = "".join(f", through {_optics(a)} optics {fmt_distance(a.get('nohd_m'))}" for a in z.get("aided") or [])
         lines.append(f"direct beam NOHD {fmt_distance(z.get('nohd_m'))}{aided}; danger zone "
-                     + ("contained by backstops" if z.get("contained") else "NOT contained"))
+                     + ("contained by backstops" if z.get("contained") else
+                        f"NOT contained: {z.get('escaping_directions')} direction(s){escape_way(z)} reach the NOHD without "
+                        "a backstop (no terrain or occluder across them; targets are not backstops)"))
     for s in ((doc.get("beam") or {}).get("spill") or {}).get("stopped") or []:
         ratio = _value(s.get("hazard_ratio"))
         if isinstance(ratio, float) and not ratio < 1:
@@ -832,7 +835,21 @@ def _verdict(doc: dict, obs: dict) -> dict:
         lines.append(f"report.json any_hazard = {json.dumps(any_hazard)}, but a moving observer is hazardous or a flight "
                      "zone does not hold: counted as a hazard here")
         any_hazard = True
-    return {"any_hazard": any_hazard, "lines": lines}
+    return {"any_hazard": any_hazard, "lines": lines, **_headline_view(doc, any_hazard)}
+
+
+def _headline_view(doc: dict, any_hazard) -> dict:
+    """report.json's ``verdict``: its headline as it is (the same text ``hazard run``
+    printed, :func:`hazard.verdict.verdict`), the zones not contained with why, the
+    plausibility ``warnings`` and the box's style (``bad``: a hazard at the observers or
+    in the zones; ``contained``: hazard zones exist, all contained; ``good``: none).
+    A report without ``verdict`` (older) gets ``headline`` None: the page says so."""
+    v = doc.get("verdict") if isinstance(doc.get("verdict"), dict) else {}
+    bad = bool(v.get("hazard_at_observers") or v.get("hazard_zones")) if v else bool(any_hazard)
+    style = "bad" if bad or (not v and any_hazard) else ("contained" if any_hazard else "good")
+    return {"headline": v.get("headline"), "zones": [str(z) for z in v.get("zones") or []],
+            "at_observers": bool(v.get("hazard_at_observers")) if v else bool(any_hazard),
+            "warnings": [str(w) for w in doc.get("warnings") or []], "style": style}
 
 
 def _frame_view(doc: dict) -> dict | None:

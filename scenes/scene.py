@@ -388,6 +388,10 @@ def _warnings(spec: SceneSpec) -> list:
     la = spec.laser
     if la.divergence_rad > 0.05:
         out.append(f"laser.divergence_rad = {la.divergence_rad:g} rad is a very wide beam (> 0.05 rad): mrad meant?")
+    elif la.divergence_rad >= DIVERGENCE_WIDE_RAD:
+        out.append(f"laser.divergence_rad = {la.divergence_rad:g} rad ({1e3 * la.divergence_rad:g} mrad) is a wide beam for a "
+                   f"range laser (10 to 50 mrad is a bare diode's, not a beam director's): mrad meant? (as rad the beam is "
+                   f"1000x wider than the same number in mrad, and its NOHD about 1000x shorter)")
     if la.divergence_rad == 0:
         out.append("laser.divergence_rad = 0: an ideal collimated beam never spreads, so its direct-beam NOHD (and the danger "
                    "zone's) is infinite where the atmosphere does not attenuate it (report.json 'inf'); give the measured "
@@ -416,7 +420,51 @@ def _warnings(spec: SceneSpec) -> list:
     if t_end is not None and t_end < spec.exposure.duration_s and any(t.history is not None for t in spec.targets):
         out.append(f"analysis.time_end_s = {t_end:g} s ends before the exposure (exposure.duration_s = "
                    f"{spec.exposure.duration_s:g} s): states after it are not seen, and a dynamic NOHD may be low")
-    return out + _magnitude_warnings(spec)
+    return out + _magnitude_warnings(spec) + _beam_quality_warnings(spec)
+
+
+DIVERGENCE_WIDE_RAD = 0.01  # full-angle divergence [rad] from which a range laser's beam is warned as wide (mrad meant?)
+# M^2 of the beam the scene describes, from its 1/e full diameter d and divergence theta:
+# with the 1/e^2 full quantities D = sqrt(2) d and Theta = sqrt(2) theta of a Gaussian,
+# M^2 = pi D Theta / (4 lambda) = pi d theta / (2 lambda). d is the aperture's diameter,
+# at least the waist's, so this is an upper bound of the true M^2: under 1 it is
+# impossible (narrower than diffraction allows). Range lasers' beam directors deliver
+# M^2 near 1 (single mode) to tens (multimode); above M2_PLAUSIBLE_MAX is a divergence
+# in degrees (57.3x) or mrad (1000x) typed as rad, or a diameter in mm typed as m.
+M2_PLAUSIBLE_MAX = 50.0
+
+
+def beam_m2(wavelength_nm, beam_diameter_m, divergence_rad) -> float:
+    """The beam quality factor M^2 [-] a 1/e full diameter [m] and full-angle divergence
+    [rad] imply at ``wavelength_nm``: pi d theta / (2 lambda) (1/e^2 full quantities
+    sqrt(2) times the 1/e ones; ISO 11146: M^2 = pi D Theta / (4 lambda))."""
+    return math.pi * beam_diameter_m * divergence_rad / (2.0 * wavelength_nm * 1e-9)
+
+
+def _beam_quality_warnings(spec: SceneSpec) -> list:
+    """M^2 under 1 (impossible) or above ``M2_PLAUSIBLE_MAX`` (a unit slip), unless a
+    warning on the divergence or the diameter already names the slip."""
+    la = spec.laser
+    if la.divergence_rad <= 0 or la.divergence_rad >= DIVERGENCE_WIDE_RAD or la.beam_diameter_m > 1.0:
+        return []
+    m2 = beam_m2(la.wavelength_nm, la.beam_diameter_m, la.divergence_rad)
+    given = (f"laser.beam_diameter_m = {la.beam_diameter_m:g} m and divergence_rad = {la.divergence_rad:g} rad at "
+             f"{la.wavelength_nm:g} nm imply M^2 = pi d theta / (2 lambda) = {m2:.3g} (1/e quantities)")
+    if m2 < 1.0:
+        return [f"{given}: under 1, narrower than diffraction allows, so no beam has them (the NOHD from them is too "
+                f"long: conservative): check both values and their units"]
+    if m2 > M2_PLAUSIBLE_MAX:
+        return [f"{given}: above {M2_PLAUSIBLE_MAX:g}, more than a range laser's beam director delivers (near 1 single "
+                f"mode, tens multimode): divergence in degrees (57.3x too wide as rad) or mrad typed as rad, or the "
+                f"diameter in mm typed as m? A wider divergence shortens the NOHD; if both values are right, ignore this"]
+    return []
+
+
+# IEC 60825-1:2014 Table 8: the class 3B accessible emission limit of CW emission longer
+# than 0.25 s, 315 nm to 1 mm, is 0.5 W. Under it a CW laser is class 3B or lower by its
+# power, not the high-energy (class 4) laser a range analysis is for: a power in kW
+# typed as W. (Pulsed lasers are classed by their pulse energy too: not checked here.)
+CLASS_4_CW_MIN_W = 0.5
 
 
 # Orders of magnitude beyond the bundled range (100 W .. 100 kW) that a unit slip gives:
@@ -446,6 +494,10 @@ def _magnitude_warnings(spec: SceneSpec) -> list:
         return [f"laser.power_w = {p:g} W is over 10 MW: mW or kW meant?"]
     if p is not None and p < POWER_PLAUSIBLE_W[0]:
         return [f"laser.power_w = {p:g} W is under 1 mW for a high-energy laser range: W or kW meant?"]
+    if p is not None and p < CLASS_4_CW_MIN_W:
+        return [f"laser.power_w = {p:g} W is under {CLASS_4_CW_MIN_W:g} W, the class 3B limit for CW emission (IEC "
+                f"60825-1:2014 Table 8): by its power the laser is class 3B or lower, not a high-energy range laser: kW "
+                f"typed as W? (1000x the power is {p * 1e3:g} W)"]
     return []
 
 

@@ -360,11 +360,26 @@ def _zone_dict(scene, z: Zone, dirs, boundary) -> dict:
            "unbounded": unbounded,
            "max_range_m": float(z.reach_m.max()), "hazard_half_width_m": z.half_width_m, "contained": bool(z.stopped.all()),
            "escaping_directions": int(escape.sum()), "above_horizon": bool(np.any(escape & (dirs[:, 2] > 0)))}
+    if escape.any():  # which way the zone escapes: said with every "NOT contained"
+        out["escaping_bearing_deg"], out["escaping_elevation_deg"] = escaping_span_deg(dirs[escape])
     if boundary is not None:
         outside = poly.difference(boundary)
         out["leaves_boundary"] = bool(outside.area > 0)
         out["outside_boundary_m2"] = math.inf if unbounded and outside.area > 0 else float(outside.area)
     return out
+
+
+def escaping_span_deg(dirs) -> tuple[list, list]:
+    """The compass bearings [deg, clockwise from north] and elevations [deg] a set of unit
+    directions (N, 3) spans: ``[first, last]`` bearing going clockwise around the largest
+    gap between them (so a span across north reads e.g. [350, 10]), ``[low, high]``
+    elevation."""
+    bearing = np.sort(np.degrees(np.arctan2(dirs[:, 0], dirs[:, 1])) % 360.0)
+    gaps = np.diff(np.concatenate([bearing, bearing[:1] + 360.0]))
+    k = int(np.argmax(gaps))  # the span starts after the largest gap
+    first, last = bearing[(k + 1) % len(bearing)], bearing[k]
+    elevation = np.degrees(np.arcsin(np.clip(dirs[:, 2], -1.0, 1.0)))
+    return [round(float(first), 3), round(float(last), 3)], [round(float(elevation.min()), 3), round(float(elevation.max()), 3)]
 
 
 def boundary_polygon(scene):

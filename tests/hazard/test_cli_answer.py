@@ -28,12 +28,13 @@ def analyse(name):
 
 
 def observer_rows(out):
-    """Rows of the hazardous-observer table: (name, ratio, distance [m], spot, cause)."""
+    """Rows of the hazardous-observer table: (name, ratio, distance from the spot [m], spot,
+    cause, distance from the laser [m])."""
     rows = []
     for line in out.splitlines():
-        m = re.match(r"^  (\S+)\s+([0-9.e+-]+)\s+([0-9.e+-]+)  (\S+)\s+(.+)$", line)
+        m = re.match(r"^  (\S+)\s+([0-9.e+-]+)\s+([0-9.e+-]+)\s+([0-9.e+-]+)  (\S+)\s+(.+)$", line)
         if m and not line.startswith("  observer "):
-            rows.append((m[1], float(m[2]), float(m[3]), m[4], m[5]))
+            rows.append((m[1], float(m[2]), float(m[4]), m[5], m[6], float(m[3])))
     return rows
 
 
@@ -46,17 +47,19 @@ def test_binoculars_answer_comes_first_and_names_the_hazard(tmp_path, binoculars
     code, out, err = run("run", "binoculars", "-o", tmp_path / "o", "--quiet")
     assert code == 0 and err == ""
     lines = out.splitlines()
-    assert lines[0].startswith("Scene 'binoculars': HAZARD: 1 of 2 observer point(s) at or above the MPE (50 W/m^2")
+    assert lines[0].startswith("Scene 'binoculars': HAZARD at the observers and in the zones: 1 of 2 observer point(s) "
+                               "at or above the MPE; ")
+    assert lines[1] == "  MPE 50 W/m^2, ansi-z136.1-2014, 10 s"
     rows = observer_rows(out)
     assert [r[0] for r in rows] == ["binoculars-7x50"]  # the naked eye is safe: not listed
     k = binoculars.observers.labels.index("binoculars-7x50")
     expected = binoculars.hazard_ratio[k]
     assert expected > 1 and binoculars.hazard_ratio[binoculars.observers.labels.index("naked-eye")] < 1
-    name, ratio, distance, spot, cause = rows[0]
+    name, ratio, distance, spot, cause, _ = rows[0]
     assert ratio == pytest.approx(expected, rel=1e-3)  # printed with 4 significant digits
     # the observer stands 1 km from the panel, outside its mirror beam, material static
     assert distance == pytest.approx(1000.0, abs=1.0) and spot == "copper-panel"
-    assert binoculars.observers.specular_irradiance_w_m2[k] == 0 and cause == "diffuse, static"
+    assert binoculars.observers.specular_irradiance_w_m2[k] == 0 and cause == "diffuse 100 %, static"
     t = binoculars.targets[0]
     assert (f"copper-panel: diffuse static {t.static_lobe.max_range_m:.4g} m, dynamic {t.dynamic_lobe.max_range_m:.4g} m; "
             f"specular static {t.specular_nohd_static_m:.4g} m, dynamic {t.specular_nohd_dynamic_m:.4g} m") in out
@@ -78,9 +81,17 @@ def test_verbose_adds_the_stage_log_after_the_answer(tmp_path):
 
 def test_no_hazard_is_said_plainly_with_the_nohds(tmp_path):
     code, out, _ = run("run", "plate", "-o", tmp_path / "o", "--quiet", "--fail-on-hazard")
-    assert code == 3  # no observer is hazardous, but the keep-out zone is real
+    assert code == 0  # no observer is hazardous (the default: fail on the observers)
+    code, out, _ = run("run", "plate", "-o", tmp_path / "o", "--quiet", "--force", "--fail-on-hazard=zones")
+    assert code == 3  # but the beam past the plate is not stopped (a target is no backstop), nor the keep-out zone
     first = out.splitlines()[0]
-    assert first.startswith("Scene 'plate': no observer point reaches the MPE") and "0 of 2 hazardous" in first
+    assert first == ("Scene 'plate': HAZARD in the zones: no listed observer at or above its limit (0 of 2 observer point(s) "
+                     "at or above the MPE), but 2 hazard zone(s) NOT contained or beyond the range boundary.")
+    nohd = (math.sqrt(4 * 100.0 / (math.pi * 50.0)) - 0.005) / 0.001  # ANSI eq. B: P 100 W, a 5 mm, phi 1 mrad, MPE 50 W/m^2
+    assert f"  zone: the direct beam's danger zone (NOHD {nohd:.4g} m) is NOT contained: 1 of 1 direction(s) toward bearing 0 deg, " \
+           "elevation 0 deg reach the NOHD without a backstop: at the aim the beam meets target(s) 'plate' (100 % of the " \
+           "beam), but a target is not a backstop" in out  # the plate is due north of the laser: bearing 0
+    assert "  zone: the keep-out lobe of 'plate' (diffuse NOHD 0.5642 m) is not bounded: the scene has no [range]" in out
     assert observer_rows(out) == []
     r0 = hazard.nohd_diffuse(100.0, 50.0, 0.5).nohd_m  # the analytic Lambertian NOHD, 0.564 m
     assert f"plate: diffuse static {r0:.4g} m, dynamic {r0:.4g} m; no mirror beam" in out
@@ -97,7 +108,7 @@ def test_big_lists_are_cut_and_sorted_by_hazard_ratio(tmp_path):
     top = np.sort(res.hazard_ratio[res.hazardous])[::-1][:ANSWER_MAX_OBSERVERS]
     assert [r[1] for r in rows] == pytest.approx(top, rel=1e-3)
     labels = res.observers.labels
-    for name, _, _, _, cause in rows:
+    for name, _, _, _, cause, _ in rows:
         i = labels.index(name)
         raised = res.observers.peak_irradiance_w_m2[i] > res.observers.static_irradiance_w_m2[i]
         assert ("dynamic (static material: ratio" in cause) == raised and cause.endswith("static") != raised

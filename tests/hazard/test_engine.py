@@ -252,8 +252,10 @@ def test_cli_run_compare_validate(tmp_path):
     assert code == 0 and "skipped history" in out and "hazard: beam..." in err
     code, out, err = run("run", "plate", "-o", str(tmp_path / "o"))
     assert code == 2 and "exists: pass --force" in err
+    code, _, _ = run("run", "plate", "-o", str(tmp_path / "o"), "--force", "--fail-on-hazard=zones", "--quiet")
+    assert code == 3  # the plate has a 0.56 m keep-out zone, and no [range] bounds it
     code, _, _ = run("run", "plate", "-o", str(tmp_path / "o"), "--force", "--fail-on-hazard", "--quiet")
-    assert code == 3  # the plate has a 0.56 m keep-out zone
+    assert code == 0  # but no observer is at risk (the default: observers)
     code, out, _ = run("compare", "steel_vs_copper", "--quiet", "--json")
     doc = json.loads(out)
     assert code == 0 and {t["target"] for t in doc["targets"]} == {"stainless", "copper"}

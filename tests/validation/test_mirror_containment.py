@@ -7,14 +7,16 @@ the 200 m to the mirror (laser-safety.md 3.1). The reflected ray then ends on th
 backstop before R_f - 200 m or is not contained; its ground track leaves a square range
 boundary of half-side L exactly when it gets past x = L (the ray runs along +x from
 x = 0). A mirror beam that leaves the range or reaches its NOHD in the open is a hazard
-(`--fail-on-hazard` exits 3) even with no observer in the scene (it said "contained by
-backstops ... within the range boundary" and exited 0).
+(`--fail-on-hazard=zones` exits 3; report.json ``hazard_zones``) even with no observer in
+the scene (it said "contained by backstops ... within the range boundary" and exited 0).
+The default `--fail-on-hazard` (observers) exits 0 there: no listed observer is at risk.
 """
 
 from __future__ import annotations
 
 import io
 import math
+import re
 
 import numpy as np
 import pytest
@@ -104,8 +106,15 @@ def test_mirror_beam_hazard_exits_3_with_no_observer(tmp_path):
     path = tmp_path / "m.toml"
     path.write_text(_text([1.0, 0.0, 0.0], boundary=_mirror_nohd() / 2))
     out = io.StringIO()
-    code = main(["run", str(path), "-o", str(tmp_path / "o"), "--fail-on-hazard"], stdout=out, stderr=io.StringIO())
+    code = main(["run", str(path), "-o", str(tmp_path / "o"), "--fail-on-hazard=zones"], stdout=out, stderr=io.StringIO())
     assert code == 3
+    assert "zone: the mirror beam of 'mirror'" in out.getvalue() and "LEAVES the range boundary" in out.getvalue()
+    way = re.search(r"mirror beam of 'mirror' \(specular NOHD [0-9.e+]+ m, toward bearing ([0-9.e+-]+) deg, "
+                    r"elevation ([0-9.e+-]+) deg\) is NOT contained", out.getvalue())
+    assert float(way[1]) == pytest.approx(90.0, abs=0.1) and float(way[2]) == pytest.approx(0.0, abs=0.1)  # r = +x: east, level
+    code = main(["run", str(path), "-o", str(tmp_path / "o"), "--force", "--fail-on-hazard"], stdout=io.StringIO(),
+                stderr=io.StringIO())
+    assert code == 0  # no observer
     assert "mirror beam of mirror" in out.getvalue() and "LEAVES the range boundary" in out.getvalue()
 
 
