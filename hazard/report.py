@@ -19,6 +19,7 @@ from brdfmodels._io import atomic_write_text
 
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
 from .verdict import escape_way, verdict
+from scenes.conventions import beam_headline
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
            "summary_text", "answer_text", "stages_text", "cause_shares"]
@@ -438,6 +439,8 @@ def _observer_lines(result, max_observers, v=None) -> list:
            + (", C_E per observer" if (getattr(result, "extended_source", None) or {}).get("applied") else ""))
     static = f"; hazardous with the static material: {int(np.sum(result.hazardous_static))}" if result.states else ""
     lines = _warning_lines(v["warnings"]) + [f"Scene {result.scene.name!r}: {v['headline']}.", f"  MPE {mpe}{static}"]
+    beam = beam_headline(getattr(result.scene, "beam_conventions", None))
+    lines += [f"  {beam}"] if beam else []
     lines += [f"  zone: {z}" for z in v["zones"]]
     hazardous = np.flatnonzero(result.hazardous)
     if not len(hazardous):

@@ -115,6 +115,18 @@ FWHM_CAVEAT = ("FWHM read for a Gaussian beam: for a flatter beam (top hat, mult
                "and a NOHD up to 1.20 x longer; give the 1/e2 or d86 values of such a beam (conservative for it)")
 
 
+def beam_headline(rec: dict | None) -> str:
+    """One line for the top of every answer: the beam convention the NOHDs were computed in,
+    and whether the scene gave it or the default was taken."""
+    if rec is None:
+        return ""
+    given = [k for k in ("diameter_definition", "divergence_definition") if rec.get(k) is not None]
+    how = ("as given" if len(given) == 2 else
+           "default, not given in the scene" if not given else f"{given[0]} given, the other the default")
+    conv = "" if not rec.get("steps") else " (converted from the scene's definitions: see the notes)"
+    return f"beam: 1/e-irradiance diameter and 1/e full-angle divergence, the standards' form ({how}){conv}"
+
+
 def beam_notes(rec: dict | None) -> list:
     """The notes an answer carries about the beam's convention: the conversions made, or
     (neither definition given) one line naming the convention the values were read in."""

@@ -50,6 +50,9 @@ def test_binoculars_answer_comes_first_and_names_the_hazard(tmp_path, binoculars
     assert lines[0].startswith("Scene 'binoculars': HAZARD at the observers and in the zones: 1 of 2 observer point(s) "
                                "at or above the MPE; ")
     assert lines[1] == "  MPE 50 W/m^2, ansi-z136.1-2014, 10 s"
+    # the beam convention the NOHDs used is said at the top (issue 31 item 2), not only in the notes below
+    assert lines[2] == ("  beam: 1/e-irradiance diameter and 1/e full-angle divergence, the standards' form "
+                        "(default, not given in the scene)")
     rows = observer_rows(out)
     assert [r[0] for r in rows] == ["binoculars-7x50"]  # the naked eye is safe: not listed
     k = binoculars.observers.labels.index("binoculars-7x50")
