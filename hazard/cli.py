@@ -21,6 +21,7 @@ Verbs:
   hazard fit oxidation SERIES.csv -o OX.json      oxidation law from a reflectance series
   hazard mpe   --wavelength-nm L --duration-s T [--standard S] [--skin] [--json]
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
+  hazard --version             the version (one source: hazard.__version__, read by pyproject.toml)
 
 SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
 Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard).
@@ -107,11 +108,18 @@ def _add_run_args(p):
     p.add_argument("--quiet", action="store_true", help="no progress on stderr (stage lines, and bars on a terminal)")
 
 
+def _version_line() -> str:
+    from . import __version__
+
+    return f"hazard (laser-hazard) {__version__}"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.",
                      epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error); "
                             "--debug shows the traceback. Input limits: HAZARD_MAX_<NAME> environment variables (see README).")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error (may also follow the verb)")
+    parser.add_argument("--version", action="version", version=_version_line(), help="print the version and exit")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
     sub.required = True
 
@@ -879,6 +887,9 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
     argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]
+    if argv[:1] == ["--version"]:  # to the given stdout (argparse's version action writes to sys.stdout)
+        out.write(_version_line() + "\n")
+        return EXIT_OK
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
