@@ -21,7 +21,10 @@ that folder back itself: it is the previous complete set. ``OUT`` therefore alwa
 the old complete set or the new one, never a mix and never nothing once recovered.
 
 ``OUT/.laser-hazard.json`` (the manifest) lists which command wrote each file; a folder
-with files not listed there is refused unless ``force``.
+with files not listed there is refused unless ``force``. After a commit, :attr:`OutputUnit.kept`
+names what stayed that this command did not write (other commands' files, and files not in
+the manifest, kept as they were) and :attr:`OutputUnit.replaced_foreign` the files not in
+the manifest that a new output of the same name replaced, so a command can say both.
 """
 
 from __future__ import annotations
@@ -215,6 +218,8 @@ class OutputUnit:
         self.stage.mkdir()
         _ACTIVE.add(self.stage)
         self._carried: set = set()
+        self.kept: dict = {}  # after commit: name -> command that wrote it ("" not in the manifest), kept as it was
+        self.replaced_foreign: list = []  # after commit: names not in the manifest replaced by a new output
 
     def _present(self) -> list:
         return sorted(os.listdir(self.out)) if self.out.is_dir() else []
@@ -264,6 +269,9 @@ class OutputUnit:
         """Carry the kept entries of ``out`` into the stage and write the manifest."""
         self.carry()
         owners = {n: self._owner(n) for n in os.listdir(self.stage) if n != MANIFEST}
+        self.kept = {n: self.owners.get(n, "") for n in sorted(self._carried) if n not in self.working}
+        self.replaced_foreign = sorted(n for n in self._present() if n != MANIFEST and n not in self.owners
+                                       and n not in self._carried and n not in self.working)
         owners = {n: o for n, o in owners.items() if o}  # foreign files stay unlisted
         doc = {"tool": "laser-hazard", "note": "files written by laser-hazard in this folder and the command of each",
                "files": dict(sorted(owners.items()))}

@@ -416,10 +416,20 @@ def _cmd_run(args, out, err):
     paths = [Path(args.output) / n for n in names]
     if args.json:
         out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
+        err.write(_kept_lines(unit))
     else:
         out.write(summary_text(result, verbose=args.verbose) + "\n")
-        out.write("".join(f"wrote {p}\n" for p in paths))
+        out.write("".join(f"wrote {p}\n" for p in paths) + _kept_lines(unit))
     return _finish(args, result)
+
+
+def _kept_lines(unit) -> str:
+    """What stayed in the output folder that this run did not write, and the files hazard
+    did not write that a new output replaced: said, never silently left or lost."""
+    lines = [f"kept {unit.given / n} (" + (f"written by hazard {o} before this run: make it again if the scene changed)"
+                                           if o else "not written by hazard: left as it was)") for n, o in unit.kept.items()]
+    lines += [f"replaced {unit.given / n} (not written by hazard: a new output has its name)" for n in unit.replaced_foreign]
+    return "".join(line + "\n" for line in lines)
 
 
 def _state_span(name, span) -> str:

@@ -443,3 +443,48 @@ def test_hazard_run_says_what_it_recovered(tmp_path, monkeypatch, results):
     assert not out.exists()
     code, _, err = run("run", "plate", "-o", out, "--quiet")  # recovered first, then refused: its outputs are back
     assert code == 2 and "restored the previous outputs after an interrupted switch" in err and snapshot(out) == old
+
+
+def test_force_into_another_scenes_folder_replaces_the_runs_set(tmp_path, monkeypatch, results):
+    """Issue 31 item 6: ``--force`` into a folder of another scene. The earlier run wrote
+    hazard_local_frame.tif (a scene with a ground grid); the new scene writes none: the
+    stale grid goes (the new report says it was not written, and it is not there), while
+    files hazard did not write and another command's pictures stay, each said on stdout."""
+    from hazard import map_outputs
+
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
+    real = map_outputs.map_files
+    out = tmp_path / "o"
+    with monkeypatch.context() as m:  # the other scene's set: its map outputs include the grid
+        m.setattr(map_outputs, "map_files", lambda result: ({**real(result)[0], "hazard_local_frame.tif": b"II*\0other scene"},
+                                                             real(result)[1]))
+        assert run("run", "plate", "-o", out, "--quiet")[0] == 0
+    assert (out / "hazard_local_frame.tif").exists()
+    write_set(out, {"keepout.png": b"k"}, command="render")
+    (out / "notes.txt").write_text("not ours")
+    (out / "zones.kml").write_bytes(b"<kml/> placed by another program")  # an output's name, not in the manifest
+    code, stdout, _ = run("run", "plate", "-o", out, "--quiet", "--force")
+    assert code == 0
+    doc = json.loads((out / "report.json").read_text())
+    assert "hazard_local_frame.tif" in doc["map_outputs"]["not_written"]
+    assert not (out / "hazard_local_frame.tif").exists()  # its own stale file removed
+    files = json.loads((out / MANIFEST).read_text())["files"]
+    assert "hazard_local_frame.tif" not in files and files["keepout.png"] == "render"
+    assert "notes.txt" not in files and "zones.kml" not in files
+    assert (out / "notes.txt").read_text() == "not ours" and (out / "zones.kml").read_bytes().startswith(b"<kml/> placed")
+    assert f"kept {out / 'notes.txt'} (not written by hazard: left as it was)" in stdout
+    assert f"kept {out / 'zones.kml'} (not written by hazard: left as it was)" in stdout
+    assert f"kept {out / 'keepout.png'} (written by hazard render before this run" in stdout
+    assert "hazard_local_frame.tif" not in stdout
+
+
+def test_force_says_which_foreign_file_a_new_output_replaced(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "report.json").write_text("someone else's")
+    (out / "keep.txt").write_text("k")
+    unit = write_set(out, NEW, force=True)
+    assert unit.replaced_foreign == ["report.json"] and unit.kept == {"keep.txt": ""}
+    assert snapshot(out) == {**NEW, "keep.txt": b"k"}
+    unit = write_set(out, {"report.json": b"3"}, overwrite=True, force=True)  # the run's own table goes: not "kept"
+    assert unit.replaced_foreign == [] and unit.kept == {"keep.txt": ""}
