@@ -9,7 +9,7 @@ Verbs:
   hazard compare SCENE         static vs dynamic: NOHD per target, changed verdicts
   hazard validate SCENE        check a scene file (or a study file) as run, risk and study would
   hazard models                registered BRDF models
-  hazard schema                JSON schema of scene files
+  hazard schema [--markdown]   JSON schema of scene files (or the reference table of every key)
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
   hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
   hazard render SCENE -o OUTDIR   keep-out renders (PNG), VTK for ParaView, lobe animation
@@ -146,8 +146,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--materials", action="store_true", help="list the material library (scenes: material = { library = NAME })")
 
-    p = sub.add_parser("schema", help="print the JSON schema of scene files")
+    p = sub.add_parser("schema", help="print the JSON schema of scene files (--markdown: the reference table of every key)")
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
+    p.add_argument("--markdown", action="store_true", help="print the scene reference as Markdown (key path, type, unit, "
+                   "default, description), as kept in docs/scene-reference.md")
 
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
     p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars)")
@@ -552,13 +554,18 @@ def _cmd_models(args, out, err):
 def _cmd_schema(args, out, err):
     import scenes
 
-    text = json.dumps(scenes.json_schema(), indent=1)
+    if args.markdown:
+        from scenes.reference import schema_markdown
+
+        text = schema_markdown()
+    else:
+        text = json.dumps(scenes.json_schema(), indent=1)
     if args.output:
         from .report import atomic_write_text
 
         atomic_write_text(Path(args.output), text)
     else:
-        out.write(text + "\n")
+        out.write(text.rstrip("\n") + "\n")
     return EXIT_OK
 
 
