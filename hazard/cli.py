@@ -108,6 +108,14 @@ def _add_run_args(p):
     p.add_argument("--quiet", action="store_true", help="no progress on stderr (stage lines, and bars on a terminal)")
 
 
+_PROVENANCE = ("Every step ends with its provenance label: [C] read in the cited public source, [D] derived here from "
+               "[C] rows, [M] general knowledge not verified against a source (a governing row labelled [M], or a [C] row "
+               "marked UNVERIFIED, adds a WARNING to the result). The sources are public implementations of the standards, not their text: "
+               "'[C] OLBtools Z136 (A), akufcsak table_a1 (I)' = read in OLBtools' ANSI Z136.1-2014 module (A) and in "
+               "akufcsak/laser_safety's IEC 60825-1:2014 Table A.1 (I), which agree; Laser-Studio = its decoded 2007 table. "
+               "Tables, formulas and sources: docs/laser-safety.md.")
+
+
 def _version_line() -> str:
     from . import __version__
 
@@ -218,14 +226,14 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--force", action="store_true")
     q.add_argument("--json", action="store_true")
 
-    p = sub.add_parser("mpe", help="maximum permissible exposure with every step")
+    p = sub.add_parser("mpe", help="maximum permissible exposure with every step", epilog=_PROVENANCE)
     _add_mpe_args(p, required=True)
     p.add_argument("--skin", action="store_true", help="skin MPE instead of ocular")
     p.add_argument("--prf-hz", type=float, help="pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
     p.add_argument("--exposure-duration-s", type=float, help="duration of the pulse train [s] (with --prf-hz)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
-    p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step")
+    p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step", epilog=_PROVENANCE)
     p.add_argument("--kind", default="direct", choices=["direct", "diffuse", "specular"], help="direct beam, Lambertian or mirror reflection")
     p.add_argument("--power-w", type=float, required=True, help="laser power [W] (pulse energy [J] with a J/m^2 MPE)")
     p.add_argument("--mpe-w-m2", type=float, help="MPE [W/m^2]; otherwise computed from --wavelength-nm and --duration-s")
