@@ -488,3 +488,52 @@ def test_force_says_which_foreign_file_a_new_output_replaced(tmp_path):
     assert snapshot(out) == {**NEW, "keep.txt": b"k"}
     unit = write_set(out, {"report.json": b"3"}, overwrite=True, force=True)  # the run's own table goes: not "kept"
     assert unit.replaced_foreign == [] and unit.kept == {"keep.txt": ""}
+
+
+_NAMES = st.sampled_from(["report.json", "observers.csv", "plan.png", "hazard.tif", "keepout.png", "notes.txt", "a.csv"])
+_STEPS_OWN = st.lists(st.tuples(st.sampled_from(["run", "render", "foreign"]), st.sets(_NAMES, min_size=1, max_size=4)),
+                      min_size=1, max_size=6)
+
+
+def _check_ownership(out: Path, steps) -> None:
+    """Random writes by two commands and by another program, each command with --force:
+    after each, the command's new set is there, its own stale files are gone, every other
+    file stays byte for byte, and ``kept`` / ``replaced_foreign`` name exactly the
+    survivors it did not write and the foreign files it overwrote (the reference is a dict
+    of owners kept in the test, not the manifest)."""
+    owner: dict = {}  # name -> "run" / "render" / "" (another program)
+    content: dict = {}
+    for k, (who, names) in enumerate(steps):
+        if who == "foreign":
+            out.mkdir(parents=True, exist_ok=True)
+            for n in names:
+                if n not in owner:  # another program writes only new names
+                    (out / n).write_bytes(f"foreign {k} {n}".encode())
+                    owner[n], content[n] = "", f"foreign {k} {n}".encode()
+            continue
+        files = {n: f"{who} {k} {n}".encode() for n in names}
+        unit = write_set(out, files, command=who, overwrite=True, force=True)
+        replaced = sorted(n for n in names if owner.get(n) == "")
+        for n in [n for n, o in owner.items() if o == who and n not in names]:
+            del owner[n], content[n]  # the command's own stale file: removed
+        kept = {n: o for n, o in sorted(owner.items()) if n not in names}
+        owner.update({n: who for n in names})
+        content.update(files)
+        assert unit.replaced_foreign == replaced
+        assert unit.kept == kept
+        assert snapshot(out) == content and leftovers(out) == []
+        listed = json.loads((out / MANIFEST).read_text())["files"]
+        assert listed == {n: o for n, o in owner.items() if o}
+
+
+@settings(derandomize=True, deadline=None, max_examples=15)
+@given(steps=_STEPS_OWN)
+def test_property_force_replaces_only_its_own_set(tmp_path_factory, steps):
+    _check_ownership(tmp_path_factory.mktemp("own") / "o", steps)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=300)
+@given(steps=_STEPS_OWN)
+def test_property_force_replaces_only_its_own_set_many(tmp_path_factory, steps):
+    _check_ownership(tmp_path_factory.mktemp("own") / "o", steps)
