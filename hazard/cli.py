@@ -327,13 +327,32 @@ def _cmd_nohd(args, out, err=None):
     return EXIT_OK
 
 
-def _load_scene(name, err=None):
+def _scene_path(name) -> Path:
+    """The scene file a SCENE argument names: a path, or a bundled example's name."""
     import scenes
 
     path = Path(name)
     if not path.exists() and name in scenes.examples():
         path = scenes.example_path(name)
-    scene = scenes.load(path)
+    return path
+
+
+def _scene_source(name) -> str | None:
+    """A digest of the scene file's bytes, kept in the output folder's manifest so that
+    files made from another scene are never mixed in silently (None: unreadable; the
+    scene's load then names the problem)."""
+    import hashlib
+
+    try:
+        return "sha256:" + hashlib.sha256(_scene_path(name).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _load_scene(name, err=None):
+    import scenes
+
+    scene = scenes.load(_scene_path(name))
     if err is not None:
         for w in scene.warnings:
             err.write(f"hazard: warning: {scene.source}: {w}\n")
@@ -408,7 +427,7 @@ def _cmd_run(args, out, err):
     if args.plot:
         _needs("matplotlib", "render")
     with output_unit(args.output, command="run", overwrite=args.force, force=args.force,  # all outputs as one unit
-                     claims=names + FIXED_NAMES) as unit:
+                     claims=names + FIXED_NAMES, source=_scene_source(args.scene)) as unit:
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))  # a crash of an earlier run recovered: said
         result = _analyse(args, err)
         extra = {}
@@ -439,6 +458,7 @@ def _kept_lines(unit) -> str:
     lines = [f"kept {unit.given / n} (" + (f"written by hazard {o} before this run: make it again if the scene changed)"
                                            if o else "not written by hazard: left as it was)") for n, o in unit.kept.items()]
     lines += [f"replaced {unit.given / n} (not written by hazard: a new output has its name)" for n in unit.replaced_foreign]
+    lines += [f"removed {unit.given / n} (written by hazard {unit.owners[n]} from another scene)" for n in unit.dropped_stale]
     return "".join(line + "\n" for line in lines)
 
 
@@ -815,7 +835,8 @@ def _cmd_render(args, out, err):
     from . import render
     from .progress import progress_to
 
-    with output_unit(args.output, command="render", overwrite=args.force, force=args.force) as unit:  # all renders as one unit
+    with output_unit(args.output, command="render", overwrite=args.force, force=args.force,  # all renders as one unit
+                     source=_scene_source(args.scene)) as unit:
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))
         result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
         with progress_to(None if args.quiet else err):  # bars on a terminal only
@@ -862,13 +883,14 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 
 
 def _cmd_report(args, out, err):
-    from brdfmodels._unit import output_unit
+    from brdfmodels._unit import output_unit, read_sources
 
     from .review import PdfError, read_report
 
     read_report(args.out_dir)  # a clear line naming the folder before anything is staged
     failed = None
-    with output_unit(args.out_dir, command="report", overwrite=True, force=True) as unit:  # the run's files are kept
+    with output_unit(args.out_dir, command="report", overwrite=True, force=True,  # the run's files are kept
+                     source=read_sources(Path(args.out_dir)).get("run")) as unit:  # the page is of the run's scene
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))
         unit.carry()  # the page reads report.json and the pictures in the folder
         try:

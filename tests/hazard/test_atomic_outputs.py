@@ -537,3 +537,51 @@ def test_property_force_replaces_only_its_own_set(tmp_path_factory, steps):
 @given(steps=_STEPS_OWN)
 def test_property_force_replaces_only_its_own_set_many(tmp_path_factory, steps):
     _check_ownership(tmp_path_factory.mktemp("own") / "o", steps)
+
+
+def test_other_commands_files_from_another_source_never_mix(tmp_path):
+    """A render of scene A beside a run of scene B: refused without --force, dropped (and
+    listed) with it; of the same scene, kept. Units without a source check nothing."""
+    out = tmp_path / "o"
+    write_set(out, OLD, source="sha256:A")
+    write_set(out, {"keepout.png": b"k"}, command="render", source="sha256:A")
+    unit = write_set(out, NEW, overwrite=True, source="sha256:A")  # the same scene again: the render stays
+    assert unit.dropped_stale == [] and unit.kept == {"keepout.png": "render"}
+    assert json.loads((out / MANIFEST).read_text())["sources"] == {"render": "sha256:A", "run": "sha256:A"}
+    with pytest.raises(OutputFolderError, match=r"files of hazard render \(keepout.png\) made from another input: pass --force"):
+        write_set(out, NEW, overwrite=True, source="sha256:B")
+    assert snapshot(out) == {**NEW, "keepout.png": b"k"} and leftovers(out) == []
+    (out / "notes.txt").write_text("not ours")
+    unit = write_set(out, {"report.json": b"B"}, overwrite=True, force=True, source="sha256:B")
+    assert unit.dropped_stale == ["keepout.png"] and unit.kept == {"notes.txt": ""}
+    assert snapshot(out) == {"report.json": b"B", "notes.txt": b"not ours"}
+    doc = json.loads((out / MANIFEST).read_text())
+    assert doc["files"] == {"report.json": "run"} and doc["sources"] == {"run": "sha256:B"}
+    unit = write_set(out, {"lobe.gif": b"g"}, command="render", force=True)  # no source given: nothing is checked or dropped
+    assert unit.dropped_stale == [] and snapshot(out)["report.json"] == b"B"
+
+
+def test_hazard_run_of_another_scene_drops_its_render_and_page(tmp_path, monkeypatch, results):
+    """The review board never gets scene A's 3-D render or page beside scene B's report."""
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results[os.path.basename(args.scene)])
+    out = tmp_path / "o"
+    assert run("run", "plate", "-o", out, "--quiet")[0] == 0
+    write_set(out, {"keepout.png": b"plate render"}, command="render", source=cli._scene_source("plate"))
+    code, stdout, _ = run("report", out, "--quiet")
+    assert code == 0 and json.loads((out / MANIFEST).read_text())["files"]["report.html"] == "report"
+    code, _, err = run("run", "binoculars", "-o", out, "--quiet")
+    assert code == 2 and "--force" in err  # refused (its own report.json is there)
+    code, _, err = run("render", "binoculars", "-o", out, "--quiet")  # another command, another scene: refused before any work
+    assert code == 2 and "files of hazard report (report.html) and hazard run (observers.csv, report.json" in err
+    assert "made from another input: pass --force" in err
+    code, stdout, _ = run("run", "binoculars", "-o", out, "--quiet", "--force")
+    assert code == 0
+    assert f"removed {out / 'keepout.png'} (written by hazard render from another scene)" in stdout
+    assert f"removed {out / 'report.html'} (written by hazard report from another scene)" in stdout
+    assert not (out / "keepout.png").exists() and not (out / "report.html").exists()
+    doc = json.loads((out / MANIFEST).read_text())
+    assert doc["sources"] == {"run": cli._scene_source("binoculars")} != {"run": cli._scene_source("plate")}
+    # the same scene again keeps a render of it
+    write_set(out, {"keepout.png": b"binoculars render"}, command="render", source=cli._scene_source("binoculars"))
+    code, stdout, _ = run("run", "binoculars", "-o", out, "--quiet", "--force")
+    assert code == 0 and (out / "keepout.png").read_bytes() == b"binoculars render" and "removed" not in stdout
