@@ -196,3 +196,18 @@ def test_quick_readme_blocks_run(tmp_path):
 @pytest.mark.slow  # every README block in order: minutes (examples with pictures, a risk analysis, a study, renders)
 def test_every_readme_block_runs_in_order(tmp_path):
     _run_blocks(runnable(), tmp_path)
+
+
+def test_the_source_distribution_carries_the_cited_documents():
+    """MANIFEST.in puts every document the README links to into the sdist (the wheel holds
+    the packages only)."""
+    rules = [line.split() for line in (ROOT / "MANIFEST.in").read_text().splitlines() if line and not line.startswith("#")]
+    included = []
+    for rule in rules:
+        if rule[0] == "include":
+            included += [lambda p, names=rule[1:]: p in names]
+        elif rule[0] == "recursive-include":
+            included += [lambda p, top=rule[1], pats=rule[2:]: p.startswith(top + "/") and any(Path(p).match(x) for x in pats)]
+    cited = {link.partition("#")[0] for link in _links(README) if not re.match(r"^[a-z]+:", link)}
+    missing = [p for p in sorted(cited) if not any(rule(p) for rule in included)]
+    assert cited and missing == [], f"README cites files MANIFEST.in leaves out of the sdist: {missing}"
