@@ -45,7 +45,12 @@ from .sh import SHBasis, fan_out, real_sph_harm
 from .states import StateTable
 from .variability import VariabilityResult, sample_variability
 
-__version__ = "0.1.0"
+try:  # one version source: hazard.__version__, read by pyproject.toml into the distribution's metadata
+    from importlib.metadata import PackageNotFoundError as _NotInstalled, version as _dist_version
+
+    __version__ = _dist_version("laser-hazard")
+except _NotInstalled:  # a source tree that was never installed
+    __version__ = "unknown"
 
 __all__ = [
     "ABg", "BRDFModel", "DHRResult", "DynamicBRDF", "Envelope", "EnvelopeReport", "FR_MAX", "GaussianLobe", "HeatingResult",

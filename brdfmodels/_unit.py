@@ -21,7 +21,16 @@ that folder back itself: it is the previous complete set. ``OUT`` therefore alwa
 the old complete set or the new one, never a mix and never nothing once recovered.
 
 ``OUT/.laser-hazard.json`` (the manifest) lists which command wrote each file; a folder
-with files not listed there is refused unless ``force``.
+with files not listed there is refused unless ``force``. After a commit, :attr:`OutputUnit.kept`
+names what stayed that this command did not write (other commands' files, and files not in
+the manifest, kept as they were) and :attr:`OutputUnit.replaced_foreign` the files not in
+the manifest that a new output of the same name replaced, so a command can say both.
+
+A command may name its input (``source``, e.g. a digest of the scene file); the manifest
+keeps each command's source. Another command's files made from a different source (the
+pictures of ``hazard render`` of scene A beside a run of scene B) are never mixed in
+silently: without ``force`` the folder is refused, with ``force`` they are dropped with
+the command's own stale files and listed in :attr:`OutputUnit.dropped_stale`.
 """
 
 from __future__ import annotations
@@ -34,7 +43,7 @@ import shutil
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "OutputFolderError"]
+__all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "read_manifest", "read_sources", "OutputFolderError"]
 
 MANIFEST = ".laser-hazard.json"
 _ACTIVE: set = set()  # staging folders of this process still being written
@@ -143,6 +152,16 @@ def _legacy(out: Path) -> list:
     return said
 
 
+def read_sources(out: Path) -> dict:
+    """command -> the source (input digest) its files in ``out`` were made from ({} when none)."""
+    try:
+        doc = json.loads((out / MANIFEST).read_text(encoding="utf-8"))
+        sources = doc.get("sources", {})
+        return {str(k): str(v) for k, v in sources.items()} if isinstance(sources, dict) else {}
+    except (OSError, ValueError, TypeError, AttributeError):
+        return {}
+
+
 def read_manifest(out: Path) -> dict:
     """name -> command that wrote it, from ``out``'s manifest ({} when none or unreadable)."""
     try:
@@ -194,15 +213,21 @@ class OutputUnit:
         In a folder without a manifest (written before manifests existed), these exact
         names count as this command's previous outputs: replaced, or dropped when not
         written again (a stale picture never stays beside a new report).
+    source : str, optional
+        What the outputs are made from (a digest of the scene file): another command's
+        files recorded with a different source are stale beside the new set (refused
+        without ``force``, dropped with it).
     """
 
-    def __init__(self, out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
+    def __init__(self, out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=(),
+                 source: str | None = None):
         self.out, self.given = _target(out), Path(out)
         self.command, self.working = command, tuple(working)
         if os.path.lexists(self.out) and not self.out.is_dir():
             raise OutputFolderError(f"{self.out}: exists and is not a folder")
         self.notes = recover(self.out)
         self.owners = read_manifest(self.out) if self.out.is_dir() else {}
+        self.sources, self.source = (read_sources(self.out) if self.out.is_dir() else {}), source
         if self.out.is_dir() and not (self.out / MANIFEST).exists():
             self.owners = {n: command for n in claims if (self.out / n).is_file()}
         try:
@@ -215,11 +240,29 @@ class OutputUnit:
         self.stage.mkdir()
         _ACTIVE.add(self.stage)
         self._carried: set = set()
+        self.dropped_stale: list = self._stale()  # other commands' files made from another source: not carried
+        self.kept: dict = {}  # after commit: name -> command that wrote it ("" not in the manifest), kept as it was
+        self.replaced_foreign: list = []  # after commit: names not in the manifest replaced by a new output
 
     def _present(self) -> list:
         return sorted(os.listdir(self.out)) if self.out.is_dir() else []
 
+    def _stale(self) -> list:
+        """Names of other commands' files whose recorded source differs from this unit's."""
+        if self.source is None:
+            return []
+        return sorted(n for n in self._present() if self.owners.get(n, self.command) != self.command
+                      and self.sources.get(self.owners[n], self.source) != self.source)
+
     def _check(self, overwrite: bool, force: bool) -> None:
+        stale = self._stale()
+        if stale and not force:
+            by = {}
+            for n in stale:
+                by.setdefault(self.owners[n], []).append(n)
+            what = " and ".join(f"hazard {c} ({', '.join(ns[:5])}{' ...' if len(ns) > 5 else ''})" for c, ns in sorted(by.items()))
+            raise OutputFolderError(f"{self.out} holds files of {what} made from another input: pass --force to replace "
+                                    "them with this set, or choose another folder")
         names = [n for n in self._present() if n != MANIFEST and n not in self.working]
         foreign = [n for n in names if n not in self.owners]
         own = [n for n in names if self.owners.get(n) == self.command]
@@ -245,8 +288,9 @@ class OutputUnit:
         Write over a carried name only by renaming a new file onto it (never in place)."""
         have, done = set(os.listdir(self.stage)), []
         for n in self._present():
-            if n in have or n == MANIFEST or self.owners.get(n) == self.command and n not in self.working:
-                continue  # written anew, or this command's previous output it does not write again
+            if (n in have or n == MANIFEST or self.owners.get(n) == self.command and n not in self.working
+                    or n in self.dropped_stale):
+                continue  # written anew, this command's previous output it does not write again, or stale
             _link_copy(self.out / n, self.stage / n)
             self._carried.add(n)
             done.append(n)
@@ -264,9 +308,15 @@ class OutputUnit:
         """Carry the kept entries of ``out`` into the stage and write the manifest."""
         self.carry()
         owners = {n: self._owner(n) for n in os.listdir(self.stage) if n != MANIFEST}
+        self.kept = {n: self.owners.get(n, "") for n in sorted(self._carried) if n not in self.working}
+        self.replaced_foreign = sorted(n for n in self._present() if n != MANIFEST and n not in self.owners
+                                       and n not in self._carried and n not in self.working)
         owners = {n: o for n, o in owners.items() if o}  # foreign files stay unlisted
         doc = {"tool": "laser-hazard", "note": "files written by laser-hazard in this folder and the command of each",
                "files": dict(sorted(owners.items()))}
+        sources = {c: s for c, s in {**self.sources, self.command: self.source}.items() if s is not None and c in owners.values()}
+        if sources:
+            doc["sources"] = dict(sorted(sources.items()))
         with open(self.stage / MANIFEST, "w", encoding="utf-8") as fh:
             fh.write(json.dumps(doc, indent=1))
             fh.flush()
@@ -317,10 +367,10 @@ class OutputUnit:
 
 
 @contextmanager
-def output_unit(out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=()):
+def output_unit(out, *, command: str, overwrite: bool = False, force: bool = False, working=(), claims=(), source=None):
     """An :class:`OutputUnit`; the body writes into ``unit.stage``; committed on a normal
     exit, discarded on an exception (``out`` then keeps its previous set)."""
-    unit = OutputUnit(out, command=command, overwrite=overwrite, force=force, working=working, claims=claims)
+    unit = OutputUnit(out, command=command, overwrite=overwrite, force=force, working=working, claims=claims, source=source)
     try:
         yield unit
         unit.commit()

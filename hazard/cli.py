@@ -9,7 +9,7 @@ Verbs:
   hazard compare SCENE         static vs dynamic: NOHD per target, changed verdicts
   hazard validate SCENE        check a scene file (or a study file) as run, risk and study would
   hazard models                registered BRDF models
-  hazard schema                JSON schema of scene files
+  hazard schema [--markdown]   JSON schema of scene files (or the reference table of every key)
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
   hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
   hazard render SCENE -o OUTDIR   keep-out renders (PNG), VTK for ParaView, lobe animation
@@ -21,6 +21,7 @@ Verbs:
   hazard fit oxidation SERIES.csv -o OX.json      oxidation law from a reflectance series
   hazard mpe   --wavelength-nm L --duration-s T [--standard S] [--skin] [--json]
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
+  hazard --version             the version (one source: hazard.__version__, read by pyproject.toml)
 
 SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
 Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard
@@ -113,11 +114,26 @@ def _add_run_args(p):
     p.add_argument("--quiet", action="store_true", help="no progress on stderr (stage lines, and bars on a terminal)")
 
 
+_PROVENANCE = ("Every step ends with its provenance label: [C] read in the cited public source, [D] derived here from "
+               "[C] rows, [M] general knowledge not verified against a source (a governing row labelled [M], or a [C] row "
+               "marked UNVERIFIED, adds a WARNING to the result). The sources are public implementations of the standards, not their text: "
+               "'[C] OLBtools Z136 (A), akufcsak table_a1 (I)' = read in OLBtools' ANSI Z136.1-2014 module (A) and in "
+               "akufcsak/laser_safety's IEC 60825-1:2014 Table A.1 (I), which agree; Laser-Studio = its decoded 2007 table. "
+               "Tables, formulas and sources: docs/laser-safety.md.")
+
+
+def _version_line() -> str:
+    from . import __version__
+
+    return f"hazard (laser-hazard) {__version__}"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.",
                      epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error); "
                             "--debug shows the traceback. Input limits: HAZARD_MAX_<NAME> environment variables (see README).")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error (may also follow the verb)")
+    parser.add_argument("--version", action="version", version=_version_line(), help="print the version and exit")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)
     sub.required = True
 
@@ -144,8 +160,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--materials", action="store_true", help="list the material library (scenes: material = { library = NAME })")
 
-    p = sub.add_parser("schema", help="print the JSON schema of scene files")
+    p = sub.add_parser("schema", help="print the JSON schema of scene files (--markdown: the reference table of every key)")
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
+    p.add_argument("--markdown", action="store_true", help="print the scene reference as Markdown (key path, type, unit, "
+                   "default, description), as kept in docs/scene-reference.md")
 
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
     p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars)")
@@ -214,7 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--force", action="store_true")
     q.add_argument("--json", action="store_true")
 
-    p = sub.add_parser("mpe", help="maximum permissible exposure with every step")
+    p = sub.add_parser("mpe", help="maximum permissible exposure with every step", epilog=_PROVENANCE)
     _add_mpe_args(p, required=True)
     p.add_argument("--skin", action="store_true", help="skin MPE instead of ocular")
     p.add_argument("--prf-hz", type=float, help="pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
@@ -222,7 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--explain", action="store_true", help="also say which rule governed and why (the candidate limits compared)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
-    p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step")
+    p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step", epilog=_PROVENANCE)
     p.add_argument("--kind", default="direct", choices=["direct", "diffuse", "specular"], help="direct beam, Lambertian or mirror reflection")
     p.add_argument("--power-w", type=float, required=True, help="laser power [W] (pulse energy [J] with a J/m^2 MPE)")
     p.add_argument("--mpe-w-m2", type=float, help="MPE [W/m^2]; otherwise computed from --wavelength-nm and --duration-s")
@@ -319,13 +337,32 @@ def _cmd_nohd(args, out, err=None):
     return EXIT_OK
 
 
-def _load_scene(name, err=None):
+def _scene_path(name) -> Path:
+    """The scene file a SCENE argument names: a path, or a bundled example's name."""
     import scenes
 
     path = Path(name)
     if not path.exists() and name in scenes.examples():
         path = scenes.example_path(name)
-    scene = scenes.load(path)
+    return path
+
+
+def _scene_source(name) -> str | None:
+    """A digest of the scene file's bytes, kept in the output folder's manifest so that
+    files made from another scene are never mixed in silently (None: unreadable; the
+    scene's load then names the problem)."""
+    import hashlib
+
+    try:
+        return "sha256:" + hashlib.sha256(_scene_path(name).read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def _load_scene(name, err=None):
+    import scenes
+
+    scene = scenes.load(_scene_path(name))
     if err is not None:
         for w in scene.warnings:
             err.write(f"hazard: warning: {scene.source}: {w}\n")
@@ -403,7 +440,7 @@ def _cmd_run(args, out, err):
     if args.plot:
         _needs("matplotlib", "render")
     with output_unit(args.output, command="run", overwrite=args.force, force=args.force,  # all outputs as one unit
-                     claims=names + FIXED_NAMES) as unit:
+                     claims=names + FIXED_NAMES, source=_scene_source(args.scene)) as unit:
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))  # a crash of an earlier run recovered: said
         result = _analyse(args, err)
         extra = {}
@@ -421,10 +458,21 @@ def _cmd_run(args, out, err):
     paths = [Path(args.output) / n for n in names]
     if args.json:
         out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
+        err.write(_kept_lines(unit))
     else:
         out.write(summary_text(result, verbose=args.verbose) + "\n")
-        out.write("".join(f"wrote {p}\n" for p in paths))
+        out.write("".join(f"wrote {p}\n" for p in paths) + _kept_lines(unit))
     return _finish(args, result)
+
+
+def _kept_lines(unit) -> str:
+    """What stayed in the output folder that this run did not write, and the files hazard
+    did not write that a new output replaced: said, never silently left or lost."""
+    lines = [f"kept {unit.given / n} (" + (f"written by hazard {o} before this run: make it again if the scene changed)"
+                                           if o else "not written by hazard: left as it was)") for n, o in unit.kept.items()]
+    lines += [f"replaced {unit.given / n} (not written by hazard: a new output has its name)" for n in unit.replaced_foreign]
+    lines += [f"removed {unit.given / n} (written by hazard {unit.owners[n]} from another scene)" for n in unit.dropped_stale]
+    return "".join(line + "\n" for line in lines)
 
 
 def _state_span(name, span) -> str:
@@ -551,13 +599,18 @@ def _cmd_models(args, out, err):
 def _cmd_schema(args, out, err):
     import scenes
 
-    text = json.dumps(scenes.json_schema(), indent=1)
+    if args.markdown:
+        from scenes.reference import schema_markdown
+
+        text = schema_markdown()
+    else:
+        text = json.dumps(scenes.json_schema(), indent=1)
     if args.output:
         from .report import atomic_write_text
 
         atomic_write_text(Path(args.output), text)
     else:
-        out.write(text + "\n")
+        out.write(text.rstrip("\n") + "\n")
     return EXIT_OK
 
 
@@ -799,7 +852,8 @@ def _cmd_render(args, out, err):
     from . import render
     from .progress import progress_to
 
-    with output_unit(args.output, command="render", overwrite=args.force, force=args.force) as unit:  # all renders as one unit
+    with output_unit(args.output, command="render", overwrite=args.force, force=args.force,  # all renders as one unit
+                     source=_scene_source(args.scene)) as unit:
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))
         result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
         with progress_to(None if args.quiet else err):  # bars on a terminal only
@@ -846,13 +900,14 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 
 
 def _cmd_report(args, out, err):
-    from brdfmodels._unit import output_unit
+    from brdfmodels._unit import output_unit, read_sources
 
     from .review import PdfError, read_report
 
     read_report(args.out_dir)  # a clear line naming the folder before anything is staged
     failed = None
-    with output_unit(args.out_dir, command="report", overwrite=True, force=True) as unit:  # the run's files are kept
+    with output_unit(args.out_dir, command="report", overwrite=True, force=True,  # the run's files are kept
+                     source=read_sources(Path(args.out_dir)).get("run")) as unit:  # the page is of the run's scene
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))
         unit.carry()  # the page reads report.json and the pictures in the folder
         try:
@@ -896,6 +951,9 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
     argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]
+    if argv[:1] == ["--version"]:  # to the given stdout (argparse's version action writes to sys.stdout)
+        out.write(_version_line() + "\n")
+        return EXIT_OK
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -111,7 +111,8 @@ class AimTrackSpec(_Strict):
     and ``elevation_rate_deg_s`` from the ``[laser]`` aim over ``times_s = [t0, t1]``. Before
     the first and after the last time the aim holds."""
 
-    times_s: list[Time] = Field(min_length=1, max_length=100_000)
+    times_s: list[Time] = Field(min_length=1, max_length=100_000, description=(
+        "scenario times [s], strictly increasing (required): the key times of aim_m, or the span [t0, t1] of the rates"))
     aim_m: list[Vec3] | None = Field(default=None, description="aim points [m] at times_s (or aim_geo)")
     aim_geo: list[GeoPos] | None = Field(default=None, description="aim points [[lat_deg, lon_deg, height_m], ...] (needs a [site])")
     azimuth_rate_deg_s: float | None = Field(default=None, ge=-3600.0, le=3600.0, description="slew rate in bearing [deg/s], clockwise from +y")
@@ -134,7 +135,7 @@ class TargetTrackSpec(_Strict):
     """A target moving: its ``center_m`` at ``times_s`` (linear between; held before and after;
     the shape keeps its orientation)."""
 
-    times_s: list[Time] = Field(min_length=1, max_length=100_000)
+    times_s: list[Time] = Field(min_length=1, max_length=100_000, description="scenario times [s] of center_m, strictly increasing (required)")
     center_m: list[Vec3] | None = Field(default=None, description="the centre [m] at times_s (or center_geo)")
     center_geo: list[GeoPos] | None = Field(default=None, description="the centre as [[lat_deg, lon_deg, height_m], ...] (needs a [site])")
 
@@ -151,8 +152,11 @@ class SectorSpec(_Strict):
     """Where the beam may point: compass bearings clockwise from +y (north) and elevations
     above the horizontal, both [deg], each ``[low, high]``."""
 
-    azimuth_deg: list[Annotated[float, Field(ge=-720.0, le=720.0)]] = Field(min_length=2, max_length=2)
-    elevation_deg: list[Annotated[float, Field(ge=-90.0, le=90.0)]] = Field(min_length=2, max_length=2)
+    azimuth_deg: list[Annotated[float, Field(ge=-720.0, le=720.0)]] = Field(min_length=2, max_length=2, description=(
+        "[low, high] compass bearings [deg], clockwise from +y (north with a [site]); 0 <= high - low <= 360 "
+        "([350, 370] spans north); required"))
+    elevation_deg: list[Annotated[float, Field(ge=-90.0, le=90.0)]] = Field(min_length=2, max_length=2, description=(
+        "[low, high] elevations above the horizontal (the x-y plane) [deg], -90 to 90; required"))
 
     @model_validator(mode="after")
     def _order(self):
@@ -190,7 +194,8 @@ class LaserSpec(_Strict):
     aim_m: Vec3 | None = Field(default=None, description="point the beam is aimed at [m] (or aim_geo)")
     aim_geo: GeoPos | None = Field(default=None, description=_GEO.format("aim_m"))
     aim_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("aim_geo"))
-    direction: Vec3 | None = Field(default=None, description="beam direction (alternative to aim_m)")
+    direction: Vec3 | None = Field(default=None, description=(
+        "beam direction, a vector of any length in the world frame (normalised; unitless), instead of aim_m"))
     polarization: Literal["unknown", "unpolarized"] = Field(default="unknown", description=(
         "the beam's polarisation for Fresnel mirrors (materials given by n and k): 'unknown' (default) takes the "
         "larger of the s and p reflectances, an upper bound for any polarisation; 'unpolarized' their mean (a randomly "
@@ -198,7 +203,9 @@ class LaserSpec(_Strict):
     pointing_error_rad: float = Field(default=0.0, ge=0, le=0.5, description=(
         "aiming error of the beam (boresight retention + tracking) [rad]: a bound, or one standard deviation "
         "with pointing_error_kind = 'sigma'"))
-    pointing_error_kind: Literal["bound", "sigma"] = "bound"
+    pointing_error_kind: Literal["bound", "sigma"] = Field(default="bound", description=(
+        "how pointing_error_rad is meant: 'bound' (default; the buffer is pointing_error_rad) or 'sigma' (one standard "
+        "deviation; the buffer is pointing_error_sigmas of them)"))
     pointing_error_sigmas: float | None = Field(default=None, gt=0, le=10, description=(
         "with pointing_error_kind = 'sigma': the buffer is this many standard deviations (required: no default is assumed)"))
     pointing_error_source: str = Field(default="", max_length=1000, description="where the pointing error comes from (recorded in the report)")
@@ -268,7 +275,8 @@ class LaserSpec(_Strict):
 
 class ExposureSpec(_Strict):
     duration_s: float = Field(ge=1e-13, le=3e4, description="exposure duration the MPE applies to [s]")
-    standard: Literal[STANDARD_KEYS] = "ansi-z136.1-2014"
+    standard: Literal[STANDARD_KEYS] = Field(default="ansi-z136.1-2014", description=(
+        "the MPE tables used (default 'ansi-z136.1-2014'; IEC 60825-1:2014 and both 2007 editions for comparison)"))
     extended_source: bool = Field(default=False, description=(
         "apply C_E per observer from the diffuse spot's angular subtense (default false: point-source MPE, conservative)"))
     optics: list[OpticsSpec] = Field(default_factory=list, max_length=16, description=(
@@ -277,9 +285,9 @@ class ExposureSpec(_Strict):
 
 
 class OxidationSpec(_Strict):
-    activation_temperature_k: float = Field(ge=0, le=1e6)
-    rate_per_s: float = Field(ge=0, le=1e12)
-    initial_extinction: float = Field(ge=0, le=1e3)
+    activation_temperature_k: float = Field(ge=0, le=1e6, description="activation temperature T0 of the oxidation law [K] (required)")
+    rate_per_s: float = Field(ge=0, le=1e12, description="rate constant of the oxidation law [1/s] (required)")
+    initial_extinction: float = Field(ge=0, le=1e3, description="extinction of the oxide at t = 0 [dimensionless] (required)")
 
 
 _StateName = Literal["temperature_k", "extinction", "time_s", "reflectance_factor", "melt_fraction"]
@@ -295,18 +303,27 @@ class HistorySpec(_Strict):
     gives ``states`` as pairs (or a CSV with both columns).
     """
 
-    kind: Literal["series", "heating"]
-    state: _StateName | Annotated[list[_StateName], Field(min_length=2, max_length=2)] = "temperature_k"
-    times_s: list[Annotated[float, Field(ge=-1e9, le=1e9)]] | None = None
+    kind: Literal["series", "heating"] = Field(description=(
+        "'series': a measured state series (times_s and states, or file); 'heating': the thin-plate heating model (required)"))
+    state: _StateName | Annotated[list[_StateName], Field(min_length=2, max_length=2)] = Field(default="temperature_k", description=(
+        "the state the material's BRDF is tabulated over (default 'temperature_k' [K]; extinction, melt_fraction and "
+        "reflectance_factor are dimensionless, time_s [s]), or two names for a two-state material"))
+    times_s: list[Annotated[float, Field(ge=-1e9, le=1e9)]] | None = Field(default=None, description=(
+        "a series' times [s] from the start of the exposure, strictly increasing (with states; or file)"))
     states: (list[Annotated[float, Field(ge=-1e9, le=1e9)]]
-             | list[Annotated[list[Annotated[float, Field(ge=-1e9, le=1e9)]], Field(min_length=2, max_length=2)]] | None) = None
-    file: Name | None = None
-    plate: Literal["stainless_steel", "copper"] | None = None
+             | list[Annotated[list[Annotated[float, Field(ge=-1e9, le=1e9)]], Field(min_length=2, max_length=2)]] | None) = Field(
+        default=None, description="a series' state values at times_s, in the state's unit (pairs for two states)")
+    file: Name | None = Field(default=None, description=(
+        "a series as CSV with columns time_s and the state name(s); relative to the scene file"))
+    plate: Literal["stainless_steel", "copper"] | None = Field(default=None, description=(
+        "a heating history's plate material (required for kind = 'heating')"))
     thickness_m: float | None = Field(default=None, ge=1e-6, le=1.0, description="plate thickness [m], 1 um to 1 m")
-    initial_reflectance: float | None = Field(default=None, ge=0, le=1)
-    oxidation: OxidationSpec | None = None
+    initial_reflectance: float | None = Field(default=None, ge=0, le=1, description=(
+        "reflectance of the plate at t = 0 at the laser wavelength [0-1] (default: the stainless_steel or copper preset's)"))
+    oxidation: OxidationSpec | None = Field(default=None, description="an oxidation law darkening the heated plate (default none)")
     rtol: float = Field(default=1e-7, ge=1e-14, le=0.1, description="heating ODE tolerance (1e-14 to 0.1)")
-    extrapolation: Literal["error", "clamp"] = "clamp"
+    extrapolation: Literal["error", "clamp"] = Field(default="clamp", description=(
+        "a series' analysis times outside its times_s: 'clamp' (default; its end states are held) or 'error' (refused)"))
 
     @property
     def state_names(self) -> list:
@@ -355,9 +372,10 @@ class MaterialSpec(BaseModel):
 
     model_config = ConfigDict(extra="allow", frozen=True, strict=True, allow_inf_nan=False)
 
-    model: Name | None = None
-    file: Name | None = None
-    library: Name | None = None
+    model: Name | None = Field(default=None, description=(
+        "a registered BRDF model's name (hazard models), its parameters as further keys; or 'table' with a measured file"))
+    file: Name | None = Field(default=None, description="a saved BRDF (JSON), relative to the scene file")
+    library: Name | None = Field(default=None, description="a material of the library (hazard models --materials), with provenance")
     groove_angle_deg: float = Field(default=0.0, ge=-360.0, le=360.0,
                                     description="angle of the material grooves from the target tangent [deg]")
     melt_tilt_deg: float = Field(default=0.0, ge=0.0, le=45.0,
@@ -410,15 +428,26 @@ _SHAPES = Literal["plate", "disk", "box", "sphere", "cylinder", "mesh"]
 
 
 class _Shape(_Strict):
-    shape: _SHAPES
-    center_m: Vec3 = [0.0, 0.0, 0.0]
+    shape: _SHAPES = Field(description=(
+        "plate, disk, box, sphere, cylinder or mesh (required); size_m gives the sizes, in the shape's frame: "
+        "x along tangent, z along normal, y = normal x tangent"))
+    center_m: Vec3 = Field(default=[0.0, 0.0, 0.0], description=(
+        "the shape's centre [m] in the world frame (x, y horizontal, z up; east, north, up with a [site]); default the origin"))
     center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m"))
     height_agl_m: float | None = Field(default=None, ge=0, le=1e5, description=_AGL.format("center_geo"))
-    normal: Vec3 = [0.0, 0.0, 1.0]
-    tangent: Vec3 = [1.0, 0.0, 0.0]
-    size_m: list[Annotated[float, Field(ge=1e-6, le=1e6)]] | None = None  # at least 1 um, as a beam
-    file: Name | None = None
-    scale: float = Field(default=1.0, ge=1e-6, le=1e6)
+    normal: Vec3 = Field(default=[0.0, 0.0, 1.0], description=(
+        "the shape's z axis, a world vector of any length (unitless): a plate's or disk's front face normal, a cylinder's "
+        "axis, a box's third edge; default up"))
+    tangent: Vec3 = Field(default=[1.0, 0.0, 0.0], description=(
+        "the shape's x axis (made perpendicular to normal; unitless): the first size of a plate or box, the material's "
+        "groove direction; default +x"))
+    size_m: list[Annotated[float, Field(ge=1e-6, le=1e6)]] | None = Field(default=None, description=(  # at least 1 um, as a beam
+        "sizes [m], full lengths: plate [width along tangent, height along normal x tangent]; disk [diameter]; box "
+        "[edge along tangent, edge along normal x tangent, edge along normal]; sphere [diameter]; cylinder [diameter, "
+        "length along normal (the axis)]; mesh: none (required for the others)"))
+    file: Name | None = Field(default=None, description=(
+        "a mesh's file (STL, OBJ, PLY or OFF) in metres x scale, in the shape's frame; relative to the scene file"))
+    scale: float = Field(default=1.0, ge=1e-6, le=1e6, description="a mesh file's units in metres (default 1: the file is in m)")
 
     @field_validator("center_m", "normal", "tangent")
     @classmethod
@@ -446,16 +475,17 @@ class _Shape(_Strict):
 
 
 class TargetSpec(_Shape):
-    name: Name = "target"
-    material: MaterialSpec
+    name: Name = Field(default="target", description="the target's name, unique among targets (default 'target')")
+    material: MaterialSpec = Field(description="how the front face reflects (a BRDF; required)")
     back: MaterialSpec | None = Field(default=None, description=(
         "material of the back face (plates, disks, open meshes); without it a beam on the back reflects nothing, and the report says so"))
-    history: HistorySpec | None = None
+    history: HistorySpec | None = Field(default=None, description=(
+        "how the target's state evolves under the beam (a dynamic BRDF); default none (a static material)"))
     track: TargetTrackSpec | None = Field(default=None, description="the target's centre over scenario time (a moving target)")
 
 
 class OccluderSpec(_Shape):
-    name: Name = "occluder"
+    name: Name = Field(default="occluder", description="the occluder's name (default 'occluder'); it blocks rays and reflects nothing")
 
 
 class SiteSpec(_Strict):
@@ -492,19 +522,24 @@ class TerrainSpec(_Strict):
     ``[site]``; resampled to ``resolution_m`` over ``extent_m`` about ``center_m``) or a
     procedural ``hill`` / ``valley`` (Gaussian bump) / ``flat`` ground."""
 
-    kind: Literal["heightmap", "dem", "hill", "valley", "flat"]
-    file: Name | None = None
+    kind: Literal["heightmap", "dem", "hill", "valley", "flat"] = Field(description=(
+        "heightmap (.npy grid), dem (GeoTIFF or DTED, needs a [site]), or procedural hill, valley or flat (required)"))
+    file: Name | None = Field(default=None, description="a heightmap's .npy or a dem's GeoTIFF/DTED file, relative to the scene file")
     nodata: Literal["error", "fill"] = Field(default="error", description=(
         "a DEM's missing cells in the analysis area: 'error', or 'fill' by GDAL's inverse-distance interpolation "
         "(rasterio.fill.fillnodata; the report gives how many were filled)"))
-    origin_m: list[Coord] = Field(default=[0.0, 0.0], min_length=2, max_length=2)
-    spacing_m: float | None = Field(default=None, ge=1e-3, le=1e5)
-    center_m: Vec3 = [0.0, 0.0, 0.0]
+    origin_m: list[Coord] = Field(default=[0.0, 0.0], min_length=2, max_length=2, description=(
+        "a heightmap's first node [x, y] [m] in the world frame (default [0, 0]); rows along y, columns along x"))
+    spacing_m: float | None = Field(default=None, ge=1e-3, le=1e5, description="a heightmap's node spacing [m] (required for a heightmap)")
+    center_m: Vec3 = Field(default=[0.0, 0.0, 0.0], description=(
+        "centre [m] of a procedural hill or valley, or of a dem's resampled grid; default the origin"))
     center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m") + "; a dem's grid centre")
-    height_m: float = Field(default=10.0, ge=-1e5, le=1e5)
-    radius_m: float = Field(default=100.0, ge=1e-3, le=1e7)
+    height_m: float = Field(default=10.0, ge=-1e5, le=1e5, description=(
+        "a hill's height (a valley's depth) above center_m's z [m], default 10; a flat ground's height is center_m's z"))
+    radius_m: float = Field(default=100.0, ge=1e-3, le=1e7, description=(
+        "a hill's or valley's width [m], the Gaussian's standard deviation: height_m exp(-r^2 / (2 radius_m^2)); default 100"))
     extent_m: float = Field(default=500.0, ge=1e-3, le=1e7, description="half-width of the procedural ground [m]")
-    resolution_m: float = Field(default=5.0, ge=1e-3, le=1e6)
+    resolution_m: float = Field(default=5.0, ge=1e-3, le=1e6, description="grid spacing [m] of procedural and dem ground, default 5")
     material: MaterialSpec | None = Field(default=None, description=(
         "how the ground reflects the beam that lands on it (static); default Lambertian of reflectance "
         "TERRAIN_DEFAULT_REFLECTANCE = 1, the most any diffuse ground can return (snow at 1 um reaches 0.8-0.9)"))
@@ -523,9 +558,9 @@ class TerrainSpec(_Strict):
 
 
 class OpticsSpec(_Strict):
-    magnification: float = Field(ge=1, le=1e4)
-    objective_diameter_m: float = Field(gt=0, le=100.0)
-    transmission: float = Field(default=1.0, gt=0, le=1)
+    magnification: float = Field(ge=1, le=1e4, description="magnification of the optical aid (e.g. 7 for 7x50 binoculars; required)")
+    objective_diameter_m: float = Field(gt=0, le=100.0, description="objective (entrance) diameter [m] (0.05 for 7x50 binoculars; required)")
+    transmission: float = Field(default=1.0, gt=0, le=1, description="optical transmission [0-1] (default 1, the conservative bound)")
 
 
 class ObserverSpec(_Strict):
@@ -533,24 +568,25 @@ class ObserverSpec(_Strict):
     ``grid`` (``origin_m``, ``u_m``, ``v_m``, ``counts``) or a spherical ``shell``
     (``center_m``, ``radius_m``, ``count``, upper hemisphere)."""
 
-    name: Name
-    points_m: list[Vec3] | None = None
-    start_m: Vec3 | None = None
-    end_m: Vec3 | None = None
-    count: int | None = Field(default=None, ge=1)
-    origin_m: Vec3 | None = None
-    u_m: Vec3 | None = None
-    v_m: Vec3 | None = None
-    counts: list[Annotated[int, Field(ge=1)]] | None = Field(default=None, min_length=2, max_length=2)
-    center_m: Vec3 | None = None
-    radius_m: float | None = Field(default=None, gt=0, le=1e8)
+    name: Name = Field(description="the group's name, unique among observer groups (required)")
+    points_m: list[Vec3] | None = Field(default=None, description="explicit eye positions [[x, y, z], ...] [m] in the world frame")
+    start_m: Vec3 | None = Field(default=None, description="a line's first point [m] (or a straight track's start)")
+    end_m: Vec3 | None = Field(default=None, description="a line's last point [m]")
+    count: int | None = Field(default=None, ge=1, description="points on a line (both ends included) or a shell")
+    origin_m: Vec3 | None = Field(default=None, description="a grid's first corner [m]")
+    u_m: Vec3 | None = Field(default=None, description="a grid's whole first edge [m] (a world vector from origin_m to the last column)")
+    v_m: Vec3 | None = Field(default=None, description="a grid's whole second edge [m] (from origin_m to the last row)")
+    counts: list[Annotated[int, Field(ge=1)]] | None = Field(default=None, min_length=2, max_length=2, description=(
+        "a grid's [points along u_m, points along v_m], corners included"))
+    center_m: Vec3 | None = Field(default=None, description="a shell's centre [m]")
+    radius_m: float | None = Field(default=None, gt=0, le=1e8, description="a shell's radius [m] (points on the upper hemisphere)")
     points_geo: list[GeoPos] | None = Field(default=None, description=_GEO.format("each of points_m"))
     start_geo: GeoPos | None = Field(default=None, description=_GEO.format("start_m"))
     end_geo: GeoPos | None = Field(default=None, description=_GEO.format("end_m"))
     origin_geo: GeoPos | None = Field(default=None, description=_GEO.format("origin_m"))
     center_geo: GeoPos | None = Field(default=None, description=_GEO.format("center_m"))
     eye_height_m: float | None = Field(default=None, ge=0, le=1e5, description="height above the terrain [m]; replaces z")
-    optics: OpticsSpec | None = None
+    optics: OpticsSpec | None = Field(default=None, description="the optical aid every observer of the group uses (default: the naked eye)")
     kind: Literal["track"] | None = Field(default=None, description=(
         "'track': one observer moving (an aircraft): times_s with positions_m (or positions_geo), or start_m, "
         "velocity_m_s and duration_s"))
@@ -651,8 +687,10 @@ class ObserverSpec(_Strict):
 
 
 class AtmosphereSpec(_Strict):
-    attenuation_per_m: float | None = Field(default=None, ge=0, le=10.0)
-    visibility_km: float | None = Field(default=None, ge=1e-3, le=1e4)
+    attenuation_per_m: float | None = Field(default=None, ge=0, le=10.0, description=(
+        "atmospheric attenuation coefficient mu [1/m] (Beer-Lambert exp(-mu d)); default none: no attenuation (conservative)"))
+    visibility_km: float | None = Field(default=None, ge=1e-3, le=1e4, description=(
+        "meteorological visibility [km], converted to mu by the Kruse model at the wavelength; instead of attenuation_per_m"))
 
     @model_validator(mode="after")
     def _one(self):
@@ -666,7 +704,7 @@ class AnalysisSpec(_Strict):
 
     # lower bounds: the MPE tables start at 1e-13 s; a 1e-308 s window overflowed the heating ODE's 1/h (no field named)
     time_end_s: float | None = Field(default=None, ge=1e-13, le=1e6, description="end of the history window [s], 1e-13 to 1e6 (default: exposure duration)")
-    time_step_s: float | None = Field(default=None, ge=1e-15, le=1e6, description="time step of the dynamic analysis [s], 1e-15 to 1e6")
+    time_step_s: float | None = Field(default=None, ge=1e-15, le=1e6, description="time step of the dynamic analysis [s], 1e-15 to 1e6 (default: time_end_s / 100)")
     direction_grid_deg: float = Field(default=2.0, gt=0, le=30, description="keep-out lobe grid resolution [deg]")
     refine_levels: int = Field(default=3, ge=0, le=8, description=(
         "most 4-way splits of a keep-out lobe cell; cells are split only where the volume error estimate asks "
@@ -687,7 +725,9 @@ class AnalysisSpec(_Strict):
         cells = max(2, round(90 / g)) * max(4, round(360 / g)) * 4.0**self.refine_levels if g >= 1e-6 else math.inf
         check_limit("KEEPOUT_CELLS", float(cells), f"keep-out cells at direction_grid_deg={g:g}, refine_levels={self.refine_levels}")
         return self
-    outputs: list[Literal["report", "csv", "render"]] = ["report", "csv"]
+    outputs: list[Literal["report", "csv", "render"]] = Field(default=["report", "csv"], description=(
+        "not read by the analysis (the command line chooses the files: hazard run --plot/--report, hazard render); "
+        "accepted so older scenes load"))
 
 
 class RangeSpec(_Strict):
@@ -738,7 +778,7 @@ class AirZoneSpec(_Strict):
     terrain (above z = 0 without one), where the effective irradiance must stay below its
     ``limit`` (FAA levels, range-safety.md section 5)."""
 
-    name: Name
+    name: Name = Field(description="the zone's name, unique among zones (required)")
     limit: Literal["lfed", "czed", "szed", "nohd"] = Field(description=(
         "lfed: 50 nW/cm^2 (laser-free), czed: 5 uW/cm^2 (critical), szed: 100 uW/cm^2 (sensitive), nohd: the MPE"))
     boundary_m: list[Annotated[list[Coord], Field(min_length=2, max_length=2)]] | None = Field(
@@ -770,7 +810,7 @@ class AirspaceSpec(_Strict):
         "photopic: the CIE 1924 V(lambda) visual correction factor; none: VCF = 1 (the most conservative)"))
     credit_attenuation: bool = Field(default=False, description=(
         "credit the atmosphere's attenuation for the visual-interference distances (the FAA zones usually do not)"))
-    zones: list[AirZoneSpec] = Field(default_factory=list, max_length=1000)
+    zones: list[AirZoneSpec] = Field(default_factory=list, max_length=1000, description="flight zones to check (default none)")
 
     @model_validator(mode="after")
     def _names(self):
@@ -842,8 +882,8 @@ class MaterialChoiceSpec(_Strict):
     """A target whose material is one of several (measured or fitted samples), drawn per
     operation with the given weights."""
 
-    target: Name
-    materials: list[MaterialSpec] = Field(min_length=1, max_length=1000)
+    target: Name = Field(description="the target's name (required)")
+    materials: list[MaterialSpec] = Field(min_length=1, max_length=1000, description="the candidate materials (BRDFs), at least one")
     weights: list[Annotated[float, Field(ge=0, le=1e12)]] | None = Field(default=None, description="relative weights (default: equal)")
 
     @model_validator(mode="after")
@@ -887,19 +927,20 @@ class UncertaintySpec(_Strict):
         default=[0.0, 0.0], description="boresight bias [right, up] of the beam axis [rad]")
     brdf_scale_sigma: float = Field(default=0.0, ge=0, le=5, description="log-normal BRDF scale per target: standard deviation of its ln (median 1)")
     brdf_scale_correlation: float = Field(default=0.0, ge=0, le=1, description="correlation of ln(scale) between targets (1: one draw for all)")
-    materials: list[MaterialChoiceSpec] = Field(default_factory=list, max_length=1000)
+    materials: list[MaterialChoiceSpec] = Field(default_factory=list, max_length=1000, description=(
+        "targets whose material is drawn from several (default none)"))
     normal_tilt_sigma_deg: float = Field(default=0.0, ge=0, le=30, description=(
         "surface-normal wander of plate and disk targets: 1-sigma per axis of a 2-D Gaussian tilt [deg]"))
     normal_wander_correlation_time_s: float | None = Field(default=None, gt=0, le=1e6, description=(
         "with it, the tilt wanders over the exposure as a random walk (Ornstein-Uhlenbeck, stationary sigma) with this correlation time [s]"))
     wander_nodes: int = Field(default=16, ge=2, le=256, description="times at which a wandering tilt is evaluated (at most)")
-    visibility: VisibilityDistributionSpec | None = None
-    scintillation: ScintillationSpec | None = None
+    visibility: VisibilityDistributionSpec | None = Field(default=None, description="visibility varying between draws (default: fixed)")
+    scintillation: ScintillationSpec | None = Field(default=None, description="scintillation of the direct and mirror beams (default none)")
     observer_position_sigma_m: float = Field(default=0.0, ge=0, le=1e5, description="observer position: 1-sigma per horizontal axis [m]")
     observer_height_sigma_m: float = Field(default=0.0, ge=0, le=1e4, description="observer height: 1-sigma [m]")
     operations: float | None = Field(default=None, gt=0, le=1e12, description=(
         "operations (shots) per year: the chance of at least one exceedance per year, Poisson"))
-    map: ProbabilityMapSpec | None = None
+    map: ProbabilityMapSpec | None = Field(default=None, description="a ground grid of exceedance probabilities (default none)")
 
     @model_validator(mode="after")
     def _choices(self):
@@ -959,21 +1000,25 @@ def check_risk(spec: "SceneSpec", draws: int | None = None, sensitivity_draws: i
 
 
 class SceneSpec(_Strict):
-    name: Name
-    description: str = Field(default="", max_length=100_000)
-    laser: LaserSpec
-    exposure: ExposureSpec
-    targets: list[TargetSpec] = Field(min_length=1)
-    occluders: list[OccluderSpec] = []
-    terrain: TerrainSpec | None = None
-    observers: list[ObserverSpec] = []
-    atmosphere: AtmosphereSpec = Field(default_factory=AtmosphereSpec)
-    analysis: AnalysisSpec = Field(default_factory=AnalysisSpec)  # built per scene: its limit checks read HAZARD_MAX_* then
-    range: RangeSpec | None = None
-    site: SiteSpec | None = None
-    motion: MotionSpec | None = None
-    airspace: AirspaceSpec | None = None
-    uncertainty: UncertaintySpec | None = None
+    """A scene file. Positions are in one right-handed world frame [m], z up: with a
+    ``[site]`` the exact local east-north-up frame at the site's origin (x east, y north),
+    else a local frame whose +y the bearings count from."""
+
+    name: Name = Field(description="the scene's name (required; in every report)")
+    description: str = Field(default="", max_length=100_000, description="free text for the report (default empty)")
+    laser: LaserSpec = Field(description="the laser: power or pulses, beam (1/e diameter and full-angle divergence), position and aim (required)")
+    exposure: ExposureSpec = Field(description="exposure duration and the standard the MPE comes from (required)")
+    targets: list[TargetSpec] = Field(min_length=1, description="what the beam may hit and reflect from (at least one)")
+    occluders: list[OccluderSpec] = Field(default=[], description="shapes that block rays and reflect nothing (default none)")
+    terrain: TerrainSpec | None = Field(default=None, description="the ground (default none: nothing below the scene)")
+    observers: list[ObserverSpec] = Field(default=[], description="where eyes may be: the MPE is checked at each point (default none)")
+    atmosphere: AtmosphereSpec = Field(default_factory=AtmosphereSpec, description="attenuation along the paths (default none, conservative)")
+    analysis: AnalysisSpec = Field(default_factory=AnalysisSpec, description="accuracy knobs (defaults as listed)")  # built per scene: its limit checks read HAZARD_MAX_* then
+    range: RangeSpec | None = Field(default=None, description="the range boundary the danger zones are checked against (default none)")
+    site: SiteSpec | None = Field(default=None, description="where the scene is on the earth (default none: a local frame only)")
+    motion: MotionSpec | None = Field(default=None, description="time stepping of things that move (defaults as listed)")
+    airspace: AirspaceSpec | None = Field(default=None, description="FAA visual-interference levels and flight zones (visible lasers)")
+    uncertainty: UncertaintySpec | None = Field(default=None, description="the random inputs of hazard risk (default none)")
 
     @property
     def has_motion(self) -> bool:

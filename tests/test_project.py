@@ -49,11 +49,45 @@ def test_examples_run(script, args, expect, tmp_path):
     assert expect in out.stdout
 
 
-def test_every_package_is_in_the_wheel():
-    """A sub-package missing from pyproject's list installs nowhere but in editable mode."""
+def _setuptools_config() -> dict:
     import tomllib
 
-    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    return tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+
+
+def test_every_package_is_in_the_wheel():
+    """The package list is exactly the folders with an ``__init__.py`` plus the mapped ones
+    (``hazard.studies`` = examples/studies): a sub-package missing from the list installs
+    nowhere but in editable mode, and a listed one that is gone breaks the build."""
+    config = _setuptools_config()
     found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("brdfmodels", "scenes", "hazard")
              for p in (ROOT / top).rglob("__init__.py")}
-    assert found <= listed, f"not in [tool.setuptools] packages: {sorted(found - listed)}"
+    mapped = set(config.get("package-dir", {}))
+    assert all((ROOT / folder).is_dir() for folder in config.get("package-dir", {}).values())
+    assert set(config["packages"]) == found | mapped, f"pyproject packages vs folders: {sorted(set(config['packages']) ^ (found | mapped))}"
+
+
+def test_every_package_data_glob_matches_a_file():
+    """A glob that matches nothing ships nothing and hides a missing file."""
+    config = _setuptools_config()
+    dirs = config.get("package-dir", {})
+    for package, globs in config["package-data"].items():
+        folder = ROOT / dirs.get(package, package.replace(".", "/"))
+        for pattern in globs:
+            assert list(folder.glob(pattern)), f"package-data {package}: {pattern!r} matches no file in {folder}"
+
+
+def test_one_version_source_and_typed_markers():
+    import tomllib
+
+    import hazard
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert "version" not in project and "version" in project["dynamic"]
+    assert _setuptools_config()["dynamic"]["version"] == {"attr": "hazard.__version__"}
+    assert project["license"] == "Apache-2.0"  # SPDX expression (setuptools >= 77)
+    out = subprocess.run([sys.executable, "-m", "hazard", "--version"], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout == f"hazard (laser-hazard) {hazard.__version__}\n"
+    for top in ("brdfmodels", "scenes", "hazard"):
+        assert (ROOT / top / "py.typed").is_file()
+        assert "py.typed" in _setuptools_config()["package-data"][top]

@@ -443,3 +443,145 @@ def test_hazard_run_says_what_it_recovered(tmp_path, monkeypatch, results):
     assert not out.exists()
     code, _, err = run("run", "plate", "-o", out, "--quiet")  # recovered first, then refused: its outputs are back
     assert code == 2 and "restored the previous outputs after an interrupted switch" in err and snapshot(out) == old
+
+
+def test_force_into_another_scenes_folder_replaces_the_runs_set(tmp_path, monkeypatch, results):
+    """Issue 31 item 6: ``--force`` into a folder of another scene. The earlier run wrote
+    hazard_local_frame.tif (a scene with a ground grid); the new scene writes none: the
+    stale grid goes (the new report says it was not written, and it is not there), while
+    files hazard did not write and another command's pictures stay, each said on stdout."""
+    from hazard import map_outputs
+
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
+    real = map_outputs.map_files
+    out = tmp_path / "o"
+    with monkeypatch.context() as m:  # the other scene's set: its map outputs include the grid
+        m.setattr(map_outputs, "map_files", lambda result: ({**real(result)[0], "hazard_local_frame.tif": b"II*\0other scene"},
+                                                             real(result)[1]))
+        assert run("run", "plate", "-o", out, "--quiet")[0] == 0
+    assert (out / "hazard_local_frame.tif").exists()
+    write_set(out, {"keepout.png": b"k"}, command="render")
+    (out / "notes.txt").write_text("not ours")
+    (out / "zones.kml").write_bytes(b"<kml/> placed by another program")  # an output's name, not in the manifest
+    code, stdout, _ = run("run", "plate", "-o", out, "--quiet", "--force")
+    assert code == 0
+    doc = json.loads((out / "report.json").read_text())
+    assert "hazard_local_frame.tif" in doc["map_outputs"]["not_written"]
+    assert not (out / "hazard_local_frame.tif").exists()  # its own stale file removed
+    files = json.loads((out / MANIFEST).read_text())["files"]
+    assert "hazard_local_frame.tif" not in files and files["keepout.png"] == "render"
+    assert "notes.txt" not in files and "zones.kml" not in files
+    assert (out / "notes.txt").read_text() == "not ours" and (out / "zones.kml").read_bytes().startswith(b"<kml/> placed")
+    assert f"kept {out / 'notes.txt'} (not written by hazard: left as it was)" in stdout
+    assert f"kept {out / 'zones.kml'} (not written by hazard: left as it was)" in stdout
+    assert f"kept {out / 'keepout.png'} (written by hazard render before this run" in stdout
+    assert "hazard_local_frame.tif" not in stdout
+
+
+def test_force_says_which_foreign_file_a_new_output_replaced(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "report.json").write_text("someone else's")
+    (out / "keep.txt").write_text("k")
+    unit = write_set(out, NEW, force=True)
+    assert unit.replaced_foreign == ["report.json"] and unit.kept == {"keep.txt": ""}
+    assert snapshot(out) == {**NEW, "keep.txt": b"k"}
+    unit = write_set(out, {"report.json": b"3"}, overwrite=True, force=True)  # the run's own table goes: not "kept"
+    assert unit.replaced_foreign == [] and unit.kept == {"keep.txt": ""}
+
+
+_NAMES = st.sampled_from(["report.json", "observers.csv", "plan.png", "hazard.tif", "keepout.png", "notes.txt", "a.csv"])
+_STEPS_OWN = st.lists(st.tuples(st.sampled_from(["run", "render", "foreign"]), st.sets(_NAMES, min_size=1, max_size=4)),
+                      min_size=1, max_size=6)
+
+
+def _check_ownership(out: Path, steps) -> None:
+    """Random writes by two commands and by another program, each command with --force:
+    after each, the command's new set is there, its own stale files are gone, every other
+    file stays byte for byte, and ``kept`` / ``replaced_foreign`` name exactly the
+    survivors it did not write and the foreign files it overwrote (the reference is a dict
+    of owners kept in the test, not the manifest)."""
+    owner: dict = {}  # name -> "run" / "render" / "" (another program)
+    content: dict = {}
+    for k, (who, names) in enumerate(steps):
+        if who == "foreign":
+            out.mkdir(parents=True, exist_ok=True)
+            for n in names:
+                if n not in owner:  # another program writes only new names
+                    (out / n).write_bytes(f"foreign {k} {n}".encode())
+                    owner[n], content[n] = "", f"foreign {k} {n}".encode()
+            continue
+        files = {n: f"{who} {k} {n}".encode() for n in names}
+        unit = write_set(out, files, command=who, overwrite=True, force=True)
+        replaced = sorted(n for n in names if owner.get(n) == "")
+        for n in [n for n, o in owner.items() if o == who and n not in names]:
+            del owner[n], content[n]  # the command's own stale file: removed
+        kept = {n: o for n, o in sorted(owner.items()) if n not in names}
+        owner.update({n: who for n in names})
+        content.update(files)
+        assert unit.replaced_foreign == replaced
+        assert unit.kept == kept
+        assert snapshot(out) == content and leftovers(out) == []
+        listed = json.loads((out / MANIFEST).read_text())["files"]
+        assert listed == {n: o for n, o in owner.items() if o}
+
+
+@settings(derandomize=True, deadline=None, max_examples=15)
+@given(steps=_STEPS_OWN)
+def test_property_force_replaces_only_its_own_set(tmp_path_factory, steps):
+    _check_ownership(tmp_path_factory.mktemp("own") / "o", steps)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=300)
+@given(steps=_STEPS_OWN)
+def test_property_force_replaces_only_its_own_set_many(tmp_path_factory, steps):
+    _check_ownership(tmp_path_factory.mktemp("own") / "o", steps)
+
+
+def test_other_commands_files_from_another_source_never_mix(tmp_path):
+    """A render of scene A beside a run of scene B: refused without --force, dropped (and
+    listed) with it; of the same scene, kept. Units without a source check nothing."""
+    out = tmp_path / "o"
+    write_set(out, OLD, source="sha256:A")
+    write_set(out, {"keepout.png": b"k"}, command="render", source="sha256:A")
+    unit = write_set(out, NEW, overwrite=True, source="sha256:A")  # the same scene again: the render stays
+    assert unit.dropped_stale == [] and unit.kept == {"keepout.png": "render"}
+    assert json.loads((out / MANIFEST).read_text())["sources"] == {"render": "sha256:A", "run": "sha256:A"}
+    with pytest.raises(OutputFolderError, match=r"files of hazard render \(keepout.png\) made from another input: pass --force"):
+        write_set(out, NEW, overwrite=True, source="sha256:B")
+    assert snapshot(out) == {**NEW, "keepout.png": b"k"} and leftovers(out) == []
+    (out / "notes.txt").write_text("not ours")
+    unit = write_set(out, {"report.json": b"B"}, overwrite=True, force=True, source="sha256:B")
+    assert unit.dropped_stale == ["keepout.png"] and unit.kept == {"notes.txt": ""}
+    assert snapshot(out) == {"report.json": b"B", "notes.txt": b"not ours"}
+    doc = json.loads((out / MANIFEST).read_text())
+    assert doc["files"] == {"report.json": "run"} and doc["sources"] == {"run": "sha256:B"}
+    unit = write_set(out, {"lobe.gif": b"g"}, command="render", force=True)  # no source given: nothing is checked or dropped
+    assert unit.dropped_stale == [] and snapshot(out)["report.json"] == b"B"
+
+
+def test_hazard_run_of_another_scene_drops_its_render_and_page(tmp_path, monkeypatch, results):
+    """The review board never gets scene A's 3-D render or page beside scene B's report."""
+    monkeypatch.setattr(cli, "_analyse", lambda args, err: results[os.path.basename(args.scene)])
+    out = tmp_path / "o"
+    assert run("run", "plate", "-o", out, "--quiet")[0] == 0
+    write_set(out, {"keepout.png": b"plate render"}, command="render", source=cli._scene_source("plate"))
+    code, stdout, _ = run("report", out, "--quiet")
+    assert code == 0 and json.loads((out / MANIFEST).read_text())["files"]["report.html"] == "report"
+    code, _, err = run("run", "binoculars", "-o", out, "--quiet")
+    assert code == 2 and "--force" in err  # refused (its own report.json is there)
+    code, _, err = run("render", "binoculars", "-o", out, "--quiet")  # another command, another scene: refused before any work
+    assert code == 2 and "files of hazard report (report.html) and hazard run (observers.csv, report.json" in err
+    assert "made from another input: pass --force" in err
+    code, stdout, _ = run("run", "binoculars", "-o", out, "--quiet", "--force")
+    assert code == 0
+    assert f"removed {out / 'keepout.png'} (written by hazard render from another scene)" in stdout
+    assert f"removed {out / 'report.html'} (written by hazard report from another scene)" in stdout
+    assert not (out / "keepout.png").exists() and not (out / "report.html").exists()
+    doc = json.loads((out / MANIFEST).read_text())
+    assert doc["sources"] == {"run": cli._scene_source("binoculars")} != {"run": cli._scene_source("plate")}
+    # the same scene again keeps a render of it
+    write_set(out, {"keepout.png": b"binoculars render"}, command="render", source=cli._scene_source("binoculars"))
+    code, stdout, _ = run("run", "binoculars", "-o", out, "--quiet", "--force")
+    assert code == 0 and (out / "keepout.png").read_bytes() == b"binoculars render" and "removed" not in stdout
