@@ -76,8 +76,15 @@ def _tables(node: dict, defs: dict) -> list:
 def _default(name: str, prop: dict, table: dict) -> str:
     if name in table.get("required", ()):
         return "required"
+    # required in one of two forms (power_w or power = "20 kW"): scenes.quantities.schema_with_units
+    either = [g for rule in table.get("allOf", ()) for g in rule.get("anyOf", ())]
+    if any(name in g.get("required", ()) for g in either):
+        return "required"
     if "default" not in prop:  # a default_factory: an empty list, or a table of its keys' defaults
-        return "[]" if prop.get("type") == "array" else "its keys' defaults"
+        if prop.get("type") == "array":
+            return "[]"
+        is_table = "$ref" in prop or "properties" in prop or any("$ref" in n for n in prop.get("anyOf", ()))
+        return "its keys' defaults" if is_table else "none"  # else an optional unit form (power = "20 kW")
     value = prop["default"]
     return "none" if value is None else json.dumps(value, separators=(", ", " = "))
 
