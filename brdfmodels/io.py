@@ -241,7 +241,7 @@ def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
             names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
             used = [j for j, n in enumerate(names) if n not in ignore]
             if len(used) != 5:
-                raise ValueError(f"{path}: line {k}: VARS: expected five columns used (theta_i, phi_i, theta_s, phi_s and one "
+                raise ValueError(f"{path}: line {k}: VARS: expected five names used (theta_i, phi_i, theta_s, phi_s and one "
                                  f"BRDF column: monochrome; several value columns are refused, name the others in "
                                  f"ignore_columns), got {len(used)} of {len(names)}")
         elif s[0].isdigit() or s[0] in "+-.":
@@ -307,7 +307,8 @@ def _csv_header(path, cols, ignore):
                              f"{', '.join(_ANGLES)}, one value column (brdf_per_sr or reflectance_factor), "
                              f"{', '.join(_CSV_FIXED + CSV_STATES)} or state_<name>; a column to skip goes in ignore_columns")
         if cols.count(c) > 1 and c not in ignore:
-            raise ValueError(f"{path}: line 1: column {j + 1} appears {cols.count(c)} times; expected once")
+            name = c if c in _ANGLES + _CSV_FIXED + CSV_STATES + ("brdf_per_sr", "reflectance_factor") else j + 1
+            raise ValueError(f"{path}: line 1: column {name} appears {cols.count(c)} times; expected once")
     return value[0]
 
 
