@@ -336,20 +336,14 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
     ignore = set(ignore_columns)
     value = _csv_header(path, cols, ignore)
     idx = {c: cols.index(c) for c in cols}
-    data = {c: [] for c in cols if c not in ("test_id",) and c not in ignore}
-    tid = []
-    for k, r in enumerate(rows[1:], start=2):
-        if not any(x.strip() for x in r):
-            continue
-        if len(r) != len(cols):
-            raise ValueError(f"{path}: line {k}: {len(r)} cells, expected {len(cols)}")
-        for c in data:
-            data[c].append(_csv_cell(path, k, idx[c], c, r[idx[c]]))
-        tid.append(r[idx["test_id"]] if "test_id" in idx else "0")
-    if not tid:
+    body = [(k, r) for k, r in enumerate(rows[1:], start=2) if any(x.strip() for x in r)]
+    short = next(((k, r) for k, r in body if len(r) != len(cols)), None)
+    if short is not None:
+        raise ValueError(f"{path}: line {short[0]}: {len(short[1])} cells, expected {len(cols)}")
+    if not body:
         raise ValueError(f"{path}: no data rows")
-    d = {c: np.array(v) for c, v in data.items()}
-    d["test_id"] = np.array(tid)
+    d = {c: _csv_column(path, body, idx[c], c) for c in cols if c != "test_id" and c not in ignore}
+    d["test_id"] = np.array([r[idx["test_id"]] if "test_id" in idx else "0" for _, r in body])
     notes = []
     if "wavelength_nm" in d:
         d = _at_wavelength(path, d, wavelength_nm, notes)
@@ -361,6 +355,22 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
     s = s.with_states(states) if states else s
     s.info["notes"] = notes
     return mirror_plane_symmetric(s) if _plane(path, symmetry) else s
+
+
+def _csv_column(path, body, j, c) -> np.ndarray:
+    """Column ``j`` (named ``c``) of the rows ``body`` as finite numbers, each angle within
+    its range; the first bad cell named by its line and column."""
+    try:
+        v = np.array([r[j] for _, r in body], dtype=float)
+        ok = np.isfinite(v)
+        if c in _ANGLES:
+            ok &= ((v >= -1.8e-7) & (v <= 180.0 + 1.8e-7)) if c.startswith("theta") else (np.abs(v) <= 360.0 + 1.8e-7)
+    except ValueError:
+        ok = None
+    if ok is None or not ok.all():
+        for k, r in body:
+            _csv_cell(path, k, j, c, r[j])
+    return v
 
 
 def _csv_cell(path, k, j, c, text) -> float:

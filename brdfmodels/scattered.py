@@ -6,8 +6,9 @@ holds measured f_r [1/sr] at scattered points of Rusinkiewicz's isotropic coordi
 barycentrically on a Delaunay triangulation of those points (scipy's
 ``LinearNDInterpolator``):
 
-- at a sample the value is the sample's (to ~1e-9 relative: the triangulation is built
-  with qhull's joggle ``QJ`` so that every sample is a vertex);
+- at a sample the value is the sample's (to ~1e-7 relative: the points are moved by at
+  most 1e-9 rad before the triangulation, so that every sample is a vertex and no
+  simplex is flat);
 - between samples it is a convex combination of the 4 vertices of the enclosing simplex,
   so it never leaves their range (bounded by its neighbours, no overshoot);
 - the triangulation is made in (theta_h cos 2 phi_d, theta_h sin 2 phi_d, theta_d)
@@ -56,7 +57,8 @@ SCATTERED_OUTSIDE = ("envelope", "fit", "error")
 DHR_TOLERANCE = 0.05  # default stated uncertainty of a measured hemispherical reflectance (absolute)
 NEAREST_K = 4  # samples whose largest value a direction outside the data's hull takes
 GUARD_MIN_DEG = 5.0  # the guard points' spacing: the data's own (median nearest-neighbour distance), 5 to 10 deg
-_SAME_RAD = 1e-9  # points of the interpolation this close [rad] are one (merged into the largest value)
+_JOGGLE_RAD = 1e-9  # the points are moved this much at most before the triangulation (every sample a vertex)
+_SAME_RAD = 1e-8  # points of the interpolation this close [rad] are one (merged into the largest value)
 _SPREAD_NOTED = 1e-6  # merged samples differing by more than this (relative) are said in the notes
 _RETRO_COPIES = 72  # a theta_d = 0 sample (wi = wo) holds for every phi_d: copies every 2.5 deg
 
@@ -135,7 +137,7 @@ def _barycentric_transforms(tri) -> np.ndarray:
     out = np.full((len(v), 4, 3), np.nan)
     det = np.linalg.det(edges)
     scale = np.max(np.abs(edges), axis=(1, 2)) ** 3
-    good = np.abs(det) > 1e-12 * np.maximum(scale, 1e-300)
+    good = np.abs(det) > 1e-15 * np.maximum(scale, 1e-300)
     out[good, :3] = np.linalg.inv(edges[good])
     out[:, 3] = v[:, 3]
     return out
@@ -236,7 +238,9 @@ class ScatteredBRDF(BRDFModel):
             gval = self._beyond(g, tree, val, placeholder=True)
             tri = None
             try:
-                tri = Delaunay(np.vstack([e, g]), qhull_options="QJ Qbb")  # QJ: every sample a vertex
+                pts = np.vstack([e, g])  # joggled so that no simplex is flat (qhull's QJ left 27 % flat ones)
+                pts = pts + np.random.default_rng(0).uniform(-_JOGGLE_RAD, _JOGGLE_RAD, pts.shape)
+                tri = Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
                 tri._transform = _barycentric_transforms(tri)  # scipy's own took 21 s for 1.4e5 simplices
             except (QhullError, ValueError):  # too few or degenerate points: the policy everywhere
                 tri = None

@@ -20,6 +20,7 @@ with true DHR 0.73 at 5 deg sampling) must load and give these values.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -60,10 +61,15 @@ def abg_truth(wi, wo):
     return a / (b + x ** g)
 
 
-def _dhr(truth, theta_deg, n=800):
+@functools.lru_cache(maxsize=4)
+def _leggauss(n):
+    return np.polynomial.legendre.leggauss(n)
+
+
+def _dhr(truth, theta_deg, n=256):
     """Directional-hemispherical reflectance by a product Gauss-Legendre rule over the
     projected disk (the reference the refused files are measured against)."""
-    u, wu = np.polynomial.legendre.leggauss(n)
+    u, wu = _leggauss(n)
     r, wr = 0.5 * (u + 1.0), 0.5 * wu  # radius of the projected disk
     p, wp = math.pi * (u + 1.0), math.pi * wu
     rr, pp = np.meshgrid(r, p, indexing="ij")
@@ -72,22 +78,24 @@ def _dhr(truth, theta_deg, n=800):
     return float(np.sum(truth(wi, wo) * rr * np.outer(wr, wp)))
 
 
+def _grid_rows(truth, ti_deg, tr_deg, pr_deg):
+    """(theta_i, theta_r, phi_r) [deg] of every row (theta_i outer, phi_r inner) and the truth there."""
+    ti, tr, pr = (g.ravel() for g in np.meshgrid(ti_deg, tr_deg, pr_deg, indexing="ij"))
+    return ti, tr, pr, truth(_sph(ti, 0.0 * ti), _sph(tr, pr))
+
+
 def _csv_text(truth, ti_deg, tr_deg, pr_deg):
+    ti, tr, pr, v = _grid_rows(truth, ti_deg, tr_deg, pr_deg)
     rows = ["theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,brdf_per_sr"]
-    for ti in ti_deg:
-        for tr in tr_deg:
-            for pr in pr_deg:
-                rows.append(f"{ti},0,{tr},{pr},{float(truth(_sph(ti, 0.0), _sph(tr, pr)))!r}")
+    rows += [f"{a:g},0,{b:g},{c:g},{float(x)!r}" for a, b, c, x in zip(ti, tr, pr, v)]
     return "\n".join(rows) + "\n"
 
 
 def _astm_text(truth, ti_deg, tr_deg, pr_deg):
-    rows = [f"NUM_POINTS {len(ti_deg) * len(tr_deg) * len(pr_deg)}", "VARS theta_i, phi_i, theta_s, phi_s, brdf"]
-    for ti in ti_deg:
-        for tr in tr_deg:
-            for pr in pr_deg:
-                v = float(truth(_sph(ti, 0.0), _sph(tr, pr)))
-                rows.append(", ".join(repr(float(x)) for x in (math.radians(ti), 0.0, math.radians(tr), math.radians(pr), v)))
+    ti, tr, pr, v = _grid_rows(truth, ti_deg, tr_deg, pr_deg)
+    rows = [f"NUM_POINTS {len(v)}", "VARS theta_i, phi_i, theta_s, phi_s, brdf"]
+    rows += [", ".join(repr(float(x)) for x in (math.radians(a), 0.0, math.radians(b), math.radians(c), f))
+             for a, b, c, f in zip(ti, tr, pr, v)]
     return "\n".join(rows) + "\n"
 
 
@@ -115,7 +123,7 @@ def _bsdf_text(truth):
              " ".join(map(str, BSDF_RAD)), "Monochrome", "DataBegin"]
     for t in BSDF_AOI:
         wi = _sph(t, 0.0)
-        lines.append(f"TIS {_dhr(truth, t, 200):.4f}")
+        lines.append(f"TIS {_dhr(truth, t):.4f}")
         for a in BSDF_AZ:
             row = []
             for r in BSDF_RAD:
