@@ -61,6 +61,7 @@ _JOGGLE_RAD = 1e-9  # the points are moved this much at most before the triangul
 _SAME_RAD = 1e-8  # points of the interpolation this close [rad] are one (merged into the largest value)
 _SPREAD_NOTED = 1e-6  # merged samples differing by more than this (relative) are said in the notes
 _RETRO_COPIES = 72  # a theta_d = 0 sample (wi = wo) holds for every phi_d: copies every 2.5 deg
+_RETRO_RAD = 1e-6  # a pair closer than this to wi = wo takes the largest value over its circle of phi_d
 
 
 def isotropic_coordinates(wi, wo) -> np.ndarray:
@@ -93,23 +94,23 @@ def _unembed(e) -> np.ndarray:
 
 
 def _guards(spacing) -> np.ndarray:
-    """Points on the boundary of the domain's image (a cylinder: theta_h <= pi/2 its radius,
-    theta_d from 0 to pi/2 its height) every ``spacing`` [rad]; the side's polygon circumscribes
-    the circle, so every coordinate lies inside their hull."""
-    top = math.pi / 2
-    n_a = max(8, math.ceil(2 * math.pi * top / spacing))
+    """Points around the domain's image (a cylinder: theta_h <= pi/2 its radius, theta_d
+    from 0 to pi/2 its height) every ``spacing`` [rad], one spacing outside it (so that the
+    joggle leaves no coordinate of the domain on or past the hull)."""
+    top, pad = math.pi / 2, spacing
+    n_a = max(8, math.ceil(2 * math.pi * (top + pad) / spacing))
     a = np.arange(n_a) * (2 * math.pi / n_a)
-    z = np.linspace(0.0, top, max(2, math.ceil(top / spacing) + 1))
-    r_out = top / math.cos(math.pi / n_a)
+    z = np.linspace(-pad, top + pad, max(2, math.ceil((top + 2 * pad) / spacing) + 1))
+    r_out = (top + pad) / math.cos(math.pi / n_a)
     side = np.column_stack([np.repeat(r_out * np.cos(a)[None], len(z), 0).ravel(),
                             np.repeat(r_out * np.sin(a)[None], len(z), 0).ravel(), np.repeat(z, n_a)])
     disk = [np.zeros((1, 2))]
-    for r in np.arange(1, math.ceil(top / spacing)) * spacing:
+    for r in np.arange(1, math.ceil((top + pad) / spacing)) * spacing:
         m = max(6, math.ceil(2 * math.pi * r / spacing))
         b = np.arange(m) * (2 * math.pi / m)
         disk.append(np.column_stack([r * np.cos(b), r * np.sin(b)]))
     d = np.vstack(disk)
-    caps = [np.column_stack([d, np.full(len(d), h)]) for h in (0.0, top)]
+    caps = [np.column_stack([d, np.full(len(d), h)]) for h in (-pad, top + pad)]
     return np.vstack([side] + caps)
 
 
@@ -271,6 +272,21 @@ class ScatteredBRDF(BRDFModel):
         """f_r [1/sr] at coordinates [rad] (any theta_h, theta_d in [0, pi/2], phi_d any real;
         below-horizon combinations too: the interpolation works in coordinates)."""
         q = np.column_stack([np.ravel(theta_h), np.ravel(theta_d), np.mod(np.ravel(phi_d), math.pi)])
+        retro = np.flatnonzero(q[:, 1] < _RETRO_RAD)
+        if len(retro):  # wi = wo: phi_d has no meaning; the largest over its circle (continuous, conservative)
+            ring = np.arange(_RETRO_COPIES) * (math.pi / _RETRO_COPIES)
+            q = np.vstack([np.delete(q, retro, axis=0), np.column_stack([np.repeat(q[retro, 0], _RETRO_COPIES),
+                           np.repeat(q[retro, 1], _RETRO_COPIES), np.tile(ring, len(retro))])])
+            v = self._at(q)
+            out = np.empty(len(v) - (_RETRO_COPIES - 1) * len(retro))
+            keep = np.setdiff1d(np.arange(len(out)), retro)
+            out[keep] = v[:len(keep)]
+            out[retro] = v[len(keep):].reshape(len(retro), _RETRO_COPIES).max(axis=1)
+            return out
+        return self._at(q)
+
+    def _at(self, q):
+        """:meth:`at_coordinates` at rows ``q`` (M, 3) [rad] (phi_d already folded)."""
         e = _embed(*q.T)
         out, guard = self._interpolated(e)
         if self.outside == "error" and np.any(guard > 1e-9):
