@@ -163,7 +163,7 @@ def test_gridding_scattered_samples_honours_the_samples_at_the_nodes():
     f = TRUTH.evaluate(wi, wo)
     m = bm.TabulatedBRDF.from_samples(wi, wo, f, th, td, pd)
     got = np.array([m.values[i, j, k] for i, j, k in at])
-    np.testing.assert_allclose(got, f, rtol=1e-9)
+    np.testing.assert_allclose(got, f, rtol=1e-7)  # the 1e-9 rad joggle of the triangulation
     assert f.min() * (1 - 1e-12) <= m.values.min() and m.values.max() <= f.max() * (1 + 1e-12)
 
 
