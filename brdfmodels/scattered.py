@@ -17,6 +17,14 @@ barycentrically on a Delaunay triangulation of those points (scipy's
   isotropic BRDF does not depend on phi_d and the map is smooth there, where phi_d itself
   is rounding noise (a specular observer came out 10 % low in plain coordinates); a
   theta_d = 0 sample (wi = wo) is copied around its circle of phi_d for the same reason;
+- theta_d is weighed by ``THETA_D_SCALE`` = 0.3 in the triangulation (barycentric weights
+  do not change with the scale; which samples form a simplex does): goniometers sample
+  the incidence more coarsely than the scatter angles, and a specular lobe is nearly a
+  function of theta_h alone, so simplices should join the same theta_h at neighbouring
+  incidences. Measured on an ABg file (peak 10 /sr, 8 incidences 10 deg apart): the
+  lowest ratio to the truth within 10 deg of the mirror direction at random incidences
+  was 0.20 at weight 1, 0.86 at 0.3, 0.94 at 0.1 (whose wings reached 36x the truth);
+  on a 5 deg Gaussian-lobe CSV 0.84, 0.88, 0.88;
 - samples at the same coordinates (a goniometer's repeated specular direction, mirrored
   copies, anisotropic rows that an isotropic table cannot separate, several states) are
   merged into their largest value, and :attr:`notes` says how many and how far apart.
@@ -51,11 +59,12 @@ from ._checks import finite_array
 from .models import BRDFModel
 from .registry import register
 
-__all__ = ["ScatteredBRDF", "SCATTERED_OUTSIDE", "DHR_TOLERANCE", "NEAREST_K", "isotropic_coordinates"]
+__all__ = ["ScatteredBRDF", "SCATTERED_OUTSIDE", "DHR_TOLERANCE", "NEAREST_K", "THETA_D_SCALE", "isotropic_coordinates"]
 
 SCATTERED_OUTSIDE = ("envelope", "fit", "error")
 DHR_TOLERANCE = 0.05  # default stated uncertainty of a measured hemispherical reflectance (absolute)
 NEAREST_K = 4  # samples whose largest value a direction outside the data's hull takes
+THETA_D_SCALE = 0.3  # theta_d's weight in the triangulation (module notes)
 GUARD_MIN_DEG = 5.0  # the guard points' spacing: the data's own (median nearest-neighbour distance), 5 to 10 deg
 _JOGGLE_RAD = 1e-9  # the points are moved this much at most before the triangulation (every sample a vertex)
 _SAME_RAD = 1e-8  # points of the interpolation this close [rad] are one (merged into the largest value)
@@ -239,13 +248,15 @@ class ScatteredBRDF(BRDFModel):
             gval = self._beyond(g, tree, val, placeholder=True)
             tri = None
             try:
-                pts = np.vstack([e, g])  # joggled so that no simplex is flat (qhull's QJ left 27 % flat ones)
+                zs = THETA_D_SCALE
+                pts = np.vstack([e, g]) * [1.0, 1.0, zs]  # joggled so that no simplex is flat (qhull's QJ left 27 % flat ones)
                 pts = pts + np.random.default_rng(0).uniform(-_JOGGLE_RAD, _JOGGLE_RAD, pts.shape)
                 tri = Delaunay(pts, qhull_options="Qbb Qc Qz Q12")
                 tri._transform = _barycentric_transforms(tri)  # scipy's own took 21 s for 1.4e5 simplices
             except (QhullError, ValueError):  # too few or degenerate points: the policy everywhere
                 tri = None
-            self._cache.update(tri=tri, tree=tree, values=np.concatenate([val, gval]), n_data=len(e), spacing_rad=spacing)
+            self._cache.update(tri=tri, tree=tree, values=np.concatenate([val, gval]), n_data=len(e), spacing_rad=spacing,
+                               z_scale=zs if tri is not None else 1.0)
         c = self._cache
         return c["tri"], c["tree"], c["values"], c["n_data"]
 
@@ -256,6 +267,7 @@ class ScatteredBRDF(BRDFModel):
         out, guard = np.full(len(e), np.nan), np.ones(len(e))
         if tri is None:
             return out, guard
+        e = e * [1.0, 1.0, self._cache["z_scale"]]
         s = tri.find_simplex(e)
         idx = np.flatnonzero(s >= 0)
         s = s[idx]
