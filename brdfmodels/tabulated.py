@@ -77,9 +77,12 @@ class TabulatedBRDF(BRDFModel):
         measured value, not 0 (a 0 there pulls grazing values down).
     outside : {"error", "envelope", "fit"}
         What directions outside the theta_h / theta_d range get (module notes).
+    notes : sequence of str
+        What the table's maker wants said (a gridding's shortfall below the samples); a
+        scene shows them among its warnings. Not saved with the table.
     """
 
-    def __init__(self, theta_h_deg, theta_d_deg, phi_d_deg, values, outside="error"):
+    def __init__(self, theta_h_deg, theta_d_deg, phi_d_deg, values, outside="error", notes=()):
         self.theta_h = _nodes("theta_h_deg", theta_h_deg, 0.0, 90.0)
         self.theta_d = _nodes("theta_d_deg", theta_d_deg, 0.0, 90.0)
         self.phi_d = _nodes("phi_d_deg", phi_d_deg, 0.0, 180.0 - 1e-12)
@@ -93,6 +96,7 @@ class TabulatedBRDF(BRDFModel):
         for arr in (self.theta_h, self.theta_d, self.phi_d, self.values):
             arr.flags.writeable = False  # immutable like every model
         self.outside = outside
+        self.notes = tuple(str(n) for n in notes)
         self._fit_cache = []  # the "fit" policy's SH model, made on first use
         self._freeze()
 
@@ -128,7 +132,16 @@ class TabulatedBRDF(BRDFModel):
         scattered = ScatteredBRDF.from_samples(wi, wo, brdf_per_sr, outside=fill)
         h, d, p = np.meshgrid(*axes, indexing="ij")
         values = scattered.at_coordinates(h, d, p).reshape(h.shape)
-        return cls(*(np.degrees(a) for a in axes), values, outside)
+        table = cls(*(np.degrees(a) for a in axes), values, outside)
+        f = np.ravel(brdf_per_sr)
+        ratio = table.evaluate(wi, wo)[f > 0] / f[f > 0]
+        if ratio.size and ratio.min() < 0.99:  # said, not hidden: the grid cuts peaks between its nodes
+            k = int(np.argmin(ratio))
+            note = (f"gridded on {len(axes[0])} x {len(axes[1])} x {len(axes[2])} nodes, the table returns down to "
+                    f"{100 * ratio[k]:.3g} % of a measured sample ({int((ratio < 0.99).sum())} of {ratio.size} samples more "
+                    f"than 1 % below); without a grid every sample is returned")
+            table = cls(*(np.degrees(a) for a in axes), values, outside, notes=(note,))
+        return table
 
     def _interpolate(self, th, td, pd):
         ih, th_t = _axis_weights(self.theta_h, th)
