@@ -124,3 +124,21 @@ def test_one_sided_data_declared_plane_symmetric_are_mirrored(tmp_path):
     assert all(got.get(k) == v for k, v in want.items())
     with pytest.raises(ValueError, match="symmetry and ignore_columns are for CSV and ASTM files"):
         read_samples(tmp_path / "x.bsdf", symmetry="plane")
+
+
+def test_a_table_brighter_than_its_light_is_refused_beyond_its_stated_uncertainty(tmp_path):
+    """A constant f_r has hemispherical reflectance pi f_r (the projected hemisphere's
+    solid angle is pi): 0.33 /sr gives 1.037, within the default tolerance 0.05, and loads;
+    0.35 /sr gives 1.100 and is refused, naming the incidence and the value; a stated
+    uncertainty of 0.2 (``dhr_tolerance``) accepts it."""
+    angles = [(ti, 0, tr, pr) for ti in range(0, 81, 10) for tr in range(0, 90, 10) for pr in range(0, 360, 30)]
+    text = PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', '{ model = "table", file = "m.csv"MORE }')
+    for value, more, refused in ((0.33, "", False), (0.35, "", True), (0.35, ", dhr_tolerance = 0.2", False)):
+        _csv(tmp_path, HEAD + ",brdf_per_sr", [list(a) + [value] for a in angles])
+        (tmp_path / "s.toml").write_text(text.replace("MORE", more))
+        if refused:
+            with pytest.raises(scenes.SceneError, match=r"hemispherical reflectance 1\.1 > 1 at 0 deg incidence \(beyond the "
+                                                        r"tolerance 0\.05\)"):
+                scenes.load(tmp_path / "s.toml")
+        else:
+            assert isinstance(scenes.load(tmp_path / "s.toml").targets[0].material, bm.ScatteredBRDF)
