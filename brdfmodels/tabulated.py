@@ -115,14 +115,15 @@ class TabulatedBRDF(BRDFModel):
 
     @classmethod
     def from_samples(cls, wi, wo, brdf_per_sr, theta_h_deg, theta_d_deg, phi_d_deg, *, fill="envelope",
-                     outside="envelope") -> "TabulatedBRDF":
+                     outside="envelope", notes=()) -> "TabulatedBRDF":
         """A table of scattered samples (any reader's, :mod:`brdfmodels.io`) on the given
         nodes: each node takes the samples' barycentric interpolation there
         (:class:`brdfmodels.ScatteredBRDF`: bounded by the neighbouring samples), a node
         beyond the samples' hull ``fill``: ``"envelope"`` (the largest of the 4 nearest
         samples, conservative) or ``"fit"`` (a spherical-harmonic fit of the samples). The
         grid adds its own error between nodes (a peak between nodes is cut); the scattered
-        model itself has none at the samples."""
+        model itself has none at the samples. ``notes`` (a reader's) are kept, and a
+        shortfall of the grid below a sample of more than 1 % is added to them."""
         from .scattered import ScatteredBRDF
 
         if fill not in ("envelope", "fit"):
@@ -132,7 +133,7 @@ class TabulatedBRDF(BRDFModel):
         scattered = ScatteredBRDF.from_samples(wi, wo, brdf_per_sr, outside=fill)
         h, d, p = np.meshgrid(*axes, indexing="ij")
         values = scattered.at_coordinates(h, d, p).reshape(h.shape)
-        table = cls(*(np.degrees(a) for a in axes), values, outside)
+        table = cls(*(np.degrees(a) for a in axes), values, outside, notes=notes)
         f = np.ravel(brdf_per_sr)
         ratio = table.evaluate(wi, wo)[f > 0] / f[f > 0]
         if ratio.size and ratio.min() < 0.99:  # said, not hidden: the grid cuts peaks between its nodes
@@ -140,7 +141,7 @@ class TabulatedBRDF(BRDFModel):
             note = (f"gridded on {len(axes[0])} x {len(axes[1])} x {len(axes[2])} nodes, the table returns down to "
                     f"{100 * ratio[k]:.3g} % of a measured sample ({int((ratio < 0.99).sum())} of {ratio.size} samples more "
                     f"than 1 % below); without a grid every sample is returned")
-            table = cls(*(np.degrees(a) for a in axes), values, outside, notes=(note,))
+            table = cls(*(np.degrees(a) for a in axes), values, outside, notes=tuple(notes) + (note,))
         return table
 
     def _interpolate(self, th, td, pd):

@@ -224,7 +224,8 @@ def _table_material(spec, base_dir, wavelength_nm=None):
     or a saved table (JSON), with its ``outside`` policy (default "envelope": conservative)."""
     p = input_path(spec.file, base_dir)
     prm = spec.params
-    outside = prm.get("outside", "envelope")
+    outside, fill = prm.get("outside", "envelope"), prm.get("fill", "envelope")
+    policy = "error" if outside == "error" else ("fit" if "fit" in (fill, outside) else "envelope")  # beyond scattered data
     if p.suffix.lower() == ".binary":
         return brdfmodels.TabulatedBRDF.from_merl(p, channel=prm.get("channel", "mean"), outside=outside)
     if p.suffix.lower() in (".bsdf", ".astm", ".e1392", ".csv"):  # scattered samples
@@ -232,18 +233,17 @@ def _table_material(spec, base_dir, wavelength_nm=None):
 
         s = read_samples(p, wavelength_nm=wavelength_nm, ignore_columns=prm.get("ignore_columns", ()),
                          symmetry=prm.get("symmetry"))
-        fill = prm.get("fill", "envelope")
+        notes = s.info.get("notes", ())
         if "grid_deg" in prm:
             dh, dd, dp = prm["grid_deg"]
             return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
                                                          np.arange(0.0, 90.0 - 1e-9, dd), np.arange(0.0, 180.0 - 1e-9, dp),
-                                                         fill=fill, outside=outside)
-        policy = "error" if outside == "error" else ("fit" if "fit" in (fill, outside) else "envelope")
-        return brdfmodels.ScatteredBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, outside=policy, notes=s.info.get("notes", ()),
+                                                         fill=fill, outside=outside, notes=notes)
+        return brdfmodels.ScatteredBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, outside=policy, notes=notes,
                                                      dhr_tolerance=prm.get("dhr_tolerance", brdfmodels.scattered.DHR_TOLERANCE))
     model = _model_file(spec.file, base_dir)
-    if isinstance(model, brdfmodels.ScatteredBRDF):
-        return model
+    if isinstance(model, brdfmodels.ScatteredBRDF):  # a saved scattered table, with this scene's policy
+        return brdfmodels.ScatteredBRDF(**{**model.to_dict()["params"], "outside": policy})
     if not isinstance(model, brdfmodels.TabulatedBRDF):
         raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")
     d = model.to_dict()["params"]
