@@ -3,8 +3,8 @@
 ``ScatteredBRDF(theta_h_deg, theta_d_deg, phi_d_deg, values)`` (model ``scattered-table``)
 holds measured f_r [1/sr] at scattered points of Rusinkiewicz's isotropic coordinates
 (theta_h, theta_d, phi_d; :func:`brdfmodels.half_diff`) and interpolates them
-barycentrically on a Delaunay triangulation of those points (scipy's
-``LinearNDInterpolator``):
+barycentrically on a Delaunay triangulation of those points (``scipy.spatial.Delaunay``;
+the barycentric transforms computed here, vectorised):
 
 - at a sample the value is the sample's (to ~1e-7 relative: the points are moved by at
   most 1e-9 rad before the triangulation, so that every sample is a vertex and no
@@ -16,7 +16,9 @@ barycentrically on a Delaunay triangulation of those points (scipy's
   180 deg), so the model is exactly reciprocal; at theta_h = 0 (h on the normal) an
   isotropic BRDF does not depend on phi_d and the map is smooth there, where phi_d itself
   is rounding noise (a specular observer came out 10 % low in plain coordinates); a
-  theta_d = 0 sample (wi = wo) is copied around its circle of phi_d for the same reason;
+  theta_d = 0 sample (wi = wo) is copied around its circle of phi_d for the same reason,
+  and a pair within 1e-6 rad of wi = wo takes the largest value over that circle
+  (continuous and conservative there);
 - theta_d is weighed by ``THETA_D_SCALE`` = 0.3 in the triangulation (barycentric weights
   do not change with the scale; which samples form a simplex does): goniometers sample
   the incidence more coarsely than the scatter angles, and a specular lobe is nearly a
@@ -36,7 +38,7 @@ samples, 5 to 10 deg); the guards are vertices of the triangulation too, so betw
 data's edge and the domain's boundary the value passes from the samples to the policy's:
 
 - ``"envelope"`` (default, conservative and physically bounded): the largest of the
-  ``NEAREST_K`` = 4 samples nearest in (theta_h, theta_d, phi_d) [rad] (as many as a
+  ``NEAREST_K`` = 4 samples nearest in the points of :func:`_embed` [rad] (as many as a
   simplex has vertices): never the global maximum of a far-away specular peak;
 - ``"fit"``: a spherical-harmonic fit of the samples (log space, horizon tacking;
   :func:`brdfmodels.fitting.fit_sh`), made on first use, capped at that envelope (an SH
@@ -124,7 +126,7 @@ def _guards(spacing) -> np.ndarray:
 
 
 def _merge(x_deg, f):
-    """Samples at one point of the interpolation (:func:`_embed`, within 1e-9 rad) merged:
+    """Samples at one point of the interpolation (:func:`_embed`, within 1e-8 rad) merged:
     the coordinate rows (N, 3) [deg] kept, the largest value of each, the number of rows
     merged and the largest relative spread among a merged group's values."""
     e = _embed(*np.radians(x_deg).T)

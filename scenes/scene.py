@@ -233,7 +233,7 @@ def _table_material(spec, base_dir, wavelength_nm=None):
 
         s = read_samples(p, wavelength_nm=wavelength_nm, ignore_columns=prm.get("ignore_columns", ()),
                          symmetry=prm.get("symmetry"))
-        notes = s.info.get("notes", ())
+        notes = tuple(s.info.get("notes", ())) + _state_note(s)
         if "grid_deg" in prm:
             dh, dd, dp = prm["grid_deg"]
             return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
@@ -248,6 +248,17 @@ def _table_material(spec, base_dir, wavelength_nm=None):
         raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")
     d = model.to_dict()["params"]
     return brdfmodels.TabulatedBRDF(d["theta_h_deg"], d["theta_d_deg"], d["phi_d_deg"], d["values"], outside)
+
+
+def _state_note(s) -> tuple:
+    """A note when measured samples span several states (time, temperature or a named
+    state): a static table holds them all, the largest at a shared direction pair."""
+    cols = {"time_s": s.time_s, "temperature_k": s.temperature_k, **s.states}
+    varied = [k for k, v in cols.items() if np.unique(v[np.isfinite(v)]).size > 1]
+    if not varied:
+        return ()
+    return (f"the samples span several values of {', '.join(varied)}; the static table holds them together (the "
+            f"largest at a shared direction pair, interpolated between); a dynamic fit (hazard fit sh) follows the state",)
 
 
 def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=None):

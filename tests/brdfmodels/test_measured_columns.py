@@ -142,3 +142,12 @@ def test_a_table_brighter_than_its_light_is_refused_beyond_its_stated_uncertaint
                 scenes.load(tmp_path / "s.toml")
         else:
             assert isinstance(scenes.load(tmp_path / "s.toml").targets[0].material, bm.ScatteredBRDF)
+
+
+def test_a_table_of_several_states_says_so_in_the_scene(tmp_path):
+    rows = _rows(lambda k: [0.1 * (k % 2)])
+    _csv(tmp_path, HEAD + ",brdf_per_sr,extinction", rows)
+    (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }',
+                                                          '{ model = "table", file = "m.csv" }'))
+    sc = scenes.load(tmp_path / "s.toml")
+    assert any("span several values of extinction; the static table holds them together" in w for w in sc.warnings)
