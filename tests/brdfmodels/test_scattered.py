@@ -112,8 +112,10 @@ def test_the_outside_policies():
     with pytest.raises(ValueError, match="beyond the measured samples: theta_h"):
         bm.ScatteredBRDF.from_samples(wi, wo, f, outside="error").evaluate(a, b)
     env = float(bm.ScatteredBRDF.from_samples(wi, wo, f).evaluate(a, b))
-    fit = float(bm.ScatteredBRDF.from_samples(wi, wo, f, outside="fit").evaluate(a, b))
+    fitted = bm.ScatteredBRDF.from_samples(wi, wo, f, outside="fit")
+    fit = float(fitted.evaluate(a, b))
     assert 0 <= fit <= env * (1 + 1e-9)  # the fit is capped at the envelope
+    np.testing.assert_allclose(fitted.evaluate(wi, wo), f, rtol=1e-7)  # and never replaces a sample
     with pytest.raises(ValueError, match="outside='nope'"):
         bm.ScatteredBRDF.from_samples(wi, wo, f, outside="nope")
 
