@@ -226,9 +226,15 @@ def _table_material(spec, base_dir, wavelength_nm=None):
     prm = spec.params
     outside, fill = prm.get("outside", "envelope"), prm.get("fill", "envelope")
     policy = "error" if outside == "error" else ("fit" if "fit" in (fill, outside) else "envelope")  # beyond scattered data
+    scattered = p.suffix.lower() in (".bsdf", ".astm", ".e1392", ".csv")
+    unused = [k for k in ("dhr_tolerance", "ignore_columns", "symmetry") if k in prm
+              and (not scattered or (k == "dhr_tolerance" and "grid_deg" in prm))]
+    if unused:
+        raise ValueError(f"{unused[0]}: applies to a scattered table (a .bsdf, .astm, .e1392 or angle .csv file without "
+                         f"grid_deg); expected it removed here")
     if p.suffix.lower() == ".binary":
         return brdfmodels.TabulatedBRDF.from_merl(p, channel=prm.get("channel", "mean"), outside=outside)
-    if p.suffix.lower() in (".bsdf", ".astm", ".e1392", ".csv"):  # scattered samples
+    if scattered:
         from brdfmodels.io import read_samples
 
         s = read_samples(p, wavelength_nm=wavelength_nm, ignore_columns=prm.get("ignore_columns", ()),

@@ -151,3 +151,13 @@ def test_a_table_of_several_states_says_so_in_the_scene(tmp_path):
                                                           '{ model = "table", file = "m.csv" }'))
     sc = scenes.load(tmp_path / "s.toml")
     assert any("span several values of extinction; the static table holds them together" in w for w in sc.warnings)
+
+
+def test_a_table_key_that_would_do_nothing_is_refused(tmp_path):
+    _csv(tmp_path, HEAD + ",brdf_per_sr", _rows())
+    text = PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', '{ model = "table", file = "m.csv"MORE }')
+    for more, words in ((", dhr_tolerance = 0.2, grid_deg = [5.0, 5.0, 30.0]", "dhr_tolerance: applies to a scattered table"),
+                        (', symmetry = "sideways"', "symmetry='sideways': expected 'plane'")):
+        (tmp_path / "s.toml").write_text(text.replace("MORE", more))
+        with pytest.raises(scenes.SceneError, match=words):
+            scenes.load(tmp_path / "s.toml")
