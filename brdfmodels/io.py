@@ -300,6 +300,9 @@ def _csv_header(path, cols, ignore):
     if missing or len(value) != 1:
         raise ValueError(f"{path}: line 1: expected columns {list(_ANGLES)} and one of brdf_per_sr or reflectance_factor"
                          f"{'; missing ' + ', '.join(missing) if missing else ''} (the header has {len(cols)} column(s))")
+    needed = [c for c in ignore if c in _ANGLES or c in value]
+    if needed:
+        raise ValueError(f"ignore_columns: {needed[0]} is a column this reader needs; expected only columns to skip")
     for j, c in enumerate(cols):
         known = c in _ANGLES or c in value or c in _CSV_FIXED or c in CSV_STATES or c in ignore
         if not known and not (c.startswith("state_") and len(c) > 6):

@@ -90,6 +90,8 @@ def test_an_unknown_column_is_refused_by_position_unless_ignored(tmp_path):
         read_brdf_csv(path)
     s = read_brdf_csv(path, ignore_columns=["operator_notes"])
     assert len(s) == 12 and s.states == {}
+    with pytest.raises(ValueError, match="ignore_columns: theta_r_deg is a column this reader needs"):
+        read_brdf_csv(path, ignore_columns=["operator_notes", "theta_r_deg"])
     text = PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', '{ model = "table", file = "m.csv" }')
     (tmp_path / "s.toml").write_text(text)
     with pytest.raises(scenes.SceneError, match="column 6: not a column"):
