@@ -240,6 +240,9 @@ def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
         elif key == "VARS":
             names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
             used = [j for j, n in enumerate(names) if n not in ignore]
+            if used[:4] != [0, 1, 2, 3]:
+                raise ValueError(f"{path}: line {k}: VARS: ignore_columns names one of the four angle columns; expected "
+                                 f"only value columns to skip")
             if len(used) != 5:
                 raise ValueError(f"{path}: line {k}: VARS: expected five names used (theta_i, phi_i, theta_s, phi_s and one "
                                  f"BRDF column: monochrome; several value columns are refused, name the others in "

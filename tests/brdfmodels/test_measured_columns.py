@@ -106,6 +106,8 @@ def test_an_astm_file_with_several_value_columns_is_refused_unless_the_others_ar
     (tmp_path / "m.astm").write_text(text + "\n".join(", ".join(repr(float(x)) for x in r) for r in rows) + "\n")
     with pytest.raises(ValueError, match="VARS: expected five names used.*several value columns are refused"):
         read_astm_e1392(tmp_path / "m.astm")
+    with pytest.raises(ValueError, match="ignore_columns names one of the four angle columns"):
+        read_astm_e1392(tmp_path / "m.astm", ignore_columns=["phi_i", "brdf_p"])
     s = read_astm_e1392(tmp_path / "m.astm", ignore_columns=["brdf_p"])
     np.testing.assert_allclose(s.brdf_per_sr, [r[4] for r in rows], rtol=1e-15)
 
