@@ -240,7 +240,7 @@ def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
         elif key == "VARS":
             names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
             used = [j for j, n in enumerate(names) if n not in ignore]
-            if used[:4] != [0, 1, 2, 3]:
+            if any(n in ignore for n in names[:4]):
                 raise ValueError(f"{path}: line {k}: VARS: ignore_columns names one of the four angle columns; expected "
                                  f"only value columns to skip")
             if len(used) != 5:
