@@ -406,7 +406,8 @@ def _at_wavelength(path, d, wavelength_nm, notes) -> dict:
     if wavelength_nm is None:
         if len(have) > 1:
             raise ValueError(f"{path}: wavelength_nm: the file holds {len(have)} wavelengths ({listed} nm); which one is "
-                             f"ambiguous: give the laser's wavelength")
+                             f"ambiguous: expected the laser's wavelength (a scene gives its laser's; in Python "
+                             f"read_samples(path, wavelength_nm=...)) or a file of one wavelength")
         return d
     lam = float(wavelength_nm)
     near = np.abs(have - lam) <= WAVELENGTH_MATCH_NM
