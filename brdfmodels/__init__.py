@@ -40,6 +40,7 @@ from .models import (
 from .optics import fresnel_reflectance, optical_constants
 from .scatter import ABg, GaussianLobe
 from .tabulated import TabulatedBRDF
+from .scattered import ScatteredBRDF
 from .registry import available_models, create, dumps, load, loads, model_from_dict, register, save
 from .sh import SHBasis, fan_out, real_sph_harm
 from .states import StateTable
@@ -55,7 +56,7 @@ except _NotInstalled:  # a source tree that was never installed
 __all__ = [
     "ABg", "BRDFModel", "DHRResult", "DynamicBRDF", "Envelope", "EnvelopeReport", "FR_MAX", "GaussianLobe", "HeatingResult",
     "History", "Lambertian", "OxidationModel", "SHBasis", "Scaled", "Specular", "SphericalHarmonicBRDF",
-    "StateTable", "TabulatedBRDF", "Sum", "ThinPlateHeating", "TorranceSparrow5", "available_models", "create", "dumps",
+    "ScatteredBRDF", "StateTable", "TabulatedBRDF", "Sum", "ThinPlateHeating", "TorranceSparrow5", "available_models", "create", "dumps",
     "envelope_report", "fan_out", "fresnel_reflectance", "half_diff", "half_diff_to_directions",
     "hemispherical_reflectance", "load", "loads", "local_frame", "local_to_world", "mirror_direction",
     "model_from_dict", "optical_constants", "real_sph_harm", "register", "rotate_about_normal", "save",

@@ -19,7 +19,8 @@ malformed entry.
   ``theta_i, phi_i, theta_s, phi_s`` [rad] and one BRDF column [1/sr] (read here as the
   spherical angles of the directions from the sample to the source and to the receiver;
   the standard's own text on the columns was not read). Duplicate angle tuples are
-  skipped.
+  skipped. Several value columns (wavelengths, polarisations) are refused unless all but
+  one are named in ``ignore_columns``; ``symmetry="plane"`` mirrors one-sided data.
 - :func:`read_merl`: MERL ``.binary`` (Matusik et al. 2003; the format of its reference
   reader BRDFRead.cpp): three int32 dimensions (90, 90, 180 for the database: theta_h,
   theta_d, phi_d), then each colour channel's values as float64 (R block, G block, B
@@ -32,7 +33,12 @@ malformed entry.
   theta_r_deg, phi_r_deg`` (spherical angles of the directions to the source and to the
   observer in the sample frame, z the normal, x the grooves) and exactly one value
   column, ``brdf_per_sr`` (BRDF [1/sr]) or ``reflectance_factor`` (R = pi f_r, converted
-  as f_r = R / pi); optional ``time_s``, ``temperature_k``, ``test_id``, ``weight``.
+  as f_r = R / pi); optional ``time_s``, ``temperature_k``, ``test_id``, ``weight``;
+  state columns ``extinction``, ``melt_fraction`` and ``state_<name>`` (into
+  ``Samples.states``); ``wavelength_nm`` (the rows at the laser's wavelength, or the two
+  nearest interpolated with a note, refused when ambiguous). Every other column is an
+  error naming its position, unless listed in ``ignore_columns``. ``symmetry="plane"``
+  mirrors data measured on one side of the plane of incidence.
 """
 
 from __future__ import annotations
@@ -47,7 +53,7 @@ from ._io import read_input_text
 from .geometry import spherical_to_vector
 
 __all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "merl_grid", "read_samples", "read_csv_columns",
-           "MERL_SCALE"]
+           "MERL_SCALE", "mirror_plane_symmetric", "CSV_STATES"]
 
 
 def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=None):
@@ -215,9 +221,13 @@ def read_bsdf(path):
 
 
 # -- ASTM E1392 -----------------------------------------------------------------------
-def read_astm_e1392(path):
-    """Samples from an ASTM E1392 scatter table (see the module notes)."""
+def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
+    """Samples from an ASTM E1392 scatter table (see the module notes); ``ignore_columns``:
+    VARS names (case-insensitive) to skip, ``symmetry="plane"``: one-sided data mirrored
+    about the plane of incidence (:func:`mirror_plane_symmetric`)."""
     path = Path(path)
+    ignore = {c.strip().lower() for c in ignore_columns}
+    used = None
     text = read_input_text(path, "ASTM E1392 file")
     n_points, names, rows, seen, n_rows = None, None, [], set(), 0
     for k, line in enumerate(text.splitlines(), start=1):
@@ -229,13 +239,19 @@ def read_astm_e1392(path):
             n_points = _count(s.split()[1:2], path, k, "NUM_POINTS")
         elif key == "VARS":
             names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
-            if len(names) != 5:
-                raise ValueError(f"{path}: line {k}: VARS: expected five names (theta_i, phi_i, theta_s, phi_s and one BRDF "
-                                 f"column: monochrome), got {len(names)}")
+            used = [j for j, n in enumerate(names) if n not in ignore]
+            if any(n in ignore for n in names[:4]):
+                raise ValueError(f"{path}: line {k}: VARS: ignore_columns names one of the four angle columns; expected "
+                                 f"only value columns to skip")
+            if len(used) != 5:
+                raise ValueError(f"{path}: line {k}: VARS: expected five names used (theta_i, phi_i, theta_s, phi_s and one "
+                                 f"BRDF column: monochrome; several value columns are refused, name the others in "
+                                 f"ignore_columns), got {len(used)} of {len(names)}")
         elif s[0].isdigit() or s[0] in "+-.":
-            vals = _numbers([x for x in s.split(",") if x.strip()], path, k, "data row")
-            if names is None or len(vals) != len(names):
+            cells = [x for x in s.split(",") if x.strip()]
+            if names is None or len(cells) != len(names):
                 raise ValueError(f"{path}: line {k}: expected {len(names) if names else 'VARS before the'} columns")
+            vals = _numbers([cells[j] for j in used], path, k, "data row")
             if not all(math.isfinite(v) for v in vals) or vals[4] < 0:
                 raise ValueError(f"{path}: line {k}: data row: expected finite angles [rad] and a finite BRDF >= 0")
             bad = _angle_out_of_range(vals[:4], math.pi)
@@ -254,7 +270,8 @@ def read_astm_e1392(path):
         raise ValueError(f"{path}: NUM_POINTS {n_points} but {n_rows} data rows")
     a = np.array(rows)
     keep = (np.cos(a[:, 0]) > 0) & (np.cos(a[:, 2]) > 0)
-    return _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
+    out = _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
+    return mirror_plane_symmetric(out) if _plane(path, symmetry) else out
 
 
 # -- generic CSV ---------------------------------------------------------------------
@@ -274,47 +291,163 @@ def _angle_out_of_range(angles, half_turn) -> int | None:
     return None
 
 
-def read_brdf_csv(path):
-    """Samples from the generic angle CSV (see the module notes)."""
-    path = Path(path)
-    rows = list(csv.reader(read_input_text(path, "BRDF CSV").splitlines()))
-    if not rows:
-        raise ValueError(f"{path}: empty file")
-    cols = [c.strip() for c in rows[0]]
+_CSV_FIXED = ("test_id", "time_s", "temperature_k", "weight", "wavelength_nm")
+CSV_STATES = ("extinction", "melt_fraction")  # state columns by name; any other as state_<name>
+WAVELENGTH_MATCH_NM = 0.5  # a measured wavelength this close to the laser's is the laser's
+
+
+def _csv_header(path, cols, ignore):
+    """The value column of a generic CSV header; each column known, ignored or refused."""
     missing = [c for c in _ANGLES if c not in cols]
     value = [c for c in ("brdf_per_sr", "reflectance_factor") if c in cols]
     if missing or len(value) != 1:
         raise ValueError(f"{path}: line 1: expected columns {list(_ANGLES)} and one of brdf_per_sr or reflectance_factor"
                          f"{'; missing ' + ', '.join(missing) if missing else ''} (the header has {len(cols)} column(s))")
-    twice = next((c for c in cols if cols.count(c) > 1), None)
-    if twice is not None and (twice in _ANGLES or twice in value or twice in ("test_id", "time_s", "temperature_k", "weight")):
-        raise ValueError(f"{path}: line 1: column {twice} appears {cols.count(twice)} times; expected once")
+    needed = [c for c in ignore if c in _ANGLES or c in value]
+    if needed:
+        raise ValueError(f"ignore_columns: {needed[0]} is a column this reader needs; expected only columns to skip")
+    for j, c in enumerate(cols):
+        known = c in _ANGLES or c in value or c in _CSV_FIXED or c in CSV_STATES or c in ignore
+        if not known and not (c.startswith("state_") and len(c) > 6):
+            raise ValueError(f"{path}: line 1, column {j + 1}: not a column this reader uses; expected "
+                             f"{', '.join(_ANGLES)}, one value column (brdf_per_sr or reflectance_factor), "
+                             f"{', '.join(_CSV_FIXED + CSV_STATES)} or state_<name>; a column to skip goes in ignore_columns")
+        if cols.count(c) > 1 and c not in ignore:
+            name = c if c in _ANGLES + _CSV_FIXED + CSV_STATES + ("brdf_per_sr", "reflectance_factor") else j + 1
+            raise ValueError(f"{path}: line 1: column {name} appears {cols.count(c)} times; expected once")
+    return value[0]
+
+
+def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None):
+    """Samples from the generic angle CSV (see the module notes).
+
+    Parameters
+    ----------
+    path : path-like
+    wavelength_nm : float, optional
+        The laser's wavelength: with a ``wavelength_nm`` column, the rows measured there
+        (within 0.5 nm), or the two nearest measured wavelengths interpolated linearly
+        (a note in ``info["notes"]``); refused outside the measured range, and without
+        ``wavelength_nm`` when the file holds several.
+    ignore_columns : sequence of str
+        Columns to skip (any other unknown column is an error naming its position).
+    symmetry : {"plane", "none"}, optional
+        "plane": the data are one side of the plane of incidence; mirrored to the other.
+    """
+    path = Path(path)
+    rows = list(csv.reader(read_input_text(path, "BRDF CSV").splitlines()))
+    if not rows:
+        raise ValueError(f"{path}: empty file")
+    cols = [c.strip() for c in rows[0]]
+    ignore = set(ignore_columns)
+    value = _csv_header(path, cols, ignore)
     idx = {c: cols.index(c) for c in cols}
-    data = {c: [] for c in cols if c != "test_id"}
-    tid = []
-    for k, r in enumerate(rows[1:], start=2):
-        if not any(x.strip() for x in r):
-            continue
-        if len(r) != len(cols):
-            raise ValueError(f"{path}: line {k}: {len(r)} cells, expected {len(cols)}")
-        for c in data:
-            try:
-                v = float(r[idx[c]])
-            except ValueError:
-                raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected a number") from None
-            if not math.isfinite(v):
-                raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected a finite number")
-            if c in _ANGLES and _angle_out_of_range([v] if c.startswith("theta") else [0.0, v], 180.0) is not None:
-                raise ValueError(f"{path}: line {k}, column {idx[c] + 1} ({c}): expected "
-                                 f"{_ANGLE_RANGES_DEG[c.startswith('phi')]}")
-            data[c].append(v)
-        tid.append(r[idx["test_id"]] if "test_id" in idx else "0")
-    if not tid:
+    body = [(k, r) for k, r in enumerate(rows[1:], start=2) if any(x.strip() for x in r)]
+    short = next(((k, r) for k, r in body if len(r) != len(cols)), None)
+    if short is not None:
+        raise ValueError(f"{path}: line {short[0]}: {len(short[1])} cells, expected {len(cols)}")
+    if not body:
         raise ValueError(f"{path}: no data rows")
-    f = np.array(data[value[0]]) / (math.pi if value[0] == "reflectance_factor" else 1.0)
-    wi = spherical_to_vector(np.radians(data["theta_i_deg"]), np.radians(data["phi_i_deg"]))
-    wo = spherical_to_vector(np.radians(data["theta_r_deg"]), np.radians(data["phi_r_deg"]))
-    return _samples(wi, wo, f, tid, data.get("time_s"), data.get("temperature_k"), data.get("weight"))
+    d = {c: _csv_column(path, body, idx[c], c) for c in cols if c != "test_id" and c not in ignore}
+    d["test_id"] = np.array([r[idx["test_id"]] if "test_id" in idx else "0" for _, r in body])
+    notes = []
+    if "wavelength_nm" in d:
+        d = _at_wavelength(path, d, wavelength_nm, notes)
+    f = d[value] / (math.pi if value == "reflectance_factor" else 1.0)
+    wi = spherical_to_vector(np.radians(d["theta_i_deg"]), np.radians(d["phi_i_deg"]))
+    wo = spherical_to_vector(np.radians(d["theta_r_deg"]), np.radians(d["phi_r_deg"]))
+    states = {c[6:] if c.startswith("state_") else c: d[c] for c in d if c in CSV_STATES or c.startswith("state_")}
+    s = _samples(wi, wo, f, d["test_id"], d.get("time_s"), d.get("temperature_k"), d.get("weight"))
+    s = s.with_states(states) if states else s
+    s.info["notes"] = notes
+    return mirror_plane_symmetric(s) if _plane(path, symmetry) else s
+
+
+def _csv_column(path, body, j, c) -> np.ndarray:
+    """Column ``j`` (named ``c``) of the rows ``body`` as finite numbers, each angle within
+    its range; the first bad cell named by its line and column."""
+    try:
+        v = np.array([r[j] for _, r in body], dtype=float)
+        ok = np.isfinite(v)
+        if c in _ANGLES:
+            ok &= ((v >= -1.8e-7) & (v <= 180.0 + 1.8e-7)) if c.startswith("theta") else (np.abs(v) <= 360.0 + 1.8e-7)
+    except ValueError:
+        ok = None
+    if ok is None or not ok.all():
+        for k, r in body:
+            _csv_cell(path, k, j, c, r[j])
+    return v
+
+
+def _csv_cell(path, k, j, c, text) -> float:
+    """One cell of a generic CSV as a finite number (an angle within its range)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise ValueError(f"{path}: line {k}, column {j + 1} ({c}): expected a number") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{path}: line {k}, column {j + 1} ({c}): expected a finite number")
+    if c in _ANGLES and _angle_out_of_range([v] if c.startswith("theta") else [0.0, v], 180.0) is not None:
+        raise ValueError(f"{path}: line {k}, column {j + 1} ({c}): expected {_ANGLE_RANGES_DEG[c.startswith('phi')]}")
+    return v
+
+
+def _plane(path, symmetry) -> bool:
+    if symmetry not in (None, "none", "plane"):
+        raise ValueError(f"symmetry={symmetry!r}: expected 'plane' or 'none'")
+    return symmetry == "plane"
+
+
+def _at_wavelength(path, d, wavelength_nm, notes) -> dict:
+    """The columns ``d`` at the laser's wavelength (module notes of :func:`read_brdf_csv`)."""
+    w = d["wavelength_nm"]
+    have = np.unique(w)
+    listed = ", ".join(f"{x:g}" for x in have[:6]) + (" ..." if len(have) > 6 else "")
+    if wavelength_nm is None:
+        if len(have) > 1:
+            raise ValueError(f"{path}: wavelength_nm: the file holds {len(have)} wavelengths ({listed} nm); which one is "
+                             f"ambiguous: expected the laser's wavelength (a scene gives its laser's; in Python "
+                             f"read_samples(path, wavelength_nm=...)) or a file of one wavelength")
+        return d
+    lam = float(wavelength_nm)
+    near = np.abs(have - lam) <= WAVELENGTH_MATCH_NM
+    if near.any():
+        return {c: v[w == have[near][np.argmin(np.abs(have[near] - lam))]] for c, v in d.items()}
+    if not have[0] < lam < have[-1]:
+        raise ValueError(f"{path}: wavelength_nm: the laser's {lam:g} nm is outside the measured wavelengths ({listed} nm); "
+                         f"expected a file measured at or around it")
+    lo, hi = have[have < lam][-1], have[have > lam][0]
+    t = (lam - lo) / (hi - lo)
+    a, b = ({c: v[w == x] for c, v in d.items()} for x in (lo, hi))
+    order = [np.lexsort(np.round([x[c] for c in _ANGLES], 9)[::-1]) for x in (a, b)]
+    keys = [np.round(np.column_stack([x[c] for c in _ANGLES]), 9)[o] for x, o in zip((a, b), order)]
+    if keys[0].shape != keys[1].shape or np.any(keys[0] != keys[1]):
+        raise ValueError(f"{path}: wavelength_nm: the laser's {lam:g} nm lies between the measured {lo:g} and {hi:g} nm, "
+                         f"whose rows are not at the same angles; expected the same angles at both to interpolate")
+    out = {c: v[order[0]] for c, v in a.items()}
+    for c in ("brdf_per_sr", "reflectance_factor"):
+        if c in out:
+            out[c] = (1 - t) * a[c][order[0]] + t * b[c][order[1]]
+    notes.append(f"{path.name}: f_r interpolated linearly between the measured {lo:g} and {hi:g} nm to the laser's "
+                 f"{lam:g} nm (weight {t:.3g} on {hi:g} nm)")
+    return out
+
+
+def mirror_plane_symmetric(s):
+    """Samples with each one's mirror image about its plane of incidence added (data
+    declared plane-symmetric: measured on one side only). Returns new Samples."""
+    from .screen import Samples
+
+    u = np.column_stack([s.wi[:, 0], s.wi[:, 1], np.zeros(len(s))])
+    n = np.linalg.norm(u, axis=1, keepdims=True)
+    u = np.where(n > 1e-12, u / np.where(n > 1e-12, n, 1.0), [1.0, 0.0, 0.0])  # normal incidence: the x-z plane
+    z = np.array([0.0, 0.0, 1.0])
+    wo = 2 * np.sum(s.wo * u, axis=1, keepdims=True) * u + 2 * s.wo[:, 2:3] * z - s.wo
+    mirrored = Samples(s.wi, wo, s.brdf_per_sr, s.time_s, s.temperature_k, s.test_id, s.frame_id, s.weight, dict(s.info),
+                       dict(s.states))
+    out = Samples.concatenate([s, mirrored])
+    out.info.update(s.info)
+    return out
 
 
 def read_csv_columns(path, columns, what: str = "CSV file") -> dict:
@@ -410,22 +543,26 @@ def read_merl(path, channel="mean"):
     return _samples(wi[keep], wo[keep], v[keep])
 
 
-def read_samples(path):
+def read_samples(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None):
     """Measured samples by the file's form: ``.bsdf`` (Zemax), ``.astm`` / ``.e1392``
     (ASTM E1392), ``.binary`` (MERL, the channels' mean), a CSV with ``theta_i_deg`` columns (generic), else this package's own
-    samples CSV / Parquet (:meth:`brdfmodels.screen.Samples.read`)."""
+    samples CSV / Parquet (:meth:`brdfmodels.screen.Samples.read`). ``wavelength_nm``
+    (the laser's), ``ignore_columns`` and ``symmetry`` as :func:`read_brdf_csv` takes
+    them (a ``.bsdf`` declares its symmetry in its header: ``symmetry`` is refused there)."""
     from .screen import Samples
 
     p = Path(path)
     suffix = p.suffix.lower()
+    if suffix in (".bsdf", ".binary") and (symmetry not in (None, "none") or ignore_columns):
+        raise ValueError(f"{p}: symmetry and ignore_columns are for CSV and ASTM files; a {suffix} file declares its own layout")
     if suffix == ".bsdf":
         return read_bsdf(p)
     if suffix in (".astm", ".e1392"):
-        return read_astm_e1392(p)
+        return read_astm_e1392(p, ignore_columns=ignore_columns, symmetry=symmetry)
     if suffix == ".binary":
         return read_merl(p)
     if suffix == ".csv":
         first = read_input_text(p, "samples").split("\n", 1)[0]
         if "theta_i_deg" in first:
-            return read_brdf_csv(p)
+            return read_brdf_csv(p, wavelength_nm=wavelength_nm, ignore_columns=ignore_columns, symmetry=symmetry)
     return Samples.read(p)

@@ -54,32 +54,6 @@ def _coordinates(wi, wo):
     return th, td, np.mod(np.arctan2(spd, cpd), np.pi)
 
 
-def _nearest_node(nodes, x, periodic=False) -> np.ndarray:
-    """Index of the node nearest each x (the cell of half a spacing each side); periodic
-    over pi for phi_d."""
-    if len(nodes) == 1:
-        return np.zeros(len(x), np.intp)
-    ext = np.append(nodes, nodes[0] + np.pi) if periodic else nodes
-    i = np.clip(np.searchsorted(ext, x), 1, len(ext) - 1)
-    nearer = np.where(np.abs(x - ext[i - 1]) <= np.abs(ext[i] - x), i - 1, i)
-    return nearer % len(nodes) if periodic else nearer
-
-
-def _fit_at_nodes(wi, wo, f, axes, empty) -> np.ndarray:
-    """A spherical-harmonic fit of the samples (log, horizon tacking) at the empty nodes
-    (those whose directions dip below the horizon take the fit at the nearest ones above)."""
-    from .fitting import fit_sh
-    from .geometry import half_diff_to_directions
-    from .sh import SHBasis
-
-    keep = f > 0
-    model = fit_sh(wi[keep], wo[keep], f[keep], SHBasis(8, 4, 2, 0)).model
-    h, d, p = (g[empty] for g in np.meshgrid(*axes, indexing="ij"))
-    a, b = half_diff_to_directions(h, np.zeros(h.size), d, p)
-    a[:, 2], b[:, 2] = np.maximum(a[:, 2], 1e-3), np.maximum(b[:, 2], 1e-3)
-    return model.evaluate(a, b)
-
-
 def _axis_weights(nodes, x):
     """Lower node index and weight of the upper one, for x inside [nodes[0], nodes[-1]]."""
     i, t = cell_fraction(nodes, x)
@@ -103,9 +77,12 @@ class TabulatedBRDF(BRDFModel):
         measured value, not 0 (a 0 there pulls grazing values down).
     outside : {"error", "envelope", "fit"}
         What directions outside the theta_h / theta_d range get (module notes).
+    notes : sequence of str
+        What the table's maker wants said (a gridding's shortfall below the samples); a
+        scene shows them among its warnings. Not saved with the table.
     """
 
-    def __init__(self, theta_h_deg, theta_d_deg, phi_d_deg, values, outside="error"):
+    def __init__(self, theta_h_deg, theta_d_deg, phi_d_deg, values, outside="error", notes=()):
         self.theta_h = _nodes("theta_h_deg", theta_h_deg, 0.0, 90.0)
         self.theta_d = _nodes("theta_d_deg", theta_d_deg, 0.0, 90.0)
         self.phi_d = _nodes("phi_d_deg", phi_d_deg, 0.0, 180.0 - 1e-12)
@@ -119,6 +96,7 @@ class TabulatedBRDF(BRDFModel):
         for arr in (self.theta_h, self.theta_d, self.phi_d, self.values):
             arr.flags.writeable = False  # immutable like every model
         self.outside = outside
+        self.notes = tuple(str(n) for n in notes)
         self._fit_cache = []  # the "fit" policy's SH model, made on first use
         self._freeze()
 
@@ -137,32 +115,34 @@ class TabulatedBRDF(BRDFModel):
 
     @classmethod
     def from_samples(cls, wi, wo, brdf_per_sr, theta_h_deg, theta_d_deg, phi_d_deg, *, fill="envelope",
-                     outside="envelope") -> "TabulatedBRDF":
-        """A table gridded from scattered samples (any reader's, :mod:`brdfmodels.io`):
-        each node takes the largest sample in its cell, the box of half a node spacing
-        each side on every axis (conservative: a peak between nodes is not averaged
-        away); a node no sample reaches takes ``fill``: ``"envelope"`` (the samples'
-        largest value, conservative) or ``"fit"`` (a spherical-harmonic fit of the
-        samples with horizon tacking, :func:`brdfmodels.fitting.fit_sh`)."""
-        from ._checks import directions
+                     outside="envelope", notes=()) -> "TabulatedBRDF":
+        """A table of scattered samples (any reader's, :mod:`brdfmodels.io`) on the given
+        nodes: each node takes the samples' barycentric interpolation there
+        (:class:`brdfmodels.ScatteredBRDF`: bounded by the neighbouring samples), a node
+        beyond the samples' hull ``fill``: ``"envelope"`` (the largest of the 4 nearest
+        samples, conservative) or ``"fit"`` (a spherical-harmonic fit of the samples). The
+        grid adds its own error between nodes (a peak between nodes is cut); the scattered
+        model itself has none at the samples. ``notes`` (a reader's) are kept, and a
+        shortfall of the grid below a sample of more than 1 % is added to them."""
+        from .scattered import ScatteredBRDF
 
-        wi = directions("wi", wi).reshape(-1, 3)
-        wo = directions("wo", wo).reshape(-1, 3)
-        f = finite_array("brdf_per_sr", brdf_per_sr).ravel()
-        if not (len(wi) == len(wo) == len(f)) or not len(f) or np.any(f < 0):
-            raise ValueError("wi, wo, brdf_per_sr: expected as many directions as values (finite, >= 0), at least one")
         if fill not in ("envelope", "fit"):
             raise ValueError(f"fill={fill!r}: expected 'envelope' or 'fit'")
         axes = [_nodes(n, a, 0.0, hi) for n, a, hi in (("theta_h_deg", theta_h_deg, 90.0), ("theta_d_deg", theta_d_deg, 90.0),
                                                         ("phi_d_deg", phi_d_deg, 180.0 - 1e-12))]
-        coords = _coordinates(wi, wo)
-        cells = [_nearest_node(ax, x, periodic=(k == 2)) for k, (ax, x) in enumerate(zip(axes, coords))]
-        values = np.full(tuple(len(a) for a in axes), -1.0)
-        np.maximum.at(values, tuple(cells), f)
-        empty = values < 0
-        if empty.any():
-            values[empty] = f.max() if fill == "envelope" else _fit_at_nodes(wi, wo, f, axes, empty)
-        return cls(*(np.degrees(a) for a in axes), values, outside)
+        scattered = ScatteredBRDF.from_samples(wi, wo, brdf_per_sr, outside=fill)
+        h, d, p = np.meshgrid(*axes, indexing="ij")
+        values = scattered.at_coordinates(h, d, p).reshape(h.shape)
+        table = cls(*(np.degrees(a) for a in axes), values, outside, notes=notes)
+        f = np.ravel(brdf_per_sr)
+        ratio = table.evaluate(wi, wo)[f > 0] / f[f > 0]
+        if ratio.size and ratio.min() < 0.99:  # said, not hidden: the grid cuts peaks between its nodes
+            k = int(np.argmin(ratio))
+            note = (f"gridded on {len(axes[0])} x {len(axes[1])} x {len(axes[2])} nodes, the table returns down to "
+                    f"{100 * ratio[k]:.3g} % of a measured sample ({int((ratio < 0.99).sum())} of {ratio.size} samples more "
+                    f"than 1 % below); without a grid every sample is returned")
+            table = cls(*(np.degrees(a) for a in axes), values, outside, notes=tuple(notes) + (note,))
+        return table
 
     def _interpolate(self, th, td, pd):
         ih, th_t = _axis_weights(self.theta_h, th)

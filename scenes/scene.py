@@ -184,7 +184,7 @@ def _check_dhr(model, where):
                                                              max_evaluations=200_000)
                 except ValueError:
                     continue
-                if not math.isfinite(r.value) or r.value > 1.0 + 0.01 + r.error_estimate:
+                if not math.isfinite(r.value) or r.value > 1.0 + _dhr_tolerance(model) + r.error_estimate:
                     bad = (th, st, r.value)
                     break
             if bad:
@@ -195,8 +195,15 @@ def _check_dhr(model, where):
     if bad:
         th, st, v = bad
         at = f" at state {_fmt(st)}" if st is not None else ""
-        raise SceneError(f"{where}: hemispherical reflectance {v:.4g} > 1 at {th:g} deg incidence{at}: "
-                         f"the material reflects more than it receives; check its parameters")
+        raise SceneError(f"{where}: hemispherical reflectance {v:.4g} > 1 at {th:g} deg incidence{at} (beyond the "
+                         f"tolerance {_dhr_tolerance(model):g}): the material reflects more than it receives; check its "
+                         f"parameters")
+
+
+def _dhr_tolerance(model) -> float:
+    """How far past 1 a material's hemispherical reflectance may go: a measured table's
+    stated uncertainty (``dhr_tolerance``), else 0.01 (quadrature rounding)."""
+    return max(0.01, float(getattr(model, "dhr_tolerance", 0.01)))
 
 
 def _with_polarization(data, polarization):
@@ -220,28 +227,55 @@ def _model_file(file, base_dir):
         raise ValueError(f"file={file!r}: {exc}") from None
 
 
-def _table_material(spec, base_dir):
+def _table_material(spec, base_dir, wavelength_nm=None):
     """``{ model = "table", file = ... }``: a MERL ``.binary`` measurement, scattered
-    samples (``.bsdf``, ``.astm``, angle ``.csv``) gridded every ``grid_deg`` (default
-    [2, 2, 10] deg in theta_h, theta_d, phi_d; empty nodes per ``fill``), or a saved table
-    (JSON), with its ``outside`` policy (default "envelope": conservative)."""
+    samples (``.bsdf``, ``.astm``, angle ``.csv``) as a :class:`brdfmodels.ScatteredBRDF`
+    (every sample honoured, barycentric between them; beyond them ``fill`` / ``outside``:
+    the nearest samples' envelope by default), or gridded every ``grid_deg`` when given,
+    or a saved table (JSON), with its ``outside`` policy (default "envelope": conservative)."""
     p = input_path(spec.file, base_dir)
-    outside = spec.params.get("outside", "envelope")
+    prm = spec.params
+    outside, fill = prm.get("outside", "envelope"), prm.get("fill", "envelope")
+    policy = "error" if outside == "error" else ("fit" if "fit" in (fill, outside) else "envelope")  # beyond scattered data
+    scattered = p.suffix.lower() in (".bsdf", ".astm", ".e1392", ".csv")
+    unused = [k for k in ("dhr_tolerance", "ignore_columns", "symmetry") if k in prm
+              and (not scattered or (k == "dhr_tolerance" and "grid_deg" in prm))]
+    if unused:
+        raise ValueError(f"{unused[0]}: applies to a scattered table (a .bsdf, .astm, .e1392 or angle .csv file without "
+                         f"grid_deg); expected it removed here")
     if p.suffix.lower() == ".binary":
-        return brdfmodels.TabulatedBRDF.from_merl(p, channel=spec.params.get("channel", "mean"), outside=outside)
-    if p.suffix.lower() in (".bsdf", ".astm", ".e1392", ".csv"):  # scattered samples, gridded (conservative max per node)
+        return brdfmodels.TabulatedBRDF.from_merl(p, channel=prm.get("channel", "mean"), outside=outside)
+    if scattered:
         from brdfmodels.io import read_samples
 
-        s = read_samples(p)
-        dh, dd, dp = spec.params.get("grid_deg", [2.0, 2.0, 10.0])
-        return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
-                                                     np.arange(0.0, 90.0 - 1e-9, dd), np.arange(0.0, 180.0 - 1e-9, dp),
-                                                     fill=spec.params.get("fill", "envelope"), outside=outside)
+        s = read_samples(p, wavelength_nm=wavelength_nm, ignore_columns=prm.get("ignore_columns", ()),
+                         symmetry=prm.get("symmetry"))
+        notes = tuple(s.info.get("notes", ())) + _state_note(s)
+        if "grid_deg" in prm:
+            dh, dd, dp = prm["grid_deg"]
+            return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
+                                                         np.arange(0.0, 90.0 - 1e-9, dd), np.arange(0.0, 180.0 - 1e-9, dp),
+                                                         fill=fill, outside=outside, notes=notes)
+        return brdfmodels.ScatteredBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, outside=policy, notes=notes,
+                                                     dhr_tolerance=prm.get("dhr_tolerance", brdfmodels.scattered.DHR_TOLERANCE))
     model = _model_file(spec.file, base_dir)
+    if isinstance(model, brdfmodels.ScatteredBRDF):  # a saved scattered table, with this scene's policy
+        return brdfmodels.ScatteredBRDF(**{**model.to_dict()["params"], "outside": policy})
     if not isinstance(model, brdfmodels.TabulatedBRDF):
         raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")
     d = model.to_dict()["params"]
     return brdfmodels.TabulatedBRDF(d["theta_h_deg"], d["theta_d_deg"], d["phi_d_deg"], d["values"], outside)
+
+
+def _state_note(s) -> tuple:
+    """A note when measured samples span several states (time, temperature or a named
+    state): a static table holds them all, the largest at a shared direction pair."""
+    cols = {"time_s": s.time_s, "temperature_k": s.temperature_k, **s.states}
+    varied = [k for k, v in cols.items() if np.unique(v[np.isfinite(v)]).size > 1]
+    if not varied:
+        return ()
+    return (f"the samples span several values of {', '.join(varied)}; the static table holds them together (the "
+            f"largest at a shared direction pair, interpolated between); a dynamic fit (hazard fit sh) follows the state",)
 
 
 def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=None):
@@ -253,7 +287,7 @@ def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=N
 
             model = material(spec.library, wavelength_nm)
         elif spec.model == "table":
-            model = _table_material(spec, base_dir)
+            model = _table_material(spec, base_dir, wavelength_nm)
         elif spec.file is not None:
             model = _model_file(spec.file, base_dir)
         else:
@@ -368,6 +402,12 @@ def _inside_solid(p, spec) -> np.ndarray:
     if spec.shape == "sphere":
         return np.linalg.norm(q, axis=1) < s[0] / 2 * (1 - 1e-9)
     return (np.hypot(q[:, 0], q[:, 1]) < s[0] / 2 * (1 - 1e-9)) & (np.abs(q[:, 2]) < s[1] / 2 * (1 - 1e-9))
+
+
+def _material_notes(targets) -> list:
+    """The notes a measured material carries (merged duplicate samples, a wavelength
+    interpolated between two measured ones), each named by its target."""
+    return [f"targets[{t.index}].material: {n}" for t in targets for n in getattr(t.material, "notes", ())]
 
 
 def _buried_targets(targets, terrain) -> list:
@@ -835,7 +875,8 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         terrain=terrain,
         observers=observers,
         terrain_target=terrain_target,
-        warnings=(_warnings(spec) + _buried_targets(targets, terrain) + ([] if site is None else site.warnings)
+        warnings=(_warnings(spec) + _buried_targets(targets, terrain) + _material_notes(targets)
+                  + ([] if site is None else site.warnings)
                   + _near_aperture(observers, lp - offset, d)),
         site=site,
     )

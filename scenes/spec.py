@@ -362,6 +362,20 @@ class HistorySpec(_Strict):
         return self
 
 
+def _check_table_keys(p: dict) -> None:
+    """The measured-table keys of a material: ``dhr_tolerance`` (0 to 1), ``ignore_columns``
+    (names), ``symmetry`` ("plane" or "none")."""
+    t = p.get("dhr_tolerance", 0.05)
+    if isinstance(t, bool) or not isinstance(t, (int, float)) or not 0 <= t <= 1:
+        raise ValueError(f"dhr_tolerance={t!r}: expected the measurement's stated uncertainty of its hemispherical "
+                         f"reflectance, 0 to 1")
+    c = p.get("ignore_columns", [])
+    if not isinstance(c, list) or not all(isinstance(x, str) and x for x in c):
+        raise ValueError(f"ignore_columns={c!r}: expected a list of column names")
+    if p.get("symmetry", "none") not in ("none", "plane"):
+        raise ValueError(f"symmetry={p['symmetry']!r}: expected 'plane' (mirror one-sided data) or 'none'")
+
+
 class MaterialSpec(BaseModel):
     """A BRDF: ``model`` plus its parameters inline, a saved model ``file`` (JSON), or a
     ``library`` material (:mod:`brdfmodels.library`, with provenance).
@@ -388,10 +402,12 @@ class MaterialSpec(BaseModel):
     @model_validator(mode="after")
     def _check(self):
         if self.model == "table" and self.file is not None:  # a measured table: { model = "table", file = ..., outside = ... }
-            extra = set(self.model_extra or {}) - {"outside", "channel", "fill", "grid_deg"}
+            keys = ("outside", "channel", "fill", "grid_deg", "dhr_tolerance", "ignore_columns", "symmetry")
+            extra = set(self.model_extra or {}) - set(keys)
             if extra:
                 raise ValueError(f"unexpected keys {sorted(extra)} next to model = 'table' and file "
-                                 f"(expected outside, channel, fill, grid_deg)")
+                                 f"(expected {', '.join(keys)})")
+            _check_table_keys(self.params)
             g = self.params.get("grid_deg", [2.0, 2.0, 10.0])
             if (not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                                                   and 0.1 <= x <= 45 for x in g)):

@@ -54,6 +54,15 @@ def _small_table():
     return bm.TabulatedBRDF(th, td, pd, v, outside="envelope")
 
 
+def _small_scattered():
+    """A scattered table of 300 random samples of a Lambertian plus a lobe."""
+    rng = np.random.default_rng(5)
+    wi = bm.spherical_to_vector(rng.uniform(0, 1.4, 300), rng.uniform(-np.pi, np.pi, 300))
+    wo = bm.spherical_to_vector(rng.uniform(0, 1.4, 300), rng.uniform(-np.pi, np.pi, 300))
+    f = bm.Lambertian(0.3).evaluate(wi, wo) + bm.GaussianLobe(1.0, 0.2).evaluate(wi, wo)
+    return bm.ScatteredBRDF.from_samples(wi, wo, f)
+
+
 def examples():
     """(id, model, state, physical) for every registered model."""
     basis = bm.SHBasis(8, 2, 2, 0)
@@ -76,6 +85,7 @@ def examples():
         ("gaussian-lobe", bm.GaussianLobe(2.0, 0.1), None, True),
         ("hel-metal", bm.Sum([bm.GaussianLobe(20.0, 0.05), bm.ABg(0.002, 0.001, 2.0), bm.Lambertian(0.05)]), None, True),
         ("table", _small_table(), None, False),
+        ("scattered-table", _small_scattered(), None, False),
         ("dynamic-two-state", make_two_state(basis), [0.9, 0.3], False),
         ("envelope-two-state", bm.Envelope(make_two_state(basis), base=0.001), None, False),
         ("sum-two-state", bm.Sum([bm.Lambertian(0.1), bm.Scaled(make_two_state(basis), 0.5)]), [1.2, 0.7], False),

@@ -146,23 +146,25 @@ def _random_pairs(n, seed):
     return np.array([p[0] for p in out]), np.array([p[1] for p in out])
 
 
-def test_gridding_scattered_samples_keeps_each_cells_largest():
-    """Each node holds the largest sample whose (theta_h, theta_d, phi_d mod 180) is
-    nearest to it (brute force here with the angles from the definition); nodes no
-    sample reaches hold the samples' largest value (envelope)."""
-    wi, wo = _random_pairs(6000, 7)
-    f = TRUTH.evaluate(wi, wo)
+def test_gridding_scattered_samples_honours_the_samples_at_the_nodes():
+    """Samples placed at the nodes (directions from the definition of the coordinates)
+    come back at those nodes; every other node lies within the samples' range (a convex
+    combination of neighbours, or the envelope of the nearest: never beyond the largest)."""
     th, td, pd = np.arange(0, 90, 10.0), np.arange(0, 90, 10.0), np.arange(0, 180, 30.0)
+    pairs, at = [], []
+    for i, a in enumerate(th):
+        for j, b in enumerate(td):
+            for k, c in enumerate(pd):
+                wi, wo = _directions(*np.radians([a, b, c]))
+                if wi[2] > 1e-3 and wo[2] > 1e-3:
+                    pairs.append((wi, wo))
+                    at.append((i, j, k))
+    wi, wo = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    f = TRUTH.evaluate(wi, wo)
     m = bm.TabulatedBRDF.from_samples(wi, wo, f, th, td, pd)
-    want = np.full((len(th), len(td), len(pd)), -1.0)
-    for a, b, v in zip(wi, wo, f):
-        h, d, p = np.degrees(_angles(a, b))
-        i, j = int(np.argmin(np.abs(th - h))), int(np.argmin(np.abs(td - d)))
-        k = int(np.argmin(np.minimum(np.abs(pd - p), 180.0 - np.abs(pd - p))))  # periodic over 180 deg
-        want[i, j, k] = max(want[i, j, k], v)
-    want[want < 0] = f.max()
-    np.testing.assert_allclose(m.values, want, rtol=1e-12)
-    assert (m.values == f.max()).sum() > 0  # some nodes (below the horizon) were empty
+    got = np.array([m.values[i, j, k] for i, j, k in at])
+    np.testing.assert_allclose(got, f, rtol=1e-7)  # the 1e-9 rad joggle of the triangulation
+    assert f.min() * (1 - 1e-12) <= m.values.min() and m.values.max() <= f.max() * (1 + 1e-12)
 
 
 def test_a_scene_grids_a_bsdf_file_into_a_table(tmp_path):
@@ -174,5 +176,9 @@ def test_a_scene_grids_a_bsdf_file_into_a_table(tmp_path):
     (tmp_path / "m.bsdf").write_text(text)
     mat = '{ model = "table", file = "m.bsdf", grid_deg = [5.0, 5.0, 30.0], fill = "fit" }'
     (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', mat))
-    m = scenes.load(tmp_path / "s.toml").targets[0].material
+    sc = scenes.load(tmp_path / "s.toml")
+    m = sc.targets[0].material
     assert isinstance(m, bm.TabulatedBRDF) and m.values.shape == (18, 18, 6) and np.all(np.isfinite(m.values))
+    s = bm.io.read_bsdf(tmp_path / "m.bsdf")
+    low = float(np.min(m.evaluate(s.wi, s.wo) / s.brdf_per_sr))  # the grid cuts the lobe between its nodes: said
+    assert low < 0.99 and any(f"down to {100 * low:.3g} % of a measured sample" in w for w in sc.warnings), sc.warnings
