@@ -32,6 +32,7 @@ LIMITS = {
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
     "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
+    "SCATTERED_SAMPLES": (200_000, "measured samples triangulated into a scattered BRDF table (1e5 took 35 s to build)"),
     "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)

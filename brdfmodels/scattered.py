@@ -58,6 +58,7 @@ import math
 import numpy as np
 
 from ._checks import finite_array
+from ._io import check_limit
 from .models import BRDFModel
 from .registry import register
 
@@ -190,6 +191,7 @@ class ScatteredBRDF(BRDFModel):
         tol = float(finite_array("dhr_tolerance", dhr_tolerance))
         if not 0.0 <= tol <= 1.0:
             raise ValueError(f"dhr_tolerance={tol!r}: expected an absolute reflectance uncertainty of 0 to 1")
+        check_limit("SCATTERED_SAMPLES", len(f), "measured samples of a scattered table")
         x, f, n_merged, spread = _merge(np.column_stack([th, td, pd]), f)
         self.points_deg, self.values = x, f
         for arr in (self.points_deg, self.values):

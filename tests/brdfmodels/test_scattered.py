@@ -139,3 +139,13 @@ def test_bad_inputs_name_the_field():
         bm.ScatteredBRDF([10.0, 20.0], [0.0], [0.0], [0.1])
     with pytest.raises(ValueError, match="dhr_tolerance"):
         bm.ScatteredBRDF([10.0], [0.0], [0.0], [0.1], dhr_tolerance=2.0)
+
+
+def test_a_sample_count_beyond_the_limit_is_refused_before_the_triangulation(monkeypatch):
+    """1e5 samples took 35 s to triangulate: a file beyond HAZARD_MAX_SCATTERED_SAMPLES is a
+    clear error naming the limit, not minutes of work (issue 30's closed inputs)."""
+    monkeypatch.setenv("HAZARD_MAX_SCATTERED_SAMPLES", "50")
+    th = np.linspace(0.0, 80.0, 51)
+    with pytest.raises(ValueError, match=r"51 exceeds the limit 50 .*HAZARD_MAX_SCATTERED_SAMPLES"):
+        bm.ScatteredBRDF(th, th / 2, np.zeros(51), np.ones(51))
+    bm.ScatteredBRDF(th[:50], th[:50] / 2, np.zeros(50), np.ones(50))  # at the limit: accepted
