@@ -23,7 +23,8 @@ Verbs:
   hazard nohd  --power-w P (--mpe-w-m2 M | --wavelength-nm L --duration-s T) ...
 
 SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
-Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard).
+Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard),
+4 some scenarios of a study or chunks of risk draws failed (study, risk; a summary on stderr).
 Every error is one line on stderr naming the input; ``--debug`` (anywhere on the command
 line) shows the traceback instead.
 """
@@ -47,6 +48,7 @@ EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_ERROR = 2
 EXIT_HAZARD = 3
+EXIT_FAILED = 4  # hazard study / risk: some scenarios or draw chunks failed (the summary names them)
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout went away (the outputs are written first)
 
 
@@ -96,6 +98,8 @@ def _add_dask_args(p, what: str, json_help: str) -> None:
     p.add_argument("--force", action="store_true", help=f"start over if the folder holds another {what}")
     p.add_argument("--json", action="store_true", help=json_help)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--keep-going", action="store_true", help=f"after a failed {'scenario' if what == 'study' else 'chunk of draws'}, "
+                   "run the rest anyway (default: stop at the first); either way a failure exits 4 with a summary")
 
 
 def _add_run_args(p):
@@ -736,7 +740,7 @@ def _cmd_study(args, out, err):
 
     study = load_study(args.study)
     res = run_study(study, args.output, scheduler=args.scheduler, serial=args.serial, n_workers=args.workers, force=args.force,
-                    progress=None if args.quiet else progress_bar(err))
+                    progress=None if args.quiet else progress_bar(err), keep_going=args.keep_going)
     if args.json:
         out.write(json.dumps(res.summary, indent=1) + "\n")
     else:
@@ -747,6 +751,12 @@ def _cmd_study(args, out, err):
         for f in res.summary["failures"][:5]:
             out.write(f"  failed scenario {f['id']}: {f['error']}\n")
         out.write(f"  wrote {res.outdir / 'results.csv'}, {res.outdir / 'summary.json'}\n")
+    if not res.ok:
+        s = res.summary
+        stop = f", {s['not_run']} not run (stopped at the first failure; --keep-going runs the rest)" if s["not_run"] else ""
+        kinds = "; ".join(_one_line(e, 300) for e in s["failure_kinds"].values())
+        err.write(f"hazard study: error: {s['failed']} of {s['scenarios']} scenarios failed{stop}; first of each kind: {kinds}\n")
+        return EXIT_FAILED
     return EXIT_OK
 
 
