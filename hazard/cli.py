@@ -765,10 +765,16 @@ def _cmd_risk(args, out, err):
     from .risk import run_risk
     from .risk.page import worst_first
 
+    from .risk.run import ChunksFailed
+
     scene = _load_scene(args.scene, err)
-    res = run_risk(scene, args.output, draws=args.draws, seed=args.seed, sampling=args.sampling, sensitivity_draws=args.sensitivity_draws,
-                   serial=args.serial, workers=args.workers, scheduler=args.scheduler, force=args.force,
-                   progress=None if args.quiet else progress_callback("risk chunks", unit="chunk", leave=True, stream=err))
+    try:
+        res = run_risk(scene, args.output, draws=args.draws, seed=args.seed, sampling=args.sampling, sensitivity_draws=args.sensitivity_draws,
+                       serial=args.serial, workers=args.workers, scheduler=args.scheduler, force=args.force, keep_going=args.keep_going,
+                       progress=None if args.quiet else progress_callback("risk chunks", unit="chunk", leave=True, stream=err))
+    except ChunksFailed as exc:
+        err.write(f"hazard risk: error: {_one_line(exc, 900)}\n")
+        return EXIT_FAILED
     doc = res.doc
     if args.json:
         out.write(json.dumps(doc["observers"], indent=1) + "\n")
