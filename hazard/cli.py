@@ -610,15 +610,28 @@ def _state_nodes_args(state_text, states_text):
 
 
 def _cmd_fit(args, out, err):
+    """``hazard fit``: its 1-3 files (model, envelope, samples; separate paths) are written
+    as one unit (:func:`brdfmodels._unit.output_files`): on any error none is created or replaced."""
+    from brdfmodels._unit import output_files
+
     from .progress import progress_to
 
-    _check_new(args.output, args.force)
-    with progress_to(None if getattr(args, "quiet", False) else err):  # bars on a terminal only
+    finals = [args.output] + [p for p in (getattr(args, "envelope_output", None), getattr(args, "samples_output", None)) if p]
+    for p in finals:
+        _check_new(p, args.force)
+    import io
+
+    text = io.StringIO()  # stdout is written once the files are in place: no "wrote" for a file never switched in
+    with progress_to(None if getattr(args, "quiet", False) else err), output_files(finals) as files:  # bars on a terminal only
+        args.stage = files.stage
         if args.fit_kind == "oxidation":
-            return _fit_oxidation(args, out)
-        samples = _fit_samples(args)
-        fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
-        return fit(args, out, samples)
+            code = _fit_oxidation(args, text)
+        else:
+            samples = _fit_samples(args)
+            fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
+            code = fit(args, text, samples)
+    out.write(text.getvalue())
+    return code
 
 
 def _fit_oxidation(args, out):
@@ -632,7 +645,7 @@ def _fit_oxidation(args, out):
     doc = {**r.model.to_dict(), "reflectance0": r.reflectance0, "reference_temperature_k": r.reference_temperature_k,
            "rate_at_reference_per_s": r.rate_at_reference_per_s, "ci95": {k: list(map(float, v)) for k, v in r.ci95.items()},
            "correlation_t0_log_d0": r.correlation_t0_log_d0, "condition_number": r.condition_number, "residual_rms": r.residual_rms}
-    atomic_write_text(args.output, json.dumps(doc, indent=1))
+    atomic_write_text(args.stage(args.output), json.dumps(doc, indent=1))
     if args.json:
         out.write(json.dumps(doc, indent=1) + "\n")
     else:
@@ -661,8 +674,7 @@ def _fit_samples(args):
             bar.update()
     samples = screen.Samples.concatenate(parts)
     if args.samples_output:
-        _check_new(args.samples_output, args.force)
-        samples.write(args.samples_output)
+        samples.write(args.stage(args.samples_output))
     return samples
 
 
@@ -678,7 +690,7 @@ def _fit_ts5(args, out, samples):
         _print_report(out, "five-parameter fit: error vs evaluations vs seconds", rows, args.json)
     r = fitting.fit_ts5(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval,
                         progress=progress_callback("five-parameter fit", unit="eval"))
-    brdfmodels.save(r.model, args.output)
+    brdfmodels.save(r.model, args.stage(args.output))
     _print_report(out, "five-parameter fit", [r.summary()], args.json, {"wrote": str(args.output)})
     return EXIT_OK
 
@@ -689,7 +701,7 @@ def _fit_abg(args, out, samples):
 
     r = fit_abg(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval,
                 weights=samples.weight)
-    brdfmodels.save(r.model, args.output)
+    brdfmodels.save(r.model, args.stage(args.output))
     d = r.details
     extra = {"A": f"{d['p_a']:.6g} +- {d['stderr_a']:.3g} (1 sigma, from the Jacobian at the optimum)",
              "B": f"{d['p_b']:.6g} +- {d['stderr_b']:.3g}", "g": f"{d['p_g']:.6g} +- {d['stderr_g']:.3g}",
@@ -725,12 +737,11 @@ def _fit_sh(args, out, samples):
     if args.envelope:  # computed before either file is written: a failed envelope leaves no new model beside an old envelope
         if not args.envelope_output:
             raise ValueError("--envelope-output: required with --envelope")
-        _check_new(args.envelope_output, args.force)
         env = fitting.envelope_paper(model, samples) if args.envelope == "paper" else fitting.envelope_sh(samples, basis, fanout=args.fanout)
         extra.update({"envelope": env.summary(), "envelope_file": str(args.envelope_output)})
-    brdfmodels.save(model, args.output)
+    brdfmodels.save(model, args.stage(args.output))
     if env is not None:
-        brdfmodels.save(env.model, args.envelope_output)
+        brdfmodels.save(env.model, args.stage(args.envelope_output))
     _print_report(out, "spherical-harmonic fit", rows, args.json, extra)
     return EXIT_OK
 
