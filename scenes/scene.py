@@ -437,12 +437,33 @@ def _warnings(spec: SceneSpec) -> list:
     if t_end is not None and t_end < spec.exposure.duration_s and any(t.history is not None for t in spec.targets):
         out.append(f"analysis.time_end_s = {t_end:g} s ends before the exposure (exposure.duration_s = "
                    f"{spec.exposure.duration_s:g} s): states after it are not seen, and a dynamic NOHD may be low")
-    return out + _magnitude_warnings(spec)
+    return out + _magnitude_warnings(spec) + _duration_warnings(spec)
+
+
+# A continuous beam watched for less than this is not an exposure anyone means on a range
+# (the shortest aversion-response and scanning dwell times are ms; the tables reach 1e-13 s
+# for single pulses); longer than this is a whole working day and more (the tables end at 3e4 s)
+DURATION_PLAUSIBLE_S = (1e-6, 2.88e4)
+
+
+def _duration_warnings(spec: SceneSpec) -> list:
+    """``exposure.duration_s`` that the schema accepts but that is hardly meant: under 1 us
+    for a continuous beam (ms or s typed as us?), over 8 h, or shorter than one pulse."""
+    d, la = spec.exposure.duration_s, spec.laser
+    if la.power_w is not None and d < DURATION_PLAUSIBLE_S[0]:
+        return [f"exposure.duration_s = {d:g} s is under 1 us for a continuous beam (laser.power_w): the MPE is that of a "
+                f"{d:g} s exposure, far above a continuous one's; ms or s meant?"]
+    if la.pulse_duration_s is not None and d < la.pulse_duration_s:
+        return [f"exposure.duration_s = {d:g} s is shorter than one pulse (laser.pulse_duration_s = {la.pulse_duration_s:g} s): "
+                f"the exposure should span the pulses seen"]
+    if d > DURATION_PLAUSIBLE_S[1]:
+        return [f"exposure.duration_s = {d:g} s is over 8 h (a working day, 2.88e4 s): s typed for ms, or the whole day meant?"]
+    return []
 
 
 # Orders of magnitude beyond the bundled range (100 W .. 100 kW) that a unit slip gives:
 # a power in mW or kW typed as W. (exposure.duration_s beyond the MPE tables' 3e4 s is
-# already an error of the schema.)
+# already an error of the schema; inside it, _duration_warnings.)
 POWER_PLAUSIBLE_W = (1e-3, 1e7)
 
 
