@@ -903,6 +903,7 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
     on stderr naming the input; ``--debug`` shows the traceback instead."""
     out = stdout or sys.stdout
     err = stderr or sys.stderr
+    as_command = argv is None  # the console script / python -m hazard: dependency noise handled (hazard._noise)
     argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]
@@ -918,7 +919,12 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
 
     where = _input_of(args)
     try:
-        return _COMMANDS[args.verb](args, out, err)
+        if not as_command:
+            return _COMMANDS[args.verb](args, out, err)
+        from ._noise import quiet_dependencies
+
+        with quiet_dependencies(err, args.verb, serial=bool(getattr(args, "serial", False))):
+            return _COMMANDS[args.verb](args, out, err)
     except (ValueError, OutputExistsError) as exc:  # bad input (SceneError is a ValueError)
         if debug:
             raise

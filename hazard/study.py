@@ -25,6 +25,7 @@ import copy
 import hashlib
 import json
 import math
+import os
 import re
 import time
 from dataclasses import asdict, dataclass, field
@@ -628,7 +629,12 @@ def local_cluster(n_workers=2):
     import dask
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    # the workers log Dask's own chatter at ERROR only, as hazard._noise does in this process
+    # (a value set in the user's environment still wins)
+    env = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+    if "DASK_LOGGING__DISTRIBUTED" not in os.environ:
+        env["distributed.nanny.pre-spawn-environ.DASK_LOGGING__DISTRIBUTED"] = "error"
+    with dask.config.set(env):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0")
 
 
