@@ -113,7 +113,7 @@ def _add_run_args(p):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.",
-                     epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error); "
+                     epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error, 4: scenarios or risk draws failed); "
                             "--debug shows the traceback. Input limits: HAZARD_MAX_<NAME> environment variables (see README).")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error (may also follow the verb)")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", parser_class=_Parser)

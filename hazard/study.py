@@ -350,6 +350,9 @@ def validate_scenarios(study: Study, shown: int = 3) -> int:
     import scenes
 
     base, base_dir = _base_data(study)
+    key = (study.digest(), hashlib.sha256(json.dumps(base, sort_keys=True, default=str).encode()).hexdigest(), str(base_dir))
+    if key in _VALIDATED:  # load_study checked it; run_study need not build every scene again
+        return _VALIDATED[key]
     for i, p in enumerate(study.parameters):  # a path the base scene lacks: one error, not one per scenario
         try:
             set_path(copy.deepcopy(base), p.path, None)
@@ -372,7 +375,13 @@ def validate_scenarios(study: Study, shown: int = 3) -> int:
     if bad:
         more = f"; and {len(bad) - shown} more" if len(bad) > shown else ""
         raise ValueError(f"{len(bad)} of {len(seen)} distinct scenario scene(s) are invalid: " + "; ".join(bad[:shown]) + more)
+    if len(_VALIDATED) > 64:
+        _VALIDATED.clear()
+    _VALIDATED[key] = len(seen)
     return len(seen)
+
+
+_VALIDATED: dict = {}  # (study digest, base scene hash, folder) -> distinct scenes checked
 
 
 def _lhs(n, d, rng):
