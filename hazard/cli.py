@@ -612,6 +612,8 @@ def _state_nodes_args(state_text, states_text):
 def _cmd_fit(args, out, err):
     """``hazard fit``: its 1-3 files (model, envelope, samples; separate paths) are written
     as one unit (:func:`brdfmodels._unit.output_files`): on any error none is created or replaced."""
+    import io
+
     from brdfmodels._unit import output_files
 
     from .progress import progress_to
@@ -619,8 +621,6 @@ def _cmd_fit(args, out, err):
     finals = [args.output] + [p for p in (getattr(args, "envelope_output", None), getattr(args, "samples_output", None)) if p]
     for p in finals:
         _check_new(p, args.force)
-    import io
-
     text = io.StringIO()  # stdout is written once the files are in place: no "wrote" for a file never switched in
     with progress_to(None if getattr(args, "quiet", False) else err), output_files(finals) as files:  # bars on a terminal only
         args.stage = files.stage

@@ -38,7 +38,7 @@ from brdfmodels._io import atomic_write, atomic_write_text, read_toml
 from .progress import progress_callback, progress_to
 
 __all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path",
-           "check_schema_path", "validate_scenarios", "StudyFailed"]
+           "check_schema_path", "validate_scenarios", "failure_kinds"]
 
 _PATH_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(\[(\d+)\])?")
 
