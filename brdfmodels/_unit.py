@@ -43,7 +43,8 @@ import shutil
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "read_manifest", "read_sources", "OutputFolderError"]
+__all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "read_manifest", "read_sources", "OutputFolderError",
+           "FileSet", "output_files"]
 
 MANIFEST = ".laser-hazard.json"
 _ACTIVE: set = set()  # staging folders of this process still being written
@@ -379,3 +380,74 @@ def output_unit(out, *, command: str, overwrite: bool = False, force: bool = Fal
         if unit.stage.exists():
             shutil.rmtree(unit.stage, ignore_errors=True)
         raise
+
+
+class FileSet:
+    """Files at separate, user-chosen paths (``hazard fit``'s model, envelope and samples)
+    replaced as one unit: each is written to a temporary beside its final path
+    (:meth:`stage`), then :meth:`commit` switches them all in, or none.
+
+    The switch: every final file that exists is first hard-linked to a backup
+    ``.NAME.<token>.old`` beside it; the temporaries are then renamed over the finals one
+    by one; if any rename fails, the finals already switched are put back from their
+    backups (or removed when they did not exist), so on an error none of the final files is
+    created or replaced. The backups are removed after the switch. A process killed between
+    the renames (not an exception) may leave a mix; its ``.NAME.*.old`` backups beside the
+    files are the previous versions."""
+
+    def __init__(self, paths):
+        finals = [Path(os.path.abspath(p)) for p in paths]
+        if len(set(finals)) != len(finals):
+            raise ValueError(f"output files {[str(p) for p in paths]}: the same file is named twice; expected separate paths")
+        self.token = secrets.token_hex(8)
+        self.finals = finals
+        self.temps = {p: p.parent / f".{p.name}.{self.token}.tmp{p.suffix}" for p in finals}
+
+    def stage(self, path) -> Path:
+        """The temporary to write instead of ``path`` (one of the set's paths; same suffix)."""
+        return self.temps[Path(os.path.abspath(path))]
+
+    def commit(self) -> None:
+        """Switch every written temporary in (a path never staged is left alone)."""
+        todo = [p for p in self.finals if self.temps[p].exists()]
+        backups, done = {}, []
+        try:
+            for p in todo:
+                if os.path.lexists(p):
+                    backups[p] = p.parent / f".{p.name}.{self.token}.old"
+                    _link_or_copy(p, backups[p])
+            for k, p in enumerate(todo):
+                _step(f"files: rename {k}")
+                os.replace(self.temps[p], p)
+                done.append(p)
+        except BaseException:
+            for p in reversed(done):  # put back what was switched: old file, or none
+                if p in backups:
+                    os.replace(backups.pop(p), p)
+                else:
+                    os.unlink(p)
+            raise
+        finally:
+            for b in backups.values():
+                if os.path.lexists(b):
+                    os.unlink(b)
+            for p in {p.parent for p in todo}:
+                _fsync_dir(p)
+
+    def discard(self) -> None:
+        for t in self.temps.values():
+            if os.path.lexists(t):
+                os.unlink(t)
+
+
+@contextmanager
+def output_files(paths):
+    """A :class:`FileSet` of ``paths``: the body writes ``files.stage(path)`` for each;
+    committed on a normal exit, every temporary discarded on an exception (no final file
+    created or replaced)."""
+    files = FileSet(paths)
+    try:
+        yield files
+        files.commit()
+    finally:
+        files.discard()

@@ -27,7 +27,7 @@ import numpy as np
 from ._checks import directions, finite_scalar
 from .states import grid_points
 
-__all__ = ["hemispherical_reflectance", "DHRResult", "envelope_report", "EnvelopeReport"]
+__all__ = ["hemispherical_reflectance", "hemispherical_reflectance_states", "DHRResult", "envelope_report", "EnvelopeReport"]
 
 _NGL = 6
 _GX, _GW = np.polynomial.legendre.leggauss(_NGL)
@@ -57,6 +57,12 @@ def _theta_max(wi, phi):
 
 def _cell_integrals(model, wi, cells, state):
     """Gauss-Legendre integral of the warped integrand over each (u, phi_h) cell (n, 4)."""
+    return _cell_integrals_with(lambda wo: model.evaluate_cos(np.broadcast_to(wi, wo.shape), wo, state=state), wi, cells)
+
+
+def _cell_integrals_with(projected, wi, cells):
+    """:func:`_cell_integrals` of ``projected(wo)`` (f_r cos(theta_o) at reflected directions
+    ``wo`` (n, g*g, 3); shape (n, g*g), or (n, g*g, S) for S states at once): (n,) or (n, S)."""
     u0, u1, p0, p1 = cells.T
     uu = (0.5 * (u1 - u0))[:, None] * (_GX[None, :] + 1.0) + u0[:, None]  # (n, g)
     pp = (0.5 * (p1 - p0))[:, None] * (_GX[None, :] + 1.0) + p0[:, None]
@@ -70,11 +76,13 @@ def _cell_integrals(model, wi, cells, state):
     wo = 2.0 * wih[..., None] * h - wi
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     # Round-off can put wo a hair below the horizon at u = 1; the BRDF is 0 there anyway.
-    g = model.evaluate_cos(np.broadcast_to(wi, wo.shape), wo, state=state) * 4.0 * np.maximum(wih, 0.0)
-    g *= st * tmax  # d omega_h = sin(theta) d theta d phi = sin(theta) theta_max du d phi
+    jac = 4.0 * np.maximum(wih, 0.0) * st * tmax  # d omega_h = sin(theta) d theta d phi = sin(theta) theta_max du d phi
+    g = projected(wo)
+    if g.ndim == 3:
+        jac = jac[..., None]
     w = np.outer(_GW, _GW).ravel()
     area = 0.25 * (u1 - u0) * (p1 - p0)
-    return (g * w).sum(axis=1) * area
+    return np.einsum("ng...,g->n...", g * jac, w) * (area if g.ndim == 2 else area[:, None])
 
 
 def _split(cells):
@@ -176,6 +184,83 @@ def hemispherical_reflectance(model, wi, *, state=None, rtol=1e-6, atol=1e-10, m
         specular_part=spec,
         wall_time_s=time.perf_counter() - start,
     )
+
+
+def _projected_states(model, wi, states):
+    """``projected(wo) -> (n, g, S)``: f_r cos(theta_o) of ``model`` at every state of
+    ``states`` (S,) or (S, 2) (None: the static model); one basis evaluation and one GEMM
+    for a spherical-harmonic table (``evaluate_many``), a loop over the states otherwise."""
+    if states is None:
+        return lambda wo: model.evaluate_cos(np.broadcast_to(wi, wo.shape), wo)[..., None]
+    many = getattr(model, "evaluate_many", None)
+
+    def projected(wo):
+        flat = wo.reshape(-1, 3)
+        if many is not None:
+            v = many(np.broadcast_to(wi, flat.shape), flat, states, projected=True)
+        else:
+            v = np.stack([model.evaluate_cos(np.broadcast_to(wi, flat.shape), flat, state=s) for s in states], axis=-1)
+        return v.reshape(*wo.shape[:-1], -1)
+
+    return projected
+
+
+def hemispherical_reflectance_states(model, wi, states=None, *, rtol=1e-3, atol=1e-10, max_evaluations=2_000_000):
+    """Directional-hemispherical reflectance of ``model`` at incidence ``wi`` for many
+    states at once (the quadrature of :func:`hemispherical_reflectance`, one cell grid for
+    every state, refined where the summed error over the states is largest).
+
+    Parameters
+    ----------
+    model : BRDFModel
+    wi : array_like, shape (3,)
+        Direction to the source in the surface frame (z > 0).
+    states : array_like, shape (S,) or (S, 2), optional
+        States of a dynamic model (None: a static model, S = 1).
+    rtol, atol : float
+        Stop when every state's error estimate is below ``max(rtol * value, atol)``.
+    max_evaluations : int
+        Budget of integrand evaluations (points x states).
+
+    Returns
+    -------
+    value, error_estimate : ndarray, shape (S,)
+        Dimensionless reflectance (delta lobes included) and its absolute error estimate.
+    converged : bool
+    """
+    wi = directions("wi", wi)
+    if wi.shape != (3,) or not wi[2] > 0:
+        raise ValueError(f"wi={wi.tolist()!r}: expected one direction above the surface (z > 0), shape (3,)")
+    states = None if states is None else np.asarray(states, float)
+    sts = [None] if states is None else list(states)
+    spec = np.array([float(model.specular_reflectance(wi, state=s if s is None or np.ndim(s) == 0 else np.asarray(s)))
+                     for s in sts])
+    projected = _projected_states(model, wi, states)
+    per_cell = 5 * _NGL * _NGL * len(sts)
+
+    def estimate(cells):
+        coarse = _cell_integrals_with(projected, wi, cells)
+        fine = _cell_integrals_with(projected, wi, _split(cells)).reshape(4, cells.shape[0], -1).sum(axis=0)
+        return fine, np.abs(fine - coarse)
+
+    cells = _initial_cells(wi)
+    vals, errs = estimate(cells)
+    evals = per_cell * cells.shape[0]
+    while True:
+        total, err = vals.sum(axis=0) + spec, errs.sum(axis=0)
+        if np.all(err <= np.maximum(rtol * np.abs(total), atol)):
+            return total, err, True
+        score = (errs / np.maximum(np.abs(total), atol)).sum(axis=1)
+        order = np.argsort(score)[::-1]
+        k = min(max(int(np.searchsorted(np.cumsum(score[order]), 0.5 * score.sum())) + 1, 1), order.size)
+        if evals + 4 * k * per_cell > max_evaluations:
+            return total, err, False
+        keep = np.ones(cells.shape[0], bool)
+        keep[order[:k]] = False
+        children = _split(cells[order[:k]])
+        cv, ce = estimate(children)
+        evals += per_cell * children.shape[0]
+        cells, vals, errs = np.concatenate([cells[keep], children]), np.concatenate([vals[keep], cv]), np.concatenate([errs[keep], ce])
 
 
 @dataclass(frozen=True)

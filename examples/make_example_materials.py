@@ -5,14 +5,28 @@ Run:  python examples/make_example_materials.py   (writes scenes/examples/*.json
 These are NOT measured fits. They are spherical-harmonic models whose shapes follow the
 trends of Bailey et al., J. Laser Appl. 20(1), 2008, Table I:
 
-* stainless_dynamic.json - DynamicBRDF over oxide extinction xi (the paper's preferred
-  state label for stainless before melting): a glossy, groove-elongated specular lobe
-  whose peak falls and broadens as xi grows from the paper's xi_0 = 0.311; the total
-  reflectance follows R(xi)/R(xi_0) = exp(-(xi - xi_0)) (about 50 % drop at xi = 1).
-  Basis (8, 4, 2, 0): the paper's 37 stainless harmonics.
-* copper_glossy.json - a static glossy copper lobe plus a Fresnel mirror part; the copper
-  example scales it by a measured-style reflectance-factor series (cleaning raises the
-  reflectance ~30 %, then oxidation drops it ~90 %).
+* stainless_dynamic.json - glossy stainless over oxide extinction xi (the paper's preferred
+  state label for stainless before melting): a specular lobe whose peak falls and
+  broadens as xi grows from the paper's xi_0 = 0.311 (width 3 deg -> 6.6 deg at xi = 1.5,
+  peak ~ f (3 deg / w)^2) and a diffuse part; the total reflectance follows
+  R(xi)/R(xi_0) = f = exp(-(xi - xi_0)) (about 50 % drop at xi = 1). Built from
+  energy-conserving parts (:func:`glossy_stainless`): two Gaussian lobes in
+  direction-cosine space (narrow and broad, their amplitudes tabulated over xi so peak and
+  lobe energy follow the design at every node) and a Lambertian, each scaled by a
+  clamped state table.
+* copper_glossy.json - a static glossy copper lobe (a Gaussian lobe in direction cosines)
+  plus a mirror part (reflectance 0.3) and a Lambertian (0.01); the copper example scales
+  it by a measured-style reflectance-factor series (cleaning raises the reflectance ~30 %,
+  then oxidation drops it ~90 %), so its reflectance is kept <= 0.77 at every incidence
+  (x 1.3 <= 1).
+
+Until 2026-11 both were spherical-harmonic models of ``ln(floor + lobe(theta_h))`` in f~ =
+cos_i cos_r f_r. A constant floor of f~ is a BRDF of floor / (cos_i cos_r): its
+hemispherical reflectance grows as 1 / cos(theta_i) and the old files reached 1.47 (copper)
+and 2.57 (stainless, xi_0) at 85 deg incidence, 4.4 and 11.2 at 89 deg; a low-order SH
+expansion cannot hold the lobe without the floor (it rings). The closed-form parts
+conserve energy at every incidence (a direction-cosine lobe integrates to at most
+peak pi sigma^2). README "Materials" gives the before/after numbers.
 * stainless_melt_brdf.json - a two-state DynamicBRDF over (oxide extinction, melt
   fraction) for the ``stainless_melt`` scene, made the way a measured one would be: the
   witness-screen simulator (:func:`brdfmodels.screen.simulate_test`, 2 % camera noise)
@@ -23,7 +37,8 @@ trends of Bailey et al., J. Laser Appl. 20(1), 2008, Table I:
   (:func:`brdfmodels.fitting.fit_dynamic_sh` over two states, basis (8, 4, 2, 0)).
 
 Run ``python examples/make_example_materials.py stainless_melt`` to remake only that one
-(about 30 s); with no argument every material is remade.
+(about 30 s), ``... glossy`` for stainless_dynamic and copper_glossy; with no argument
+every material is remade.
 """
 
 import math
@@ -38,20 +53,6 @@ from brdfmodels.melt_truth import SyntheticMeltingSteel
 from brdfmodels.validation import FIT_TESTS, HELD_OUT_TESTS
 
 OUT = Path(__file__).resolve().parents[1] / "scenes" / "examples"
-
-
-def lobe_coefficients(basis, width_deg, peak, diffuse, anisotropy):
-    """Zonal lobe ln(diffuse + peak exp(-(theta_h/w)^2)) plus a cos(2 phi_h) elongation."""
-    w = np.radians(width_deg)
-    zonal = bm.sh.zonal_coefficients(lambda th: np.log(diffuse + peak * np.exp(-((th / w) ** 2))), basis.lh_max, 0.6)
-    coef = np.zeros(basis.size)
-    for k, col in enumerate(basis.columns):
-        kind, l, m = col
-        if kind == "h" and m == 0:
-            coef[k] = zonal[l]
-        elif kind == "h" and m == 2 and l >= 2:
-            coef[k] = anisotropy * zonal[l]  # elongates the lobe along the grooves
-    return coef
 
 
 # State grid of stainless_melt_brdf.json: oxide extinction from the paper's xi_0 = 0.311
@@ -108,28 +109,61 @@ def make_stainless_melt():
 
 
 def main(names=()):
+    if set(names) - {"stainless_melt", "glossy"}:
+        raise SystemExit(f"unknown names {sorted(set(names) - {'stainless_melt', 'glossy'})}: expected stainless_melt, glossy or nothing")
     if "stainless_melt" in names or not names:
         make_stainless_melt()
-    if names and set(names) != {"stainless_melt"}:
-        raise SystemExit(f"unknown names {sorted(set(names) - {'stainless_melt'})}: expected stainless_melt or nothing")
-    if names:
-        return
-    basis = bm.SHBasis(8, 4, 2, 0)
-    xi = np.array([0.311, 0.5, 0.8, 1.1, 1.5])
-    factor = np.exp(-(xi - 0.311))
-    # lobe width grows with oxidation; peak ~ f / w^2 keeps the lobe's albedo ~ f
-    widths = 3.0 + 3.0 * (xi - 0.311)
-    rows = [lobe_coefficients(basis, w, 13.0 * f * (3.0 / w) ** 2, 0.03 * f, 0.15) for w, f in zip(widths, factor)]
-    steel = bm.DynamicBRDF(basis, xi, np.array(rows), "extinction", fanout=0.6, log=True, extrapolation="clamp")
-    bm.save(steel, OUT / "stainless_dynamic.json")
+    if "glossy" in names or not names:
+        make_glossy()
 
-    cu_basis = bm.SHBasis(10, 4, 2, 0)  # the paper's 47 copper harmonics
-    cu_lobe = bm.SphericalHarmonicBRDF(cu_basis, lobe_coefficients(cu_basis, 2.0, 30.0, 0.01, 0.05))
-    copper = bm.Sum([cu_lobe, bm.Specular(reflectance=0.3), bm.Lambertian(0.01)])
+
+# stainless_dynamic: the design of the earlier SH file (lobe width w = 3 + 3 (xi - xi_0) deg,
+# peak ~ f (3/w)^2, lobe energy ~ f, diffuse ~ f) with the lobe's peak taken as the old
+# file's value at 20 deg incidence (22.4 /sr at xi_0: steel_vs_copper's incidence), the
+# diffuse part as the old floor's value at normal incidence (0.03 f /sr: a Lambertian of
+# pi 0.03 f). A lobe of angular width w (exp(-(theta_h/w)^2)) is exp(-(delta/2w)^2) in the
+# angle delta from the mirror direction: sigma = 2 w in direction cosines.
+STAINLESS_XI = (0.311, 0.5, 0.8, 1.1, 1.5)
+STAINLESS_PEAK_PER_SR = 22.4
+COPPER_LOBE = dict(peak=41.0, sigma=0.0593)  # old file: 41.7 /sr at 10 deg, e-fold 3.4 deg from the mirror direction
+COPPER_MIRROR, COPPER_DIFFUSE = 0.3, 0.01
+
+
+def glossy_stainless():
+    """stainless_dynamic.json (see the module docstring): narrow (3 deg) and broad (6.57 deg)
+    lobes with amplitudes a(xi), b(xi) >= 0 solving, at each node, peak a + b = f (3/w)^2
+    and energy a + b (w_b/w_a)^2 = f (both relative to the narrow lobe at xi_0)."""
+    xi = np.array(STAINLESS_XI)
+    f = np.exp(-(xi - 0.311))
+    w = 3.0 + 3.0 * (xi - 0.311)
+    ratio = (w[-1] / w[0]) ** 2
+    peak = f * (w[0] / w) ** 2
+    b = (f - peak) / (ratio - 1.0)
+    a = peak - b
+    assert np.all(a >= -1e-12) and np.all(b >= 0)
+    a = np.maximum(a, 0.0)
+
+    def part(model, values):
+        return bm.Scaled(model, bm.StateTable(xi, values, "extinction", extrapolation="clamp"))
+
+    sig = 2.0 * np.radians(w[[0, -1]])
+    return bm.Sum([part(bm.create("gaussian-lobe", peak=STAINLESS_PEAK_PER_SR, sigma=float(sig[0])), a),
+                   part(bm.create("gaussian-lobe", peak=STAINLESS_PEAK_PER_SR, sigma=float(sig[1])), b),
+                   part(bm.Lambertian(math.pi * 0.03), f)])
+
+
+def glossy_copper():
+    """copper_glossy.json: Gaussian lobe + mirror + Lambertian (module docstring)."""
+    return bm.Sum([bm.create("gaussian-lobe", **COPPER_LOBE), bm.Specular(reflectance=COPPER_MIRROR), bm.Lambertian(COPPER_DIFFUSE)])
+
+
+def make_glossy():
+    steel, copper = glossy_stainless(), glossy_copper()
+    bm.save(steel, OUT / "stainless_dynamic.json")
     bm.save(copper, OUT / "copper_glossy.json")
-    for name, m in (("stainless @ xi0", steel.at_state(0.311)), ("stainless @ 1.5", steel.at_state(1.5)), ("copper", copper)):
-        r = bm.hemispherical_reflectance(m, bm.spherical_to_vector(np.radians(20), 0.0), rtol=1e-4)
-        print(f"{name}: DHR at 20 deg = {r.value:.3f}")
+    for name, m, st in (("stainless @ xi0", steel, 0.311), ("stainless @ 1.5", steel, 1.5), ("copper", copper, None)):
+        r = [bm.hemispherical_reflectance(m, bm.spherical_to_vector(np.radians(t), 0.0), state=st, rtol=1e-4).value for t in (0, 20, 60, 85, 89)]
+        print(f"{name}: DHR at 0/20/60/85/89 deg = " + " / ".join(f"{v:.3f}" for v in r))
 
 
 if __name__ == "__main__":

@@ -25,7 +25,8 @@ Verbs:
 
 SCENE is a TOML file or the name of a bundled example (``hazard validate plate``).
 Exit codes: 0 done, 1 internal error, 2 bad input, 3 hazard found (only with --fail-on-hazard
-[observers|zones|any]: at the listed observers (default), in zones not contained, either).
+[observers|zones|any]: at the listed observers (default), in zones not contained, either),
+4 some scenarios of a study or chunks of risk draws failed (study, risk; a summary on stderr).
 Every error is one line on stderr naming the input; ``--debug`` (anywhere on the command
 line) shows the traceback instead.
 """
@@ -49,6 +50,7 @@ EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_ERROR = 2
 EXIT_HAZARD = 3
+EXIT_FAILED = 4  # hazard study / risk: some scenarios or draw chunks failed (the summary names them)
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout went away (the outputs are written first)
 
 
@@ -98,6 +100,8 @@ def _add_dask_args(p, what: str, json_help: str) -> None:
     p.add_argument("--force", action="store_true", help=f"start over if the folder holds another {what}")
     p.add_argument("--json", action="store_true", help=json_help)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--keep-going", action="store_true", help=f"after a failed {'scenario' if what == 'study' else 'chunk of draws'}, "
+                   "run the rest anyway (default: stop at the first); either way a failure exits 4 with a summary")
 
 
 def _add_run_args(p):
@@ -130,7 +134,7 @@ def _version_line() -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="hazard", description="Laser reflection hazard analysis.",
-                     epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error); "
+                     epilog="Errors are one line on stderr (exit 2: bad input, 1: internal error, 4: scenarios or risk draws failed); "
                             "--debug shows the traceback. Input limits: HAZARD_MAX_<NAME> environment variables (see README).")
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error (may also follow the verb)")
     parser.add_argument("--version", action="version", version=_version_line(), help="print the version and exit")
@@ -676,15 +680,28 @@ def _state_nodes_args(state_text, states_text):
 
 
 def _cmd_fit(args, out, err):
+    """``hazard fit``: its 1-3 files (model, envelope, samples; separate paths) are written
+    as one unit (:func:`brdfmodels._unit.output_files`): on any error none is created or replaced."""
+    import io
+
+    from brdfmodels._unit import output_files
+
     from .progress import progress_to
 
-    _check_new(args.output, args.force)
-    with progress_to(None if getattr(args, "quiet", False) else err):  # bars on a terminal only
+    finals = [args.output] + [p for p in (getattr(args, "envelope_output", None), getattr(args, "samples_output", None)) if p]
+    for p in finals:
+        _check_new(p, args.force)
+    text = io.StringIO()  # stdout is written once the files are in place: no "wrote" for a file never switched in
+    with progress_to(None if getattr(args, "quiet", False) else err), output_files(finals) as files:  # bars on a terminal only
+        args.stage = files.stage
         if args.fit_kind == "oxidation":
-            return _fit_oxidation(args, out)
-        samples = _fit_samples(args)
-        fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
-        return fit(args, out, samples)
+            code = _fit_oxidation(args, text)
+        else:
+            samples = _fit_samples(args)
+            fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
+            code = fit(args, text, samples)
+    out.write(text.getvalue())
+    return code
 
 
 def _fit_oxidation(args, out):
@@ -698,7 +715,7 @@ def _fit_oxidation(args, out):
     doc = {**r.model.to_dict(), "reflectance0": r.reflectance0, "reference_temperature_k": r.reference_temperature_k,
            "rate_at_reference_per_s": r.rate_at_reference_per_s, "ci95": {k: list(map(float, v)) for k, v in r.ci95.items()},
            "correlation_t0_log_d0": r.correlation_t0_log_d0, "condition_number": r.condition_number, "residual_rms": r.residual_rms}
-    atomic_write_text(args.output, json.dumps(doc, indent=1))
+    atomic_write_text(args.stage(args.output), json.dumps(doc, indent=1))
     if args.json:
         out.write(json.dumps(doc, indent=1) + "\n")
     else:
@@ -727,8 +744,7 @@ def _fit_samples(args):
             bar.update()
     samples = screen.Samples.concatenate(parts)
     if args.samples_output:
-        _check_new(args.samples_output, args.force)
-        samples.write(args.samples_output)
+        samples.write(args.stage(args.samples_output))
     return samples
 
 
@@ -744,7 +760,7 @@ def _fit_ts5(args, out, samples):
         _print_report(out, "five-parameter fit: error vs evaluations vs seconds", rows, args.json)
     r = fitting.fit_ts5(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval,
                         progress=progress_callback("five-parameter fit", unit="eval"))
-    brdfmodels.save(r.model, args.output)
+    brdfmodels.save(r.model, args.stage(args.output))
     _print_report(out, "five-parameter fit", [r.summary()], args.json, {"wrote": str(args.output)})
     return EXIT_OK
 
@@ -755,7 +771,7 @@ def _fit_abg(args, out, samples):
 
     r = fit_abg(samples.wi, samples.wo, samples.brdf_per_sr, method=args.method, seed=args.seed, maxeval=args.maxeval,
                 weights=samples.weight)
-    brdfmodels.save(r.model, args.output)
+    brdfmodels.save(r.model, args.stage(args.output))
     d = r.details
     extra = {"A": f"{d['p_a']:.6g} +- {d['stderr_a']:.3g} (1 sigma, from the Jacobian at the optimum)",
              "B": f"{d['p_b']:.6g} +- {d['stderr_b']:.3g}", "g": f"{d['p_g']:.6g} +- {d['stderr_g']:.3g}",
@@ -791,12 +807,11 @@ def _fit_sh(args, out, samples):
     if args.envelope:  # computed before either file is written: a failed envelope leaves no new model beside an old envelope
         if not args.envelope_output:
             raise ValueError("--envelope-output: required with --envelope")
-        _check_new(args.envelope_output, args.force)
         env = fitting.envelope_paper(model, samples) if args.envelope == "paper" else fitting.envelope_sh(samples, basis, fanout=args.fanout)
         extra.update({"envelope": env.summary(), "envelope_file": str(args.envelope_output)})
-    brdfmodels.save(model, args.output)
+    brdfmodels.save(model, args.stage(args.output))
     if env is not None:
-        brdfmodels.save(env.model, args.envelope_output)
+        brdfmodels.save(env.model, args.stage(args.envelope_output))
     _print_report(out, "spherical-harmonic fit", rows, args.json, extra)
     return EXIT_OK
 
@@ -806,7 +821,7 @@ def _cmd_study(args, out, err):
 
     study = load_study(args.study)
     res = run_study(study, args.output, scheduler=args.scheduler, serial=args.serial, n_workers=args.workers, force=args.force,
-                    progress=None if args.quiet else progress_bar(err))
+                    progress=None if args.quiet else progress_bar(err), keep_going=args.keep_going)
     if args.json:
         out.write(json.dumps(res.summary, indent=1) + "\n")
     else:
@@ -817,6 +832,12 @@ def _cmd_study(args, out, err):
         for f in res.summary["failures"][:5]:
             out.write(f"  failed scenario {f['id']}: {f['error']}\n")
         out.write(f"  wrote {res.outdir / 'results.csv'}, {res.outdir / 'summary.json'}\n")
+    if not res.ok:
+        s = res.summary
+        stop = f", {s['not_run']} not run (stopped at the first failure; --keep-going runs the rest)" if s["not_run"] else ""
+        kinds = "; ".join(_one_line(e, 300) for e in s["failure_kinds"].values())
+        err.write(f"hazard study: error: {s['failed']} of {s['scenarios']} scenarios failed{stop}; first of each kind: {kinds}\n")
+        return EXIT_FAILED
     return EXIT_OK
 
 
@@ -825,10 +846,16 @@ def _cmd_risk(args, out, err):
     from .risk import run_risk
     from .risk.page import worst_first
 
+    from .risk.run import ChunksFailed
+
     scene = _load_scene(args.scene, err)
-    res = run_risk(scene, args.output, draws=args.draws, seed=args.seed, sampling=args.sampling, sensitivity_draws=args.sensitivity_draws,
-                   serial=args.serial, workers=args.workers, scheduler=args.scheduler, force=args.force,
-                   progress=None if args.quiet else progress_callback("risk chunks", unit="chunk", leave=True, stream=err))
+    try:
+        res = run_risk(scene, args.output, draws=args.draws, seed=args.seed, sampling=args.sampling, sensitivity_draws=args.sensitivity_draws,
+                       serial=args.serial, workers=args.workers, scheduler=args.scheduler, force=args.force, keep_going=args.keep_going,
+                       progress=None if args.quiet else progress_callback("risk chunks", unit="chunk", leave=True, stream=err))
+    except ChunksFailed as exc:
+        err.write(f"hazard risk: error: {_one_line(exc, 900)}\n")
+        return EXIT_FAILED
     doc = res.doc
     if args.json:
         out.write(json.dumps(doc["observers"], indent=1) + "\n")
@@ -948,6 +975,7 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
     on stderr naming the input; ``--debug`` shows the traceback instead."""
     out = stdout or sys.stdout
     err = stderr or sys.stderr
+    as_command = argv is None  # the console script / python -m hazard: dependency noise handled (hazard._noise)
     argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
     debug = "--debug" in argv
     argv = [a for a in argv if a != "--debug"]
@@ -966,7 +994,12 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
 
     where = _input_of(args)
     try:
-        return _COMMANDS[args.verb](args, out, err)
+        if not as_command:
+            return _COMMANDS[args.verb](args, out, err)
+        from ._noise import quiet_dependencies
+
+        with quiet_dependencies(err, args.verb, serial=bool(getattr(args, "serial", False))):
+            return _COMMANDS[args.verb](args, out, err)
     except (ValueError, OutputExistsError) as exc:  # bad input (SceneError is a ValueError)
         if debug:
             raise

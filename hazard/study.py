@@ -11,8 +11,10 @@ al. 2008, Table I); the defaults of :class:`MonteCarlo` are zero - set yours.
 Execution: each scenario is a pure function of (base scene, overrides, seed), so a
 Dask run (an embedded ``LocalCluster`` or an existing scheduler) gives exactly the results
 of a serial run. Each result is written atomically as it finishes
-(``OUTDIR/scenarios/NNNNN.json``); a restarted study skips finished scenarios; a failing
-scenario is recorded with its error and the rest continue. At the end: ``results.csv``
+(``OUTDIR/scenarios/NNNNN.json``); a restarted study skips finished scenarios and runs
+failed ones again. Every scenario's scene is validated before any work; a scenario that
+still fails at run time is recorded with its error and stops the study (``keep_going``
+runs the rest); either way the result says so and ``hazard study`` exits 4. At the end: ``results.csv``
 (and ``results.parquet`` with pyarrow), ``summary.json`` (percentiles for Monte Carlo)
 and, with matplotlib, ``summary.png``.
 """
@@ -23,6 +25,7 @@ import copy
 import hashlib
 import json
 import math
+import os
 import re
 import time
 from dataclasses import asdict, dataclass, field
@@ -34,7 +37,8 @@ from brdfmodels._io import atomic_write, atomic_write_text, read_toml
 
 from .progress import progress_callback, progress_to
 
-__all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path"]
+__all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path",
+           "check_schema_path", "validate_scenarios", "failure_kinds"]
 
 _PATH_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(\[(\d+)\])?")
 
@@ -52,7 +56,11 @@ def _split(path: str):
 
 
 def set_path(data: dict, path: str, value):
-    """Set ``value`` at a scene field path such as ``targets[0].material.file`` (in place)."""
+    """Set ``value`` at a scene field path such as ``targets[0].material.file`` (in place).
+
+    The field must already be in ``data``: a missing key (a misspelling, or a field the
+    base scene leaves at its default) is an error, never created.
+    """
     parts = _split(path)
     node = data
     for i, key in enumerate(parts[:-1]):
@@ -74,7 +82,11 @@ def set_path(data: dict, path: str, value):
     else:
         from scenes.quantities import other_forms
 
-        for k in other_forms(node, last):  # power = "20 kW" in the base, laser.power_w swept: the sweep's value replaces it
+        others = other_forms(node, last)
+        if last not in node and not others:
+            raise ValueError(f"path={path!r}: {last!r} does not exist in the base scene (a swept field must be set in the base "
+                             f"scene, so the sweep changes a value the scene states; add {last} there)")
+        for k in others:  # power = "20 kW" in the base, laser.power_w swept: the sweep's value replaces it
             del node[k]
     node[last] = value
 
@@ -102,6 +114,57 @@ def _parameter_units(p, where: str) -> None:
         if isinstance(p.get(key), list):
             p[key] = convert_value(p[key], unit, f"{where}.{key}", bare_ok=bare_ok)
     p["path"] = _join(parts)
+
+
+def _schema_types(tp) -> list:
+    """The concrete alternatives of a type annotation (Annotated, Optional and unions unwrapped)."""
+    import types
+    import typing
+
+    origin = typing.get_origin(tp)
+    if origin is typing.Annotated:
+        return _schema_types(typing.get_args(tp)[0])
+    if origin is typing.Union or origin is types.UnionType:
+        return [t for a in typing.get_args(tp) for t in _schema_types(a)]
+    return [tp] if tp is not type(None) else []
+
+
+def check_schema_path(path: str) -> None:
+    """Raise ValueError unless ``path`` names a field of the scene schema
+    (:class:`scenes.spec.SceneSpec`): each key a field of its table, each ``[i]`` on a list.
+    A misspelled key is named with the closest valid names. Below a material (whose extra
+    keys are its model's parameters) any key is accepted here; building the scene checks it."""
+    import difflib
+    import typing
+
+    from pydantic import BaseModel
+
+    from scenes.spec import SceneSpec
+
+    options, done = [SceneSpec], []
+    for part in _split(path):
+        models = [t for t in options if isinstance(t, type) and issubclass(t, BaseModel)]
+        if isinstance(part, str) and not models and any(typing.get_origin(t) is list for t in options):
+            raise ValueError(f"path={path!r}: {'.'.join(done)} is a list; expected an item of it, e.g. {'.'.join(done)}[0].{part}")
+        if isinstance(part, int):
+            lists = [t for t in options if typing.get_origin(t) is list]
+            if not lists:
+                raise ValueError(f"path={path!r}: {'.'.join(done) or 'the scene'} is not a list (no [{part}])")
+            options = [a for t in lists for a in _schema_types(typing.get_args(t)[0])]
+            done[-1] += f"[{part}]"
+            continue
+        if any(m.model_config.get("extra") == "allow" for m in models) and not any(part in m.model_fields for m in models):
+            return  # a model's parameter: checked when the scene is built
+        fields = {k: f for m in models for k, f in m.model_fields.items()}
+        if part not in fields:
+            where = ".".join(done) or "the scene"
+            if not fields:
+                raise ValueError(f"path={path!r}: {where} is a value, not a table (no field {part!r} under it)")
+            close = difflib.get_close_matches(part, sorted(fields), n=3, cutoff=0.6)
+            hint = f"did you mean {' or '.join(repr('.'.join([*done, c])) for c in close)}?" if close else f"expected one of {sorted(fields)}"
+            raise ValueError(f"path={path!r}: {part!r} is not a field of {where}; {hint}")
+        options = _schema_types(fields[part].annotation)
+        done.append(part)
 
 
 @dataclass(frozen=True)
@@ -295,21 +358,65 @@ def load_study(path) -> Study:
 
 
 def _check_study(study: Study, path) -> None:
-    """Before any work: the number of scenarios is within the limit, the base scene
-    loads, and every swept path exists in it."""
-    import scenes
+    """Before any work: the number of scenarios is within the limit, every swept path is a
+    field of the scene schema and of the base scene, and every scenario's scene validates."""
     from brdfmodels._io import check_limit
 
     n = math.prod(len(p.values) for p in study.parameters) if study.kind == "grid" else study.samples
     n *= max(1, study.montecarlo.samples)
     try:
         check_limit("SCENARIOS", n, "scenarios")
-        base, base_dir = _base_data(study)
-        for p in study.parameters:
-            set_path(copy.deepcopy(base), p.path, p.values[0] if p.values is not None else p.range[0])
-        scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir)
+        for i, p in enumerate(study.parameters):
+            try:
+                check_schema_path(p.path)
+            except ValueError as exc:
+                raise ValueError(f"sweep.parameters[{i}].path: {exc}") from None
+        validate_scenarios(study)
     except ValueError as exc:
         raise ValueError(f"{path}: {' '.join(str(exc).split())}") from None
+
+
+def validate_scenarios(study: Study, shown: int = 3) -> int:
+    """Build and validate the scene of every scenario (each distinct set of swept values
+    once; the Monte Carlo draws only tilt normals and scale BRDFs). Raises one ValueError
+    naming how many scenarios are invalid and, for the first ``shown``, the scenario, its
+    swept values and the scene's error (which names the field path). Returns the number of
+    distinct scenes checked."""
+    import scenes
+
+    base, base_dir = _base_data(study)
+    key = (study.digest(), hashlib.sha256(json.dumps(base, sort_keys=True, default=str).encode()).hexdigest(), str(base_dir))
+    if key in _VALIDATED:  # load_study checked it; run_study need not build every scene again
+        return _VALIDATED[key]
+    for i, p in enumerate(study.parameters):  # a path the base scene lacks: one error, not one per scenario
+        try:
+            set_path(copy.deepcopy(base), p.path, None)
+        except ValueError as exc:
+            raise ValueError(f"sweep.parameters[{i}].path: {exc}") from None
+    seen, bad = set(), []
+    for sc in scenarios(study):
+        key = json.dumps(sc["overrides"], sort_keys=True, default=str)
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            data = copy.deepcopy(base)
+            for p, value in sc["overrides"].items():
+                set_path(data, p, value)
+            scenes.from_data(data, source=f"scene={study.scene!r}", base_dir=base_dir)
+        except ValueError as exc:
+            what = ", ".join(f"{p} = {v!r}" for p, v in sc["overrides"].items()) or "the base scene"
+            bad.append(f"scenario {sc['id']} ({what}): {' '.join(str(exc).split())}")
+    if bad:
+        more = f"; and {len(bad) - shown} more" if len(bad) > shown else ""
+        raise ValueError(f"{len(bad)} of {len(seen)} distinct scenario scene(s) are invalid: " + "; ".join(bad[:shown]) + more)
+    if len(_VALIDATED) > 64:
+        _VALIDATED.clear()
+    _VALIDATED[key] = len(seen)
+    return len(seen)
+
+
+_VALIDATED: dict = {}  # (study digest, base scene hash, folder) -> distinct scenes checked
 
 
 def _lhs(n, d, rng):
@@ -439,6 +546,21 @@ class StudyResult:
     ran: int
     skipped: int
     failed: int
+    not_run: int = 0  # scenarios left undone after the first failure (without keep_going)
+
+    @property
+    def ok(self) -> bool:
+        """Every scenario ran and none failed."""
+        return self.failed == 0 and self.not_run == 0
+
+
+def failure_kinds(errors) -> dict:
+    """The first error of each kind (the exception's name before ``:``) among ``errors``
+    (strings ``"Kind: message"``), in the order met."""
+    kinds: dict = {}
+    for e in errors:
+        kinds.setdefault(str(e).split(":", 1)[0], str(e))
+    return kinds
 
 
 def _safe(obj):
@@ -453,10 +575,13 @@ def _safe(obj):
     return obj
 
 
-def _summary(study: Study, rows: list) -> dict:
+def _summary(study: Study, rows: list, total: int | None = None) -> dict:
     ok = [r for r in rows if r.get("error") is None]
-    out = {"study": study.name, "digest": study.digest(), "scenarios": len(rows), "succeeded": len(ok), "failed": len(rows) - len(ok),
-           "failures": [{"id": r["id"], "error": r["error"]} for r in rows if r.get("error")]}
+    total = len(rows) if total is None else total
+    failures = [{"id": r["id"], "error": r["error"]} for r in rows if r.get("error")]
+    out = {"study": study.name, "digest": study.digest(), "scenarios": total, "succeeded": len(ok), "failed": len(failures),
+           "not_run": total - len(rows), "complete": len(ok) == total, "failures": failures,
+           "failure_kinds": failure_kinds(f["error"] for f in failures)}
     stats = {}
     for col in OUTPUT_COLUMNS:
         vals = np.array([r[col] for r in ok if isinstance(r.get(col), (int, float)) and r.get(col) is not None], float)
@@ -548,11 +673,17 @@ def local_cluster(n_workers=2):
     import dask
     from distributed import LocalCluster
 
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    # the workers log Dask's own chatter at ERROR only, as hazard._noise does in this process
+    # (a value set in the user's environment still wins)
+    env = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
+    if "DASK_LOGGING__DISTRIBUTED" not in os.environ:
+        env["distributed.nanny.pre-spawn-environ.DASK_LOGGING__DISTRIBUTED"] = "error"
+    with dask.config.set(env):
         return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0")
 
 
-def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2, force=False, progress=None) -> StudyResult:
+def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2, force=False, progress=None,
+              keep_going=False) -> StudyResult:
     """Run a study; finished scenarios in ``outdir`` are kept (resume).
 
     Parameters
@@ -567,7 +698,16 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     progress : callable, optional
         Called with (done, total) as scenarios finish (:func:`progress_bar` draws a bar
         on a terminal). The scenarios' own progress bars (keep-out lobes) are not drawn.
+    keep_going : bool
+        Run every scenario even after one fails; by default the study stops at the first
+        failure (the rest are ``not_run``). Either way the result's ``ok`` is False and
+        ``summary`` counts the failures with the first error of each kind; a failed or
+        unrun scenario runs again on the next start.
+
+    Every scenario's scene is validated first (:func:`validate_scenarios`), so a study
+    with an invalid value does no work.
     """
+    validate_scenarios(study)
     from brdfmodels._unit import output_unit
 
     outdir = Path(outdir)
@@ -575,10 +715,11 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     # scenarios/ are the resumable working files, kept across runs
     with output_unit(outdir, command="study", overwrite=True, force=force, working=("study.json", "scenarios"),
                      claims=("results.csv", "results.parquet", "summary.json", "summary.png")) as unit:
-        return _run_study(study, outdir, unit.stage, scheduler=scheduler, serial=serial, n_workers=n_workers, force=force, progress=progress)
+        return _run_study(study, outdir, unit.stage, scheduler=scheduler, serial=serial, n_workers=n_workers, force=force, progress=progress,
+                          keep_going=keep_going)
 
 
-def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_workers, force, progress) -> StudyResult:
+def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_workers, force, progress, keep_going) -> StudyResult:
     """:func:`run_study`: scenarios in ``outdir/scenarios``, the final files in ``stage``."""
     outdir = Path(outdir)
     sdir = outdir / "scenarios"
@@ -595,7 +736,7 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
     atomic_write_text(meta, json.dumps({"name": study.name, "digest": digest, "study": _safe(asdict(study))}, indent=1, default=str))
     base, base_dir = _base_data(study)
     todo = scenarios(study)
-    done_ids = {int(p.stem) for p in sdir.glob("*.json")}
+    done_ids = {int(p.stem) for p in sdir.glob("*.json") if json.loads(p.read_text()).get("error") is None}  # failures run again
     pending = [s for s in todo if s["id"] not in done_ids]
     mc = asdict(study.montecarlo)
     total, finished = len(todo), len(todo) - len(pending)
@@ -605,12 +746,17 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
     def record(row):
         atomic_write_text(sdir / f"{row['id']:05d}.json", json.dumps(_safe(row), default=str))
 
+    for s in pending:  # a failure of an earlier start is replaced, not kept beside a success
+        (sdir / f"{s['id']:05d}.json").unlink(missing_ok=True)
     if pending:
         if serial:
             for s in pending:
-                record(run_scenario(base, str(base_dir), s, mc))
+                row = run_scenario(base, str(base_dir), s, mc)
+                record(row)
                 finished += 1
                 say(finished, total)
+                if row["error"] is not None and not keep_going:
+                    break
         else:
             from distributed import Client, as_completed
 
@@ -624,20 +770,25 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
                 base_f = client.scatter(base, broadcast=True)
                 futures = [client.submit(run_scenario, base_f, str(base_dir), s, mc, 1, pure=False) for s in pending]
                 for fut in as_completed(futures):
-                    record(fut.result())
+                    row = fut.result()
+                    record(row)
                     finished += 1
                     say(finished, total)
+                    if row["error"] is not None and not keep_going:
+                        client.cancel([f for f in futures if not f.done()])
+                        break
             finally:
                 client.close()
                 if cluster is not None:
                     cluster.close()
     rows = sorted((json.loads(p.read_text()) for p in sdir.glob("*.json")), key=lambda r: r["id"])
     rows = [r for r in rows if r["id"] < total]
-    summary = _summary(study, rows)
+    summary = _summary(study, rows, total)
     _write_table(rows, stage)
     atomic_write_text(stage / "summary.json", json.dumps(_safe(summary), indent=1))
     _plot(study, rows, stage)
-    return StudyResult(rows, summary, outdir, len(pending), total - len(pending), summary["failed"])
+    skipped = total - len(pending)
+    return StudyResult(rows, summary, outdir, finished - skipped, skipped, summary["failed"], summary["not_run"])
 
 
 def progress_bar(stream=None):

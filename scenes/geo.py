@@ -83,10 +83,14 @@ def _vertical_transformer(vertical: str, to_ellipsoid: bool):
     """pyproj transformer between the datum's heights and ellipsoidal heights, or a GeoError
     naming the missing grid (PROJ's ballpark fallback would drop the geoid); made once per
     datum and direction (a DEM's load asks for it at every iteration)."""
+    import warnings
+
     from pyproj.transformer import TransformerGroup
 
     src, dst = _VERTICAL_CRS[vertical], "EPSG:4979"
-    group = TransformerGroup(src, dst, always_xy=True) if to_ellipsoid else TransformerGroup(dst, src, always_xy=True)
+    with warnings.catch_warnings():  # pyproj's "Best transformation is not available": the GeoError below says it in full
+        warnings.filterwarnings("ignore", message="Best transformation is not available", category=UserWarning)
+        group = TransformerGroup(src, dst, always_xy=True) if to_ellipsoid else TransformerGroup(dst, src, always_xy=True)
     if not group.best_available or not group.transformers:
         missing = sorted({g.short_name for op in group.unavailable_operations for g in op.grids if not g.available})
         import pyproj

@@ -146,64 +146,100 @@ def _identity_factor(model):
     return brdfmodels.Scaled(model, table)
 
 
-# incidence angles [deg] at which a material's hemispherical reflectance must be <= 1;
-# grazing angles are left out: fitted SH models extrapolate there (the bundled fits reach
-# 1.1-1.5 at 80 deg, outside the measured range)
-DHR_INCIDENCES_DEG = (0.0, 20.0, 40.0, 60.0)
+# incidence angles [deg] at which a material's hemispherical reflectance must be <= 1: the
+# whole range to 89 deg (fitted SH models extrapolate at grazing incidence, where a floor
+# of f~ = cos_i cos_r f_r grows as 1/cos_i: the old copper_glossy reached 4.4 at 89 deg)
+DHR_INCIDENCES_DEG = (0.0, 20.0, 40.0, 60.0, 70.0, 80.0, 85.0, 89.0)
+# azimuths of incidence [deg] from the material tangent (grooves); 90 only for an
+# anisotropic material
+DHR_AZIMUTHS_DEG = (0.0, 90.0)
+DHR_TOLERANCE = 0.01  # allowed above 1, plus the quadrature's own error estimate
 _DHR_CACHE: dict = {}
 
 
-def _dhr_states(model) -> list:
-    """States where :func:`_check_dhr` looks: the ends and the middle of the range (for
-    two states, the four corners and the middle); [None] for a static model."""
+def _dhr_states(model):
+    """Every state where :func:`_worst_dhr` looks: all nodes of the model's state table
+    (clipped to its range) and the range's ends; None for a static model. Between nodes
+    the reflectance is convex in the state (log-linear SH coefficients, linear factors and
+    delta-lobe reflectances; bilinear cells convex along each axis), so its maximum over
+    the whole state range, and over any history inside it, is at one of these states."""
     if not model.is_dynamic:
-        return [None]
+        return None
+    nodes = np.asarray(model.state_nodes(), float)
     r = model.state_range
     if model.state_dim == 2:
         (a, b), (c, d) = r
-        return [np.array(p) for p in ((a, c), (b, c), (a, d), (b, d), (0.5 * (a + b), 0.5 * (c + d)))]
+        nodes = np.clip(nodes.reshape(-1, 2), [a, c], [b, d])
+        corners = np.array([(a, c), (b, c), (a, d), (b, d)])
+        return np.unique(np.concatenate([nodes, corners]), axis=0)
     lo, hi = r
-    return [lo, 0.5 * (lo + hi), hi] if math.isfinite(lo) and math.isfinite(hi) else [None]
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise SceneError(f"state range [{lo:g}, {hi:g}]: the energy check needs a finite state range")
+    return np.unique(np.concatenate([np.clip(nodes.ravel(), lo, hi), [lo, hi]]))
 
 
-def _check_dhr(model, where):
-    """SceneError if the directional-hemispherical reflectance exceeds 1 (energy from
-    nowhere: ``kd = 22``) at one of :data:`DHR_INCIDENCES_DEG` (and, for a dynamic model,
-    at the ends and the middle of its state range)."""
+def _isotropic(model, states) -> bool:
+    """True when turning both directions by 90 deg about the normal leaves the BRDF
+    unchanged at a few fixed direction pairs (then one azimuth of incidence suffices)."""
+    rng = np.random.default_rng(0)
+    wi, wo = (brdfmodels.spherical_to_vector(rng.uniform(0.1, 1.4, 8), rng.uniform(-3.1, 3.1, 8)) for _ in range(2))
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    for st in [None] if states is None else states[[0, -1]]:
+        a, b = model.evaluate(wi, wo, state=st), model.evaluate(wi @ turn.T, wo @ turn.T, state=st)
+        if not np.allclose(a, b, rtol=1e-9, atol=0.0):
+            return False
+    return True
+
+
+def _worst_dhr(model):
+    """The largest directional-hemispherical reflectance of ``model`` over
+    :data:`DHR_INCIDENCES_DEG`, :data:`DHR_AZIMUTHS_DEG` and every state of
+    :func:`_dhr_states`: ``(excess, value, error, theta_deg, phi_deg, state)`` with
+    ``excess = value - error`` (the most it can be less). Cached per model."""
     key = brdfmodels.dumps(model)
     if key in _DHR_CACHE:
-        bad = _DHR_CACHE[key]
-    else:
-        states = _dhr_states(model)
-        bad = None
-        for st in states:
-            for th in DHR_INCIDENCES_DEG:
-                t = math.radians(th)
-                try:
-                    r = brdfmodels.hemispherical_reflectance(model, [math.sin(t), 0.0, math.cos(t)], state=st, rtol=1e-3,
-                                                             max_evaluations=200_000)
-                except ValueError:
-                    continue
-                if not math.isfinite(r.value) or r.value > 1.0 + _dhr_tolerance(model) + r.error_estimate:
-                    bad = (th, st, r.value)
-                    break
-            if bad:
-                break
-        if len(_DHR_CACHE) > 256:
-            _DHR_CACHE.clear()
-        _DHR_CACHE[key] = bad
-    if bad:
-        th, st, v = bad
+        return _DHR_CACHE[key]
+    from brdfmodels.analysis import hemispherical_reflectance_states
+
+    states = _dhr_states(model)
+    worst = (-math.inf, 0.0, 0.0, 0.0, 0.0, None)
+    for ph in DHR_AZIMUTHS_DEG if not _isotropic(model, states) else DHR_AZIMUTHS_DEG[:1]:
+        for th in DHR_INCIDENCES_DEG:
+            t, p = math.radians(th), math.radians(ph)
+            try:
+                v, e, _ = hemispherical_reflectance_states(model, [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)],
+                                                           states, rtol=1e-3, max_evaluations=4_000_000)
+            except ValueError:  # a measured table that refuses directions without data (outside = "error")
+                continue
+            v = np.where(np.isfinite(v), v, math.inf)
+            k = int(np.argmax(v - e))
+            if v[k] - e[k] > worst[0]:
+                worst = (float(v[k] - e[k]), float(v[k]), float(e[k]), th, ph, None if states is None else states[k])
+    if len(_DHR_CACHE) > 256:
+        _DHR_CACHE.clear()
+    _DHR_CACHE[key] = worst
+    return worst
+
+
+def _check_dhr(model, where, factor=1.0, why=""):
+    """SceneError if the directional-hemispherical reflectance (times ``factor``, the
+    largest reflectance factor a history reaches) exceeds 1 (energy from nowhere:
+    ``kd = 22``) at any incidence of :data:`DHR_INCIDENCES_DEG` (and azimuth, and state of
+    a dynamic model: every node of its table)."""
+    excess, v, e, th, ph, st = _worst_dhr(model)
+    tol = _dhr_tolerance(model)
+    if factor * excess > 1.0 + tol:
         at = f" at state {_fmt(st)}" if st is not None else ""
-        raise SceneError(f"{where}: hemispherical reflectance {v:.4g} > 1 at {th:g} deg incidence{at} (beyond the "
-                         f"tolerance {_dhr_tolerance(model):g}): the material reflects more than it receives; check its "
-                         f"parameters")
+        az = f", azimuth {ph:g} deg from the tangent" if ph else ""
+        raise SceneError(f"{where}: hemispherical reflectance {factor * v:.4g} > 1 at {th:g} deg incidence{az}{at}{why} (beyond the "
+                         f"tolerance {tol:g}): "
+                         f"the material reflects more than it receives; check its parameters")
 
 
 def _dhr_tolerance(model) -> float:
     """How far past 1 a material's hemispherical reflectance may go: a measured table's
-    stated uncertainty (``dhr_tolerance``), else 0.01 (quadrature rounding)."""
-    return max(0.01, float(getattr(model, "dhr_tolerance", 0.01)))
+    stated uncertainty (``dhr_tolerance``), else ``DHR_TOLERANCE`` (quadrature rounding)."""
+    return max(DHR_TOLERANCE, float(getattr(model, "dhr_tolerance", DHR_TOLERANCE)))
 
 
 def _with_polarization(data, polarization):
@@ -460,7 +496,7 @@ def _warnings(spec: SceneSpec) -> list:
     if t_end is not None and t_end < spec.exposure.duration_s and any(t.history is not None for t in spec.targets):
         out.append(f"analysis.time_end_s = {t_end:g} s ends before the exposure (exposure.duration_s = "
                    f"{spec.exposure.duration_s:g} s): states after it are not seen, and a dynamic NOHD may be low")
-    return out + _magnitude_warnings(spec) + _beam_quality_warnings(spec)
+    return out + _magnitude_warnings(spec) + _beam_quality_warnings(spec) + _duration_warnings(spec)
 
 
 DIVERGENCE_WIDE_RAD = 0.01  # full-angle divergence [rad] from which a range laser's beam is warned as wide (mrad meant?)
@@ -507,9 +543,30 @@ def _beam_quality_warnings(spec: SceneSpec) -> list:
 CLASS_4_CW_MIN_W = 0.5
 
 
+# A continuous beam watched for less than this is not an exposure anyone means on a range
+# (the shortest aversion-response and scanning dwell times are ms; the tables reach 1e-13 s
+# for single pulses); longer than this is a whole working day and more (the tables end at 3e4 s)
+DURATION_PLAUSIBLE_S = (1e-6, 2.88e4)
+
+
+def _duration_warnings(spec: SceneSpec) -> list:
+    """``exposure.duration_s`` that the schema accepts but that is hardly meant: under 1 us
+    for a continuous beam (ms or s typed as us?), over 8 h, or shorter than one pulse."""
+    d, la = spec.exposure.duration_s, spec.laser
+    if la.power_w is not None and d < DURATION_PLAUSIBLE_S[0]:
+        return [f"exposure.duration_s = {d:g} s is under 1 us for a continuous beam (laser.power_w): the MPE is that of a "
+                f"{d:g} s exposure, far above a continuous one's; ms or s meant?"]
+    if la.pulse_duration_s is not None and d < la.pulse_duration_s:
+        return [f"exposure.duration_s = {d:g} s is shorter than one pulse (laser.pulse_duration_s = {la.pulse_duration_s:g} s): "
+                f"the exposure should span the pulses seen"]
+    if d > DURATION_PLAUSIBLE_S[1]:
+        return [f"exposure.duration_s = {d:g} s is over 8 h (a working day, 2.88e4 s): s typed for ms, or the whole day meant?"]
+    return []
+
+
 # Orders of magnitude beyond the bundled range (100 W .. 100 kW) that a unit slip gives:
 # a power in mW or kW typed as W. (exposure.duration_s beyond the MPE tables' 3e4 s is
-# already an error of the schema.)
+# already an error of the schema; inside it, _duration_warnings.)
 POWER_PLAUSIBLE_W = (1e-3, 1e7)
 
 
@@ -640,8 +697,9 @@ def _material_for_history(material, hs, hist, where):
     for a series, its states' span (a static material with ``reflectance_factor`` is
     wrapped in an identity factor table)."""
     state = hs.state if isinstance(hs.state, str) else tuple(hs.state)
+    base = None
     if state == "reflectance_factor" and not material.is_dynamic:
-        material = _identity_factor(material)
+        base, material = material, _identity_factor(material)
     elif not material.is_dynamic:
         raise SceneError(
             f"{where}.history: the material is static; a history needs a dynamic material, "
@@ -656,6 +714,8 @@ def _material_for_history(material, hs, hist, where):
                 material.evaluate([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], state=s_)
             except ValueError as exc:
                 raise SceneError(f"{where}.history: states span [{_fmt(lo)}, {_fmt(hi)}]: {exc}") from None
+        if base is not None:  # the static material times the largest factor the series reaches
+            _check_dhr(base, f"{where}.material", float(hi), f" times the history's reflectance_factor {float(hi):g}")
     return material
 
 

@@ -121,9 +121,11 @@ def check_risk_args(scene, draws=None, sensitivity_draws=None) -> None:
 
 
 def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity_draws=None, serial=False, workers=2,
-             scheduler=None, force=False, progress=None, backend="embree") -> RiskResult:
+             scheduler=None, force=False, progress=None, backend="embree", keep_going=False) -> RiskResult:
     """Run the probabilistic risk analysis of ``scene`` (it needs ``[uncertainty]``) into
-    ``outdir``; finished chunks there are reused (resume). Arguments override the scene's
+    ``outdir``; finished chunks there are reused (resume). A failed chunk of draws stops the
+    run (``keep_going``: after the rest) with :class:`hazard.risk.run.ChunksFailed`, and no
+    result file is written or replaced. Arguments override the scene's
     ``[uncertainty]`` (draws, seed, sampling "plain" | "importance" | "auto").
     ``serial``: in this process, without Dask (identical results). The final files are
     switched in as one unit (:mod:`brdfmodels._unit`); ``force`` also accepts files in
@@ -140,7 +142,7 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
     with output_unit(outdir, command="risk", overwrite=True, force=force, working=(".risk",), claims=claims) as unit:
         outdir.mkdir(parents=True, exist_ok=True)
         doc, mp = _risk_doc(scene, outdir, t0, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws, serial=serial,
-                            workers=workers, scheduler=scheduler, force=force, progress=progress, backend=backend)
+                            workers=workers, scheduler=scheduler, force=force, progress=progress, backend=backend, keep_going=keep_going)
         doc["notes"][:0] = unit.notes  # a crash of an earlier run recovered: said in risk.json and by the CLI
         write_outputs(unit.stage, doc, scene, mp)
         from .page import write_risk_page
@@ -149,7 +151,8 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
     return RiskResult(doc, outdir, mp)
 
 
-def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, serial, workers, scheduler, force, progress, backend):
+def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, serial, workers, scheduler, force, progress, backend,
+              keep_going=False):
     """risk.json's content and the map of :func:`run_risk` (chunks computed or reused in ``outdir/.risk``)."""
     from .results import map_result, observer_rows, sensitivity
     from .run import run_chunks, settings, shared
@@ -158,7 +161,8 @@ def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, se
     active = ev.model.active()
     s = settings(scene, len(ev.points_m), ev.n_observers, draws=draws, seed=seed, sampling=sampling, sensitivity_draws=sensitivity_draws,
                  active=active, can_import=bool(prop.components))
-    chunks = run_chunks(scene, s, outdir, backend=backend, serial=serial, workers=workers, scheduler=scheduler, force=force, progress=progress)
+    chunks = run_chunks(scene, s, outdir, backend=backend, serial=serial, workers=workers, scheduler=scheduler, force=force, progress=progress,
+                        keep_going=keep_going)
     sens = sensitivity(chunks.sensitivity, ev.own_gain()[: s.n_observers], active)
     mp = map_result(ev, s, chunks)
     notes, left = _notes(ev, s, prop)

@@ -28,7 +28,7 @@ from brdfmodels._io import atomic_write, atomic_write_text
 
 from .stats import weighted_counts
 
-__all__ = ["RiskSettings", "settings", "tasks", "run_task", "run_chunks", "Chunks"]
+__all__ = ["RiskSettings", "settings", "tasks", "run_task", "run_chunks", "Chunks", "ChunksFailed"]
 
 VERSION = "risk-1"
 POINT_VALUES_PER_CHUNK = 2_000_000  # draws x points held at once by one task (16 MB of float64)
@@ -118,13 +118,32 @@ def _sensitivity_chunk(ev, s: RiskSettings, index: int, n: int) -> dict:
 
 
 def run_task(key: str, payload, s: RiskSettings, task) -> dict:
-    """One chunk (see the module notes); arrays by name."""
+    """One chunk (see the module notes); arrays by name. A NaN exposure ratio (a draw the
+    engine could not evaluate) fails the chunk: counted as below the MPE it would pass
+    for safe."""
     from brdfmodels.parallel import thread_limit
 
     ev, prop = shared(payload[:3], payload[3], key)
     kind, index, n = task
     with thread_limit(1):
-        return _main_chunk(ev, prop, s, index, n) if kind == "m" else _sensitivity_chunk(ev, s, index, n)
+        out = _main_chunk(ev, prop, s, index, n) if kind == "m" else _sensitivity_chunk(ev, s, index, n)
+    bad = {k: int(np.isnan(v).any(axis=tuple(range(1, v.ndim))).sum()) for k, v in out.items()
+           if (k == "ratio" or k == "A" or k.startswith("C_")) and v.size}
+    if any(bad.values()):
+        raise FloatingPointError(f"chunk {kind}{index}: {max(bad.values())} of {n} draws gave a NaN exposure ratio")
+    return out
+
+
+class ChunksFailed(RuntimeError):
+    """Some chunks of draws failed: no result is written (the finished chunks are kept for
+    a restart). ``failed`` and ``not_run`` count chunks; ``kinds`` maps each error kind to
+    its first message."""
+
+    def __init__(self, failed: int, total: int, not_run: int, kinds: dict, draws: int):
+        self.failed, self.total, self.not_run, self.kinds, self.draws = failed, total, not_run, kinds, draws
+        stop = f", {not_run} not run (stopped at the first failure; --keep-going runs the rest)" if not_run else ""
+        super().__init__(f"{failed} of {total} chunks of draws failed ({draws} draws){stop}; no risk result is written "
+                         f"(finished chunks are kept: a restart runs the rest); first of each kind: {'; '.join(kinds.values())}")
 
 
 def _save(path: Path, arrays: dict) -> None:
@@ -171,11 +190,21 @@ def _name(task) -> str:
     return f"{task[0]}{task[1]:06d}.npz"
 
 
-def _run_pending(pending, key, payload, s, serial, workers, scheduler, record):
+def _run_pending(pending, key, payload, s, serial, workers, scheduler, record, keep_going=False) -> dict:
+    """Run the ``pending`` chunks; returns task -> error line of the failed ones (the first
+    failure stops the rest unless ``keep_going``)."""
+    failed = {}
     if serial:
         for t in pending:
-            record(t, run_task(key, payload, s, t))
-        return
+            try:
+                arrays = run_task(key, payload, s, t)
+            except Exception as exc:  # noqa: BLE001 - counted and said; the run exits non-zero
+                failed[t] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+                if not keep_going:
+                    break
+                continue
+            record(t, arrays)
+        return failed
     from distributed import Client, as_completed
 
     from ..study import local_cluster
@@ -186,7 +215,14 @@ def _run_pending(pending, key, payload, s, serial, workers, scheduler, record):
         pay = client.scatter(payload, broadcast=True)
         futures = {client.submit(run_task, key, pay, s, t, pure=False): t for t in pending}
         for fut in as_completed(futures):
-            record(futures[fut], fut.result())
+            exc = fut.exception()
+            if exc is None:
+                record(futures[fut], fut.result())
+                continue
+            failed[futures[fut]] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+            if not keep_going:
+                client.cancel([f for f in futures if not f.done()])
+                break
     finally:
         client.close()
         if cluster is not None:
@@ -194,8 +230,9 @@ def _run_pending(pending, key, payload, s, serial, workers, scheduler, record):
 
 
 def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False, workers=2, scheduler=None, force=False,
-               progress=None) -> Chunks:
-    """Every chunk of the run, computing the ones not yet in ``outdir``."""
+               progress=None, keep_going=False) -> Chunks:
+    """Every chunk of the run, computing the ones not yet in ``outdir``. Raises
+    :class:`ChunksFailed` if any chunk failed (after the first, unless ``keep_going``)."""
     outdir = Path(outdir)
     digest = digest_of(scene, s, backend, shared(scene, backend)[1])
     cdir = _prepare(outdir, digest, force)
@@ -212,6 +249,12 @@ def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False
 
     if pending:
         payload = (scene.source_data, scene.source, None if scene.base_dir is None else str(scene.base_dir), backend)
-        _run_pending(pending, scene_key(scene, backend), payload, s, serial, workers, scheduler, record)
+        failed = _run_pending(pending, scene_key(scene, backend), payload, s, serial, workers, scheduler, record, keep_going)
+        if failed:
+            from ..study import failure_kinds
+
+            missing = [t for t in todo if not (cdir / _name(t)).exists()]
+            raise ChunksFailed(len(failed), len(todo), len(missing) - len(failed), failure_kinds(failed.values()),
+                               sum(t[2] for t in failed))
     loaded = {t: dict(np.load(cdir / _name(t))) for t in todo}
     return Chunks([loaded[t] for t in todo if t[0] == "m"], [loaded[t] for t in todo if t[0] == "s"], len(pending), len(todo) - len(pending))

@@ -110,3 +110,37 @@ def test_fit_sh_two_states_from_named_columns(tests_folder, tmp_path):
     code, _, err = run("fit", "sh", tmp_path / "tagged.csv", "-o", tmp_path / "bad.json", "--state", "extinction,melt_fraction",
                        "--states", "0.311,1.5", "--force")
     assert code == 2 and "--states" in err and "2 node list(s)" in err
+
+
+@pytest.mark.parametrize("fail_at", ["envelope", "rename 1", "rename 2"])
+def test_fit_files_are_one_unit(tests_folder, tmp_path, monkeypatch, fail_at):
+    """hazard fit's model, envelope and samples files (separate paths) switch in together:
+    a failure while writing the envelope, or at the second or third rename, leaves every
+    final file as it was (old ones unchanged, new ones never created) and no temporary."""
+    import brdfmodels._unit as unit
+    from brdfmodels import fitting
+
+    folder, paths = tests_folder
+    old_model = tmp_path / "m.json"
+    old_model.write_text("old model")
+    env, smp = tmp_path / "sub" / "env.json", tmp_path / "s.csv"
+    env.parent.mkdir()
+    if fail_at == "envelope":
+        def boom(*a, **k):
+            raise RuntimeError("injected envelope failure")
+        monkeypatch.setattr(fitting, "envelope_sh", boom)
+    else:
+        def step(name):
+            if name == f"files: {fail_at}":
+                raise OSError(28, "No space left on device (injected)")
+        monkeypatch.setattr(unit, "_step", step)
+    argv = ("fit", "screen", *paths, "-o", old_model, "--envelope", "sh", "--envelope-output", env, "--samples-output", smp, "--force")
+    code, out, err = run(*argv)
+    assert code == 1 and err.count("\n") == 1 and out == "", (code, err)
+    assert old_model.read_text() == "old model" and not env.exists() and not smp.exists()
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["m.json"]  # no temporary or backup left
+    monkeypatch.undo()
+    code, out, err = run(*argv)
+    assert code == 0, err
+    assert bm.load(old_model).is_dynamic is False and bm.load(env) is not None and smp.exists() and f"wrote: {old_model}" in out
+    assert sorted(p.name for p in tmp_path.rglob("*") if p.is_file()) == ["env.json", "m.json", "s.csv"]

@@ -279,3 +279,46 @@ def test_lambertian_lognormal_random_geometry(tmp_path_factory, yaw, dist, side,
     assert _within(r["probability_exceed"], ref, 600, k=4.5), (r["probability_exceed"], ref)
     ci = binomtest(r["hits"], 600).proportion_ci(0.95, method="exact")
     assert r["probability_ci_low"] == pytest.approx(ci.low, abs=1e-12) and r["probability_ci_high"] == pytest.approx(ci.high, abs=1e-12)
+
+
+def test_failed_chunks_exit_4_and_write_nothing(tmp_path, monkeypatch):
+    """A chunk of draws that fails (here an injected error in chunk 1, NaN ratios in chunk 2)
+    stops the run with exit 4 and one summary line; no risk file is written, the finished
+    chunks are kept, and --keep-going runs the rest before failing the same way."""
+    import io
+
+    import hazard.risk.run as rr
+    from hazard.cli import main
+
+    real = rr._main_chunk
+
+    def broken(ev, prop, s, index, n):
+        out = real(ev, prop, s, index, n)
+        if index == 1:
+            raise RuntimeError("injected chunk failure")
+        if index == 2:
+            out["ratio"][3] = np.nan  # one draw the engine could not evaluate: never counted as safe
+        return out
+
+    monkeypatch.setattr(rr, "_main_chunk", broken)
+    monkeypatch.setattr(rr, "POINT_VALUES_PER_CHUNK", 1)  # chunks of 16 draws, the smallest
+    scene = tmp_path / "s.toml"
+    scene.write_text(_small(tmp_path))
+    argv = ["risk", str(scene), "-o", str(tmp_path / "out"), "--serial", "--quiet", "--draws", "64", "--sensitivity-draws", "0"]
+    out, err = io.StringIO(), io.StringIO()
+    assert main(argv, stdout=out, stderr=err) == 4
+    assert err.getvalue().count("\n") == 1, err.getvalue()
+    assert "1 of 4 chunks of draws failed (16 draws), 2 not run (stopped at the first failure" in err.getvalue()
+    assert "RuntimeError: injected chunk failure" in err.getvalue()
+    assert not (tmp_path / "out" / "risk.json").exists() and not (tmp_path / "out" / "risk.csv").exists()
+    assert sorted(p.name for p in (tmp_path / "out" / ".risk").glob("*.npz")) == ["m000000.npz"]
+    err = io.StringIO()
+    assert main(argv + ["--keep-going"], stdout=out, stderr=err) == 4
+    assert "2 of 4 chunks of draws failed (32 draws);" in err.getvalue()
+    assert "FloatingPointError: chunk m2: 1 of 16 draws gave a NaN exposure ratio" in err.getvalue()
+    assert sorted(p.name for p in (tmp_path / "out" / ".risk").glob("*.npz")) == ["m000000.npz", "m000003.npz"]
+    monkeypatch.setattr(rr, "_main_chunk", real)
+    err = io.StringIO()
+    assert main(argv, stdout=out, stderr=err) == 0 and err.getvalue() == ""
+    doc = json.loads((tmp_path / "out" / "risk.json").read_text())
+    assert doc["run"]["ran"] == 2 and doc["run"]["reused"] == 2
