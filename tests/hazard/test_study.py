@@ -58,7 +58,10 @@ def test_study_file_validated_in_full_before_work(tmp_path):
     with pytest.raises(ValueError, match=r"sweep.parameters\[0\].path: .*did you mean 'laser.power_w'"):
         load_study(_study_file(tmp_path, sweep.format("laser.powr_w", "[1.0, 2.0]")))
     # a value of the wrong type, in the third scenario only: named with its scenario and path
-    with pytest.raises(ValueError, match=r"1 of 3 distinct scenario.*scenario 2 \(laser.power_w = 'lots'\).*laser.power_w"):
+    with pytest.raises(ValueError, match=r"1 of 3 distinct scenario.*scenario 2 \(laser.power_w = True\).*laser.power_w"):
+        load_study(_study_file(tmp_path, sweep.format("laser.power_w", '[1.0, 2.0, true]')))
+    # a text that is no quantity is refused by the units reader, naming the value's place in the study file
+    with pytest.raises(ValueError, match=r"sweep.parameters\[0\].values\[2\] = 'lots': expected a number and a unit"):
         load_study(_study_file(tmp_path, sweep.format("laser.power_w", '[1.0, 2.0, "lots"]')))
     with pytest.raises(ValueError, match=r"2 of 3 distinct .*scenario 0 .*-1.0.*scenario 2 .*-5.0"):
         load_study(_study_file(tmp_path, sweep.format("laser.power_w", "[-1.0, 2.0, -5.0]")))
