@@ -24,7 +24,8 @@ __all__ = ["write_outputs", "CSV_COLUMNS", "CONTOUR_LEVELS"]
 CONTOUR_LEVELS = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1)
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "optical_gain", "probability_exceed", "probability_ci_low", "probability_ci_high", "ci_method",
                "hits", "draws", "effective_draws", "hazard_ratio_p50", "hazard_ratio_p95", "hazard_ratio_p99", "irradiance_p50_w_m2",
-               "irradiance_p95_w_m2", "irradiance_p99_w_m2", "probability_exceed_aided", "probability_per_year",
+               "irradiance_p95_w_m2", "irradiance_p99_w_m2", "lit_fraction", "hazard_ratio_lit_p50", "hazard_ratio_lit_p95",
+               "hazard_ratio_lit_p99", "probability_exceed_aided", "probability_per_year",
                "probability_per_year_ci_high", "driver", "sensitivity_of"]
 
 
@@ -41,8 +42,10 @@ def _csv_row(r: dict, draws: int, inputs: list) -> list:
     ops, sens = r["operations"], r["sensitivity"]
     aided = max((a["probability_exceed"] for a in r["aided"]), default=None)
     first = (sens or {}).get("first_order") or {}
+    ql = r.get("hazard_ratio_quantiles_lit") or {}
     vals = [r["name"], *r["position_m"], r["optical_gain"], r["probability_exceed"], r["probability_ci_low"], r["probability_ci_high"],
-            r["ci_method"], r["hits"], draws, r["effective_draws"], q["p50"], q["p95"], q["p99"], qe["p50"], qe["p95"], qe["p99"], aided,
+            r["ci_method"], r["hits"], draws, r["effective_draws"], q["p50"], q["p95"], q["p99"], qe["p50"], qe["p95"], qe["p99"],
+            r.get("lit_fraction"), ql.get("p50"), ql.get("p95"), ql.get("p99"), aided,
             None if ops is None else ops["probability_at_least_one"], None if ops is None else ops["ci_high"],
             None if sens is None else sens["driver"], None if sens is None else sens["of"]]
     return [_cell(v) for v in vals] + [_cell(first.get(g)) for g in inputs]
