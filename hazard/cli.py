@@ -160,6 +160,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "from an output folder of hazard run")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output folder of hazard run (holding report.json; its pictures are embedded)")
     p.add_argument("--pdf", action="store_true", help="also print report.pdf with headless Chromium")
+    p.add_argument("--observer", action="append", default=[], metavar="NAME",
+                   help="also show this observer's irradiance with its steps (besides the ten highest; repeatable)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = sub.add_parser("render", help="3-D renders of the keep-out zones (PNG), a VTK multiblock and a lobe animation")
@@ -850,7 +852,7 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
     """hazard.review.write_review with the stage lines of the other verbs on ``err``."""
     from .review import write_review
 
-    return write_review(out_dir, pdf=pdf, progress=_stage_lines(args, err))
+    return write_review(out_dir, pdf=pdf, progress=_stage_lines(args, err), observers=getattr(args, "observer", None) or ())
 
 
 def _cmd_report(args, out, err):
