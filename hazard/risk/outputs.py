@@ -6,6 +6,9 @@ then rename).
 
 The contours are drawn from the cells whose 95 % upper bound reaches each level (a cell
 whose interval straddles a level is inside it): conservative, never the estimate alone.
+A cell without an exceedance in the draws is inside every level up to its zero-hit bound;
+each feature counts those cells (``unresolved_cells``) and the collection states the bound
+(``laser_hazard.zero_hit_bound``), so a contour that only restates the bound is told apart.
 """
 
 from __future__ import annotations
@@ -106,6 +109,8 @@ def contours(scene, mp: dict) -> dict:
     from ..map_outputs import to_lonlat
 
     pts, hi, h = mp["points_m"], np.asarray(mp["ci_high"]), mp["spacing_m"] / 2
+    unresolved = np.asarray(mp["hits"]) <= 0
+    floor = float(hi[unresolved].max()) if unresolved.any() else None  # what zero hits in these draws can bound
     feats = []
     for level in CONTOUR_LEVELS:
         sel = np.flatnonzero(hi >= level)
@@ -117,10 +122,15 @@ def contours(scene, mp: dict) -> dict:
             geom = to_lonlat(geom, scene.site.frame, None, z)
         feats.append({"type": "Feature", "geometry": mapping(geom),
                       "properties": {"kind": "probability_contour", "level": level, "cells": int(len(sel)),
+                                     "unresolved_cells": int(unresolved[sel].sum()),
                                      "rule": "cells whose 95 % upper bound of P(E > MPE) is at or above the level"}})
     frame = "WGS 84 lon/lat" if scene.site is not None else "the scene's local frame [m] (no [site])"
+    said = ("every cell has an exceedance in the draws" if floor is None else
+            f"{int(unresolved.sum())} cell(s) had no exceedance in the draws: their 95 % upper bound, up to {floor:.3g}, puts "
+            "them inside every contour at or below it (unresolved_cells per level); more draws resolve them")
     return {"type": "FeatureCollection", "features": feats, "laser_hazard": {"frame": frame, "scene": scene.name,
-                                                                             "levels": list(CONTOUR_LEVELS)}}
+                                                                             "levels": list(CONTOUR_LEVELS),
+                                                                             "zero_hit_bound": floor, "unresolved": said}}
 
 
 def _map_files(scene, mp, outdir, notes) -> list:

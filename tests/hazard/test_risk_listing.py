@@ -177,3 +177,22 @@ def test_map_picture_draws_the_estimate_and_hatches_the_rest():
     grey = [int(UNRESOLVED_COLOUR[k:k + 2], 16) for k in (1, 3, 5)]
     assert count(np.round(np.asarray(colour) * 255)) > 500  # the resolved cell, in its band (a 10 m cell is ~70 px wide)
     assert count(grey) > 5000  # the hatched cells' ground
+
+
+def test_contours_count_the_cells_only_bounded():
+    """A level at or below the zero-hit bound holds every unresolved cell: each feature
+    says how many, and the collection states the bound."""
+    from types import SimpleNamespace
+
+    pytest.importorskip("shapely")
+    from hazard.risk.outputs import contours
+
+    c = _cells()
+    mp = {"points_m": np.column_stack([c["x"], c["y"], np.full(c["x"].size, 1.7)]), "ci_high": c["hi"], "hits": c["hits"],
+          "spacing_m": 10.0}
+    doc = contours(SimpleNamespace(site=None, name="s"), mp)
+    by_level = {f["properties"]["level"]: f["properties"] for f in doc["features"]}
+    assert doc["laser_hazard"]["zero_hit_bound"] == 1.8e-4 and "28 cell(s) had no exceedance" in doc["laser_hazard"]["unresolved"]
+    assert by_level[1e-4] == by_level[1e-4] | {"cells": 30, "unresolved_cells": 28}  # 1.8e-4 >= 1e-4: all inside
+    assert by_level[1e-3] == by_level[1e-3] | {"cells": 1, "unresolved_cells": 0}  # only the 2.8e-3 cell
+    assert 1e-2 not in by_level
