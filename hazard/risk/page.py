@@ -143,9 +143,9 @@ def _lit_text(r: dict) -> str:
     if not isinstance(frac, float):
         return "not stated"
     if frac == 0:
-        return "never lit in the draws"
+        return "never lit in the draws"  # (weighted as the estimate when importance sampled)
     ql = r.get("hazard_ratio_quantiles_lit") or {}
-    return (f"lit in {fmt_p(100 * frac, sig=3)} % of the draws; then "
+    return (f"lit in {fmt_p(100 * frac, sig=3)} % of the operations; then "
             f"{' / '.join(fmt_p(ql.get(k)) for k in ('p50', 'p95', 'p99'))}")
 
 
@@ -171,7 +171,8 @@ def statement_row(r: dict, draws=None) -> dict:
 
 ZERO_QUANTILES = ("A hazard ratio p50 / p95 / p99 of 0 / 0 / 0 is no error: the quantiles are over all draws, and a point "
                   "lit (E > 0) in under 1 % of them has all three at 0, as a pointing error usually carries the beam or the "
-                  "glint past it. The column 'when lit' gives the hazard ratio's quantiles among the draws that light it.")
+                  "glint past it. The column 'when lit' gives the share of the operations that light it (the draws weighted as "
+                  "the estimate is) and the hazard ratio's quantiles among them.")
 RATIO_MEANS = ("hazard ratio: per draw the observer's exposure over the {t} exposure against the MPE for {t} (the peak "
                "irradiance over the analysis times / the MPE; for an irradiance constant over the exposure this is H / MPE_H)")
 

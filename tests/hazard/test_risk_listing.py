@@ -79,7 +79,7 @@ def test_page_lists_resolved_and_unresolved_in_labelled_tables(tmp_path):
     assert "Resolved points" in head and "Unresolved points" in head
     assert re.search(r"4 resolved \(at least one exceedance in the 20\W000 draws\), 19 unresolved", page)
     assert markupsafe.escape(ZERO_QUANTILES) in page  # the 0 / 0 / 0 column is explained
-    assert "lit in 0.5 % of the draws; then 0.2 / 1.5 / 3</td>" in page
+    assert "lit in 0.5 % of the operations; then 0.2 / 1.5 / 3</td>" in page
 
 
 def test_no_sentence_without_an_all_zero_quantile_row():
