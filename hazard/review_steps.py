@@ -125,9 +125,25 @@ def lobe_steps(title: str, lobe: dict, mpe_w_m2: float, mu_per_m: float, key: st
     return {"title": title, "lines": lines, "result_m": r, "check": _check(r, reported, key), "key": key}
 
 
-def observer_steps(r: dict, static: bool, duration_s) -> dict:
+def _track_ratio(track: dict, r: dict, lines: list, checks: list) -> None:
+    """A moving observer (``tracks[]``): the hazard ratio is its worst window's H / MPE_H."""
+    w = track.get("worst_window") or {}
+    h, limit = w.get("exposure_j_m2"), w.get("mpe_radiant_exposure_j_m2")
+    if h is None or not limit:
+        lines.append("a moving observer: its hazard ratio is the motion stage's worst window (not given in full here)")
+        return
+    err, path = float(track.get("exposure_error_estimate_j_m2") or 0.0), float(track.get("path_exposure_j_m2") or 0.0)
+    rel = err / path if path > 0 else 0.0
+    ratio = float(h) * (1.0 + rel) / float(limit)
+    lines.append(f"a moving observer (tracks[{track.get('name')}]): the worst {g(w.get('duration_s'))} s window's H, raised by "
+                 f"the integral's relative error estimate, over its MPE: hazard ratio = H_w (1 + err / H_path) / MPE_H = "
+                 f"{g(h)} * (1 + {g(err)} / {g(path)}) / {g(limit)} = {g(ratio)}")
+    checks.append(_check(ratio, r.get("hazard_ratio"), "hazard_ratio"))
+
+
+def observer_steps(r: dict, static: bool, duration_s, track: dict | None = None) -> dict:
     """One observer: its peak irradiance as direct beam + reflected peak, the hazard ratio
-    E / MPE, and (a static scene) the exposure H = E t."""
+    E / MPE (a moving observer: its worst window's H / MPE_H), and (static) H = E t."""
     name = str(r.get("name", "?"))
     d, refl = r.get("direct_irradiance_w_m2"), r.get("reflected_irradiance_w_m2")
     mpe, peak = r.get("mpe_w_m2"), r.get("peak_irradiance_w_m2")
@@ -144,6 +160,9 @@ def observer_steps(r: dict, static: bool, duration_s) -> dict:
     e = float(d) + float(refl)
     lines.append(f"E = E_direct + E_reflected = {g(d)} + {g(refl)} = {g(e)} W/m²")
     checks.append(_check(e, peak, "peak_irradiance_w_m2"))
+    if track is not None:
+        _track_ratio(track, r, lines, checks)
+        return {"title": f"observer {name}", "lines": lines, "checks": checks}
     ratio = e / float(mpe)
     c_e = r.get("c_e")
     lines.append(f"hazard ratio = E / MPE = {g(e)} / {g(mpe)} = {g(ratio)}" + (f" (MPE with C_E = {g(c_e)})" if c_e not in (None, 1.0) else ""))
@@ -239,16 +258,19 @@ def analysed_times_text(doc: dict) -> str:
     t = doc.get("times_s") or {}
     dur = (doc.get("mpe") or {}).get("duration_s")
     dur_t = "not stated" if dur is None else f"{g(dur)} s"
+    m_span = (doc.get("motion") or {}).get("time_span_s")
+    moving = "" if not m_span else (f" The motion stage follows what moves (beam, targets, observers) from {g(m_span[0])} s to "
+                                    f"{g(m_span[-1])} s, every window of up to {dur_t} in it (see Airspace and moving observers).")
     if t.get("count") == 1:
-        return (f"Analysed exposure: a static scene (one state at t = {g(t.get('start', 0.0))} s), held over the whole "
-                f"exposure duration of {dur_t}: the window analysed is 0 s to {dur_t} (H = E × {dur_t}).")
+        return (f"Analysed exposure: the materials do not change (one state at t = {g(t.get('start', 0.0))} s), held over "
+                f"the whole exposure duration of {dur_t}: the window analysed is 0 s to {dur_t} (H = E × {dur_t}).{moving}")
     if t.get("start") is None or t.get("end") is None:
         return f"Analysed times: not stated in report.json (exposure duration {dur_t})."
     span = float(t["end"]) - float(t["start"])
     how = ("the worst window of that duration within them" if dur is not None and span > float(dur) else
            "the exposure integrated over the whole span")
     return (f"Analysed times: {g(t['start'])} s to {g(t['end'])} s ({t.get('count', 'not stated')} time steps, a span of "
-            f"{g(span)} s); exposure duration {dur_t}: {how}.")
+            f"{g(span)} s); exposure duration {dur_t}: {how}.{moving}")
 
 
 def steps_section(doc: dict, names=(), shown: int = STEPS_OBSERVERS) -> dict:
@@ -265,6 +287,8 @@ def steps_section(doc: dict, names=(), shown: int = STEPS_OBSERVERS) -> dict:
     chosen += [by_name[n] for n in names if n in by_name and by_name[n] not in chosen]
     static = (doc.get("times_s") or {}).get("count") == 1
     dur = (doc.get("mpe") or {}).get("duration_s")
-    return {"blocks": blocks, "faa": faa, "observers": [observer_steps(r, static, dur) for r in chosen],
+    tracks = {str(t.get("name")): t for t in doc.get("tracks") or [] if t.get("kind", "track") != "fixed"}
+    return {"blocks": blocks, "faa": faa, "observers": [observer_steps(r, static, dur, tracks.get(str(r.get("name"))))
+                                                         for r in chosen],
             "missing": [n for n in names if n not in by_name], "absent": "" if ln is not None else
             "report.json lacks the laser's power, beam size, divergence, attenuation or MPE: no steps"}

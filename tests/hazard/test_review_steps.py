@@ -192,7 +192,7 @@ def test_plate_steps_and_the_analysed_window(tmp_path):
     assert _verify_observers(doc, blocks)
     # the issue's misreading: "Analysed times: 0 s to 0 s" for a 10 s exposure
     said = html.unescape(re.search(r'<p id="analysed-times">(.*?)</p>', page, re.S).group(1))
-    assert "0 s to 10 s" in said and "static" in said and "0 s to 0 s" not in said
+    assert "0 s to 10 s" in said and "do not change" in said and "0 s to 0 s" not in said
 
 
 def test_analysed_window_of_a_time_run():
@@ -201,3 +201,27 @@ def test_analysed_window_of_a_time_run():
                                         "10 s: the worst window of that duration within them.")
     doc["times_s"]["end"] = 5.0
     assert "the exposure integrated over the whole span" in analysed_times_text(doc)
+
+
+def test_a_moving_observer_takes_its_worst_window():
+    """A track's hazard ratio is its worst window's exposure, raised by the integral's
+    relative error estimate, over that window's MPE (hazard.pipeline.motion_stage)."""
+    from hazard.review_steps import steps_section
+
+    h_w, err, path, limit = 0.1926532025278637, 2.155667067793576e-06, 0.2898293597913221, 0.5241469051493551
+    ratio = h_w * (1 + err / path) / limit
+    row = {"name": "heli", "peak_irradiance_w_m2": 24.9, "direct_irradiance_w_m2": 24.8, "reflected_irradiance_w_m2": 0.1,
+           "mpe_w_m2": 25.4, "hazard_ratio": ratio, "radiant_exposure_j_m2": 0.29}
+    track = {"name": "heli", "kind": "track", "exposure_error_estimate_j_m2": err, "path_exposure_j_m2": path,
+             "worst_window": {"duration_s": 0.009, "exposure_j_m2": h_w, "mpe_radiant_exposure_j_m2": limit, "ratio": ratio}}
+    doc = {"observers": [row], "tracks": [track], "times_s": {"start": 0.0, "end": 0.0, "count": 1}, "mpe": {"duration_s": 0.25},
+           "motion": {"time_span_s": [0.0, 60.0]}}
+    (b,) = steps_section(doc)["observers"]
+    text = "\n".join(b["lines"])
+    m = re.search(rf"= {NUM} \* \(1 \+ {NUM} / {NUM}\) / {NUM} = {NUM}$", text, re.M)
+    a, e, p, lim, shown = (float(x) for x in m.groups())
+    assert a * (1 + e / p) / lim == pytest.approx(ratio, rel=1e-6) and shown == pytest.approx(ratio, rel=1e-9)
+    assert "H = E t" not in text  # a track's exposure is not E times the duration
+    assert all(c["agrees"] for c in b["checks"])
+    said = analysed_times_text(doc)
+    assert "0 s to 0.25 s" in said and "from 0 s to 60 s" in said
