@@ -209,7 +209,8 @@ def _direct_blocks(doc: dict, ln: dict) -> list:
     spill = (doc.get("beam") or {}).get("spill") or {}
     prof = spill.get("peak_profile")
     if prof:
-        out.append(direct_steps(f"Spilled beam NOHD (the beam past the targets at {g(prof)} of its power profile)",
+        out.append(direct_steps(f"Spilled beam NOHD (the beam past the targets: P times its hottest remaining part of the "
+                                f"profile, {g(prof)})",
                                 ln["p"] * float(prof), ln["mpe"], ln["a"], ln["phi"], ln["mu"], 1.0, spill.get("nohd_m"),
                                 "beam.spill.nohd_m"))
     return out
