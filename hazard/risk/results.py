@@ -79,12 +79,19 @@ def lit_quantiles(own: np.ndarray, w: np.ndarray | None) -> tuple[np.ndarray, np
     n, m = own.shape
     lit = own > 0
     ww = np.ones(n) if w is None else np.asarray(w, float)
-    total = ww.sum()
-    frac = (ww[:, None] * lit).sum(axis=0) / total if total > 0 else np.zeros(m)
+    lw = ww[:, None] * lit  # (n, M): the weights of the lit draws, 0 elsewhere
+    total = lw.sum(axis=0)
+    frac = total / ww.sum() if ww.sum() > 0 else np.zeros(m)
+    order = np.argsort(np.where(lit, own, np.inf), axis=0, kind="stable")  # the unlit last, with no weight
+    vs = np.take_along_axis(own, order, axis=0)
+    cdf = np.cumsum(np.take_along_axis(lw, order, axis=0), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cdf = cdf / total
     q = np.full((len(stats.QUANTILES), m), np.nan)
-    for j in np.flatnonzero(lit.any(axis=0)):
-        sel = lit[:, j]
-        q[:, j] = stats.weighted_quantiles(own[sel, j][:, None], None if w is None else ww[sel])[:, 0]
+    some = total > 0
+    for i, x in enumerate(stats.QUANTILES):  # the smallest value with at least the fraction x at or below it
+        k = np.minimum((cdf < x - 1e-12).sum(axis=0), n - 1)
+        q[i, some] = np.take_along_axis(vs, k[None, :], axis=0)[0, some]
     return frac, q
 
 
