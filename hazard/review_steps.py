@@ -188,6 +188,31 @@ def _laser_numbers(doc: dict) -> dict | None:
     return {"p": float(p), "a": float(a), "phi": float(phi), "mu": float(mu), "mpe": float(doc["mpe_w_m2"])}
 
 
+def half_width_steps(ln: dict, length_m: float, reported) -> dict | None:
+    """The LSDZ's widening: the beam's largest hazardous half-width max over R of
+    w(R) sqrt(ln(E(R) / MPE)), w = d / 2, d = a + R phi; without attenuation
+    h(d) = (d / 2) sqrt(2 ln(D0 / d)), largest at d* = D0 e^(-1/2) (h = D0 / (2 sqrt(e)))
+    when that d lies on the drawn length, else at its nearer end; the engine adds 1e-6 of
+    itself. None with attenuation (a numerical search only) or no hazard."""
+    p, mpe, a, phi, mu = ln["p"], ln["mpe"], ln["a"], ln["phi"], ln["mu"]
+    d0 = math.sqrt(4.0 * p / (math.pi * mpe))
+    if mu != 0.0 or phi <= 0.0 or d0 <= a or not math.isfinite(length_m):
+        return None
+    d_star = d0 * math.exp(-0.5)
+    lines = ["hazardous half-width h = max over R of (d / 2) sqrt(ln(E(R) / MPE)) = (d / 2) sqrt(2 ln(D0 / d)), d = a + R phi "
+             "(mu = 0); largest at d* = D0 exp(-1/2)",
+             f"d* = {g(d0)} * exp(-1/2) = {g(d_star)} m, at R* = (d* - a) / phi = ({g(d_star)} - {g(a)}) / {g(phi)} = "
+             f"{g((d_star - a) / phi)} m (the zone is drawn to {g(length_m)} m)"]
+    d = min(max(d_star, a), a + length_m * phi)
+    h = d / 2.0 * math.sqrt(2.0 * math.log(d0 / d))
+    where = "d = d*" if d == d_star else ("R* < 0: at the aperture, d = a" if d == a else "R* beyond the zone: at its end")
+    lines.append(f"{where}: h = ({g(d)} / 2) * sqrt(2 ln({g(d0)} / {g(d)})) = {g(h)} m")
+    h1 = h * (1.0 + 1e-6)
+    lines.append(f"with the engine's margin of 1e-6: h = {g(h)} * (1 + 1e-6) = {g(h1)} m")
+    return {"title": "The danger zone's widening: the beam's hazardous half-width", "lines": lines, "result_m": h1,
+            "check": _check(h1, reported, "sdz.hazard_half_width_m"), "key": "sdz.hazard_half_width_m"}
+
+
 def _direct_blocks(doc: dict, ln: dict) -> list:
     """The LSDZ's NOHD (naked and through each aid), its extent, and the spilled beam's NOHD."""
     out = []
@@ -201,6 +226,9 @@ def _direct_blocks(doc: dict, ln: dict) -> list:
                               f"{g(reach)} m" + (" (= the NOHD: no backstop stops the beam before it)"
                                                  if not sdz.get("contained") else " (every direction stopped by a backstop)"))
         out.append(b)
+        hw = half_width_steps(ln, float(reach), sdz.get("hazard_half_width_m")) if reach is not None else None
+        if hw is not None:
+            out.append(hw)
         for i, a in enumerate(sdz.get("aided") or []):
             k = a.get("gain")
             if k is not None:

@@ -106,6 +106,14 @@ def _check_block(title, lines, checks, doc):
         r = _direct_range(_get(text, "P"), limit, _get(text, "a"), _get(text, "phi"), _get(text, "mu"), _get(text, "K"))
         shown = _reported(checks, "report.json")
         return r, shown
+    if "half-width" in title:  # max of (d / 2) sqrt(2 ln(D0 / d)): d* = D0 exp(-1/2), or the nearer end of the zone
+        m = re.search(rf"^d\* = {NUM} \* exp\(-1/2\) = {NUM} m, at R\* = .* = {NUM} m \(the zone is drawn to {NUM} m\)", text, re.M)
+        d0, d_star, r_star, length = (float(x) for x in m.groups())
+        assert d_star == pytest.approx(d0 * math.exp(-0.5), rel=1e-9)
+        m = re.search(rf"h = \({NUM} / 2\) \* sqrt\(2 ln\({NUM} / {NUM}\)\) = {NUM} m", text)
+        d, d0b, d_b = float(m.group(1)), float(m.group(2)), float(m.group(3))
+        assert d0b == d0 and d_b == d and (d == d_star or not 0 <= r_star <= length)
+        return d / 2 * math.sqrt(2 * math.log(d0 / d)) * (1 + 1e-6), _reported(checks, "report.json")
     if "reflected lobe" in title:
         r = _point_range(_get(text, "I"), _get(text, "MPE"), _get(text, "mu"))
         return r, _reported(checks, "report.json")
@@ -174,7 +182,7 @@ def test_every_distance_redone_from_the_page(green):
     assert any(t.startswith("Direct-beam ENOHD through optics") for t in titles)  # the binoculars
     assert sum(t.startswith("FAA") for t in titles) == 3
     assert any("reflected lobe NOHD (static)" in t for t in titles)
-    assert done >= 6
+    assert done >= 6 and not any("half-width" in t for t in titles)  # with attenuation: a numerical search, no step
     assert not re.search(r"DIFFERS", page)
 
 
@@ -188,7 +196,7 @@ def test_observer_irradiance_redone_from_the_page(green):
 def test_plate_steps_and_the_analysed_window(tmp_path):
     doc, page = _run(tmp_path, open(scenes.example_path("plate")).read())
     blocks, done = _verify(doc, page)
-    assert done == 2  # the LSDZ NOHD (mu = 0: closed form) and the Lambertian plate's lobe
+    assert done == 3  # the LSDZ NOHD and its half-width (mu = 0: closed forms) and the Lambertian plate's lobe
     assert _verify_observers(doc, blocks)
     # the misreading: "Analysed times: 0 s to 0 s" for a 10 s exposure
     said = html.unescape(re.search(r'<p id="analysed-times">(.*?)</p>', page, re.S).group(1))
