@@ -233,3 +233,16 @@ def test_a_moving_observer_takes_its_worst_window():
     assert all(c["agrees"] for c in b["checks"])
     said = analysed_times_text(doc)
     assert "0 s to 0.25 s" in said and "from 0 s to 60 s" in said
+
+
+def test_named_observers_beyond_the_top_ten_are_added():
+    from hazard.review_steps import steps_section
+
+    rows = [{"name": f"o{k}", "peak_irradiance_w_m2": float(k), "direct_irradiance_w_m2": 0.0, "reflected_irradiance_w_m2": float(k),
+             "mpe_w_m2": 50.0, "hazard_ratio": k / 50.0, "radiant_exposure_j_m2": 10.0 * k} for k in range(30)]
+    doc = {"observers": rows, "times_s": {"start": 0.0, "end": 0.0, "count": 1}, "mpe": {"duration_s": 10.0}}
+    st = steps_section(doc, ["o3", "o29", "ghost"])
+    titles = [b["title"] for b in st["observers"]]
+    assert titles == [f"observer o{k}" for k in range(29, 19, -1)] + ["observer o3"]  # the ten highest, then o3
+    assert st["missing"] == ["ghost"]
+    assert all(c["agrees"] for b in st["observers"] for c in b["checks"])
