@@ -188,6 +188,8 @@ def build_parser() -> argparse.ArgumentParser:
                                       "from an output folder of hazard run")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output folder of hazard run (holding report.json; its pictures are embedded)")
     p.add_argument("--pdf", action="store_true", help="also print report.pdf with headless Chromium")
+    p.add_argument("--observer", action="append", default=[], metavar="NAME",
+                   help="also show this observer's irradiance with its steps (besides the ten highest; repeatable)")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
 
     p = sub.add_parser("render", help="3-D renders of the keep-out zones (PNG), a VTK multiblock and a lobe animation")
@@ -841,10 +843,31 @@ def _cmd_study(args, out, err):
     return EXIT_OK
 
 
+def _risk_listing(doc, out, shown=20, unresolved_shown=5):
+    """hazard risk's lines: the resolved points (an exceedance seen) by the estimate first,
+    then the unresolved (zero hits, only an upper bound) by their bound; the rest counted."""
+    from .risk.page import split_rows
+
+    resolved, unresolved = split_rows(doc["observers"])
+    out.write(f"  resolved (at least one exceedance in the draws; highest estimate first): {len(resolved)} point(s)\n")
+    for r in resolved[:shown]:
+        drv = r["sensitivity"]["driver"] if r["sensitivity"] else None
+        out.write(f"    {r['name']}: {r['statement']}" + (f"; driven by {drv}" if drv else "") + "\n")
+    if len(resolved) > shown:
+        out.write(f"    ... {len(resolved) - shown} more resolved point(s) in risk.csv\n")
+    if unresolved:
+        hi = unresolved[0]["probability_ci_high"]
+        out.write(f"  unresolved (no exceedance in the draws: only the 95 % upper bound is known, the highest {hi:.2g}): "
+                  f"{len(unresolved)} point(s)\n")
+        for r in unresolved[:unresolved_shown]:
+            out.write(f"    {r['name']}: {r['statement']}\n")
+        if len(unresolved) > unresolved_shown:
+            out.write(f"    ... {len(unresolved) - unresolved_shown} more unresolved point(s) in risk.csv\n")
+
+
 def _cmd_risk(args, out, err):
     from .progress import progress_callback
     from .risk import run_risk
-    from .risk.page import worst_first
 
     from .risk.run import ChunksFailed
 
@@ -862,11 +885,7 @@ def _cmd_risk(args, out, err):
         return EXIT_OK
     out.write(f"risk {scene.name!r}: {doc['draws']:,} draws ({doc['sampling']} sampling), MPE {doc['mpe_w_m2']:.4g} W/m^2; "
               f"{doc['run']['ran']} chunk(s) run now, {doc['run']['reused']} reused\n")
-    for r in sorted(doc["observers"], key=worst_first)[:20]:
-        drv = r["sensitivity"]["driver"] if r["sensitivity"] else None
-        out.write(f"  {r['name']}: {r['statement']}" + (f"; driven by {drv}" if drv else "") + "\n")
-    if len(doc["observers"]) > 20:
-        out.write(f"  ... {len(doc['observers']) - 20} more observer point(s) in risk.csv\n")
+    _risk_listing(doc, out)
     for n in doc["notes"]:
         out.write(f"  note: {n}\n")
     out.write(f"  wrote {', '.join(str(res.outdir / f) for f in doc['files'])}\n")
@@ -923,7 +942,7 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
     """hazard.review.write_review with the stage lines of the other verbs on ``err``."""
     from .review import write_review
 
-    return write_review(out_dir, pdf=pdf, progress=_stage_lines(args, err))
+    return write_review(out_dir, pdf=pdf, progress=_stage_lines(args, err), observers=getattr(args, "observer", None) or ())
 
 
 def _cmd_report(args, out, err):

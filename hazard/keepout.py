@@ -55,10 +55,12 @@ class Lobe:
     evaluations: int
     cells: int
     normals: int = 1  # surface normals each direction's range is the max over (a slumping spot's union)
+    peak_intensity_w_sr: float | None = None  # I = f_r cos(theta_r) P toward max_direction (None: a slumping spot's union)
+    spot_power_w: float | None = None  # P: the spot's power times the viewer's gain [W]
 
     def summary(self) -> dict:
         return {
-            "max_nohd_m": self.max_range_m,
+            "max_nohd_m": self.max_range_m, "peak_intensity_w_sr": self.peak_intensity_w_sr, "power_w": self.spot_power_w,
             "max_direction": self.max_direction_world.tolist(),
             "volume_m3": self.volume_m3,
             "volume_error_m3": self.volume_error_m3,
@@ -84,10 +86,14 @@ def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None):
     wi = spot_directions(spot)
     st = None if states is None else path_states(model, states)
 
-    def fn(wo):
-        f = projected_brdf(model, wi[None, :], wo, st, reduce="path-max")  # the lobe: max over the history
-        return range_from_intensity(f * power, mpe_w_m2, mu)
+    def intensity(wo):
+        """Radiant intensity I = f_r cos(theta_r) P [W/sr] toward wo (the max over the history)."""
+        return projected_brdf(model, wi[None, :], wo, st, reduce="path-max") * power
 
+    def fn(wo):
+        return range_from_intensity(intensity(wo), mpe_w_m2, mu)
+
+    fn.intensity = intensity
     return fn
 
 
@@ -341,6 +347,8 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         near = seeds_r >= POLISH_FRACTION * seeds_r.max()
         best_r, best_dir, n_polish = _polish_max(fn, seeds_w[near], math.radians(grid_deg) / 4)
     centre_t, centre_p = _centres(cells)
+    peak_i = getattr(fn, "intensity", None)
+    peak_i = None if peak_i is None or best_r <= 0 else float(peak_i(best_dir[None, :])[0])
     return Lobe(
         theta_rad=centre_t,
         phi_rad=centre_p,
@@ -354,6 +362,8 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         evaluations=evals + n_polish + 2,
         cells=len(cells),
         normals=getattr(fn, "samples", 1),
+        peak_intensity_w_sr=peak_i,
+        spot_power_w=float(spot.total_power_w * gain),
     )
 
 

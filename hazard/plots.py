@@ -176,6 +176,8 @@ class ExposureDisplay(_Display):
     first_exceedance_s: float = math.nan  # from the analysis (NaN: none in the window)
     hazard_ratio: float | None = None
     ratio_text: str = "peak E / MPE"
+    duration_s: float | None = None  # the exposure duration whose MPE the verdict uses [s]
+    rule: str = "peak"  # the verdict's rule: "peak" (E(t) > the duration's MPE) or "window" (a window's H > its MPE)
 
     @classmethod
     def from_result(cls, result, observer=0, *, irradiance_w_m2=None):
@@ -200,7 +202,7 @@ class ExposureDisplay(_Display):
         obs = result.observers
         mpe = np.broadcast_to(np.asarray(result.observer_mpe_w_m2, float), (len(obs),))[observer] if len(obs) else result.mpe_w_m2
         return cls(t, row, cum, limit, obs.labels[observer], float(mpe), float(obs.first_exceedance_s[observer]),
-                   float(result.hazard_ratio[observer]))
+                   float(result.hazard_ratio[observer]), duration_s=float(spec.exposure.duration_s))
 
     @classmethod
     def from_path(cls, result, path):
@@ -217,16 +219,49 @@ class ExposureDisplay(_Display):
         first = math.nan if s.get("first_exceedance_s") is None else float(s["first_exceedance_s"])
         return cls(t, path.irradiance_w_m2, path.cumulative_j_m2, limit, f"{path.name} ({path.kind})",
                    float(result.mpe_w_m2), first, float(s["exposure_ratio"]),
-                   f"worst {s['worst_window']['duration_s']:.3g} s window's H / MPE")
+                   f"worst {s['worst_window']['duration_s']:.3g} s window's H / MPE", duration_s=float(spec.exposure.duration_s),
+                   rule="window")
+
+    def verdict_exceedance_s(self) -> float:
+        """The first time the verdict's rule is broken [s] (NaN: never in the window).
+
+        ``rule == "peak"`` (a fixed observer, hazard ratio = peak E / MPE): the first time
+        E(t) reaches the MPE of the exposure duration (``mpe_w_m2``), the limit the verdict
+        compares with. ``rule == "window"`` (a moving observer): the analysis's own first
+        exceedance of its worst window.
+        """
+        if self.rule != "peak" or self.mpe_w_m2 is None:
+            return self.first_exceedance_s
+        over = np.flatnonzero(np.asarray(self.irradiance_w_m2, float) >= self.mpe_w_m2)
+        return float(self.times_s[over[0]]) if len(over) else math.nan
+
+    def _limit_text(self) -> str:
+        t = "the exposure duration" if self.duration_s is None else f"{self.duration_s:.4g} s"
+        return f"the MPE for {t}"
+
+    def _limits_and_exceedance(self, ax) -> None:
+        """The elapsed-time MPE curve (for reading only), the verdict's limit as radiant
+        exposure and the exceedance marked by the verdict's own rule."""
+        ax.semilogy(self.times_s[1:], self.mpe_exposure_j_m2[1:], "k--", lw=0.9,
+                    label="MPE for the elapsed time t [J/m^2] (for reading; not the verdict's rule)")
+        limit = self._limit_text()
+        if self.rule == "peak" and self.mpe_w_m2 is not None and self.duration_s is not None:
+            h = self.mpe_w_m2 * self.duration_s
+            ax.axhline(h, c="k", lw=1.2, label=f"{limit} as exposure: {self.mpe_w_m2:.4g} W/m^2 x {self.duration_s:.4g} s "
+                                                f"= {h:.4g} J/m^2")
+        t = self.verdict_exceedance_s()
+        rule = f"E(t) first at or above {limit}" if self.rule == "peak" else f"{self.ratio_text} first over 1"
+        if np.isfinite(t):
+            ax.axvline(t, c="tab:red", lw=1.2, label=f"exceedance by the verdict's rule ({rule}): t = {t:.4g} s")
+        elif self.hazard_ratio is not None and self.hazard_ratio > 1:
+            ax.plot([], [], " ", label=f"exceeds by another rule of the MPE (hazard ratio {self.hazard_ratio:.3g}; see the report)")
+        else:
+            ax.plot([], [], " ", label=f"no exceedance in the window ({rule}: never)")
 
     def plot(self, ax=None):
         fig, ax = _axes(ax)
         ax.semilogy(self.times_s[1:], np.maximum(self.exposure_j_m2[1:], 1e-12), c="tab:blue", label="accumulated exposure H(t) [J/m^2]")
-        ax.semilogy(self.times_s[1:], self.mpe_exposure_j_m2[1:], "k--", label="MPE for the elapsed time [J/m^2]")
-        if np.isfinite(self.first_exceedance_s):
-            ax.axvline(self.first_exceedance_s, c="tab:red", lw=1.2, label=f"first exceedance t = {self.first_exceedance_s:.4g} s")
-        else:
-            ax.plot([], [], " ", label="no exceedance in the window")
+        self._limits_and_exceedance(ax)
         ax2 = ax.twinx()
         e = np.asarray(self.irradiance_w_m2, float)
         top = float(e.max()) if len(e) else 0.0
@@ -238,7 +273,8 @@ class ExposureDisplay(_Display):
         ax2.plot(self.times_s, np.maximum(e, min(levels) / 4.0) if levels else e, c="tab:orange", alpha=0.7,
                  label="irradiance E(t) [W/m^2]")
         if self.mpe_w_m2 is not None:
-            ax2.axhline(self.mpe_w_m2, c="tab:orange", ls=":", lw=1.2, label=f"MPE {self.mpe_w_m2:.4g} W/m^2 (hazard ratio's limit)")
+            ax2.axhline(self.mpe_w_m2, c="tab:orange", ls=":", lw=1.2,
+                        label=f"{self._limit_text()}: {self.mpe_w_m2:.4g} W/m^2 (the verdict's limit)")
         ax2.set_ylabel("irradiance [W/m^2]", color="tab:orange")
         ax.set_xlabel("time [s]")
         ax.set_ylabel("radiant exposure [J/m^2]")

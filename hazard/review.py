@@ -86,6 +86,7 @@ SECTIONS = {  # id -> heading, in page order
     "renders": "3-D renders",
     "time": "Time plots",
     "observers": "Observers",
+    "steps": "Every number with its steps",
     "airspace": "Airspace and moving observers",
     "stages": "Stages run and skipped",
     "assumptions": "Assumptions and limits",
@@ -958,8 +959,11 @@ def _sections(risk) -> dict:
     return out
 
 
-def review_context(doc: dict, out: Path, report_path: Path, pictures: dict) -> dict:
-    """Everything the template shows, each part from its report.json keys."""
+def review_context(doc: dict, out: Path, report_path: Path, pictures: dict, observers=()) -> dict:
+    """Everything the template shows, each part from its report.json keys (``observers``:
+    names whose irradiance steps are shown besides the highest ten)."""
+    from .review_steps import analysed_times_text, steps_section
+
     obs = observers_section(doc)
     stages = doc.get("stages") or []
     risk = risk_section(out, doc, pictures.get("risk", []))
@@ -982,6 +986,7 @@ def review_context(doc: dict, out: Path, report_path: Path, pictures: dict) -> d
         "frame": _frame_view(doc), "files": _files_view(doc, out, report_path, pictures),
         "risk": risk, "sections": _sections(risk), "report_format": doc.get("format"), "report_version": doc.get("version"),
         "fmt": fmt_number, "dist": fmt_distance,
+        "steps": steps_section(doc, observers), "times_text": analysed_times_text(doc),
     }
 
 
@@ -993,12 +998,12 @@ def _environment():
                               undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
 
 
-def review_html(out_dir) -> str:
+def review_html(out_dir, observers=()) -> str:
     """The review page of ``out_dir`` as HTML text (see :func:`write_review`)."""
     doc, path = read_report(out_dir)
     out = Path(out_dir)
     pictures = collect_pictures(out, path.stat().st_mtime)
-    return _environment().get_template("review.html.j2").render(**review_context(doc, out, path, pictures))
+    return _environment().get_template("review.html.j2").render(**review_context(doc, out, path, pictures, observers))
 
 
 def find_chromium() -> str | None:
@@ -1042,7 +1047,7 @@ def print_pdf(html_path: Path, pdf_path: Path, browser: str) -> Path:
     return atomic_write(pdf_path, write)
 
 
-def write_review(out_dir, *, pdf: bool = False, progress=None) -> list[Path]:
+def write_review(out_dir, *, pdf: bool = False, progress=None, observers=()) -> list[Path]:
     """Write the report for the review board, ``OUT/report.html`` (and ``report.pdf``).
 
     Parameters
@@ -1054,6 +1059,9 @@ def write_review(out_dir, *, pdf: bool = False, progress=None) -> list[Path]:
         Also print the page to ``OUT/report.pdf`` with headless Chromium.
     progress : callable, optional
         Called with a short message before each step (``"writing report.html"``).
+    observers : sequence of str
+        Observer names whose irradiance is shown with its steps besides the ten highest
+        hazard ratios (a name report.json does not list is said on the page).
 
     Returns
     -------
@@ -1070,7 +1078,7 @@ def write_review(out_dir, *, pdf: bool = False, progress=None) -> list[Path]:
     say = progress or (lambda msg: None)
     out = Path(out_dir)
     say("reading report.json and the pictures")
-    html = review_html(out)
+    html = review_html(out, observers)
     say(f"writing {HTML_NAME}")
     written = [atomic_write_text(out / HTML_NAME, html)]
     if pdf:

@@ -50,6 +50,8 @@ def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
     half = _range_fn(sp, mpe_w_m2, mu, gain, states[t.index], sl.step_rad / 2)
     r_half = float(half(lobe.max_direction_local[None, :])[0])
     err = max(r_half - lobe.max_range_m, 0.0)
+    if r_half > lobe.max_range_m:  # the NOHD is now the half-step union's: no single intensity gives it
+        lobe.peak_intensity_w_sr = None
     lobe.max_range_m = max(lobe.max_range_m, r_half)
     return {"tilt_deg": float(np.degrees(t.slump.tilt_rad)), "wander_deg": float(np.degrees(t.slump.wander_rad)),
             "tilt_direction": t.slump.direction.tolist(), "step_deg": float(np.degrees(sl.step_rad)),

@@ -6,6 +6,9 @@ then rename).
 
 The contours are drawn from the cells whose 95 % upper bound reaches each level (a cell
 whose interval straddles a level is inside it): conservative, never the estimate alone.
+A cell without an exceedance in the draws is inside every level up to its zero-hit bound;
+each feature counts those cells (``unresolved_cells``) and the collection states the bound
+(``laser_hazard.zero_hit_bound``), so a contour that only restates the bound is told apart.
 """
 
 from __future__ import annotations
@@ -24,7 +27,8 @@ __all__ = ["write_outputs", "CSV_COLUMNS", "CONTOUR_LEVELS"]
 CONTOUR_LEVELS = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1)
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "optical_gain", "probability_exceed", "probability_ci_low", "probability_ci_high", "ci_method",
                "hits", "draws", "effective_draws", "hazard_ratio_p50", "hazard_ratio_p95", "hazard_ratio_p99", "irradiance_p50_w_m2",
-               "irradiance_p95_w_m2", "irradiance_p99_w_m2", "probability_exceed_aided", "probability_per_year",
+               "irradiance_p95_w_m2", "irradiance_p99_w_m2", "lit_fraction", "hazard_ratio_lit_p50", "hazard_ratio_lit_p95",
+               "hazard_ratio_lit_p99", "probability_exceed_aided", "probability_per_year",
                "probability_per_year_ci_high", "driver", "sensitivity_of"]
 
 
@@ -41,8 +45,10 @@ def _csv_row(r: dict, draws: int, inputs: list) -> list:
     ops, sens = r["operations"], r["sensitivity"]
     aided = max((a["probability_exceed"] for a in r["aided"]), default=None)
     first = (sens or {}).get("first_order") or {}
+    ql = r.get("hazard_ratio_quantiles_lit") or {}
     vals = [r["name"], *r["position_m"], r["optical_gain"], r["probability_exceed"], r["probability_ci_low"], r["probability_ci_high"],
-            r["ci_method"], r["hits"], draws, r["effective_draws"], q["p50"], q["p95"], q["p99"], qe["p50"], qe["p95"], qe["p99"], aided,
+            r["ci_method"], r["hits"], draws, r["effective_draws"], q["p50"], q["p95"], q["p99"], qe["p50"], qe["p95"], qe["p99"],
+            r.get("lit_fraction"), ql.get("p50"), ql.get("p95"), ql.get("p99"), aided,
             None if ops is None else ops["probability_at_least_one"], None if ops is None else ops["ci_high"],
             None if sens is None else sens["driver"], None if sens is None else sens["of"]]
     return [_cell(v) for v in vals] + [_cell(first.get(g)) for g in inputs]
@@ -103,6 +109,8 @@ def contours(scene, mp: dict) -> dict:
     from ..map_outputs import to_lonlat
 
     pts, hi, h = mp["points_m"], np.asarray(mp["ci_high"]), mp["spacing_m"] / 2
+    unresolved = np.asarray(mp["hits"]) <= 0
+    floor = float(hi[unresolved].max()) if unresolved.any() else None  # what zero hits in these draws can bound
     feats = []
     for level in CONTOUR_LEVELS:
         sel = np.flatnonzero(hi >= level)
@@ -114,10 +122,15 @@ def contours(scene, mp: dict) -> dict:
             geom = to_lonlat(geom, scene.site.frame, None, z)
         feats.append({"type": "Feature", "geometry": mapping(geom),
                       "properties": {"kind": "probability_contour", "level": level, "cells": int(len(sel)),
+                                     "unresolved_cells": int(unresolved[sel].sum()),
                                      "rule": "cells whose 95 % upper bound of P(E > MPE) is at or above the level"}})
     frame = "WGS 84 lon/lat" if scene.site is not None else "the scene's local frame [m] (no [site])"
+    said = ("every cell has an exceedance in the draws" if floor is None else
+            f"{int(unresolved.sum())} cell(s) had no exceedance in the draws: their 95 % upper bound, up to {floor:.3g}, puts "
+            "them inside every contour at or below it (unresolved_cells per level); more draws resolve them")
     return {"type": "FeatureCollection", "features": feats, "laser_hazard": {"frame": frame, "scene": scene.name,
-                                                                             "levels": list(CONTOUR_LEVELS)}}
+                                                                             "levels": list(CONTOUR_LEVELS),
+                                                                             "zero_hit_bound": floor, "unresolved": said}}
 
 
 def _map_files(scene, mp, outdir, notes) -> list:

@@ -11,7 +11,7 @@ from . import stats
 from .evaluate import map_shape
 from .importance import ALPHA0
 
-__all__ = ["observer_rows", "map_result", "statement", "sensitivity"]
+__all__ = ["observer_rows", "map_result", "statement", "sensitivity", "lit_quantiles"]
 
 SOBOL_MIN_HITS = 10  # fewer exceedances in the sensitivity sample: apportion the variance of ln(E) instead
 
@@ -68,6 +68,38 @@ def _aids(scene) -> list:
     return [(a, optical_gain(a.magnification, a.objective_diameter_m, a.transmission)) for a in scene_aids(scene)]
 
 
+def lit_quantiles(own: np.ndarray, w: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Per column of the hazard ratios ``own`` (n, M): the (weighted) fraction of the draws
+    that put any light on the point (ratio > 0) and the quantiles of the ratio among those
+    draws (len(QUANTILES), M; NaN where no draw lit the point).
+
+    A point lit in under 1 % of the draws has all three unconditional quantiles 0; these
+    say how strong the exposure is when it comes.
+    """
+    n, m = own.shape
+    lit = own > 0
+    ww = np.ones(n) if w is None else np.asarray(w, float)
+    lw = ww[:, None] * lit  # (n, M): the weights of the lit draws, 0 elsewhere
+    total = lw.sum(axis=0)
+    frac = total / ww.sum() if ww.sum() > 0 else np.zeros(m)
+    order = np.argsort(np.where(lit, own, np.inf), axis=0, kind="stable")  # the unlit last, with no weight
+    vs = np.take_along_axis(own, order, axis=0)
+    cdf = np.cumsum(np.take_along_axis(lw, order, axis=0), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cdf = cdf / total
+    q = np.full((len(stats.QUANTILES), m), np.nan)
+    some = total > 0
+    for i, x in enumerate(stats.QUANTILES):  # the smallest value with at least the fraction x at or below it
+        k = np.minimum((cdf < x - 1e-12).sum(axis=0), n - 1)
+        q[i, some] = np.take_along_axis(vs, k[None, :], axis=0)[0, some]
+    return frac, q
+
+
+def _quantile_dict(q: np.ndarray, j: int, scale: float = 1.0) -> dict:
+    return {f"p{int(round(100 * x))}": (None if not np.isfinite(q[i, j]) else float(q[i, j] * scale))
+            for i, x in enumerate(stats.QUANTILES)}
+
+
 def observer_rows(ev, s, chunks, sens) -> list:
     """One dict per observer point (see risk.json ``observers``)."""
     m = s.n_observers
@@ -80,6 +112,7 @@ def observer_rows(ev, s, chunks, sens) -> list:
     own = r * gains
     est = _estimate(own >= 1.0, w, imp, s.draws)
     q = stats.weighted_quantiles(own, w if imp else None)
+    lit_frac, q_lit = lit_quantiles(own, w if imp else None)
     aided = [(a, g, _estimate(r * g >= 1.0, w, imp, s.draws)) for a, g in _aids(ev.scene)]
     ops = _operations(est, ev.scene.spec.uncertainty.operations)
     labels = ev.labels
@@ -92,6 +125,7 @@ def observer_rows(ev, s, chunks, sens) -> list:
             "ci_method": est.method, "hits": int(est.hits[j]), "effective_draws": float(est.n_eff[j]),
             "hazard_ratio_quantiles": {f"p{int(round(100 * x))}": float(q[i, j]) for i, x in enumerate(stats.QUANTILES)},
             "irradiance_quantiles_w_m2": {f"p{int(round(100 * x))}": float(q[i, j] * ev.mpe_w_m2) for i, x in enumerate(stats.QUANTILES)},
+            "lit_fraction": float(lit_frac[j]), "hazard_ratio_quantiles_lit": _quantile_dict(q_lit, j),
             "aided": [{"magnification": a.magnification, "objective_diameter_m": a.objective_diameter_m, "gain": float(g),
                        "probability_exceed": float(e.p[j]), "probability_ci_low": float(e.lo[j]), "probability_ci_high": float(e.hi[j])}
                       for a, g, e in aided],

@@ -108,14 +108,17 @@ def test_page_has_every_statement_input_and_note(risk):
 def test_rows_worst_first_and_small_numbers_scientific(risk):
     page, doc = risk["html"], risk["doc"]
     rows = re.findall(r'<td class="stmt">(.*?)</td>', page)
-    order = sorted(doc["observers"], key=lambda r: -r["probability_ci_high"])  # stable: ties keep risk.json's order
-    assert rows == [esc(r["statement"]) for r in order]
+    resolved = sorted([r for r in doc["observers"] if r["hits"] > 0],  # stable: ties keep risk.json's order
+                      key=lambda r: (-r["probability_exceed"], -r["probability_ci_high"]))
+    unresolved = sorted([r for r in doc["observers"] if r["hits"] == 0], key=lambda r: -r["probability_ci_high"])
+    assert rows == [esc(r["statement"]) for r in resolved + unresolved]
     his = [0.5, 2e-3, 0.9, 1e-5] + [1e-4] * 250
     many = doc | {"observers": [doc["observers"][0] | {"name": f"o{k}", "probability_ci_high": h} for k, h in enumerate(his)]}
     st = statement_section(many)
-    assert [r["name"] for r in st["rows"][:3]] == ["o2", "o0", "o1"] and st["rows"][-1]["name"] != "o3"
-    assert st["shown"] == ROWS_SHOWN == 200 and st["total"] == 254 and "54 more observer point(s)" in st["more"]
-    assert "risk.csv" in st["more"]
+    part = st["unresolved"] if doc["observers"][0]["hits"] == 0 else st["resolved"]  # equal estimates: by the upper bound
+    assert [r["name"] for r in part["rows"][:3]] == ["o2", "o0", "o1"] and part["rows"][-1]["name"] != "o3"
+    assert part["shown"] == ROWS_SHOWN == 200 and part["total"] == 254 and "54 more" in part["more"]
+    assert "risk.csv" in part["more"]
     assert fmt_p(3.2e-3) == "3.20e-3" and fmt_p(3.2e-3, sig=2) == "3.2e-3" and fmt_p(0.0) == "0" and fmt_p(0.0903) == "0.0903"
     assert fmt_p(None) == "none" and fmt_p(1e-6, sig=1) == "1e-6"
 

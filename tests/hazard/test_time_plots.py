@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import io
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -128,3 +129,46 @@ def test_file_names_are_safe():
     assert plots._file_part("a b/c") == "a_b_c"
     assert plots._file_part("../") == "unnamed"
     assert plots._unique("x.png", {"x.png": b""}) == "x_2.png"
+
+
+def _hot_plate(tmp_path, power_w):
+    text = Path(scenes.example_path("plate")).read_text()
+    assert "power_w = 100.0" in text
+    path = tmp_path / "plate_hot.toml"
+    path.write_text(text.replace("power_w = 100.0", f"power_w = {power_w!r}"))
+    return hazard.analyze(scenes.load(path))
+
+
+def test_exposure_plot_marks_the_exceedance_by_the_verdicts_rule_and_names_its_mpe(tmp_path):
+    """Issue 34: a static observer over the 10 s MPE had "first exceedance t = 0 s" drawn
+    while H(t) was below the elapsed-time MPE curve. The plot now names the MPE the verdict
+    uses (the exposure duration's) and marks the exceedance by that rule (E >= that MPE)."""
+    from hazard import mpe as _mpe
+
+    r = _hot_plate(tmp_path, 100.0 * 1.5 / 0.0007053)  # hazard ratio ~1.5 at "east"
+    i = r.observers.labels.index("east")
+    d = plots.ExposureDisplay.from_result(r, i)
+    spec = r.scene.spec
+    assert d.duration_s == spec.exposure.duration_s == 10.0
+    limit = _mpe.ocular_mpe(spec.laser.wavelength_nm, 10.0, standard=spec.exposure.standard).irradiance_w_m2
+    assert d.mpe_w_m2 == pytest.approx(limit, rel=1e-12)
+    e = float(d.irradiance_w_m2[0])
+    assert 1.0 < e / limit < 3.0 and d.hazard_ratio == pytest.approx(e / limit, rel=1e-9)
+    # the case of the issue: early on H(t) = E t is under the elapsed-time curve, yet the verdict holds from t = 0
+    assert np.any(d.exposure_j_m2[1:] < d.mpe_exposure_j_m2[1:])
+    assert d.verdict_exceedance_s() == 0.0
+    _, ax = d.plot()
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any("verdict's rule" in s and "MPE for 10 s" in s and "t = 0 s" in s for s in labels), labels
+    assert any("not the verdict's rule" in s for s in labels), labels
+    h = f"{limit * 10.0:.4g} J/m^2"
+    assert any(h in s and "MPE for 10 s as exposure" in s for s in labels), labels
+
+
+def test_exposure_plot_below_the_verdicts_mpe_marks_nothing(tmp_path):
+    r = _hot_plate(tmp_path, 100.0 * 0.5 / 0.0007053)
+    d = plots.ExposureDisplay.from_result(r, r.observers.labels.index("east"))
+    assert d.hazard_ratio < 1 and np.isnan(d.verdict_exceedance_s())
+    _, ax = d.plot()
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(s.startswith("no exceedance in the window") for s in labels), labels
