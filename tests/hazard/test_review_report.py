@@ -247,8 +247,16 @@ def test_dynamic_targets_say_what_changed(svc):
         assert fmt_distance(copper[key]) in table(page, "targets-table")
     assert f"diffuse NOHD {fmt_distance(copper['nohd_static_m'])} \u2192 {fmt_distance(copper['nohd_dynamic_m'])} +14.0\u00a0%" in page
     assert "melting from 3.523\u00a0s" in page  # stainless
-    assert "1 observer point(s): arc-10m[32]" in page
+    # the rebuilt energy-conserving copper (issue 36) changes no observer's verdict here any more
+    assert doc["verdict_changes"] == [] and "None: the dynamic material changes no observer's verdict." in page
     assert fmt_distance(doc["sdz"]["mirror_beams"][0]["nohd_m"]) in page
+
+
+def test_changed_verdicts_are_listed_by_name(plate, tmp_path):
+    out = copy_out(plate["out"], tmp_path / "o", verdict_changes=["arc-10m[32]", "road[4]"])
+    write_review(out)
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "2 observer point(s): arc-10m[32], road[4]." in page
 
 
 def test_numbers_with_units_and_significant_figures():
