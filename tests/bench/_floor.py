@@ -33,8 +33,12 @@ def median_s(fn, repeat=REPEAT):
     return statistics.median(times), out
 
 
+RESULTS: list = []  # (name, ratio, goal) of every check this session: tests/bench/conftest.py prints them
+
+
 def check_goal(name: str, ratio: float, goal: float) -> None:
     """Assert ``ratio`` (time / floor) <= ``goal``, saying both and the mode."""
+    RESULTS.append((name, float(ratio), float(goal)))
     assert np.isfinite(ratio) and ratio > 0, f"{name}: ratio {ratio!r} is not a positive number"
     mode = "quick (BENCH_QUICK=1)" if QUICK else "full"
     assert ratio <= goal, f"{name}: time / floor = {ratio:.3f} > goal {goal:g} ({mode})"
