@@ -4,26 +4,22 @@ Run on demand:  python -m tests.bench.bench_brdf   (or pytest tests/bench -m ben
 
 The floor, measured in the same run on the same data, is the irreducible work: the
 (N x 37) design matrix from precomputed half/diff angles plus one (N x 37) @ (37 x 100)
-matrix product. Goal (issue 2): evaluate_many / floor <= 1.5.
+matrix product. Goal (issue 2): evaluate_many / floor <= 1.5; times are the median of 5.
 """
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 
 import brdfmodels as bm
 from brdfmodels.geometry import _half_diff_parts
 
+from ._floor import median_s
 
-def _best(fn, repeat=3):
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
+
+def _median(fn, repeat=5):
+    return median_s(fn, repeat)[0]
 
 
 def run(n=1_000_000, t_states=100, seed=0, verbose=True):
@@ -56,8 +52,8 @@ def run(n=1_000_000, t_states=100, seed=0, verbose=True):
 
     floor()
     full()  # warm-up (BLAS threads, page faults)
-    t_floor = _best(floor)
-    t_full = _best(full)
+    t_floor = _median(floor)
+    t_full = _median(full)
     # spot check against the per-state path
     idx = rng.integers(0, n, 1000)
     ref = dyn.evaluate(wi[idx], wo[idx], state=states[37])

@@ -4,10 +4,11 @@ Run on demand:  python -m tests.bench.bench_dem   (the slow test tests/scenes/te
 
 A 3200 x 3200 GeoTIFF (1.02e7 float32 cells, 3 m cells in UTM zone 32N, tiled) is written
 once; a scene with a [site] at its centre reads it at ``resolution_m`` over +-``extent_m``.
-Each case runs in a fresh process and reports its wall time and peak resident memory
-(getrusage): the reading is windowed and decimated by GDAL, so memory follows the
-analysis grid (nodes), not the DEM's size (the whole DEM as float64 would be 82 MB, its
-ENU nodes at full resolution 245 MB, their Embree mesh far more).
+Each case runs in a fresh process and reports its wall time and its own peak resident
+memory (VmHWM; ``ru_maxrss`` would include the parent's, see ``PEAK_RSS``): the reading
+is windowed and decimated by GDAL, so memory follows the analysis grid (nodes), not the
+DEM's size (the whole DEM as float64 would be 82 MB, its ENU nodes at full resolution
+245 MB, their Embree mesh far more).
 """
 
 from __future__ import annotations
@@ -42,8 +43,26 @@ def write_dem(path: Path) -> Path:
     return path
 
 
-_CHILD = textwrap.dedent('''
-    import json, resource, sys, time
+# The child's own peak resident memory [MB]. Not getrusage(RUSAGE_SELF).ru_maxrss: on Linux,
+# exec() folds the pre-exec image's high-water mark (the forked copy of the parent: a pytest
+# session's 1.5 GB) into the child's ru_maxrss; VmHWM is the high-water mark of the child's
+# own address space, made fresh at exec.
+PEAK_RSS = textwrap.dedent('''
+    import resource
+    def own_peak_rss_mb():
+        try:
+            with open("/proc/self/status") as f:
+                return next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")) / 1024
+        except (OSError, StopIteration):  # not Linux: ru_maxrss (bytes on macOS, KiB elsewhere)
+            import sys
+            r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+            return r / 2**20 if sys.platform == "darwin" else r / 1024
+    def inherited_maxrss_mb():
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+''')
+
+_CHILD = PEAK_RSS + textwrap.dedent('''
+    import json, sys, time
     import scenes
     from hazard.pipeline.spots import ray_scene
     t0 = time.perf_counter()
@@ -53,7 +72,7 @@ _CHILD = textwrap.dedent('''
     t2 = time.perf_counter()
     print(json.dumps({"load_s": t1 - t0, "ray_scene_s": t2 - t1, "triangles": int(rs.n_triangles),
                       "nodes": int(scene.terrain.heights.size),
-                      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+                      "peak_rss_mb": own_peak_rss_mb(), "ru_maxrss_mb": inherited_maxrss_mb()}))
 ''')
 
 

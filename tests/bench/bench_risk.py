@@ -9,13 +9,13 @@ and rescales the panel, evaluates the mirror beam and the direct beam at every p
 scintillation and takes the peak ratio. The floor is the engine work each draw cannot do
 without, called directly: the same turned beams traced (:func:`trace_beam`), the same
 points through :func:`specular_irradiance`, :func:`spot_irradiance` and the direct beam
-(:func:`beam_at`), nothing drawn, tilted or weighted. Times are best of 3 over 200 draws,
-one thread.
+(:func:`beam_at`), nothing drawn, tilted or weighted. Times are the median of 5 over 200
+draws (20 with BENCH_QUICK=1), one thread.
 """
 
 from __future__ import annotations
 
-import math
+import statistics
 import time
 
 import numpy as np
@@ -44,19 +44,20 @@ def _floor(ev, d) -> float:
     return time.perf_counter() - t0
 
 
-def run() -> dict:
+def run(n=N, repeat=5) -> dict:
     sc = scenes.load(scenes.example_path("risk"))
     ev, prop = shared(sc, "embree")
-    best_path = best_floor = math.inf
+    paths, floors = [], []
     with thread_limit(1):
-        for _ in range(3):
+        for _ in range(repeat):
             t0 = time.perf_counter()
-            d = prop.draw(ev.model, np.random.default_rng(0), N)
+            d = prop.draw(ev.model, np.random.default_rng(0), n)
             ev.ratios(d)
-            best_path = min(best_path, time.perf_counter() - t0)
-            best_floor = min(best_floor, _floor(ev, d))
-    return {"draws": N, "points": len(ev.points_m), "per_draw_ms": 1e3 * best_path / N, "floor_per_draw_ms": 1e3 * best_floor / N,
-            "ratio": best_path / best_floor}
+            paths.append(time.perf_counter() - t0)
+            floors.append(_floor(ev, d))
+    t_path, t_floor = statistics.median(paths), statistics.median(floors)
+    return {"draws": n, "points": len(ev.points_m), "per_draw_ms": 1e3 * t_path / n, "floor_per_draw_ms": 1e3 * t_floor / n,
+            "ratio": t_path / t_floor}
 
 
 if __name__ == "__main__":

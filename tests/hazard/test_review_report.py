@@ -393,23 +393,41 @@ def test_a_report_without_the_motion_keys_says_so(collimated, tmp_path):
 
 
 # -- the page in a real browser ------------------------------------------------------
-BROWSER_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-                "--disable-sync", "--no-first-run"]
+CHROMIUM = "/usr/bin/chromium"  # Debian's; never `playwright install` (it downloads browsers)
+BROWSER_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+APT_TIMEOUT_S = 600
 
 
-def _os_chromium() -> str:
-    """/usr/bin/chromium; installed from Debian's packages when absent and this runs as
-    root with apt-get; else the test is skipped with the reason."""
-    path = "/usr/bin/chromium"
-    if not os.access(path, os.X_OK) and os.geteuid() == 0 and shutil.which("apt-get"):
-        env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-        for cmd in (["apt-get", "install", "-y", "chromium"], ["apt-get", "update"], ["apt-get", "install", "-y", "chromium"]):
-            if os.access(path, os.X_OK):
-                break
-            subprocess.run(cmd, env=env, capture_output=True, timeout=1200, check=False)
-    if not os.access(path, os.X_OK):
-        pytest.skip("needs Chromium at /usr/bin/chromium (Debian: apt-get install chromium; tried when root)")
-    return path
+def _apt_install_chromium() -> str:
+    """Try ``apt-get install -y chromium`` (then update and retry); '' on success, else why not."""
+    if os.geteuid() != 0:
+        return "not root, so apt-get cannot install it"
+    if not shutil.which("apt-get"):
+        return "no apt-get on this system"
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    why = ""
+    for cmd in (["apt-get", "install", "-y", "chromium"], ["apt-get", "update"], ["apt-get", "install", "-y", "chromium"]):
+        if os.access(CHROMIUM, os.X_OK):
+            return ""
+        try:
+            r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=APT_TIMEOUT_S, check=False)
+        except subprocess.TimeoutExpired:
+            return f"`{' '.join(cmd)}` took over {APT_TIMEOUT_S} s"
+        if r.returncode:
+            why = f"`{' '.join(cmd)}` failed: {(r.stderr.strip().splitlines() or ['exit %d' % r.returncode])[-1]}"
+    return "" if os.access(CHROMIUM, os.X_OK) else why or "apt-get ran but installed no /usr/bin/chromium"
+
+
+@pytest.fixture(scope="session")
+def os_chromium() -> str:
+    """Debian's Chromium at /usr/bin/chromium, installed with apt-get when missing; the
+    test is skipped (with apt's reason) only when apt cannot install it."""
+    if not os.access(CHROMIUM, os.X_OK):
+        why = _apt_install_chromium()
+        if why:
+            pytest.skip(f"needs Chromium at {CHROMIUM} (Debian: apt-get install chromium): {why}")
+    return CHROMIUM
 
 
 def _console_errors(page) -> list:
@@ -419,20 +437,20 @@ def _console_errors(page) -> list:
     return errors
 
 
-@pytest.mark.slow
-def test_the_page_in_a_real_headless_chromium(tmp_path):
-    chromium = _os_chromium()
-    sync_api = pytest.importorskip("playwright.sync_api", reason="needs playwright: pip install 'laser-hazard[browser]' "
+def test_the_page_in_a_real_headless_chromium(plate, tmp_path, os_chromium):
+    """The plate run's page (--report --plot, shared with the tests above) in Debian's
+    Chromium: about 5 s on top of that run, so it runs by default."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="needs playwright: pip install 'laser-hazard[test]' "
                                                                  "(it drives the OS's Chromium; never `playwright install`)")
     pytest.importorskip("matplotlib", reason="the plan view needs matplotlib (pip install 'laser-hazard[render]')")
-    out = tmp_path / "out"
-    code, _, err = run("run", "steel_vs_copper", "-o", out, "--quiet", "--plot", "--report")
-    assert code == 0, err
-    doc = json.loads((out / "report.json").read_text())
+    out = copy_out(plate["out"], tmp_path / "out")  # the PDF is written beside a copy
+    doc = plate["doc"]
     with sync_api.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=chromium, args=BROWSER_ARGS)
+        # a fresh profile: Playwright takes --user-data-dir only through a persistent context
+        browser = p.chromium.launch_persistent_context(str(tmp_path / "profile"), executable_path=os_chromium,
+                                                       args=BROWSER_ARGS, headless=True, viewport={"width": 1280, "height": 900})
         try:
-            page = browser.new_page(viewport={"width": 1280, "height": 900})
+            page = browser.new_page()
             errors, requests = _console_errors(page), []
             page.on("request", lambda r: requests.append(r.url))
             page.goto((out / "report.html").resolve().as_uri(), wait_until="load")

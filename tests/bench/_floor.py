@@ -1,0 +1,138 @@
+"""What the benchmarks share: the quick switch, the median-of-5 timer, the goal check, and
+the complete floor of the irradiance map written by hand (raw embreex, the basis kernel,
+BLAS, exp, exposure), for ``bench_engine`` and ``bench_whole_run``.
+
+``BENCH_QUICK=1`` (``.ci/run``): small sizes and the quick goals, which leave room for
+a loaded 2-core CI machine (each set from the spread measured under load; see the README's
+benchmark section). Without it: the issues' sizes and goals.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import statistics
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+QUICK = os.environ.get("BENCH_QUICK", "0").strip() not in ("", "0")
+REPEAT = 5  # every time [s] is the median of 5 runs, the real path's and its floor's alike
+MAP_BLOCK = 32768  # observers per block, as the map's (hazard.pipeline.irradiance_map.MAP_CHUNK)
+
+
+def median_s(fn, repeat=REPEAT):
+    """Median wall time [s] of ``repeat`` calls of ``fn``, and its last result."""
+    times, out = [], None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+RESULTS: list = []  # (name, ratio, goal) of every check this session: tests/bench/conftest.py prints them
+
+
+def check_goal(name: str, ratio: float, goal: float) -> None:
+    """Assert ``ratio`` (time / floor) <= ``goal``, saying both and the mode."""
+    RESULTS.append((name, float(ratio), float(goal)))
+    assert np.isfinite(ratio) and ratio > 0, f"{name}: ratio {ratio!r} is not a positive number"
+    mode = "quick (BENCH_QUICK=1)" if QUICK else "full"
+    assert ratio <= goal, f"{name}: time / floor = {ratio:.3f} > goal {goal:g} ({mode})"
+
+
+class RawEmbree:
+    """The scene's triangles in one embreex scene, queried directly (no wrapper)."""
+
+    def __init__(self, meshes):
+        from embreex import mesh_construction, rtcore_scene
+
+        v = np.concatenate([m[0] for m in meshes]).astype(np.float32)
+        offsets = np.cumsum([0] + [len(m[0]) for m in meshes[:-1]])
+        f = np.concatenate([m[1] + o for m, o in zip(meshes, offsets)]).astype(np.int32)
+        self.scene = rtcore_scene.EmbreeScene()
+        self.mesh = mesh_construction.TriangleMesh(self.scene, v, f)
+        self.scale_m = float(np.ptp(v, axis=0).max())
+
+    def occluded(self, start, end):
+        """True where the segment start -> end (its last 1e-6 of the scene size left out) is blocked."""
+        vec = end - start
+        length = np.sqrt(np.einsum("ij,ij->i", vec, vec))
+        frac = 1.0 - 1e-6 * self.scale_m / np.maximum(length, 1e-300)
+        res = self.scene.run(start.astype(np.float32), vec.astype(np.float32), dists=frac.astype(np.float32), query="OCCLUDED")
+        return res == 0
+
+
+class MapFloor:
+    """The complete floor of the irradiance map of one flat dynamic-SH target: per block of
+    observers (on as many threads as the map, BLAS on one thread each) the points, the
+    occlusion query from the spot, the directions in the target's frame, the basis, one
+    GEMM with the (ln gain - ln cos i) row, exp, the peak over time and the exposure
+    (trapezoid over the history). Everything the map computes and nothing else; no
+    checks, no near field, no sparse bookkeeping."""
+
+    def __init__(self, scene, material, times_s, tracer, threads=None):
+        from brdfmodels.states import interpolation_weights
+
+        self.part = scene.observers.parts[0]
+        assert len(scene.observers.parts) == 1, "the floor is written for one observer grid"
+        t = scene.targets[0]
+        self.centre = np.asarray(t.center_m, float)
+        n = np.asarray(t.normal, float) / np.linalg.norm(t.normal)
+        u = np.asarray(t.tangent, float)
+        u = u - (u @ n) * n
+        u /= np.linalg.norm(u)
+        self.frame = np.array([u, np.cross(n, u), n])  # rows: tangent, bitangent, normal
+        to_laser = np.asarray(scene.spec.laser.position_m, float) - self.centre
+        self.wi = self.frame @ (to_laser / np.linalg.norm(to_laser))
+        self.start = self.centre + 1e-3 * n
+        self.power_w = float(scene.spec.laser.power_w)
+        self.basis, self.fanout = material.basis, material.fanout
+        k = self.basis.size
+        coef = material.coefficients.reshape(-1, k).T @ interpolation_weights(material.states, states_at(scene, times_s))
+        self.coef = np.vstack([coef, np.ones((1, coef.shape[1]))])
+        times = np.asarray(times_s, float)
+        self.trap = np.zeros(len(times))
+        self.trap[1:] += 0.5 * np.diff(times)
+        self.trap[:-1] += 0.5 * np.diff(times)
+        self.tracer = tracer
+        self.n = len(scene.observers)
+        self.threads = threads or min(2, os.cpu_count() or 1)
+        self.peak = np.zeros(self.n)
+        self.exposure = np.zeros(self.n)
+
+    def block(self, a0, a1):
+        from brdfmodels.geometry import _half_diff_parts
+
+        p = self.part.at(np.arange(a0, a1))
+        d = p - self.centre
+        r = np.sqrt(np.einsum("ij,ij->i", d, d))
+        wo = (d / r[:, None]) @ self.frame.T
+        live = np.flatnonzero(wo[:, 2] > 0)
+        live = live[~self.tracer.occluded(np.broadcast_to(self.start, (len(live), 3)), p[live])]
+        m, k = len(live), self.basis.size
+        y = np.empty((k + 1, m))
+        wo_l = wo[live]
+        self.basis.design_transposed(*_half_diff_parts(np.broadcast_to(self.wi, (m, 3)), wo_l), self.fanout, self.fanout, out=y[:k])
+        # the row factor in the exponent: P cos_o / r^2 (a point source's gain) over cos i
+        y[k] = math.log(self.power_w) + np.log(wo_l[:, 2]) - 2.0 * np.log(r[live]) - math.log(self.wi[2])
+        ev = y.T @ self.coef
+        np.exp(ev, out=ev)
+        idx = ev.argmax(axis=1)
+        self.peak[a0 + live] = ev[np.arange(m), idx]
+        self.exposure[a0 + live] = ev @ self.trap
+
+    def __call__(self):
+        bounds = [(a, min(a + MAP_BLOCK, self.n)) for a in range(0, self.n, MAP_BLOCK)]
+        with threadpool_limits(1, user_api="blas"), ThreadPoolExecutor(self.threads) as pool:
+            list(pool.map(lambda ab: self.block(*ab), bounds))
+        return self.peak
+
+
+def states_at(scene, times_s):
+    """The target's state at each time of the history (a linear series)."""
+    h = scene.spec.targets[0].history
+    return np.interp(times_s, h.times_s, h.states)
