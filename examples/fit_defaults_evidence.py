@@ -35,6 +35,8 @@ def basis_choices(fit, held):
         t0 = time.perf_counter()
         best, table = v.choose_sh_basis(fit, **kw)
         run_s = time.perf_counter() - t0
+        if name == "old default":  # its rule: the mean over folds (the worst fold since issue 32)
+            best = v.cheapest_within(table, kw["tolerance"], key="held_out_log_rms")
         rows.append({"grid": name, "settings": len(table), "run_time_s": run_s, "lh_max": best["lh_max"], "mh_max": best["mh_max"],
                      "fanout": best["fanout"], "coefficients": best["coefficients"], "loto_log_rms": best["held_out_log_rms"],
                      "held_out_tests_log_rms": held_out_tests_error(fit, held, best), "eval_s_per_1e6": best["eval_s_per_1e6"]})
@@ -64,8 +66,9 @@ def tolerance_evidence():
         def cell(row):
             return f"{held_out_tests_error(fit, held, row):.3f} ({row['lh_max']},{row['mh_max']},{row['fanout']:g})"
 
-        row = {"truth": name, "old default": cell(v.cheapest_within(old_rows, OLD_DEFAULT["tolerance"]))}
-        row.update({f"tolerance {t:g}": cell(v.cheapest_within(table, t)) for t in TOLERANCES})
+        row = {"truth": name, "old default": cell(v.cheapest_within(old_rows, OLD_DEFAULT["tolerance"], key="held_out_log_rms"))}
+        row.update({f"mean, tolerance {t:g}": cell(v.cheapest_within(table, t, key="held_out_log_rms")) for t in TOLERANCES})
+        row["worst fold, default"] = cell(v.cheapest_within(table, v.DEFAULT_BASIS_TOLERANCE))
         rows.append(row)
     return rows
 

@@ -792,8 +792,13 @@ def _fit_sh(args, out, samples):
     if args.report:
         from brdfmodels import validation
 
-        best, table = validation.choose_sh_basis(samples, progress=progress_callback("leave-one-test-out settings", unit="setting"))
-        _print_report(out, "leave-one-test-out: basis orders and fan-out", table, args.json, {"best": best})
+        state, nodes = _state_nodes_args(args.state, args.states) if args.state else (None, None)
+        one = isinstance(state, str)  # folds within each state group (two states: pooled, as before)
+        best, table = validation.choose_sh_basis(samples, state=state if one else None, states=nodes if one else None,
+                                                 progress=progress_callback("leave-one-test-out settings", unit="setting"))
+        if not args.json:  # the per-fold errors are in --json; the text table keeps one line per setting
+            table = [{k: v for k, v in r.items() if k != "fold_log_rms"} for r in table]
+        _print_report(out, "leave-one-test-out (scored by the worst fold): basis orders and fan-out", table, args.json, {"best": best})
     if args.state:
         state, nodes = _state_nodes_args(args.state, args.states)
         res = fitting.fit_dynamic_sh(samples, basis, nodes, state=state, fanout=args.fanout,
