@@ -86,15 +86,47 @@ def walk():
     return imported, skipped
 
 
-if sys.argv[2] == "dependencies":  # the third-party modules the packages import, in import order
+def draw(mode):
+    """Draw by every path (``cheap``: small data) or a bundled example's every picture and
+    render; (pictures, rendered)."""
+    pictures, rendered = [], []
+    if mode == "cheap":  # every way the library makes a figure, on small data
+        from hazard import convergence, picture, plan_view, plots
+        pictures.append(len(plots.ErrorTableDisplay.from_rows([{"t": 1, "e": 0.1}, {"t": 2, "e": 0.01}], "t", "e").png_bytes()))
+        fig, axes = plan_view.two_panels(None, (4, 2))
+        pictures.append(len(picture.compose(np.full((60, 80, 3), 200, np.uint8), [("a", "#ff0000", "patch")], ["title"])[0]))
+        from hazard import study
+        from types import SimpleNamespace
+        rows = [dict({c: 0.1 / k for c in convergence.REL_ERROR_COLUMNS.values()}, knob="beam_samples", value=k, time_s=k)
+                for k in (1, 2, 4)]
+        runs = [{"error": None, "in:x": x, "nohd_static_m": x, "nohd_dynamic_m": 2 * x} for x in (1.0, 2.0)]
+        with tempfile.TemporaryDirectory() as tmp:
+            pictures.append(os.path.basename(str(convergence.plot(convergence.ConvergenceReport(rows, {}, 0.01), tmp + "/c.png"))))
+            pictures.append(os.path.basename(str(study._plot(SimpleNamespace(name="s"), runs, pathlib.Path(tmp)))))
+    else:  # the bundled example's every picture, and the 3-D render
+        import hazard, scenes
+        from hazard.figures import run_figures
+
+        result = hazard.analyze(scenes.load(scenes.example_path(mode)), keep_history=True)
+        pictures = sorted(run_figures(result))
+        if pyvista is not None:
+            from hazard import render
+            with tempfile.TemporaryDirectory() as tmp:
+                rendered = sorted(k for k, v in render.keepout(result, tmp).items() if os.path.exists(str(v)))
+    return pictures, rendered
+
+
+ours = tuple(sys.argv[1].split(","))
+if sys.argv[3] == "-":  # the third-party modules the packages and the drawing import, in import order
     seen = set(sys.modules)
     walk()
-    ours = tuple(sys.argv[1].split(","))
+    draw(sys.argv[2])
     print(json.dumps([m for m in sys.modules if m not in seen and m.split(".")[0] not in ours
                       and m.split(".")[0] not in sys.stdlib_module_names]))
     sys.exit(0)
-# the dependencies' own import-time effects (scipy.special's warnings filter, a logger of
-# charset_normalizer, scipy's OpenBLAS) are the user's baseline, not the library's doing
+# the dependencies' own import-time effects (scipy.special's and scipy.sparse's warnings
+# filters, loggers of charset_normalizer and pyvista.plotting, scipy's OpenBLAS) are the
+# user's baseline, not the library's doing
 for name in json.loads(pathlib.Path(sys.argv[3]).read_text()):
     try:
         importlib.import_module(name)
@@ -103,31 +135,7 @@ for name in json.loads(pathlib.Path(sys.argv[3]).read_text()):
 before = state()
 imported, skipped = walk()
 after_import = state()
-
-pictures, rendered = [], []
-if sys.argv[2] == "cheap":  # every way the library makes a figure, on small data
-    from hazard import convergence, picture, plan_view, plots
-    pictures.append(len(plots.ErrorTableDisplay.from_rows([{"t": 1, "e": 0.1}, {"t": 2, "e": 0.01}], "t", "e").png_bytes()))
-    fig, axes = plan_view.two_panels(None, (4, 2))
-    pictures.append(len(picture.compose(np.full((60, 80, 3), 200, np.uint8), [("a", "#ff0000", "patch")], ["title"])[0]))
-    from hazard import study
-    from types import SimpleNamespace
-    rows = [dict({c: 0.1 / k for c in convergence.REL_ERROR_COLUMNS.values()}, knob="beam_samples", value=k, time_s=k)
-            for k in (1, 2, 4)]
-    runs = [{"error": None, "in:x": x, "nohd_static_m": x, "nohd_dynamic_m": 2 * x} for x in (1.0, 2.0)]
-    with tempfile.TemporaryDirectory() as tmp:
-        pictures.append(os.path.basename(str(convergence.plot(convergence.ConvergenceReport(rows, {}, 0.01), tmp + "/c.png"))))
-        pictures.append(os.path.basename(str(study._plot(SimpleNamespace(name="s"), runs, pathlib.Path(tmp)))))
-else:  # the bundled example's every picture, and the 3-D render
-    import hazard, scenes
-    from hazard.figures import run_figures
-
-    result = hazard.analyze(scenes.load(scenes.example_path(sys.argv[2])), keep_history=True)
-    pictures = sorted(run_figures(result))
-    if pyvista is not None:
-        from hazard import render
-        with tempfile.TemporaryDirectory() as tmp:
-            rendered = sorted(k for k, v in render.keepout(result, tmp).items() if os.path.exists(str(v)))
+pictures, rendered = draw(sys.argv[2])
 after_calls = state()
 print(json.dumps({"before": before, "after_import": after_import, "after_calls": after_calls, "imported": imported,
                   "skipped": skipped, "pictures": pictures, "rendered": rendered}))
@@ -138,11 +146,11 @@ def _run(mode, tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("MPLBACKEND", "PYVISTA_OFF_SCREEN")}
     env["PYTHONPATH"] = str(ROOT)
     deps = tmp_path / "dependencies.json"
-    for args in (["dependencies"], [mode, str(deps)]):
+    for args in ([mode, "-"], [mode, str(deps)]):
         out = subprocess.run([sys.executable, "-c", _SCRIPT, ",".join(PACKAGES), *args], capture_output=True, text=True,
                              cwd=ROOT, env=env, timeout=600)
         assert out.returncode == 0, out.stderr[-4000:]
-        if args[0] == "dependencies":
+        if args[1] == "-":
             deps.write_text(out.stdout.strip().splitlines()[-1])
     return json.loads(out.stdout.strip().splitlines()[-1])
 
