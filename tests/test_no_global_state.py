@@ -166,6 +166,34 @@ def _check_imports(run):
     assert _differences(run["before"], run["after_import"]) == {}
 
 
+_LIGHT = r'''
+import json, os, sys
+import matplotlib
+matplotlib.use("pdf")
+import matplotlib.pyplot as plt
+import numpy as np
+plt.plot([0, 1], [1, 0])
+state = lambda: [matplotlib.get_backend().lower(), plt.get_fignums(), np.geterr(), dict(os.environ), "pyvista" in sys.modules]
+before = state()
+from hazard import plots
+png = plots.ErrorTableDisplay.from_rows([{"t": 1, "e": 0.1}, {"t": 2, "e": 0.01}], "t", "e").png_bytes()
+print(json.dumps([before, state(), png[:8] == b"\x89PNG\r\n\x1a\n"]))
+'''
+
+
+def test_a_display_keeps_the_users_backend_and_figures():
+    """The fast check (the full one is slow): a user's ``pdf`` backend and open figure are
+    kept when a Display draws a PNG (it once switched the backend to Agg)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MPLBACKEND", "PYVISTA_OFF_SCREEN")}
+    env["PYTHONPATH"] = str(ROOT)
+    out = subprocess.run([sys.executable, "-c", _LIGHT], capture_output=True, text=True, cwd=ROOT, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-4000:]
+    before, after, is_png = json.loads(out.stdout.strip().splitlines()[-1])
+    assert before[:2] == ["pdf", [1]] and is_png
+    assert after == before
+
+
+@pytest.mark.slow
 def test_importing_every_module_and_drawing_changes_no_global_state(tmp_path):
     """Every public module imported; a figure made by every drawing path (Display, two
     panels, composed picture, convergence and study plots) on small data."""
