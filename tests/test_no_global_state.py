@@ -263,3 +263,26 @@ def test_the_cli_environment_is_restored():
         assert pv is None or pv.OFF_SCREEN is True
     assert {k: os.environ.get(k) for k in before} == before
     assert pv is None or pv.OFF_SCREEN == off
+
+
+def test_the_umask_is_read_without_setting_it(monkeypatch):
+    """Outputs get the usual permissions (0666 minus the umask) from a mask read, not set
+    and put back (a moment in which another thread's new file would get the mask 0)."""
+    from brdfmodels._io import current_umask
+
+    old = os.umask(0o027)
+    try:
+        assert current_umask() == 0o027
+        os.umask(0o002)
+        assert current_umask() == 0o002
+    finally:
+        os.umask(old)
+    status = pathlib.Path("/proc/self/status")
+    if not (status.exists() and "Umask:" in status.read_text()):
+        pytest.skip("no Umask line in /proc/self/status (Linux < 4.7 or not Linux): the mask is set and put back")
+
+    def refuse(mask):
+        raise AssertionError(f"os.umask({mask:o}) called: the mask was set to read it")
+
+    monkeypatch.setattr(os, "umask", refuse)
+    assert current_umask() == old
