@@ -181,7 +181,18 @@ def parse_toml(text: str, source: str) -> dict:
     return data
 
 
-def _umask() -> int:
+def current_umask() -> int:
+    """The process's file-mode creation mask, read without changing it where the system
+    says it (Linux >= 4.7: ``/proc/self/status``); elsewhere set and put back at once
+    (``os.umask`` has no read-only form), a moment in which another thread's new file
+    would get the mask 0."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except OSError:
+        pass
     mask = os.umask(0)
     os.umask(mask)
     return mask
@@ -199,7 +210,7 @@ def atomic_write(path, write, *, keep_suffix: bool = False) -> Path:
     os.close(fd)
     try:
         write(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())
+        os.chmod(tmp, 0o666 & ~current_umask())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

@@ -43,6 +43,8 @@ import shutil
 from contextlib import contextmanager
 from pathlib import Path
 
+from ._io import current_umask
+
 __all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "read_manifest", "read_sources", "OutputFolderError",
            "FileSet", "output_files"]
 
@@ -330,9 +332,7 @@ class OutputUnit:
         if self.out.is_dir():
             os.chmod(self.stage, os.stat(self.out).st_mode & 0o7777)
         else:
-            mask = os.umask(0)
-            os.umask(mask)
-            os.chmod(self.stage, 0o777 & ~mask)
+            os.chmod(self.stage, 0o777 & ~current_umask())  # read, not set: the process's mask never changes
 
     def commit(self) -> None:
         """Switch the staged set in (see the module docstring)."""

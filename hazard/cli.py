@@ -1014,16 +1014,18 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
         return EXIT_ERROR
     except SystemExit as exc:  # --help
         return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_ERROR
+    from ._cli_env import headless
     from .report import OutputExistsError
 
     where = _input_of(args)
     try:
-        if not as_command:
-            return _COMMANDS[args.verb](args, out, err)
-        from ._noise import quiet_dependencies
+        with headless():  # the CLI's process draws headless; the library itself changes no global state
+            if not as_command:
+                return _COMMANDS[args.verb](args, out, err)
+            from ._noise import quiet_dependencies
 
-        with quiet_dependencies(err, args.verb, serial=bool(getattr(args, "serial", False))):
-            return _COMMANDS[args.verb](args, out, err)
+            with quiet_dependencies(err, args.verb, serial=bool(getattr(args, "serial", False))):
+                return _COMMANDS[args.verb](args, out, err)
     except (ValueError, OutputExistsError) as exc:  # bad input (SceneError is a ValueError)
         if debug:
             raise

@@ -21,9 +21,7 @@ def _figure_pixels(fig) -> np.ndarray:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI)
     import matplotlib.image as mpimg
-    import matplotlib.pyplot as plt
 
-    plt.close(fig)
     buf.seek(0)
     return (mpimg.imread(buf)[..., :3] * 255).round().astype(np.uint8)
 
@@ -44,13 +42,10 @@ def _handle(label, colour, kind):
 def legend_panel(entries, height_px) -> np.ndarray:
     """The legend of ``entries`` (label, colour, "patch" | "line" | "marker") on a white
     panel ``height_px`` high, as wide as the legend measures (plus margins)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .canvas import new_figure
 
     handles = [_handle(*e) for e in entries]
-    fig = plt.figure(figsize=(4.0, height_px / DPI), dpi=DPI)
+    fig = new_figure((4.0, height_px / DPI), DPI)
     leg = fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(0.0, 1.0), frameon=True, fontsize=10,
                      borderaxespad=0.5, title="legend", title_fontsize=10)
     fig.canvas.draw()
@@ -65,13 +60,10 @@ def legend_panel(entries, height_px) -> np.ndarray:
 
 def title_strip(lines, width_px) -> np.ndarray:
     """``lines`` of text, the first bold, on a white strip ``width_px`` wide."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .canvas import new_figure
 
     line_px = 22
-    fig = plt.figure(figsize=(width_px / DPI, (len(lines) * line_px + MARGIN_PX) / DPI), dpi=DPI)
+    fig = new_figure((width_px / DPI, (len(lines) * line_px + MARGIN_PX) / DPI), DPI)
     for i, text in enumerate(lines):
         fig.text(MARGIN_PX / width_px, 1.0 - (MARGIN_PX / 2 + (i + 0.5) * line_px) / (len(lines) * line_px + MARGIN_PX), text,
                  fontsize=13 if i == 0 else 10, fontweight="bold" if i == 0 else "normal", va="center", wrap=True)

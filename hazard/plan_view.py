@@ -192,14 +192,11 @@ def square_limits(points) -> tuple:
 
 
 def two_panels(axes, figsize) -> tuple:
-    """(figure, axes): the two panels given, or new ones (matplotlib, Agg)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """(figure, axes): the two panels given, or new ones (on their own Agg canvas: no backend switched)."""
     if axes is None:
-        _, axes = plt.subplots(1, 2, figsize=figsize)
+        from .canvas import subplots
+
+        _, axes = subplots(1, 2, figsize=figsize)
     return axes[0].figure, axes
 
 

@@ -18,14 +18,11 @@ __all__ = ["BRDFPlaneDisplay", "NOHDTimeDisplay", "ExposureDisplay", "ErrorTable
 
 
 def _axes(ax):
-    import matplotlib
-
+    """(figure, axes): ``ax``'s, or a new figure on its own Agg canvas (no backend switched)."""
     if ax is None:
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        from .canvas import subplots
 
-        fig, ax = plt.subplots(figsize=(7, 4.5))
-        return fig, ax
+        return subplots(figsize=(7, 4.5))
     return ax.figure, ax
 
 
@@ -37,21 +34,13 @@ class _Display:
 
         # a legend beside or below the axes stays whole
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"), keep_suffix=True)
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
-        return path
+        return path  # a figure drawn here is in no pyplot manager (nothing to close); a caller's ``ax`` stays the caller's
 
     def png_bytes(self, **plot_kw) -> bytes:
-        """The figure as PNG bytes (the figure is closed)."""
-        import matplotlib.pyplot as plt
-
+        """The figure as PNG bytes (a figure drawn here is in no pyplot manager: nothing to close)."""
         fig, _ = self.plot(**plot_kw)
         buf = io.BytesIO()
-        try:
-            fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # a legend below the axes stays whole
-        finally:
-            plt.close(fig)
+        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # a legend below the axes stays whole
         return buf.getvalue()
 
 

@@ -49,7 +49,7 @@ from .progress import terminal_bar
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii"]
 
-pv.OFF_SCREEN = True
+# every Plotter here is made with off_screen=True; the global pv.OFF_SCREEN is the CLI's to set (hazard._cli_env)
 LINE_POINTS = 256  # points along a drawn line (a line bends on a log-distance picture)
 ISO_VIEW = np.array([1.0, 1.0, 1.0])  # from the focal point toward the camera (pyvista's "iso")
 COMPRESS_RATIO = 8.0  # the overview goes log-distance when everything lies this many close-view radii away

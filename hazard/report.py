@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write_text
+from brdfmodels._io import atomic_write_text, current_umask
 
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
 from .verdict import escape_way, verdict
@@ -292,8 +292,7 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     doc.update(_json_safe(dict(sections or {})))
     texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
              **extra}
-    mask = os.umask(0)
-    os.umask(mask)
+    mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
         _write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)

@@ -617,16 +617,15 @@ def _write_table(rows, outdir: Path):
 
 def _plot(study, rows, outdir):
     try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib  # noqa: F401  (the [render] extra; no backend is selected: the figure has its own Agg canvas)
     except ImportError:
         return None
+    from .canvas import subplots
+
     ok = [r for r in rows if r.get("error") is None]
     if not ok:
         return None
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    fig, axes = subplots(1, 2, figsize=(10, 4))
     inputs = sorted({k for r in ok for k in r if k.startswith("in:") and isinstance(r[k], (int, float))})
     ax = axes[0]
     if inputs:
@@ -653,10 +652,7 @@ def _plot(study, rows, outdir):
     ax.grid(alpha=0.3)
     fig.suptitle(f"study {study.name}: {len(ok)} scenarios")
     fig.tight_layout()
-    try:
-        return atomic_write(outdir / "summary.png", lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)
-    finally:
-        plt.close(fig)
+    return atomic_write(outdir / "summary.png", lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)
 
 
 def local_cluster(n_workers=2):
