@@ -19,6 +19,7 @@ import hazard
 import scenes
 from hazard.cli import main
 from tests._scene_text import PLATE_AT_50M
+from tests._bundled import bundled
 
 
 @pytest.fixture(scope="module")
@@ -223,7 +224,7 @@ def test_the_vtk_output_holds_the_zones_as_volumes():
     pytest.importorskip("pyvista")
     from hazard import render
 
-    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    res = bundled("airspace")
     blocks = render._scene_blocks(res, 6.0)
     names = set(blocks.keys())
     assert {"track_helicopter", "airspace_airfield LFZ", "visual_szed", "visual_czed", "visual_lfed"} <= names
@@ -237,7 +238,7 @@ def test_each_track_gets_its_exposure_plot():
     pytest.importorskip("matplotlib")
     from hazard.plots import time_figures
 
-    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    res = bundled("airspace")
     figs = time_figures(res, worst=0)
     assert "exposure_track_helicopter.png" in figs and figs["exposure_track_helicopter.png"][:4] == b"\x89PNG"
 
@@ -299,7 +300,7 @@ def test_the_elevation_view_puts_observers_where_they_are():
     pytest.importorskip("matplotlib")
     from hazard.elevation_view import ElevationViewDisplay
 
-    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    res = bundled("airspace")
     d = ElevationViewDisplay.from_result(res)
     laser = np.array([0.0, 0.0, 2.0])
     u = np.array([-30.0, 2000.0, 98.0]) / np.linalg.norm([-30.0, 2000.0, 98.0])
