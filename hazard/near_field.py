@@ -169,14 +169,14 @@ def patches_from_pieces(pieces, fraction, power_w, hit, centroids) -> SpotPatche
     in beam coordinates, one per sample): fans from each piece's first vertex, mapped
     onto the surface by ``hit(s (N, 2)) -> points (N, 3)`` (exact ray-plane hits);
     ``fraction`` (n,) the pieces' exact beam power fractions, ``power_w`` (n,) their powers."""
-    tri_s, samp = [], []
-    for q, poly in enumerate(pieces):
-        p = np.asarray(poly, float)
-        for k in range(1, len(p) - 1):
-            tri_s.append(p[[0, k, k + 1]])
-            samp.append(q)
-    tri_s = np.asarray(tri_s, float).reshape(-1, 3, 2)
-    samp = np.asarray(samp, int)
+    polys = [np.asarray(poly, float).reshape(-1, 2) for poly in pieces]
+    lens = np.array([len(v) for v in polys], int)
+    fans = np.maximum(lens - 2, 0)  # triangles (0, k, k + 1), k = 1 .. V - 2, of each piece
+    samp = np.repeat(np.arange(len(polys)), fans)
+    first = np.repeat(np.cumsum(lens) - lens, fans)  # each triangle's piece's vertex 0 in the stacked vertices
+    k = np.arange(len(samp)) - np.repeat(np.cumsum(fans) - fans, fans) + 1
+    verts = np.concatenate(polys) if polys else np.zeros((0, 2))
+    tri_s = verts[np.stack([first, first + k, first + k + 1], axis=1)].reshape(-1, 3, 2)
     tri_x = hit(tri_s.reshape(-1, 2)).reshape(-1, 3, 3)
     mass = math.pi * np.asarray(fraction, float)
     dens = np.where(mass > 0, np.asarray(power_w, float) / np.where(mass > 0, mass, 1.0), 0.0)[samp]

@@ -119,17 +119,21 @@ def beam_at(beam, points_m, mu, reach_m=0.0) -> BeamAt:
     # P / (pi w0^2) exp(-|s|^2)); behind it (z < 0) the laser emits nothing. "On the plane"
     # within APERTURE_PLANE_TOL_M: rounding puts a point given on it 1e-17 m either side.
     z = np.where(np.abs(z) <= APERTURE_PLANE_TOL_M, 0.0, z)
-    idx = np.flatnonzero(np.isfinite(z) & (z >= 0) & np.all(np.isfinite(s), axis=1))
-    e = beam.irradiance_w_m2(s[idx], z[idx])
-    w = beam.diameter_at(z[idx]) / 2
-    r = np.sqrt((s[idx] ** 2).sum(axis=1))
+    inside = np.isfinite(z) & (z >= 0) & np.all(np.isfinite(s), axis=1)
+    idx = np.flatnonzero(inside)
+    if len(idx) < len(p):  # gathers only where some point drops out (the values are the same)
+        s, z, p = s[idx], z[idx], p[idx]
+    e = beam.irradiance_w_m2(s, z)
+    w = beam.diameter_at(z) / 2
+    r = np.sqrt((s ** 2).sum(axis=1))
     live = e > 0  # exp(-|s|^2) underflows to 0 only far outside the beam
     if reach_m > 0:
         live |= r - reach_m / w < _UNDERFLOW_S
-    idx, e, w, r = idx[live], e[live], w[live], r[live]
-    o, _ = beam.rays(s[idx])
-    dist = np.linalg.norm(p[idx] - o, axis=1)
-    return BeamAt(idx, e * np.exp(-mu * dist), o, dist, z[idx], r * w)
+    if not live.all():
+        idx, e, w, r, s, z, p = idx[live], e[live], w[live], r[live], s[live], z[live], p[live]
+    o, _ = beam.rays(s)
+    dist = np.linalg.norm(p - o, axis=1)
+    return BeamAt(idx, e * np.exp(-mu * dist), o, dist, z, r * w)
 
 
 def clear_of_objects(at: BeamAt, points_m, tracer) -> np.ndarray:

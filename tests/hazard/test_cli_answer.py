@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import hazard
-import scenes
 from hazard import convergence as conv
 from hazard.cli import main
 from hazard.report import ANSWER_MAX_OBSERVERS
+from tests._bundled import bundled
 
 
 def run(*argv):
@@ -24,7 +24,7 @@ def run(*argv):
 
 
 def analyse(name):
-    return hazard.analyze(scenes.load(scenes.example_path(name)))
+    return bundled(name)
 
 
 def observer_rows(out):

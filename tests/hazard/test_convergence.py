@@ -7,14 +7,14 @@ import math
 import pytest
 
 import hazard
-import scenes
 from hazard import convergence as conv
 from hazard.cli import main
+from tests._bundled import bundled
 
 
 def test_lambertian_keepout_volume_is_analytic():
     # R(theta) = R0 sqrt(cos theta)  =>  V = int R^3 / 3 d omega = (4 pi / 15) R0^3
-    res = hazard.analyze(scenes.load(scenes.example_path("plate")))
+    res = bundled("plate")
     lobe = res.targets[0].static_lobe
     r0 = hazard.nohd_diffuse(100.0, 50.0, 0.5).nohd_m
     exact = 4 * math.pi / 15 * r0**3

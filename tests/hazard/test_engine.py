@@ -16,6 +16,7 @@ import scenes
 from hazard.pipeline.irradiance_map import sliding_max_integral as _sliding_max_integral
 from hazard.cli import main
 from hazard.report import write_outputs
+from tests._bundled import bundled
 
 PLATE = """
 name = "t"
@@ -112,7 +113,7 @@ def test_flat_mirror_is_the_direct_beam_at_the_folded_range():
 
 
 def test_occlusion_by_a_box():
-    res = hazard.analyze(scenes.load(scenes.example_path("plate")))
+    res = bundled("plate")
     e = dict(zip(res.observers.labels, res.observers.static_irradiance_w_m2))
     assert e["west-behind-box"] == 0.0 and e["east"] > 0
     assert res.stage("line_of_sight").ran and res.stage("rays").ran
@@ -171,7 +172,7 @@ def test_sliding_window_exposure():
 
 
 def test_dynamic_scene_states_and_verdicts():
-    res = hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
+    res = bundled("steel_vs_copper")
     assert res.stage("history").ran and res.stage("dynamic").ran
     copper = next(t for t in res.targets if t.name == "copper")
     assert copper.state_range == [pytest.approx(0.1), pytest.approx(1.3)]
@@ -232,7 +233,7 @@ def test_dynamic_irradiance_equals_static_material_at_that_state():
 
 @pytest.mark.parametrize("name", sorted(scenes.examples()))
 def test_every_bundled_scene_runs(name, tmp_path):
-    res = hazard.analyze(scenes.load(scenes.example_path(name)))
+    res = bundled(name)
     paths = write_outputs(res, tmp_path)
     doc = json.loads(paths[0].read_text())
     assert doc["scene"]["name"] == name and doc["mpe"]["irradiance_w_m2"] > 0
@@ -243,7 +244,7 @@ def test_every_bundled_scene_runs(name, tmp_path):
 
 
 def test_report_is_atomic_and_never_overwrites(tmp_path):
-    res = hazard.analyze(scenes.load(scenes.example_path("plate")))
+    res = bundled("plate")
     write_outputs(res, tmp_path)
     with pytest.raises(FileExistsError, match="pass --force"):
         write_outputs(res, tmp_path)

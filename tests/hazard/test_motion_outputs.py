@@ -19,6 +19,7 @@ import hazard
 import scenes
 from hazard.cli import main
 from tests._scene_text import PLATE_AT_50M
+from tests._bundled import bundled
 
 
 @pytest.fixture(scope="module")
@@ -172,7 +173,7 @@ def test_a_standing_track_sees_the_dynamic_history_the_fixed_observer_sees():
     p = scenes.example_path("stainless_melt")
     sc0 = scenes.load(p)
     t_end = sc0.spec.analysis.time_end_s or sc0.spec.exposure.duration_s
-    res0 = hazard.analyze(sc0)
+    res0 = bundled("stainless_melt")  # the default analysis of sc0
     i = int(np.argmax(res0.observers.peak_irradiance_w_m2))
     x, y, z = (float(v) for v in res0.observers.position_m[i])
     text = p.read_text() + f"""
@@ -223,7 +224,7 @@ def test_the_vtk_output_holds_the_zones_as_volumes():
     pytest.importorskip("pyvista")
     from hazard import render
 
-    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    res = bundled("airspace")
     blocks = render._scene_blocks(res, 6.0)
     names = set(blocks.keys())
     assert {"track_helicopter", "airspace_airfield LFZ", "visual_szed", "visual_czed", "visual_lfed"} <= names
@@ -237,7 +238,7 @@ def test_each_track_gets_its_exposure_plot():
     pytest.importorskip("matplotlib")
     from hazard.plots import time_figures
 
-    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    res = bundled("airspace")
     figs = time_figures(res, worst=0)
     assert "exposure_track_helicopter.png" in figs and figs["exposure_track_helicopter.png"][:4] == b"\x89PNG"
 
@@ -299,7 +300,7 @@ def test_the_elevation_view_puts_observers_where_they_are():
     pytest.importorskip("matplotlib")
     from hazard.elevation_view import ElevationViewDisplay
 
-    res = hazard.analyze(scenes.load(scenes.example_path("airspace")))
+    res = bundled("airspace")
     d = ElevationViewDisplay.from_result(res)
     laser = np.array([0.0, 0.0, 2.0])
     u = np.array([-30.0, 2000.0, 98.0]) / np.linalg.norm([-30.0, 2000.0, 98.0])

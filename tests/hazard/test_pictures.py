@@ -8,17 +8,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import hazard
-import scenes
 from hazard import palette as C
 from hazard.palette import rgb
+from tests._bundled import bundled
 
 pytest.importorskip("matplotlib")
 
 
 @pytest.fixture(scope="module")
 def svc():
-    return hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
+    return bundled("steel_vs_copper")
 
 
 def _near(img, colour, tol):
@@ -121,7 +120,7 @@ def test_a_two_state_dynamic_lobe_is_drawn_from_its_history_in_time_order():
     pytest.importorskip("pyvista")
     from hazard import render
 
-    res = hazard.analyze(scenes.load(scenes.example_path("stainless_melt")))
+    res = bundled("stainless_melt")
     blocks = render._scene_blocks(res, 6.0)
     drawn = float(np.max(blocks["lobe_dynamic_stainless"]["nohd_m"]))
     reported = res.targets[0].dynamic_lobe.max_range_m
@@ -186,7 +185,7 @@ def test_the_elevation_projects_across_the_aim(svc):
 def test_the_elevation_of_a_scene_with_ground_draws_the_terrain_under_the_aim():
     from hazard.elevation_view import ElevationViewDisplay
 
-    res = hazard.analyze(scenes.load(scenes.example_path("range_terrain")))
+    res = bundled("range_terrain")
     d = ElevationViewDisplay.from_result(res)
     s, ground, eye = d.profile
     t = res.scene.terrain

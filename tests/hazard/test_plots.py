@@ -4,16 +4,15 @@ import numpy as np
 import pytest
 
 import brdfmodels as bm
-import hazard
-import scenes
 from hazard import plots
+from tests._bundled import bundled
 
 pytest.importorskip("matplotlib")
 
 
 @pytest.fixture(scope="module")
 def dyn_result():
-    return hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")), keep_history=True)
+    return bundled("steel_vs_copper", keep_history=True)
 
 
 def test_brdf_plane_display_with_samples(tmp_path):
@@ -38,7 +37,7 @@ def test_exposure_display(dyn_result, tmp_path):
     d = plots.ExposureDisplay.from_result(dyn_result, observer=0)
     assert np.all(np.diff(d.exposure_j_m2) >= 0) and d.mpe_exposure_j_m2[-1] == pytest.approx(500.0)
     assert d.save(tmp_path / "e.png").stat().st_size > 10_000
-    lean = hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")), keep_history=False)
+    lean = bundled("steel_vs_copper", keep_history=False)
     with pytest.raises(ValueError, match="keep_history=True"):
         plots.ExposureDisplay.from_result(lean)
 

@@ -7,13 +7,12 @@ import math
 import numpy as np
 import pytest
 
-import hazard
-import scenes
+from tests._bundled import bundled
 
 
 @pytest.fixture(scope="module")
 def result():
-    return hazard.analyze(scenes.load(scenes.example_path("range_clearance")))
+    return bundled("range_clearance")
 
 
 def test_the_danger_zone_is_contained_by_the_hill_and_stays_on_the_range(result):

@@ -7,16 +7,15 @@ import sys
 import numpy as np
 import pytest
 
-import hazard
-import scenes
 from hazard.cli import main
+from tests._bundled import bundled
 
 pv = pytest.importorskip("pyvista")
 
 
 @pytest.fixture(scope="module")
 def mirror_result():
-    return hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
+    return bundled("steel_vs_copper")
 
 
 def _rgb(path):

@@ -11,9 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import hazard
-import scenes
 from hazard import plots
+from tests._bundled import bundled
 
 pytest.importorskip("matplotlib")
 
@@ -22,7 +21,7 @@ RED = (214, 39, 40)  # tab:red: the NOHD maximum, the first exceedance
 
 
 def _analyze(name, keep_history):
-    return hazard.analyze(scenes.load(scenes.example_path(name)), keep_history=keep_history)
+    return bundled(name, keep_history=keep_history)
 
 
 @pytest.fixture(scope="module")

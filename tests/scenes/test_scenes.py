@@ -167,8 +167,13 @@ def test_json_schema_accepts_the_examples():
 
     schema = scenes.json_schema()
     assert schema["title"] == "laser-hazard scene" and "laser" in schema["properties"]
+    # jsonschema.validate checks the schema itself on every call (2.1 s for the 11 examples):
+    # the same two checks, the schema once, then each example against it (0.2 s)
+    cls = jsonschema.validators.validator_for(schema)
+    cls.check_schema(schema)
+    validator = cls(schema)
     for path in scenes.examples().values():
-        jsonschema.validate(tomllib.loads(path.read_text()), schema)
+        validator.validate(tomllib.loads(path.read_text()))
 
 
 def test_spec_standards_match_hazard():

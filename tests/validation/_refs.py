@@ -31,6 +31,9 @@ _HC = [HealthCheck.filter_too_much, HealthCheck.too_slow]
 FAST = settings(max_examples=25, derandomize=True, deadline=None, database=None, suppress_health_check=_HC,
                 phases=[Phase.explicit, Phase.generate])
 SLOW = settings(max_examples=120, derandomize=True, deadline=None, database=None, suppress_health_check=_HC)
+# the default run of a property whose @pytest.mark.slow twin (same helper) sweeps SLOW: 10
+# drawn examples (the twin holds the breadth; 25 cost 2-9 s per property of whole analyses)
+FAST_TWIN = settings(FAST, max_examples=10)
 
 # --------------------------------------------------------------------------- vectors
 

@@ -143,7 +143,7 @@ def _sphere_property(r, L, w_over_r, q, mu, rho, obs, rot):
     _observed_off_beam(_sphere_case, _check_sphere, r, L, w_over_r, q, mu, rho, obs, rot)
 
 
-@ref.FAST
+@ref.FAST_TWIN
 @given(**SPHERE_ARGS)
 def test_sphere_far_field_property(**kw):
     """Random spheres (r 2-30 cm, beam w 0.5-5 r, 20 m - 2 km and >= 1000 r away so the
@@ -246,7 +246,7 @@ def _cylinder_property(r, R1, w_over_r, q, mu, rho, obs, rot):
     _observed_off_beam(_cylinder_case, _check_cylinder, r, R1, w_over_r, q, mu, rho, obs, rot)
 
 
-@ref.FAST
+@ref.FAST_TWIN
 @given(**CYL_ARGS)
 def test_cylinder_fan_property(**kw):
     """Random cylinders (r 5-50 cm, beam w 0.3-2 r, length 40 beam diameters, 20 m - 2 km,

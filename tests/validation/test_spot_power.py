@@ -178,7 +178,7 @@ def _plate_property(R1, a, phi, fw, fh, ox, oz, tilt_deg, tilt_az, spin, mu, rot
         _check_power(res.targets[0], expected, mu, R1)
 
 
-@ref.FAST
+@ref.FAST_TWIN
 @given(**PLATE_ARGS)
 def test_plate_spot_power_property(**kw):
     """Random plates (0.05-20 D per side, offsets up to 2 D, tilts up to 60 deg, any spin,
@@ -188,7 +188,7 @@ def test_plate_spot_power_property(**kw):
     _plate_property(**kw)
 
 
-@ref.FAST
+@ref.FAST_TWIN
 @given(**PLATE_ARGS)
 def test_plate_spot_power_error_bound_property(**kw):
     """Same draws: the stated ``spot_power_error_w`` covers |engine - reference|."""
@@ -225,7 +225,7 @@ def _disk_property(R1, a, phi, f, off, az, mu, rot):
     _check_power(res.targets[0], expected, mu, R1)
 
 
-@ref.FAST
+@ref.FAST_TWIN
 @given(**DISK_ARGS)
 def test_disk_spot_power_property(**kw):
     """Random disks normal to the beam (diameter 0.05-20 D, offset up to 2 D): Marcum-Q
@@ -319,7 +319,7 @@ def _peak_property(R1, a, phi, fw, fh, ox, oz, tilt_deg, tilt_az, spin, mu, rot)
     assert res.targets[0].peak_irradiance_w_m2 == pytest.approx(expected, rel=0.01)
 
 
-@ref.FAST
+@ref.FAST_TWIN
 @given(**PLATE_ARGS)
 def test_target_peak_irradiance_property(**kw):
     """Random plates (as in the spot-power property): the highest incident irradiance on the
