@@ -578,10 +578,19 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     normals = _hit_normals(target, cells.point[rows], cells.faces[rows, 0], tracer)
     back = np.einsum("ij,ij->i", cells.direction[rows], normals) > 0
     # the true power lies between the leaves wholly on the target and those plus every
-    # mixed leaf touching it (and the truncated tail): take the upper end
+    # mixed leaf touching it (and the truncated tail): take the upper end; a sphere or
+    # cylinder takes its exact outline's power where nothing else shows inside it, else
+    # the rays' total plus what its facets may lose (_curved_total)
     raw = float(cells.power_w[rows].sum())
     err = float(cells.power_w[touch].sum()) + cells.truncated_w
     whole = raw - float(cells.power_w[rows][cells.mixed[rows]].sum())
+    curved = _curved_total(beam, cells, target)
+    if curved is not None and curved[0] is not None:
+        whole, err = curved[0] - curved[1], curved[1]
+    elif curved is not None:
+        err += curved[1]
+    if curved is not None:  # wholly ahead of the aperture, a convex shape is lit outside only (a
+        back[:] = False  # faceted limb's hit may face away from its exact normal at grazing)
     scale = (whole + err) / raw
     side, material, other = _pick_side(target, cells.power_w[rows] * scale, back)
     if other > 0:
@@ -594,6 +603,36 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
         sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([use, touch]), mu)
         out.spots.append(sp)
     return whole + err
+
+
+def _curved_total(beam, cells, target):
+    """A sphere's or cylinder's intercepted power from its exact surface, or what its
+    triangle mesh may lose (the rays see a polyhedron inscribed in it).
+
+    Returns None for other targets (or a shape not wholly ahead of the aperture); else
+    ``(total_w, error_w)`` when no ray inside its exact outline hits anything else: the
+    Gaussian power over the outline's circumscribed polygon (Owen's T, exact for it) and
+    the power between it and the inscribed one; or ``(None, facet_w)`` otherwise, facet_w
+    the power between the outline and the outline of the largest such shape inside the
+    mesh (:func:`hazard.beam.curved_outline_s`), a bound on the power lost to faceting.
+    """
+    from .beam import _OFFSETS, curved_outline_s, inside_convex_many, polygon_moments
+
+    outl = curved_outline_s(beam, target.mesh)
+    if outl is None:
+        return None
+    frac = polygon_moments(list(outl)).fraction
+    outer_w, inner_w, mesh_w = beam.power_w * frac
+    s0, s1, t0, t1 = cells.bounds()
+    lo, hi = outl[0].min(axis=0), outl[0].max(axis=0)
+    near = np.flatnonzero((s1 >= lo[0]) & (s0 <= hi[0]) & (t1 >= lo[1]) & (t0 <= hi[1]))
+    d = (s1 - s0)[near]
+    s = (np.stack([s0[near], t0[near]], axis=1)[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+    inside = inside_convex_many(s, outl[0])
+    lab = cells.labels[near].ravel()[inside]
+    if np.all((lab == target.index) | (lab == -1)):
+        return outer_w, max(outer_w - inner_w, 0.0)
+    return None, max(outer_w - mesh_w, 0.0)
 
 
 def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) -> SpotBuild:
