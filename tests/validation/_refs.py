@@ -470,6 +470,26 @@ def cylinder_fan_exact(rho, r, Rs, w, E0, observer_xy):
     return rho * E0 * math.exp(-x0 * x0 / (w * w)) / spacing * zfac, p
 
 
+def sphere_mirror_exact(rho, r, Rs, w, E0, observer_xy):
+    """Geometric-optics irradiance of a mirror sphere (radius r, centred on the beam axis,
+    virtual source Rs before its centre) at an observer, without the far-field step.
+
+    By symmetry about the axis the reflecting ray lies in the plane of the axis and the
+    observer, where the sphere's section is the cylinder's circle: the in-plane ray x0
+    and its spacing at the observer are those of :func:`cylinder_fan_exact`
+    (``observer_xy`` = (distance from the axis > 0, position along the beam)). Out of
+    the plane, rays at azimuth dphi about the axis leave from the ring x0 dphi and reach
+    the observer's ring X_O dphi, so ``E = rho E0 exp(-x0^2/w^2) |x0| / (|dW/dx0| X_O)``
+    (power of the annulus x0 dx0 dphi over the area dW X_O dphi). Its far field is
+    ``rho (r^2/4) E0 exp(-r^2 sin^2(psi/2)/w^2) / D^2`` (range-safety.md 4).
+    Returns (irradiance, hit point)."""
+    O = np.asarray(observer_xy, float)
+    e_cyl, p = cylinder_fan_exact(rho, r, Rs, w, E0, O)
+    x0 = float(p[0]) * Rs / (float(p[1]) + Rs)
+    zfac = math.hypot(x0, Rs) / (math.hypot(p[0], p[1] + Rs) + float(np.linalg.norm(O - p)))
+    return e_cyl / zfac * abs(x0) / abs(float(O[0])), p
+
+
 # --------------------------------------------------------------------------- optics
 
 
