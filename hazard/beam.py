@@ -747,37 +747,25 @@ def _convex_outline_s(beam, analytic, radius, half_length, n, outer):
 
 def curved_outline_s(beam: BeamGeometry, mesh, n=1024):
     """A sphere's or capped cylinder's outline in s, exact to its polygons, and the
-    outline of what its triangle mesh surely covers: (outer, inner, mesh_inner) or None
-    (not an analytic shape, or not wholly ahead of the aperture).
+    outline of its triangle mesh: (outer, inner, mesh_outline) or None (not an analytic
+    shape, or not wholly ahead of the aperture).
 
     ``outer`` circumscribes and ``inner`` is inscribed in the exact outline (n-gons of
     the projected contour / end disks: between them ``1/cos^2(pi/n) - 1`` = 9.4e-6 of its
-    area for n = 1024). The mesh is a polyhedron inscribed in the surface; it holds the
-    same shape shrunk to the smallest distance of its faces' planes from the centre (axis),
-    whose inscribed outline is ``mesh_inner``. So the power the faceting loses is at most
-    the Gaussian power between ``outer`` and ``mesh_inner``.
+    area for n = 1024). The mesh is a convex polyhedron with its vertices on the surface,
+    so its outline is the hull of its projected vertices, inside the exact one: the
+    Gaussian power between ``outer`` and it bounds what the faceting loses.
     """
     an = mesh.analytic
     if an is None or an[0] not in ("sphere", "cylinder"):
         return None
-    v = mesh.vertices[mesh.faces]
-    fn = mesh.face_normals
-    c = np.asarray(an[1], float)
-    dist = np.abs(np.einsum("ij,ij->i", fn, v[:, 0] - c))
-    if an[0] == "sphere":
-        r, h = float(an[2]), 0.0
-        r_in, h_in = float(dist.min()), 0.0
-    else:
-        r, h = float(an[3]), float(an[4])
-        cap = np.abs(fn @ np.asarray(an[2], float)) > 0.5
-        r_in = float(dist[~cap].min()) if np.any(~cap) else r
-        h_in = float(dist[cap].min()) if np.any(cap) else h
+    r, h = (float(an[2]), 0.0) if an[0] == "sphere" else (float(an[3]), float(an[4]))
     outer = _convex_outline_s(beam, an, r, h, n, True)
     inner = _convex_outline_s(beam, an, r, h, n, False)
-    mesh_inner = _convex_outline_s(beam, an, min(r_in, r), min(h_in, h), n, False)
-    if outer is None or inner is None or mesh_inner is None:
+    sv, zv = beam.to_s(mesh.vertices)
+    if outer is None or inner is None or np.any(zv <= 0) or not np.all(np.isfinite(sv)):
         return None
-    return outer, inner, mesh_inner
+    return outer, inner, _hull_s(sv)
 
 
 def inside_convex_many(points_s, polygon_s) -> np.ndarray:

@@ -613,8 +613,8 @@ def _curved_total(beam, cells, target):
     ``(total_w, error_w)`` when no ray inside its exact outline hits anything else: the
     Gaussian power over the outline's circumscribed polygon (Owen's T, exact for it) and
     the power between it and the inscribed one; or ``(None, facet_w)`` otherwise, facet_w
-    the power between the outline and the outline of the largest such shape inside the
-    mesh (:func:`hazard.beam.curved_outline_s`), a bound on the power lost to faceting.
+    the power between the outline and the mesh's own (the hull of its projected vertices,
+    :func:`hazard.beam.curved_outline_s`), a bound on the power lost to faceting.
     """
     from .beam import _OFFSETS, curved_outline_s, inside_convex_many, polygon_moments
 
