@@ -646,7 +646,8 @@ def _in_front_of_surface(beam, tracer, analytic, s) -> np.ndarray:
     unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     hits = tracer.first_hit(o, dirs)
     t_hit = np.where(hits.hit, np.linalg.norm(hits.point - o, axis=1), np.inf)
-    return t_hit < _entry_distance(analytic, o, unit) * (1 - 1e-9)
+    entry = _entry_distance(analytic, o, unit)
+    return np.isfinite(entry) & (t_hit < entry * (1 - 1e-9))
 
 
 def _entry_distance(analytic, o, u) -> np.ndarray:
