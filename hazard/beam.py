@@ -705,20 +705,13 @@ def _disk_ring_s(beam: BeamGeometry, centre, normal, radius, n, outer):
 
 
 def _hull_s(points_s) -> np.ndarray:
-    """Convex hull (V, 2) of points in s, counter-clockwise (Andrew's monotone chain)."""
+    """Convex hull (V, 2) of points in s, counter-clockwise (Qhull)."""
+    from scipy.spatial import ConvexHull
+
     pts = np.unique(np.asarray(points_s, float), axis=0)
     if len(pts) < 3:
         return pts
-
-    def half(seq):
-        out = []
-        for p in seq:
-            while len(out) >= 2 and (out[-1][0] - out[-2][0]) * (p[1] - out[-2][1]) - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0]) <= 0:
-                out.pop()
-            out.append(p)
-        return out[:-1]
-
-    return np.array(half(pts) + half(pts[::-1]))
+    return pts[ConvexHull(pts).vertices]
 
 
 def _convex_outline_s(beam, analytic, radius, half_length, n, outer):
