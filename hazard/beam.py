@@ -71,9 +71,20 @@ class BeamGeometry:
     divergence_rad: float
 
     @classmethod
-    def create(cls, position_m, axis, power_w, diameter_m, divergence_rad) -> "BeamGeometry":
+    def create(cls, position_m, axis, power_w, diameter_m, divergence_rad, reference=()) -> "BeamGeometry":
+        """The beam along ``axis``; its cross-section's e1 is the first of the
+        ``reference`` directions not within 1 deg of the axis, made normal to it (the scene's
+        own geometry: the sampling grid then turns with a rigidly moved scene), else
+        :func:`perp_basis`'s (from the world axes)."""
         axis = np.asarray(axis, float) / np.linalg.norm(axis)
         e1, e2 = perp_basis(axis)
+        for ref in reference:
+            ref = np.asarray(ref, float)
+            side = ref - (ref @ axis) * axis
+            if np.linalg.norm(side) > math.sin(math.radians(1.0)) * np.linalg.norm(ref):
+                e1 = side / np.linalg.norm(side)
+                e2 = np.cross(axis, e1)
+                break
         return cls(np.asarray(position_m, float), axis, e1, e2, float(power_w), float(diameter_m), float(divergence_rad))
 
     def diameter_at(self, range_m):
