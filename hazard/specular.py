@@ -24,6 +24,11 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   (Deschamps, Proc. IEEE 60:1022 (1972), eq. for reflection Q_r = Q_i + 2 cos_i
   Theta^-1 C Theta^-1) give the ray tube's area factor exactly as
   ``(1 + D/p)(1 + D/p + 2 D (cos^2(beta) / cos_i + sin^2(beta) cos_i) / r)``.
+* At an eye (given its apertures) that beam is averaged over the limiting aperture or the
+  aid's objective: locally the incident Gaussian seen through the reflection's ray map
+  ``(I + D V)^-1`` (an astigmatic Gaussian), its disk mean by converged quadrature, raised
+  by the exact field's largest excess over it on the disk's rim
+  (:func:`_curved_aperture_w_m2`).
 * The specular NOHD of a sphere or cylinder is solved on that same function along the
   worst reflected ray (:func:`specular_nohd`), so the observers and the NOHD agree.
 * **Curved meshes** (mesh files whose facets approximate a curved surface): a smooth
