@@ -510,6 +510,25 @@ def _circle_reflection(r, Rs, X, Y, n_grid=801):
     return x0, np.stack([px, py], axis=-1), np.abs(side(b)[0] - side(a)[0]) / (b - a)
 
 
+def fan_pupil_factor(r, Rs, w, observer_xy, hit_xy, aperture_m=7e-3):
+    """The mean over the limiting aperture (a disk of diameter ``aperture_m`` facing the
+    fan) of a cylinder's thin fan over its value at the disk's centre, for an observer
+    in the plane through the beam normal to the axis. Along the axis the reflection keeps
+    the incident beam's Gaussian, spreading from the virtual source along the unfolded
+    path: 1/e radius ``W = w (|S -> P| + |P -> O|) / l0`` (the inverse of the out-of-plane
+    factor of :func:`cylinder_fan_exact`); across it the fan varies on the scale of its
+    width, metres away (ignored). Mean of ``exp(-y^2 / W^2)`` over the disk by 64-node
+    Gauss-Legendre in y with chord weights ``2 sqrt(a^2 - y^2) / (pi a^2)``."""
+    O, p = np.asarray(observer_xy, float), np.asarray(hit_xy, float)
+    x0 = float(p[0]) * Rs / (float(p[1]) + Rs)
+    W = w * (math.hypot(p[0], p[1] + Rs) + float(np.linalg.norm(O - p))) / math.hypot(x0, Rs)
+    a = aperture_m / 2
+    t, wt = np.polynomial.legendre.leggauss(64)
+    th = 0.5 * math.pi * t  # y = a sin(th): smooth at the rim
+    y, c = a * np.sin(th), a * np.cos(th)
+    return float((wt * 0.5 * math.pi * c * 2 * c * np.exp(-(y / W) ** 2)).sum() / (math.pi * a * a))
+
+
 def sphere_mirror_exact(rho, r, Rs, w, E0, observer_xy):
     """Geometric-optics irradiance of a mirror sphere (radius r, centred on the beam axis,
     virtual source Rs before its centre) at observers, without the far-field step.

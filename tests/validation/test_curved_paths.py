@@ -14,7 +14,8 @@ the references written here from range-safety.md section 4 (not from the engine)
   the 2-D hit point (section 4). E = I exp(-mu L1) exp(-mu L2)/D^2, exact to O(r/D): with
   D >= 1000 r held to 1 %, one-sided (as test_curved_reflectors.py);
 - cylinder, axis normal to the beam: the fan rho E(h) r cos(psi/2)/(2D) traced without
-  its far-field step (``_refs.cylinder_fan_exact``), 1 %, one-sided. The beam's offset
+  its far-field step (``_refs.cylinder_fan_exact``), averaged over the 7 mm limiting
+  aperture across the fan's thickness (``_refs.fan_pupil_factor``), 1 %, one-sided. The beam's offset
   runs along the axis (the fan reference takes the beam centred across it).
 
 Glass at grazing incidence (Fresnel, n = 1.5, written out here, Born & Wolf 1.5.2): a
@@ -208,7 +209,9 @@ def _cylinder_case(r, R1, w_over_r, q, mu, rho, offset, obs, orient):
         O = shift + m * r * d
         if not ref.off_incident_beam(beam, O):
             continue
-        e, hit2 = ref.cylinder_fan_exact(rho, r, Rs, D / 2, beam.peak(R1), (m * r * math.sin(psi), -m * r * math.cos(psi)))
+        o_xy = (m * r * math.sin(psi), -m * r * math.cos(psi))
+        e, hit2 = ref.cylinder_fan_exact(rho, r, Rs, D / 2, beam.peak(R1), o_xy)
+        e *= ref.fan_pupil_factor(r, Rs, D / 2, o_xy, hit2)  # the 7 mm mean across the fan's thickness
         hit = shift + hit2[0] * side + hit2[1] * u
         att = math.exp(-mu * (np.linalg.norm(hit - beam.pos) + np.linalg.norm(O - hit)))
         pts.append(O)
