@@ -71,9 +71,20 @@ class BeamGeometry:
     divergence_rad: float
 
     @classmethod
-    def create(cls, position_m, axis, power_w, diameter_m, divergence_rad) -> "BeamGeometry":
+    def create(cls, position_m, axis, power_w, diameter_m, divergence_rad, reference=()) -> "BeamGeometry":
+        """The beam along ``axis``; its cross-section's e1 is the first of the
+        ``reference`` directions not within 1 deg of the axis, made normal to it (the scene's
+        own geometry: the sampling grid then turns with a rigidly moved scene), else
+        :func:`perp_basis`'s (from the world axes)."""
         axis = np.asarray(axis, float) / np.linalg.norm(axis)
         e1, e2 = perp_basis(axis)
+        for ref in reference:
+            ref = np.asarray(ref, float)
+            side = ref - (ref @ axis) * axis
+            if np.linalg.norm(side) > math.sin(math.radians(1.0)) * np.linalg.norm(ref):
+                e1 = side / np.linalg.norm(side)
+                e2 = np.cross(axis, e1)
+                break
         return cls(np.asarray(position_m, float), axis, e1, e2, float(power_w), float(diameter_m), float(divergence_rad))
 
     def diameter_at(self, range_m):
@@ -687,3 +698,94 @@ def flat_outline_s(beam: BeamGeometry, target, n_disk=1024):
     if np.any(zo <= 0) or np.any(zi <= 0) or not (np.all(np.isfinite(so)) and np.all(np.isfinite(si))):
         return None
     return so, si
+
+
+def _disk_ring_s(beam: BeamGeometry, centre, normal, radius, n, outer):
+    """A disk (centre, unit normal, radius [m]) as a regular n-gon in s: inscribed in its
+    projected ellipse (``outer`` False) or circumscribed about it (True: central
+    projection keeps lines and tangency). None when any vertex is not ahead of the aperture."""
+    x, _ = perp_basis(normal)
+    y = np.cross(normal, x)
+    a = 2 * math.pi * np.arange(n) / n
+    scale = radius / math.cos(math.pi / n) if outer else radius
+    ring = centre + scale * (np.cos(a)[:, None] * x + np.sin(a)[:, None] * y)
+    s, z = beam.to_s(ring)
+    if np.any(z <= 0) or not np.all(np.isfinite(s)):
+        return None
+    return s
+
+
+def _hull_s(points_s) -> np.ndarray:
+    """Convex hull (V, 2) of points in s, counter-clockwise (Qhull)."""
+    from scipy.spatial import ConvexHull
+
+    pts = np.unique(np.asarray(points_s, float), axis=0)
+    if len(pts) < 3:
+        return pts
+    return pts[ConvexHull(pts).vertices]
+
+
+def _convex_outline_s(beam, analytic, radius, half_length, n, outer):
+    """The s-outline (a polygon) of a sphere or capped cylinder of the given radius (and
+    half-length) with the analytic shape's centre and axis: the projection of the sphere's
+    contour disk as seen from the beam's virtual source, or the hull of the cylinder's two
+    end disks (a cylinder is their convex hull; central projection keeps hulls)."""
+    c = np.asarray(analytic[1], float)
+    if analytic[0] == "sphere":
+        if beam.divergence_rad > 0:
+            rel = c - (beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad))
+            dist = float(np.linalg.norm(rel))
+            if dist <= radius * (1 + 1e-9):
+                return None
+            u = rel / dist
+            centre, rho = c - (radius * radius / dist) * u, radius * math.sqrt(1.0 - (radius / dist) ** 2)
+        else:
+            u, centre, rho = beam.axis, c, radius
+        return _disk_ring_s(beam, centre, u, rho, n, outer)
+    ax = np.asarray(analytic[2], float)
+    ends = [_disk_ring_s(beam, c + sgn * half_length * ax, ax, radius, n, outer) for sgn in (-1.0, 1.0)]
+    if any(e is None for e in ends):
+        return None
+    return _hull_s(np.vstack(ends))
+
+
+def curved_outline_s(beam: BeamGeometry, mesh, n=1024):
+    """A sphere's or capped cylinder's outline in s, exact to its polygons, and the
+    outline of its triangle mesh: (outer, inner, mesh_outline) or None (not an analytic
+    shape, or not wholly ahead of the aperture).
+
+    ``outer`` circumscribes and ``inner`` is inscribed in the exact outline (n-gons of
+    the projected contour / end disks: between them ``1/cos^2(pi/n) - 1`` = 9.4e-6 of its
+    area for n = 1024). The mesh is a convex polyhedron with its vertices on the surface,
+    so its outline is the hull of its projected vertices, inside the exact one: the
+    Gaussian power between ``outer`` and it bounds what the faceting loses.
+    """
+    an = mesh.analytic
+    if an is None or an[0] not in ("sphere", "cylinder"):
+        return None
+    r, h = (float(an[2]), 0.0) if an[0] == "sphere" else (float(an[3]), float(an[4]))
+    outer = _convex_outline_s(beam, an, r, h, n, True)
+    inner = _convex_outline_s(beam, an, r, h, n, False)
+    sv, zv = beam.to_s(mesh.vertices)
+    if outer is None or inner is None or np.any(zv <= 0) or not np.all(np.isfinite(sv)):
+        return None
+    return outer, inner, _hull_s(sv)
+
+
+def inside_convex_many(points_s, polygon_s) -> np.ndarray:
+    """Points (N, 2) inside or on a convex polygon (V, 2) of many sides, in O(N log V):
+    the edge facing each point is found by its angle about the vertices' mean (the
+    polygon is star-shaped about it), then one cross product decides."""
+    pts = np.asarray(points_s, float)
+    poly = np.asarray(polygon_s, float)
+    if _signed_area2(poly) < 0:
+        poly = poly[::-1]
+    c = poly.mean(axis=0)
+    ang = np.arctan2(poly[:, 1] - c[1], poly[:, 0] - c[0])
+    start = int(np.argmin(ang))
+    poly, ang = np.roll(poly, -start, axis=0), np.roll(ang, -start)
+    q = np.arctan2(pts[:, 1] - c[1], pts[:, 0] - c[0])
+    i = (np.searchsorted(ang, q, side="right") - 1) % len(poly)
+    a, b = poly[i], poly[(i + 1) % len(poly)]
+    cross = (b[:, 0] - a[:, 0]) * (pts[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (pts[:, 0] - a[:, 0])
+    return cross >= -1e-12 * (1.0 + np.abs(pts).sum(1))

@@ -578,10 +578,19 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     normals = _hit_normals(target, cells.point[rows], cells.faces[rows, 0], tracer)
     back = np.einsum("ij,ij->i", cells.direction[rows], normals) > 0
     # the true power lies between the leaves wholly on the target and those plus every
-    # mixed leaf touching it (and the truncated tail): take the upper end
+    # mixed leaf touching it (and the truncated tail): take the upper end; a sphere or
+    # cylinder takes its exact outline's power where nothing else shows inside it, else
+    # the rays' total plus what its facets may lose (_curved_total)
     raw = float(cells.power_w[rows].sum())
     err = float(cells.power_w[touch].sum()) + cells.truncated_w
     whole = raw - float(cells.power_w[rows][cells.mixed[rows]].sum())
+    curved = _curved_total(beam, cells, target, tracer)
+    if curved is not None and curved[0] is not None:
+        whole, err = curved[0] - curved[1], curved[1]
+    elif curved is not None:
+        err += curved[1]
+    if curved is not None:  # wholly ahead of the aperture, a convex shape is lit outside only (a
+        back[:] = False  # faceted limb's hit may face away from its exact normal at grazing)
     scale = (whole + err) / raw
     side, material, other = _pick_side(target, cells.power_w[rows] * scale, back)
     if other > 0:
@@ -594,6 +603,81 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
         sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([use, touch]), mu)
         out.spots.append(sp)
     return whole + err
+
+
+def _curved_total(beam, cells, target, tracer):
+    """A sphere's or cylinder's intercepted power from its exact surface, or what its
+    triangle mesh may lose (the rays see a polyhedron inscribed in it).
+
+    Returns None for other targets (or a shape not wholly ahead of the aperture); else
+    ``(total_w, error_w)`` when nothing else is hit in front of the exact surface by any
+    ray inside its outline (rays beside the facets that meet something behind it, a wall
+    or the ground, are retraced and their hits compared with the exact surface's
+    entry): the Gaussian power over the outline's circumscribed polygon (Owen's T, exact
+    for it) and the power between it and the inscribed one; or ``(None, facet_w)``
+    otherwise, facet_w the power between the outline and the mesh's own (the hull of its
+    projected vertices, :func:`hazard.beam.curved_outline_s`), a bound on the power lost
+    to faceting.
+    """
+    from .beam import _OFFSETS, curved_outline_s, inside_convex_many, polygon_moments
+
+    outl = curved_outline_s(beam, target.mesh)
+    if outl is None:
+        return None
+    frac = polygon_moments(list(outl)).fraction
+    outer_w, inner_w, mesh_w = beam.power_w * frac
+    s0, s1, t0, t1 = cells.bounds()
+    lo, hi = outl[0].min(axis=0), outl[0].max(axis=0)
+    near = np.flatnonzero((s1 >= lo[0]) & (s0 <= hi[0]) & (t1 >= lo[1]) & (t0 <= hi[1]))
+    d = (s1 - s0)[near]
+    s = (np.stack([s0[near], t0[near]], axis=1)[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+    inside = inside_convex_many(s, outl[0])
+    lab = cells.labels[near].ravel()
+    other = np.flatnonzero(inside & (lab != target.index) & (lab != -1))
+    if not len(other) or not np.any(_in_front_of_surface(beam, tracer, target.mesh.analytic, s[other])):
+        return outer_w, max(outer_w - inner_w, 0.0)
+    return None, max(outer_w - mesh_w, 0.0)
+
+
+def _in_front_of_surface(beam, tracer, analytic, s) -> np.ndarray:
+    """For rays at s (N, 2): whether their first hit lies in front of the exact sphere or
+    capped cylinder ``analytic`` where they meet it (False where they miss it)."""
+    o, dirs = beam.rays(s)
+    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    hits = tracer.first_hit(o, dirs)
+    t_hit = np.where(hits.hit, np.linalg.norm(hits.point - o, axis=1), np.inf)
+    entry = _entry_distance(analytic, o, unit)
+    return np.isfinite(entry) & (t_hit < entry * (1 - 1e-9))
+
+
+def _entry_distance(analytic, o, u) -> np.ndarray:
+    """Distance [m] along unit rays (o, u) to where they enter a sphere ``("sphere", c, r)``
+    or capped cylinder ``("cylinder", c, axis, r, half_length)``; inf where they miss.
+    Solved from each line's point nearest the centre (no cancellation of long ranges)."""
+    c = np.asarray(analytic[1], float)
+    shift = ((c - o) * u).sum(1)
+    q = o + shift[:, None] * u - c
+    if analytic[0] == "sphere":
+        half = np.sqrt(np.maximum(analytic[2] ** 2 - (q * q).sum(1), 0.0))
+        meet = ((q * q).sum(1) <= analytic[2] ** 2) & (shift + half > 0)
+        return np.where(meet, np.maximum(shift - half, 0.0), np.inf)
+    ax, r, h = np.asarray(analytic[2], float), analytic[3], analytic[4]
+    qa, ua = q @ ax, u @ ax
+    qp, up = q - qa[:, None] * ax, u - ua[:, None] * ax
+    a2, b2, c2 = (up * up).sum(1), 2 * (qp * up).sum(1), (qp * qp).sum(1) - r * r
+    disc = b2 * b2 - 4 * a2 * c2
+    par = a2 < 1e-15
+    root = np.sqrt(np.maximum(disc, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lo1 = np.where(par, np.where(c2 <= 0, -np.inf, np.inf), (-b2 - root) / (2 * a2))
+        hi1 = np.where(par, np.where(c2 <= 0, np.inf, -np.inf), (-b2 + root) / (2 * a2))
+        ta, tb = (-h - qa) / ua, (h - qa) / ua
+    slab = np.abs(ua) < 1e-15
+    lo2 = np.where(slab, np.where(np.abs(qa) <= h, -np.inf, np.inf), np.minimum(ta, tb))
+    hi2 = np.where(slab, np.where(np.abs(qa) <= h, np.inf, -np.inf), np.maximum(ta, tb))
+    lo, hi = np.maximum(lo1, lo2), np.minimum(hi1, hi2)
+    meet = (par | (disc >= 0)) & (lo <= hi) & (hi + shift > 0)
+    return np.where(meet, np.maximum(lo + shift, 0.0), np.inf)
 
 
 def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) -> SpotBuild:

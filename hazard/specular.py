@@ -24,6 +24,11 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   (Deschamps, Proc. IEEE 60:1022 (1972), eq. for reflection Q_r = Q_i + 2 cos_i
   Theta^-1 C Theta^-1) give the ray tube's area factor exactly as
   ``(1 + D/p)(1 + D/p + 2 D (cos^2(beta) / cos_i + sin^2(beta) cos_i) / r)``.
+* At an eye (given its apertures) that beam is averaged over the limiting aperture or the
+  aid's objective: locally the incident Gaussian seen through the reflection's ray map
+  ``(I + D V)^-1`` (an astigmatic Gaussian), its disk mean by converged quadrature, raised
+  by the exact field's largest excess over it on the disk's rim
+  (:func:`_curved_aperture_w_m2`).
 * The specular NOHD of a sphere or cylinder is solved on that same function along the
   worst reflected ray (:func:`specular_nohd`), so the observers and the NOHD agree.
 * **Curved meshes** (mesh files whose facets approximate a curved surface): a smooth
@@ -46,7 +51,7 @@ from .rays import own_object
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w",
            "mesh_mirror_irradiance"]
 
-_ITERATIONS = 80
+_ITERATIONS = 300
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
 
 
@@ -339,8 +344,10 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     most 1.5e-4 of the disk's area); other flat facets integrate the whole unfolded beam
     over the disk, as if the mirror did not cut it (an upper bound, exact where the
     disk's image lies inside the lit part; an eye is lit when its disk's image overlaps
-    that part at all). Curved facets keep the point value times
-    ``gain`` (their beams spread from the mirror: wide at any eye beyond a few radii).
+    that part at all). A sphere's or cylinder's curved side is averaged over the same
+    disks through its local astigmatic Gaussian, its error bounded from above
+    (:func:`_curved_aperture_w_m2`); a curved mesh's rays are binned over the limiting
+    aperture (:mod:`hazard.mesh_mirror`).
 
     ``ray_scene`` (optional, :class:`hazard.rays.RayScene`): each observer's line of
     sight is traced from its own reflection point (just off the surface there; the
@@ -369,14 +376,16 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     if is_curved_mesh(spot.target):
         out += mesh_mirror_irradiance(spot, obs, gain, mu, states).irradiance_w_m2
     if spot.target.mesh.analytic is not None:
-        _add_curved_side(spot, obs, gain, mu, states, ray_scene, out)
+        _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures)
     return np.minimum(out, _power_cap(spot, obs, gain, mu, states))
 
 
-def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out) -> None:
+def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None) -> None:
     """Add (in place) a sphere's or cylinder's curved side to ``out``: Coddington spreading
-    from each observer's specular point (module notes), and ``rho E_peak`` where that
-    point cannot be found (conservative)."""
+    from each observer's specular point (module notes), averaged over each observer's
+    limiting aperture or aid's objective when ``apertures`` are given
+    (:func:`_curved_aperture_w_m2`; else the point value times ``gain``), and
+    ``rho E_peak`` where that point cannot be found (conservative)."""
     pos, tangent = spot.beam.position_m, spot.target.tangent
     ok, geo, p, n, d, near = _curved_geometry(spot, obs)
     _seen(ray_scene, spot, p, n, obs, ok)
@@ -384,12 +393,165 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out) -> None:
     if np.any(ok):
         path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
         rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
-        g = geo[ok] * np.exp(-mu * path) * gain[ok]
+        if apertures is None:
+            g = geo[ok] * np.exp(-mu * path) * gain[ok]
+        else:
+            rows = np.flatnonzero(ok)
+            g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
+                                      apertures.take(rows))
         out[ok] += rho * (g if states is None else g[:, None])
     if np.any(near):
         rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
         cap = spot.max_irradiance_w_m2 * gain[near]
         out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
+
+
+_DISK_RULES = ((12, 24), (24, 48), (48, 96))  # (radial Gauss-Legendre, angular) nodes of the disk mean
+_DISK_RTOL = 1e-6  # two successive rules agreeing to this accept the finer one
+
+
+def _curved_beam_map(spot, obs, p, n, d):
+    """The mirror beam near each observer as the incident Gaussian seen through the ray map:
+    (J (M, 2, 2), s_P (M, 2)). A displacement delta (tangential, sagittal:
+    the plane of incidence and across it) normal to the reflected ray at the observer
+    traces back to the reflected wavefront at P as ``(I + D V)^-1 delta`` (V the
+    reflected vergence matrix, generalised Coddington, :func:`_vergences`), and that to the
+    incident wavefront unchanged (reflection is an isometry between the two transverse
+    planes in these bases); in beam coordinates ``s = s_P + J delta``. The field there is
+    ``E(O) exp(|s_P|^2 - |s_P + J delta|^2)`` to first order in delta / R (R the smallest
+    of the distance D, the radius r and the incident wavefront radius: the spreading factor
+    and the map's curvature vary on that scale; :func:`_curved_aperture_w_m2` bounds the rest)."""
+    beam = spot.beam
+    an = spot.target.mesh.analytic
+    r = an[2] if an[0] == "sphere" else an[3]
+    out_dir = obs - p
+    dist = np.linalg.norm(out_dir, axis=1)
+    ref = out_dir / dist[:, None]
+    cos_i = np.clip(-(n * d).sum(1), 1e-12, 1.0)
+    t = d - (d * n).sum(1)[:, None] * n
+    tn = np.linalg.norm(t, axis=1)
+    flat = tn < 1e-12  # normal incidence: any tangent
+    if np.any(flat):
+        t[flat] = np.cross(n[flat], np.where(np.abs(n[flat, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
+        tn[flat] = np.linalg.norm(t[flat], axis=1)
+    t = t / tn[:, None]
+    sg = np.cross(n, t)
+    t_in = _unit(t - (t * d).sum(1)[:, None] * d)
+    s_pt, z = beam.to_s(p)
+    p_src = beam.source_distance_m(z) * np.sqrt(1 + (s_pt ** 2).sum(1) * (beam.divergence_rad / 2) ** 2)
+    v_in = np.where(np.isfinite(p_src), 1.0 / np.where(np.isfinite(p_src), p_src, 1.0), 0.0)
+    if an[0] == "sphere":
+        ct, cs = np.ones(len(p)), np.zeros(len(p))  # curvature 1/r in every direction: diagonal
+        vtt, vts, vss = v_in + 2.0 / (r * cos_i), np.zeros(len(p)), v_in + 2.0 * cos_i / r
+    else:
+        c = _unit(np.cross(np.broadcast_to(an[2], n.shape), n))
+        ct, cs = (c * t).sum(1), (c * sg).sum(1)
+        vtt, vts, vss = v_in + 2 * ct * ct / (r * cos_i), 2 * ct * cs / r, v_in + 2 * cs * cs * cos_i / r
+    m = np.empty((len(p), 2, 2))
+    m[:, 0, 0], m[:, 0, 1], m[:, 1, 0], m[:, 1, 1] = 1 + dist * vtt, dist * vts, dist * vts, 1 + dist * vss
+    k = np.linalg.inv(m)
+    w = beam.diameter_at(z) / 2
+    basis = np.stack([np.stack([t_in @ beam.e1, sg @ beam.e1], 1), np.stack([t_in @ beam.e2, sg @ beam.e2], 1)], 1)
+    return basis @ k / w[:, None, None], np.nan_to_num(s_pt)
+
+
+def _disk_mean_ratio(jac, s_p, radius_m) -> np.ndarray:
+    """Mean over disks of radius a of ``exp(|s_P|^2 - |s_P + J delta|^2)`` (the mirror beam
+    over its value at the centre), by polar Gauss-Legendre x trapezoid rules of rising
+    order; a row whose two finest rules differ by more than ``_DISK_RTOL`` (a beam much
+    narrower than the disk) takes the integrand's largest value on the disk,
+    ``exp(min(|s_P|^2, 2 a |J^T s_P|))`` (an upper bound)."""
+    a = np.broadcast_to(np.asarray(radius_m, float), (len(s_p),))
+    b = np.einsum("mji,mj->mi", jac, s_p)  # J^T s_P
+    q = np.einsum("mki,mkj->mij", jac, jac)  # J^T J
+    prev, out = None, None
+    for n_r, n_t in _DISK_RULES:
+        x, wx = np.polynomial.legendre.leggauss(n_r)
+        rho = 0.5 * (x + 1.0)
+        th = 2 * math.pi * (np.arange(n_t) + 0.5) / n_t
+        u = (rho[:, None, None] * np.stack([np.cos(th), np.sin(th)], -1)[None]).reshape(-1, 2)  # unit disk nodes
+        wt = np.repeat(0.5 * wx * rho, n_t) / n_t * 2.0  # int_0^1 rho drho over the disk's area / pi: sum = 1
+        qu = np.einsum("ui,mij,uj->mu", u, q, u)
+        bu = b @ u.T
+        expo = -(a[:, None] ** 2 * qu + 2 * a[:, None] * bu)
+        out = np.exp(np.minimum(expo, 700.0)) @ wt
+        if prev is not None:
+            good = np.abs(out - prev) <= _DISK_RTOL * np.abs(out)
+            if np.all(good):
+                return out
+        prev = out
+    bound = np.exp(np.minimum(np.minimum((s_p * s_p).sum(1), 2 * a * np.linalg.norm(b, axis=1)), 700.0))
+    return np.where(np.abs(out - prev) <= _DISK_RTOL * np.abs(out), out, bound)
+
+
+_RIM_POINTS = 16  # where the local Gaussian is checked against the exact field on each disk's rim
+_SMALL_CHANGE = 1e-3  # a disk mean within this of the point value: its change is doubled instead
+
+
+def _curved_aperture_w_m2(spot, obs, p, n, d, point_w_m2, apertures):
+    """A sphere's or cylinder's mirror beam through each observer's limiting aperture (or
+    its aid's objective, delivered into the 7 mm pupil): the point value times the disk
+    mean of the local Gaussian (:func:`_curved_beam_map`, :func:`_disk_mean_ratio`).
+
+    The local Gaussian is first order in the disk's radius over the scale the ray map
+    curves on; its error is bounded from above as follows. Where the mean is within
+    ``_SMALL_CHANGE`` of the point value, the larger of the two is taken and its change
+    from the point value doubled (the model's own error is a small fraction of that change).
+    Elsewhere the exact field (:func:`_curved_geometry`: the specular point and Coddington
+    spreading of each rim point) is evaluated at ``_RIM_POINTS`` points of the disk's rim,
+    and the mean is raised by the largest ratio of the exact to the model value found
+    there (the model's error grows from 0 at the centre to its largest on the rim)."""
+    from .aperture import aperture_irradiance_w_m2
+
+    jac, s_p = _curved_beam_map(spot, obs, p, n, d)
+    ref = _unit(obs - p)
+    t_r, s_r = _curved_transverse(p, n, d, ref)
+
+    def fraction(radius_m, rows):
+        a = np.broadcast_to(np.asarray(radius_m, float), (len(rows),))
+        ratio = _disk_mean_ratio(jac[rows], s_p[rows], a)
+        change = np.abs(ratio - 1.0)
+        out = np.maximum(ratio, 1.0) * (1.0 + change)
+        big = np.flatnonzero(change > _SMALL_CHANGE)
+        if len(big):
+            k = rows[big]
+            out[big] = ratio[big] * _rim_margin(spot, obs[k], point_w_m2[k], jac[k], s_p[k], t_r[k], s_r[k], a[big])
+        return out * math.pi * a * a
+
+    return aperture_irradiance_w_m2(point_w_m2, 1.0, 0.0, apertures, fraction)
+
+
+def _curved_transverse(p, n, d, ref):
+    """The reflected ray's transverse basis at each observer: tangential (in the plane of
+    incidence) and sagittal, as in :func:`_curved_beam_map`."""
+    t = d - (d * n).sum(1)[:, None] * n
+    tn = np.linalg.norm(t, axis=1)
+    flat = tn < 1e-12
+    if np.any(flat):
+        t[flat] = np.cross(n[flat], np.where(np.abs(n[flat, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]))
+        tn[flat] = np.linalg.norm(t[flat], axis=1)
+    t = t / tn[:, None]
+    return _unit(t - (t * ref).sum(1)[:, None] * ref), np.cross(n, t)
+
+
+def _rim_margin(spot, obs, point_w_m2, jac, s_p, t_r, s_r, a) -> np.ndarray:
+    """Per observer: max(1, the largest ratio of the exact field to the local Gaussian at
+    ``_RIM_POINTS`` points on its disk's rim (radius a, normal to the reflected ray))."""
+    th = 2 * math.pi * np.arange(_RIM_POINTS) / _RIM_POINTS
+    u = np.stack([np.cos(th), np.sin(th)], axis=1)  # (K, 2): tangential, sagittal
+    delta = a[:, None, None] * u[None]  # (M, K, 2)
+    pts = obs[:, None, :] + delta[..., :1] * t_r[:, None, :] + delta[..., 1:] * s_r[:, None, :]
+    _, geo, *_ = _curved_geometry(spot, pts.reshape(-1, 3))
+    _, geo0, *_ = _curved_geometry(spot, obs)
+    sd = s_p[:, None, :] + np.einsum("mij,mkj->mki", jac, delta)
+    model = geo0[:, None] * np.exp(np.minimum((s_p * s_p).sum(1)[:, None] - (sd * sd).sum(2), 700.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(model > 0, geo.reshape(len(obs), -1) / model, np.where(geo.reshape(len(obs), -1) > 0, np.inf, 1.0))
+    worst = np.max(ratio, axis=1)
+    # an infinite ratio (lit where the model is 0): the disk's largest possible mean, the
+    # incident beam's value at the centre of its image
+    cap = np.exp(np.minimum((s_p * s_p).sum(1), 700.0))
+    return np.where(np.isfinite(worst), np.maximum(worst, 1.0), cap)
 
 
 def reflected_power_w(spot, states=None):

@@ -89,10 +89,13 @@ class BeamStage:
 
 
 def scene_beam(scene, direction=None) -> BeamGeometry:
-    """The laser's beam from the scene (along ``direction``, unit; default: the aim)."""
+    """The laser's beam from the scene (along ``direction``, unit; default: the aim); its
+    sampling grid is aligned with the first target's tangent (or normal), so it turns
+    with the scene."""
     laser = scene.spec.laser
+    reference = [v for t in scene.targets[:1] for v in (t.tangent, t.normal)]
     return BeamGeometry.create(scene.laser_position_m, scene.laser_direction if direction is None else direction,
-                               laser.average_power_w, laser.beam_diameter_m, laser.divergence_rad)
+                               laser.average_power_w, laser.beam_diameter_m, laser.divergence_rad, reference)
 
 
 def mirror_aperture_m(spec) -> float:

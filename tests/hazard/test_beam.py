@@ -135,3 +135,21 @@ def test_bounded_error_is_added_conservatively():
     assert tr.spot_power_w >= ref * (1 - 1e-9)
     assert tr.spot_power_w - ref <= tr.spot_power_error_w + 1e-6
     assert tr.spot_power_error_w <= 2e-3 * 1000
+
+
+@settings(max_examples=20, derandomize=True, deadline=None, database=None)
+@given(seed=st.integers(0, 10**6), n=st.integers(3, 400), sx=st.floats(0.05, 5.0), sy=st.floats(0.05, 5.0))
+def test_inside_convex_many_matches_the_edge_test(seed, n, sx, sy):
+    """The O(log V) point-in-convex-polygon test used on spheres' and cylinders' outlines
+    agrees with the all-edges test on random hulls and points (points within 1e-9 of an
+    edge may go either way)."""
+    from hazard.beam import _hull_s, inside_convex_many
+
+    rng = np.random.default_rng(seed)
+    poly = _hull_s(rng.normal(size=(n, 2)) * [sx, sy] + rng.normal(size=2))
+    if len(poly) < 3:
+        return
+    pts = rng.normal(size=(4000, 2)) * 2 * max(sx, sy) + poly.mean(axis=0)
+    got = inside_convex_many(pts, poly)
+    assert np.all(got >= inside_convex(pts, poly, margin=1e-9))
+    assert np.all(got <= inside_convex(pts, poly, margin=-1e-9))

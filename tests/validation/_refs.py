@@ -473,6 +473,85 @@ def cylinder_fan_exact(rho, r, Rs, w, E0, observer_xy):
     return rho * E0 * math.exp(-x0 * x0 / (w * w)) / spacing * zfac, p
 
 
+def _circle_reflection(r, Rs, X, Y, n_grid=801):
+    """In the plane of the axis and observers O = (X > 0, Y) (arrays; axis along +Y, the
+    circle of radius r at the origin, the point source at (0, -Rs)): the x0 where the
+    incident ray crosses Y = 0 whose mirror reflection passes through O (the first sign
+    change of O's side of the reflected ray from 0 out to the limb, refined by 80
+    bisections), the hit points, and the ray spacing |dW/dx0| at O (central difference)."""
+    X, Y = np.atleast_1d(np.asarray(X, float)), np.atleast_1d(np.asarray(Y, float))
+
+    def side(x0, rows=slice(None)):
+        h = np.hypot(x0, Rs)
+        dx, dy = x0 / h, Rs / h
+        cx, cy = Rs * dx * dy, -Rs * dx * dx
+        root = np.sqrt(np.maximum(r * r - cx * cx - cy * cy, 0.0))
+        px, py = cx - root * dx, cy - root * dy
+        dn = (dx * px + dy * py) / r
+        ox, oy = dx - 2 * dn * px / r, dy - 2 * dn * py / r
+        return ox * (Y[rows] - py) - oy * (X[rows] - px), (px, py, ox, oy)
+
+    xmax = r * Rs / math.sqrt(Rs * Rs - r * r) * (1 - 1e-9)
+    grid = np.linspace(0.0, xmax, n_grid)
+    vals = side(grid[None, :], (slice(None), None))[0]
+    change = np.sign(vals[:, 1:]) != np.sign(vals[:, :-1])
+    if not np.all(change.any(axis=1)):
+        raise ValueError("no reflecting ray reaches an observer")
+    k = np.argmax(change, axis=1)
+    lo, hi = grid[k], grid[k + 1]
+    f_lo = side(lo)[0]
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        f_mid = side(mid)[0]
+        same = np.sign(f_mid) == np.sign(f_lo)
+        lo, f_lo, hi = np.where(same, mid, lo), np.where(same, f_mid, f_lo), np.where(same, hi, mid)
+    x0 = 0.5 * (lo + hi)
+    _, (px, py, ox, oy) = side(x0)
+    if np.any(ox * (X - px) + oy * (Y - py) <= 0):
+        raise ValueError("observer behind the reflecting point")
+    a, b = np.maximum(x0 - 1e-6 * r, 0.0), x0 + 1e-6 * r
+    return x0, np.stack([px, py], axis=-1), np.abs(side(b)[0] - side(a)[0]) / (b - a)
+
+
+def fan_pupil_factor(r, Rs, w, observer_xy, hit_xy, aperture_m=7e-3):
+    """The mean over the limiting aperture (a disk of diameter ``aperture_m`` facing the
+    fan) of a cylinder's thin fan over its value at the disk's centre, for an observer
+    in the plane through the beam normal to the axis. Along the axis the reflection keeps
+    the incident beam's Gaussian, spreading from the virtual source along the unfolded
+    path: 1/e radius ``W = w (|S -> P| + |P -> O|) / l0`` (the inverse of the out-of-plane
+    factor of :func:`cylinder_fan_exact`); across it the fan varies on the scale of its
+    width, metres away (ignored). Mean of ``exp(-y^2 / W^2)`` over the disk by 64-node
+    Gauss-Legendre in y with chord weights ``2 sqrt(a^2 - y^2) / (pi a^2)``."""
+    O, p = np.asarray(observer_xy, float), np.asarray(hit_xy, float)
+    x0 = float(p[0]) * Rs / (float(p[1]) + Rs)
+    W = w * (math.hypot(p[0], p[1] + Rs) + float(np.linalg.norm(O - p))) / math.hypot(x0, Rs)
+    a = aperture_m / 2
+    t, wt = np.polynomial.legendre.leggauss(64)
+    th = 0.5 * math.pi * t  # y = a sin(th): smooth at the rim
+    y, c = a * np.sin(th), a * np.cos(th)
+    return float((wt * 0.5 * math.pi * c * 2 * c * np.exp(-(y / W) ** 2)).sum() / (math.pi * a * a))
+
+
+def sphere_mirror_exact(rho, r, Rs, w, E0, observer_xy):
+    """Geometric-optics irradiance of a mirror sphere (radius r, centred on the beam axis,
+    virtual source Rs before its centre) at observers, without the far-field step.
+
+    By symmetry about the axis the reflecting ray lies in the plane of the axis and the
+    observer (``observer_xy`` = (distance from the axis > 0, position along the beam),
+    arrays allowed), where the sphere's section is a circle: the in-plane ray crossing
+    the centre's plane at x0 and its spacing |dW/dx0| at the observer
+    (:func:`_circle_reflection`, as :func:`cylinder_fan_exact`). Out of the plane, rays
+    at azimuth dphi about the axis leave the ring x0 dphi and reach the observer's ring
+    X_O dphi, so ``E = rho E0 exp(-x0^2/w^2) |x0| / (|dW/dx0| X_O)`` (the annulus' power
+    x0 dx0 dphi over the area dW X_O dphi). Its far field is
+    ``rho (r^2/4) E0 exp(-r^2 sin^2(psi/2)/w^2) / D^2`` (range-safety.md 4).
+    Returns (irradiance, hit point), scalars for one observer."""
+    X, Y = observer_xy
+    x0, p, spacing = _circle_reflection(r, Rs, X, Y)
+    e = rho * E0 * np.exp(-x0 * x0 / (w * w)) * np.abs(x0) / (spacing * np.abs(np.atleast_1d(np.asarray(X, float))))
+    return (float(e[0]), p[0]) if np.ndim(X) == 0 else (e, p)
+
+
 # --------------------------------------------------------------------------- optics
 
 

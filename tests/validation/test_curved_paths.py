@@ -12,9 +12,10 @@ the references written here from range-safety.md section 4 (not from the engine)
   (b the back-reflection direction, d the observer's); for a beam centred on the sphere
   this is rho (r^2/4) E0 exp(-r^2 sin^2(psi/2)/w_e^2); an off-centre beam is evaluated at
   the 2-D hit point (section 4). E = I exp(-mu L1) exp(-mu L2)/D^2, exact to O(r/D): with
-  D >= 1000 r held to 2 %, one-sided (as test_curved_reflectors.py);
+  D >= 1000 r held to 1 %, one-sided (as test_curved_reflectors.py);
 - cylinder, axis normal to the beam: the fan rho E(h) r cos(psi/2)/(2D) traced without
-  its far-field step (``_refs.cylinder_fan_exact``), 5 %, one-sided. The beam's offset
+  its far-field step (``_refs.cylinder_fan_exact``), averaged over the 7 mm limiting
+  aperture across the fan's thickness (``_refs.fan_pupil_factor``), 1 %, one-sided. The beam's offset
   runs along the axis (the fan reference takes the beam centred across it).
 
 Glass at grazing incidence (Fresnel, n = 1.5, written out here, Born & Wolf 1.5.2): a
@@ -155,7 +156,7 @@ def _sphere_property(r, L, w_over_r, q, mu, rho, offset, obs, orient):
     assume(L >= 1000 * r)  # locally collimated beam over the sphere, as the formula assumes
     beam, target, pts, want = _sphere_case(r, L, w_over_r, q, mu, rho, offset, obs, orient)
     assume(pts)
-    _check(_mirror_lobes(beam, target, pts), want, 0.02)
+    _check(_mirror_lobes(beam, target, pts), want, 0.01)
 
 
 def test_sphere_same_on_every_path_spec_geometry():
@@ -166,7 +167,7 @@ def test_sphere_same_on_every_path_spec_geometry():
                                            [(math.radians(p), 0.7, 2000.0) for p in (10, 30, 60, 100)],
                                            (0.3, math.radians(20), 0.0))
     assert len(pts) == 4 and np.all(want > 0)
-    _check(_mirror_lobes(beam, target, pts), want, 0.02)
+    _check(_mirror_lobes(beam, target, pts), want, 0.01)
 
 
 @PATHS_FAST
@@ -175,7 +176,7 @@ def test_sphere_same_on_every_path_property(**kw):
     """Random spheres (r 2-30 cm, beam w 0.5-5 r, offset up to r/2, 20 m - 2 km and
     >= 1000 r away, mu in {0, 1e-4, 2e-3}), observers 1000-5000 r away at psi 2-120 deg:
     alone == with a box == with a second target == over terrain (1e-6), and each equals
-    rho (r^2/4) E_inc(P) exp(-mu (L1 + L2))/D^2 (range-safety.md 4) to 2 %."""
+    rho (r^2/4) E_inc(P) exp(-mu (L1 + L2))/D^2 (range-safety.md 4) to 1 %."""
     _sphere_property(**kw)
 
 
@@ -208,7 +209,9 @@ def _cylinder_case(r, R1, w_over_r, q, mu, rho, offset, obs, orient):
         O = shift + m * r * d
         if not ref.off_incident_beam(beam, O):
             continue
-        e, hit2 = ref.cylinder_fan_exact(rho, r, Rs, D / 2, beam.peak(R1), (m * r * math.sin(psi), -m * r * math.cos(psi)))
+        o_xy = (m * r * math.sin(psi), -m * r * math.cos(psi))
+        e, hit2 = ref.cylinder_fan_exact(rho, r, Rs, D / 2, beam.peak(R1), o_xy)
+        e *= ref.fan_pupil_factor(r, Rs, D / 2, o_xy, hit2)  # the 7 mm mean across the fan's thickness
         hit = shift + hit2[0] * side + hit2[1] * u
         att = math.exp(-mu * (np.linalg.norm(hit - beam.pos) + np.linalg.norm(O - hit)))
         pts.append(O)
@@ -219,7 +222,7 @@ def _cylinder_case(r, R1, w_over_r, q, mu, rho, offset, obs, orient):
 
 
 CYL_ARGS = dict(
-    r=ref.log_uniform(0.05, 0.5), R1=ref.log_uniform(20.0, 2000.0), w_over_r=ref.log_uniform(0.3, 2.0), q=st.floats(0.1, 0.9),
+    r=ref.log_uniform(0.05, 0.5), R1=ref.log_uniform(20.0, 2000.0), w_over_r=ref.log_uniform(0.1, 2.0), q=st.floats(0.1, 0.9),
     mu=st.sampled_from([0.0, 1e-4, 2e-3]), rho=st.floats(0.3, 1.0), offset=st.floats(-1.0, 1.0),
     obs=st.lists(st.tuples(st.floats(math.radians(5), math.radians(120)).flatmap(lambda p: st.sampled_from([p, -p])),
                            ref.log_uniform(50.0, 400.0)), min_size=1, max_size=4),
@@ -232,7 +235,7 @@ def _cylinder_property(r, R1, w_over_r, q, mu, rho, offset, obs, orient):
     beam, target, pts, want = _cylinder_case(r, R1, w_over_r, q, mu, rho, offset, obs, orient)
     assume(pts)
     assume(np.all(want > 1e-12 * want.max()))
-    _check(_mirror_lobes(beam, target, pts), want, 0.05)
+    _check(_mirror_lobes(beam, target, pts), want, 0.01)
 
 
 def test_cylinder_same_on_every_path_spec_geometry():
@@ -243,16 +246,16 @@ def test_cylinder_same_on_every_path_spec_geometry():
                                              [(math.radians(10), 300.0), (math.radians(-40), 300.0), (math.radians(90), 300.0)],
                                              (1.0, math.radians(30), 0.4))
     assert len(pts) == 3 and np.all(want > 0)
-    _check(_mirror_lobes(beam, target, pts), want, 0.05)
+    _check(_mirror_lobes(beam, target, pts), want, 0.01)
 
 
 @PATHS_FAST
 @given(**CYL_ARGS)
 def test_cylinder_same_on_every_path_property(**kw):
-    """Random cylinders (r 5-50 cm, beam w 0.3-2 r offset along the axis, 20 m - 2 km,
+    """Random cylinders (r 5-50 cm, beam w 0.1-2 r offset along the axis, 20 m - 2 km,
     mu in {0, 1e-4, 2e-3}), observers in the fan 50-400 r away at psi 5-120 deg either
     side: alone == with a box == with a second target == over terrain (1e-6), and each
-    equals the thin fan rho E(h) r cos(psi/2)/(2D) traced exactly (range-safety.md 4), 5 %."""
+    equals the thin fan rho E(h) r cos(psi/2)/(2D) traced exactly (range-safety.md 4), 1 %."""
     _cylinder_property(**kw)
 
 
@@ -278,7 +281,7 @@ def test_blocker_on_one_line_blocks_that_observer_only():
                           targets=[target], observers=obs)
     got = hazard.analyze(scenes.loads(text + wall)).observers.specular_irradiance_w_m2
     assert got[0] == 0.0
-    assert got[1] == pytest.approx(want[1], rel=0.02)
+    assert got[1] == pytest.approx(want[1], rel=0.01)
 
 
 # ------------------------------------------------------------------ glass at grazing incidence
