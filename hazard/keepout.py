@@ -25,6 +25,7 @@ import brdfmodels
 from brdfmodels.parallel import block_rows, map_blocks
 
 from .engine import Spot, path_states, projected_brdf, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
+from .near_field_lobe import near_lobe_fn
 from .nohd import range_from_intensity
 from .progress import terminal_bar
 
@@ -88,7 +89,7 @@ def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None):
         f = projected_brdf(model, wi[None, :], wo, st, reduce="path-max")  # the lobe: max over the history
         return range_from_intensity(f * power, mpe_w_m2, mu)
 
-    return fn
+    return near_lobe_fn(spot, fn, mpe_w_m2, mu, gain, st)
 
 
 def _grid_cells(grid_deg):

@@ -1,0 +1,265 @@
+"""Keep-out lobe near an extended spot: the farthest root of the near-field integral per direction.
+
+The lobe (:mod:`hazard.keepout`) is ``R(w)``, the distance from the spot's **power
+centroid** ``c`` (the origin of every lobe distance: lobes, outlines, renders, the
+terrain's keep-out distance) along ``w`` to the farthest point where the reflected
+irradiance reaches the MPE. The point form ``I(w) exp(-mu R) / R^2`` from ``c`` is that
+irradiance only where the whole spot is a point source; the engine uses it for observers
+beyond ``FAR_FIELD_SPOT_SIZES`` spot sizes and the exact integral over the spot
+(:mod:`hazard.near_field`, range-safety.md section 10) nearer. A spot stretched by
+grazing incidence has an elongated zone that the point form misses (a plate at 89.9 deg:
+0.52 m from the point form where the integral reaches 6.3 m, 3 deg above the plate).
+
+What is computed. On a fixed grid of directions (``GRID_THETA_DEG`` x ``GRID_PHI_DEG``
+over the hemisphere of the spot's mean frame), every node whose point-form range is
+within ``FAR_FIELD_SPOT_SIZES`` spot sizes gets the farthest root of
+``E(c + r w) = MPE`` for ``r`` up to ``r_hi``: the engine's near/far switch
+(``FAR_FIELD_SPOT_SIZES`` spot sizes) or, nearer, where the ray leaves the spot's box
+widened by ``reach`` (the point form's largest range over the hemisphere: ``E <= I_max
+exp(-mu d) / d^2`` with ``d`` the distance to the spot, so nothing beyond is hazardous).
+The ray is scanned inward from ``r_hi`` in steps ``h`` no larger than the spot's
+smallest extent (and ``r_hi / SCAN_MIN_STEPS``); the first hazardous sample brackets the
+farthest root, bisected to ``ROOT_RTOL``; the reported range is the bracket's far end
+plus ``h`` (the scan's resolution, added: a hazard between two samples beyond it is
+covered to one step). A direction between grid nodes takes the largest of its cell's four
+nodes plus the curvature margin (the largest second difference of the nodes about the
+cell / 8 along each axis: exact for a quadratic), and never less than its own point form.
+
+The integral. ``E(x) = sum_k w_k f_r cos(theta_r) exp(-mu R_k) / R_k^2`` over a fixed
+node set: the spot's triangles (:class:`hazard.near_field.SpotPatches`) split along
+their longest edges to radius ``a <= smallest extent / 2`` (at most ``MAX_TRIANGLES``
+triangles: ``a`` grows for a longer spot), each with the 7-point degree-5 rule, accurate
+to 4e-5 of a triangle's ``P / d^2`` from ``RULE_REACH`` triangle radii
+(:mod:`hazard.near_field`). Points nearer than that to any triangle are counted as
+hazardous (the lobe reaches at least ``RULE_REACH a`` beyond the spot's surface along the
+ray: conservative, never short). A dynamic material takes per node the maximum over the
+history's path before the sum (an upper bound of the maximum over time of the sum).
+
+Not covered (the lobe keeps the point form and the report says so): a slumping spot
+(its union of tilted normals), a spot built without its triangles. The quadrature's
+proof holds for the Lambertian kernel; a glossy lobe narrower than a triangle seen from
+the point is resolved only as far as the rule resolves it (as for observers).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from .engine import FAR_FIELD_SPOT_SIZES, _near_field, spot_directions
+from .near_field import NEAR_FIELD_RTOL
+
+__all__ = ["NearLobeFn", "near_lobe_fn", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "SCAN_MIN_STEPS",
+           "STATS"]
+
+THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 89.5)  # polar rows of the grid [deg]
+GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
+ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
+SCAN_MIN_STEPS = 8
+CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
+CONE_AZIMUTHS = 12  # ... and its azimuths per ring
+CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius  # the scan's step is at most r_hi / this (and at most the spot's smallest extent)
+
+
+class _Stats:
+    """Near-field lobe work in this process: directions integrated, points, seconds."""
+
+    def __init__(self):
+        self.directions = self.points = 0
+        self.seconds = 0.0
+
+    def snapshot(self) -> dict:
+        return dict(directions=self.directions, points=self.points, seconds=self.seconds)
+
+
+STATS = _Stats()
+
+
+def _smallest_extent_m(spot, frame) -> float:
+    """The spot's smallest extent [m] across its surface: twice the RMS width along the
+    minor axis of its power-weighted in-plane covariance (samples and their spread)."""
+    rel = (np.asarray(spot.points, float) - spot.centroid) @ frame[:2].T  # in-plane coordinates
+    w = np.asarray(spot.power_w, float)
+    w = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
+    cov = (rel * w[:, None]).T @ rel
+    lam = float(np.linalg.eigvalsh(cov)[0])
+    if spot.spread_m2 is not None:
+        lam += 0.5 * float((np.asarray(spot.spread_m2, float) * w).sum())
+    return 2.0 * math.sqrt(max(lam, 0.0))
+
+
+class NearLobeFn:
+    """``fn(wo (N, 3)) -> range [m]`` in the spot's mean frame: the point form ``base``,
+    raised to the near-field integral's farthest root where the grid of module notes says
+    so. ``info`` holds the grid's figures (directions integrated, scan step, seconds)."""
+
+    def __init__(self, spot, base, mpe_w_m2, mu, gain, states):
+        self.spot, self.base, self.mpe, self.mu, self.gain, self.states = spot, base, float(mpe_w_m2), float(mu), float(gain), states
+        self.samples = getattr(base, "samples", 1)
+        self.frame = spot.mean_frame
+        self.c = spot.centroid
+        self.far_m = FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
+        self._grid = None
+        self.info = None
+
+    # -- the integral ------------------------------------------------------------------------
+    def _setup(self, reach_m, peaks):
+        sp = self.spot
+        self.smallest_m = max(_smallest_extent_m(sp, self.frame), 1e-9)
+        loc = (sp.patches.tri_x.reshape(-1, 3) - self.c) @ self.frame.T
+        self.box = (loc.min(0) - reach_m, loc.max(0) + reach_m)
+        self.ext_m = float(sp.extent_m)
+        rot = np.einsum("nij,kj->nik", np.asarray(sp.frames, float), self.frame)  # each sample's frame in the mean one
+        self.tilt_rad = float(np.arccos(np.clip((np.trace(rot, axis1=1, axis2=2).min() - 1) / 2, -1.0, 1.0)))
+        self.peaks, self.r_peaks = peaks, np.asarray(self.base(peaks), float)
+
+    def hazardous(self, pts):
+        """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
+        the observers' own) at world points ``pts`` (M, 3) reaches the MPE (with a
+        history: at some state of its path)."""
+        e = _near_field(self.spot, pts, np.full(len(pts), self.gain), self.mu, self.states)
+        STATS.points += len(pts)
+        return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
+
+    # -- roots along rays ----------------------------------------------------------------------
+    def _r_hi(self, w_loc):
+        """Where each ray (mean-frame unit vectors (N, 3)) leaves the widened box, capped at
+        the engine's near/far switch."""
+        lo, hi = self.box
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(w_loc > 0, hi / w_loc, np.where(w_loc < 0, lo / w_loc, np.inf))
+        return np.minimum(t.min(axis=1), self.far_m)
+
+    def _cone_reach(self, w_loc, r):
+        """Largest point-form range [m] over the cone of directions from which the spot's
+        parts are seen at ``c + r w`` (half-angle ``asin(extent / r)`` plus the samples'
+        frame tilt): ``CONE_RINGS`` x ``CONE_AZIMUTHS`` samples, the axis, and the point
+        form's peaks (grid maximum, mirror and retro directions) inside the cone."""
+        alpha = np.where(r > self.ext_m, np.arcsin(np.clip(self.ext_m / np.maximum(r, 1e-300), 0.0, 1.0)), math.pi)
+        alpha = np.minimum(alpha + self.tilt_rad, math.pi)
+        ref = np.where(np.abs(w_loc[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+        e1 = np.cross(w_loc, ref)
+        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+        e2 = np.cross(w_loc, e1)
+        ring = np.asarray(CONE_RINGS)[None, :, None] * alpha[:, None, None]  # (N, R, 1)
+        az = np.linspace(0, 2 * math.pi, CONE_AZIMUTHS, endpoint=False)[None, None, :]
+        d = (np.cos(ring)[..., None] * w_loc[:, None, None, :]
+             + np.sin(ring)[..., None] * (np.cos(az)[..., None] * e1[:, None, None, :] + np.sin(az)[..., None] * e2[:, None, None, :]))
+        d = d.reshape(len(w_loc), -1, 3)
+        d[..., 2] = np.maximum(d[..., 2], 0.0)
+        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
+        best = np.asarray(self.base(d.reshape(-1, 3)), float).reshape(len(w_loc), -1).max(axis=1)
+        best = np.maximum(best, np.asarray(self.base(w_loc), float))
+        inside = np.arccos(np.clip(w_loc @ self.peaks.T, -1.0, 1.0)) <= alpha[:, None]
+        return np.maximum(best, np.where(inside, self.r_peaks[None, :], 0.0).max(axis=1))
+
+    def _scan_start(self, w_loc):
+        """Farthest radius [m] along each direction where the integral can reach the MPE:
+        ``E <= I_cone exp(-mu (r - extent)) / (r - extent)^2`` (every part of the spot is
+        at least ``r - extent`` away and seen within the cone), so hazard needs ``r <=
+        extent + cone reach``; bisected (``CONE_BISECTIONS``) within the box's exit."""
+        hi = self._r_hi(w_loc)
+        lo = np.minimum(np.full(len(w_loc), self.ext_m), hi)
+        ok = self.ext_m + self._cone_reach(w_loc, hi) >= hi  # hazard possible out to the box's exit
+        top = np.where(ok, hi, np.nan)
+        for _ in range(CONE_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            reach = self.ext_m + self._cone_reach(w_loc, mid) >= mid
+            lo, hi = np.where(reach, mid, lo), np.where(reach, hi, mid)
+        return np.where(ok, top, hi)
+
+    def roots(self, w_loc, r_floor):
+        """Farthest roots [m] beyond ``r_floor`` (N,) along mean-frame directions (N, 3),
+        each with the scan's resolution added (0 where no scan sample beyond ``r_floor``
+        is hazardous), and the steps [m] (module notes)."""
+        w_loc = np.asarray(w_loc, float)
+        r_hi = self._scan_start(w_loc)
+        h = np.minimum(self.smallest_m, r_hi / SCAN_MIN_STEPS)
+        w = w_loc @ self.frame
+        found = np.full(len(w), -1.0)
+        k = 0
+        live = np.flatnonzero(r_hi > r_floor)
+        while len(live):
+            r = r_hi[live] - k * h[live]
+            keep = r > r_floor[live]
+            live, r = live[keep], r[keep]
+            hot = self.hazardous(self.c + r[:, None] * w[live])
+            found[live[hot]] = r[hot]
+            live = live[~hot]
+            k += 1
+        lo = np.maximum(found, 0.0)
+        hi = np.minimum(lo + h, r_hi)
+        tol = np.maximum(ROOT_RTOL * r_hi, h / 8)
+        live = np.flatnonzero((found >= 0) & (hi - lo > tol))
+        while len(live):
+            mid = 0.5 * (lo[live] + hi[live])
+            hot = self.hazardous(self.c + mid[:, None] * w[live])
+            lo[live[hot]], hi[live[~hot]] = mid[hot], mid[~hot]
+            live = live[hi[live] - lo[live] > tol[live]]
+        return np.where(found >= 0, hi + h, 0.0), h
+
+    # -- the grid and the envelope ---------------------------------------------------------------
+    def _build(self):
+        t0 = time.perf_counter()
+        th = np.radians(np.asarray(THETA_ROWS_DEG))
+        ph = np.radians(np.arange(-180.0, 180.0 + 1e-9, GRID_PHI_DEG))
+        tt, pp = np.meshgrid(th, ph, indexing="ij")
+        dirs = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
+        r0 = np.asarray(self.base(dirs), float)
+        need = r0 < self.far_m
+        val = np.zeros(len(dirs))
+        steps = np.zeros(0)
+        if need.any():
+            wi = spot_directions(self.spot)
+            peaks = np.concatenate([dirs[np.argmax(r0)][None], wi[None] * np.array([[-1.0, -1, 1]]), wi[None]])
+            self._setup(float(r0.max()), peaks)
+            val[need], steps = self.roots(dirs[need], r0[need])
+        need = need.reshape(tt.shape)
+        v = np.maximum(val, 0.0).reshape(tt.shape)
+        d2 = np.zeros_like(v)
+        d2[1:-1] += np.maximum(-(v[:-2] + v[2:] - 2 * v[1:-1]), 0.0)  # along theta
+        vp = np.concatenate([v[:, -2:-1], v, v[:, 1:2]], axis=1)  # phi wraps (first and last columns coincide)
+        d2 += np.maximum(-(vp[:, :-2] + vp[:, 2:] - 2 * v), 0.0)
+        self._grid = (th, ph, v, d2 / 8.0, need)
+        dt = time.perf_counter() - t0
+        STATS.directions += int(need.sum())
+        STATS.seconds += dt
+        self.info = {"directions_integrated": int(need.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
+                     "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL, "seconds": dt}
+
+    def envelope(self, wo):
+        """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in
+        cells none of whose nodes needed it)."""
+        if self._grid is None:
+            self._build()
+        th, ph, v, marg, need = self._grid
+        t = np.arccos(np.clip(wo[:, 2] / np.linalg.norm(wo, axis=1), -1.0, 1.0))
+        p = np.arctan2(wo[:, 1], wo[:, 0])
+        i = np.clip(np.searchsorted(th, t, side="right") - 1, 0, len(th) - 2)
+        j = np.clip(np.searchsorted(ph, p, side="right") - 1, 0, len(ph) - 2)
+        corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
+        top = np.max([v[a, b] for a, b in corners], axis=0)
+        m = np.max([marg[a, b] for a, b in corners], axis=0)
+        any_need = np.any([need[a, b] for a, b in corners], axis=0)
+        return np.where(any_need & (top > 0), top + m, 0.0)
+
+    def __call__(self, wo):
+        wo = np.asarray(wo, float)
+        r0 = np.asarray(self.base(wo), float)
+        return np.maximum(r0, self.envelope(wo))
+
+
+def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):
+    """The lobe function of ``spot`` with the near field integrated (module notes), or
+    ``base`` for a spot built without its triangles. Cached on the spot per (MPE,
+    attenuation, gain, states): the static and dynamic lobes, the outlines and the
+    renders share one grid."""
+    if spot.patches is None or not len(spot.points) or not spot.total_power_w > 0:
+        return base
+    key = (float(mpe_w_m2), float(mu), float(gain), None if states is None else np.asarray(states, float).tobytes())
+    cache = spot.__dict__.setdefault("_near_lobes", {})
+    if key not in cache:
+        cache[key] = NearLobeFn(spot, base, mpe_w_m2, mu, gain, states)
+    return cache[key]
