@@ -174,7 +174,9 @@ class NearLobeFn:
         """Farthest roots [m] beyond ``r_floor`` (N,) along mean-frame directions (N, 3),
         each with the scan's resolution added (0 where no scan sample beyond ``r_floor``
         is hazardous), and the steps [m] (module notes)."""
-        w_loc = np.asarray(w_loc, float)
+        w_loc = np.asarray(w_loc, float).reshape(-1, 3)
+        if not len(w_loc):
+            return np.zeros(0), np.zeros(0)
         r_hi = self._scan_start(w_loc)
         h = np.minimum(self.smallest_m, r_hi / SCAN_MIN_STEPS)
         w = w_loc @ self.frame
@@ -217,7 +219,7 @@ class NearLobeFn:
             self._setup(float(r0.max()), peaks)
             val[need], steps = self.roots(dirs[need], r0[need])
         need = need.reshape(tt.shape)
-        v = np.maximum(val, 0.0).reshape(tt.shape)
+        v = np.maximum(val, r0).reshape(tt.shape)  # the lobe at the nodes: never below the point form
         d2 = np.zeros_like(v)
         d2[1:-1] += np.maximum(-(v[:-2] + v[2:] - 2 * v[1:-1]), 0.0)  # along theta
         vp = np.concatenate([v[:, -2:-1], v, v[:, 1:2]], axis=1)  # phi wraps (first and last columns coincide)
