@@ -56,6 +56,8 @@ class Lobe:
     evaluations: int
     cells: int
     normals: int = 1  # surface normals each direction's range is the max over (a slumping spot's union)
+    near_field: dict | None = None  # hazard.near_field_lobe.NearLobeFn.info: the directions integrated near the spot
+
 
     def summary(self) -> dict:
         return {
@@ -65,6 +67,7 @@ class Lobe:
             "volume_error_m3": self.volume_error_m3,
             "cells": self.cells,
             "evaluations": self.evaluations,
+            "near_field": self.near_field,
         }
 
 
@@ -355,6 +358,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         evaluations=evals + n_polish + 2,
         cells=len(cells),
         normals=getattr(fn, "samples", 1),
+        near_field=getattr(fn, "info", None),
     )
 
 

@@ -51,9 +51,10 @@ import numpy as np
 from .engine import FAR_FIELD_SPOT_SIZES, _near_field, spot_directions
 from .near_field import NEAR_FIELD_RTOL
 
-__all__ = ["NearLobeFn", "near_lobe_fn", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "SCAN_MIN_STEPS",
+__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "SCAN_MIN_STEPS",
            "STATS"]
 
+ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
 THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 89.5)  # polar rows of the grid [deg]
 GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
 ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
@@ -258,7 +259,7 @@ def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):
     ``base`` for a spot built without its triangles. Cached on the spot per (MPE,
     attenuation, gain, states): the static and dynamic lobes, the outlines and the
     renders share one grid."""
-    if spot.patches is None or not len(spot.points) or not spot.total_power_w > 0:
+    if not ENABLED or spot.patches is None or not len(spot.points) or not spot.total_power_w > 0:
         return base
     key = (float(mpe_w_m2), float(mu), float(gain), None if states is None else np.asarray(states, float).tobytes())
     cache = spot.__dict__.setdefault("_near_lobes", {})
