@@ -10,35 +10,45 @@ beyond ``FAR_FIELD_SPOT_SIZES`` spot sizes and the exact integral over the spot
 grazing incidence has an elongated zone that the point form misses (a plate at 89.9 deg:
 0.52 m from the point form where the integral reaches 6.3 m, 3 deg above the plate).
 
-What is computed. On a fixed grid of directions (``GRID_THETA_DEG`` x ``GRID_PHI_DEG``
-over the hemisphere of the spot's mean frame), every node whose point-form range is
-within ``FAR_FIELD_SPOT_SIZES`` spot sizes gets the farthest root of
-``E(c + r w) = MPE`` for ``r`` up to ``r_hi``: the engine's near/far switch
-(``FAR_FIELD_SPOT_SIZES`` spot sizes) or, nearer, where the ray leaves the spot's box
-widened by ``reach`` (the point form's largest range over the hemisphere: ``E <= I_max
-exp(-mu d) / d^2`` with ``d`` the distance to the spot, so nothing beyond is hazardous).
-The ray is scanned inward from ``r_hi`` in steps ``h`` no larger than the spot's
-smallest extent (and ``r_hi / SCAN_MIN_STEPS``); the first hazardous sample brackets the
-farthest root, bisected to ``ROOT_RTOL``; the reported range is the bracket's far end
-plus ``h`` (the scan's resolution, added: a hazard between two samples beyond it is
-covered to one step). A direction between grid nodes takes the largest of its cell's four
-nodes plus the curvature margin (the largest second difference of the nodes about the
-cell / 8 along each axis: exact for a quadratic), and never less than its own point form.
+What is computed. On a fixed grid of directions (polar rows ``THETA_ROWS_DEG`` x
+azimuths every ``GRID_PHI_DEG`` in the spot's mean frame), every node whose point-form
+range ``r0`` is within ``FAR_FIELD_SPOT_SIZES`` spot sizes gets the farthest root of
+``E(c + r w) = MPE`` beyond ``r0``, with ``E`` the engine's near-field integral
+(:func:`hazard.engine._near_field`: the observers' own computation, each sample a point
+source only where its error is proven below 1 % of ``P / d^2``, its triangles integrated
+elsewhere). The ray is scanned inward from ``r_start`` in steps ``h`` no larger than the
+spot's smallest extent (twice its RMS width across) nor ``r_start / SCAN_MIN_STEPS``; the
+first hazardous sample brackets the farthest root, bisected to ``ROOT_RTOL`` (or ``h /
+8``); the node's range is the bracket's far end plus ``h`` (the scan's resolution,
+added), or ``r0`` where no sample beyond ``r0`` is hazardous; the last sample is
+``r0 (1 + FLOOR_RTOL)`` (the point form is kept where the integral's root lies within
+0.5 % beyond it: the integral's own 1 % tolerance in irradiance).
 
-The integral. ``E(x) = sum_k w_k f_r cos(theta_r) exp(-mu R_k) / R_k^2`` over a fixed
-node set: the spot's triangles (:class:`hazard.near_field.SpotPatches`) split along
-their longest edges to radius ``a <= smallest extent / 2`` (at most ``MAX_TRIANGLES``
-triangles: ``a`` grows for a longer spot), each with the 7-point degree-5 rule, accurate
-to 4e-5 of a triangle's ``P / d^2`` from ``RULE_REACH`` triangle radii
-(:mod:`hazard.near_field`). Points nearer than that to any triangle are counted as
-hazardous (the lobe reaches at least ``RULE_REACH a`` beyond the spot's surface along the
-ray: conservative, never short). A dynamic material takes per node the maximum over the
-history's path before the sum (an upper bound of the maximum over time of the sum).
+``r_start``: nothing beyond it can reach the MPE. Every part of the spot is at least
+``r - extent`` from ``c + r w`` and seen from it within a cone of half-angle ``asin(extent
+/ r)`` (plus the samples' frame tilt) about ``w``, so ``E <= I_cone exp(-mu (r -
+extent)) / (r - extent)^2`` with ``I_cone`` the point form's largest intensity in that
+cone (sampled on ``CONE_RINGS`` x ``CONE_AZIMUTHS`` directions plus the point form's
+peaks inside it): hazard needs ``r <= extent + R_cone(r)``, bisected. ``r_start`` is
+also at most where the ray leaves the spot's box widened by the point form's largest
+range, and at most the engine's near/far switch (beyond it observers get the point form).
 
-Not covered (the lobe keeps the point form and the report says so): a slumping spot
-(its union of tilted normals), a spot built without its triangles. The quadrature's
-proof holds for the Lambertian kernel; a glossy lobe narrower than a triangle seen from
-the point is resolved only as far as the rule resolves it (as for observers).
+Between nodes a direction takes the largest value of its cell's four nodes (each never
+below its point form) plus a curvature margin (the largest negative second difference
+of the nodes about the cell / 8 along each axis: a quadratic's rise between two equally
+spaced nodes), and never less
+than its own point form; nodes whose point form reaches past the near/far switch enter
+it capped there, and the envelope is capped at the switch plus the spot's smallest extent
+(no near-field root lies beyond). Directions beyond the last polar row (within 0.5 deg of the
+spot's plane) take that row's cell.
+
+Not covered (the lobe keeps the point form and the report says so where it matters): a
+slumping spot (its union of tilted normals), a spot built without its triangles. With a
+history the integral is the largest over the path's states (``path_states``: for a
+two-state history its states in time order, not the continuous path between them). The
+cone's sampling and the envelope between nodes are not proven for a lobe narrower than
+their steps (as the lobe's own grid; measured against the section-10 integral in
+``tests/validation/test_near_field_lobes.py``).
 """
 
 from __future__ import annotations
@@ -49,19 +59,19 @@ import time
 import numpy as np
 
 from .engine import FAR_FIELD_SPOT_SIZES, _near_field, spot_directions
-from .near_field import NEAR_FIELD_RTOL
 
-__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "SCAN_MIN_STEPS",
-           "STATS"]
+__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS",
+           "STATS", "describe_since"]
 
 ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
 THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 89.5)  # polar rows of the grid [deg]
 GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
 ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
-SCAN_MIN_STEPS = 8
+FLOOR_RTOL = 0.005  # the point form is kept where the integral's root lies within this of it (its 1 % in irradiance)
+SCAN_MIN_STEPS = 8  # the scan's step is at most r_start / this (and at most the spot's smallest extent)
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
-CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius  # the scan's step is at most r_hi / this (and at most the spot's smallest extent)
+CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
 
 
 class _Stats:
@@ -76,6 +86,17 @@ class _Stats:
 
 
 STATS = _Stats()
+
+
+def describe_since(before: dict) -> str:
+    """One line for the keepout stage's detail: the near-field lobe work since ``before``
+    (a :meth:`_Stats.snapshot`)."""
+    now = STATS.snapshot()
+    n = now["directions"] - before["directions"]
+    if not n:
+        return "near-field lobe: no direction's point-form range within the near field"
+    return (f"near-field lobe: {n} grid direction(s) within {FAR_FIELD_SPOT_SIZES:g} spot sizes integrated "
+            f"({now['points'] - before['points']} points, {now['seconds'] - before['seconds']:.3g} s)")
 
 
 def _smallest_extent_m(spot, frame) -> float:
@@ -115,6 +136,13 @@ class NearLobeFn:
         rot = np.einsum("nij,kj->nik", np.asarray(sp.frames, float), self.frame)  # each sample's frame in the mean one
         self.tilt_rad = float(np.arccos(np.clip((np.trace(rot, axis1=1, axis2=2).min() - 1) / 2, -1.0, 1.0)))
         self.peaks, self.r_peaks = peaks, np.asarray(self.base(peaks), float)
+
+    def prepare(self, dirs, r0):
+        """Set up the bounds from the point form's ranges ``r0`` on directions ``dirs``
+        (mean frame): its largest range and peaks (with the mirror and retro directions)."""
+        wi = spot_directions(self.spot)
+        peaks = np.concatenate([dirs[np.argmax(r0)][None], wi[None] * np.array([[-1.0, -1, 1]]), wi[None]])
+        self._setup(float(r0.max()), peaks)
 
     def hazardous(self, pts):
         """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
@@ -182,15 +210,14 @@ class NearLobeFn:
         h = np.minimum(self.smallest_m, r_hi / SCAN_MIN_STEPS)
         w = w_loc @ self.frame
         found = np.full(len(w), -1.0)
+        floor = r_floor * (1 + FLOOR_RTOL)
         k = 0
-        live = np.flatnonzero(r_hi > r_floor)
+        live = np.flatnonzero(r_hi > floor)
         while len(live):
-            r = r_hi[live] - k * h[live]
-            keep = r > r_floor[live]
-            live, r = live[keep], r[keep]
+            r = np.maximum(r_hi[live] - k * h[live], floor[live])  # the last sample: just beyond the point form
             hot = self.hazardous(self.c + r[:, None] * w[live])
             found[live[hot]] = r[hot]
-            live = live[~hot]
+            live = live[~hot & (r > floor[live])]
             k += 1
         lo = np.maximum(found, 0.0)
         hi = np.minimum(lo + h, r_hi)
@@ -215,12 +242,12 @@ class NearLobeFn:
         val = np.zeros(len(dirs))
         steps = np.zeros(0)
         if need.any():
-            wi = spot_directions(self.spot)
-            peaks = np.concatenate([dirs[np.argmax(r0)][None], wi[None] * np.array([[-1.0, -1, 1]]), wi[None]])
-            self._setup(float(r0.max()), peaks)
+            self.prepare(dirs, r0)
             val[need], steps = self.roots(dirs[need], r0[need])
+        self.cap_m = self.far_m + getattr(self, "smallest_m", 0.0)  # no near-field root lies beyond (scan start + step)
+        # the lobe at the nodes, never below the point form (capped where the point form is far: the envelope covers the near field)
+        v = np.where(need, np.maximum(val, r0), np.minimum(r0, self.cap_m)).reshape(tt.shape)
         need = need.reshape(tt.shape)
-        v = np.maximum(val, r0).reshape(tt.shape)  # the lobe at the nodes: never below the point form
         d2 = np.zeros_like(v)
         d2[1:-1] += np.maximum(-(v[:-2] + v[2:] - 2 * v[1:-1]), 0.0)  # along theta
         vp = np.concatenate([v[:, -2:-1], v, v[:, 1:2]], axis=1)  # phi wraps (first and last columns coincide)
@@ -246,12 +273,21 @@ class NearLobeFn:
         top = np.max([v[a, b] for a, b in corners], axis=0)
         m = np.max([marg[a, b] for a, b in corners], axis=0)
         any_need = np.any([need[a, b] for a, b in corners], axis=0)
-        return np.where(any_need & (top > 0), top + m, 0.0)
+        return np.where(any_need & (top > 0), np.minimum(top + m, self.cap_m), 0.0)
 
     def __call__(self, wo):
         wo = np.asarray(wo, float)
         r0 = np.asarray(self.base(wo), float)
         return np.maximum(r0, self.envelope(wo))
+
+    def max_range(self, wo) -> float:
+        """The largest range [m] over directions ``wo`` (N, 3), without integrating where
+        the point form's largest range already reaches past every near-field value (the
+        near/far switch plus the spot's smallest extent, the largest scan step)."""
+        r0 = np.asarray(self.base(np.asarray(wo, float)), float)
+        if self._grid is None and r0.max() >= self.far_m + _smallest_extent_m(self.spot, self.frame):
+            return float(r0.max())
+        return float(self(wo).max())
 
 
 def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):

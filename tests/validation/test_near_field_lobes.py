@@ -16,7 +16,8 @@ grid nodes the largest of the cell's nodes plus a curvature margin. Checks:
 
 - never short, on and off the grid: the lobe >= the reference root (to 1e-6 and the
   engine's 1 % near-field tolerance, i.e. 0.5 % in range);
-- at grid nodes (the node's own value): no longer than the larger of the point form and the reference root plus
+- at grid nodes and, by default, along random directions (the node computation
+  there, fast): no longer than the larger of the point form and the reference root plus
   the stated step and bisection tolerance (and the integral's 1 % tolerance);
 - a grazing spot's lobe is elongated: along the spot, low down, it reaches the
   integral's root far beyond the centroid's point form.
@@ -112,7 +113,11 @@ def _plate_spot(inc_deg, power_w, half_len_m, half_wid_m):
     text = ref.scene_text(power=power_w, a=A, phi=PHI, position=np.array([0.0, -R1, 0.0]), aim=np.zeros(3), targets=[plate],
                           observers=[("o", np.array([0.0, 0.0, 50.0]), None)],
                           analysis="direction_grid_deg = 10.0\nrefine_levels = 0\n")
-    res = hazard.analyze(scenes.loads(text))
+    enabled, near_field_lobe.ENABLED = near_field_lobe.ENABLED, False  # the test makes its own lobe function
+    try:
+        res = hazard.analyze(scenes.loads(text))
+    finally:
+        near_field_lobe.ENABLED = enabled
     return res.spots[0], res.mpe_w_m2, np.asarray(res.scene.offset_m, float)
 
 
@@ -129,18 +134,28 @@ def _grid_dir(theta_deg, phi_deg):
     return np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
 
 
-def _check(inc_deg, power_w, world_dirs, grid_dirs=(), half_len_m=None, half_wid_m=0.5):
+def _check(inc_deg, power_w, world_dirs, grid_dirs=(), half_len_m=None, half_wid_m=0.5, roots_only=False):
     """The lobe against the reference root along world directions (never short) and
-    along grid nodes (never short, and within the stated tolerance)."""
+    along grid nodes (never short, and within the stated tolerance). ``roots_only``: the
+    world directions too get the node computation (the integral's root along them, no
+    grid: fast)."""
     half_len_m = 4 * W / math.cos(math.radians(inc_deg)) if half_len_m is None else half_len_m
     spot, mpe, off = _plate_spot(inc_deg, power_w, half_len_m, half_wid_m)
     fn = _range_fn(spot, mpe, 0.0, 1.0, None)
     assert isinstance(fn, near_field_lobe.NearLobeFn)
     frame = spot.mean_frame
-    on_grid = np.array([_grid_dir(*g) for g in grid_dirs]).reshape(-1, 3)
+    if roots_only:
+        grid_dirs = [tuple(x) for x in grid_dirs]
+        on_grid = np.concatenate([np.array([_grid_dir(*g) for g in grid_dirs]).reshape(-1, 3),
+                                  np.asarray(world_dirs, float).reshape(-1, 3) @ frame.T])
+        world_dirs = np.zeros((0, 3))
+        probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
+        fn.prepare(probe, fn.base(probe))
+    else:
+        on_grid = np.array([_grid_dir(*g) for g in grid_dirs]).reshape(-1, 3)
     w = np.concatenate([np.asarray(world_dirs, float).reshape(-1, 3), on_grid @ frame])
-    reported = fn(w @ frame.T)  # the lobe (grid envelope off the nodes)
     point = fn.base(w @ frame.T)
+    reported = point.copy() if roots_only else fn(w @ frame.T)  # the lobe (grid envelope off the nodes)
     g = slice(len(w) - len(on_grid), None)
     node_root, step = fn.roots(on_grid, point[g])  # a node's own value: the integral's root + the scan step
     reported[g] = np.maximum(point[g], node_root)
@@ -159,11 +174,18 @@ GRID = [(0.0, 0.0), (45.0, 0.0), (70.0, 90.0), (85.0, 180.0), (89.5, 0.0), (89.5
 
 
 def test_plate_at_85_deg():
-    """85 deg, 1 kW: the lobe's spot is 0.29 m long (1/e); on the grid the lobe is the
-    integral's root within its stated step; off it, never short."""
+    """85 deg, 200 W: the spot is 0.29 m long (1/e); at grid nodes the lobe is the
+    integral's root within its stated step; off them, never short."""
     n, b, t = _frame(85.0)
-    dirs = [_world_dir(n, b, t, el, az) for el, az in [(20.0, 180.0), (3.0, 0.0), (3.0, 90.0)]]
-    _check(85.0, 1000.0, dirs, GRID[::2])
+    _check(85.0, 200.0, [_world_dir(n, b, t, 3.0, 0.0), _world_dir(n, b, t, 20.0, 180.0)], [GRID[1], GRID[4]], roots_only=True)
+
+
+@pytest.mark.slow
+def test_plate_at_85_deg_more_directions():
+    """85 deg, 1 kW: more directions on and off the grid."""
+    n, b, t = _frame(85.0)
+    dirs = [_world_dir(n, b, t, el, az) for el, az in [(90.0, 0.0), (20.0, 180.0), (3.0, 0.0), (3.0, 90.0)]]
+    _check(85.0, 1000.0, dirs, GRID)
 
 
 @pytest.mark.slow
@@ -180,6 +202,17 @@ def test_plate_at_89_9_deg_is_elongated():
 @FEW
 @given(inc=st.floats(60.0, 89.9), power=ref.log_uniform(300.0, 3000.0), el=st.floats(3.0, 90.0), az=st.floats(-180.0, 180.0))
 def test_random_incidence_power_and_direction(inc, power, el, az):
+    """The node computation (the integral's farthest root plus the scan step) along a
+    random direction: never short, no longer than the stated tolerance."""
+    n, b, t = _frame(inc)
+    _check(inc, power, [_world_dir(n, b, t, el, az)], roots_only=True)
+
+
+@pytest.mark.slow
+@settings(ref.SLOW, max_examples=6)
+@given(inc=st.floats(60.0, 89.9), power=ref.log_uniform(300.0, 3000.0), el=st.floats(3.0, 90.0), az=st.floats(-180.0, 180.0))
+def test_random_incidence_power_and_direction_whole_lobe(inc, power, el, az):
+    """The whole lobe (grid envelope) along a random direction: never short."""
     n, b, t = _frame(inc)
     _check(inc, power, [_world_dir(n, b, t, el, az)])
 
@@ -192,3 +225,37 @@ def test_random_incidence_power_and_direction(inc, power, el, az):
 def test_random_incidence_direction_clip_and_node_many(inc, power, el, az, clip, node):
     n, b, t = _frame(inc)
     _check(inc, power, [_world_dir(n, b, t, el, az)], [node], half_len_m=clip * W / math.cos(math.radians(inc)))
+
+
+# ------------------------------------------------------------------ grazing terrain (the 100 kW ground spot)
+@pytest.mark.slow
+def test_grazing_terrain():
+    """The ground spot of test_near_field_spot (100 kW at 89.91 deg, l = 16.7 m): the lobe
+    never short of the integral's farthest root (coded there, Gauss-Legendre over the
+    ground) along and across the spot, and the eye-height points along the spot that the
+    integral finds hazardous (before: missed by the keep-out 33 m along it) lie inside it."""
+    from .test_near_field_spot import EYE, GY, _ground_reference, _ground_scene
+
+    res = hazard.analyze(_ground_scene(8.0, 40.0, [np.array([0.0, GY, 2.0])]))
+    spot = next(s for s in res.spots if s.target.name == "terrain")
+    mpe, off = res.mpe_w_m2, np.asarray(res.scene.offset_m, float)
+    fn = _range_fn(spot, mpe, 0.0, 1.0, None)
+    assert isinstance(fn, near_field_lobe.NearLobeFn)
+    c = spot.centroid + off
+    frame = spot.mean_frame
+    dirs = [(60.0, 90.0), (20.0, 90.0), (5.0, 90.0), (5.0, -90.0), (10.0, 0.0)]  # azimuth from +x: 90 deg is along the spot
+    w = np.array([[math.cos(math.radians(e)) * math.cos(math.radians(a)), math.cos(math.radians(e)) * math.sin(math.radians(a)),
+                   math.sin(math.radians(e))] for e, a in dirs])
+    reported = fn(w @ frame.T)
+    for k in range(len(w)):
+        rs = np.linspace(0.05, 1.5 * reported[k] + 1, 400)
+        hot = np.flatnonzero(_ground_reference(c + rs[:, None] * w[k]) >= mpe)
+        assert not len(hot) or hot[-1] < len(rs) - 1
+        root = rs[hot[-1] + 1] if len(hot) else 0.0  # the scan's far end: >= the root
+        assert reported[k] >= root - (rs[1] - rs[0]), f"short along {dirs[k]}: {reported[k]} < {root}"
+    along = np.array([[0.0, GY + d, EYE] for d in (-33.0, -20.0, 20.0, 33.0)])
+    want = _ground_reference(along) / mpe
+    v = along - c
+    dist = np.linalg.norm(v, axis=1)
+    inside = dist <= fn((v / dist[:, None]) @ frame.T)
+    assert np.all(inside[want >= 1.0]), (want, dist, inside)
