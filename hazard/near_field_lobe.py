@@ -54,7 +54,9 @@ their steps (as the lobe's own grid; measured against the section-10 integral in
 from __future__ import annotations
 
 import math
+import threading
 import time
+import weakref
 
 import numpy as np
 
@@ -64,7 +66,7 @@ __all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_
            "STATS", "describe_since"]
 
 ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
-THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 89.5)  # polar rows of the grid [deg]
+THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 87.5, 89.0, 89.5)  # polar rows of the grid [deg]
 GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
 ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
 FLOOR_RTOL = 0.005  # the point form is kept where the integral's root lies within this of it (its 1 % in irradiance)
@@ -298,7 +300,15 @@ def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):
     if not ENABLED or spot.patches is None or not len(spot.points) or not spot.total_power_w > 0:
         return base
     key = (float(mpe_w_m2), float(mu), float(gain), None if states is None else np.asarray(states, float).tobytes())
-    cache = spot.__dict__.setdefault("_near_lobes", {})
-    if key not in cache:
-        cache[key] = NearLobeFn(spot, base, mpe_w_m2, mu, gain, states)
-    return cache[key]
+    with _CACHE_LOCK:
+        ref, cache = _CACHE.get(id(spot), (None, None))
+        if ref is None or ref() is not spot:  # not on the spot itself: a Spot stays picklable
+            cache = {}
+            _CACHE[id(spot)] = (weakref.ref(spot, lambda _, k=id(spot): _CACHE.pop(k, None)), cache)
+        if key not in cache:
+            cache[key] = NearLobeFn(spot, base, mpe_w_m2, mu, gain, states)
+        return cache[key]
+
+
+_CACHE: dict = {}  # id(spot) -> (weak reference to it, {key: NearLobeFn})
+_CACHE_LOCK = threading.Lock()

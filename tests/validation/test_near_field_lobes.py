@@ -45,7 +45,7 @@ RHO = 0.8
 PANEL_M = 0.05  # the reference's Gauss-Legendre panels along the spot: at most this long on the plate (40 to 2000)
 RANGE_TOL = 0.005  # the integral's 1 % tolerance (hazard.near_field.NEAR_FIELD_RTOL) in range: half of it
 FEW = settings(ref.FAST, max_examples=2)
-MANY = settings(ref.SLOW, max_examples=25)
+MANY = settings(ref.SLOW, max_examples=20)
 
 
 def _frame(inc_deg):
@@ -224,7 +224,7 @@ def test_random_incidence_power_and_direction_whole_lobe(inc, power, el, az):
        node=st.tuples(st.sampled_from(near_field_lobe.THETA_ROWS_DEG), st.sampled_from([0.0, 30.0, 90.0, 180.0, -120.0])))
 def test_random_incidence_direction_clip_and_node_many(inc, power, el, az, clip, node):
     n, b, t = _frame(inc)
-    _check(inc, power, [_world_dir(n, b, t, el, az)], [node], half_len_m=clip * W / math.cos(math.radians(inc)))
+    _check(inc, power, [_world_dir(n, b, t, el, az)], [node], half_len_m=clip * W / math.cos(math.radians(inc)), roots_only=True)
 
 
 # ------------------------------------------------------------------ grazing terrain (the 100 kW ground spot)
