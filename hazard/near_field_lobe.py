@@ -24,6 +24,13 @@ added), or ``r0`` where no sample beyond ``r0`` is hazardous; the last sample is
 ``r0 (1 + FLOOR_RTOL)`` (the point form is kept where the integral's root lies within
 0.5 % beyond it: the integral's own 1 % tolerance in irradiance).
 
+Each sample is first tested against a cheap upper bound (the spot's samples as point
+sources plus their Taylor remainders, infinite within a sample's radius): only where it
+reaches the MPE is the integral evaluated. The integral's work per lobe function is
+capped at ``MAX_EVALUATIONS`` kernel evaluations (deterministic); past it the bound alone
+decides (never short for a Lambertian spot, looser: ``info["points_by_bound"]`` counts
+those points).
+
 ``r_start``: nothing beyond it can reach the MPE. Every part of the spot is at least
 ``r - extent`` from ``c + r w`` and seen from it within a cone of half-angle ``asin(extent
 / r)`` (plus the samples' frame tilt) about ``w``, so ``E <= I_cone exp(-mu (r -
@@ -60,9 +67,10 @@ import weakref
 
 import numpy as np
 
-from .engine import FAR_FIELD_SPOT_SIZES, _near_field, spot_directions
+from . import near_field
+from .engine import FAR_FIELD_SPOT_SIZES, _near_field, _to_local, projected_brdf, spot_directions
 
-__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS",
+__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
            "STATS", "describe_since"]
 
 ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
@@ -71,6 +79,7 @@ GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
 ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
 FLOOR_RTOL = 0.005  # the point form is kept where the integral's root lies within this of it (its 1 % in irradiance)
 SCAN_MIN_STEPS = 8  # the scan's step is at most r_start / this (and at most the spot's smallest extent)
+MAX_EVALUATIONS = 1_000_000  # kernel evaluations of the integral per lobe function; beyond, the samples' bound decides
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
@@ -127,6 +136,7 @@ class NearLobeFn:
         self.far_m = FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
         self._grid = None
         self.info = None
+        self.evaluations = self.bound_points = 0  # kernel evaluations of the integral; points the bound decided
 
     # -- the integral ------------------------------------------------------------------------
     def _setup(self, reach_m, peaks):
@@ -138,6 +148,13 @@ class NearLobeFn:
         rot = np.einsum("nij,kj->nik", np.asarray(sp.frames, float), self.frame)  # each sample's frame in the mean one
         self.tilt_rad = float(np.arccos(np.clip((np.trace(rot, axis1=1, axis2=2).min() - 1) / 2, -1.0, 1.0)))
         self.peaks, self.r_peaks = peaks, np.asarray(self.base(peaks), float)
+        self.pts, self.p_w = np.asarray(sp.points, float), np.asarray(sp.power_w, float)
+        self.a_m = np.asarray(sp.patches.radius_m, float)
+        spread = np.zeros(len(self.pts)) if sp.spread_m2 is None else np.asarray(sp.spread_m2, float)
+        self.var_m2 = np.minimum(spread, self.a_m ** 2)
+        self.wi = _to_local(sp.frames, -sp.incoming)
+        k_max = reach_m ** 2 * math.exp(min(self.mu * reach_m, 700.0))  # the largest intensity / MPE [m^2]
+        self.k_i = k_max * self.p_w / max(float(self.p_w.sum()), 1e-300)
 
     def prepare(self, dirs, r0):
         """Set up the bounds from the point form's ranges ``r0`` on directions ``dirs``
@@ -146,13 +163,42 @@ class NearLobeFn:
         peaks = np.concatenate([dirs[np.argmax(r0)][None], wi[None] * np.array([[-1.0, -1, 1]]), wi[None]])
         self._setup(float(r0.max()), peaks)
 
+    def _upper(self, pts):
+        """An upper bound of the integral / MPE at world points ``pts`` (M, 3): the samples'
+        point forms plus their Taylor remainders ``k_i 12 sigma_i^2 / (d_i - a_i)^4``
+        (the Lambertian kernel's, as :func:`hazard.near_field.point_form_ok`; ``k_i`` the
+        sample's share of the point form's largest intensity over the MPE), infinite
+        within a sample's radius; with a history the path's maximum per sample."""
+        sp = self.spot
+        v = pts[:, None, :] - self.pts[None]
+        d = np.maximum(np.sqrt((v * v).sum(-1)), 1e-300)  # (M, n)
+        wo = np.einsum("nij,mnj->mni", sp.frames, v / d[..., None]).reshape(-1, 3)
+        wi = np.broadcast_to(self.wi[None], (len(pts),) + self.wi.shape).reshape(-1, 3)
+        scale = (self.p_w[None] * self.gain * np.exp(-self.mu * d) / (d * d) / self.mpe).ravel()
+        f = projected_brdf(sp.material, wi, wo, self.states, scale, reduce=None if self.states is None else "path-max")
+        gap = d - self.a_m[None]
+        with np.errstate(divide="ignore"):
+            err = np.where(gap > 0, 12.0 * self.k_i * self.var_m2 / np.where(gap > 0, gap, 1.0) ** 4, np.inf)
+        return f.reshape(d.shape).sum(axis=1) + err.sum(axis=1)
+
     def hazardous(self, pts):
         """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
         the observers' own) at world points ``pts`` (M, 3) reaches the MPE (with a
-        history: at some state of its path)."""
-        e = _near_field(self.spot, pts, np.full(len(pts), self.gain), self.mu, self.states)
-        STATS.points += len(pts)
-        return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
+        history: at some state of its path); integrated only where the samples' bound
+        (:meth:`_upper`) reaches it."""
+        out = self._upper(pts) >= 1.0
+        cand = np.flatnonzero(out)
+        if not len(cand):
+            return out
+        if self.evaluations >= MAX_EVALUATIONS:  # the budget is spent: the bound decides (never short, looser)
+            self.bound_points += len(cand)
+            return out
+        before = near_field.STATS.snapshot()
+        e = _near_field(self.spot, pts[cand], np.full(len(cand), self.gain), self.mu, self.states)
+        self.evaluations += near_field.stats_since(before)["evaluations"]
+        out[cand] = (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
+        STATS.points += len(cand)
+        return out
 
     # -- roots along rays ----------------------------------------------------------------------
     def _r_hi(self, w_loc):
@@ -259,7 +305,8 @@ class NearLobeFn:
         STATS.directions += int(need.sum())
         STATS.seconds += dt
         self.info = {"directions_integrated": int(need.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
-                     "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL, "seconds": dt}
+                     "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
+                     "kernel_evaluations": int(self.evaluations), "points_by_bound": int(self.bound_points), "seconds": dt}
 
     def envelope(self, wo):
         """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in
