@@ -351,7 +351,7 @@ def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):
         ref, cache = _CACHE.get(id(spot), (None, None))
         if ref is None or ref() is not spot:  # not on the spot itself: a Spot stays picklable
             cache = {}
-            _CACHE[id(spot)] = (weakref.ref(spot, lambda _, k=id(spot): _CACHE.pop(k, None)), cache)
+            _CACHE[id(spot)] = (weakref.ref(spot, _forget(id(spot))), cache)
         if key not in cache:
             cache[key] = NearLobeFn(spot, base, mpe_w_m2, mu, gain, states)
         return cache[key]
@@ -359,3 +359,12 @@ def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):
 
 _CACHE: dict = {}  # id(spot) -> (weak reference to it, {key: NearLobeFn})
 _CACHE_LOCK = threading.Lock()
+
+
+def _forget(key):
+    """Callback of a spot's weak reference: drop its entry (only its own: an id is reused)."""
+    def drop(ref):
+        cache = _CACHE
+        if cache is not None and cache.get(key, (None,))[0] is ref:
+            cache.pop(key, None)
+    return drop
