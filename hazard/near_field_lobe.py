@@ -40,8 +40,9 @@ peaks inside it): hazard needs ``r <= extent + R_cone(r)``, bisected. ``r_start`
 also at most where the ray leaves the spot's box widened by the point form's largest
 range, and at most the engine's near/far switch (beyond it observers get the point form).
 
-Between nodes a direction takes the largest value of its cell's four nodes (each never
-below its point form) plus a curvature margin (the largest negative second difference
+In a cell none of whose four nodes the integral raised past the point form, a direction
+keeps its own point form. Elsewhere it takes the largest value of the cell's four nodes
+(each never below its point form) plus a curvature margin (the largest negative second difference
 of the nodes about the cell / 8 along each axis: a quadratic's rise between two equally
 spaced nodes), and never less
 than its own point form; nodes whose point form reaches past the near/far switch enter
@@ -295,25 +296,25 @@ class NearLobeFn:
         self.cap_m = self.far_m + getattr(self, "smallest_m", 0.0)  # no near-field root lies beyond (scan start + step)
         # the lobe at the nodes, never below the point form (capped where the point form is far: the envelope covers the near field)
         v = np.where(need, np.maximum(val, r0), np.minimum(r0, self.cap_m)).reshape(tt.shape)
-        need = need.reshape(tt.shape)
+        raised = (need & (val > r0)).reshape(tt.shape)  # nodes where the integral reaches past the point form
         d2 = np.zeros_like(v)
         d2[1:-1] += np.maximum(-(v[:-2] + v[2:] - 2 * v[1:-1]), 0.0)  # along theta
         vp = np.concatenate([v[:, -2:-1], v, v[:, 1:2]], axis=1)  # phi wraps (first and last columns coincide)
         d2 += np.maximum(-(vp[:, :-2] + vp[:, 2:] - 2 * v), 0.0)
-        self._grid = (th, ph, v, d2 / 8.0, need)
+        self._grid = (th, ph, v, d2 / 8.0, raised)
         dt = time.perf_counter() - t0
         STATS.directions += int(need.sum())
         STATS.seconds += dt
-        self.info = {"directions_integrated": int(need.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
+        self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
                      "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
                      "kernel_evaluations": int(self.evaluations), "points_by_bound": int(self.bound_points), "seconds": dt}
 
     def envelope(self, wo):
         """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in
-        cells none of whose nodes needed it)."""
+        cells none of whose nodes the integral raised past the point form)."""
         if self._grid is None:
             self._build()
-        th, ph, v, marg, need = self._grid
+        th, ph, v, marg, raised = self._grid
         t = np.arccos(np.clip(wo[:, 2] / np.linalg.norm(wo, axis=1), -1.0, 1.0))
         p = np.arctan2(wo[:, 1], wo[:, 0])
         i = np.clip(np.searchsorted(th, t, side="right") - 1, 0, len(th) - 2)
@@ -321,8 +322,8 @@ class NearLobeFn:
         corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
         top = np.max([v[a, b] for a, b in corners], axis=0)
         m = np.max([marg[a, b] for a, b in corners], axis=0)
-        any_need = np.any([need[a, b] for a, b in corners], axis=0)
-        return np.where(any_need & (top > 0), np.minimum(top + m, self.cap_m), 0.0)
+        any_raised = np.any([raised[a, b] for a, b in corners], axis=0)
+        return np.where(any_raised & (top > 0), np.minimum(top + m, self.cap_m), 0.0)
 
     def __call__(self, wo):
         wo = np.asarray(wo, float)

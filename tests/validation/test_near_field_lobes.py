@@ -17,7 +17,7 @@ grid nodes the largest of the cell's nodes plus a curvature margin. Checks:
 - never short, on and off the grid: the lobe >= the reference root (to 1e-6 and the
   engine's 1 % near-field tolerance, i.e. 0.5 % in range);
 - at grid nodes and, by default, along random directions (the node computation
-  there, fast): no longer than the larger of the point form and the reference root plus
+  there, fast, with the integral's work budget unspent): no longer than the larger of the point form and the reference root plus
   the stated step and bisection tolerance (and the integral's 1 % tolerance);
 - a grazing spot's lobe is elongated: along the spot, low down, it reaches the
   integral's root far beyond the centroid's point form.
@@ -145,19 +145,20 @@ def _check(inc_deg, power_w, world_dirs, grid_dirs=(), half_len_m=None, half_wid
     assert isinstance(fn, near_field_lobe.NearLobeFn)
     frame = spot.mean_frame
     if roots_only:
-        grid_dirs = [tuple(x) for x in grid_dirs]
         on_grid = np.concatenate([np.array([_grid_dir(*g) for g in grid_dirs]).reshape(-1, 3),
                                   np.asarray(world_dirs, float).reshape(-1, 3) @ frame.T])
         world_dirs = np.zeros((0, 3))
-        probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
-        fn.prepare(probe, fn.base(probe))
     else:
         on_grid = np.array([_grid_dir(*g) for g in grid_dirs]).reshape(-1, 3)
     w = np.concatenate([np.asarray(world_dirs, float).reshape(-1, 3), on_grid @ frame])
     point = fn.base(w @ frame.T)
     reported = point.copy() if roots_only else fn(w @ frame.T)  # the lobe (grid envelope off the nodes)
     g = slice(len(w) - len(on_grid), None)
-    node_root, step = fn.roots(on_grid, point[g])  # a node's own value: the integral's root + the scan step
+    fresh = near_field_lobe.NearLobeFn(spot, fn.base, mpe, 0.0, 1.0, None)  # the integral's budget unspent
+    probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
+    fresh.prepare(probe, fn.base(probe))
+    node_root, step = fresh.roots(on_grid, point[g])  # a node's own value: the integral's root + the scan step
+    assert fresh.bound_points == 0
     reported[g] = np.maximum(point[g], node_root)
     nodes = _nodes(inc_deg, power_w, half_len_m, half_wid_m)
     c = spot.centroid + off
@@ -182,7 +183,7 @@ def test_plate_at_85_deg():
 
 @pytest.mark.slow
 def test_plate_at_85_deg_more_directions():
-    """85 deg, 1 kW: more directions on and off the grid."""
+    """85 deg, 1 kW: more directions on and off the grid (the whole lobe: never short)."""
     n, b, t = _frame(85.0)
     dirs = [_world_dir(n, b, t, el, az) for el, az in [(90.0, 0.0), (20.0, 180.0), (3.0, 0.0), (3.0, 90.0)]]
     _check(85.0, 1000.0, dirs, GRID)
