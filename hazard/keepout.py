@@ -6,6 +6,11 @@ For a spot of power P and a direction w above it, the far-field radiant intensit
 ``R(w)`` over the hemisphere; its volume is ``integral R^3 / 3 d omega``. The dynamic
 lobe uses, per direction, the maximum intensity over the history's states.
 
+Near the spot (a direction whose point-form range is within ``FAR_FIELD_SPOT_SIZES``
+spot sizes) ``R(w)`` is the farthest root of the near-field integral over the spot
+instead (:mod:`hazard.near_field_lobe`: a spot stretched by grazing incidence has a lobe
+elongated along it), never below the point form.
+
 The direction grid (``grid_deg``) is refined only where the volume's error estimate
 asks: cells with the largest estimates, and those holding the mirror or retro
 direction, are split in four, up to ``refine_levels`` times, until the estimated
