@@ -22,7 +22,7 @@ import numpy as np
 
 from brdfmodels.parallel import default_threads, thread_limit
 
-from . import near_field
+from . import near_field, near_field_lobe
 from .aperture import limiting_aperture_m, observer_apertures
 from .nohd import group_gains
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
@@ -217,9 +217,11 @@ def _targets(scene, traced, states, exposure, mu, log):
     a, spots = scene.spec.analysis, traced.built.spots
     with log.run("keepout") as st:
         aids = lobes.scene_aids(scene)
+        before = near_field_lobe.STATS.snapshot()
         rows = lobes.target_results(spots, states, exposure.irradiance_w_m2, mu, a, aids)
         st.detail = (f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
-                     + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else ""))
+                     + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else "")
+                     + f"; {near_field_lobe.describe_since(before)}")
     return rows + beam_stage.unlit_targets(scene.targets, spots, traced.built.unreflected)
 
 

@@ -6,6 +6,11 @@ For a spot of power P and a direction w above it, the far-field radiant intensit
 ``R(w)`` over the hemisphere; its volume is ``integral R^3 / 3 d omega``. The dynamic
 lobe uses, per direction, the maximum intensity over the history's states.
 
+Near the spot (a direction whose point-form range is within ``FAR_FIELD_SPOT_SIZES``
+spot sizes) ``R(w)`` is the farthest root of the near-field integral over the spot
+instead (:mod:`hazard.near_field_lobe`: a spot stretched by grazing incidence has a lobe
+elongated along it), never below the point form.
+
 The direction grid (``grid_deg``) is refined only where the volume's error estimate
 asks: cells with the largest estimates, and those holding the mirror or retro
 direction, are split in four, up to ``refine_levels`` times, until the estimated
@@ -25,6 +30,7 @@ import brdfmodels
 from brdfmodels.parallel import block_rows, map_blocks
 
 from .engine import Spot, path_states, projected_brdf, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
+from .near_field_lobe import near_lobe_fn
 from .nohd import range_from_intensity
 from .progress import terminal_bar
 
@@ -57,6 +63,8 @@ class Lobe:
     normals: int = 1  # surface normals each direction's range is the max over (a slumping spot's union)
     peak_intensity_w_sr: float | None = None  # I = f_r cos(theta_r) P toward max_direction (None: a slumping spot's union)
     spot_power_w: float | None = None  # P: the spot's power times the viewer's gain [W]
+    near_field: dict | None = None  # hazard.near_field_lobe.NearLobeFn.info: the directions integrated near the spot
+
 
     def summary(self) -> dict:
         return {
@@ -66,6 +74,7 @@ class Lobe:
             "volume_error_m3": self.volume_error_m3,
             "cells": self.cells,
             "evaluations": self.evaluations,
+            "near_field": self.near_field,
         }
 
 
@@ -94,7 +103,7 @@ def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None):
         return range_from_intensity(intensity(wo), mpe_w_m2, mu)
 
     fn.intensity = intensity
-    return fn
+    return near_lobe_fn(spot, fn, mpe_w_m2, mu, gain, st)
 
 
 def _grid_cells(grid_deg):
@@ -347,7 +356,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         near = seeds_r >= POLISH_FRACTION * seeds_r.max()
         best_r, best_dir, n_polish = _polish_max(fn, seeds_w[near], math.radians(grid_deg) / 4)
     centre_t, centre_p = _centres(cells)
-    peak_i = getattr(fn, "intensity", None)
+    peak_i = getattr(fn, "intensity", None) or getattr(getattr(fn, "base", None), "intensity", None)  # a NearLobeFn wraps it
     peak_i = None if peak_i is None or best_r <= 0 else float(peak_i(best_dir[None, :])[0])
     return Lobe(
         theta_rad=centre_t,
@@ -364,6 +373,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         normals=getattr(fn, "samples", 1),
         peak_intensity_w_sr=peak_i,
         spot_power_w=float(spot.total_power_w * gain),
+        near_field=getattr(fn, "info", None),
     )
 
 

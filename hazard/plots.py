@@ -128,7 +128,8 @@ class NOHDTimeDisplay(_Display):
             if len(t) < 2:  # a static analysis has one time: the line spans the exposure window
                 t = np.array([t[0], t[0] + result.scene.spec.exposure.duration_s])
             return cls(t, np.full(len(t), r), r, spot.target.name, mpe, False)
-        per_t = np.array([_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, states[j:j + 1])(dirs).max() for j in range(len(states))])
+        fns = [_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, states[j:j + 1]) for j in range(len(states))]
+        per_t = np.array([fn.max_range(dirs) if hasattr(fn, "max_range") else fn(dirs).max() for fn in fns])  # near field only where it can matter
         return cls(result.times_s, per_t, float(per_t[0]), spot.target.name, mpe, True)
 
     def plot(self, ax=None):

@@ -51,7 +51,7 @@ class TargetResult:
     def to_dict(self):
         def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side
             return {"max_nohd_m": 0.0, "max_direction": None, "volume_m3": 0.0, "volume_error_m3": 0.0, "cells": 0,
-                    "evaluations": 0} if lb is None else lb.summary()
+                    "evaluations": 0, "near_field": None} if lb is None else lb.summary()
 
         return {
             "name": self.name,

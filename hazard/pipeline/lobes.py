@@ -162,23 +162,35 @@ def target_results(spots, states, mpe_w_m2, mu, analysis, aids=()) -> list:
 
 def near_field_lobe_notes(spots, rows) -> list[str]:
     """A note for each lit target whose keep-out lobe ends within ``FAR_FIELD_SPOT_SIZES``
-    spot sizes (the map's far-field rule): the lobe is the point-source form from the spot's centroid,
-    which near a spot stretched by grazing incidence is short along the spot (a plate at
-    89.9 deg: 0.52 m where the exact integral reaches 6.30 m, 3 deg above it); the
-    observers and the hazardous-ground footprint there use the exact integral over the
-    spot (:mod:`hazard.near_field`)."""
+    spot sizes (the map's far-field rule): where the lobe there is
+    the farthest root of the near-field integral over the spot (:mod:`hazard.near_field_lobe`),
+    how it was found and its tolerance; where it could not be (a slumping spot, a spot
+    without its triangles) and the lobe ends within that distance, that the lobe is the
+    point-source form from the spot's centroid, which is short along a spot stretched by
+    grazing incidence (a plate at 89.9 deg: 0.52 m where the integral reaches 6.30 m)."""
     by_name = {sp.target.name: sp for sp in spots}
     out = []
     for row in rows:
         sp, lobe = by_name.get(row.name), row.dynamic_lobe
         if sp is None or lobe is None or not lobe.max_range_m > 0:
             continue
-        size = sp.size_m  # 2 RMS radii: the map's own far-field rule (engine.FAR_FIELD_SPOT_SIZES)
-        if lobe.max_range_m < FAR_FIELD_SPOT_SIZES * size:
+        if not lobe.max_range_m < FAR_FIELD_SPOT_SIZES * sp.size_m:
+            continue  # the keep-out distance lies in the far field (report.json's lobe "near_field" says what was integrated)
+        nf = lobe.near_field  # a slumping spot's dynamic lobe (the union of tilted normals) has none
+        if nf and nf["directions_integrated"]:
             out.append(f"{row.name}: its keep-out lobe reaches {lobe.max_range_m:.4g} m from the spot's centroid, within "
-                       f"{FAR_FIELD_SPOT_SIZES:g} spot sizes ({size:.4g} m each, 2 RMS radii) of the spot: there the lobe is the "
-                       f"point-source form, which is short along a spot stretched by grazing incidence (a plate at "
-                       f"89.9 deg: 0.52 m where the exact integral reaches 6.30 m), so it is not a keep-out distance "
-                       f"there; the observers and the hazardous-ground footprint use the exact integral over the spot: "
-                       f"place observers along the spot to map the zone")
+                       f"{FAR_FIELD_SPOT_SIZES:g} spot sizes ({sp.size_m:.4g} m each) of the spot, where it is the farthest root "
+                       f"of the near-field integral over the spot (the observers' own, 1 % of P / d^2 per sample), from the "
+                       f"spot's centroid, on {nf['directions_integrated']} direction(s) of a grid (polar rows "
+                       f"{', '.join(f'{t:g}' for t in nf['grid_theta_deg'])} deg, azimuth step {nf['grid_phi_deg']:g} deg); "
+                       f"each scanned inward in steps up to {nf['scan_step_max_m']:.3g} m (added to the distance), between the "
+                       f"nodes the largest node of the cell plus a curvature margin, never below the point form")
+        else:
+            out.append(f"{row.name}: its keep-out lobe reaches {lobe.max_range_m:.4g} m from the spot's centroid, within "
+                       f"{FAR_FIELD_SPOT_SIZES:g} spot sizes ({sp.size_m:.4g} m each, 2 RMS radii) of the spot, and was not "
+                       f"integrated there ({'a slumping spot' if sp.slump is not None else 'no near-field triangles'}): it is the "
+                       f"point-source form, which is short along a spot stretched by grazing incidence (a plate at 89.9 deg: "
+                       f"0.52 m where the exact integral reaches 6.30 m), so it is not a keep-out distance there; the "
+                       f"observers and the hazardous-ground footprint use the exact integral over the spot: place observers "
+                       f"along the spot to map the zone")
     return out

@@ -267,9 +267,10 @@ def test_flat_terrain_under_a_grazing_100_kW_beam_fine_grid():
 
 @pytest.mark.parametrize("inc_deg, said", [(0.0, False), (89.9, True)])
 def test_a_lobe_inside_its_spots_near_field_is_said(inc_deg, said):
-    """A keep-out lobe ending within 20 spot sizes of its spot is the point-source form
-    there (short along a grazing spot): the report says so, naming the target; a spot
-    at normal incidence, whose lobe reaches far past it, gets no such note."""
+    """A keep-out lobe ending within 20 spot sizes of its spot is the near-field
+    integral's farthest root there (hazard.near_field_lobe; the point-source form alone
+    was short along a grazing spot): the report says so, naming the target; a spot at
+    normal incidence, whose lobe reaches far past it, gets no such note."""
     n, b, t = _frame(inc_deg)
     half_len = 4 * _spot_length(inc_deg)
     plate = dict(name="plate", shape="plate", center=np.zeros(3), normal=n, tangent=t, size=(1.0, 2 * half_len),
@@ -281,3 +282,4 @@ def test_a_lobe_inside_its_spots_near_field_is_said(inc_deg, said):
     notes = [x for x in res.notes if x.startswith("plate: its keep-out lobe")]
     assert row.dynamic_lobe.max_range_m > 0
     assert bool(notes) == said, (row.dynamic_lobe.max_range_m, res.notes)
+    assert all("farthest root of the near-field integral" in x for x in notes)

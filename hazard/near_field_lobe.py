@@ -1,0 +1,371 @@
+"""Keep-out lobe near an extended spot: the farthest root of the near-field integral per direction.
+
+The lobe (:mod:`hazard.keepout`) is ``R(w)``, the distance from the spot's **power
+centroid** ``c`` (the origin of every lobe distance: lobes, outlines, renders, the
+terrain's keep-out distance) along ``w`` to the farthest point where the reflected
+irradiance reaches the MPE. The point form ``I(w) exp(-mu R) / R^2`` from ``c`` is that
+irradiance only where the whole spot is a point source; the engine uses it for observers
+beyond ``FAR_FIELD_SPOT_SIZES`` spot sizes and the exact integral over the spot
+(:mod:`hazard.near_field`, range-safety.md section 10) nearer. A spot stretched by
+grazing incidence has an elongated zone that the point form misses (a plate at 89.9 deg:
+0.52 m from the point form where the integral reaches 6.3 m, 3 deg above the plate).
+
+What is computed. On a fixed grid of directions (polar rows ``THETA_ROWS_DEG`` x
+azimuths every ``GRID_PHI_DEG`` in the spot's mean frame), every node whose point-form
+range ``r0`` is within ``FAR_FIELD_SPOT_SIZES`` spot sizes gets the farthest root of
+``E(c + r w) = MPE`` beyond ``r0``, with ``E`` the engine's near-field integral
+(:func:`hazard.engine._near_field`: the observers' own computation, each sample a point
+source only where its error is proven below 1 % of ``P / d^2``, its triangles integrated
+elsewhere). The ray is scanned inward from ``r_start`` in steps ``h`` no larger than the
+spot's smallest extent (twice its RMS width across) nor ``r_start / SCAN_MIN_STEPS``; the
+first hazardous sample brackets the farthest root, bisected to ``ROOT_RTOL`` (or ``h /
+8``); the node's range is the bracket's far end plus ``h`` (the scan's resolution,
+added), or ``r0`` where no sample beyond ``r0`` is hazardous; the last sample is
+``r0 (1 + FLOOR_RTOL)`` (the point form is kept where the integral's root lies within
+0.5 % beyond it: the integral's own 1 % tolerance in irradiance).
+
+Each sample is first tested against a cheap upper bound (the spot's samples as point
+sources plus their Taylor remainders, infinite within a sample's radius): only where it
+reaches the MPE is the integral evaluated. The integral's work per lobe function is
+capped at ``MAX_EVALUATIONS`` kernel evaluations (deterministic); past it the bound alone
+decides (never short for a Lambertian spot, looser: ``info["points_by_bound"]`` counts
+those points).
+
+``r_start``: nothing beyond it can reach the MPE. Every part of the spot is at least
+``r - extent`` from ``c + r w`` and seen from it within a cone of half-angle ``asin(extent
+/ r)`` (plus the samples' frame tilt) about ``w``, so ``E <= I_cone exp(-mu (r -
+extent)) / (r - extent)^2`` with ``I_cone`` the point form's largest intensity in that
+cone (sampled on ``CONE_RINGS`` x ``CONE_AZIMUTHS`` directions plus the point form's
+peaks inside it): hazard needs ``r <= extent + R_cone(r)``, bisected. ``r_start`` is
+also at most where the ray leaves the spot's box widened by the point form's largest
+range, and at most the engine's near/far switch (beyond it observers get the point form).
+
+In a cell none of whose four nodes the integral raised past the point form, a direction
+keeps its own point form. Elsewhere it takes the largest value of the cell's four nodes
+(each never below its point form) plus a curvature margin (the largest negative second difference
+of the nodes about the cell / 8 along each axis: a quadratic's rise between two equally
+spaced nodes), and never less
+than its own point form; nodes whose point form reaches past the near/far switch enter
+it capped there, and the envelope is capped at the switch plus the spot's smallest extent
+(no near-field root lies beyond). Directions beyond the last polar row (within 0.5 deg of the
+spot's plane) take that row's cell.
+
+Not covered (the lobe keeps the point form and the report says so where it matters): a
+slumping spot (its union of tilted normals), a spot built without its triangles. With a
+history the integral is the largest over the path's states (``path_states``: for a
+two-state history its states in time order, not the continuous path between them). The
+cone's sampling and the envelope between nodes are not proven for a lobe narrower than
+their steps (as the lobe's own grid; measured against the section-10 integral in
+``tests/validation/test_near_field_lobes.py``).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import weakref
+
+import numpy as np
+
+from . import near_field
+from .engine import FAR_FIELD_SPOT_SIZES, _near_field, _to_local, projected_brdf, spot_directions
+
+__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
+           "STATS", "describe_since"]
+
+ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
+THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 87.5, 89.0, 89.5)  # polar rows of the grid [deg]
+GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
+ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
+FLOOR_RTOL = 0.005  # the point form is kept where the integral's root lies within this of it (its 1 % in irradiance)
+SCAN_MIN_STEPS = 8  # the scan's step is at most r_start / this (and at most the spot's smallest extent)
+MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe function; beyond, the samples' bound decides
+CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
+CONE_AZIMUTHS = 12  # ... and its azimuths per ring
+CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
+
+
+class _Stats:
+    """Near-field lobe work in this process: directions integrated, points, seconds."""
+
+    def __init__(self):
+        self.directions = self.points = 0
+        self.seconds = 0.0
+
+    def snapshot(self) -> dict:
+        return dict(directions=self.directions, points=self.points, seconds=self.seconds)
+
+
+STATS = _Stats()
+
+
+def describe_since(before: dict) -> str:
+    """One line for the keepout stage's detail: the near-field lobe work since ``before``
+    (a :meth:`_Stats.snapshot`)."""
+    now = STATS.snapshot()
+    n = now["directions"] - before["directions"]
+    if not n:
+        return "near-field lobe: no direction's point-form range within the near field"
+    return (f"near-field lobe: {n} grid direction(s) within {FAR_FIELD_SPOT_SIZES:g} spot sizes integrated "
+            f"({now['points'] - before['points']} points, {now['seconds'] - before['seconds']:.3g} s)")
+
+
+def _smallest_extent_m(spot, frame) -> float:
+    """The spot's smallest extent [m] across its surface: twice the RMS width along the
+    minor axis of its power-weighted in-plane covariance (samples and their spread)."""
+    rel = (np.asarray(spot.points, float) - spot.centroid) @ frame[:2].T  # in-plane coordinates
+    w = np.asarray(spot.power_w, float)
+    w = w / w.sum() if w.sum() > 0 else np.full(len(w), 1.0 / len(w))
+    cov = (rel * w[:, None]).T @ rel
+    lam = float(np.linalg.eigvalsh(cov)[0])
+    if spot.spread_m2 is not None:
+        lam += 0.5 * float((np.asarray(spot.spread_m2, float) * w).sum())
+    return 2.0 * math.sqrt(max(lam, 0.0))
+
+
+class NearLobeFn:
+    """``fn(wo (N, 3)) -> range [m]`` in the spot's mean frame: the point form ``base``,
+    raised to the near-field integral's farthest root where the grid of module notes says
+    so. ``info`` holds the grid's figures (directions integrated, scan step, seconds)."""
+
+    def __init__(self, spot, base, mpe_w_m2, mu, gain, states):
+        self.spot, self.base, self.mpe, self.mu, self.gain, self.states = spot, base, float(mpe_w_m2), float(mu), float(gain), states
+        self.samples = getattr(base, "samples", 1)
+        self.frame = spot.mean_frame
+        self.c = spot.centroid
+        self.far_m = FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
+        self._grid = None
+        self.info = None
+        self.evaluations = self.bound_points = 0  # kernel evaluations of the integral; points the bound decided
+
+    # -- the integral ------------------------------------------------------------------------
+    def _setup(self, reach_m, peaks):
+        sp = self.spot
+        self.smallest_m = max(_smallest_extent_m(sp, self.frame), 1e-9)
+        loc = (sp.patches.tri_x.reshape(-1, 3) - self.c) @ self.frame.T
+        self.box = (loc.min(0) - reach_m, loc.max(0) + reach_m)
+        self.ext_m = float(sp.extent_m)
+        rot = np.einsum("nij,kj->nik", np.asarray(sp.frames, float), self.frame)  # each sample's frame in the mean one
+        self.tilt_rad = float(np.arccos(np.clip((np.trace(rot, axis1=1, axis2=2).min() - 1) / 2, -1.0, 1.0)))
+        self.peaks, self.r_peaks = peaks, np.asarray(self.base(peaks), float)
+        self.pts, self.p_w = np.asarray(sp.points, float), np.asarray(sp.power_w, float)
+        self.a_m = np.asarray(sp.patches.radius_m, float)
+        spread = np.zeros(len(self.pts)) if sp.spread_m2 is None else np.asarray(sp.spread_m2, float)
+        self.var_m2 = np.minimum(spread, self.a_m ** 2)
+        self.wi = _to_local(sp.frames, -sp.incoming)
+        k_max = reach_m ** 2 * math.exp(min(self.mu * reach_m, 700.0))  # the largest intensity / MPE [m^2]
+        self.k_i = k_max * self.p_w / max(float(self.p_w.sum()), 1e-300)
+
+    def prepare(self, dirs, r0):
+        """Set up the bounds from the point form's ranges ``r0`` on directions ``dirs``
+        (mean frame): its largest range and peaks (with the mirror and retro directions)."""
+        wi = spot_directions(self.spot)
+        peaks = np.concatenate([dirs[np.argmax(r0)][None], wi[None] * np.array([[-1.0, -1, 1]]), wi[None]])
+        self._setup(float(r0.max()), peaks)
+
+    def _upper(self, pts):
+        """An upper bound of the integral / MPE at world points ``pts`` (M, 3): the samples'
+        point forms plus their Taylor remainders ``k_i 12 sigma_i^2 / (d_i - a_i)^4``
+        (the Lambertian kernel's, as :func:`hazard.near_field.point_form_ok`; ``k_i`` the
+        sample's share of the point form's largest intensity over the MPE), infinite
+        within a sample's radius; with a history the path's maximum per sample."""
+        sp = self.spot
+        v = pts[:, None, :] - self.pts[None]
+        d = np.maximum(np.sqrt((v * v).sum(-1)), 1e-300)  # (M, n)
+        wo = np.einsum("nij,mnj->mni", sp.frames, v / d[..., None]).reshape(-1, 3)
+        wi = np.broadcast_to(self.wi[None], (len(pts),) + self.wi.shape).reshape(-1, 3)
+        scale = (self.p_w[None] * self.gain * np.exp(-self.mu * d) / (d * d) / self.mpe).ravel()
+        f = projected_brdf(sp.material, wi, wo, self.states, scale, reduce=None if self.states is None else "path-max")
+        gap = d - self.a_m[None]
+        with np.errstate(divide="ignore"):
+            err = np.where(gap > 0, 12.0 * self.k_i * self.var_m2 / np.where(gap > 0, gap, 1.0) ** 4, np.inf)
+        return f.reshape(d.shape).sum(axis=1) + err.sum(axis=1)
+
+    def hazardous(self, pts):
+        """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
+        the observers' own) at world points ``pts`` (M, 3) reaches the MPE (with a
+        history: at some state of its path); integrated only where the samples' bound
+        (:meth:`_upper`) reaches it."""
+        out = self._upper(pts) >= 1.0
+        cand = np.flatnonzero(out)
+        if not len(cand):
+            return out
+        if self.evaluations >= MAX_EVALUATIONS:  # the budget is spent: the bound decides (never short, looser)
+            self.bound_points += len(cand)
+            return out
+        before = near_field.STATS.snapshot()
+        e = _near_field(self.spot, pts[cand], np.full(len(cand), self.gain), self.mu, self.states)
+        self.evaluations += near_field.stats_since(before)["evaluations"]
+        out[cand] = (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
+        STATS.points += len(cand)
+        return out
+
+    # -- roots along rays ----------------------------------------------------------------------
+    def _r_hi(self, w_loc):
+        """Where each ray (mean-frame unit vectors (N, 3)) leaves the widened box, capped at
+        the engine's near/far switch."""
+        lo, hi = self.box
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(w_loc > 0, hi / w_loc, np.where(w_loc < 0, lo / w_loc, np.inf))
+        return np.minimum(t.min(axis=1), self.far_m)
+
+    def _cone_reach(self, w_loc, r):
+        """Largest point-form range [m] over the cone of directions from which the spot's
+        parts are seen at ``c + r w`` (half-angle ``asin(extent / r)`` plus the samples'
+        frame tilt): ``CONE_RINGS`` x ``CONE_AZIMUTHS`` samples, the axis, and the point
+        form's peaks (grid maximum, mirror and retro directions) inside the cone."""
+        alpha = np.where(r > self.ext_m, np.arcsin(np.clip(self.ext_m / np.maximum(r, 1e-300), 0.0, 1.0)), math.pi)
+        alpha = np.minimum(alpha + self.tilt_rad, math.pi)
+        ref = np.where(np.abs(w_loc[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+        e1 = np.cross(w_loc, ref)
+        e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+        e2 = np.cross(w_loc, e1)
+        ring = np.asarray(CONE_RINGS)[None, :, None] * alpha[:, None, None]  # (N, R, 1)
+        az = np.linspace(0, 2 * math.pi, CONE_AZIMUTHS, endpoint=False)[None, None, :]
+        d = (np.cos(ring)[..., None] * w_loc[:, None, None, :]
+             + np.sin(ring)[..., None] * (np.cos(az)[..., None] * e1[:, None, None, :] + np.sin(az)[..., None] * e2[:, None, None, :]))
+        d = d.reshape(len(w_loc), -1, 3)
+        d[..., 2] = np.maximum(d[..., 2], 0.0)
+        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
+        best = np.asarray(self.base(d.reshape(-1, 3)), float).reshape(len(w_loc), -1).max(axis=1)
+        best = np.maximum(best, np.asarray(self.base(w_loc), float))
+        inside = np.arccos(np.clip(w_loc @ self.peaks.T, -1.0, 1.0)) <= alpha[:, None]
+        return np.maximum(best, np.where(inside, self.r_peaks[None, :], 0.0).max(axis=1))
+
+    def _scan_start(self, w_loc):
+        """Farthest radius [m] along each direction where the integral can reach the MPE:
+        ``E <= I_cone exp(-mu (r - extent)) / (r - extent)^2`` (every part of the spot is
+        at least ``r - extent`` away and seen within the cone), so hazard needs ``r <=
+        extent + cone reach``; bisected (``CONE_BISECTIONS``) within the box's exit."""
+        hi = self._r_hi(w_loc)
+        lo = np.minimum(np.full(len(w_loc), self.ext_m), hi)
+        ok = self.ext_m + self._cone_reach(w_loc, hi) >= hi  # hazard possible out to the box's exit
+        top = np.where(ok, hi, np.nan)
+        for _ in range(CONE_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            reach = self.ext_m + self._cone_reach(w_loc, mid) >= mid
+            lo, hi = np.where(reach, mid, lo), np.where(reach, hi, mid)
+        return np.where(ok, top, hi)
+
+    def roots(self, w_loc, r_floor):
+        """Farthest roots [m] beyond ``r_floor`` (N,) along mean-frame directions (N, 3),
+        each with the scan's resolution added (0 where no scan sample beyond ``r_floor``
+        is hazardous), and the steps [m] (module notes)."""
+        w_loc = np.asarray(w_loc, float).reshape(-1, 3)
+        if not len(w_loc):
+            return np.zeros(0), np.zeros(0)
+        r_hi = self._scan_start(w_loc)
+        h = np.minimum(self.smallest_m, r_hi / SCAN_MIN_STEPS)
+        w = w_loc @ self.frame
+        found = np.full(len(w), -1.0)
+        floor = r_floor * (1 + FLOOR_RTOL)
+        k = 0
+        live = np.flatnonzero(r_hi > floor)
+        while len(live):
+            r = np.maximum(r_hi[live] - k * h[live], floor[live])  # the last sample: just beyond the point form
+            hot = self.hazardous(self.c + r[:, None] * w[live])
+            found[live[hot]] = r[hot]
+            live = live[~hot & (r > floor[live])]
+            k += 1
+        lo = np.maximum(found, 0.0)
+        hi = np.minimum(lo + h, r_hi)
+        tol = np.maximum(ROOT_RTOL * r_hi, h / 8)
+        live = np.flatnonzero((found >= 0) & (hi - lo > tol))
+        while len(live):
+            mid = 0.5 * (lo[live] + hi[live])
+            hot = self.hazardous(self.c + mid[:, None] * w[live])
+            lo[live[hot]], hi[live[~hot]] = mid[hot], mid[~hot]
+            live = live[hi[live] - lo[live] > tol[live]]
+        return np.where(found >= 0, hi + h, 0.0), h
+
+    # -- the grid and the envelope ---------------------------------------------------------------
+    def _build(self):
+        t0 = time.perf_counter()
+        th = np.radians(np.asarray(THETA_ROWS_DEG))
+        ph = np.radians(np.arange(-180.0, 180.0 + 1e-9, GRID_PHI_DEG))
+        tt, pp = np.meshgrid(th, ph, indexing="ij")
+        dirs = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
+        r0 = np.asarray(self.base(dirs), float)
+        need = r0 < self.far_m
+        val = np.zeros(len(dirs))
+        steps = np.zeros(0)
+        if need.any():
+            self.prepare(dirs, r0)
+            val[need], steps = self.roots(dirs[need], r0[need])
+        self.cap_m = self.far_m + getattr(self, "smallest_m", 0.0)  # no near-field root lies beyond (scan start + step)
+        # the lobe at the nodes, never below the point form (capped where the point form is far: the envelope covers the near field)
+        v = np.where(need, np.maximum(val, r0), np.minimum(r0, self.cap_m)).reshape(tt.shape)
+        raised = (need & (val > r0)).reshape(tt.shape)  # nodes where the integral reaches past the point form
+        d2 = np.zeros_like(v)
+        d2[1:-1] += np.maximum(-(v[:-2] + v[2:] - 2 * v[1:-1]), 0.0)  # along theta
+        vp = np.concatenate([v[:, -2:-1], v, v[:, 1:2]], axis=1)  # phi wraps (first and last columns coincide)
+        d2 += np.maximum(-(vp[:, :-2] + vp[:, 2:] - 2 * v), 0.0)
+        self._grid = (th, ph, v, d2 / 8.0, raised)
+        dt = time.perf_counter() - t0
+        STATS.directions += int(need.sum())
+        STATS.seconds += dt
+        self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
+                     "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
+                     "kernel_evaluations": int(self.evaluations), "points_by_bound": int(self.bound_points), "seconds": dt}
+
+    def envelope(self, wo):
+        """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in
+        cells none of whose nodes the integral raised past the point form)."""
+        if self._grid is None:
+            self._build()
+        th, ph, v, marg, raised = self._grid
+        t = np.arccos(np.clip(wo[:, 2] / np.linalg.norm(wo, axis=1), -1.0, 1.0))
+        p = np.arctan2(wo[:, 1], wo[:, 0])
+        i = np.clip(np.searchsorted(th, t, side="right") - 1, 0, len(th) - 2)
+        j = np.clip(np.searchsorted(ph, p, side="right") - 1, 0, len(ph) - 2)
+        corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
+        top = np.max([v[a, b] for a, b in corners], axis=0)
+        m = np.max([marg[a, b] for a, b in corners], axis=0)
+        any_raised = np.any([raised[a, b] for a, b in corners], axis=0)
+        return np.where(any_raised & (top > 0), np.minimum(top + m, self.cap_m), 0.0)
+
+    def __call__(self, wo):
+        wo = np.asarray(wo, float)
+        r0 = np.asarray(self.base(wo), float)
+        return np.maximum(r0, self.envelope(wo))
+
+    def max_range(self, wo) -> float:
+        """The largest range [m] over directions ``wo`` (N, 3), without integrating where
+        the point form's largest range already reaches past every near-field value (the
+        near/far switch plus the spot's smallest extent, the largest scan step)."""
+        r0 = np.asarray(self.base(np.asarray(wo, float)), float)
+        if self._grid is None and r0.max() >= self.far_m + _smallest_extent_m(self.spot, self.frame):
+            return float(r0.max())
+        return float(self(wo).max())
+
+
+def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):
+    """The lobe function of ``spot`` with the near field integrated (module notes), or
+    ``base`` for a spot built without its triangles. Cached on the spot per (MPE,
+    attenuation, gain, states): the static and dynamic lobes, the outlines and the
+    renders share one grid."""
+    if not ENABLED or spot.patches is None or not len(spot.points) or not spot.total_power_w > 0:
+        return base
+    key = (float(mpe_w_m2), float(mu), float(gain), None if states is None else np.asarray(states, float).tobytes())
+    with _CACHE_LOCK:
+        ref, cache = _CACHE.get(id(spot), (None, None))
+        if ref is None or ref() is not spot:  # not on the spot itself: a Spot stays picklable
+            cache = {}
+            _CACHE[id(spot)] = (weakref.ref(spot, _forget(id(spot))), cache)
+        if key not in cache:
+            cache[key] = NearLobeFn(spot, base, mpe_w_m2, mu, gain, states)
+        return cache[key]
+
+
+_CACHE: dict = {}  # id(spot) -> (weak reference to it, {key: NearLobeFn})
+_CACHE_LOCK = threading.Lock()
+
+
+def _forget(key):
+    """Callback of a spot's weak reference: drop its entry (only its own: an id is reused)."""
+    def drop(ref):
+        cache = _CACHE
+        if cache is not None and cache.get(key, (None,))[0] is ref:
+            cache.pop(key, None)
+    return drop
