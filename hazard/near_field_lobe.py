@@ -287,7 +287,10 @@ class NearLobeFn:
         tt, pp = np.meshgrid(th, ph, indexing="ij")
         dirs = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
         r0 = np.asarray(self.base(dirs), float)
-        need = r0 < self.far_m
+        # a lobe that is 0 in every direction (f_r cos P = 0: a pure mirror's, whose beam the mirror
+        # stage handles) has no near field either; the scan would end on the spot itself, where the
+        # bound's remainders give a 1e-12 m "lobe" and a hazard zone that is not one
+        need = (r0 < self.far_m) & bool(np.any(r0 > 0))
         val = np.zeros(len(dirs))
         steps = np.zeros(0)
         if need.any():

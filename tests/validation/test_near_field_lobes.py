@@ -260,3 +260,17 @@ def test_grazing_terrain():
     dist = np.linalg.norm(v, axis=1)
     inside = dist <= fn((v / dist[:, None]) @ frame.T)
     assert np.all(inside[want >= 1.0]), (want, dist, inside)
+
+
+def test_a_pure_mirror_has_no_near_field_lobe():
+    """A pure (Fresnel) mirror reflects nothing outside its mirror beam: f_r cos P = 0 in every
+    lobe direction, so the near-field integral is 0 too. The scan once ended on the spot
+    itself (1e-12 m), where the bound's remainders made a 9e-13 m "lobe" that the verdict
+    then listed as a hazard zone without a range boundary (mirror_window's window)."""
+    from tests._bundled import bundled
+
+    result = bundled("mirror_window")
+    window = next(t for t in result.targets if t.name == "window")
+    assert window.static_lobe.max_range_m == 0.0 and window.dynamic_lobe.max_range_m == 0.0
+    painted = next(t for t in result.targets if t.name == "painted-target")
+    assert painted.static_lobe.max_range_m > 0.9  # the diffuse target beside it keeps its lobe
