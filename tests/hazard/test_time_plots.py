@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import hazard
+import scenes
 from hazard import plots
 from tests._bundled import bundled
 
