@@ -20,6 +20,7 @@ from brdfmodels._io import atomic_write_text, current_umask
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
 from .verdict import escape_way, verdict
 from scenes.conventions import beam_headline
+from scenes.quantities import as_written_lines
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
            "summary_text", "answer_text", "stages_text", "cause_shares"]
@@ -429,6 +430,18 @@ def _observer_table(result, hazardous, max_observers) -> list:
     return lines
 
 
+UNITS_SHOWN = 8  # values written with units echoed in the answer (all of them in report.json scene.units_as_written)
+
+
+def _units_lines(scene) -> list:
+    """The values the scene wrote with units, as read (issue 31: a slip is visible in the answer)."""
+    written = as_written_lines(scene) if getattr(scene, "units_as_written", None) else []
+    if not written:
+        return []
+    more = f"; ... and {len(written) - UNITS_SHOWN} more (report.json scene.units_as_written)" if len(written) > UNITS_SHOWN else ""
+    return [f"  units as written: {'; '.join(written[:UNITS_SHOWN])}{more}"]
+
+
 def _observer_lines(result, max_observers, v=None) -> list:
     """The warnings, the verdict's headline (:func:`hazard.verdict.verdict`: the same text
     as report.json's and the review page's), the MPE, the zones not contained and the
@@ -440,6 +453,7 @@ def _observer_lines(result, max_observers, v=None) -> list:
     lines = _warning_lines(v["warnings"]) + [f"Scene {result.scene.name!r}: {v['headline']}.", f"  MPE {mpe}{static}"]
     beam = beam_headline(getattr(result.scene, "beam_conventions", None))
     lines += [f"  {beam}"] if beam else []
+    lines += _units_lines(result.scene)
     lines += [f"  zone: {z}" for z in v["zones"]]
     hazardous = np.flatnonzero(result.hazardous)
     if not len(hazardous):

@@ -389,3 +389,23 @@ def test_any_text_is_a_value_or_an_error_naming_the_key(text):
         assert "laser.power" in str(exc), str(exc)
         return
     assert 1e-9 <= sc.spec.laser.power_w <= 1e9 and scenes.quantities.as_written(sc)["laser.power"]["as_written"] == text
+
+
+def test_the_answer_echoes_the_values_written_with_units(tmp_path):
+    """Issue 31 item 1: the stdout answer says how each value with a unit was read, under
+    the beam convention line (a slip such as "20 mW" for "20 W" is visible where the verdict is)."""
+    p = tmp_path / "u.toml"
+    p.write_text(_scene(laser=LASER.replace("power_w = 20.0", 'power = "20 kW"')
+                        .replace("divergence_rad = 0.0005", 'divergence = "0.5 mrad"')))
+    out, err = io.StringIO(), io.StringIO()
+    assert main(["run", str(p), "-o", str(tmp_path / "o"), "--quiet"], stdout=out, stderr=err) == 0, err.getvalue()
+    lines = out.getvalue().splitlines()
+    units = next(i for i, line in enumerate(lines) if line.startswith("  units as written: "))
+    assert lines[units - 1].startswith("  beam: ")
+    assert "laser.power = '20 kW' -> laser.power_w = 20000 W" in lines[units]
+    assert "laser.divergence = '0.5 mrad' -> laser.divergence_rad = 0.0005 rad" in lines[units]
+    si = tmp_path / "si.toml"
+    si.write_text(_scene())
+    out = io.StringIO()
+    assert main(["run", str(si), "-o", str(tmp_path / "o2"), "--quiet"], stdout=out, stderr=io.StringIO()) == 0
+    assert "units as written" not in out.getvalue()  # an SI scene has nothing to echo
