@@ -579,6 +579,9 @@ def _cmd_validate(args, out, err):
         out.write(f"{scene.source}: valid scene {scene.name!r}: {len(scene.targets)} target(s), {len(scene.occluders)} occluder(s), "
                   f"{'terrain, ' if scene.terrain is not None else ''}{len(scene.observers)} observer point(s); "
                   f"local origin {scene.offset_m.tolist()} m\n" + "".join(f"  {line}\n" for line in info["summary"]))
+        if info["warnings"]:  # the slips a run would put above its verdict, visible before the run (issue 31)
+            out.write(f"  CHECK FIRST: {len(info['warnings'])} warning(s) that can change a verdict:\n"
+                      + "".join(f"    warning: {w}\n" for w in info["warnings"]))
     return EXIT_OK
 
 

@@ -409,3 +409,14 @@ def test_the_answer_echoes_the_values_written_with_units(tmp_path):
     out = io.StringIO()
     assert main(["run", str(si), "-o", str(tmp_path / "o2"), "--quiet"], stdout=out, stderr=io.StringIO()) == 0
     assert "units as written" not in out.getvalue()  # an SI scene has nothing to echo
+
+
+def test_validate_prints_the_warnings_a_run_would_put_above_its_verdict(tmp_path):
+    """Issue 31 item 7: the slips are visible before a run: divergence 0.05 meant as mrad."""
+    code, out, _ = _cli(tmp_path, _scene(laser=LASER.replace("divergence_rad = 0.0005", "divergence_rad = 0.05")))
+    assert code == 0
+    head, _, rest = out.partition("  CHECK FIRST: ")
+    assert "valid scene 'units'" in head and rest[:1] in ("1", "2") and rest[1:].startswith(" warning(s)")
+    assert "laser.divergence_rad = 0.05" in rest
+    code, out, _ = _cli(tmp_path, _scene())
+    assert code == 0 and "CHECK FIRST" not in out
