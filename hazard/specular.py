@@ -431,7 +431,8 @@ def _straddle_max(spot, obs, radius_m, mu, states, ray_scene) -> np.ndarray:
     unit_pts = np.concatenate(ring)  # (K, 2)
     a = np.broadcast_to(np.asarray(radius_m, float), (len(obs),))[:, None, None]
     pts = (obs[:, None, :] + a * (unit_pts[None, :, :1] * e1[:, None, :] + unit_pts[None, :, 1:] * e2[:, None, :])).reshape(-1, 3)
-    ok, geo, p, n, d, _ = _curved_geometry(spot, pts)
+    with np.errstate(over="ignore", invalid="ignore"):  # unlit samples far out of the beam: not used
+        ok, geo, p, n, d, _ = _curved_geometry(spot, pts)
     _seen(ray_scene, spot, p, n, pts, ok)
     val = np.zeros((len(pts),) if states is None else (len(pts), len(np.atleast_1d(states))))
     if np.any(ok):
