@@ -346,7 +346,8 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     disk's image lies inside the lit part; an eye is lit when its disk's image overlaps
     that part at all). A sphere's or cylinder's curved side is averaged over the same
     disks through its local astigmatic Gaussian, its error bounded from above
-    (:func:`_curved_aperture_w_m2`); a curved mesh's rays are binned over the limiting
+    (:func:`_curved_aperture_w_m2`); an eye with no specular point of its own but part
+    of its disk in that beam gets a sampled bound (:func:`_straddle_w_m2`); a curved mesh's rays are binned over the limiting
     aperture (:mod:`hazard.mesh_mirror`).
 
     ``ray_scene`` (optional, :class:`hazard.rays.RayScene`): each observer's line of
