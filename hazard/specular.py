@@ -346,7 +346,8 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
     disk's image lies inside the lit part; an eye is lit when its disk's image overlaps
     that part at all). A sphere's or cylinder's curved side is averaged over the same
     disks through its local astigmatic Gaussian, its error bounded from above
-    (:func:`_curved_aperture_w_m2`); a curved mesh's rays are binned over the limiting
+    (:func:`_curved_aperture_w_m2`); an eye with no specular point of its own but part
+    of its disk in that beam gets a sampled bound (:func:`_straddle_w_m2`); a curved mesh's rays are binned over the limiting
     aperture (:mod:`hazard.mesh_mirror`).
 
     ``ray_scene`` (optional, :class:`hazard.rays.RayScene`): each observer's line of
@@ -400,10 +401,70 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None
             g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
                                       apertures.take(rows))
         out[ok] += rho * (g if states is None else g[:, None])
+    dark = ~ok & ~near
+    if apertures is not None and np.any(dark):
+        rows = np.flatnonzero(dark)
+        out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
     if np.any(near):
         rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
         cap = spot.max_irradiance_w_m2 * gain[near]
         out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
+
+
+_STRADDLE_RINGS = ((1.0 / 3.0, 8), (2.0 / 3.0, 16), (1.0, 64))  # (radius / a, points) sampled beside the centre
+
+
+def _straddle_max(spot, obs, radius_m, mu, states, ray_scene) -> np.ndarray:
+    """Per observer (M,) or (M, T): the largest exact curved-side irradiance (reflectance
+    and attenuation applied, lines of sight traced) at the disk's centre and
+    ``_STRADDLE_RINGS`` rings (radius ``radius_m``, normal to the direction from the
+    mirror's centre: for a cylinder from its axis, perpendicular to it); 0 where no
+    sample is lit."""
+    an = spot.target.mesh.analytic
+    c = np.broadcast_to(an[1], obs.shape)
+    if an[0] != "sphere":
+        c = c + ((obs - c) @ an[2])[:, None] * an[2]
+    u = _unit(obs - c)
+    e1 = _unit(np.cross(u, np.where(np.abs(u[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])))
+    e2 = np.cross(u, e1)
+    ring = [np.zeros((1, 2))] + [f * np.stack([np.cos(th), np.sin(th)], 1)
+                                 for f, k in _STRADDLE_RINGS for th in [2 * math.pi * np.arange(k) / k]]
+    unit_pts = np.concatenate(ring)  # (K, 2)
+    a = np.broadcast_to(np.asarray(radius_m, float), (len(obs),))[:, None, None]
+    pts = (obs[:, None, :] + a * (unit_pts[None, :, :1] * e1[:, None, :] + unit_pts[None, :, 1:] * e2[:, None, :])).reshape(-1, 3)
+    with np.errstate(over="ignore", invalid="ignore"):  # unlit samples far out of the beam: not used
+        ok, geo, p, n, d, _ = _curved_geometry(spot, pts)
+    _seen(ray_scene, spot, p, n, pts, ok)
+    val = np.zeros((len(pts),) if states is None else (len(pts), len(np.atleast_1d(states))))
+    if np.any(ok):
+        path = np.linalg.norm(p[ok] - spot.beam.position_m, axis=1) + np.linalg.norm(pts[ok] - p[ok], axis=1)
+        rho = _reflectance(spot, _local(n[ok], spot.target.tangent, -d[ok]), states)
+        g = geo[ok] * np.exp(-mu * path)
+        val[ok] = rho * (g if states is None else g[:, None])
+    return val.reshape((len(obs), len(unit_pts)) + val.shape[1:]).max(axis=1)
+
+
+def _straddle_w_m2(spot, obs, mu, states, ray_scene, apertures) -> np.ndarray:
+    """A sphere's or cylinder's mirror beam through the aperture of observers with no
+    specular point of their own (just outside the beam's geometric edge: the reflection of
+    a cylinder's end or a sphere's silhouette) but part of whose disk is lit, (M,) or (M, T).
+
+    A conservative bound, not the disk mean: the largest exact value found at the disk's
+    samples (:func:`_straddle_max`) taken over the whole disk, i.e. as if the disk were
+    wholly lit at that value (the true mean is that times the lit fraction at most, up to
+    the field's variation between samples). Naked eye: that over its limiting aperture;
+    an aid: also ``tau E_max (a_c / 3.5 mm)^2`` over its collecting disk. Not exact: a lit
+    cap thinner than ``1 - cos(pi / 64)`` (1.2e-3) of the radius on the rim can fall
+    between the samples (that eye then stays at 0)."""
+    from .aperture import PUPIL_RADIUS_M
+
+    out = _straddle_max(spot, obs, apertures.eye_radius_m, mu, states, ray_scene)
+    k = np.flatnonzero(apertures.aided)
+    if len(k):
+        emax = _straddle_max(spot, obs[k], apertures.collect_radius_m[k], mu, states, ray_scene)
+        f = apertures.transmission[k] * (apertures.collect_radius_m[k] / PUPIL_RADIUS_M) ** 2
+        out[k] = np.maximum(out[k], emax * (f if states is None else f[:, None]))
+    return out
 
 
 _DISK_RULES = ((12, 24), (24, 48), (48, 96))  # (radial Gauss-Legendre, angular) nodes of the disk mean
