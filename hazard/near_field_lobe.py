@@ -108,7 +108,7 @@ def describe_since(before: dict) -> str:
     if not n:
         return "near-field lobe: no direction's point-form range within the near field"
     return (f"near-field lobe: {n} grid direction(s) within {FAR_FIELD_SPOT_SIZES:g} spot sizes integrated "
-            f"({now['points'] - before['points']} points, {now['seconds'] - before['seconds']:.3g} s)")
+            f"({now['points'] - before['points']} points; its time is in the stage's seconds)")
 
 
 def _smallest_extent_m(spot, frame) -> float:
@@ -310,7 +310,7 @@ class NearLobeFn:
         STATS.seconds += dt
         self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
                      "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
-                     "kernel_evaluations": int(self.evaluations), "points_by_bound": int(self.bound_points), "seconds": dt}
+                     "kernel_evaluations": int(self.evaluations), "points_by_bound": int(self.bound_points)}
 
     def envelope(self, wo):
         """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in
