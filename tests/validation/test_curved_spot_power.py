@@ -205,7 +205,7 @@ def _property(shape, R1, a, phi, f, fl, ox, oz, axis_dirn, rot, backstop, screen
     _check(text, expected)
 
 
-@ref.settings(ref.FAST, max_examples=12)
+@ref.settings(ref.FAST, max_examples=6)  # 12 took 25 s; the slow sweep draws 120
 @given(**CURVED_ARGS)
 def test_curved_spot_power_property(**kw):
     """Random spheres and cylinders (diameter 0.05-10 D: far smaller and far larger than
@@ -229,7 +229,10 @@ def test_curved_spot_power_sweep(**kw):
     _property(**kw)
 
 
-@pytest.mark.parametrize("rtol, backstop", [(1e-4, False), pytest.param(1e-4, True, marks=pytest.mark.slow),
+# every case here is slow (the unscreened 1e-4 one took 93 s of the default suite): the default run keeps
+# test_curved_spot_power_property and the named cases (exact <= engine <= exact + bound at the default beam_rtol)
+@pytest.mark.parametrize("rtol, backstop", [pytest.param(1e-4, False, marks=pytest.mark.slow),
+                                            pytest.param(1e-4, True, marks=pytest.mark.slow),
                                              pytest.param(1e-5, False, marks=pytest.mark.slow),
                                              pytest.param(1e-5, True, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("screen", [False, pytest.param(True, marks=pytest.mark.slow)])
