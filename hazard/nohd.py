@@ -66,7 +66,7 @@ def _num(name, value, *, minimum=None, strict=False, maximum=None):
     return v
 
 
-def _log_lambertw_exp(log_z: float) -> float:
+def log_lambertw_exp(log_z: float) -> float:
     """ln W(e^L) on the principal branch for any real L: no overflow for large L, no
     underflow for very negative L (there W(z) = z (1 - z + 3 z^2 / 2 - ...))."""
     if log_z < -20.0:
@@ -101,7 +101,7 @@ def _lambertw0(z: np.ndarray) -> np.ndarray:
 
 def _scaled_lambertw(log_scale: float, log_z: float) -> float:
     """scale * W(e^L) from the logarithms of both (finite for mu -> 0 and mu R -> 700)."""
-    return math.exp(log_scale + _log_lambertw_exp(log_z))
+    return math.exp(log_scale + log_lambertw_exp(log_z))
 
 
 @dataclass(frozen=True)

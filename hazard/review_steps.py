@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import math
 
+from .nohd import log_lambertw_exp
+
 __all__ = ["steps_section", "direct_steps", "lobe_steps", "observer_steps", "analysed_times_text", "STEPS_OBSERVERS"]
 
 STEPS_OBSERVERS = 10  # observers with their steps: the highest hazard ratios (and any named)
@@ -34,21 +36,6 @@ def g(x) -> str:
     """A number as the steps write it: 10 significant digits (``inf`` as ``inf``)."""
     x = float(x)
     return "inf" if math.isinf(x) else f"{x:.10g}"
-
-
-def _log_w(log_z: float) -> float:
-    """ln W(e^L) on the principal branch for any real L (W(z) e^W(z) = z)."""
-    if log_z < -20.0:
-        z = math.exp(log_z)
-        return log_z + math.log1p(-z + 1.5 * z * z)
-    if log_z < 700.0:
-        from scipy.special import lambertw
-
-        return math.log(float(lambertw(math.exp(log_z)).real))
-    w = log_z - math.log(log_z)
-    for _ in range(60):  # Newton on w + ln w = L
-        w -= (w + math.log(w) - log_z) / (1.0 + 1.0 / w)
-    return math.log(w)
 
 
 def _check(computed: float, reported, key: str) -> dict:
@@ -74,7 +61,7 @@ def _beam_range(d0: float, a: float, phi: float, mu: float) -> tuple[float, list
         r = (d0 - a) / phi
         return r, [f"NOHD = (D0 - a) / phi = ({g(d0)} - {g(a)}) / {g(phi)} = {g(r)} m"]
     log_z = math.log(mu * d0 / (2.0 * phi)) + mu * a / (2.0 * phi)
-    w = math.exp(_log_w(log_z))
+    w = math.exp(log_lambertw_exp(log_z))
     r = max(2.0 * phi / mu * w - a, 0.0) / phi
     z = f"{g(math.exp(log_z))}" if log_z < 700 else f"exp({g(log_z)})"
     return r, [f"z = (mu D0 / (2 phi)) exp(mu a / (2 phi)) = ({g(mu)} * {g(d0)} / (2 * {g(phi)})) * exp({g(mu)} * {g(a)} / "
@@ -118,7 +105,7 @@ def lobe_steps(title: str, lobe: dict, mpe_w_m2: float, mu_per_m: float, key: st
         lines.append(f"mu = 0: NOHD = R0 = {g(r)} m")
     else:
         zz = mu_per_m * r0 / 2.0
-        w = math.exp(_log_w(math.log(zz)))
+        w = math.exp(log_lambertw_exp(math.log(zz)))
         r = 2.0 / mu_per_m * w
         lines.append(f"NOHD = (2 / mu) W(mu R0 / 2) = (2 / {g(mu_per_m)}) * W({g(mu_per_m)} * {g(r0)} / 2) = "
                      f"(2 / {g(mu_per_m)}) * {g(w)} = {g(r)} m")
