@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 import hazard
+from tests._scene_text import PLATE_AT_50M
 
 ROOT = Path(hazard.__file__).resolve().parents[1]
 OWN = re.compile(r"^hazard( [a-z]+)?: \S")  # the tool's own line
@@ -35,28 +36,8 @@ def _foreign(stderr: str) -> list:
     return [ln for ln in stderr.splitlines() if ln.strip() and not OWN.match(ln)]
 
 
-EGM96_SCENE = '''name = "egm"
-[site]
-origin = [35.0, -106.0, 1500.0]
-vertical = "egm96"
-[laser]
-wavelength_nm = 1064.0
-power_w = 100.0
-beam_diameter_m = 0.005
-divergence_rad = 0.001
-position_m = [0.0, -50.0, 0.0]
-aim_m = [0.0, 0.0, 0.0]
-[exposure]
-duration_s = 10.0
-[[targets]]
-name = "plate"
-shape = "plate"
-center_m = [0.0, 0.0, 0.0]
-normal = [0.0, -1.0, 0.0]
-tangent = [1.0, 0.0, 0.0]
-size_m = [1.0, 1.0]
-material = { model = "lambertian", reflectance = 0.5 }
-'''
+# the shared plate scene on a [site] whose heights are over the EGM96 geoid (its grid is not installed here)
+EGM96_SCENE = PLATE_AT_50M + '[site]\norigin = [35.0, -106.0, 1500.0]\nvertical = "egm96"\n'
 
 
 def test_quick_runs_write_only_their_own_lines(tmp_path):
