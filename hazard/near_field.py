@@ -216,6 +216,19 @@ def _area_s(ss):
     return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
+def _scatter_add(e, rows, values):
+    """``e[rows] += values`` with repeated rows summed (``np.add.at``'s result, several
+    times faster): the values sorted by row (stable: each row's values keep their order)
+    and summed per row with ``np.add.reduceat``. ``e`` (M,) or (M, T); ``values`` (N,)
+    or (N, T)."""
+    if not len(rows):
+        return
+    order = np.argsort(rows, kind="stable")
+    r = rows[order]
+    starts = np.flatnonzero(np.concatenate(([True], r[1:] != r[:-1])))
+    e[r[starts]] += np.add.reduceat(np.asarray(values)[order], starts, axis=0)
+
+
 def _rule(xs, ss, dens, oi, obs, kernel, samp, e):
     """Add the 7-point rule of triangles (P, 3, .) to ``e`` at observers ``oi``; ``dens``
     (P,) already holds the per-pair factors. Returns the number of nodes evaluated."""
@@ -230,7 +243,7 @@ def _rule(xs, ss, dens, oi, obs, kernel, samp, e):
     step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
     for a in range(0, len(o), step):
         b = min(len(o), a + step)
-        np.add.at(e, o[a:b], kernel(smp[a:b], x[a:b], obs[o[a:b]], w[a:b]))
+        _scatter_add(e, o[a:b], kernel(smp[a:b], x[a:b], obs[o[a:b]], w[a:b]))
     return len(o)
 
 
@@ -302,7 +315,7 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
     for a in range(0, len(po), step):
         o, s = po[a:a + step], ps[a:a + step]
-        np.add.at(e, o, src.kernel(s, pt[s], obs[o], src.power_w[s] * weight[o]))
+        _scatter_add(e, o, src.kernel(s, pt[s], obs[o], src.power_w[s] * weight[o]))
     n_eval += len(po)
     oi, tri = _expand(src.patches, io, is_)
     p = src.patches

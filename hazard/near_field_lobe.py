@@ -304,7 +304,12 @@ class NearLobeFn:
         d2[1:-1] += np.maximum(-(v[:-2] + v[2:] - 2 * v[1:-1]), 0.0)  # along theta
         vp = np.concatenate([v[:, -2:-1], v, v[:, 1:2]], axis=1)  # phi wraps (first and last columns coincide)
         d2 += np.maximum(-(vp[:, :-2] + vp[:, 2:] - 2 * v), 0.0)
-        self._grid = (th, ph, v, d2 / 8.0, raised)
+        marg = d2 / 8.0
+        cells = [(slice(a, a + v.shape[0] - 1), slice(b, b + v.shape[1] - 1)) for a in (0, 1) for b in (0, 1)]
+        top = np.max([v[c] for c in cells], axis=0) + np.max([marg[c] for c in cells], axis=0)
+        any_raised = np.any([raised[c] for c in cells], axis=0) & (np.max([v[c] for c in cells], axis=0) > 0)
+        # per cell: its four nodes' largest value plus their largest margin, capped; 0 where no node was raised
+        self._grid = (th, ph, np.where(any_raised, np.minimum(top, self.cap_m), 0.0))
         dt = time.perf_counter() - t0
         STATS.directions += int(need.sum())
         STATS.seconds += dt
@@ -317,16 +322,14 @@ class NearLobeFn:
         cells none of whose nodes the integral raised past the point form)."""
         if self._grid is None:
             self._build()
-        th, ph, v, marg, raised = self._grid
+        th, ph, cell = self._grid
+        if not cell.any():
+            return np.zeros(len(wo))
         t = np.arccos(np.clip(wo[:, 2] / np.linalg.norm(wo, axis=1), -1.0, 1.0))
         p = np.arctan2(wo[:, 1], wo[:, 0])
         i = np.clip(np.searchsorted(th, t, side="right") - 1, 0, len(th) - 2)
         j = np.clip(np.searchsorted(ph, p, side="right") - 1, 0, len(ph) - 2)
-        corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
-        top = np.max([v[a, b] for a, b in corners], axis=0)
-        m = np.max([marg[a, b] for a, b in corners], axis=0)
-        any_raised = np.any([raised[a, b] for a, b in corners], axis=0)
-        return np.where(any_raised & (top > 0), np.minimum(top + m, self.cap_m), 0.0)
+        return cell[i, j]
 
     def __call__(self, wo):
         wo = np.asarray(wo, float)

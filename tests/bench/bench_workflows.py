@@ -8,7 +8,8 @@
   The study is timed once (its time is already a sum over 200 scenarios); the lobe and
   the render, and their floors, are the median of 5.
 * keep-out lobe at 0.25 deg (no refinement) of the glossy copper panel (`binoculars`).
-  Floor: one BRDF evaluation call over the same number of directions.
+  Floor: one BRDF evaluation call over the same number of directions, and the range from
+  each intensity with attenuation (one vectorised Lambert W over as many values).
 * render: `hazard.render.keepout` of `steel_vs_copper` (close view + overview + VTK).
   Floor: the same meshes made (the lobe surfaces) and two screenshots of them added as
   one MultiBlock, no styling, no legend, no log-distance copy.
@@ -54,6 +55,7 @@ def bench_study(n=200, workers=2):
 def bench_lobe(grid_deg=0.25):
     from hazard.engine import projected_brdf, spot_directions
     from hazard.keepout import hazard_lobe
+    from hazard.nohd import _lambertw0
 
     res = hazard.analyze(scenes.load(scenes.example_path("binoculars")))
     spot = res.spots[0]
@@ -62,7 +64,14 @@ def bench_lobe(grid_deg=0.25):
     wo = rng.normal(size=(lobe.evaluations, 3))
     wo[:, 2] = np.abs(wo[:, 2])
     wi = np.broadcast_to(spot_directions(spot), wo.shape)
-    floor, _ = median_s(lambda: projected_brdf(spot.target.material, wi, wo))
+    mu = max(res.attenuation_per_m, 1e-6)
+
+    def by_hand():
+        i = projected_brdf(spot.target.material, wi, wo) * spot.total_power_w
+        # the range where I exp(-mu R) / R^2 = MPE: R = (2 / mu) W(mu / 2 sqrt(I / MPE))
+        return 2.0 / mu * _lambertw0(0.5 * mu * np.sqrt(np.maximum(i, 0.0) / res.mpe_w_m2))
+
+    floor, _ = median_s(by_hand)
     return {"name": f"keep-out lobe at {grid_deg} deg ({lobe.evaluations} evaluations)", "time_s": t, "floor_s": floor, "ratio": t / floor}
 
 
