@@ -31,14 +31,14 @@ def test_ci_runs_the_readme_test_command():
     ci = (ROOT / ".ci" / "run").read_text()
     assert "<!-- test-command -->" in readme and "<!-- test-command -->" in ci
     block = readme.split("<!-- test-command -->", 1)[1].split("```bash", 1)[1].split("```", 1)[0].strip()
-    assert block == 'python -m pip install -e ".[all]" && python -m pytest'
+    assert block == 'python -m pip install -e ".[all]" && python -m pytest -n auto'
 
 
 @pytest.mark.parametrize("script, args, expect", [
     ("accuracy_tables.py", [], "Thin-plate heating"),
     ("sh_order_table.py", ["--quick"], "held_out_log_rms"),
     ("static_vs_dynamic.py", [], "observers whose verdict changes"),
-    ("power_sweep.py", ["--quick"], "power    10000 W"),
+    pytest.param("power_sweep.py", ["--quick"], "power    10000 W", marks=pytest.mark.slow),  # a study: 10-15 s idle
     ("monte_carlo.py", ["--samples", "4", "--serial"], "nohd_dynamic_m"),
     ("render_keepout.py", ["mirror_window", "--frames", "2"], "overview"),
 ])

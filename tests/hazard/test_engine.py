@@ -360,7 +360,7 @@ def test_mesh_file_target_and_heightmap_terrain(tmp_path):
         scenes.loads(bad, base_dir=tmp_path)
 
 
-@pytest.mark.parametrize("name", ["steel_vs_copper", "witness_screen", "range_terrain"])
+@pytest.mark.parametrize("name", [pytest.param("steel_vs_copper", marks=pytest.mark.slow), "witness_screen", "range_terrain"])
 def test_map_on_threads_equals_serial_map(name, monkeypatch):
     # the map runs in blocks on threads (line of sight, BRDF, exposure per block); tiny
     # blocks force many of them, with the multi-spot, single-spot and static paths

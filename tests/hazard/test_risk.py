@@ -133,6 +133,7 @@ def test_tilt_against_rice_plain_and_importance(tmp_path):
             assert _within(r["probability_exceed"], ref, 3000), (sampling, d, r["probability_exceed"], ref)
 
 
+@pytest.mark.slow  # 10-20 s idle; test_tilt_against_rice_plain_and_importance runs by default
 def test_importance_reaches_a_rare_tilt(tmp_path):
     """An observer whose Rice chance is ~1e-7: importance sampling gets it within its CI;
     plain sampling of the same size sees nothing and says only an upper bound."""

@@ -52,7 +52,7 @@ def _check(az, el, s, psi, behind_m):
     assert any("laser aperture" in w and "1 behind it are out of the beam" in w for w in scene.warnings)
 
 
-@ref.FAST
+@ref.FAST_TWIN  # the slow twin below sweeps 120
 @given(az=st.floats(-math.pi, math.pi), el=st.floats(-1.2, 1.2), s=st.floats(0.0, 2.0), psi=st.floats(0.0, 2 * math.pi),
        behind_m=st.floats(1e-3, 0.5))
 def test_the_aperture_plane_is_in_the_beam(az, el, s, psi, behind_m):

@@ -470,6 +470,7 @@ def test_rice_pointing_importance_sampling_is_unbiased(tmp_path):
 RARE_THETA = 2.873e-3  # 5.75 sigma to the right at 1 km: Rice P ~ 1e-6
 
 
+@pytest.mark.slow  # 15-25 s idle (2 x 20000 draws); test_rice_pointing_importance_sampling_is_unbiased runs by default
 def test_rare_event_importance_vs_plain(tmp_path):
     """P ~ 1e-6: importance sampling with 20000 draws finds it within a factor 1.5 and its
     interval contains it; plain sampling with the same draws sees no hit and says so with a
@@ -623,6 +624,7 @@ def test_serial_and_cluster_identical(tmp_path):
         assert ja[key] == jb[key]
 
 
+@pytest.mark.slow  # 15-25 s idle (2000 draws x 512 sensitivity draws)
 def test_sensitivity_drivers(tmp_path):
     """First-order Sobol indices name the input that drives each observer: 'pointing' for the
     observer only the direct beam can reach, 'material' for the one only the plate lights."""

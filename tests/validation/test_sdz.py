@@ -66,7 +66,7 @@ def _scene(position, aim, *, pointing=None, extra="", sector=None, plate_at=(300
 FLAT = '[terrain]\nkind = "flat"\nextent_m = 20000.0\nresolution_m = 1000.0\n'
 
 
-@pytest.mark.parametrize("theta", [5e-4, 2e-3, 2e-2])
+@pytest.mark.parametrize("theta", [5e-4, pytest.param(2e-3, marks=pytest.mark.slow), 2e-2])
 def test_a_horizontal_pointing_cone_sweeps_a_circular_sector(theta):
     """A laser 30 m up aiming level (its lowest ray meets the ground beyond L): the zone is
     the sector of radius L, half-angle theta, widened by the hazardous half-width."""
@@ -82,9 +82,24 @@ def test_a_horizontal_pointing_cone_sweeps_a_circular_sector(theta):
     assert z["directions"]["kind"] == "cone" and z["directions"]["buffer_rad"] == theta
 
 
-@ref.FAST
-@given(beta_deg=st.floats(8.0, 60.0), theta_deg=st.floats(0.5, 5.0), height=st.floats(5.0, 100.0), bearing=st.floats(-3.1, 3.1))
+CONE_DRAW = dict(beta_deg=st.floats(8.0, 60.0), theta_deg=st.floats(0.5, 5.0), height=st.floats(5.0, 100.0), bearing=st.floats(-3.1, 3.1))
+
+
+@ref.FAST_TWIN
+@given(**CONE_DRAW)
 def test_a_downward_cone_over_flat_ground_covers_the_hull_of_its_ground_ellipse(beta_deg, theta_deg, height, bearing):
+    """The default run of :func:`_downward_cone_case` (10 draws; the slow twin sweeps 120)."""
+    _downward_cone_case(beta_deg, theta_deg, height, bearing)
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(**CONE_DRAW)
+def test_a_downward_cone_over_flat_ground_sweep(beta_deg, theta_deg, height, bearing):
+    _downward_cone_case(beta_deg, theta_deg, height, bearing)
+
+
+def _downward_cone_case(beta_deg, theta_deg, height, bearing):
     """Every ray meets the ground before L: the zone covers the hull of the foot and the
     ellipse, contained. Its far end is where the hazardous edge of the topmost beam (at
     elevation -(beta - theta)) comes down: the upper edge of {r <= w(R) sqrt(ln(E(R) /

@@ -90,9 +90,24 @@ def test_the_ground_reflects_the_spill_with_its_material_or_reflectance_1(rho):
     assert "terrain" in [t.name for t in res.targets]
 
 
-@ref.FAST
-@given(az=st.floats(-1.2, 1.2), el=st.floats(0.05, 1.4), dist=st.floats(10.0, 150.0), mu=st.sampled_from([0.0, 1e-3]))
+GROUND_DRAW = dict(az=st.floats(-1.2, 1.2), el=st.floats(0.05, 1.4), dist=st.floats(10.0, 150.0), mu=st.sampled_from([0.0, 1e-3]))
+
+
+@ref.FAST_TWIN
+@given(**GROUND_DRAW)
 def test_a_lambertian_ground_seen_from_anywhere_beyond_the_plate(az, el, dist, mu):
+    """The default run of :func:`_lambertian_ground_case` (10 draws; the slow twin 120)."""
+    _lambertian_ground_case(az, el, dist, mu)
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(**GROUND_DRAW)
+def test_a_lambertian_ground_sweep(az, el, dist, mu):
+    _lambertian_ground_case(az, el, dist, mu)
+
+
+def _lambertian_ground_case(az, el, dist, mu):
     """An observer at (azimuth from +y, elevation, distance) from the ground spot, on the
     side away from the laser: rho P_g cos(theta_r) / (pi d^2), attenuated on both legs,
     plus the plate's own reflection where the observer (high up) sees its lit face."""
