@@ -46,8 +46,8 @@ OBSERVER_KEYS = (("peak_irradiance_w_m2", "peak irradiance"), ("mpe_w_m2", "MPE"
                  ("exposure_ratio", "exposure ratio"), ("radiant_exposure_j_m2", "radiant exposure"),
                  ("mpe_radiant_exposure_j_m2", "MPE (radiant exposure)"), ("first_exceedance_s", "first exceedance"))
 
-# layer id -> (title, the GeoJSON kinds it draws, a test on the properties, style); drawn in this order
-# (areas first, points last so that a click finds the point); "finding": a hazard the layer can hold
+# layer id -> (title, the GeoJSON kinds it draws, a test on the properties, style); drawn in this order:
+# areas first, points last so that a click finds the point, hazardous observers over everything
 LAYERS = {
     "visual_zone": ("FAA visual zones (SZED, CZED, LFED)", ("visual_zone",), None,
                     {"color": "#8e44ad", "weight": 1.5, "fillOpacity": 0.04, "dashArray": "6 4"}),
@@ -65,12 +65,12 @@ LAYERS = {
                      {"color": "#2166ac", "weight": 2, "fillOpacity": 0.15}),
     "mirror_beam": ("Mirror beams", ("mirror_beam",), None, {"color": "#e66101", "weight": 3}),
     "track": ("Moving observers' tracks", ("track",), None, {"color": "#1a9641", "weight": 3, "dashArray": "8 5"}),
-    "observers_hazardous": ("Observers at or above the MPE", ("observer",), lambda p: p.get("hazard") not in (None, "none"),
-                            {"color": "#67000d", "fillColor": "#e41a1c", "radius": 6, "weight": 1.5, "fillOpacity": 0.95}),
-    "observers_safe": ("Observers below the MPE", ("observer",), lambda p: p.get("hazard") in (None, "none"),
-                       {"color": "#00441b", "fillColor": "#4daf4a", "radius": 4, "weight": 1, "fillOpacity": 0.9}),
     "laser_targets": ("Laser and targets", ("laser", "target"), None,
                       {"color": "#000000", "fillColor": "#ffffff", "radius": 7, "weight": 2.5, "fillOpacity": 1.0}),
+    "observers_safe": ("Observers below the MPE", ("observer",), lambda p: p.get("hazard") in (None, "none"),
+                       {"color": "#00441b", "fillColor": "#4daf4a", "radius": 4, "weight": 1, "fillOpacity": 0.9}),
+    "observers_hazardous": ("Observers at or above the MPE", ("observer",), lambda p: p.get("hazard") not in (None, "none"),
+                            {"color": "#67000d", "fillColor": "#e41a1c", "radius": 6, "weight": 1.5, "fillOpacity": 0.95}),
 }
 HAZARD_COLOURS = {"naked eye": "#d7191c", "aided only": "#f39c12", "visual interference": "#8e44ad", "none": "#1a9641"}
 

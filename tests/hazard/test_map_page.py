@@ -21,19 +21,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("pyproj")  # the site scene (lon/lat) needs the geo extra
-pytest.importorskip("rasterio")
-
-from hazard.cli import main  # noqa: E402
-from hazard.map_page import LAYERS, MAP_NAME, hillshade, png_gray_alpha, write_map_page  # noqa: E402
-from tests.hazard.test_map_outputs import SCENE as GEO_ZONES  # noqa: E402
-from tests.hazard.test_review_report import BROWSER_ARGS, _console_errors, os_chromium  # noqa: E402,F401
+from hazard.cli import main
+from hazard.map_page import LAYERS, MAP_NAME, hillshade, png_gray_alpha, write_map_page
+from tests.hazard.test_review_report import NASTY, BROWSER_ARGS, _console_errors, os_chromium  # noqa: F401
+from tests.hazard.test_review_report import SCENE as PLATE_FAN
 
 HAZARDOUS_NAME = "on the aim <b>&amp;"  # escaped by the page, shown as typed
-# the map-outputs scene (every kind of zone but the nominal sector: footprint, danger zone
+# added to the map-outputs scene (every kind of zone but the nominal sector: footprint, danger zone
 # with buffer and through optics, keep-out lobe, mirror beam, range boundary; flat terrain
-# on a site) with an observer on the aim line at 150 m (hazardous: ratio about 3e3)
-SCENE = GEO_ZONES + f"""
+# on a site): an observer on the aim line at 150 m (hazardous: ratio about 3e3)
+ON_THE_AIM = f"""
 [[observers]]
 name = {json.dumps(HAZARDOUS_NAME)}
 points_m = [[0.0, 150.0, 0.0]]
@@ -59,17 +56,33 @@ def features(data: dict, layer_id: str) -> list:
     return next(lay for lay in data["layers"] if lay["id"] == layer_id)["features"]
 
 
-@pytest.fixture(scope="module")
-def site(tmp_path_factory):
-    """``hazard run SCENE -o OUT --report`` on the site scene (about 4 s)."""
-    root = tmp_path_factory.mktemp("site")
-    (root / "scene.toml").write_text(SCENE)
+def _run_report(root: Path, scene: str) -> dict:
+    """``hazard run SCENE -o OUT --report`` and what it wrote."""
+    (root / "scene.toml").write_text(scene)
     out = root / "out"
     code, stdout, err = run("run", root / "scene.toml", "-o", out, "--quiet", "--report")
     assert code == 0, err
     page = (out / MAP_NAME).read_text(encoding="utf-8")
-    return {"out": out, "stdout": stdout, "page": page, "data": page_data(page), "scene": root / "scene.toml",
-            "doc": json.loads((out / "report.json").read_text()), "geojson": json.loads((out / "zones.geojson").read_text())}
+    zones = out / ("zones.geojson" if (out / "zones.geojson").exists() else "zones_local_frame.json")
+    return {"out": out, "stdout": stdout, "page": page, "data": page_data(page), "scene": scene,
+            "doc": json.loads((out / "report.json").read_text()), "geojson": json.loads(zones.read_text())}
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """The site scene with an observer on the aim (about 4 s; lon/lat needs the geo extra)."""
+    pytest.importorskip("pyproj", reason="a [site] scene needs pyproj: pip install 'laser-hazard[geo]'")
+    pytest.importorskip("rasterio", reason="the map outputs of a site need rasterio: pip install 'laser-hazard[geo]'")
+    from tests.hazard.test_map_outputs import SCENE as GEO_ZONES
+
+    return _run_report(tmp_path_factory.mktemp("site"), GEO_ZONES + ON_THE_AIM)
+
+
+@pytest.fixture(scope="module")
+def local(tmp_path_factory):
+    """The review page's plate with a fan of 60 observers, two hazardous, and a name with
+    markup, in the scene's local frame (no site: L.CRS.Simple in metres; about 2 s)."""
+    return _run_report(tmp_path_factory.mktemp("local"), PLATE_FAN)
 
 
 # -- without a browser -------------------------------------------------------------------
@@ -105,6 +118,7 @@ def test_run_report_writes_map_html_listed_in_the_manifest(site):
     assert code == 0, err
     assert stdout.splitlines() == [f"wrote {out / MAP_NAME}", f"wrote {out / 'report.html'}"]
     assert json.loads((out / ".laser-hazard.json").read_text())["files"][MAP_NAME] == "report"
+    assert "<li>map.html: present: the plan view as an interactive map" in (out / "report.html").read_text(encoding="utf-8")
 
 
 def test_the_page_is_one_file_that_fetches_nothing(site):
@@ -170,7 +184,7 @@ def test_absent_kinds_and_the_terrain_are_said(site):
 def test_a_changed_scene_file_or_a_missing_geojson_is_said(site, tmp_path):
     out = shutil.copytree(site["out"], tmp_path / "out")
     scene = tmp_path / "scene.toml"
-    scene.write_text(SCENE + "\n# edited after the run\n")
+    scene.write_text(site["scene"] + "\n# edited after the run\n")
     doc = json.loads((out / "report.json").read_text())
     doc["scene"]["source"] = str(scene)
     (out / "report.json").write_text(json.dumps(doc))
@@ -312,5 +326,25 @@ def test_bundled_examples_maps_in_chromium(example, browser, tmp_path):
         if hazardous:
             row = next(o for o in doc["observers"] if o["name"] == hazardous[0])
             assert float(click_observer(page, row["name"])["rows"]["hazard_ratio"][1]) == row["hazard_ratio"]
+    finally:
+        page.close()
+
+
+def test_the_local_frame_map_in_a_real_headless_chromium(local, browser, tmp_path):
+    """No site: metres on L.CRS.Simple, the cursor in x, y; both hazardous observers' numbers."""
+    doc = local["doc"]
+    hazardous = [o for o in doc["observers"] if o["hazardous"]]
+    assert len(hazardous) == 2 and local["data"]["site"] is False
+    page = check_loaded_map(browser, local["out"], doc, tmp_path / "local.png")
+    try:
+        assert page.evaluate("window.hazardMap.map.options.crs === L.CRS.Simple")
+        for row in hazardous:  # 6 cm apart in the fan: each found by its own click at high zoom
+            popup = click_observer(page, row["name"])
+            assert popup["title"] == f"observer {row['name']}" and float(popup["rows"]["hazard_ratio"][1]) == row["hazard_ratio"]
+        page.mouse.move(300, 400)
+        assert re.fullmatch(r"x -?[0-9.]+ m, y -?[0-9.]+ m", page.locator("#cursor").inner_text())
+        assert page.locator("#hazardous-list li a").all_inner_texts() == [o["name"] for o in hazardous]
+        nasty = click_observer(page, NASTY)
+        assert nasty["title"] == f"observer {NASTY}"
     finally:
         page.close()
