@@ -307,7 +307,8 @@ def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list]:
         hazard = p.get("hazard", "none") or "none"
         feats[lid].append({"type": "Feature", "geometry": f.get("geometry"),
                            "properties": {"kind": p.get("kind"), "name": str(p.get("name") or p.get("target") or ""),
-                                          "variant": p.get("variant"), "hazard": hazard, "popup": popup}})
+                                          "variant": p.get("variant"), "hazard": hazard, "popup": popup,
+                                          "reach_reported_m": _reported_reach_m(p, doc), "rise_m": _rise_m(p)}})
     layers = []
     for lid, (title, kinds, _, style) in LAYERS.items():
         fs = feats[lid]
@@ -317,6 +318,8 @@ def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list]:
     return layers, stray
 
 
+SHORT_REL, SHORT_ABS_M = 1e-3, 1.0  # a drawing this much shorter than report.json's reach is said to stop short
+ENDS = {"sdz": "danger zone", "sdz_aided": "aided danger zone", "mirror_beam": "mirror beam"}  # far ends marked, labelled
 FAR_LAYERS = ("sdz", "sdz_nominal", "sdz_aided", "mirror_beam", "visual_zone")  # beams: the first view starts at the site
 
 
@@ -336,35 +339,80 @@ def _coords(geom) -> np.ndarray:
 
 
 def _distance_m(xy: np.ndarray, origin, site: bool) -> np.ndarray:
-    """Horizontal distance [m] of points from ``origin``: local metres, or lon/lat [deg] on a
-    sphere of the WGS 84 mean radius (haversine; for the page's words, not for a verdict)."""
+    """Horizontal distance [m] of points from ``origin``: local metres, or lon/lat [deg]
+    along the WGS 84 ellipsoid (pyproj's geodesic: a [site] run has pyproj)."""
     if not site:
         return np.hypot(xy[:, 0] - origin[0], xy[:, 1] - origin[1])
-    lon, lat = np.radians(xy[:, 0]), np.radians(xy[:, 1])
-    lon0, lat0 = math.radians(origin[0]), math.radians(origin[1])
-    a = np.sin((lat - lat0) / 2) ** 2 + math.cos(lat0) * np.cos(lat) * np.sin((lon - lon0) / 2) ** 2
-    return 2 * 6_371_008.8 * np.arcsin(np.sqrt(np.clip(a, 0, 1)))
+    from pyproj import Geod
+
+    n = len(xy)
+    _, _, dist = Geod(ellps="WGS84").inv(np.full(n, float(origin[0])), np.full(n, float(origin[1])), xy[:, 0], xy[:, 1])
+    return np.asarray(dist, float)
+
+
+def _reported_reach_m(p: dict, doc: dict) -> float | None:
+    """How far report.json says a danger zone reaches from the laser (``max_range_m``) or a
+    mirror beam from its mirror (the specular NOHD) [m]; None for other kinds."""
+    kind = p.get("kind")
+    if kind == "sdz":
+        v = p.get("max_range_m")
+    elif kind == "sdz_aided":
+        rows = [a for a in (doc.get("sdz") or {}).get("aided") or [] if a.get("nohd_m") == p.get("nohd_m")]
+        v = rows[0].get("max_range_m", p.get("nohd_m")) if rows else p.get("nohd_m")
+    elif kind == "mirror_beam":
+        v = p.get("nohd_m")
+    else:
+        return None
+    try:
+        return None if v is None else float(v)  # "inf" (JSON has no infinity) included
+    except (TypeError, ValueError):
+        return None
+
+
+def _rise_m(p: dict) -> float | None:
+    """A mirror beam's height change from its mirror to the end drawn [m] (GeoJSON properties)."""
+    try:
+        return float(p["end_height_m"]) - float(p["start_height_m"])
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def _end_mark(lid: str, f: dict, xy: np.ndarray, d: np.ndarray, site: bool) -> dict:
+    """Where a danger zone or mirror beam is drawn to, and what report.json says it reaches
+    when that is farther (``short``: the drawing stops before the hazard does)."""
+    i = int(np.argmax(d))
+    if lid == "mirror_beam":  # from its mirror (the line's first vertex), along the slant of the beam
+        rise = f["properties"].get("rise_m") or 0.0
+        drawn, origin = float(np.hypot(_distance_m(xy[i:i + 1], xy[0], site)[0], rise)), "its mirror"
+    else:
+        drawn, origin = float(d[i]), "the laser"
+    reported = f["properties"].get("reach_reported_m")
+    short = reported is not None and reported > drawn * (1 + SHORT_REL) + SHORT_ABS_M
+    text = f"{ENDS[lid]} drawn to {fmt_number(drawn, 'm', sig=4)} from {origin}"
+    if short:
+        text += f"; it reaches {fmt_number(reported, 'm', sig=4)} (report.json), beyond this drawing"
+    return {"latlng": [float(xy[i, 1]), float(xy[i, 0])], "text": text, "short": short,
+            "reported_m": reported, "drawn_m": drawn}
 
 
 def _mark_reach(layers: list, site: bool) -> None:
     """Each layer's farthest vertex from the laser [m] (``reach_m``), and each danger zone's
-    and mirror beam's far end (``end``: [lat, lng] and its distance) to mark on the map."""
+    and mirror beam's far end (``end``, :func:`_end_mark`) to mark on the map."""
     laser = next((_coords(f["geometry"])[0] for lay in layers if lay["id"] == "laser_targets"
                   for f in lay["features"] if f["properties"]["kind"] == "laser"), None)
     for lay in layers:
-        lay["reach_m"] = None
-        if laser is None:
-            continue
+        lay["reach_m"], lay["short"] = None, []
         for f in lay["features"]:
             xy = _coords(f["geometry"])
-            if not len(xy):
-                continue
-            d = _distance_m(xy, laser, site)
-            i = int(np.argmax(d))
-            lay["reach_m"] = max(lay["reach_m"] or 0.0, float(d[i]))
-            if lay["id"] in ("sdz", "sdz_aided", "mirror_beam"):
-                f["properties"]["end"] = {"latlng": [float(xy[i, 1]), float(xy[i, 0])],
-                                          "text": f"end of the {lay['title'].lower()}: {fmt_number(float(d[i]), 'm', sig=4)} from the laser"}
+            if laser is not None and len(xy):
+                d = _distance_m(xy, laser, site)
+                lay["reach_m"] = max(lay["reach_m"] or 0.0, float(d.max()))
+                if lay["id"] in ENDS:
+                    f["properties"]["end"] = _end_mark(lay["id"], f, xy, d, site)
+                    if f["properties"]["end"]["short"]:
+                        lay["short"].append(f["properties"]["end"]["text"])
+            f["properties"].pop("reach_reported_m", None)
+            f["properties"].pop("rise_m", None)
 
 
 def _extent(layers: list, skip=("visual_zone",)) -> list | None:

@@ -18,11 +18,13 @@ import re
 import shutil
 from pathlib import Path
 
+import markupsafe
 import numpy as np
 import pytest
 
 from hazard.cli import main
 from hazard.map_page import LAYERS, MAP_NAME, hillshade, png_gray_alpha, write_map_page
+from hazard.review import fmt_number
 from tests.hazard.test_review_report import NASTY, BROWSER_ARGS, _console_errors, os_chromium  # noqa: F401
 from tests.hazard.test_review_report import SCENE as PLATE_FAN
 
@@ -167,7 +169,7 @@ def test_absent_kinds_and_the_terrain_are_said(site):
     absent = site["geojson"]["laser_hazard"]["absent"]
     assert set(absent) >= {"track", "airspace_zone", "visual_zone", "sdz_nominal"}
     for why in absent.values():
-        assert str(__import__("markupsafe").escape(why)) in page
+        assert str(markupsafe.escape(why)) in page
     hs = data["hillshade"]
     assert hs["uri"].startswith("data:image/png;base64,") and "hillshade of the analysed terrain (flat;" in hs["what"]
     err_m = float(re.search(r"within ([0-9.e-]+) m of its exact place", hs["what"]).group(1))
@@ -179,6 +181,21 @@ def test_absent_kinds_and_the_terrain_are_said(site):
     assert 0.7 * expected_m < err_m < 1.3 * expected_m
     (s, w), (n, e) = hs["bounds"]
     assert 46.99 < s < 47.0 < n < 47.01 and 7.99 < w < 8.0 < e < 8.01
+
+
+def test_where_a_beam_or_zone_is_drawn_to_and_whether_the_hazard_goes_farther(site):
+    doc, data = site["doc"], site["data"]
+    sdz = features(data, "sdz")[0]["properties"]["end"]  # drawn to its reach (NOHD: no backstop on flat ground)
+    assert not sdz["short"] and math.isclose(sdz["drawn_m"], doc["sdz"]["max_range_m"], rel_tol=1e-3)
+    mirror = next(t for t in doc["targets"] if t["specular_nohd_dynamic_m"])
+    end = features(data, "mirror_beam")[0]["properties"]["end"]  # from the mirror, along the slant of the beam
+    assert not end["short"] and math.isclose(end["drawn_m"], mirror["specular_nohd_dynamic_m"], rel_tol=1e-3)
+    # the aided zone (7x binoculars) reaches 237 km; its polygon in the GeoJSON is drawn to 100 km only
+    reach = doc["sdz"]["aided"][0]["max_range_m"]
+    aided = features(data, "sdz_aided")[0]["properties"]["end"]
+    assert reach > 2e5 and aided["drawn_m"] < 1.01e5 and aided["short"]
+    assert aided["text"].endswith(f"it reaches {fmt_number(reach, 'm', sig=4)} (report.json), beyond this drawing")
+    assert str(markupsafe.escape(aided["text"])) in site["page"]  # in the layer list too
 
 
 def test_a_changed_scene_file_or_a_missing_geojson_is_said(site, tmp_path):
@@ -296,6 +313,7 @@ def test_the_map_in_a_real_headless_chromium(site, browser, tmp_path):
         assert math.isclose(float(text.replace("\u00a0", "").replace(",", "")), row["hazard_ratio"], rel_tol=5e-4)
         assert popup["rows"]["mpe_w_m2"][0] == "50\u00a0W/m\u00b2" and popup["rows"]["verdict"][0] == "hazardous"
         assert page.locator(".grat-label").count() >= 2  # the longitude and latitude lines are labelled
+        assert page.locator(".end-label.short").all_inner_texts() == [features(site["data"], "sdz_aided")[0]["properties"]["end"]["text"]]
         label = page.locator(".leaflet-control-layers-overlays label", has_text="Mirror beams")
         label.locator("input").uncheck()
         assert not page.evaluate("window.hazardMap.map.hasLayer(window.hazardMap.layers.mirror_beam)")
