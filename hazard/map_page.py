@@ -259,13 +259,12 @@ def _observer_popup(p: dict, sources: dict) -> dict:
     row, source = sources.get(p.get("name"), (None, ""))
     if row is None:  # not in report.json or observers.csv: the GeoJSON's own numbers
         row, source = p, "zones GeoJSON (the observer is in neither report.json nor observers.csv)"
-    lines = [{"label": "verdict", "value": str(p.get("verdict", "?")), "key": "verdict"}]
-    for key, label in OBSERVER_KEYS:
+    lines = [["verdict", str(p.get("verdict", "?")), None]]
+    for key, _ in OBSERVER_KEYS:
         if key in row:
             v = row[key]
             text = "none" if v is None and key == "first_exceedance_s" else fmt_number(v, _unit_of(key), sig=4)
-            lines.append({"label": label, "value": text, "key": key,
-                          "exact": None if not isinstance(v, (int, float)) or isinstance(v, bool) else repr(float(v))})
+            lines.append([key, text, None if not isinstance(v, (int, float)) or isinstance(v, bool) else repr(float(v))])
     return {"title": f"observer {p.get('name', '?')}", "lines": lines, "source": source}
 
 
@@ -280,7 +279,7 @@ def _feature_popup(kind: str, p: dict, doc: dict) -> dict:
     title = " ".join(str(x) for x in (LAYERS.get(kind, (kind,))[0] if kind in LAYERS else kind.replace("_", " "),
                                         p.get("name") or p.get("target") or p.get("level") or "", p.get("variant") or "") if x)
     return {"title": title, "what": p.get("what", ""), "source": "zones GeoJSON",
-            "lines": [{"label": r["label"], "value": r["value"], "key": r["key"]} for r in rows]}
+            "lines": [[r["key"], r["value"], None] for r in rows], "labels": {r["key"]: r["label"] for r in rows}}
 
 
 def _feature_layer(p: dict) -> str | None:
@@ -291,12 +290,13 @@ def _feature_layer(p: dict) -> str | None:
     return None
 
 
-def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list]:
+def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list, dict]:
     """The layers in drawing order (id, title, style, features with pop-ups, hazardous
-    count) and the features no layer draws (listed on the page)."""
+    count), the features no layer draws (listed on the page) and the pop-ups' row labels
+    (key -> label; each pop-up row is [key, value as shown, exact value or None])."""
     sources = _observer_sources(out, doc)
     feats = {lid: [] for lid in LAYERS}
-    stray = []
+    stray, labels = [], {"verdict": "verdict", **dict(OBSERVER_KEYS)}
     for f in gj["features"]:
         p = dict(f.get("properties") or {})
         lid = _feature_layer(p)
@@ -304,6 +304,7 @@ def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list]:
             stray.append(str(p.get("kind")))
             continue
         popup = _observer_popup(p, sources) if p.get("kind") == "observer" else _feature_popup(p.get("kind", "?"), p, doc)
+        labels.update(popup.pop("labels", {}))
         hazard = p.get("hazard", "none") or "none"
         feats[lid].append({"type": "Feature", "geometry": f.get("geometry"),
                            "properties": {"kind": p.get("kind"), "name": str(p.get("name") or p.get("target") or ""),
@@ -315,7 +316,7 @@ def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list]:
         layers.append({"id": lid, "title": title, "kinds": list(kinds), "style": style, "count": len(fs),
                        "hazardous": sum(f["properties"]["hazard"] not in ("none", "visual interference") for f in fs),
                        "features": fs})
-    return layers, stray
+    return layers, stray, labels
 
 
 SHORT_REL, SHORT_ABS_M = 1e-3, 1.0  # a drawing this much shorter than report.json's reach is said to stop short
@@ -432,15 +433,15 @@ def map_data(out_dir) -> dict:
     verdict = doc.get("verdict") or {}
     data = {"scene": str((doc.get("scene") or {}).get("name", "?")), "headline": str(verdict.get("headline", "")),
             "zones_notes": [str(z) for z in verdict.get("zones") or []], "problem": problem, "geojson": gj_name,
-            "frame": doc.get("frame") or {}, "site": False, "layers": [], "absent": {}, "stray": [], "extent": None,
+            "frame": doc.get("frame") or {}, "site": False, "layers": [], "labels": {}, "absent": {}, "stray": [], "extent": None,
             "hillshade": None, "hillshade_absent": "", "observers_shown": "",
             "mpe": fmt_number(doc.get("mpe_w_m2"), "W/m²", sig=6)}
     if gj is None:
         return data
     info = gj.get("laser_hazard") or {}
-    layers, stray = map_layers(gj, doc, out)
+    layers, stray, labels = map_layers(gj, doc, out)
     site = (info.get("frame") or {}).get("kind") == "site"
-    data.update({"site": site, "layers": layers, "stray": stray, "absent": dict(info.get("absent") or {}),
+    data.update({"site": site, "layers": layers, "stray": stray, "labels": labels, "absent": dict(info.get("absent") or {}),
                  "frame": info.get("frame") or data["frame"], "observers_shown": str(info.get("observers", "")),
                  "extent": _extent(layers, skip=FAR_LAYERS) or _extent(layers, skip=()), "extent_all": _extent(layers, skip=())})
     _mark_reach(layers, site)
@@ -455,8 +456,10 @@ def _vendor(name: str) -> str:
 
 
 def _script_json(obj) -> str:
-    """JSON for a ``<script type="application/json">`` element (no ``</`` can end it early)."""
-    return json.dumps(obj, allow_nan=False, separators=(",", ":")).replace("</", "<\\/").replace("<!--", "<\\!--")
+    """JSON for a ``<script type="application/json">`` element: every ``<`` escaped
+    (``\\u003c``), so no text of the scene can end the element early."""
+    text = json.dumps(obj, allow_nan=False, separators=(",", ":"), ensure_ascii=False)
+    return text.replace("<", "\\u003c").replace("\u2028", "\\u2028").replace("\u2029", "\\u2029")
 
 
 def map_html(out_dir) -> str:

@@ -157,11 +157,12 @@ def test_each_observer_pop_up_holds_report_json_numbers(site):
     assert len(popups) == len(rows)
     for p in popups:
         name = p["title"].removeprefix("observer ")
-        lines = {line["key"]: line for line in p["lines"]}
+        lines = {key: (shown, exact) for key, shown, exact in p["lines"]}
         for key in ("peak_irradiance_w_m2", "mpe_w_m2", "hazard_ratio"):
-            assert float(lines[key]["exact"]) == rows[name][key], (name, key)
+            assert float(lines[key][1]) == rows[name][key], (name, key)
         assert p["source"] == "report.json observers"
-    assert lines["mpe_w_m2"]["value"] == "50\u00a0W/m\u00b2"
+    assert lines["mpe_w_m2"][0] == "50\u00a0W/m\u00b2"
+    assert site["data"]["labels"]["hazard_ratio"] == "hazard ratio"
 
 
 def test_absent_kinds_and_the_terrain_are_said(site):
