@@ -72,7 +72,8 @@ LAYERS = {
     "observers_hazardous": ("Observers at or above the MPE", ("observer",), lambda p: p.get("hazard") not in (None, "none"),
                             {"color": "#67000d", "fillColor": "#e41a1c", "radius": 6, "weight": 1.5, "fillOpacity": 0.95}),
 }
-HAZARD_COLOURS = {"naked eye": "#d7191c", "aided only": "#f39c12", "visual interference": "#8e44ad", "none": "#1a9641"}
+LEGEND_ORDER = ("observers_hazardous", "sdz", "sdz_aided", "footprint", "keepout_lobe", "mirror_beam", "track",
+                "airspace_zone", "visual_zone", "sdz_nominal", "range_boundary", "laser_targets", "observers_safe")  # findings first
 
 
 # -- the hillshade ---------------------------------------------------------------------
@@ -314,6 +315,7 @@ def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list, dict]:
     for lid, (title, kinds, _, style) in LAYERS.items():
         fs = feats[lid]
         layers.append({"id": lid, "title": title, "kinds": list(kinds), "style": style, "count": len(fs),
+                       "legend_rank": LEGEND_ORDER.index(lid),
                        "hazardous": sum(f["properties"]["hazard"] not in ("none", "visual interference") for f in fs),
                        "features": fs})
     return layers, stray, labels

@@ -145,6 +145,7 @@ def test_every_finding_of_report_json_is_in_a_layer(site):
     variants = sorted(f["properties"]["variant"] for f in features(data, "footprint"))
     assert variants == sorted(k for k, v in doc["footprint"].items() if v["cells"] > 0) == ["dynamic", "static"]
     assert len(names["range_boundary"]) == 1
+    assert sorted(lay["legend_rank"] for lay in data["layers"]) == list(range(len(LAYERS)))  # each layer listed once
     # every GeoJSON feature is drawn by exactly one layer, its geometry unchanged
     assert sum(lay["count"] for lay in data["layers"]) == len(gj["features"]) and data["stray"] == []
     drawn = [f["geometry"] for lay in data["layers"] for f in lay["features"]]
@@ -314,6 +315,7 @@ def test_the_map_in_a_real_headless_chromium(site, browser, tmp_path):
         assert math.isclose(float(text.replace("\u00a0", "").replace(",", "")), row["hazard_ratio"], rel_tol=5e-4)
         assert popup["rows"]["mpe_w_m2"][0] == "50\u00a0W/m\u00b2" and popup["rows"]["verdict"][0] == "hazardous"
         assert page.locator(".grat-label").count() >= 2  # the longitude and latitude lines are labelled
+        assert page.locator("#legend .legend-row").first.get_attribute("data-layer") == "observers_hazardous"
         assert page.locator(".end-label.short").all_inner_texts() == [features(site["data"], "sdz_aided")[0]["properties"]["end"]["text"]]
         label = page.locator(".leaflet-control-layers-overlays label", has_text="Mirror beams")
         label.locator("input").uncheck()
