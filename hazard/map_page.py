@@ -393,9 +393,10 @@ def _end_mark(lid: str, f: dict, xy: np.ndarray, d: np.ndarray, site: bool) -> d
     short = reported is not None and reported > drawn * (1 + SHORT_REL) + SHORT_ABS_M
     text = f"{ENDS[lid]} drawn to {fmt_number(drawn, 'm', sig=4)} from {origin}"
     if short:
-        text += f"; it reaches {fmt_number(reported, 'm', sig=4)} (report.json), beyond this drawing"
+        text += (f"; it reaches {fmt_number(reported, 'm', sig=4)} (report.json)" if math.isfinite(reported)
+                 else "; it is unbounded (report.json: an infinite reach)") + ", beyond this drawing"
     return {"latlng": [float(xy[i, 1]), float(xy[i, 0])], "text": text, "short": short,
-            "reported_m": reported, "drawn_m": drawn}
+            "reported_m": reported if reported is None or math.isfinite(reported) else "inf", "drawn_m": drawn}
 
 
 def _mark_reach(layers: list, site: bool) -> None:

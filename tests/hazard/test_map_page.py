@@ -200,6 +200,19 @@ def test_where_a_beam_or_zone_is_drawn_to_and_whether_the_hazard_goes_farther(si
     assert str(markupsafe.escape(aided["text"])) in site["page"]  # in the layer list too
 
 
+def test_an_unbounded_danger_zone_is_said_unbounded(local, tmp_path):
+    """A collimated beam in clear air: report.json's reach "inf" (JSON has no infinity), its
+    polygon drawn to 100 km; the copy of the local run is given that reach."""
+    out = shutil.copytree(local["out"], tmp_path / "out")
+    gj = json.loads((out / "zones_local_frame.json").read_text())
+    sdz = next(f for f in gj["features"] if f["properties"]["kind"] == "sdz")
+    sdz["properties"]["max_range_m"] = "inf"
+    (out / "zones_local_frame.json").write_text(json.dumps(gj))
+    end = features(page_data(write_map_page(out).read_text(encoding="utf-8")), "sdz")[0]["properties"]["end"]
+    assert end["short"] and end["reported_m"] == "inf"
+    assert end["text"].endswith("; it is unbounded (report.json: an infinite reach), beyond this drawing")
+
+
 def test_a_changed_scene_file_or_a_missing_geojson_is_said(site, tmp_path):
     out = shutil.copytree(site["out"], tmp_path / "out")
     scene = tmp_path / "scene.toml"
