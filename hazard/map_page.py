@@ -42,6 +42,7 @@ MAP_NAME = "map.html"
 VENDOR = "vendor/leaflet"  # under hazard/templates
 HILLSHADE_MAX_PX = 1500  # the hillshade keeps every k-th node so that no side has more pixels (said on the page)
 SUN_AZIMUTH_DEG, SUN_ALTITUDE_DEG = 315.0, 45.0  # the cartographers' north-west light
+HILLSHADE_CONTRAST = 3.0  # opacity per unit of (lit / lit when flat - 1): gentle ranges still show their relief
 OBSERVER_KEYS = (("peak_irradiance_w_m2", "peak irradiance"), ("mpe_w_m2", "MPE"), ("hazard_ratio", "hazard ratio"),
                  ("exposure_ratio", "exposure ratio"), ("radiant_exposure_j_m2", "radiant exposure"),
                  ("mpe_radiant_exposure_j_m2", "MPE (radiant exposure)"), ("first_exceedance_s", "first exceedance"))
@@ -187,13 +188,16 @@ def hillshade_layer(doc: dict) -> tuple[dict | None, str]:
     if scene.terrain is None:
         return None, "the scene has no terrain grid: no hillshade"
     x, y, h, d, k = _terrain_grid(scene)
-    shade = hillshade(h, d)
-    gray = np.nan_to_num(shade * 255.0, nan=0.0)[::-1].round().astype(np.uint8)  # image rows north to south
-    alpha = np.where(np.isnan(shade), 0, 255)[::-1].astype(np.uint8)
+    shade = hillshade(h, d) / math.sin(math.radians(SUN_ALTITUDE_DEG))  # 1: lit as flat ground
+    gray = np.where(shade < 1.0, 0, 255)[::-1].astype(np.uint8)  # image rows north to south
+    alpha = np.nan_to_num(np.clip(np.abs(shade - 1.0) * HILLSHADE_CONTRAST, 0.0, 0.85) * 255.0, nan=0.0)
+    alpha = alpha[::-1].round().astype(np.uint8)
     uri = "data:image/png;base64," + base64.b64encode(png_gray_alpha(gray, alpha)).decode()
     kind = (doc["scene"]["echo"]["terrain"] or {}).get("kind", "terrain")
     what = (f"hillshade of the analysed terrain ({kind}; {h.shape[1]} x {h.shape[0]} nodes every {d:g} m"
-            f"{f', every {k}th node of the grid' if k > 1 else ''}; light from {SUN_AZIMUTH_DEG:g} deg at {SUN_ALTITUDE_DEG:g} deg)")
+            f"{f', every {k}th node of the grid' if k > 1 else ''}; light from {SUN_AZIMUTH_DEG:g} deg at {SUN_ALTITUDE_DEG:g} deg: "
+            f"slopes lit less than flat ground darkened, lit more lightened, {HILLSHADE_CONTRAST:g} x the difference; "
+            "flat ground left clear)")
     if scene.site is not None:
         bounds, err_m = _site_placement(scene, x, y, h, d)
         what += (f"; placed by its corners in Web Mercator: a terrain node is within {err_m:.2g} m of its exact place "
