@@ -304,6 +304,9 @@ def map_layers(gj: dict, doc: dict, out: Path) -> tuple[list, list, dict]:
     stray, labels = [], {"verdict": "verdict", **dict(OBSERVER_KEYS)}
     for f in gj["features"]:
         p = dict(f.get("properties") or {})
+        if p.get("kind") == "observer" and p.get("hazard") in (None, "none") and \
+                (sources.get(p.get("name")) or ({},))[0].get("hazardous") is True:
+            p["hazard"] = "naked eye"  # report.json (or observers.csv) says hazardous: drawn so whatever the GeoJSON says
         lid = _feature_layer(p)
         if lid is None:
             stray.append(str(p.get("kind")))

@@ -213,6 +213,17 @@ def test_an_unbounded_danger_zone_is_said_unbounded(local, tmp_path):
     assert end["text"].endswith("; it is unbounded (report.json: an infinite reach), beyond this drawing")
 
 
+def test_an_observer_report_json_calls_hazardous_is_drawn_hazardous(local, tmp_path):
+    """Where the GeoJSON and report.json disagree, the page takes the hazardous side."""
+    out = shutil.copytree(local["out"], tmp_path / "out")
+    gj = json.loads((out / "zones_local_frame.json").read_text())
+    name = next(o["name"] for o in local["doc"]["observers"] if o["hazardous"])
+    next(f for f in gj["features"] if f["properties"].get("name") == name)["properties"]["hazard"] = "none"
+    (out / "zones_local_frame.json").write_text(json.dumps(gj))
+    data = page_data(write_map_page(out).read_text(encoding="utf-8"))
+    assert name in [f["properties"]["name"] for f in features(data, "observers_hazardous")]
+
+
 def test_a_changed_scene_file_or_a_missing_geojson_is_said(site, tmp_path):
     out = shutil.copytree(site["out"], tmp_path / "out")
     scene = tmp_path / "scene.toml"
