@@ -483,6 +483,7 @@ def map_html(out_dir) -> str:
     leaflet_js = _vendor("leaflet.min.js").replace("</script", "<\\/script")
     return env.get_template("map.html.j2").render(
         data=data, dist=fmt_distance, data_json=Markup(_script_json(data)), leaflet_css=Markup(_vendor("leaflet.css")),
+        leaflet_license=Markup(_vendor("LICENSE").replace("--", "- -")),
         leaflet_js=Markup(leaflet_js))
 
 

@@ -129,6 +129,8 @@ def test_the_page_is_one_file_that_fetches_nothing(site):
     assert not re.search(r"<script[^>]*\bsrc=", page, re.I)
     assert not re.search(r"url\((?!data:|#default#VML)", page)  # the CSS's images are data URIs
     assert "Leaflet" in page and "BSD-2-Clause" in page and "PROVENANCE.md" in page
+    licence = (Path(__file__).parents[2] / "hazard/templates/vendor/leaflet/LICENSE").read_text()
+    assert licence in page  # BSD-2 clause 2: the notice and conditions travel with the minified copy
 
 
 def test_every_finding_of_report_json_is_in_a_layer(site):
