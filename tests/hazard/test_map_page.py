@@ -242,7 +242,7 @@ def test_a_changed_scene_file_or_a_missing_geojson_is_said(site, tmp_path):
 
 # -- in a real browser ---------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def browser(tmp_path_factory, os_chromium):
+def browser(tmp_path_factory, os_chromium):  # noqa: F811 (the fixture imported above)
     sync_api = pytest.importorskip("playwright.sync_api", reason="needs playwright: pip install 'laser-hazard[test]' "
                                                                  "(it drives the OS's Chromium; never `playwright install`)")
     with sync_api.sync_playwright() as p:
