@@ -238,6 +238,10 @@ def test_a_changed_scene_file_or_a_missing_geojson_is_said(site, tmp_path):
     (out / "zones.geojson").unlink()
     page = write_map_page(out).read_text(encoding="utf-8")
     assert "No map: zones.geojson cannot be read" in page and page_data(page)["layers"] == []
+    doc.pop("map_outputs")  # a run from before the map outputs
+    (out / "report.json").write_text(json.dumps(doc))
+    page = write_map_page(out).read_text(encoding="utf-8")
+    assert "No map: report.json lists no zones GeoJSON (map_outputs.files): run hazard run again" in page
 
 
 # -- in a real browser ---------------------------------------------------------------------
