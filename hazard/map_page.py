@@ -348,13 +348,27 @@ def _coords(geom) -> np.ndarray:
     return np.asarray(pts, float).reshape(-1, 2)
 
 
+def _has_pyproj() -> bool:
+    try:
+        import pyproj  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def _distance_m(xy: np.ndarray, origin, site: bool) -> np.ndarray:
     """Horizontal distance [m] of points from ``origin``: local metres, or lon/lat [deg]
-    along the WGS 84 ellipsoid (pyproj's geodesic: a [site] run has pyproj)."""
+    along the WGS 84 ellipsoid (pyproj's geodesic), else (pyproj not installed where the
+    page is made) on a sphere of the mean radius, within 0.6 % (said on the page)."""
     if not site:
         return np.hypot(xy[:, 0] - origin[0], xy[:, 1] - origin[1])
-    from pyproj import Geod
-
+    try:
+        from pyproj import Geod
+    except ImportError:
+        lon, lat = np.radians(xy[:, 0]), np.radians(xy[:, 1])
+        lon0, lat0 = math.radians(origin[0]), math.radians(origin[1])
+        a = np.sin((lat - lat0) / 2) ** 2 + math.cos(lat0) * np.cos(lat) * np.sin((lon - lon0) / 2) ** 2
+        return 2 * 6_371_008.8 * np.arcsin(np.sqrt(np.clip(a, 0, 1)))
     n = len(xy)
     _, _, dist = Geod(ellps="WGS84").inv(np.full(n, float(origin[0])), np.full(n, float(origin[1])), xy[:, 0], xy[:, 1])
     return np.asarray(dist, float)
@@ -444,7 +458,7 @@ def map_data(out_dir) -> dict:
     data = {"scene": str((doc.get("scene") or {}).get("name", "?")), "headline": str(verdict.get("headline", "")),
             "zones_notes": [str(z) for z in verdict.get("zones") or []], "problem": problem, "geojson": gj_name,
             "frame": doc.get("frame") or {}, "site": False, "layers": [], "labels": {}, "absent": {}, "stray": [], "extent": None,
-            "hillshade": None, "hillshade_absent": "", "observers_shown": "",
+            "hillshade": None, "hillshade_absent": "", "distance_note": "", "observers_shown": "",
             "mpe": fmt_number(doc.get("mpe_w_m2"), "W/m²", sig=6)}
     if gj is None:
         return data
@@ -455,6 +469,9 @@ def map_data(out_dir) -> dict:
                  "frame": info.get("frame") or data["frame"], "observers_shown": str(info.get("observers", "")),
                  "extent": _extent(layers, skip=FAR_LAYERS) or _extent(layers, skip=()), "extent_all": _extent(layers, skip=())})
     _mark_reach(layers, site)
+    if site and not _has_pyproj():
+        data["distance_note"] = ("Distances from the laser are on a sphere (pyproj is not installed here: pip install "
+                                 "'laser-hazard[geo]' for the ellipsoid's geodesics), within 0.6 %.")
     data["hillshade"], data["hillshade_absent"] = hillshade_layer(doc)
     return data
 
