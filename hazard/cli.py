@@ -14,6 +14,7 @@ Verbs:
   hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
   hazard render SCENE -o OUTDIR   keep-out renders (PNG), VTK for ParaView, lobe animation
   hazard report OUTDIR [--pdf]  the report for the review board: OUTDIR/report.html (self-contained)
+                               and OUTDIR/map.html (interactive plan view, offline)
   hazard fit screen TEST.toml [...] -o BRDF.json   witness-screen tests -> fitted BRDF
   hazard fit sh SAMPLES.csv -o BRDF.json          spherical-harmonic fit (static or per state)
   hazard fit ts5 SAMPLES.csv -o BRDF.json         five-parameter model (nlopt)
@@ -185,7 +186,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_dask_args(p, "risk analysis", "print risk.json's observers as JSON")
 
     p = sub.add_parser("report", help="the report for the review board: one self-contained HTML file (and a PDF) "
-                                      "from an output folder of hazard run")
+                                      "and map.html, an interactive offline plan view, from an output folder of hazard run")
     p.add_argument("out_dir", metavar="OUT_DIR", help="output folder of hazard run (holding report.json; its pictures are embedded)")
     p.add_argument("--pdf", action="store_true", help="also print report.pdf with headless Chromium")
     p.add_argument("--observer", action="append", default=[], metavar="NAME",
@@ -947,10 +948,18 @@ def _cmd_convergence(args, out, err):
 
 
 def _write_review(out_dir, args, err, pdf=False) -> list:
-    """hazard.review.write_review with the stage lines of the other verbs on ``err``."""
-    from .review import write_review
+    """map.html (hazard.map_page) then hazard.review.write_review, with the stage lines of
+    the other verbs on ``err``; a PdfError carries both pages in ``written``."""
+    from .map_page import write_map_page
+    from .review import PdfError, write_review
 
-    return write_review(out_dir, pdf=pdf, progress=_stage_lines(args, err), observers=getattr(args, "observer", None) or ())
+    say = _stage_lines(args, err)
+    page = write_map_page(out_dir, progress=say)
+    try:
+        return [page, *write_review(out_dir, pdf=pdf, progress=say, observers=getattr(args, "observer", None) or ())]
+    except PdfError as exc:
+        exc.written = [page, exc.html]
+        raise
 
 
 def _cmd_report(args, out, err):
@@ -967,10 +976,10 @@ def _cmd_report(args, out, err):
         try:
             paths = _write_review(unit.stage, args, err, pdf=args.pdf)
         except PdfError as exc:  # the HTML is written (and switched in); the PDF is not
-            failed, paths = exc, [exc.html]
+            failed, paths = exc, exc.written
     paths = [unit.final(p) for p in paths]
     if failed is not None:
-        out.write(f"wrote {paths[0]}\n")
+        out.write("".join(f"wrote {p}\n" for p in paths))
         err.write(f"hazard report: error: {_one_line(str(failed).replace(str(unit.stage), str(unit.given)))}\n")
         return EXIT_INTERNAL
     out.write("".join(f"wrote {p}\n" for p in paths))

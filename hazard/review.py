@@ -883,6 +883,7 @@ def _files_view(doc: dict, out: Path, report_path: Path, pictures: dict) -> dict
     tracks = [{"name": str(t["csv"]), "present": (out / str(t["csv"])).is_file()}
               for t in doc.get("tracks") or [] if t.get("csv")]
     return {"report": report_path.name, "csv": (out / "observers.csv").exists(), "track_csvs": tracks,
+            "map_page": (out / "map.html").is_file(),  # written by hazard report before this page (hazard.map_page)
             "maps": _map_outputs_view(doc.get("map_outputs"), out),
             "embedded": embedded, "report_sha256": hashlib.sha256(report_path.read_bytes()).hexdigest()}
 

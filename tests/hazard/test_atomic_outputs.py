@@ -302,9 +302,9 @@ def test_hazard_run_review_page_sees_render_pictures(tmp_path, monkeypatch, resu
     assert code == 0 and f"wrote {out / 'report.html'}" in stdout and ".tmp" not in stdout
     assert (out / "report.html").exists() and leftovers(out) == []
     code, stdout, err = run("report", out, "--quiet")
-    assert code == 0 and stdout == f"wrote {out / 'report.html'}\n", err
+    assert code == 0 and stdout == f"wrote {out / 'map.html'}\nwrote {out / 'report.html'}\n", err
     files = json.loads((out / MANIFEST).read_text())["files"]
-    assert files["report.html"] == "report" and files["report.json"] == "run"
+    assert files["report.html"] == files["map.html"] == "report" and files["report.json"] == "run"
 
 
 def _risk_view(out: Path):
@@ -377,8 +377,9 @@ def test_hazard_report_interrupted_keeps_the_run_whole(tmp_path, monkeypatch, re
             run("report", out, "--quiet")
     recover(out)
     now = snapshot(out)
-    assert leftovers(out) == [] and now == (old if step != "switched" else {**old, "report.html": now.get("report.html")})
-    assert ("report.html" in now) == (step == "switched")
+    pages = {n: now.get(n) for n in ("map.html", "report.html")}  # both pages or neither
+    assert leftovers(out) == [] and now == (old if step != "switched" else {**old, **pages})
+    assert ("report.html" in now) == ("map.html" in now) == (step == "switched")
 
 
 @pytest.mark.parametrize("step", ["moved", pytest.param("switched", marks=pytest.mark.slow)])
@@ -572,12 +573,13 @@ def test_hazard_run_of_another_scene_drops_its_render_and_page(tmp_path, monkeyp
     code, _, err = run("run", "binoculars", "-o", out, "--quiet")
     assert code == 2 and "--force" in err  # refused (its own report.json is there)
     code, _, err = run("render", "binoculars", "-o", out, "--quiet")  # another command, another scene: refused before any work
-    assert code == 2 and "files of hazard report (report.html) and hazard run (observers.csv, report.json" in err
+    assert code == 2 and "files of hazard report (map.html, report.html) and hazard run (observers.csv, report.json" in err
     assert "made from another input: pass --force" in err
     code, stdout, _ = run("run", "binoculars", "-o", out, "--quiet", "--force")
     assert code == 0
     assert f"removed {out / 'keepout.png'} (written by hazard render from another scene)" in stdout
     assert f"removed {out / 'report.html'} (written by hazard report from another scene)" in stdout
+    assert f"removed {out / 'map.html'} (written by hazard report from another scene)" in stdout
     assert not (out / "keepout.png").exists() and not (out / "report.html").exists()
     doc = json.loads((out / MANIFEST).read_text())
     assert doc["sources"] == {"run": cli._scene_source("binoculars")} != {"run": cli._scene_source("plate")}

@@ -284,7 +284,7 @@ def test_cli_report_rewrites_the_same_page(plate, tmp_path):
     out = copy_out(plate["out"], tmp_path / "o")
     (out / "report.html").unlink()
     code, stdout, err = run("report", out, "--quiet")
-    assert code == 0 and err == "" and stdout == f"wrote {out / 'report.html'}\n"
+    assert code == 0 and err == "" and stdout == f"wrote {out / 'map.html'}\nwrote {out / 'report.html'}\n"
     assert (out / "report.html").read_text(encoding="utf-8") == plate["html"]  # deterministic: same report, same page
 
 
@@ -292,7 +292,7 @@ def test_pdf_without_chromium_says_so_and_keeps_the_html(plate, tmp_path, monkey
     out = copy_out(plate["out"], tmp_path / "o")
     monkeypatch.setattr(review, "find_chromium", lambda: None)
     code, stdout, err = run("report", out, "--pdf", "--quiet")
-    assert code == 1 and stdout == f"wrote {out / 'report.html'}\n" and err.count("\n") == 1
+    assert code == 1 and stdout == f"wrote {out / 'map.html'}\nwrote {out / 'report.html'}\n" and err.count("\n") == 1
     assert "PDF needs Chromium" in err and "the HTML was written" in err
     assert (out / "report.html").exists() and not (out / "report.pdf").exists()
 
@@ -437,6 +437,16 @@ def _console_errors(page) -> list:
     return errors
 
 
+def _not_blank(png: bytes, dark_fraction: float) -> None:
+    """A screenshot with contrast (grey-level spread) and at least ``dark_fraction`` of its
+    pixels dark (below half grey: text, lines), i.e. not one flat colour."""
+    import numpy as np
+
+    image = pytest.importorskip("PIL.Image", reason="counts the screenshot's pixels (Pillow comes with matplotlib)")
+    grey = np.asarray(image.open(io.BytesIO(png)).convert("L"), float)
+    assert grey.std() > 10.0 and (grey < 128).mean() > dark_fraction, (grey.std(), (grey < 128).mean())
+
+
 def test_the_page_in_a_real_headless_chromium(plate, tmp_path, os_chromium):
     """The plate run's page (--report --plot, shared with the tests above) in Debian's
     Chromium: about 5 s on top of that run, so it runs by default."""
@@ -465,9 +475,12 @@ def test_the_page_in_a_real_headless_chromium(plate, tmp_path, os_chromium):
             assert page.locator("#mpe-value").inner_text() == "50\u00a0W/m\u00b2"
             shot = tmp_path / "report.png"
             page.screenshot(path=str(shot), full_page=True)
+            plan_png = plan.screenshot()  # the plan view as the browser drew it
         finally:
             browser.close()
     assert errors == [] and shot.stat().st_size > 50_000
+    _not_blank(shot.read_bytes(), dark_fraction=0.005)  # text on the page
+    _not_blank(plan_png, dark_fraction=0.001)  # the picture drawn, not an empty frame
     assert all(u.startswith(("file:", "data:")) for u in requests), requests  # nothing fetched from outside
     pdf = write_review(out, pdf=True)[1]
     assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 100_000

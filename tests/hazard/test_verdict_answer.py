@@ -289,6 +289,8 @@ def _headline_everywhere(name, tmp_path):
     page = html.unescape((tmp_path / "o" / "report.html").read_text())
     head = re.search(r'<div class="head">\s*<span class="(\w+)">(.*?)</span>\.', page, re.S)
     assert head is not None and head[2] == headline
+    mp = re.search(r'<p id="headline" class="(\w*)">(.*?)</p>', html.unescape((tmp_path / "o" / "map.html").read_text()), re.S)
+    assert mp is not None and mp[2] == headline and (mp[1] == "hazard") is headline.startswith("HAZARD")  # map.html too
     bad = doc["hazard_at_observers"] or doc["hazard_zones"]
     assert (head[1] == "hazard") is bad and headline.startswith("HAZARD") is bad
     assert doc["any_hazard"] is (doc["any_hazard"] or bad)  # any_hazard covers both
