@@ -353,12 +353,16 @@ class Zone:
 
 
 def _zone(scene, dirs, backstop_m, nohd_m, power_w, mpe_w_m2, mu) -> Zone:
-    """The zone out to min(backstop, NOHD) along each direction. An infinite NOHD (a
-    collimated beam in clear air) is drawn to ``UNBOUNDED_DRAW_M`` and its area and
-    range stay infinite."""
+    """The zone out to min(backstop, NOHD) along each direction, however far. An infinite
+    NOHD (a collimated beam in clear air) is drawn to ``UNBOUNDED_DRAW_M`` (or the farthest
+    finite reach) and its area and range stay infinite."""
     laser, origin = scene.spec.laser, np.asarray(scene.laser_position_m, float)
     reach = np.minimum(backstop_m, nohd_m)
-    drawn = np.minimum(reach, UNBOUNDED_DRAW_M)
+    # a finite reach is drawn whole (a 237 km aided zone was cut at 100 km, its area with it);
+    # an infinite one at UNBOUNDED_DRAW_M or the farthest finite reach, whichever is farther
+    finite = reach[np.isfinite(reach)]
+    draw_inf = max(UNBOUNDED_DRAW_M, float(finite.max()) if len(finite) else 0.0)
+    drawn = np.where(np.isfinite(reach), reach, draw_inf)
     ends = origin + dirs * drawn[:, None]
     half = hazard_half_width_m(laser, power_w, mpe_w_m2, float(drawn.max()), mu)
     # an infinite NOHD is never reached by a backstop at inf; a zero NOHD (the beam below the

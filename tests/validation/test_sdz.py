@@ -302,3 +302,20 @@ def test_the_hazardous_half_width_is_the_maximum_over_the_path(a, phi, power_w, 
 @given(**_HALF_ARGS)
 def test_the_hazardous_half_width_is_the_maximum_over_the_path_many(a, phi, power_w, mpe_w_m2, length_m, mu):
     _check_half_width(a, phi, power_w, mpe_w_m2, length_m, mu)
+
+
+def test_a_zone_beyond_100_km_is_drawn_to_its_nohd():
+    """A 0.04 mrad beam: L = (sqrt(4 P / (pi MPE)) - a) / phi = 124.9 km, nothing in the way.
+    The zone's polygon reaches L along the aim (it was cut at 100 km, the unbounded draw
+    distance, and its area with it)."""
+    phi = 4e-5
+    l_far = (math.sqrt(C) - A) / phi
+    plate = dict(name="plate", shape="plate", center=np.array([300.0, 300.0, 50.0]), normal=np.array([0.0, -1.0, 0.0]),
+                 tangent=np.array([1.0, 0.0, 0.0]), size=(1.0, 1.0), material=ref.lambertian(0.5))
+    text = ref.scene_text(power=P, a=A, phi=phi, position=np.array([0.0, 0.0, 30.0]), aim=np.array([0.0, 1000.0, 30.0]), targets=[plate])
+    z = hazard.analyze(scenes.loads(text)).sdz
+    assert l_far > 1.2e5 and z["max_range_m"] == pytest.approx(l_far, rel=1e-9)
+    ring = np.asarray(z["polygon_m"])
+    far = float(ring[:, 1].max())  # along the aim (+y) from the laser at y = 0
+    assert l_far * (1 - 1e-6) <= far <= l_far + z["hazard_half_width_m"] + 1.0
+    assert z["area_m2"] >= 2 * z["hazard_half_width_m"] * l_far * (1 - 1e-6)
