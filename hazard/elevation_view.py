@@ -22,8 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
-from .plan_view import (_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mirror_segments,
-                        square_limits, two_panels)
+from .figure_index import mark
+from .plan_view import (_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mark_mirror,
+                        mirror_segments, square_limits, two_panels)
 from .plots import _Display
 
 __all__ = ["ElevationViewDisplay"]
@@ -44,6 +45,9 @@ class ElevationViewDisplay(_Display):
     hazardous: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     labels: list = field(default_factory=list)
     unlabelled: int = 0
+    paths: dict = field(default_factory=dict)  # report.json paths of what is drawn (:func:`hazard.figure_index.finding_paths`)
+    tracks: list = field(default_factory=list)  # (paths, name, (N, 2) sz, text) moving observers
+    flight_zones: list = field(default_factory=list)  # (path, (4, 2) sz box: along-aim span x floor-ceiling, exceeded, text, worst sz)
 
     @classmethod
     def from_result(cls, result) -> "ElevationViewDisplay":
@@ -67,8 +71,16 @@ class ElevationViewDisplay(_Display):
         obs = np.asarray(result.observers.position_m, float).reshape(-1, 3) - scene.offset_m  # world -> local, as sz takes
         obs_sz = sz(obs) if len(obs) else np.zeros((0, 2))
         labels, more = hazardous_labels(result, obs_sz)
-        return cls(f"{scene.name}: elevation view", sz(scene.laser_position_m), aim, targets, lobes, mirrors,
-                   _profile(scene, view, aim, obs_sz, up), obs_sz, np.asarray(result.hazardous, bool), labels, more)
+        d = cls(f"{scene.name}: elevation view", sz(scene.laser_position_m), aim, targets, lobes, mirrors,
+                _profile(scene, view, aim, obs_sz, up), obs_sz, np.asarray(result.hazardous, bool), labels, more)
+        from .figure_index import finding_paths, flight_zone_rings, track_lines
+
+        d.paths = finding_paths(result)
+        off = np.asarray(scene.offset_m, float)
+        d.tracks = [(p, name, sz(xyz - off), text) for p, name, xyz, text in track_lines(result, d.paths)]
+        d.flight_zones = [(path, _zone_box(result, spec, ring, lambda q: sz(q - off)), exceeded, text, sz(worst - off))
+                          for path, ring, exceeded, text, spec, worst in flight_zone_rings(result)]
+        return d
 
     def plot(self, axes=None):
         """Two panels: the whole range and the site. Returns (figure, axes)."""
@@ -115,8 +127,13 @@ class ElevationViewDisplay(_Display):
         for target, kind, rings in self.lobes:
             draw_lobe(ax, kind, rings, None if kind in seen else f"{kind} keep-out lobe (projected)")
             seen.add(kind)
+            path = self.paths.get("lobe", {}).get((target, kind))
+            for ring in rings:
+                mark(ax, [path] if path else [], f"{kind} keep-out lobe (projected)", ring, "polygon")
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
+            mark_mirror(ax, self.paths, name, a, b)
+        self._draw_airspace(ax)
         ax.plot(*self.laser_sz, marker="^", ms=10, c="k", ls="", label="laser")
         for i, (name, sz) in enumerate(self.targets):
             ax.plot(*sz, marker="s", ms=6, mfc="white", mec=C.TARGET, ls="", label="targets" if i == 0 else None)
@@ -124,7 +141,27 @@ class ElevationViewDisplay(_Display):
         if len(self.observers_sz):
             safe = ~self.hazardous
             ax.scatter(*self.observers_sz[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
-            draw_hazardous(ax, self.observers_sz[self.hazardous], self.unlabelled)
+            rows = self.paths.get("observers", {})
+            draw_hazardous(ax, self.observers_sz[self.hazardous], self.unlabelled,
+                           [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)])
+
+    def _draw_airspace(self, ax):
+        """Flight zones as their along-aim span between floor and ceiling (exceeded: red
+        hatched) and the moving observers' tracks projected, each named with its verdict."""
+        for k, (path, box, exceeded, text, worst) in enumerate(self.flight_zones):
+            colour = C.HAZARDOUS if exceeded else "#555555"
+            ax.plot(*worst, marker="*", ms=9, c=colour, mec="k", ls="", zorder=12,
+                    label="flight zones' worst points (FAA levels)" if k == 0 else None)
+            closed = np.vstack([box, box[:1]])
+            ax.fill(*closed.T, fc="none", ec=colour, lw=1.2, hatch="//" if exceeded else None, ls="-" if exceeded else "--")
+            ax.annotate(text, box.mean(axis=0), fontsize=6, ha="center", va="center", color=colour, zorder=11, wrap=True,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
+            mark(ax, [path], text, closed, "polygon")
+        for k, (paths, name, pts, text) in enumerate(self.tracks):
+            ax.plot(*pts.T, c="#6a3d9a", lw=1.4, label="moving observers' tracks (projected)" if k == 0 else None)
+            ax.annotate(text, pts[0], xytext=(0, 8), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
+            mark(ax, paths, text, pts, "line")
 
 
 def _profile(scene, view, aim, obs_sz, up):
@@ -144,3 +181,16 @@ def _profile(scene, view, aim, obs_sz, up):
     s = s[inside]
     ground = t.height_at(xy[inside, 0], xy[inside, 1]) + up[1]
     return s, ground, float(scene.spec.analysis.footprint_eye_height_m)
+
+
+def _zone_box(result, spec, ring, to_sz) -> np.ndarray:
+    """(4, 2) a flight zone in the elevation view: the span of its outline along the aim's
+    azimuth, from its floor to its ceiling above the lowest ground under its outline."""
+    scene = result.scene
+    off = np.asarray(scene.offset_m, float)
+    ground = (scene.terrain.height_at(ring[:, 0] - off[0], ring[:, 1] - off[1]) + off[2]) if scene.terrain is not None \
+        else np.zeros(len(ring))
+    s = to_sz(np.column_stack([ring, ground]))[:, 0]
+    g = float(np.min(ground))
+    lo, hi = g + float(spec.floor_agl_m), g + float(spec.ceiling_agl_m)
+    return np.array([[s.min(), lo], [s.max(), lo], [s.max(), hi], [s.min(), hi]])

@@ -54,6 +54,10 @@ class PlanViewDisplay(_Display):
     lobes: list = field(default_factory=list)  # (target, kind, cut, [exterior rings (K, 2)], [holes]) world x, y
     labels: list = field(default_factory=list)  # (xy, text): the worst hazardous observers
     unlabelled: int = 0  # hazardous observers not named in the picture
+    paths: dict = field(default_factory=dict)  # report.json paths of what is drawn (:func:`hazard.figure_index.finding_paths`)
+    tracks: list = field(default_factory=list)  # (paths, name, (N, 2) xy, text) moving observers
+    flight_zones: list = field(default_factory=list)  # (path, (K, 2) ring, exceeded, text, spec, worst point)
+    faa: list = field(default_factory=list)  # (path, text, distance along the aim [m]) FAA visual-interference distances
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -70,13 +74,20 @@ class PlanViewDisplay(_Display):
         obs = result.observers
         nominal = np.asarray(z["nominal"]["polygon_m"], float) if z.get("nominal") else None
         with_optics = np.array([o is not None for o in obs.observers.optics], bool)
-        return cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
+        d = cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
                    _targets(result, off), _mirrors(result, off), *_footprint(result, off), _contours(scene, off),
                    np.asarray(obs.position_m, float)[:, :2] if len(obs.position_m) else np.zeros((0, 2)),
                    np.asarray(result.hazardous, bool),
                    with_optics[obs.observers.group] if len(obs.position_m) and len(with_optics) else np.zeros(len(obs.position_m), bool),
                    _occluders(scene, off), lobe_rings(result, off[:2]), *hazardous_labels(result, np.asarray(obs.position_m, float)[:, :2]
                                                                                             if len(obs.position_m) else np.zeros((0, 2))))
+        from .figure_index import faa_marks, finding_paths, flight_zone_rings, track_lines
+
+        d.paths = finding_paths(result)
+        d.tracks = [(p, name, xyz[:, :2], text) for p, name, xyz, text in track_lines(result, d.paths)]
+        d.flight_zones = flight_zone_rings(result)
+        d.faa = faa_marks(result)
+        return d
 
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
@@ -87,6 +98,7 @@ class PlanViewDisplay(_Display):
             self._draw_zones(ax)
             self._draw_lobes(ax)
             self._draw_objects(ax)
+            self._draw_airspace(ax)
             ax.set_aspect("equal", adjustable="box" if limits is not None else "datalim")
             if limits is not None:
                 ax.set_xlim(limits[0], limits[1])
@@ -104,7 +116,48 @@ class PlanViewDisplay(_Display):
         _range_rings(axes[0], [self.laser_xy], "from the laser")
         framed = [xy for name, xy, r, ra, f in self.targets if f]
         _range_rings(axes[1], framed or [self.laser_xy], "from the targets" if framed else "from the laser")
+        self._draw_faa(axes[0])
         return fig, axes
+
+    def _draw_airspace(self, ax):
+        """Flight zones (exceeded: red hatched) and the moving observers' tracks, each named
+        with its verdict."""
+        from .figure_index import mark
+
+        for k, (path, ring, exceeded, text, _, worst) in enumerate(self.flight_zones):
+            colour = C.HAZARDOUS if exceeded else "#555555"
+            ax.plot(*worst[:2], marker="*", ms=9, c=colour, mec="k", ls="", zorder=12,
+                    label="flight zones' worst points (FAA levels)" if k == 0 else None)
+            closed = np.vstack([ring, ring[:1]])
+            ax.fill(*closed.T, fc="none", ec=colour, lw=1.4, hatch="//" if exceeded else None, ls="-" if exceeded else "--")
+            ax.annotate(text, ring.mean(axis=0), fontsize=6, ha="center", va="center",
+                        color=colour, zorder=11, bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
+            mark(ax, [path], text, closed, "polygon")
+        for k, (paths, name, xy, text) in enumerate(self.tracks):
+            ax.plot(*xy.T, c="#6a3d9a", lw=1.4, label="moving observers' tracks" if k == 0 else None)
+            ax.annotate("", xy=xy[-1], xytext=xy[max(0, len(xy) - 2)], arrowprops=dict(arrowstyle="-|>", color="#6a3d9a"))
+            ax.annotate(text, xy[0], xytext=(0, -10), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
+            mark(ax, paths, text, xy, "line")
+
+    def _draw_faa(self, ax):
+        """The direct beam's FAA distances on the aim: a tick and its name in the frame,
+        else an arrow at the edge with the distance."""
+        from .figure_index import arrow_to, mark
+
+        x0, x1 = ax.get_xlim()
+        y0, y1 = ax.get_ylim()
+        for path, text, xyz in self.faa:
+            xy = np.asarray(xyz, float)[:2]
+            if x0 <= xy[0] <= x1 and y0 <= xy[1] <= y1:
+                ax.plot(*xy, marker="D", ms=5, mfc="#ffd92f", mec="k", ls="", zorder=12)
+                ax.annotate(text, xy, xytext=(6, 0), textcoords="offset points", fontsize=6, va="center", zorder=12,
+                            bbox=dict(boxstyle="round,pad=0.2", fc="#fff7bc", ec="none", alpha=0.9))
+                mark(ax, [path], text, xy)
+            else:
+                arrow_to(ax, [path], text, self.laser_xy, xy)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
 
     def site_limits(self) -> tuple:
         """x0, x1, y0, y1 [m] around the targets: their diffuse hazard circles (naked and
@@ -125,27 +178,44 @@ class PlanViewDisplay(_Display):
                 cs = ax.contour(x, y, h, levels=np.linspace(lo + 0.1 * (hi - lo), hi - 0.05 * (hi - lo), 7), colors="#b0b0b0", linewidths=0.6)
                 ax.clabel(cs, fontsize=6, fmt="%.0f m")
         if self.footprint_xy is not None and len(self.footprint_xy):
+            from matplotlib.collections import PolyCollection
+
+            from .figure_index import mark
+
             s = self.footprint_cell_m
-            ax.scatter(*self.footprint_xy.T, s=4, marker="s", c=C.FOOTPRINT, alpha=0.6, lw=0,
-                       label=f"hazardous ground at eye height, every spot summed ({s:g} m cells)")
+            label = f"hazardous ground at eye height, every spot summed ({s:g} m cells, drawn at their size)"
+            cells = cell_squares(self.footprint_xy, s)
+            ax.add_collection(PolyCollection(cells, facecolors=C.FOOTPRINT, edgecolors=C.FOOTPRINT, lw=0.3, alpha=0.6, label=label,
+                                             zorder=2))
+            ax.update_datalim(cells.reshape(-1, 2))
+            mark(ax, self.paths.get("footprint", []), label, cells.reshape(-1, 2), "points")
         if self.boundary is not None:
             ring = np.vstack([self.boundary, self.boundary[:1]])
             ax.plot(*ring.T, c="k", lw=1.5, label="range boundary")
 
     def _draw_zones(self, ax):
+        from .figure_index import mark
+
         if self.zone is not None:
             ax.fill(*self.zone.T, fc="#e41a1c", alpha=0.25, ec="#e41a1c", lw=1.0, label=self.zone_label)
+            mark(ax, [self.paths.get("zone")] if self.paths.get("zone") else [], self.zone_label, self.zone, "polygon")
         if self.nominal is not None:
             ax.plot(*self.nominal.T, c="#e41a1c", lw=0.8, ls=":", label="the sector without the buffer (the band between is the buffer zone)")
-        for (label, ring), ls in zip(self.aided_zones, ("--", ":", "-.") * 8):
+        for k, ((label, ring), ls) in enumerate(zip(self.aided_zones, ("--", ":", "-.") * 8)):
             ax.plot(*ring.T, c="#984ea3", lw=1.0, ls=ls, label=label)
+            mark(ax, self.paths.get("aided", [])[k:k + 1], label, ring, "polygon")
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
 
     def _draw_lobes(self, ax):
+        from .figure_index import mark
+
         seen = set()
         for target, kind, cut, rings, holes in self.lobes:
             draw_lobe(ax, kind, rings, None if (kind, cut) in seen else f"{kind} keep-out lobe, {cut}")
             seen.add((kind, cut))
+            path = self.paths.get("lobe", {}).get((target, kind))
+            for ring in rings:
+                mark(ax, [path] if path else [], f"{kind} keep-out lobe, {cut}", ring, "polygon")
             for ring in holes:
                 ax.plot(*ring.T, c=C.STATIC if kind == "static" else C.DYNAMIC, lw=0.8, ls=":")
 
@@ -166,13 +236,18 @@ class PlanViewDisplay(_Display):
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
+            mark_mirror(ax, self.paths, name, a, b)
         if len(self.observers_xy):
             safe = ~self.hazardous
             ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
             if self.aided.any():
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
-            draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled)
+            draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled, self._hazardous_paths())
+
+    def _hazardous_paths(self) -> list:
+        rows = self.paths.get("observers", {})
+        return [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)]
 
 
 def aim_reach_m(result) -> float:
@@ -212,11 +287,26 @@ def draw_lobe(ax, kind, rings, label):
         label = None
 
 
-def draw_hazardous(ax, xy, unlabelled):
-    """Observers at or above the MPE: large red crosses on top, counted in the legend."""
+def draw_hazardous(ax, xy, unlabelled, paths=None):
+    """Observers at or above the MPE: large red crosses on top, counted in the legend;
+    noted for figures.json under ``paths`` (report.json paths, one per point, None:
+    not listed)."""
+    from .figure_index import mark
+
     more = f"; {unlabelled} more unnamed, see observers.csv" if unlabelled else ""
-    ax.scatter(*np.asarray(xy).reshape(-1, 2).T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
-               label=f"observers at or above the MPE ({len(xy)}{more})")
+    label = f"observers at or above the MPE ({len(xy)}{more})"
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    ax.scatter(*xy.T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10, label=label)
+    keep = [k for k, p in enumerate(paths or []) if p]
+    mark(ax, [paths[k] for k in keep], label, xy[keep], "points")
+
+
+def mark_mirror(ax, paths, name, a, b):
+    """Note a mirror beam drawn from ``a`` to ``b`` (figures.json)."""
+    from .figure_index import mark
+
+    path = paths.get("mirror", {}).get(name)
+    mark(ax, [path] if path else [], "mirror beams (specular NOHD)", np.array([a, b]), "line")
 
 
 def lobe_rings(result, off_xy) -> list:
@@ -360,12 +450,21 @@ def _mirrors(result, off) -> list:
     return [(name, (a + off)[:2], (b + off)[:2]) for name, a, b in mirror_segments(result)]
 
 
+def cell_squares(xy, cell_m) -> np.ndarray:
+    """(N, 4, 2) the corners of the ``cell_m`` squares centred on the nodes ``xy`` [m]."""
+    h = 0.5 * float(cell_m)
+    corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    return np.asarray(xy, float)[:, None, :] + corners[None]
+
+
 def _footprint(result, off):
-    f = result.footprint_dynamic
+    """The hazardous ground nodes (world x, y) of the static or the dynamic footprint, and
+    the terrain's cell size [m]."""
+    masks = [f.mask for f in (result.footprint_dynamic, result.footprint_static) if f is not None]
     terrain = result.scene.terrain
-    if f is None or terrain is None or not f.mask.any():
+    if not masks or terrain is None or not any(m.any() for m in masks):
         return None, 0.0
-    iy, ix = np.nonzero(f.mask)
+    iy, ix = np.nonzero(np.logical_or.reduce(masks))
     xy = np.stack([terrain.x0 + terrain.dx * ix, terrain.y0 + terrain.dx * iy], axis=1) + off[:2]
     return xy, float(terrain.dx)
 
