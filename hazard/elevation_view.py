@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
-from .figure_index import mark
+from .figure_index import lobe_paths, mark
 from .plan_view import (_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mark_mirror,
                         mirror_segments, square_limits, two_panels)
 from .plots import _Display
@@ -127,9 +127,8 @@ class ElevationViewDisplay(_Display):
         for target, kind, rings in self.lobes:
             draw_lobe(ax, kind, rings, None if kind in seen else f"{kind} keep-out lobe (projected)")
             seen.add(kind)
-            path = self.paths.get("lobe", {}).get((target, kind))
             for ring in rings:
-                mark(ax, [path] if path else [], f"{kind} keep-out lobe (projected)", ring, "polygon")
+                mark(ax, lobe_paths(self.paths, self.lobes, target, kind), f"{kind} keep-out lobe (projected)", ring, "polygon")
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)

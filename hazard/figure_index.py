@@ -244,3 +244,15 @@ def faa_marks(result) -> list:
             text += f" (the beam is stopped at {_metres(stop)}: not reached)"
         out.append((f"visual_interference.direct.{level}_m", text, origin + np.asarray(scene.laser_direction, float) * d))
     return out
+
+
+def lobe_paths(paths, lobes, target, kind) -> list:
+    """The report.json paths a drawn lobe outline stands for: its own, and a static
+    lobe's also the dynamic one's when the target has no dynamic outline (its material
+    does not change: the two are the same lobe)."""
+    own = paths.get("lobe", {}).get((target, kind))
+    out = [own] if own else []
+    if kind == "static" and not any(t == target and k == "dynamic" for t, k, *_ in lobes):
+        other = paths.get("lobe", {}).get((target, "dynamic"))
+        out += [other] if other else []
+    return out

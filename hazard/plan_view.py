@@ -207,15 +207,14 @@ class PlanViewDisplay(_Display):
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
 
     def _draw_lobes(self, ax):
-        from .figure_index import mark
+        from .figure_index import lobe_paths, mark
 
         seen = set()
         for target, kind, cut, rings, holes in self.lobes:
             draw_lobe(ax, kind, rings, None if (kind, cut) in seen else f"{kind} keep-out lobe, {cut}")
             seen.add((kind, cut))
-            path = self.paths.get("lobe", {}).get((target, kind))
             for ring in rings:
-                mark(ax, [path] if path else [], f"{kind} keep-out lobe, {cut}", ring, "polygon")
+                mark(ax, lobe_paths(self.paths, self.lobes, target, kind), f"{kind} keep-out lobe, {cut}", ring, "polygon")
             for ring in holes:
                 ax.plot(*ring.T, c=C.STATIC if kind == "static" else C.DYNAMIC, lw=0.8, ls=":")
 
