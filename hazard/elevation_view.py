@@ -23,7 +23,7 @@ import numpy as np
 
 from . import palette as C
 from .figure_index import lobe_paths, mark
-from .plan_view import (_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mark_mirror,
+from .plan_view import (MIRROR_LABEL, _scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mark_mirror,
                         mirror_segments, square_limits, two_panels)
 from .plots import _Display
 
@@ -97,10 +97,7 @@ class ElevationViewDisplay(_Display):
         axes[1].set_ylabel("height [m] (equal scale)")
         fig.tight_layout()
         fig.canvas.draw()
-        x0, x1 = axes[0].get_xlim()
-        y0, y1 = axes[0].get_ylim()
-        box = axes[0].get_window_extent()
-        exaggeration = (box.height / (y1 - y0)) / (box.width / (x1 - x0))
+        exaggeration = readable_heights(axes[0])
         axes[0].set_ylabel(f"height [m] (vertical scale x{exaggeration:.3g})" if abs(exaggeration - 1) > 0.05 else "height [m]")
         label_points(axes[1], self.labels)
         axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
@@ -130,7 +127,7 @@ class ElevationViewDisplay(_Display):
             for ring in rings:
                 mark(ax, lobe_paths(self.paths, self.lobes, target, kind), f"{kind} keep-out lobe (projected)", ring, "polygon")
         for i, (name, a, b) in enumerate(self.mirrors):
-            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
+            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)
         self._draw_airspace(ax)
         ax.plot(*self.laser_sz, marker="^", ms=10, c="k", ls="", label="laser")
@@ -161,6 +158,26 @@ class ElevationViewDisplay(_Display):
             ax.annotate(text, pts[0], xytext=(0, 8), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
             mark(ax, paths, text, pts, "line")
+
+
+MAX_EXAGGERATION = 10.0  # the range panel's vertical exaggeration at most: a 1 deg slope is drawn at most 10 deg
+
+
+def readable_heights(ax, max_exaggeration=MAX_EXAGGERATION) -> float:
+    """Widen ``ax``'s height range (about its middle) so that its vertical exaggeration
+    (height scale over distance scale) is at most ``max_exaggeration``: a nearly level
+    beam is not drawn as a vertical line, a lobe metres tall not as a bar across a
+    kilometre axis. Returns the exaggeration the panel shows (said on its axis)."""
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    box = ax.get_window_extent()
+    exaggeration = (box.height / (y1 - y0)) / (box.width / (x1 - x0))
+    if exaggeration > max_exaggeration:
+        half = 0.5 * (y1 - y0) * exaggeration / max_exaggeration
+        mid = 0.5 * (y0 + y1)
+        ax.set_ylim(mid - half, mid + half)
+        exaggeration = max_exaggeration
+    return float(exaggeration)
 
 
 def _profile(scene, view, aim, obs_sz, up):

@@ -27,6 +27,8 @@ from .plots import _Display
 
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
+MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
+SITE_CONTEXT = 3.0  # the site panel also frames occluders and safe observers this many half-widths about the hazard
 LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
 
 
@@ -57,7 +59,8 @@ class PlanViewDisplay(_Display):
     paths: dict = field(default_factory=dict)  # report.json paths of what is drawn (:func:`hazard.figure_index.finding_paths`)
     tracks: list = field(default_factory=list)  # (paths, name, (N, 2) xy, text) moving observers
     flight_zones: list = field(default_factory=list)  # (path, (K, 2) ring, exceeded, text, spec, worst point)
-    faa: list = field(default_factory=list)  # (path, text, distance along the aim [m]) FAA visual-interference distances
+    faa: list = field(default_factory=list)  # (path, text, world point) FAA visual-interference distances
+    ends: list = field(default_factory=list)  # (xy, text): where the danger zone and each mirror beam end, and why
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -87,6 +90,7 @@ class PlanViewDisplay(_Display):
         d.tracks = [(p, name, xyz[:, :2], text) for p, name, xyz, text in track_lines(result, d.paths)]
         d.flight_zones = flight_zone_rings(result)
         d.faa = faa_marks(result)
+        d.ends = beam_ends(result, d.aim_xy[1], off)
         return d
 
     def plot(self, axes=None):
@@ -114,8 +118,9 @@ class PlanViewDisplay(_Display):
             _scale_bar(ax)
             _north_arrow(ax)
         _range_rings(axes[0], [self.laser_xy], "from the laser")
-        framed = [xy for name, xy, r, ra, f in self.targets if f]
-        _range_rings(axes[1], framed or [self.laser_xy], "from the targets" if framed else "from the laser")
+        framed = [(name, xy) for name, xy, r, ra, f in self.targets if f]
+        what = f"from {framed[0][0]}" if len(framed) == 1 else "from the targets" if framed else "from the laser"
+        _range_rings(axes[1], [xy for _, xy in framed] or [self.laser_xy], what)
         self._draw_faa(axes[0])
         return fig, axes
 
@@ -162,13 +167,18 @@ class PlanViewDisplay(_Display):
     def site_limits(self) -> tuple:
         """x0, x1, y0, y1 [m] around the targets: their diffuse hazard circles (naked and
         aided, at least 20 m), the hazardous observers and the hazardous ground, 10 %
-        wider."""
+        wider; then widened to the occluders and the safe observers within
+        ``SITE_CONTEXT`` times that frame's half-width of its centre (what stands
+        around the hazard; the range panel shows the rest)."""
         pts = [np.asarray(xy, float)[None] + max(r, ra, 20.0) * np.array([[-1.0, -1.0], [1.0, 1.0]])
                for name, xy, r, ra, framed in self.targets if framed] or [self.laser_xy[None]]
         pts += [self.observers_xy[self.hazardous]] if self.hazardous.any() else []
         pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
         pts += [ring for lobe in self.lobes for ring in lobe[3]]
-        return square_limits(pts)
+        x0, x1, y0, y1 = square_limits(pts)
+        near = _near_points([np.asarray(r, float).reshape(-1, 2) for r in self.occluders] + [self.observers_xy[~self.hazardous]],
+                            ((x0 + x1) / 2, (y0 + y1) / 2), SITE_CONTEXT * (x1 - x0) / 2)
+        return square_limits(pts + near) if near else (x0, x1, y0, y1)
 
     def _draw_ground(self, ax):
         if self.contours is not None:
@@ -205,6 +215,12 @@ class PlanViewDisplay(_Display):
             ax.plot(*ring.T, c="#984ea3", lw=1.0, ls=ls, label=label)
             mark(ax, self.paths.get("aided", [])[k:k + 1], label, ring, "polygon")
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
+        for xy, text in self.ends:
+            right = xy[0] > self.laser_xy[0]  # the text toward the laser: inside the frame
+            ax.plot(*xy, marker="o", ms=5, mfc="white", mec="k", ls="", zorder=9)
+            ax.annotate(text, xy, xytext=(-6 if right else 6, -8), textcoords="offset points", fontsize=6, zorder=9,
+                        ha="right" if right else "left",
+                        bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
     def _draw_lobes(self, ax):
         from .figure_index import lobe_paths, mark
@@ -234,7 +250,7 @@ class PlanViewDisplay(_Display):
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
-            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
+            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)
         if len(self.observers_xy):
             safe = ~self.hazardous
@@ -247,6 +263,29 @@ class PlanViewDisplay(_Display):
     def _hazardous_paths(self) -> list:
         rows = self.paths.get("observers", {})
         return [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)]
+
+
+def _metres(d) -> str:
+    return f"{d / 1000:.3g} km" if d >= 1000 else f"{d:.3g} m"
+
+
+def beam_ends(result, aim_end_xy, off) -> list:
+    """(xy, text) where the drawn danger zone's aim line and each mirror beam end, world
+    x, y, and why there: the NOHD, a backstop, or the 100 km drawn of an unbounded zone."""
+    z = getattr(result, "sdz", None) or {}
+    out = []
+    if z.get("polygon_m"):
+        r = float(z.get("max_range_m") or 0.0)
+        why = ("every direction stopped by a backstop" if z.get("contained") else
+               "unbounded: drawn to 100 km" if not math.isfinite(r) or r > 1e5 else "its NOHD")
+        out.append((np.asarray(aim_end_xy, float), f"danger zone ends at {_metres(min(r, 1e5))} ({why})"))
+    nohd = {t.name: t.specular_nohd_dynamic_m for t in result.targets}
+    for name, a, b in mirror_segments(result):
+        length = float(np.linalg.norm(b - a))
+        full = float(nohd.get(name) or 0.0)
+        why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
+        out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
+    return out
 
 
 def aim_reach_m(result) -> float:
@@ -305,7 +344,7 @@ def mark_mirror(ax, paths, name, a, b):
     from .figure_index import mark
 
     path = paths.get("mirror", {}).get(name)
-    mark(ax, [path] if path else [], "mirror beams (specular NOHD)", np.array([a, b]), "line")
+    mark(ax, [path] if path else [], MIRROR_LABEL, np.array([a, b]), "line")
 
 
 def lobe_rings(result, off_xy) -> list:
@@ -346,6 +385,18 @@ def label_points(ax, labels):
     ax.set_ylim(y0, y1)
 
 
+def _near_points(groups, centre, radius_m) -> list:
+    """The points of ``groups`` ((K, 2) arrays) within ``radius_m`` of ``centre`` (a
+    square about it), as a list of arrays (empty ones left out)."""
+    out = []
+    for g in groups:
+        g = np.asarray(g, float).reshape(-1, 2)
+        near = g[np.all(np.abs(g - np.asarray(centre, float)) <= radius_m, axis=1)]
+        if len(near):
+            out.append(near)
+    return out
+
+
 def _distinct(points, tol_m) -> list:
     """Points more than ``tol_m`` apart (the first of each cluster)."""
     out = []
@@ -357,7 +408,8 @@ def _distinct(points, tol_m) -> list:
 
 def _range_rings(ax, centres, what):
     """Labelled circles about each centre at a round spacing (1, 2 or 5 x 10^k m), about a
-    quarter of the panel."""
+    quarter of the panel; the first ring's label says what they are centred on (``what``,
+    e.g. "from the laser")."""
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
     step = _nice_length(max(x1 - x0, y1 - y0) * 1.25)  # about a quarter of the panel
@@ -370,7 +422,9 @@ def _range_rings(ax, centres, what):
             for a in (np.pi / 4, -3 * np.pi / 4):
                 p = c + r * np.array([np.cos(a), np.sin(a)])
                 if x0 < p[0] < x1 and y0 < p[1] < y1:
-                    ax.text(*p, f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m", fontsize=6, color="#555555", ha="center",
+                    text = f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m"
+                    text += f" {what}" if k == 1 else ""  # the first ring says what the rings are centred on
+                    ax.text(*p, text, fontsize=6, color="#555555", ha="center",
                             va="center", bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.7), zorder=3)
                     break
     ax.set_xlim(x0, x1)
@@ -428,18 +482,24 @@ def _finite_or_0(x) -> float:
 
 
 def mirror_segments(result) -> list:
-    """(target, start, end) of every mirror beam to its dynamic specular NOHD (at most
-    100 km drawn) along the direction the report gives (else the mirror axis of the
-    spot's mean normal), scene-local 3-D points [m]."""
+    """(target, start, end) of every mirror beam along the direction the report gives
+    (else the mirror axis of the spot's mean normal), scene-local 3-D points [m], to its
+    dynamic specular NOHD or, when every ray of it is stopped sooner, to where the
+    analysis stops its farthest ray (``sdz.mirror_beams[].max_reach_m``): never past
+    where the text says it ends; at most 100 km drawn."""
     from .engine import mirror_axis
 
     out = []
     rows = {t.name: t for t in result.targets}
+    reach = {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
     for sp in result.spots:
         row = rows.get(sp.target.name)
         if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
             continue
         length = min(float(row.specular_nohd_dynamic_m), 1e5)
+        stop = reach.get(sp.target.name)
+        if stop is not None and math.isfinite(stop) and 0.0 <= stop < length:
+            length = float(stop)
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
         out.append((sp.target.name, sp.centroid, sp.centroid + axis * length))
     return out
