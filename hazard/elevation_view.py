@@ -46,6 +46,8 @@ class ElevationViewDisplay(_Display):
     labels: list = field(default_factory=list)
     unlabelled: int = 0
     paths: dict = field(default_factory=dict)  # report.json paths of what is drawn (:func:`hazard.figure_index.finding_paths`)
+    aim_past: np.ndarray | None = None  # (2, 2) the aim line past its centre's first meeting with the ground (dotted)
+    aim_label: str = "aim line (to the danger zone's range)"
     tracks: list = field(default_factory=list)  # (paths, name, (N, 2) sz, text) moving observers
     flight_zones: list = field(default_factory=list)  # (path, (4, 2) sz box: along-aim span x floor-ceiling, exceeded, text, worst sz)
 
@@ -60,11 +62,13 @@ class ElevationViewDisplay(_Display):
         def sz(points):
             return view.to_2d(points) + up
 
-        reach = aim_reach_m(result)
+        zone_reach = aim_reach_m(result)
         spots = {sp.target.name: sp.centroid for sp in result.spots}
-        reach = max(reach, 2.0 * max([float(np.linalg.norm(c - scene.laser_position_m)) for c in spots.values()] + [1.0]))
+        reach = max(zone_reach, 2.0 * max([float(np.linalg.norm(c - scene.laser_position_m)) for c in spots.values()] + [1.0]))
         reach = min(reach, 1e5)
-        aim = sz(np.array([scene.laser_position_m, scene.laser_position_m + scene.laser_direction * reach]))
+        frame = sz(np.array([scene.laser_position_m, scene.laser_position_m + scene.laser_direction * reach]))  # the terrain drawn
+        drawn = zone_reach if zone_reach > 0 else reach  # the aim line to the zone's range, never past it
+        aim = sz(np.array([scene.laser_position_m, scene.laser_position_m + scene.laser_direction * drawn]))
         targets = [(t.name, sz(spots.get(t.name, t.center_m))) for t in scene.targets]
         lobes = [(o.target, o.kind, [r + up for r in o.rings()]) for o in lobe_outlines(result, view)]
         mirrors = [(name, sz(a), sz(b)) for name, a, b in mirror_segments(result)]
@@ -72,7 +76,9 @@ class ElevationViewDisplay(_Display):
         obs_sz = sz(obs) if len(obs) else np.zeros((0, 2))
         labels, more = hazardous_labels(result, obs_sz)
         d = cls(f"{scene.name}: elevation view", sz(scene.laser_position_m), aim, targets, lobes, mirrors,
-                _profile(scene, view, aim, obs_sz, up), obs_sz, np.asarray(result.hazardous, bool), labels, more)
+                _profile(scene, view, frame, obs_sz, up), obs_sz, np.asarray(result.hazardous, bool), labels, more)
+        d.aim_sz, d.aim_past = clip_at_ground(aim, d.profile)
+        d.aim_label = "aim line (to the danger zone's range)" if zone_reach > 0 else "aim line"
         from .figure_index import finding_paths, flight_zone_rings, track_lines
 
         d.paths = finding_paths(result)
@@ -119,7 +125,10 @@ class ElevationViewDisplay(_Display):
             floor = ground.min() - max(1.0, 0.2 * float(np.ptp(ground)))
             ax.fill_between(s, ground, floor, color=C.GROUND, lw=0, label="terrain under the aim line")
             ax.plot(s, ground + eye, c="#4d7a3a", lw=0.8, ls=":", label=f"eye height ({eye:g} m) above it")
-        ax.plot(*self.aim_sz.T, c=C.ZONE, lw=0.9, ls="--", label="aim line (to the danger zone's range)")
+        ax.plot(*self.aim_sz.T, c=C.ZONE, lw=0.9, ls="--", label=self.aim_label)
+        if self.aim_past is not None:
+            ax.plot(*self.aim_past.T, c=C.ZONE, lw=0.6, ls=":", alpha=0.7,
+                    label="aim line past its centre's ground contact (part of the beam goes on)")
         seen = set()
         for target, kind, rings in self.lobes:
             draw_lobe(ax, kind, rings, None if kind in seen else f"{kind} keep-out lobe (projected)")
@@ -158,6 +167,31 @@ class ElevationViewDisplay(_Display):
             ax.annotate(text, pts[0], xytext=(0, 8), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
             mark(ax, paths, text, pts, "line")
+
+
+def clip_at_ground(aim, profile) -> tuple:
+    """(the aim line (2, 2) up to where its centre first meets the ground under it, the
+    rest (2, 2) or None): an aim line is never drawn through a hill. ``profile``: (s,
+    ground height, eye height) of :func:`_profile`, or None (no ground: nothing to clip)."""
+    if profile is None:
+        return aim, None
+    s, ground, _ = profile
+    (s0, z0), (s1, z1) = aim
+    if not s1 > s0:
+        return aim, None
+    on = (s > s0 + 1e-9) & (s <= s1)
+    z = z0 + (s[on] - s0) * (z1 - z0) / (s1 - s0)
+    below = np.flatnonzero(z < ground[on])
+    if not len(below):
+        return aim, None
+    k = below[0]
+    prev_s, prev_z, prev_g = (s0, z0, None) if k == 0 else (s[on][k - 1], z[k - 1], ground[on][k - 1])
+    cut = s[on][k]
+    if prev_g is not None:  # where the line crosses the ground between the two samples
+        a, b = prev_z - prev_g, z[k] - ground[on][k]
+        cut = prev_s + (s[on][k] - prev_s) * a / (a - b)
+    hit = np.array([cut, z0 + (cut - s0) * (z1 - z0) / (s1 - s0)])
+    return np.array([aim[0], hit]), np.array([hit, aim[1]])
 
 
 MAX_EXAGGERATION = 10.0  # the range panel's vertical exaggeration at most: a 1 deg slope is drawn at most 10 deg
