@@ -58,6 +58,15 @@ def test_figures_json_says_every_hazardous_finding_is_drawn_and_is_in_the_manife
             assert any(f["paths"] and f["paths"][0].startswith("observers[") for f in entry["findings"]), name
 
 
+def test_every_png_of_the_run_is_whole_and_nothing_runs_off_its_edge(run_with_plot):
+    from tests.hazard.test_picture_pixels import png_problems
+
+    out, _ = run_with_plot
+    pngs = sorted(out.glob("*.png"))
+    assert len(pngs) == 7
+    assert not {p.name: png_problems(p.read_bytes()) for p in pngs if png_problems(p.read_bytes())}
+
+
 def test_the_plan_shows_the_zone_the_mirror_beam_and_both_verdicts(run_with_plot):
     img = imageio.imread(run_with_plot[0] / "plan.png")
     zone_fill = _near(img, (249, 197, 198))  # #e41a1c at alpha 0.25 over white
