@@ -23,8 +23,8 @@ import numpy as np
 
 from . import palette as C
 from .figure_index import lobe_paths, mark
-from .plan_view import (MIRROR_LABEL, _scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, label_points, mark_mirror,
-                        mirror_segments, square_limits, two_panels)
+from .plan_view import (MIRROR_LABEL, _scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
+                        label_points, mark_mirror, mirror_segments, square_limits, two_panels)
 from .plots import _Display
 
 __all__ = ["ElevationViewDisplay"]
@@ -109,6 +109,9 @@ class ElevationViewDisplay(_Display):
         axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
         for ax in axes:
             _scale_bar(ax, "lower right")
+        fig.canvas.draw()
+        for ax in axes:
+            keep_texts_inside(ax)
         return fig, axes
 
     def site_limits(self) -> tuple:

@@ -122,6 +122,9 @@ class PlanViewDisplay(_Display):
         what = f"from {framed[0][0]}" if len(framed) == 1 else "from the targets" if framed else "from the laser"
         _range_rings(axes[1], [xy for _, xy in framed] or [self.laser_xy], what)
         self._draw_faa(axes[0])
+        fig.canvas.draw()
+        for ax in axes:
+            keep_texts_inside(ax)
         return fig, axes
 
     def _draw_airspace(self, ax):
@@ -216,10 +219,10 @@ class PlanViewDisplay(_Display):
             mark(ax, self.paths.get("aided", [])[k:k + 1], label, ring, "polygon")
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
         for xy, text in self.ends:
-            right = xy[0] > self.laser_xy[0]  # the text toward the laser: inside the frame
+            right, above = xy[0] > self.laser_xy[0], xy[1] > self.laser_xy[1]  # the text toward the laser: inside the frame
             ax.plot(*xy, marker="o", ms=5, mfc="white", mec="k", ls="", zorder=9)
-            ax.annotate(text, xy, xytext=(-6 if right else 6, -8), textcoords="offset points", fontsize=6, zorder=9,
-                        ha="right" if right else "left",
+            ax.annotate(text, xy, xytext=(-6 if right else 6, -8 if above else 8), textcoords="offset points", fontsize=6, zorder=9,
+                        ha="right" if right else "left", va="top" if above else "bottom",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
     def _draw_lobes(self, ax):
@@ -383,6 +386,42 @@ def label_points(ax, labels):
                         arrowprops=dict(arrowstyle="-", color=C.HAZARDOUS, lw=0.5, alpha=0.8))
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
+
+
+def keep_texts_inside(ax, pad_px=2.0):
+    """Shift every text placed at a data point of ``ax`` (labels of targets, ends, rings,
+    FAA distances, flight zones) that runs out of the panel back inside it by the pixels
+    it overhangs (call once the limits are final): a label is never cut by its panel's
+    edge or drawn over the next panel. A leader line keeps an annotation tied to its
+    point."""
+    from matplotlib.text import Annotation
+
+    r = ax.figure.canvas.get_renderer()
+    frame = ax.get_window_extent(r)
+    for t in ax.texts:
+        note = isinstance(t, Annotation)
+        data = t.xycoords == "data" if note else t.get_transform() == ax.transData
+        if not data or not t.get_visible() or not t.get_text().strip() or (note and not t._check_xy(r)):
+            continue
+        box = t.get_window_extent(r)
+        shift = np.array([_overhang(box.x0, box.x1, frame.x0 + pad_px, frame.x1 - pad_px),
+                          _overhang(box.y0, box.y1, frame.y0 + pad_px, frame.y1 - pad_px)])
+        if not shift.any():
+            continue
+        if note and t.anncoords == "offset points":
+            t.xyann = tuple(np.asarray(t.xyann, float) + shift * 72.0 / ax.figure.dpi)
+        elif note and t.anncoords == "data":
+            t.xyann = tuple(ax.transData.inverted().transform(ax.transData.transform(t.xyann) + shift))
+        elif not note:
+            t.set_position(tuple(ax.transData.inverted().transform(ax.transData.transform(t.get_position()) + shift)))
+
+
+def _overhang(lo, hi, frame_lo, frame_hi) -> float:
+    """The shift [px] that brings [lo, hi] inside [frame_lo, frame_hi] (0: inside; a box
+    wider than the frame is aligned on its low side)."""
+    if lo < frame_lo:
+        return frame_lo - lo
+    return min(0.0, frame_hi - hi) if hi - lo <= frame_hi - frame_lo else frame_lo - lo
 
 
 def _near_points(groups, centre, radius_m) -> list:

@@ -19,7 +19,7 @@ pytest.importorskip("matplotlib")
 FAST = ["mirror_window"]
 SLOW = sorted(set(scenes.examples()) - set(FAST))
 DPI = 110  # the pictures' resolution (hazard.plots._Display)
-RENDER_S = 60.0  # every picture of one example, drawn on a loaded 2-core machine (mirror_window: 4 s)
+RENDER_S = 120.0  # every picture of one example (run_figures), on a 2-core machine shared by five runs (mirror_window: 4 to 19 s)
 
 
 def _pixels(data: bytes) -> np.ndarray:
@@ -121,7 +121,7 @@ def test_every_picture_is_whole_and_keeps_its_text_inside(name, monkeypatch):
     assert len(pngs) == len(figs) >= 2 and {"plan.png", "elevation.png"} <= set(pngs)
     problems = {n: png_problems(out[n]) + figure_problems(f) for n, f in zip(pngs, figs)}
     assert not {n: p for n, p in problems.items() if p}, problems
-    assert seconds < RENDER_S
+    assert seconds < RENDER_S, f"{seconds:.1f} s to draw the pictures of {name}"
 
 
 def test_the_checks_see_a_blank_picture_a_cut_text_and_a_label_off_its_panel():
