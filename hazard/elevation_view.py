@@ -10,7 +10,10 @@ height above it (scenes with ground), the targets, the projection of every keep-
 beams to their NOHD, and the observers coloured by verdict with the worst hazardous ones
 named. A projection keeps every height and loses the lateral offset: the plan view says
 where across the aim a thing is. Two panels as in the plan view: the whole range (its
-vertical scale exaggerated, said on the axis) and the site at equal scale. Colours:
+vertical scale exaggerated at most ``MAX_EXAGGERATION`` times, said on the axis) and the
+site at equal scale. The aim line ends at the danger zone's range and is never drawn
+through the ground (dotted past its centre's first ground contact); the flight zones
+(floor to ceiling over their span along the aim) and the tracks are drawn too (issue 34). Colours:
 :mod:`hazard.palette`. Written by ``hazard run --plot`` (``elevation.png``) and by
 ``hazard render``. matplotlib is imported when it draws.
 """

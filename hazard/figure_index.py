@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FIGURES_NAME", "mark", "arrow_to", "figure_entry", "figures_document", "report_observer_paths"]
+__all__ = ["FIGURES_NAME", "mark", "arrow_to", "figure_entry", "figures_document", "report_observer_paths", "finding_paths",
+           "track_lines", "flight_zone_rings", "faa_marks", "lobe_paths"]
 
 FIGURES_NAME = "figures.json"
 FORMAT = "laser-hazard-figures"
@@ -167,6 +168,7 @@ def report_observer_paths(result) -> dict:
 
 
 def finite(x) -> bool:
+    """``x`` is a finite number (not None)."""
     return x is not None and isinstance(x, (int, float)) and math.isfinite(x)
 
 

@@ -10,7 +10,11 @@ verdict, the worst hazardous ones labelled. Issue 18 adds the outline of every
 keep-out lobe (static and dynamic, :mod:`hazard.lobe_outline`: the section at the
 footprint's eye height over terrain, else the plan projection of the lobe at any height)
 and range rings about the laser (the range panel) and the targets (the site panel).
-Colours: :mod:`hazard.palette`. Written by ``hazard run --plot`` (``plan.png`` with the
+Issue 34 adds the flight zones, the moving observers' tracks and the direct beam's FAA
+distances (an arrow with the distance for one off the frame), mirror beams drawn to
+where the analysis stops them with each beam's end said, the hazardous ground as cells
+at their true size, and notes for figures.json (:mod:`hazard.figure_index`) of every
+finding drawn. Colours: :mod:`hazard.palette`. Written by ``hazard run --plot`` (``plan.png`` with the
 other outputs, as one unit) and by ``hazard render``. matplotlib is imported when it
 draws.
 """
