@@ -151,7 +151,8 @@ class ElevationViewDisplay(_Display):
             ax.annotate(name, sz, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         if len(self.observers_sz):
             safe = ~self.hazardous
-            ax.scatter(*self.observers_sz[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            ax.scatter(*self.observers_sz[safe].T, s=6, c=C.SAFE, lw=0, zorder=11,  # over the crosses: a safe one beside a hazardous one stays seen
+                       label=f"observers below the MPE ({int(safe.sum())})")
             rows = self.paths.get("observers", {})
             draw_hazardous(ax, self.observers_sz[self.hazardous], self.unlabelled,
                            [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)])

@@ -119,7 +119,7 @@ class PlanViewDisplay(_Display):
         fig.tight_layout()
         fig.canvas.draw()  # settle the limits before the scale bars and the arrows
         for ax in axes:
-            _scale_bar(ax)
+            _scale_bar(ax, quiet_corner(ax, self._key_points()))
             _north_arrow(ax)
         _range_rings(axes[0], [self.laser_xy], "from the laser")
         framed = [(name, xy) for name, xy, r, ra, f in self.targets if f]
@@ -261,11 +261,20 @@ class PlanViewDisplay(_Display):
             mark_mirror(ax, self.paths, name, a, b)
         if len(self.observers_xy):
             safe = ~self.hazardous
-            ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, zorder=11,  # over the crosses: a safe one beside a hazardous one stays seen
+                       label=f"observers below the MPE ({int(safe.sum())})")
             if self.aided.any():
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
             draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled, self._hazardous_paths())
+
+    def _key_points(self) -> np.ndarray:
+        """(K, 2) what a scale bar must not cover: the laser, the targets, the beams'
+        ends and the observers."""
+        pts = [self.laser_xy[None], self.observers_xy.reshape(-1, 2)]
+        pts += [np.asarray(xy, float)[None] for _, xy, *_ in self.targets]
+        pts += [np.array([a, b]) for _, a, b in self.mirrors] + [np.asarray(xy, float)[None] for xy, _ in self.ends]
+        return np.vstack(pts)
 
     def _hazardous_paths(self) -> list:
         rows = self.paths.get("observers", {})
@@ -587,6 +596,20 @@ def _nice_length(span) -> float:
     raw = span / 5
     e = 10 ** math.floor(math.log10(raw))
     return max(m * e for m in (1, 2, 5) if m * e <= raw) if raw >= e else e
+
+
+def quiet_corner(ax, points, frac=(0.3, 0.15)) -> str:
+    """The lower or upper right, or the lower left corner of ``ax`` (the north arrow has
+    the upper left) holding the fewest of ``points`` (data x, y) in a box ``frac`` of
+    the panel: where a scale bar covers nothing (ties: lower left)."""
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    u = (np.asarray(points, float).reshape(-1, 2) - [x0, y0]) / [x1 - x0, y1 - y0]  # axes fraction
+    boxes = {"lower left": ((0, frac[0]), (0, frac[1])), "lower right": ((1 - frac[0], 1), (0, frac[1])),
+             "upper right": ((1 - frac[0], 1), (1 - frac[1], 1))}
+    counts = {k: int(np.sum((u[:, 0] >= a) & (u[:, 0] <= b) & (u[:, 1] >= c) & (u[:, 1] <= d)))
+              for k, ((a, b), (c, d)) in boxes.items()}
+    return min(boxes, key=lambda k: counts[k])  # dicts keep order: lower left wins a tie
 
 
 def _scale_bar(ax, loc="lower left"):

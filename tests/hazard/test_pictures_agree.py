@@ -130,3 +130,22 @@ def test_the_first_range_ring_says_what_the_rings_are_centred_on():
     rng = [t.get_text() for t in axes[0].texts if t.get_text().endswith(" from the laser")]
     site = [t.get_text() for t in axes[1].texts if t.get_text().endswith(" from target-plate")]
     assert len(rng) == 1 and len(site) == 1
+
+
+def test_the_scale_bar_takes_a_corner_that_covers_nothing_and_safe_observers_stay_over_the_crosses():
+    from hazard.canvas import subplots
+    from hazard.plan_view import PlanViewDisplay, quiet_corner
+
+    _, ax = subplots(figsize=(4, 4))
+    ax.set_xlim(0, 100)
+    ax.set_ylim(0, 100)
+    assert quiet_corner(ax, np.array([[50.0, 50.0]])) == "lower left"  # nothing in any corner: the usual place
+    assert quiet_corner(ax, np.array([[5.0, 5.0]])) == "lower right"  # the laser in the lower left corner
+    assert quiet_corner(ax, np.array([[5.0, 5.0], [95.0, 5.0]])) == "upper right"
+    d = PlanViewDisplay("t", np.array([50.0, 5.0]), np.array([[50.0, 5.0], [50.0, 95.0]]), None, "zone",
+                        observers_xy=np.array([[50.0, 50.0], [50.5, 50.0]]), hazardous=np.array([True, False]),
+                        aided=np.zeros(2, bool))
+    fig, axes = d.plot()
+    safe = [c for c in axes[1].collections if c.get_label().startswith("observers below")]
+    crosses = [c for c in axes[1].collections if c.get_label().startswith("observers at or above")]
+    assert len(safe) == len(crosses) == 1 and safe[0].get_zorder() > crosses[0].get_zorder()
