@@ -11,7 +11,8 @@ beams to their NOHD, and the observers coloured by verdict with the worst hazard
 named. A projection keeps every height and loses the lateral offset: the plan view says
 where across the aim a thing is. Two panels as in the plan view: the whole range (its
 vertical scale exaggerated at most ``MAX_EXAGGERATION`` times, said on the axis) and the
-site at equal scale. The aim line ends at the danger zone's range and is never drawn
+site (at equal scale up to ``SITE_EQUAL_MAX_M`` long, a longer one with its heights
+exaggerated between 1 and ``MAX_EXAGGERATION`` times, said too). The aim line ends at the danger zone's range and is never drawn
 through the ground (dotted past its centre's first ground contact); the flight zones
 (floor to ceiling over their span along the aim) and the tracks are drawn too (issue 34). Colours:
 :mod:`hazard.palette`. Written by ``hazard run --plot`` (``elevation.png``) and by
@@ -94,20 +95,26 @@ class ElevationViewDisplay(_Display):
     def plot(self, axes=None):
         """Two panels: the whole range and the site. Returns (figure, axes)."""
         fig, axes = two_panels(axes, (15, 6.5))
-        for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
+        limits = self.site_limits()
+        for ax, title in ((axes[0], "the range"), (axes[1], "the site")):
             self._draw(ax)
-            if limits is not None:
-                ax.set_aspect("equal", adjustable="box")
-                ax.set_xlim(limits[0], limits[1])
-                ax.set_ylim(limits[2], limits[3])
             ax.set_xlabel("distance along the aim's azimuth from the laser [m]")
             ax.set_title(f"{self.title}: {title}")
             ax.grid(alpha=0.25)
-        axes[1].set_ylabel("height [m] (equal scale)")
+        axes[1].set_xlim(limits[0], limits[1])
+        long_site = limits[1] - limits[0] > SITE_EQUAL_MAX_M  # equal scale would flatten its heights to a line
+        axes[1].set_ylim(*(self.site_heights() if long_site else limits[2:]))
+        axes[1].set_ylabel("height [m] (vertical scale x10)")  # the longest label it can get, for the layout
         fig.tight_layout()
         fig.canvas.draw()
-        exaggeration = readable_heights(axes[0])
-        axes[0].set_ylabel(f"height [m] (vertical scale x{exaggeration:.3g})" if abs(exaggeration - 1) > 0.05 else "height [m]")
+        for ax, equal in ((axes[0], None), (axes[1], limits[2:])):
+            exaggeration = readable_heights(ax)
+            if equal is not None and (exaggeration < 1.0 or not long_site):  # a short site, or heights beyond the distances
+                ax.set_aspect("equal", adjustable="box")
+                ax.set_ylim(*equal)
+                exaggeration = 1.0
+            ax.set_ylabel(f"height [m] (vertical scale x{exaggeration:.3g})" if abs(exaggeration - 1) > 0.05
+                          else "height [m] (equal scale)")
         label_points(axes[1], self.labels)
         axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
         for ax in axes:
@@ -124,6 +131,19 @@ class ElevationViewDisplay(_Display):
         pts += [r for _, _, rings in self.lobes for r in rings]
         pts += [self.observers_sz[self.hazardous]] if self.hazardous.any() else []
         return square_limits(pts)
+
+    def site_heights(self) -> tuple:
+        """z0, z1 [m]: the heights of the site panel's contents (the targets, their lobes,
+        the hazardous observers), 10 % (at least 1 m) wider each side: the heights of a
+        site panel longer than ``SITE_EQUAL_MAX_M``, exaggerated at most
+        ``MAX_EXAGGERATION`` times (:func:`readable_heights`) and at least not at all, so
+        that a site kilometres long is not drawn flat."""
+        pts = [sz[None] for _, sz in self.targets] or [self.laser_sz[None]]
+        pts += [r for _, _, rings in self.lobes for r in rings]
+        pts += [self.observers_sz[self.hazardous]] if self.hazardous.any() else []
+        z = np.vstack(pts)[:, 1]
+        pad = max(0.1 * float(np.ptp(z)), 1.0)
+        return float(z.min()) - pad, float(z.max()) + pad
 
     def _draw(self, ax):
         if self.profile is not None:
@@ -201,6 +221,7 @@ def clip_at_ground(aim, profile) -> tuple:
     return np.array([aim[0], hit]), np.array([hit, aim[1]])
 
 
+SITE_EQUAL_MAX_M = 1000.0  # a site panel up to 1 km long is drawn at equal scale (a lobe's true shape); a longer one exaggerated
 MAX_EXAGGERATION = 10.0  # the range panel's vertical exaggeration at most: a 1 deg slope is drawn at most 10 deg
 
 

@@ -149,3 +149,16 @@ def test_the_scale_bar_takes_a_corner_that_covers_nothing_and_safe_observers_sta
     safe = [c for c in axes[1].collections if c.get_label().startswith("observers below")]
     crosses = [c for c in axes[1].collections if c.get_label().startswith("observers at or above")]
     assert len(safe) == len(crosses) == 1 and safe[0].get_zorder() > crosses[0].get_zorder()
+
+
+def test_a_site_kilometres_long_is_not_drawn_flat():
+    from hazard.elevation_view import ElevationViewDisplay
+
+    d = ElevationViewDisplay("t", np.array([0.0, 0.0]), np.array([[0.0, 0.0], [6000.0, 60.0]]),
+                             targets=[("a", np.array([100.0, 10.0])), ("b", np.array([5000.0, 60.0]))])
+    fig, axes = d.plot()
+    fig.canvas.draw()
+    y0, y1 = axes[1].get_ylim()
+    assert y0 <= 10.0 - 5.0 and y1 >= 60.0 + 5.0  # both targets and a margin
+    assert _exaggeration(axes[1]) == pytest.approx(10.0, rel=1e-3)  # at equal scale 50 m in 5 km would be a line
+    assert axes[1].get_ylabel() == "height [m] (vertical scale x10)"
