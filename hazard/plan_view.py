@@ -75,6 +75,7 @@ class PlanViewDisplay(_Display):
         reach = aim_reach_m(result)
         aim = np.array([laser[:2], laser[:2] + np.asarray(scene.laser_direction, float)[:2] * reach])
         zone = np.asarray(z["polygon_m"], float) if z.get("polygon_m") else None
+        aim = clip_to_zone(aim, zone)
         aided = [(f"LSDZ through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", np.asarray(a["polygon_m"], float))
                  for a in z.get("aided", [])]
         boundary = np.asarray(scene.spec.range.boundary_m, float) if scene.spec.range is not None else None
@@ -294,7 +295,13 @@ def beam_ends(result, aim_end_xy, off) -> list:
         r = float(z.get("max_range_m") or 0.0)
         why = ("every direction stopped by a backstop" if z.get("contained") else
                "unbounded: drawn to 100 km" if not math.isfinite(r) or r > 1e5 else "its NOHD")
-        out.append((np.asarray(aim_end_xy, float), f"danger zone ends at {_metres(min(r, 1e5))} ({why})"))
+        laser = (np.asarray(result.scene.laser_position_m, float) + off)[:2]
+        run = float(np.hypot(*(np.asarray(aim_end_xy, float) - laser)))
+        horizontal = float(np.hypot(*np.asarray(result.scene.laser_direction, float)[:2]))
+        text = f"danger zone ends at {_metres(min(r, 1e5))} ({why})"
+        if horizontal > 0 and run < 0.99 * min(r, 1e5) * horizontal:  # the aim's own direction stops sooner
+            text = f"aim line ends at {_metres(run / horizontal)}; the zone reaches {_metres(min(r, 1e5))} ({why})"
+        out.append((np.asarray(aim_end_xy, float), text))
     nohd = {t.name: t.specular_nohd_dynamic_m for t in result.targets}
     for name, a, b in mirror_segments(result):
         length = float(np.linalg.norm(b - a))
@@ -302,6 +309,27 @@ def beam_ends(result, aim_end_xy, off) -> list:
         why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
         out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
     return out
+
+
+def clip_to_zone(aim, ring) -> np.ndarray:
+    """The aim line (2, 2) cut where it leaves the danger zone's outline ``ring`` (K, 2)
+    (a zone reaching farther in other directions than along the aim), or as it is
+    without an outline."""
+    if ring is None or len(ring) < 3:
+        return aim
+    from shapely.geometry import LineString, Point, Polygon
+
+    poly = Polygon(ring)
+    poly = poly if poly.is_valid else poly.buffer(0)
+    inside = LineString(aim).intersection(poly)
+    parts = [g for g in getattr(inside, "geoms", [inside]) if g.geom_type == "LineString" and not g.is_empty]
+    if not parts:
+        return aim
+    start = Point(aim[0])
+    first = min(parts, key=lambda g: g.distance(start))  # the run from the laser
+    pts = np.asarray(first.coords, float)
+    end = pts[np.argmax(np.hypot(*(pts - aim[0]).T))]
+    return np.array([aim[0], end])
 
 
 def aim_reach_m(result) -> float:

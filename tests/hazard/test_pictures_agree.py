@@ -162,3 +162,15 @@ def test_a_site_kilometres_long_is_not_drawn_flat():
     assert y0 <= 10.0 - 5.0 and y1 >= 60.0 + 5.0  # both targets and a margin
     assert _exaggeration(axes[1]) == pytest.approx(10.0, rel=1e-3)  # at equal scale 50 m in 5 km would be a line
     assert axes[1].get_ylabel() == "height [m] (vertical scale x10)"
+
+
+def test_the_plan_aim_line_ends_where_the_zone_does_along_the_aim():
+    from hazard.plan_view import clip_to_zone
+
+    deg = np.radians
+    ring = [[0.0, 0.0]] + [[1000 * np.sin(deg(a)), 1000 * np.cos(deg(a))] for a in (-10, -1)]  # a wall stops the aim's
+    ring += [[300 * np.sin(deg(a)), 300 * np.cos(deg(a))] for a in (-1, 1)]  # +-1 deg at 300 m; the rest runs 1 km
+    ring += [[1000 * np.sin(deg(a)), 1000 * np.cos(deg(a))] for a in (1, 10)]
+    aim = np.array([[0.0, 0.0], [0.0, 1000.0]])  # drawn to the zone's farthest reach
+    np.testing.assert_allclose(clip_to_zone(aim, np.array(ring)), [[0.0, 0.0], [0.0, 300.0 * np.cos(deg(1))]], atol=1e-6)
+    np.testing.assert_allclose(clip_to_zone(aim, None), aim)
