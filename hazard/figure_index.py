@@ -68,8 +68,8 @@ def arrow_to(ax, paths, name, origin_xy, target_xy, distance_m=None, *, colour="
     d = (t - c) / half  # in frame units: the edge is at max |d| = 1
     n = float(np.abs(d).max())
     k = sum(1 for m in ax.figure.__dict__.get("_hazard_marks", []) if m.ax is ax and m.how == "arrow")
-    tip = c + half * d / max(n, 1e-12) * 0.93
-    tail = c + half * d / max(n, 1e-12) * 0.62 - np.array([0.0, 0.09 * k]) * half  # arrows to one side: their texts stacked
+    tip = c + half * d / max(n, 1e-12) * 0.97
+    tail = c + half * d / max(n, 1e-12) * 0.84 - np.array([0.0, 0.08 * k]) * half  # near the edge; several: texts stacked
     dist = float(np.hypot(*(t - np.asarray(origin_xy, float)))) if distance_m is None else float(distance_m)
     label = f"{name}: off the frame, {_metres(dist)} from {origin}"
     ax.annotate(label, xy=tip, xytext=tail, fontsize=7, ha="center", va="center", color=colour, zorder=14,
@@ -220,7 +220,7 @@ def flight_zone_rings(result) -> list:
         text = (f"flight zone {z['name']} ({z['limit'].upper()}, {z['floor_agl_m']:g}-{z['ceiling_agl_m']:g} m AGL): "
                 f"{'EXCEEDED' if exceeded else 'holds'} (worst {z['worst_effective_irradiance_w_m2']:.3g} W/m^2, "
                 f"limit {z['limit_w_m2']:g} W/m^2)")
-        worst = np.asarray(z.get("worst_point_m") or [math.nan] * 3, float) + np.asarray(result.scene.offset_m, float)
+        worst = np.asarray(z.get("worst_point_m") or [math.nan] * 3, float)  # world already (hazard.pipeline.airspace)
         out.append((f"airspace.zones[{k}]", np.asarray(spec.boundary_m, float), exceeded, text, spec, worst))
     return out
 

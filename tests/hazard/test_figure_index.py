@@ -54,14 +54,13 @@ def _in(extent, xy, tol=1e-6) -> bool:
 
 def _plan_point(doc, path):
     """Where report.json puts a finding in the plan (world x, y), or None."""
-    off = np.asarray(doc["scene"]["offset_m"], float)
-    kind, _, rest = path.partition("[")
+    kind, _, rest = path.partition("[")  # report.json's positions are world coordinates, as the plan's axes
     if kind == "observers":
         return np.asarray(doc["observers"][int(rest[:-1])]["position_m"], float)[:2]
     if kind == "airspace.zones":
-        return np.asarray(doc["airspace"]["zones"][int(rest[:-1])]["worst_point_m"], float)[:2] + off[:2]
+        return np.asarray(doc["airspace"]["zones"][int(rest[:-1])]["worst_point_m"], float)[:2]
     if kind == "tracks":
-        return np.asarray(doc["tracks"][int(rest[:-1])]["worst_point_m"], float)[:2] + off[:2]
+        return np.asarray(doc["tracks"][int(rest[:-1])]["worst_point_m"], float)[:2]
     return None
 
 
@@ -140,6 +139,7 @@ def test_airspace_draws_its_flight_zones_track_and_faa_distances_with_arrows_off
     assert "visual_interference.direct.lfed_m" in arrows and arrows["visual_interference.direct.lfed_m"]["distance_m"] > 0.9 * lfed
     zones = [f for f in plan if f["paths"] == ["airspace.zones[0]"] and f["panel"].endswith("the range")]
     assert zones and zones[0]["inside"] == [True] and "EXCEEDED" in zones[0]["label"]
+    assert zones[0]["bbox"] == [-1000.0, 1000.0, 8000.0, 10000.0]  # the scene file's outline of the airfield's zone
     assert any(f["paths"][0] == "tracks[0]" and f["inside"][0] for f in figs["figures"]["elevation.png"]["findings"])
 
 
