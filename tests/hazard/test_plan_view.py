@@ -64,7 +64,8 @@ def test_every_png_of_the_run_is_whole_and_nothing_runs_off_its_edge(run_with_pl
     out, _ = run_with_plot
     pngs = sorted(out.glob("*.png"))
     assert len(pngs) == 7
-    assert not {p.name: png_problems(p.read_bytes()) for p in pngs if png_problems(p.read_bytes())}
+    problems = {p.name: png_problems(p.read_bytes()) for p in pngs}
+    assert not {n: v for n, v in problems.items() if v}, problems
 
 
 def test_the_plan_shows_the_zone_the_mirror_beam_and_both_verdicts(run_with_plot):
