@@ -130,7 +130,8 @@ def figure_entry(fig, view: str) -> dict:
     findings = []
     for m in fig.__dict__.get("_hazard_marks", []):
         extent = _panel(m.ax)["extent"]
-        lo, hi = np.nanmin(m.xy, axis=0), np.nanmax(m.xy, axis=0)
+        ok = m.xy[np.all(np.isfinite(m.xy), axis=1)]  # an unbounded NOHD (inf) is drawn to the frame; JSON holds no inf
+        bbox = None if not len(ok) else [float(ok[:, 0].min()), float(ok[:, 0].max()), float(ok[:, 1].min()), float(ok[:, 1].max())]
         if m.kind == "points" and len(m.xy) == len(m.paths) > 1:  # one point per finding: each its own answer
             x0, x1, y0, y1 = extent
             inside = ((m.xy[:, 0] >= min(x0, x1)) & (m.xy[:, 0] <= max(x0, x1)) & (m.xy[:, 1] >= min(y0, y1))
@@ -139,8 +140,7 @@ def figure_entry(fig, view: str) -> dict:
             inside = [_inside(m, extent)] * len(m.paths)
         findings.append({"paths": list(m.paths), "label": m.label, "label_shown": m.label in shown, "panel": m.ax.get_title(),
                          "how": m.how, "geometry": m.kind, "inside": inside,
-                         "bbox": [float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])],
-                         **({} if m.distance_m is None else {"distance_m": float(m.distance_m)})})
+                         "bbox": bbox, **({} if not finite(m.distance_m) else {"distance_m": float(m.distance_m)})})
     return {"view": view, "panels": [_panel(ax) for ax in panels], "findings": findings}
 
 

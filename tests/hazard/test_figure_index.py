@@ -181,3 +181,18 @@ def test_a_finding_drawn_off_the_panel_is_not_inside_and_its_label_must_be_shown
            "scene": {"offset_m": [0, 0, 0]}}
     figs = {"figures": {"plan.png": figure_entry(fig, "plan")}}
     assert [m[0] for m in check_coverage(doc, figs)] == ["sdz", "observers[1]"]  # the checker finds both gaps
+
+
+def test_an_unbounded_curve_still_makes_valid_json():
+    import math
+
+    from hazard.canvas import subplots
+    from hazard.figure_index import figure_entry, figures_document, mark
+
+    fig, ax = subplots(figsize=(3, 3))
+    ax.set_title("target t: diffuse-lobe NOHD vs time")
+    mark(ax, ["targets[0].keepout_dynamic"], ax.get_title(), [[0.0, 5.0], [1.0, math.inf]], "line")
+    mark(ax, ["sdz"], ax.get_title(), [[math.nan, math.nan]], "points")
+    doc = json.loads(figures_document({"nohd_time_t.png": figure_entry(fig, "time")}))
+    a, b = doc["figures"]["nohd_time_t.png"]["findings"]
+    assert a["bbox"] == [0.0, 0.0, 5.0, 5.0] and a["label_shown"] and b["bbox"] is None and b["inside"] == [False]
