@@ -10,24 +10,28 @@ from pathlib import Path
 
 __all__ = ["run_figures", "write_figures", "FIXED_NAMES"]
 
-FIXED_NAMES = ("plan.png", "elevation.png")  # the other names depend on the scene's targets and observers
+FIXED_NAMES = ("plan.png", "elevation.png", "figures.json")  # the other names depend on the scene's targets and observers
 
 
 def run_figures(result, *, worst=3, progress=None) -> dict:
-    """Every picture of ``result`` as {file name: PNG bytes}; ``progress(name)`` is called
-    before each is drawn (a bar or a line on a terminal)."""
+    """Every picture of ``result`` as {file name: PNG bytes}, and ``figures.json``: for
+    each picture, the report.json findings it draws and its panels' extents
+    (:mod:`hazard.figure_index`); ``progress(name)`` is called before each is drawn (a
+    bar or a line on a terminal)."""
     from .elevation_view import ElevationViewDisplay
+    from .figure_index import FIGURES_NAME, figures_document
     from .plan_view import PlanViewDisplay
     from .plots import time_figures
 
-    out = {}
-    for name, display in (("plan.png", PlanViewDisplay), ("elevation.png", ElevationViewDisplay)):
+    out, index = {}, {}
+    for name, display, view in (("plan.png", PlanViewDisplay, "plan"), ("elevation.png", ElevationViewDisplay, "elevation")):
         if progress is not None:
             progress(name)
-        out[name] = display.from_result(result).png_bytes()
+        out[name], index[name] = display.from_result(result).png_and_entry(view)
     if progress is not None:
         progress("time plots")
-    out.update(time_figures(result, worst=worst))
+    out.update(time_figures(result, worst=worst, index=index))
+    out[FIGURES_NAME] = figures_document(index)
     return out
 
 

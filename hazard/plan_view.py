@@ -10,7 +10,11 @@ verdict, the worst hazardous ones labelled. Issue 18 adds the outline of every
 keep-out lobe (static and dynamic, :mod:`hazard.lobe_outline`: the section at the
 footprint's eye height over terrain, else the plan projection of the lobe at any height)
 and range rings about the laser (the range panel) and the targets (the site panel).
-Colours: :mod:`hazard.palette`. Written by ``hazard run --plot`` (``plan.png`` with the
+Issue 34 adds the flight zones, the moving observers' tracks and the direct beam's FAA
+distances (an arrow with the distance for one off the frame), mirror beams drawn to
+where the analysis stops them with each beam's end said, the hazardous ground as cells
+at their true size, and notes for figures.json (:mod:`hazard.figure_index`) of every
+finding drawn. Colours: :mod:`hazard.palette`. Written by ``hazard run --plot`` (``plan.png`` with the
 other outputs, as one unit) and by ``hazard render``. matplotlib is imported when it
 draws.
 """
@@ -27,6 +31,8 @@ from .plots import _Display
 
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
+MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
+SITE_CONTEXT = 3.0  # the site panel also frames occluders and safe observers this many half-widths about the hazard
 LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
 
 
@@ -54,6 +60,11 @@ class PlanViewDisplay(_Display):
     lobes: list = field(default_factory=list)  # (target, kind, cut, [exterior rings (K, 2)], [holes]) world x, y
     labels: list = field(default_factory=list)  # (xy, text): the worst hazardous observers
     unlabelled: int = 0  # hazardous observers not named in the picture
+    paths: dict = field(default_factory=dict)  # report.json paths of what is drawn (:func:`hazard.figure_index.finding_paths`)
+    tracks: list = field(default_factory=list)  # (paths, name, (N, 2) xy, text) moving observers
+    flight_zones: list = field(default_factory=list)  # (path, (K, 2) ring, exceeded, text, spec, worst point)
+    faa: list = field(default_factory=list)  # (path, text, world point) FAA visual-interference distances
+    ends: list = field(default_factory=list)  # (xy, text): where the danger zone and each mirror beam end, and why
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -64,19 +75,28 @@ class PlanViewDisplay(_Display):
         reach = aim_reach_m(result)
         aim = np.array([laser[:2], laser[:2] + np.asarray(scene.laser_direction, float)[:2] * reach])
         zone = np.asarray(z["polygon_m"], float) if z.get("polygon_m") else None
+        aim = clip_to_zone(aim, zone)
         aided = [(f"LSDZ through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", np.asarray(a["polygon_m"], float))
                  for a in z.get("aided", [])]
         boundary = np.asarray(scene.spec.range.boundary_m, float) if scene.spec.range is not None else None
         obs = result.observers
         nominal = np.asarray(z["nominal"]["polygon_m"], float) if z.get("nominal") else None
         with_optics = np.array([o is not None for o in obs.observers.optics], bool)
-        return cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
+        d = cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
                    _targets(result, off), _mirrors(result, off), *_footprint(result, off), _contours(scene, off),
                    np.asarray(obs.position_m, float)[:, :2] if len(obs.position_m) else np.zeros((0, 2)),
                    np.asarray(result.hazardous, bool),
                    with_optics[obs.observers.group] if len(obs.position_m) and len(with_optics) else np.zeros(len(obs.position_m), bool),
                    _occluders(scene, off), lobe_rings(result, off[:2]), *hazardous_labels(result, np.asarray(obs.position_m, float)[:, :2]
                                                                                             if len(obs.position_m) else np.zeros((0, 2))))
+        from .figure_index import faa_marks, finding_paths, flight_zone_rings, track_lines
+
+        d.paths = finding_paths(result)
+        d.tracks = [(p, name, xyz[:, :2], text) for p, name, xyz, text in track_lines(result, d.paths)]
+        d.flight_zones = flight_zone_rings(result)
+        d.faa = faa_marks(result)
+        d.ends = beam_ends(result, d.aim_xy[1], off)
+        return d
 
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
@@ -87,6 +107,7 @@ class PlanViewDisplay(_Display):
             self._draw_zones(ax)
             self._draw_lobes(ax)
             self._draw_objects(ax)
+            self._draw_airspace(ax)
             ax.set_aspect("equal", adjustable="box" if limits is not None else "datalim")
             if limits is not None:
                 ax.set_xlim(limits[0], limits[1])
@@ -99,23 +120,73 @@ class PlanViewDisplay(_Display):
         fig.tight_layout()
         fig.canvas.draw()  # settle the limits before the scale bars and the arrows
         for ax in axes:
-            _scale_bar(ax)
+            _scale_bar(ax, quiet_corner(ax, self._key_points()))
             _north_arrow(ax)
         _range_rings(axes[0], [self.laser_xy], "from the laser")
-        framed = [xy for name, xy, r, ra, f in self.targets if f]
-        _range_rings(axes[1], framed or [self.laser_xy], "from the targets" if framed else "from the laser")
+        framed = [(name, xy) for name, xy, r, ra, f in self.targets if f]
+        what = f"from {framed[0][0]}" if len(framed) == 1 else "from the targets" if framed else "from the laser"
+        _range_rings(axes[1], [xy for _, xy in framed] or [self.laser_xy], what)
+        self._draw_faa(axes[0])
+        fig.canvas.draw()
+        for ax in axes:
+            keep_texts_inside(ax)
         return fig, axes
+
+    def _draw_airspace(self, ax):
+        """Flight zones (exceeded: red hatched) and the moving observers' tracks, each named
+        with its verdict."""
+        from .figure_index import mark
+
+        for k, (path, ring, exceeded, text, _, worst) in enumerate(self.flight_zones):
+            colour = C.HAZARDOUS if exceeded else "#555555"
+            ax.plot(*worst[:2], marker="*", ms=9, c=colour, mec="k", ls="", zorder=12,
+                    label="flight zones' worst points (FAA levels)" if k == 0 else None)
+            closed = np.vstack([ring, ring[:1]])
+            ax.fill(*closed.T, fc="none", ec=colour, lw=1.4, hatch="//" if exceeded else None, ls="-" if exceeded else "--")
+            ax.annotate(text, ring.mean(axis=0), fontsize=6, ha="center", va="center",
+                        color=colour, zorder=11, bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
+            mark(ax, [path], text, closed, "polygon")
+        for k, (paths, name, xy, text) in enumerate(self.tracks):
+            ax.plot(*xy.T, c="#6a3d9a", lw=1.4, label="moving observers' tracks" if k == 0 else None)
+            ax.annotate("", xy=xy[-1], xytext=xy[max(0, len(xy) - 2)], arrowprops=dict(arrowstyle="-|>", color="#6a3d9a"))
+            ax.annotate(text, xy[0], xytext=(0, -10), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
+                        bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
+            mark(ax, paths, text, xy, "line")
+
+    def _draw_faa(self, ax):
+        """The direct beam's FAA distances on the aim: a tick and its name in the frame,
+        else an arrow at the edge with the distance."""
+        from .figure_index import arrow_to, mark
+
+        x0, x1 = ax.get_xlim()
+        y0, y1 = ax.get_ylim()
+        for path, text, xyz in self.faa:
+            xy = np.asarray(xyz, float)[:2]
+            if x0 <= xy[0] <= x1 and y0 <= xy[1] <= y1:
+                ax.plot(*xy, marker="D", ms=5, mfc="#ffd92f", mec="k", ls="", zorder=12)
+                ax.annotate(text, xy, xytext=(6, 0), textcoords="offset points", fontsize=6, va="center", zorder=12,
+                            bbox=dict(boxstyle="round,pad=0.2", fc="#fff7bc", ec="none", alpha=0.9))
+                mark(ax, [path], text, xy)
+            else:
+                arrow_to(ax, [path], text, self.laser_xy, xy)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
 
     def site_limits(self) -> tuple:
         """x0, x1, y0, y1 [m] around the targets: their diffuse hazard circles (naked and
         aided, at least 20 m), the hazardous observers and the hazardous ground, 10 %
-        wider."""
+        wider; then widened to the occluders and the safe observers within
+        ``SITE_CONTEXT`` times that frame's half-width of its centre (what stands
+        around the hazard; the range panel shows the rest)."""
         pts = [np.asarray(xy, float)[None] + max(r, ra, 20.0) * np.array([[-1.0, -1.0], [1.0, 1.0]])
                for name, xy, r, ra, framed in self.targets if framed] or [self.laser_xy[None]]
         pts += [self.observers_xy[self.hazardous]] if self.hazardous.any() else []
         pts += [self.footprint_xy] if self.footprint_xy is not None and len(self.footprint_xy) else []
         pts += [ring for lobe in self.lobes for ring in lobe[3]]
-        return square_limits(pts)
+        x0, x1, y0, y1 = square_limits(pts)
+        near = _near_points([np.asarray(r, float).reshape(-1, 2) for r in self.occluders] + [self.observers_xy[~self.hazardous]],
+                            ((x0 + x1) / 2, (y0 + y1) / 2), SITE_CONTEXT * (x1 - x0) / 2)
+        return square_limits(pts + near) if near else (x0, x1, y0, y1)
 
     def _draw_ground(self, ax):
         if self.contours is not None:
@@ -125,27 +196,49 @@ class PlanViewDisplay(_Display):
                 cs = ax.contour(x, y, h, levels=np.linspace(lo + 0.1 * (hi - lo), hi - 0.05 * (hi - lo), 7), colors="#b0b0b0", linewidths=0.6)
                 ax.clabel(cs, fontsize=6, fmt="%.0f m")
         if self.footprint_xy is not None and len(self.footprint_xy):
+            from matplotlib.collections import PolyCollection
+
+            from .figure_index import mark
+
             s = self.footprint_cell_m
-            ax.scatter(*self.footprint_xy.T, s=4, marker="s", c=C.FOOTPRINT, alpha=0.6, lw=0,
-                       label=f"hazardous ground at eye height, every spot summed ({s:g} m cells)")
+            label = f"hazardous ground at eye height, every spot summed ({s:g} m cells, drawn at their size)"
+            cells = cell_squares(self.footprint_xy, s)
+            ax.add_collection(PolyCollection(cells, facecolors=C.FOOTPRINT, edgecolors=C.FOOTPRINT, lw=0.3, alpha=0.6, label=label,
+                                             zorder=2))
+            ax.update_datalim(cells.reshape(-1, 2))
+            mark(ax, self.paths.get("footprint", []), label, cells.reshape(-1, 2), "points")
         if self.boundary is not None:
             ring = np.vstack([self.boundary, self.boundary[:1]])
             ax.plot(*ring.T, c="k", lw=1.5, label="range boundary")
 
     def _draw_zones(self, ax):
+        from .figure_index import mark
+
         if self.zone is not None:
             ax.fill(*self.zone.T, fc="#e41a1c", alpha=0.25, ec="#e41a1c", lw=1.0, label=self.zone_label)
+            mark(ax, [self.paths.get("zone")] if self.paths.get("zone") else [], self.zone_label, self.zone, "polygon")
         if self.nominal is not None:
             ax.plot(*self.nominal.T, c="#e41a1c", lw=0.8, ls=":", label="the sector without the buffer (the band between is the buffer zone)")
-        for (label, ring), ls in zip(self.aided_zones, ("--", ":", "-.") * 8):
+        for k, ((label, ring), ls) in enumerate(zip(self.aided_zones, ("--", ":", "-.") * 8)):
             ax.plot(*ring.T, c="#984ea3", lw=1.0, ls=ls, label=label)
+            mark(ax, self.paths.get("aided", [])[k:k + 1], label, ring, "polygon")
         ax.plot(*self.aim_xy.T, c="#e41a1c", lw=0.8, ls="--", label="aim line")
+        for xy, text in self.ends:
+            right, above = xy[0] > self.laser_xy[0], xy[1] > self.laser_xy[1]  # the text toward the laser: inside the frame
+            ax.plot(*xy, marker="o", ms=5, mfc="white", mec="k", ls="", zorder=9)
+            ax.annotate(text, xy, xytext=(-6 if right else 6, -8 if above else 8), textcoords="offset points", fontsize=6, zorder=9,
+                        ha="right" if right else "left", va="top" if above else "bottom",
+                        bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
     def _draw_lobes(self, ax):
+        from .figure_index import lobe_paths, mark
+
         seen = set()
         for target, kind, cut, rings, holes in self.lobes:
             draw_lobe(ax, kind, rings, None if (kind, cut) in seen else f"{kind} keep-out lobe, {cut}")
             seen.add((kind, cut))
+            for ring in rings:
+                mark(ax, lobe_paths(self.paths, self.lobes, target, kind), f"{kind} keep-out lobe, {cut}", ring, "polygon")
             for ring in holes:
                 ax.plot(*ring.T, c=C.STATIC if kind == "static" else C.DYNAMIC, lw=0.8, ls=":")
 
@@ -165,14 +258,78 @@ class PlanViewDisplay(_Display):
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
         for i, (name, a, b) in enumerate(self.mirrors):
-            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label="mirror beams (specular NOHD)" if i == 0 else None)
+            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
+            mark_mirror(ax, self.paths, name, a, b)
         if len(self.observers_xy):
             safe = ~self.hazardous
-            ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, label=f"observers below the MPE ({int(safe.sum())})")
+            ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, zorder=11,  # over the crosses: a safe one beside a hazardous one stays seen
+                       label=f"observers below the MPE ({int(safe.sum())})")
             if self.aided.any():
                 ax.scatter(*self.observers_xy[self.aided].T, s=40, marker="D", facecolors="none", edgecolors="k", lw=0.8,
                            label=f"observers with optics ({int(self.aided.sum())})")
-            draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled)
+            draw_hazardous(ax, self.observers_xy[self.hazardous], self.unlabelled, self._hazardous_paths())
+
+    def _key_points(self) -> np.ndarray:
+        """(K, 2) what a scale bar must not cover: the laser, the targets, the beams'
+        ends and the observers."""
+        pts = [self.laser_xy[None], self.observers_xy.reshape(-1, 2)]
+        pts += [np.asarray(xy, float)[None] for _, xy, *_ in self.targets]
+        pts += [np.array([a, b]) for _, a, b in self.mirrors] + [np.asarray(xy, float)[None] for xy, _ in self.ends]
+        return np.vstack(pts)
+
+    def _hazardous_paths(self) -> list:
+        rows = self.paths.get("observers", {})
+        return [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)]
+
+
+def _metres(d) -> str:
+    return f"{d / 1000:.3g} km" if d >= 1000 else f"{d:.3g} m"
+
+
+def beam_ends(result, aim_end_xy, off) -> list:
+    """(xy, text) where the drawn danger zone's aim line and each mirror beam end, world
+    x, y, and why there: the NOHD, a backstop, or the 100 km drawn of an unbounded zone."""
+    z = getattr(result, "sdz", None) or {}
+    out = []
+    if z.get("polygon_m"):
+        r = float(z.get("max_range_m") or 0.0)
+        why = ("every direction stopped by a backstop" if z.get("contained") else
+               "unbounded: drawn to 100 km" if not math.isfinite(r) or r > 1e5 else "its NOHD")
+        laser = (np.asarray(result.scene.laser_position_m, float) + off)[:2]
+        run = float(np.hypot(*(np.asarray(aim_end_xy, float) - laser)))
+        horizontal = float(np.hypot(*np.asarray(result.scene.laser_direction, float)[:2]))
+        text = f"danger zone ends at {_metres(min(r, 1e5))} ({why})"
+        if horizontal > 0 and run < 0.99 * min(r, 1e5) * horizontal:  # the aim's own direction stops sooner
+            text = f"aim line ends at {_metres(run / horizontal)}; the zone reaches {_metres(min(r, 1e5))} ({why})"
+        out.append((np.asarray(aim_end_xy, float), text))
+    nohd = {t.name: t.specular_nohd_dynamic_m for t in result.targets}
+    for name, a, b in mirror_segments(result):
+        length = float(np.linalg.norm(b - a))
+        full = float(nohd.get(name) or 0.0)
+        why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
+        out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
+    return out
+
+
+def clip_to_zone(aim, ring) -> np.ndarray:
+    """The aim line (2, 2) cut where it leaves the danger zone's outline ``ring`` (K, 2)
+    (a zone reaching farther in other directions than along the aim), or as it is
+    without an outline."""
+    if ring is None or len(ring) < 3:
+        return aim
+    from shapely.geometry import LineString, Point, Polygon
+
+    poly = Polygon(ring)
+    poly = poly if poly.is_valid else poly.buffer(0)
+    inside = LineString(aim).intersection(poly)
+    parts = [g for g in getattr(inside, "geoms", [inside]) if g.geom_type == "LineString" and not g.is_empty]
+    if not parts:
+        return aim
+    start = Point(aim[0])
+    first = min(parts, key=lambda g: g.distance(start))  # the run from the laser
+    pts = np.asarray(first.coords, float)
+    end = pts[np.argmax(np.hypot(*(pts - aim[0]).T))]
+    return np.array([aim[0], end])
 
 
 def aim_reach_m(result) -> float:
@@ -212,11 +369,26 @@ def draw_lobe(ax, kind, rings, label):
         label = None
 
 
-def draw_hazardous(ax, xy, unlabelled):
-    """Observers at or above the MPE: large red crosses on top, counted in the legend."""
+def draw_hazardous(ax, xy, unlabelled, paths=None):
+    """Observers at or above the MPE: large red crosses on top, counted in the legend;
+    noted for figures.json under ``paths`` (report.json paths, one per point, None:
+    not listed)."""
+    from .figure_index import mark
+
     more = f"; {unlabelled} more unnamed, see observers.csv" if unlabelled else ""
-    ax.scatter(*np.asarray(xy).reshape(-1, 2).T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10,
-               label=f"observers at or above the MPE ({len(xy)}{more})")
+    label = f"observers at or above the MPE ({len(xy)}{more})"
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    ax.scatter(*xy.T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10, label=label)
+    keep = [k for k, p in enumerate(paths or []) if p]
+    mark(ax, [paths[k] for k in keep], label, xy[keep], "points")
+
+
+def mark_mirror(ax, paths, name, a, b):
+    """Note a mirror beam drawn from ``a`` to ``b`` (figures.json)."""
+    from .figure_index import mark
+
+    path = paths.get("mirror", {}).get(name)
+    mark(ax, [path] if path else [], MIRROR_LABEL, np.array([a, b]), "line")
 
 
 def lobe_rings(result, off_xy) -> list:
@@ -257,6 +429,54 @@ def label_points(ax, labels):
     ax.set_ylim(y0, y1)
 
 
+def keep_texts_inside(ax, pad_px=2.0):
+    """Shift every text placed at a data point of ``ax`` (labels of targets, ends, rings,
+    FAA distances, flight zones) that runs out of the panel back inside it by the pixels
+    it overhangs (call once the limits are final): a label is never cut by its panel's
+    edge or drawn over the next panel. A leader line keeps an annotation tied to its
+    point."""
+    from matplotlib.text import Annotation
+
+    r = ax.figure.canvas.get_renderer()
+    frame = ax.get_window_extent(r)
+    for t in ax.texts:
+        note = isinstance(t, Annotation)
+        data = t.xycoords == "data" if note else t.get_transform() == ax.transData
+        if not data or not t.get_visible() or not t.get_text().strip() or (note and not t._check_xy(r)):
+            continue
+        box = t.get_window_extent(r)
+        shift = np.array([_overhang(box.x0, box.x1, frame.x0 + pad_px, frame.x1 - pad_px),
+                          _overhang(box.y0, box.y1, frame.y0 + pad_px, frame.y1 - pad_px)])
+        if not shift.any():
+            continue
+        if note and t.anncoords == "offset points":
+            t.xyann = tuple(np.asarray(t.xyann, float) + shift * 72.0 / ax.figure.dpi)
+        elif note and t.anncoords == "data":
+            t.xyann = tuple(ax.transData.inverted().transform(ax.transData.transform(t.xyann) + shift))
+        elif not note:
+            t.set_position(tuple(ax.transData.inverted().transform(ax.transData.transform(t.get_position()) + shift)))
+
+
+def _overhang(lo, hi, frame_lo, frame_hi) -> float:
+    """The shift [px] that brings [lo, hi] inside [frame_lo, frame_hi] (0: inside; a box
+    wider than the frame is aligned on its low side)."""
+    if lo < frame_lo:
+        return frame_lo - lo
+    return min(0.0, frame_hi - hi) if hi - lo <= frame_hi - frame_lo else frame_lo - lo
+
+
+def _near_points(groups, centre, radius_m) -> list:
+    """The points of ``groups`` ((K, 2) arrays) within ``radius_m`` of ``centre`` (a
+    square about it), as a list of arrays (empty ones left out)."""
+    out = []
+    for g in groups:
+        g = np.asarray(g, float).reshape(-1, 2)
+        near = g[np.all(np.abs(g - np.asarray(centre, float)) <= radius_m, axis=1)]
+        if len(near):
+            out.append(near)
+    return out
+
+
 def _distinct(points, tol_m) -> list:
     """Points more than ``tol_m`` apart (the first of each cluster)."""
     out = []
@@ -268,7 +488,8 @@ def _distinct(points, tol_m) -> list:
 
 def _range_rings(ax, centres, what):
     """Labelled circles about each centre at a round spacing (1, 2 or 5 x 10^k m), about a
-    quarter of the panel."""
+    quarter of the panel; the first ring's label says what they are centred on (``what``,
+    e.g. "from the laser")."""
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
     step = _nice_length(max(x1 - x0, y1 - y0) * 1.25)  # about a quarter of the panel
@@ -281,7 +502,9 @@ def _range_rings(ax, centres, what):
             for a in (np.pi / 4, -3 * np.pi / 4):
                 p = c + r * np.array([np.cos(a), np.sin(a)])
                 if x0 < p[0] < x1 and y0 < p[1] < y1:
-                    ax.text(*p, f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m", fontsize=6, color="#555555", ha="center",
+                    text = f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m"
+                    text += f" {what}" if k == 1 else ""  # the first ring says what the rings are centred on
+                    ax.text(*p, text, fontsize=6, color="#555555", ha="center",
                             va="center", bbox=dict(boxstyle="round,pad=0.1", fc="white", ec="none", alpha=0.7), zorder=3)
                     break
     ax.set_xlim(x0, x1)
@@ -339,18 +562,24 @@ def _finite_or_0(x) -> float:
 
 
 def mirror_segments(result) -> list:
-    """(target, start, end) of every mirror beam to its dynamic specular NOHD (at most
-    100 km drawn) along the direction the report gives (else the mirror axis of the
-    spot's mean normal), scene-local 3-D points [m]."""
+    """(target, start, end) of every mirror beam along the direction the report gives
+    (else the mirror axis of the spot's mean normal), scene-local 3-D points [m], to its
+    dynamic specular NOHD or, when every ray of it is stopped sooner, to where the
+    analysis stops its farthest ray (``sdz.mirror_beams[].max_reach_m``): never past
+    where the text says it ends; at most 100 km drawn."""
     from .engine import mirror_axis
 
     out = []
     rows = {t.name: t for t in result.targets}
+    reach = {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
     for sp in result.spots:
         row = rows.get(sp.target.name)
         if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
             continue
         length = min(float(row.specular_nohd_dynamic_m), 1e5)
+        stop = reach.get(sp.target.name)
+        if stop is not None and math.isfinite(stop) and 0.0 <= stop < length:
+            length = float(stop)
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
         out.append((sp.target.name, sp.centroid, sp.centroid + axis * length))
     return out
@@ -360,12 +589,21 @@ def _mirrors(result, off) -> list:
     return [(name, (a + off)[:2], (b + off)[:2]) for name, a, b in mirror_segments(result)]
 
 
+def cell_squares(xy, cell_m) -> np.ndarray:
+    """(N, 4, 2) the corners of the ``cell_m`` squares centred on the nodes ``xy`` [m]."""
+    h = 0.5 * float(cell_m)
+    corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    return np.asarray(xy, float)[:, None, :] + corners[None]
+
+
 def _footprint(result, off):
-    f = result.footprint_dynamic
+    """The hazardous ground nodes (world x, y) of the static or the dynamic footprint, and
+    the terrain's cell size [m]."""
+    masks = [f.mask for f in (result.footprint_dynamic, result.footprint_static) if f is not None]
     terrain = result.scene.terrain
-    if f is None or terrain is None or not f.mask.any():
+    if not masks or terrain is None or not any(m.any() for m in masks):
         return None, 0.0
-    iy, ix = np.nonzero(f.mask)
+    iy, ix = np.nonzero(np.logical_or.reduce(masks))
     xy = np.stack([terrain.x0 + terrain.dx * ix, terrain.y0 + terrain.dx * iy], axis=1) + off[:2]
     return xy, float(terrain.dx)
 
@@ -386,6 +624,20 @@ def _nice_length(span) -> float:
     raw = span / 5
     e = 10 ** math.floor(math.log10(raw))
     return max(m * e for m in (1, 2, 5) if m * e <= raw) if raw >= e else e
+
+
+def quiet_corner(ax, points, frac=(0.3, 0.15)) -> str:
+    """The lower or upper right, or the lower left corner of ``ax`` (the north arrow has
+    the upper left) holding the fewest of ``points`` (data x, y) in a box ``frac`` of
+    the panel: where a scale bar covers nothing (ties: lower left)."""
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    u = (np.asarray(points, float).reshape(-1, 2) - [x0, y0]) / [x1 - x0, y1 - y0]  # axes fraction
+    boxes = {"lower left": ((0, frac[0]), (0, frac[1])), "lower right": ((1 - frac[0], 1), (0, frac[1])),
+             "upper right": ((1 - frac[0], 1), (1 - frac[1], 1))}
+    counts = {k: int(np.sum((u[:, 0] >= a) & (u[:, 0] <= b) & (u[:, 1] >= c) & (u[:, 1] <= d)))
+              for k, ((a, b), (c, d)) in boxes.items()}
+    return min(boxes, key=lambda k: counts[k])  # dicts keep order: lower left wins a tie
 
 
 def _scale_bar(ax, loc="lower left"):

@@ -38,10 +38,17 @@ class _Display:
 
     def png_bytes(self, **plot_kw) -> bytes:
         """The figure as PNG bytes (a figure drawn here is in no pyplot manager: nothing to close)."""
+        return self.png_and_entry("", **plot_kw)[0]
+
+    def png_and_entry(self, view, **plot_kw) -> tuple:
+        """(PNG bytes, figures.json entry (:func:`hazard.figure_index.figure_entry`, read
+        after the figure is saved: the panels' final extents))."""
+        from .figure_index import figure_entry
+
         fig, _ = self.plot(**plot_kw)
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # a legend below the axes stays whole
-        return buf.getvalue()
+        return buf.getvalue(), figure_entry(fig, view)
 
 
 def _state_label(name, s) -> str:
@@ -108,6 +115,7 @@ class NOHDTimeDisplay(_Display):
     target: str
     mpe_w_m2: float | None = None  # the MPE the NOHD is the distance to (point source)
     dynamic: bool = True  # the target's material changes over the times
+    paths: tuple = ()  # report.json paths it draws (figures.json)
 
     @classmethod
     def from_result(cls, result, target=0, *, grid_deg=5.0):
@@ -148,6 +156,7 @@ class NOHDTimeDisplay(_Display):
         mpe = "" if self.mpe_w_m2 is None else f" to E = MPE = {self.mpe_w_m2:.4g} W/m^2"
         ax.set_ylabel(f"max NOHD{mpe} [m]")
         ax.set_title(f"target {self.target}: diffuse-lobe NOHD vs time")
+        _mark_curve(ax, self.paths, self.times_s, self.nohd_dynamic_m)
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3)
         return fig, ax
@@ -168,6 +177,7 @@ class ExposureDisplay(_Display):
     ratio_text: str = "peak E / MPE"
     duration_s: float | None = None  # the exposure duration whose MPE the verdict uses [s]
     rule: str = "peak"  # the verdict's rule: "peak" (E(t) > the duration's MPE) or "window" (a window's H > its MPE)
+    paths: tuple = ()  # report.json paths it draws (figures.json)
 
     @classmethod
     def from_result(cls, result, observer=0, *, irradiance_w_m2=None):
@@ -270,6 +280,7 @@ class ExposureDisplay(_Display):
         ax.set_ylabel("radiant exposure [J/m^2]")
         ratio = "" if self.hazard_ratio is None else f" ({self.ratio_text} = {self.hazard_ratio:.3g})"
         ax.set_title(f"observer {self.observer}{ratio}")
+        _mark_curve(ax, self.paths, self.times_s[1:], np.maximum(self.exposure_j_m2[1:], 1e-12))
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
         ax.legend(h1 + h2, l1 + l2, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=7)
@@ -305,6 +316,14 @@ class ErrorTableDisplay(_Display):
         ax.legend(fontsize=8)
         ax.grid(alpha=0.3, which="both")
         return fig, ax
+
+
+def _mark_curve(ax, paths, x, y):
+    """Note (figures.json) that ``ax`` draws the findings ``paths`` as the curve x, y,
+    labelled by its title."""
+    from .figure_index import mark
+
+    mark(ax, paths, ax.get_title(), np.column_stack([np.asarray(x, float), np.asarray(y, float)]), "line")
 
 
 def _file_part(name) -> str:
@@ -357,7 +376,7 @@ def _observer_histories(result, rows):
     return out.history_w_m2, None
 
 
-def time_figures(result, *, worst=3) -> dict:
+def time_figures(result, *, worst=3, index=None) -> dict:
     """Pictures over time of an analysis (:func:`hazard.analyze`) as PNG bytes by file name.
 
     * ``nohd_time_<target>.png``: :class:`NOHDTimeDisplay` for every lit target (every
@@ -373,14 +392,27 @@ def time_figures(result, *, worst=3) -> dict:
       why, and how to get them (``analyze(scene, keep_history=True)``).
 
     Names are made file-safe (``_file_part``) and kept unique. matplotlib is needed (the
-    ``[render]`` extra); it is imported here, not by ``import hazard``.
+    ``[render]`` extra); it is imported here, not by ``import hazard``. ``index`` (a dict)
+    receives each picture's figures.json entry by file name.
     """
-    out = {}
+    from .figure_index import finding_paths
+
+    out, index = {}, ({} if index is None else index)
+    paths = finding_paths(result)
+
+    def add(name, display, view):
+        out[name], index[name] = display.png_and_entry(view)
+
     for k, spot in enumerate(result.spots):
-        name = _unique(f"nohd_time_{_file_part(spot.target.name)}.png", out)
-        out[name] = NOHDTimeDisplay.from_result(result, k).png_bytes()
-    for p in ([] if getattr(result, "motion", None) is None else result.motion.tracks()):
-        out[_unique(f"exposure_track_{_file_part(p.name)}.png", out)] = ExposureDisplay.from_path(result, p).png_bytes()
+        d = NOHDTimeDisplay.from_result(result, k)
+        d.paths = tuple(paths["lobe"].get((spot.target.name, kind)) for kind in ("static", "dynamic")
+                        if paths["lobe"].get((spot.target.name, kind)))
+        add(_unique(f"nohd_time_{_file_part(spot.target.name)}.png", out), d, "time")
+    m = len(result.observers)
+    for k, p in enumerate([] if getattr(result, "motion", None) is None else result.motion.tracks()):
+        d = ExposureDisplay.from_path(result, p)
+        d.paths = (f"tracks[{k}]",) + ((paths["observers"][m + k],) if m + k in paths["observers"] else ())
+        add(_unique(f"exposure_track_{_file_part(p.name)}.png", out), d, "time")
     ratio = np.asarray(result.hazard_ratio, float)
     if worst <= 0 or not len(ratio):
         return out
@@ -398,5 +430,6 @@ def time_figures(result, *, worst=3) -> dict:
             return out
     for i, e in zip(rows, histories):
         d = ExposureDisplay.from_result(result, int(i), irradiance_w_m2=e)
-        out[_unique(f"exposure_{_file_part(d.observer)}.png", out)] = d.png_bytes()
+        d.paths = (paths["observers"][int(i)],) if int(i) in paths["observers"] else ()
+        add(_unique(f"exposure_{_file_part(d.observer)}.png", out), d, "time")
     return out

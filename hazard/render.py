@@ -369,7 +369,7 @@ def _add_objects(p, blocks, framing, tube, legend):
             _once(legend, ("aim line to the danger zone's range", C.AIM, "line"))
         elif name.startswith("mirror_"):
             p.add_mesh(framing.mesh(mesh).tube(radius=tube), color=C.MIRROR, lighting=False)
-            _once(legend, ("mirror beam to its NOHD", C.MIRROR, "line"))
+            _once(legend, ("mirror beam to its NOHD or its backstop", C.MIRROR, "line"))
         elif name == "laser":
             p.add_mesh(framing.mesh(mesh), color="black", point_size=16, render_points_as_spheres=True)
             _once(legend, ("laser", "#000000", "marker"))

@@ -32,10 +32,40 @@ def run_with_plot(tmp_path_factory):
 def test_run_plot_writes_the_plan_with_the_other_outputs(run_with_plot):
     out, text = run_with_plot
     want = ["elevation.png", "exposure_arc-10m_crossing.png", "exposure_shell-20m_crossing_0.png", "exposure_shell-20m_crossing_1.png",
-            "nohd_time_copper.png", "nohd_time_stainless.png", "observers.csv", "plan.png", "report.json",
+            "figures.json", "nohd_time_copper.png", "nohd_time_stainless.png", "observers.csv", "plan.png", "report.json",
             "zones_local_frame.json"]
     assert sorted(p.name for p in out.iterdir() if p.name != ".laser-hazard.json") == want  # + the outputs' manifest
     assert all("wrote " + str(out / n) in text for n in want)
+
+
+def test_figures_json_says_every_hazardous_finding_is_drawn_and_is_in_the_manifest(run_with_plot):
+    import json
+
+    from brdfmodels._unit import read_manifest
+    from tests.hazard.test_figure_index import check_coverage, hazardous_paths
+
+    out, _ = run_with_plot
+    doc = json.loads((out / "report.json").read_text())
+    figs = json.loads((out / "figures.json").read_text())
+    assert read_manifest(out)["figures.json"] == "run"  # claimed like the other outputs
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert sorted(figs["figures"]) == pngs  # an entry for every picture written, and no other
+    paths = hazardous_paths(doc)
+    assert "sdz.mirror_beams[0]" in paths and sum(p.startswith("observers[") for p in paths) == 39
+    assert not check_coverage(doc, figs)
+    for name, entry in figs["figures"].items():  # the time plots say which finding they draw
+        if name.startswith("exposure_"):
+            assert any(f["paths"] and f["paths"][0].startswith("observers[") for f in entry["findings"]), name
+
+
+def test_every_png_of_the_run_is_whole_and_nothing_runs_off_its_edge(run_with_plot):
+    from tests.hazard.test_picture_pixels import png_problems
+
+    out, _ = run_with_plot
+    pngs = sorted(out.glob("*.png"))
+    assert len(pngs) == 7
+    problems = {p.name: png_problems(p.read_bytes()) for p in pngs}
+    assert not {n: v for n, v in problems.items() if v}, problems
 
 
 def test_the_plan_shows_the_zone_the_mirror_beam_and_both_verdicts(run_with_plot):
