@@ -376,7 +376,8 @@ def _distance_m(xy: np.ndarray, origin, site: bool) -> np.ndarray:
 
 def _reported_reach_m(p: dict, doc: dict) -> float | None:
     """How far report.json says a danger zone reaches from the laser (``max_range_m``) or a
-    mirror beam from its mirror (the specular NOHD) [m]; None for other kinds."""
+    mirror beam from its mirror (the specular NOHD, or the backstop that stops every ray of
+    it sooner: ``sdz.mirror_beams[].max_reach_m``) [m]; None for other kinds."""
     kind = p.get("kind")
     if kind == "sdz":
         v = p.get("max_range_m")
@@ -384,7 +385,7 @@ def _reported_reach_m(p: dict, doc: dict) -> float | None:
         rows = [a for a in (doc.get("sdz") or {}).get("aided") or [] if a.get("nohd_m") == p.get("nohd_m")]
         v = rows[0].get("max_range_m", p.get("nohd_m")) if rows else p.get("nohd_m")
     elif kind == "mirror_beam":
-        v = p.get("nohd_m")
+        v = p.get("reach_m", p.get("nohd_m"))  # the NOHD, or where the analysis stops every ray sooner
     else:
         return None
     try:

@@ -122,12 +122,16 @@ def _mirrors(result, off) -> list:
     from .plan_view import mirror_segments
 
     rows = {t.name: t for t in result.targets}
+    stops = {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
     out = []
     for target, start, end in mirror_segments(result):
         row = rows.get(target)
         nohd = None if row is None else row.specular_nohd_dynamic_m
         a, b = np.asarray(start) + off, np.asarray(end) + off
-        out.append(Zone("mirror_beam", LineString([a[:2], b[:2]]), {"target": target, "nohd_m": nohd, "hazard": "naked eye",
+        stop = stops.get(target)
+        # how far the hazard goes from the mirror: the NOHD, or sooner where every ray is stopped
+        reach = nohd if stop is None or nohd is None or not (0.0 <= stop < nohd) else float(stop)
+        out.append(Zone("mirror_beam", LineString([a[:2], b[:2]]), {"target": target, "nohd_m": nohd, "reach_m": reach, "hazard": "naked eye",
                                                                      "start_height_m": float(a[2]), "end_height_m": float(b[2])}))
     return out
 

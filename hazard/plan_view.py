@@ -566,7 +566,7 @@ def mirror_segments(result) -> list:
     (else the mirror axis of the spot's mean normal), scene-local 3-D points [m], to its
     dynamic specular NOHD or, when every ray of it is stopped sooner, to where the
     analysis stops its farthest ray (``sdz.mirror_beams[].max_reach_m``): never past
-    where the text says it ends; at most 100 km drawn."""
+    where the text says it ends; an infinite NOHD drawn 100 km."""
     from .engine import mirror_axis
 
     out = []
@@ -576,7 +576,7 @@ def mirror_segments(result) -> list:
         row = rows.get(sp.target.name)
         if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
             continue
-        length = min(float(row.specular_nohd_dynamic_m), 1e5)
+        length = float(row.specular_nohd_dynamic_m) if math.isfinite(row.specular_nohd_dynamic_m) else 1e5
         stop = reach.get(sp.target.name)
         if stop is not None and math.isfinite(stop) and 0.0 <= stop < length:
             length = float(stop)

@@ -423,3 +423,12 @@ def test_the_local_frame_map_in_a_real_headless_chromium(local, browser, tmp_pat
         assert nasty["title"] == f"observer {NASTY}"
     finally:
         page.close()
+
+
+def test_a_mirror_beam_stopped_by_a_backstop_is_not_said_short():
+    """A mirror beam the analysis stops at a wall 188 m out (its NOHD 1121 m) is drawn to the
+    wall; the page takes that stop as its reach, not the NOHD (no false "reaches farther")."""
+    from hazard.map_page import _reported_reach_m
+
+    assert _reported_reach_m({"kind": "mirror_beam", "nohd_m": 1121.0, "reach_m": 188.0}, {}) == 188.0
+    assert _reported_reach_m({"kind": "mirror_beam", "nohd_m": 1121.0}, {}) == 1121.0  # an older GeoJSON
