@@ -282,6 +282,21 @@ def _curved_source(spot, p, n, d, ok):
     return e_inc, vt, vs
 
 
+def _lit_or_tail(spot, s):
+    """Points (beam coordinates s, (N, 2)) of a curved side lit by the beam: a lit cell
+    (:func:`_lit`), or beyond the sampled square (``|s_i| >= HALF_WIDTH``, where no cell
+    says what the ray hits): there the Gaussian's tail (below ``exp(-16)`` = 1.1e-7 of the
+    peak, a hazard for a beam of kilowatts) reaches the surface unless something shadows
+    it, which is not known there, so it is taken as lit (conservative). Before, those
+    points were dark and an eye beyond the 4 w edge of a cylinder's fan or a sphere's
+    cone got 0 (issue 29)."""
+    from .beam import HALF_WIDTH
+
+    finite = np.all(np.isfinite(s), axis=1)
+    tail = finite & np.any(np.abs(np.nan_to_num(s)) >= HALF_WIDTH, axis=1)
+    return tail | _lit(spot, np.nan_to_num(s, nan=1e9))
+
+
 def _curved_geometry(spot, obs):
     """Per observer on a convex sphere / cylinder side: (mask, E_geo at the observer
     before reflectance and attenuation, point P, normal n, incoming d, not settled)."""
@@ -309,7 +324,7 @@ def _curved_geometry(spot, obs):
         d[far_fix] = _unit(beam.rays(np.nan_to_num(beam.to_s(p[far_fix])[0]))[1])
     s, z = beam.to_s(p)
     front = (n * d).sum(1) < 0
-    ok = settled & on_surface & front & _lit(spot, np.nan_to_num(s, nan=1e9)) & (z > 0)
+    ok = settled & on_surface & front & _lit_or_tail(spot, s) & (z > 0)
     e_inc, vt, vs = _curved_source(spot, p, n, d, ok)
     dist = np.linalg.norm(obs - p, axis=1)
     geo = margin * e_inc / ((1 + dist * vt) * (1 + dist * vs))
