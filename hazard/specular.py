@@ -51,7 +51,8 @@ from .rays import own_object
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w",
            "mesh_mirror_irradiance"]
 
-_ITERATIONS = 300
+_ITERATIONS = 40  # fixed-point steps before the bisection (_bisect_specular)
+_BISECTIONS = 64
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
 
 
@@ -194,8 +195,10 @@ def _specular_point(spot, obs):
     Fixed-point iteration of the reflection law (the normal bisects the directions to
     the source and to the observer) from the virtual source of the ray through P; only
     rows not yet settled are iterated. Plain steps converge fast far away (contraction
-    about r / distance); after 20 steps they are halved to settle observers close to
-    the surface.
+    about r / distance); after 20 steps they are halved. Rows still unsettled after
+    ``_ITERATIONS`` steps (close to a large mirror, where r / distance > 3 and the
+    iteration diverges) are solved by bisection in the plane of the reflection
+    (:func:`_bisect_specular`).
     """
     beam = spot.beam
     an = spot.target.mesh.analytic
@@ -231,6 +234,8 @@ def _specular_point(spot, obs):
             moved = np.maximum(moved, np.abs(step) / r)
         n[active] = n_new
         active = active[moved > 1e-14]
+    if len(active):
+        n[active], along[active] = _bisect_specular(spot, obs[active])
     p = c + r * n if ax is None else c + along[:, None] * ax + r * n
     s, _z = beam.to_s(p)
     d = _unit(beam.rays(np.nan_to_num(s))[1])
@@ -239,6 +244,62 @@ def _specular_point(spot, obs):
     on_surface = np.ones(len(obs), bool) if ax is None else np.abs(along) <= an[4]
     near = np.ones(len(obs), bool) if ax is None else np.abs(along) <= an[4] + 2 * r
     return p, n, d, settled, on_surface, near
+
+
+def _bisect_specular(spot, obs):
+    """The specular point of a convex sphere or cylinder for observers (M, 3) by bisection:
+    (unit normals n (M, 3), positions along a cylinder's axis (M,), 0 for a sphere).
+
+    The normal at P, the virtual source S (or, collimated, the beam's direction) and the
+    observer O lie in one plane through the centre c (for a cylinder: everything projected
+    along its axis, where the section is a circle). In it, with x towards O and y towards
+    S, P = c + r (cos t, sin t) for t in [0, beta] (beta the angle of S); the reflection
+    law is g(t) = n x u_O + n x u_S = 0 (u the unit directions from P), with g(0) > 0 >
+    g(beta): ``_BISECTIONS`` halvings. A cylinder's ray keeps its ratio of axial to
+    in-plane travel on reflection, so P's axial position divides S -> O in the ratio of
+    the in-plane lengths (collimated: ``z_O - L_2 d_z / |d_in-plane|``). Rows with O on
+    the ray from c through S get the back-reflection point; the caller checks the law."""
+    beam = spot.beam
+    an = spot.target.mesh.analytic
+    c, r = an[1], (an[2] if an[0] == "sphere" else an[3])
+    ax = None if an[0] == "sphere" else np.asarray(an[2], float)
+
+    def flat(v):
+        return v if ax is None else v - (v @ ax)[..., None] * ax
+
+    o = flat(obs - c)
+    if beam.divergence_rad > 0:
+        src = beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad)
+        sv = np.broadcast_to(flat(src - c), o.shape)
+    else:
+        src, sv = None, np.broadcast_to(flat(-np.asarray(beam.axis, float)), o.shape) * 1e12 * max(r, 1.0)
+    x = _unit(o)
+    toward = _unit(sv)
+    y = toward - (toward * x).sum(1)[:, None] * x
+    y = _unit(np.where(np.linalg.norm(y, axis=1)[:, None] > 1e-12, y, np.cross(x, [0.0, 0.0, 1.0] if ax is None else ax)))
+    beta = np.arctan2((toward * y).sum(1), (toward * x).sum(1))
+    lo, hi = np.zeros(len(o)), beta
+
+    def cross(a, b):
+        return (a * x).sum(1) * (b * y).sum(1) - (a * y).sum(1) * (b * x).sum(1)
+
+    for _ in range(_BISECTIONS):
+        th = 0.5 * (lo + hi)
+        nv = np.cos(th)[:, None] * x + np.sin(th)[:, None] * y
+        g = cross(nv, _unit(o - r * nv)) + cross(nv, _unit(sv - r * nv))
+        lo, hi = np.where(g > 0, th, lo), np.where(g > 0, hi, th)
+    th = 0.5 * (lo + hi)
+    nv = np.cos(th)[:, None] * x + np.sin(th)[:, None] * y
+    if ax is None:
+        return nv, np.zeros(len(o))
+    z_o = (obs - c) @ ax
+    l2 = np.linalg.norm(o - r * nv, axis=1)
+    if src is None:
+        dz = float(np.dot(beam.axis, ax))
+        return nv, z_o - l2 * dz / max(math.sqrt(max(1.0 - dz * dz, 0.0)), 1e-300)
+    l1 = np.linalg.norm(sv - r * nv, axis=1)
+    z_s = float((src - c) @ ax)
+    return nv, z_s + (z_o - z_s) * l1 / (l1 + l2)
 
 
 def _vergences(kind, n, d, p_src, ax=None, r=1.0):
