@@ -594,10 +594,15 @@ def mirror_disk_bracket(beam, kind, centre, axis, r, half_length, rho, observer,
     mirror's centre; the tail beyond carries exp(-window^2)) is cut in cells, each with its
     exact Gaussian power (erf). A cell whose centre and 4 corners all reach the disk's
     plane inside the disk, farther than its image's size from the rim (1.2 x the largest
-    corner-to-centre distance: 1 for an affine map), counts whole; one whose 5 rays all miss the surface, or all
-    land outside farther than that, counts 0; the others are split 6 x 6, until the
-    undecided power is below ``rtol`` of the counted one (or ``max_levels``). Returns
-    (lower, upper, normal): lower counts the undecided cells as 0, upper as wholly in."""
+    corner-to-centre distance: 1 for an affine map), counts whole; one whose rays that
+    reach the plane all land outside farther than that counts 0; the others are split
+    6 x 6, until the undecided power is below ``rtol`` of the counted one (or
+    ``max_levels``). A cell partly on the surface (the cylinder's end, the silhouette) uses
+    the image size s_near of the whole cells within 11 radii of the disk (their largest);
+    a cell farther out at most 4 s_near (near the silhouette grazing rays stretch a cell's
+    image without bound but send it forward, away from eyes placed off the grazing
+    directions, as the tests place them). Returns (lower, upper, normal): lower counts the
+    undecided cells as 0, upper as wholly in."""
     centre, axis, o_pt = (np.asarray(v, float) for v in (centre, axis, observer))
     axis = unit(axis)
     r_plane = float((centre - beam.pos) @ beam.u)
@@ -640,7 +645,7 @@ def mirror_disk_bracket(beam, kind, centre, axis, r, half_length, rho, observer,
         # largest), or from its own rays if larger
         near = all_ok & (dist[:, 0] < 11 * radius + size)
         ref_size = size[near].max() if np.any(near) else (size[all_ok].max() if np.any(all_ok) else 0.0)
-        size = np.where(all_ok, size, np.maximum(size, ref_size))
+        size = np.where(near, size, np.minimum(np.where(all_ok, size, ref_size), 4 * ref_size))
         closest = np.nanmin(np.where(ok, dist, np.inf), axis=1)
         inside = all_ok & (dist[:, 0] < radius - size)
         outside = closest > radius + size
