@@ -293,13 +293,28 @@ def _bisect_specular(spot, obs):
     if ax is None:
         return nv, np.zeros(len(o))
     z_o = (obs - c) @ ax
-    l2 = np.linalg.norm(o - r * nv, axis=1)
-    if src is None:
-        dz = float(np.dot(beam.axis, ax))
-        return nv, z_o - l2 * dz / max(math.sqrt(max(1.0 - dz * dz, 0.0)), 1e-300)
-    l1 = np.linalg.norm(sv - r * nv, axis=1)
-    z_s = float((src - c) @ ax)
+    l1, l2, z_s, slope = _in_plane_legs(spot, o, nv, r, ax)
+    if z_s is None:
+        return nv, z_o - l2 * slope
     return nv, z_s + (z_o - z_s) * l1 / (l1 + l2)
+
+
+def _in_plane_legs(spot, o, nv, r, ax):
+    """A cylinder's reflection in its cross-section (o: the observers relative to the axis,
+    in-plane; nv: the in-plane unit normals at the specular points): the in-plane lengths
+    source -> P (inf when collimated) and P -> observer [m], the source's axial position
+    relative to the centre (None when collimated) and the collimated beam's axial travel per
+    in-plane length."""
+    beam = spot.beam
+    c = spot.target.mesh.analytic[1]
+    l2 = np.linalg.norm(o - r * nv, axis=1)
+    if beam.divergence_rad > 0:
+        src = beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad)
+        rel = src - c
+        l1 = np.linalg.norm(rel - (rel @ ax) * ax - r * nv, axis=1)
+        return l1, l2, float(rel @ ax), 0.0
+    dz = float(np.dot(beam.axis, ax))
+    return np.full(len(o), np.inf), l2, None, dz / max(math.sqrt(max(1.0 - dz * dz, 0.0)), 1e-300)
 
 
 def _vergences(kind, n, d, p_src, ax=None, r=1.0):
@@ -480,7 +495,10 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None
     dark = ~ok & ~near
     if apertures is not None and np.any(dark):
         rows = np.flatnonzero(dark)
-        out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
+        reach = np.maximum(apertures.eye_radius_m[rows], np.where(apertures.aided[rows], apertures.collect_radius_m[rows], 0.0))
+        rows = rows[_straddle_needed(spot, obs[rows], reach)]
+        if len(rows):
+            out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
     if np.any(near):
         rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
         cap = spot.max_irradiance_w_m2 * gain[near]
@@ -518,6 +536,91 @@ def _straddle_max(spot, obs, radius_m, mu, states, ray_scene) -> np.ndarray:
         g = geo[ok] * np.exp(-mu * path)
         val[ok] = rho * (g if states is None else g[:, None])
     return val.reshape((len(obs), len(unit_pts)) + val.shape[1:]).max(axis=1)
+
+
+def _straddle_needed(spot, obs, reach_m) -> np.ndarray:
+    """The prefilter of :func:`_straddle_w_m2`: False for observers (with no lit specular
+    point of their own) whose disk of radius ``reach_m`` provably holds no lit point.
+
+    * **Shadow.** No mirror-reflected ray of a convex sphere or cylinder enters its shadow
+      (the cone from the virtual source tangent to the sphere, beyond the plane through the
+      centre normal to the cone's axis; a cylinder's wedge in its cross-section, where a
+      point's reflection depends on its projection only; a cylinder of radius r when
+      collimated): a disk more than its radius inside the shadow is dark.
+    * **Beyond a cylinder's end.** The specular point's axial position is
+      ``z_P = z_S + (z_X - z_S) f(X')``, ``f = L1 / (L1 + L2)`` the share of the source's
+      in-plane leg (collimated: ``z_X - L2 dz/d_in``), X' the point's projection. Over the
+      disk ``z_X`` spans ``z_O +- a``; f (or L2) is taken at the centre and 4 in-plane points
+      ``a`` away, its range doubled about them; if the interval product for z_P lies wholly
+      beyond the cylinder's ends, the disk is dark.
+
+    Everything else (cells shadowed by other objects, unsettled rows) is kept. Tested in
+    ``tests/validation/test_curved_fan_ends.py`` against dense samples of the disk."""
+    an = spot.target.mesh.analytic
+    a = np.asarray(reach_m, float) * (1 + 1e-9) + 1e-12
+    need = ~_disk_in_shadow(spot, obs, a)
+    if an[0] != "sphere" and np.any(need):
+        rows = np.flatnonzero(need)
+        need[rows] = ~_disk_beyond_end(spot, obs[rows], a[rows])
+    return need
+
+
+def _disk_in_shadow(spot, obs, a) -> np.ndarray:
+    """Observers whose ball of radius a (M,) lies wholly in the mirror's own shadow
+    (:func:`_straddle_needed`)."""
+    beam = spot.beam
+    an = spot.target.mesh.analytic
+    c, r = an[1], (an[2] if an[0] == "sphere" else an[3])
+    ax = None if an[0] == "sphere" else np.asarray(an[2], float)
+
+    def flat(v):
+        return v if ax is None else v - (v @ ax)[..., None] * ax
+
+    o = flat(obs - c)
+    if beam.divergence_rad > 0:
+        sv = flat(beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad) - c)
+        lc = float(np.linalg.norm(sv))
+        if lc <= r:
+            return np.zeros(len(obs), bool)
+        v = o - sv
+        cone = -sv / lc
+        lv = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+        gamma = np.arccos(np.clip((v @ cone) / lv, -1.0, 1.0))
+        alpha = math.asin(r / lc)
+        return (gamma < alpha) & (lv * np.sin(alpha - gamma) > a) & (v @ cone - a > lc)
+    u = flat(np.asarray(beam.axis, float))
+    if np.linalg.norm(u) < 1e-9:
+        return np.zeros(len(obs), bool)
+    u = u / np.linalg.norm(u)
+    along = o @ u
+    return (np.linalg.norm(o - along[:, None] * u, axis=1) < r - a) & (along > a)
+
+
+def _disk_beyond_end(spot, obs, a) -> np.ndarray:
+    """Observers whose disk of radius a (M,) provably reflects from beyond a cylinder's
+    ends only (:func:`_straddle_needed`)."""
+    an = spot.target.mesh.analytic
+    c, ax, r, half = an[1], np.asarray(an[2], float), an[3], an[4]
+    e1 = _unit(np.cross(ax, [1.0, 0.0, 0.0] if abs(ax[0]) < 0.9 else [0.0, 1.0, 0.0]))
+    e2 = np.cross(ax, e1)
+    offs = np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    pts = obs[:, None, :] + a[:, None, None] * (offs[None, :, :1] * e1 + offs[None, :, 1:] * e2)
+    pts = pts.reshape(-1, 3)
+    nv, _ = _bisect_specular(spot, pts)
+    rel = pts - c
+    o = rel - (rel @ ax)[:, None] * ax
+    l1, l2, z_s, slope = _in_plane_legs(spot, o, nv, r, ax)
+    q = (l2 if z_s is None else l1 / (l1 + l2)).reshape(len(obs), 5)
+    lo, hi = q.min(axis=1), q.max(axis=1)
+    lo, hi = lo - (hi - lo), hi + (hi - lo)
+    z_o = (obs - c) @ ax
+    if z_s is None:
+        zmin, zmax = z_o - a - np.maximum(hi * slope, lo * slope), z_o + a - np.minimum(hi * slope, lo * slope)
+    else:
+        lo, hi = np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
+        ends = np.stack([(z_o + sa * a - z_s) * f for sa in (-1, 1) for f in (lo, hi)], axis=1)
+        zmin, zmax = z_s + ends.min(axis=1), z_s + ends.max(axis=1)
+    return np.all(np.isfinite(q), axis=1) & ((zmin > half) | (zmax < -half))
 
 
 def _straddle_w_m2(spot, obs, mu, states, ray_scene, apertures) -> np.ndarray:
@@ -648,7 +751,8 @@ def _curved_aperture_w_m2(spot, obs, p, n, d, point_w_m2, apertures):
         a = np.broadcast_to(np.asarray(radius_m, float), (len(rows),))
         ratio = _disk_mean_ratio(jac[rows], s_p[rows], a)
         change = np.abs(ratio - 1.0)
-        out = np.maximum(ratio, 1.0) * (1.0 + change)
+        with np.errstate(over="ignore"):  # rows far in the tail: replaced below (big)
+            out = np.maximum(ratio, 1.0) * (1.0 + change)
         big = np.flatnonzero(change > _SMALL_CHANGE)
         if len(big):
             k = rows[big]
