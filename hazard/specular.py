@@ -42,6 +42,8 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
 from __future__ import annotations
 
 import math
+import threading
+import time
 
 import numpy as np
 
@@ -49,11 +51,60 @@ from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, 
 from .rays import own_object
 
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w",
-           "mesh_mirror_irradiance"]
+           "mesh_mirror_irradiance", "APERTURE_STATS", "aperture_stats_since", "describe_apertures"]
 
 _ITERATIONS = 40  # fixed-point steps before the bisection (_bisect_specular)
 _BISECTIONS = 64
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
+
+
+class _ApertureStats:
+    """Counts of the mirror beams averaged over observers' apertures in this process, per
+    mirror kind ("flat", "sphere", "cylinder", "curved mesh") and way ("averaged": the
+    disk mean; "straddle": the sampled bound of an eye with no specular point of its own;
+    "skipped": such eyes the prefilter proved dark), with the seconds spent (summed over
+    threads); read as differences around a stage (:func:`aperture_stats_since`)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._counts = {}
+
+    def add(self, kind, way, n, seconds=0.0):
+        with self._lock:
+            c = self._counts.setdefault(f"{kind}/{way}", [0, 0.0])
+            c[0] += int(n)
+            c[1] += float(seconds)
+
+    def snapshot(self) -> dict:
+        with self._lock:
+            return {k: tuple(v) for k, v in self._counts.items()}
+
+
+APERTURE_STATS = _ApertureStats()
+
+
+def aperture_stats_since(before: dict) -> dict:
+    """``{"kind/way": (observers, seconds)}`` added since ``before`` (an
+    :meth:`_ApertureStats.snapshot`); ways with no observer left out."""
+    now = APERTURE_STATS.snapshot()
+    out = {k: (n - before.get(k, (0, 0.0))[0], s - before.get(k, (0, 0.0))[1]) for k, (n, s) in now.items()}
+    return {k: v for k, v in out.items() if v[0] > 0}
+
+
+def describe_apertures(counts: dict) -> str:
+    """One line for a stage's detail: the observers whose mirror beams were averaged over
+    the limiting aperture, per mirror kind, and the cost."""
+    if not counts:
+        return "aperture: no mirror beam averaged over an observer's aperture"
+    parts = []
+    for kind in ("flat", "sphere", "cylinder", "curved mesh"):
+        ways = {k.split("/")[1]: v for k, v in counts.items() if k.split("/")[0] == kind}
+        if not ways:
+            continue
+        text = ", ".join(f"{n} {way}" + (f" ({s:.3g} s)" if s > 0 else "") for way, (n, s) in sorted(ways.items()))
+        parts.append(f"{kind}: {text}")
+    return ("aperture (observer rows per mirror; flat: observer-facet pairs; straddle: an eye at a curved beam's edge "
+            "bounded by samples of its disk, skipped: such eyes proven dark): " + "; ".join(parts))
 
 
 def _unit(v):
@@ -463,10 +514,14 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
         if apertures is None:
             geo = e[ok] * np.exp(-mu * path) * gain[ok]
         else:
+            t0 = time.perf_counter()
             geo = _flat_aperture_w_m2(spot.beam, s[ok], z[ok], path, mu, apertures.take(np.flatnonzero(ok)), spot.outline_s)
+            APERTURE_STATS.add("flat", "averaged", int(ok.sum()), time.perf_counter() - t0)
         out[ok] += rho * (geo if states is None else geo[:, None])
     if is_curved_mesh(spot.target):
+        t0 = time.perf_counter()
         out += mesh_mirror_irradiance(spot, obs, gain, mu, states).irradiance_w_m2
+        APERTURE_STATS.add("curved mesh", "averaged", m, time.perf_counter() - t0)
     if spot.target.mesh.analytic is not None:
         _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures)
     return np.minimum(out, _power_cap(spot, obs, gain, mu, states))
@@ -488,17 +543,21 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None
         if apertures is None:
             g = geo[ok] * np.exp(-mu * path) * gain[ok]
         else:
-            rows = np.flatnonzero(ok)
+            rows, t0 = np.flatnonzero(ok), time.perf_counter()
             g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
                                       apertures.take(rows))
+            APERTURE_STATS.add(spot.target.mesh.analytic[0], "averaged", len(rows), time.perf_counter() - t0)
         out[ok] += rho * (g if states is None else g[:, None])
     dark = ~ok & ~near
     if apertures is not None and np.any(dark):
         rows = np.flatnonzero(dark)
         reach = np.maximum(apertures.eye_radius_m[rows], np.where(apertures.aided[rows], apertures.collect_radius_m[rows], 0.0))
-        rows = rows[_straddle_needed(spot, obs[rows], reach)]
+        need, t0, kind = _straddle_needed(spot, obs[rows], reach), time.perf_counter(), spot.target.mesh.analytic[0]
+        APERTURE_STATS.add(kind, "skipped", int((~need).sum()))
+        rows = rows[need]
         if len(rows):
             out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
+            APERTURE_STATS.add(kind, "straddle", len(rows), time.perf_counter() - t0)
     if np.any(near):
         rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
         cap = spot.max_irradiance_w_m2 * gain[near]
