@@ -232,3 +232,22 @@ def test_straddle_prefilter_skips_most_dark_observers():
 def test_straddle_prefilter_sweep(kind, r, tilt, w, L, q, end_s, spread, aided):
     """Larger sweep of ``test_straddle_prefilter_never_skips_a_lit_disk``."""
     _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided)
+
+
+def test_stage_detail_counts_the_aperture_averaged_observers():
+    """The specular stage's detail says how many observers had a mirror beam averaged over
+    their aperture, per mirror kind. A 2 m pipe (r = 0.5 m) lit on its middle by a 4 mm
+    beam; eyes 0.3 m before it: in the fan 10 mm and (binoculars) 20 mm up, and 0.5 m
+    across it (deep in the Gaussian's tail, still a specular point): 3 averaged; 10 mm and
+    0.3 m beyond its top end (specular points off the pipe, disks far from the end): 2
+    skipped by the prefilter, none bounded by samples."""
+    w, L, q = 4e-3, 100.0, 0.5
+    beam = ref.Beam(100.0, (1 - q) * 2 * w, q * 2 * w / L, [0.0, -L, 0.0], [0.0, 0.0, 0.0])
+    target = dict(name="pipe", shape="cylinder", center=np.zeros(3), normal=[0.0, 0.0, 1.0], tangent=[1.0, 0.0, 0.0],
+                  size=(1.0, 2.0), material=ref.specular(0.9))
+    pts = [(0.002, 0.01, None), (0.002, 0.02, BINOCULARS), (0.0, 1.01, None), (0.0, 1.3, None), (0.5, 0.0, None)]
+    text = ref.scene_text(power=beam.P, a=beam.a, phi=beam.phi, position=beam.pos, aim=[0.0, 0.0, 0.0], targets=[target],
+                          observers=[(f"o{i}", np.array([x, -0.8, z]), o) for i, (x, z, o) in enumerate(pts)])
+    res = hazard.analyze(scenes.loads(text))
+    detail = [s.detail for s in res.stages if s.name == "specular"][0]
+    assert "cylinder: 3 averaged" in detail and ", 2 skipped" in detail and "straddle (" not in detail.split("cylinder:")[1], detail
