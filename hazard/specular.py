@@ -532,11 +532,15 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None
     from each observer's specular point (module notes), averaged over each observer's
     limiting aperture or aid's objective when ``apertures`` are given
     (:func:`_curved_aperture_w_m2`; else the point value times ``gain``), and
-    ``rho E_peak`` where that point cannot be found (conservative)."""
+    ``rho E_peak`` where that point cannot be found (conservative). With apertures, eyes
+    with no lit specular point of their own, and eyes so deep in the Gaussian's tail that
+    the point value underflows (the disk mean is then not computable from it), get the
+    straddle bound (:func:`_add_straddle`)."""
     pos, tangent = spot.beam.position_m, spot.target.tangent
     ok, geo, p, n, d, near = _curved_geometry(spot, obs)
     _seen(ray_scene, spot, p, n, obs, ok)
     _seen(ray_scene, spot, p, n, obs, near)
+    dark = ~ok & ~near
     if np.any(ok):
         path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
         rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
@@ -544,24 +548,53 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None
             g = geo[ok] * np.exp(-mu * path) * gain[ok]
         else:
             rows, t0 = np.flatnonzero(ok), time.perf_counter()
-            g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
-                                      apertures.take(rows))
+            with np.errstate(over="ignore", invalid="ignore"):  # deep-tail rows: replaced below
+                g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
+                                          apertures.take(rows))
+            deep = ~np.isfinite(g) | ~(geo[rows] > 0)
+            g = np.where(deep, 0.0, g)
+            if np.any(deep):
+                k = rows[deep]
+                dark[k[~_tail_negligible(spot, obs[k], p[k], n[k], d[k], _reach(apertures, k))]] = True
             APERTURE_STATS.add(spot.target.mesh.analytic[0], "averaged", len(rows), time.perf_counter() - t0)
         out[ok] += rho * (g if states is None else g[:, None])
-    dark = ~ok & ~near
     if apertures is not None and np.any(dark):
-        rows = np.flatnonzero(dark)
-        reach = np.maximum(apertures.eye_radius_m[rows], np.where(apertures.aided[rows], apertures.collect_radius_m[rows], 0.0))
-        need, t0, kind = _straddle_needed(spot, obs[rows], reach), time.perf_counter(), spot.target.mesh.analytic[0]
-        APERTURE_STATS.add(kind, "skipped", int((~need).sum()))
-        rows = rows[need]
-        if len(rows):
-            out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
-            APERTURE_STATS.add(kind, "straddle", len(rows), time.perf_counter() - t0)
+        _add_straddle(spot, obs, np.flatnonzero(dark), mu, states, ray_scene, apertures, out)
     if np.any(near):
         rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
         cap = spot.max_irradiance_w_m2 * gain[near]
         out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
+
+
+def _reach(apertures, rows) -> np.ndarray:
+    """The largest disk radius [m] each observer's power is collected over (eye or aid)."""
+    return np.maximum(apertures.eye_radius_m[rows], np.where(apertures.aided[rows], apertures.collect_radius_m[rows], 0.0))
+
+
+def _add_straddle(spot, obs, rows, mu, states, ray_scene, apertures, out) -> None:
+    """Raise ``out[rows]`` (in place) to the straddle bound (:func:`_straddle_w_m2`) of the
+    observers the prefilter (:func:`_straddle_needed`) cannot prove dark; counted in
+    :data:`APERTURE_STATS`."""
+    need, t0, kind = _straddle_needed(spot, obs[rows], _reach(apertures, rows)), time.perf_counter(), spot.target.mesh.analytic[0]
+    APERTURE_STATS.add(kind, "skipped", int((~need).sum()))
+    rows = rows[need]
+    if len(rows):
+        out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
+        APERTURE_STATS.add(kind, "straddle", len(rows), time.perf_counter() - t0)
+
+
+_TAIL_EXPONENT = 800.0  # exp(-800) is below every double: a disk wholly that deep in the tail gets 0
+
+
+def _tail_negligible(spot, obs, p, n, d, reach_m) -> np.ndarray:
+    """Observers whose specular point lies so deep in the Gaussian's tail that no point of
+    their disk (radius ``reach_m``) can hold a representable field: in the local Gaussian
+    of :func:`_curved_beam_map` a disk point is at least ``|s_P| - a ||J||`` from the beam's
+    axis (units of w); taken with twice the disk's reach (for the model's curvature), a
+    squared distance above ``_TAIL_EXPONENT`` means a field below exp(-800) of the peak."""
+    jac, s_p = _curved_beam_map(spot, obs, p, n, d)
+    gap = np.linalg.norm(s_p, axis=1) - 2 * np.asarray(reach_m, float) * np.linalg.norm(jac, ord=2, axis=(1, 2))
+    return np.isfinite(gap) & (gap > 0) & (gap * gap > _TAIL_EXPONENT)
 
 
 _STRADDLE_RINGS = ((1.0 / 3.0, 8), (2.0 / 3.0, 16), (1.0, 64))  # (radius / a, points) sampled beside the centre

@@ -118,6 +118,7 @@ def _check_fan_end(r, tilt, length, w, L, q, tail, end_s, phi, dist, gap_frac, a
     beam, axis, obs = case
     lo, hi = _reference(beam, r, axis, length, 0.9, obs, optics, rtol, max_levels)
     got = float(_engine(beam, r, axis, length, 0.9, [obs], optics)[0])
+    assert math.isfinite(got), f"engine {got!r}"
     assert hi <= lo * 1.03 + 1e-300, f"reference bracket too wide: {lo:.6g} .. {hi:.6g}"
     assert got >= lo * (1 - 1e-9), f"engine {got:.6g} below the traced aperture mean {lo:.6g} (upper {hi:.6g})"
     return got, lo, hi
@@ -138,6 +139,15 @@ def test_cylinder_fan_ends_property(r, tilt, length, w, L, q, tail, end_s, phi, 
     inside the fan's end to 1.3 radii beyond it, naked or through 7x50 binoculars: the
     engine is never below the traced aperture mean."""
     _check_fan_end(r, tilt, length, w, L, q, tail, end_s if tail else end_s, phi, dist, gap_frac, aided)
+
+
+def test_cylinder_fan_end_deep_tail_is_finite():
+    """Found by the sweep: binoculars 1 m before a pipe whose specular point lies 400 1/e
+    radii into the Gaussian's tail (the point value underflows to 0): the disk mean's factor
+    overflowed and the engine returned NaN; now such eyes take the straddle bound (here a
+    representable 1.8e-279 W/m^2 against a traced 0)."""
+    _check_fan_end(0.5590385652586795, -0.20522564995292386, 0.99, 0.0035350700053407413, 82.3060957258681,
+                   0.8803742795444903, True, 0.37563776331761756, 0.0, 1.0, 0.0, True)
 
 
 @pytest.mark.slow
