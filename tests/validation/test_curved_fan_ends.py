@@ -55,12 +55,12 @@ def _reference(beam, r, axis, length, rho, observer, optics=None, rtol=1e-2, max
 
 def test_cylinder_fan_tail_beyond_the_sampled_beam():
     """A 2 m mirror pipe (r = 0.5 m) 100 m from the laser, beam w = 4 mm at it on its middle;
-    eyes 0.3 m in front, 2 mm across the fan, 17-24 mm up (4.3-6 of the reflected beam's
-    1/e radii): before, 0 beyond about 19.5 mm (the sampled square's edge); now the exact
+    eyes 0.3 m in front, 2 mm across the fan, 20 and 24 mm up (5 and 6 of the reflected
+    beam's 1/e radii): before, 0 beyond about 19.5 mm (the sampled square's edge); now the exact
     7 mm mean (within the reference's bracket, +1 % for the engine's rim margin)."""
     w, L, q = 4e-3, 100.0, 0.5
     beam = ref.Beam(100.0, (1 - q) * 2 * w, q * 2 * w / L, [0.0, -L, 0.0], [0.0, 0.0, 0.0])
-    zs = [0.017, 0.020, 0.024]
+    zs = [0.020, 0.024]
     obs = [np.array([2e-3, -0.8, z]) for z in zs]
     got = _engine(beam, 0.5, [0.0, 0.0, 1.0], 2.0, 0.9, obs)
     for z, o, g in zip(zs, obs, got):
@@ -131,14 +131,14 @@ _FAN_END = dict(r=ref.log_uniform(0.05, 2.0), tilt=st.floats(-0.5, 0.5), length=
                 gap_frac=st.floats(-0.5, 1.3), aided=st.booleans())
 
 
-@ref.settings(ref.FAST, max_examples=4)
+@ref.settings(ref.FAST, max_examples=2)
 @given(**_FAN_END)
 def test_cylinder_fan_ends_property(r, tilt, length, w, L, q, tail, end_s, phi, dist, gap_frac, aided):
     """Random cylinders (r 5 cm - 2 m, axis up to 29 degrees oblique), beams (w 2-20 mm),
     ends (the cylinder's, the beam's axis 1 w beyond to 6 w before it; or the Gaussian's
     tail at -1 to 6 1/e radii), eyes 5 cm - 3 m before the mirror, their disks from half
     inside the fan's end to 1.3 radii beyond it, naked or through 7x50 binoculars: the
-    engine is never below the traced aperture mean."""
+    engine is never below the traced aperture mean. 2 draws by default, 40 in the slow sweep."""
     _check_fan_end(r, tilt, length, w, L, q, tail, end_s if tail else end_s, phi, dist, gap_frac, aided)
 
 
@@ -146,9 +146,12 @@ def test_cylinder_fan_end_deep_tail_is_finite():
     """Found by the sweep: binoculars 1 m before a pipe whose specular point lies 400 1/e
     radii into the Gaussian's tail (the point value underflows to 0): the disk mean's factor
     overflowed and the engine returned NaN; now such eyes take the straddle bound (here a
-    representable 1.8e-279 W/m^2 against a traced 0)."""
-    _check_fan_end(0.5590385652586795, -0.20522564995292386, 0.99, 0.0035350700053407413, 82.3060957258681,
-                   0.8803742795444903, True, 0.37563776331761756, 0.0, 1.0, 0.0, True)
+    representable 1.8e-279 W/m^2; the traced reference, 0, is in the slow sweep)."""
+    case = _fan_end_case(0.5590385652586795, -0.20522564995292386, 0.99, 0.0035350700053407413, 82.3060957258681,
+                         0.8803742795444903, True, 0.37563776331761756, 0.0, 1.0, 0.0, BINOCULARS)
+    beam, axis, obs = case
+    got = _engine(beam, 0.5590385652586795, axis, 0.99, 0.9, [obs], BINOCULARS)
+    assert np.all(np.isfinite(got)) and np.all(got >= 0), got
 
 
 @pytest.mark.slow
@@ -162,7 +165,7 @@ def test_cylinder_fan_ends_sweep(r, tilt, length, w, L, q, tail, end_s, phi, dis
 # ------------------------------------------------------------ the straddle prefilter
 
 
-def _ball_points(n_dir=200, radii=(0.25, 0.5, 0.75, 0.9, 1.0)):
+def _ball_points(n_dir=80, radii=(0.25, 0.5, 0.75, 0.9, 1.0)):
     """Unit-ball samples: a Fibonacci sphere of directions at several radii, and the centre."""
     k = np.arange(n_dir) + 0.5
     z = 1 - 2 * k / n_dir
@@ -185,12 +188,12 @@ def _prefilter_case(kind, r, tilt, w, L, q, end_s, spread):
     built = trace_beam(scene, ray_scene(scene, "embree", 1), 0.0).built
     spot = [s for s in built.spots if s.material.has_specular][0]
     # observers around the fan's ends and the shadow's edge: a lattice about the mirror
-    g = np.linspace(-1.0, 1.0, 9)
+    g = np.linspace(-1.0, 1.0, 7)
     box = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3) * spread * r
     return spot, np.concatenate([box + [0.0, -1.5 * r, 0.0], box + [0.0, 1.5 * r, 0.0], box + length / 2 * axis])
 
 
-def _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided):
+def _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided, n_dir=80):
     import hazard.specular as sp
 
     spot, obs = _prefilter_case(kind, r, tilt, w, L, q, end_s, spread)
@@ -205,7 +208,7 @@ def _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided):
     skip = dark[skipped]
     if not len(skip):
         return len(dark), 0
-    ball = _ball_points()
+    ball = _ball_points(n_dir)
     pts = (obs[skip][:, None, :] + a[skipped][:, None, None] * ball[None]).reshape(-1, 3)
     lit, *_ = sp._curved_geometry(spot, pts)
     lit = lit.reshape(len(skip), -1).any(axis=1)
@@ -218,14 +221,14 @@ _PREFILTER = dict(kind=st.sampled_from(["cylinder", "sphere"]), r=ref.log_unifor
                   end_s=st.floats(-2.0, 4.0), spread=ref.log_uniform(0.05, 3.0), aided=st.booleans())
 
 
-@ref.settings(ref.FAST, max_examples=6)
+@ref.settings(ref.FAST, max_examples=2)
 @given(**_PREFILTER)
 def test_straddle_prefilter_never_skips_a_lit_disk(kind, r, tilt, w, L, q, end_s, spread, aided):
     """Random spheres and cylinders (r 5 cm - 2 m, up to 29 degrees oblique, collimated or
-    diverging beams 2-50 mm, cylinder ends 2 w beyond to 4 w before the beam's axis), 2187
+    diverging beams 2-50 mm, cylinder ends 2 w beyond to 4 w before the beam's axis), 1029
     observers on lattices before, behind and at the end of the mirror: every dark observer
-    the straddle's prefilter skips has no lit point at 1001 samples of its ball (the naked
-    eye's 3.5 mm, or 7x50 binoculars' 12.25 mm)."""
+    the straddle's prefilter skips has no lit point at 401 samples of its ball (the naked
+    eye's 3.5 mm, or 7x50 binoculars' 12.25 mm). 2 draws by default, 60 in the slow sweep."""
     _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided)
 
 
@@ -234,15 +237,15 @@ def test_straddle_prefilter_skips_most_dark_observers():
     observers skip the 89-point straddle bound. (A sphere's dark observers are rare: those
     in its shadow find no specular point and take the mirror's cap, conservative.)"""
     dark, skipped = _check_prefilter("cylinder", 0.5, 0.2, 4e-3, 100.0, 0.5, 1.0, 1.0, False)
-    assert dark > 50 and skipped > 0.5 * dark, (dark, skipped)
+    assert dark > 20 and skipped > 0.5 * dark, (dark, skipped)
 
 
 @pytest.mark.slow
 @ref.settings(ref.FAST, max_examples=60)
 @given(**_PREFILTER)
 def test_straddle_prefilter_sweep(kind, r, tilt, w, L, q, end_s, spread, aided):
-    """Larger sweep of ``test_straddle_prefilter_never_skips_a_lit_disk``."""
-    _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided)
+    """Larger sweep of ``test_straddle_prefilter_never_skips_a_lit_disk`` (1001 ball samples)."""
+    _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided, n_dir=200)
 
 
 def test_stage_detail_counts_the_aperture_averaged_observers():
