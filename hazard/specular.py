@@ -13,7 +13,9 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   mirror and its lateral extent is cut by the mirror's outline. No diffraction credit
   (the Fraunhofer spread of a small mirror would lower far irradiance: not taken).
 * **Convex sphere and cylinder** (exact normals): the specular point P is found by
-  iterating the reflection law from the virtual source to O; the reflected wavefront
+  iterating the reflection law from the virtual source to O (by bisection in the plane of
+  reflection where the iteration diverges, close to a large mirror); the Gaussian's tail
+  beyond the beam's sampled square lights the surface too; the reflected wavefront
   leaves P with vergences (Coddington, reflection: ``1/q = 1/p + 2 kappa_n / cos(theta)``
   tangential, ``1/p + 2 kappa_n cos(theta)`` sagittal, p the incident wavefront radius),
   so ``E(D) = rho E_inc(P) / ((1 + D/q_t)(1 + D/q_s))`` at distance D. Far away this is
