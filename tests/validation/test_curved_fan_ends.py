@@ -265,3 +265,20 @@ def test_stage_detail_counts_the_aperture_averaged_observers():
     res = hazard.analyze(scenes.loads(text))
     detail = [s.detail for s in res.stages if s.name == "specular"][0]
     assert "cylinder: 3 averaged" in detail and ", 2 skipped" in detail and "straddle (" not in detail.split("cylinder:")[1], detail
+
+
+def test_traced_bracket_holds_the_exact_sphere_mean():
+    """Self-check of the traced reference: for a mirror ball (r = 1 m, beam w = 4 mm from
+    100 m) and an eye 0.3 m before it, 1.5 reflected radii off the axis, the bracket of
+    :func:`_refs.mirror_disk_bracket` holds the 7 mm mean of the exact sphere field
+    (``_refs.sphere_mirror_exact`` integrated over the disk in test_curved_aperture)."""
+    from .test_curved_aperture import _case
+
+    r, L, w, q, dist, edge = 1.0, 100.0, 4e-3, 0.5, 0.3, 1.5
+    _, _, want = _case(r, L, w, q, 0.9, dist, edge)
+    beam = ref.Beam(100.0, (1 - q) * 2 * w, q * 2 * w / L, [0.0, -L, 0.0], [0.0, 0.0, 0.0])
+    w_refl = w * (1 + 2 * dist / r + dist / (L + beam.a / beam.phi))
+    obs = np.array([edge * w_refl, -(r + dist), 0.0])
+    lo, hi, _ = ref.mirror_disk_bracket(beam, "sphere", np.zeros(3), [0.0, 0.0, 1.0], r, math.inf, 0.9, obs, PUPIL_R,
+                                        max_levels=4)
+    assert lo <= want <= hi and hi <= 1.03 * lo, (lo, want, hi)
