@@ -594,8 +594,9 @@ def _tail_negligible(spot, obs, p, n, d, reach_m) -> np.ndarray:
     of :func:`_curved_beam_map` a disk point is at least ``|s_P| - a ||J||`` from the beam's
     axis (units of w); taken with twice the disk's reach (for the model's curvature), a
     squared distance above ``_TAIL_EXPONENT`` means a field below exp(-800) of the peak."""
-    jac, s_p = _curved_beam_map(spot, obs, p, n, d)
-    gap = np.linalg.norm(s_p, axis=1) - 2 * np.asarray(reach_m, float) * np.linalg.norm(jac, ord=2, axis=(1, 2))
+    with np.errstate(over="ignore", invalid="ignore"):  # a non-finite gap is not taken as negligible
+        jac, s_p = _curved_beam_map(spot, obs, p, n, d)
+        gap = np.linalg.norm(s_p, axis=1) - 2 * np.asarray(reach_m, float) * np.linalg.norm(jac, ord=2, axis=(1, 2))
     return np.isfinite(gap) & (gap > 0) & (gap * gap > _TAIL_EXPONENT)
 
 

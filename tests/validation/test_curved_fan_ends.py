@@ -55,12 +55,13 @@ def _reference(beam, r, axis, length, rho, observer, optics=None, rtol=1e-2, max
 
 def test_cylinder_fan_tail_beyond_the_sampled_beam():
     """A 2 m mirror pipe (r = 0.5 m) 100 m from the laser, beam w = 4 mm at it on its middle;
-    eyes 0.3 m in front, 2 mm across the fan, 20 and 24 mm up (5 and 6 of the reflected
-    beam's 1/e radii): before, 0 beyond about 19.5 mm (the sampled square's edge); now the exact
+    an eye 0.3 m in front, 2 mm across the fan, 20 mm up (5 of the reflected beam's 1/e
+    radii; traced 1.11e-3 W/m^2 at 100 W): before, 0 beyond about 19.5 mm (the sampled
+    square's edge; 24 mm: 0 against 7.8e-8, in the slow sweep's range); now the exact
     7 mm mean (within the reference's bracket, +1 % for the engine's rim margin)."""
     w, L, q = 4e-3, 100.0, 0.5
     beam = ref.Beam(100.0, (1 - q) * 2 * w, q * 2 * w / L, [0.0, -L, 0.0], [0.0, 0.0, 0.0])
-    zs = [0.020, 0.024]
+    zs = [0.020]
     obs = [np.array([2e-3, -0.8, z]) for z in zs]
     got = _engine(beam, 0.5, [0.0, 0.0, 1.0], 2.0, 0.9, obs)
     for z, o, g in zip(zs, obs, got):
@@ -131,14 +132,15 @@ _FAN_END = dict(r=ref.log_uniform(0.05, 2.0), tilt=st.floats(-0.5, 0.5), length=
                 gap_frac=st.floats(-0.5, 1.3), aided=st.booleans())
 
 
-@ref.settings(ref.FAST, max_examples=2)
+@pytest.mark.slow
+@ref.settings(ref.FAST, max_examples=3)
 @given(**_FAN_END)
 def test_cylinder_fan_ends_property(r, tilt, length, w, L, q, tail, end_s, phi, dist, gap_frac, aided):
     """Random cylinders (r 5 cm - 2 m, axis up to 29 degrees oblique), beams (w 2-20 mm),
     ends (the cylinder's, the beam's axis 1 w beyond to 6 w before it; or the Gaussian's
     tail at -1 to 6 1/e radii), eyes 5 cm - 3 m before the mirror, their disks from half
     inside the fan's end to 1.3 radii beyond it, naked or through 7x50 binoculars: the
-    engine is never below the traced aperture mean. 2 draws by default, 40 in the slow sweep."""
+    engine is never below the traced aperture mean. 3 draws (9-14 s: slow), 40 in the sweep."""
     _check_fan_end(r, tilt, length, w, L, q, tail, end_s if tail else end_s, phi, dist, gap_frac, aided)
 
 
