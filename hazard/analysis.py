@@ -25,6 +25,7 @@ from brdfmodels.parallel import default_threads, thread_limit
 from . import near_field, near_field_lobe
 from .aperture import limiting_aperture_m, observer_apertures
 from .nohd import group_gains
+from .specular import describe_apertures
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
@@ -174,7 +175,8 @@ def _log_map(log, inp, out, the_plan):
     spec_spots = [sp for sp in spots if sp.material.has_specular]
     if spec_spots:
         log.ran("specular", f"{len(spec_spots)} mirror lobe(s) by geometric optics (unfolded beam on flat facets, Coddington "
-                            f"spread on spheres and cylinders) from the lit part of each mirror, inside the irradiance map", 0.0)
+                            f"spread on spheres and cylinders) from the lit part of each mirror, inside the irradiance map; "
+                            f"{describe_apertures(out.apertures)}", 0.0)
     else:
         log.skip("specular", the_plan.skipped("specular") or "no lit target has an ideal-mirror (delta) lobe")
     if inp.ray_scene is not None:

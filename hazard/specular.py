@@ -13,7 +13,9 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   mirror and its lateral extent is cut by the mirror's outline. No diffraction credit
   (the Fraunhofer spread of a small mirror would lower far irradiance: not taken).
 * **Convex sphere and cylinder** (exact normals): the specular point P is found by
-  iterating the reflection law from the virtual source to O; the reflected wavefront
+  iterating the reflection law from the virtual source to O (by bisection in the plane of
+  reflection where the iteration diverges, close to a large mirror); the Gaussian's tail
+  beyond the beam's sampled square lights the surface too; the reflected wavefront
   leaves P with vergences (Coddington, reflection: ``1/q = 1/p + 2 kappa_n / cos(theta)``
   tangential, ``1/p + 2 kappa_n cos(theta)`` sagittal, p the incident wavefront radius),
   so ``E(D) = rho E_inc(P) / ((1 + D/q_t)(1 + D/q_s))`` at distance D. Far away this is
@@ -42,6 +44,8 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
 from __future__ import annotations
 
 import math
+import threading
+import time
 
 import numpy as np
 
@@ -49,10 +53,60 @@ from .mesh_mirror import aperture_irradiance, curved_face_mask, is_curved_mesh, 
 from .rays import own_object
 
 __all__ = ["specular_irradiance", "specular_nohd", "SpecularNohd", "mirror_directions", "reflected_power_w",
-           "mesh_mirror_irradiance"]
+           "mesh_mirror_irradiance", "APERTURE_STATS", "aperture_stats_since", "describe_apertures"]
 
-_ITERATIONS = 300
+_ITERATIONS = 40  # fixed-point steps before the bisection (_bisect_specular)
+_BISECTIONS = 64
 _CONVERGED = 1e-9  # 1 - cos of the angle between the reflected ray and the observer
+
+
+class _ApertureStats:
+    """Counts of the mirror beams averaged over observers' apertures in this process, per
+    mirror kind ("flat", "sphere", "cylinder", "curved mesh") and way ("averaged": the
+    disk mean; "straddle": the sampled bound of an eye with no specular point of its own;
+    "skipped": such eyes the prefilter proved dark), with the seconds spent (summed over
+    threads); read as differences around a stage (:func:`aperture_stats_since`)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._counts = {}
+
+    def add(self, kind, way, n, seconds=0.0):
+        with self._lock:
+            c = self._counts.setdefault(f"{kind}/{way}", [0, 0.0])
+            c[0] += int(n)
+            c[1] += float(seconds)
+
+    def snapshot(self) -> dict:
+        with self._lock:
+            return {k: tuple(v) for k, v in self._counts.items()}
+
+
+APERTURE_STATS = _ApertureStats()
+
+
+def aperture_stats_since(before: dict) -> dict:
+    """``{"kind/way": (observers, seconds)}`` added since ``before`` (an
+    :meth:`_ApertureStats.snapshot`); ways with no observer left out."""
+    now = APERTURE_STATS.snapshot()
+    out = {k: (n - before.get(k, (0, 0.0))[0], s - before.get(k, (0, 0.0))[1]) for k, (n, s) in now.items()}
+    return {k: v for k, v in out.items() if v[0] > 0}
+
+
+def describe_apertures(counts: dict) -> str:
+    """One line for a stage's detail: the observers whose mirror beams were averaged over
+    the limiting aperture, per mirror kind, and the cost."""
+    if not counts:
+        return "aperture: no mirror beam averaged over an observer's aperture"
+    parts = []
+    for kind in ("flat", "sphere", "cylinder", "curved mesh"):
+        ways = {k.split("/")[1]: v for k, v in counts.items() if k.split("/")[0] == kind}
+        if not ways:
+            continue
+        text = ", ".join(f"{n} {way}" + (f" ({s:.3g} s)" if s > 0 else "") for way, (n, s) in sorted(ways.items()))
+        parts.append(f"{kind}: {text}")
+    return ("aperture (observer rows per mirror; flat: observer-facet pairs; straddle: an eye at a curved beam's edge "
+            "bounded by samples of its disk, skipped: such eyes proven dark): " + "; ".join(parts))
 
 
 def _unit(v):
@@ -194,8 +248,10 @@ def _specular_point(spot, obs):
     Fixed-point iteration of the reflection law (the normal bisects the directions to
     the source and to the observer) from the virtual source of the ray through P; only
     rows not yet settled are iterated. Plain steps converge fast far away (contraction
-    about r / distance); after 20 steps they are halved to settle observers close to
-    the surface.
+    about r / distance); after 20 steps they are halved. Rows still unsettled after
+    ``_ITERATIONS`` steps (close to a large mirror, where r / distance > 3 and the
+    iteration diverges) are solved by bisection in the plane of the reflection
+    (:func:`_bisect_specular`).
     """
     beam = spot.beam
     an = spot.target.mesh.analytic
@@ -231,6 +287,8 @@ def _specular_point(spot, obs):
             moved = np.maximum(moved, np.abs(step) / r)
         n[active] = n_new
         active = active[moved > 1e-14]
+    if len(active):
+        n[active], along[active] = _bisect_specular(spot, obs[active])
     p = c + r * n if ax is None else c + along[:, None] * ax + r * n
     s, _z = beam.to_s(p)
     d = _unit(beam.rays(np.nan_to_num(s))[1])
@@ -239,6 +297,77 @@ def _specular_point(spot, obs):
     on_surface = np.ones(len(obs), bool) if ax is None else np.abs(along) <= an[4]
     near = np.ones(len(obs), bool) if ax is None else np.abs(along) <= an[4] + 2 * r
     return p, n, d, settled, on_surface, near
+
+
+def _bisect_specular(spot, obs):
+    """The specular point of a convex sphere or cylinder for observers (M, 3) by bisection:
+    (unit normals n (M, 3), positions along a cylinder's axis (M,), 0 for a sphere).
+
+    The normal at P, the virtual source S (or, collimated, the beam's direction) and the
+    observer O lie in one plane through the centre c (for a cylinder: everything projected
+    along its axis, where the section is a circle). In it, with x towards O and y towards
+    S, P = c + r (cos t, sin t) for t in [0, beta] (beta the angle of S); the reflection
+    law is g(t) = n x u_O + n x u_S = 0 (u the unit directions from P), with g(0) > 0 >
+    g(beta): ``_BISECTIONS`` halvings. A cylinder's ray keeps its ratio of axial to
+    in-plane travel on reflection, so P's axial position divides S -> O in the ratio of
+    the in-plane lengths (collimated: ``z_O - L_2 d_z / |d_in-plane|``). Rows with O on
+    the ray from c through S get the back-reflection point; the caller checks the law."""
+    beam = spot.beam
+    an = spot.target.mesh.analytic
+    c, r = an[1], (an[2] if an[0] == "sphere" else an[3])
+    ax = None if an[0] == "sphere" else np.asarray(an[2], float)
+
+    def flat(v):
+        return v if ax is None else v - (v @ ax)[..., None] * ax
+
+    o = flat(obs - c)
+    if beam.divergence_rad > 0:
+        src = beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad)
+        sv = np.broadcast_to(flat(src - c), o.shape)
+    else:
+        src, sv = None, np.broadcast_to(flat(-np.asarray(beam.axis, float)), o.shape) * 1e12 * max(r, 1.0)
+    x = _unit(o)
+    toward = _unit(sv)
+    y = toward - (toward * x).sum(1)[:, None] * x
+    y = _unit(np.where(np.linalg.norm(y, axis=1)[:, None] > 1e-12, y, np.cross(x, [0.0, 0.0, 1.0] if ax is None else ax)))
+    beta = np.arctan2((toward * y).sum(1), (toward * x).sum(1))
+    lo, hi = np.zeros(len(o)), beta
+
+    def cross(a, b):
+        return (a * x).sum(1) * (b * y).sum(1) - (a * y).sum(1) * (b * x).sum(1)
+
+    for _ in range(_BISECTIONS):
+        th = 0.5 * (lo + hi)
+        nv = np.cos(th)[:, None] * x + np.sin(th)[:, None] * y
+        g = cross(nv, _unit(o - r * nv)) + cross(nv, _unit(sv - r * nv))
+        lo, hi = np.where(g > 0, th, lo), np.where(g > 0, hi, th)
+    th = 0.5 * (lo + hi)
+    nv = np.cos(th)[:, None] * x + np.sin(th)[:, None] * y
+    if ax is None:
+        return nv, np.zeros(len(o))
+    z_o = (obs - c) @ ax
+    l1, l2, z_s, slope = _in_plane_legs(spot, o, nv, r, ax)
+    if z_s is None:
+        return nv, z_o - l2 * slope
+    return nv, z_s + (z_o - z_s) * l1 / (l1 + l2)
+
+
+def _in_plane_legs(spot, o, nv, r, ax):
+    """A cylinder's reflection in its cross-section (o: the observers relative to the axis,
+    in-plane; nv: the in-plane unit normals at the specular points): the in-plane lengths
+    source -> P (inf when collimated) and P -> observer [m], the source's axial position
+    relative to the centre (None when collimated) and the collimated beam's axial travel per
+    in-plane length."""
+    beam = spot.beam
+    c = spot.target.mesh.analytic[1]
+    l2 = np.linalg.norm(o - r * nv, axis=1)
+    if beam.divergence_rad > 0:
+        src = beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad)
+        rel = src - c
+        l1 = np.linalg.norm(rel - (rel @ ax) * ax - r * nv, axis=1)
+        return l1, l2, float(rel @ ax), 0.0
+    dz = float(np.dot(beam.axis, ax))
+    return np.full(len(o), np.inf), l2, None, dz / max(math.sqrt(max(1.0 - dz * dz, 0.0)), 1e-300)
 
 
 def _vergences(kind, n, d, p_src, ax=None, r=1.0):
@@ -282,6 +411,21 @@ def _curved_source(spot, p, n, d, ok):
     return e_inc, vt, vs
 
 
+def _lit_or_tail(spot, s):
+    """Points (beam coordinates s, (N, 2)) of a curved side lit by the beam: a lit cell
+    (:func:`_lit`), or beyond the sampled square (``|s_i| >= HALF_WIDTH``, where no cell
+    says what the ray hits): there the Gaussian's tail (below ``exp(-16)`` = 1.1e-7 of the
+    peak, a hazard for a beam of kilowatts) reaches the surface unless something shadows
+    it, which is not known there, so it is taken as lit (conservative). Before, those
+    points were dark and an eye beyond the 4 w edge of a cylinder's fan or a sphere's
+    cone got 0 (issue 29)."""
+    from .beam import HALF_WIDTH
+
+    finite = np.all(np.isfinite(s), axis=1)
+    tail = finite & np.any(np.abs(np.nan_to_num(s)) >= HALF_WIDTH, axis=1)
+    return tail | _lit(spot, np.nan_to_num(s, nan=1e9))
+
+
 def _curved_geometry(spot, obs):
     """Per observer on a convex sphere / cylinder side: (mask, E_geo at the observer
     before reflectance and attenuation, point P, normal n, incoming d, not settled)."""
@@ -309,7 +453,7 @@ def _curved_geometry(spot, obs):
         d[far_fix] = _unit(beam.rays(np.nan_to_num(beam.to_s(p[far_fix])[0]))[1])
     s, z = beam.to_s(p)
     front = (n * d).sum(1) < 0
-    ok = settled & on_surface & front & _lit(spot, np.nan_to_num(s, nan=1e9)) & (z > 0)
+    ok = settled & on_surface & front & _lit_or_tail(spot, s) & (z > 0)
     e_inc, vt, vs = _curved_source(spot, p, n, d, ok)
     dist = np.linalg.norm(obs - p, axis=1)
     geo = margin * e_inc / ((1 + dist * vt) * (1 + dist * vs))
@@ -372,10 +516,14 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
         if apertures is None:
             geo = e[ok] * np.exp(-mu * path) * gain[ok]
         else:
+            t0 = time.perf_counter()
             geo = _flat_aperture_w_m2(spot.beam, s[ok], z[ok], path, mu, apertures.take(np.flatnonzero(ok)), spot.outline_s)
+            APERTURE_STATS.add("flat", "averaged", int(ok.sum()), time.perf_counter() - t0)
         out[ok] += rho * (geo if states is None else geo[:, None])
     if is_curved_mesh(spot.target):
+        t0 = time.perf_counter()
         out += mesh_mirror_irradiance(spot, obs, gain, mu, states).irradiance_w_m2
+        APERTURE_STATS.add("curved mesh", "averaged", m, time.perf_counter() - t0)
     if spot.target.mesh.analytic is not None:
         _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures)
     return np.minimum(out, _power_cap(spot, obs, gain, mu, states))
@@ -386,29 +534,70 @@ def _add_curved_side(spot, obs, gain, mu, states, ray_scene, out, apertures=None
     from each observer's specular point (module notes), averaged over each observer's
     limiting aperture or aid's objective when ``apertures`` are given
     (:func:`_curved_aperture_w_m2`; else the point value times ``gain``), and
-    ``rho E_peak`` where that point cannot be found (conservative)."""
+    ``rho E_peak`` where that point cannot be found (conservative). With apertures, eyes
+    with no lit specular point of their own, and eyes so deep in the Gaussian's tail that
+    the point value underflows (the disk mean is then not computable from it), get the
+    straddle bound (:func:`_add_straddle`)."""
     pos, tangent = spot.beam.position_m, spot.target.tangent
     ok, geo, p, n, d, near = _curved_geometry(spot, obs)
     _seen(ray_scene, spot, p, n, obs, ok)
     _seen(ray_scene, spot, p, n, obs, near)
+    dark = ~ok & ~near
     if np.any(ok):
         path = np.linalg.norm(p[ok] - pos, axis=1) + np.linalg.norm(obs[ok] - p[ok], axis=1)
         rho = _reflectance(spot, _local(n[ok], tangent, -d[ok]), states)
         if apertures is None:
             g = geo[ok] * np.exp(-mu * path) * gain[ok]
         else:
-            rows = np.flatnonzero(ok)
-            g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
-                                      apertures.take(rows))
+            rows, t0 = np.flatnonzero(ok), time.perf_counter()
+            with np.errstate(over="ignore", invalid="ignore"):  # deep-tail rows: replaced below
+                g = _curved_aperture_w_m2(spot, obs[rows], p[rows], n[rows], d[rows], geo[rows] * np.exp(-mu * path),
+                                          apertures.take(rows))
+            deep = ~np.isfinite(g) | ~(geo[rows] > 0)
+            g = np.where(deep, 0.0, g)
+            if np.any(deep):
+                k = rows[deep]
+                dark[k[~_tail_negligible(spot, obs[k], p[k], n[k], d[k], _reach(apertures, k))]] = True
+            APERTURE_STATS.add(spot.target.mesh.analytic[0], "averaged", len(rows), time.perf_counter() - t0)
         out[ok] += rho * (g if states is None else g[:, None])
-    dark = ~ok & ~near
     if apertures is not None and np.any(dark):
-        rows = np.flatnonzero(dark)
-        out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
+        _add_straddle(spot, obs, np.flatnonzero(dark), mu, states, ray_scene, apertures, out)
     if np.any(near):
         rho_max = _reflectance(spot, _local(spot.frames[:, 2], tangent, -spot.incoming), states).max(axis=0)
         cap = spot.max_irradiance_w_m2 * gain[near]
         out[near] = np.maximum(out[near], rho_max * cap if states is None else cap[:, None] * rho_max[None, :])
+
+
+def _reach(apertures, rows) -> np.ndarray:
+    """The largest disk radius [m] each observer's power is collected over (eye or aid)."""
+    return np.maximum(apertures.eye_radius_m[rows], np.where(apertures.aided[rows], apertures.collect_radius_m[rows], 0.0))
+
+
+def _add_straddle(spot, obs, rows, mu, states, ray_scene, apertures, out) -> None:
+    """Raise ``out[rows]`` (in place) to the straddle bound (:func:`_straddle_w_m2`) of the
+    observers the prefilter (:func:`_straddle_needed`) cannot prove dark; counted in
+    :data:`APERTURE_STATS`."""
+    need, t0, kind = _straddle_needed(spot, obs[rows], _reach(apertures, rows)), time.perf_counter(), spot.target.mesh.analytic[0]
+    APERTURE_STATS.add(kind, "skipped", int((~need).sum()))
+    rows = rows[need]
+    if len(rows):
+        out[rows] = np.maximum(out[rows], _straddle_w_m2(spot, obs[rows], mu, states, ray_scene, apertures.take(rows)))
+        APERTURE_STATS.add(kind, "straddle", len(rows), time.perf_counter() - t0)
+
+
+_TAIL_EXPONENT = 800.0  # exp(-800) is below every double: a disk wholly that deep in the tail gets 0
+
+
+def _tail_negligible(spot, obs, p, n, d, reach_m) -> np.ndarray:
+    """Observers whose specular point lies so deep in the Gaussian's tail that no point of
+    their disk (radius ``reach_m``) can hold a representable field: in the local Gaussian
+    of :func:`_curved_beam_map` a disk point is at least ``|s_P| - a ||J||`` from the beam's
+    axis (units of w); taken with twice the disk's reach (for the model's curvature), a
+    squared distance above ``_TAIL_EXPONENT`` means a field below exp(-800) of the peak."""
+    with np.errstate(over="ignore", invalid="ignore"):  # a non-finite gap is not taken as negligible
+        jac, s_p = _curved_beam_map(spot, obs, p, n, d)
+        gap = np.linalg.norm(s_p, axis=1) - 2 * np.asarray(reach_m, float) * np.linalg.norm(jac, ord=2, axis=(1, 2))
+    return np.isfinite(gap) & (gap > 0) & (gap * gap > _TAIL_EXPONENT)
 
 
 _STRADDLE_RINGS = ((1.0 / 3.0, 8), (2.0 / 3.0, 16), (1.0, 64))  # (radius / a, points) sampled beside the centre
@@ -442,6 +631,91 @@ def _straddle_max(spot, obs, radius_m, mu, states, ray_scene) -> np.ndarray:
         g = geo[ok] * np.exp(-mu * path)
         val[ok] = rho * (g if states is None else g[:, None])
     return val.reshape((len(obs), len(unit_pts)) + val.shape[1:]).max(axis=1)
+
+
+def _straddle_needed(spot, obs, reach_m) -> np.ndarray:
+    """The prefilter of :func:`_straddle_w_m2`: False for observers (with no lit specular
+    point of their own) whose disk of radius ``reach_m`` provably holds no lit point.
+
+    * **Shadow.** No mirror-reflected ray of a convex sphere or cylinder enters its shadow
+      (the cone from the virtual source tangent to the sphere, beyond the plane through the
+      centre normal to the cone's axis; a cylinder's wedge in its cross-section, where a
+      point's reflection depends on its projection only; a cylinder of radius r when
+      collimated): a disk more than its radius inside the shadow is dark.
+    * **Beyond a cylinder's end.** The specular point's axial position is
+      ``z_P = z_S + (z_X - z_S) f(X')``, ``f = L1 / (L1 + L2)`` the share of the source's
+      in-plane leg (collimated: ``z_X - L2 dz/d_in``), X' the point's projection. Over the
+      disk ``z_X`` spans ``z_O +- a``; f (or L2) is taken at the centre and 4 in-plane points
+      ``a`` away, its range doubled about them; if the interval product for z_P lies wholly
+      beyond the cylinder's ends, the disk is dark.
+
+    Everything else (cells shadowed by other objects, unsettled rows) is kept. Tested in
+    ``tests/validation/test_curved_fan_ends.py`` against dense samples of the disk."""
+    an = spot.target.mesh.analytic
+    a = np.asarray(reach_m, float) * (1 + 1e-9) + 1e-12
+    need = ~_disk_in_shadow(spot, obs, a)
+    if an[0] != "sphere" and np.any(need):
+        rows = np.flatnonzero(need)
+        need[rows] = ~_disk_beyond_end(spot, obs[rows], a[rows])
+    return need
+
+
+def _disk_in_shadow(spot, obs, a) -> np.ndarray:
+    """Observers whose ball of radius a (M,) lies wholly in the mirror's own shadow
+    (:func:`_straddle_needed`)."""
+    beam = spot.beam
+    an = spot.target.mesh.analytic
+    c, r = an[1], (an[2] if an[0] == "sphere" else an[3])
+    ax = None if an[0] == "sphere" else np.asarray(an[2], float)
+
+    def flat(v):
+        return v if ax is None else v - (v @ ax)[..., None] * ax
+
+    o = flat(obs - c)
+    if beam.divergence_rad > 0:
+        sv = flat(beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad) - c)
+        lc = float(np.linalg.norm(sv))
+        if lc <= r:
+            return np.zeros(len(obs), bool)
+        v = o - sv
+        cone = -sv / lc
+        lv = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+        gamma = np.arccos(np.clip((v @ cone) / lv, -1.0, 1.0))
+        alpha = math.asin(r / lc)
+        return (gamma < alpha) & (lv * np.sin(alpha - gamma) > a) & (v @ cone - a > lc)
+    u = flat(np.asarray(beam.axis, float))
+    if np.linalg.norm(u) < 1e-9:
+        return np.zeros(len(obs), bool)
+    u = u / np.linalg.norm(u)
+    along = o @ u
+    return (np.linalg.norm(o - along[:, None] * u, axis=1) < r - a) & (along > a)
+
+
+def _disk_beyond_end(spot, obs, a) -> np.ndarray:
+    """Observers whose disk of radius a (M,) provably reflects from beyond a cylinder's
+    ends only (:func:`_straddle_needed`)."""
+    an = spot.target.mesh.analytic
+    c, ax, r, half = an[1], np.asarray(an[2], float), an[3], an[4]
+    e1 = _unit(np.cross(ax, [1.0, 0.0, 0.0] if abs(ax[0]) < 0.9 else [0.0, 1.0, 0.0]))
+    e2 = np.cross(ax, e1)
+    offs = np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    pts = obs[:, None, :] + a[:, None, None] * (offs[None, :, :1] * e1 + offs[None, :, 1:] * e2)
+    pts = pts.reshape(-1, 3)
+    nv, _ = _bisect_specular(spot, pts)
+    rel = pts - c
+    o = rel - (rel @ ax)[:, None] * ax
+    l1, l2, z_s, slope = _in_plane_legs(spot, o, nv, r, ax)
+    q = (l2 if z_s is None else l1 / (l1 + l2)).reshape(len(obs), 5)
+    lo, hi = q.min(axis=1), q.max(axis=1)
+    lo, hi = lo - (hi - lo), hi + (hi - lo)
+    z_o = (obs - c) @ ax
+    if z_s is None:
+        zmin, zmax = z_o - a - np.maximum(hi * slope, lo * slope), z_o + a - np.minimum(hi * slope, lo * slope)
+    else:
+        lo, hi = np.clip(lo, 0.0, 1.0), np.clip(hi, 0.0, 1.0)
+        ends = np.stack([(z_o + sa * a - z_s) * f for sa in (-1, 1) for f in (lo, hi)], axis=1)
+        zmin, zmax = z_s + ends.min(axis=1), z_s + ends.max(axis=1)
+    return np.all(np.isfinite(q), axis=1) & ((zmin > half) | (zmax < -half))
 
 
 def _straddle_w_m2(spot, obs, mu, states, ray_scene, apertures) -> np.ndarray:
@@ -572,7 +846,8 @@ def _curved_aperture_w_m2(spot, obs, p, n, d, point_w_m2, apertures):
         a = np.broadcast_to(np.asarray(radius_m, float), (len(rows),))
         ratio = _disk_mean_ratio(jac[rows], s_p[rows], a)
         change = np.abs(ratio - 1.0)
-        out = np.maximum(ratio, 1.0) * (1.0 + change)
+        with np.errstate(over="ignore"):  # rows far in the tail: replaced below (big)
+            out = np.maximum(ratio, 1.0) * (1.0 + change)
         big = np.flatnonzero(change > _SMALL_CHANGE)
         if len(big):
             k = rows[big]

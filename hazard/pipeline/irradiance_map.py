@@ -22,6 +22,7 @@ from brdfmodels.parallel import block_rows, map_blocks
 
 from .. import mpe as _mpe
 from .. import near_field as _near
+from .. import specular as _specular
 from ..engine import spot_irradiance, spot_line_of_sight, specular_irradiance
 
 __all__ = ["MapInputs", "MapOutputs", "irradiance_map", "spot_line_of_sight", "sliding_max_integral", "HISTORY_KEEP_MAX", "MAP_CHUNK"]
@@ -81,6 +82,7 @@ class MapOutputs:
     map_seconds: float = 0.0
     chunk: int = 0  # observers per block
     near_field: dict = field(default_factory=dict)  # hazard.near_field counts of this map
+    apertures: dict = field(default_factory=dict)  # hazard.specular.aperture_stats_since: mirror beams averaged over apertures
     workers: int = 1
     segments: list = field(default_factory=list)
 
@@ -244,9 +246,10 @@ def irradiance_map(inp: MapInputs) -> MapOutputs:
     m = len(inp.points)
     chunk = block_rows(len(inp.times_s), inp.chunk)  # long histories: fewer observers per block
     workers = max(1, min(inp.threads, -(-m // chunk)))
-    t0, before = time.perf_counter(), _near.STATS.snapshot()
+    t0, before, ap_before = time.perf_counter(), _near.STATS.snapshot(), _specular.APERTURE_STATS.snapshot()
     parts = map_blocks(run.block, m, chunk, workers)
     run.out.near_field = _near.stats_since(before)
+    run.out.apertures = _specular.aperture_stats_since(ap_before)
     out = run.out
     out.map_seconds = time.perf_counter() - t0
     # per-thread shares of the wall time (the parts ran side by side on the workers)
