@@ -540,11 +540,17 @@ def _as_study(name):
 
 
 def _validate_study(study, args, out):
-    from .study import scenarios
+    import scenes
 
-    info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study))}
+    from .study import _base_data, scenarios
+
+    base, base_dir = _base_data(study)  # its warnings, as the run's answers would put them above their verdicts
+    warned = list(scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir).warnings)
+    info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study)), "warnings": warned}
     out.write((json.dumps(info, indent=1) if args.json else
-               f"{args.scene}: valid study {study.name!r}: {info['scenarios']} scenario(s) over scene {study.scene!r}") + "\n")
+               f"{args.scene}: valid study {study.name!r}: {info['scenarios']} scenario(s) over scene {study.scene!r}"
+               + (f"\n  CHECK FIRST: {len(warned)} warning(s) of the base scene that can change a verdict:\n"
+                  + "\n".join(f"    warning: {w}" for w in warned) if warned else "")) + "\n")
     return EXIT_OK
 
 
