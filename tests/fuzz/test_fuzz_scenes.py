@@ -36,7 +36,11 @@ from hazard.report import report_dict
 
 # every declared target must be in the report, hit by the beam or not (False: only count)
 REQUIRE_ALL_TARGETS = True
-CASE_SECONDS = 20  # time box of one analysis (the cheap bases run in well under 1 s)
+# time box of one analysis: the hang limit (tests/fuzz/_file_corpus.py's too). Most cheap
+# bases run in under 1 s; airspace (its zone lattice over the track's times) and range_geo took
+# 14 and 23 s alone, 67 and 165 s (footprint 154 s; 15 s with the coarser terrain above) on 2
+# shared cores at load 9: a 20 s box failed their unmutated bases
+CASE_SECONDS = 120
 DEEP = 200  # nesting depth of the "deep list" mutation (the limit is 32)
 
 _MISSING = object()
@@ -79,6 +83,9 @@ def _cheap(data: dict) -> dict:
             o["counts"] = [3, 3]
     if any("history" in t for t in data["targets"]):
         a["time_step_s"] = (a.get("time_end_s") or data["exposure"]["duration_s"]) / 8
+    terrain = data.get("terrain", {})
+    if "resolution_m" in terrain and "extent_m" in terrain:  # at most 30 cells across: range_geo's footprint took 154 s
+        terrain["resolution_m"] = max(terrain["resolution_m"], terrain["extent_m"] / 30)
     return data
 
 
