@@ -72,7 +72,26 @@ class QuantityOption(argparse.Action):
 
 def add_quantity_option(parser, flag: str, unit: str, help: str, **kwargs):
     """``parser.add_argument(flag, alias, ...)`` for a suffixed flag (``--power-w``) in
-    ``unit``, with the alias without the suffix (``--power``) taking quantity strings."""
+    ``unit``, with the alias without the suffix (``--power``) taking quantity strings.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser or argument group
+        Where the option is added.
+    flag : str
+        The option with its unit suffix (``--power-w``, ``--mpe-w-m2``, ``--attenuation-per-m``).
+    unit : str
+        The unit of the stored value, pint text (``"W"``, ``"W/m^2"``, ``"1/m"``).
+    help : str
+        The option's help; the accepted forms are appended.
+    **kwargs
+        Passed to ``add_argument`` (``required``, ``default``).
+
+    Returns
+    -------
+    argparse.Action
+        The added option.
+    """
     parts = flag[2:].split("-")
     for n in (3, 2, 1):  # the longest unit suffix: w-m2, per-m, km, ...
         tail = "-".join(parts[-n:])
