@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import argparse
 
-from scenes.quantities import QuantityError, _example, convert_value
-
 __all__ = ["QuantityOption", "add_quantity_option", "parse_option"]
 
 
@@ -40,14 +38,18 @@ def parse_option(text: str, unit: str, option: str, *, bare_ok: bool, suffixed: 
 
     Raises
     ------
-    QuantityError
+    scenes.quantities.QuantityError
         An unknown unit, a unit of another dimension, or a bare number where not allowed.
     """
     try:
         number = float(text)
     except ValueError:
+        from scenes.quantities import convert_value  # only for a quantity: a bare number loads neither pydantic nor pint
+
         return convert_value(text, unit, option, bare_ok=bare_ok)
     if not bare_ok:
+        from scenes.quantities import QuantityError
+
         raise QuantityError(f"{option} = {text!r}: a bare number without its unit is ambiguous here; write it with a unit "
                             f"('{text} {unit}' if {unit} is meant) or use {suffixed} (in {unit})")
     return number
@@ -65,7 +67,7 @@ class QuantityOption(argparse.Action):
         try:
             value = parse_option(values, self.unit, option_string, bare_ok=option_string.endswith(self.suffix),
                                  suffixed=self.option_strings[0])
-        except QuantityError as exc:
+        except ValueError as exc:  # scenes.quantities.QuantityError
             raise argparse.ArgumentError(self, str(exc)) from None
         setattr(namespace, self.dest, value)
 
@@ -101,8 +103,10 @@ def add_quantity_option(parser, flag: str, unit: str, help: str, **kwargs):
     else:
         raise ValueError(f"{flag}: no unit suffix")
     return parser.add_argument(flag, f"--{stem}", action=QuantityOption, unit=unit, suffix=suffix, metavar="Q",
-                               help=f"{help}; a number in {unit} or a quantity ('{_example(unit)}'); --{stem} takes a quantity only",
+                               help=f"{help}; a number in {unit} or a quantity ('{_EXAMPLES[unit]}'); --{stem} takes a quantity only",
                                **kwargs)
 
 
 _SUFFIXES = ("w_m2", "per_m", "nm", "km", "m", "s", "w", "rad", "deg", "hz")
+_EXAMPLES = {"W": "2 kW", "W/m^2": "5 mW/cm^2", "nm": "1.064 um", "s": "250 ms", "rad": "0.5 mrad", "deg": "5 deg", "m": "7 mm",
+             "km": "23 km", "1/m": "0.2 1/km", "Hz": "10 kHz"}
