@@ -10,6 +10,7 @@ and every error that hits a limit says so.
 from __future__ import annotations
 
 import os
+import re
 import tempfile
 import tomllib
 from pathlib import Path
@@ -102,7 +103,14 @@ def read_input_text(path, what: str | None = None) -> str:
 def toml_depth(text: str) -> int:
     """Deepest nesting of ``[`` / ``{`` in TOML values (strings and comments skipped;
     table headers do not count). Linear time, no recursion."""
+    return toml_depth_at(text)[0]
+
+
+def toml_depth_at(text: str) -> tuple[int, int]:
+    """(deepest nesting of ``[`` / ``{`` in TOML values, the 1-based line where it is
+    first reached; 0 without any): :func:`toml_depth` with the place, for the error."""
     depth = best = 0
+    at = 0
     i, n = 0, len(text)
     line_start = True
     while i < n:
@@ -136,7 +144,8 @@ def toml_depth(text: str) -> int:
             continue
         elif c in "[{":
             depth += 1
-            best = max(best, depth)
+            if depth > best:
+                best, at = depth, i
             line_start = False
         elif c in "]}":
             depth = max(depth - 1, 0)
@@ -144,7 +153,7 @@ def toml_depth(text: str) -> int:
         else:
             line_start = False
         i += 1
-    return best
+    return best, (text.count("\n", 0, at) + 1 if best else 0)
 
 
 def data_depth(data) -> int:
@@ -164,9 +173,10 @@ def data_depth(data) -> int:
 
 def parse_toml(text: str, source: str) -> dict:
     """Parse TOML text with bounded nesting; ValueError with one line naming ``source``."""
-    depth = toml_depth(text)
-    if depth > limit("DEPTH"):
-        check_limit("DEPTH", depth, f"{source}: nesting depth")
+    depth, line = toml_depth_at(text)
+    if depth > limit("DEPTH"):  # the line and its key, not its contents
+        key = re.match(r"[ \t]*([A-Za-z0-9_.-]{1,64})[ \t]*=", text.split("\n", line)[line - 1][:300])  # a bare key only
+        check_limit("DEPTH", depth, f"{source}: line {line}{f' (key {key[1]})' if key else ''}: nesting depth")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

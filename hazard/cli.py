@@ -44,6 +44,7 @@ from pathlib import Path
 
 from . import mpe as _mpe
 from . import nohd as _nohd
+from .cli_units import add_quantity_option
 
 __all__ = ["main", "build_parser"]
 
@@ -67,10 +68,10 @@ class _UsageError(Exception):
 
 
 def _add_mpe_args(p, *, required):
-    p.add_argument("--wavelength-nm", type=float, required=required, help="laser wavelength [nm], 180 nm to 1 mm")
-    p.add_argument("--duration-s", type=float, required=required, help="exposure duration (or pulse duration) [s], 1e-13 to 3e4")
+    add_quantity_option(p, "--wavelength-nm", "nm", "laser wavelength [nm], 180 nm to 1 mm", required=required)
+    add_quantity_option(p, "--duration-s", "s", "exposure duration (or pulse duration) [s], 1e-13 to 3e4", required=required)
     p.add_argument("--standard", default=_mpe.DEFAULT_STANDARD, help=f"one of {sorted(_mpe.STANDARDS)} (default {_mpe.DEFAULT_STANDARD})")
-    p.add_argument("--angular-subtense-rad", type=float, default=0.0, help="apparent source size [rad] (0: point source)")
+    add_quantity_option(p, "--angular-subtense-rad", "rad", "apparent source size [rad] (0: point source)", default=0.0)
 
 
 def _positive_int(text):
@@ -242,27 +243,27 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("mpe", help="maximum permissible exposure with every step", epilog=_PROVENANCE)
     _add_mpe_args(p, required=True)
     p.add_argument("--skin", action="store_true", help="skin MPE instead of ocular")
-    p.add_argument("--prf-hz", type=float, help="pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
-    p.add_argument("--exposure-duration-s", type=float, help="duration of the pulse train [s] (with --prf-hz)")
+    add_quantity_option(p, "--prf-hz", "Hz", "pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
+    add_quantity_option(p, "--exposure-duration-s", "s", "duration of the pulse train [s] (with --prf-hz)")
     p.add_argument("--explain", action="store_true", help="also say which rule governed and why (the candidate limits compared)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
     p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step", epilog=_PROVENANCE)
     p.add_argument("--kind", default="direct", choices=["direct", "diffuse", "specular"], help="direct beam, Lambertian or mirror reflection")
-    p.add_argument("--power-w", type=float, required=True, help="laser power [W] (pulse energy [J] with a J/m^2 MPE)")
-    p.add_argument("--mpe-w-m2", type=float, help="MPE [W/m^2]; otherwise computed from --wavelength-nm and --duration-s")
+    add_quantity_option(p, "--power-w", "W", "laser power [W] (pulse energy [J], a bare number, with a J/m^2 MPE)", required=True)
+    add_quantity_option(p, "--mpe-w-m2", "W/m^2", "MPE [W/m^2]; otherwise computed from --wavelength-nm and --duration-s")
     _add_mpe_args(p, required=False)
-    p.add_argument("--beam-diameter-m", type=float, help="beam diameter at the aperture, 1/e [m] (direct, specular)")
-    p.add_argument("--divergence-rad", type=float, help="full-angle divergence, 1/e [rad] (direct, specular)")
+    add_quantity_option(p, "--beam-diameter-m", "m", "beam diameter at the aperture, 1/e [m] (direct, specular)")
+    add_quantity_option(p, "--divergence-rad", "rad", "full-angle divergence, 1/e [rad] (direct, specular)")
     p.add_argument("--reflectance", type=float, help="reflectance of the surface (diffuse, specular)")
-    p.add_argument("--viewing-angle-deg", type=float, default=0.0, help="viewing angle from the surface normal [deg] (diffuse)")
-    p.add_argument("--range-to-reflector-m", type=float, default=0.0, help="laser to mirror [m] (specular)")
+    add_quantity_option(p, "--viewing-angle-deg", "deg", "viewing angle from the surface normal [deg] (diffuse)", default=0.0)
+    add_quantity_option(p, "--range-to-reflector-m", "m", "laser to mirror [m] (specular)", default=0.0)
     att = p.add_mutually_exclusive_group()
-    att.add_argument("--attenuation-per-m", type=float, default=0.0, help="atmospheric attenuation [1/m]")
-    att.add_argument("--visibility-km", type=float, help="meteorological visibility [km] (Kruse model)")
+    add_quantity_option(att, "--attenuation-per-m", "1/m", "atmospheric attenuation [1/m]", default=0.0)
+    add_quantity_option(att, "--visibility-km", "km", "meteorological visibility [km] (Kruse model)")
     p.add_argument("--optical-gain", type=float, help="collecting gain of viewing optics (>= 1)")
     p.add_argument("--magnification", type=float, help="viewing optics magnification (with --objective-diameter-m)")
-    p.add_argument("--objective-diameter-m", type=float, help="viewing optics objective diameter [m]")
+    add_quantity_option(p, "--objective-diameter-m", "m", "viewing optics objective diameter [m]")
     p.add_argument("--transmission", type=float, default=1.0, help="viewing optics transmission")
     p.add_argument("--json", action="store_true", help="print JSON")
     return parser
@@ -540,11 +541,17 @@ def _as_study(name):
 
 
 def _validate_study(study, args, out):
-    from .study import scenarios
+    import scenes
 
-    info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study))}
+    from .study import _base_data, scenarios
+
+    base, base_dir = _base_data(study)  # its warnings, as the run's answers would put them above their verdicts
+    warned = list(scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir).warnings)
+    info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study)), "warnings": warned}
     out.write((json.dumps(info, indent=1) if args.json else
-               f"{args.scene}: valid study {study.name!r}: {info['scenarios']} scenario(s) over scene {study.scene!r}") + "\n")
+               f"{args.scene}: valid study {study.name!r}: {info['scenarios']} scenario(s) over scene {study.scene!r}"
+               + (f"\n  CHECK FIRST: {len(warned)} warning(s) of the base scene that can change a verdict:\n"
+                  + "\n".join(f"    warning: {w}" for w in warned) if warned else "")) + "\n")
     return EXIT_OK
 
 

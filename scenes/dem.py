@@ -76,6 +76,9 @@ GDAL_CLOSED = {
     "GDAL_PAM_ENABLED": "NO",
     "GDAL_DISABLE_READDIR_ON_OPEN": "EMPTY_DIR",  # no directory listing (local or remote) to find sidecars
     "CPL_VSIL_CURL_USE_HEAD": "NO",
+    # a DTED column whose checksum does not match is a read error, not heights: GDAL's default
+    # (NO) read a zeroed block of a column as 0 m terrain (a hole 1000 m deep in the file fuzz)
+    "DTED_VERIFY_CHECKSUM": "YES",
 }
 DEM_DRIVERS = ("GTiff", "DTED")
 _MAGIC = ((b"II*\0", "GTiff"), (b"MM\0*", "GTiff"), (b"II+\0", "GTiff"), (b"MM\0+", "GTiff"), (b"UHL1", "DTED"))
@@ -202,7 +205,7 @@ def _read_window(ds, spec, rows, cols):
                 block = ds.read(1, window=w, masked=True)[::step, ::step]
             except rasterio.errors.RasterioError:
                 raise GeoError(f"terrain.file={spec.file!r}: cannot read the DEM's cells in rows {a}..{a + w.height - 1} "
-                               f"(a damaged or truncated file?)") from None
+                               f"(a damaged or truncated file? DTED columns are read only where their checksums match)") from None
             parts.append(np.ma.filled(block.astype(float), np.nan))
     if damage.seen:
         raise GeoError(f"terrain.file={spec.file!r}: GDAL found a damaged record in the cells over the analysis area (a "

@@ -214,4 +214,29 @@ def test_a_dted_column_record_out_of_place_is_refused(tmp_path):
     assert data[at] == 0xAA and int.from_bytes(data[at + 4:at + 6], "big") == 60  # the record's sentinel and count
     data[at + 4:at + 6] = b"\0\0"
     (tmp_path / "n32_w107.dt0").write_bytes(bytes(data))
-    _one_line_refusal(tmp_path, tmp_path / "s.toml", "terrain.file='n32_w107.dt0'", "damaged record", "expected an intact DEM")
+    # the count is under the column's checksum too, which is now verified first (GDAL: read error)
+    _one_line_refusal(tmp_path, tmp_path / "s.toml", "terrain.file='n32_w107.dt0'", "damaged", "checksums match")
+
+
+def test_a_dted_column_with_a_zeroed_block_is_refused(tmp_path):
+    """Column 60's record intact (sentinel, counts) but 20 of its heights zeroed: GDAL's
+    default read them as 0 m terrain, a hole 1000 m deep (accepted in the file fuzz, seeds
+    zero_block 1, 3, 17); the column's checksum no longer matches and is now verified."""
+    rasterio = pytest.importorskip("rasterio")
+    pytest.importorskip("pyproj")
+    from tests.fuzz._file_corpus import _argv, _cli
+    from tests.scenes.test_dem_formats import SCENE, _dted
+
+    _dted(tmp_path / "n32_w107.dt0")
+    (tmp_path / "s.toml").write_text(SCENE)
+    data = bytearray((tmp_path / "n32_w107.dt0").read_bytes())
+    at = 3428 + 60 * 254  # column 60 (lon -106.5), inside the analysis area: 8 header bytes, 121 x 2 height bytes, checksum
+    assert data[at] == 0xAA and int.from_bytes(data[at + 4:at + 6], "big") == 60
+    heights = [int.from_bytes(data[at + 8 + 2 * k:at + 10 + 2 * k], "big") for k in range(121)]
+    assert min(heights) >= 1000  # the tile's heights are 1000 to 2200 m: a zero is no height of it
+    data[at + 8 + 2 * 50:at + 8 + 2 * 70] = bytes(40)
+    (tmp_path / "n32_w107.dt0").write_bytes(bytes(data))
+    with rasterio.Env(DTED_VERIFY_CHECKSUM="NO"), rasterio.open(tmp_path / "n32_w107.dt0") as ds:
+        assert (ds.read(1)[:, 60] == 0).sum() == 20  # what was read as terrain before
+    _one_line_refusal(tmp_path, tmp_path / "s.toml", "terrain.file='n32_w107.dt0'", "cannot read the DEM's cells",
+                      "checksums")

@@ -59,7 +59,7 @@ def test_nohd_with_computed_mpe_atmosphere_and_optics():
         (["mpe", "--wavelength-nm", "1064", "--duration-s", "1", "--standard", "nope"], "expected one of ['ansi-z136.1-2007'"),
         (["nohd", "--power-w", "-5", "--mpe-w-m2", "50", "--beam-diameter-m", "0.003", "--divergence-rad", "0.001"], "power_w=-5.0: expected a number >= 0"),
         (["nohd", "--power-w", "5", "--mpe-w-m2", "50"], "--beam-diameter-m: required for --kind direct"),
-        (["mpe", "--wavelength-nm", "abc", "--duration-s", "1"], "invalid float value: 'abc'"),
+        (["mpe", "--wavelength-nm", "abc", "--duration-s", "1"], "--wavelength-nm = 'abc': expected a number and a unit, like '1064 nm'"),
         (["frobnicate"], "invalid choice: 'frobnicate'"),
         (["run", "plate", "-o", "x", "--threads", "0"], "argument --threads: '0': expected an integer >= 1"),
         (["run", "plate", "-o", "x", "--threads", "two"], "argument --threads: 'two': expected an integer >= 1"),
