@@ -881,7 +881,7 @@ def _near_field(spot: Spot, obs, weight, attenuation_per_m, states):
 
     def kernel(samples, x, o, scale):
         v = o - x
-        r = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+        r = np.maximum(np.sqrt(np.einsum("ij,ij->i", v, v)), 1e-300)
         wo = _to_local(spot.frames[samples], v / r[:, None])
         s = scale / (r * r)
         if attenuation_per_m:
