@@ -84,6 +84,7 @@ MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe functio
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
+_BOUND_BLOCK = 1 << 22  # (point, sample, state) triples of the samples' bound evaluated at once (bounded memory)
 
 
 class _Stats:
@@ -130,7 +131,8 @@ class NearLobeFn:
     so. ``info`` holds the grid's figures (directions integrated, scan step, seconds)."""
 
     def __init__(self, spot, base, mpe_w_m2, mu, gain, states):
-        self.spot, self.base, self.mpe, self.mu, self.gain, self.states = spot, base, float(mpe_w_m2), float(mu), float(gain), states
+        self.spot, self.base, self.mpe, self.mu, self.gain = spot, base, float(mpe_w_m2), float(mu), float(gain)
+        self.states = None if states is None else np.asarray(states, float)
         self.samples = getattr(base, "samples", 1)
         self.frame = spot.mean_frame
         self.c = spot.centroid
@@ -165,40 +167,74 @@ class NearLobeFn:
         self._setup(float(r0.max()), peaks)
 
     def _upper(self, pts):
-        """An upper bound of the integral / MPE at world points ``pts`` (M, 3): the samples'
+        """Upper bounds of the integral / MPE at world points ``pts`` (M, 3): the samples'
         point forms plus their Taylor remainders ``k_i 12 sigma_i^2 / (d_i - a_i)^4``
         (the Lambertian kernel's, as :func:`hazard.near_field.point_form_ok`; ``k_i`` the
         sample's share of the point form's largest intensity over the MPE), infinite
-        within a sample's radius; with a history the path's maximum per sample."""
+        within a sample's radius. Returns the point forms' sums (M,) without a history,
+        else (M, T) (one per state of ``states``, the states the integral is evaluated
+        at), and the remainders' sums (M,): the bound is their sum. Points go in blocks of
+        at most ``_BOUND_BLOCK`` (point, sample, state) triples."""
+        per = len(self.pts) * (1 if self.states is None else len(self.states))
+        step = max(1, _BOUND_BLOCK // max(per, 1))
+        if len(pts) > step:
+            parts = [self._upper(pts[a:a + step]) for a in range(0, len(pts), step)]
+            return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
         sp = self.spot
         v = pts[:, None, :] - self.pts[None]
         d = np.maximum(np.sqrt((v * v).sum(-1)), 1e-300)  # (M, n)
         wo = np.einsum("nij,mnj->mni", sp.frames, v / d[..., None]).reshape(-1, 3)
         wi = np.broadcast_to(self.wi[None], (len(pts),) + self.wi.shape).reshape(-1, 3)
         scale = (self.p_w[None] * self.gain * np.exp(-self.mu * d) / (d * d) / self.mpe).ravel()
-        f = projected_brdf(sp.material, wi, wo, self.states, scale, reduce=None if self.states is None else "path-max")
+        f = projected_brdf(sp.material, wi, wo, self.states, scale)  # (M n,) or (M n, T)
         gap = d - self.a_m[None]
         with np.errstate(divide="ignore"):
-            err = np.where(gap > 0, 12.0 * self.k_i * self.var_m2 / np.where(gap > 0, gap, 1.0) ** 4, np.inf)
-        return f.reshape(d.shape).sum(axis=1) + err.sum(axis=1)
+            err = np.where(gap > 0, 12.0 * self.k_i * self.var_m2 / np.where(gap > 0, gap, 1.0) ** 4, np.inf).sum(axis=1)
+        return f.reshape(d.shape + (() if self.states is None else (-1,))).sum(axis=1), err
+
+    def _integral_hot(self, pts, states):
+        """The integral at world points ``pts`` reaches the MPE at some state of ``states``
+        (None: no history); counts its kernel evaluations."""
+        before = near_field.STATS.snapshot()
+        e = _near_field(self.spot, pts, np.full(len(pts), self.gain), self.mu, states)
+        self.evaluations += near_field.stats_since(before)["evaluations"]
+        STATS.points += len(pts)
+        return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
 
     def hazardous(self, pts):
         """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
         the observers' own) at world points ``pts`` (M, 3) reaches the MPE (with a
-        history: at some state of its path); integrated only where the samples' bound
-        (:meth:`_upper`) reaches it."""
-        out = self._upper(pts) >= 1.0
+        history: at some state of ``states``); integrated only where the samples' bound
+        (:meth:`_upper`) reaches it. With a history, per point first at its state of the
+        largest point-form sum alone (reaching the MPE there decides), then only at the states whose
+        own bound reaches the MPE (below it at the others: the same decision as every state)."""
+        point, err = self._upper(pts)
+        up = point + (err if point.ndim == 1 else err[:, None])
+        top = up if up.ndim == 1 else up.max(axis=1)
+        out = top >= 1.0
         cand = np.flatnonzero(out)
         if not len(cand):
             return out
         if self.evaluations >= MAX_EVALUATIONS:  # the budget is spent: the bound decides (never short, looser)
             self.bound_points += len(cand)
             return out
-        before = near_field.STATS.snapshot()
-        e = _near_field(self.spot, pts[cand], np.full(len(cand), self.gain), self.mu, self.states)
-        self.evaluations += near_field.stats_since(before)["evaluations"]
-        out[cand] = (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
-        STATS.points += len(cand)
+        if self.states is None:
+            out[cand] = self._integral_hot(pts[cand], None)
+            return out
+        up = up[cand]
+        best = point[cand].argmax(axis=1)  # the states' remainders are the same (infinite near the spot)
+        hot = np.zeros(len(cand), bool)
+        for t in np.unique(best):  # the likeliest state first: one state's hazard decides
+            k = np.flatnonzero(best == t)
+            hot[k] = self._integral_hot(pts[cand[k]], self.states[t:t + 1])
+        rest = np.flatnonzero(~hot)
+        need = up[rest] >= 1.0
+        need[np.arange(len(rest)), best[rest]] = False  # done above
+        cols = np.flatnonzero(need.any(axis=0))
+        if len(rest) and len(cols):
+            rows = rest[need[:, cols].any(axis=1)]
+            hot[rows] = self._integral_hot(pts[cand[rows]], self.states[cols])
+        out[cand] = hot
         return out
 
     # -- roots along rays ----------------------------------------------------------------------
