@@ -316,3 +316,28 @@ def test_history_state_shortcut_decides_as_every_state(seed, n_states):
     assert fn.bound_points == 0
     np.testing.assert_array_equal(got, every)
     assert every.any() and not every.all()  # both verdicts drawn
+
+
+# ------------------------------------------------------------------ the flat spot's bound (a spot much larger than its lobe)
+def _flat_bound_case(inc, power, h, along, across):
+    spot, mpe, off = _plate_spot(inc, power, 4 * W / math.cos(math.radians(inc)), 0.5)
+    fn = _range_fn(spot, mpe, 0.0, 1.0, None)
+    probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
+    fn.prepare(probe, fn.base(probe))
+    n, b, t = _frame(inc)
+    pts = spot.centroid + np.array([h * n + along * W / math.cos(math.radians(inc)) * b + across * W * t])
+    bound = fn._flat_bound(pts)
+    ref_e = _ref_irradiance(_nodes(inc, power, 4 * W / math.cos(math.radians(inc)), 0.5), pts + off)
+    assert np.all(np.isfinite(bound))
+    assert np.all(bound >= ref_e / mpe), (bound, ref_e / mpe)
+
+
+@settings(ref.FAST, max_examples=8)
+@given(inc=st.floats(0.0, 89.9), power=ref.log_uniform(1.0, 3000.0), h=ref.log_uniform(0.02, 2.0),
+       along=st.floats(-3.0, 3.0), across=st.floats(-3.0, 3.0))
+def test_flat_spot_bound_is_above_the_integral(inc, power, h, along, across):
+    """The lobe's bound for a flat spot (hazard.near_field_lobe NearLobeFn._flat_bound:
+    the largest incident irradiance x the point form's largest intensity / P x pi ln(1 +
+    rho^2 / h^2)) is finite and never below the section-10 integral (coded here) at random
+    points above a Lambertian plate, down to 2 cm above it."""
+    _flat_bound_case(inc, power, h, along, across)
