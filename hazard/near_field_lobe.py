@@ -89,6 +89,7 @@ MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe functio
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
+FLAT_BOUND_MARGIN = 4.0  # the flat spot's bound x this: it rests on the point form's sampled largest intensity at first order
 _BOUND_BLOCK = 1 << 22  # (point, sample, state) triples of the samples' bound evaluated at once (bounded memory)
 
 
@@ -189,7 +190,7 @@ class NearLobeFn:
         self.wi = _to_local(sp.frames, -sp.incoming)
         k_max = reach_m ** 2 * math.exp(min(self.mu * reach_m, 700.0))  # the largest intensity / MPE [m^2]
         self.k_i = k_max * self.p_w / max(float(self.p_w.sum()), 1e-300)
-        self.g_m2 = k_max / max(float(self.p_w.sum()), 1e-300) * _largest_incident_w_m2(sp) if self.tilt_rad == 0.0 and \
+        self.g_m2 = FLAT_BOUND_MARGIN * k_max / max(float(self.p_w.sum()), 1e-300) * _largest_incident_w_m2(sp) if self.tilt_rad == 0.0 and \
             float(np.abs(loc[:, 2]).max()) <= 1e-9 * max(self.ext_m, 1e-300) else math.inf  # a flat spot's factor (_flat_bound)
         self.r_spot_m = float(np.sqrt((loc[:, :2] ** 2).sum(axis=1)).max())
 
@@ -198,8 +199,10 @@ class NearLobeFn:
         spot (infinite otherwise): ``E <= E_inc,max int f_r cos / R^2 dA`` with ``f_r cos <=
         I_max / P`` (the point form's largest intensity, as the samples' bound) and the
         spot inside the disk of radius ``rho`` about the point's foot at height ``h``:
-        ``int dA / R^2 <= pi ln(1 + rho^2 / h^2)``. Finite within a sample's radius, where
-        the samples' bound is not: a spot much larger than its lobe."""
+        ``int dA / R^2 <= pi ln(1 + rho^2 / h^2)``, times ``FLAT_BOUND_MARGIN`` (``I_max``
+        is the point form's sampled largest intensity, which this bound rests on at first
+        order, the samples' only in their remainders). Finite within a sample's radius,
+        where the samples' bound is not: a spot much larger than its lobe."""
         if not math.isfinite(self.g_m2):
             return np.full(len(pts), np.inf)
         loc = (pts - self.c) @ self.frame.T
