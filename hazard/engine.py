@@ -757,9 +757,30 @@ def projected_brdf(model, wi, wo, states=None, row_scale=None, reduce=None) -> n
     if reduce and isinstance(model, Sum) and model.state_dim == 2:
         # the max of a sum <= the sum of the parts' maxima (exact when one part varies)
         return sum(projected_brdf(m, wi, wo, states if m.is_dynamic else None, row_scale, reduce) for m in model.models)
-    f = np.stack([model.evaluate_cos(wi, wo, state=s) for s in states], axis=-1)
+    f = _per_state(model, wi, wo, states) if states.ndim == 1 and model.state_dim == 1 else \
+        np.stack([model.evaluate_cos(wi, wo, state=s) for s in states], axis=-1)
     f = f if row_scale is None else f * row_scale[:, None]
     return f.max(axis=1) if reduce else f
+
+
+_STATE_BLOCK = 1 << 16  # (pair, state) evaluations of a state-looping model per call
+
+
+def _per_state(model, wi, wo, states):
+    """``f_r cos(theta_r)`` (N, T) of a model without a vectorised state path, the pairs
+    repeated over the (scalar) states in one call per block: the model's per-call work
+    (checks, normalisation) once per block instead of once per state."""
+    wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
+    wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+    n, t = len(wi), len(states)
+    out = np.empty((n, t))
+    step = max(1, _STATE_BLOCK // t)
+    for a in range(0, n, step):
+        k = min(n, a + step) - a
+        rep = (k, t, 3)
+        out[a:a + k] = model.evaluate_cos(np.broadcast_to(wi[a:a + k, None], rep), np.broadcast_to(wo[a:a + k, None], rep),
+                                          state=np.broadcast_to(states, (k, t)))
+    return out
 
 
 def path_states(model, states) -> np.ndarray:
@@ -881,7 +902,7 @@ def _near_field(spot: Spot, obs, weight, attenuation_per_m, states):
 
     def kernel(samples, x, o, scale):
         v = o - x
-        r = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+        r = np.maximum(np.sqrt(np.einsum("ij,ij->i", v, v)), 1e-300)
         wo = _to_local(spot.frames[samples], v / r[:, None])
         s = scale / (r * r)
         if attenuation_per_m:

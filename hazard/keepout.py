@@ -78,11 +78,12 @@ class Lobe:
         }
 
 
-def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None):
+def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None, near_field=True):
     """``fn(wo (N, 3)) -> NOHD [m]`` in the spot's mean frame: the max over the history's
     path of states (:func:`hazard.engine.path_states`) and, for a slumping spot over the
     whole history, over the normals the molten surface may take
-    (:func:`hazard.pipeline.slump.union_range_fn`)."""
+    (:func:`hazard.pipeline.slump.union_range_fn`); ``near_field=False``: the point form
+    alone (no :mod:`hazard.near_field_lobe`)."""
     model = spot.material
     power = spot.total_power_w * gain
     if states is not None and spot.slump is not None and spot.slump.moves and len(states) == len(spot.slump.tilt_rad):
@@ -103,7 +104,7 @@ def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None):
         return range_from_intensity(intensity(wo), mpe_w_m2, mu)
 
     fn.intensity = intensity
-    return near_lobe_fn(spot, fn, mpe_w_m2, mu, gain, st)
+    return near_lobe_fn(spot, fn, mpe_w_m2, mu, gain, st) if near_field else fn
 
 
 def _grid_cells(grid_deg):
@@ -300,7 +301,7 @@ def _refine(fn, grid_deg, refine_levels, rtol, special, r_special, level_done=No
 
 
 def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states=None, grid_deg=2.0, refine_levels=3,
-                rtol=None) -> Lobe:
+                rtol=None, near_field=True) -> Lobe:
     """NOHD per reflection direction over the hemisphere above a spot.
 
     Parameters
@@ -326,6 +327,9 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
         cells kept take at most half of the budget left (``rtol`` x volume minus the
         estimates already kept). The cells holding the mirror or retro direction are
         always split (a lobe narrower than a cell still gets its volume).
+    near_field : bool
+        False: the point form alone (its maximum range is the lobe's wherever it reaches
+        :func:`hazard.near_field_lobe.near_field_reach_m`).
 
     Notes
     -----
@@ -340,7 +344,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
     it does not depend on the grid down to ``POLISH_TOL_RAD``.
     """
     rtol = VOLUME_RTOL if rtol is None else float(rtol)
-    fn = _range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states)
+    fn = _range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states, near_field=near_field)
     wi = spot_directions(spot)
     special = np.stack([wi * np.array([-1, -1, 1]), wi])  # mirror, retro
     extra = getattr(fn, "special", None)  # a slumping spot: the mirror directions of its tilted normals

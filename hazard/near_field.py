@@ -234,8 +234,8 @@ def _rule(xs, ss, dens, oi, obs, kernel, samp, e):
     (P,) already holds the per-pair factors. Returns the number of nodes evaluated."""
     if not len(oi):
         return 0
-    x = np.einsum("jv,pvk->pjk", RULE_BARY, xs).reshape(-1, 3)
-    s = np.einsum("jv,pvk->pjk", RULE_BARY, ss)
+    x = (RULE_BARY @ xs).reshape(-1, 3)  # (P, 7, 3): a batched product (several times einsum's speed here)
+    s = RULE_BARY @ ss
     w = (_area_s(ss) * dens)[:, None] * RULE_W[None, :] * np.exp(-(s * s).sum(-1))
     o = np.repeat(oi, len(RULE_W))
     smp = np.repeat(samp, len(RULE_W))

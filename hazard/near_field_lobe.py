@@ -25,8 +25,13 @@ added), or ``r0`` where no sample beyond ``r0`` is hazardous; the last sample is
 0.5 % beyond it: the integral's own 1 % tolerance in irradiance).
 
 Each sample is first tested against a cheap upper bound (the spot's samples as point
-sources plus their Taylor remainders, infinite within a sample's radius): only where it
-reaches the MPE is the integral evaluated. The integral's work per lobe function is
+sources plus their Taylor remainders, infinite within a sample's radius; for a flat spot
+the smaller of that and ``E_inc,max I_max / P pi ln(1 + rho^2 / h^2)``, finite down to the
+surface: a spot much larger than its lobe, e.g. airspace's board lit by the beam's far
+tail, is no longer integrated point by point on its surface): only where it reaches the
+MPE is the integral evaluated. With a history a point is integrated first at its state
+of the largest point-form sum alone (hazard there decides), then only at the states whose
+own bound reaches the MPE: the same decision as the integral at every state. The integral's work per lobe function is
 capped at ``MAX_EVALUATIONS`` kernel evaluations (deterministic); past it the bound alone
 decides (never short for a Lambertian spot, looser: ``info["points_by_bound"]`` counts
 those points).
@@ -71,7 +76,7 @@ import numpy as np
 from . import near_field
 from .engine import FAR_FIELD_SPOT_SIZES, _near_field, _to_local, projected_brdf, spot_directions
 
-__all__ = ["NearLobeFn", "near_lobe_fn", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
+__all__ = ["NearLobeFn", "near_lobe_fn", "near_field_reach_m", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
            "STATS", "describe_since"]
 
 ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
@@ -84,6 +89,8 @@ MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe functio
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
+FLAT_BOUND_MARGIN = 4.0  # the flat spot's bound x this: it rests on the point form's sampled largest intensity at first order
+_BOUND_BLOCK = 1 << 22  # (point, sample, state) triples of the samples' bound evaluated at once (bounded memory)
 
 
 class _Stats:
@@ -111,6 +118,32 @@ def describe_since(before: dict) -> str:
             f"({now['points'] - before['points']} points; its time is in the stage's seconds)")
 
 
+def _largest_incident_w_m2(spot) -> float:
+    """Largest irradiance [W/m^2] the beam lays on the spot's surface (a bound): per
+    triangle its power density in beam coordinates ``c exp(-|s|^2)`` at its point nearest
+    ``s = 0`` times ``area_s / area_x`` (the affine map's), with the spot's current
+    powers; infinite for a triangle of no area on the surface."""
+    p = spot.patches
+    v = p.tri_s
+    d2 = np.full(len(v), np.inf)  # squared distance of s = 0 from each triangle's edges
+    for i in range(3):
+        a, e = v[:, i], v[:, (i + 1) % 3] - v[:, i]
+        t = np.clip(-(a * e).sum(1) / np.maximum((e * e).sum(1), 1e-300), 0.0, 1.0)
+        q = a + t[:, None] * e
+        d2 = np.minimum(d2, (q * q).sum(1))
+    cross = [v[:, i, 0] * v[:, (i + 1) % 3, 1] - v[:, i, 1] * v[:, (i + 1) % 3, 0] for i in range(3)]
+    inside = (np.min(cross, axis=0) >= 0) | (np.max(cross, axis=0) <= 0)  # s = 0 on the same side of every edge
+    peak = np.where(inside, 1.0, np.exp(-d2))
+    e1, e2 = p.tri_s[:, 1] - p.tri_s[:, 0], p.tri_s[:, 2] - p.tri_s[:, 0]
+    area_s = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    area_x = 0.5 * np.linalg.norm(np.cross(p.tri_x[:, 1] - p.tri_x[:, 0], p.tri_x[:, 2] - p.tri_x[:, 0]), axis=1)
+    built = np.asarray(p.sample_power_w, float)
+    ratio = np.where(built > 0, np.asarray(spot.power_w, float) / np.where(built > 0, built, 1.0), 0.0)[p.sample]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = np.where(area_x > 0, p.density_w * ratio * peak * area_s / np.where(area_x > 0, area_x, 1.0), np.inf)
+    return float(e.max()) if len(e) else 0.0
+
+
 def _smallest_extent_m(spot, frame) -> float:
     """The spot's smallest extent [m] across its surface: twice the RMS width along the
     minor axis of its power-weighted in-plane covariance (samples and their spread)."""
@@ -130,7 +163,8 @@ class NearLobeFn:
     so. ``info`` holds the grid's figures (directions integrated, scan step, seconds)."""
 
     def __init__(self, spot, base, mpe_w_m2, mu, gain, states):
-        self.spot, self.base, self.mpe, self.mu, self.gain, self.states = spot, base, float(mpe_w_m2), float(mu), float(gain), states
+        self.spot, self.base, self.mpe, self.mu, self.gain = spot, base, float(mpe_w_m2), float(mu), float(gain)
+        self.states = None if states is None else np.asarray(states, float)
         self.samples = getattr(base, "samples", 1)
         self.frame = spot.mean_frame
         self.c = spot.centroid
@@ -156,6 +190,26 @@ class NearLobeFn:
         self.wi = _to_local(sp.frames, -sp.incoming)
         k_max = reach_m ** 2 * math.exp(min(self.mu * reach_m, 700.0))  # the largest intensity / MPE [m^2]
         self.k_i = k_max * self.p_w / max(float(self.p_w.sum()), 1e-300)
+        self.g_m2 = FLAT_BOUND_MARGIN * k_max / max(float(self.p_w.sum()), 1e-300) * _largest_incident_w_m2(sp) if self.tilt_rad == 0.0 and \
+            float(np.abs(loc[:, 2]).max()) <= 1e-9 * max(self.ext_m, 1e-300) else math.inf  # a flat spot's factor (_flat_bound)
+        self.r_spot_m = float(np.sqrt((loc[:, :2] ** 2).sum(axis=1)).max())
+
+    def _flat_bound(self, pts):
+        """An upper bound of the integral / MPE at world points ``pts`` (M, 3) from a flat
+        spot (infinite otherwise): ``E <= E_inc,max int f_r cos / R^2 dA`` with ``f_r cos <=
+        I_max / P`` (the point form's largest intensity, as the samples' bound) and the
+        spot inside the disk of radius ``rho`` about the point's foot at height ``h``:
+        ``int dA / R^2 <= pi ln(1 + rho^2 / h^2)``, times ``FLAT_BOUND_MARGIN`` (``I_max``
+        is the point form's sampled largest intensity, which this bound rests on at first
+        order, the samples' only in their remainders). Finite within a sample's radius,
+        where the samples' bound is not: a spot much larger than its lobe."""
+        if not math.isfinite(self.g_m2):
+            return np.full(len(pts), np.inf)
+        loc = (pts - self.c) @ self.frame.T
+        h2 = loc[:, 2] ** 2
+        rho = np.sqrt(loc[:, 0] ** 2 + loc[:, 1] ** 2) + self.r_spot_m
+        with np.errstate(divide="ignore"):
+            return np.where(h2 > 0, self.g_m2 * math.pi * np.log1p(rho * rho / np.where(h2 > 0, h2, 1.0)), np.inf)
 
     def prepare(self, dirs, r0):
         """Set up the bounds from the point form's ranges ``r0`` on directions ``dirs``
@@ -165,40 +219,75 @@ class NearLobeFn:
         self._setup(float(r0.max()), peaks)
 
     def _upper(self, pts):
-        """An upper bound of the integral / MPE at world points ``pts`` (M, 3): the samples'
+        """Upper bounds of the integral / MPE at world points ``pts`` (M, 3): the samples'
         point forms plus their Taylor remainders ``k_i 12 sigma_i^2 / (d_i - a_i)^4``
         (the Lambertian kernel's, as :func:`hazard.near_field.point_form_ok`; ``k_i`` the
         sample's share of the point form's largest intensity over the MPE), infinite
-        within a sample's radius; with a history the path's maximum per sample."""
+        within a sample's radius. Returns the point forms' sums (M,) without a history,
+        else (M, T) (one per state of ``states``, the states the integral is evaluated
+        at), and the remainders' sums (M,): the bound is their sum. Points go in blocks of
+        at most ``_BOUND_BLOCK`` (point, sample, state) triples."""
+        per = len(self.pts) * (1 if self.states is None else len(self.states))
+        step = max(1, _BOUND_BLOCK // max(per, 1))
+        if len(pts) > step:
+            parts = [self._upper(pts[a:a + step]) for a in range(0, len(pts), step)]
+            return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
         sp = self.spot
         v = pts[:, None, :] - self.pts[None]
         d = np.maximum(np.sqrt((v * v).sum(-1)), 1e-300)  # (M, n)
         wo = np.einsum("nij,mnj->mni", sp.frames, v / d[..., None]).reshape(-1, 3)
         wi = np.broadcast_to(self.wi[None], (len(pts),) + self.wi.shape).reshape(-1, 3)
         scale = (self.p_w[None] * self.gain * np.exp(-self.mu * d) / (d * d) / self.mpe).ravel()
-        f = projected_brdf(sp.material, wi, wo, self.states, scale, reduce=None if self.states is None else "path-max")
+        f = projected_brdf(sp.material, wi, wo, self.states, scale)  # (M n,) or (M n, T)
         gap = d - self.a_m[None]
         with np.errstate(divide="ignore"):
-            err = np.where(gap > 0, 12.0 * self.k_i * self.var_m2 / np.where(gap > 0, gap, 1.0) ** 4, np.inf)
-        return f.reshape(d.shape).sum(axis=1) + err.sum(axis=1)
+            err = np.where(gap > 0, 12.0 * self.k_i * self.var_m2 / np.where(gap > 0, gap, 1.0) ** 4, np.inf).sum(axis=1)
+        return f.reshape(d.shape + (() if self.states is None else (-1,))).sum(axis=1), err
+
+    def _integral_hot(self, pts, states):
+        """The integral at world points ``pts`` reaches the MPE at some state of ``states``
+        (None: no history); counts its kernel evaluations."""
+        before = near_field.STATS.snapshot()
+        e = _near_field(self.spot, pts, np.full(len(pts), self.gain), self.mu, states)
+        self.evaluations += near_field.stats_since(before)["evaluations"]
+        STATS.points += len(pts)
+        return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
 
     def hazardous(self, pts):
         """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
         the observers' own) at world points ``pts`` (M, 3) reaches the MPE (with a
-        history: at some state of its path); integrated only where the samples' bound
-        (:meth:`_upper`) reaches it."""
-        out = self._upper(pts) >= 1.0
+        history: at some state of ``states``); integrated only where the samples' bound
+        (:meth:`_upper`) reaches it. With a history, per point first at its state of the
+        largest point-form sum alone (reaching the MPE there decides), then only at the states whose
+        own bound reaches the MPE (below it at the others: the same decision as every state)."""
+        point, err = self._upper(pts)
+        err = np.minimum(err, self._flat_bound(pts))  # the smaller of two bounds (the flat one covers the point forms too)
+        up = point + (err if point.ndim == 1 else err[:, None])
+        top = up if up.ndim == 1 else up.max(axis=1)
+        out = top >= 1.0
         cand = np.flatnonzero(out)
         if not len(cand):
             return out
         if self.evaluations >= MAX_EVALUATIONS:  # the budget is spent: the bound decides (never short, looser)
             self.bound_points += len(cand)
             return out
-        before = near_field.STATS.snapshot()
-        e = _near_field(self.spot, pts[cand], np.full(len(cand), self.gain), self.mu, self.states)
-        self.evaluations += near_field.stats_since(before)["evaluations"]
-        out[cand] = (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
-        STATS.points += len(cand)
+        if self.states is None:
+            out[cand] = self._integral_hot(pts[cand], None)
+            return out
+        up = up[cand]
+        best = point[cand].argmax(axis=1)  # the states' remainders are the same (infinite near the spot)
+        hot = np.zeros(len(cand), bool)
+        for t in np.unique(best):  # the likeliest state first: one state's hazard decides
+            k = np.flatnonzero(best == t)
+            hot[k] = self._integral_hot(pts[cand[k]], self.states[t:t + 1])
+        rest = np.flatnonzero(~hot)
+        need = up[rest] >= 1.0
+        need[np.arange(len(rest)), best[rest]] = False  # done above
+        cols = np.flatnonzero(need.any(axis=0))
+        if len(rest) and len(cols):
+            rows = rest[need[:, cols].any(axis=1)]
+            hot[rows] = self._integral_hot(pts[cand[rows]], self.states[cols])
+        out[cand] = hot
         return out
 
     # -- roots along rays ----------------------------------------------------------------------
@@ -341,9 +430,16 @@ class NearLobeFn:
         the point form's largest range already reaches past every near-field value (the
         near/far switch plus the spot's smallest extent, the largest scan step)."""
         r0 = np.asarray(self.base(np.asarray(wo, float)), float)
-        if self._grid is None and r0.max() >= self.far_m + _smallest_extent_m(self.spot, self.frame):
+        if self._grid is None and r0.max() >= near_field_reach_m(self.spot):
             return float(r0.max())
         return float(self(wo).max())
+
+
+def near_field_reach_m(spot) -> float:
+    """Farthest range [m] the near-field lobe can reach (its envelope's cap: the engine's
+    near/far switch plus the spot's smallest extent, the largest scan step): a point-form
+    lobe whose largest range reaches it has the near-field lobe's largest range."""
+    return FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9) + _smallest_extent_m(spot, spot.mean_frame)
 
 
 def near_lobe_fn(spot, base, mpe_w_m2, mu, gain, states):

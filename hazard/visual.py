@@ -111,15 +111,20 @@ def _row_nohd_m(row) -> float:
 
 def _spot_reach_m(sp, e_w_m2, mu, states, analysis) -> float:
     """How far [m] a spot's reflection stays at or above ``e_w_m2``: its lobe (over the
-    history's states) and its mirror beam."""
+    history's states) and its mirror beam. The lobe's point form first: where its largest
+    range reaches :func:`hazard.near_field_lobe.near_field_reach_m`, that is the lobe's
+    (the near-field envelope stays within it); else the lobe with the near field."""
     from .keepout import hazard_lobe
+    from .near_field_lobe import near_field_reach_m
     from .specular import specular_nohd
 
     if not np.isfinite(e_w_m2):
         return 0.0
     st = states.get(sp.target.index)
-    lobe = hazard_lobe(sp, e_w_m2, mu, states=st, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
-    r = float(lobe.max_range_m)
+    kw = dict(states=st, grid_deg=analysis.direction_grid_deg, refine_levels=analysis.refine_levels)
+    r = float(hazard_lobe(sp, e_w_m2, mu, near_field=False, **kw).max_range_m)
+    if r < near_field_reach_m(sp):
+        r = float(hazard_lobe(sp, e_w_m2, mu, **kw).max_range_m)
     if sp.material.has_specular:
         r = max(r, float(specular_nohd(sp, e_w_m2, mu, st).nohd_m))
     return r

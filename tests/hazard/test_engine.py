@@ -413,6 +413,32 @@ def test_projected_brdf_max_over_states_for_every_model_kind():
         np.testing.assert_allclose(top, full.max(axis=1), rtol=1e-14, atol=0, err_msg=name)
 
 
+@settings(max_examples=10, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 300), t=st.integers(2, 40), block=st.integers(1, 64))
+def test_state_looping_models_in_one_call_equal_the_loop(seed, n, t, block):
+    # a model without a vectorised state path is evaluated over all states in one call per block
+    # (hazard.engine._per_state): the per-state loop to rounding (a dynamic SH part sums its basis in
+    # another order with per-row states: 1 ulp), whatever the block size
+    import brdfmodels as bm
+    from hazard import engine
+
+    rng = np.random.default_rng(seed)
+    basis = bm.SHBasis(4, 2, 2, 0)
+    dyn = bm.DynamicBRDF(basis, [300.0, 600.0, 900.0], rng.normal(scale=0.3, size=(3, basis.size)), "temperature_k")
+    model = bm.Sum([dyn, bm.Scaled(bm.Lambertian(0.2), bm.StateTable([300.0, 900.0], [1.0, 0.3], "temperature_k"))])
+    wi = bm.spherical_to_vector(rng.uniform(0, 1.5, n), rng.uniform(-np.pi, np.pi, n))
+    wo = bm.spherical_to_vector(rng.uniform(0, 1.6, n), rng.uniform(-np.pi, np.pi, n))
+    states = rng.uniform(300.0, 900.0, t)
+    loop = np.stack([model.evaluate_cos(wi, wo, state=s) for s in states], axis=-1)
+    saved, engine._STATE_BLOCK = engine._STATE_BLOCK, block * t
+    try:
+        np.testing.assert_allclose(engine.projected_brdf(model, wi, wo, states), loop, rtol=1e-13, atol=0)
+    finally:
+        engine._STATE_BLOCK = saved
+    np.testing.assert_allclose(engine.projected_brdf(model, wi[:1], wo, states), np.stack(
+        [model.evaluate_cos(wi[:1], wo, state=s) for s in states], axis=-1), rtol=1e-13, atol=0)
+
+
 def test_long_histories_get_smaller_map_blocks(monkeypatch):
     # memory per block is capped in observer x time values, whatever the history length
     import hazard.analysis as ha

@@ -101,3 +101,22 @@ def test_the_default_tolerance_is_read_when_called(monkeypatch):
     spot, mpe, mu = _spot(_sharp(0.01))
     monkeypatch.setattr(keepout, "VOLUME_RTOL", 1e-4)
     assert keepout.hazard_lobe(spot, mpe, mu).cells == keepout.hazard_lobe(spot, mpe, mu, rtol=1e-4).cells
+
+
+def test_point_form_max_range_is_the_lobe_max_beyond_the_near_field(monkeypatch):
+    # hazard.visual takes the point-form lobe's largest range where it reaches the near field's
+    # cap (near_field_lobe.near_field_reach_m): the near-field envelope stays within the cap, so the
+    # lobe with the near field has the same largest range there
+    from tests._bundled import bundled
+
+    monkeypatch.setattr(near_field_lobe, "ENABLED", True)  # this module's default is the point form
+    res = bundled("plate")
+    sp = res.spots[0]
+    reach = near_field_lobe.near_field_reach_m(sp)
+    assert keepout.hazard_lobe(sp, res.mpe_w_m2, near_field=False, grid_deg=10.0, refine_levels=1).max_range_m < reach
+    low = res.mpe_w_m2 / 1e4
+    point = keepout.hazard_lobe(sp, low, near_field=False, grid_deg=10.0, refine_levels=1)
+    full = keepout.hazard_lobe(sp, low, grid_deg=10.0, refine_levels=1)
+    assert point.max_range_m >= reach and point.near_field is None
+    assert full.near_field is not None, full.near_field
+    assert full.max_range_m == pytest.approx(point.max_range_m, rel=1e-12)

@@ -274,3 +274,70 @@ def test_a_pure_mirror_has_no_near_field_lobe():
     assert window.static_lobe.max_range_m == 0.0 and window.dynamic_lobe.max_range_m == 0.0
     painted = next(t for t in result.targets if t.name == "painted-target")
     assert painted.static_lobe.max_range_m > 0.9  # the diffuse target beside it keeps its lobe
+
+
+# ------------------------------------------------------------------ a history: the states' shortcut decides as all states
+def _history_lobe(n_states):
+    """The witness screen's spot (a state-looping dynamic material) and its near-field lobe
+    function over ``n_states`` states across the material's range, bounds prepared."""
+    from tests._bundled import bundled
+
+    res = bundled("witness_screen")
+    spot = res.spots[0]
+    lo, hi = spot.material.state_range
+    states = np.linspace(lo, hi, n_states)
+    fn = _range_fn(spot, res.mpe_w_m2, 0.0, 1.0, states)
+    assert isinstance(fn, near_field_lobe.NearLobeFn)
+    probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
+    r0 = fn.base(probe)
+    fn.prepare(probe, r0)
+    return spot, fn, res.mpe_w_m2, float(r0.max())
+
+
+@settings(ref.FAST, max_examples=3)
+@given(seed=st.integers(0, 2**31 - 1), n_states=st.integers(2, 24))
+def test_history_state_shortcut_decides_as_every_state(seed, n_states):
+    """With a history the lobe integrates each point first at its state of the largest bound,
+    then only at the states whose own bound reaches the MPE (hazard.near_field_lobe
+    NearLobeFn.hazardous): at random points near the spot (inside the point form's reach)
+    the decision equals the integral at every state reaching the MPE (the bound below the
+    MPE at a state: the integral there is too). Radii log-uniform from 1e-3 of the point
+    form's reach: near the spot every state's bound is infinite."""
+    from hazard.engine import _near_field
+
+    spot, fn, mpe, reach = _history_lobe(n_states)
+    rng = np.random.default_rng(seed)
+    w = rng.normal(size=(40, 3)) * np.repeat([1.0, 0.05], 20)[:, None] + np.repeat([0.0, 1.0], 20)[:, None] * fn.peaks[0]
+    w[:, 2] = np.abs(w[:, 2])  # half anywhere above the spot, half about the point form's farthest direction
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    pts = spot.centroid + (np.exp(rng.uniform(math.log(1e-3), math.log(1.2), 40)) * reach)[:, None] * (w @ spot.mean_frame)
+    every = _near_field(spot, pts, np.ones(len(pts)), 0.0, fn.states).max(axis=1) >= mpe
+    got = fn.hazardous(pts)
+    assert fn.bound_points == 0
+    np.testing.assert_array_equal(got, every)
+    assert every.any() and not every.all()  # both verdicts drawn
+
+
+# ------------------------------------------------------------------ the flat spot's bound (a spot much larger than its lobe)
+def _flat_bound_case(inc, power, h, along, across):
+    spot, mpe, off = _plate_spot(inc, power, 4 * W / math.cos(math.radians(inc)), 0.5)
+    fn = _range_fn(spot, mpe, 0.0, 1.0, None)
+    probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
+    fn.prepare(probe, fn.base(probe))
+    n, b, t = _frame(inc)
+    pts = spot.centroid + np.array([h * n + along * W / math.cos(math.radians(inc)) * b + across * W * t])
+    bound = fn._flat_bound(pts)
+    ref_e = _ref_irradiance(_nodes(inc, power, 4 * W / math.cos(math.radians(inc)), 0.5), pts + off)
+    assert np.all(np.isfinite(bound))
+    assert np.all(bound >= ref_e / mpe), (bound, ref_e / mpe)
+
+
+@settings(ref.FAST, max_examples=8)
+@given(inc=st.floats(0.0, 89.9), power=ref.log_uniform(1.0, 3000.0), h=ref.log_uniform(0.02, 2.0),
+       along=st.floats(-3.0, 3.0), across=st.floats(-3.0, 3.0))
+def test_flat_spot_bound_is_above_the_integral(inc, power, h, along, across):
+    """The lobe's bound for a flat spot (hazard.near_field_lobe NearLobeFn._flat_bound:
+    the largest incident irradiance x the point form's largest intensity / P x pi ln(1 +
+    rho^2 / h^2)) is finite and never below the section-10 integral (coded here) at random
+    points above a Lambertian plate, down to 2 cm above it."""
+    _flat_bound_case(inc, power, h, along, across)
