@@ -286,7 +286,7 @@ class Samples:
 
         try:
             check_input_file(path, "samples")
-        except ValueError as exc:
+        except ValueError:
             if Path(path).exists():
                 raise
             raise ValueError(f"{path}: cannot read the samples (No such file or directory)") from None

@@ -80,7 +80,7 @@ def _cos_multiples(c: np.ndarray, s: np.ndarray, mmax: int, *, with_sin: bool = 
     """cos(m phi) (and sin(m phi)) for m = 0..mmax from cos(phi), sin(phi) by recurrence."""
     cos_m = [np.ones_like(c)]
     sin_m = [np.zeros_like(c)]
-    for m in range(1, mmax + 1):
+    for _ in range(1, mmax + 1):
         # angle addition keeps both sequences accurate
         cos_m.append(cos_m[-1] * c - sin_m[-1] * s)
         sin_m.append(sin_m[-1] * c + cos_m[-2] * s)
@@ -235,7 +235,7 @@ class SHBasis:
             top = max(l for l, _ in col)
             free = list(scratch)
 
-            def dest(l):
+            def dest(l, m=m, free=free):  # called within this iteration only
                 r = where.get((l, m))
                 return rows[r] if r is not None else free.pop()
 

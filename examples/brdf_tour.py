@@ -28,7 +28,7 @@ def dynamic_steel():
     rows = []
     for width_deg, peak in [(2.0, 40.0), (4.0, 10.0), (7.0, 3.0)]:
         w = np.radians(width_deg)
-        rows.append(bm.sh.zonal_coefficients(lambda th: np.log(0.02 + peak * np.exp(-((th / w) ** 2))), 16))
+        rows.append(bm.sh.zonal_coefficients(lambda th, peak=peak, w=w: np.log(0.02 + peak * np.exp(-((th / w) ** 2))), 16))
     coef = np.zeros((3, basis.size))
     coef[:, :17] = rows  # the halfway columns come first in the separable basis
     return bm.DynamicBRDF(basis, states, coef, "temperature_k")

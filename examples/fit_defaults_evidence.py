@@ -63,7 +63,7 @@ def tolerance_evidence():
         old_rows = [r for r in table if r["lh_max"] in OLD_DEFAULT["lh_maxes"] and r["mh_max"] in OLD_DEFAULT["mh_maxes"]
                     and r["fanout"] in OLD_DEFAULT["fanouts"]]  # the old grid is part of the new: same rows
 
-        def cell(row):
+        def cell(row, fit=fit, held=held):
             return f"{held_out_tests_error(fit, held, row):.3f} ({row['lh_max']},{row['mh_max']},{row['fanout']:g})"
 
         row = {"truth": name, "old default": cell(v.cheapest_within(old_rows, OLD_DEFAULT["tolerance"], key="held_out_log_rms"))}

@@ -475,7 +475,7 @@ class CellSampling:
                 order = np.argsort(key)
                 self._lookup[int(lv)] = (n, key[order], rows[order])
         inside = np.all(np.isfinite(s), axis=1) & np.all(np.abs(np.nan_to_num(s)) < HALF_WIDTH, axis=1)
-        for lv, (n, keys, rows) in self._lookup.items():
+        for _lv, (n, keys, rows) in self._lookup.items():
             todo = np.flatnonzero(inside & (out < 0))
             if not len(todo):
                 break

@@ -189,7 +189,7 @@ class ElevationViewDisplay(_Display):
             ax.annotate(text, box.mean(axis=0), fontsize=6, ha="center", va="center", color=colour, zorder=11, wrap=True,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
             mark(ax, [path], text, closed, "polygon")
-        for k, (paths, name, pts, text) in enumerate(self.tracks):
+        for k, (paths, _name, pts, text) in enumerate(self.tracks):
             ax.plot(*pts.T, c="#6a3d9a", lw=1.4, label="moving observers' tracks (projected)" if k == 0 else None)
             ax.annotate(text, pts[0], xytext=(0, 8), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))

@@ -146,7 +146,7 @@ class PlanViewDisplay(_Display):
             ax.annotate(text, ring.mean(axis=0), fontsize=6, ha="center", va="center",
                         color=colour, zorder=11, bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
             mark(ax, [path], text, closed, "polygon")
-        for k, (paths, name, xy, text) in enumerate(self.tracks):
+        for k, (paths, _name, xy, text) in enumerate(self.tracks):
             ax.plot(*xy.T, c="#6a3d9a", lw=1.4, label="moving observers' tracks" if k == 0 else None)
             ax.annotate("", xy=xy[-1], xytext=xy[max(0, len(xy) - 2)], arrowprops=dict(arrowstyle="-|>", color="#6a3d9a"))
             ax.annotate(text, xy[0], xytext=(0, -10), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,

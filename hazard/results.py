@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .keepout import Footprint, Lobe
+
+if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
+    from scenes.observers import Observers
+
+    from .pipeline.motion_stage import MotionResult
 
 __all__ = ["Stage", "TargetResult", "ObserverResults", "HazardResult"]
 
@@ -81,7 +87,7 @@ class TargetResult:
 class ObserverResults:
     """Arrays over the M observer points (file coordinates)."""
 
-    observers: object  # scenes.Observers (names are built on demand: 1e6 strings cost 0.5 s)
+    observers: Observers  # scenes.Observers (names are built on demand: 1e6 strings cost 0.5 s)
     offset_m: np.ndarray  # world = local + offset_m (positions are generated on demand: scenes.observers)
     static_irradiance_w_m2: np.ndarray
     peak_irradiance_w_m2: np.ndarray
@@ -159,7 +165,7 @@ class HazardResult:
     beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
     spill: dict = field(default_factory=dict)  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill)
     sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
-    motion: object = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
+    motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.visual)
     airspace: dict = field(default_factory=dict)  # the flight zones' checks (hazard.pipeline.airspace)
 

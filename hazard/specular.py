@@ -761,7 +761,6 @@ def _curved_beam_map(spot, obs, p, n, d):
     r = an[2] if an[0] == "sphere" else an[3]
     out_dir = obs - p
     dist = np.linalg.norm(out_dir, axis=1)
-    ref = out_dir / dist[:, None]
     cos_i = np.clip(-(n * d).sum(1), 1e-12, 1.0)
     t = d - (d * n).sum(1)[:, None] * n
     tn = np.linalg.norm(t, axis=1)
@@ -1143,7 +1142,7 @@ def _curved_nohd(spot, mpe_w_m2, mu, states, gain):
         return math.inf, p[0], u[0]
     best_s, best = cand[int(np.argmax(roots))], float(roots.max())
     for i in np.argsort(-roots)[:CURVED_STARTS]:
-        res = minimize(lambda x: -_curved_roots(spot, x[None, :], mpe_w_m2, mu, states, gain)[0][0] / best, cand[i],
+        res = minimize(lambda x, scale=best: -_curved_roots(spot, x[None, :], mpe_w_m2, mu, states, gain)[0][0] / scale, cand[i],
                        method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-11, "maxiter": 400})
         if -res.fun * best > best:
             best_s, best = res.x, -float(res.fun) * best

@@ -149,7 +149,7 @@ def _lobe_findings(result) -> list:
 
     scene = result.scene
     boundary = boundary_polygon(scene)
-    centres = {}
+    centres: dict[str, list[np.ndarray]] = {}
     for sp in result.spots:  # the terrain's spots too (a target of the results, not of the scene)
         centres.setdefault(sp.target.name, []).append(np.asarray(sp.centroid, float))
     for spec in scene.targets:  # no spot: the target's centre

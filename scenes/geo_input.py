@@ -192,7 +192,7 @@ def _raise_points(site: GeoSite, data: dict) -> None:
                 continue
             if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
                 t[f"{stem}_m"] = _raised(site, v)
-    for path, t, stem in _moving(data):  # an aim track's points and a target track's centres (observer tracks: as made)
+    for _path, t, stem in _moving(data):  # an aim track's points and a target track's centres (observer tracks: as made)
         rows = t.get(f"{stem}_m")
         if stem in ("aim", "center") and isinstance(rows, list):
             t[f"{stem}_m"] = [_raised(site, v) if _numbers3(v) else v for v in rows]

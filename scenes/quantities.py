@@ -184,6 +184,7 @@ def _walk(data, model, path: str, record: dict | None) -> bool:
             raise QuantityError(f"{where} = {value!r} and {twhere} = {data[target]!r}: the same value given twice; give one "
                                 f"({key} with a unit, or {target} in {unit_of_key(target)})")
         unit = unit_of_key(target)
+        assert unit is not None, target  # target is the unit-suffixed form of key (_unit_forms)
         data[target] = convert_value(value, unit, where, bare_ok=False)
         del data[key]
         record[where] = {"as_written": value, "key": twhere, "value": data[target], "unit": unit}
@@ -307,6 +308,8 @@ def schema_with_units(schema: dict, model=None) -> dict:
             continue
         for base, key in _unit_forms(m).items():
             unit = unit_of_key(key)
+            if unit is None:  # _unit_forms gives suffixed keys only
+                continue
             node["properties"][base] = {
                 "anyOf": [{"type": "string"}, {"type": "array"}],
                 "description": (f"{key} written with a unit: a quantity string '<number> <unit>' (e.g. '{_example(unit)}'), "

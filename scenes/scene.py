@@ -607,7 +607,7 @@ def _near_aperture(observers, laser_m, direction) -> list:
     irradiance inside its diameter); behind it they are out of the beam (the laser emits
     forward only), not 0 W/m^2 by accident."""
     front, behind, names = 0, 0, []
-    for a0, a1, p in observers.blocks():
+    for a0, _a1, p in observers.blocks():
         rel = p - laser_m
         near = np.flatnonzero(np.einsum("ij,ij->i", rel, rel) < NEAR_APERTURE_M ** 2)
         if len(near):

@@ -31,7 +31,7 @@ def test_ci_runs_the_readme_test_command():
     ci = (ROOT / ".ci" / "run").read_text()
     assert "<!-- test-command -->" in readme and "<!-- test-command -->" in ci
     block = readme.split("<!-- test-command -->", 1)[1].split("```bash", 1)[1].split("```", 1)[0].strip()
-    assert block == 'python -m pip install -e ".[all]" && python -m pytest -n auto'
+    assert block == 'python -m pip install -e ".[all]" && python -m ruff check && python -m mypy && python -m pytest -n auto'
 
 
 @pytest.mark.parametrize("script, args, expect", [

@@ -224,7 +224,6 @@ def test_a_dted_column_with_a_zeroed_block_is_refused(tmp_path):
     zero_block 1, 3, 17); the column's checksum no longer matches and is now verified."""
     rasterio = pytest.importorskip("rasterio")
     pytest.importorskip("pyproj")
-    from tests.fuzz._file_corpus import _argv, _cli
     from tests.scenes.test_dem_formats import SCENE, _dted
 
     _dted(tmp_path / "n32_w107.dt0")

@@ -265,7 +265,7 @@ def test_named_examples_of_the_issue(tmp_path):
         "five-parameter kd = 22": (("targets", 0, "material"), {"model": "torrance-sparrow-5", "kb": 0.072, "kr": 16.125,
                                                                  "b": -29.917, "a": 0.959, "kd": 22.0}, "hemispherical reflectance"),
     }
-    for what, (path, value, expect) in cases.items():
+    for _what, (path, value, expect) in cases.items():
         d = copy.deepcopy(base)
         node = d
         for k in path[:-1]:

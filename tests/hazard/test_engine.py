@@ -167,7 +167,7 @@ def test_property_keepout_monotone_in_power_and_attenuation(p1, p2, m1, m2):
         lobe = hazard.analyze(plate(power=p, mu=m, grid=10.0, levels=0, samples=16)).targets[0].static_lobe
         return lobe.max_range_m, 2.0 * (lobe.near_field or {}).get("scan_step_max_m", 0.0)
 
-    (r_hi, s_hi), (r_lo, s_lo), (r_att, s_att) = r(hi_p, lo_m), r(lo_p, lo_m), r(hi_p, hi_m)
+    (r_hi, _s_hi), (r_lo, s_lo), (r_att, s_att) = r(hi_p, lo_m), r(lo_p, lo_m), r(hi_p, hi_m)
     assert r_hi >= r_lo * (1 - 1e-12) - s_lo
     assert r_att <= r_hi * (1 + 1e-12) + s_att
 

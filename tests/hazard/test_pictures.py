@@ -173,7 +173,7 @@ def test_the_elevation_projects_across_the_aim(svc):
     scene = svc.scene
     u = np.array([scene.laser_direction[0], scene.laser_direction[1], 0.0])
     u /= np.linalg.norm(u)
-    for name, a, b in d.mirrors:  # each end: distance along the aim's azimuth from the laser, world height
+    for name, _a, b in d.mirrors:  # each end: distance along the aim's azimuth from the laser, world height
         sp = next(s for s in svc.spots if s.target.name == name)
         row = next(t for t in svc.targets if t.name == name)
         end = sp.centroid + np.asarray(row.specular_direction) * row.specular_nohd_dynamic_m

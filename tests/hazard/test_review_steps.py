@@ -151,7 +151,7 @@ def _verify(doc, page):
 def _verify_observers(doc, blocks):
     rows = {r["name"]: r for r in doc["observers"]}
     seen = []
-    for bid, (title, lines, checks) in blocks.items():
+    for bid, (title, lines, _checks) in blocks.items():
         if not bid.startswith("steps-observer"):
             continue
         name = title.removeprefix("observer ")

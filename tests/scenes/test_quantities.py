@@ -304,7 +304,7 @@ def test_cylinder_and_sphere_sizes_are_said():
 
 
 def test_study_sweeps_values_with_units(tmp_path):
-    from hazard.study import load_study, run_scenario, scenarios
+    from hazard.study import load_study, scenarios
 
     (tmp_path / "s.toml").write_text(_scene(laser='wavelength_nm = 1064.0\npower = "20 W"\nbeam_diameter_m = 0.007\ndivergence_rad = 0.0005'))
     (tmp_path / "study.toml").write_text('name = "u"\nscene = "s.toml"\n[sweep]\nkind = "random"\nsamples = 2\n'

@@ -340,7 +340,7 @@ def _random_cap(tmp_path, rc, rim_over_w, w_m, x, off, sign):
     L = 40.0
     phi = 5e-5
     beam = ref.Beam(2.0, 2 * w_m - L * phi, phi, [0.0, -L, 0.0], [0.0, 0.0, 0.0])
-    path = write_mesh(tmp_path / f"cap{sign}.stl", *cap_vertices_faces(rc, rim, sign))
+    write_mesh(tmp_path / f"cap{sign}.stl", *cap_vertices_faces(rc, rim, sign))
     q = focus_distance(beam, L, rc) if sign > 0 else rc / 2
     dist = x * q
     lateral = off * 2 * APERTURE_M  # near the axis, up to two apertures off it

@@ -555,7 +555,7 @@ def test_refraction_is_applied_to_points_at_absolute_heights_too(ridge):
     for k in (0.0, 0.13):
         true_ground = ridge.terrain_z(0.0)
 
-        def refracted_clearance(p):
+        def refracted_clearance(p, k=k, true_ground=true_ground):  # called within this iteration
             t = np.unique(np.concatenate([np.linspace(0, 1, 4000), [RIDGE_Y / p[1]]]))[1:-1]
             q = laser[None, :] + t[:, None] * (p - laser)[None, :]
             dd = np.hypot(q[:, 0], q[:, 1])
@@ -741,7 +741,7 @@ def test_the_horizon_with_and_without_refraction(flat_dem):
                             observers=[("north", pts, eye)], laser_agl=h_laser, sector=([-2.0, 2.0], [-1.0, 1.0]), power=1e5)
         got_laser, _, got = world_points(scene)
         np.testing.assert_allclose(got_laser, laser, atol=1e-3)
-        ground = lambda x, y: surface_below(x, y, o, lambda la, lo: o[2]) + refraction_rise(x, y, o, k)  # noqa: E731
+        ground = lambda x, y, k=k: surface_below(x, y, o, lambda la, lo: o[2]) + refraction_rise(x, y, o, k)  # noqa: E731
         ref_pts = np.array([[*enu(la, lo, o[2], o)[:2], 0.0] for la, lo in pts])
         ref_pts[:, 2] = ground(ref_pts[:, 0], ref_pts[:, 1]) + eye
         np.testing.assert_allclose(got, ref_pts, atol=2e-3)

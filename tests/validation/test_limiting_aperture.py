@@ -138,11 +138,11 @@ def test_limiting_aperture_skin_and_errors():
 def test_observer_apertures_of_a_group():
     """7x50 binoculars collect over min(50 mm, 7 mm x 7) = 49 mm; 10x25 over 25 mm."""
 
-    class O:
+    class Aid:
         def __init__(self, m, d, t):
             self.magnification, self.objective_diameter_m, self.transmission = m, d, t
 
-    ap = observer_apertures((None, O(7.0, 0.05, 0.9), O(10.0, 0.025, 1.0)), [0, 1, 2, 1], 1064.0, 10.0)
+    ap = observer_apertures((None, Aid(7.0, 0.05, 0.9), Aid(10.0, 0.025, 1.0)), [0, 1, 2, 1], 1064.0, 10.0)
     np.testing.assert_allclose(ap.diameter_m, [7e-3, 0.049, 0.025, 0.049], rtol=1e-12)
     np.testing.assert_allclose(ap.transmission, [1.0, 0.9, 1.0, 0.9])
     assert list(ap.aided) == [False, True, True, True]

@@ -306,7 +306,7 @@ def test_reference_crossing_formula():
     assert H == pytest.approx(1.3688, abs=1e-4)
     w, E0 = 0.25, e_axis(R_X, mu=MU)
     for b in (0.0, 0.125):
-        q, _ = quad(lambda t: E0 * math.exp(-(b * b + (10.0 * t) ** 2) / (w * w)), -1.0, 1.0, points=[0.0], epsabs=0, epsrel=1e-12)
+        q, _ = quad(lambda t, b=b: E0 * math.exp(-(b * b + (10.0 * t) ** 2) / (w * w)), -1.0, 1.0, points=[0.0], epsabs=0, epsrel=1e-12)
         assert crossing_exposure(R_X, 10.0, b=b) == pytest.approx(q, rel=1e-9)
 
 

@@ -127,7 +127,7 @@ def test_pointing_cone_direct_irradiance_inside_and_outside():
     got = np.asarray(res.observers.direct_point_irradiance_w_m2, float)
     np.testing.assert_allclose(got, want, rtol=1e-6)
     # the reference's own check: inside the cone it is the on-axis value at the range
-    for (n, t, psi, R), e in zip(_CONE_OBSERVERS, want):
+    for (_n, t, _psi, R), e in zip(_CONE_OBSERVERS, want):
         if t <= B:
             assert e == pytest.approx(_e_axis(R), rel=1e-12)
 

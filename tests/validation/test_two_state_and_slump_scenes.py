@@ -305,7 +305,7 @@ def test_heating_history_slump_follows_the_plate_melt(tmp_path, two_state):
     assert melt["full_melt_s"] == pytest.approx(heat.full_melt_s, rel=1e-3)
     d = tilt_direction("up")
     worst = 0.0
-    for k, t in enumerate(res.times_s):
+    for k, _t in enumerate(res.times_s):
         r = reflect(BEAM, tilted_normal(tilt * heat.melt_fraction[k], d))
         worst = max(worst, angle(dirs[np.argmax(e[:, k])], r))
     assert worst <= SPACING * (1 + 1e-9), worst / DEG
