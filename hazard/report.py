@@ -229,12 +229,29 @@ _CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", "aperture_diamet
 
 def _csv_cell(values, key) -> list:
     """One column as CSV text: floats by repr (exact round trip; NaN empty where it means
-    "not applicable"), bools as True/False."""
+    "not applicable"), bools as True/False. The reprs are made by the list's own repr (one
+    C loop, the same strings as ``repr`` of each value)."""
     values = np.asarray(values)
+    if not len(values):
+        return []
     if values.dtype == bool:
-        return ["True" if v else "False" for v in values.tolist()]
-    blank = key in _CSV_BLANK_NAN
-    return ["" if (blank and v != v) else repr(v) for v in values.astype(float).tolist()]
+        return repr(values.tolist())[1:-1].split(", ")
+    v = values.astype(float)
+    text = repr(v.tolist())[1:-1].split(", ")
+    if key in _CSV_BLANK_NAN:
+        nan = np.isnan(v)
+        if nan.all():
+            return [""] * len(v)
+        for i in np.flatnonzero(nan).tolist():
+            text[i] = ""
+    return text
+
+
+def _csv_names(labels: list) -> list:
+    """:func:`_csv_name` of each label (one scan of the joined text when none needs quotes)."""
+    if not any(c in "\0".join(labels) for c in ',"\r\n'):
+        return list(labels)
+    return [_csv_name(x) for x in labels]
 
 
 def _csv_name(label: str) -> str:
@@ -258,20 +275,40 @@ def observer_geodetic(result, pos) -> np.ndarray:
     return np.column_stack([lat, lon, frame.datum_height_m(lat, lon, h)])
 
 
-def _csv_text(result, cols) -> str:
-    """observers.csv: every observer, one row each (columns computed once, joined as text);
-    with a [site], each position also as latitude, longitude and height."""
+CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects)
+
+
+def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
+    """observers.csv as text pieces: the header, then ``block_rows`` observers at a time
+    (every observer, one row each, each column formatted from its array); with a [site],
+    each position also as latitude, longitude and height. The bytes of the whole table at
+    once; the memory of one block."""
     pos = cols["position_m"]
-    names = CSV_COLUMNS[:4]
-    text = [[_csv_name(x) for x in cols["labels"]]] + [_csv_cell(pos[:, k], "x") for k in range(3)]
-    if getattr(result.scene, "site", None) is not None and len(pos):
-        geo = observer_geodetic(result, pos)
-        text += [_csv_cell(geo[:, k], "x") for k in range(3)]
-        names = names + GEO_COLUMNS
+    site = getattr(result.scene, "site", None) is not None and len(pos)
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
-    text += [_csv_cell(cols[k], k) for k in rest]
-    lines = [",".join(names + rest)] + [",".join(r) for r in zip(*text)]
-    return "\r\n".join(lines) + "\r\n"
+    yield ",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n"
+    for a0 in range(0, len(pos), block_rows):
+        a1 = min(a0 + block_rows, len(pos))
+        p = pos[a0:a1]
+        text = [_csv_names(cols["labels"][a0:a1])] + [_csv_cell(p[:, k], "x") for k in range(3)]
+        if site:
+            geo = observer_geodetic(result, p)
+            text += [_csv_cell(geo[:, k], "x") for k in range(3)]
+        text += [_csv_cell(np.asarray(cols[k])[a0:a1], k) for k in rest]
+        yield "\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n"
+
+
+def _csv_text(result, cols) -> str:
+    """observers.csv as one text (:func:`_csv_chunks` joined)."""
+    return "".join(_csv_chunks(result, cols))
+
+
+def _write_csv_synced(path: Path, result, cols) -> None:
+    with open(path, "wb") as fh:
+        for piece in _csv_chunks(result, cols):
+            fh.write(piece.encode())
+        fh.flush()
+        os.fsync(fh.fileno())
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -291,11 +328,13 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     cols = observer_columns(result)  # once, for the report and the table
     doc = report_dict(result, cols)
     doc.update(_json_safe(dict(sections or {})))
-    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
-             **extra}
+    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
-        _write_synced(folder / n, texts[n])
+        if n == "observers.csv":  # written by blocks of rows from the columns
+            _write_csv_synced(folder / n, result, cols)
+        else:
+            _write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)
     return list(names)
 
