@@ -237,7 +237,7 @@ def _csv_cell(values, key) -> list:
     if values.dtype == bool:
         return repr(values.tolist())[1:-1].split(", ")
     v = values.astype(float)
-    text = repr(v.tolist())[1:-1].split(", ")
+    text = _reprs(v)
     if key in _CSV_BLANK_NAN:
         nan = np.isnan(v)
         if nan.all():
@@ -245,6 +245,18 @@ def _csv_cell(values, key) -> list:
         for i in np.flatnonzero(nan).tolist():
             text[i] = ""
     return text
+
+
+def _reprs(v: np.ndarray) -> list:
+    """``[repr(x) for x in v.tolist()]`` of a float64 column: a value repeated through it
+    (grid coordinates, a constant MPE) formatted once (values told apart by their bits:
+    -0.0 is not 0.0)."""
+    bits = np.ascontiguousarray(v, float).view(np.int64)
+    if not len(v) or len(np.unique(bits[:256])) * 10 > 9 * min(len(v), 256):  # mostly distinct: every value formatted
+        return repr(v.tolist())[1:-1].split(", ") if len(v) else []
+    _, first, inv = np.unique(bits, return_index=True, return_inverse=True)
+    text = repr(v[first].tolist())[1:-1].split(", ")
+    return [text[i] for i in inv.ravel().tolist()]
 
 
 def _csv_names(labels: list) -> list:
