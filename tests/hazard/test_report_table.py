@@ -144,3 +144,23 @@ def test_csv_reprs_of_repeated_and_signed_values():
     assert report._csv_cell(v, "first_exceedance_s") == ["" if x != x else repr(x) for x in v.tolist()]
     flags = np.array([True, False, False] * 9)
     assert report._csv_cell(flags, "hazardous") == [str(x) for x in flags.tolist()]
+
+
+def test_report_rows_are_json_safe_column_by_column():
+    """report.json's observer rows are built from the columns: a non-finite value is the
+    string "inf"/"-inf"/"nan" (JSON has no such numbers), NaN where it means "not
+    applicable" is null, bools stay bools; the file puts one row per line."""
+    inf, nan = float("inf"), float("nan")
+    cols = {"labels": ["a", "b,c", "d"], "position_m": np.array([[0.0, 1.0, 2.0], [3.0, 4.0, 5.0], [6.0, 7.0, 8.0]]),
+            "hazard_ratio": np.array([0.5, inf, nan]), "first_exceedance_s": np.array([nan, 2.0, -inf]),
+            "hazardous": np.array([False, True, True])}
+    rows = report.observer_rows(None, np.arange(3), cols)
+    assert rows == [
+        {"name": "a", "position_m": [0.0, 1.0, 2.0], "hazard_ratio": 0.5, "first_exceedance_s": None, "hazardous": False},
+        {"name": "b,c", "position_m": [3.0, 4.0, 5.0], "hazard_ratio": "inf", "first_exceedance_s": 2.0, "hazardous": True},
+        {"name": "d", "position_m": [6.0, 7.0, 8.0], "hazard_ratio": "nan", "first_exceedance_s": None, "hazardous": True}]
+    doc = {"format": "x", "observers": rows, "after": {"k": [1, 2]}}
+    text = report.report_json_text(doc)
+    assert json.loads(text) == doc
+    assert [line.rstrip(",") for line in text.splitlines() if line.startswith("  {")] == ["  " + json.dumps(r) for r in rows]
+    assert json.loads(report.report_json_text({"observers": []})) == {"observers": []}
