@@ -91,7 +91,7 @@ def _with_tracks(result, cols, m) -> dict:
     """The fixed observers' columns with the moving observers' rows after them (at each
     one's worst point, :mod:`hazard.motion_outputs`) and the ``motion_*`` columns; the
     row names under ``labels``."""
-    cols["labels"] = list(result.observers.labels)
+    cols["labels"] = result.observers.labels  # made by rows when read (hazard.results.ObserverLabels)
     if getattr(result, "motion", None) is None:
         return cols
     tracks = track_columns(result, float(result.mpe_w_m2))
@@ -120,7 +120,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
     rows = np.arange(len(labels)) if rows is None else rows
     maybe = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
     keys = [k for k in cols if k not in ("position_m", "labels")]
-    columns = [[labels[i] for i in rows.tolist()]]
+    columns = [labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]]
     for k in ["position_m"] + keys:
         a = np.asarray(cols[k])[rows]
         v = a.tolist()  # Python floats and bools, once
@@ -488,7 +488,7 @@ def _observer_table(result, hazardous, max_observers) -> list:
     order = hazardous[np.argsort(-ratio[hazardous], kind="stable")][:max_observers]
     dist, near = _nearest_spot(result, order)
     laser = _from_laser(result, order)
-    labels = [obs.labels[i] for i in order]
+    labels = obs.labels.take(np.asarray(order, np.int64))
     w_obs, w_spot = max(map(len, labels + ["observer"])), max(map(len, near + ["nearest spot"]))
     lines = [f"  {'observer':{w_obs}s}  {'hazard ratio':>12s}  {'from laser [m]':>14s}  {'from spot [m]':>13s}  "
              f"{'nearest spot':{w_spot}s}  cause (share of the peak irradiance)"]
