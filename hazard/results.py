@@ -127,7 +127,7 @@ class ObserverResults:
         return self._position_m
 
     @property
-    def labels(self) -> "ObserverLabels":
+    def labels(self) -> ObserverLabels:
         """The observers' names by row (made when read: a 1e7-point grid's as one list are 0.7 GB)."""
         return ObserverLabels(self.observers)
 

@@ -17,13 +17,14 @@ array has only one.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ColumnStore", "block_bounds", "BLOCK_VALUES"]
+__all__ = ["BLOCK_VALUES", "ColumnStore", "block_bounds"]
 
 BLOCK_VALUES = 2_000_000  # draws x columns read at once (16 MB of float64; ~12 such temporaries in the statistics)
 
@@ -36,7 +37,7 @@ def block_bounds(n_rows: int, n_cols: int, block_values: int = BLOCK_VALUES) -> 
     want = max(1, math.ceil(n_cols / max(1, block_values // max(n_rows, 1))))
     n_blocks = max(1, min(want, n_cols // 2))
     edges = np.linspace(0, n_cols, n_blocks + 1).round().astype(int)
-    return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
+    return [(int(a), int(b)) for a, b in itertools.pairwise(edges.tolist())]
 
 
 class ColumnStore:

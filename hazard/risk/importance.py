@@ -130,15 +130,15 @@ class _Cands:
     whys: list
 
     @staticmethod
-    def empty() -> "_Cands":
+    def empty() -> _Cands:
         return _Cands(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, int), [])
 
-    def __add__(self, o: "_Cands") -> "_Cands":
+    def __add__(self, o: _Cands) -> _Cands:
         n = len(self.whys)
         return _Cands(*(np.concatenate([x, y]) for x, y in ((self.block, o.block), (self.k, o.k), (self.mean, o.mean), (self.sd, o.sd),
                                                            (self.j, o.j), (self.why, o.why + n))), self.whys + o.whys)
 
-    def take(self, rows) -> "_Cands":
+    def take(self, rows) -> _Cands:
         return _Cands(self.block[rows], self.k[rows], self.mean[rows], self.sd[rows], self.j[rows], self.why[rows], self.whys)
 
 

@@ -11,6 +11,7 @@ whole array). The memory test runs in a child process and reads its own VmHWM.
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -25,7 +26,6 @@ from hypothesis import strategies as st
 import scenes
 from hazard.risk.columns import ColumnStore, block_bounds
 from hazard.risk.results import observer_stats
-from hazard.risk.run import Chunks, gather
 from tests._scene_text import PLATE_AT_50M
 
 QS = (0.50, 0.95, 0.99)
@@ -37,7 +37,7 @@ FAST = settings(derandomize=True, deadline=None, max_examples=25)
 def test_blocks_cover_the_columns_never_one_wide(rows, cols, budget):
     b = block_bounds(rows, cols, budget)
     assert b[0][0] == 0 and b[-1][1] == cols
-    assert all(x[1] == y[0] for x, y in zip(b, b[1:]))
+    assert all(x[1] == y[0] for x, y in itertools.pairwise(b))
     widths = [j1 - j0 for j0, j1 in b]
     assert min(widths) >= (1 if cols == 1 else 2)  # a one-column block would be summed pairwise
     assert max(widths) <= max(3, budget // rows)  # about the budget (two or three columns when it is smaller)
