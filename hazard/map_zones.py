@@ -160,9 +160,10 @@ def _observers(result) -> list:
     ratio = np.asarray(result.hazard_ratio, float)
     haz = np.asarray(result.hazardous, bool)
     groups = obs.observers
-    aided = np.array([groups.optics[g] is not None for g in groups.group], bool) if len(p) else np.zeros(0, bool)
+    with_aid = np.array([o is not None for o in groups.optics], bool)
+    aided = with_aid[groups.group] if len(p) and len(with_aid) else np.zeros(len(p), bool)
     h_exp = np.asarray(obs.radiant_exposure_j_m2, float)
-    labels = obs.labels
+    labels = dict(zip(rows.tolist(), obs.labels.take(rows)))  # the listed rows' names only
     out = []
     for i in rows.tolist():
         verdict = ("hazardous, aided" if aided[i] else "hazardous") if haz[i] else "below the MPE"

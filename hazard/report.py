@@ -91,7 +91,7 @@ def _with_tracks(result, cols, m) -> dict:
     """The fixed observers' columns with the moving observers' rows after them (at each
     one's worst point, :mod:`hazard.motion_outputs`) and the ``motion_*`` columns; the
     row names under ``labels``."""
-    cols["labels"] = list(result.observers.labels)
+    cols["labels"] = result.observers.labels  # made by rows when read (hazard.results.ObserverLabels)
     if getattr(result, "motion", None) is None:
         return cols
     tracks = track_columns(result, float(result.mpe_w_m2))
@@ -112,21 +112,25 @@ def _listed(cols, m) -> np.ndarray:
 
 
 def observer_rows(result, rows=None, cols=None) -> list:
-    """One dict per observer (``rows``: which; default all) for report.json."""
+    """One dict per observer (``rows``: which; default all) for report.json, JSON-safe
+    (:func:`_json_safe`'s strings for non-finite values, null where NaN means "not
+    applicable"), built column by column."""
     cols = observer_columns(result) if cols is None else cols
     labels = cols["labels"]
     rows = np.arange(len(labels)) if rows is None else rows
-    plain = {k: np.asarray(v)[rows].tolist() for k, v in cols.items() if k != "labels"}  # Python floats and bools, once
     maybe = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
     keys = [k for k in cols if k not in ("position_m", "labels")]
-    out = []
-    for j, i in enumerate(rows.tolist()):
-        row = {"name": labels[i], "position_m": plain["position_m"][j]}
-        for k in keys:
-            v = plain[k][j]
-            row[k] = _num(v) if k in maybe else v
-        out.append(row)
-    return out
+    columns = [labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]]
+    for k in ["position_m"] + keys:
+        a = np.asarray(cols[k])[rows]
+        v = a.tolist()  # Python floats and bools, once
+        if k in maybe:
+            v = [_num(x) for x in v]
+        elif a.dtype.kind == "f" and not np.isfinite(a).all():
+            v = _json_safe(v)
+        columns.append(v)
+    names = ["name", "position_m"] + keys
+    return [dict(zip(names, vals)) for vals in zip(*columns)]
 
 
 def observers_listed(result, cols) -> tuple[list, dict]:
@@ -187,7 +191,7 @@ def report_dict(result, cols=None) -> dict:
     listed, which = observers_listed(result, observer_columns(result) if cols is None else cols)
     v = verdict(result)
     warnings = v.pop("warnings")  # report.json's top-level "warnings"
-    return _json_safe({
+    doc = _json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
         "versions": versions(),
@@ -210,7 +214,7 @@ def report_dict(result, cols=None) -> dict:
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
         "targets": [{**t.to_dict(), "hit": target_hit(t)} for t in result.targets],
         "footprint": fp or None,
-        "observers": listed,
+        "observers": None,  # the listed rows below: JSON-safe already (observer_rows), not walked again
         "observers_listed": which,
         "verdict_changes": result.verdict_changes(),
         "verdict": v,  # the headline stdout and the review page print (hazard.verdict)
@@ -221,6 +225,8 @@ def report_dict(result, cols=None) -> dict:
         "notes": list(result.notes),
         **motion_sections(result),
     })
+    doc["observers"] = listed
+    return doc
 
 
 _MOTION_BLANK = MOTION_COLUMNS  # the motion_* columns: NaN where a fixed observer was not evaluated over time
@@ -229,12 +235,41 @@ _CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", "aperture_diamet
 
 def _csv_cell(values, key) -> list:
     """One column as CSV text: floats by repr (exact round trip; NaN empty where it means
-    "not applicable"), bools as True/False."""
+    "not applicable"), bools as True/False. The reprs are made by the list's own repr (one
+    C loop, the same strings as ``repr`` of each value)."""
     values = np.asarray(values)
+    if not len(values):
+        return []
     if values.dtype == bool:
-        return ["True" if v else "False" for v in values.tolist()]
-    blank = key in _CSV_BLANK_NAN
-    return ["" if (blank and v != v) else repr(v) for v in values.astype(float).tolist()]
+        return repr(values.tolist())[1:-1].split(", ")
+    v = values.astype(float)
+    text = _reprs(v)
+    if key in _CSV_BLANK_NAN:
+        nan = np.isnan(v)
+        if nan.all():
+            return [""] * len(v)
+        for i in np.flatnonzero(nan).tolist():
+            text[i] = ""
+    return text
+
+
+def _reprs(v: np.ndarray) -> list:
+    """``[repr(x) for x in v.tolist()]`` of a float64 column: a value repeated through it
+    (grid coordinates, a constant MPE) formatted once (values told apart by their bits:
+    -0.0 is not 0.0)."""
+    bits = np.ascontiguousarray(v, float).view(np.int64)
+    if not len(v) or len(np.unique(bits[:256])) * 10 > 9 * min(len(v), 256):  # mostly distinct: every value formatted
+        return repr(v.tolist())[1:-1].split(", ") if len(v) else []
+    _, first, inv = np.unique(bits, return_index=True, return_inverse=True)
+    text = repr(v[first].tolist())[1:-1].split(", ")
+    return [text[i] for i in inv.ravel().tolist()]
+
+
+def _csv_names(labels: list) -> list:
+    """:func:`_csv_name` of each label (one scan of the joined text when none needs quotes)."""
+    if not any(c in "\0".join(labels) for c in ',"\r\n'):
+        return list(labels)
+    return [_csv_name(x) for x in labels]
 
 
 def _csv_name(label: str) -> str:
@@ -258,20 +293,53 @@ def observer_geodetic(result, pos) -> np.ndarray:
     return np.column_stack([lat, lon, frame.datum_height_m(lat, lon, h)])
 
 
-def _csv_text(result, cols) -> str:
-    """observers.csv: every observer, one row each (columns computed once, joined as text);
-    with a [site], each position also as latitude, longitude and height."""
+CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects)
+
+
+def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
+    """observers.csv as text pieces: the header, then ``block_rows`` observers at a time
+    (every observer, one row each, each column formatted from its array); with a [site],
+    each position also as latitude, longitude and height. The bytes of the whole table at
+    once; the memory of one block."""
     pos = cols["position_m"]
-    names = CSV_COLUMNS[:4]
-    text = [[_csv_name(x) for x in cols["labels"]]] + [_csv_cell(pos[:, k], "x") for k in range(3)]
-    if getattr(result.scene, "site", None) is not None and len(pos):
-        geo = observer_geodetic(result, pos)
-        text += [_csv_cell(geo[:, k], "x") for k in range(3)]
-        names = names + GEO_COLUMNS
+    site = getattr(result.scene, "site", None) is not None and len(pos)
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
-    text += [_csv_cell(cols[k], k) for k in rest]
-    lines = [",".join(names + rest)] + [",".join(r) for r in zip(*text)]
-    return "\r\n".join(lines) + "\r\n"
+    yield ",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n"
+    for a0 in range(0, len(pos), block_rows):
+        a1 = min(a0 + block_rows, len(pos))
+        p = pos[a0:a1]
+        text = [_csv_names(cols["labels"][a0:a1])] + [_csv_cell(p[:, k], "x") for k in range(3)]
+        if site:
+            geo = observer_geodetic(result, p)
+            text += [_csv_cell(geo[:, k], "x") for k in range(3)]
+        text += [_csv_cell(np.asarray(cols[k])[a0:a1], k) for k in rest]
+        yield "\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n"
+
+
+def _csv_text(result, cols) -> str:
+    """observers.csv as one text (:func:`_csv_chunks` joined)."""
+    return "".join(_csv_chunks(result, cols))
+
+
+def _write_csv_synced(path: Path, result, cols) -> None:
+    with open(path, "wb") as fh:
+        for piece in _csv_chunks(result, cols):
+            fh.write(piece.encode())
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def report_json_text(doc: dict) -> str:
+    """report.json's text: indented one space per level, each listed observer's row on one
+    line by json's C encoder (the indented encoding runs the per-element Python encoder:
+    most of the writing at 1e5 listed observers). The same values; only the layout of
+    the ``observers`` list differs from ``json.dumps(doc, indent=1)``."""
+    import uuid
+
+    mark = f"observers-{uuid.uuid4().hex}"
+    head = json.dumps({**doc, "observers": mark}, indent=1, allow_nan=False)
+    rows = [json.dumps(r, allow_nan=False) for r in doc["observers"]]
+    return head.replace(json.dumps(mark), "[" + ",".join("\n  " + r for r in rows) + "\n ]" if rows else "[]", 1)
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -291,11 +359,13 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     cols = observer_columns(result)  # once, for the report and the table
     doc = report_dict(result, cols)
     doc.update(_json_safe(dict(sections or {})))
-    texts = {"report.json": json.dumps(doc, indent=1, allow_nan=False).encode(), "observers.csv": _csv_text(result, cols).encode(),
-             **extra}
+    texts = {"report.json": report_json_text(doc).encode(), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
-        _write_synced(folder / n, texts[n])
+        if n == "observers.csv":  # written by blocks of rows from the columns
+            _write_csv_synced(folder / n, result, cols)
+        else:
+            _write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)
     return list(names)
 
@@ -418,7 +488,7 @@ def _observer_table(result, hazardous, max_observers) -> list:
     order = hazardous[np.argsort(-ratio[hazardous], kind="stable")][:max_observers]
     dist, near = _nearest_spot(result, order)
     laser = _from_laser(result, order)
-    labels = [obs.labels[i] for i in order]
+    labels = obs.labels.take(np.asarray(order, np.int64))
     w_obs, w_spot = max(map(len, labels + ["observer"])), max(map(len, near + ["nearest spot"]))
     lines = [f"  {'observer':{w_obs}s}  {'hazard ratio':>12s}  {'from laser [m]':>14s}  {'from spot [m]':>13s}  "
              f"{'nearest spot':{w_spot}s}  cause (share of the peak irradiance)"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -132,10 +133,39 @@ class ObserverResults:
         return self._position_m
 
     @property
-    def labels(self) -> list:
-        if not hasattr(self, "_labels"):
-            self._labels = self.observers.labels()
-        return self._labels
+    def labels(self) -> ObserverLabels:
+        """The observers' names by row (made when read: a 1e7-point grid's as one list are 0.7 GB)."""
+        return ObserverLabels(self.observers)
+
+
+class ObserverLabels(Sequence):
+    """Observer names by row (:meth:`scenes.observers.Observers.labels_at`): an int gives
+    one name, a slice a list; equal to a list of the same names."""
+
+    def __init__(self, observers):
+        self._obs = observers
+
+    def __len__(self):
+        return len(self._obs)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return self._obs.labels_at(np.arange(len(self))[k])
+        n = len(self)
+        if not -n <= k < n:
+            raise IndexError(f"observer row {k} of {n}")
+        return self._obs.labels_at([k % n])[0]
+
+    def take(self, rows) -> list:
+        """The names of the rows ``rows`` (int array, any order), made together."""
+        return self._obs.labels_at(rows)
+
+    def __iter__(self):
+        for a0 in range(0, len(self), 65536):
+            yield from self._obs.labels_at(np.arange(a0, min(a0 + 65536, len(self))))
+
+    def __eq__(self, other):
+        return isinstance(other, (list, tuple, ObserverLabels)) and len(other) == len(self) and list(self) == list(other)
 
 
 @dataclass
@@ -223,4 +253,4 @@ class HazardResult:
     def verdict_changes(self) -> list:
         """Observers whose verdict differs between the static and the dynamic analysis."""
         changed = np.flatnonzero(self.hazardous != self.hazardous_static)
-        return [self.observers.labels[i] for i in changed]
+        return self.observers.labels.take(np.asarray(changed, np.int64))

@@ -13,6 +13,7 @@ write time). Explicit points, lines and shells are small and stored.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
@@ -152,7 +153,17 @@ class Observers:
                        index_in_group=np.concatenate([self.index_in_group, np.arange(len(p))]),
                        group_names=self.group_names + (name,), optics=tuple(self.optics) + (optics,), _cache=cache)
 
+    @functools.cached_property
+    def group_sizes(self) -> np.ndarray:
+        """Points per group (G,)."""
+        return np.bincount(self.group, minlength=len(self.group_names))
+
     def labels(self) -> list:
         """Point names: the group name for a one-point group, ``group[i]`` otherwise."""
-        sizes = np.bincount(self.group, minlength=len(self.group_names))
-        return [self.group_names[g] if sizes[g] == 1 else f"{self.group_names[g]}[{i}]" for g, i in zip(self.group, self.index_in_group)]
+        return self.labels_at(np.arange(len(self)))
+
+    def labels_at(self, rows) -> list:
+        """The names (:meth:`labels`) of the rows ``rows`` only (int array, any order)."""
+        rows = np.asarray(rows, np.int64).ravel()
+        sizes, names = self.group_sizes, self.group_names
+        return [names[g] if sizes[g] == 1 else f"{names[g]}[{i}]" for g, i in zip(self.group[rows].tolist(), self.index_in_group[rows].tolist())]

@@ -155,7 +155,7 @@ def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, se
               keep_going=False):
     """risk.json's content and the map of :func:`run_risk` (chunks computed or reused in ``outdir/.risk``)."""
     from .results import map_result, observer_rows, sensitivity
-    from .run import run_chunks, settings, shared
+    from .run import gather, run_chunks, settings, shared
 
     ev, prop = shared(scene, backend)
     active = ev.model.active()
@@ -163,8 +163,14 @@ def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, se
                  active=active, can_import=bool(prop.components))
     chunks = run_chunks(scene, s, outdir, backend=backend, serial=serial, workers=workers, scheduler=scheduler, force=force, progress=progress,
                         keep_going=keep_going)
-    sens = sensitivity(chunks.sensitivity, ev.own_gain()[: s.n_observers], active)
-    mp = map_result(ev, s, chunks)
+    got = gather(chunks, s, active, Path(outdir) / ".risk")  # one chunk in memory at a time; observers' arrays on disk
+    try:
+        sens = sensitivity(got.store, ev.own_gain()[: s.n_observers], active)
+        rows = observer_rows(ev, s, got, sens)
+    finally:
+        if got.store is not None:
+            got.store.close()
+    mp = map_result(ev, s, got)
     notes, left = _notes(ev, s, prop)
     doc = {"scene": scene.name, "scene_sha256": scene.text_sha256, "mpe_w_m2": ev.mpe_w_m2, "mpe": ev.exposure.detail,
            "standard": scene.spec.exposure.standard, "duration_s": scene.spec.exposure.duration_s,
@@ -173,7 +179,7 @@ def _risk_doc(scene, outdir, t0, *, draws, seed, sampling, sensitivity_draws, se
            "inputs": _describe_inputs(ev), "inputs_active": active,
            "importance": None if s.sampling != "importance" else {"alpha0": prop.alpha0, "components": [c.why for c in prop.components]},
            "operations": scene.spec.uncertainty.operations,
-           "observers": observer_rows(ev, s, chunks, sens), "map": _map_summary(mp), "notes": notes, "left_out": left,
+           "observers": rows, "map": _map_summary(mp), "notes": notes, "left_out": left,
            "run": {"chunks": len(chunks.main) + len(chunks.sensitivity), "ran": chunks.ran, "reused": chunks.reused,
                    "mode": "serial" if serial else (f"scheduler {scheduler}" if scheduler else f"LocalCluster, {workers} workers"),
                    "seconds": round(time.perf_counter() - t0, 3)}}

@@ -99,12 +99,6 @@ class Proposal:
         return -(top + np.log(np.exp(t - top[:, None]).sum(axis=1)))
 
 
-def _in_tangent(v, axis, right, up):
-    """Tangent-plane coordinates (right, up) of direction v about ``axis``; None behind it."""
-    c = float(v @ axis)
-    return None if c <= 1e-9 else np.array([v @ right, v @ up]) / c
-
-
 def _spread(theta_w, e0, limit, sigma, theta_pos=0.0):
     """Angular size of the hazardous region, widened by the observer's position
     uncertainty ``theta_pos`` seen at its distance (at most sigma); None when it cannot
@@ -121,18 +115,73 @@ def _position_angle(ev, j, distance_m) -> float:
     return math.hypot(m.position_sigma_m, m.height_sigma_m) / max(distance_m, 1e-9) if j < ev.n_observers else 0.0
 
 
-def _direct(ev, p, limit) -> list:
-    beam, out = ev.nominal.beam, []
-    for j, q in enumerate(p):
-        rel = q - beam.position_m
-        r = float(np.linalg.norm(rel))
-        mean = _in_tangent(rel / r, beam.axis, ev.right, ev.up)
-        w = float(beam.diameter_at(r)) / 2
-        sd = _spread(w / r, beam.power_w / (math.pi * w * w) * math.exp(-ev.mu0 * r), limit, ev.model.pointing_sigma_rad,
-                     _position_angle(ev, j, r))
-        if mean is not None and sd is not None:
-            out.append(("pointing", -1, mean, sd, f"direct beam on {ev.point_name(j)}", j))
-    return out
+@dataclass
+class _Cands:
+    """Candidate components as arrays, in the order the points and mirrors are visited:
+    block (0 pointing, 1 tilt), target index, mean (N, 2), sd (N,), point j, and the
+    sentence ``why`` (``whys[kind]``: the text before and after the point's name)."""
+
+    block: np.ndarray
+    k: np.ndarray
+    mean: np.ndarray
+    sd: np.ndarray
+    j: np.ndarray
+    why: np.ndarray
+    whys: list
+
+    @staticmethod
+    def empty() -> _Cands:
+        return _Cands(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 2)), np.zeros(0), np.zeros(0, int), np.zeros(0, int), [])
+
+    def __add__(self, o: _Cands) -> _Cands:
+        n = len(self.whys)
+        return _Cands(*(np.concatenate([x, y]) for x, y in ((self.block, o.block), (self.k, o.k), (self.mean, o.mean), (self.sd, o.sd),
+                                                           (self.j, o.j), (self.why, o.why + n))), self.whys + o.whys)
+
+    def take(self, rows) -> _Cands:
+        return _Cands(self.block[rows], self.k[rows], self.mean[rows], self.sd[rows], self.j[rows], self.why[rows], self.whys)
+
+
+def _dot(v, a) -> np.ndarray:
+    """Row-wise v @ a, bit for bit as the 1-D dot of each row (the sum of the three products in order)."""
+    return (v * np.asarray(a, float)).sum(axis=1)
+
+
+def _in_tangents(v, axis, right, up):
+    """Tangent-plane coordinates (N, 2) of unit directions v (N, 3) and where they are in front of the axis."""
+    c = _dot(v, axis)
+    front = c > 1e-9
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.column_stack([_dot(v, right) / c, _dot(v, up) / c]), front
+
+
+def _spreads(ev, js, theta_w, e0, limit, sigma, dist_m) -> np.ndarray:
+    """:func:`_spread` of each point (scalar arithmetic, Python's math, as one point at a time); NaN where None."""
+    out = [_spread(tw, e, limit, sigma, _position_angle(ev, j, d)) for j, tw, e, d in
+           zip(js.tolist(), theta_w.tolist(), e0.tolist(), dist_m.tolist())]
+    return np.array([np.nan if x is None else x for x in out], float)
+
+
+def _exp(x: np.ndarray) -> np.ndarray:
+    return np.array([math.exp(v) for v in x.tolist()], float)
+
+
+def _make(block, k, mean, sd, js, kind, whys) -> _Cands:
+    n = len(js)
+    return _Cands(np.full(n, block), np.full(n, k), mean.reshape(n, 2), sd, js, np.full(n, kind), whys)
+
+
+def _direct(ev, p, limit) -> _Cands:
+    beam = ev.nominal.beam
+    rel = p - beam.position_m
+    r = np.linalg.norm(rel, axis=1)
+    mean, front = _in_tangents(rel / r[:, None], beam.axis, ev.right, ev.up)
+    w = (beam.diameter_m + r * beam.divergence_rad) / 2
+    e0 = beam.power_w / (math.pi * w * w) * _exp(-ev.mu0 * r)
+    js = np.arange(len(p))
+    sd = _spreads(ev, js, w / r, e0, limit, ev.model.pointing_sigma_rad, r)
+    ok = front & np.isfinite(sd)
+    return _make(0, -1, mean[ok], sd[ok], js[ok], 0, [("direct beam on ", "")])
 
 
 def _flat_mirrors(ev):
@@ -142,51 +191,60 @@ def _flat_mirrors(ev):
             yield sp, frac * math.exp(3 * ev.model.scale_sigma)
 
 
-def _on_plate(t, x) -> bool:
+def _on_plates(t, x) -> np.ndarray:
     q = x - t.center_m
-    a, b = q @ t.tangent, q @ np.cross(t.normal, t.tangent)
+    a, b = _dot(q, t.tangent), _dot(q, np.cross(t.normal, t.tangent))
     s = t.spec.size_m
-    return (abs(a) <= s[0] / 2 and abs(b) <= s[1] / 2) if t.spec.shape == "plate" else a * a + b * b <= (s[0] / 2) ** 2
+    return (np.abs(a) <= s[0] / 2) & (np.abs(b) <= s[1] / 2) if t.spec.shape == "plate" else a * a + b * b <= (s[0] / 2) ** 2
 
 
-def _mirror(ev, p, limit) -> list:
-    beam, lp, out = ev.nominal.beam, ev.nominal.beam.position_m, []
+def _mirror(ev, p, limit) -> _Cands:
+    """Per flat mirror, per point: the pointing that puts its mirror beam on the point,
+    then the tilt that does (in that order, point by point)."""
+    beam, lp, out, js = ev.nominal.beam, ev.nominal.beam.position_m, _Cands.empty(), np.arange(len(p))
+    m = ev.model
     for sp, frac in _flat_mirrors(ev):
         t, c = sp.target, sp.centroid
         n = t.normal
-        for j, q in enumerate(p):
-            image = q - 2 * float((q - c) @ n) * n
-            rel = image - lp
-            L = float(np.linalg.norm(rel))
-            w = float(beam.diameter_at(L)) / 2
-            e0 = frac * beam.power_w / (math.pi * w * w) * math.exp(-ev.mu0 * L)
-            den = float(rel @ n)
-            if ev.model.pointing_sigma_rad > 0 and abs(den) > 1e-12:
-                hit = lp + rel * (float((c - lp) @ n) / den)
-                mean = _in_tangent(rel / L, beam.axis, ev.right, ev.up)
-                sd = _spread(w / L, e0, limit, ev.model.pointing_sigma_rad, _position_angle(ev, j, L))
-                if mean is not None and sd is not None and _on_plate(t, hit):
-                    out.append(("pointing", -1, mean, sd, f"{t.name}'s mirror beam on {ev.point_name(j)} (pointing)", j))
-            if t.index in ev.model.tilt_targets and ev.model.tilt_sigma_rad > 0 and ev.model.wander_times_s is None:
-                u = (q - c) / np.linalg.norm(q - c)
-                n2 = u - sp.mean_incoming
-                n2 /= np.linalg.norm(n2)
-                n2 = n2 if n2 @ n > 0 else -n2
-                delta = np.array([n2 @ t.tangent, n2 @ np.cross(n, t.tangent)]) / float(n2 @ n)
-                l2 = max(float(np.linalg.norm(q - c)), 1e-9)
-                sd = _spread(w / l2, e0, limit, 2 * ev.model.tilt_sigma_rad, _position_angle(ev, j, l2))
-                if sd is not None:
-                    out.append(("tilt", t.index, delta, sd / 2, f"{t.name}'s mirror beam on {ev.point_name(j)} (tilt)", j))
+        image = p - (2 * _dot(p - c, n))[:, None] * n
+        rel = image - lp
+        L = np.linalg.norm(rel, axis=1)
+        w = (beam.diameter_m + L * beam.divergence_rad) / 2
+        e0 = frac * beam.power_w / (math.pi * w * w) * _exp(-ev.mu0 * L)
+        den = _dot(rel, n)
+        parts = []
+        if m.pointing_sigma_rad > 0:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                hit = lp + rel * (float((c - lp) @ n) / den)[:, None]
+            mean, front = _in_tangents(rel / L[:, None], beam.axis, ev.right, ev.up)
+            sd = _spreads(ev, js, w / L, e0, limit, m.pointing_sigma_rad, L)
+            ok = (np.abs(den) > 1e-12) & front & np.isfinite(sd) & _on_plates(t, hit)
+            parts.append((js[ok] * 2, _make(0, -1, mean[ok], sd[ok], js[ok], 0, [(f"{t.name}'s mirror beam on ", " (pointing)")])))
+        if t.index in m.tilt_targets and m.tilt_sigma_rad > 0 and m.wander_times_s is None:
+            qc = p - c
+            l2 = np.linalg.norm(qc, axis=1)
+            n2 = qc / l2[:, None] - sp.mean_incoming
+            n2 = n2 / np.linalg.norm(n2, axis=1)[:, None]
+            n2 = np.where((_dot(n2, n) > 0)[:, None], n2, -n2)
+            delta = np.column_stack([_dot(n2, t.tangent), _dot(n2, np.cross(n, t.tangent))]) / _dot(n2, n)[:, None]
+            l2 = np.maximum(l2, 1e-9)
+            sd = _spreads(ev, js, w / l2, e0, limit, 2 * m.tilt_sigma_rad, l2)
+            ok = np.isfinite(sd)
+            parts.append((js[ok] * 2 + 1, _make(1, t.index, delta[ok], sd[ok] / 2, js[ok], 0, [(f"{t.name}'s mirror beam on ", " (tilt)")])))
+        if parts:
+            both = parts[0][1] if len(parts) == 1 else parts[0][1] + parts[1][1]
+            order = np.argsort(np.concatenate([q for q, _ in parts]), kind="stable")
+            out = out + both.take(order)
     return out
 
 
-def _keep(cands, model, n_observers: int) -> list:
+def _keep(cands: _Cands, model, n_observers: int, name) -> list:
     """Candidates plain draws would rarely reach (Rice chance of landing within the spread
     below 1e-2) out to 6.5 sigma, one per cell of their own spread, at most 64: the
     observers' first (they are people), then the map's, evenly over the distance."""
-    people = _pick(_distinct([c for c in cands if c[5] < n_observers], model), MAX_COMPONENTS)
+    people = _pick(_distinct(cands.take(cands.j < n_observers), model, name), MAX_COMPONENTS)
     room = MAX_COMPONENTS - len(people) if not people else min(MAP_COMPONENTS_BESIDE_OBSERVERS, MAX_COMPONENTS - len(people))
-    return people + _pick(_distinct([c for c in cands if c[5] >= n_observers], model), room)
+    return people + _pick(_distinct(cands.take(cands.j >= n_observers), model, name), room)
 
 
 def _pick(kept, n) -> list:
@@ -195,22 +253,25 @@ def _pick(kept, n) -> list:
     return [c for _, c in kept]
 
 
-def _distinct(cands, model) -> list:
+def _distinct(c: _Cands, model, name) -> list:
+    """The rare and near candidates, the first of each cell of its own spread, nearest the
+    stated mean first (ties in the candidates' order): (distance in sigmas, Component)."""
     from scipy.stats import ncx2
 
-    kept, seen = [], set()
-    for block, k, mean, sd, why, _ in cands:
-        m0, s0 = (np.asarray(model.pointing_bias_rad), model.pointing_sigma_rad) if block == "pointing" else (np.zeros(2), model.tilt_sigma_rad)
-        dist = float(np.linalg.norm(np.asarray(mean) - m0)) / s0
-        rough = float(ncx2.cdf((sd / s0) ** 2, 2, dist**2))  # the chance of landing within sd of the mean (spec section 8)
-        if not (RARE_BELOW > rough and dist <= FAR_SIGMAS):
-            continue
-        key = (block, k, int(round(mean[0] / sd)), int(round(mean[1] / sd)))
-        if key not in seen:
-            seen.add(key)
-            kept.append((dist, Component(block, k, (float(mean[0]), float(mean[1])), float(sd), why)))
-    kept.sort(key=lambda x: x[0])
-    return kept
+    if not len(c.sd):
+        return []
+    tilt = c.block == 1
+    m0 = np.where(tilt[:, None], 0.0, np.asarray(model.pointing_bias_rad, float))
+    s0 = np.where(tilt, model.tilt_sigma_rad, model.pointing_sigma_rad)
+    dist = np.linalg.norm(c.mean - m0, axis=1) / s0
+    rough = ncx2.cdf((c.sd / s0) ** 2, 2, dist**2)  # the chance of landing within sd of the mean (spec section 8)
+    ok = np.flatnonzero((RARE_BELOW > rough) & (dist <= FAR_SIGMAS))
+    key = np.column_stack([c.block[ok], c.k[ok], np.round(c.mean[ok] / c.sd[ok, None])]).astype(np.int64)
+    _, first = np.unique(key, axis=0, return_index=True)  # the first candidate of each cell
+    rows = ok[np.sort(first)]
+    rows = rows[np.argsort(dist[rows], kind="stable")]
+    return [(float(dist[i]), Component("pointing" if c.block[i] == 0 else "tilt", int(c.k[i]), (float(c.mean[i, 0]), float(c.mean[i, 1])),
+                                       float(c.sd[i]), name(int(c.j[i])).join(c.whys[c.why[i]]))) for i in rows]
 
 
 def proposal(ev) -> Proposal:
@@ -218,9 +279,9 @@ def proposal(ev) -> Proposal:
     m = ev.model
     gain = float(ev.own_gain().max()) if len(ev.points_m) else 1.0
     limit = ev.mpe_w_m2 / gain
-    cands = []
-    if m.pointing_sigma_rad > 0:
-        cands += _direct(ev, ev.points_m, limit)
-    if (m.pointing_sigma_rad > 0 or m.tilt_sigma_rad > 0) and ev.nominal.spots:
-        cands += _mirror(ev, ev.points_m, limit)
-    return Proposal(tuple(_keep(cands, m, ev.n_observers)))
+    cands = _Cands.empty()
+    if m.pointing_sigma_rad > 0 and len(ev.points_m):
+        cands = cands + _direct(ev, ev.points_m, limit)
+    if (m.pointing_sigma_rad > 0 or m.tilt_sigma_rad > 0) and ev.nominal.spots and len(ev.points_m):
+        cands = cands + _mirror(ev, ev.points_m, limit)
+    return Proposal(tuple(_keep(cands, m, ev.n_observers, ev.point_name)))

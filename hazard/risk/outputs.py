@@ -17,6 +17,7 @@ import csv
 import io
 import json
 import math
+import uuid
 
 import numpy as np
 
@@ -162,8 +163,19 @@ def write_outputs(outdir, doc: dict, scene, mp: dict | None) -> list:
     atomic_write_text(outdir / "risk.csv", risk_csv(doc["observers"], doc["draws"], inputs))
     written.insert(0, "risk.csv")
     doc["files"] = ["risk.json", *written, "risk.html"] + (["probability_map.png"] if mp is not None else [])
-    atomic_write_text(outdir / "risk.json", json.dumps(doc, indent=1, allow_nan=False, default=_json_default))
+    atomic_write_text(outdir / "risk.json", risk_json_text(doc))
     return doc["files"]
+
+
+def risk_json_text(doc: dict) -> str:
+    """risk.json's text: indented one space per level, but each observer's row on one line,
+    encoded by json's C encoder (an indented encoding runs the per-element Python encoder:
+    3.6 s against 1.0 s for 1e4 observers). The same values; only the layout of the
+    ``observers`` list differs from ``json.dumps(doc, indent=1)``."""
+    mark = f"observers-{uuid.uuid4().hex}"
+    head = json.dumps({**doc, "observers": mark}, indent=1, allow_nan=False, default=_json_default)
+    rows = [json.dumps(r, allow_nan=False, default=_json_default) for r in doc["observers"]]
+    return head.replace(json.dumps(mark), "[" + ",".join("\n  " + r for r in rows) + "\n ]" if rows else "[]", 1)
 
 
 def _json_default(v):

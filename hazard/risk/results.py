@@ -11,7 +11,7 @@ from . import stats
 from .evaluate import map_shape
 from .importance import ALPHA0
 
-__all__ = ["observer_rows", "map_result", "statement", "sensitivity", "lit_quantiles"]
+__all__ = ["observer_rows", "observer_stats", "map_result", "statement", "sensitivity", "lit_quantiles"]
 
 SOBOL_MIN_HITS = 10  # fewer exceedances in the sensitivity sample: apportion the variance of ln(E) instead
 
@@ -28,13 +28,23 @@ def _estimate(over: np.ndarray, w: np.ndarray, importance: bool, n: int) -> stat
     return stats.estimate(*stats.weighted_counts(over, w), n, importance, ALPHA0)
 
 
-def sensitivity(chunks, gains: np.ndarray, active: list) -> list | None:
+def sensitivity(store, gains: np.ndarray, active: list) -> list | None:
     """Per observer: first-order Sobol indices of the exceedance (or of ln ratio when the
-    sample has fewer than 10 exceedances) and the driver; None without a sensitivity sample."""
-    if not chunks:
+    sample has fewer than 10 exceedances) and the driver; None without a sensitivity sample.
+    ``store``: the gathered arrays (:class:`hazard.risk.columns.ColumnStore` with "A" and
+    "C_<group>"), read one block of observers at a time."""
+    if store is None or "A" not in store.rows:
         return None
-    a = np.concatenate([c["A"] for c in chunks]) * gains
-    cs = {g: np.concatenate([c[f"C_{g}"] for c in chunks]) * gains for g in active}
+    out = []
+    for j0, j1 in store.bounds["A"]:
+        g = gains[j0:j1]
+        a = store.block("A", j0, j1) * g
+        cs = {k: store.block(f"C_{k}", j0, j1) * g for k in active}
+        out += _sensitivity_block(a, cs, active)
+    return out
+
+
+def _sensitivity_block(a: np.ndarray, cs: dict, active: list) -> list:
     over = a >= 1.0
     hits = over.sum(axis=0) + sum((c >= 1.0).sum(axis=0) for c in cs.values())
     ind = stats.sobol_first_order(over.astype(float), {g: (c >= 1.0).astype(float) for g, c in cs.items()})
@@ -100,50 +110,74 @@ def _quantile_dict(q: np.ndarray, j: int, scale: float = 1.0) -> dict:
             for i, x in enumerate(stats.QUANTILES)}
 
 
-def observer_rows(ev, s, chunks, sens) -> list:
+class _Columns:
+    """Per observer (M,) arrays filled block by block (:func:`observer_stats`)."""
+
+    def __init__(self, m: int, n_aids: int):
+        self.p, self.lo, self.hi, self.hits, self.n_eff = (np.empty(m) for _ in range(5))
+        self.q, self.q_lit = np.empty((len(stats.QUANTILES), m)), np.empty((len(stats.QUANTILES), m))
+        self.lit_frac = np.empty(m)
+        self.aided = [(np.empty(m), np.empty(m), np.empty(m)) for _ in range(n_aids)]
+        self.method = None
+
+
+def observer_stats(ev, s, gathered) -> _Columns:
+    """The per-observer statistics from the gathered ratios (:func:`hazard.risk.run.gather`),
+    one block of observers at a time: the same values as from the whole (draws, M) array."""
+    imp = s.sampling == "importance"
+    w = np.exp(gathered.log_weight)
+    gains = ev.own_gain()[: s.n_observers]
+    aids = _aids(ev.scene)
+    out = _Columns(s.n_observers, len(aids))
+    for j0, j1, r in gathered.store.blocks("ratio"):
+        own = r * gains[j0:j1]
+        est = _estimate(own >= 1.0, w, imp, s.draws)
+        out.p[j0:j1], out.lo[j0:j1], out.hi[j0:j1], out.hits[j0:j1], out.n_eff[j0:j1] = est.p, est.lo, est.hi, est.hits, est.n_eff
+        out.method = est.method
+        out.q[:, j0:j1] = stats.weighted_quantiles(own, w if imp else None)
+        out.lit_frac[j0:j1], out.q_lit[:, j0:j1] = lit_quantiles(own, w if imp else None)
+        del own
+        for (_, g), cols in zip(aids, out.aided):
+            e = _estimate(r * g >= 1.0, w, imp, s.draws)
+            cols[0][j0:j1], cols[1][j0:j1], cols[2][j0:j1] = e.p, e.lo, e.hi
+    return out
+
+
+def observer_rows(ev, s, gathered, sens) -> list:
     """One dict per observer point (see risk.json ``observers``)."""
     m = s.n_observers
     if m == 0:
         return []
-    r = np.concatenate([c["ratio"] for c in chunks.main]) if chunks.main else np.zeros((0, m))
-    w = np.exp(np.concatenate([c["log_weight"] for c in chunks.main])) if chunks.main else np.zeros(0)
-    imp = s.sampling == "importance"
+    c = observer_stats(ev, s, gathered)
+    aided = [(a, g, cols) for (a, g), cols in zip(_aids(ev.scene), c.aided)]
     gains = ev.own_gain()[:m]
-    own = r * gains
-    est = _estimate(own >= 1.0, w, imp, s.draws)
-    q = stats.weighted_quantiles(own, w if imp else None)
-    lit_frac, q_lit = lit_quantiles(own, w if imp else None)
-    aided = [(a, g, _estimate(r * g >= 1.0, w, imp, s.draws)) for a, g in _aids(ev.scene)]
-    ops = _operations(est, ev.scene.spec.uncertainty.operations)
+    ops = _operations(stats.Estimate(c.p, c.lo, c.hi, c.hits, c.n_eff, c.method), ev.scene.spec.uncertainty.operations)
     labels = ev.labels
     pos = ev.points_m[:m] + ev.scene.offset_m
     rows = []
     for j in range(m):
         rows.append({
             "name": labels[j], "position_m": [float(x) for x in pos[j]], "optical_gain": float(gains[j]),
-            "probability_exceed": float(est.p[j]), "probability_ci_low": float(est.lo[j]), "probability_ci_high": float(est.hi[j]),
-            "ci_method": est.method, "hits": int(est.hits[j]), "effective_draws": float(est.n_eff[j]),
-            "hazard_ratio_quantiles": {f"p{int(round(100 * x))}": float(q[i, j]) for i, x in enumerate(stats.QUANTILES)},
-            "irradiance_quantiles_w_m2": {f"p{int(round(100 * x))}": float(q[i, j] * ev.mpe_w_m2) for i, x in enumerate(stats.QUANTILES)},
-            "lit_fraction": float(lit_frac[j]), "hazard_ratio_quantiles_lit": _quantile_dict(q_lit, j),
+            "probability_exceed": float(c.p[j]), "probability_ci_low": float(c.lo[j]), "probability_ci_high": float(c.hi[j]),
+            "ci_method": c.method, "hits": int(c.hits[j]), "effective_draws": float(c.n_eff[j]),
+            "hazard_ratio_quantiles": {f"p{int(round(100 * x))}": float(c.q[i, j]) for i, x in enumerate(stats.QUANTILES)},
+            "irradiance_quantiles_w_m2": {f"p{int(round(100 * x))}": float(c.q[i, j] * ev.mpe_w_m2) for i, x in enumerate(stats.QUANTILES)},
+            "lit_fraction": float(c.lit_frac[j]), "hazard_ratio_quantiles_lit": _quantile_dict(c.q_lit, j),
             "aided": [{"magnification": a.magnification, "objective_diameter_m": a.objective_diameter_m, "gain": float(g),
-                       "probability_exceed": float(e.p[j]), "probability_ci_low": float(e.lo[j]), "probability_ci_high": float(e.hi[j])}
+                       "probability_exceed": float(e[0][j]), "probability_ci_low": float(e[1][j]), "probability_ci_high": float(e[2][j])}
                       for a, g, e in aided],
             "operations": ops[j], "sensitivity": None if sens is None else sens[j],
-            "statement": statement(float(est.p[j]), float(est.lo[j]), float(est.hi[j]), s.draws),
+            "statement": statement(float(c.p[j]), float(c.lo[j]), float(c.hi[j]), s.draws),
         })
     return rows
 
 
-def map_result(ev, s, chunks) -> dict | None:
+def map_result(ev, s, gathered) -> dict | None:
     """The probability map: cell centres (world) and per cell the probability and its interval."""
     n_map = s.n_points - s.n_observers
     if n_map == 0:
         return None
-    hits = sum(c["map_hits"] for c in chunks.main)
-    sw = sum(c["map_sum_w"] for c in chunks.main)
-    sw2 = sum(c["map_sum_w2"] for c in chunks.main)
-    est = stats.estimate(hits, sw, sw2, s.draws, s.sampling == "importance", ALPHA0)
+    est = stats.estimate(gathered.map_hits, gathered.map_sum_w, gathered.map_sum_w2, s.draws, s.sampling == "importance", ALPHA0)
     spec = ev.scene.spec.uncertainty.map
     pts = ev.points_m[s.n_observers:] + ev.scene.offset_m
     return {"points_m": pts, "shape": map_shape(spec), "probability": est.p, "ci_low": est.lo, "ci_high": est.hi,

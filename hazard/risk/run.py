@@ -26,9 +26,10 @@ import numpy as np
 
 from brdfmodels._io import atomic_write, atomic_write_text
 
+from .columns import ColumnStore
 from .stats import weighted_counts
 
-__all__ = ["RiskSettings", "settings", "tasks", "run_task", "run_chunks", "Chunks", "ChunksFailed"]
+__all__ = ["RiskSettings", "settings", "tasks", "run_task", "run_chunks", "Chunks", "ChunksFailed", "gather", "Gathered"]
 
 VERSION = "risk-1"
 POINT_VALUES_PER_CHUNK = 2_000_000  # draws x points held at once by one task (16 MB of float64)
@@ -178,12 +179,58 @@ def _prepare(outdir: Path, digest: str, force: bool) -> Path:
 
 @dataclass
 class Chunks:
-    """Every chunk's arrays in order, and how many ran now and were found done."""
+    """Every chunk's file in order (read back one at a time: :func:`gather`), and how many
+    ran now and were found done."""
 
     main: list
     sensitivity: list
     ran: int
     reused: int
+
+
+@dataclass
+class Gathered:
+    """The chunks reduced in chunk order: the draws' log weights (draws,), the map's sums
+    (0 without chunks) and the per-draw observer arrays in a :class:`ColumnStore` (None
+    without observers): "ratio" (draws, M), and "A", "C_<group>" (sensitivity draws, M)."""
+
+    log_weight: np.ndarray
+    map_hits: object
+    map_sum_w: object
+    map_sum_w2: object
+    store: ColumnStore | None
+
+
+def _load(path: Path, keys=None) -> dict:
+    with np.load(path) as z:
+        return {k: z[k] for k in (z.files if keys is None else keys)}
+
+
+def gather(chunks: Chunks, s: RiskSettings, groups, folder) -> Gathered:
+    """Read the chunks once, in order: the map's counts summed as they come (the same
+    additions, in the same order, as summing the kept chunks), the observers' arrays copied
+    into a :class:`ColumnStore` in ``folder`` (the caller closes it). Memory: one chunk."""
+    rows = {"ratio": s.draws} if s.n_observers else {}
+    if s.n_observers and chunks.sensitivity:
+        rows.update({k: s.sensitivity_draws for k in ["A", *[f"C_{g}" for g in groups]]})
+    store = ColumnStore(folder, rows, s.n_observers) if rows else None
+    lw, hits, sw, sw2 = [], 0, 0, 0
+    try:
+        for p in chunks.main:
+            c = _load(p)
+            lw.append(c["log_weight"])
+            hits, sw, sw2 = hits + c["map_hits"], sw + c["map_sum_w"], sw2 + c["map_sum_w2"]
+            if store is not None:
+                store.append("ratio", c["ratio"])
+        for p in chunks.sensitivity if store is not None and "A" in rows else ():
+            c = _load(p)
+            for k in c:
+                store.append(k, c[k])
+    except BaseException:
+        if store is not None:
+            store.close()
+        raise
+    return Gathered(np.concatenate(lw) if lw else np.zeros(0), hits, sw, sw2, store)
 
 
 def _name(task) -> str:
@@ -256,5 +303,5 @@ def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False
             missing = [t for t in todo if not (cdir / _name(t)).exists()]
             raise ChunksFailed(len(failed), len(todo), len(missing) - len(failed), failure_kinds(failed.values()),
                                sum(t[2] for t in failed))
-    loaded = {t: dict(np.load(cdir / _name(t))) for t in todo}
-    return Chunks([loaded[t] for t in todo if t[0] == "m"], [loaded[t] for t in todo if t[0] == "s"], len(pending), len(todo) - len(pending))
+    return Chunks([cdir / _name(t) for t in todo if t[0] == "m"], [cdir / _name(t) for t in todo if t[0] == "s"], len(pending),
+                  len(todo) - len(pending))

@@ -102,3 +102,65 @@ def test_a_target_the_beam_misses_is_said_to_get_only_its_wing(tmp_path):
     assert report.report_dict(hazard.analyze(scenes.loads(thick)))["targets"][0]["hit"] == "beam"  # e^-500 of air, on axis
     far = SCENE.replace("position_m = [0.0, -50.0, 0.0]", "position_m = [0.0, -1e8, 0.0]")
     assert report.report_dict(hazard.analyze(scenes.loads(far)))["targets"][0]["hit"] == "beam"  # a 1e5 m beam on a 1 m plate
+
+
+def _csv_module_text(result) -> bytes:
+    """observers.csv written here with the csv module from the analysis's arrays: str() of
+    each Python float (its repr), True/False, an empty cell where NaN means "not applicable"."""
+    import io
+
+    cols = report.observer_columns(result)
+    blank = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"}
+    names = report.CSV_COLUMNS[4:]
+    buf = io.StringIO()
+    w = csv.writer(buf)  # QUOTE_MINIMAL, "\r\n": the format observers.csv promises
+    w.writerow(report.CSV_COLUMNS)
+    pos = np.asarray(cols["position_m"]).tolist()
+    values = {k: np.asarray(cols[k]).tolist() for k in names}
+    for i, label in enumerate(cols["labels"]):
+        row = [label, *pos[i]]
+        for k in names:
+            v = values[k][i]
+            row.append("" if (k in blank and v != v) else v)
+        w.writerow(row)
+    return buf.getvalue().encode()
+
+
+def test_streamed_csv_is_the_csv_module_table_byte_for_byte(tmp_path, result):
+    """observers.csv is written in blocks of rows (issue 37 item 3): the file equals the
+    table the csv module writes from the arrays, whatever the block size (2 rows here)."""
+    expected = _csv_module_text(result)
+    report.write_outputs(result, tmp_path / "o")
+    assert (tmp_path / "o" / "observers.csv").read_bytes() == expected
+    cols = report.observer_columns(result)
+    for rows in (1, 2, 7, 10_000):
+        assert "".join(report._csv_chunks(result, cols, rows)).encode() == expected
+
+
+def test_csv_reprs_of_repeated_and_signed_values():
+    """A column's repeated values are formatted once: -0.0, NaN and inf keep their own text."""
+    v = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, 0.1] * 50 + [2.5] * 30)
+    assert report._csv_cell(v, "x") == [repr(x) for x in v.tolist()]
+    assert report._csv_cell(v, "first_exceedance_s") == ["" if x != x else repr(x) for x in v.tolist()]
+    flags = np.array([True, False, False] * 9)
+    assert report._csv_cell(flags, "hazardous") == [str(x) for x in flags.tolist()]
+
+
+def test_report_rows_are_json_safe_column_by_column():
+    """report.json's observer rows are built from the columns: a non-finite value is the
+    string "inf"/"-inf"/"nan" (JSON has no such numbers), NaN where it means "not
+    applicable" is null, bools stay bools; the file puts one row per line."""
+    inf, nan = float("inf"), float("nan")
+    cols = {"labels": ["a", "b,c", "d"], "position_m": np.array([[0.0, 1.0, 2.0], [3.0, 4.0, 5.0], [6.0, 7.0, 8.0]]),
+            "hazard_ratio": np.array([0.5, inf, nan]), "first_exceedance_s": np.array([nan, 2.0, -inf]),
+            "hazardous": np.array([False, True, True])}
+    rows = report.observer_rows(None, np.arange(3), cols)
+    assert rows == [
+        {"name": "a", "position_m": [0.0, 1.0, 2.0], "hazard_ratio": 0.5, "first_exceedance_s": None, "hazardous": False},
+        {"name": "b,c", "position_m": [3.0, 4.0, 5.0], "hazard_ratio": "inf", "first_exceedance_s": 2.0, "hazardous": True},
+        {"name": "d", "position_m": [6.0, 7.0, 8.0], "hazard_ratio": "nan", "first_exceedance_s": None, "hazardous": True}]
+    doc = {"format": "x", "observers": rows, "after": {"k": [1, 2]}}
+    text = report.report_json_text(doc)
+    assert json.loads(text) == doc
+    assert [line.rstrip(",") for line in text.splitlines() if line.startswith("  {")] == ["  " + json.dumps(r) for r in rows]
+    assert json.loads(report.report_json_text({"observers": []})) == {"observers": []}
