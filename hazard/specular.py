@@ -313,13 +313,7 @@ def _bisect_specular(spot, obs):
     the in-plane lengths (collimated: ``z_O - L_2 d_z / |d_in-plane|``). Rows with O on
     the ray from c through S get the back-reflection point; the caller checks the law."""
     beam = spot.beam
-    an = spot.target.mesh.analytic
-    c, r = an[1], (an[2] if an[0] == "sphere" else an[3])
-    ax = None if an[0] == "sphere" else np.asarray(an[2], float)
-
-    def flat(v):
-        return v if ax is None else v - (v @ ax)[..., None] * ax
-
+    c, r, ax, flat = _section(spot)
     o = flat(obs - c)
     if beam.divergence_rad > 0:
         src = beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad)
@@ -660,10 +654,10 @@ def _straddle_needed(spot, obs, reach_m) -> np.ndarray:
     return need
 
 
-def _disk_in_shadow(spot, obs, a) -> np.ndarray:
-    """Observers whose ball of radius a (M,) lies wholly in the mirror's own shadow
-    (:func:`_straddle_needed`)."""
-    beam = spot.beam
+def _section(spot):
+    """A sphere's or cylinder's centre c, radius r [m], axis (None for a sphere) and the
+    projection onto its section plane (along a cylinder's axis; a sphere's: the identity),
+    where its reflection is a circle's."""
     an = spot.target.mesh.analytic
     c, r = an[1], (an[2] if an[0] == "sphere" else an[3])
     ax = None if an[0] == "sphere" else np.asarray(an[2], float)
@@ -671,6 +665,14 @@ def _disk_in_shadow(spot, obs, a) -> np.ndarray:
     def flat(v):
         return v if ax is None else v - (v @ ax)[..., None] * ax
 
+    return c, r, ax, flat
+
+
+def _disk_in_shadow(spot, obs, a) -> np.ndarray:
+    """Observers whose ball of radius a (M,) lies wholly in the mirror's own shadow
+    (:func:`_straddle_needed`)."""
+    beam = spot.beam
+    c, r, ax, flat = _section(spot)
     o = flat(obs - c)
     if beam.divergence_rad > 0:
         sv = flat(beam.position_m - beam.axis * (beam.diameter_m / beam.divergence_rad) - c)
