@@ -215,6 +215,73 @@ def _inside_expanded(s, outline, reach_s, inside_convex):
     return out
 
 
+def _facet_triangles_s(spot, faces):
+    """The triangles (F, 3, 2) of a flat facet (global ids ``faces``) in beam coordinates
+    s, or None where they cannot be matched to the target's mesh. The central projection
+    from the beam's virtual source keeps s constant along each ray, so a planar triangle
+    projects to a triangle (NaN vertices: behind the virtual source)."""
+    if spot.ray_faces is None or spot.target.mesh is None:
+        return None
+    ids, _, first = spot.ray_faces
+    local = np.searchsorted(ids, faces)
+    mesh = spot.target.mesh
+    if np.any(local >= len(ids)) or len(ids) != len(mesh.faces) or np.any(ids[np.minimum(local, len(ids) - 1)] != faces):
+        return None
+    tri = np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)[local]]
+    if not np.allclose(tri[:, 0], first[local], rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(first).max()))):
+        return None  # the tracer's triangles are not the mesh's: unknown outline
+    s, _ = spot.beam.to_s(tri.reshape(-1, 3))
+    return s.reshape(-1, 3, 2)
+
+
+def _near_triangles(p, tri, r) -> np.ndarray:
+    """Points p (N, 2) within r (N,) of any triangle (T, 3, 2): inside one with its edges
+    moved out by r (a superset of the disks that overlap it). A triangle with a
+    non-finite vertex counts as everywhere (conservative); degenerate ones (edge-on to
+    the rays, they reflect nothing) as nowhere."""
+    out = np.zeros(len(p), bool)
+    if not len(tri) or not len(p):
+        return out
+    if not np.all(np.isfinite(tri)):
+        out[:] = True
+        return out
+    e = np.roll(tri, -1, axis=1) - tri  # (T, 3, 2)
+    area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    keep = np.abs(area2) > 1e-12 * (1.0 + (tri * tri).sum(axis=(1, 2)))
+    tri, e, orient = tri[keep], e[keep], np.sign(area2[keep])
+    length = np.sqrt((e * e).sum(-1))  # (T, 3)
+    step = max(1, 2_000_000 // (3 * max(len(tri), 1)))
+    for a in range(0, len(p), step):
+        rel = p[a:a + step, None, None, :] - tri[None]  # (n, T, 3, 2)
+        cross = e[None, ..., 0] * rel[..., 1] - e[None, ..., 1] * rel[..., 0]
+        inside = orient[None, :, None] * cross >= -r[a:a + step, None, None] * length[None] - 1e-12
+        out[a:a + step] = np.any(np.all(inside, axis=2), axis=1)
+    return out
+
+
+def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
+    """Images (transverse s (N, 2), units of w; NaN: none) of eyes lit through a flat
+    facet by the Gaussian's tail beyond the sampled square (``|s_i| >= HALF_WIDTH``),
+    where no cell says what the rays hit (issue 29): there the tail (below exp(-16) =
+    1.1e-7 of the peak, still above the MPE for a beam of tens of kilowatts) is taken to
+    reach the facet unshadowed (conservative, as :func:`_lit_or_tail` for curved sides),
+    within the facet's own outline (its triangles projected into s). With ``reach_s``
+    (an aperture of that radius about s): lit when the disk reaches beyond the square and
+    comes within reach_s of the facet (a superset of the disks overlapping its part
+    there). Without the facet's triangles the facet's plane counts as unbounded."""
+    from .beam import HALF_WIDTH
+
+    r = np.zeros(len(s)) if reach_s is None else np.asarray(reach_s, float)
+    finite = np.all(np.isfinite(s), axis=1)
+    beyond = np.flatnonzero(finite & (np.abs(np.nan_to_num(s)).max(axis=1) + r >= HALF_WIDTH))
+    out = np.zeros(len(s), bool)
+    if not len(beyond):
+        return out
+    tri = _facet_triangles_s(spot, faces)
+    out[beyond] = True if tri is None else _near_triangles(s[beyond], tri, r[beyond])
+    return out
+
+
 def _flat_geometry(spot, plane, obs, reach_m=None):
     """Per observer through one flat facet: (mask, E_geo, point X, unit incoming d,
     the image's s and axial z). ``reach_m`` (per observer, [m]): the radius of the
@@ -234,7 +301,10 @@ def _flat_geometry(spot, plane, obs, reach_m=None):
     reach_s = None
     if reach_m is not None:
         reach_s = np.asarray(reach_m, float) / (beam.diameter_at(np.where(ok, z, 1.0)) / 2)
-    ok &= _lit(spot, np.nan_to_num(s, nan=1e9), faces, reach_s)
+    lit = _lit(spot, np.nan_to_num(s, nan=1e9), faces, reach_s)
+    if spot.outline_s is None:  # cells end at the sampled square: the tail beyond it (issue 29)
+        lit |= _tail_lit(spot, s, faces, reach_s)
+    ok &= lit
     e = np.where(ok, beam.irradiance_w_m2(np.nan_to_num(s), np.where(ok, z, 1.0)), 0.0)
     return ok, e, x, _unit(d), s, z
 
