@@ -268,17 +268,29 @@ def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
     within the facet's own outline (its triangles projected into s). With ``reach_s``
     (an aperture of that radius about s): lit when the disk reaches beyond the square and
     comes within reach_s of the facet (a superset of the disks overlapping its part
-    there). Without the facet's triangles the facet's plane counts as unbounded."""
+    there). Without the facet's triangles the facet's plane counts as unbounded. Disks
+    deeper than ``exp(-_TAIL_EXPONENT)`` (where the engine's value underflows to 0 anyway)
+    are not tested."""
     from .beam import HALF_WIDTH
 
     r = np.zeros(len(s)) if reach_s is None else np.asarray(reach_s, float)
     finite = np.all(np.isfinite(s), axis=1)
-    beyond = np.flatnonzero(finite & (np.abs(np.nan_to_num(s)).max(axis=1) + r >= HALF_WIDTH))
+    s0 = np.nan_to_num(s)
+    gap = np.maximum(np.sqrt((s0 * s0).sum(axis=1)) - r, 0.0)  # the disk's nearest approach to the axis
+    # deeper than exp(-_TAIL_EXPONENT) the engine's own value is 0: nothing to light
+    beyond = np.flatnonzero(finite & (np.abs(s0).max(axis=1) + r >= HALF_WIDTH) & (gap * gap <= _TAIL_EXPONENT))
     out = np.zeros(len(s), bool)
     if not len(beyond):
         return out
     tri = _facet_triangles_s(spot, faces)
-    out[beyond] = True if tri is None else _near_triangles(s[beyond], tri, r[beyond])
+    if tri is None:
+        out[beyond] = True
+        return out
+    if np.all(np.isfinite(tri)):  # the facet's bounding box in s first (cheap)
+        lo, hi = tri.min(axis=(0, 1)), tri.max(axis=(0, 1))
+        sb, rb = s[beyond], r[beyond]
+        beyond = beyond[np.all((sb >= lo - rb[:, None]) & (sb <= hi + rb[:, None]), axis=1)]
+    out[beyond] = _near_triangles(s[beyond], tri, r[beyond])
     return out
 
 
