@@ -150,7 +150,9 @@ def _planes(spot):
         planes.append((n, t.center_m, _target_faces(spot)))
     elif spot.ray_faces is not None:
         faces, normals, points = spot.ray_faces
-        flat = np.isin(faces, _target_faces(spot))  # lit facets only
+        flat = np.isin(faces, _target_faces(spot))  # lit facets
+        if spot.outline_s is None:  # and those only the tail beyond the sampled square reaches (issue 29)
+            flat |= _tail_facets(spot, faces, normals, d) & ~flat
         flat &= ~curved_face_mask(t)  # a curved mesh's facets are traced by hazard.mesh_mirror
         if t.mesh.analytic is not None:
             if t.mesh.analytic[0] == "sphere":
@@ -172,6 +174,35 @@ def _planes(spot):
                 planes.append((n, points[sel][0], faces[sel]))
     spot._planes_cache = planes
     return planes
+
+
+def _tail_facets(spot, faces, normals, d) -> np.ndarray:
+    """Facets (global ids ``faces``, unit ``normals`` as the mesh orients them) that no cell
+    lit but the Gaussian's tail beyond the sampled square may reach: facing the beam
+    (``normals . d < 0``), their projection in s not wholly inside the square (inside it
+    the cells say they are not hit) and within ``sqrt(_TAIL_EXPONENT)`` of the axis (deeper
+    the engine's value is 0). A box's side face next to a front face whose edge lies beyond
+    4 w got 0 before (issue 29). Facets whose outline is unknown: all facing ones."""
+    from .beam import HALF_WIDTH
+
+    cand = np.flatnonzero((normals @ d) < 0)
+    out = np.zeros(len(faces), bool)
+    if not len(cand):
+        return out
+    tri = _facet_triangles_s(spot, faces[cand])
+    if tri is None:
+        out[cand] = True
+        return out
+    bad = ~np.all(np.isfinite(tri), axis=(1, 2))
+    t = np.nan_to_num(tri)
+    inside = np.all(np.abs(t) < HALF_WIDTH, axis=(1, 2))
+    e = np.roll(t, -1, axis=1) - t
+    area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    cross = e[..., 0] * (-t[..., 1]) - e[..., 1] * (-t[..., 0])  # the origin against each edge
+    length = np.sqrt((e * e).sum(-1))
+    near = np.all(np.sign(area2)[:, None] * cross >= -math.sqrt(_TAIL_EXPONENT) * length, axis=1)
+    out[cand] = bad | (near & ~inside & (np.abs(area2) > 0))
+    return out
 
 
 def _lit(spot, s, faces=None, reach_s=None):

@@ -145,6 +145,31 @@ def test_flat_facet_tail_point_values(shape, tmp_path):
     assert got_small[0] > 0 and got_small[1] == 0.0, got_small
 
 
+@pytest.mark.parametrize("shape", ["box", "mesh"])
+def test_side_face_lit_only_by_the_tail(shape, tmp_path):
+    """A 0.25 m box turned 30 degrees: its front face and one side face both face the beam
+    (along +y); the beam's axis runs 4.2 and 4.5 w (2 mm) inside the front face from their
+    shared edge, so no cell of the +-4 w square reaches the side face. An eye 1 m along the
+    side face's reflection of the ray 0.3 w beyond the edge gets ``rho E_beam(O')`` (its
+    image in the side face's plane: 13 and 0.87 W/m^2 at 100 kW, point values); before, 0
+    (that face was not among the spot's facets at all)."""
+    h = 0.25
+    n = np.array([-0.5, -math.sqrt(3) / 2, 0.0])  # the front face, through the origin
+    m = -np.cross(n, [0.0, 0.0, 1.0])  # the side face, facing the beam
+    edge = m * h / 2  # a point of the shared edge (z = 0)
+    for k in (4.2, 4.5):
+        beam = _beam(aim=(edge[0] - k * 2e-3, 0.0, 0.0))
+        start = np.array([edge[0] + 0.3 * 2e-3, -100.0, 0.0])
+        hit = start + float((edge - start) @ m) / float(beam.u @ m) * beam.u
+        eye = hit + ref.reflect(beam.u, m)
+        image = eye - 2 * float((eye - edge) @ m) * m
+        want = RHO * beam.irradiance_at(image)
+        scene = _scene(beam, shape, n, [eye], edge=h, tmp_path=tmp_path)
+        got = specular_irradiance(_spot(scene), np.array([eye]) - scene.offset_m, np.ones(1), 0.0)[0]
+        assert want > 0.5 and got >= want * (1 - _ROUNDING), (k, got, want)
+        assert got <= want * (1 + 1e-5), (k, got, want)
+
+
 # ------------------------------------------------------------------ random facets
 
 
