@@ -12,6 +12,10 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   length, so a mirror smaller than the beam keeps the full beam's local peak near the
   mirror and its lateral extent is cut by the mirror's outline. No diffraction credit
   (the Fraunhofer spread of a small mirror would lower far irradiance: not taken).
+  Beyond the beam's sampled square (+-4 w), where no cell says what the rays hit, the
+  Gaussian's tail lights a box's or mesh's facet within its own outline, unshadowed
+  (conservative), facets no cell reached included (:func:`_tail_lit`,
+  :func:`_tail_facets`; plates and disks have their exact outline).
 * **Convex sphere and cylinder** (exact normals): the specular point P is found by
   iterating the reflection law from the virtual source to O (by bisection in the plane of
   reflection where the iteration diverges, close to a large mirror); the Gaussian's tail
