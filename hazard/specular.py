@@ -155,7 +155,9 @@ def _planes(spot):
     elif spot.ray_faces is not None:
         faces, normals, points = spot.ray_faces
         flat = np.isin(faces, _target_faces(spot))  # lit facets
-        if spot.outline_s is None:  # and those only the tail beyond the sampled square reaches (issue 29)
+        if spot.outline_s is None and getattr(t.spec, "shape", None) in ("box", "mesh"):
+            # and those only the tail beyond the sampled square reaches (issue 29); not the
+            # terrain's many facets (a grazing beam's tail spans hundreds: 45x the time)
             flat |= _tail_facets(spot, faces, normals, d) & ~flat
         flat &= ~curved_face_mask(t)  # a curved mesh's facets are traced by hazard.mesh_mirror
         if t.mesh.analytic is not None:
