@@ -12,6 +12,10 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   length, so a mirror smaller than the beam keeps the full beam's local peak near the
   mirror and its lateral extent is cut by the mirror's outline. No diffraction credit
   (the Fraunhofer spread of a small mirror would lower far irradiance: not taken).
+  Beyond the beam's sampled square (+-4 w), where no cell says what the rays hit, the
+  Gaussian's tail lights a box's or mesh's facet within its own outline, unshadowed
+  (conservative), facets no cell reached included (:func:`_tail_lit`,
+  :func:`_tail_facets`; plates and disks have their exact outline).
 * **Convex sphere and cylinder** (exact normals): the specular point P is found by
   iterating the reflection law from the virtual source to O (by bisection in the plane of
   reflection where the iteration diverges, close to a large mirror); the Gaussian's tail
@@ -150,7 +154,11 @@ def _planes(spot):
         planes.append((n, t.center_m, _target_faces(spot)))
     elif spot.ray_faces is not None:
         faces, normals, points = spot.ray_faces
-        flat = np.isin(faces, _target_faces(spot))  # lit facets only
+        flat = np.isin(faces, _target_faces(spot))  # lit facets
+        if spot.outline_s is None and getattr(t.spec, "shape", None) in ("box", "mesh"):
+            # and those only the tail beyond the sampled square reaches (issue 29); not the
+            # terrain's many facets (a grazing beam's tail spans hundreds: 45x the time)
+            flat |= _tail_facets(spot, faces, normals, d) & ~flat
         flat &= ~curved_face_mask(t)  # a curved mesh's facets are traced by hazard.mesh_mirror
         if t.mesh.analytic is not None:
             if t.mesh.analytic[0] == "sphere":
@@ -172,6 +180,35 @@ def _planes(spot):
                 planes.append((n, points[sel][0], faces[sel]))
     spot._planes_cache = planes
     return planes
+
+
+def _tail_facets(spot, faces, normals, d) -> np.ndarray:
+    """Facets (global ids ``faces``, unit ``normals`` as the mesh orients them) that no cell
+    lit but the Gaussian's tail beyond the sampled square may reach: facing the beam
+    (``normals . d < 0``), their projection in s not wholly inside the square (inside it
+    the cells say they are not hit) and within ``sqrt(_TAIL_EXPONENT)`` of the axis (deeper
+    the engine's value is 0). A box's side face next to a front face whose edge lies beyond
+    4 w got 0 before (issue 29). Facets whose outline is unknown: all facing ones."""
+    from .beam import HALF_WIDTH
+
+    cand = np.flatnonzero((normals @ d) < 0)
+    out = np.zeros(len(faces), bool)
+    if not len(cand):
+        return out
+    tri = _facet_triangles_s(spot, faces[cand])
+    if tri is None:
+        out[cand] = True
+        return out
+    bad = ~np.all(np.isfinite(tri), axis=(1, 2))
+    t = np.nan_to_num(tri)
+    inside = np.all(np.abs(t) < HALF_WIDTH, axis=(1, 2))
+    e = np.roll(t, -1, axis=1) - t
+    area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    cross = e[..., 0] * (-t[..., 1]) - e[..., 1] * (-t[..., 0])  # the origin against each edge
+    length = np.sqrt((e * e).sum(-1))
+    near = np.all(np.sign(area2)[:, None] * cross >= -math.sqrt(_TAIL_EXPONENT) * length, axis=1)
+    out[cand] = bad | (near & ~inside & (np.abs(area2) > 0))
+    return out
 
 
 def _lit(spot, s, faces=None, reach_s=None):
@@ -215,6 +252,85 @@ def _inside_expanded(s, outline, reach_s, inside_convex):
     return out
 
 
+def _facet_triangles_s(spot, faces):
+    """The triangles (F, 3, 2) of a flat facet (global ids ``faces``) in beam coordinates
+    s, or None where they cannot be matched to the target's mesh. The central projection
+    from the beam's virtual source keeps s constant along each ray, so a planar triangle
+    projects to a triangle (NaN vertices: behind the virtual source)."""
+    if spot.ray_faces is None or spot.target.mesh is None:
+        return None
+    ids, _, first = spot.ray_faces
+    local = np.searchsorted(ids, faces)
+    mesh = spot.target.mesh
+    if np.any(local >= len(ids)) or len(ids) != len(mesh.faces) or np.any(ids[np.minimum(local, len(ids) - 1)] != faces):
+        return None
+    tri = np.asarray(mesh.vertices, float)[np.asarray(mesh.faces)[local]]
+    if not np.allclose(tri[:, 0], first[local], rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(first).max()))):
+        return None  # the tracer's triangles are not the mesh's: unknown outline
+    s, _ = spot.beam.to_s(tri.reshape(-1, 3))
+    return s.reshape(-1, 3, 2)
+
+
+def _near_triangles(p, tri, r) -> np.ndarray:
+    """Points p (N, 2) within r (N,) of any triangle (T, 3, 2): inside one with its edges
+    moved out by r (a superset of the disks that overlap it). A triangle with a
+    non-finite vertex counts as everywhere (conservative); degenerate ones (edge-on to
+    the rays, they reflect nothing) as nowhere."""
+    out = np.zeros(len(p), bool)
+    if not len(tri) or not len(p):
+        return out
+    if not np.all(np.isfinite(tri)):
+        out[:] = True
+        return out
+    e = np.roll(tri, -1, axis=1) - tri  # (T, 3, 2)
+    area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
+    keep = np.abs(area2) > 1e-12 * (1.0 + (tri * tri).sum(axis=(1, 2)))
+    tri, e, orient = tri[keep], e[keep], np.sign(area2[keep])
+    length = np.sqrt((e * e).sum(-1))  # (T, 3)
+    step = max(1, 2_000_000 // (3 * max(len(tri), 1)))
+    for a in range(0, len(p), step):
+        rel = p[a:a + step, None, None, :] - tri[None]  # (n, T, 3, 2)
+        cross = e[None, ..., 0] * rel[..., 1] - e[None, ..., 1] * rel[..., 0]
+        inside = orient[None, :, None] * cross >= -r[a:a + step, None, None] * length[None] - 1e-12
+        out[a:a + step] = np.any(np.all(inside, axis=2), axis=1)
+    return out
+
+
+def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
+    """Images (transverse s (N, 2), units of w; NaN: none) of eyes lit through a flat
+    facet by the Gaussian's tail beyond the sampled square (``|s_i| >= HALF_WIDTH``),
+    where no cell says what the rays hit (issue 29): there the tail (below exp(-16) =
+    1.1e-7 of the peak, still above the MPE for a beam of tens of kilowatts) is taken to
+    reach the facet unshadowed (conservative, as :func:`_lit_or_tail` for curved sides),
+    within the facet's own outline (its triangles projected into s). With ``reach_s``
+    (an aperture of that radius about s): lit when the disk reaches beyond the square and
+    comes within reach_s of the facet (a superset of the disks overlapping its part
+    there). Without the facet's triangles the facet's plane counts as unbounded. Disks
+    deeper than ``exp(-_TAIL_EXPONENT)`` (where the engine's value underflows to 0 anyway)
+    are not tested."""
+    from .beam import HALF_WIDTH
+
+    r = np.zeros(len(s)) if reach_s is None else np.asarray(reach_s, float)
+    finite = np.all(np.isfinite(s), axis=1)
+    s0 = np.nan_to_num(s)
+    gap = np.maximum(np.sqrt((s0 * s0).sum(axis=1)) - r, 0.0)  # the disk's nearest approach to the axis
+    # deeper than exp(-_TAIL_EXPONENT) the engine's own value is 0: nothing to light
+    beyond = np.flatnonzero(finite & (np.abs(s0).max(axis=1) + r >= HALF_WIDTH) & (gap * gap <= _TAIL_EXPONENT))
+    out = np.zeros(len(s), bool)
+    if not len(beyond):
+        return out
+    tri = _facet_triangles_s(spot, faces)
+    if tri is None:
+        out[beyond] = True
+        return out
+    if np.all(np.isfinite(tri)):  # the facet's bounding box in s first (cheap)
+        lo, hi = tri.min(axis=(0, 1)), tri.max(axis=(0, 1))
+        sb, rb = s[beyond], r[beyond]
+        beyond = beyond[np.all((sb >= lo - rb[:, None]) & (sb <= hi + rb[:, None]), axis=1)]
+    out[beyond] = _near_triangles(s[beyond], tri, r[beyond])
+    return out
+
+
 def _flat_geometry(spot, plane, obs, reach_m=None):
     """Per observer through one flat facet: (mask, E_geo, point X, unit incoming d,
     the image's s and axial z). ``reach_m`` (per observer, [m]): the radius of the
@@ -234,7 +350,10 @@ def _flat_geometry(spot, plane, obs, reach_m=None):
     reach_s = None
     if reach_m is not None:
         reach_s = np.asarray(reach_m, float) / (beam.diameter_at(np.where(ok, z, 1.0)) / 2)
-    ok &= _lit(spot, np.nan_to_num(s, nan=1e9), faces, reach_s)
+    lit = _lit(spot, np.nan_to_num(s, nan=1e9), faces, reach_s)
+    if spot.outline_s is None:  # cells end at the sampled square: the tail beyond it (issue 29)
+        lit |= _tail_lit(spot, s, faces, reach_s)
+    ok &= lit
     e = np.where(ok, beam.irradiance_w_m2(np.nan_to_num(s), np.where(ok, z, 1.0)), 0.0)
     return ok, e, x, _unit(d), s, z
 
