@@ -25,7 +25,7 @@ LIMITS = {
     "POINTS": (100_000, "explicit observer points (points_m): each is a feature of the map outputs"),
     "TARGETS": (100, "targets of a scene"),
     "RISK_EVALUATIONS": (1e8, "point evaluations of a risk analysis ((draws + sensitivity sets) x (points + map cells))"),
-    "BEAM_SAMPLES": (262_144, "rays across the beam cross-section (analysis.beam_samples)"),
+    "BEAM_SAMPLES": (65_536, "rays across the beam cross-section (analysis.beam_samples)"),
     "TIME_STEPS": (100_000, "time steps of a dynamic analysis (time_end_s / time_step_s)"),
     "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
     "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
