@@ -297,6 +297,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     mu = limits.attenuation_per_m(scene.spec)
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(getattr(scene, "notes", None) or []) + list(traced.notes)  # the beam's convention first (scenes.conventions)
+    notes.extend(beam_stage.tail_notes(scene, traced.beam, traced.built.spots, exposure.irradiance_w_m2, mu))
     scene = _crossings(scene, traced, tracer, mu, exposure.irradiance_w_m2, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan, ray_scene)
     spill_part = _spill(scene, traced, mu, exposure, log)

@@ -16,7 +16,7 @@ from ..beam import BeamGeometry, sample_cells
 from ..engine import build_spots, flat_outlines
 from ..results import TargetResult
 
-__all__ = ["BeamStage", "ray_scene", "scene_beam", "trace_beam", "unlit_targets"]
+__all__ = ["BeamStage", "ray_scene", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
 
 
 class FlatScene:
@@ -186,6 +186,64 @@ def unlit_targets(targets, spots, unreflected) -> list:
         side = "; ".join(f"{s} face lit, not reflected" if s != "unresolved" else "only unresolved beam cells" for s, _ in parts) or "not lit"
         rows.append(TargetResult(t.name, power, 0.0, None, None, None, None, None, None, None, lit_side=side))
     return rows
+
+
+TAIL_NOTE_FRACTION = 0.01  # a target the sampled beam misses is said where the tail there reaches this fraction of the MPE
+TAIL_EDGE_POINTS = 65  # points per mesh edge where its distance from the beam's axis is taken
+
+
+def tail_notes(scene, beam, spots, mpe_w_m2: float, mu: float) -> list[str]:
+    """A note for every target the sampled beam (+-``HALF_WIDTH`` 1/e radii) does not light
+    but whose nearest edge lies where the beam's Gaussian tail still reaches
+    ``TAIL_NOTE_FRACTION`` of the MPE: its reflection of that tail is NOT computed (a
+    mirror there reflects up to the tail's irradiance), so it is said, never dropped.
+
+    The nearest approach is taken over the mesh's edges (:func:`_nearest_in_beam`; a face
+    the axis pierces is lit by the sampled beam). The tail's irradiance there:
+    ``P / (pi w^2) exp(-s^2) exp(-mu z)``."""
+    from ..beam import HALF_WIDTH
+
+    lit = {sp.target.index for sp in spots}
+    terrain = getattr(scene, "terrain_target", None)
+    out = []
+    for t in scene.targets:
+        if t.index in lit or t is terrain:
+            continue
+        s_min, z = _nearest_in_beam(beam, t.mesh)
+        if s_min is None or s_min <= HALF_WIDTH:
+            continue  # behind the laser, or inside the sampled square (the beam stage says why it is unlit)
+        w = float(beam.diameter_at(z)) / 2
+        e = beam.power_w / (math.pi * w * w) * math.exp(-s_min * s_min - mu * z)
+        if e >= TAIL_NOTE_FRACTION * mpe_w_m2:
+            out.append(f"target {t.name!r} lies outside the sampled beam (+-{HALF_WIDTH:g} w), {s_min:.3g} w from its axis, "
+                       f"where the beam's Gaussian tail still gives up to {e:.3g} W/m^2 ({e / mpe_w_m2:.3g} x MPE): "
+                       f"its reflection of that tail is NOT computed")
+    return out
+
+
+def _nearest_in_beam(beam, mesh):
+    """Smallest distance from the beam's axis [1/e radii] over a mesh's edges, and the axial
+    distance [m] there; (None, None) when no edge is in front of the laser. Per edge: the
+    point nearest the axis line (closed form) and ``TAIL_EDGE_POINTS`` points along it (the
+    radius grows along the axis, so the nearest in radii can lie elsewhere)."""
+    f = np.asarray(mesh.faces)
+    v = np.asarray(mesh.vertices, float)
+    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    a, b = v[edges[:, 0]], v[edges[:, 1]]
+
+    def transverse(x):
+        return x - (x @ beam.axis)[:, None] * beam.axis
+
+    ta, te = transverse(a - beam.position_m), transverse(b - a)
+    u_star = np.clip(-(ta * te).sum(1) / np.maximum((te * te).sum(1), 1e-300), 0.0, 1.0)
+    u = np.concatenate([u_star[:, None], np.broadcast_to(np.linspace(0.0, 1.0, TAIL_EDGE_POINTS), (len(edges), TAIL_EDGE_POINTS))], axis=1)
+    pts = a[:, None, :] + u[..., None] * (b - a)[:, None, :]
+    s, z = beam.to_s(pts.reshape(-1, 3))
+    r = np.where((z > 0) & np.all(np.isfinite(s), axis=1), np.linalg.norm(s, axis=1), np.inf)
+    if not np.isfinite(r).any():
+        return None, None
+    k = int(np.argmin(r))
+    return float(r[k]), float(z[k])
 
 
 def _unreflected_notes(unreflected) -> list:
