@@ -42,7 +42,7 @@ def test_bench_evaluate_many():
     check_goal("evaluate_many", res["ratio"], goal(1.5, 3.0))
 
 
-@not_met("issue 37: map stages 1.50 on a quiet machine, 1.52 measured here at load 13; goal 1.3")
+@not_met("issue 37: map stages 1.49 (2026-11-26, load ~2; 1.50 earlier on a quiet machine); goal 1.3")
 def test_bench_hazard_map():
     from .bench_engine import run
 
@@ -50,7 +50,7 @@ def test_bench_hazard_map():
     check_goal("hazard map stages", res["ratio"], goal(1.3, 3.0))
 
 
-@not_met("issue 37: whole analyze 1.92 on a quiet machine, 1.78 measured here at load 11; goal 1.3")
+@not_met("issue 37: whole analyze 2.01 against the complete floor with the near-field lobes' work (2026-11-26, load ~2); goal 1.3")
 def test_bench_whole_run():
     from .bench_whole_run import run
 
@@ -58,7 +58,7 @@ def test_bench_whole_run():
     check_goal("whole run", res["ratio"], goal(1.3, 4.0))
 
 
-@not_met("motion stage 73 ms (median of 5) against a 0.7 ms floor at load 12: ratio 104; the README's 22 (9 ms vs 0.4 ms) is not met")
+@not_met("motion stage: ratio 104 at load 12 (73 ms vs 0.7 ms); met (XPASS) on 2026-11-26 at load ~2")
 def test_bench_motion():
     from .bench_motion import run
 
