@@ -35,6 +35,7 @@ the command's own stale files and listed in :attr:`OutputUnit.dropped_stale`.
 
 from __future__ import annotations
 
+import glob
 import json
 import os
 import re
@@ -393,15 +394,25 @@ class FileSet:
     backups (or removed when they did not exist), so on an error none of the final files is
     created or replaced. The backups are removed after the switch. A process killed between
     the renames (not an exception) may leave a mix; its ``.NAME.*.old`` backups beside the
-    files are the previous versions."""
+    files are the previous versions. A journal ``.NAME.<token>.journal`` beside each final
+    file, written before the first rename and removed last, lists the whole set: the next
+    :class:`FileSet` naming any of its files (the next ``hazard fit`` writing them) finishes
+    an interrupted switch first (:func:`recover_file_sets`): forward when every temporary
+    was renamed in (only the backups were left), else back to the previous versions (the
+    backups restored, files that did not exist before removed). So a kill between the
+    renames leaves a mix only until the next run touches the set."""
 
     def __init__(self, paths):
         finals = [Path(os.path.abspath(p)) for p in paths]
         if len(set(finals)) != len(finals):
             raise ValueError(f"output files {[str(p) for p in paths]}: the same file is named twice; expected separate paths")
+        self.recovered = recover_file_sets(finals)  # what an interrupted earlier switch needed (said by the caller)
         self.token = secrets.token_hex(8)
         self.finals = finals
         self.temps = {p: p.parent / f".{p.name}.{self.token}.tmp{p.suffix}" for p in finals}
+
+    def _journal(self, p: Path) -> Path:
+        return p.parent / f".{p.name}.{self.token}.journal"
 
     def stage(self, path) -> Path:
         """The temporary to write instead of ``path`` (one of the set's paths; same suffix)."""
@@ -416,10 +427,12 @@ class FileSet:
                 if os.path.lexists(p):
                     backups[p] = p.parent / f".{p.name}.{self.token}.old"
                     _link_or_copy(p, backups[p])
+            self._write_journals(todo, backups)
             for k, p in enumerate(todo):
                 _step(f"files: rename {k}")
                 os.replace(self.temps[p], p)
                 done.append(p)
+            _step("files: renamed")
         except BaseException:
             for p in reversed(done):  # put back what was switched: old file, or none
                 if p in backups:
@@ -431,13 +444,73 @@ class FileSet:
             for b in backups.values():
                 if os.path.lexists(b):
                     os.unlink(b)
+            for p in todo:  # last: until here a kill is finished by the next FileSet
+                if os.path.lexists(self._journal(p)):
+                    os.unlink(self._journal(p))
             for p in {p.parent for p in todo}:
                 _fsync_dir(p)
+
+    def _write_journals(self, todo, backups) -> None:
+        """The set's journal beside each of its final files (written and synced before any rename)."""
+        entries = [{"final": str(p), "temp": str(self.temps[p]), "backup": str(backups[p]) if p in backups else None} for p in todo]
+        text = json.dumps({"token": self.token, "pid": os.getpid(), "files": entries})
+        for p in todo:
+            with open(self._journal(p), "w", encoding="utf-8") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+        for d in {p.parent for p in todo}:
+            _fsync_dir(d)
 
     def discard(self) -> None:
         for t in self.temps.values():
             if os.path.lexists(t):
                 os.unlink(t)
+
+
+def recover_file_sets(paths) -> list[str]:
+    """Finish every interrupted :class:`FileSet` switch whose journal lies beside one of
+    ``paths``: forward when all its temporaries were renamed in (remove the backups), else
+    back (restore every backup over its final file, remove the finals that had none, remove
+    the temporaries). Returns what was done, one line per set."""
+    done = []
+    for p in [Path(os.path.abspath(q)) for q in paths]:
+        for journal in sorted(p.parent.glob(f".{glob.escape(p.name)}.*.journal")):
+            try:
+                doc = json.loads(journal.read_text(encoding="utf-8"))
+                entries, pid = doc["files"], int(doc["pid"])
+            except (OSError, ValueError, KeyError, TypeError):
+                continue  # not ours, or already finished by another set's recovery
+            if _alive(pid):
+                continue  # another running process is switching this set now
+            done.append(_finish_switch(entries))
+            for e in entries:
+                j = Path(e["final"]).parent / f".{Path(e['final']).name}.{journal.name.split('.')[-2]}.journal"
+                if os.path.lexists(j):
+                    os.unlink(j)
+    return done
+
+
+def _finish_switch(entries) -> str:
+    """Roll one interrupted switch forward or back (:func:`recover_file_sets`)."""
+    forward = not any(os.path.lexists(e["temp"]) for e in entries)
+    for e in entries:
+        final, temp, backup = Path(e["final"]), Path(e["temp"]), e["backup"]
+        if forward:
+            if backup and os.path.lexists(backup):
+                os.unlink(backup)
+            continue
+        if backup and os.path.lexists(backup):
+            if os.path.lexists(final) and os.path.samefile(backup, final):
+                os.unlink(backup)  # never switched: the final is the previous version (rename() of two links is a no-op)
+            else:
+                os.replace(backup, final)  # the previous version back
+        elif not backup and not os.path.lexists(temp) and os.path.lexists(final):
+            os.unlink(final)  # switched in, had no previous version
+        if os.path.lexists(temp):
+            os.unlink(temp)
+    names = ", ".join(Path(e["final"]).name for e in entries)
+    return f"an interrupted write of {names} was {'completed' if forward else 'rolled back to the previous files'}"
 
 
 @contextmanager

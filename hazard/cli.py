@@ -707,6 +707,8 @@ def _cmd_fit(args, out, err):
     text = io.StringIO()  # stdout is written once the files are in place: no "wrote" for a file never switched in
     with progress_to(None if getattr(args, "quiet", False) else err), output_files(finals) as files:  # bars on a terminal only
         args.stage = files.stage
+        for line in files.recovered:
+            print(f"hazard: note: {line}", file=err)
         if args.fit_kind == "oxidation":
             code = _fit_oxidation(args, text)
         else:
