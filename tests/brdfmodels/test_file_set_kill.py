@@ -40,14 +40,15 @@ def _files(tmp_path):
     return sorted(p.name for p in tmp_path.rglob("*") if p.is_file())
 
 
-@pytest.mark.parametrize("kill_at", ["files: rename 1", "files: rename 2"])
+@pytest.mark.parametrize("kill_at", ["files: rename 0", "files: rename 1", "files: rename 2"])
 def test_a_kill_between_renames_is_rolled_back_by_the_next_set(tmp_path, kill_at):
     a, b, c = tmp_path / "model.json", tmp_path / "sub" / "env.json", tmp_path / "s.csv"
     b.parent.mkdir()
     a.write_text("old model.json")
     b.write_text("old env.json")  # s.csv did not exist before
     _kill_during_commit(tmp_path, kill_at, [a, b, c])
-    assert a.read_text() == "new model.json"  # the mix the kill left: model switched ...
+    if kill_at != "files: rename 0":
+        assert a.read_text() == "new model.json"  # the mix the kill left: model switched ...
     assert any(p.name.endswith(".journal") for p in tmp_path.rglob("*"))  # ... and the journal says what was under way
     done = FileSet([c])  # the next run naming any one of the set's files
     assert done.recovered == ["an interrupted write of model.json, env.json, s.csv was rolled back to the previous files"]
