@@ -119,10 +119,10 @@ def _lobes(result, off) -> list:
 def _mirrors(result, off) -> list:
     from shapely.geometry import LineString
 
-    from .plan_view import mirror_segments
+    from .plan_view import mirror_segments, mirror_stops_m
 
     rows = {t.name: t for t in result.targets}
-    stops = {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
+    stops = mirror_stops_m(result)
     out = []
     for target, start, end in mirror_segments(result):
         row = rows.get(target)

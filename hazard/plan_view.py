@@ -561,6 +561,12 @@ def _finite_or_0(x) -> float:
     return float(x) if math.isfinite(x) else 0.0
 
 
+def mirror_stops_m(result) -> dict:
+    """Per target, where the analysis stops its mirror beam's farthest ray [m] (report.json
+    ``sdz.mirror_beams[].max_reach_m``; None or inf where nothing stops it)."""
+    return {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
+
+
 def mirror_segments(result) -> list:
     """(target, start, end) of every mirror beam along the direction the report gives
     (else the mirror axis of the spot's mean normal), scene-local 3-D points [m], to its
@@ -571,7 +577,7 @@ def mirror_segments(result) -> list:
 
     out = []
     rows = {t.name: t for t in result.targets}
-    reach = {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
+    reach = mirror_stops_m(result)
     for sp in result.spots:
         row = rows.get(sp.target.name)
         if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..beam import BeamGeometry, sample_cells
+from ..beam import HALF_WIDTH, BeamGeometry, sample_cells
 from ..engine import build_spots, flat_outlines
 from ..results import TargetResult
 
@@ -201,8 +201,6 @@ def tail_notes(scene, beam, spots, mpe_w_m2: float, mu: float) -> list[str]:
     The nearest approach is taken over the mesh's edges (:func:`_nearest_in_beam`; a face
     the axis pierces is lit by the sampled beam). The tail's irradiance there:
     ``P / (pi w^2) exp(-s^2) exp(-mu z)``."""
-    from ..beam import HALF_WIDTH
-
     lit = {sp.target.index for sp in spots}
     terrain = getattr(scene, "terrain_target", None)
     out = []
