@@ -161,15 +161,15 @@ def target_results(spots, states, mpe_w_m2, mu, analysis, aids=()) -> list:
 
 
 def near_field_lobe_notes(spots, rows) -> list[str]:
-    """A note for each lit target whose keep-out lobe ends within ``FAR_FIELD_SPOT_SIZES``
-    spot sizes (the map's far-field rule): where the lobe there is
-    the farthest root of the near-field integral over the spot (:mod:`hazard.near_field_lobe`),
-    how it was found and its tolerance; where it could not be (a slumping spot, a spot
-    without its triangles) and the lobe ends within that distance, that the lobe is the
-    point-source form from the spot's centroid, which is short along a spot stretched by
-    grazing incidence (a plate at 89.9 deg: 0.52 m where the integral reaches 6.30 m)."""
+    """Notes on the lit targets whose keep-out lobe ends within ``FAR_FIELD_SPOT_SIZES``
+    spot sizes (the map's far-field rule), one note per kind, every such target named with its
+    reach: where the lobe there is the farthest root of the near-field integral over the spot
+    (:mod:`hazard.near_field_lobe`), how it was found and its tolerance; where it could not be
+    (a slumping spot, a spot without its triangles), that the lobe is the point-source form
+    from the spot's centroid, which is short along a spot stretched by grazing incidence (a
+    plate at 89.9 deg: 0.52 m where the integral reaches 6.30 m)."""
     by_name = {sp.target.name: sp for sp in spots}
-    out = []
+    integrated, point_form = [], []
     for row in rows:
         sp, lobe = by_name.get(row.name), row.dynamic_lobe
         if sp is None or lobe is None or not lobe.max_range_m > 0:
@@ -178,19 +178,26 @@ def near_field_lobe_notes(spots, rows) -> list[str]:
             continue  # the keep-out distance lies in the far field (report.json's lobe "near_field" says what was integrated)
         nf = lobe.near_field  # a slumping spot's dynamic lobe (the union of tilted normals) has none
         if nf and nf["directions_integrated"]:
-            out.append(f"{row.name}: its keep-out lobe reaches {lobe.max_range_m:.4g} m from the spot's centroid, within "
-                       f"{FAR_FIELD_SPOT_SIZES:g} spot sizes ({sp.size_m:.4g} m each) of the spot, where it is the farthest root "
-                       f"of the near-field integral over the spot (the observers' own, 1 % of P / d^2 per sample), from the "
-                       f"spot's centroid, on {nf['directions_integrated']} direction(s) of a grid (polar rows "
-                       f"{', '.join(f'{t:g}' for t in nf['grid_theta_deg'])} deg, azimuth step {nf['grid_phi_deg']:g} deg); "
-                       f"each scanned inward in steps up to {nf['scan_step_max_m']:.3g} m (added to the distance), between the "
-                       f"nodes the largest node of the cell plus a curvature margin, never below the point form")
+            integrated.append((row.name, lobe.max_range_m, sp.size_m, nf))
         else:
-            out.append(f"{row.name}: its keep-out lobe reaches {lobe.max_range_m:.4g} m from the spot's centroid, within "
-                       f"{FAR_FIELD_SPOT_SIZES:g} spot sizes ({sp.size_m:.4g} m each, 2 RMS radii) of the spot, and was not "
-                       f"integrated there ({'a slumping spot' if sp.slump is not None else 'no near-field triangles'}): it is the "
-                       f"point-source form, which is short along a spot stretched by grazing incidence (a plate at 89.9 deg: "
-                       f"0.52 m where the exact integral reaches 6.30 m), so it is not a keep-out distance there; the "
-                       f"observers and the hazardous-ground footprint use the exact integral over the spot: place observers "
-                       f"along the spot to map the zone")
+            point_form.append((row.name, lobe.max_range_m, sp.size_m,
+                               "a slumping spot" if sp.slump is not None else "no near-field triangles"))
+    out = []
+    if integrated:
+        grids = {(tuple(nf["grid_theta_deg"]), nf["grid_phi_deg"]) for *_, nf in integrated}
+        grid = "; ".join(f"polar rows {', '.join(f'{t:g}' for t in th)} deg, azimuth step {ph:g} deg" for th, ph in sorted(grids))
+        each = "; ".join(f"{name} {reach:.4g} m (spot size {size:.4g} m, {nf['directions_integrated']} direction(s), "
+                         f"scan step up to {nf['scan_step_max_m']:.3g} m)" for name, reach, size, nf in integrated)
+        out.append(f"keep-out lobe(s) within {FAR_FIELD_SPOT_SIZES:g} spot sizes of their spot, each the farthest root "
+                   f"of the near-field integral over the spot (the observers' own, 1 % of P / d^2 per sample) from the "
+                   f"spot's centroid on a grid of directions ({grid}), scanned inward (the step added to the distance), "
+                   f"between the nodes the largest node of the cell plus a curvature margin, never below the point form: "
+                   f"{each}")
+    if point_form:
+        each = "; ".join(f"{name} {reach:.4g} m (spot size {size:.4g} m, 2 RMS radii; {why})" for name, reach, size, why in point_form)
+        out.append(f"keep-out lobe(s) ending within {FAR_FIELD_SPOT_SIZES:g} spot sizes of their spot and not integrated "
+                   f"there: the point-source form, which is short along a spot stretched by grazing incidence (a plate at "
+                   f"89.9 deg: 0.52 m where the exact integral reaches 6.30 m), so not a keep-out distance there; the "
+                   f"observers and the hazardous-ground footprint use the exact integral over the spot: place observers "
+                   f"along the spot to map the zone: {each}")
     return out
