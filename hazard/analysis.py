@@ -1,16 +1,21 @@
-"""``hazard.analyze(scene)``: the whole analysis as a plan of stages.
+"""``hazard.analyze(scene)``: the whole analysis as a plan of declared stages.
 
 :func:`hazard.pipeline.plan.plan` decides from the scene which stages run and why the
-others are left out; each stage is a function of explicit inputs in its own module of
-:mod:`hazard.pipeline`; :func:`analyze` runs them in order and the report's stage list
-(``result.stages``: ran or skipped, the reason, the run time) comes from that plan:
+others are left out. Each stage below is registered with
+:func:`hazard.pipeline.stages.stage`: the names it needs and the frozen result it provides
+(:mod:`hazard.pipeline.stages`); the run order is derived from those declarations
+(:func:`~hazard.pipeline.stages.derive_plan`), each stage calls the physics of its module
+of :mod:`hazard.pipeline` and records in the stage log what it did or why it was skipped
+(``result.stages``: ran or skipped, the reason, the run time). No stage changes another's
+result; :func:`hazard_result` assembles the :class:`HazardResult` by keyword:
 
 ``mpe`` (:mod:`~hazard.pipeline.limits`) -> ``rays`` and ``beam``
 (:mod:`~hazard.pipeline.spots`) -> ``crossings`` (:mod:`~hazard.pipeline.crossings`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``spill``
 (:mod:`~hazard.pipeline.spill`) -> ``sdz`` (:mod:`~hazard.pipeline.sdz`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
-``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
-(:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
--> ``mirror_beams`` (:mod:`~hazard.pipeline.mirror_reach`) -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
+``irradiance_map`` (records ``specular``, ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``;
+:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
+-> ``mirror_beams`` (:mod:`~hazard.pipeline.mirror_reach`) -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``motion``
+(:mod:`~hazard.pipeline.motion_stage`) -> ``airspace`` (:mod:`~hazard.pipeline.airspace`) -> ``extended_source``
 (:mod:`hazard.extended_source`).
 """
 

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-import hazard
 import scenes
 from hazard.analysis import hazard_result, run_pipeline
 from hazard.pipeline.plan import STAGES
 from hazard.pipeline.stages import INPUTS, REGISTRY, StagePlanError, derive_plan, run_stages, stage
+from tests._bundled import bundled
 
 FAST = settings(max_examples=15, derandomize=True, deadline=None, database=None)
 SLOW = settings(max_examples=300, derandomize=True, deadline=None, database=None)
@@ -60,8 +60,14 @@ def test_every_stage_result_is_frozen_and_documented():
         assert set(d.needs) <= set(INPUTS) | set(REGISTRY), d.name
 
 
-def test_frozen_result_refuses_assignment():
-    res, _ = run_pipeline(scenes.load(scenes.example_path("plate")))
+@pytest.fixture(scope="module")
+def plate_run():
+    """run_pipeline of the bundled plate (read only)."""
+    return run_pipeline(scenes.load(scenes.example_path("plate")))
+
+
+def test_frozen_result_refuses_assignment(plate_run):
+    res, _ = plate_run
     with pytest.raises(dataclasses.FrozenInstanceError):
         res["mpe"].attenuation_per_m = 0.0
     with pytest.raises(TypeError):
@@ -187,9 +193,9 @@ def test_history_makes_a_new_trace(tmp_path):
     assert final.spots is hist.built.spots
 
 
-def test_extended_source_builds_new_observers():
+def test_extended_source_builds_new_observers(plate_run):
     """The map's observers are not given C_E: the result's are a new object."""
-    res, log = run_pipeline(scenes.load(scenes.example_path("plate")))
+    res, log = plate_run
     assert res["irradiance_map"].observers.mpe_w_m2 is None
     final = hazard_result(res, log.stages() + [res["extended_source"].record])
     assert final.observers is not res["irradiance_map"].observers
@@ -206,10 +212,9 @@ def test_mirror_beams_do_not_change_the_sdz_result():
     assert {k: v for k, v in final.sdz.items() if k != "mirror_beams"} == res["sdz"].zone
 
 
-def test_analyze_is_the_assembled_stage_results():
-    scene = scenes.load(scenes.example_path("plate"))
-    a = hazard.analyze(scene)
-    res, log = run_pipeline(scene)
+def test_analyze_is_the_assembled_stage_results(plate_run):
+    a = bundled("plate")
+    res, log = plate_run
     b = hazard_result(res, log.stages() + [res["extended_source"].record])
     assert [s.name for s in a.stages] == [s.name for s in b.stages] == list(STAGES)
     np.testing.assert_array_equal(a.observers.peak_irradiance_w_m2, b.observers.peak_irradiance_w_m2)
