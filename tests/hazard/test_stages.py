@@ -14,12 +14,16 @@ from hypothesis import given, settings, strategies as st
 
 import scenes
 from hazard.analysis import hazard_result, run_pipeline
-from hazard.pipeline.plan import STAGES
+from hazard.pipeline.log import StageLog
+from hazard.pipeline.plan import STAGES, plan
 from hazard.pipeline.stages import INPUTS, REGISTRY, StagePlanError, derive_plan, run_stages, stage
 from tests._bundled import bundled
+from tests._scene_text import PLATE_AT_50M
 
 FAST = settings(max_examples=15, derandomize=True, deadline=None, database=None)
 SLOW = settings(max_examples=300, derandomize=True, deadline=None, database=None)
+FAST_FEW = settings(max_examples=2, derandomize=True, deadline=None, database=None)  # whole analyses: ~1 s each
+SLOW_FEW = settings(max_examples=25, derandomize=True, deadline=None, database=None)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -221,3 +225,71 @@ def test_analyze_is_the_assembled_stage_results(plate_run):
     np.testing.assert_array_equal(a.observers.mpe_w_m2, b.observers.mpe_w_m2)
     assert a.notes == b.notes and a.sdz == b.sdz and a.spill == b.spill
     assert [t.to_dict() for t in a.targets] == [t.to_dict() for t in b.targets]
+
+
+# -- property: on random scenes, no stage result changes after its stage returned ---------
+GLOSSY = ('{ model = "sum", models = [{ type = "lambertian", params = { reflectance = 0.5 } }, '
+          '{ type = "specular", params = { reflectance = 0.1 } }] }')
+
+
+def _fingerprint(x, depth=0):
+    """A comparable picture of a value: arrays by content, containers and dataclasses by
+    their members (4 levels deep), any other object by identity."""
+    if isinstance(x, (bool, int, float, str, type(None))):
+        return x if not (isinstance(x, float) and x != x) else "nan"
+    if isinstance(x, np.ndarray):
+        return ("array", x.shape, x.dtype.str, x.tobytes())
+    if depth >= 4:
+        return ("id", id(x))
+    if isinstance(x, dict):
+        return ("dict", tuple((repr(k), _fingerprint(v, depth + 1)) for k, v in x.items()))
+    if isinstance(x, (list, tuple)):
+        return (type(x).__name__, tuple(_fingerprint(v, depth + 1) for v in x))
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return (type(x).__name__, tuple((f.name, _fingerprint(getattr(x, f.name), depth + 1)) for f in dataclasses.fields(x)))
+    return ("id", id(x))
+
+
+def _random_scene(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m):
+    t, a = np.radians(tilt_deg), np.radians(azimuth_deg)
+    normal = [float(np.sin(t) * np.sin(a)), float(-np.cos(t)), float(np.sin(t) * np.cos(a))]
+    text = PLATE_AT_50M.replace("position_m = [0.0, -50.0, 1.0]", f"position_m = [0.0, {-distance_m}, 1.0]")
+    text = text.replace("normal = [0.0, -1.0, 0.0]", f"normal = {normal}").replace("tangent = [1.0, 0.0, 0.0]", "")
+    if mirror:
+        text = text.replace('material = { model = "lambertian", reflectance = 0.5 }', f"material = {GLOSSY}")
+    text += ('[analysis]\ndirection_grid_deg = 10.0\nrefine_levels = 1\n'
+             f'[[observers]]\nname = "line"\nstart_m = [-20.0, -30.0, {line_z_m}]\nend_m = [20.0, -30.0, {line_z_m}]\ncount = 9\n'
+             '[[observers]]\nname = "eye"\npoints_m = [[5.0, -20.0, 1.5]]\n')
+    return scenes.loads(text)
+
+
+def _check_no_stage_changes_an_earlier_result(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m):
+    scene = _random_scene(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m)
+    taken = {}
+    reg = {}
+    for name, d in REGISTRY.items():
+        def run(log, _d=d, **kw):
+            out = _d.run(log, **kw)
+            taken[_d.name] = _fingerprint(out)  # as the stage returned it
+            return out
+        stage(name, needs=d.needs, result=d.result, records=d.records, registry=reg)(run)
+    log = StageLog()
+    inputs = {"scene": scene, "plan": plan(scene), "backend": "embree", "threads": 1, "keep_history": None}
+    res = run_stages(reg, derive_plan(reg, inputs), inputs, log)
+    final = hazard_result(res, log.stages() + [res["extended_source"].record])
+    for name, out in res.items():
+        assert _fingerprint(out) == taken[name], f"stage {name}'s result changed after it returned"
+    assert final.observers.mpe_w_m2 is not None and res["irradiance_map"].observers.mpe_w_m2 is None
+
+
+@FAST_FEW
+@given(st.floats(0.0, 60.0), st.floats(0.0, 360.0), st.floats(5.0, 80.0), st.booleans(), st.floats(0.0, 3.0))
+def test_no_stage_changes_an_earlier_result(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m):
+    _check_no_stage_changes_an_earlier_result(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m)
+
+
+@pytest.mark.slow
+@SLOW_FEW
+@given(st.floats(0.0, 80.0), st.floats(0.0, 360.0), st.floats(2.0, 200.0), st.booleans(), st.floats(-1.0, 10.0))
+def test_no_stage_changes_an_earlier_result_many(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m):
+    _check_no_stage_changes_an_earlier_result(tilt_deg, azimuth_deg, distance_m, mirror, line_z_m)
