@@ -23,9 +23,17 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:  # annotations only (no import at run time: the stages' modules import this one)
+    from ..keepout import Footprint
+    from ..results import ObserverResults, TargetResult
+    from .direct import DirectBeam
+    from .limits import ExposureLimits
+    from .motion_stage import MotionResult
+    from .spots import BeamStage
 
 __all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS",
            "LimitsResult", "RaysResult", "BeamResult", "CrossingsResult", "DirectResult", "SpillResult", "SdzResult",
@@ -153,7 +161,7 @@ class LimitsResult:
     the MPE with its steps, the irradiance limit [W/m^2], the radiant-exposure limit
     [J/m^2], the pulse result) and the atmospheric attenuation coefficient [1/m]."""
 
-    exposure: Any
+    exposure: ExposureLimits
     attenuation_per_m: float
 
 
@@ -172,7 +180,7 @@ class BeamResult:
     cells, spots before any history) and the notes it leaves (the scene's first, then the
     trace's and the beam tail's)."""
 
-    traced: Any
+    traced: BeamStage
     notes: tuple[str, ...]
 
 
@@ -189,7 +197,7 @@ class DirectResult:
     """Stage ``direct``: the laser's own beam at the observers
     (:class:`hazard.pipeline.direct.DirectBeam`, irradiances [W/m^2]); None when skipped."""
 
-    direct_beam: Any
+    direct_beam: DirectBeam | None
 
 
 @dataclass(frozen=True)
@@ -218,7 +226,7 @@ class HistoryResult:
     times_s: np.ndarray
     states: dict
     melts: dict
-    traced: Any
+    traced: BeamStage
 
 
 @dataclass(frozen=True)
@@ -227,7 +235,7 @@ class MapResult:
     per-observer irradiances [W/m^2], exposures [J/m^2] and times [s]
     (:class:`hazard.results.ObserverResults`, point-source MPE) and the map's notes."""
 
-    observers: Any
+    observers: ObserverResults
     notes: tuple[str, ...]
 
 
@@ -236,7 +244,7 @@ class KeepoutResult:
     """Stage ``keepout``: a :class:`hazard.results.TargetResult` per target (lit or not;
     lobes, NOHDs [m], melt) and the near-field lobe notes."""
 
-    targets: tuple
+    targets: tuple[TargetResult, ...]
     notes: tuple[str, ...]
 
 
@@ -253,8 +261,8 @@ class FootprintResult:
     """Stage ``footprint``: hazardous ground with the initial states held (``static``) and
     over the history (``dynamic``), :class:`hazard.keepout.Footprint`; None when skipped."""
 
-    static: Any = None
-    dynamic: Any = None
+    static: Footprint | None = None
+    dynamic: Footprint | None = None
 
 
 @dataclass(frozen=True)
@@ -262,7 +270,7 @@ class MotionStageResult:
     """Stage ``motion``: tracks and fixed observers over time
     (:class:`hazard.pipeline.motion_stage.MotionResult`); None when nothing moves."""
 
-    motion: Any
+    motion: MotionResult | None
 
 
 @dataclass(frozen=True)
