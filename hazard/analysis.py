@@ -1,22 +1,28 @@
-"""``hazard.analyze(scene)``: the whole analysis as a plan of stages.
+"""``hazard.analyze(scene)``: the whole analysis as a plan of declared stages.
 
 :func:`hazard.pipeline.plan.plan` decides from the scene which stages run and why the
-others are left out; each stage is a function of explicit inputs in its own module of
-:mod:`hazard.pipeline`; :func:`analyze` runs them in order and the report's stage list
-(``result.stages``: ran or skipped, the reason, the run time) comes from that plan:
+others are left out. Each stage below is registered with
+:func:`hazard.pipeline.stages.stage`: the names it needs and the frozen result it provides
+(:mod:`hazard.pipeline.stages`); the run order is derived from those declarations
+(:func:`~hazard.pipeline.stages.derive_plan`), each stage calls the physics of its module
+of :mod:`hazard.pipeline` and records in the stage log what it did or why it was skipped
+(``result.stages``: ran or skipped, the reason, the run time). No stage changes another's
+result; :func:`hazard_result` assembles the :class:`HazardResult` by keyword:
 
 ``mpe`` (:mod:`~hazard.pipeline.limits`) -> ``rays`` and ``beam``
 (:mod:`~hazard.pipeline.spots`) -> ``crossings`` (:mod:`~hazard.pipeline.crossings`) -> ``direct`` (:mod:`~hazard.pipeline.direct`) -> ``spill``
 (:mod:`~hazard.pipeline.spill`) -> ``sdz`` (:mod:`~hazard.pipeline.sdz`) -> ``history`` (:mod:`~hazard.pipeline.history`) ->
-``specular`` -> ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``
-(:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
--> ``mirror_beams`` (:mod:`~hazard.pipeline.mirror_reach`) -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``extended_source``
+``irradiance_map`` (records ``specular``, ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``;
+:mod:`~hazard.pipeline.irradiance_map`) -> ``keepout`` (:mod:`~hazard.pipeline.lobes`)
+-> ``mirror_beams`` (:mod:`~hazard.pipeline.mirror_reach`) -> ``footprint`` (:mod:`~hazard.pipeline.ground`) -> ``motion``
+(:mod:`~hazard.pipeline.motion_stage`) -> ``airspace`` (:mod:`~hazard.pipeline.airspace`) -> ``extended_source``
 (:mod:`hazard.extended_source`).
 """
 
 from __future__ import annotations
 
 import platform
+from dataclasses import replace
 
 import numpy as np
 
@@ -24,15 +30,19 @@ from brdfmodels.parallel import default_threads, thread_limit
 
 from . import near_field, near_field_lobe
 from .aperture import limiting_aperture_m, observer_apertures
+from .extended_source import ExtendedSourceResult, extended_source_of
 from .nohd import group_gains
 from .specular import describe_apertures
 from .pipeline import crossings, direct, ground, history, irradiance_map, limits, lobes, mirror_reach, sdz, spill, spots as beam_stage
 from .pipeline.irradiance_map import HISTORY_KEEP_MAX, MAP_CHUNK, MapInputs  # noqa: F401 (tunable, re-exported)
 from .pipeline.log import StageLog
 from .pipeline.plan import plan
+from .pipeline.stages import (REGISTRY, AirspaceResult, BeamResult, CrossingsResult, DirectResult, FootprintResult,
+                              HistoryResult, KeepoutResult, LimitsResult, MapResult, MirrorBeamsResult, MotionStageResult,
+                              RaysResult, SdzResult, SpillResult, derive_plan, run_stages, stage)
 from .results import HazardResult, ObserverResults, Stage, TargetResult
 
-__all__ = ["analyze", "HazardResult", "Stage", "TargetResult", "ObserverResults"]
+__all__ = ["analyze", "run_pipeline", "hazard_result", "HazardResult", "Stage", "TargetResult", "ObserverResults"]
 
 
 def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None) -> HazardResult:
@@ -56,58 +66,121 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
 
     The last stage, ``extended_source``, sets the MPE per observer: the point-source MPE
     by default, C_E from the diffuse spot's angular subtense with ``[exposure]
-    extended_source = true`` (:func:`hazard.extended_source.apply_extended_source`).
+    extended_source = true`` (:func:`hazard.extended_source.extended_source_of`).
     """
-    from .extended_source import apply_extended_source
-
     if threads is None:
-        return apply_extended_source(_run(scene, backend, progress, keep_history, default_threads()))
+        return _run(scene, backend, progress, keep_history, default_threads())
     with thread_limit(threads):  # checks it; caps every hot loop called from here
-        return apply_extended_source(_run(scene, backend, progress, keep_history, threads))
+        return _run(scene, backend, progress, keep_history, threads)
 
 
-def _trace(scene, the_plan, log, backend, threads, mu):
-    """Stages ``rays`` and ``beam``: the ray scene (or analytic hits) and the spots."""
+def run_pipeline(scene, *, backend="embree", progress=None, keep_history=None, threads=None):
+    """The stages' results of an analysis: stage name -> frozen result (the types of
+    :mod:`hazard.pipeline.stages`, and :class:`hazard.extended_source.ExtendedSourceResult`),
+    and the stage log. :func:`analyze` assembles its :class:`HazardResult` from them
+    (:func:`hazard_result`)."""
+    log = StageLog(progress)
+    inputs = {"scene": scene, "plan": plan(scene), "backend": backend,
+              "threads": default_threads() if threads is None else threads, "keep_history": keep_history}
+    return run_stages(REGISTRY, derive_plan(REGISTRY, inputs), inputs, log), log
+
+
+def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
+    results, log = run_pipeline(scene, backend=backend, progress=progress, keep_history=keep_history, threads=threads)
+    return hazard_result(results, log.stages() + [results["extended_source"].record])
+
+
+def hazard_result(r, stages=()) -> HazardResult:
+    """The :class:`HazardResult` of the stage results ``r`` (stage name -> result; the
+    stages after ``motion`` may be absent: the result is then the one they read), by
+    keyword; ``stages``: the stage records."""
+    exposure, mu = r["mpe"].exposure, r["mpe"].attenuation_per_m
+    hist, scene, ext, air = r["history"], r["crossings"].scene, r.get("extended_source"), r.get("airspace")
+    traced = hist.traced
+    built = traced.built
+    fp, beams = r["footprint"], r["mirror_beams"].beams
+    observers = r["irradiance_map"].observers
+    notes = [*r["beam"].notes, *r["irradiance_map"].notes, *r["keepout"].notes, *(() if ext is None else ext.notes)]
+    return HazardResult(
+        scene=scene, mpe=exposure.mpe, mpe_w_m2=exposure.irradiance_w_m2, mpe_radiant_exposure_j_m2=exposure.radiant_exposure_j_m2,
+        pulse=exposure.pulse, attenuation_per_m=mu, times_s=hist.times_s, stages=list(stages), targets=list(r["keepout"].targets),
+        observers=observers if ext is None else replace(observers, **ext.observer_fields()),
+        spill_w=built.spill_w, blocked_w=built.blocked_w, beam_power_w=traced.beam.power_w,
+        footprint_static=fp.static, footprint_dynamic=fp.dynamic, notes=notes, spots=built.spots, beam=traced.beam,
+        states=hist.states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
+        spill=r["spill"].summary, sdz=r["sdz"].zone if beams is None else {**r["sdz"].zone, "mirror_beams": beams},
+        motion=r["motion"].motion,
+        extended_source={} if ext is None else ext.summary,
+        visual_interference={} if air is None else air.visual_interference,
+        airspace={} if air is None else air.zones,
+    )
+
+
+@stage("mpe", needs=("scene",), result=LimitsResult)
+def _limits(log, scene) -> LimitsResult:
+    """The MPE and the exposure limits; the attenuation coefficient."""
+    with log.run("mpe") as st:
+        exposure = limits.exposure_limits(scene.spec)
+        st.detail = exposure.detail
+    return LimitsResult(exposure, limits.attenuation_per_m(scene.spec))
+
+
+@stage("rays", needs=("scene", "plan", "backend", "threads"), result=RaysResult)
+def _rays(log, scene, plan, backend, threads) -> RaysResult:
+    """The ray scene (or analytic hits on flat targets)."""
     ray_scene = None
-    if the_plan.rays:
+    if plan.rays:
         with log.run("rays") as st:
             ray_scene = beam_stage.ray_scene(scene, backend, threads)
             st.detail = f"{backend}: {ray_scene.n_triangles} triangles"
     else:
-        log.skip("rays", the_plan.skipped("rays"))
-    tracer = ray_scene if ray_scene is not None else beam_stage.FlatScene(scene.targets)
+        log.skip("rays", plan.skipped("rays"))
+    return RaysResult(ray_scene, ray_scene if ray_scene is not None else beam_stage.FlatScene(scene.targets))
+
+
+@stage("beam", needs=("scene", "rays", "mpe"), result=BeamResult)
+def _beam(log, scene, rays, mpe) -> BeamResult:
+    """The beam sampled against every object, the targets' spots, the beam's notes."""
+    mu = mpe.attenuation_per_m
     with log.run("beam") as st:
-        traced = beam_stage.trace_beam(scene, tracer, mu)
+        traced = beam_stage.trace_beam(scene, rays.tracer, mu)
         st.detail = traced.detail
-    return ray_scene, tracer, traced
+    notes = list(getattr(scene, "notes", None) or []) + list(traced.notes)  # the beam's convention first (scenes.conventions)
+    notes.extend(beam_stage.tail_notes(scene, traced.beam, traced.built.spots, mpe.exposure.irradiance_w_m2, mu))
+    return BeamResult(traced, tuple(notes))
 
 
-def _crossings(scene, traced, tracer, mu, mpe_w_m2, log, the_plan):
-    """Stage ``crossings``: observer points added where a beam crosses a line between its
-    points (the scene is returned with them; the caller's is not changed)."""
-    if the_plan.skipped("crossings"):
-        log.skip("crossings", the_plan.skipped("crossings"))
-        return scene
+@stage("crossings", needs=("scene", "plan", "beam", "rays", "mpe"), result=CrossingsResult)
+def _crossings(log, scene, plan, beam, rays, mpe) -> CrossingsResult:
+    """Observer points added where a beam crosses a line between its points (a new scene;
+    the input's is not changed)."""
+    if plan.skipped("crossings"):
+        log.skip("crossings", plan.skipped("crossings"))
+        return CrossingsResult(scene)
+    traced = beam.traced
     with log.run("crossings") as st:
         spill_s = spill.hottest_spill_s(traced, len(scene.targets))
-        scene, st.detail = crossings.add_crossings(scene, traced.beam, traced.built.spots, mu, mpe_w_m2, tracer, spill_s)
-    return scene
+        scene, st.detail = crossings.add_crossings(scene, traced.beam, traced.built.spots, mpe.attenuation_per_m,
+                                                   mpe.exposure.irradiance_w_m2, rays.tracer, spill_s)
+    return CrossingsResult(scene)
 
 
-def _direct(scene, traced, tracer, mu, log, the_plan, ray_scene):
-    """Stage ``direct``: the laser's own beam at the observers, at its worst over the
-    pointing error or sector when the scene gives one (None without observers)."""
-    if the_plan.skipped("direct"):
-        log.skip("direct", the_plan.skipped("direct"))
-        return None
+@stage("direct", needs=("crossings", "plan", "beam", "rays", "mpe"), result=DirectResult)
+def _direct(log, crossings, plan, beam, rays, mpe) -> DirectResult:
+    """The laser's own beam at the observers, at its worst over the pointing error or
+    sector when the scene gives one (None without observers)."""
+    if plan.skipped("direct"):
+        log.skip("direct", plan.skipped("direct"))
+        return DirectResult(None)
+    scene, traced, mu = crossings.scene, beam.traced, mpe.attenuation_per_m
     with log.run("direct") as st:
         laser = scene.spec.laser
         apertures = _apertures(scene)
-        d = direct.direct_beam(traced.beam, scene.observers, tracer, mu, apertures)
+        d = direct.direct_beam(traced.beam, scene.observers, rays.tracer, mu, apertures)
         if laser.pointing_buffer_rad > 0 or laser.sector is not None or laser.aim_track is not None:
-            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, ray_scene, apertures)
+            d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, rays.ray_scene, apertures)
         st.detail = d.detail
-    return d
+    return DirectResult(d)
 
 
 def _apertures(scene):
@@ -116,44 +189,49 @@ def _apertures(scene):
                               scene.spec.exposure.duration_s)
 
 
-def _spill(scene, traced, mu, exposure, log) -> dict:
-    """Stage ``spill``: where the beam that misses every target goes, and its NOHD."""
+@stage("spill", needs=("crossings", "beam", "mpe"), result=SpillResult)
+def _spill(log, crossings, beam, mpe) -> SpillResult:
+    """Where the beam that misses every target goes, and its NOHD."""
+    scene = crossings.scene
     with log.run("spill") as st:
-        out = spill.spill_summary(scene, traced, mu, exposure.irradiance_w_m2, lobes.scene_aids(scene))
+        out = spill.spill_summary(scene, beam.traced, mpe.attenuation_per_m, mpe.exposure.irradiance_w_m2, lobes.scene_aids(scene))
         stopped = "; ".join(f"{d['power_w']:.4g} W stopped by {d['object']} at {d['range_m']:.4g} m, {d['reflected']}" for d in out["stopped"])
         st.detail = (f"{out['leaves_scene_w']:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
                      f"{out['nohd_m']:.4g} m (the spill's highest point of the beam profile: {out['peak_profile']:.3g})"
                      + (f"; {stopped}" if stopped else "")
                      + (f"; {out['shared_w']:.4g} W in beam cells shared by a target and a stopper (it lands on one of them)"
                         if out["shared_w"] > 0 else ""))
-    return out
+    return SpillResult(out)
 
 
-def _sdz(scene, exposure, mu, log, ray_scene) -> dict:
-    """Stage ``sdz``: the laser surface danger zone of the direct beam over its pointing
-    cone or sector."""
+@stage("sdz", needs=("crossings", "mpe", "rays"), result=SdzResult)
+def _sdz(log, crossings, mpe, rays) -> SdzResult:
+    """The laser surface danger zone of the direct beam over its pointing cone or sector."""
+    scene = crossings.scene
     with log.run("sdz") as st:
-        out = sdz.danger_zone(scene, exposure.irradiance_w_m2, mu, lobes.scene_aids(scene), ray_scene)
+        out = sdz.danger_zone(scene, mpe.exposure.irradiance_w_m2, mpe.attenuation_per_m, lobes.scene_aids(scene), rays.ray_scene)
         d = out["directions"]
         st.detail = (f"{d['count']} direction(s) ({d['kind']}, buffer {d['buffer_rad']:.3g} rad, step {d['step_rad']:.3g} rad); "
                      f"{out['area_m2']:.4g} m^2 out to {out['max_range_m']:.4g} m; "
                      + ("contained by backstops" if out["contained"] else f"{out['escaping_directions']} direction(s) reach their NOHD "
                         f"({out['nohd_m']:.4g} m) without a backstop" + (", some above the horizon" if out["above_horizon"] else "")))
-    return out
+    return SdzResult(out)
 
 
-def _histories(scene, traced, log, the_plan):
-    """Stage ``history``: analysis times, the dynamic spots' states over them and their
-    melting (the spots of slumping targets get their tilt over the times)."""
+@stage("history", needs=("crossings", "plan", "beam"), result=HistoryResult)
+def _histories(log, crossings, plan, beam) -> HistoryResult:
+    """Analysis times, the dynamic spots' states over them and their melting (the spots
+    of slumping targets get their tilt over the times: a new trace, the beam's unchanged)."""
+    scene, traced = crossings.scene, beam.traced
     dynamic = any(sp.material.is_dynamic for sp in traced.built.spots)
     times = history.analysis_times(scene.spec, dynamic, history.series_nodes(scene.targets))
     if not dynamic:
-        log.skip("history", the_plan.skipped("history") or "no lit target has a dynamic material")
-        return times, {}, {}
+        log.skip("history", plan.skipped("history") or "no lit target has a dynamic material")
+        return HistoryResult(times, {}, {}, traced)
     with log.run("history") as st:
-        traced.built.spots, hist, notes = history.spot_states(scene.spec, traced.built.spots, times)
+        spots, hist, notes = history.spot_states(scene.spec, traced.built.spots, times)
         st.detail = "; ".join([hist.detail] + notes)
-    return times, hist.states, hist.melt
+    return HistoryResult(times, hist.states, hist.melt, replace(traced, built=replace(traced.built, spots=spots)))
 
 
 def _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan) -> MapInputs:
@@ -167,6 +245,27 @@ def _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_hist
     return MapInputs(spots, traced.beam, states, times, obs, group_gains(obs.optics, obs.group), mu,
                      spec.exposure.duration_s, spec.laser.wavelength_nm, spec.exposure.standard, exposure.irradiance_w_m2,
                      los_scene, keep, threads, MAP_CHUNK)
+
+
+@stage("irradiance_map", needs=("crossings", "plan", "history", "rays", "mpe", "direct", "keep_history", "threads"),
+       result=MapResult, records=("specular", "line_of_sight", "static", "dynamic", "exposure"))
+def _map(log, crossings, plan, history, rays, mpe, direct, keep_history, threads) -> MapResult:
+    """The irradiance map: every observer over the analysis times (mirror lobes, lines of
+    sight, the static or dynamic pass, the exposure)."""
+    scene, exposure, direct_beam = crossings.scene, mpe.exposure, direct.direct_beam
+    inp = _map_inputs(scene, history.traced, history.states, history.times_s, mpe.attenuation_per_m, exposure, rays.ray_scene,
+                      keep_history, threads, plan)
+    if direct_beam is not None and direct_beam.irradiance_w_m2.any():
+        inp.direct_w_m2 = direct_beam.irradiance_w_m2
+    if any(sp.material.has_specular for sp in inp.spots):
+        inp.apertures = _apertures(scene)
+    if exposure.pulse is not None:
+        inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
+    notes = () if inp.keep_history else (
+        f"irradiance history not kept ({len(inp.points)} x {len(history.times_s)} values); pass keep_history=True to keep it",)
+    out = irradiance_map.irradiance_map(inp)
+    _log_map(log, inp, out, plan)
+    return MapResult(_observers(scene, out, direct_beam), notes)
 
 
 def _log_map(log, inp, out, the_plan):
@@ -214,124 +313,107 @@ def _observers(scene, out, direct_beam) -> ObserverResults:
     )
 
 
-def _targets(scene, traced, states, exposure, mu, log):
-    """Stage ``keepout`` and a row for every target (lit or not)."""
-    a, spots = scene.spec.analysis, traced.built.spots
+@stage("keepout", needs=("crossings", "history", "mpe"), result=KeepoutResult)
+def _targets(log, crossings, history, mpe) -> KeepoutResult:
+    """The keep-out lobes and a row for every target (lit or not), with its melt."""
+    scene, spots = crossings.scene, history.traced.built.spots
+    a = scene.spec.analysis
     with log.run("keepout") as st:
         aids = lobes.scene_aids(scene)
         before = near_field_lobe.STATS.snapshot()
-        rows = lobes.target_results(spots, states, exposure.irradiance_w_m2, mu, a, aids)
+        rows = lobes.target_results(spots, history.states, mpe.exposure.irradiance_w_m2, mpe.attenuation_per_m, a, aids)
         st.detail = (f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
                      + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else "")
                      + f"; {near_field_lobe.describe_since(before)}")
-    return rows + beam_stage.unlit_targets(scene.targets, spots, traced.built.unreflected)
+    rows = rows + beam_stage.unlit_targets(scene.targets, spots, history.traced.built.unreflected)
+    notes = lobes.near_field_lobe_notes(spots, rows)
+    melt_by_name = {scene.targets[k].name: m for k, m in history.melts.items()}
+    for row in rows:  # this stage's own rows
+        row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None
+    return KeepoutResult(tuple(rows), tuple(notes))
 
 
-def _mirror_beams(scene, rows, spots, ray_scene, zone, log, the_plan) -> None:
-    """Stage ``mirror_beams``: each mirror beam's reach and containment, into ``zone``
-    (report.json ``sdz.mirror_beams``)."""
-    if the_plan.skipped("mirror_beams"):
-        log.skip("mirror_beams", the_plan.skipped("mirror_beams"))
-        return
+@stage("mirror_beams", needs=("crossings", "plan", "keepout", "history", "rays"), result=MirrorBeamsResult)
+def _mirror_beams(log, crossings, plan, keepout, history, rays) -> MirrorBeamsResult:
+    """Each mirror beam's reach and containment (report.json ``sdz.mirror_beams``)."""
+    if plan.skipped("mirror_beams"):
+        log.skip("mirror_beams", plan.skipped("mirror_beams"))
+        return MirrorBeamsResult(None)
     with log.run("mirror_beams") as st:
-        zone["mirror_beams"] = mirror_reach.mirror_beams(scene, rows, spots, ray_scene)
-        st.detail = mirror_reach.summary(zone["mirror_beams"])
+        beams = mirror_reach.mirror_beams(crossings.scene, list(keepout.targets), history.traced.built.spots, rays.ray_scene)
+        st.detail = mirror_reach.summary(beams)
+    return MirrorBeamsResult(beams)
 
 
-def _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan):
+@stage("footprint", needs=("crossings", "plan", "history", "rays", "mpe", "keepout"), result=FootprintResult)
+def _footprints(log, crossings, plan, history, rays, mpe, keepout) -> FootprintResult:
+    """Hazardous ground under the lobes (with terrain)."""
+    scene, traced = crossings.scene, history.traced
     spots = traced.built.spots
-    if not the_plan.footprint or not spots:
-        log.skip("footprint", the_plan.skipped("footprint") or "no spot")
-        return None
+    if not plan.footprint or not spots:
+        log.skip("footprint", plan.skipped("footprint") or "no spot")
+        return FootprintResult()
     with log.run("footprint") as st:
-        fps = ground.footprints(spots, traced.beam, scene.terrain, ray_scene, exposure.irradiance_w_m2, mu,
-                                scene.spec.analysis.footprint_eye_height_m, states, rows,
+        fps = ground.footprints(spots, traced.beam, scene.terrain, rays.ray_scene, mpe.exposure.irradiance_w_m2, mpe.attenuation_per_m,
+                                scene.spec.analysis.footprint_eye_height_m, history.states, list(keepout.targets),
                                 aperture_m=limiting_aperture_m(scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s))
         st.detail = fps.detail
-    return fps
+    return FootprintResult(fps.static, fps.dynamic)
 
 
-def _motion(scene, first, states, times, mu, exposure, backend, threads, log):
-    """Stage ``motion``: moving observers, a moving beam or targets, firing windows
+@stage("motion", needs=("crossings", "history", "rays", "mpe", "backend", "threads"), result=MotionStageResult)
+def _motion(log, crossings, history, rays, mpe, backend, threads) -> MotionStageResult:
+    """Moving observers, a moving beam or targets, firing windows
     (:mod:`hazard.pipeline.motion`); None when nothing moves."""
     from scenes.motion import motion_of
 
+    scene = crossings.scene
     motion = motion_of(scene)
     if motion is None:
         log.skip("motion", "nothing moves and lasing never stops (no track, aim_track, target track or windows)")
-        return None
+        return MotionStageResult(None)
     from .pipeline.motion_stage import run_motion
 
+    first = (history.traced, rays.tracer, rays.ray_scene)
     with log.run("motion") as st:
-        out = run_motion(scene, motion, first, states, times, mu, exposure, backend, threads)
+        out = run_motion(scene, motion, first, history.states, history.times_s, mpe.attenuation_per_m, mpe.exposure, backend, threads)
         st.detail = (f"{len(out.tracks())} track(s), {len(out.fixed())} fixed observer(s) over [{out.span_s[0]:g}, "
                      f"{out.span_s[1]:g}] s; {out.key_step_text}; {sum(p.summary['samples'] for p in out.paths)} samples"
                      + "".join(f"; {n}" for n in out.notes))
-    return out
+    return MotionStageResult(out)
 
 
-def _airspace(result, log, first):
-    """Stage ``airspace``: the visual-interference distances (visible lasers) and the
-    flight zones' checks (:mod:`hazard.visual`, :mod:`hazard.pipeline.airspace`)."""
+_CORE = ("mpe", "crossings", "beam", "rays", "history", "irradiance_map", "keepout", "spill", "sdz", "mirror_beams",
+         "footprint", "motion")
+
+
+@stage("airspace", needs=_CORE, result=AirspaceResult)
+def _airspace(log, **r) -> AirspaceResult:
+    """The visual-interference distances (visible lasers) and the flight zones' checks
+    (:mod:`hazard.visual`, :mod:`hazard.pipeline.airspace`), on the result so far."""
     from .visual import visual_interference
 
-    spec = result.scene.spec
+    result = hazard_result(r)
+    first = (r["history"].traced, r["rays"].tracer, r["rays"].ray_scene)
+    spec, zones = result.scene.spec, {}
     with log.run("airspace") as st:
-        result.visual_interference = visual_interference(result)
-        d = result.visual_interference["direct"]
-        st.detail = (("visual levels apply: " if result.visual_interference["applies"] else "not a visible laser: ")
-                     + ", ".join(f"{k} {v:.4g}" for k, v in d.items() if v is not None))
+        vi = visual_interference(result)
+        st.detail = (("visual levels apply: " if vi["applies"] else "not a visible laser: ")
+                     + ", ".join(f"{k} {v:.4g}" for k, v in vi["direct"].items() if v is not None))
         if spec.airspace is not None and spec.airspace.zones:
             from .pipeline.airspace import check_zones
 
-            result.airspace = check_zones(result, first)
-            held = sum(z["holds"] for z in result.airspace["zones"])
-            st.detail += f"; {held} of {len(result.airspace['zones'])} flight zone(s) hold their limit"
+            zones = check_zones(replace(result, visual_interference=vi), first)
+            held = sum(z["holds"] for z in zones["zones"])
+            st.detail += f"; {held} of {len(zones['zones'])} flight zone(s) hold their limit"
+    return AirspaceResult(vi, zones)
 
 
-def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
-    the_plan, log = plan(scene), StageLog(progress)
-    with log.run("mpe") as st:
-        exposure = limits.exposure_limits(scene.spec)
-        st.detail = exposure.detail
-    mu = limits.attenuation_per_m(scene.spec)
-    ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
-    notes = list(getattr(scene, "notes", None) or []) + list(traced.notes)  # the beam's convention first (scenes.conventions)
-    notes.extend(beam_stage.tail_notes(scene, traced.beam, traced.built.spots, exposure.irradiance_w_m2, mu))
-    scene = _crossings(scene, traced, tracer, mu, exposure.irradiance_w_m2, log, the_plan)
-    direct_beam = _direct(scene, traced, tracer, mu, log, the_plan, ray_scene)
-    spill_part = _spill(scene, traced, mu, exposure, log)
-    zone = _sdz(scene, exposure, mu, log, ray_scene)
-    times, states, melts = _histories(scene, traced, log, the_plan)
-    inp = _map_inputs(scene, traced, states, times, mu, exposure, ray_scene, keep_history, threads, the_plan)
-    if direct_beam is not None and direct_beam.irradiance_w_m2.any():
-        inp.direct_w_m2 = direct_beam.irradiance_w_m2
-    if any(sp.material.has_specular for sp in inp.spots):
-        inp.apertures = _apertures(scene)
-    if exposure.pulse is not None:
-        inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
-    if not inp.keep_history:
-        notes.append(f"irradiance history not kept ({len(inp.points)} x {len(times)} values); pass keep_history=True to keep it")
-    out = irradiance_map.irradiance_map(inp)
-    _log_map(log, inp, out, the_plan)
-    rows = _targets(scene, traced, states, exposure, mu, log)
-    notes.extend(lobes.near_field_lobe_notes(traced.built.spots, rows))
-    melt_by_name = {scene.targets[k].name: m for k, m in melts.items()}
-    for row in rows:
-        row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None
-    _mirror_beams(scene, rows, traced.built.spots, ray_scene, zone, log, the_plan)
-    fps = _footprints(scene, traced, ray_scene, states, exposure, mu, rows, log, the_plan)
-    moving = _motion(scene, (traced, tracer, ray_scene), states, times, mu, exposure, backend, threads, log)
-    built = traced.built
-    result = HazardResult(scene, exposure.mpe, exposure.irradiance_w_m2, exposure.radiant_exposure_j_m2, exposure.pulse, mu, times,
-                          [], rows, _observers(scene, out, direct_beam),
-                          built.spill_w, built.blocked_w, traced.beam.power_w,
-                          None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
-                          traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
-                          spill=spill_part, sdz=zone, motion=moving)
-    _airspace(result, log, (traced, tracer, ray_scene))
-    result.stages = log.stages()
-    return result
+@stage("extended_source", needs=(*_CORE, "airspace"), result=ExtendedSourceResult)
+def _extended_source(log, **r) -> ExtendedSourceResult:
+    """The MPE per observer: C_E from the diffuse spot's subtense, or the point-source MPE
+    (its record is kept in the result: :func:`hazard_result` appends it)."""
+    return extended_source_of(hazard_result(r))
 
 
 def versions() -> dict:

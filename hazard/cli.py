@@ -9,7 +9,8 @@ Verbs:
   hazard compare SCENE         static vs dynamic: NOHD per target, changed verdicts
   hazard validate SCENE        check a scene file (or a study file) as run, risk and study would
   hazard models                registered BRDF models
-  hazard schema [--markdown]   JSON schema of scene files (or the reference table of every key)
+  hazard schema [--markdown]   JSON schema of scene files (or the reference table of every key;
+                               --report: the JSON schema of report.json)
   hazard study STUDY.toml -o OUTDIR  sweeps / Monte Carlo on Dask (resumable)
   hazard convergence SCENE     error vs run time of each accuracy knob, recommendation
   hazard render SCENE -o OUTDIR   keep-out renders (PNG), VTK for ParaView, lobe animation
@@ -170,6 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
     p.add_argument("--markdown", action="store_true", help="print the scene reference as Markdown (key path, type, unit, "
                    "default, description), as kept in docs/scene-reference.md")
+    p.add_argument("--report", action="store_true", help="print the JSON schema of report.json instead (hazard.report_schema)")
 
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
     p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars)")
@@ -616,7 +618,14 @@ def _cmd_models(args, out, err):
 def _cmd_schema(args, out, err):
     import scenes
 
-    if args.markdown:
+    if args.report and args.markdown:
+        err.write("hazard schema: --report and --markdown: choose one (--report prints report.json's JSON schema)\n")
+        return EXIT_ERROR
+    if args.report:
+        from .report_schema import report_schema
+
+        text = json.dumps(report_schema(), indent=1)
+    elif args.markdown:
         from scenes.reference import schema_markdown
 
         text = schema_markdown()

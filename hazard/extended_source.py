@@ -84,6 +84,8 @@ __all__ = [
     "observer_subtense_rad",
     "extended_source_mpe",
     "apply_extended_source",
+    "extended_source_of",
+    "ExtendedSourceResult",
     "MAX_EXACT_ALPHAS",
     "BIN_RATIO",
 ]
@@ -298,20 +300,17 @@ def _specular_observers(result, m):
     return np.full(m, any_specular), False
 
 
-def _point_source_only(result, m, seconds):
+def _point_source_only(result, alpha, m, seconds):
     """C_E = 1 and the scalar MPE for every observer; a skipped stage (its time: the
     subtense, still computed for the report)."""
     from .results import Stage
 
-    obs = result.observers
-    obs.c_e = np.ones(m)
-    obs.mpe_w_m2 = np.full(m, float(result.mpe_w_m2))
-    obs.mpe_radiant_exposure_j_m2 = np.full(m, float(result.mpe_radiant_exposure_j_m2))
-    result.extended_source = {"applied": False}
-    result.stages.append(Stage("extended_source", False,
-                               "point-source MPE (conservative); set [exposure] extended_source = true to apply C_E "
-                               "(the spot subtense is still computed for the report)", seconds))
-    return result
+    return ExtendedSourceResult(
+        angular_subtense_rad=alpha, c_e=np.ones(m), mpe_w_m2=np.full(m, float(result.mpe_w_m2)),
+        mpe_radiant_exposure_j_m2=np.full(m, float(result.mpe_radiant_exposure_j_m2)), first_exceedance_s=None,
+        summary={"applied": False}, notes=(),
+        record=Stage("extended_source", False, "point-source MPE (conservative); set [exposure] extended_source = true to apply "
+                     "C_E (the spot subtense is still computed for the report)", seconds))
 
 
 def _with_direct_beam(obs, mpe_point, mpe_ext):
@@ -330,27 +329,28 @@ def _with_direct_beam(obs, mpe_point, mpe_ext):
     return np.where(both, total / frac, mpe_ext)
 
 
-def _set_observer_mpe(result, ext, specular, m, t_exp):
-    """Per-observer C_E and MPE (for observers also in the direct beam, C_E is the ratio of
-    their combined MPE to the point-source one); a static map's first exceedance with it."""
+def _observer_mpe(result, ext, specular, m, t_exp):
+    """Per-observer ``(c_e, mpe_w_m2, first_exceedance_s, notes)``: for observers also in
+    the direct beam, C_E is the ratio of their combined MPE to the point-source one; a
+    static map's first exceedance with it (None: unchanged)."""
     obs = result.observers
     mpe_obs = _with_direct_beam(obs, float(result.mpe_w_m2), ext.mpe_w_m2)
     mixed = mpe_obs != ext.mpe_w_m2  # with the direct beam: the effective factor of the sum
-    obs.c_e = np.where(specular, 1.0, np.where(mixed, mpe_obs / float(result.mpe_w_m2), ext.c_e))
-    obs.mpe_w_m2 = mpe_obs
-    obs.mpe_radiant_exposure_j_m2 = mpe_obs * t_exp
+    c_e = np.where(specular, 1.0, np.where(mixed, mpe_obs / float(result.mpe_w_m2), ext.c_e))
+    first, notes = None, []
     if len(result.times_s) == 1 and m:  # static: exceeded from the start or never (the map's rule, with the observer's MPE)
         changed = mpe_obs != float(result.mpe_w_m2)
-        obs.first_exceedance_s = np.where(changed, np.where(obs.static_irradiance_w_m2 > mpe_obs, result.times_s[0], np.nan),
-                                          obs.first_exceedance_s)
+        first = np.where(changed, np.where(obs.static_irradiance_w_m2 > mpe_obs, result.times_s[0], np.nan),
+                         obs.first_exceedance_s)
     elif m:
-        result.notes.append("extended source: first_exceedance_s of dynamic materials uses the point-source MPE "
-                            "(the earliest possible time; conservative)")
+        notes.append("extended source: first_exceedance_s of dynamic materials uses the point-source MPE "
+                     "(the earliest possible time; conservative)")
+    return c_e, mpe_obs, first, notes
 
 
-def _stage_detail(obs, alpha, ext, specular, known, n_above, m) -> str:
+def _stage_detail(c_e, alpha, ext, specular, known, n_above, m) -> str:
     if m:
-        parts = [f"C_E from the spot subtense: {obs.c_e.min():.4g} .. {obs.c_e.max():.4g}, "
+        parts = [f"C_E from the spot subtense: {c_e.min():.4g} .. {c_e.max():.4g}, "
                  f"{n_above} of {m} observers above alpha_min ({1e3 * ALPHA_MIN_RAD:g} mrad)",
                  f"alpha {1e3 * alpha.min():.4g} .. {1e3 * alpha.max():.4g} mrad",
                  f"MPE {ext.mpe_w_m2.min():.6g} .. {ext.mpe_w_m2.max():.6g} W/m^2"]
@@ -411,42 +411,82 @@ def _subtense_by_block(result, observers, whole) -> np.ndarray:
     return alpha
 
 
-def apply_extended_source(result):
-    """Set the per-observer subtense, C_E and MPE on ``result`` (in place; returns it).
+@dataclass(frozen=True)
+class ExtendedSourceResult:
+    """Stage ``extended_source`` (:func:`extended_source_of`): per observer the spot's
+    angular subtense [rad], C_E, the MPE [W/m^2] and [J/m^2]; the first exceedance [s]
+    recomputed with that MPE (static maps with C_E applied; None: the map's stands); the
+    report's ``extended_source`` block, the notes it adds and its stage record."""
 
-    With ``[exposure] extended_source = true``: ``observers.angular_subtense_rad``,
-    ``observers.c_e`` and ``observers.mpe_w_m2`` (+ ``mpe_radiant_exposure_j_m2``) from
-    the spot subtense (see the module notes), a ran stage ``extended_source`` and
-    ``result.extended_source`` (a summary for the report). Otherwise C_E = 1 and the
-    scalar point-source MPE everywhere (the subtense is still reported), and a skipped
-    stage. ``hazard_ratio``, ``hazardous`` and ``hazardous_static`` use the per-observer
-    MPE; for static materials the first exceedance is recomputed with it.
+    angular_subtense_rad: np.ndarray
+    c_e: np.ndarray
+    mpe_w_m2: np.ndarray
+    mpe_radiant_exposure_j_m2: np.ndarray
+    first_exceedance_s: np.ndarray | None
+    summary: dict
+    notes: tuple
+    record: object
+
+    def observer_fields(self) -> dict:
+        """The :class:`hazard.results.ObserverResults` fields this stage sets, by name."""
+        out = {"angular_subtense_rad": self.angular_subtense_rad, "c_e": self.c_e, "mpe_w_m2": self.mpe_w_m2,
+               "mpe_radiant_exposure_j_m2": self.mpe_radiant_exposure_j_m2}
+        if self.first_exceedance_s is not None:
+            out["first_exceedance_s"] = self.first_exceedance_s
+        return out
+
+
+def extended_source_of(result) -> ExtendedSourceResult:
+    """The per-observer subtense, C_E and MPE of an analysis result (read, not changed).
+
+    With ``[exposure] extended_source = true``: the subtense, C_E and MPE from the spot
+    subtense (see the module notes), a ran stage record and the report's summary.
+    Otherwise C_E = 1 and the scalar point-source MPE everywhere (the subtense is still
+    reported), and a skipped stage. For static materials the first exceedance is
+    recomputed with the per-observer MPE.
     """
     from .results import Stage
 
     t0 = time.perf_counter()
-    scene, obs = result.scene, result.observers
+    scene = result.scene
     spec, m = scene.spec, len(result.observers)
     whole = [_holds_whole_beam(result, sp) for sp in result.spots]
     alpha = _subtense_by_block(result, scene.observers, whole) if (m and result.spots) else np.zeros(m)
     t_exp = spec.exposure.duration_s
-    obs.angular_subtense_rad = alpha
     if not spec.exposure.extended_source:
-        return _point_source_only(result, m, time.perf_counter() - t0)
+        return _point_source_only(result, alpha, m, time.perf_counter() - t0)
     laser, pulsed = spec.laser, result.pulse is not None
     specular, known = _specular_observers(result, m)
     alpha_used = np.where(specular, 0.0, alpha)
     ext = extended_source_mpe(alpha_used, laser.wavelength_nm, t_exp, standard=spec.exposure.standard,
                               pulse_duration_s=laser.pulse_duration_s if pulsed else None,
                               prf_hz=laser.prf_hz if pulsed else None)
-    _set_observer_mpe(result, ext, specular, m, t_exp)
+    c_e, mpe_obs, first, notes = _observer_mpe(result, ext, specular, m, t_exp)
     n_above = int((alpha_used > ALPHA_MIN_RAD).sum())
     if any(v[0].unverified for a, v in ext.evaluations.items() if a > 0):
-        result.notes.append("extended source: the governing MPE row for some observers is labelled [M] "
-                            "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, unverified)")
+        notes.append("extended source: the governing MPE row for some observers is labelled [M] "
+                     "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, unverified)")
     if n_above:
-        result.notes.append("extended source: keep-out lobes, NOHDs and the ground footprint use the point-source MPE (conservative)")
-    result.extended_source = _summary(spec, ext, known, n_above, int(specular.sum()), t_exp)
-    result.stages.append(Stage("extended_source", True, _stage_detail(obs, alpha, ext, specular, known, n_above, m),
-                               time.perf_counter() - t0))
+        notes.append("extended source: keep-out lobes, NOHDs and the ground footprint use the point-source MPE (conservative)")
+    return ExtendedSourceResult(
+        angular_subtense_rad=alpha, c_e=c_e, mpe_w_m2=mpe_obs, mpe_radiant_exposure_j_m2=mpe_obs * t_exp,
+        first_exceedance_s=first, summary=_summary(spec, ext, known, n_above, int(specular.sum()), t_exp), notes=tuple(notes),
+        record=Stage("extended_source", True, _stage_detail(c_e, alpha, ext, specular, known, n_above, m),
+                     time.perf_counter() - t0))
+
+
+def apply_extended_source(result):
+    """Set :func:`extended_source_of` on ``result`` in place (returns it): the observers'
+    ``angular_subtense_rad``, ``c_e``, ``mpe_w_m2``, ``mpe_radiant_exposure_j_m2`` (and a
+    static map's ``first_exceedance_s``), ``result.extended_source``, its notes and stage
+    record. For results built outside :func:`hazard.analyze` (which assembles a new result
+    from the stage's instead); ``hazard_ratio``, ``hazardous`` and ``hazardous_static``
+    then use the per-observer MPE.
+    """
+    ext = extended_source_of(result)
+    for name, value in ext.observer_fields().items():
+        setattr(result.observers, name, value)
+    result.notes.extend(ext.notes)
+    result.extended_source = ext.summary
+    result.stages.append(ext.record)
     return result

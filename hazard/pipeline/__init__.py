@@ -1,4 +1,6 @@
 """The analysis as a plan of stages (:mod:`hazard.pipeline.plan`), one module per stage.
 
-Each stage takes and returns explicit data; :func:`hazard.analysis.analyze` runs them.
+Each stage takes and returns explicit data, declared in :mod:`hazard.pipeline.stages` (what it
+needs, the frozen result it provides); :func:`hazard.analysis.analyze` runs them in the order
+derived from those declarations.
 """
