@@ -59,10 +59,18 @@ Conventions (all chosen so that the subtense is never overstated):
 * **Viewing optics**: binoculars magnify the retinal image (alpha x M); the unmagnified
   subtense is used, which understates C_E (conservative).
 * **Field of view**: alpha enters C_E and T2 with the limits above (C_E stops growing at
-  alpha_max in the 2014 editions; T2 at 100 mrad). The limiting angles of acceptance of
-  the standard (alpha_max for the thermal limit, gamma = 11 mrad - 110 mrad for the
-  photochemical limit, spec section 2.4) would only *reduce* the irradiance that counts
-  against the MPE for sources larger than them; they are not applied (conservative).
+  alpha_max in the 2014 editions; T2 at 100 mrad). The photochemical limit (400-600 nm,
+  t >= 10 s) is on the irradiance averaged over its field of view gamma_ph (11 mrad to
+  110 mrad with duration, spec section 2.4): :func:`hazard.mpe.ocular_mpe` raises it by
+  (alpha / gamma_ph)^2 for alpha > gamma_ph (the lower of that and the tables' radiance
+  form, never below the point value). That factor is the fraction of a uniform disk's
+  irradiance inside gamma_ph; for a Gaussian spot of 1/e diameter alpha the fraction is
+  1 - exp(-(gamma_ph / alpha)^2), never more, and the smaller principal axis used for an
+  elongated spot overstates it too, so the MPE is never overstated for such spots. A
+  spot whose reflected radiance is concentrated in a small part of it (a hot core in a
+  wide halo) is not covered by that bound (nor by C_E's). The thermal limit's acceptance
+  angle alpha_max would only *reduce* the irradiance counted; it is not applied
+  (conservative).
 
 The point-source MPE stays the default: ``[exposure] extended_source = true`` opts in.
 Keep-out lobes, NOHDs and the ground footprint stay point-source (conservative).
@@ -253,8 +261,9 @@ def extended_source_mpe(alpha_rad, wavelength_nm, duration_s, *, standard=_mpe.D
     in the 2014 editions subtenses above 100 mrad are evaluated at 100 mrad (identical:
     C_E and T2 no longer change). With more than ``max_exact`` distinct values left, each
     is rounded down to a log bin of ratio ``BIN_RATIO``: the MPE is then at most 0.1 % low
-    (0.2 % where C_E grows as alpha^2, 2007 editions above 100 mrad; the first bin above
-    alpha_min falls back to the point-source MPE).
+    (0.2 % where it grows as alpha^2: C_E in the 2007 editions above 100 mrad, and the
+    photochemical limit above its field of view gamma_ph; the first bin above alpha_min
+    falls back to the point-source MPE).
     C_E is reported for the duration of the exposure (``correction_factors``, spec 2.4).
     """
     std = _mpe.check_standard(standard)
@@ -262,8 +271,8 @@ def extended_source_mpe(alpha_rad, wavelength_nm, duration_s, *, standard=_mpe.D
     if np.any(~np.isfinite(alpha)) or np.any(alpha < 0):
         raise ValueError("angular subtenses must be finite and >= 0")
     ev = np.where(alpha <= ALPHA_MIN_RAD, 0.0, alpha)
-    if int(std[-4:]) >= 2014:
-        ev = np.minimum(ev, ALPHA_SATURATION_2014_RAD)
+    if int(std[-4:]) >= 2014 and not (400 <= wavelength_nm < 600 and duration_s >= 10):
+        ev = np.minimum(ev, ALPHA_SATURATION_2014_RAD)  # (the photochemical limit keeps growing above gamma_ph)
     uniq, inv = np.unique(ev, return_inverse=True)
     exact = len(uniq) <= max_exact
     if not exact:
