@@ -297,6 +297,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
     mu = limits.attenuation_per_m(scene.spec)
     ray_scene, tracer, traced = _trace(scene, the_plan, log, backend, threads, mu)
     notes = list(getattr(scene, "notes", None) or []) + list(traced.notes)  # the beam's convention first (scenes.conventions)
+    notes.extend(exposure.notes)  # the UV 24 h accumulation (hazard.pipeline.limits)
     notes.extend(beam_stage.tail_notes(scene, traced.beam, traced.built.spots, exposure.irradiance_w_m2, mu))
     scene = _crossings(scene, traced, tracer, mu, exposure.irradiance_w_m2, log, the_plan)
     direct_beam = _direct(scene, traced, tracer, mu, log, the_plan, ray_scene)
@@ -329,6 +330,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
                           None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
                           traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
                           spill=spill_part, sdz=zone, motion=moving)
+    result.uv_24h = None if exposure.uv_24h is None else exposure.uv_24h.to_dict()
     _airspace(result, log, (traced, tracer, ray_scene))
     result.stages = log.stages()
     return result

@@ -448,11 +448,14 @@ def apply_extended_source(result):
     ext = extended_source_mpe(alpha_used, laser.wavelength_nm, t_exp, standard=spec.exposure.standard,
                               pulse_duration_s=laser.pulse_duration_s if pulsed else None,
                               prf_hz=laser.prf_hz if pulsed else None)
+    if laser.wavelength_nm < 400:  # C_E = 1 in the UV; keep the analysis's limit (it holds the UV 24 h accumulation)
+        ext.mpe_w_m2 = np.minimum(ext.mpe_w_m2, float(result.mpe_w_m2))
     _set_observer_mpe(result, ext, specular, m, t_exp)
     n_above = int((alpha_used > ALPHA_MIN_RAD).sum())
     if any(v[0].unverified for a, v in ext.evaluations.items() if a > 0):
         result.notes.append("extended source: the governing MPE row for some observers is labelled [M] "
-                            "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, unverified)")
+                            "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, or the photochemical limit "
+                            "averaged over gamma_ph in the 2014 editions: unverified)")
     if n_above:
         result.notes.append("extended source: keep-out lobes, NOHDs and the ground footprint use the point-source MPE (conservative)")
     result.extended_source = _summary(spec, ext, known, n_above, int(specular.sum()), t_exp)
