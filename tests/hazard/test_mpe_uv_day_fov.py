@@ -264,3 +264,22 @@ def test_path_summary_slides_a_24h_window():
     # 20 h apart: one 24 h holds both, 12040 > 1e4 J/m^2 (Table 5a 315-400 nm): hazardous
     s2 = path_summary(_lit([10.0, 72000.0], 300.0, 20.0, 108400.0), 10.0, 355.0, ANSI)
     assert s2["uv_24h"]["dose_j_m2"] == pytest.approx(2 * one, rel=1e-12) and s2["hazardous"]
+
+
+def test_cli_exposures_per_day():
+    import io
+    import json
+
+    from hazard.cli import main
+
+    out = io.StringIO()
+    args = ["mpe", "--wavelength-nm", "355", "--duration-s", "60", "--exposures-per-day", "5", "--json"]
+    assert main(args, stdout=out) == 0
+    doc = json.loads(out.getvalue())
+    # one 60 s exposure: Table 5a 315-400 nm, 10 - 3e4 s, 1.0 J/cm^2 = 1e4 J/m^2; five in a day share it: 2000 each
+    assert doc["radiant_exposure_j_m2"] == pytest.approx(1e4, rel=REL)
+    assert doc["uv_24h"]["total_on_time_s"] == 300.0 and doc["uv_24h"]["radiant_exposure_j_m2"] == pytest.approx(1e4, rel=REL)
+    assert doc["uv_24h"]["per_exposure_radiant_exposure_j_m2"] == pytest.approx(2000.0, rel=REL)
+    err = io.StringIO()
+    assert main(["mpe", "--wavelength-nm", "532", "--duration-s", "60", "--exposures-per-day", "5"], stdout=io.StringIO(), stderr=err) != 0
+    assert "ultraviolet" in err.getvalue()
