@@ -311,6 +311,8 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
         inp.apertures = _apertures(scene)
     if exposure.pulse is not None:
         inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
+    if exposure.uv_24h is not None:
+        inp.uv_day_limit_j_m2 = exposure.uv_24h.radiant_exposure_j_m2
     if not inp.keep_history:
         notes.append(f"irradiance history not kept ({len(inp.points)} x {len(times)} values); pass keep_history=True to keep it")
     out = irradiance_map.irradiance_map(inp)

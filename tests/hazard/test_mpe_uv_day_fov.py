@@ -283,3 +283,24 @@ def test_cli_exposures_per_day():
     err = io.StringIO()
     assert main(["mpe", "--wavelength-nm", "532", "--duration-s", "60", "--exposures-per-day", "5"], stdout=io.StringIO(), stderr=err) != 0
     assert "ultraviolet" in err.getvalue()
+
+
+@pytest.mark.parametrize("day_limit, expected_first", [(None, None), (1e4, 1300.0)])
+def test_history_first_exceedance_holds_the_day_limit(day_limit, expected_first):
+    # a dynamic-material history at 355 nm, IEC: E = 8 W/m^2 for 3000 s. Single-exposure limits
+    # (Table A.1 315-400 nm): 1e4 J/m^2 to 1e3 s, then 10 W/m^2 x t: 8 t never exceeds them.
+    # With the day's summed-dose limit 1e4 J/m^2, the dose 8 t passes it first at the 1300 s node.
+    from types import SimpleNamespace
+
+    from hazard.pipeline.irradiance_map import _Exposure
+
+    times = np.arange(0.0, 3001.0, 100.0)
+    inp = SimpleNamespace(times_s=times, duration_s=3000.0, mpe_w_m2=10.0, pulse_limit_w_m2=None, wavelength_nm=355.0,
+                          standard=IEC, uv_day_limit_j_m2=day_limit)
+    out = SimpleNamespace(**{k: np.full(1, np.nan) for k in ("peak_w_m2", "peak_time_s", "static_w_m2", "exposure_j_m2",
+                                                               "first_exceedance_s")})
+    _Exposure(inp, out).post(np.full((1, len(times)), 8.0), np.array([0]))
+    if expected_first is None:
+        assert np.isnan(out.first_exceedance_s[0])
+    else:
+        assert out.first_exceedance_s[0] == pytest.approx(expected_first)
