@@ -98,7 +98,8 @@ __all__ = [
 
 ALPHA_MIN_RAD = _mpe.ALPHA_MIN_RAD
 # 2014 editions: C_E is constant above alpha_max (<= 100 mrad for every duration) and T2 is
-# constant above 100 mrad, so the MPE does not change above 100 mrad.
+# constant above 100 mrad, so the thermal MPE does not change above 100 mrad (the
+# photochemical limit, 400-600 nm and t >= 10 s, keeps growing above gamma_ph: not clamped then).
 ALPHA_SATURATION_2014_RAD = 0.1
 MAX_EXACT_ALPHAS = 4096  # distinct subtenses evaluated exactly (ocular_mpe ~15 us each, pulsed ~50 us)
 BIN_RATIO = 1.001  # beyond that: log bins of 0.1 %, each subtense rounded DOWN to its bin's lower edge

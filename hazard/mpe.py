@@ -13,6 +13,9 @@ Coverage: ocular and skin MPE from 180 nm to 1 mm and 1e-13 s to 3e4 s. The UV r
 (180-400 nm: thermal and photochemical dual limits) are written from general knowledge of
 ANSI Z136.1-2014 Table 5a and IEC 60825-1:2014 Table A.1 and labelled [M] (flagged as
 unverified in every result), with the lower reading taken where the edges are uncertain.
+UV exposures within 24 h add up (:func:`uv_24h_mpe`, [M]). The photochemical limit
+(400-600 nm) is averaged over its field of view gamma_ph for sources larger than it
+(:func:`photochemical_field_of_view_rad`). The tool computes no laser class (no AEL).
 
 Units: SI throughout (J/m^2, W/m^2); ANSI's tables are in J/cm^2 (1 J/cm^2 = 1e4 J/m^2).
 Notation: ANSI C_A, C_B, C_C, C_E = IEC C4, C3, C7, C6.
@@ -602,8 +605,8 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     -------
     MPEResult
         The lowest of the applicable limits (retinal thermal, photochemical 400-600 nm
-        for t >= 10 s, ANSI corneal 1200-1400 nm; corneal above 1400 nm), with every
-        step.
+        for t >= 10 s - averaged over gamma_ph when alpha > gamma_ph - ANSI corneal
+        1200-1400 nm; corneal above 1400 nm), with every step.
     """
     std = check_standard(standard)
     wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
