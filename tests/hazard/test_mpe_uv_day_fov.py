@@ -332,3 +332,51 @@ def test_history_first_exceedance_holds_the_day_limit(day_limit, expected_first)
         assert np.isnan(out.first_exceedance_s[0])
     else:
         assert out.first_exceedance_s[0] == pytest.approx(expected_first)
+
+
+def test_extended_source_scene_uses_the_photochemical_field_of_view():
+    import scenes
+
+    # 450 nm (C_B = 1), 1000 s, a Lambertian plate lit by a beam of 1/e diameter 0.1 m and 1e-4 rad
+    # divergence from 10 m: the spot is a disc of 1/e diameter D = 0.1 + 10 * 1e-4 = 0.101 m. An
+    # observer 2 m away at 30 deg from the normal (out of the beam) sees alpha = 2 atan(D cos 30 / 4)
+    # = 43.7 mrad > gamma_ph = 1.1 sqrt(1000) = 34.8 mrad: photochemical limit = lower of
+    # 1000 (alpha/gamma)^2 and 1e6 Omega(alpha) J/m^2 (ANSI Table 5a/5b, 400-600 nm, 100 - 1e4 s),
+    # over 1000 s. At 20 m (alpha = 4.4 mrad < gamma): the point value E = 1 C_B W/m^2. The
+    # retinal thermal rows are far higher (18 C_E T2^-0.25 W/m^2).
+    text = """
+name = "photochemical_fov"
+[laser]
+wavelength_nm = 450.0
+power_w = 1.0
+beam_diameter_m = 0.1
+divergence_rad = 1e-4
+position_m = [0.0, -10.0, 0.0]
+aim_m = [0.0, 0.0, 0.0]
+[exposure]
+duration_s = 1000.0
+standard = "ansi-z136.1-2014"
+extended_source = true
+[[targets]]
+name = "plate"
+shape = "plate"
+center_m = [0.0, 0.0, 0.0]
+normal = [0.0, -1.0, 0.0]
+tangent = [0.0, 0.0, 1.0]
+size_m = [2.0, 2.0]
+material = { model = "lambertian", reflectance = 0.5 }
+[[observers]]
+name = "near"
+points_m = [[1.0, -1.7320508075688772, 0.0]]
+[[observers]]
+name = "far"
+points_m = [[10.0, -17.320508075688772, 0.0]]
+"""
+    res = hz.analyze(scenes.loads(text))
+    alpha = 2 * math.atan(0.101 * math.cos(math.radians(30.0)) / 4.0)
+    gamma = 1.1e-3 * math.sqrt(1000.0)
+    h_near = min(1000.0 * (alpha / gamma) ** 2, 1e6 * omega_sr(alpha))
+    assert res.observers.angular_subtense_rad[0] == pytest.approx(alpha, rel=1e-9)
+    assert res.observers.mpe_w_m2[0] == pytest.approx(h_near / 1000.0, rel=1e-9)
+    assert res.observers.mpe_w_m2[1] == pytest.approx(1.0, rel=1e-9)
+    assert any("gamma_ph" in n for n in res.notes)  # the [M] row is said
