@@ -380,3 +380,14 @@ points_m = [[10.0, -17.320508075688772, 0.0]]
     assert res.observers.mpe_w_m2[0] == pytest.approx(h_near / 1000.0, rel=1e-9)
     assert res.observers.mpe_w_m2[1] == pytest.approx(1.0, rel=1e-9)
     assert any("gamma_ph" in n for n in res.notes)  # the [M] row is said
+
+
+@pytest.mark.parametrize("wl, claims_class", [(1064.0, True), (355.0, True), (266.0, False)])
+def test_class_3b_power_warning_only_where_0_5_w_is_the_ael(wl, claims_class):
+    # IEC 60825-1:2014 Table 8: the class 3B AEL for CW emission (t > 0.25 s) is 0.5 W from 315 nm
+    # to 1 mm; below 315 nm it is lower, so a 0.3 W laser at 266 nm may be class 4: no class claimed
+    from scenes.scene import _magnitude_warnings
+
+    spec = _plate_scene(wl, 0.3).spec
+    (w,) = _magnitude_warnings(spec)
+    assert "kW typed as W" in w and ("class 3B or lower" in w) == claims_class
