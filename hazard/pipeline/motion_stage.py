@@ -4,6 +4,7 @@ moves, every fixed observer's) sampled, refined and summarised (see
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -97,12 +98,20 @@ def _uv_limits_j_m2(wavelength_nm, standard, on_s) -> np.ndarray:
     on = np.asarray(on_s, float)
     pos = on > 0
     k = np.floor(np.log(np.maximum(on[pos], _mpe.DURATION_MIN_S) / _mpe.DURATION_MIN_S) / math.log(1.01))
-    binned = np.minimum(_mpe.DURATION_MIN_S * 1.01**k, on[pos])
-    uniq, inv = np.unique(binned, return_inverse=True)
-    h_u = np.array([_mpe.uv_24h_mpe(wavelength_nm, float(x), standard=standard).radiant_exposure_j_m2 for x in uniq])
+    k = np.minimum(k, np.floor(np.log(_mpe.UV_ACCUMULATION_S / _mpe.DURATION_MIN_S) / math.log(1.01)))  # <= 24 h
+    k = np.where(_mpe.DURATION_MIN_S * 1.01**k > on[pos], k - 1, k)  # the edge never above T (float rounding)
+    uniq, inv = np.unique(k.astype(np.int64), return_inverse=True)
+    h_u = np.array([_uv_day_h_j_m2(float(wavelength_nm), int(b), standard) for b in uniq])
     out = np.full(on.shape, np.inf)
     out[pos] = h_u[inv]
     return out
+
+
+@functools.lru_cache(maxsize=65536)
+def _uv_day_h_j_m2(wavelength_nm, bin_k, standard) -> float:
+    """H of :func:`hazard.mpe.uv_24h_mpe` at the lower edge of 1 % log bin ``bin_k`` (cached:
+    the paths of one run share their bins)."""
+    return _mpe.uv_24h_mpe(wavelength_nm, _mpe.DURATION_MIN_S * 1.01**bin_k, standard=standard).radiant_exposure_j_m2
 
 
 def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> dict:
@@ -110,23 +119,26 @@ def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> dict:
     the time exposed in that 24 h (the exposures of a day add up: :func:`hazard.mpe.uv_24h_mpe`).
 
     Exposed time counts the steps with irradiance at both ends (never more than the true
-    time, so the limit is never raised; a path lit only at isolated samples counts the
+    time, so the limit is never raised; a 24 h lit only at isolated samples counts the
     steps with irradiance at either end). Windows of 24 h end at every sample (the first
     exceedance is the first such end over the limit) and, for paths longer than 24 h,
     start at every sample."""
     dt = np.diff(t)
     both = (e[1:] > 0) & (e[:-1] > 0)
     either = (e[1:] > 0) | (e[:-1] > 0)
-    mask = both if np.any(both) else either
-    x = np.concatenate([[0.0], np.cumsum(np.where(mask, dt, 0.0))])
+    x = np.concatenate([[0.0], np.cumsum(np.where(both, dt, 0.0))])
+    xe = np.concatenate([[0.0], np.cumsum(np.where(either, dt, 0.0))])
     day = _mpe.UV_ACCUMULATION_S
     lo = np.maximum(t - day, t[0])
-    ends, doses, on = t, cum - np.interp(lo, t, cum), x - np.interp(lo, t, x)  # the 24 h up to each sample
+    ends, doses = t, cum - np.interp(lo, t, cum)  # the 24 h up to each sample
+    on, on_e = x - np.interp(lo, t, x), xe - np.interp(lo, t, xe)
     if t[-1] - t[0] > day:  # and from each sample on
         hi = np.minimum(t + day, t[-1])
         ends = np.concatenate([ends, hi])
         doses = np.concatenate([doses, np.interp(hi, t, cum) - cum])
         on = np.concatenate([on, np.interp(hi, t, x) - x])
+        on_e = np.concatenate([on_e, np.interp(hi, t, xe) - xe])
+    on = np.where(on > 0, on, on_e)  # lit only at isolated samples: the steps touching them
     h = _uv_limits_j_m2(wavelength_nm, standard, on)
     ratio = np.where(doses > 0, doses * (1.0 + rel_err) / h, 0.0)
     w = int(np.argmax(ratio))

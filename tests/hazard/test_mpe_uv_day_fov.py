@@ -391,3 +391,16 @@ def test_class_3b_power_warning_only_where_0_5_w_is_the_ael(wl, claims_class):
     spec = _plate_scene(wl, 0.3).spec
     (w,) = _magnitude_warnings(spec)
     assert "kW typed as W" in w and ("class 3B or lower" in w) == claims_class
+
+
+def test_path_day_limits_round_down_within_1_percent():
+    # the motion stage's binned day limits against IEC 60825-1:2014 Table A.1, 315-400 nm, typed
+    # here: C1 = 5.6e3 t^0.25 (< 10 s), 1e4 J/m^2 (10 - 1e3 s), 10 W/m^2 x t (1e3 - 3e4 s), the
+    # 3e4 s value beyond: never above it, at most 1 % below
+    from hazard.pipeline.motion_stage import _uv_limits_j_m2
+
+    on = np.concatenate([np.geomspace(1e-3, 86400.0, 1500), [10.0, 1e3, 3e4, 86400.0]])
+    ref = np.where(on < 10, 5.6e3 * on**0.25, np.where(on < 1e3, 1e4, 10.0 * np.minimum(on, 3e4)))
+    h = _uv_limits_j_m2(355.0, IEC, on)
+    assert np.all(h <= ref * (1 + 1e-12)) and np.all(h >= ref / 1.0101)
+    assert np.isinf(_uv_limits_j_m2(355.0, IEC, np.array([0.0]))[0])  # never exposed: no limit needed (dose 0)
