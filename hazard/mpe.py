@@ -714,7 +714,7 @@ def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD
     label = "[M] UV 24 h accumulation (ANSI Z136.1-2014 8.2, IEC 60825-1:2014 A.3; general knowledge, unverified)"
     steps = (
         f"UV exposures within 24 h per {STANDARDS[std]} at {wl:g} nm: {len(durs)} exposure(s), total {total:.6g} s {label}",
-        f"  limit on the summed dose = the MPE for one exposure of the total duration"
+        "  limit on the summed dose = the MPE for one exposure of the total duration"
         + (f" (tables end at 3e4 s: evaluated at {t_eval:g} s, not extrapolated)" if t_eval < total else ""),
         f"  {res.governing_limit}: {res.table_row}: {res.formula} -> H = {h:.6g} J/m^2",
         f"  summed dose <= {h:.6g} J/m^2, i.e. average irradiance while exposed <= {h / total:.6g} W/m^2",
