@@ -451,6 +451,9 @@ def apply_extended_source(result):
                               prf_hz=laser.prf_hz if pulsed else None)
     if laser.wavelength_nm < 400:  # C_E = 1 in the UV; keep the analysis's limit (it holds the UV 24 h accumulation)
         ext.mpe_w_m2 = np.minimum(ext.mpe_w_m2, float(result.mpe_w_m2))
+        result.notes.append(f"extended source: no C_E in the UV (180-400 nm); every observer keeps the analysis's MPE, "
+                            f"{float(result.mpe_w_m2):.6g} W/m^2 (with the UV 24 h accumulation), not the single-exposure "
+                            f"values of the extended_source block")
     _set_observer_mpe(result, ext, specular, m, t_exp)
     n_above = int((alpha_used > ALPHA_MIN_RAD).sum())
     if any(v[0].unverified for a, v in ext.evaluations.items() if a > 0):

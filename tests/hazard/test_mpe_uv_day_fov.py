@@ -404,3 +404,18 @@ def test_path_day_limits_round_down_within_1_percent():
     h = _uv_limits_j_m2(355.0, IEC, on)
     assert np.all(h <= ref * (1 + 1e-12)) and np.all(h >= ref / 1.0101)
     assert np.isinf(_uv_limits_j_m2(355.0, IEC, np.array([0.0]))[0])  # never exposed: no limit needed (dose 0)
+
+
+def test_extended_source_in_the_uv_keeps_the_day_limit():
+    # C_E = 1 below 400 nm: with extended_source = true the observers keep the analysis's MPE,
+    # here the day's 1e4 J/m^2 over 3000 s (ANSI Table 5a 315-400 nm) = 3.33 W/m^2, not 1000 W/m^2
+    import scenes
+
+    win = "[[0.0, 600.0], [3600.0, 4200.0], [7200.0, 7800.0], [10800.0, 11400.0], [14400.0, 15000.0]]"
+    path = scenes.example_path("plate")
+    text = path.read_text().replace("wavelength_nm = 1064.0", "wavelength_nm = 355.0").replace("power_w = 100.0", "power_w = 10000.0")
+    text = text.replace("aim_m = [0.0, 0.0, 0.0]", f"aim_m = [0.0, 0.0, 0.0]\nwindows = {win}")
+    text = text.replace('standard = "ansi-z136.1-2014"', 'standard = "ansi-z136.1-2014"\nextended_source = true')
+    res = hz.analyze(scenes.loads(text, base_dir=path.parent))
+    np.testing.assert_allclose(res.observers.mpe_w_m2, 1e4 / 3000.0, rtol=1e-12)
+    assert res.hazardous[0] and any("no C_E in the UV" in n for n in res.notes)
