@@ -113,6 +113,7 @@ def hazard_result(r, stages=()) -> HazardResult:
         extended_source={} if ext is None else ext.summary,
         visual_interference={} if air is None else air.visual_interference,
         airspace={} if air is None else air.zones,
+        uv_24h=None if exposure.uv_24h is None else exposure.uv_24h.to_dict(),
     )
 
 
@@ -146,6 +147,7 @@ def _beam(log, scene, rays, mpe) -> BeamResult:
         traced = beam_stage.trace_beam(scene, rays.tracer, mu)
         st.detail = traced.detail
     notes = list(getattr(scene, "notes", None) or []) + list(traced.notes)  # the beam's convention first (scenes.conventions)
+    notes.extend(mpe.exposure.notes)  # the UV 24 h accumulation (hazard.pipeline.limits)
     notes.extend(beam_stage.tail_notes(scene, traced.beam, traced.built.spots, mpe.exposure.irradiance_w_m2, mu))
     return BeamResult(traced, tuple(notes))
 
@@ -261,6 +263,8 @@ def _map(log, crossings, plan, history, rays, mpe, direct, keep_history, threads
         inp.apertures = _apertures(scene)
     if exposure.pulse is not None:
         inp.pulse_limit_w_m2 = exposure.pulse.per_pulse_radiant_exposure_j_m2 * scene.spec.laser.prf_hz
+    if exposure.uv_24h is not None:
+        inp.uv_day_limit_j_m2 = exposure.uv_24h.radiant_exposure_j_m2
     notes = () if inp.keep_history else (
         f"irradiance history not kept ({len(inp.points)} x {len(history.times_s)} values); pass keep_history=True to keep it",)
     out = irradiance_map.irradiance_map(inp)

@@ -248,6 +248,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_quantity_option(p, "--prf-hz", "Hz", "pulse repetition frequency [Hz]: --duration-s is then the pulse duration")
     add_quantity_option(p, "--exposure-duration-s", "s", "duration of the pulse train [s] (with --prf-hz)")
     p.add_argument("--explain", action="store_true", help="also say which rule governed and why (the candidate limits compared)")
+    p.add_argument("--exposures-per-day", type=_positive_int, help=(
+        "180-400 nm: this many such exposures (or trains) within 24 h; their doses add up and the sum is held to "
+        "the MPE of their total duration (hazard.mpe.uv_24h_mpe, [M])"))
     p.add_argument("--json", action="store_true", help="print JSON")
 
     p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step", epilog=_PROVENANCE)
@@ -288,7 +291,15 @@ def _cmd_mpe(args, out, err=None):
     doc = res.to_dict()
     if args.explain:
         doc["explanation"] = res.explain().splitlines()
-    out.write((json.dumps(doc, indent=1) if args.json else str(res) + ("\n" + res.explain() if args.explain else "")) + "\n")
+    day = ""
+    if args.exposures_per_day is not None:
+        each_s = args.duration_s if args.prf_hz is None else args.exposure_duration_s
+        uv = _mpe.uv_24h_mpe(args.wavelength_nm, [each_s] * args.exposures_per_day, standard=args.standard)
+        doc["uv_24h"] = {**uv.to_dict(), "exposures": args.exposures_per_day,
+                         "per_exposure_radiant_exposure_j_m2": uv.radiant_exposure_j_m2 / args.exposures_per_day}
+        day = (f"\n{uv}\n  per exposure: {uv.radiant_exposure_j_m2:.6g} / {args.exposures_per_day} = "
+               f"{uv.radiant_exposure_j_m2 / args.exposures_per_day:.6g} J/m^2 (also each exposure's own MPE above)")
+    out.write((json.dumps(doc, indent=1) if args.json else str(res) + ("\n" + res.explain() if args.explain else "") + day) + "\n")
     return EXIT_OK
 
 

@@ -59,10 +59,18 @@ Conventions (all chosen so that the subtense is never overstated):
 * **Viewing optics**: binoculars magnify the retinal image (alpha x M); the unmagnified
   subtense is used, which understates C_E (conservative).
 * **Field of view**: alpha enters C_E and T2 with the limits above (C_E stops growing at
-  alpha_max in the 2014 editions; T2 at 100 mrad). The limiting angles of acceptance of
-  the standard (alpha_max for the thermal limit, gamma = 11 mrad - 110 mrad for the
-  photochemical limit, spec section 2.4) would only *reduce* the irradiance that counts
-  against the MPE for sources larger than them; they are not applied (conservative).
+  alpha_max in the 2014 editions; T2 at 100 mrad). The photochemical limit (400-600 nm,
+  t >= 10 s) is on the irradiance averaged over its field of view gamma_ph (11 mrad to
+  110 mrad with duration, spec section 2.4): :func:`hazard.mpe.ocular_mpe` raises it by
+  (alpha / gamma_ph)^2 for alpha > gamma_ph (the lower of that and the tables' radiance
+  form, never below the point value). That factor is the fraction of a uniform disk's
+  irradiance inside gamma_ph; for a Gaussian spot of 1/e diameter alpha the fraction is
+  1 - exp(-(gamma_ph / alpha)^2), never more, and the smaller principal axis used for an
+  elongated spot overstates it too, so the MPE is never overstated for such spots. A
+  spot whose reflected radiance is concentrated in a small part of it (a hot core in a
+  wide halo) is not covered by that bound (nor by C_E's). The thermal limit's acceptance
+  angle alpha_max would only *reduce* the irradiance counted; it is not applied
+  (conservative).
 
 The point-source MPE stays the default: ``[exposure] extended_source = true`` opts in.
 Keep-out lobes, NOHDs and the ground footprint stay point-source (conservative).
@@ -92,7 +100,8 @@ __all__ = [
 
 ALPHA_MIN_RAD = _mpe.ALPHA_MIN_RAD
 # 2014 editions: C_E is constant above alpha_max (<= 100 mrad for every duration) and T2 is
-# constant above 100 mrad, so the MPE does not change above 100 mrad.
+# constant above 100 mrad, so the thermal MPE does not change above 100 mrad (the
+# photochemical limit, 400-600 nm and t >= 10 s, keeps growing above gamma_ph: not clamped then).
 ALPHA_SATURATION_2014_RAD = 0.1
 MAX_EXACT_ALPHAS = 4096  # distinct subtenses evaluated exactly (ocular_mpe ~15 us each, pulsed ~50 us)
 BIN_RATIO = 1.001  # beyond that: log bins of 0.1 %, each subtense rounded DOWN to its bin's lower edge
@@ -255,8 +264,9 @@ def extended_source_mpe(alpha_rad, wavelength_nm, duration_s, *, standard=_mpe.D
     in the 2014 editions subtenses above 100 mrad are evaluated at 100 mrad (identical:
     C_E and T2 no longer change). With more than ``max_exact`` distinct values left, each
     is rounded down to a log bin of ratio ``BIN_RATIO``: the MPE is then at most 0.1 % low
-    (0.2 % where C_E grows as alpha^2, 2007 editions above 100 mrad; the first bin above
-    alpha_min falls back to the point-source MPE).
+    (0.2 % where it grows as alpha^2: C_E in the 2007 editions above 100 mrad, and the
+    photochemical limit above its field of view gamma_ph; the first bin above alpha_min
+    falls back to the point-source MPE).
     C_E is reported for the duration of the exposure (``correction_factors``, spec 2.4).
     """
     std = _mpe.check_standard(standard)
@@ -264,8 +274,8 @@ def extended_source_mpe(alpha_rad, wavelength_nm, duration_s, *, standard=_mpe.D
     if np.any(~np.isfinite(alpha)) or np.any(alpha < 0):
         raise ValueError("angular subtenses must be finite and >= 0")
     ev = np.where(alpha <= ALPHA_MIN_RAD, 0.0, alpha)
-    if int(std[-4:]) >= 2014:
-        ev = np.minimum(ev, ALPHA_SATURATION_2014_RAD)
+    if int(std[-4:]) >= 2014 and not (400 <= wavelength_nm < 600 and duration_s >= 10):
+        ev = np.minimum(ev, ALPHA_SATURATION_2014_RAD)  # (the photochemical limit keeps growing above gamma_ph)
     uniq, inv = np.unique(ev, return_inverse=True)
     exact = len(uniq) <= max_exact
     if not exact:
@@ -461,11 +471,19 @@ def extended_source_of(result) -> ExtendedSourceResult:
     ext = extended_source_mpe(alpha_used, laser.wavelength_nm, t_exp, standard=spec.exposure.standard,
                               pulse_duration_s=laser.pulse_duration_s if pulsed else None,
                               prf_hz=laser.prf_hz if pulsed else None)
+    uv_notes = []
+    if laser.wavelength_nm < 400:  # C_E = 1 in the UV; keep the analysis's limit (it holds the UV 24 h accumulation)
+        ext.mpe_w_m2 = np.minimum(ext.mpe_w_m2, float(result.mpe_w_m2))
+        uv_notes.append(f"extended source: no C_E in the UV (180-400 nm); every observer keeps the analysis's MPE, "
+                        f"{float(result.mpe_w_m2):.6g} W/m^2 (with the UV 24 h accumulation), not the single-exposure "
+                        f"values of the extended_source block")
     c_e, mpe_obs, first, notes = _observer_mpe(result, ext, specular, m, t_exp)
+    notes = uv_notes + list(notes)
     n_above = int((alpha_used > ALPHA_MIN_RAD).sum())
     if any(v[0].unverified for a, v in ext.evaluations.items() if a > 0):
         notes.append("extended source: the governing MPE row for some observers is labelled [M] "
-                     "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, unverified)")
+                     "(extended-source rows for t >= 10 s, IEC 60825-1:2014 Table A.1 structure, or the photochemical limit "
+                     "averaged over gamma_ph in the 2014 editions: unverified)")
     if n_above:
         notes.append("extended source: keep-out lobes, NOHDs and the ground footprint use the point-source MPE (conservative)")
     return ExtendedSourceResult(

@@ -13,6 +13,9 @@ Coverage: ocular and skin MPE from 180 nm to 1 mm and 1e-13 s to 3e4 s. The UV r
 (180-400 nm: thermal and photochemical dual limits) are written from general knowledge of
 ANSI Z136.1-2014 Table 5a and IEC 60825-1:2014 Table A.1 and labelled [M] (flagged as
 unverified in every result), with the lower reading taken where the edges are uncertain.
+UV exposures within 24 h add up (:func:`uv_24h_mpe`, [M]). The photochemical limit
+(400-600 nm) is averaged over its field of view gamma_ph for sources larger than it
+(:func:`photochemical_field_of_view_rad`). The tool computes no laser class (no AEL).
 
 Units: SI throughout (J/m^2, W/m^2); ANSI's tables are in J/cm^2 (1 J/cm^2 = 1e4 J/m^2).
 Notation: ANSI C_A, C_B, C_C, C_E = IEC C4, C3, C7, C6.
@@ -22,6 +25,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from .aperture import limiting_aperture_m
 
@@ -35,6 +40,10 @@ __all__ = [
     "skin_mpe",
     "repetitive_pulse_mpe",
     "check_standard",
+    "photochemical_field_of_view_rad",
+    "uv_24h_mpe",
+    "on_time_in_24h_s",
+    "UV_ACCUMULATION_S",
 ]
 
 STANDARDS = {
@@ -322,16 +331,59 @@ def _retinal_thermal(wl, t, f: CorrectionFactors, std, alpha) -> _Limit:
                   "[M] extended-source rule (IEC 60825-1:2014 Table A.1 structure), unverified")
 
 
-def _photochemical(wl, t, f: CorrectionFactors, std):
-    """Photochemical (blue-light) limit, 400-600 nm, t >= 10 s ([C] A; point-source
-    irradiance form - for sources larger than the averaging angle gamma the standard
-    limits radiance, which this irradiance form bounds conservatively)."""
+def photochemical_field_of_view_rad(duration_s) -> float:
+    """The photochemical limit's field of view (limiting cone angle) gamma_ph [rad].
+
+    gamma_ph = 11 mrad (t <= 100 s), 1.1 t^0.5 mrad (100 - 1e4 s), 110 mrad (t > 1e4 s):
+    ANSI Z136.1-2014 / IEC 60825-1:2014 (ICNIRP 2013 values), spec section 2.4 [C].
+    Continuous: 1.1 * 100^0.5 = 11 and 1.1 * 1e4^0.5 = 110.
+    """
+    t = float(duration_s)
+    if not (math.isfinite(t) and t > 0):
+        raise ValueError(f"duration_s={duration_s!r}: expected a finite duration > 0 s")
+    return 11e-3 if t <= 100.0 else (1.1e-3 * math.sqrt(t) if t <= 1e4 else 110e-3)
+
+
+def _cone_solid_angle_sr(full_angle_rad):
+    """Solid angle [sr] of a cone of full angle ``full_angle_rad``: 2 pi (1 - cos(a / 2)),
+    never above the small-angle pi a^2 / 4."""
+    return 4.0 * math.pi * math.sin(full_angle_rad / 4.0) ** 2
+
+
+def _photochemical(wl, t, f: CorrectionFactors, std, alpha=0.0):
+    """Photochemical (blue-light) limit, 400-600 nm, t >= 10 s ([C] A), with its field of view.
+
+    Point source (alpha <= gamma_ph): H = 100 C_B J/m^2 (10 - 100 s), E = 1 C_B W/m^2
+    (100 - 3e4 s). The limit is on the irradiance averaged over the limiting cone angle
+    gamma_ph (:func:`photochemical_field_of_view_rad`), so a uniform source of subtense
+    alpha > gamma_ph puts only (gamma_ph / alpha)^2 of its irradiance in that field: the
+    limit on the whole irradiance is the point value x (alpha / gamma_ph)^2. The tables'
+    radiance form of the same limit (ANSI Z136.1 Table 5b; ICNIRP 2013), L_p t =
+    1e6 C_B J m^-2 sr^-1 (10 - 1e4 s) or L_p = 100 C_B W m^-2 sr^-1 (1e4 - 3e4 s), gives
+    H = L_p t Omega(alpha), up to 5 % lower (1e6 * Omega(11 mrad) = 95 against 100); the
+    lower of the two readings applies, never below the point value.
+    """
     if not (400 <= wl < 600 and t >= 10):
         return None
     label = "[C] OLBtools Z136 (A)" if _edition(std) >= 2014 else "[M] same values assumed for 2007"
     if t < 100:
-        return _Limit("photochemical", 100.0 * f.C_B, "400-600 nm, 10 - 100 s", f"H = 100 C_B J/m^2 = 100 * {f.C_B:.6g}", label)
-    return _Limit("photochemical", f.C_B * t, "400-600 nm, 100 - 3e4 s", f"E = 1 C_B W/m^2 = {f.C_B:.6g}; H = E t", label)
+        point = _Limit("photochemical", 100.0 * f.C_B, "400-600 nm, 10 - 100 s", f"H = 100 C_B J/m^2 = 100 * {f.C_B:.6g}", label)
+    else:
+        point = _Limit("photochemical", f.C_B * t, "400-600 nm, 100 - 3e4 s", f"E = 1 C_B W/m^2 = {f.C_B:.6g}; H = E t", label)
+    gamma = photochemical_field_of_view_rad(t)
+    if alpha <= gamma:
+        return point
+    h_fov = point.radiant_exposure_j_m2 * (alpha / gamma) ** 2
+    omega = _cone_solid_angle_sr(alpha)
+    lt = 1e6 * f.C_B if t < 1e4 else 100.0 * f.C_B * t
+    h_rad = lt * omega
+    h = max(point.radiant_exposure_j_m2, min(h_fov, h_rad))
+    formula = (f"{point.formula}; alpha = {1e3 * alpha:.6g} mrad > gamma_ph = {1e3 * gamma:.6g} mrad: lower of "
+               f"H_pt (alpha / gamma_ph)^2 = {point.radiant_exposure_j_m2:.6g} * ({1e3 * alpha:.6g} / {1e3 * gamma:.6g})^2 = {h_fov:.6g} "
+               f"and L_p t Omega(alpha) = {lt:.6g} J/(m^2 sr) * {omega:.6g} sr = {h_rad:.6g} J/m^2 (never below H_pt)")
+    return _Limit("photochemical", h, f"{point.row}, extended source averaged over gamma_ph (ANSI Table 5b; IEC Table A.1 gamma_ph)",
+                  formula, "[C] gamma_ph (spec 2.4), ANSI Z136.1-2007 Table 5b radiance form (Psychtoolbox AnsiZ136MPE); "
+                  "[M] the averaging rule for the 2014 editions")
 
 
 def _corneal_ansi(wl, t, std):
@@ -553,8 +605,8 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     -------
     MPEResult
         The lowest of the applicable limits (retinal thermal, photochemical 400-600 nm
-        for t >= 10 s, ANSI corneal 1200-1400 nm; corneal above 1400 nm), with every
-        step.
+        for t >= 10 s - averaged over gamma_ph when alpha > gamma_ph - ANSI corneal
+        1200-1400 nm; corneal above 1400 nm), with every step.
     """
     std = check_standard(standard)
     wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
@@ -562,7 +614,7 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     if wl < 400:
         cands = _ultraviolet(wl, t, std)
     elif wl < 1400:
-        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std), _corneal_ansi(wl, t, std),
+        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std, alpha), _corneal_ansi(wl, t, std),
                  *_anterior_dual(wl, t, f, std)]
     else:
         cands = [_infrared(wl, t, std)]
@@ -580,6 +632,120 @@ def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResu
     else:
         cands = [_skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)]
     return _result("skin", std, wl, t, 0.0, f, cands)
+
+
+# ----------------------------------------------------------------------------------------
+UV_ACCUMULATION_S = 86400.0  # 24 h: the UV exposures of a day add up (ANSI Z136.1-2014 8.2; IEC 60825-1:2014 A.3) [M]
+
+
+@dataclass(frozen=True)
+class UV24hResult:
+    """The 24 h (accumulated) UV limit: the dose of every exposure within 24 h, summed,
+    against the MPE of one exposure lasting their total duration.
+
+    Attributes
+    ----------
+    total_on_time_s : float
+        Sum of the exposure durations within the 24 h [s].
+    radiant_exposure_j_m2 : float
+        Limit on the summed dose [J/m^2].
+    average_irradiance_w_m2 : float
+        The same as an irradiance while exposed, H / total_on_time_s [W/m^2].
+    mpe : MPEResult
+        The single-exposure MPE evaluated at the total (clipped to the tables' 3e4 s).
+    """
+
+    wavelength_nm: float
+    standard: str
+    total_on_time_s: float
+    radiant_exposure_j_m2: float
+    average_irradiance_w_m2: float
+    mpe: MPEResult
+    label: str
+    steps: tuple
+
+    def to_dict(self) -> dict:
+        return {"wavelength_nm": self.wavelength_nm, "standard": self.standard, "accumulation_s": UV_ACCUMULATION_S,
+                "total_on_time_s": self.total_on_time_s, "radiant_exposure_j_m2": self.radiant_exposure_j_m2,
+                "average_irradiance_w_m2": self.average_irradiance_w_m2, "governing_limit": self.mpe.governing_limit,
+                "table_row": self.mpe.table_row, "label": self.label, "unverified": True, "steps": list(self.steps)}
+
+    def __str__(self):
+        return "\n".join(self.steps)
+
+
+def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD) -> UV24hResult:
+    """MPE for the UV exposures (180-400 nm) received within 24 h, which add up.
+
+    Both standards treat the ultraviolet limits as cumulative over a day: exposures
+    repeated within 24 h are summed and the sum compared with the MPE for their total
+    duration (ANSI Z136.1-2014 section 8.2, repeated exposures; IEC 60825-1:2014 Annex A,
+    A.3; ICNIRP 2013) - [M]: clause wording from general knowledge, not read in the text.
+    The rule applied is therefore: dose summed over the exposures <= H(T_sum), the
+    single-exposure MPE (:func:`ocular_mpe`, the lowest of its thermal and photochemical
+    candidates) at T_sum = the sum of the durations. Each exposure must also meet its own
+    MPE (checked elsewhere). The tables end at 3e4 s: for T_sum > 3e4 s the 3e4 s value is
+    used, never extrapolated upward (constant-H rows are unchanged; IEC's 315-400 nm
+    E = 10 W/m^2 row stops at 3e5 J/m^2, the lower reading).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        180 nm to 400 nm.
+    exposure_durations_s : float or sequence of float
+        Durations [s] of the exposures within 24 h (or their total), each > 0, summed <= 24 h.
+    standard : str
+        One of :data:`STANDARDS`.
+    """
+    std = check_standard(standard)
+    wl, _, _ = _check_inputs(wavelength_nm, 1.0, 0.0)
+    if not wl < 400.0:
+        raise ValueError(f"wavelength_nm={wl!r}: the 24 h accumulation applies to the ultraviolet, expected 180 to < 400 nm")
+    durs = [exposure_durations_s] if isinstance(exposure_durations_s, (int, float)) else list(exposure_durations_s)
+    for i, d in enumerate(durs):
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d) or d <= 0:
+            raise ValueError(f"exposure_durations_s[{i}]={d!r}: expected a finite duration > 0 s")
+    total = float(sum(durs))
+    if not 0 < total <= UV_ACCUMULATION_S * (1 + 1e-12):
+        raise ValueError(f"exposure_durations_s sum to {total!r} s: expected > 0 and at most 24 h = {UV_ACCUMULATION_S:g} s")
+    t_eval = min(max(total, DURATION_MIN_S), DURATION_MAX_S)
+    res = ocular_mpe(wl, t_eval, standard=std)
+    h = res.radiant_exposure_j_m2
+    label = "[M] UV 24 h accumulation (ANSI Z136.1-2014 8.2, IEC 60825-1:2014 A.3; general knowledge, unverified)"
+    steps = (
+        f"UV exposures within 24 h per {STANDARDS[std]} at {wl:g} nm: {len(durs)} exposure(s), total {total:.6g} s {label}",
+        "  limit on the summed dose = the MPE for one exposure of the total duration"
+        + (f" (tables end at 3e4 s: evaluated at {t_eval:g} s, not extrapolated)" if t_eval < total else ""),
+        f"  {res.governing_limit}: {res.table_row}: {res.formula} -> H = {h:.6g} J/m^2",
+        f"  summed dose <= {h:.6g} J/m^2, i.e. average irradiance while exposed <= {h / total:.6g} W/m^2",
+    )
+    return UV24hResult(wl, std, total, h, h / total, res, label, steps)
+
+
+def on_time_in_24h_s(intervals_s) -> float:
+    """Largest time [s] the laser is on within any 24 h, for firing windows
+    ``[[t0_s, t1_s], ...]`` (overlaps counted once). A sliding 24 h window holds the most
+    when it starts at a window's start, so those starts are the only ones tried."""
+    w = np.asarray(intervals_s, float).reshape(-1, 2)
+    if not len(w):
+        return 0.0
+    w = w[np.argsort(w[:, 0])]
+    merged = [list(w[0])]
+    for a, b in w[1:]:
+        if a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    m = np.asarray(merged)
+    cum = np.concatenate([[0.0], np.cumsum(m[:, 1] - m[:, 0])])
+
+    def on_before(t):  # lased time in (-inf, t]
+        k = np.searchsorted(m[:, 0], t, side="right")  # windows starting at or before t
+        part = np.clip(t - m[np.maximum(k - 1, 0), 0], 0.0, m[np.maximum(k - 1, 0), 1] - m[np.maximum(k - 1, 0), 0])
+        return cum[np.maximum(k - 1, 0)] + np.where(k > 0, part, 0.0)
+
+    starts = m[:, 0]
+    return float(np.max(on_before(starts + UV_ACCUMULATION_S) - on_before(starts)))
 
 
 # ----------------------------------------------------------------------------------------

@@ -203,6 +203,7 @@ def report_dict(result, cols=None) -> dict:
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),
         "mpe_w_m2": result.mpe_w_m2,
+        "uv_24h": result.uv_24h,  # UV: the day's summed-dose limit (hazard.mpe.uv_24h_mpe), else None
         "extended_source": getattr(result, "extended_source", None) or {"applied": False},
         "attenuation_per_m": result.attenuation_per_m,
         "limiting_aperture": _limiting_aperture(scene),
@@ -694,8 +695,11 @@ def _motion_lines(result) -> list:
     for p in ([] if m is None else m.tracks()):
         s = p.summary
         first = "" if s["first_exceedance_s"] is None else f", first over the MPE at t = {s['first_exceedance_s']:.6g} s"
+        uv = s.get("uv_24h")
+        where = (f"the UV dose within 24 h: {uv['dose_j_m2']:.4g} J/m^2 over {uv['exposed_s']:.4g} s exposed against {uv['limit_j_m2']:.4g}"
+                 if uv and uv["ratio"] >= s["worst_window"]["ratio"] else f"in its worst {s['worst_window']['duration_s']:.3g} s window")
         out.append(f"  track {p.name}: {'HAZARD' if s['hazardous'] else 'below the MPE'} (exposure ratio "
-                   f"{s['exposure_ratio']:.3g} in its worst {s['worst_window']['duration_s']:.3g} s window{first}); peak "
+                   f"{s['exposure_ratio']:.3g} {where}{first}); peak "
                    f"{s['peak_irradiance_w_m2']:.4g} W/m^2 at t = {s['peak_time_s']:.6g} s; {s['samples']} samples, "
                    f"smallest step {s['min_step_s']:.3g} s" + _levels_text(result, s))
     out += [f"  note: {n}" for n in ([] if m is None else m.notes)]

@@ -154,6 +154,7 @@ class ReportModel(_Strict):
     mpe: dict[str, Any]
     pulse: Block
     mpe_w_m2: Number
+    uv_24h: Block  # 180-400 nm: the day's summed-dose limit (hazard.mpe.uv_24h_mpe), null elsewhere
     extended_source: dict[str, Any]
     attenuation_per_m: Number
     limiting_aperture: dict[str, Any]

@@ -198,6 +198,7 @@ class HazardResult:
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.visual)
     airspace: dict = field(default_factory=dict)  # the flight zones' checks (hazard.pipeline.airspace)
+    uv_24h: dict | None = None  # 180-400 nm: the day's summed-dose limit (hazard.mpe.uv_24h_mpe, [M]), else None
 
     @property
     def motion_hazardous(self) -> np.ndarray | None:

@@ -591,6 +591,11 @@ def _magnitude_warnings(spec: SceneSpec) -> list:
         return [f"laser.power_w = {p:g} W is over 10 MW: mW or kW meant?"]
     if p is not None and p < POWER_PLAUSIBLE_W[0]:
         return [f"laser.power_w = {p:g} W is under 1 mW for a high-energy laser range: W or kW meant?"]
+    if p is not None and p < CLASS_4_CW_MIN_W and spec.laser.wavelength_nm < 315.0:
+        # the 0.5 W class 3B AEL starts at 315 nm: below, Table 8's limits are lower, so no class is claimed
+        return [f"laser.power_w = {p:g} W is under {CLASS_4_CW_MIN_W:g} W, low for a high-energy range laser: kW typed as W? "
+                f"(1000x the power is {p * 1e3:g} W; below 315 nm the class 3B limit is lower than 0.5 W, so the laser "
+                f"may still be class 4)"]
     if p is not None and p < CLASS_4_CW_MIN_W:
         return [f"laser.power_w = {p:g} W is under {CLASS_4_CW_MIN_W:g} W, the class 3B limit for CW emission (IEC "
                 f"60825-1:2014 Table 8): by its power the laser is class 3B or lower, not a high-energy range laser: kW "

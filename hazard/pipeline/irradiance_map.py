@@ -58,6 +58,7 @@ class MapInputs:
     direct_w_m2: np.ndarray | None = None  # the laser's own beam at each observer (constant in time), added to the map
     pulse_limit_w_m2: float | None = None  # pulsed: per-pulse MPE x PRF (the first pulse above it is an exceedance)
     apertures: object | None = None  # hazard.aperture.Apertures per observer: flat mirrors' beams through them (None: point x gain)
+    uv_day_limit_j_m2: float | None = None  # 180-400 nm: the day's summed-dose limit (hazard.pipeline.limits.uv_24h_limit)
 
 
 @dataclass
@@ -126,6 +127,8 @@ class _Exposure:
             elapsed = np.clip(times[1:] - times[0], _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)
             self.mpe_h_t = np.array([_mpe.ocular_mpe(inp.wavelength_nm, t, standard=inp.standard).radiant_exposure_j_m2
                                      for t in elapsed])
+            if inp.uv_day_limit_j_m2 is not None:  # UV: no part of the day's dose may exceed the day's limit
+                self.mpe_h_t = np.minimum(self.mpe_h_t, inp.uv_day_limit_j_m2)
             self.e_floor = float(np.min(self.mpe_h_t / np.maximum(times[1:] - times[0], 1e-300)))
 
     def post(self, ec, rows):

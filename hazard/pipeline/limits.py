@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from .. import mpe as _mpe
 from ..nohd import attenuation_from_visibility
 
-__all__ = ["ExposureLimits", "exposure_limits", "attenuation_per_m"]
+__all__ = ["ExposureLimits", "exposure_limits", "uv_24h_limit", "attenuation_per_m"]
 
 
 @dataclass
@@ -21,12 +21,15 @@ class ExposureLimits:
     irradiance_w_m2: float
     radiant_exposure_j_m2: float
     detail: str
+    uv_24h: object | None = None  # hazard.mpe.UV24hResult (180-400 nm): the day's summed dose limit
+    notes: list = field(default_factory=list)
 
 
 def exposure_limits(spec) -> ExposureLimits:
     """Ocular MPE for the laser and exposure of a scene spec (ANSI Z136.1 / IEC 60825-1
     tables via :mod:`hazard.mpe`); pulsed lasers take the smaller of the average-power
-    MPE and the per-pulse MPE times the PRF (the repetitive-pulse rules)."""
+    MPE and the per-pulse MPE times the PRF (the repetitive-pulse rules). In the UV the
+    limit is also held to the day's summed dose (:func:`uv_24h_limit`), the lowest governing."""
     laser = spec.laser
     wl, t_exp, std = laser.wavelength_nm, spec.exposure.duration_s, spec.exposure.standard
     res = _mpe.ocular_mpe(wl, t_exp, standard=std)
@@ -38,7 +41,38 @@ def exposure_limits(spec) -> ExposureLimits:
         detail = f"pulsed: per-pulse MPE x PRF = {pulse.per_pulse_radiant_exposure_j_m2 * laser.prf_hz:.6g} W/m^2 average"
     else:
         detail = f"{res.irradiance_w_m2:.6g} W/m^2 for {t_exp:g} s"
-    return ExposureLimits(res, pulse, mpe_w_m2, mpe_w_m2 * t_exp, detail)
+    uv, notes = None, []
+    if wl < 400:
+        uv, note = uv_24h_limit(spec)
+        notes.append(note)
+        if uv.average_irradiance_w_m2 < mpe_w_m2:
+            mpe_w_m2 = uv.average_irradiance_w_m2
+            detail += f"; UV 24 h accumulation governs: {mpe_w_m2:.6g} W/m^2 ({uv.total_on_time_s:g} s of exposure in 24 h)"
+    return ExposureLimits(res, pulse, mpe_w_m2, mpe_w_m2 * t_exp, detail, uv, notes)
+
+
+def uv_24h_limit(spec):
+    """The UV (180-400 nm) day's limit of a scene (:func:`hazard.mpe.uv_24h_mpe`) and a note.
+
+    An observer held in place is exposed whenever the laser fires: the exposure time in 24 h
+    is the largest lased time of the firing windows (``[laser] windows``) within any 24 h
+    (:func:`hazard.mpe.on_time_in_24h_s`), or ``exposure.duration_s`` if longer or when no
+    windows are given (then the exposure duration is taken as the day's whole exposure).
+    """
+    laser, t_exp = spec.laser, spec.exposure.duration_s
+    on = _mpe.on_time_in_24h_s(laser.windows) if laser.windows else 0.0
+    total = min(max(t_exp, on), _mpe.UV_ACCUMULATION_S)
+    uv = _mpe.uv_24h_mpe(laser.wavelength_nm, total, standard=spec.exposure.standard)
+    if laser.windows:
+        src = (f"the firing windows lase up to {on:.6g} s within 24 h" + ("" if on >= t_exp else
+               f", less than exposure.duration_s = {t_exp:g} s, which is used"))
+    else:
+        src = (f"no firing windows: exposure.duration_s = {t_exp:g} s is taken as the whole exposure in 24 h "
+               f"(give [laser] windows for repeated firing)")
+    note = (f"UV: exposures within 24 h add up (ANSI Z136.1-2014 8.2 / IEC 60825-1:2014 A.3, [M]); {src}: the summed dose "
+            f"limit is {uv.radiant_exposure_j_m2:.6g} J/m^2 over {uv.total_on_time_s:.6g} s, an average of "
+            f"{uv.average_irradiance_w_m2:.6g} W/m^2 while exposed ({uv.mpe.governing_limit}, {uv.mpe.table_row})")
+    return uv, note
 
 
 def attenuation_per_m(spec) -> float:

@@ -4,6 +4,7 @@ moves, every fixed observer's) sampled, refined and summarised (see
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -90,9 +91,68 @@ def _windows(t, cum, lengths, idx):
     return np.asarray(best), (th, ends)
 
 
+def _uv_limits_j_m2(wavelength_nm, standard, on_s) -> np.ndarray:
+    """The day's limit H(T) (:func:`hazard.mpe.uv_24h_mpe`) for each exposed time T [s],
+    T rounded down to 1 % log bins (H never decreases with T in the UV rows, so the limit
+    is never raised by it; at most 1 % low where H grows as T, 0.25 % where as T^0.25)."""
+    on = np.asarray(on_s, float)
+    pos = on > 0
+    k = np.floor(np.log(np.maximum(on[pos], _mpe.DURATION_MIN_S) / _mpe.DURATION_MIN_S) / math.log(1.01))
+    k = np.minimum(k, np.floor(np.log(_mpe.UV_ACCUMULATION_S / _mpe.DURATION_MIN_S) / math.log(1.01)))  # <= 24 h
+    k = np.where(_mpe.DURATION_MIN_S * 1.01**k > on[pos], k - 1, k)  # the edge never above T (float rounding)
+    uniq, inv = np.unique(k.astype(np.int64), return_inverse=True)
+    h_u = np.array([_uv_day_h_j_m2(float(wavelength_nm), int(b), standard) for b in uniq])
+    out = np.full(on.shape, np.inf)
+    out[pos] = h_u[inv]
+    return out
+
+
+@functools.lru_cache(maxsize=65536)
+def _uv_day_h_j_m2(wavelength_nm, bin_k, standard) -> float:
+    """H of :func:`hazard.mpe.uv_24h_mpe` at the lower edge of 1 % log bin ``bin_k`` (cached:
+    the paths of one run share their bins)."""
+    return _mpe.uv_24h_mpe(wavelength_nm, _mpe.DURATION_MIN_S * 1.01**bin_k, standard=standard).radiant_exposure_j_m2
+
+
+def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> dict:
+    """UV (180-400 nm): the largest dose of the path within any 24 h against the limit for
+    the time exposed in that 24 h (the exposures of a day add up: :func:`hazard.mpe.uv_24h_mpe`).
+
+    Exposed time counts the steps with irradiance at both ends (never more than the true
+    time, so the limit is never raised; a 24 h lit only at isolated samples counts the
+    steps with irradiance at either end). Windows of 24 h end at every sample (the first
+    exceedance is the first such end over the limit) and, for paths longer than 24 h,
+    start at every sample."""
+    dt = np.diff(t)
+    both = (e[1:] > 0) & (e[:-1] > 0)
+    either = (e[1:] > 0) | (e[:-1] > 0)
+    x = np.concatenate([[0.0], np.cumsum(np.where(both, dt, 0.0))])
+    xe = np.concatenate([[0.0], np.cumsum(np.where(either, dt, 0.0))])
+    day = _mpe.UV_ACCUMULATION_S
+    lo = np.maximum(t - day, t[0])
+    ends, doses = t, cum - np.interp(lo, t, cum)  # the 24 h up to each sample
+    on, on_e = x - np.interp(lo, t, x), xe - np.interp(lo, t, xe)
+    if t[-1] - t[0] > day:  # and from each sample on
+        hi = np.minimum(t + day, t[-1])
+        ends = np.concatenate([ends, hi])
+        doses = np.concatenate([doses, np.interp(hi, t, cum) - cum])
+        on = np.concatenate([on, np.interp(hi, t, x) - x])
+        on_e = np.concatenate([on_e, np.interp(hi, t, xe) - xe])
+    on = np.where(on > 0, on, on_e)  # lit only at isolated samples: the steps touching them
+    h = _uv_limits_j_m2(wavelength_nm, standard, on)
+    ratio = np.where(doses > 0, doses * (1.0 + rel_err) / h, 0.0)
+    w = int(np.argmax(ratio))
+    over = ratio >= 1.0
+    return {"dose_j_m2": float(doses[w]), "exposed_s": float(on[w]), "limit_j_m2": float(h[w]), "ratio": float(ratio[w]),
+            "window_end_s": float(ends[w]), "first_exceedance_s": float(ends[over].min()) if over.any() else None,
+            "label": "[M] UV 24 h accumulation (ANSI Z136.1-2014 8.2, IEC 60825-1:2014 A.3; unverified)"}
+
+
 def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limit_w_m2=None) -> dict:
     """Peak, radiant exposure (largest over windows of ``duration_s``), the whole path's,
-    the verdict over every window length and the first exceedance of one path."""
+    the verdict over every window length and the first exceedance of one path; in the UV
+    also the largest dose within 24 h against the day's limit (``uv_24h``, :func:`_uv_24h`),
+    which counts in ``exposure_ratio`` and ``hazardous``."""
     t, e = pr.times_s, pr.irradiance_w_m2
     cum = pr.cumulative_j_m2
     err = _richardson_j_m2(t, e)
@@ -109,6 +169,10 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
     if pulse_limit_w_m2 is not None and np.any(e >= pulse_limit_w_m2):
         first.append(t[np.argmax(e >= pulse_limit_w_m2)])
     hazardous = bool(ratio[w] >= 1.0 or (pulse_limit_w_m2 is not None and e[k] >= pulse_limit_w_m2))
+    uv = _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) if wavelength_nm < 400 and len(t) > 1 else None
+    if uv is not None and uv["ratio"] >= 1.0:
+        hazardous = True
+        first.append(uv["first_exceedance_s"])
     dt = np.diff(t)
     steps = dt[dt > 1e-9 * pr.base_step_s]  # not the zero-width pairs at the windows' edges
     return {
@@ -119,7 +183,8 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
         "exposure_error_estimate_j_m2": err,
         "worst_window": {"duration_s": float(lengths[w]), "exposure_j_m2": float(best[w]), "mpe_radiant_exposure_j_m2": float(mpe_h[w]),
                          "ratio": float(ratio[w])},
-        "exposure_ratio": float(ratio[w]), "hazardous": hazardous,
+        "exposure_ratio": float(max(ratio[w], 0.0 if uv is None else uv["ratio"])), "hazardous": hazardous,
+        "uv_24h": uv,  # UV: the day's summed dose against its limit (None outside 180-400 nm)
         "first_exceedance_s": float(min(first)) if first else None,
         "time_span_s": [float(t[0]), float(t[-1])], "samples": int(len(t)), "base_step_s": pr.base_step_s,
         "min_step_s": float(steps.min()) if len(steps) else pr.base_step_s, "adaptive": pr.adaptive,

@@ -278,10 +278,13 @@ def test_mpe_monotone_in_alpha_and_bins_round_down(wl, t, std):
     assert np.all(binned.alpha_eval_rad <= alpha)
     assert np.all(binned.mpe_w_m2 <= exact.mpe_w_m2 * (1 + 1e-12))
     # 0.1 % bins in alpha: the MPE is at most 0.1 % low where it grows as alpha, 0.2 % where as
-    # alpha^2 (2007, above 100 mrad); the first bin above alpha_min rounds to a point source (a
-    # 1.2 % step for t >= 10 s)
+    # alpha^2 (2007, above 100 mrad; the photochemical limit, 400-600 nm and t >= 10 s, above its
+    # field of view gamma_ph = 11 mrad up to 100 s, 1.1 t^0.5 mrad to 1e4 s, spec 2.4); the first
+    # bin above alpha_min rounds to a point source (a 1.2 % step for t >= 10 s)
     first_bin = alpha <= ALPHA_MIN * 1.001
-    lin = alpha <= 0.1
+    gamma_ph = 11e-3 if t <= 100 else (1.1e-3 * t**0.5 if t <= 1e4 else 0.11)
+    photo_sq = (400 <= wl < 600 and t >= 10) & (alpha > gamma_ph)
+    lin = (alpha <= 0.1) & ~photo_sq
     assert np.all(binned.mpe_w_m2[~first_bin & lin] >= exact.mpe_w_m2[~first_bin & lin] / 1.0011)
     assert np.all(binned.mpe_w_m2[~lin] >= exact.mpe_w_m2[~lin] / 1.0021)
     assert np.all(binned.mpe_w_m2[first_bin] >= exact.mpe_w_m2[first_bin] / 1.013)
