@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import read_input_text
+from .fileio import read_input_text
 from .geometry import spherical_to_vector
 
 __all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "merl_grid", "read_samples", "read_csv_columns",
@@ -501,7 +501,7 @@ MERL_SCALE = {"R": 1.0 / 1500.0, "G": 1.15 / 1500.0, "B": 1.66 / 1500.0}
 def _merl_table(path):
     """(dims (3,), raw channel values (3, n)) of a MERL ``.binary`` file, its size checked
     against the header."""
-    from ._io import check_input_file
+    from .fileio import check_input_file
 
     path = check_input_file(path, "MERL file")
     raw = path.read_bytes()

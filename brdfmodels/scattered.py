@@ -58,7 +58,7 @@ import math
 import numpy as np
 
 from ._checks import finite_array
-from ._io import check_limit
+from .fileio import check_limit
 from .models import BRDFModel
 from .registry import register
 

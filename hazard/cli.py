@@ -435,7 +435,7 @@ def _finish(args, result):
 
 
 def _cmd_run(args, out, err):
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
     from .report import _json_safe, report_dict, summary_text, write_set
 
@@ -531,7 +531,7 @@ def _as_study(name):
     path = Path(name)
     if not path.exists():
         return load_study(name) if name in examples() and name not in scenes.examples() else None
-    from brdfmodels._io import read_toml
+    from brdfmodels.fileio import read_toml
 
     try:
         d = read_toml(path)
@@ -694,10 +694,10 @@ def _state_nodes_args(state_text, states_text):
 
 def _cmd_fit(args, out, err):
     """``hazard fit``: its 1-3 files (model, envelope, samples; separate paths) are written
-    as one unit (:func:`brdfmodels._unit.output_files`): on any error none is created or replaced."""
+    as one unit (:func:`brdfmodels.output_sets.output_files`): on any error none is created or replaced."""
     import io
 
-    from brdfmodels._unit import output_files
+    from brdfmodels.output_sets import output_files
 
     from .progress import progress_to
 
@@ -721,7 +721,7 @@ def _cmd_fit(args, out, err):
 
 def _fit_oxidation(args, out):
     from brdfmodels import fitting
-    from brdfmodels._io import atomic_write_text
+    from brdfmodels.fileio import atomic_write_text
 
     from brdfmodels.io import read_csv_columns
 
@@ -911,7 +911,7 @@ def _cmd_risk(args, out, err):
 
 
 def _cmd_render(args, out, err):
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
     from . import render
     from .progress import progress_to
@@ -972,7 +972,7 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 
 
 def _cmd_report(args, out, err):
-    from brdfmodels._unit import output_unit, read_sources
+    from brdfmodels.output_sets import output_unit, read_sources
 
     from .review import PdfError, read_report
 

@@ -30,7 +30,7 @@ class _Display:
     def save(self, path, **plot_kw) -> Path:
         fig, _ = self.plot(**plot_kw)
         path = Path(path)
-        from brdfmodels._io import atomic_write
+        from brdfmodels.fileio import atomic_write
 
         # a legend beside or below the axes stays whole
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"), keep_suffix=True)

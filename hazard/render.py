@@ -527,7 +527,7 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
     except ImportError:
         return result_paths
     gif = out / "lobe.gif"
-    from brdfmodels._io import atomic_write
+    from brdfmodels.fileio import atomic_write
 
     atomic_write(gif, lambda tmp: imageio.mimsave(tmp, [imageio.imread(f) for f in paths], duration=0.15), keep_suffix=True)
     result_paths["gif"] = gif

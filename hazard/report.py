@@ -1,7 +1,7 @@
 """Outputs of an analysis: ``report.json`` (every step) and ``observers.csv``, atomically.
 
 The whole set is written into a staging folder beside the output folder and switched in
-as one unit (:mod:`brdfmodels._unit`), so a crash never leaves a half-written report nor
+as one unit (:mod:`brdfmodels.output_sets`), so a crash never leaves a half-written report nor
 a new report beside an old table. An existing report is never overwritten unless asked
 (``force=True``).
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write_text, current_umask
+from brdfmodels.fileio import atomic_write_text, current_umask
 
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
 from .verdict import escape_way, verdict
@@ -351,7 +351,7 @@ def _write_synced(path: Path, data: bytes) -> None:
 
 def write_set(result, folder, *, extra=None, sections=None) -> list:
     """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
-    ``folder`` (a staging folder of :class:`brdfmodels._unit.OutputUnit`), each fsynced;
+    ``folder`` (a staging folder of :class:`brdfmodels.output_sets.OutputUnit`), each fsynced;
     returns the names written."""
     folder = Path(folder)
     extra = {**track_files(result), **dict(extra or {})}
@@ -376,11 +376,11 @@ def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> 
     the report's further ``sections`` (key -> data, e.g. ``map_outputs``).
 
     The files are written into a staging folder beside ``outdir`` and switched in as one
-    unit (:mod:`brdfmodels._unit`): ``outdir`` holds the previous complete set or the new
+    unit (:mod:`brdfmodels.output_sets`): ``outdir`` holds the previous complete set or the new
     one, never a mix. Previous outputs of ``hazard run`` need ``force``; files hazard did
     not write need ``force`` too and are kept. Returns the paths of the outputs.
     """
-    from brdfmodels._unit import OutputFolderError, output_unit
+    from brdfmodels.output_sets import OutputFolderError, output_unit
 
     out = Path(outdir)
     if out.exists() and not out.is_dir():

@@ -30,7 +30,7 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from brdfmodels._io import atomic_write, atomic_write_text, check_input_file
+from brdfmodels.fileio import atomic_write, atomic_write_text, check_input_file
 
 from .plots import _file_part
 from .report import NEVER_MODELLED, REPORT_FORMAT, REPORT_VERSION

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write, atomic_write_text, read_toml
+from brdfmodels.fileio import atomic_write, atomic_write_text, read_toml
 
 from .progress import progress_callback, progress_to
 
@@ -360,7 +360,7 @@ def load_study(path) -> Study:
 def _check_study(study: Study, path) -> None:
     """Before any work: the number of scenarios is within the limit, every swept path is a
     field of the scene schema and of the base scene, and every scenario's scene validates."""
-    from brdfmodels._io import check_limit
+    from brdfmodels.fileio import check_limit
 
     n = math.prod(len(p.values) for p in study.parameters) if study.kind == "grid" else study.samples
     n *= max(1, study.montecarlo.samples)
@@ -704,7 +704,7 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     with an invalid value does no work.
     """
     validate_scenarios(study)
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
     outdir = Path(outdir)
     # results.csv/.parquet, summary.json and summary.png switch in as one unit; study.json and

@@ -289,7 +289,7 @@ def check_aim_sector(spec, aim: AimSchedule | None) -> None:
 
 def samples_max() -> int:
     """Time samples a moving path may take (limit ``MOTION_SAMPLES``, ``HAZARD_MAX_MOTION_SAMPLES``)."""
-    from brdfmodels._io import limit
+    from brdfmodels.fileio import limit
 
     return int(limit("MOTION_SAMPLES"))
 
@@ -297,7 +297,7 @@ def samples_max() -> int:
 def check_base_steps(motion: Motion, t0: float, t1: float) -> int:
     """Samples of the base step over [t0, t1] (``floor((t1 - t0) / time_step_s) + 1``);
     ValueError naming ``motion.time_step_s`` and the limit when they exceed it."""
-    from brdfmodels._io import check_limit
+    from brdfmodels.fileio import check_limit
 
     step = motion.spec.time_step_s
     n = math.floor((t1 - t0) / step) + 1

@@ -19,7 +19,7 @@ import numpy as np
 from pydantic import ValidationError
 
 import brdfmodels
-from brdfmodels._io import check_limit, parse_toml, read_input_text
+from brdfmodels.fileio import check_limit, parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, direction_in_sector, input_path, observer_points, shape_mesh, terrain_heightfield
 from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write, atomic_write_text, check_input_file
+from brdfmodels.fileio import atomic_write, atomic_write_text, check_input_file
 
 from ..review import _environment, _optics, _plain_number, _value, fmt_number, fmt_vector
 from .outputs import CONTOUR_LEVELS

@@ -10,7 +10,7 @@ import pytest
 import brdfmodels
 import hazard
 import scenes
-from brdfmodels._io import read_toml
+from brdfmodels.fileio import read_toml
 from hazard import keepout, near_field_lobe
 
 BACKSCATTER = {"model": "torrance-sparrow-5", "kb": 0.072, "kr": 16.125, "b": -29.917, "a": 0.959, "kd": 0.081}  # range_terrain's steel

@@ -41,7 +41,7 @@ def test_run_plot_writes_the_plan_with_the_other_outputs(run_with_plot):
 def test_figures_json_says_every_hazardous_finding_is_drawn_and_is_in_the_manifest(run_with_plot):
     import json
 
-    from brdfmodels._unit import read_manifest
+    from brdfmodels.output_sets import read_manifest
     from tests.hazard.test_figure_index import check_coverage, hazardous_paths
 
     out, _ = run_with_plot
