@@ -11,15 +11,19 @@ and every error that hits a limit says so.
 
 from __future__ import annotations
 
+import csv
+import math
 import os
 import re
 import tempfile
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ["LIMITS", "LIMIT_CEILING", "DEPTH_CEILING", "limit", "check_limit", "check_input_file", "read_input_text",
            "toml_depth", "toml_depth_at", "data_depth", "parse_toml", "current_umask", "fsync_dir", "fsync_file",
-           "atomic_write", "atomic_write_text", "read_toml"]
+           "atomic_write", "atomic_write_text", "read_toml", "read_csv_columns"]
 
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {
@@ -289,3 +293,48 @@ def read_toml(path) -> dict:
     """Parse a TOML file; ValueError naming the file on a read or syntax error."""
     path = Path(path)
     return parse_toml(read_input_text(path), str(path))
+
+
+def read_csv_columns(path, columns, what: str = "CSV file") -> dict:
+    """Named numeric columns of a CSV file whose first line names them: ``{name: (N,) array}``
+    for each of ``columns`` (others ignored). Every error is one line naming the file, the
+    line and the column and what was expected; nothing of the file is quoted (an empty
+    file, a missing column, a short row, a cell that is not a finite number, no rows)."""
+    path = Path(path)
+    lines = read_input_text(path, what).splitlines()
+    start = next((k for k, ln in enumerate(lines) if ln.strip()), None)
+    if start is None:
+        raise ValueError(f"{path}: empty file; expected a header line naming the columns {', '.join(columns)}")
+    names = [c.strip() for c in next(csv.reader([lines[start]]))]
+    missing = [c for c in columns if c not in names]
+    if missing:
+        raise ValueError(f"{path}: line {start + 1}: expected CSV columns {', '.join(columns)}; missing {', '.join(missing)} "
+                         f"(the header has {len(names)} column(s))")
+    twice = [c for c in columns if names.count(c) > 1]
+    if twice:
+        raise ValueError(f"{path}: line {start + 1}: column {twice[0]} appears {names.count(twice[0])} times; expected once")
+    rows = [(k + 1, r) for k, r in enumerate(csv.reader(lines[start + 1:]), start=start + 1) if any(x.strip() for x in r)]
+    if not rows:
+        raise ValueError(f"{path}: no data rows after the header (line {start + 1})")
+    short = next(((no, r) for no, r in rows if len(r) != len(names)), None)
+    if short is not None:
+        raise ValueError(f"{path}: line {short[0]}: {len(short[1])} cells, expected {len(names)} (one per header column)")
+    out = {}
+    for c in columns:
+        j = names.index(c)
+        try:
+            v = np.array([r[j] for _, r in rows], dtype=float)
+        except ValueError:
+            v = None
+        if v is None or not np.all(np.isfinite(v)):
+            bad = next(no for no, r in rows if not _finite_text(r[j]))
+            raise ValueError(f"{path}: line {bad}, column {j + 1} ({c}): expected a finite number")
+        out[c] = v
+    return out
+
+
+def _finite_text(text) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False

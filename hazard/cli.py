@@ -437,7 +437,7 @@ def _finish(args, result):
 def _cmd_run(args, out, err):
     from brdfmodels.output_sets import output_unit
 
-    from .report import _json_safe, report_dict, summary_text, write_set
+    from .report import json_safe, report_dict, summary_text, write_set
 
     from .figures import FIXED_NAMES
 
@@ -465,7 +465,7 @@ def _cmd_run(args, out, err):
             names += [p.name for p in _write_review(unit.stage, args, err)]
     paths = [Path(args.output) / n for n in names]
     if args.json:
-        out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
+        out.write(json.dumps({**report_dict(result), "map_outputs": json_safe(section)}, indent=1) + "\n")
         err.write(_kept_lines(unit))
     else:
         out.write(summary_text(result, verbose=args.verbose) + "\n")
@@ -543,9 +543,9 @@ def _as_study(name):
 def _validate_study(study, args, out):
     import scenes
 
-    from .study import _base_data, scenarios
+    from .study import base_data, scenarios
 
-    base, base_dir = _base_data(study)  # its warnings, as the run's answers would put them above their verdicts
+    base, base_dir = base_data(study)  # its warnings, as the run's answers would put them above their verdicts
     warned = list(scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir).warnings)
     info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study)), "warnings": warned}
     out.write((json.dumps(info, indent=1) if args.json else
@@ -937,7 +937,7 @@ def _cmd_render(args, out, err):
 def _cmd_convergence(args, out, err):
     from . import convergence as conv
     from .progress import progress_stream, progress_to
-    from .report import _json_safe
+    from .report import json_safe
 
     with progress_to(None if args.quiet else err):
         # a bar of the runs on a terminal; elsewhere one line per run (as the stage lines of run)
@@ -946,7 +946,7 @@ def _cmd_convergence(args, out, err):
     if args.plot:
         conv.plot(rep, args.plot)
     if args.json:  # a relative error against a zero reference is inf: written "inf" as in report.json
-        doc = _json_safe({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance})
+        doc = json_safe({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance})
         out.write(json.dumps(doc, indent=1) + "\n")
     else:
         from brdfmodels.accuracy import format_table

@@ -345,9 +345,9 @@ def load_study(path) -> Study:
     try:
         _study_schema().model_validate(d)
     except ValidationError as exc:
-        from scenes.scene import _format_validation
+        from scenes.scene import format_validation_error
 
-        raise ValueError(_format_validation(exc, str(path))) from None
+        raise ValueError(format_validation_error(exc, str(path))) from None
     try:
         study = Study(name=str(d.get("name", path.stem)), scene=str(d["scene"]), kind=sw.get("kind", "grid"), parameters=tuple(params),
                       samples=int(sw.get("samples", 0)), montecarlo=MonteCarlo(**mc), seed=int(d.get("seed", 0)), base_dir=str(path.parent))
@@ -384,7 +384,7 @@ def validate_scenarios(study: Study, shown: int = 3) -> int:
     distinct scenes checked."""
     import scenes
 
-    base, base_dir = _base_data(study)
+    base, base_dir = base_data(study)
     key = (study.digest(), hashlib.sha256(json.dumps(base, sort_keys=True, default=str).encode()).hexdigest(), str(base_dir))
     if key in _VALIDATED:  # load_study checked it; run_study need not build every scene again
         return _VALIDATED[key]
@@ -450,7 +450,9 @@ def scenarios(study: Study) -> list:
     return out
 
 
-def _base_data(study: Study):
+def base_data(study: Study):
+    """(the base scene's parsed TOML, the folder its relative paths are read from) of
+    ``study``: a file (relative to the study file's folder first) or a bundled example."""
     import scenes
 
     path = Path(study.scene)
@@ -730,7 +732,7 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
             for p in sdir.glob("*.json"):
                 p.unlink()
     atomic_write_text(meta, json.dumps({"name": study.name, "digest": digest, "study": _safe(asdict(study))}, indent=1, default=str))
-    base, base_dir = _base_data(study)
+    base, base_dir = base_data(study)
     todo = scenarios(study)
     done_ids = {int(p.stem) for p in sdir.glob("*.json") if json.loads(p.read_text()).get("error") is None}  # failures run again
     pending = [s for s in todo if s["id"] not in done_ids]

@@ -239,7 +239,10 @@ def _span(spec, parts) -> tuple[float, float]:
     return float(t0), float(t1)
 
 
-def _aim(spec, laser_position_m, laser_direction, offset_m) -> AimSchedule | None:
+def aim_schedule(spec, laser_position_m, laser_direction, offset_m) -> AimSchedule | None:
+    """The laser's aim over time from ``spec.laser.aim_track`` (None without one): aim
+    points [m] in the scene frame (``offset_m`` subtracted), or azimuth / elevation rates
+    [rad/s] from ``laser_direction``'s bearing."""
     at = spec.laser.aim_track
     if at is None:
         return None
@@ -349,7 +352,7 @@ def motion_of(scene) -> Motion | None:
         return None
     offset = np.asarray(scene.offset_m, float)
     tracks = _tracks(spec, offset, scene.site)
-    aim = _aim(spec, np.asarray(scene.laser_position_m, float), np.asarray(scene.laser_direction, float), offset)
+    aim = aim_schedule(spec, np.asarray(scene.laser_position_m, float), np.asarray(scene.laser_direction, float), offset)
     tts = [TargetTrack(i, t.name, np.asarray(t.track.times_s, float),
                        np.asarray(t.track.center_m, float) - np.asarray(t.center_m, float))
            for i, t in enumerate(spec.targets) if t.track is not None]
