@@ -298,8 +298,8 @@ def examples() -> dict:
         found = {Path(p.name).stem: Path(str(p)) for p in resources.files("hazard.studies").iterdir() if p.name.endswith(".toml")}
     except (ModuleNotFoundError, TypeError, FileNotFoundError, NotADirectoryError):
         found = {}
-    if not found:  # a source checkout: examples/studies
-        folder = Path(__file__).resolve().parents[1] / "examples" / "studies"
+    if not found:  # the package's folder itself
+        folder = Path(__file__).resolve().parent / "studies"
         found = {p.stem: p for p in folder.glob("*.toml")} if folder.is_dir() else {}
     return dict(sorted(found.items()))
 
