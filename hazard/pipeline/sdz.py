@@ -93,8 +93,8 @@ def _cone_basis(axis):
 
 
 def cone_directions(axis, half_angle, step) -> np.ndarray:
-    """Directions filling a cone of ``half_angle`` about ``axis``: rings every ``step``,
-    each with a multiple of 4 samples starting at the horizontal offset."""
+    """Unit directions (N, 3) filling a cone of ``half_angle`` [rad] about ``axis``: rings
+    every ``step`` [rad], each with a multiple of 4 samples starting at the horizontal offset."""
     e1, e2 = _cone_basis(axis)
     out = [axis[None]]
     n_r = max(1, math.ceil(half_angle / step))
