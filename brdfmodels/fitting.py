@@ -106,7 +106,10 @@ class FitResult:
         }
 
 
-def _check_data(wi, wo, brdf, weights):
+def check_fit_data(wi, wo, brdf, weights):
+    """Checked fit samples: (wi (N, 3), wo (N, 3), f_r [1/sr] (N,), weights (N,)); ValueError
+    naming the field on non-finite values, mismatched lengths, negative weights or directions
+    at or below the horizon. ``weights`` None: all 1."""
     wi = directions("wi", wi).reshape(-1, 3)
     wo = directions("wo", wo).reshape(-1, 3)
     f = finite_array("brdf_per_sr", brdf).ravel()
@@ -125,10 +128,10 @@ def _check_data(wi, wo, brdf, weights):
 
 
 def check_nlopt_data(wi, wo, brdf, weights, n_params: int, method: str, nonpositive: str):
-    """:func:`_check_data` for a parametric nlopt fit (TS5, ABg): positive values (what a
+    """:func:`check_fit_data` for a parametric nlopt fit (TS5, ABg): positive values (what a
     value <= 0 cannot do: ``nonpositive``), at least ``n_params`` samples, a known global
     ``method``."""
-    wi, wo, f, w = _check_data(wi, wo, brdf, weights)
+    wi, wo, f, w = check_fit_data(wi, wo, brdf, weights)
     if np.any(f <= 0):
         raise ValueError(f"brdf_per_sr: values <= 0 {nonpositive}; mask them first")
     if len(f) < n_params:
@@ -202,7 +205,7 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         log fit, directions below the horizon.
     """
     start = time.perf_counter()
-    wi, wo, f, w = _check_data(wi, wo, brdf_per_sr, weights)
+    wi, wo, f, w = check_fit_data(wi, wo, brdf_per_sr, weights)
     k = basis.size
     if len(f) < k:
         raise ValueError(f"underdetermined fit: {len(f)} samples for {k} coefficients; give at least {k} samples or a smaller basis")
@@ -420,7 +423,7 @@ def envelope_sh(samples, basis: SHBasis, *, fanout=0.6, horizon=True) -> Envelop
     """
     from scipy.optimize import linprog
 
-    wi, wo, f, _ = _check_data(samples.wi, samples.wo, samples.brdf_per_sr, None)
+    wi, wo, f, _ = check_fit_data(samples.wi, samples.wo, samples.brdf_per_sr, None)
     if np.any(f <= 0):
         raise ValueError("brdf_per_sr: values <= 0 cannot bound a log envelope; mask them first")
     y = np.log(wi[:, 2] * wo[:, 2] * f)

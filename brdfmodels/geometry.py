@@ -29,6 +29,9 @@ from ._checks import directions, finite_array, finite_scalar
 
 __all__ = [
     "half_diff",
+    "half_diff_parts",
+    "isotropic_half_diff_rad",
+    "normalize_sum",
     "half_diff_to_directions",
     "spherical_to_vector",
     "vector_to_spherical",
@@ -41,7 +44,7 @@ __all__ = [
 ]
 
 
-def _normalize_sum(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def normalize_sum(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """normalize(a + b) with the normal (0, 0, 1) where the sum vanishes."""
     h = a + b
     n = np.sqrt(np.einsum("...i,...i->...", h, h))
@@ -52,13 +55,13 @@ def _normalize_sum(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return h / n[..., None]
 
 
-def _half_diff_parts(wi: np.ndarray, wo: np.ndarray):
+def half_diff_parts(wi: np.ndarray, wo: np.ndarray):
     """Core of :func:`half_diff` on already-normalised vectors.
 
     Returns ``theta_h, cos_phi_h, sin_phi_h, theta_d, cos_phi_d, sin_phi_d`` so that
     callers needing ``cos(m phi)`` avoid the arctan2/cos round trip.
     """
-    h = _normalize_sum(wi, wo)
+    h = normalize_sum(wi, wo)
     hx, hy, hz = h[..., 0], h[..., 1], h[..., 2]
     sin_th = np.hypot(hx, hy)
     theta_h = np.arctan2(sin_th, hz)
@@ -83,6 +86,13 @@ def _half_diff_parts(wi: np.ndarray, wo: np.ndarray):
     return theta_h, cph, sph, theta_d, cpd, spd
 
 
+def isotropic_half_diff_rad(wi, wo):
+    """(theta_h, theta_d, phi_d folded to [0, pi)) [rad] of normalised direction pairs
+    ``wi``, ``wo`` (..., 3), each of shape (...): the coordinates of an isotropic BRDF,
+    where reciprocity makes phi_d and phi_d + pi one (tables and scattered samples)."""
+    th, _, _, td, cpd, spd = half_diff_parts(wi, wo)
+    return th, td, np.mod(np.arctan2(spd, cpd), np.pi)
+
 def half_diff(wi, wo):
     """Halfway/difference angles (Rusinkiewicz 1998) of direction pairs.
 
@@ -102,7 +112,7 @@ def half_diff(wi, wo):
     wi = directions("wi", wi)
     wo = directions("wo", wo)
     wi, wo = np.broadcast_arrays(wi, wo)
-    th, cph, sph, td, cpd, spd = _half_diff_parts(wi, wo)
+    th, cph, sph, td, cpd, spd = half_diff_parts(wi, wo)
     return th, np.arctan2(sph, cph), td, np.arctan2(spd, cpd)
 
 

@@ -49,16 +49,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ._io import read_input_text
+from .fileio import read_csv_columns, read_input_text
 from .geometry import spherical_to_vector
+from .screen import Samples
 
 __all__ = ["read_bsdf", "read_astm_e1392", "read_brdf_csv", "read_merl", "merl_grid", "read_samples", "read_csv_columns",
            "MERL_SCALE", "mirror_plane_symmetric", "CSV_STATES"]
 
 
 def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=None):
-    from .screen import Samples
-
     n = len(f)
     return Samples(np.asarray(wi, float), np.asarray(wo, float), np.asarray(f, float),
                    np.zeros(n) if time_s is None else np.asarray(time_s, float),
@@ -436,8 +435,6 @@ def _at_wavelength(path, d, wavelength_nm, notes) -> dict:
 def mirror_plane_symmetric(s):
     """Samples with each one's mirror image about its plane of incidence added (data
     declared plane-symmetric: measured on one side only). Returns new Samples."""
-    from .screen import Samples
-
     u = np.column_stack([s.wi[:, 0], s.wi[:, 1], np.zeros(len(s))])
     n = np.linalg.norm(u, axis=1, keepdims=True)
     u = np.where(n > 1e-12, u / np.where(n > 1e-12, n, 1.0), [1.0, 0.0, 0.0])  # normal incidence: the x-z plane
@@ -450,58 +447,13 @@ def mirror_plane_symmetric(s):
     return out
 
 
-def read_csv_columns(path, columns, what: str = "CSV file") -> dict:
-    """Named numeric columns of a CSV file whose first line names them: ``{name: (N,) array}``
-    for each of ``columns`` (others ignored). Every error is one line naming the file, the
-    line and the column and what was expected; nothing of the file is quoted (an empty
-    file, a missing column, a short row, a cell that is not a finite number, no rows)."""
-    path = Path(path)
-    lines = read_input_text(path, what).splitlines()
-    start = next((k for k, ln in enumerate(lines) if ln.strip()), None)
-    if start is None:
-        raise ValueError(f"{path}: empty file; expected a header line naming the columns {', '.join(columns)}")
-    names = [c.strip() for c in next(csv.reader([lines[start]]))]
-    missing = [c for c in columns if c not in names]
-    if missing:
-        raise ValueError(f"{path}: line {start + 1}: expected CSV columns {', '.join(columns)}; missing {', '.join(missing)} "
-                         f"(the header has {len(names)} column(s))")
-    twice = [c for c in columns if names.count(c) > 1]
-    if twice:
-        raise ValueError(f"{path}: line {start + 1}: column {twice[0]} appears {names.count(twice[0])} times; expected once")
-    rows = [(k + 1, r) for k, r in enumerate(csv.reader(lines[start + 1:]), start=start + 1) if any(x.strip() for x in r)]
-    if not rows:
-        raise ValueError(f"{path}: no data rows after the header (line {start + 1})")
-    short = next(((no, r) for no, r in rows if len(r) != len(names)), None)
-    if short is not None:
-        raise ValueError(f"{path}: line {short[0]}: {len(short[1])} cells, expected {len(names)} (one per header column)")
-    out = {}
-    for c in columns:
-        j = names.index(c)
-        try:
-            v = np.array([r[j] for _, r in rows], dtype=float)
-        except ValueError:
-            v = None
-        if v is None or not np.all(np.isfinite(v)):
-            bad = next(no for no, r in rows if not _finite(r[j]))
-            raise ValueError(f"{path}: line {bad}, column {j + 1} ({c}): expected a finite number")
-        out[c] = v
-    return out
-
-
-def _finite(text) -> bool:
-    try:
-        return math.isfinite(float(text))
-    except ValueError:
-        return False
-
-
 MERL_SCALE = {"R": 1.0 / 1500.0, "G": 1.15 / 1500.0, "B": 1.66 / 1500.0}
 
 
 def _merl_table(path):
     """(dims (3,), raw channel values (3, n)) of a MERL ``.binary`` file, its size checked
     against the header."""
-    from ._io import check_input_file
+    from .fileio import check_input_file
 
     path = check_input_file(path, "MERL file")
     raw = path.read_bytes()
@@ -549,8 +501,6 @@ def read_samples(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None):
     samples CSV / Parquet (:meth:`brdfmodels.screen.Samples.read`). ``wavelength_nm``
     (the laser's), ``ignore_columns`` and ``symmetry`` as :func:`read_brdf_csv` takes
     them (a ``.bsdf`` declares its symmetry in its header: ``symmetry`` is refused there)."""
-    from .screen import Samples
-
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix in (".bsdf", ".binary") and (symmetry not in (None, "none") or ignore_columns):

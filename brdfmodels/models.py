@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from ._checks import directions, finite_array, finite_scalar
-from .geometry import _half_diff_parts, _normalize_sum
+from .geometry import half_diff_parts, normalize_sum
 from .optics import N_MAX, N_MIN, POLARIZATIONS, fresnel_reflectance, optical_constants
 from .parallel import map_blocks
 from .registry import model_from_dict, register
@@ -412,7 +412,7 @@ class TorranceSparrow5(BRDFModel):
         self._freeze()
 
     def _fr(self, wi, wo, state):
-        h = _normalize_sum(wi, wo)
+        h = normalize_sum(wi, wo)
         ca = np.clip(h[:, 2], 0.0, 1.0)
         cg = np.clip(np.einsum("ij,ij->i", wi, h), 1e-300, 1.0)
         ci = np.maximum(wi[:, 2], _COS_FLOOR)
@@ -449,7 +449,7 @@ def _sh_eval(basis, fanout_h, fanout_d, log, wi, wo, coef, divide_r):
     s = np.empty(n)
 
     def block(a, b):
-        y = basis.design_transposed(*_half_diff_parts(wi[a:b], wo[a:b]), fanout_h, fanout_d)
+        y = basis.design_transposed(*half_diff_parts(wi[a:b], wo[a:b]), fanout_h, fanout_d)
         s[a:b] = coef @ y if coef.ndim == 1 else np.einsum("kn,nk->n", y, coef[a:b])
 
     map_blocks(block, n, _SH_CHUNK)
@@ -733,7 +733,7 @@ class DynamicBRDF(_SHMixin, BRDFModel):
         def block(s, e):
             a, b = wi[s:e], wo[s:e]
             yb = np.empty((k + 1, e - s))
-            self.basis.design_transposed(*_half_diff_parts(a, b), self.fanout, self.fanout, out=yb[:k])
+            self.basis.design_transposed(*half_diff_parts(a, b), self.fanout, self.fanout, out=yb[:k])
             ci, cr = a[:, 2], b[:, 2]
             valid = (ci > 0.0) & (cr > 0.0)
             if self.log:

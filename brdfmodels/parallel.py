@@ -62,7 +62,9 @@ def _in_block():
     _local.cap = 1
 
 
-def _blas_one_thread():
+def blas_one_thread():
+    """A context manager limiting the BLAS libraries to one thread (threadpoolctl), for
+    work already running on one thread per block."""
     global _controller
     if _controller is None:  # inspecting the loaded libraries costs ~0.5 ms: once
         from threadpoolctl import ThreadpoolController
@@ -100,5 +102,5 @@ def map_blocks(fn, n: int, block: int, threads=None) -> list:
         return [fn(a, min(a + block, n)) for a in starts]
     from concurrent.futures import ThreadPoolExecutor
 
-    with _blas_one_thread(), ThreadPoolExecutor(workers, initializer=_in_block) as pool:
+    with blas_one_thread(), ThreadPoolExecutor(workers, initializer=_in_block) as pool:
         return list(pool.map(lambda a: fn(a, min(a + block, n)), starts))

@@ -13,7 +13,7 @@ import json
 from importlib.metadata import entry_points
 from pathlib import Path
 
-from ._io import atomic_write_text
+from .fileio import atomic_write_text
 
 __all__ = [
     "register",
@@ -165,7 +165,7 @@ def save(model, path) -> Path:
 
 def load(path):
     """Read a model written by :func:`save`."""
-    from ._io import read_input_text
+    from .fileio import read_input_text
 
     path = Path(path)
     text = read_input_text(path, "model file")  # a regular file of bounded size

@@ -58,7 +58,8 @@ import math
 import numpy as np
 
 from ._checks import finite_array
-from ._io import check_limit
+from .fileio import check_limit
+from .geometry import isotropic_half_diff_rad
 from .models import BRDFModel
 from .registry import register
 
@@ -78,9 +79,7 @@ _RETRO_RAD = 1e-6  # a pair closer than this to wi = wo takes the largest value 
 
 def isotropic_coordinates(wi, wo) -> np.ndarray:
     """(theta_h, theta_d, phi_d folded to [0, pi)) [rad] of flattened direction pairs, (N, 3)."""
-    from .tabulated import _coordinates
-
-    return np.column_stack(_coordinates(wi, wo))
+    return np.column_stack(isotropic_half_diff_rad(wi, wo))
 
 
 def _checked(name, deg, lo, hi) -> np.ndarray:

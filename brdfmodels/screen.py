@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ._checks import finite_array, finite_scalar
-from ._io import atomic_write, atomic_write_text, read_toml
+from .fileio import atomic_write, atomic_write_text, read_csv_columns, read_toml
 from .geometry import local_frame
 
 __all__ = [
@@ -282,7 +282,7 @@ class Samples:
     @classmethod
     def read(cls, path) -> "Samples":
         """CSV or Parquet by the file's suffix (a regular file of bounded size)."""
-        from ._io import check_input_file
+        from .fileio import check_input_file
 
         try:
             check_input_file(path, "samples")
@@ -555,7 +555,7 @@ def load_test(path) -> ScreenTest:
         raise ValueError(f"{path}: {exc}") from None
 
     def load_array(name, key=None):
-        from ._io import check_input_file, check_limit
+        from .fileio import check_input_file, check_limit
 
         p = base / name
         check_input_file(p, f"image file of {path}")
@@ -579,8 +579,6 @@ def load_test(path) -> ScreenTest:
     pyro_t = pyro_k = None
     if "pyrometer" in d:
         pf = base / _need(d["pyrometer"], "file", "pyrometer")
-        from .io import read_csv_columns
-
         data = read_csv_columns(pf, ["time_s", "temperature_k"], "pyrometer file")
         pyro_t, pyro_k = data["time_s"], data["temperature_k"]
     return ScreenTest(

@@ -299,12 +299,12 @@ class SHBasis:
     def evaluate_directions(self, wi, wo, *, fanout=0.6, fanout_h=None) -> np.ndarray:
         """Design matrix (N, K) at direction pairs (..., 3) in the surface frame."""
         from ._checks import directions
-        from .geometry import _half_diff_parts
+        from .geometry import half_diff_parts
 
         wi = directions("wi", wi)
         wo = directions("wo", wo)
         wi, wo = np.broadcast_arrays(wi, wo)
-        parts = [p.ravel() for p in _half_diff_parts(wi.reshape(-1, 3), wo.reshape(-1, 3))]
+        parts = [p.ravel() for p in half_diff_parts(wi.reshape(-1, 3), wo.reshape(-1, 3))]
         fh = fanout if fanout_h is None else fanout_h
         return self.design_transposed(*parts, fh, fanout).T
 

@@ -30,9 +30,10 @@ import math
 import numpy as np
 
 from ._checks import finite_array
-from .geometry import _half_diff_parts
+from .geometry import isotropic_half_diff_rad
 from .models import BRDFModel
 from .registry import register
+from .scattered import ScatteredBRDF
 from .states import cell_fraction
 
 __all__ = ["TabulatedBRDF", "OUTSIDE_POLICIES"]
@@ -45,13 +46,6 @@ def _nodes(name, deg, lo, hi):
     if v.size < 1 or np.any(np.diff(v) <= 0) or v[0] < lo or v[-1] > hi:
         raise ValueError(f"{name}: expected strictly increasing angles within [{lo:g}, {hi:g}] deg")
     return np.radians(v)
-
-
-def _coordinates(wi, wo):
-    """(theta_h, theta_d, phi_d folded to [0, pi)) [rad] of direction pairs: reciprocity
-    makes phi_d and phi_d + pi one."""
-    th, _, _, td, cpd, spd = _half_diff_parts(wi, wo)
-    return th, td, np.mod(np.arctan2(spd, cpd), np.pi)
 
 
 def _axis_weights(nodes, x):
@@ -124,8 +118,6 @@ class TabulatedBRDF(BRDFModel):
         grid adds its own error between nodes (a peak between nodes is cut); the scattered
         model itself has none at the samples. ``notes`` (a reader's) are kept, and a
         shortfall of the grid below a sample of more than 1 % is added to them."""
-        from .scattered import ScatteredBRDF
-
         if fill not in ("envelope", "fit"):
             raise ValueError(f"fill={fill!r}: expected 'envelope' or 'fit'")
         axes = [_nodes(n, a, 0.0, hi) for n, a, hi in (("theta_h_deg", theta_h_deg, 90.0), ("theta_d_deg", theta_d_deg, 90.0),
@@ -166,7 +158,7 @@ class TabulatedBRDF(BRDFModel):
         return out
 
     def _fr(self, wi, wo, state):
-        th, td, pd = _coordinates(wi, wo)
+        th, td, pd = isotropic_half_diff_rad(wi, wo)
         tol = 1e-12
         inside = ((th >= self.theta_h[0] - tol) & (th <= self.theta_h[-1] + tol)
                   & (td >= self.theta_d[0] - tol) & (td <= self.theta_d[-1] + tol))

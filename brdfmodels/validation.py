@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .models import BRDFModel
-from .parallel import _blas_one_thread
+from .parallel import blas_one_thread
 from .screen import Samples, reduce_test, simulate_test
 from .sh import SHBasis
 
@@ -275,7 +275,7 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
     pairs = (_hemisphere(rng, _EVAL_PAIRS, 0.05), _hemisphere(rng, _EVAL_PAIRS, 0.05))
     data = {g: _fold_data(s, opts) for g, s in groups.items()} if opts["method"] == "tsvd" else None
     costs, table, solvers = {}, [], {}
-    with _blas_one_thread():  # small factorizations: BLAS threads gain nothing and contend (3.7 s vs 3.8-12 s)
+    with blas_one_thread():  # small factorizations: BLAS threads gain nothing and contend (3.7 s vs 3.8-12 s)
         for done, (fan, mh, lh) in enumerate(settings):
             if progress is not None:
                 progress(done, len(settings))
@@ -421,9 +421,9 @@ def _basis_costs(samples, basis, fanout, fit_kwargs, pairs):
 
 def _fold_data(samples, opts):
     """Checked directions, f_r, weights and the fitted quantity (ln f~ or f~), as fit_sh has them."""
-    from .fitting import _check_data
+    from .fitting import check_fit_data
 
-    wi, wo, f, w = _check_data(samples.wi, samples.wo, samples.brdf_per_sr, samples.weight)
+    wi, wo, f, w = check_fit_data(samples.wi, samples.wo, samples.brdf_per_sr, samples.weight)
     if opts["log"] and np.any(f <= 0):
         raise ValueError(f"brdf_per_sr: {int((f <= 0).sum())} values <= 0 cannot enter a log fit; mask them first")
     ft = wi[:, 2] * wo[:, 2] * f

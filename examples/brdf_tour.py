@@ -19,6 +19,7 @@ import numpy as np
 
 import brdfmodels as bm
 from brdfmodels.accuracy import sharp_sh_lobe
+from brdfmodels.fileio import atomic_write
 
 
 def dynamic_steel():
@@ -88,9 +89,7 @@ def main(argv=None):
     ax.set_title("BRDF models at 30 deg incidence")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    tmp = out / ".brdf_tour.png.tmp.png"
-    fig.savefig(tmp, dpi=110)
-    os.replace(tmp, out / "brdf_tour.png")
+    atomic_write(out / "brdf_tour.png", lambda tmp: fig.savefig(tmp, dpi=110), keep_suffix=True)
     print(f"plot: {out / 'brdf_tour.png'}")
     return 0
 

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from brdfmodels.fileio import atomic_write
+
 LAT0, LON0 = 32.60, -106.30  # the firing point
 ARCSEC = 1.0 / 3600.0
 HALF_CELLS = 160  # 2 x 160 + 1 cells each way: +-160 arc-seconds, about 4.9 km north-south, 4.2 km east-west
@@ -49,14 +51,16 @@ def write(out: Path) -> Path:
     h = heights_m(lat, lon).astype("float32")
     transform = from_origin(lons[0] - ARCSEC / 2, lats[0] + ARCSEC / 2, ARCSEC, ARCSEC)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(out.name + ".tmp")
-    with rasterio.open(tmp, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs="EPSG:4326",
-                       transform=transform, nodata=-32768.0, compress="deflate", predictor=3, tiled=True,
-                       blockxsize=128, blockysize=128) as ds:
-        ds.write(h, 1)
-        ds.update_tags(description="invented desert range for laser-hazard's range_geo example; heights above WGS 84 [m]",
-                       source="examples/make_range_geo_dem.py")
-    tmp.replace(out)
+
+    def write_tif(tmp):
+        with rasterio.open(tmp, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs="EPSG:4326",
+                           transform=transform, nodata=-32768.0, compress="deflate", predictor=3, tiled=True,
+                           blockxsize=128, blockysize=128) as ds:
+            ds.write(h, 1)
+            ds.update_tags(description="invented desert range for laser-hazard's range_geo example; heights above WGS 84 [m]",
+                           source="examples/make_range_geo_dem.py")
+
+    atomic_write(out, write_tif)
     return out
 
 

@@ -2,7 +2,7 @@
 
 Run:  python examples/monte_carlo.py [--out DIR] [--samples N] [--serial]
 
-Runs examples/studies/montecarlo_binoculars.toml (BRDF scale spread ~2x, 0.5 deg rms
+Runs hazard/studies/montecarlo_binoculars.toml (BRDF scale spread ~2x, 0.5 deg rms
 peak wander - the paper's sample-to-sample variability) and prints the percentiles of
 the hazard distances.
 """
@@ -24,7 +24,7 @@ def main(argv=None):
     ap.add_argument("--samples", type=int, default=None)
     ap.add_argument("--serial", action="store_true")
     args = ap.parse_args(argv)
-    study = load_study(HERE / "studies" / "montecarlo_binoculars.toml")
+    study = load_study(HERE.parent / "hazard" / "studies" / "montecarlo_binoculars.toml")
     if args.samples is not None:
         study = replace(study, montecarlo=replace(study.montecarlo, samples=args.samples))
     res = run_study(study, args.out, serial=args.serial, force=True, progress=progress_bar())

@@ -2,7 +2,7 @@
 
 Run:  python examples/power_sweep.py [--out DIR] [--quick]
 
-Runs examples/studies/power_sweep.toml on an embedded Dask LocalCluster (2 workers),
+Runs hazard/studies/power_sweep.toml on an embedded Dask LocalCluster (2 workers),
 writes results.csv/.parquet, summary.json and summary.png, and prints the table. A
 restarted run skips finished scenarios. --quick: two powers, in this process.
 """
@@ -23,7 +23,7 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(HERE, "out", "power_sweep"))
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
-    study = load_study(HERE / "studies" / "power_sweep.toml")
+    study = load_study(HERE.parent / "hazard" / "studies" / "power_sweep.toml")
     if args.quick:
         study = replace(study, parameters=(Parameter("laser.power_w", values=(1000.0, 10000.0)),))
     res = run_study(study, args.out, serial=args.quick, force=True, progress=progress_bar())

@@ -489,14 +489,14 @@ class CellSampling:
         return out
 
 
-_OFFSETS = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+CELL_OFFSETS = np.array([[0.5, 0.5], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
 
 
 def _ray_s(s0, t0, d) -> np.ndarray:
     """The five rays (centre, four corners) of cells with lower corners (s0, t0) and side
     d, as s coordinates (5n, 2), cell by cell."""
     base = np.stack([s0, t0], axis=1)
-    return (base[:, None, :] + _OFFSETS[None, :, :] * d).reshape(-1, 2)
+    return (base[:, None, :] + CELL_OFFSETS[None, :, :] * d).reshape(-1, 2)
 
 
 def _trace_cells(beam, tracer, s):

@@ -448,9 +448,9 @@ def _finish(args, result):
 
 
 def _cmd_run(args, out, err):
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
-    from .report import _json_safe, report_dict, summary_text, write_set
+    from .report import json_safe, report_dict, summary_text, write_set
 
     from .figures import FIXED_NAMES
 
@@ -478,7 +478,7 @@ def _cmd_run(args, out, err):
             names += [p.name for p in _write_review(unit.stage, args, err)]
     paths = [Path(args.output) / n for n in names]
     if args.json:
-        out.write(json.dumps({**report_dict(result), "map_outputs": _json_safe(section)}, indent=1) + "\n")
+        out.write(json.dumps({**report_dict(result), "map_outputs": json_safe(section)}, indent=1) + "\n")
         err.write(_kept_lines(unit))
     else:
         out.write(summary_text(result, verbose=args.verbose) + "\n")
@@ -544,7 +544,7 @@ def _as_study(name):
     path = Path(name)
     if not path.exists():
         return load_study(name) if name in examples() and name not in scenes.examples() else None
-    from brdfmodels._io import read_toml
+    from brdfmodels.fileio import read_toml
 
     try:
         d = read_toml(path)
@@ -556,9 +556,9 @@ def _as_study(name):
 def _validate_study(study, args, out):
     import scenes
 
-    from .study import _base_data, scenarios
+    from .study import base_data, scenarios
 
-    base, base_dir = _base_data(study)  # its warnings, as the run's answers would put them above their verdicts
+    base, base_dir = base_data(study)  # its warnings, as the run's answers would put them above their verdicts
     warned = list(scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir).warnings)
     info = {"study": study.name, "scene": study.scene, "kind": study.kind, "scenarios": len(scenarios(study)), "warnings": warned}
     out.write((json.dumps(info, indent=1) if args.json else
@@ -714,10 +714,10 @@ def _state_nodes_args(state_text, states_text):
 
 def _cmd_fit(args, out, err):
     """``hazard fit``: its 1-3 files (model, envelope, samples; separate paths) are written
-    as one unit (:func:`brdfmodels._unit.output_files`): on any error none is created or replaced."""
+    as one unit (:func:`brdfmodels.output_sets.output_files`): on any error none is created or replaced."""
     import io
 
-    from brdfmodels._unit import output_files
+    from brdfmodels.output_sets import output_files
 
     from .progress import progress_to
 
@@ -741,7 +741,7 @@ def _cmd_fit(args, out, err):
 
 def _fit_oxidation(args, out):
     from brdfmodels import fitting
-    from brdfmodels._io import atomic_write_text
+    from brdfmodels.fileio import atomic_write_text
 
     from brdfmodels.io import read_csv_columns
 
@@ -931,7 +931,7 @@ def _cmd_risk(args, out, err):
 
 
 def _cmd_render(args, out, err):
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
     from . import render
     from .progress import progress_to
@@ -957,7 +957,7 @@ def _cmd_render(args, out, err):
 def _cmd_convergence(args, out, err):
     from . import convergence as conv
     from .progress import progress_stream, progress_to
-    from .report import _json_safe
+    from .report import json_safe
 
     with progress_to(None if args.quiet else err):
         # a bar of the runs on a terminal; elsewhere one line per run (as the stage lines of run)
@@ -966,7 +966,7 @@ def _cmd_convergence(args, out, err):
     if args.plot:
         conv.plot(rep, args.plot)
     if args.json:  # a relative error against a zero reference is inf: written "inf" as in report.json
-        doc = _json_safe({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance})
+        doc = json_safe({"rows": rep.rows, "recommended": rep.recommended, "tolerance": rep.tolerance})
         out.write(json.dumps(doc, indent=1) + "\n")
     else:
         from brdfmodels.accuracy import format_table
@@ -992,7 +992,7 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 
 
 def _cmd_report(args, out, err):
-    from brdfmodels._unit import output_unit, read_sources
+    from brdfmodels.output_sets import output_unit, read_sources
 
     from .review import PdfError, read_report
 

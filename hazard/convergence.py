@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import read_toml
+from brdfmodels.fileio import read_toml
 
 from .progress import progress_to, terminal_bar
 
@@ -202,6 +202,6 @@ def plot(report: ConvergenceReport, path) -> Path | None:
     ax.set_ylabel("max relative error vs the finest run")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
-    from brdfmodels._io import atomic_write
+    from brdfmodels.fileio import atomic_write
 
     return atomic_write(Path(path), lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)

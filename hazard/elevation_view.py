@@ -27,15 +27,15 @@ import numpy as np
 
 from . import palette as C
 from .figure_index import lobe_paths, mark
-from .plan_view import (MIRROR_LABEL, _scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
+from .plan_view import (MIRROR_LABEL, draw_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
                         label_points, mark_mirror, mirror_segments, square_limits, two_panels)
-from .plots import _Display
+from .plots import DisplayBase
 
 __all__ = ["ElevationViewDisplay"]
 
 
 @dataclass
-class ElevationViewDisplay(_Display):
+class ElevationViewDisplay(DisplayBase):
     """Elevation-view data in (distance along the aim's azimuth, height) [m]."""
 
     title: str
@@ -118,7 +118,7 @@ class ElevationViewDisplay(_Display):
         label_points(axes[1], self.labels)
         axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
         for ax in axes:
-            _scale_bar(ax, "lower right")
+            draw_scale_bar(ax, "lower right")
         fig.canvas.draw()
         for ax in axes:
             keep_texts_inside(ax)

@@ -619,7 +619,7 @@ def _curved_total(beam, cells, target, tracer):
     projected vertices, :func:`hazard.beam.curved_outline_s`), a bound on the power lost
     to faceting.
     """
-    from .beam import _OFFSETS, curved_outline_s, inside_convex_many, polygon_moments
+    from .beam import CELL_OFFSETS, curved_outline_s, inside_convex_many, polygon_moments
 
     outl = curved_outline_s(beam, target.mesh)
     if outl is None:
@@ -630,7 +630,7 @@ def _curved_total(beam, cells, target, tracer):
     lo, hi = outl[0].min(axis=0), outl[0].max(axis=0)
     near = np.flatnonzero((s1 >= lo[0]) & (s0 <= hi[0]) & (t1 >= lo[1]) & (t0 <= hi[1]))
     d = (s1 - s0)[near]
-    s = (np.stack([s0[near], t0[near]], axis=1)[:, None, :] + _OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
+    s = (np.stack([s0[near], t0[near]], axis=1)[:, None, :] + CELL_OFFSETS[None, :, :] * d[:, None, None]).reshape(-1, 2)
     inside = inside_convex_many(s, outl[0])
     lab = cells.labels[near].ravel()
     other = np.flatnonzero(inside & (lab != target.index) & (lab != -1))
@@ -796,7 +796,7 @@ def path_states(model, states) -> np.ndarray:
     return np.unique(np.concatenate([s, nodes[(nodes >= lo) & (nodes <= hi)]]))
 
 
-def _to_local(frames, v):
+def to_local(frames, v):
     """World vectors v (..., 3) into frames (3, 3) or per-row frames (N, 3, 3)."""
     if frames.ndim == 2:
         return v @ frames.T
@@ -826,8 +826,8 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     vis = np.ones(m) if visible is None else np.asarray(visible, float)
     if np.all(far):
         fr = spot.mean_frame
-        wi = _to_local(fr, -spot.mean_incoming)[None, :]
-        wo = _to_local(fr, (obs - c) / rng[:, None])
+        wi = to_local(fr, -spot.mean_incoming)[None, :]
+        wo = to_local(fr, (obs - c) / rng[:, None])
         scale = spot.total_power_w * gain * vis / rng**2
         if attenuation_per_m:
             scale *= np.exp(-attenuation_per_m * rng)
@@ -847,14 +847,14 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     e = np.zeros(shape)
     if np.any(far):
         fr = spot.mean_frame
-        wi = _to_local(fr, -spot.mean_incoming)[None, :]
+        wi = to_local(fr, -spot.mean_incoming)[None, :]
         d = (obs[far] - c) / rng[far, None]
-        wo = _to_local(fr, d)
+        wo = to_local(fr, d)
         scale = spot.total_power_w * np.exp(-attenuation_per_m * rng[far]) * gain[far] * vis[far] / rng[far] ** 2
         e[far] = projected_brdf(model, wi, wo, states, scale)
     near = np.flatnonzero(~far & (vis > 0))
     if len(near) and spot.patches is not None:
-        e[near] = _near_field(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
+        e[near] = near_field_w_m2(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
     elif len(near):  # a spot built without its patches (by hand): its samples as point sources
         e[near] = _samples_as_points(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
     return ((np.arange(m), e), far) if sparse else (e, far)
@@ -865,11 +865,11 @@ def _samples_as_points(spot: Spot, obs, weight, attenuation_per_m, states):
     (spots built without their near-field patches), ``weight`` the gain x line of sight."""
     model = spot.material
     e = np.zeros((len(obs),) if states is None else (len(obs), len(states)))
-    wi_all = _to_local(spot.frames, -spot.incoming)
+    wi_all = to_local(spot.frames, -spot.incoming)
     for i in range(len(spot.points)):
         v = obs - spot.points[i]
         r = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
-        wo = _to_local(spot.frames[i], v / r[:, None])
+        wo = to_local(spot.frames[i], v / r[:, None])
         scale = spot.power_w[i] * np.exp(-attenuation_per_m * r) * weight / r**2
         e += projected_brdf(model, np.broadcast_to(wi_all[i], wo.shape), wo, states, scale)
     return e
@@ -892,18 +892,18 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     return row, len(idx)
 
 
-def _near_field(spot: Spot, obs, weight, attenuation_per_m, states):
+def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states):
     """Irradiance [W/m^2] (M,) or (M, T) at near observers ``obs`` (M, 3) with factors
     ``weight`` (gain x line of sight): the integral over the spot's patches
     (:func:`hazard.near_field.near_field_irradiance`, ``f_r cos(theta_r)`` of each
     sample's material frame and incidence)."""
     model = spot.material
-    wi_all = _to_local(spot.frames, -spot.incoming)
+    wi_all = to_local(spot.frames, -spot.incoming)
 
     def kernel(samples, x, o, scale):
         v = o - x
         r = np.maximum(np.sqrt(np.einsum("ij,ij->i", v, v)), 1e-300)
-        wo = _to_local(spot.frames[samples], v / r[:, None])
+        wo = to_local(spot.frames[samples], v / r[:, None])
         s = scale / (r * r)
         if attenuation_per_m:
             s = s * np.exp(-attenuation_per_m * r)
@@ -917,7 +917,7 @@ def _near_field(spot: Spot, obs, weight, attenuation_per_m, states):
 def specular_power_w(spot: Spot, states=None):
     """Power [W] in the delta (mirror) lobe of a spot, per state."""
     model = spot.material
-    wi = _to_local(spot.frames, -spot.incoming)
+    wi = to_local(spot.frames, -spot.incoming)
     if states is None:
         return float((model.specular_reflectance(wi) * spot.power_w).sum())
     return np.array([(model.specular_reflectance(wi, state=s) * spot.power_w).sum() for s in states])
@@ -946,7 +946,7 @@ def specular_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, beam=N
 
 def spot_directions(spot: Spot):
     """Incidence direction of the spot in its mean material frame."""
-    return _to_local(spot.mean_frame, -spot.mean_incoming)
+    return to_local(spot.mean_frame, -spot.mean_incoming)
 
 
 __all__ += ["specular_power_w", "mirror_axis", "spot_directions", "SpotBuild", "path_states"]

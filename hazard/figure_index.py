@@ -160,10 +160,10 @@ def figures_document(entries: dict) -> bytes:
 def report_observer_paths(result) -> dict:
     """report.json's observer path (``observers[i]``) of each row of the observer table
     (fixed observers, then tracks), for the rows report.json lists."""
-    from .report import _listed, observer_columns
+    from .report import listed_rows, observer_columns
 
     cols = observer_columns(result)
-    rows = _listed(cols, len(cols["labels"]))
+    rows = listed_rows(cols, len(cols["labels"]))
     return {int(r): f"observers[{j}]" for j, r in enumerate(np.asarray(rows).tolist())}
 
 

@@ -39,6 +39,6 @@ def write_figures(figures: dict, outdir) -> list:
     """Write each file through a temporary beside it, then rename (never half a PNG)."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
-    from brdfmodels._io import atomic_write
+    from brdfmodels.fileio import atomic_write
 
     return [atomic_write(out / name, lambda tmp, data=data: Path(tmp).write_bytes(data)) for name, data in figures.items()]

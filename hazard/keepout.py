@@ -78,7 +78,7 @@ class Lobe:
         }
 
 
-def _range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None, near_field=True):
+def nohd_range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None, near_field=True):
     """``fn(wo (N, 3)) -> NOHD [m]`` in the spot's mean frame: the max over the history's
     path of states (:func:`hazard.engine.path_states`) and, for a slumping spot over the
     whole history, over the normals the molten surface may take
@@ -344,7 +344,7 @@ def hazard_lobe(spot: Spot, mpe_w_m2, attenuation_per_m=0.0, *, gain=1.0, states
     it does not depend on the grid down to ``POLISH_TOL_RAD``.
     """
     rtol = VOLUME_RTOL if rtol is None else float(rtol)
-    fn = _range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states, near_field=near_field)
+    fn = nohd_range_fn(spot, mpe_w_m2, attenuation_per_m, gain, states, near_field=near_field)
     wi = spot_directions(spot)
     special = np.stack([wi * np.array([-1, -1, 1]), wi])  # mirror, retro
     extra = getattr(fn, "special", None)  # a slumping spot: the mirror directions of its tilted normals

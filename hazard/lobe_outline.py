@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .engine import mirror_axis
-from .keepout import _range_fn
+from .keepout import nohd_range_fn
 
 __all__ = ["Outline", "View", "projected_outline", "section_outline", "lobe_outlines", "plan_view_frame", "elevation_frame"]
 
@@ -119,7 +119,7 @@ def _polygons(geom) -> list:
 
 def _local_range_fn(spot, mpe_w_m2, mu, states):
     """NOHD [m] for world directions (N, 3): 0 below the spot's surface."""
-    fn = _range_fn(spot, mpe_w_m2, mu, 1.0, states)
+    fn = nohd_range_fn(spot, mpe_w_m2, mu, 1.0, states)
     frame = spot.mean_frame
 
     def world_fn(w):

@@ -32,7 +32,7 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-from brdfmodels._io import atomic_write_text
+from brdfmodels.fileio import atomic_write_text
 
 from .review import fmt_distance, fmt_number, kv_rows, read_report
 

@@ -13,6 +13,8 @@ import re
 
 import numpy as np
 
+from .csv_text import GEO_COLUMNS, column_text, observer_geodetic
+
 __all__ = ["motion_sections", "track_files", "track_file_name", "track_columns", "motion_columns", "TRACK_CSV_COLUMNS"]
 
 TRACK_CSV_COLUMNS = ["time_s", "x_m", "y_m", "z_m", "lased", "direct_irradiance_w_m2", "reflected_irradiance_w_m2",
@@ -73,9 +75,7 @@ def motion_sections(result) -> dict:
 
 
 def _track_text(result, p) -> str:
-    """One track's table, each column formatted as observers.csv's (:func:`hazard.report._csv_cell`)."""
-    from .report import GEO_COLUMNS, _csv_cell, observer_geodetic
-
+    """One track's table, each column formatted as observers.csv's (:func:`hazard.csv_text.column_text`)."""
     pos = _world(result, p.positions_m)
     cols = [p.times_s, pos[:, 0], pos[:, 1], pos[:, 2]]
     names = TRACK_CSV_COLUMNS[:4]
@@ -84,7 +84,7 @@ def _track_text(result, p) -> str:
         cols += [geo[:, 0], geo[:, 1], geo[:, 2]]
         names = names + GEO_COLUMNS
     cols += [p.lased, p.direct_w_m2, p.reflected_w_m2, p.irradiance_w_m2, p.cumulative_j_m2]
-    text = [_csv_cell(c, "x") for c in cols]
+    text = [column_text(c) for c in cols]
     lines = [",".join(names + TRACK_CSV_COLUMNS[4:])] + [",".join(r) for r in zip(*text)]
     return "\r\n".join(lines) + "\r\n"
 

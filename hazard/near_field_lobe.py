@@ -14,7 +14,7 @@ What is computed. On a fixed grid of directions (polar rows ``THETA_ROWS_DEG`` x
 azimuths every ``GRID_PHI_DEG`` in the spot's mean frame), every node whose point-form
 range ``r0`` is within ``FAR_FIELD_SPOT_SIZES`` spot sizes gets the farthest root of
 ``E(c + r w) = MPE`` beyond ``r0``, with ``E`` the engine's near-field integral
-(:func:`hazard.engine._near_field`: the observers' own computation, each sample a point
+(:func:`hazard.engine.near_field_w_m2`: the observers' own computation, each sample a point
 source only where its error is proven below 1 % of ``P / d^2``, its triangles integrated
 elsewhere). The ray is scanned inward from ``r_start`` in steps ``h`` no larger than the
 spot's smallest extent (twice its RMS width across) nor ``r_start / SCAN_MIN_STEPS``; the
@@ -74,7 +74,7 @@ import weakref
 import numpy as np
 
 from . import near_field
-from .engine import FAR_FIELD_SPOT_SIZES, _near_field, _to_local, projected_brdf, spot_directions
+from .engine import FAR_FIELD_SPOT_SIZES, near_field_w_m2, to_local, projected_brdf, spot_directions
 
 __all__ = ["NearLobeFn", "near_lobe_fn", "near_field_reach_m", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
            "STATS", "describe_since"]
@@ -187,7 +187,7 @@ class NearLobeFn:
         self.a_m = np.asarray(sp.patches.radius_m, float)
         spread = np.zeros(len(self.pts)) if sp.spread_m2 is None else np.asarray(sp.spread_m2, float)
         self.var_m2 = np.minimum(spread, self.a_m ** 2)
-        self.wi = _to_local(sp.frames, -sp.incoming)
+        self.wi = to_local(sp.frames, -sp.incoming)
         k_max = reach_m ** 2 * math.exp(min(self.mu * reach_m, 700.0))  # the largest intensity / MPE [m^2]
         self.k_i = k_max * self.p_w / max(float(self.p_w.sum()), 1e-300)
         self.g_m2 = FLAT_BOUND_MARGIN * k_max / max(float(self.p_w.sum()), 1e-300) * _largest_incident_w_m2(sp) if self.tilt_rad == 0.0 and \
@@ -248,13 +248,13 @@ class NearLobeFn:
         """The integral at world points ``pts`` reaches the MPE at some state of ``states``
         (None: no history); counts its kernel evaluations."""
         before = near_field.STATS.snapshot()
-        e = _near_field(self.spot, pts, np.full(len(pts), self.gain), self.mu, states)
+        e = near_field_w_m2(self.spot, pts, np.full(len(pts), self.gain), self.mu, states)
         self.evaluations += near_field.stats_since(before)["evaluations"]
         STATS.points += len(pts)
         return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
 
     def hazardous(self, pts):
-        """True where the spot's near-field integral (:func:`hazard.engine._near_field`,
+        """True where the spot's near-field integral (:func:`hazard.engine.near_field_w_m2`,
         the observers' own) at world points ``pts`` (M, 3) reaches the MPE (with a
         history: at some state of ``states``); integrated only where the samples' bound
         (:meth:`_upper`) reaches it. With a history, per point first at its state of the

@@ -88,6 +88,6 @@ def write_png(picture, path) -> Path:
     """Write the picture through a temporary beside ``path``, then rename."""
     import matplotlib.image as mpimg
 
-    from brdfmodels._io import atomic_write
+    from brdfmodels.fileio import atomic_write
 
     return atomic_write(Path(path), lambda tmp: mpimg.imsave(tmp, picture, format="png"), keep_suffix=True)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
-from .plots import _Display
+from .plots import DisplayBase
 
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
@@ -37,7 +37,7 @@ LABELLED = 8  # hazardous observers named in a picture (the worst by hazard rati
 
 
 @dataclass
-class PlanViewDisplay(_Display):
+class PlanViewDisplay(DisplayBase):
     """Plan-view data in world x, y [m] (see the module notes); ``plot`` only draws."""
 
     title: str
@@ -120,7 +120,7 @@ class PlanViewDisplay(_Display):
         fig.tight_layout()
         fig.canvas.draw()  # settle the limits before the scale bars and the arrows
         for ax in axes:
-            _scale_bar(ax, quiet_corner(ax, self._key_points()))
+            draw_scale_bar(ax, quiet_corner(ax, self._key_points()))
             _north_arrow(ax)
         _range_rings(axes[0], [self.laser_xy], "from the laser")
         framed = [(name, xy) for name, xy, r, ra, f in self.targets if f]
@@ -492,7 +492,7 @@ def _range_rings(ax, centres, what):
     e.g. "from the laser")."""
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
-    step = _nice_length(max(x1 - x0, y1 - y0) * 1.25)  # about a quarter of the panel
+    step = nice_length_m(max(x1 - x0, y1 - y0) * 1.25)  # about a quarter of the panel
     for n, c in enumerate(_distinct(centres, step / 2)):  # targets closer than half a step share their rings
         corners = np.array([[x0, y0], [x0, y1], [x1, y0], [x1, y1]]) - c
         far = float(np.hypot(corners[:, 0], corners[:, 1]).max())
@@ -625,7 +625,7 @@ def _contours(scene, off):
     return x, y, t.heights[::k, ::k] + off[2]
 
 
-def _nice_length(span) -> float:
+def nice_length_m(span) -> float:
     """A 1, 2 or 5 x 10^k length near a fifth of ``span``."""
     raw = span / 5
     e = 10 ** math.floor(math.log10(raw))
@@ -646,11 +646,12 @@ def quiet_corner(ax, points, frac=(0.3, 0.15)) -> str:
     return min(boxes, key=lambda k: counts[k])  # dicts keep order: lower left wins a tie
 
 
-def _scale_bar(ax, loc="lower left"):
+def draw_scale_bar(ax, loc="lower left"):
+    """A scale bar of a round length [m] (about a fifth of the x span) on ``ax``."""
     from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
     x0, x1 = ax.get_xlim()
-    length = _nice_length(x1 - x0)
+    length = nice_length_m(x1 - x0)
     label = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
     ax.add_artist(AnchoredSizeBar(ax.transData, length, label, loc, pad=0.5, frameon=True, size_vertical=0))
 

@@ -26,11 +26,14 @@ def _axes(ax):
     return ax.figure, ax
 
 
-class _Display:
+class DisplayBase:
+    """Base of the Display objects: ``save`` (atomic PNG), ``png_bytes`` and
+    ``png_and_entry`` around the subclass's ``plot(**kw) -> (fig, ax)``."""
+
     def save(self, path, **plot_kw) -> Path:
         fig, _ = self.plot(**plot_kw)
         path = Path(path)
-        from brdfmodels._io import atomic_write
+        from brdfmodels.fileio import atomic_write
 
         # a legend beside or below the axes stays whole
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"), keep_suffix=True)
@@ -59,7 +62,7 @@ def _state_label(name, s) -> str:
 
 
 @dataclass
-class BRDFPlaneDisplay(_Display):
+class BRDFPlaneDisplay(DisplayBase):
     """BRDF in the plane of incidence: model curves (per state) and measured samples."""
 
     angles_deg: np.ndarray
@@ -105,7 +108,7 @@ class BRDFPlaneDisplay(_Display):
 
 
 @dataclass
-class NOHDTimeDisplay(_Display):
+class NOHDTimeDisplay(DisplayBase):
     """Max NOHD of a target over the history: the static line against the dynamic curve
     (a target whose material does not change: one flat line over the window)."""
 
@@ -120,7 +123,7 @@ class NOHDTimeDisplay(_Display):
     @classmethod
     def from_result(cls, result, target=0, *, grid_deg=5.0):
         """``target``: index into ``result.spots`` (the lit targets)."""
-        from .keepout import _range_fn
+        from .keepout import nohd_range_fn
 
         spot = result.spots[target]
         states = result.states.get(spot.target.index)
@@ -131,12 +134,12 @@ class NOHDTimeDisplay(_Display):
         dirs = np.vstack([brdfmodels.spherical_to_vector(tt.ravel(), pp.ravel()), wi * [-1, -1, 1], wi])
         mpe = float(result.mpe_w_m2)
         if states is None:
-            r = float(_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, None)(dirs).max())
+            r = float(nohd_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, None)(dirs).max())
             t = np.asarray(result.times_s, float)
             if len(t) < 2:  # a static analysis has one time: the line spans the exposure window
                 t = np.array([t[0], t[0] + result.scene.spec.exposure.duration_s])
             return cls(t, np.full(len(t), r), r, spot.target.name, mpe, False)
-        fns = [_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, states[j:j + 1]) for j in range(len(states))]
+        fns = [nohd_range_fn(spot, result.mpe_w_m2, result.attenuation_per_m, 1.0, states[j:j + 1]) for j in range(len(states))]
         per_t = np.array([fn.max_range(dirs) if hasattr(fn, "max_range") else fn(dirs).max() for fn in fns])  # near field only where it can matter
         return cls(result.times_s, per_t, float(per_t[0]), spot.target.name, mpe, True)
 
@@ -163,7 +166,7 @@ class NOHDTimeDisplay(_Display):
 
 
 @dataclass
-class ExposureDisplay(_Display):
+class ExposureDisplay(DisplayBase):
     """An observer's irradiance and accumulated exposure over time against the MPE."""
 
     times_s: np.ndarray
@@ -289,7 +292,7 @@ class ExposureDisplay(_Display):
 
 
 @dataclass
-class ErrorTableDisplay(_Display):
+class ErrorTableDisplay(DisplayBase):
     """Error against run time (or evaluations) from a table's rows, one line per group."""
 
     series: dict = field(default_factory=dict)  # group -> (x, y)
@@ -326,7 +329,7 @@ def _mark_curve(ax, paths, x, y):
     mark(ax, paths, ax.get_title(), np.column_stack([np.asarray(x, float), np.asarray(y, float)]), "line")
 
 
-def _file_part(name) -> str:
+def file_part(name) -> str:
     """``name`` as part of a file name: runs of other characters than letters, digits,
     ``.``, ``-`` and ``_`` become one ``_`` (``shell-20m:crossing[0]`` ->
     ``shell-20m_crossing_0``)."""
@@ -391,7 +394,7 @@ def time_figures(result, *, worst=3, index=None) -> dict:
       irradiance; if that check fails, ``exposure_omitted.txt`` says which observers,
       why, and how to get them (``analyze(scene, keep_history=True)``).
 
-    Names are made file-safe (``_file_part``) and kept unique. matplotlib is needed (the
+    Names are made file-safe (``file_part``) and kept unique. matplotlib is needed (the
     ``[render]`` extra); it is imported here, not by ``import hazard``. ``index`` (a dict)
     receives each picture's figures.json entry by file name.
     """
@@ -407,12 +410,12 @@ def time_figures(result, *, worst=3, index=None) -> dict:
         d = NOHDTimeDisplay.from_result(result, k)
         d.paths = tuple(paths["lobe"].get((spot.target.name, kind)) for kind in ("static", "dynamic")
                         if paths["lobe"].get((spot.target.name, kind)))
-        add(_unique(f"nohd_time_{_file_part(spot.target.name)}.png", out), d, "time")
+        add(_unique(f"nohd_time_{file_part(spot.target.name)}.png", out), d, "time")
     m = len(result.observers)
     for k, p in enumerate([] if getattr(result, "motion", None) is None else result.motion.tracks()):
         d = ExposureDisplay.from_path(result, p)
         d.paths = (f"tracks[{k}]",) + ((paths["observers"][m + k],) if m + k in paths["observers"] else ())
-        add(_unique(f"exposure_track_{_file_part(p.name)}.png", out), d, "time")
+        add(_unique(f"exposure_track_{file_part(p.name)}.png", out), d, "time")
     ratio = np.asarray(result.hazard_ratio, float)
     if worst <= 0 or not len(ratio):
         return out
@@ -431,5 +434,5 @@ def time_figures(result, *, worst=3, index=None) -> dict:
     for i, e in zip(rows, histories):
         d = ExposureDisplay.from_result(result, int(i), irradiance_w_m2=e)
         d.paths = (paths["observers"][int(i)],) if int(i) in paths["observers"] else ()
-        add(_unique(f"exposure_{_file_part(d.observer)}.png", out), d, "time")
+        add(_unique(f"exposure_{file_part(d.observer)}.png", out), d, "time")
     return out

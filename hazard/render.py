@@ -42,9 +42,9 @@ import pyvista as pv
 
 from . import palette as C
 from .beam import perp_basis as _perp_basis
-from .keepout import _range_fn
+from .keepout import nohd_range_fn
 from .picture import compose, write_png
-from .plan_view import _nice_length, aim_reach_m, hazardous_labels, mirror_segments
+from .plan_view import nice_length_m, aim_reach_m, hazardous_labels, mirror_segments
 from .progress import terminal_bar
 
 __all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii"]
@@ -61,7 +61,7 @@ def lobe_grid(spot, mpe_w_m2, mu, states=None, resolution_deg=3.0) -> pv.Structu
     The grid's pole is the mirror direction (where finite lobes peak), with rings at 0.1,
     0.3 and 1 deg around it, so a sharp specular tip is drawn at its full length;
     directions below the surface have NOHD 0."""
-    fn = _range_fn(spot, mpe_w_m2, mu, 1.0, states)
+    fn = nohd_range_fn(spot, mpe_w_m2, mu, 1.0, states)
     wi = -spot.mean_incoming @ spot.mean_frame.T  # incidence in the material frame
     m = wi * np.array([-1.0, -1.0, 1.0])
     e1, e2 = _perp_basis(m)
@@ -238,7 +238,7 @@ def framings(result, blocks) -> dict:
 
 def _nice(x) -> float:
     """The largest 1, 2 or 5 x 10^k not above ``x``."""
-    return _nice_length(5.0 * x)
+    return nice_length_m(5.0 * x)
 
 
 def ring_radii(extent_m, compressed) -> list:
@@ -527,7 +527,7 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
     except ImportError:
         return result_paths
     gif = out / "lobe.gif"
-    from brdfmodels._io import atomic_write
+    from brdfmodels.fileio import atomic_write
 
     atomic_write(gif, lambda tmp: imageio.mimsave(tmp, [imageio.imread(f) for f in paths], duration=0.15), keep_suffix=True)
     result_paths["gif"] = gif

@@ -1,7 +1,7 @@
 """Outputs of an analysis: ``report.json`` (every step) and ``observers.csv``, atomically.
 
 The whole set is written into a staging folder beside the output folder and switched in
-as one unit (:mod:`brdfmodels._unit`), so a crash never leaves a half-written report nor
+as one unit (:mod:`brdfmodels.output_sets`), so a crash never leaves a half-written report nor
 a new report beside an old table. An existing report is never overwritten unless asked
 (``force=True``).
 """
@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write_text, current_umask
+from brdfmodels.fileio import atomic_write_text, current_umask
 
+from .csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
 from .verdict import escape_way, verdict
 from scenes.conventions import beam_headline
@@ -102,7 +103,7 @@ def _with_tracks(result, cols, m) -> dict:
     return cols
 
 
-def _listed(cols, m) -> np.ndarray:
+def listed_rows(cols, m) -> np.ndarray:
     """Rows of report.json's observer list: every one up to ``JSON_OBSERVERS_MAX``, else
     the highest hazard ratios (every hazardous one first), in the scene's order."""
     if m <= JSON_OBSERVERS_MAX:
@@ -113,7 +114,7 @@ def _listed(cols, m) -> np.ndarray:
 
 def observer_rows(result, rows=None, cols=None) -> list:
     """One dict per observer (``rows``: which; default all) for report.json, JSON-safe
-    (:func:`_json_safe`'s strings for non-finite values, null where NaN means "not
+    (:func:`json_safe`'s strings for non-finite values, null where NaN means "not
     applicable"), built column by column."""
     cols = observer_columns(result) if cols is None else cols
     labels = cols["labels"]
@@ -127,7 +128,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
         if k in maybe:
             v = [_num(x) for x in v]
         elif a.dtype.kind == "f" and not np.isfinite(a).all():
-            v = _json_safe(v)
+            v = json_safe(v)
         columns.append(v)
     names = ["name", "position_m"] + keys
     return [dict(zip(names, vals)) for vals in zip(*columns)]
@@ -136,22 +137,22 @@ def observer_rows(result, rows=None, cols=None) -> list:
 def observers_listed(result, cols) -> tuple[list, dict]:
     """report.json's observer rows and a statement of which are listed."""
     m = len(cols["labels"])
-    rows = _listed(cols, m)
+    rows = listed_rows(cols, m)
     said = {"count": m, "listed": int(len(rows)),
             "which": "all" if len(rows) == m else
             f"the {len(rows)} highest hazard ratios (every hazardous observer first); all {m} are in observers.csv"}
     return observer_rows(result, rows, cols), said
 
 
-def _json_safe(obj):
+def json_safe(obj):
     """Non-finite floats as the strings "inf", "-inf", "nan" (JSON has no such numbers;
     an infinite NOHD - a collimated beam without attenuation - must not vanish)."""
     if isinstance(obj, float) and not math.isfinite(obj):
         return "nan" if math.isnan(obj) else ("inf" if obj > 0 else "-inf")
     if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
+        return {k: json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
+        return [json_safe(v) for v in obj]
     return obj
 
 
@@ -191,7 +192,7 @@ def report_dict(result, cols=None) -> dict:
     listed, which = observers_listed(result, observer_columns(result) if cols is None else cols)
     v = verdict(result)
     warnings = v.pop("warnings")  # report.json's top-level "warnings"
-    doc = _json_safe({
+    doc = json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
         "versions": versions(),
@@ -234,36 +235,10 @@ _MOTION_BLANK = MOTION_COLUMNS  # the motion_* columns: NaN where a fixed observ
 _CSV_BLANK_NAN = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2", *_MOTION_BLANK}  # NaN there means "not applicable": an empty cell
 
 
-def _csv_cell(values, key) -> list:
-    """One column as CSV text: floats by repr (exact round trip; NaN empty where it means
-    "not applicable"), bools as True/False. The reprs are made by the list's own repr (one
-    C loop, the same strings as ``repr`` of each value)."""
-    values = np.asarray(values)
-    if not len(values):
-        return []
-    if values.dtype == bool:
-        return repr(values.tolist())[1:-1].split(", ")
-    v = values.astype(float)
-    text = _reprs(v)
-    if key in _CSV_BLANK_NAN:
-        nan = np.isnan(v)
-        if nan.all():
-            return [""] * len(v)
-        for i in np.flatnonzero(nan).tolist():
-            text[i] = ""
-    return text
-
-
-def _reprs(v: np.ndarray) -> list:
-    """``[repr(x) for x in v.tolist()]`` of a float64 column: a value repeated through it
-    (grid coordinates, a constant MPE) formatted once (values told apart by their bits:
-    -0.0 is not 0.0)."""
-    bits = np.ascontiguousarray(v, float).view(np.int64)
-    if not len(v) or len(np.unique(bits[:256])) * 10 > 9 * min(len(v), 256):  # mostly distinct: every value formatted
-        return repr(v.tolist())[1:-1].split(", ") if len(v) else []
-    _, first, inv = np.unique(bits, return_index=True, return_inverse=True)
-    text = repr(v[first].tolist())[1:-1].split(", ")
-    return [text[i] for i in inv.ravel().tolist()]
+def csv_cell(values, key) -> list:
+    """One observers.csv column ``key`` as text (:func:`hazard.csv_text.column_text`): NaN
+    an empty cell where it means "not applicable" (the keys of ``_CSV_BLANK_NAN``)."""
+    return column_text(values, blank_nan=key in _CSV_BLANK_NAN)
 
 
 def _csv_names(labels: list) -> list:
@@ -278,20 +253,6 @@ def _csv_name(label: str) -> str:
     if any(c in label for c in ',"\r\n'):
         return '"' + label.replace('"', '""') + '"'
     return label
-
-
-GEO_COLUMNS = ["lat_deg", "lon_deg", "height_m"]  # after z_m, in scenes with a [site]
-
-
-def observer_geodetic(result, pos) -> np.ndarray:
-    """(M, 3) latitude, longitude [deg] and height in the site's vertical datum [m] of the
-    observers at world ``pos``: the true positions, the apparent refraction rise of the
-    analysis frame (:mod:`scenes.geo`) taken off."""
-    frame = result.scene.site.frame
-    true = pos.copy()
-    true[:, 2] -= frame.refraction_rise_m(pos[:, 0], pos[:, 1])
-    lat, lon, h = frame.geodetic(true)
-    return np.column_stack([lat, lon, frame.datum_height_m(lat, lon, h)])
 
 
 CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects)
@@ -309,11 +270,11 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
     for a0 in range(0, len(pos), block_rows):
         a1 = min(a0 + block_rows, len(pos))
         p = pos[a0:a1]
-        text = [_csv_names(cols["labels"][a0:a1])] + [_csv_cell(p[:, k], "x") for k in range(3)]
+        text = [_csv_names(cols["labels"][a0:a1])] + [csv_cell(p[:, k], "x") for k in range(3)]
         if site:
             geo = observer_geodetic(result, p)
-            text += [_csv_cell(geo[:, k], "x") for k in range(3)]
-        text += [_csv_cell(np.asarray(cols[k])[a0:a1], k) for k in rest]
+            text += [csv_cell(geo[:, k], "x") for k in range(3)]
+        text += [csv_cell(np.asarray(cols[k])[a0:a1], k) for k in rest]
         yield "\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n"
 
 
@@ -352,14 +313,14 @@ def _write_synced(path: Path, data: bytes) -> None:
 
 def write_set(result, folder, *, extra=None, sections=None) -> list:
     """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
-    ``folder`` (a staging folder of :class:`brdfmodels._unit.OutputUnit`), each fsynced;
+    ``folder`` (a staging folder of :class:`brdfmodels.output_sets.OutputUnit`), each fsynced;
     returns the names written."""
     folder = Path(folder)
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
     cols = observer_columns(result)  # once, for the report and the table
     doc = report_dict(result, cols)
-    doc.update(_json_safe(dict(sections or {})))
+    doc.update(json_safe(dict(sections or {})))
     texts = {"report.json": report_json_text(doc).encode(), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
@@ -377,11 +338,11 @@ def write_outputs(result, outdir, *, force=False, extra=None, sections=None) -> 
     the report's further ``sections`` (key -> data, e.g. ``map_outputs``).
 
     The files are written into a staging folder beside ``outdir`` and switched in as one
-    unit (:mod:`brdfmodels._unit`): ``outdir`` holds the previous complete set or the new
+    unit (:mod:`brdfmodels.output_sets`): ``outdir`` holds the previous complete set or the new
     one, never a mix. Previous outputs of ``hazard run`` need ``force``; files hazard did
     not write need ``force`` too and are kept. Returns the paths of the outputs.
     """
-    from brdfmodels._unit import OutputFolderError, output_unit
+    from brdfmodels.output_sets import OutputFolderError, output_unit
 
     out = Path(outdir)
     if out.exists() and not out.is_dir():

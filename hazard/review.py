@@ -30,10 +30,12 @@ import subprocess
 import tempfile
 from pathlib import Path
 
-from brdfmodels._io import atomic_write, atomic_write_text, check_input_file
+from brdfmodels.fileio import atomic_write, atomic_write_text, check_input_file
 
-from .plots import _file_part
+from .page_format import fmt_distance, fmt_number, fmt_percent_change, fmt_vector, optics_text, report_number, template_environment
+from .plots import file_part
 from .report import NEVER_MODELLED, REPORT_FORMAT, REPORT_VERSION
+from .risk.page import inputs_rows, map_summary, statement_section
 from .verdict import escape_way
 
 __all__ = ["write_review", "review_html", "read_report", "find_chromium", "PdfError", "fmt_number", "fmt_distance",
@@ -106,97 +108,6 @@ class PdfError(RuntimeError):
     def __init__(self, message: str, html: Path):
         super().__init__(message)
         self.html = html
-
-
-# -- numbers -------------------------------------------------------------------------
-_SUPERSCRIPT = str.maketrans("-0123456789", "\u207b\u2070\u00b9\u00b2\u00b3\u2074\u2075\u2076\u2077\u2078\u2079")
-
-
-def _value(x):
-    """A report.json number as a float: the strings ``"inf"``, ``"-inf"`` and ``"nan"``
-    (JSON has no infinity) included; None, text and anything else stay as they are."""
-    if isinstance(x, str) and x in ("inf", "-inf", "nan"):
-        return float(x)
-    if isinstance(x, (int, float)) and not isinstance(x, bool):
-        return float(x)
-    return x
-
-
-def _plain_number(v: float, sig: int) -> str:
-    """``v`` with ``sig`` significant figures: fixed notation from 1e-3 to 1e7 (digits in
-    groups of three from 10 000 on), else a power of ten (``3.1×10⁻⁸``)."""
-    if v == 0:
-        return "0"
-    mag = math.floor(math.log10(abs(v)))
-    if -3 <= mag < 7:
-        text = f"{v:.{max(sig - 1 - mag, 0)}f}"
-        if "." in text:
-            text = text.rstrip("0").rstrip(".")
-        if abs(v) >= 1e4:
-            head, _, tail = text.partition(".")
-            sign, digits = ("-", head[1:]) if head.startswith("-") else ("", head)
-            groups = [digits[max(i - 3, 0):i] for i in range(len(digits), 0, -3)][::-1]
-            text = sign + "\u202f".join(groups) + ("." + tail if tail else "")
-        return text
-    mant, _, exp = f"{v:.{sig - 1}e}".partition("e")
-    mant = mant.rstrip("0").rstrip(".") if "." in mant else mant
-    return f"{mant}\u00d710{str(int(exp)).translate(_SUPERSCRIPT)}"
-
-
-def fmt_number(x, unit: str = "", *, sig: int = 4, inf: str = "infinite", none: str = "none") -> str:
-    """One value of report.json as text, with its unit.
-
-    Parameters
-    ----------
-    x : float, int, str or None
-        The value; ``"inf"``/``"-inf"``/``"nan"`` are report.json's non-finite numbers.
-    unit : str
-        Unit appended after a no-break space (``"m"``, ``"W/m²"``); none for ratios.
-    sig : int
-        Significant figures (4: the precision of ``hazard run``'s text).
-    inf : str
-        Text of +infinity (``"unbounded"`` for distances).
-    none : str
-        Text of a missing value (JSON null).
-
-    Returns
-    -------
-    str
-    """
-    v = _value(x)
-    if v is None:
-        return none
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if not isinstance(v, float):
-        return str(v)
-    if math.isnan(v):
-        return "undefined (NaN)"
-    if math.isinf(v):
-        return inf if v > 0 else f"-{inf}"
-    text = _plain_number(v, sig)
-    return f"{text}\u00a0{unit}" if unit else text
-
-
-def fmt_distance(x, *, none: str = "none") -> str:
-    """A distance [m] (a NOHD, a range) as text; infinity is ``"unbounded"``."""
-    return fmt_number(x, "m", inf="unbounded", none=none)
-
-
-def fmt_percent_change(before, after) -> str:
-    """``after`` against ``before`` as a signed percentage (``"+14.0 %"``), or ``""``."""
-    b, a = _value(before), _value(after)
-    if not (isinstance(a, float) and isinstance(b, float)) or not (math.isfinite(a) and math.isfinite(b)) or b == 0:
-        return ""
-    return f"{100.0 * (a - b) / b:+.1f}\u00a0%"
-
-
-def fmt_vector(v, unit: str = "", *, sig: int = 6) -> str:
-    """A list of numbers as ``[a, b, c] unit``; anything else as :func:`fmt_number`."""
-    if not isinstance(v, (list, tuple)):
-        return fmt_number(v, unit, sig=sig, none="not given")
-    text = "[" + ", ".join(fmt_vector(x, sig=sig) for x in v) + "]"
-    return f"{text}\u00a0{unit}" if unit else text
 
 
 # units by key suffix (report.json's naming convention), longest suffix first
@@ -336,7 +247,7 @@ def _sorted_observers(rows: list, ratio_key: str = "hazard_ratio") -> list:
     """Observer rows (or paths over time, by ``exposure_ratio``) hazardous first, then by
     the ratio, highest first (NaN counts as highest: never rounded toward safe)."""
     def key(r):
-        ratio = _value(r.get(ratio_key))
+        ratio = report_number(r.get(ratio_key))
         ratio = math.inf if not isinstance(ratio, float) or math.isnan(ratio) else ratio
         return (not r.get("hazardous"), -ratio)
 
@@ -345,8 +256,8 @@ def _sorted_observers(rows: list, ratio_key: str = "hazard_ratio") -> list:
 
 def _observer_row(r: dict) -> dict:
     """One observer as the page's table shows it (every value from report.json)."""
-    mpe = _value(r.get("mpe_w_m2"))
-    static = _value(r.get("static_irradiance_w_m2"))
+    mpe = report_number(r.get("mpe_w_m2"))
+    static = report_number(r.get("static_irradiance_w_m2"))
     static_ratio = static / mpe if isinstance(static, float) and isinstance(mpe, float) and mpe > 0 else None
     before, after = bool(r.get("hazardous_static")), bool(r.get("hazardous"))
     return {
@@ -432,10 +343,10 @@ def _track_plots(tracks: list, pictures: dict) -> list:
     taken, found = set(), {p["name"] for p in pictures.get("exposure_track", [])}
     out = []
     for t in tracks:
-        name = f"exposure_track_{_file_part(t.get('name', ''))}.png"
+        name = f"exposure_track_{file_part(t.get('name', ''))}.png"
         k = 2
         while name in taken:
-            name, k = f"exposure_track_{_file_part(t.get('name', ''))}_{k}.png", k + 1
+            name, k = f"exposure_track_{file_part(t.get('name', ''))}_{k}.png", k + 1
         taken.add(name)
         out.append(name if name in found else None)
     return out
@@ -560,16 +471,10 @@ def _changes(t: dict) -> list:
     return out
 
 
-def _optics(a: dict) -> str:
-    """An optical aid as ``7×50`` (magnification × objective diameter [mm])."""
-    d = _value(a.get("objective_diameter_m"))
-    return f"{fmt_number(a.get('magnification'))}\u00d7{fmt_number(1e3 * d) if isinstance(d, float) else '?'}"
-
-
 def _target_view(t: dict, i: int) -> dict:
     """One target's static and dynamic hazard as the page shows it (``targets[i]``)."""
     ko_s, ko_d = t.get("keepout_static") or {}, t.get("keepout_dynamic") or {}
-    aided = [{"optics": f"{_optics(a)} (transmission {fmt_number(a.get('transmission'))}, gain {fmt_number(a.get('gain'))})",
+    aided = [{"optics": f"{optics_text(a)} (transmission {fmt_number(a.get('transmission'))}, gain {fmt_number(a.get('gain'))})",
               "static": fmt_distance(a.get("nohd_static_m")), "dynamic": fmt_distance(a.get("nohd_dynamic_m")),
               "spec_static": fmt_distance(a.get("specular_nohd_static_m"), none="no mirror beam"),
               "spec_dynamic": fmt_distance(a.get("specular_nohd_dynamic_m"), none="no mirror beam")}
@@ -596,7 +501,7 @@ def _sdz_view(z: dict | None) -> dict | None:
     if not z:
         return None
     d = z.get("directions") or {}
-    aided = [{"optics": _optics(a),
+    aided = [{"optics": optics_text(a),
               "gain": fmt_number(a.get("gain")), "enohd": fmt_distance(a.get("nohd_m")),
               "area": fmt_number(a.get("area_m2"), "m\u00b2", inf="unbounded"),
               "reach": fmt_distance(a.get("max_range_m")), "contained": fmt_number(a.get("contained"))}
@@ -630,7 +535,7 @@ def _spill_view(beam: dict | None) -> dict:
                 "range": fmt_distance(s.get("range_m")), "ratio": fmt_number(s.get("hazard_ratio")),
                 "peak": fmt_number(s.get("peak_irradiance_w_m2"), "W/m\u00b2"), "reflected": s.get("reflected", "")}
                for s in sp.get("stopped") or []]
-    aided = [{"optics": _optics(a),
+    aided = [{"optics": optics_text(a),
               "enohd": fmt_distance(a.get("nohd_m"))} for a in sp.get("aided") or []]
     return {"present": bool(sp), "leaves": fmt_number(sp.get("leaves_scene_w"), "W"),
             "nohd": fmt_distance(sp.get("nohd_m")), "aided": aided, "stopped": stopped}
@@ -814,20 +719,20 @@ def _verdict(doc: dict, obs: dict) -> dict:
                      f"{fmt_number(z.get('worst_time_s'), 's')} (limit {fmt_number(z.get('limit_w_m2'), 'W/m²')}, "
                      f"{z.get('worst_path') or 'path not stated'})")
     for t in doc.get("targets") or []:
-        n = _value(t.get("nohd_dynamic_m"))
+        n = report_number(t.get("nohd_dynamic_m"))
         if isinstance(n, float) and n > 0:
             lines.append(f"target {t.get('name')}: diffuse NOHD {fmt_distance(n)}"
                          + (f", mirror beam NOHD {fmt_distance(t['specular_nohd_dynamic_m'])}"
                             if t.get("specular_nohd_dynamic_m") is not None else ""))
     z = doc.get("sdz") or {}
     if z:
-        aided = "".join(f", through {_optics(a)} optics {fmt_distance(a.get('nohd_m'))}" for a in z.get("aided") or [])
+        aided = "".join(f", through {optics_text(a)} optics {fmt_distance(a.get('nohd_m'))}" for a in z.get("aided") or [])
         lines.append(f"direct beam NOHD {fmt_distance(z.get('nohd_m'))}{aided}; danger zone "
                      + ("contained by backstops" if z.get("contained") else
                         f"NOT contained: {z.get('escaping_directions')} direction(s){escape_way(z)} reach the NOHD without "
                         "a backstop (no terrain or occluder across them; targets are not backstops)"))
     for s in ((doc.get("beam") or {}).get("spill") or {}).get("stopped") or []:
-        ratio = _value(s.get("hazard_ratio"))
+        ratio = report_number(s.get("hazard_ratio"))
         if isinstance(ratio, float) and not ratio < 1:
             lines.append(f"{fmt_number(s.get('power_w'), 'W')} of the beam stopped by {s.get('object')} at "
                          f"{fmt_distance(s.get('range_m'))}: hazard ratio {fmt_number(ratio)} on its way")
@@ -933,8 +838,6 @@ def risk_section(out: Path, report: dict, pictures: list) -> dict | None:
     run, the statement table (the ``RISK_ROWS_SHOWN`` worst), the inputs, the map summary
     and picture (``pictures``: probability_map.png, embedded), the notes and what is left
     out, and a warning when risk.json is of another scene text than report.json."""
-    from .risk.page import inputs_rows, map_summary, statement_section
-
     risk, problem, path = read_risk(out)
     if risk is None:
         return None if problem is None else {"problem": problem}
@@ -992,19 +895,12 @@ def review_context(doc: dict, out: Path, report_path: Path, pictures: dict, obse
 
 
 # -- rendering and writing -----------------------------------------------------------
-def _environment():
-    import jinja2
-
-    return jinja2.Environment(loader=jinja2.PackageLoader("hazard", "templates"), autoescape=True,
-                              undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True)
-
-
 def review_html(out_dir, observers=()) -> str:
     """The review page of ``out_dir`` as HTML text (see :func:`write_review`)."""
     doc, path = read_report(out_dir)
     out = Path(out_dir)
     pictures = collect_pictures(out, path.stat().st_mtime)
-    return _environment().get_template("review.html.j2").render(**review_context(doc, out, path, pictures, observers))
+    return template_environment().get_template("review.html.j2").render(**review_context(doc, out, path, pictures, observers))
 
 
 def find_chromium() -> str | None:

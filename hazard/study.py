@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write, atomic_write_text, read_toml
+from brdfmodels.fileio import atomic_write, atomic_write_text, read_toml
 
 from .progress import progress_callback, progress_to
 
@@ -298,8 +298,8 @@ def examples() -> dict:
         found = {Path(p.name).stem: Path(str(p)) for p in resources.files("hazard.studies").iterdir() if p.name.endswith(".toml")}
     except (ModuleNotFoundError, TypeError, FileNotFoundError, NotADirectoryError):
         found = {}
-    if not found:  # a source checkout: examples/studies
-        folder = Path(__file__).resolve().parents[1] / "examples" / "studies"
+    if not found:  # the package's folder itself
+        folder = Path(__file__).resolve().parent / "studies"
         found = {p.stem: p for p in folder.glob("*.toml")} if folder.is_dir() else {}
     return dict(sorted(found.items()))
 
@@ -345,9 +345,9 @@ def load_study(path) -> Study:
     try:
         _study_schema().model_validate(d)
     except ValidationError as exc:
-        from scenes.scene import _format_validation
+        from scenes.scene import format_validation_error
 
-        raise ValueError(_format_validation(exc, str(path))) from None
+        raise ValueError(format_validation_error(exc, str(path))) from None
     try:
         study = Study(name=str(d.get("name", path.stem)), scene=str(d["scene"]), kind=sw.get("kind", "grid"), parameters=tuple(params),
                       samples=int(sw.get("samples", 0)), montecarlo=MonteCarlo(**mc), seed=int(d.get("seed", 0)), base_dir=str(path.parent))
@@ -360,7 +360,7 @@ def load_study(path) -> Study:
 def _check_study(study: Study, path) -> None:
     """Before any work: the number of scenarios is within the limit, every swept path is a
     field of the scene schema and of the base scene, and every scenario's scene validates."""
-    from brdfmodels._io import check_limit
+    from brdfmodels.fileio import check_limit
 
     n = math.prod(len(p.values) for p in study.parameters) if study.kind == "grid" else study.samples
     n *= max(1, study.montecarlo.samples)
@@ -384,7 +384,7 @@ def validate_scenarios(study: Study, shown: int = 3) -> int:
     distinct scenes checked."""
     import scenes
 
-    base, base_dir = _base_data(study)
+    base, base_dir = base_data(study)
     key = (study.digest(), hashlib.sha256(json.dumps(base, sort_keys=True, default=str).encode()).hexdigest(), str(base_dir))
     if key in _VALIDATED:  # load_study checked it; run_study need not build every scene again
         return _VALIDATED[key]
@@ -450,7 +450,9 @@ def scenarios(study: Study) -> list:
     return out
 
 
-def _base_data(study: Study):
+def base_data(study: Study):
+    """(the base scene's parsed TOML, the folder its relative paths are read from) of
+    ``study``: a file (relative to the study file's folder first) or a bundled example."""
     import scenes
 
     path = Path(study.scene)
@@ -704,7 +706,7 @@ def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2
     with an invalid value does no work.
     """
     validate_scenarios(study)
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
     outdir = Path(outdir)
     # results.csv/.parquet, summary.json and summary.png switch in as one unit; study.json and
@@ -730,7 +732,7 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
             for p in sdir.glob("*.json"):
                 p.unlink()
     atomic_write_text(meta, json.dumps({"name": study.name, "digest": digest, "study": _safe(asdict(study))}, indent=1, default=str))
-    base, base_dir = _base_data(study)
+    base, base_dir = base_data(study)
     todo = scenarios(study)
     done_ids = {int(p.stem) for p in sdir.glob("*.json") if json.loads(p.read_text()).get("error") is None}  # failures run again
     pending = [s for s in todo if s["id"] not in done_ids]

@@ -49,7 +49,7 @@ class DemInfo:
 
 def _grid(spec, frame: SiteFrame, centre_xy):
     n = int(math.ceil(spec.extent_m / spec.resolution_m))
-    from brdfmodels._io import check_limit
+    from brdfmodels.fileio import check_limit
 
     check_limit("TERRAIN_NODES", (2 * n + 1) ** 2, "terrain: nodes ((2 extent_m / resolution_m + 1)^2)")
     xs = centre_xy[0] + spec.resolution_m * np.arange(-n, n + 1)
@@ -90,7 +90,7 @@ def dem_path(file: str, base_dir=None):
     """The local regular file a scene's ``terrain.file`` names, and the GDAL driver its
     first bytes show (GTiff or DTED); GeoError for anything else: a URL, a GDAL virtual
     path (``/vsi...``), a subdataset name (``DRIVER:...``), a VRT or any other format."""
-    from brdfmodels._io import check_input_file
+    from brdfmodels.fileio import check_input_file
 
     name = str(file)
     if "://" in name or name.startswith("/vsi") or re.match(r"^[A-Z][A-Z0-9_]+:", name):  # GDAL subdatasets: NETCDF:, GTIFF_DIR:

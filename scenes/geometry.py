@@ -205,7 +205,7 @@ MESH_TYPES = ("stl", "obj", "ply", "off")  # self-contained mesh formats a shape
 def _mesh_file(spec, frame, base_dir):
     import trimesh  # only for scenes with mesh files
 
-    from brdfmodels._io import check_input_file
+    from brdfmodels.fileio import check_input_file
 
     path = input_path(spec.file, base_dir)
     kind = path.suffix.lower().lstrip(".")
@@ -268,7 +268,7 @@ class Heightfield:
 def terrain_heightfield(spec, base_dir=None) -> Heightfield:
     """Heightfield of a terrain spec."""
     if spec.kind == "heightmap":
-        from brdfmodels._io import check_input_file, check_limit
+        from brdfmodels.fileio import check_input_file, check_limit
 
         path = input_path(spec.file, base_dir)
         check_input_file(path, "terrain.file")
@@ -288,7 +288,7 @@ def terrain_heightfield(spec, base_dir=None) -> Heightfield:
         if h.dtype.kind not in "iuf" or h.ndim != 2 or min(h.shape) < 2 or not np.all(np.isfinite(h)) or np.abs(h).max() > 1e5:
             raise ValueError(f"terrain.file={spec.file!r}: expected a 2-d array of finite heights [m], got shape {h.shape}")
         return Heightfield(spec.origin_m[0], spec.origin_m[1], spec.spacing_m, np.asarray(h, float))
-    from brdfmodels._io import check_limit
+    from brdfmodels.fileio import check_limit
 
     cx, cy, cz = spec.center_m
     n = int(math.ceil(spec.extent_m / spec.resolution_m))

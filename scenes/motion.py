@@ -239,7 +239,10 @@ def _span(spec, parts) -> tuple[float, float]:
     return float(t0), float(t1)
 
 
-def _aim(spec, laser_position_m, laser_direction, offset_m) -> AimSchedule | None:
+def aim_schedule(spec, laser_position_m, laser_direction, offset_m) -> AimSchedule | None:
+    """The laser's aim over time from ``spec.laser.aim_track`` (None without one): aim
+    points [m] in the scene frame (``offset_m`` subtracted), or azimuth / elevation rates
+    [rad/s] from ``laser_direction``'s bearing."""
     at = spec.laser.aim_track
     if at is None:
         return None
@@ -289,7 +292,7 @@ def check_aim_sector(spec, aim: AimSchedule | None) -> None:
 
 def samples_max() -> int:
     """Time samples a moving path may take (limit ``MOTION_SAMPLES``, ``HAZARD_MAX_MOTION_SAMPLES``)."""
-    from brdfmodels._io import limit
+    from brdfmodels.fileio import limit
 
     return int(limit("MOTION_SAMPLES"))
 
@@ -297,7 +300,7 @@ def samples_max() -> int:
 def check_base_steps(motion: Motion, t0: float, t1: float) -> int:
     """Samples of the base step over [t0, t1] (``floor((t1 - t0) / time_step_s) + 1``);
     ValueError naming ``motion.time_step_s`` and the limit when they exceed it."""
-    from brdfmodels._io import check_limit
+    from brdfmodels.fileio import check_limit
 
     step = motion.spec.time_step_s
     n = math.floor((t1 - t0) / step) + 1
@@ -349,7 +352,7 @@ def motion_of(scene) -> Motion | None:
         return None
     offset = np.asarray(scene.offset_m, float)
     tracks = _tracks(spec, offset, scene.site)
-    aim = _aim(spec, np.asarray(scene.laser_position_m, float), np.asarray(scene.laser_direction, float), offset)
+    aim = aim_schedule(spec, np.asarray(scene.laser_position_m, float), np.asarray(scene.laser_direction, float), offset)
     tts = [TargetTrack(i, t.name, np.asarray(t.track.times_s, float),
                        np.asarray(t.track.center_m, float) - np.asarray(t.center_m, float))
            for i, t in enumerate(spec.targets) if t.track is not None]

@@ -19,7 +19,7 @@ import numpy as np
 from pydantic import ValidationError
 
 import brdfmodels
-from brdfmodels._io import check_limit, parse_toml, read_input_text
+from brdfmodels.fileio import check_limit, parse_toml, read_input_text
 
 from .geometry import Heightfield, Mesh, direction_in_sector, input_path, observer_points, shape_mesh, terrain_heightfield
 from .observers import BLOCK, GroupPoints, Observers, grid_generator, stored
@@ -42,7 +42,9 @@ def _path(loc) -> str:
     return out or "(scene)"
 
 
-def _format_validation(exc: ValidationError, source: str) -> str:
+def format_validation_error(exc: ValidationError, source: str) -> str:
+    """One line for a pydantic validation error of ``source``: the first error's field path,
+    message and value, then how many more (the next three shown)."""
     errs = exc.errors(include_url=False)
     msgs = []
     for e in errs:
@@ -883,10 +885,10 @@ def _observers(spec, offset, terrain, rise=None) -> Observers:
 
 def _check_aim_track(spec, laser_local, direction, offset) -> None:
     """A slewing beam's aim stays in ``[laser] sector`` (:func:`scenes.motion.check_aim_sector`)."""
-    from .motion import _aim, check_aim_sector
+    from .motion import aim_schedule, check_aim_sector
 
     try:
-        check_aim_sector(spec, _aim(spec, laser_local, direction, offset))
+        check_aim_sector(spec, aim_schedule(spec, laser_local, direction, offset))
     except ValueError as exc:
         raise SceneError(str(exc)) from None
 
@@ -978,7 +980,7 @@ def _resolve_geo(data: dict, source: str, base_dir):
         try:
             return cls.model_validate(value)
         except ValidationError as exc:
-            msg = _format_validation(exc, source).removeprefix(f"{source}: ")
+            msg = format_validation_error(exc, source).removeprefix(f"{source}: ")
             raise SceneError(f"{source}: {path}{'' if msg.startswith('(scene)') else '.'}{msg.removeprefix('(scene)')}") from None
 
     try:
@@ -1027,7 +1029,7 @@ def from_data(data: dict, *, source: str = "<scene>", base_dir=None, text=None) 
     except SceneError:
         raise
     except ValidationError as exc:
-        raise SceneError(_format_validation(exc, source)) from None
+        raise SceneError(format_validation_error(exc, source)) from None
     except RecursionError:
         raise SceneError(f"{source}: nesting too deep") from None
     except ValueError as exc:  # limits checked outside pydantic's own validators

@@ -7,7 +7,7 @@ nm. The classes only validate; :mod:`scenes.scene` converts them once to numpy a
 Types are strict (``power_w = true`` or ``"5"`` is an error, not 1 W or 5 W), every number
 must be finite and within a physical range, and the total work a scene asks for (observer
 points, explicit points, targets, beam rays, table nodes, time steps, keep-out cells, risk
-point evaluations) is bounded by the limits of :data:`brdfmodels._io.LIMITS` (raise them
+point evaluations) is bounded by the limits of :data:`brdfmodels.fileio.LIMITS` (raise them
 with ``HAZARD_MAX_<NAME>``), each chosen from a measured cost (README, Input checks).
 """
 
@@ -18,7 +18,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from brdfmodels._io import check_limit
+from brdfmodels.fileio import check_limit
 
 __all__ = [
     "SceneSpec",

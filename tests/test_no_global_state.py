@@ -282,7 +282,7 @@ def test_the_cli_environment_is_restored():
 def test_the_umask_is_read_without_setting_it(monkeypatch):
     """Outputs get the usual permissions (0666 minus the umask) from a mask read, not set
     and put back (a moment in which another thread's new file would get the mask 0)."""
-    from brdfmodels._io import current_umask
+    from brdfmodels.fileio import current_umask
 
     old = os.umask(0o027)
     try:

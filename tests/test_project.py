@@ -56,23 +56,26 @@ def _setuptools_config() -> dict:
 
 
 def test_every_package_is_in_the_wheel():
-    """The package list is exactly the folders with an ``__init__.py`` plus the mapped ones
-    (``hazard.studies`` = examples/studies): a sub-package missing from the list installs
-    nowhere but in editable mode, and a listed one that is gone breaks the build."""
+    """Packages are found, not listed (``[tool.setuptools.packages.find]``): the finder,
+    given the include patterns of pyproject.toml, returns exactly the folders with an
+    ``__init__.py`` of the three packages (never tests or examples), and no folder is mapped
+    from elsewhere (a mapped sub-package cannot be found: hazard/studies is package data)."""
+    from setuptools import find_packages
+
     config = _setuptools_config()
+    find = config["packages"]["find"]
+    assert "package-dir" not in config and find.get("namespaces") is False
     found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("brdfmodels", "scenes", "hazard")
              for p in (ROOT / top).rglob("__init__.py")}
-    mapped = set(config.get("package-dir", {}))
-    assert all((ROOT / folder).is_dir() for folder in config.get("package-dir", {}).values())
-    assert set(config["packages"]) == found | mapped, f"pyproject packages vs folders: {sorted(set(config['packages']) ^ (found | mapped))}"
+    assert {"hazard.pipeline", "hazard.risk"} <= found
+    assert set(find_packages(str(ROOT), include=find["include"])) == found
 
 
 def test_every_package_data_glob_matches_a_file():
     """A glob that matches nothing ships nothing and hides a missing file."""
     config = _setuptools_config()
-    dirs = config.get("package-dir", {})
     for package, globs in config["package-data"].items():
-        folder = ROOT / dirs.get(package, package.replace(".", "/"))
+        folder = ROOT / package.replace(".", "/")
         for pattern in globs:
             assert list(folder.glob(pattern)), f"package-data {package}: {pattern!r} matches no file in {folder}"
 

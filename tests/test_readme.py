@@ -181,7 +181,8 @@ def _run_blocks(blocks, tmp_path: Path) -> None:
     env = _shim(tmp_path)
     work = tmp_path / "work"
     work.mkdir()
-    (work / "examples").symlink_to(ROOT / "examples")  # commands name examples/studies/*.toml
+    (work / "examples").symlink_to(ROOT / "examples")  # commands name examples/*.py
+    (work / "hazard").symlink_to(ROOT / "hazard")  # and hazard/studies/*.toml (the same package as on PYTHONPATH)
     for line, cmds in blocks:
         for c in cmds:
             done = subprocess.run(["bash", "-c", c], cwd=work, env=env, capture_output=True, text=True, timeout=3600)

@@ -214,12 +214,12 @@ def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
 def _pointing_ring(u, b) -> list:
     """The aim, and with a pointing buffer b > 0 directions on the cone of half-angle b
     about it (the beam may point anywhere within it): the danger zone's cone at one ring
-    (:func:`hazard.pipeline.sdz._cone`, 8 directions for a small buffer)."""
+    (:func:`hazard.pipeline.sdz.cone_directions`, 8 directions for a small buffer)."""
     if b <= 0:
         return [u]
-    from .sdz import _cone
+    from .sdz import cone_directions
 
-    return list(_cone(np.asarray(u, float), b, b))
+    return list(cone_directions(np.asarray(u, float), b, b))
 
 
 def _which(spots, p, mu, ray_scene, states) -> str | None:

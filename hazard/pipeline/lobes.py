@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from ..engine import FAR_FIELD_SPOT_SIZES, path_states
-from ..keepout import _range_fn, hazard_lobe
+from ..keepout import nohd_range_fn, hazard_lobe
 from ..nohd import optical_gain
 from ..results import TargetResult
 from ..specular import specular_nohd
@@ -47,7 +47,7 @@ def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
     t = sp.target
     if sl is None or not sl.moves or lobe is None or t.index not in states:
         return None
-    half = _range_fn(sp, mpe_w_m2, mu, gain, states[t.index], sl.step_rad / 2)
+    half = nohd_range_fn(sp, mpe_w_m2, mu, gain, states[t.index], sl.step_rad / 2)
     r_half = float(half(lobe.max_direction_local[None, :])[0])
     err = max(r_half - lobe.max_range_m, 0.0)
     if r_half > lobe.max_range_m:  # the NOHD is now the half-step union's: no single intensity gives it

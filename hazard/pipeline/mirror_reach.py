@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..specular import mirror_directions
-from .sdz import UNBOUNDED_DRAW_M, boundary_polygon, first_backstop_rays
+from .backstops import first_backstop_rays
+from .sdz import UNBOUNDED_DRAW_M, boundary_polygon
 
 __all__ = ["mirror_beams", "summary"]
 

@@ -192,7 +192,7 @@ def base_grid(motion, t0: float, t1: float) -> np.ndarray:
     return t[(t >= t0) & (t <= t1)]
 
 
-def _lased_time(run: MotionRun, t) -> np.ndarray:
+def lased_time_s(run: MotionRun, t) -> np.ndarray:
     """Lased seconds from the scenario's start to each time (sorted times)."""
     t = np.asarray(t, float)
     w = run.motion.windows
@@ -357,11 +357,11 @@ def _reflected_w_m2(run: MotionRun, p, t, state_idx, gain, tau) -> np.ndarray:
 
 def _dwell_s(run: MotionRun, t) -> np.ndarray:
     """Dwell time [s] of the spot at each time (see the module notes)."""
-    lased = _lased_time(run, t)
+    lased = lased_time_s(run, t)
     if not run.motion.beam_moves or not run.states:
         return lased
     k = run.state_index(t)
-    lk = _lased_time(run, run.key_times_s)
+    lk = lased_time_s(run, run.key_times_s)
     return _key_dwell_s(run)[k] + np.maximum(lased - lk[k], 0.0)
 
 
@@ -371,7 +371,7 @@ def _key_dwell_s(run: MotionRun) -> np.ndarray:
     spot's radius of it, each for its own lased interval (made once per run)."""
     if run.dwell_keys_s is not None:
         return run.dwell_keys_s
-    lk = _lased_time(run, run.key_times_s)
+    lk = lased_time_s(run, run.key_times_s)
     held = np.diff(lk)  # lased seconds each state is held for, up to the next key time
     c = np.array([_spot_centre(run, bs) for bs in run.states_list])
     r = np.array([_spot_radius(bs) for bs in run.states_list])

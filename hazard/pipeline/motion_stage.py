@@ -357,6 +357,6 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
 
 
 def _max_dwell(run: MotionRun) -> float:
-    from .motion import _lased_time
+    from .motion import lased_time_s
 
-    return float(_lased_time(run, np.array([run.motion.t_end_s]))[0])
+    return float(lased_time_s(run, np.array([run.motion.t_end_s]))[0])

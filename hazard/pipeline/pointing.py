@@ -50,7 +50,7 @@ import numpy as np
 
 from scenes.geometry import angle_to_sector_rad, direction_in_sector
 
-from .sdz import first_backstop_rays
+from .backstops import first_backstop_rays
 
 __all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2", "aim_track_directions"]
 

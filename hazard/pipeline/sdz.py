@@ -48,6 +48,8 @@ import numpy as np
 from scenes.geometry import direction_in_sector, widened_azimuths_rad
 
 from ..beam import perp_basis
+from .backstops import first_backstop_rays
+from .pointing import aim_track_directions
 from .spill import direct_nohds
 
 __all__ = ["Directions", "pointing_directions", "bearing_vectors", "danger_zone", "zone_polygon", "MAX_RAYS"]
@@ -90,9 +92,9 @@ def _cone_basis(axis):
     return e1, (e2 if e2[2] >= 0 else -e2) / np.linalg.norm(e2)
 
 
-def _cone(axis, half_angle, step) -> np.ndarray:
-    """Directions filling a cone of ``half_angle`` about ``axis``: rings every ``step``,
-    each with a multiple of 4 samples starting at the horizontal offset."""
+def cone_directions(axis, half_angle, step) -> np.ndarray:
+    """Unit directions (N, 3) filling a cone of ``half_angle`` [rad] about ``axis``: rings
+    every ``step`` [rad], each with a multiple of 4 samples starting at the horizontal offset."""
     e1, e2 = _cone_basis(axis)
     out = [axis[None]]
     n_r = max(1, math.ceil(half_angle / step))
@@ -145,19 +147,17 @@ def pointing_directions(scene) -> Directions:
     if laser.sector is not None:
         unit, step = _sector(laser.sector, b)
         if not direction_in_sector(axis, laser.sector, b):  # the aim must be in the zone whatever the sector says
-            unit = np.vstack([unit, _cone(axis, b, CONE_STEP * b) if b > 0 else axis[None]])
+            unit = np.vstack([unit, cone_directions(axis, b, CONE_STEP * b) if b > 0 else axis[None]])
         return _with_aim_track(scene, Directions(unit, step, "sector", b))
     if b <= 0:
         return _with_aim_track(scene, Directions(axis[None], 0.0, "aim", 0.0))
-    return _with_aim_track(scene, Directions(_cone(axis, b, CONE_STEP * b), CONE_STEP * b, "cone", b))
+    return _with_aim_track(scene, Directions(cone_directions(axis, b, CONE_STEP * b), CONE_STEP * b, "cone", b))
 
 
 def _with_aim_track(scene, d: Directions) -> Directions:
     """``d`` and a slewing beam's track (:func:`hazard.pipeline.pointing.aim_track_directions`),
     each track direction widened across the track by the buffer (the band the cones of
     the track's directions sweep), the track's ends by their cones."""
-    from .pointing import aim_track_directions
-
     b = d.buffer_rad
     track, gap = aim_track_directions(scene, max(CONE_STEP * b, 1e-5) if b > 0 else None)
     if not len(track):
@@ -170,7 +170,7 @@ def _with_aim_track(scene, d: Directions) -> Directions:
         for f in np.linspace(-1.0, 1.0, 2 * max(2, math.ceil(1 / CONE_STEP / 4)) + 1):
             v = np.cos(f * b) * track + np.sin(f * b) * across
             parts.append(v / np.linalg.norm(v, axis=1, keepdims=True))
-        parts += [_cone(track[0], b, CONE_STEP * b), _cone(track[-1], b, CONE_STEP * b)]
+        parts += [cone_directions(track[0], b, CONE_STEP * b), cone_directions(track[-1], b, CONE_STEP * b)]
     unit = np.vstack(parts)
     return Directions(unit, max(d.step_rad, gap), d.kind, b, aim_track=True)
 
@@ -312,32 +312,6 @@ def _first_backstop(origin, dirs, ray_scene, n_targets, max_passes=64) -> np.nda
     """Distance [m] to the first terrain or occluder hit along each direction (inf: none),
     through the targets (rays that meet a target go on from just past it)."""
     return first_backstop_rays(np.broadcast_to(origin, np.shape(dirs)), dirs, ray_scene, n_targets, max_passes)
-
-
-def first_backstop_rays(origins, dirs, ray_scene, n_targets, max_passes=64) -> np.ndarray:
-    """As :func:`_first_backstop`, for rays of their own origins (distance along the
-    normalised direction)."""
-    dirs = np.asarray(dirs, float)
-    dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
-    out = np.full(len(dirs), np.inf)
-    if ray_scene is None:
-        return out
-    rows = np.arange(len(dirs))
-    start = np.array(origins, float)
-    gone = np.zeros(len(dirs))
-    step = 1e-6 * max(getattr(ray_scene, "scale_m", 1.0), 1.0)
-    for _ in range(max_passes):
-        hits = ray_scene.first_hit(start[rows], dirs[rows])
-        stop = hits.hit & (hits.obj >= n_targets)
-        out[rows[stop]] = gone[rows[stop]] + hits.t[stop]
-        through = hits.hit & (hits.obj < n_targets)
-        if not through.any():
-            return out
-        r = rows[through]
-        gone[r] += hits.t[through] + step
-        start[r] = start[r] + dirs[r] * (hits.t[through] + step)[:, None]
-        rows = r
-    return out  # rays still passing targets after max_passes stay unstopped (inf): conservative
 
 
 @dataclass

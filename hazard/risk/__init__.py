@@ -128,9 +128,9 @@ def run_risk(scene, outdir, *, draws=None, seed=None, sampling=None, sensitivity
     result file is written or replaced. Arguments override the scene's
     ``[uncertainty]`` (draws, seed, sampling "plain" | "importance" | "auto").
     ``serial``: in this process, without Dask (identical results). The final files are
-    switched in as one unit (:mod:`brdfmodels._unit`); ``force`` also accepts files in
+    switched in as one unit (:mod:`brdfmodels.output_sets`); ``force`` also accepts files in
     ``outdir`` hazard did not write (kept)."""
-    from brdfmodels._unit import output_unit
+    from brdfmodels.output_sets import output_unit
 
     from .outputs import write_outputs
 

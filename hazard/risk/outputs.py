@@ -21,7 +21,7 @@ import uuid
 
 import numpy as np
 
-from brdfmodels._io import atomic_write_text, atomic_write
+from brdfmodels.fileio import atomic_write_text, atomic_write
 
 __all__ = ["write_outputs", "CSV_COLUMNS", "CONTOUR_LEVELS"]
 

@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write, atomic_write_text, check_input_file
+from brdfmodels.fileio import atomic_write, atomic_write_text, check_input_file
 
-from ..review import _environment, _optics, _plain_number, _value, fmt_number, fmt_vector
+from ..page_format import fmt_number, fmt_vector, optics_text, plain_number, report_number, template_environment
 from .outputs import CONTOUR_LEVELS
 
 __all__ = ["risk_page", "write_risk_page", "risk_context", "statement_section", "split_rows", "estimate_first", "is_resolved", "inputs_rows", "map_summary", "map_png",
@@ -59,7 +59,7 @@ CONTOUR_RULE = ("The probability contours ({files}) hold the cells whose 95 % up
 def fmt_p(x, sig: int = 3, none: str = "none") -> str:
     """A probability, ratio or index as text: fixed notation from 0.01 to 1e7 (``0.0903``),
     else plain scientific notation (``3.2e-3``); 0 as ``0``; JSON null as ``none``."""
-    v = _value(x)
+    v = report_number(x)
     if v is None:
         return none
     if not isinstance(v, float) or not math.isfinite(v):
@@ -67,7 +67,7 @@ def fmt_p(x, sig: int = 3, none: str = "none") -> str:
     if v == 0:
         return "0"
     if 1e-2 <= abs(v) < 1e7:
-        return _plain_number(v, sig)
+        return plain_number(v, sig)
     mant, _, exp = f"{v:.{sig - 1}e}".partition("e")
     return f"{mant}e{int(exp)}"
 
@@ -78,7 +78,7 @@ def _interval(d: dict, p="probability_exceed", lo="probability_ci_low", hi="prob
 
 # -- the statement table -------------------------------------------------------------
 def _num_or_worst(r: dict, k: str) -> float:
-    x = _value(r.get(k))
+    x = report_number(r.get(k))
     return math.inf if not isinstance(x, float) or math.isnan(x) else x
 
 
@@ -94,7 +94,7 @@ worst_first = estimate_first  # the listings' order (hazard risk's terminal line
 def is_resolved(r: dict) -> bool:
     """A point with at least one exceedance among the draws (``hits`` > 0): its estimate is
     known. Without hits only an upper bound is known (the estimate 0 is no finding)."""
-    hits = _value(r.get("hits"))
+    hits = report_number(r.get("hits"))
     if isinstance(hits, float):
         return hits > 0
     return _num_or_worst(r, "probability_exceed") > 0  # hits not stated: an estimate above 0 was seen
@@ -113,8 +113,8 @@ def _aided_text(aided: list) -> str:
     """The optics with the highest probability (``aided``), or why there is none."""
     if not aided:
         return "no optics in the scene"
-    a = max(aided, key=lambda a: _value(a.get("probability_exceed")) or 0.0)
-    return f"{_interval(a)} through {_optics(a)} (gain {fmt_number(a.get('gain'), sig=3)})"
+    a = max(aided, key=lambda a: report_number(a.get("probability_exceed")) or 0.0)
+    return f"{_interval(a)} through {optics_text(a)} (gain {fmt_number(a.get('gain'), sig=3)})"
 
 
 def _operations_text(ops) -> str:
@@ -139,7 +139,7 @@ def _driver_text(sens) -> str:
 
 def _lit_text(r: dict) -> str:
     """How often the point was lit at all and the hazard ratio's quantiles then."""
-    frac = _value(r.get("lit_fraction"))
+    frac = report_number(r.get("lit_fraction"))
     if not isinstance(frac, float):
         return "not stated"
     if frac == 0:
@@ -150,15 +150,15 @@ def _lit_text(r: dict) -> str:
 
 
 def _all_zero(q: dict) -> bool:
-    return all(_value(q.get(k)) == 0.0 for k in ("p50", "p95", "p99"))
+    return all(report_number(q.get(k)) == 0.0 for k in ("p50", "p95", "p99"))
 
 
 def statement_row(r: dict, draws=None) -> dict:
     """One observer of risk.json as the statement table shows it."""
     q = r.get("hazard_ratio_quantiles") or {}
     hits = fmt_number(r.get("hits"), none="not stated")
-    n_eff = _value(r.get("effective_draws"))
-    if isinstance(n_eff, float) and n_eff != _value(draws):
+    n_eff = report_number(r.get("effective_draws"))
+    if isinstance(n_eff, float) and n_eff != report_number(draws):
         hits += f" (effective draws {fmt_number(n_eff, sig=4)})"
     return {"name": str(r.get("name", "?")), "position": fmt_vector(r.get("position_m"), sig=4),
             "p": fmt_p(r.get("probability_exceed")), "lo": fmt_p(r.get("probability_ci_low")),
@@ -209,7 +209,7 @@ def inputs_rows(doc: dict) -> list:
 def _importance_lines(imp) -> list | None:
     if not imp:
         return None
-    share = _value(imp.get("alpha0"))
+    share = report_number(imp.get("alpha0"))
     head = (f"{fmt_number(100 * share, sig=3)} % of the draws from the stated distributions"
             if isinstance(share, float) else "share of the stated distributions not stated")
     return [head] + [f"component {k + 1}: {c}" for k, c in enumerate(imp.get("components") or [])]
@@ -286,7 +286,7 @@ def _grid(cells: dict, spacing, key: str = "hi") -> tuple:
     """Cell edges (x, y) and the column ``key`` as a grid (rows south to north; NaN where
     the CSV has no cell)."""
     x, y, v = cells["x"], cells["y"], cells[key]
-    d = _value(spacing)
+    d = report_number(spacing)
     if not isinstance(d, float) or not d > 0:
         steps = np.diff(np.unique(np.concatenate([x, y])))
         d = float(steps[steps > 0].min()) if (steps > 0).any() else 1.0
@@ -470,7 +470,7 @@ def risk_page(doc: dict, out_dir: Path) -> str:
     """The risk page of ``doc`` (risk.json's content) as HTML text: self-contained (CSS
     inline, the map as a data URI, no script). Draws and saves ``OUT/probability_map.png``
     when the run has a map and ``OUT/probability_map.csv`` is there."""
-    return _environment().get_template("risk.html.j2").render(**risk_context(doc, out_dir))
+    return template_environment().get_template("risk.html.j2").render(**risk_context(doc, out_dir))
 
 
 def write_risk_page(doc: dict, out_dir) -> Path:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels._io import atomic_write, atomic_write_text
+from brdfmodels.fileio import atomic_write, atomic_write_text
 
 from .columns import ColumnStore
 from .stats import weighted_counts

@@ -105,7 +105,7 @@ class MapFloor:
         self.exposure = np.zeros(self.n)
 
     def block(self, a0, a1):
-        from brdfmodels.geometry import _half_diff_parts
+        from brdfmodels.geometry import half_diff_parts
 
         p = self.part.at(np.arange(a0, a1))
         d = p - self.centre
@@ -116,7 +116,7 @@ class MapFloor:
         m, k = len(live), self.basis.size
         y = np.empty((k + 1, m))
         wo_l = wo[live]
-        self.basis.design_transposed(*_half_diff_parts(np.broadcast_to(self.wi, (m, 3)), wo_l), self.fanout, self.fanout, out=y[:k])
+        self.basis.design_transposed(*half_diff_parts(np.broadcast_to(self.wi, (m, 3)), wo_l), self.fanout, self.fanout, out=y[:k])
         # the row factor in the exponent: P cos_o / r^2 (a point source's gain) over cos i
         y[k] = math.log(self.power_w) + np.log(wo_l[:, 2]) - 2.0 * np.log(r[live]) - math.log(self.wi[2])
         ev = y.T @ self.coef

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 import brdfmodels as bm
-from brdfmodels.geometry import _half_diff_parts
+from brdfmodels.geometry import half_diff_parts
 
 from ._floor import median_s
 
@@ -38,7 +38,7 @@ def run(n=1_000_000, t_states=100, seed=0, verbose=True):
     states = np.linspace(300.0, 1500.0, t_states)
     out = np.empty((n, t_states))
 
-    parts = [p.copy() for p in _half_diff_parts(wi, wo)]
+    parts = [p.copy() for p in half_diff_parts(wi, wo)]
     ybuf = np.empty((basis.size, n))
     cmat = np.ascontiguousarray(coef.T @ bm.states.interpolation_weights(table_states, states))
     gemm_out = np.empty((n, t_states))

@@ -23,7 +23,7 @@ import numpy as np
 
 import hazard
 import scenes
-from brdfmodels._io import read_toml
+from brdfmodels.fileio import read_toml
 from hazard import keepout
 from scenes.spec import AnalysisSpec
 

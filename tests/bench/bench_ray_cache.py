@@ -15,7 +15,7 @@ import copy
 
 
 import scenes
-from brdfmodels._io import read_toml
+from brdfmodels.fileio import read_toml
 from hazard import rays
 from hazard.pipeline.spots import ray_meshes as _meshes  # the meshes in the order analyze uses
 from hazard.rays import RayScene, cached_ray_scene

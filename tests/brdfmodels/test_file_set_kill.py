@@ -1,4 +1,4 @@
-"""hazard fit's separate output files (``brdfmodels._unit.FileSet``) after a KILL between
+"""hazard fit's separate output files (``brdfmodels.output_sets.FileSet``) after a KILL between
 their renames (issue 30: "no output set is ever mixed"): the process dies in the middle (no
 exception handler runs: ``os._exit``), leaving some new files beside old ones; the next
 FileSet naming any of them finishes the switch first: back to the previous files when some
@@ -12,11 +12,11 @@ import textwrap
 
 import pytest
 
-from brdfmodels._unit import FileSet
+from brdfmodels.output_sets import FileSet
 
 CHILD = textwrap.dedent("""
     import os, sys
-    import brdfmodels._unit as unit
+    import brdfmodels.output_sets as unit
     kill_at = sys.argv[1]
     finals = sys.argv[2:]
 

@@ -351,9 +351,9 @@ def test_save_is_atomic_on_failure(tmp_path, monkeypatch):
     def failing_write(*a, **k):
         raise RuntimeError("disk full")
 
-    from brdfmodels import _io
+    from brdfmodels import fileio
 
-    monkeypatch.setattr(_io.os, "replace", failing_write)
+    monkeypatch.setattr(fileio.os, "replace", failing_write)
     with pytest.raises(RuntimeError):
         bm.save(bm.Lambertian(0.5), target)
     assert target.read_text() == "old" and list(tmp_path.iterdir()) == [target]

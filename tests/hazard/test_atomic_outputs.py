@@ -1,4 +1,4 @@
-"""Outputs replaced as one unit (brdfmodels._unit): fault injection at every step.
+"""Outputs replaced as one unit (brdfmodels.output_sets): fault injection at every step.
 
 Each test writes an old complete set, then a new one that is interrupted before, between
 and after each rename (an exception in-process, ``os._exit`` and a real SIGKILL in a
@@ -23,8 +23,8 @@ from hypothesis import given, settings, strategies as st
 
 import hazard
 import scenes
-from brdfmodels import _unit
-from brdfmodels._unit import MANIFEST, OutputFolderError, output_unit, recover
+from brdfmodels import output_sets
+from brdfmodels.output_sets import MANIFEST, OutputFolderError, output_unit, recover
 from hazard import cli
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -62,7 +62,7 @@ def crash_at_step(monkeypatch, step):
         if name == step:
             raise Crash(name)
 
-    monkeypatch.setattr(_unit, "_step", hook)
+    monkeypatch.setattr(output_sets, "_step", hook)
 
 
 def crash_at_rename(monkeypatch, k):
@@ -101,7 +101,7 @@ def test_interrupted_switch_leaves_old_or_new_set(tmp_path, monkeypatch, how):
 _CHILD = textwrap.dedent("""
     import os, sys, time
     from pathlib import Path
-    from brdfmodels import _unit
+    from brdfmodels import output_sets
     out, step, kill = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
     def hook(name):
         if name == step:
@@ -109,8 +109,8 @@ _CHILD = textwrap.dedent("""
                 print("ready", flush=True)
                 time.sleep(60)
             os._exit(9)
-    _unit._step = hook
-    with _unit.output_unit(out, command="run", overwrite=True) as unit:
+    output_sets._step = hook
+    with output_sets.output_unit(out, command="run", overwrite=True) as unit:
         for n in ("report.json", "observers.csv"):
             (unit.stage / n).write_bytes(b"new " + n.encode())
 """)

@@ -131,7 +131,7 @@ def test_fit_files_are_one_unit(tests_folder, tmp_path, monkeypatch, fail_at):
     """hazard fit's model, envelope and samples files (separate paths) switch in together:
     a failure while writing the envelope, or at the second or third rename, leaves every
     final file as it was (old ones unchanged, new ones never created) and no temporary."""
-    import brdfmodels._unit as unit
+    import brdfmodels.output_sets as unit
     from brdfmodels import fitting
 
     folder, paths = tests_folder

@@ -234,11 +234,11 @@ def test_motion_samples_count_is_the_base_step_formula(tmp_path, monkeypatch):
 
 
 def test_every_limit_is_in_the_readme_table_with_its_default():
-    """The README's limits table lists every limit of brdfmodels._io.LIMITS at its default."""
+    """The README's limits table lists every limit of brdfmodels.fileio.LIMITS at its default."""
     import re
     from pathlib import Path
 
-    from brdfmodels._io import LIMITS
+    from brdfmodels.fileio import LIMITS
 
     text = (Path(__file__).resolve().parents[2] / "README.md").read_text()
     rows = dict(re.findall(r"^\| `HAZARD_MAX_([A-Z_]+)` \| ([0-9.e+]+) \|", text, flags=re.M))

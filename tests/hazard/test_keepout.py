@@ -10,7 +10,7 @@ import pytest
 import brdfmodels
 import hazard
 import scenes
-from brdfmodels._io import read_toml
+from brdfmodels.fileio import read_toml
 from hazard import keepout, near_field_lobe
 
 BACKSCATTER = {"model": "torrance-sparrow-5", "kb": 0.072, "kr": 16.125, "b": -29.917, "a": 0.959, "kd": 0.081}  # range_terrain's steel
@@ -49,7 +49,7 @@ def test_polish_finds_a_peak_between_grid_points():
 def test_off_specular_max_nohd_is_exact_at_any_depth():
     spot, mpe, mu = _spot(BACKSCATTER)
     lobes = [keepout.hazard_lobe(spot, mpe, mu, refine_levels=n) for n in (0, 3)]
-    fn = keepout._range_fn(spot, mpe, mu, 1.0, None)
+    fn = keepout.nohd_range_fn(spot, mpe, mu, 1.0, None)
     wi = keepout.spot_directions(spot)
     best = lobes[0].max_range_m
     assert lobes[1].max_range_m == pytest.approx(best, rel=1e-12)

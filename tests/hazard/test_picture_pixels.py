@@ -18,7 +18,7 @@ pytest.importorskip("matplotlib")
 
 FAST = ["mirror_window"]
 SLOW = sorted(set(scenes.examples()) - set(FAST))
-DPI = 110  # the pictures' resolution (hazard.plots._Display)
+DPI = 110  # the pictures' resolution (hazard.plots.DisplayBase)
 RENDER_S = 120.0  # every picture of one example (run_figures), on a 2-core machine shared by five runs (mirror_window: 4 to 19 s)
 
 

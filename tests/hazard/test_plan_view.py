@@ -10,7 +10,7 @@ import pytest
 from hazard.cli import main
 from hazard import palette as C
 from hazard.palette import rgb
-from hazard.plan_view import PlanViewDisplay, _nice_length
+from hazard.plan_view import PlanViewDisplay, nice_length_m
 
 pytest.importorskip("matplotlib")
 imageio = pytest.importorskip("imageio.v3")
@@ -41,7 +41,7 @@ def test_run_plot_writes_the_plan_with_the_other_outputs(run_with_plot):
 def test_figures_json_says_every_hazardous_finding_is_drawn_and_is_in_the_manifest(run_with_plot):
     import json
 
-    from brdfmodels._unit import read_manifest
+    from brdfmodels.output_sets import read_manifest
     from tests.hazard.test_figure_index import check_coverage, hazardous_paths
 
     out, _ = run_with_plot
@@ -96,7 +96,7 @@ def test_site_limits_hold_the_hazard_circles_and_the_hazardous_observers():
 
 @pytest.mark.parametrize("span, want", [(1000.0, 200.0), (73.0, 10.0), (5e4, 1e4), (9.0, 1.0), (0.3, 0.05)])
 def test_the_scale_bar_is_a_round_fifth_of_the_width(span, want):
-    assert _nice_length(span) == pytest.approx(want)
+    assert nice_length_m(span) == pytest.approx(want)
 
 
 def test_the_legend_stays_inside_the_picture_and_an_edge_on_wall_is_drawn(tmp_path):

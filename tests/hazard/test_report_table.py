@@ -140,10 +140,10 @@ def test_streamed_csv_is_the_csv_module_table_byte_for_byte(tmp_path, result):
 def test_csv_reprs_of_repeated_and_signed_values():
     """A column's repeated values are formatted once: -0.0, NaN and inf keep their own text."""
     v = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, 0.1] * 50 + [2.5] * 30)
-    assert report._csv_cell(v, "x") == [repr(x) for x in v.tolist()]
-    assert report._csv_cell(v, "first_exceedance_s") == ["" if x != x else repr(x) for x in v.tolist()]
+    assert report.csv_cell(v, "x") == [repr(x) for x in v.tolist()]
+    assert report.csv_cell(v, "first_exceedance_s") == ["" if x != x else repr(x) for x in v.tolist()]
     flags = np.array([True, False, False] * 9)
-    assert report._csv_cell(flags, "hazardous") == [str(x) for x in flags.tolist()]
+    assert report.csv_cell(flags, "hazardous") == [str(x) for x in flags.tolist()]
 
 
 def test_report_rows_are_json_safe_column_by_column():

@@ -72,7 +72,7 @@ def test_worst_observers_by_hazard_ratio(figures, full):
     rows = _worst(full)
     assert np.all(full.hazard_ratio[rows][:-1] >= full.hazard_ratio[rows][1:])
     assert full.hazard_ratio[rows].min() >= np.sort(full.hazard_ratio)[-3]
-    expected = {f"exposure_{plots._file_part(full.observers.labels[i])}.png" for i in rows}
+    expected = {f"exposure_{plots.file_part(full.observers.labels[i])}.png" for i in rows}
     assert expected == {"exposure_shell-20m_crossing_0.png", "exposure_arc-10m_crossing.png", "exposure_shell-20m_crossing_1.png"}
     assert set(figures) == {"nohd_time_stainless.png", "nohd_time_copper.png"} | expected
     for name in expected:
@@ -126,9 +126,9 @@ def test_static_scene_draws_flat_lines_over_the_window():
 
 
 def test_file_names_are_safe():
-    assert plots._file_part("shell-20m:crossing[0]") == "shell-20m_crossing_0"
-    assert plots._file_part("a b/c") == "a_b_c"
-    assert plots._file_part("../") == "unnamed"
+    assert plots.file_part("shell-20m:crossing[0]") == "shell-20m_crossing_0"
+    assert plots.file_part("a b/c") == "a_b_c"
+    assert plots.file_part("../") == "unnamed"
     assert plots._unique("x.png", {"x.png": b""}) == "x_2.png"
 
 

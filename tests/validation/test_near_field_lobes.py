@@ -35,7 +35,7 @@ from hypothesis import strategies as st
 import hazard
 import scenes
 from hazard import near_field_lobe
-from hazard.keepout import _range_fn
+from hazard.keepout import nohd_range_fn
 
 from . import _refs as ref
 
@@ -141,7 +141,7 @@ def _check(inc_deg, power_w, world_dirs, grid_dirs=(), half_len_m=None, half_wid
     grid: fast)."""
     half_len_m = 4 * W / math.cos(math.radians(inc_deg)) if half_len_m is None else half_len_m
     spot, mpe, off = _plate_spot(inc_deg, power_w, half_len_m, half_wid_m)
-    fn = _range_fn(spot, mpe, 0.0, 1.0, None)
+    fn = nohd_range_fn(spot, mpe, 0.0, 1.0, None)
     assert isinstance(fn, near_field_lobe.NearLobeFn)
     frame = spot.mean_frame
     if roots_only:
@@ -240,7 +240,7 @@ def test_grazing_terrain():
     res = hazard.analyze(_ground_scene(8.0, 40.0, [np.array([0.0, GY, 2.0])]))
     spot = next(s for s in res.spots if s.target.name == "terrain")
     mpe, off = res.mpe_w_m2, np.asarray(res.scene.offset_m, float)
-    fn = _range_fn(spot, mpe, 0.0, 1.0, None)
+    fn = nohd_range_fn(spot, mpe, 0.0, 1.0, None)
     assert isinstance(fn, near_field_lobe.NearLobeFn)
     c = spot.centroid + off
     frame = spot.mean_frame
@@ -286,7 +286,7 @@ def _history_lobe(n_states):
     spot = res.spots[0]
     lo, hi = spot.material.state_range
     states = np.linspace(lo, hi, n_states)
-    fn = _range_fn(spot, res.mpe_w_m2, 0.0, 1.0, states)
+    fn = nohd_range_fn(spot, res.mpe_w_m2, 0.0, 1.0, states)
     assert isinstance(fn, near_field_lobe.NearLobeFn)
     probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
     r0 = fn.base(probe)
@@ -303,7 +303,7 @@ def test_history_state_shortcut_decides_as_every_state(seed, n_states):
     the decision equals the integral at every state reaching the MPE (the bound below the
     MPE at a state: the integral there is too). Radii log-uniform from 1e-3 of the point
     form's reach: near the spot every state's bound is infinite."""
-    from hazard.engine import _near_field
+    from hazard.engine import near_field_w_m2
 
     spot, fn, mpe, reach = _history_lobe(n_states)
     rng = np.random.default_rng(seed)
@@ -311,7 +311,7 @@ def test_history_state_shortcut_decides_as_every_state(seed, n_states):
     w[:, 2] = np.abs(w[:, 2])  # half anywhere above the spot, half about the point form's farthest direction
     w /= np.linalg.norm(w, axis=1, keepdims=True)
     pts = spot.centroid + (np.exp(rng.uniform(math.log(1e-3), math.log(1.2), 40)) * reach)[:, None] * (w @ spot.mean_frame)
-    every = _near_field(spot, pts, np.ones(len(pts)), 0.0, fn.states).max(axis=1) >= mpe
+    every = near_field_w_m2(spot, pts, np.ones(len(pts)), 0.0, fn.states).max(axis=1) >= mpe
     got = fn.hazardous(pts)
     assert fn.bound_points == 0
     np.testing.assert_array_equal(got, every)
@@ -321,7 +321,7 @@ def test_history_state_shortcut_decides_as_every_state(seed, n_states):
 # ------------------------------------------------------------------ the flat spot's bound (a spot much larger than its lobe)
 def _flat_bound_case(inc, power, h, along, across):
     spot, mpe, off = _plate_spot(inc, power, 4 * W / math.cos(math.radians(inc)), 0.5)
-    fn = _range_fn(spot, mpe, 0.0, 1.0, None)
+    fn = nohd_range_fn(spot, mpe, 0.0, 1.0, None)
     probe = np.array([_grid_dir(t, p) for t in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
     fn.prepare(probe, fn.base(probe))
     n, b, t = _frame(inc)

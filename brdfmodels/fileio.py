@@ -1,0 +1,340 @@
+"""The file-I/O layer of all three packages (brdfmodels, scenes, hazard): atomic writes
+(:func:`atomic_write`: a temporary file in the target folder, fsynced, then ``os.replace``;
+the one write-then-rename of a single file), bounded input files (regular files of bounded
+size, bounded nesting) and TOML reading with one clear error line. Sets of files replaced
+as one unit (output folders, ``hazard fit``'s files): :mod:`brdfmodels.output_sets`.
+
+Input limits (:data:`LIMITS`) protect against memory bombs and endless reads; each can be
+raised with an environment variable ``HAZARD_MAX_<NAME>`` (e.g. ``HAZARD_MAX_OBSERVERS=2e6``),
+and every error that hits a limit says so.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import re
+import tempfile
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["LIMITS", "LIMIT_CEILING", "DEPTH_CEILING", "limit", "check_limit", "check_input_file", "read_input_text",
+           "toml_depth", "toml_depth_at", "data_depth", "parse_toml", "current_umask", "fsync_dir", "fsync_file",
+           "atomic_write", "atomic_write_text", "read_toml", "read_csv_columns"]
+
+# name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
+LIMITS = {
+    "FILE_MB": (256, "size of an input file [MB]"),
+    "SCENE_MB": (32, "size of a scene's TOML text [MB] (parsing takes about 0.8 s of CPU per MB)"),
+    "DEPTH": (32, "nesting depth of arrays and tables in an input file"),
+    "OBSERVERS": (1_000_000, "observer points of a scene"),
+    "POINTS": (100_000, "explicit observer points (points_m): each is a feature of the map outputs"),
+    "TARGETS": (100, "targets of a scene"),
+    "RISK_EVALUATIONS": (1e8, "point evaluations of a risk analysis ((draws + sensitivity sets) x (points + map cells))"),
+    "BEAM_SAMPLES": (65_536, "rays across the beam cross-section (analysis.beam_samples)"),
+    "TIME_STEPS": (100_000, "time steps of a dynamic analysis (time_end_s / time_step_s)"),
+    "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
+    "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
+    "TABLE_NODES": (2_000_000, "nodes of a BRDF table gridded from samples (grid_deg; a MERL table has 1.46e6)"),
+    "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
+    "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
+    "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
+    "SCATTERED_SAMPLES": (200_000, "measured samples triangulated into a scattered BRDF table (1e5 took 35 s to build)"),
+    "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
+}
+LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
+DEPTH_CEILING = 200  # nesting the parsers can follow (Python's recursion limit is 1000)
+
+
+def limit(name: str) -> float:
+    """The current value of limit ``name`` (environment ``HAZARD_MAX_<NAME>`` or the default)."""
+    default = LIMITS[name][0]
+    text = os.environ.get(f"HAZARD_MAX_{name}")
+    if not text:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a number") from None
+    ceiling = DEPTH_CEILING if name == "DEPTH" else LIMIT_CEILING
+    if not 0 < value <= ceiling:
+        raise ValueError(f"HAZARD_MAX_{name}={text!r}: expected a positive number up to {ceiling:g}")
+    return value
+
+
+def check_limit(name: str, value, what: str) -> None:
+    """ValueError naming ``what``, the limit and how to raise it when ``value`` exceeds it."""
+    lim = limit(name)
+    if not value <= lim:  # also catches nan
+        shown = f"{value:.4g}" if isinstance(value, float) else f"{value}"
+        raise ValueError(f"{what} = {shown} exceeds the limit {lim:g} ({LIMITS[name][1]}); "
+                         f"if intended, raise it with the environment variable HAZARD_MAX_{name}")
+
+
+def check_input_file(path, what: str | None = None) -> Path:
+    """``path`` if it is a regular file within the size limit; ValueError otherwise
+    (missing files, folders, devices such as /dev/zero, FIFOs, oversized files)."""
+    import stat
+
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read{' the ' + what if what else ''} ({exc.strerror})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise ValueError(f"{path}: {kind}; expected a regular file{' (' + what + ')' if what else ''}")
+    mb = st.st_size / 1e6
+    if mb > limit("FILE_MB"):
+        check_limit("FILE_MB", mb, f"{path}: size [MB]")
+    return path
+
+
+def read_input_text(path, what: str | None = None) -> str:
+    """UTF-8 text of a bounded regular file; ValueError with one line otherwise."""
+    path = check_input_file(path, what)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(int(limit("FILE_MB") * 1e6) + 1)
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read{' the ' + what if what else ''} ({exc.strerror})") from None
+    if len(data) > limit("FILE_MB") * 1e6:
+        check_limit("FILE_MB", len(data) / 1e6, f"{path}: size [MB]")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def toml_depth(text: str) -> int:
+    """Deepest nesting of ``[`` / ``{`` in TOML values (strings and comments skipped;
+    table headers do not count). Linear time, no recursion."""
+    return toml_depth_at(text)[0]
+
+
+def toml_depth_at(text: str) -> tuple[int, int]:
+    """(deepest nesting of ``[`` / ``{`` in TOML values, the 1-based line where it is
+    first reached; 0 without any): :func:`toml_depth` with the place, for the error."""
+    depth = best = 0
+    at = 0
+    i, n = 0, len(text)
+    line_start = True
+    while i < n:
+        c = text[i]
+        if c == "#":
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        if c in "\"'":
+            triple = text.startswith(c * 3, i)
+            if triple:
+                j = text.find(c * 3, i + 3)
+                i = n if j < 0 else j + 3
+                while i < n and text[i] == c:  # up to two quotes may close the string
+                    i += 1
+            else:
+                j = i + 1
+                while j < n and text[j] != c and text[j] != "\n":
+                    j += 2 if (c == '"' and text[j] == "\\") else 1
+                i = j + 1
+            line_start = False
+            continue
+        if c == "\n":
+            line_start = depth == 0
+        elif c in " \t\r":
+            pass
+        elif c == "[" and line_start and depth == 0:
+            # a table header [a] / [[a]]: skip to the end of the line
+            j = text.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        elif c in "[{":
+            depth += 1
+            if depth > best:
+                best, at = depth, i
+            line_start = False
+        elif c in "]}":
+            depth = max(depth - 1, 0)
+            line_start = False
+        else:
+            line_start = False
+        i += 1
+    return best, (text.count("\n", 0, at) + 1 if best else 0)
+
+
+def data_depth(data) -> int:
+    """Deepest nesting of dicts and lists in parsed data (iterative)."""
+    best = 0
+    stack = [(data, 0)]
+    while stack:
+        node, d = stack.pop()
+        if isinstance(node, dict):
+            node = list(node.values())
+        elif not isinstance(node, list):
+            continue
+        best = max(best, d + 1)
+        stack.extend((v, d + 1) for v in node)
+    return best
+
+
+def parse_toml(text: str, source: str) -> dict:
+    """Parse TOML text with bounded nesting; ValueError with one line naming ``source``."""
+    depth, line = toml_depth_at(text)
+    if depth > limit("DEPTH"):  # the line and its key, not its contents
+        key = re.match(r"[ \t]*([A-Za-z0-9_.-]{1,64})[ \t]*=", text.split("\n", line)[line - 1][:300])  # a bare key only
+        check_limit("DEPTH", depth, f"{source}: line {line}{f' (key {key[1]})' if key else ''}: nesting depth")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{source}: not valid TOML: {' '.join(str(exc).split())}") from None
+    except RecursionError:
+        raise ValueError(f"{source}: nesting too deep for the parser (at most {DEPTH_CEILING} levels)") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise ValueError(f"{source}: not valid TOML: {' '.join(str(exc).split()[:12])} (a number with too many digits?)") from None
+    depth = data_depth(data)
+    if depth > limit("DEPTH") + 1:  # tables add one level to the arrays counted above
+        check_limit("DEPTH", depth, f"{source}: nesting depth")
+    return data
+
+
+def current_umask() -> int:
+    """The process's file-mode creation mask, read without changing it where the system
+    says it (Linux >= 4.7: ``/proc/self/status``); elsewhere set and put back at once
+    (``os.umask`` has no read-only form), a moment in which another thread's new file
+    would get the mask 0."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def fsync_dir(path) -> None:
+    """Flush folder ``path``'s entries (a rename in it) to disk; a no-op where folders
+    cannot be opened or synced (Windows, some network file systems)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def fsync_file(path) -> None:
+    """Flush file ``path``'s data to disk (whatever wrote it: numpy, matplotlib, rasterio)."""
+    with open(path, "rb") as fh:
+        os.fsync(fh.fileno())
+
+
+def atomic_write(path, write, *, keep_suffix: bool = False) -> Path:
+    """Call ``write(tmp_path)`` on a temporary file beside ``path``, fsync it, then
+    ``os.replace`` it into place (and fsync the folder): readers see the old file or the
+    whole new one, never a part, also after a power cut. The file gets the usual
+    permissions (0666 minus the umask). ``keep_suffix``: the temporary ends with ``.tmp``
+    plus ``path``'s suffix (for writers that choose the format by it, matplotlib).
+    The one write-then-rename of a file; a set of files or a folder of outputs:
+    :mod:`brdfmodels.output_sets`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The final file.
+    write : callable
+        ``write(tmp_path)`` writes the whole new content to ``tmp_path`` (a str).
+    keep_suffix : bool
+        End the temporary's name with ``path``'s suffix.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = Path(path)
+    suffix = ".tmp" + (path.suffix if keep_suffix else "")
+    folder = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=folder)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.chmod(tmp, 0o666 & ~current_umask())
+        fsync_file(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    fsync_dir(folder)
+    return path
+
+
+def atomic_write_text(path, text: str) -> Path:
+    """:func:`atomic_write` of a UTF-8 text."""
+
+    def write(tmp):
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+
+    return atomic_write(path, write)
+
+
+def read_toml(path) -> dict:
+    """Parse a TOML file; ValueError naming the file on a read or syntax error."""
+    path = Path(path)
+    return parse_toml(read_input_text(path), str(path))
+
+
+def read_csv_columns(path, columns, what: str = "CSV file") -> dict:
+    """Named numeric columns of a CSV file whose first line names them: ``{name: (N,) array}``
+    for each of ``columns`` (others ignored). Every error is one line naming the file, the
+    line and the column and what was expected; nothing of the file is quoted (an empty
+    file, a missing column, a short row, a cell that is not a finite number, no rows)."""
+    path = Path(path)
+    lines = read_input_text(path, what).splitlines()
+    start = next((k for k, ln in enumerate(lines) if ln.strip()), None)
+    if start is None:
+        raise ValueError(f"{path}: empty file; expected a header line naming the columns {', '.join(columns)}")
+    names = [c.strip() for c in next(csv.reader([lines[start]]))]
+    missing = [c for c in columns if c not in names]
+    if missing:
+        raise ValueError(f"{path}: line {start + 1}: expected CSV columns {', '.join(columns)}; missing {', '.join(missing)} "
+                         f"(the header has {len(names)} column(s))")
+    twice = [c for c in columns if names.count(c) > 1]
+    if twice:
+        raise ValueError(f"{path}: line {start + 1}: column {twice[0]} appears {names.count(twice[0])} times; expected once")
+    rows = [(k + 1, r) for k, r in enumerate(csv.reader(lines[start + 1:]), start=start + 1) if any(x.strip() for x in r)]
+    if not rows:
+        raise ValueError(f"{path}: no data rows after the header (line {start + 1})")
+    short = next(((no, r) for no, r in rows if len(r) != len(names)), None)
+    if short is not None:
+        raise ValueError(f"{path}: line {short[0]}: {len(short[1])} cells, expected {len(names)} (one per header column)")
+    out = {}
+    for c in columns:
+        j = names.index(c)
+        try:
+            v = np.array([r[j] for _, r in rows], dtype=float)
+        except ValueError:
+            v = None
+        if v is None or not np.all(np.isfinite(v)):
+            bad = next(no for no, r in rows if not _finite_text(r[j]))
+            raise ValueError(f"{path}: line {bad}, column {j + 1} ({c}): expected a finite number")
+        out[c] = v
+    return out
+
+
+def _finite_text(text) -> bool:
+    try:
+        return math.isfinite(float(text))
+    except ValueError:
+        return False
