@@ -7,10 +7,10 @@ import math
 import pytest
 
 import hazard
+import scenes
 from hazard import convergence as conv
 from hazard import near_field_lobe
 from hazard.cli import main
-from tests._bundled import bundled
 
 
 @pytest.fixture
@@ -24,7 +24,7 @@ def point_form_lobes(monkeypatch):
 
 def test_lambertian_keepout_volume_is_analytic(point_form_lobes):
     # R(theta) = R0 sqrt(cos theta)  =>  V = int R^3 / 3 d omega = (4 pi / 15) R0^3
-    res = bundled("plate")
+    res = hazard.analyze(scenes.load(scenes.example_path("plate")))  # not the shared bundled() result: the lobes are patched
     lobe = res.targets[0].static_lobe
     r0 = hazard.nohd_diffuse(100.0, 50.0, 0.5).nohd_m
     exact = 4 * math.pi / 15 * r0**3
