@@ -293,38 +293,102 @@ def observer_geodetic(result, pos) -> np.ndarray:
     return np.column_stack([lat, lon, frame.datum_height_m(lat, lon, h)])
 
 
-CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects)
+CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects; ~4 MB of bytes with pyarrow)
 
 
 def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
-    """observers.csv as text pieces: the header, then ``block_rows`` observers at a time
-    (every observer, one row each, each column formatted from its array); with a [site],
-    each position also as latitude, longitude and height. The bytes of the whole table at
-    once; the memory of one block."""
+    """observers.csv as bytes: the header, then ``block_rows`` observers at a time (every
+    observer, one row each, each column formatted from its array); with a [site], each
+    position also as latitude, longitude and height. The bytes of the whole table at once;
+    the memory of one block. Each block by pyarrow's CSV writer when it is installed
+    (:func:`_arrow_block`), else by Python's reprs (:func:`_repr_block`): the same numbers."""
     pos = cols["position_m"]
     site = getattr(result.scene, "site", None) is not None and len(pos)
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
-    yield ",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n"
+    yield (",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n").encode()
+    arrow = _arrow()
     for a0 in range(0, len(pos), block_rows):
         a1 = min(a0 + block_rows, len(pos))
         p = pos[a0:a1]
-        text = [_csv_names(cols["labels"][a0:a1])] + [_csv_cell(p[:, k], "x") for k in range(3)]
+        values = [p[:, 0], p[:, 1], p[:, 2]]
         if site:
             geo = observer_geodetic(result, p)
-            text += [_csv_cell(geo[:, k], "x") for k in range(3)]
-        text += [_csv_cell(np.asarray(cols[k])[a0:a1], k) for k in rest]
-        yield "\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n"
+            values += [geo[:, 0], geo[:, 1], geo[:, 2]]
+        keys = ["x"] * len(values) + rest
+        values += [np.asarray(cols[k])[a0:a1] for k in rest]
+        names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
+        if names is None:
+            yield _repr_block(cols["labels"][a0:a1], values, keys)
+        else:
+            yield _arrow_block(arrow, names, values, keys)
+
+
+def _repr_block(labels, values, keys) -> bytes:
+    """Rows of observers.csv by Python's float reprs (:func:`_csv_cell`)."""
+    text = [_csv_names(labels)] + [_csv_cell(v, k) for v, k in zip(values, keys)]
+    return ("\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n").encode()
+
+
+def _arrow():
+    """(pyarrow, pyarrow.compute, pyarrow.csv), or None when pyarrow is not installed."""
+    try:
+        import pyarrow
+        import pyarrow.compute
+        import pyarrow.csv
+    except ImportError:
+        return None
+    return pyarrow, pyarrow.compute, pyarrow.csv
+
+
+def _arrow_names(arrow, labels, a0, a1):
+    """The names of rows ``a0:a1`` as a pyarrow string array, or None where one needs
+    quotes (a comma, quote or line break in a group's name: the repr writer quotes it).
+    Names of a grid group made as ``group[i]`` from the row's group and index."""
+    pa, pc, _ = arrow
+    obs = getattr(labels, "observers", None)
+    if obs is None:  # a list (the moving observers' rows appended)
+        names = list(labels[a0:a1])
+        return None if any(c in "\0".join(names) for c in ',"\r\n') else pa.array(names, pa.string())
+    if any(c in n for n in obs.group_names for c in ',"\r\n'):
+        return None
+    g = obs.group[a0:a1]
+    base = pa.array(list(obs.group_names), pa.string()).take(pa.array(g))
+    indexed = pc.binary_join_element_wise(base, "[", pc.cast(pa.array(obs.index_in_group[a0:a1]), pa.string()), "]", "")
+    return pc.if_else(pa.array(obs.group_sizes[g] == 1), base, indexed)
+
+
+_ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}
+
+
+def _arrow_block(arrow, names, values, keys) -> bytes:
+    """Rows of observers.csv by pyarrow's CSV writer: floats in their shortest text that
+    reads back as the same double (``1``, ``-0``, ``0.00001``, ``1e+15``; Python's repr
+    writes ``1.0``, ``-0.0``, ``1e-05``, ``1000000000000000.0``), nan and inf as repr does,
+    an empty cell where NaN means "not applicable", True/False."""
+    pa, pc, csv = arrow
+    arrays = [names]
+    for v, k in zip(values, keys):
+        v = np.asarray(v)
+        if v.dtype == bool:
+            arrays.append(pc.if_else(pa.array(v), "True", "False"))
+            continue
+        v = np.ascontiguousarray(v, float)
+        arrays.append(pa.array(v, mask=np.isnan(v) if k in _CSV_BLANK_NAN else None))
+    table = pa.Table.from_arrays(arrays, names=[str(i) for i in range(len(arrays))])
+    sink = pa.BufferOutputStream()
+    csv.write_csv(table, sink, csv.WriteOptions(**_ARROW_OPTIONS))
+    return sink.getvalue().to_pybytes()
 
 
 def _csv_text(result, cols) -> str:
     """observers.csv as one text (:func:`_csv_chunks` joined)."""
-    return "".join(_csv_chunks(result, cols))
+    return b"".join(_csv_chunks(result, cols)).decode()
 
 
 def _write_csv_synced(path: Path, result, cols) -> None:
     with open(path, "wb") as fh:
         for piece in _csv_chunks(result, cols):
-            fh.write(piece.encode())
+            fh.write(piece)
         fh.flush()
         os.fsync(fh.fileno())
 

@@ -148,6 +148,11 @@ class ObserverLabels(Sequence):
     def __len__(self):
         return len(self._obs)
 
+    @property
+    def observers(self):
+        """The observer table the names are made from (its groups and indices)."""
+        return self._obs
+
     def __getitem__(self, k):
         if isinstance(k, slice):
             return self._obs.labels_at(np.arange(len(self))[k])

@@ -4,10 +4,13 @@ hazard-ratio array), and report.json listing at most ``JSON_OBSERVERS_MAX`` obse
 the highest hazard ratios first, with a statement of which are listed."""
 
 import csv
+import io
 import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import hazard
 import scenes
@@ -126,15 +129,95 @@ def _csv_module_text(result) -> bytes:
     return buf.getvalue().encode()
 
 
-def test_streamed_csv_is_the_csv_module_table_byte_for_byte(tmp_path, result):
-    """observers.csv is written in blocks of rows (issue 37 item 3): the file equals the
-    table the csv module writes from the arrays, whatever the block size (2 rows here)."""
+def test_streamed_csv_is_the_csv_module_table_byte_for_byte(monkeypatch, tmp_path, result):
+    """observers.csv is written in blocks of rows (issue 37 item 3). Without pyarrow (or
+    where a name needs quotes, as "field, west" does here) the file equals the table the
+    csv module writes from the arrays, whatever the block size."""
     expected = _csv_module_text(result)
     report.write_outputs(result, tmp_path / "o")
-    assert (tmp_path / "o" / "observers.csv").read_bytes() == expected
+    assert (tmp_path / "o" / "observers.csv").read_bytes() == expected  # the comma in the name: Python's writer
+    monkeypatch.setattr(report, "_arrow", lambda: None)  # as without pyarrow
     cols = report.observer_columns(result)
     for rows in (1, 2, 7, 10_000):
-        assert "".join(report._csv_chunks(result, cols, rows)).encode() == expected
+        assert b"".join(report._csv_chunks(result, cols, rows)) == expected
+
+
+def _read_back_exact(data: bytes, result):
+    """Check observers.csv's ``data`` against ``result``'s arrays: the header as the csv
+    module writes the column names, every float cell the same double (bits: -0.0 is not
+    0.0), an empty cell only where NaN means "not applicable", True/False, the names."""
+    rows = list(csv.reader(io.StringIO(data.decode(), newline="")))
+    cols = report.observer_columns(result)
+    assert rows[0] == report.CSV_COLUMNS and len(rows) == len(result.observers) + 1
+    assert [r[0] for r in rows[1:]] == list(cols["labels"])
+    blank = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"}
+    pos = np.asarray(cols["position_m"])
+    want = {"x_m": pos[:, 0], "y_m": pos[:, 1], "z_m": pos[:, 2], **{k: np.asarray(cols[k]) for k in report.CSV_COLUMNS[4:]}}
+    for j, k in enumerate(report.CSV_COLUMNS[1:], start=1):
+        cells = [r[j] for r in rows[1:]]
+        if want[k].dtype == bool:
+            assert cells == [str(x) for x in want[k].tolist()], k
+            continue
+        v = want[k].astype(float)
+        if k in blank:
+            assert [c == "" for c in cells] == np.isnan(v).tolist(), k
+            cells = ["nan" if c == "" else c for c in cells]
+        got = np.array([float(c) for c in cells])
+        np.testing.assert_array_equal(got.view(np.int64)[~np.isnan(v)], v.view(np.int64)[~np.isnan(v)], err_msg=k)
+        assert np.isnan(got).tolist() == np.isnan(v).tolist(), k
+
+
+def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path):
+    """With pyarrow, the blocks are written by its CSV writer (shortest round-trip digits):
+    the header unchanged, every number read back bit for bit, whatever the block size."""
+    pytest.importorskip("pyarrow")
+    res = hazard.analyze(scenes.loads(SCENE.replace('name = "field, west"', 'name = "field"')))
+    report.write_outputs(res, tmp_path / "o")
+    data = (tmp_path / "o" / "observers.csv").read_bytes()
+    _read_back_exact(data, res)
+    assert data != _csv_module_text(res)  # the pyarrow writer ran (its layout: 1 for 1.0)
+    cols = report.observer_columns(res)
+    for rows in (1, 2, 7, 10_000):
+        assert b"".join(report._csv_chunks(res, cols, rows)) == data
+
+
+def _bits_round_trip(bits, blank):
+    """One column of float64 values given by their bits through pyarrow's block writer:
+    each cell reads back as the same double (NaN: empty in a "not applicable" column)."""
+    arrow = report._arrow()
+    v = np.asarray(bits, np.uint64).view(np.float64)
+    names = arrow[0].array([f"o[{i}]" for i in range(len(v))])
+    key = "first_exceedance_s" if blank else "x"
+    lines = report._arrow_block(arrow, names, [v, v > 0], [key, "hazardous"]).decode().split("\r\n")
+    assert lines[-1] == "" and len(lines) == len(v) + 1
+    for line, x in zip(lines, v.tolist()):
+        name, cell, flag = line.split(",")
+        assert flag == str(x > 0)
+        if x != x:
+            assert cell == ("" if blank else "nan")
+        else:
+            assert np.float64(float(cell)).view(np.uint64) == np.float64(x).view(np.uint64), (cell, x)
+
+
+_SPECIAL = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308,
+                     1e16, 1e15, 1e-5, 1e-4, 0.1, 1.0 / 3.0, 123456789.0, 1e22, 1e21]).view(np.uint64).tolist()
+_BITS = st.lists(st.one_of(st.integers(0, 2**64 - 1), st.sampled_from(_SPECIAL)), min_size=1, max_size=200)
+
+
+@settings(derandomize=True, deadline=None, max_examples=20)
+@given(bits=_BITS, blank=st.booleans())
+def test_arrow_cells_round_trip_any_double(bits, blank):
+    """Any float64 (random bit patterns: subnormals, huge, NaN payloads, -0.0, inf)."""
+    pytest.importorskip("pyarrow")
+    _bits_round_trip(bits, blank)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=500)
+@given(bits=_BITS, blank=st.booleans())
+def test_arrow_cells_round_trip_any_double_many(bits, blank):
+    pytest.importorskip("pyarrow")
+    _bits_round_trip(bits, blank)
 
 
 def test_csv_reprs_of_repeated_and_signed_values():
