@@ -118,7 +118,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
     cols = observer_columns(result) if cols is None else cols
     labels = cols["labels"]
     rows = np.arange(len(labels)) if rows is None else rows
-    maybe = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
+    maybe = _JSON_NULL
     keys = [k for k in cols if k not in ("position_m", "labels")]
     columns = [labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]]
     for k in ["position_m"] + keys:
@@ -137,10 +137,13 @@ def observers_listed(result, cols) -> tuple[list, dict]:
     """report.json's observer rows and a statement of which are listed."""
     m = len(cols["labels"])
     rows = _listed(cols, m)
-    said = {"count": m, "listed": int(len(rows)),
-            "which": "all" if len(rows) == m else
-            f"the {len(rows)} highest hazard ratios (every hazardous observer first); all {m} are in observers.csv"}
-    return observer_rows(result, rows, cols), said
+    return observer_rows(result, rows, cols), _listed_statement(m, len(rows))
+
+
+def _listed_statement(m: int, n: int) -> dict:
+    """report.json's ``observers_listed``: ``n`` of the ``m`` observers listed."""
+    return {"count": m, "listed": int(n), "which": "all" if n == m else
+            f"the {n} highest hazard ratios (every hazardous observer first); all {m} are in observers.csv"}
 
 
 def _json_safe(obj):
@@ -177,10 +180,12 @@ def _limiting_aperture(scene) -> dict:
                           "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
 
 
-def report_dict(result, cols=None) -> dict:
+def report_dict(result, cols=None, *, row_dicts=True) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
-    (``cols``: :func:`observer_columns` of ``result`` when the caller has them)."""
+    (``cols``: :func:`observer_columns` of ``result`` when the caller has them). With
+    ``row_dicts=False`` the ``observers`` entry is the listed rows' indices into ``cols``
+    (:func:`report_json_text` writes them from the columns, no dict per row)."""
     from .analysis import versions
 
     scene = result.scene
@@ -188,7 +193,12 @@ def report_dict(result, cols=None) -> dict:
     for key, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
-    listed, which = observers_listed(result, observer_columns(result) if cols is None else cols)
+    cols = observer_columns(result) if cols is None else cols
+    if row_dicts:
+        listed, which = observers_listed(result, cols)
+    else:
+        listed = _listed(cols, len(cols["labels"]))
+        which = _listed_statement(len(cols["labels"]), len(listed))
     v = verdict(result)
     warnings = v.pop("warnings")  # report.json's top-level "warnings"
     doc = _json_safe({
@@ -372,12 +382,23 @@ def _arrow_block(arrow, names, values, keys) -> bytes:
         if v.dtype == bool:
             arrays.append(pc.if_else(pa.array(v), "True", "False"))
             continue
-        v = np.ascontiguousarray(v, float)
-        arrays.append(pa.array(v, mask=np.isnan(v) if k in _CSV_BLANK_NAN else None))
+        arrays.append(_arrow_floats(pa, np.ascontiguousarray(v, float), k in _CSV_BLANK_NAN))
     table = pa.Table.from_arrays(arrays, names=[str(i) for i in range(len(arrays))])
     sink = pa.BufferOutputStream()
     csv.write_csv(table, sink, csv.WriteOptions(**_ARROW_OPTIONS))
     return sink.getvalue().to_pybytes()
+
+
+def _arrow_floats(pa, v: np.ndarray, blank: bool):
+    """A float64 column for pyarrow's writer (NaN as null, an empty cell, where ``blank``):
+    a column whose values repeat (grid coordinates, a constant MPE) as a dictionary of its
+    distinct values (told apart by their bits), each formatted once."""
+    mask = np.isnan(v) if blank else None
+    bits = v.view(np.int64)
+    if len(np.unique(bits[:256])) * 10 > 9 * min(len(v), 256):  # mostly distinct: every value formatted
+        return pa.array(v, mask=mask)
+    distinct, inv = np.unique(bits, return_inverse=True)
+    return pa.DictionaryArray.from_arrays(pa.array(inv.ravel().astype(np.int32), mask=mask), pa.array(distinct.view(np.float64)))
 
 
 def _csv_text(result, cols) -> str:
@@ -393,17 +414,73 @@ def _write_csv_synced(path: Path, result, cols) -> None:
         os.fsync(fh.fileno())
 
 
-def report_json_text(doc: dict) -> str:
+def report_json_text(doc: dict, cols=None) -> str:
     """report.json's text: indented one space per level, each listed observer's row on one
     line by json's C encoder (the indented encoding runs the per-element Python encoder:
     most of the writing at 1e5 listed observers). The same values; only the layout of
-    the ``observers`` list differs from ``json.dumps(doc, indent=1)``."""
+    the ``observers`` list differs from ``json.dumps(doc, indent=1)``. ``doc["observers"]``
+    may be the listed rows' indices into the columns ``cols`` (:func:`report_dict` with
+    ``row_dicts=False``): the rows are then written from the columns (:func:`_rows_json`)."""
     import uuid
 
     mark = f"observers-{uuid.uuid4().hex}"
     head = json.dumps({**doc, "observers": mark}, indent=1, allow_nan=False)
-    rows = [json.dumps(r, allow_nan=False) for r in doc["observers"]]
-    return head.replace(json.dumps(mark), "[" + ",".join("\n  " + r for r in rows) + "\n ]" if rows else "[]", 1)
+    listed = doc["observers"]
+    if isinstance(listed, np.ndarray):
+        rows = _rows_json(cols, listed)
+    else:
+        rows = ",".join("\n  " + json.dumps(r, allow_nan=False) for r in listed)
+    return head.replace(json.dumps(mark), "[" + rows + "\n ]" if rows else "[]", 1)
+
+
+_JSON_NULL = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2",
+              *MOTION_COLUMNS}  # NaN (or inf) there means "not applicable": JSON null
+
+
+def _rows_json(cols, rows) -> str:
+    """The rows ``rows`` of ``cols`` as report.json lists them (``",\\n  "`` before each,
+    the text of ``json.dumps`` of :func:`observer_rows`' dicts): by pyarrow when installed
+    (each float's shortest round-trip digits, ``.0`` added where they read as an integer:
+    json.loads gives the same float), else by json's encoder row by row."""
+    arrow = _arrow()
+    keys = [k for k in cols if k not in ("position_m", "labels")]
+    kinds = [np.asarray(cols[k]).dtype.kind for k in keys]
+    if arrow is None or not len(rows) or any(c not in "fbiu" for c in kinds):
+        return ",".join("\n  " + json.dumps(r, allow_nan=False) for r in observer_rows(None, rows, cols))
+    pa, pc, _ = arrow
+    labels = cols["labels"]
+    names = labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]
+    pos = np.asarray(cols["position_m"])[rows]
+    parts = ["\n  {\"name\": ", pa.array([json.dumps(n) for n in names], pa.string()), ", \"position_m\": [",
+             _json_numbers(arrow, pos[:, 0], False), ", ", _json_numbers(arrow, pos[:, 1], False), ", ",
+             _json_numbers(arrow, pos[:, 2], False), "]"]
+    for k in keys:
+        parts += [f", {json.dumps(k)}: ", _json_numbers(arrow, np.asarray(cols[k])[rows], k in _JSON_NULL)]
+    parts.append("},")
+    text = pc.binary_join_element_wise(*parts, "")
+    off = np.frombuffer(text.buffers()[1], np.int32)[text.offset:text.offset + len(text) + 1]
+    return memoryview(text.buffers()[2])[off[0]:off[-1] - 1].tobytes().decode()  # the last row's comma off
+
+
+def _json_numbers(arrow, a: np.ndarray, null: bool):
+    """A column's values as JSON text, as :func:`observer_rows` makes them: bools
+    true/false, integers, floats exactly; a non-finite float null where ``null`` (not
+    applicable), else the string "inf", "-inf" or "nan"."""
+    pa, pc, _ = arrow
+    if a.dtype.kind == "b":
+        return pc.if_else(pa.array(a), "true", "false")
+    if a.dtype.kind in "iu":
+        return pc.cast(pa.array(a), pa.string())
+    v = np.ascontiguousarray(a, float)
+    text = pc.cast(pa.array(v), pa.string())
+    text = pc.if_else(pc.match_substring_regex(text, r"^-?[0-9]+$"), pc.binary_join_element_wise(text, ".0", ""), text)
+    finite = np.isfinite(v)
+    if finite.all():
+        return text
+    if null:
+        return pc.if_else(pa.array(finite), text, "null")
+    other = np.where(np.isnan(v), '"nan"', np.where(v > 0, '"inf"', '"-inf"'))
+    return pc.if_else(pa.array(finite), text, pa.array(other, pa.string()))
 
 
 def _write_synced(path: Path, data: bytes) -> None:
@@ -421,9 +498,9 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
     cols = observer_columns(result)  # once, for the report and the table
-    doc = report_dict(result, cols)
+    doc = report_dict(result, cols, row_dicts=False)  # the listed rows written from the columns
     doc.update(_json_safe(dict(sections or {})))
-    texts = {"report.json": report_json_text(doc).encode(), **extra}
+    texts = {"report.json": report_json_text(doc, cols).encode(), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
         if n == "observers.csv":  # written by blocks of rows from the columns

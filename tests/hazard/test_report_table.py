@@ -184,8 +184,13 @@ def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path):
 def _bits_round_trip(bits, blank):
     """One column of float64 values given by their bits through pyarrow's block writer:
     each cell reads back as the same double (NaN: empty in a "not applicable" column)."""
-    arrow = report._arrow()
     v = np.asarray(bits, np.uint64).view(np.float64)
+    _column_round_trip(v, blank)
+    _column_round_trip(np.repeat(v, 3), blank)  # repeated values: formatted once (a dictionary column)
+
+
+def _column_round_trip(v, blank):
+    arrow = report._arrow()
     names = arrow[0].array([f"o[{i}]" for i in range(len(v))])
     key = "first_exceedance_s" if blank else "x"
     lines = report._arrow_block(arrow, names, [v, v > 0], [key, "hazardous"]).decode().split("\r\n")
@@ -247,3 +252,49 @@ def test_report_rows_are_json_safe_column_by_column():
     assert json.loads(text) == doc
     assert [line.rstrip(",") for line in text.splitlines() if line.startswith("  {")] == ["  " + json.dumps(r) for r in rows]
     assert json.loads(report.report_json_text({"observers": []})) == {"observers": []}
+
+
+def _same(a, b) -> bool:
+    """``a`` and ``b`` equal with the same types throughout (a float is not an int; floats by bits)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, dict):
+        return list(a) == list(b) and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, float):
+        return np.float64(a).view(np.int64) == np.float64(b).view(np.int64)
+    return a == b
+
+
+def _rows_from_columns(cols, rows):
+    text = report._rows_json(cols, rows)
+    assert all(line.startswith("  {") for line in text.split("\n")[1:])  # one row per line
+    return json.loads("[" + text + "\n]")
+
+
+def test_report_rows_written_from_the_columns_are_the_row_dicts():
+    """report.json's listed rows written from the columns (pyarrow's float text, ".0" where
+    it reads as an integer) load as the very dicts observer_rows builds: every float the
+    same double, ints stay ints, non-finite values as strings or null, names escaped."""
+    inf, nan = float("inf"), float("nan")
+    specials = np.array([0.5, inf, nan, -0.0, 1e15, 1e16, 1e-5, 5e-324, 1.0 / 3.0, 16791.0, -inf, 1e22])
+    n = len(specials)
+    cols = {"labels": [f"o{i}" for i in range(n - 3)] + ['quote " here', "b,c", "\u00e9t\u00e9"],
+            "position_m": np.column_stack([specials[::-1], np.arange(n) * 0.1, -np.arange(n) * 1e3]),
+            "hazard_ratio": specials, "first_exceedance_s": np.roll(specials, 1), "count": np.arange(n) - 4,
+            "hazardous": np.arange(n) % 3 == 0, "motion_peak_irradiance_w_m2": np.roll(specials, 5)}
+    for rows in (np.arange(n), np.array([3, 0, 11]), np.array([7])):
+        want = report.observer_rows(None, rows, cols)
+        got = _rows_from_columns(cols, rows)
+        assert _same(got, json.loads(json.dumps(want))), (got, want)
+    pytest.importorskip("pyarrow")
+    assert report._rows_json(cols, np.arange(n)) != ",".join("\n  " + json.dumps(r) for r in report.observer_rows(None, np.arange(n), cols))
+
+
+def test_report_json_of_a_run_has_the_row_dicts(tmp_path, result):
+    """The written report.json's observers (from the columns) equal report_dict's row dicts."""
+    report.write_outputs(result, tmp_path / "o")
+    doc = json.loads((tmp_path / "o" / "report.json").read_text())
+    want = json.loads(json.dumps(report.report_dict(result)["observers"]))
+    assert len(want) == len(result.observers) and _same(doc["observers"], want)
