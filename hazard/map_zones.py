@@ -156,21 +156,21 @@ def _observers(result) -> list:
 
     obs = result.observers
     rows, _ = observers_on_map(result)
-    p = np.asarray(obs.position_m, float).reshape(-1, 3)  # world
-    ratio = np.asarray(result.hazard_ratio, float)
-    haz = np.asarray(result.hazardous, bool)
+    p = np.asarray(obs.position_at(rows), float).reshape(-1, 3)  # world, the rows shown only
+    ratio = np.asarray(result.hazard_ratio, float)[rows].tolist()
+    haz = np.asarray(result.hazardous, bool)[rows].tolist()
     groups = obs.observers
     with_aid = np.array([o is not None for o in groups.optics], bool)
-    aided = with_aid[groups.group] if len(p) and len(with_aid) else np.zeros(len(p), bool)
-    h_exp = np.asarray(obs.radiant_exposure_j_m2, float)
-    labels = dict(zip(rows.tolist(), obs.labels.take(rows)))  # the listed rows' names only
+    aided = (with_aid[groups.group[rows]] if len(p) and len(with_aid) else np.zeros(len(p), bool)).tolist()
+    h_exp = np.asarray(obs.radiant_exposure_j_m2, float)[rows].tolist()
+    labels = obs.labels.take(rows)  # the listed rows' names only
     out = []
-    for i in rows.tolist():
-        verdict = ("hazardous, aided" if aided[i] else "hazardous") if haz[i] else "below the MPE"
-        out.append(Zone("observer", Point(p[i, :2]), {
-            "name": labels[i], "verdict": verdict, "hazard_ratio": float(ratio[i]),
-            "radiant_exposure_j_m2": float(h_exp[i]), "hazard": ("aided only" if aided[i] else "naked eye") if haz[i] else "none",
-            "z_m": float(p[i, 2])}, z_m=float(p[i, 2])))
+    for j, (x, y, z) in enumerate(p.tolist()):
+        verdict = ("hazardous, aided" if aided[j] else "hazardous") if haz[j] else "below the MPE"
+        out.append(Zone("observer", Point(x, y), {
+            "name": labels[j], "verdict": verdict, "hazard_ratio": ratio[j],
+            "radiant_exposure_j_m2": h_exp[j], "hazard": ("aided only" if aided[j] else "naked eye") if haz[j] else "none",
+            "z_m": z}, z_m=z))
     return out
 
 

@@ -57,7 +57,7 @@ def observer_columns(result) -> dict:
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
     direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
     cols = {
-        "position_m": np.asarray(obs.position_m, float).reshape(m, 3),
+        "position_m": _Positions(obs) if hasattr(obs, "position_at") else np.asarray(obs.position_m, float).reshape(m, 3),
         "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
         "direct_irradiance_w_m2": direct,
         "direct_at_aim_irradiance_w_m2": obs.direct_at_aim_irradiance_w_m2 if obs.direct_at_aim_irradiance_w_m2 is not None else direct,
@@ -85,6 +85,29 @@ def observer_columns(result) -> dict:
                                 else np.full(m, np.nan)),
     }
     return _with_tracks(result, cols, m)
+
+
+class _Positions:
+    """The observers' world positions [m] by rows (:meth:`hazard.results.ObserverResult.position_at`):
+    the whole (M, 3) table is made only by ``np.asarray`` (at 1e7 observers it is 240 MB,
+    and 240 MB more for the generated points it is made from)."""
+
+    def __init__(self, obs):
+        self._obs = obs
+
+    def __len__(self):
+        return len(self._obs)
+
+    def __getitem__(self, rows):
+        return self._obs.position_at(rows)
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self._obs.position_m, dtype)
+
+
+def _at(column, rows):
+    """``column[rows]`` (an array, or :class:`_Positions` without the whole table)."""
+    return column[rows] if isinstance(column, _Positions) else np.asarray(column)[rows]
 
 
 def _with_tracks(result, cols, m) -> dict:
@@ -122,7 +145,7 @@ def observer_rows(result, rows=None, cols=None) -> list:
     keys = [k for k in cols if k not in ("position_m", "labels")]
     columns = [labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]]
     for k in ["position_m"] + keys:
-        a = np.asarray(cols[k])[rows]
+        a = _at(cols[k], rows)
         v = a.tolist()  # Python floats and bools, once
         if k in maybe:
             v = [_num(x) for x in v]
@@ -450,7 +473,7 @@ def _rows_json(cols, rows) -> str:
     pa, pc, _ = arrow
     labels = cols["labels"]
     names = labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]
-    pos = np.asarray(cols["position_m"])[rows]
+    pos = _at(cols["position_m"], rows)
     parts = ["\n  {\"name\": ", pa.array([json.dumps(n) for n in names], pa.string()), ", \"position_m\": [",
              _json_numbers(arrow, pos[:, 0], False), ", ", _json_numbers(arrow, pos[:, 1], False), ", ",
              _json_numbers(arrow, pos[:, 2], False), "]"]
@@ -552,7 +575,7 @@ def _nearest_spot(result, idx):
         names = [t.name for t in scene.targets]
     if not centres:
         return np.full(len(idx), np.nan), [""] * len(idx)
-    d = np.linalg.norm(result.observers.position_m[idx][:, None, :] - np.asarray(centres)[None], axis=2)
+    d = np.linalg.norm(result.observers.position_at(idx)[:, None, :] - np.asarray(centres)[None], axis=2)
     k = d.argmin(axis=1)
     return d[np.arange(len(idx)), k], [names[j] for j in k]
 
@@ -560,7 +583,7 @@ def _nearest_spot(result, idx):
 def _from_laser(result, idx) -> np.ndarray:
     """Distance [m] from observers ``idx`` to the laser's aperture."""
     laser = np.asarray(result.scene.to_world(result.scene.laser_position_m), float)
-    return np.linalg.norm(result.observers.position_m[idx] - laser, axis=1)
+    return np.linalg.norm(result.observers.position_at(idx) - laser, axis=1)
 
 
 CAUSE_SHARE_MIN = 0.01  # a contribution under this fraction of an observer's peak irradiance is left out of "cause"
