@@ -142,13 +142,17 @@ MAP_OBSERVERS_MAX = 20_000  # observer points on a map: every hazardous one, the
 def observers_on_map(result) -> tuple[np.ndarray, str]:
     """Which observers a map shows: all up to :data:`MAP_OBSERVERS_MAX`, else every
     hazardous one and then the highest hazard ratios; and a statement of which."""
-    ratio = np.nan_to_num(np.asarray(result.hazard_ratio, float), nan=np.inf)
+    ratio = np.nan_to_num(np.array(result.hazard_ratio, float), copy=False, nan=np.inf)  # our copy, changed in place
     m = len(ratio)
     if m <= MAP_OBSERVERS_MAX:
         return np.arange(m), "all"
+    from ._select import top_rows
+
     haz = np.asarray(result.hazardous, bool)
-    order = np.lexsort((-ratio, ~haz))[: max(MAP_OBSERVERS_MAX, int(haz.sum()))]
-    return np.sort(order), f"{len(order)} of {m}: every hazardous one, then the highest hazard ratios (all in observers.csv)"
+    n_haz = int(haz.sum())
+    ratio[haz] = -np.inf  # the others by ratio (a ratio is >= 0: no other row is -inf)
+    order = np.unique(np.concatenate([np.flatnonzero(haz), top_rows(ratio, MAP_OBSERVERS_MAX - n_haz)]))
+    return order, f"{len(order)} of {m}: every hazardous one, then the highest hazard ratios (all in observers.csv)"
 
 
 def _observers(result) -> list:

@@ -57,7 +57,7 @@ def observer_columns(result) -> dict:
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
     direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
     cols = {
-        "position_m": _Positions(obs) if hasattr(obs, "position_at") else np.asarray(obs.position_m, float).reshape(m, 3),
+        "position_m": _positions(obs) if hasattr(obs, "position_at") else np.asarray(obs.position_m, float).reshape(m, 3),
         "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
         "direct_irradiance_w_m2": direct,
         "direct_at_aim_irradiance_w_m2": obs.direct_at_aim_irradiance_w_m2 if obs.direct_at_aim_irradiance_w_m2 is not None else direct,
@@ -71,8 +71,8 @@ def observer_columns(result) -> dict:
         "c_e": obs.c_e if obs.c_e is not None else np.ones(m),
         "mpe_w_m2": obs.mpe_w_m2 if obs.mpe_w_m2 is not None else np.full(m, float(result.mpe_w_m2)),
         "mpe_radiant_exposure_j_m2": mpe_h,
-        "hazard_ratio": result.hazard_ratio,
-        "exposure_ratio": obs.radiant_exposure_j_m2 / mpe_h,
+        "hazard_ratio": _ratio(obs.peak_irradiance_w_m2, result.observer_mpe_w_m2),  # result.hazard_ratio, by rows
+        "exposure_ratio": _ratio(obs.radiant_exposure_j_m2, mpe_h),
         "hazardous": result.hazardous,
         "hazardous_static": result.hazardous_static,
         "first_exceedance_s": obs.first_exceedance_s,
@@ -87,27 +87,40 @@ def observer_columns(result) -> dict:
     return _with_tracks(result, cols, m)
 
 
-class _Positions:
-    """The observers' world positions [m] by rows (:meth:`hazard.results.ObserverResult.position_at`):
-    the whole (M, 3) table is made only by ``np.asarray`` (at 1e7 observers it is 240 MB,
-    and 240 MB more for the generated points it is made from)."""
+class _ByRows:
+    """A column made by rows, ``fn(rows)`` (int array or slice), never whole unless asked
+    (``np.asarray``: ``whole()``): at 1e7 observers each float column is 80 MB, the
+    positions 240 MB (and 240 MB more for the generated points they are made from)."""
 
-    def __init__(self, obs):
-        self._obs = obs
+    def __init__(self, fn, m: int, whole=None):
+        self._fn, self._m = fn, m
+        self._whole = whole or (lambda: fn(slice(None)))
 
     def __len__(self):
-        return len(self._obs)
+        return self._m
 
     def __getitem__(self, rows):
-        return self._obs.position_at(rows)
+        return self._fn(rows)
 
     def __array__(self, dtype=None, copy=None):
-        return np.asarray(self._obs.position_m, dtype)
+        return np.asarray(self._whole(), dtype)
+
+
+def _positions(obs):
+    """The observers' world positions [m] by rows (:meth:`hazard.results.ObserverResult.position_at`)."""
+    return _ByRows(obs.position_at, len(obs), lambda: obs.position_m)
+
+
+def _ratio(num, den):
+    """``num / den`` by rows (``den`` an array or a scalar): the values of the whole division."""
+    if np.ndim(den):
+        return _ByRows(lambda rows: num[rows] / den[rows], len(num))
+    return _ByRows(lambda rows: num[rows] / den, len(num))
 
 
 def _at(column, rows):
-    """``column[rows]`` (an array, or :class:`_Positions` without the whole table)."""
-    return column[rows] if isinstance(column, _Positions) else np.asarray(column)[rows]
+    """``column[rows]`` (an array, or a :class:`_ByRows` column without the whole of it)."""
+    return column[rows] if isinstance(column, _ByRows) else np.asarray(column)[rows]
 
 
 def _with_tracks(result, cols, m) -> dict:
@@ -130,8 +143,10 @@ def _listed(cols, m) -> np.ndarray:
     the highest hazard ratios (every hazardous one first), in the scene's order."""
     if m <= JSON_OBSERVERS_MAX:
         return np.arange(m)
-    order = np.argsort(-np.nan_to_num(cols["hazard_ratio"], nan=np.inf), kind="stable")[:JSON_OBSERVERS_MAX]
-    return np.sort(order)
+    from ._select import top_rows
+
+    ratio = np.array(cols["hazard_ratio"], float)  # made here, changed in place: the only copy
+    return top_rows(np.nan_to_num(ratio, copy=False, nan=np.inf), JSON_OBSERVERS_MAX)  # a NaN ratio (unknown) counts as the highest
 
 
 def observer_rows(result, rows=None, cols=None) -> list:
@@ -348,7 +363,7 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
             geo = observer_geodetic(result, p)
             values += [geo[:, 0], geo[:, 1], geo[:, 2]]
         keys = ["x"] * len(values) + rest
-        values += [np.asarray(cols[k])[a0:a1] for k in rest]
+        values += [_at(cols[k], slice(a0, a1)) for k in rest]
         names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
         if names is None:
             yield _repr_block(cols["labels"][a0:a1], values, keys)
@@ -444,32 +459,40 @@ def report_json_text(doc: dict, cols=None) -> str:
     the ``observers`` list differs from ``json.dumps(doc, indent=1)``. ``doc["observers"]``
     may be the listed rows' indices into the columns ``cols`` (:func:`report_dict` with
     ``row_dicts=False``): the rows are then written from the columns (:func:`_rows_json`)."""
+    return b"".join(report_json_pieces(doc, cols)).decode()
+
+
+def report_json_pieces(doc: dict, cols=None) -> list:
+    """:func:`report_json_text` as UTF-8 pieces (bytes) to write one after another: the
+    listed rows' text is not copied into one string with the rest."""
     import uuid
 
-    mark = f"observers-{uuid.uuid4().hex}"
-    head = json.dumps({**doc, "observers": mark}, indent=1, allow_nan=False)
+    mark = json.dumps(f"observers-{uuid.uuid4().hex}")
+    before, after = json.dumps({**doc, "observers": json.loads(mark)}, indent=1, allow_nan=False).split(mark, 1)
     listed = doc["observers"]
     if isinstance(listed, np.ndarray):
         rows = _rows_json(cols, listed)
     else:
-        rows = ",".join("\n  " + json.dumps(r, allow_nan=False) for r in listed)
-    return head.replace(json.dumps(mark), "[" + rows + "\n ]" if rows else "[]", 1)
+        rows = ",".join("\n  " + json.dumps(r, allow_nan=False) for r in listed).encode()
+    if not rows:
+        return [(before + "[]" + after).encode()]
+    return [(before + "[").encode(), rows, ("\n ]" + after).encode()]
 
 
 _JSON_NULL = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2",
               *MOTION_COLUMNS}  # NaN (or inf) there means "not applicable": JSON null
 
 
-def _rows_json(cols, rows) -> str:
-    """The rows ``rows`` of ``cols`` as report.json lists them (``",\\n  "`` before each,
+def _rows_json(cols, rows) -> bytes:
+    """The rows ``rows`` of ``cols`` as report.json lists them (UTF-8) (``",\\n  "`` before each,
     the text of ``json.dumps`` of :func:`observer_rows`' dicts): by pyarrow when installed
     (each float's shortest round-trip digits, ``.0`` added where they read as an integer:
     json.loads gives the same float), else by json's encoder row by row."""
     arrow = _arrow()
     keys = [k for k in cols if k not in ("position_m", "labels")]
-    kinds = [np.asarray(cols[k]).dtype.kind for k in keys]
-    if arrow is None or not len(rows) or any(c not in "fbiu" for c in kinds):
-        return ",".join("\n  " + json.dumps(r, allow_nan=False) for r in observer_rows(None, rows, cols))
+    values = {k: _at(cols[k], rows) for k in keys}
+    if arrow is None or not len(rows) or any(v.dtype.kind not in "fbiu" for v in values.values()):
+        return ",".join("\n  " + json.dumps(r, allow_nan=False) for r in observer_rows(None, rows, cols)).encode()
     pa, pc, _ = arrow
     labels = cols["labels"]
     names = labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]
@@ -478,11 +501,11 @@ def _rows_json(cols, rows) -> str:
              _json_numbers(arrow, pos[:, 0], False), ", ", _json_numbers(arrow, pos[:, 1], False), ", ",
              _json_numbers(arrow, pos[:, 2], False), "]"]
     for k in keys:
-        parts += [f", {json.dumps(k)}: ", _json_numbers(arrow, np.asarray(cols[k])[rows], k in _JSON_NULL)]
+        parts += [f", {json.dumps(k)}: ", _json_numbers(arrow, values[k], k in _JSON_NULL)]
     parts.append("},")
     text = pc.binary_join_element_wise(*parts, "")
     off = np.frombuffer(text.buffers()[1], np.int32)[text.offset:text.offset + len(text) + 1]
-    return memoryview(text.buffers()[2])[off[0]:off[-1] - 1].tobytes().decode()  # the last row's comma off
+    return memoryview(text.buffers()[2])[off[0]:off[-1] - 1].tobytes()  # the last row's comma off
 
 
 def _json_numbers(arrow, a: np.ndarray, null: bool):
@@ -506,9 +529,11 @@ def _json_numbers(arrow, a: np.ndarray, null: bool):
     return pc.if_else(pa.array(finite), text, pa.array(other, pa.string()))
 
 
-def _write_synced(path: Path, data: bytes) -> None:
+def _write_synced(path: Path, data) -> None:
+    """Write ``data`` (bytes, or a list of bytes one after another) and fsync it."""
     with open(path, "wb") as fh:
-        fh.write(data)
+        for piece in [data] if isinstance(data, (bytes, bytearray)) else data:
+            fh.write(piece)
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -523,7 +548,7 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     cols = observer_columns(result)  # once, for the report and the table
     doc = report_dict(result, cols, row_dicts=False)  # the listed rows written from the columns
     doc.update(_json_safe(dict(sections or {})))
-    texts = {"report.json": report_json_text(doc, cols).encode(), **extra}
+    texts = {"report.json": report_json_pieces(doc, cols), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
         if n == "observers.csv":  # written by blocks of rows from the columns
