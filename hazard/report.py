@@ -348,14 +348,15 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
     """observers.csv as bytes: the header, then ``block_rows`` observers at a time (every
     observer, one row each, each column formatted from its array); with a [site], each
     position also as latitude, longitude and height. The bytes of the whole table at once;
-    the memory of one block. Each block by pyarrow's CSV writer when it is installed
+    the memory of a few blocks (formatted on two threads, :func:`_in_order`). Each block by pyarrow's CSV writer when it is installed
     (:func:`_arrow_block`), else by Python's reprs (:func:`_repr_block`): the same numbers."""
     pos = cols["position_m"]
     site = getattr(result.scene, "site", None) is not None and len(pos)
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
     yield (",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n").encode()
     arrow = _arrow()
-    for a0 in range(0, len(pos), block_rows):
+
+    def block(a0):  # the block's columns, on this thread (the geodetic transform included)
         a1 = min(a0 + block_rows, len(pos))
         p = pos[a0:a1]
         values = [p[:, 0], p[:, 1], p[:, 2]]
@@ -366,9 +367,34 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
         values += [_at(cols[k], slice(a0, a1)) for k in rest]
         names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
         if names is None:
-            yield _repr_block(cols["labels"][a0:a1], values, keys)
-        else:
-            yield _arrow_block(arrow, names, values, keys)
+            return _repr_block, (cols["labels"][a0:a1], values, keys)
+        return _arrow_block, (arrow, names, values, keys)
+
+    yield from _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=2 if arrow else 1)
+
+
+def _in_order(jobs, threads: int):
+    """``fn(*args)`` of each ``(fn, args)`` of ``jobs``, in order, on up to ``threads``
+    threads (pyarrow's writer runs without the GIL) with at most ``2 threads`` results
+    waiting: the memory of a few blocks."""
+    from brdfmodels.parallel import default_threads
+
+    threads = min(threads, default_threads())
+    if threads <= 1:
+        for fn, args in jobs:
+            yield fn(*args)
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(threads) as pool:
+        ahead = deque()
+        for fn, args in jobs:
+            ahead.append(pool.submit(fn, *args))
+            if len(ahead) > 2 * threads:
+                yield ahead.popleft().result()
+        while ahead:
+            yield ahead.popleft().result()
 
 
 def _repr_block(labels, values, keys) -> bytes:
