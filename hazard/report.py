@@ -438,31 +438,39 @@ def _arrow_block(arrow, names, values, keys) -> bytes:
     """Rows of observers.csv by pyarrow's CSV writer: floats in their shortest text that
     reads back as the same double (``1``, ``-0``, ``0.00001``, ``1e+15``; Python's repr
     writes ``1.0``, ``-0.0``, ``1e-05``, ``1000000000000000.0``), nan and inf as repr does,
-    an empty cell where NaN means "not applicable", True/False."""
+    an empty cell where NaN means "not applicable", True/False. A column with the bits of
+    an earlier one (peak = static = reflected in a static scene) is formatted once."""
     pa, pc, csv = arrow
-    arrays = [names]
+    arrays, done = [names], []
     for v, k in zip(values, keys):
         v = np.asarray(v)
-        if v.dtype == bool:
-            arrays.append(pc.if_else(pa.array(v), "True", "False"))
+        v = v.view(np.int8) if v.dtype == bool else np.ascontiguousarray(v, float)
+        key = (v.dtype, k in _CSV_BLANK_NAN)
+        same = [a for (w, kw, a) in done if kw == key and np.array_equal(w[:64], v[:64]) and np.array_equal(w.view(np.int8), v.view(np.int8))]
+        if same:
+            arrays.append(same[0])
             continue
-        arrays.append(_arrow_floats(pa, np.ascontiguousarray(v, float), k in _CSV_BLANK_NAN))
+        a = pc.if_else(pa.array(v.view(bool)), "True", "False") if v.dtype == np.int8 else _arrow_floats(arrow, v, key[1])
+        done.append((v, key, a))
+        arrays.append(a)
     table = pa.Table.from_arrays(arrays, names=[str(i) for i in range(len(arrays))])
     sink = pa.BufferOutputStream()
     csv.write_csv(table, sink, csv.WriteOptions(**_ARROW_OPTIONS))
     return sink.getvalue().to_pybytes()
 
 
-def _arrow_floats(pa, v: np.ndarray, blank: bool):
+def _arrow_floats(arrow, v: np.ndarray, blank: bool):
     """A float64 column for pyarrow's writer (NaN as null, an empty cell, where ``blank``):
     a column whose values repeat (grid coordinates, a constant MPE) as a dictionary of its
-    distinct values (told apart by their bits), each formatted once."""
+    distinct values (told apart by their bits: -0.0 is not 0.0), each formatted once."""
+    pa, pc, _ = arrow
     mask = np.isnan(v) if blank else None
     bits = v.view(np.int64)
     if len(np.unique(bits[:256])) * 10 > 9 * min(len(v), 256):  # mostly distinct: every value formatted
         return pa.array(v, mask=mask)
-    distinct, inv = np.unique(bits, return_inverse=True)
-    return pa.DictionaryArray.from_arrays(pa.array(inv.ravel().astype(np.int32), mask=mask), pa.array(distinct.view(np.float64)))
+    enc = pc.dictionary_encode(pa.array(bits))  # by hashing, in one pass
+    text = pc.cast(pa.array(enc.dictionary.to_numpy().view(np.float64)), pa.string())
+    return pa.DictionaryArray.from_arrays(enc.indices.to_numpy(), text, mask=mask)
 
 
 def _csv_text(result, cols) -> str:
