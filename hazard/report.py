@@ -345,7 +345,7 @@ CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text 
 
 
 def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
-    """observers.csv as bytes: the header, then ``block_rows`` observers at a time (every
+    """observers.csv as bytes-like pieces: the header, then ``block_rows`` observers at a time (every
     observer, one row each, each column formatted from its array); with a [site], each
     position also as latitude, longitude and height. The bytes of the whole table at once;
     the memory of a few blocks (formatted on two threads, :func:`_in_order`). Each block by pyarrow's CSV writer when it is installed
@@ -434,7 +434,7 @@ def _arrow_names(arrow, labels, a0, a1):
 _ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}
 
 
-def _arrow_block(arrow, names, values, keys) -> bytes:
+def _arrow_block(arrow, names, values, keys):
     """Rows of observers.csv by pyarrow's CSV writer: floats in their shortest text that
     reads back as the same double (``1``, ``-0``, ``0.00001``, ``1e+15``; Python's repr
     writes ``1.0``, ``-0.0``, ``1e-05``, ``1000000000000000.0``), nan and inf as repr does,
@@ -456,7 +456,7 @@ def _arrow_block(arrow, names, values, keys) -> bytes:
     table = pa.Table.from_arrays(arrays, names=[str(i) for i in range(len(arrays))])
     sink = pa.BufferOutputStream()
     csv.write_csv(table, sink, csv.WriteOptions(**_ARROW_OPTIONS))
-    return sink.getvalue().to_pybytes()
+    return sink.getvalue()  # a pyarrow Buffer: bytes-like, written without a copy
 
 
 def _arrow_floats(arrow, v: np.ndarray, blank: bool):
@@ -466,7 +466,8 @@ def _arrow_floats(arrow, v: np.ndarray, blank: bool):
     pa, pc, _ = arrow
     mask = np.isnan(v) if blank else None
     bits = v.view(np.int64)
-    if len(np.unique(bits[:256])) * 10 > 9 * min(len(v), 256):  # mostly distinct: every value formatted
+    sample = bits[::max(1, len(bits) // 2048)]  # spread over the block (a grid's x repeats row by row)
+    if len(np.unique(sample)) * 10 > 9 * len(sample):  # mostly distinct: every value formatted
         return pa.array(v, mask=mask)
     enc = pc.dictionary_encode(pa.array(bits))  # by hashing, in one pass
     text = pc.cast(pa.array(enc.dictionary.to_numpy().view(np.float64)), pa.string())
@@ -553,8 +554,13 @@ def _json_numbers(arrow, a: np.ndarray, null: bool):
         return pc.cast(pa.array(a), pa.string())
     v = np.ascontiguousarray(a, float)
     text = pc.cast(pa.array(v), pa.string())
-    text = pc.if_else(pc.match_substring_regex(text, r"^-?[0-9]+$"), pc.binary_join_element_wise(text, ".0", ""), text)
     finite = np.isfinite(v)
+    whole = np.flatnonzero(finite & (v == np.trunc(v)))  # "1", "-0", "16791", or "1e+15" (a float to json already)
+    if len(whole):
+        plain = ~pc.match_substring(text.take(pa.array(whole)), "e").to_numpy(zero_copy_only=False)
+        dot = np.zeros(len(v), bool)
+        dot[whole[plain]] = True
+        text = pc.binary_join_element_wise(text, pc.if_else(pa.array(dot), ".0", ""), "")
     if finite.all():
         return text
     if null:

@@ -193,7 +193,7 @@ def _column_round_trip(v, blank):
     arrow = report._arrow()
     names = arrow[0].array([f"o[{i}]" for i in range(len(v))])
     key = "first_exceedance_s" if blank else "x"
-    lines = report._arrow_block(arrow, names, [v, v > 0], [key, "hazardous"]).decode().split("\r\n")
+    lines = bytes(report._arrow_block(arrow, names, [v, v > 0], [key, "hazardous"])).decode().split("\r\n")
     assert lines[-1] == "" and len(lines) == len(v) + 1
     for line, x in zip(lines, v.tolist()):
         name, cell, flag = line.split(",")
