@@ -156,7 +156,7 @@ def observers_on_map(result) -> tuple[np.ndarray, str]:
 
 
 def _observers(result) -> list:
-    from shapely.geometry import Point
+    import shapely
 
     obs = result.observers
     rows, _ = observers_on_map(result)
@@ -168,10 +168,11 @@ def _observers(result) -> list:
     aided = (with_aid[groups.group[rows]] if len(p) and len(with_aid) else np.zeros(len(p), bool)).tolist()
     h_exp = np.asarray(obs.radiant_exposure_j_m2, float)[rows].tolist()
     labels = obs.labels.take(rows)  # the listed rows' names only
+    points = shapely.points(p[:, :2])  # made at once
     out = []
     for j, (x, y, z) in enumerate(p.tolist()):
         verdict = ("hazardous, aided" if aided[j] else "hazardous") if haz[j] else "below the MPE"
-        out.append(Zone("observer", Point(x, y), {
+        out.append(Zone("observer", points[j], {
             "name": labels[j], "verdict": verdict, "hazard_ratio": ratio[j],
             "radiant_exposure_j_m2": h_exp[j], "hazard": ("aided only" if aided[j] else "naked eye") if haz[j] else "none",
             "z_m": z}, z_m=z))
