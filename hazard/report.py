@@ -518,8 +518,8 @@ _JSON_NULL = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m
               *MOTION_COLUMNS}  # NaN (or inf) there means "not applicable": JSON null
 
 
-def _rows_json(cols, rows) -> bytes:
-    """The rows ``rows`` of ``cols`` as report.json lists them (UTF-8) (``",\\n  "`` before each,
+def _rows_json(cols, rows):
+    """The rows ``rows`` of ``cols`` as report.json lists them (UTF-8 bytes-like) (``",\\n  "`` before each,
     the text of ``json.dumps`` of :func:`observer_rows`' dicts): by pyarrow when installed
     (each float's shortest round-trip digits, ``.0`` added where they read as an integer:
     json.loads gives the same float), else by json's encoder row by row."""
@@ -540,7 +540,7 @@ def _rows_json(cols, rows) -> bytes:
     parts.append("},")
     text = pc.binary_join_element_wise(*parts, "")
     off = np.frombuffer(text.buffers()[1], np.int32)[text.offset:text.offset + len(text) + 1]
-    return memoryview(text.buffers()[2])[off[0]:off[-1] - 1].tobytes()  # the last row's comma off
+    return text.buffers()[2].slice(int(off[0]), int(off[-1] - 1 - off[0]))  # bytes-like, no copy; the last row's comma off
 
 
 def _json_numbers(arrow, a: np.ndarray, null: bool):
@@ -596,6 +596,8 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
         else:
             _write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)
+    if (arrow := _arrow()) is not None:
+        arrow[0].default_memory_pool().release_unused()  # the writers' text buffers back to the system
     return list(names)
 
 

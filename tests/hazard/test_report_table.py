@@ -268,7 +268,7 @@ def _same(a, b) -> bool:
 
 
 def _rows_from_columns(cols, rows):
-    text = report._rows_json(cols, rows).decode()
+    text = bytes(report._rows_json(cols, rows)).decode()
     assert all(line.startswith("  {") for line in text.split("\n")[1:])  # one row per line
     return json.loads("[" + text + "\n]")
 
@@ -289,7 +289,7 @@ def test_report_rows_written_from_the_columns_are_the_row_dicts():
         got = _rows_from_columns(cols, rows)
         assert _same(got, json.loads(json.dumps(want))), (got, want)
     pytest.importorskip("pyarrow")
-    assert report._rows_json(cols, np.arange(n)).decode() != ",".join("\n  " + json.dumps(r) for r in report.observer_rows(None, np.arange(n), cols))
+    assert bytes(report._rows_json(cols, np.arange(n))).decode() != ",".join("\n  " + json.dumps(r) for r in report.observer_rows(None, np.arange(n), cols))
 
 
 def test_report_json_of_a_run_has_the_row_dicts(tmp_path, result):
