@@ -125,7 +125,7 @@ def geojson_document(result, zs, absent, frame_info) -> dict:
         feats.append({"type": "Feature", "geometry": g,
                       "properties": {k: _jsonable(v) for k, v in z.properties.items()}})
     _, which = observers_on_map(result)
-    doc = {"type": "FeatureCollection", "features": feats}
+    doc: dict = {"type": "FeatureCollection", "features": feats}
     doc["laser_hazard"] = {"frame": frame_info, "kinds": list(ZONE_KINDS), "absent": absent, "observers": which,
                            "scene": result.scene.name, "scene_sha256": result.scene.text_sha256}
     return doc

@@ -170,7 +170,7 @@ def _observers(result) -> list:
     labels = obs.labels.take(rows)  # the listed rows' names only
     points = shapely.points(p[:, :2])  # made at once
     out = []
-    for j, (x, y, z) in enumerate(p.tolist()):
+    for j, z in enumerate(p[:, 2].tolist()):
         verdict = ("hazardous, aided" if aided[j] else "hazardous") if haz[j] else "below the MPE"
         out.append(Zone("observer", points[j], {
             "name": labels[j], "verdict": verdict, "hazard_ratio": ratio[j],

@@ -232,6 +232,7 @@ def report_dict(result, cols=None, *, row_dicts=True) -> dict:
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
     cols = observer_columns(result) if cols is None else cols
+    listed: list | np.ndarray
     if row_dicts:
         listed, which = observers_listed(result, cols)
     else:
@@ -388,7 +389,7 @@ def _in_order(jobs, threads: int):
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(threads) as pool:
-        ahead = deque()
+        ahead: deque = deque()
         for fn, args in jobs:
             ahead.append(pool.submit(fn, *args))
             if len(ahead) > 2 * threads:

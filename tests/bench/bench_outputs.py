@@ -43,9 +43,10 @@ def scene_text(rows: int) -> str:
     return text.split("[[observers]]")[0] + GRID.format(rows=rows)
 
 
-def _timed(fn):
+def _timed(fn, *args):
+    """Wall and CPU time [s] of ``fn(*args)``, and its result."""
     w, c = time.perf_counter(), time.process_time()
-    out = fn()
+    out = fn(*args)
     return time.perf_counter() - w, time.process_time() - c, out
 
 
@@ -60,13 +61,13 @@ def run(rows: int = 1000, repeat: int = REPEAT) -> dict:
     ana, out = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(repeat):
-            w, c, res = _timed(lambda: hazard.analyze(scene))
+            w, c, result = _timed(hazard.analyze, scene)
             ana.append((w, c))
             folder = Path(tmp) / f"o{i}"
             folder.mkdir()
-            w, c, _ = _timed(lambda: _outputs(res, folder))
+            w, c, _ = _timed(_outputs, result, folder)
             out.append((w, c))
-            del res
+            del result
             shutil.rmtree(folder)
     a_w, a_c = (statistics.median(x) for x in zip(*ana))
     o_w, o_c = (statistics.median(x) for x in zip(*out))
