@@ -62,8 +62,8 @@ def test_bench_whole_run():
 def test_bench_outputs():
     from .bench_outputs import run
 
-    res = run(rows=200 if QUICK else 1000, repeat=3)
-    check_goal("outputs / analysis", res["ratio"], goal(1.0, 6.0))
+    res = run(rows=100 if QUICK else 1000, repeat=3)
+    check_goal("outputs / analysis", res["ratio"], goal(1.0, 3.0))  # quick: 1.06 measured at load 6
 
 
 @not_met("motion stage: ratio 104 at load 12 (73 ms vs 0.7 ms); met (XPASS) on 2026-11-26 at load ~2")
