@@ -25,6 +25,7 @@ its frame; every kind of zone the run lacks is listed with the reason (``absent`
 from __future__ import annotations
 
 import json
+import math
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -79,11 +80,36 @@ def _local(geom):
 
 
 def _jsonable(v):
+    if type(v) is float:  # the common cases first (20 000 observer features)
+        return v if math.isfinite(v) else ("inf" if v > 0 else ("-inf" if v < 0 else "nan"))
+    if type(v) in (str, bool, int) or v is None:
+        return v
     if isinstance(v, float) and not np.isfinite(v):
         return "inf" if v > 0 else ("-inf" if v < 0 else "nan")
     if isinstance(v, (np.floating, np.integer)):
         return _jsonable(v.item())
     return v
+
+
+def _points(zs, frame, height) -> dict:
+    """GeoJSON geometry of each point zone (index -> mapping), all converted at once: the
+    values :func:`to_lonlat` (``frame``) or :func:`_local` give one by one."""
+    import shapely
+
+    at = [i for i, z in enumerate(zs) if z.geometry.geom_type == "Point" and not z.geometry.is_empty and not np.ndim(z.z_m)]
+    if not at:
+        return {}
+    xy = shapely.get_coordinates(np.array([zs[i].geometry for i in at], dtype=object))
+    if frame is None:
+        out = np.round(xy, 4)
+    else:
+        known = np.array([zs[i].z_m is not None for i in at])
+        z = np.where(known, np.array([zs[i].z_m if zs[i].z_m is not None else np.nan for i in at], float), 0.0)
+        if not known.all():
+            z[~known] = height(xy[~known])
+        lat, lon, _ = frame.geodetic(np.column_stack([xy, z]))
+        out = np.round(np.column_stack([lon, lat]), DEGREE_DECIMALS)
+    return {i: {"type": "Point", "coordinates": tuple(c)} for i, c in zip(at, out.tolist())}
 
 
 def geojson_document(result, zs, absent, frame_info) -> dict:
@@ -93,12 +119,13 @@ def geojson_document(result, zs, absent, frame_info) -> dict:
     site = result.scene.site
     height = _height_fn(result, result.scene.spec.analysis.footprint_eye_height_m)
     feats = []
-    for z in zs:
-        g = to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else _local(z.geometry)
-        feats.append({"type": "Feature", "geometry": mapping(g),
+    points = _points(zs, None if site is None else site.frame, height)
+    for i, z in enumerate(zs):
+        g = points.get(i) or mapping(to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else _local(z.geometry))
+        feats.append({"type": "Feature", "geometry": g,
                       "properties": {k: _jsonable(v) for k, v in z.properties.items()}})
     _, which = observers_on_map(result)
-    doc = {"type": "FeatureCollection", "features": feats}
+    doc: dict = {"type": "FeatureCollection", "features": feats}
     doc["laser_hazard"] = {"frame": frame_info, "kinds": list(ZONE_KINDS), "absent": absent, "observers": which,
                            "scene": result.scene.name, "scene_sha256": result.scene.text_sha256}
     return doc

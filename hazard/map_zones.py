@@ -142,35 +142,40 @@ MAP_OBSERVERS_MAX = 20_000  # observer points on a map: every hazardous one, the
 def observers_on_map(result) -> tuple[np.ndarray, str]:
     """Which observers a map shows: all up to :data:`MAP_OBSERVERS_MAX`, else every
     hazardous one and then the highest hazard ratios; and a statement of which."""
-    ratio = np.nan_to_num(np.asarray(result.hazard_ratio, float), nan=np.inf)
+    ratio = np.nan_to_num(np.array(result.hazard_ratio, float), copy=False, nan=np.inf)  # our copy, changed in place
     m = len(ratio)
     if m <= MAP_OBSERVERS_MAX:
         return np.arange(m), "all"
+    from ._select import top_rows
+
     haz = np.asarray(result.hazardous, bool)
-    order = np.lexsort((-ratio, ~haz))[: max(MAP_OBSERVERS_MAX, int(haz.sum()))]
-    return np.sort(order), f"{len(order)} of {m}: every hazardous one, then the highest hazard ratios (all in observers.csv)"
+    n_haz = int(haz.sum())
+    ratio[haz] = -np.inf  # the others by ratio (a ratio is >= 0: no other row is -inf)
+    order = np.unique(np.concatenate([np.flatnonzero(haz), top_rows(ratio, MAP_OBSERVERS_MAX - n_haz)]))
+    return order, f"{len(order)} of {m}: every hazardous one, then the highest hazard ratios (all in observers.csv)"
 
 
 def _observers(result) -> list:
-    from shapely.geometry import Point
+    import shapely
 
     obs = result.observers
     rows, _ = observers_on_map(result)
-    p = np.asarray(obs.position_m, float).reshape(-1, 3)  # world
-    ratio = np.asarray(result.hazard_ratio, float)
-    haz = np.asarray(result.hazardous, bool)
+    p = np.asarray(obs.position_at(rows), float).reshape(-1, 3)  # world, the rows shown only
+    ratio = np.asarray(result.hazard_ratio, float)[rows].tolist()
+    haz = np.asarray(result.hazardous, bool)[rows].tolist()
     groups = obs.observers
     with_aid = np.array([o is not None for o in groups.optics], bool)
-    aided = with_aid[groups.group] if len(p) and len(with_aid) else np.zeros(len(p), bool)
-    h_exp = np.asarray(obs.radiant_exposure_j_m2, float)
-    labels = dict(zip(rows.tolist(), obs.labels.take(rows)))  # the listed rows' names only
+    aided = (with_aid[groups.group[rows]] if len(p) and len(with_aid) else np.zeros(len(p), bool)).tolist()
+    h_exp = np.asarray(obs.radiant_exposure_j_m2, float)[rows].tolist()
+    labels = obs.labels.take(rows)  # the listed rows' names only
+    points = shapely.points(p[:, :2])  # made at once
     out = []
-    for i in rows.tolist():
-        verdict = ("hazardous, aided" if aided[i] else "hazardous") if haz[i] else "below the MPE"
-        out.append(Zone("observer", Point(p[i, :2]), {
-            "name": labels[i], "verdict": verdict, "hazard_ratio": float(ratio[i]),
-            "radiant_exposure_j_m2": float(h_exp[i]), "hazard": ("aided only" if aided[i] else "naked eye") if haz[i] else "none",
-            "z_m": float(p[i, 2])}, z_m=float(p[i, 2])))
+    for j, z in enumerate(p[:, 2].tolist()):
+        verdict = ("hazardous, aided" if aided[j] else "hazardous") if haz[j] else "below the MPE"
+        out.append(Zone("observer", points[j], {
+            "name": labels[j], "verdict": verdict, "hazard_ratio": ratio[j],
+            "radiant_exposure_j_m2": h_exp[j], "hazard": ("aided only" if aided[j] else "naked eye") if haz[j] else "none",
+            "z_m": z}, z_m=z))
     return out
 
 

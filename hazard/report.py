@@ -17,6 +17,7 @@ import numpy as np
 
 from brdfmodels.fileio import atomic_write_text, current_umask
 
+from ._select import top_rows
 from .csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from .motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
 from .verdict import escape_way, verdict
@@ -58,7 +59,7 @@ def observer_columns(result) -> dict:
              else np.full(m, float(result.mpe_radiant_exposure_j_m2)))
     direct = obs.direct_irradiance_w_m2 if obs.direct_irradiance_w_m2 is not None else np.zeros(m)
     cols = {
-        "position_m": np.asarray(obs.position_m, float).reshape(m, 3),
+        "position_m": _positions(obs) if hasattr(obs, "position_at") else np.asarray(obs.position_m, float).reshape(m, 3),
         "peak_irradiance_w_m2": obs.peak_irradiance_w_m2,
         "direct_irradiance_w_m2": direct,
         "direct_at_aim_irradiance_w_m2": obs.direct_at_aim_irradiance_w_m2 if obs.direct_at_aim_irradiance_w_m2 is not None else direct,
@@ -72,8 +73,8 @@ def observer_columns(result) -> dict:
         "c_e": obs.c_e if obs.c_e is not None else np.ones(m),
         "mpe_w_m2": obs.mpe_w_m2 if obs.mpe_w_m2 is not None else np.full(m, float(result.mpe_w_m2)),
         "mpe_radiant_exposure_j_m2": mpe_h,
-        "hazard_ratio": result.hazard_ratio,
-        "exposure_ratio": obs.radiant_exposure_j_m2 / mpe_h,
+        "hazard_ratio": _ratio(obs.peak_irradiance_w_m2, result.observer_mpe_w_m2),  # result.hazard_ratio, by rows
+        "exposure_ratio": _ratio(obs.radiant_exposure_j_m2, mpe_h),
         "hazardous": result.hazardous,
         "hazardous_static": result.hazardous_static,
         "first_exceedance_s": obs.first_exceedance_s,
@@ -86,6 +87,42 @@ def observer_columns(result) -> dict:
                                 else np.full(m, np.nan)),
     }
     return _with_tracks(result, cols, m)
+
+
+class _ByRows:
+    """A column made by rows, ``fn(rows)`` (int array or slice), never whole unless asked
+    (``np.asarray``: ``whole()``): at 1e7 observers each float column is 80 MB, the
+    positions 240 MB (and 240 MB more for the generated points they are made from)."""
+
+    def __init__(self, fn, m: int, whole=None):
+        self._fn, self._m = fn, m
+        self._whole = whole or (lambda: fn(slice(None)))
+
+    def __len__(self):
+        return self._m
+
+    def __getitem__(self, rows):
+        return self._fn(rows)
+
+    def __array__(self, dtype=None, copy=None):
+        return np.asarray(self._whole(), dtype)
+
+
+def _positions(obs):
+    """The observers' world positions [m] by rows (:meth:`hazard.results.ObserverResult.position_at`)."""
+    return _ByRows(obs.position_at, len(obs), lambda: obs.position_m)
+
+
+def _ratio(num, den):
+    """``num / den`` by rows (``den`` an array or a scalar): the values of the whole division."""
+    if np.ndim(den):
+        return _ByRows(lambda rows: num[rows] / den[rows], len(num))
+    return _ByRows(lambda rows: num[rows] / den, len(num))
+
+
+def _at(column, rows):
+    """``column[rows]`` (an array, or a :class:`_ByRows` column without the whole of it)."""
+    return column[rows] if isinstance(column, _ByRows) else np.asarray(column)[rows]
 
 
 def _with_tracks(result, cols, m) -> dict:
@@ -108,8 +145,11 @@ def listed_rows(cols, m) -> np.ndarray:
     the highest hazard ratios (every hazardous one first), in the scene's order."""
     if m <= JSON_OBSERVERS_MAX:
         return np.arange(m)
-    order = np.argsort(-np.nan_to_num(cols["hazard_ratio"], nan=np.inf), kind="stable")[:JSON_OBSERVERS_MAX]
-    return np.sort(order)
+    ratio = np.array(cols["hazard_ratio"], float)  # made here, changed in place: the only copy
+    np.nan_to_num(ratio, copy=False, nan=np.inf)  # a NaN ratio (unknown) counts as the highest
+    over_time = np.asarray(cols["hazardous"], bool)  # hazardous over time (a moving beam) with a static ratio below 1
+    ratio[over_time] = np.maximum(ratio[over_time], 1.0)  # ranks with the hazardous ones, which all come first
+    return top_rows(ratio, JSON_OBSERVERS_MAX)
 
 
 def observer_rows(result, rows=None, cols=None) -> list:
@@ -119,11 +159,11 @@ def observer_rows(result, rows=None, cols=None) -> list:
     cols = observer_columns(result) if cols is None else cols
     labels = cols["labels"]
     rows = np.arange(len(labels)) if rows is None else rows
-    maybe = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"} | set(_MOTION_BLANK)  # NaN: not applicable (JSON null)
+    maybe = _JSON_NULL
     keys = [k for k in cols if k not in ("position_m", "labels")]
     columns = [labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]]
     for k in ["position_m"] + keys:
-        a = np.asarray(cols[k])[rows]
+        a = _at(cols[k], rows)
         v = a.tolist()  # Python floats and bools, once
         if k in maybe:
             v = [_num(x) for x in v]
@@ -138,10 +178,13 @@ def observers_listed(result, cols) -> tuple[list, dict]:
     """report.json's observer rows and a statement of which are listed."""
     m = len(cols["labels"])
     rows = listed_rows(cols, m)
-    said = {"count": m, "listed": int(len(rows)),
-            "which": "all" if len(rows) == m else
-            f"the {len(rows)} highest hazard ratios (every hazardous observer first); all {m} are in observers.csv"}
-    return observer_rows(result, rows, cols), said
+    return observer_rows(result, rows, cols), _listed_statement(m, len(rows))
+
+
+def _listed_statement(m: int, n: int) -> dict:
+    """report.json's ``observers_listed``: ``n`` of the ``m`` observers listed."""
+    return {"count": m, "listed": int(n), "which": "all" if n == m else
+            f"the {n} highest hazard ratios (every hazardous observer first); all {m} are in observers.csv"}
 
 
 def json_safe(obj):
@@ -178,10 +221,12 @@ def _limiting_aperture(scene) -> dict:
                           "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
 
 
-def report_dict(result, cols=None) -> dict:
+def report_dict(result, cols=None, *, row_dicts=True) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
-    (``cols``: :func:`observer_columns` of ``result`` when the caller has them)."""
+    (``cols``: :func:`observer_columns` of ``result`` when the caller has them). With
+    ``row_dicts=False`` the ``observers`` entry is the listed rows' indices into ``cols``
+    (:func:`report_json_text` writes them from the columns, no dict per row)."""
     from .analysis import versions
 
     scene = result.scene
@@ -189,7 +234,13 @@ def report_dict(result, cols=None) -> dict:
     for key, f in (("static", result.footprint_static), ("dynamic", result.footprint_dynamic)):
         if f is not None:
             fp[key] = {"area_m2": f.area_m2, "eye_height_m": f.eye_height_m, "cells": int(f.mask.sum())}
-    listed, which = observers_listed(result, observer_columns(result) if cols is None else cols)
+    cols = observer_columns(result) if cols is None else cols
+    listed: list | np.ndarray
+    if row_dicts:
+        listed, which = observers_listed(result, cols)
+    else:
+        listed = listed_rows(cols, len(cols["labels"]))
+        which = _listed_statement(len(cols["labels"]), len(listed))
     v = verdict(result)
     warnings = v.pop("warnings")  # report.json's top-level "warnings"
     doc = json_safe({
@@ -255,58 +306,239 @@ def _csv_name(label: str) -> str:
     return label
 
 
-CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects)
+CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects; ~4 MB of bytes with pyarrow)
 
 
 def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
-    """observers.csv as text pieces: the header, then ``block_rows`` observers at a time
-    (every observer, one row each, each column formatted from its array); with a [site],
-    each position also as latitude, longitude and height. The bytes of the whole table at
-    once; the memory of one block."""
+    """observers.csv as bytes-like pieces: the header, then ``block_rows`` observers at a time (every
+    observer, one row each, each column formatted from its array); with a [site], each
+    position also as latitude, longitude and height. The bytes of the whole table at once;
+    the memory of a few blocks (formatted on two threads, :func:`_in_order`). Each block by pyarrow's CSV writer when it is installed
+    (:func:`_arrow_block`), else by Python's reprs (:func:`_repr_block`): the same numbers."""
     pos = cols["position_m"]
     site = getattr(result.scene, "site", None) is not None and len(pos)
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
-    yield ",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n"
-    for a0 in range(0, len(pos), block_rows):
+    yield (",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n").encode()
+    arrow = _arrow()
+
+    def block(a0):  # the block's columns, on this thread (the geodetic transform included)
         a1 = min(a0 + block_rows, len(pos))
         p = pos[a0:a1]
-        text = [_csv_names(cols["labels"][a0:a1])] + [csv_cell(p[:, k], "x") for k in range(3)]
+        values = [p[:, 0], p[:, 1], p[:, 2]]
         if site:
             geo = observer_geodetic(result, p)
-            text += [csv_cell(geo[:, k], "x") for k in range(3)]
-        text += [csv_cell(np.asarray(cols[k])[a0:a1], k) for k in rest]
-        yield "\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n"
+            values += [geo[:, 0], geo[:, 1], geo[:, 2]]
+        keys = ["x"] * len(values) + rest
+        values += [_at(cols[k], slice(a0, a1)) for k in rest]
+        names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
+        if names is None:
+            return _repr_block, (cols["labels"][a0:a1], values, keys)
+        return _arrow_block, (arrow, names, values, keys)
+
+    yield from _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=2 if arrow else 1)
+
+
+def _in_order(jobs, threads: int):
+    """``fn(*args)`` of each ``(fn, args)`` of ``jobs``, in order, on up to ``threads``
+    threads (pyarrow's writer runs without the GIL) with at most ``2 threads`` results
+    waiting: the memory of a few blocks."""
+    from brdfmodels.parallel import default_threads
+
+    threads = min(threads, default_threads())
+    if threads <= 1:
+        for fn, args in jobs:
+            yield fn(*args)
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(threads) as pool:
+        ahead: deque = deque()
+        for fn, args in jobs:
+            ahead.append(pool.submit(fn, *args))
+            if len(ahead) > 2 * threads:
+                yield ahead.popleft().result()
+        while ahead:
+            yield ahead.popleft().result()
+
+
+def _repr_block(labels, values, keys) -> bytes:
+    """Rows of observers.csv by Python's float reprs (:func:`csv_cell`)."""
+    text = [_csv_names(labels)] + [csv_cell(v, k) for v, k in zip(values, keys)]
+    return ("\r\n".join([",".join(r) for r in zip(*text)]) + "\r\n").encode()
+
+
+def _arrow():
+    """(pyarrow, pyarrow.compute, pyarrow.csv), or None when pyarrow is not installed."""
+    try:
+        import pyarrow
+        import pyarrow.compute
+        import pyarrow.csv
+    except ImportError:
+        return None
+    return pyarrow, pyarrow.compute, pyarrow.csv
+
+
+def _arrow_names(arrow, labels, a0, a1):
+    """The names of rows ``a0:a1`` as a pyarrow string array, or None where one needs
+    quotes (a comma, quote or line break in a group's name: the repr writer quotes it).
+    Names of a grid group made as ``group[i]`` from the row's group and index."""
+    pa, pc, _ = arrow
+    obs = getattr(labels, "observers", None)
+    if obs is None:  # a list (the moving observers' rows appended)
+        names = list(labels[a0:a1])
+        return None if any(c in "\0".join(names) for c in ',"\r\n') else pa.array(names, pa.string())
+    if any(c in n for n in obs.group_names for c in ',"\r\n'):
+        return None
+    g = obs.group[a0:a1]
+    base = pa.array(list(obs.group_names), pa.string()).take(pa.array(g))
+    indexed = pc.binary_join_element_wise(base, "[", pc.cast(pa.array(obs.index_in_group[a0:a1]), pa.string()), "]", "")
+    return pc.if_else(pa.array(obs.group_sizes[g] == 1), base, indexed)
+
+
+_ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}
+
+
+def _arrow_block(arrow, names, values, keys):
+    """Rows of observers.csv by pyarrow's CSV writer: floats in their shortest text that
+    reads back as the same double (``1``, ``-0``, ``0.00001``, ``1e+15``; Python's repr
+    writes ``1.0``, ``-0.0``, ``1e-05``, ``1000000000000000.0``), nan and inf as repr does,
+    an empty cell where NaN means "not applicable", True/False. A column with the bits of
+    an earlier one (peak = static = reflected in a static scene) is formatted once."""
+    pa, pc, csv = arrow
+    arrays, done = [names], []
+    for v, k in zip(values, keys):
+        v = np.asarray(v)
+        v = v.view(np.int8) if v.dtype == bool else np.ascontiguousarray(v, float)
+        key = (v.dtype, k in _CSV_BLANK_NAN)
+        same = [a for (w, kw, a) in done if kw == key and np.array_equal(w[:64], v[:64]) and np.array_equal(w.view(np.int8), v.view(np.int8))]
+        if same:
+            arrays.append(same[0])
+            continue
+        a = pc.if_else(pa.array(v.view(bool)), "True", "False") if v.dtype == np.int8 else _arrow_floats(arrow, v, key[1])
+        done.append((v, key, a))
+        arrays.append(a)
+    table = pa.Table.from_arrays(arrays, names=[str(i) for i in range(len(arrays))])
+    sink = pa.BufferOutputStream()
+    csv.write_csv(table, sink, csv.WriteOptions(**_ARROW_OPTIONS))
+    return sink.getvalue()  # a pyarrow Buffer: bytes-like, written without a copy
+
+
+def _arrow_floats(arrow, v: np.ndarray, blank: bool):
+    """A float64 column for pyarrow's writer (NaN as null, an empty cell, where ``blank``):
+    a column whose values repeat (grid coordinates, a constant MPE) as a dictionary of its
+    distinct values (told apart by their bits: -0.0 is not 0.0), each formatted once."""
+    pa, pc, _ = arrow
+    mask = np.isnan(v) if blank else None
+    bits = v.view(np.int64)
+    sample = bits[::max(1, len(bits) // 2048)]  # spread over the block (a grid's x repeats row by row)
+    if len(np.unique(sample)) * 10 > 9 * len(sample):  # mostly distinct: every value formatted
+        return pa.array(v, mask=mask)
+    enc = pc.dictionary_encode(pa.array(bits))  # by hashing, in one pass
+    text = pc.cast(pa.array(enc.dictionary.to_numpy().view(np.float64)), pa.string())
+    return pa.DictionaryArray.from_arrays(enc.indices.to_numpy(), text, mask=mask)
 
 
 def _csv_text(result, cols) -> str:
     """observers.csv as one text (:func:`_csv_chunks` joined)."""
-    return "".join(_csv_chunks(result, cols))
+    return b"".join(_csv_chunks(result, cols)).decode()
 
 
 def _write_csv_synced(path: Path, result, cols) -> None:
     with open(path, "wb") as fh:
         for piece in _csv_chunks(result, cols):
-            fh.write(piece.encode())
+            fh.write(piece)
         fh.flush()
         os.fsync(fh.fileno())
 
 
-def report_json_text(doc: dict) -> str:
+def report_json_text(doc: dict, cols=None) -> str:
     """report.json's text: indented one space per level, each listed observer's row on one
     line by json's C encoder (the indented encoding runs the per-element Python encoder:
     most of the writing at 1e5 listed observers). The same values; only the layout of
-    the ``observers`` list differs from ``json.dumps(doc, indent=1)``."""
+    the ``observers`` list differs from ``json.dumps(doc, indent=1)``. ``doc["observers"]``
+    may be the listed rows' indices into the columns ``cols`` (:func:`report_dict` with
+    ``row_dicts=False``): the rows are then written from the columns (:func:`_rows_json`)."""
+    return b"".join(report_json_pieces(doc, cols)).decode()
+
+
+def report_json_pieces(doc: dict, cols=None) -> list:
+    """:func:`report_json_text` as UTF-8 pieces (bytes) to write one after another: the
+    listed rows' text is not copied into one string with the rest."""
     import uuid
 
-    mark = f"observers-{uuid.uuid4().hex}"
-    head = json.dumps({**doc, "observers": mark}, indent=1, allow_nan=False)
-    rows = [json.dumps(r, allow_nan=False) for r in doc["observers"]]
-    return head.replace(json.dumps(mark), "[" + ",".join("\n  " + r for r in rows) + "\n ]" if rows else "[]", 1)
+    mark = json.dumps(f"observers-{uuid.uuid4().hex}")
+    before, after = json.dumps({**doc, "observers": json.loads(mark)}, indent=1, allow_nan=False).split(mark, 1)
+    listed = doc["observers"]
+    if isinstance(listed, np.ndarray):
+        rows = _rows_json(cols, listed)
+    else:
+        rows = ",".join("\n  " + json.dumps(r, allow_nan=False) for r in listed).encode()
+    if not rows:
+        return [(before + "[]" + after).encode()]
+    return [(before + "[").encode(), rows, ("\n ]" + after).encode()]
 
 
-def _write_synced(path: Path, data: bytes) -> None:
+_JSON_NULL = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2",
+              *MOTION_COLUMNS}  # NaN (or inf) there means "not applicable": JSON null
+
+
+def _rows_json(cols, rows):
+    """The rows ``rows`` of ``cols`` as report.json lists them (UTF-8 bytes-like) (``",\\n  "`` before each,
+    the text of ``json.dumps`` of :func:`observer_rows`' dicts): by pyarrow when installed
+    (each float's shortest round-trip digits, ``.0`` added where they read as an integer:
+    json.loads gives the same float), else by json's encoder row by row."""
+    arrow = _arrow()
+    keys = [k for k in cols if k not in ("position_m", "labels")]
+    values = {k: _at(cols[k], rows) for k in keys}
+    if arrow is None or not len(rows) or any(v.dtype.kind not in "fbiu" for v in values.values()):
+        return ",".join("\n  " + json.dumps(r, allow_nan=False) for r in observer_rows(None, rows, cols)).encode()
+    pa, pc, _ = arrow
+    labels = cols["labels"]
+    names = labels.take(rows) if hasattr(labels, "take") else [labels[i] for i in rows.tolist()]
+    pos = _at(cols["position_m"], rows)
+    parts = ["\n  {\"name\": ", pa.array([json.dumps(n) for n in names], pa.string()), ", \"position_m\": [",
+             _json_numbers(arrow, pos[:, 0], False), ", ", _json_numbers(arrow, pos[:, 1], False), ", ",
+             _json_numbers(arrow, pos[:, 2], False), "]"]
+    for k in keys:
+        parts += [f", {json.dumps(k)}: ", _json_numbers(arrow, values[k], k in _JSON_NULL)]
+    parts.append("},")
+    text = pc.binary_join_element_wise(*parts, "")
+    off = np.frombuffer(text.buffers()[1], np.int32)[text.offset:text.offset + len(text) + 1]
+    return text.buffers()[2].slice(int(off[0]), int(off[-1] - 1 - off[0]))  # bytes-like, no copy; the last row's comma off
+
+
+def _json_numbers(arrow, a: np.ndarray, null: bool):
+    """A column's values as JSON text, as :func:`observer_rows` makes them: bools
+    true/false, integers, floats exactly; a non-finite float null where ``null`` (not
+    applicable), else the string "inf", "-inf" or "nan"."""
+    pa, pc, _ = arrow
+    if a.dtype.kind == "b":
+        return pc.if_else(pa.array(a), "true", "false")
+    if a.dtype.kind in "iu":
+        return pc.cast(pa.array(a), pa.string())
+    v = np.ascontiguousarray(a, float)
+    text = pc.cast(pa.array(v), pa.string())
+    finite = np.isfinite(v)
+    whole = np.flatnonzero(finite & (v == np.trunc(v)))  # "1", "-0", "16791", or "1e+15" (a float to json already)
+    if len(whole):
+        plain = ~pc.match_substring(text.take(pa.array(whole)), "e").to_numpy(zero_copy_only=False)
+        dot = np.zeros(len(v), bool)
+        dot[whole[plain]] = True
+        text = pc.binary_join_element_wise(text, pc.if_else(pa.array(dot), ".0", ""), "")
+    if finite.all():
+        return text
+    if null:
+        return pc.if_else(pa.array(finite), text, "null")
+    other = np.where(np.isnan(v), '"nan"', np.where(v > 0, '"inf"', '"-inf"'))
+    return pc.if_else(pa.array(finite), text, pa.array(other, pa.string()))
+
+
+def _write_synced(path: Path, data) -> None:
+    """Write ``data`` (bytes, or a list of bytes one after another) and fsync it."""
     with open(path, "wb") as fh:
-        fh.write(data)
+        for piece in [data] if isinstance(data, (bytes, bytearray)) else data:
+            fh.write(piece)
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -319,9 +551,9 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
     cols = observer_columns(result)  # once, for the report and the table
-    doc = report_dict(result, cols)
+    doc = report_dict(result, cols, row_dicts=False)  # the listed rows written from the columns
     doc.update(json_safe(dict(sections or {})))
-    texts = {"report.json": report_json_text(doc).encode(), **extra}
+    texts = {"report.json": report_json_pieces(doc, cols), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
         if n == "observers.csv":  # written by blocks of rows from the columns
@@ -329,6 +561,8 @@ def write_set(result, folder, *, extra=None, sections=None) -> list:
         else:
             _write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)
+    if (arrow := _arrow()) is not None:
+        arrow[0].default_memory_pool().release_unused()  # the writers' text buffers back to the system
     return list(names)
 
 
@@ -373,7 +607,7 @@ def _nearest_spot(result, idx):
         names = [t.name for t in scene.targets]
     if not centres:
         return np.full(len(idx), np.nan), [""] * len(idx)
-    d = np.linalg.norm(result.observers.position_m[idx][:, None, :] - np.asarray(centres)[None], axis=2)
+    d = np.linalg.norm(result.observers.position_at(idx)[:, None, :] - np.asarray(centres)[None], axis=2)
     k = d.argmin(axis=1)
     return d[np.arange(len(idx)), k], [names[j] for j in k]
 
@@ -381,7 +615,7 @@ def _nearest_spot(result, idx):
 def _from_laser(result, idx) -> np.ndarray:
     """Distance [m] from observers ``idx`` to the laser's aperture."""
     laser = np.asarray(result.scene.to_world(result.scene.laser_position_m), float)
-    return np.linalg.norm(result.observers.position_m[idx] - laser, axis=1)
+    return np.linalg.norm(result.observers.position_at(idx) - laser, axis=1)
 
 
 CAUSE_SHARE_MIN = 0.01  # a contribution under this fraction of an observer's peak irradiance is left out of "cause"

@@ -132,6 +132,16 @@ class ObserverResults:
             self._position_m = self.observers.positions_m + self.offset_m if len(self.observers) else np.zeros((0, 3))
         return self._position_m
 
+    def position_at(self, rows) -> np.ndarray:
+        """The positions (n, 3) [m], world, of the rows ``rows`` only (int array or slice):
+        :attr:`position_m`'s values without making the whole table (240 MB at 1e7 points)."""
+        if hasattr(self, "_position_m"):
+            return self._position_m[rows]
+        if isinstance(rows, slice):
+            a0, a1, step = rows.indices(len(self.observers))
+            return (self.observers.block(a0, a1) + self.offset_m)[::step]
+        return self.observers.take(rows) + self.offset_m
+
     @property
     def labels(self) -> ObserverLabels:
         """The observers' names by row (made when read: a 1e7-point grid's as one list are 0.7 GB)."""
@@ -147,6 +157,11 @@ class ObserverLabels(Sequence):
 
     def __len__(self):
         return len(self._obs)
+
+    @property
+    def observers(self):
+        """The observer table the names are made from (its groups and indices)."""
+        return self._obs
 
     def __getitem__(self, k):
         if isinstance(k, slice):

@@ -218,3 +218,27 @@ def test_a_scene_without_site_writes_local_frame_files_named_so(tmp_path):
         assert ds.crs is None and "local frame" in ds.tags()["frame"]
     rep = json.loads((out / "report.json").read_text())
     assert rep["frame"]["kind"] == "local" and "KML is WGS 84 only" in rep["map_outputs"]["not_written"]["zones.kml"]
+
+
+@pytest.mark.parametrize("text", [SCENE, None], ids=["site", "local"])
+def test_point_features_converted_at_once_are_the_one_by_one_values(text):
+    """Point zones (20 000 observers on a large map) are converted in one call: each
+    geometry equals what to_lonlat (with a site) or the local rounding gives one by one."""
+    from shapely.geometry import mapping
+
+    import hazard
+    import scenes
+    from hazard import map_outputs
+    from hazard.map_zones import zones
+
+    res = hazard.analyze(scenes.loads(text) if text else scenes.load(scenes.example_path("range_terrain")))
+    zs, absent = zones(res)
+    doc = map_outputs.geojson_document(res, zs, absent, {})
+    site = res.scene.site
+    height = map_outputs._height_fn(res, res.scene.spec.analysis.footprint_eye_height_m)
+    n_points = 0
+    for z, f in zip(zs, doc["features"]):
+        one = (map_outputs.to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else map_outputs._local(z.geometry))
+        assert json.dumps(f["geometry"]) == json.dumps(mapping(one))
+        n_points += z.geometry.geom_type == "Point"
+    assert n_points >= 3 and len(doc["features"]) == len(zs)

@@ -4,10 +4,13 @@ hazard-ratio array), and report.json listing at most ``JSON_OBSERVERS_MAX`` obse
 the highest hazard ratios first, with a statement of which are listed."""
 
 import csv
+import io
 import json
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import hazard
 import scenes
@@ -126,15 +129,100 @@ def _csv_module_text(result) -> bytes:
     return buf.getvalue().encode()
 
 
-def test_streamed_csv_is_the_csv_module_table_byte_for_byte(tmp_path, result):
-    """observers.csv is written in blocks of rows (issue 37 item 3): the file equals the
-    table the csv module writes from the arrays, whatever the block size (2 rows here)."""
+def test_streamed_csv_is_the_csv_module_table_byte_for_byte(monkeypatch, tmp_path, result):
+    """observers.csv is written in blocks of rows (issue 37 item 3). Without pyarrow (or
+    where a name needs quotes, as "field, west" does here) the file equals the table the
+    csv module writes from the arrays, whatever the block size."""
     expected = _csv_module_text(result)
     report.write_outputs(result, tmp_path / "o")
-    assert (tmp_path / "o" / "observers.csv").read_bytes() == expected
+    assert (tmp_path / "o" / "observers.csv").read_bytes() == expected  # the comma in the name: Python's writer
+    monkeypatch.setattr(report, "_arrow", lambda: None)  # as without pyarrow
     cols = report.observer_columns(result)
     for rows in (1, 2, 7, 10_000):
-        assert "".join(report._csv_chunks(result, cols, rows)).encode() == expected
+        assert b"".join(report._csv_chunks(result, cols, rows)) == expected
+
+
+def _read_back_exact(data: bytes, result):
+    """Check observers.csv's ``data`` against ``result``'s arrays: the header as the csv
+    module writes the column names, every float cell the same double (bits: -0.0 is not
+    0.0), an empty cell only where NaN means "not applicable", True/False, the names."""
+    rows = list(csv.reader(io.StringIO(data.decode(), newline="")))
+    cols = report.observer_columns(result)
+    assert rows[0] == report.CSV_COLUMNS and len(rows) == len(result.observers) + 1
+    assert [r[0] for r in rows[1:]] == list(cols["labels"])
+    blank = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2"}
+    pos = np.asarray(cols["position_m"])
+    want = {"x_m": pos[:, 0], "y_m": pos[:, 1], "z_m": pos[:, 2], **{k: np.asarray(cols[k]) for k in report.CSV_COLUMNS[4:]}}
+    for j, k in enumerate(report.CSV_COLUMNS[1:], start=1):
+        cells = [r[j] for r in rows[1:]]
+        if want[k].dtype == bool:
+            assert cells == [str(x) for x in want[k].tolist()], k
+            continue
+        v = want[k].astype(float)
+        if k in blank:
+            assert [c == "" for c in cells] == np.isnan(v).tolist(), k
+            cells = ["nan" if c == "" else c for c in cells]
+        got = np.array([float(c) for c in cells])
+        np.testing.assert_array_equal(got.view(np.int64)[~np.isnan(v)], v.view(np.int64)[~np.isnan(v)], err_msg=k)
+        assert np.isnan(got).tolist() == np.isnan(v).tolist(), k
+
+
+def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path):
+    """With pyarrow, the blocks are written by its CSV writer (shortest round-trip digits):
+    the header unchanged, every number read back bit for bit, whatever the block size."""
+    pytest.importorskip("pyarrow")
+    res = hazard.analyze(scenes.loads(SCENE.replace('name = "field, west"', 'name = "field"')))
+    report.write_outputs(res, tmp_path / "o")
+    data = (tmp_path / "o" / "observers.csv").read_bytes()
+    _read_back_exact(data, res)
+    assert data != _csv_module_text(res)  # the pyarrow writer ran (its layout: 1 for 1.0)
+    cols = report.observer_columns(res)
+    for rows in (1, 2, 7, 10_000):
+        assert b"".join(report._csv_chunks(res, cols, rows)) == data
+
+
+def _bits_round_trip(bits, blank):
+    """One column of float64 values given by their bits through pyarrow's block writer:
+    each cell reads back as the same double (NaN: empty in a "not applicable" column)."""
+    v = np.asarray(bits, np.uint64).view(np.float64)
+    _column_round_trip(v, blank)
+    _column_round_trip(np.repeat(v, 3), blank)  # repeated values: formatted once (a dictionary column)
+
+
+def _column_round_trip(v, blank):
+    arrow = report._arrow()
+    names = arrow[0].array([f"o[{i}]" for i in range(len(v))])
+    key = "first_exceedance_s" if blank else "x"
+    lines = bytes(report._arrow_block(arrow, names, [v, v > 0], [key, "hazardous"])).decode().split("\r\n")
+    assert lines[-1] == "" and len(lines) == len(v) + 1
+    for line, x in zip(lines, v.tolist()):
+        name, cell, flag = line.split(",")
+        assert flag == str(x > 0)
+        if x != x:
+            assert cell == ("" if blank else "nan")
+        else:
+            assert np.float64(float(cell)).view(np.uint64) == np.float64(x).view(np.uint64), (cell, x)
+
+
+_SPECIAL = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308,
+                     1e16, 1e15, 1e-5, 1e-4, 0.1, 1.0 / 3.0, 123456789.0, 1e22, 1e21]).view(np.uint64).tolist()
+_BITS = st.lists(st.one_of(st.integers(0, 2**64 - 1), st.sampled_from(_SPECIAL)), min_size=1, max_size=200)
+
+
+@settings(derandomize=True, deadline=None, max_examples=20)
+@given(bits=_BITS, blank=st.booleans())
+def test_arrow_cells_round_trip_any_double(bits, blank):
+    """Any float64 (random bit patterns: subnormals, huge, NaN payloads, -0.0, inf)."""
+    pytest.importorskip("pyarrow")
+    _bits_round_trip(bits, blank)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=500)
+@given(bits=_BITS, blank=st.booleans())
+def test_arrow_cells_round_trip_any_double_many(bits, blank):
+    pytest.importorskip("pyarrow")
+    _bits_round_trip(bits, blank)
 
 
 def test_csv_reprs_of_repeated_and_signed_values():
@@ -164,3 +252,60 @@ def test_report_rows_are_json_safe_column_by_column():
     assert json.loads(text) == doc
     assert [line.rstrip(",") for line in text.splitlines() if line.startswith("  {")] == ["  " + json.dumps(r) for r in rows]
     assert json.loads(report.report_json_text({"observers": []})) == {"observers": []}
+
+
+def _same(a, b) -> bool:
+    """``a`` and ``b`` equal with the same types throughout (a float is not an int; floats by bits)."""
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, dict):
+        return list(a) == list(b) and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, float):
+        return np.float64(a).view(np.int64) == np.float64(b).view(np.int64)
+    return a == b
+
+
+def _rows_from_columns(cols, rows):
+    text = bytes(report._rows_json(cols, rows)).decode()
+    assert all(line.startswith("  {") for line in text.split("\n")[1:])  # one row per line
+    return json.loads("[" + text + "\n]")
+
+
+def test_report_rows_written_from_the_columns_are_the_row_dicts():
+    """report.json's listed rows written from the columns (pyarrow's float text, ".0" where
+    it reads as an integer) load as the very dicts observer_rows builds: every float the
+    same double, ints stay ints, non-finite values as strings or null, names escaped."""
+    inf, nan = float("inf"), float("nan")
+    specials = np.array([0.5, inf, nan, -0.0, 1e15, 1e16, 1e-5, 5e-324, 1.0 / 3.0, 16791.0, -inf, 1e22])
+    n = len(specials)
+    cols = {"labels": [f"o{i}" for i in range(n - 3)] + ['quote " here', "b,c", "\u00e9t\u00e9"],
+            "position_m": np.column_stack([specials[::-1], np.arange(n) * 0.1, -np.arange(n) * 1e3]),
+            "hazard_ratio": specials, "first_exceedance_s": np.roll(specials, 1), "count": np.arange(n) - 4,
+            "hazardous": np.arange(n) % 3 == 0, "motion_peak_irradiance_w_m2": np.roll(specials, 5)}
+    for rows in (np.arange(n), np.array([3, 0, 11]), np.array([7])):
+        want = report.observer_rows(None, rows, cols)
+        got = _rows_from_columns(cols, rows)
+        assert _same(got, json.loads(json.dumps(want))), (got, want)
+    pytest.importorskip("pyarrow")
+    assert bytes(report._rows_json(cols, np.arange(n))).decode() != ",".join("\n  " + json.dumps(r) for r in report.observer_rows(None, np.arange(n), cols))
+
+
+def test_report_json_of_a_run_has_the_row_dicts(tmp_path, result):
+    """The written report.json's observers (from the columns) equal report_dict's row dicts."""
+    report.write_outputs(result, tmp_path / "o")
+    doc = json.loads((tmp_path / "o" / "report.json").read_text())
+    want = json.loads(json.dumps(report.report_dict(result)["observers"]))
+    assert len(want) == len(result.observers) and _same(doc["observers"], want)
+
+
+def test_observers_hazardous_over_time_are_listed_before_higher_static_ratios(monkeypatch):
+    # a moving beam makes an observer hazardous over time while its static ratio stays below 1:
+    # report.json's list (cut at JSON_OBSERVERS_MAX) must still hold every hazardous observer
+    monkeypatch.setattr(report, "JSON_OBSERVERS_MAX", 4)
+    ratio = np.array([0.9, 0.01, 0.8, np.nan, 0.7, 0.02, 2.0, 0.6])
+    hazardous = np.array([False, True, False, False, False, True, True, False])  # rows 1 and 5 over time only
+    rows = report.listed_rows({"hazard_ratio": ratio, "hazardous": hazardous}, len(ratio))
+    assert rows.tolist() == [1, 3, 5, 6]  # the three hazardous and the unknown (NaN) ratio, in the scene's order
+    assert ratio[1] == 0.01  # the caller's column is not changed

@@ -1,0 +1,80 @@
+"""Benchmark: writing a large run's outputs against its analysis (issue 37 item 3).
+
+Run on demand:  python -m tests.bench.bench_outputs   (or pytest tests/bench -m bench -s)
+
+Scene: the bundled ``plate`` (100 W at 1064 nm on a Lambertian plate 50 m down range)
+with its two observers replaced by a ``rows x rows`` grid at 1.5 m in front of the plate
+(1000 x 1000: the 1e6-observer run of the README). Timed, median of ``repeat``, in one
+process: ``hazard.analyze`` of the loaded scene (the ray cache kept: a run builds its
+14 triangles once), and the outputs ``hazard run`` writes after it: the map files
+(:func:`hazard.map_outputs.map_files`) and report.json + observers.csv
+(:func:`hazard.report.write_set`, each file fsynced) into a temporary folder. Goal
+(issue 37): outputs / analysis <= 1. CPU seconds (every thread) are printed beside the
+wall times: on a shared machine they are the steadier figure.
+"""
+
+from __future__ import annotations
+
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import hazard
+import scenes
+from hazard import report
+from hazard.map_outputs import map_files
+
+from ._floor import REPEAT
+
+GRID = """[[observers]]
+name = "map"
+origin_m = [-50.0, -45.0, 1.5]
+u_m = [100.0, 0.0, 0.0]
+v_m = [0.0, 33.0, 0.0]
+counts = [{rows}, {rows}]
+"""
+
+
+def scene_text(rows: int) -> str:
+    """The plate example with a ``rows x rows`` observer grid instead of its two observers."""
+    text = scenes.example_path("plate").read_text()
+    return text.split("[[observers]]")[0] + GRID.format(rows=rows)
+
+
+def _timed(fn, *args):
+    """Wall and CPU time [s] of ``fn(*args)``, and its result."""
+    w, c = time.perf_counter(), time.process_time()
+    out = fn(*args)
+    return time.perf_counter() - w, time.process_time() - c, out
+
+
+def _outputs(result, folder: Path):
+    maps, section = map_files(result)
+    return report.write_set(result, folder, extra=maps, sections={"map_outputs": section})
+
+
+def run(rows: int = 1000, repeat: int = REPEAT) -> dict:
+    """Analysis and outputs, wall and CPU [s] (median of ``repeat``), and their ratio."""
+    scene = scenes.loads(scene_text(rows))
+    ana, out = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(repeat):
+            w, c, result = _timed(hazard.analyze, scene)
+            ana.append((w, c))
+            folder = Path(tmp) / f"o{i}"
+            folder.mkdir()
+            w, c, _ = _timed(_outputs, result, folder)
+            out.append((w, c))
+            del result
+            shutil.rmtree(folder)
+    a_w, a_c = (statistics.median(x) for x in zip(*ana))
+    o_w, o_c = (statistics.median(x) for x in zip(*out))
+    print(f"\noutputs of {rows * rows} observers: {o_w:.2f} s wall ({o_c:.2f} s CPU) against the analysis "
+          f"{a_w:.2f} s ({a_c:.2f} s CPU): ratio {o_w / a_w:.2f} wall, {o_c / a_c:.2f} CPU")
+    return {"analysis_s": a_w, "outputs_s": o_w, "analysis_cpu_s": a_c, "outputs_cpu_s": o_c, "ratio": o_w / a_w}
+
+
+if __name__ == "__main__":
+    run()
