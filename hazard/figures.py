@@ -13,11 +13,13 @@ __all__ = ["run_figures", "write_figures", "FIXED_NAMES"]
 FIXED_NAMES = ("plan.png", "elevation.png", "figures.json")  # the other names depend on the scene's targets and observers
 
 
-def run_figures(result, *, worst=3, progress=None) -> dict:
+def run_figures(result, *, worst=3, progress=None, rendered=None) -> dict:
     """Every picture of ``result`` as {file name: PNG bytes}, and ``figures.json``: for
     each picture, the report.json findings it draws and its panels' extents
     (:mod:`hazard.figure_index`); ``progress(name)`` is called before each is drawn (a
-    bar or a line on a terminal)."""
+    bar or a line on a terminal). ``rendered``: the entries of pictures written
+    elsewhere ({file name: entry}: ``hazard render``'s keepout.png, overview.png and
+    lobe.gif, :mod:`hazard.render`), listed in the same figures.json."""
     from .elevation_view import ElevationViewDisplay
     from .figure_index import FIGURES_NAME, figures_document
     from .plan_view import PlanViewDisplay
@@ -31,7 +33,7 @@ def run_figures(result, *, worst=3, progress=None) -> dict:
     if progress is not None:
         progress("time plots")
     out.update(time_figures(result, worst=worst, index=index))
-    out[FIGURES_NAME] = figures_document(index)
+    out[FIGURES_NAME] = figures_document({**(rendered or {}), **index})
     return out
 
 
