@@ -33,6 +33,7 @@ __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", 
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
 SITE_CONTEXT = 3.0  # the site panel also frames occluders and safe observers this many half-widths about the hazard
+MIN_ZONE_PT = 4.0  # a danger zone drawn narrower than this [pt] is also outlined exaggerated across the aim, and said
 LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
 
 
@@ -127,6 +128,8 @@ class PlanViewDisplay(_Display):
         what = f"from {framed[0][0]}" if len(framed) == 1 else "from the targets" if framed else "from the laser"
         _range_rings(axes[1], [xy for _, xy in framed] or [self.laser_xy], what)
         self._draw_faa(axes[0])
+        for ax in axes:
+            self._draw_thin_zone(ax)
         fig.canvas.draw()
         for ax in axes:
             keep_texts_inside(ax)
@@ -230,6 +233,39 @@ class PlanViewDisplay(_Display):
                         ha="right" if right else "left", va="top" if above else "bottom",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
+    def _draw_thin_zone(self, ax):
+        """A danger zone drawn narrower than ``MIN_ZONE_PT`` (a 37 km x 2 m zone is a line at
+        range scale): also its outline widened across the aim to that width (a cone stays a
+        cone, the along-aim lengths are true), with a label giving its true width and the
+        factor. Call once the limits are final."""
+        from .figure_index import mark
+
+        if self.zone is None or len(self.zone) < 3:
+            return
+        a, b = (np.asarray(p, float) for p in self.aim_xy)
+        if not np.hypot(*(b - a)) > 0:
+            return
+        u = (b - a) / np.hypot(*(b - a))
+        n = np.array([-u[1], u[0]])
+        width_m = float(np.ptp((self.zone - a) @ n))
+        ends = ax.transData.transform(np.array([a, a + n * max(width_m, 1e-9)]))
+        width_pt = float(np.hypot(*(ends[1] - ends[0]))) * 72.0 / ax.figure.dpi
+        if width_pt >= MIN_ZONE_PT:
+            return
+        factor = MIN_ZONE_PT / max(width_pt, 1e-9)
+        ring = widen_across(self.zone, a, u, factor)
+        x0, x1, y0, y1 = (*ax.get_xlim(), *ax.get_ylim())
+        ax.fill(*ring.T, fc="none", ec="#e41a1c", lw=0.9, hatch="////", zorder=3)
+        label = f"danger zone {_metres(width_m)} wide,\ndrawn exaggerated (x{factor:.3g} across the aim)"
+        at = a + u * 0.55 * float(np.max((self.zone - a) @ u))
+        side = 1.0 if (at @ n) <= ((np.array([x0 + x1, y0 + y1]) / 2) @ n) else -1.0  # the text toward the frame's middle
+        ax.annotate(label, at, xytext=tuple(8 * side * n), textcoords="offset points", fontsize=6, color="#b2182b", zorder=9,
+                    rotation=0, ha="left" if side * n[0] >= 0 else "right", va="center",
+                    bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="#e41a1c", lw=0.5, alpha=0.9))
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
+        mark(ax, [self.paths.get("zone")] if self.paths.get("zone") else [], label, ring, "polygon")
+
     def _draw_lobes(self, ax):
         from .figure_index import lobe_paths, mark
 
@@ -309,6 +345,15 @@ def beam_ends(result, aim_end_xy, off) -> list:
         why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
         out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
     return out
+
+
+def widen_across(ring, origin, direction, factor) -> np.ndarray:
+    """``ring`` (K, 2) [m] with every point's offset across the line through ``origin``
+    along the unit ``direction`` multiplied by ``factor`` (its offset along it kept)."""
+    u = np.asarray(direction, float)
+    n = np.array([-u[1], u[0]])
+    d = np.asarray(ring, float) - origin
+    return origin + np.outer(d @ u, u) + np.outer(factor * (d @ n), n)
 
 
 def clip_to_zone(aim, ring) -> np.ndarray:
