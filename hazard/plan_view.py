@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
+from .label_place import place_labels
 from .plots import _Display
 
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
@@ -133,6 +134,7 @@ class PlanViewDisplay(_Display):
         fig.canvas.draw()
         for ax in axes:
             keep_texts_inside(ax)
+            place_labels(ax)
         return fig, axes
 
     def _draw_airspace(self, ax):

@@ -19,7 +19,7 @@ from tests.hazard.test_figure_index import hazardous_paths
 
 pv = pytest.importorskip("pyvista")
 
-SMALL = (480, 340)  # window [px]: enough for the camera's answer, quick to render
+SMALL = (640, 560)  # window [px]: the legend (up to ~24 entries) fits beside it; quick to render
 NOT_IN_3D = ("tracks", "airspace.zones", "visual_interference", "sdz.aided")  # the plan and elevation views draw these
 
 
