@@ -92,6 +92,16 @@ def check_3d_coverage(doc, entry) -> list:
     return [p for p in hazardous_paths(doc) if not p.startswith(NOT_IN_3D) and p not in moving and not any(drawn.get(p, []))]
 
 
+def dark_edges(png) -> list:
+    """The edges of a picture with dark pixels (any channel at most 90 of 255: the black
+    and dark grey of text and labels) in their outer 3 pixels: text cut by the edge."""
+    import matplotlib.image as mpimg
+
+    img = (mpimg.imread(png)[..., :3] * 255).round().astype(int)
+    edges = {"left": img[:, :3], "right": img[:, -3:], "top": img[:3], "bottom": img[-3:]}
+    return [side for side, px in edges.items() if (px.max(axis=-1) <= 90).any()]
+
+
 def _check(name, tmp_path):
     res, figs = _render(name, tmp_path)
     doc = _report(res)
@@ -103,6 +113,7 @@ def _check(name, tmp_path):
                 x, y = np.asarray(doc["observers"][int(path[10:-1])]["position_m"], float)[:2]
                 assert f["bbox"] == pytest.approx([x, x, y, y])
     for fname in ("keepout.png", "overview.png"):
+        assert not dark_edges(tmp_path / fname), (fname, dark_edges(tmp_path / fname))  # issue 34: text cut at the left edge
         (panel,) = figs[fname]["panels"]
         x0, x1, y0, y1 = panel["extent"]
         assert x0 < x1 and y0 < y1 and panel["title"].startswith(doc["scene"]["name"]) and "3-D" in panel["projection"]
