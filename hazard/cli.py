@@ -453,9 +453,10 @@ def _cmd_run(args, out, err):
         result = _analyse(args, err)
         extra = {}
         if args.plot:
-            from .figures import run_figures
+            from .figures import kept_render_entries, run_figures
 
-            extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
+            extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")),
+                                rendered=kept_render_entries(unit))  # hazard render's 3-D pictures kept beside: still listed
         if not args.quiet:
             err.write("hazard: map outputs...\n")
         maps, section = map_files(result)

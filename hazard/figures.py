@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["run_figures", "write_figures", "FIXED_NAMES"]
+__all__ = ["run_figures", "write_figures", "kept_render_entries", "FIXED_NAMES"]
 
 FIXED_NAMES = ("plan.png", "elevation.png", "figures.json")  # the other names depend on the scene's targets and observers
 
@@ -44,3 +44,19 @@ def write_figures(figures: dict, outdir) -> list:
     from brdfmodels._io import atomic_write
 
     return [atomic_write(out / name, lambda tmp, data=data: Path(tmp).write_bytes(data)) for name, data in figures.items()]
+
+
+def kept_render_entries(unit) -> dict:
+    """The figures.json entries of ``hazard render``'s 3-D pictures (views ``3d`` and
+    ``animation``) in ``unit``'s folder that the new set keeps (written by render from
+    the same scene), so that a ``hazard run --plot`` after a render, rewriting figures.json,
+    still lists the pictures left beside it."""
+    import json
+
+    old = unit.out / "figures.json"
+    try:
+        entries = json.loads(old.read_text(encoding="utf-8")).get("figures", {}) if old.is_file() else {}
+    except (OSError, ValueError):
+        return {}
+    return {n: e for n, e in entries.items() if isinstance(e, dict) and e.get("view") in ("3d", "animation")
+            and unit.owners.get(n) == "render" and n not in unit.dropped_stale and (unit.out / n).is_file()}

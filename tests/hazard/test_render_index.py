@@ -162,3 +162,18 @@ def test_hazard_render_lists_every_picture_it_writes_in_figures_json(tmp_path):
     assert {"keepout.png", "overview.png", "lobe.gif", "plan.png"} <= written and written == set(figs)
     doc = json.loads((out / "report.json").read_text()) if (out / "report.json").exists() else _report(bundled("steel_vs_copper"))
     assert not check_3d_coverage(doc, figs["overview.png"])
+
+
+@pytest.mark.slow
+def test_a_run_after_a_render_still_lists_the_3d_pictures_it_keeps(tmp_path):
+    out = tmp_path / "r"
+    args = ["mirror_window", "-o", str(out), "--quiet"]
+    assert main(["render", *args, "--no-animation"], stdout=io.StringIO(), stderr=io.StringIO()) == 0
+    before = json.loads((out / "figures.json").read_text())["figures"]
+    said = io.StringIO()
+    assert main(["run", *args, "--plot", "--force"], stdout=said, stderr=io.StringIO()) == 0
+    figs = json.loads((out / "figures.json").read_text())["figures"]
+    assert "kept" in said.getvalue() and (out / "keepout.png").exists()
+    assert figs["keepout.png"] == before["keepout.png"] and figs["overview.png"] == before["overview.png"]
+    written = {p.name for p in out.iterdir() if p.suffix in (".png", ".gif")}
+    assert written == set(figs)
