@@ -259,7 +259,7 @@ class PlanViewDisplay(_Display):
         x0, x1, y0, y1 = (*ax.get_xlim(), *ax.get_ylim())
         ax.fill(*ring.T, fc="none", ec="#e41a1c", lw=0.9, hatch="////", zorder=3)
         label = f"danger zone {_metres(width_m)} wide,\ndrawn exaggerated (x{factor:.3g} across the aim)"
-        at = a + u * 0.55 * float(np.max((self.zone - a) @ u))
+        at = _visible_middle(a, u, float(np.max((self.zone - a) @ u)), (x0, x1, y0, y1))
         side = 1.0 if (at @ n) <= ((np.array([x0 + x1, y0 + y1]) / 2) @ n) else -1.0  # the text toward the frame's middle
         ax.annotate(label, at, xytext=tuple(8 * side * n), textcoords="offset points", fontsize=6, color="#b2182b", zorder=9,
                     rotation=0, ha="left" if side * n[0] >= 0 else "right", va="center",
@@ -347,6 +347,19 @@ def beam_ends(result, aim_end_xy, off) -> list:
         why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
         out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
     return out
+
+
+def _visible_middle(a, u, length_m, limits) -> np.ndarray:
+    """The middle of the part of the aim (from ``a`` along ``u``, ``length_m`` long) in
+    the frame ``limits`` (x0, x1, y0, y1) - where a label of the zone is seen -, or 55 %
+    along it when no part is in the frame."""
+    from shapely.geometry import LineString, box
+
+    x0, x1, y0, y1 = limits
+    seen = LineString([a, a + u * length_m]).intersection(box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)))
+    if seen.is_empty or seen.length <= 0:
+        return a + u * 0.55 * length_m
+    return np.asarray(seen.interpolate(0.5, normalized=True).coords[0], float)
 
 
 def widen_across(ring, origin, direction, factor) -> np.ndarray:
