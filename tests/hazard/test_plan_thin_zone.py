@@ -80,3 +80,21 @@ def test_widening_keeps_along_offsets_and_multiplies_across_offsets():
     assert out[:2] == pytest.approx(r)
     along, across = np.array([4.0, 3.0]) @ u, np.array([4.0, 3.0]) @ np.array([-0.8, 0.6])
     assert out[2] == pytest.approx(along * u + 2.0 * across * np.array([-0.8, 0.6]))
+
+
+@pytest.mark.parametrize("name", ["mirror_window", pytest.param("range_clearance", marks=pytest.mark.slow),
+                                  pytest.param("range_geo", marks=pytest.mark.slow)])
+def test_every_widened_zone_label_is_drawn_in_its_panel(name):
+    """A panel drawing the widened outline shows its label: the label's point is inside
+    the panel (matplotlib hides an annotation whose point is outside), whether or not the
+    laser is in the frame (range_clearance's site panel: the laser 1.5 km south of it)."""
+    fig, axes, _ = _figure(name)
+    r = fig.canvas.get_renderer()
+    for ax in axes:
+        said = [t for t in ax.texts if "drawn exaggerated" in t.get_text()]
+        widened = [p for p in ax.patches if p.get_hatch() == "////" and p.get_facecolor()[3] == 0]
+        assert len(said) == len(widened) <= 1, ax.get_title()
+        for t in said:
+            x0, x1 = sorted(ax.get_xlim())
+            y0, y1 = sorted(ax.get_ylim())
+            assert x0 <= t.xy[0] <= x1 and y0 <= t.xy[1] <= y1 and t._check_xy(r), ax.get_title()
