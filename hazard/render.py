@@ -48,7 +48,7 @@ from .picture import compose, write_png
 from .plan_view import LABELLED, _nice_length, aim_reach_m, hazardous_labels, mirror_segments
 from .progress import terminal_bar
 
-__all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii"]
+__all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii", "not_drawn"]
 
 # every Plotter here is made with off_screen=True; the global pv.OFF_SCREEN is the CLI's to set (hazard._cli_env)
 LINE_POINTS = 256  # points along a drawn line (a line bends on a log-distance picture)
@@ -546,8 +546,34 @@ def _title_lines(result, framing, title) -> list:
     lines = [title, f"MPE {result.mpe_w_m2:.4g} W/m^2; local origin at {np.round(scene.offset_m, 3).tolist()} m (world = local + origin)"]
     if framing.compressed:
         lines.append(f"distances beyond {framing.r0_m:.3g} m from the site are drawn on a log scale (r0 (1 + ln(r / r0))): "
-                     f"the rings give true distances; everything hazardous is in the picture, out to {framing.extent_m:.4g} m")
+                     f"the rings give true distances; every lobe, beam, observer and hazardous ground is in the picture, "
+                     f"out to {framing.extent_m:.4g} m")
+    elsewhere = not_drawn(result)
+    if elsewhere["paths"]:
+        lines.append(elsewhere["label"])
     return lines
+
+
+def not_drawn(result) -> dict:
+    """The report.json findings the 3-D pictures do not draw - the moving observers'
+    tracks (and their observer rows), the flight zones, the direct beam's FAA distances,
+    the danger zones through optics -, the line saying so and where they are drawn
+    (``see``: the plan and elevation views)."""
+    from .figure_index import faa_marks
+
+    paths = finding_paths(result)
+    tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
+    zones = (getattr(result, "airspace", None) or {}).get("zones") or []
+    faa = faa_marks(result)
+    rows = [p for r, p in sorted(paths["observers"].items()) if r >= len(result.observers)]
+    out = [f"tracks[{k}]" for k in range(len(tracks))] + rows + [f"airspace.zones[{k}]" for k in range(len(zones))]
+    out += [p for p, *_ in faa] + list(paths["aided"])
+    what = [f"{n} {one if n == 1 else many}" for n, one, many in (
+        (len(tracks), "moving observer's track", "moving observers' tracks"), (len(zones), "flight zone", "flight zones"),
+        (len(faa), "FAA distance", "FAA distances"), (len(paths["aided"]), "danger zone through optics", "danger zones through optics"))
+        if n]
+    label = f"not drawn here, see plan.png and elevation.png: {', '.join(what)}" if what else ""
+    return {"paths": out, "label": label, "see": ["plan.png", "elevation.png"]}
 
 
 def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900), vtk=True, force=False) -> dict:
@@ -580,6 +606,7 @@ def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900),
             shown = set(lines) | {e[0] for e in legend} | set(p.__dict__.get("_hazard_tags", []))
             index[f"{name}.png"] = view_entry("3d", _panel(result, frames[name], title), _notes(result, blocks, frames[name], legend),
                                               _world_to_clip(p, window_size), shown)
+            index[f"{name}.png"]["not_drawn"] = not_drawn(result)
             p.close()
             picture, layout[name] = compose(img, legend, lines)
             paths[name] = write_png(picture, out / f"{name}.png")

@@ -177,3 +177,21 @@ def test_a_run_after_a_render_still_lists_the_3d_pictures_it_keeps(tmp_path):
     assert figs["keepout.png"] == before["keepout.png"] and figs["overview.png"] == before["overview.png"]
     written = {p.name for p in out.iterdir() if p.suffix in (".png", ".gif")}
     assert written == set(figs)
+
+
+@pytest.mark.slow
+def test_the_3d_pictures_say_which_findings_they_leave_to_the_2d_views(tmp_path):
+    """airspace: its track, flight zones and FAA distances are not drawn in 3-D; the
+    overview says so in its title and figures.json lists them under ``not_drawn``."""
+    res, figs = _render("airspace", tmp_path)
+    doc = _report(res)
+    left = [p for p in hazardous_paths(doc) if p.startswith(NOT_IN_3D)]
+    assert left and "airspace.zones[0]" in left
+    for fname in ("keepout.png", "overview.png"):
+        nd = figs[fname]["not_drawn"]
+        assert set(left) <= set(nd["paths"]) and nd["see"] == ["plan.png", "elevation.png"]
+        assert "1 moving observer's track" in nd["label"] and "flight zones" in nd["label"]
+    from hazard import render
+
+    framing = render.Framing(np.zeros((3, 2)), np.zeros(3))
+    assert figs["overview.png"]["not_drawn"]["label"] in render._title_lines(res, framing, "t")  # said in the title strip
