@@ -26,12 +26,14 @@ def _figure(name):
     return fig, axes, img
 
 
-def _true_width(name):
-    """The zone's width across the aim [m], from report.json's outline and the scene file."""
+def _true_width(name, aided=None):
+    """The zone's width across the aim [m] (the naked-eye zone, or ``sdz.aided[aided]``),
+    from report.json's outline and the scene file."""
     from hazard.report import report_dict
 
     res = bundled(name)
-    ring = np.asarray(report_dict(res)["sdz"]["polygon_m"], float)
+    z = report_dict(res)["sdz"]
+    ring = np.asarray(z["polygon_m"] if aided is None else z["aided"][aided]["polygon_m"], float)
     scene = scenes.load(scenes.example_path(name))
     d = np.asarray(scene.laser_direction, float)[:2]
     u = d / np.hypot(*d)
@@ -40,7 +42,7 @@ def _true_width(name):
     return float(np.ptp((ring - laser) @ n)), laser, u, n, float(np.max((ring - laser) @ u))
 
 
-def _red_span_px(ax, img, centre, n, half_px=25) -> float:
+def _red_span_px(ax, img, centre, n, half_px=25, colour="red") -> float:
     """Pixels between the first and the last red pixel on a line across ``n`` through
     ``centre`` (data coordinates) in the rendered picture ``img``."""
     c = ax.transData.transform(centre)
@@ -50,7 +52,10 @@ def _red_span_px(ax, img, centre, n, half_px=25) -> float:
     pts = c + s[:, None] * dn
     rows, cols = np.round(img.shape[0] - pts[:, 1]).astype(int), np.round(pts[:, 0]).astype(int)
     px = img[rows, cols]
-    red = (px[:, 0] - px[:, 1] > 40) & (px[:, 0] > 150)
+    if colour == "red":
+        red = (px[:, 0] - px[:, 1] > 40) & (px[:, 0] > 150)
+    else:  # purple (#984ea3, the zones through optics)
+        red = (px[:, 2] - px[:, 1] > 40) & (px[:, 0] - px[:, 1] > 30)
     return float(np.ptp(s[red])) if red.any() else 0.0
 
 
@@ -83,7 +88,7 @@ def test_widening_keeps_along_offsets_and_multiplies_across_offsets():
 
 
 @pytest.mark.parametrize("name", ["mirror_window", pytest.param("range_clearance", marks=pytest.mark.slow),
-                                  pytest.param("range_geo", marks=pytest.mark.slow)])
+                                  pytest.param("range_geo", marks=pytest.mark.slow), pytest.param("binoculars", marks=pytest.mark.slow)])
 def test_every_widened_zone_label_is_drawn_in_its_panel(name):
     """A panel drawing the widened outline shows its label: the label's point is inside
     the panel (matplotlib hides an annotation whose point is outside), whether or not the
@@ -92,9 +97,23 @@ def test_every_widened_zone_label_is_drawn_in_its_panel(name):
     r = fig.canvas.get_renderer()
     for ax in axes:
         said = [t for t in ax.texts if "drawn exaggerated" in t.get_text()]
-        widened = [p for p in ax.patches if p.get_hatch() == "////" and p.get_facecolor()[3] == 0]
-        assert len(said) == len(widened) <= 1, ax.get_title()
+        widened = [p for p in ax.patches if p.get_hatch() in ("////", "\\\\") and p.get_facecolor()[3] == 0]
+        assert len(said) == len(widened), ax.get_title()
         for t in said:
             x0, x1 = sorted(ax.get_xlim())
             y0, y1 = sorted(ax.get_ylim())
             assert x0 <= t.xy[0] <= x1 and y0 <= t.xy[1] <= y1 and t._check_xy(r), ax.get_title()
+
+
+@pytest.mark.slow
+def test_a_hairline_danger_zone_through_optics_is_widened_and_says_its_width_too():
+    """binoculars: the zone through 7x50 optics reaches 65 km, twice the naked-eye zone;
+    past the naked-eye zone's end only its own (purple) widened outline is there."""
+    width_m, laser, u, n, length_m = _true_width("binoculars", 0)
+    naked = _true_width("binoculars")[4]
+    fig, (rng, site), img = _figure("binoculars")
+    assert length_m > 1.5 * naked
+    for f in (0.6, 0.8):  # beyond the naked-eye zone
+        assert f * length_m > naked and _red_span_px(rng, img, laser + u * f * length_m, n, colour="purple") >= MIN_PX
+    said = [t.get_text() for t in rng.texts if "through 7x50 optics" in t.get_text() and "drawn exaggerated" in t.get_text()]
+    assert len(said) == 1 and f"{width_m:.3g} m wide" in said[0]
