@@ -149,7 +149,9 @@ def figures_document(entries: dict) -> bytes:
     to read it."""
     doc = {"format": FORMAT, "version": VERSION,
            "frame": "plan and elevation views: report.json's world frame [m] (plan: x east, y north; elevation: distance "
-                    "along the aim's azimuth from the laser, height); time plots: time [s] against their y axis",
+                    "along the aim's azimuth from the laser, height); time plots: time [s] against their y axis; 3-D pictures (view '3d', "
+                    "'animation'): the box they are framed on in the world frame [m] (extent, extent_z), 'inside' the camera's "
+                    "answer (the drawn points projected into the view; a point behind a surface still counts as in the view)",
            "paths": "report.json paths of the findings each picture draws (observers[i]: the i-th row of report.json's "
                     "observer list); 'inside': the drawn geometry meets the panel's extent; 'how': 'arrow' for a finding "
                     "off the frame, shown by an arrow at the edge with its distance",
