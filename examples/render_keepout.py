@@ -22,7 +22,7 @@ def main(argv=None):
     path = scenes.example_path(args.scene) if args.scene in scenes.examples() else args.scene
     res = hazard.analyze(scenes.load(path))
     for k, p in render.keepout(res, args.out, force=True).items():
-        if k not in ("png", "layout"):
+        if k not in ("png", "layout", "figures"):
             print(f"{k}: {p}")
     if res.states:
         anim = render.animate_lobe(res, args.out, max_frames=args.frames)

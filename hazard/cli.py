@@ -466,9 +466,10 @@ def _cmd_run(args, out, err):
         result = _analyse(args, err)
         extra = {}
         if args.plot:
-            from .figures import run_figures
+            from .figures import kept_render_entries, run_figures
 
-            extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")))
+            extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")),
+                                rendered=kept_render_entries(unit))  # hazard render's 3-D pictures kept beside: still listed
         if not args.quiet:
             err.write("hazard: map outputs...\n")
         maps, section = map_files(result)
@@ -942,14 +943,16 @@ def _cmd_render(args, out, err):
         result = _analyse(argparse.Namespace(scene=args.scene, backend="embree", quiet=args.quiet), err)
         with progress_to(None if args.quiet else err):  # bars on a terminal only
             paths = render.keepout(result, unit.stage, lobe_resolution_deg=args.resolution_deg, force=args.force)
-            lines = [f"  wrote {unit.final(p)}" for k, p in paths.items() if k not in ("png", "layout")]
+            lines = [f"  wrote {unit.final(p)}" for k, p in paths.items() if k not in ("png", "layout", "figures")]
             from .figures import run_figures, write_figures
 
-            say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
-            lines += [f"  wrote {unit.final(p)}" for p in write_figures(run_figures(result, progress=say), unit.stage)]
-            if not args.no_animation and result.states:
+            if not args.no_animation and result.states:  # before the 2-D pictures: figures.json lists the GIF too
                 anim = render.animate_lobe(result, unit.stage)
                 lines.append(f"  wrote {unit.final(anim.get('gif', anim['frames'][0].parent))}")
+                paths["figures"].update(anim.get("figures", {}))
+            say = None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n"))
+            lines += [f"  wrote {unit.final(p)}" for p in write_figures(run_figures(result, progress=say, rendered=paths["figures"]),
+                                                                         unit.stage)]
     out.write(f"renders of {result.scene.name!r}\n" + "\n".join(lines) + "\n")
     return EXIT_OK
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from . import palette as C
 from .figure_index import lobe_paths, mark
+from .label_place import place_labels
 from .plan_view import (MIRROR_LABEL, draw_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
                         label_points, mark_mirror, mirror_segments, square_limits, two_panels)
 from .plots import DisplayBase
@@ -122,6 +123,7 @@ class ElevationViewDisplay(DisplayBase):
         fig.canvas.draw()
         for ax in axes:
             keep_texts_inside(ax)
+            place_labels(ax)
         return fig, axes
 
     def site_limits(self) -> tuple:

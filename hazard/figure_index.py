@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["FIGURES_NAME", "mark", "arrow_to", "figure_entry", "figures_document", "report_observer_paths", "finding_paths",
-           "track_lines", "flight_zone_rings", "faa_marks", "lobe_paths"]
+           "track_lines", "flight_zone_rings", "faa_marks", "lobe_paths", "view_entry"]
 
 FIGURES_NAME = "figures.json"
 FORMAT = "laser-hazard-figures"
@@ -149,7 +149,9 @@ def figures_document(entries: dict) -> bytes:
     to read it."""
     doc = {"format": FORMAT, "version": VERSION,
            "frame": "plan and elevation views: report.json's world frame [m] (plan: x east, y north; elevation: distance "
-                    "along the aim's azimuth from the laser, height); time plots: time [s] against their y axis",
+                    "along the aim's azimuth from the laser, height); time plots: time [s] against their y axis; 3-D pictures (view '3d', "
+                    "'animation'): the box they are framed on in the world frame [m] (extent, extent_z), 'inside' the camera's "
+                    "answer (the drawn points projected into the view; a point behind a surface still counts as in the view)",
            "paths": "report.json paths of the findings each picture draws (observers[i]: the i-th row of report.json's "
                     "observer list); 'inside': the drawn geometry meets the panel's extent; 'how': 'arrow' for a finding "
                     "off the frame, shown by an arrow at the edge with its distance",
@@ -258,3 +260,69 @@ def lobe_paths(paths, lobes, target, kind) -> list:
         other = paths.get("lobe", {}).get((target, "dynamic"))
         out += [other] if other else []
     return out
+
+
+def _clip_inside(clip, kind) -> list:
+    """Whether projected geometry is in the view: ``clip`` (K, 4) homogeneous clip
+    coordinates (in view: w > 0 and |x|, |y| <= w); one answer for a line or a surface
+    (any part in view; a line also where it crosses the view between its points), else
+    one per point."""
+    w = clip[:, 3]
+    front = w > 0
+    ndc = np.where(front[:, None], clip[:, :2] / np.where(front, w, 1.0)[:, None], np.nan)
+    each = front & np.all(np.abs(ndc) <= 1.0, axis=1)
+    if kind == "points":
+        return each.tolist()
+    ok = bool(each.any())
+    if not ok and kind == "line" and len(clip) >= 2:
+        ok = _segments_cross_view(clip)
+    return [ok]
+
+
+def _segments_cross_view(clip, eps=1e-9) -> bool:
+    """Whether a polyline of clip coordinates (K, 4) crosses the view between its
+    points: each segment is first cut at the camera's plane (w = eps: a segment from
+    behind the camera to in front of it keeps its front part), then projected."""
+    from shapely.geometry import MultiLineString, box
+
+    a, b = clip[:-1], clip[1:]
+    keep = (a[:, 3] > eps) | (b[:, 3] > eps)
+    a, b = a[keep], b[keep]
+
+    def cut(p, q):  # p moved toward q onto w = eps where p is behind the camera
+        wp, wq = p[:, 3], q[:, 3]
+        t = np.clip((eps - wp) / np.where(wq != wp, wq - wp, 1.0), 0.0, 1.0)[:, None]
+        return np.where((wp <= eps)[:, None], p + t * (q - p), p)
+
+    a, b = cut(a, b), cut(b, a)
+    if not len(a):
+        return False
+    segs = np.stack([a[:, :2] / a[:, 3:4], b[:, :2] / b[:, 3:4]], 1)
+    return bool(MultiLineString([s.tolist() for s in segs]).intersects(box(-1.0, -1.0, 1.0, 1.0)))
+
+
+def view_entry(view, panel, notes, world_to_clip, shown) -> dict:
+    """The figures.json entry of a 3-D picture (``keepout.png``, ``overview.png``,
+    ``lobe.gif``): its one ``panel`` (title, axis names, ``extent`` [x0, x1, y0, y1] and
+    ``extent_z`` [z0, z1] in report.json's world frame [m], how distances are drawn) and
+    the findings ``notes`` drawn in it, each (paths, label, (K, 3) drawn points, kind,
+    (K, 3) world points [m]). Whether a finding is in the picture is the camera's answer:
+    its drawn points projected by ``world_to_clip`` (4 x 4, drawn coordinates to clip
+    coordinates) fall in the view; ``label_shown``: the label is among the texts
+    ``shown`` (title lines, legend entries, point tags)."""
+    findings = []
+    for paths, label, drawn, kind, world in notes:
+        if not paths:
+            continue
+        drawn = np.asarray(drawn, float).reshape(-1, 3)
+        world = np.asarray(world, float).reshape(-1, 3)
+        ok = np.all(np.isfinite(drawn), axis=1)
+        clip = np.hstack([drawn[ok], np.ones((int(ok.sum()), 1))]) @ np.asarray(world_to_clip, float).T
+        per = kind == "points" and len(paths) == len(drawn) > 1 and ok.all()
+        inside = _clip_inside(clip, "points" if per else kind) if len(clip) else [False]
+        inside = inside if per else [any(inside)] * len(paths)
+        fin = world[np.all(np.isfinite(world), axis=1)]
+        bbox = None if not len(fin) else [float(fin[:, 0].min()), float(fin[:, 0].max()), float(fin[:, 1].min()), float(fin[:, 1].max())]
+        findings.append({"paths": list(paths), "label": label, "label_shown": label in shown, "panel": panel["title"],
+                         "how": "drawn", "geometry": kind, "inside": inside, "bbox": bbox})
+    return {"view": view, "panels": [panel], "findings": findings}

@@ -27,12 +27,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import palette as C
+from .label_place import place_labels
 from .plots import DisplayBase
 
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
 SITE_CONTEXT = 3.0  # the site panel also frames occluders and safe observers this many half-widths about the hazard
+MIN_ZONE_PT = 4.0  # a danger zone drawn narrower than this [pt] is also outlined exaggerated across the aim, and said
 LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
 
 
@@ -127,9 +129,12 @@ class PlanViewDisplay(DisplayBase):
         what = f"from {framed[0][0]}" if len(framed) == 1 else "from the targets" if framed else "from the laser"
         _range_rings(axes[1], [xy for _, xy in framed] or [self.laser_xy], what)
         self._draw_faa(axes[0])
+        for ax in axes:
+            self._draw_thin_zone(ax)
         fig.canvas.draw()
         for ax in axes:
             keep_texts_inside(ax)
+            place_labels(ax)
         return fig, axes
 
     def _draw_airspace(self, ax):
@@ -230,6 +235,24 @@ class PlanViewDisplay(DisplayBase):
                         ha="right" if right else "left", va="top" if above else "bottom",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
+    def _draw_thin_zone(self, ax):
+        """Each danger zone (naked eye, through each optical aid) drawn narrower than
+        ``MIN_ZONE_PT`` (a 37 km x 2 m zone is a line at range scale): also its outline
+        widened across the aim to that width (a cone stays a cone, the along-aim lengths
+        are true), with a label giving its true width and the factor. Call once the
+        limits are final."""
+        a, b = (np.asarray(p, float) for p in self.aim_xy)
+        if not np.hypot(*(b - a)) > 0:
+            return
+        u = (b - a) / np.hypot(*(b - a))
+        zones = [] if self.zone is None else [(self.zone, "danger zone", "#e41a1c", "////", self.paths.get("zone"))]
+        aided = self.paths.get("aided", [])
+        zones += [(ring, label.replace("LSDZ", "danger zone"), "#984ea3", "\\\\", aided[k] if k < len(aided) else None)
+                  for k, (label, ring) in enumerate(self.aided_zones)]
+        for ring, name, colour, hatch, path in zones:
+            if ring is not None and len(ring) >= 3:
+                _widen_thin(ax, ring, a, u, name, colour, hatch, path)
+
     def _draw_lobes(self, ax):
         from .figure_index import lobe_paths, mark
 
@@ -309,6 +332,56 @@ def beam_ends(result, aim_end_xy, off) -> list:
         why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
         out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
     return out
+
+
+def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
+    """``zone`` (K, 2) [m] about the aim from ``a`` along ``u``, if drawn narrower than
+    ``MIN_ZONE_PT`` in ``ax``: also outlined widened across the aim to that width, hatched,
+    labelled ``name`` with its true width and the factor, noted for figures.json under
+    ``path``."""
+    from .figure_index import mark
+
+    n = np.array([-u[1], u[0]])
+    width_m = float(np.ptp((zone - a) @ n))
+    ends = ax.transData.transform(np.array([a, a + n * max(width_m, 1e-9)]))
+    width_pt = float(np.hypot(*(ends[1] - ends[0]))) * 72.0 / ax.figure.dpi
+    if width_pt >= MIN_ZONE_PT:
+        return
+    factor = MIN_ZONE_PT / max(width_pt, 1e-9)
+    ring = widen_across(zone, a, u, factor)
+    x0, x1, y0, y1 = (*ax.get_xlim(), *ax.get_ylim())
+    ax.fill(*ring.T, fc="none", ec=colour, lw=0.9, hatch=hatch, zorder=3)
+    label = f"{name} {_metres(width_m)} wide,\ndrawn exaggerated (x{factor:.3g} across the aim)"
+    at = _visible_middle(a, u, float(np.max((zone - a) @ u)), (x0, x1, y0, y1))
+    side = 1.0 if (at @ n) <= ((np.array([x0 + x1, y0 + y1]) / 2) @ n) else -1.0  # the text toward the frame's middle
+    ax.annotate(label, at, xytext=tuple(8 * side * n), textcoords="offset points", fontsize=6, color=colour, zorder=9,
+                ha="left" if side * n[0] >= 0 else "right", va="center",
+                bbox=dict(boxstyle="round,pad=0.15", fc="white", ec=colour, lw=0.5, alpha=0.9))
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    mark(ax, [path] if path else [], label, ring, "polygon")
+
+
+def _visible_middle(a, u, length_m, limits) -> np.ndarray:
+    """The middle of the part of the aim (from ``a`` along ``u``, ``length_m`` long) in
+    the frame ``limits`` (x0, x1, y0, y1) - where a label of the zone is seen -, or 55 %
+    along it when no part is in the frame."""
+    from shapely.geometry import LineString, box
+
+    x0, x1, y0, y1 = limits
+    seen = LineString([a, a + u * length_m]).intersection(box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)))
+    if seen.is_empty or seen.length <= 0:
+        return a + u * 0.55 * length_m
+    return np.asarray(seen.interpolate(0.5, normalized=True).coords[0], float)
+
+
+def widen_across(ring, origin, direction, factor) -> np.ndarray:
+    """``ring`` (K, 2) [m] with every point's offset across the line through ``origin``
+    along the unit ``direction`` multiplied by ``factor`` (its offset along it kept)."""
+    u = np.asarray(direction, float)
+    n = np.array([-u[1], u[0]])
+    d = np.asarray(ring, float) - origin
+    return origin + np.outer(d @ u, u) + np.outer(factor * (d @ n), n)
 
 
 def clip_to_zone(aim, ring) -> np.ndarray:

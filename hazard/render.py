@@ -43,11 +43,12 @@ import pyvista as pv
 from . import palette as C
 from .beam import perp_basis as _perp_basis
 from .keepout import nohd_range_fn
+from .figure_index import finding_paths, lobe_paths, view_entry
 from .picture import compose, write_png
-from .plan_view import nice_length_m, aim_reach_m, hazardous_labels, mirror_segments
+from .plan_view import LABELLED, nice_length_m, aim_reach_m, hazardous_labels, mirror_segments
 from .progress import terminal_bar
 
-__all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii"]
+__all__ = ["keepout", "lobe_grid", "animate_lobe", "framings", "Framing", "ring_radii", "not_drawn"]
 
 # every Plotter here is made with off_screen=True; the global pv.OFF_SCREEN is the CLI's to set (hazard._cli_env)
 LINE_POINTS = 256  # points along a drawn line (a line bends on a log-distance picture)
@@ -182,6 +183,17 @@ class Framing:
         r = np.linalg.norm(d, axis=-1, keepdims=True)
         far = r > self.r0_m
         scale = np.where(far, self.r0_m * (1.0 + np.log(np.maximum(r, self.r0_m) / self.r0_m)) / np.maximum(r, 1e-300), 1.0)
+        return self.centre_m + d * scale
+
+    def undraw(self, points) -> np.ndarray:
+        """True coordinates of drawn ``points`` (the inverse of :meth:`draw`)."""
+        p = np.asarray(points, float)
+        if not self.compressed:
+            return p
+        d = p - self.centre_m
+        rd = np.linalg.norm(d, axis=-1, keepdims=True)
+        far = rd > self.r0_m
+        scale = np.where(far, self.r0_m * np.exp(np.minimum(rd / self.r0_m - 1.0, 700.0)) / np.maximum(rd, 1e-300), 1.0)
         return self.centre_m + d * scale
 
     def mesh(self, mesh):
@@ -320,6 +332,7 @@ def _add_rings(p, result, framing, legend, limit=None):
         labels.append(f"{r / 1000:g} km" if r >= 1000 else f"{r:g} m")
         where.append(drawn[30])
     if labels:
+        p.__dict__.setdefault("_hazard_tags", []).extend(labels)
         p.add_point_labels(np.array(where), labels, font_size=11, text_color="#444444", shape_opacity=0.0, show_points=False,
                            always_visible=True)
         legend.append(("range rings about the laser" + (" (true distances)" if framing.compressed else ""), C.RINGS, "line"))
@@ -389,6 +402,7 @@ def _add_observers(p, result, blocks, framing, legend):
         return
     p.add_mesh(pv.PolyData(obs.points[bad]), color=C.HAZARDOUS, point_size=18, render_points_as_spheres=True, lighting=False)
     labels, more = hazardous_labels(result, obs.points)
+    p.__dict__.setdefault("_hazard_tags", []).extend(str(k + 1) for k in range(len(labels)))
     p.add_point_labels(np.array([xy for xy, _ in labels]), [str(k + 1) for k in range(len(labels))], font_size=12, bold=True,
                        text_color="black", shape_color="white", shape_opacity=0.85, show_points=False, always_visible=True)
     extra = f"; {more} more in observers.csv" if more else ""
@@ -412,6 +426,7 @@ def _add_nohd_labels(p, result, framing, legend):
         names.append(tr.name)
         points.append(sp.centroid + tr.dynamic_lobe.max_direction_world * tr.dynamic_lobe.max_range_m)
     if points:
+        p.__dict__.setdefault("_hazard_tags", []).extend(names)
         p.add_point_labels(framing.draw(np.array(points)), names, font_size=12, text_color="black", shape_color="white",
                            shape_opacity=0.8, always_visible=True, show_points=False)
 
@@ -441,13 +456,124 @@ def _draw(result, blocks, framing, window_size):
     return p, legend
 
 
+def _world_to_clip(p, window_size) -> np.ndarray:
+    """The camera's 4 x 4 matrix from drawn coordinates to clip coordinates (the view is
+    |x|, |y| <= w after the projection)."""
+    m = p.camera.GetCompositeProjectionTransformMatrix(window_size[0] / window_size[1], -1.0, 1.0)
+    return np.array([[m.GetElement(i, j) for j in range(4)] for i in range(4)])
+
+
+def _panel(result, framing, title, true_box=None) -> dict:
+    """figures.json's panel of a 3-D picture: the box it is framed on in report.json's
+    world frame [m] (a log-distance overview: the true box of everything it holds)."""
+    off = np.asarray(result.scene.offset_m, float)
+    if true_box is None:
+        pts = framing.undraw(framing.points) if framing.compressed else framing.bounds.T
+        true_box = np.stack([pts.min(axis=0), pts.max(axis=0)], 1)
+    box = np.asarray(true_box, float) + off[:, None]
+    scale = (f"true distances within {framing.r0_m:.4g} m of the site, a log scale beyond (r0 (1 + ln(r / r0)))"
+             if framing.compressed else "true scale")
+    return {"title": title, "x": "x east [m]", "y": "y north [m]", "z": "height [m]", "projection": "3-D perspective, "
+            + scale, "extent": [float(v) for v in box[:2].ravel()], "extent_z": [float(v) for v in box[2]]}
+
+
+def _notes(result, blocks, framing, legend) -> list:
+    """What a 3-D picture draws, for figures.json (:func:`hazard.figure_index.view_entry`):
+    (report.json paths, the legend text naming it, drawn points, kind, world points [m])
+    for every lobe, mirror beam, the aim line (the danger zone), each hazardous observer
+    and the hazardous ground."""
+    paths, texts = finding_paths(result), [e[0] for e in legend]
+    off = np.asarray(result.scene.offset_m, float)
+    notes = []
+
+    def add(ps, label, local, kind):
+        local = np.asarray(local, float).reshape(-1, 3)
+        notes.append(([q for q in ps if q], label, framing.draw(local), kind, local + off))
+
+    lobes = [tuple(reversed(k.split("_", 2)[1:])) for k in blocks.keys() if k.startswith("lobe_")]  # (target, kind)
+    for target, kind in lobes:
+        label = "static keep-out lobe (NOHD surface)" if kind == "static" else "dynamic keep-out lobe (its near half cut away)"
+        add(lobe_paths(paths, lobes, target, kind), label, _points(blocks[f"lobe_{kind}_{target}"]), "surface")
+    for name in [k for k in blocks.keys() if k.startswith("mirror_")]:
+        add([paths["mirror"].get(name[len("mirror_"):])], "mirror beam to its NOHD or its backstop", _points(blocks[name]), "line")
+    if "aim" in blocks.keys():
+        add([paths["zone"]], "aim line to the danger zone's range", _points(blocks["aim"]), "line")
+    _observer_notes(result, paths, texts, add)
+    _footprint_notes(result, framing, paths, texts, add)
+    return notes
+
+
+def _observer_notes(result, paths, texts, add) -> None:
+    """Each hazardous observer: the worst by their numbered legend line, the rest by the
+    legend's count."""
+    bad = np.flatnonzero(np.asarray(result.hazardous, bool))
+    if not len(bad):
+        return
+    ratio = np.asarray(result.hazard_ratio, float)
+    bad = bad[np.argsort(-ratio[bad], kind="stable")]
+    pos = np.asarray(result.scene.observers.positions_m, float)
+    rows = paths["observers"]
+    for k, i in enumerate(bad[:LABELLED]):
+        add([rows.get(int(i))], f"{k + 1}: {result.observers.labels[i]} ({ratio[i]:.3g} x MPE)", pos[i], "points")
+    rest = bad[LABELLED:]
+    group = next((t for t in texts if t.startswith("observers at or above the MPE")), "observers at or above the MPE")
+    if len(rest):
+        kept = [int(i) for i in rest if rows.get(int(i))]
+        add([rows[i] for i in kept], group, pos[kept], "points")
+
+
+def _footprint_notes(result, framing, paths, texts, add) -> None:
+    """The hazardous ground nodes of each footprint drawn (the close view clips the
+    terrain to its box)."""
+    t = result.scene.terrain
+    ground = [x for x in texts if x.startswith("hazardous ground")]
+    if t is None or not ground:
+        return
+    for key, f in (("dynamic", result.footprint_dynamic), ("static", result.footprint_static)):
+        if f is None or not f.mask.any() or f"footprint.{key}" not in paths["footprint"]:
+            continue
+        iy, ix = np.nonzero(f.mask)
+        pts = np.stack([t.x0 + t.dx * ix, t.y0 + t.dx * iy, t.heights[iy, ix]], 1)
+        if not framing.compressed:
+            lo, hi = framing.bounds[:, 0], framing.bounds[:, 1]
+            pts = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+        if len(pts):
+            add([f"footprint.{key}"], ground[0], pts, "points")
+
+
 def _title_lines(result, framing, title) -> list:
     scene = result.scene
     lines = [title, f"MPE {result.mpe_w_m2:.4g} W/m^2; local origin at {np.round(scene.offset_m, 3).tolist()} m (world = local + origin)"]
     if framing.compressed:
         lines.append(f"distances beyond {framing.r0_m:.3g} m from the site are drawn on a log scale (r0 (1 + ln(r / r0))): "
-                     f"the rings give true distances; everything hazardous is in the picture, out to {framing.extent_m:.4g} m")
+                     f"the rings give true distances; every lobe, beam, observer and hazardous ground is in the picture, "
+                     f"out to {framing.extent_m:.4g} m")
+    elsewhere = not_drawn(result)
+    if elsewhere["paths"]:
+        lines.append(elsewhere["label"])
     return lines
+
+
+def not_drawn(result) -> dict:
+    """The report.json findings the 3-D pictures do not draw - the moving observers'
+    tracks (and their observer rows), the flight zones, the direct beam's FAA distances,
+    the danger zones through optics -, the line saying so and where they are drawn
+    (``see``: the plan and elevation views)."""
+    from .figure_index import faa_marks
+
+    paths = finding_paths(result)
+    tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
+    zones = (getattr(result, "airspace", None) or {}).get("zones") or []
+    faa = faa_marks(result)
+    rows = [p for r, p in sorted(paths["observers"].items()) if r >= len(result.observers)]
+    out = [f"tracks[{k}]" for k in range(len(tracks))] + rows + [f"airspace.zones[{k}]" for k in range(len(zones))]
+    out += [p for p, *_ in faa] + list(paths["aided"])
+    what = [f"{n} {one if n == 1 else many}" for n, one, many in (
+        (len(tracks), "moving observer's track", "moving observers' tracks"), (len(zones), "flight zone", "flight zones"),
+        (len(faa), "FAA distance", "FAA distances"), (len(paths["aided"]), "danger zone through optics", "danger zones through optics"))
+        if n]
+    label = f"not drawn here, see plan.png and elevation.png: {', '.join(what)}" if what else ""
+    return {"paths": out, "label": label, "see": ["plan.png", "elevation.png"]}
 
 
 def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900), vtk=True, force=False) -> dict:
@@ -457,14 +583,16 @@ def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900),
     hazardous ground, every observer), on a log-distance scale where true scale would
     shrink the lobes to dots -, plus ``outdir/keepout.vtm`` for ParaView (true
     coordinates). Each picture is the 3-D view with a title strip above and its legend
-    beside it (never cut; :func:`hazard.picture.compose`). Returns the paths written and,
-    under ``"layout"``, where the scene and the legend are in each picture [px]."""
+    beside it (never cut; :func:`hazard.picture.compose`). Returns the paths written,
+    under ``"layout"`` where the scene and the legend are in each picture [px], and under
+    ``"figures"`` the pictures' figures.json entries ({file name:
+    :func:`hazard.figure_index.view_entry`}: what each draws and whether the camera shows it)."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     png = out / "keepout.png"
     if png.exists() and not force:
         raise FileExistsError(f"{png} exists: pass --force to overwrite")
-    paths, layout = {}, {}
+    paths, layout, index = {}, {}, {}
     with terminal_bar(4 if vtk else 3, "renders", unit="step", leave=True) as bar:  # terminals only
         bar.set_postfix_str("lobe surfaces")
         blocks = _scene_blocks(result, lobe_resolution_deg)
@@ -474,8 +602,13 @@ def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900),
             bar.set_postfix_str(f"{name}.png")
             p, legend = _draw(result, blocks, frames[name], window_size)
             img = p.screenshot(None, return_img=True)
+            lines = _title_lines(result, frames[name], title)
+            shown = set(lines) | {e[0] for e in legend} | set(p.__dict__.get("_hazard_tags", []))
+            index[f"{name}.png"] = view_entry("3d", _panel(result, frames[name], title), _notes(result, blocks, frames[name], legend),
+                                              _world_to_clip(p, window_size), shown)
+            index[f"{name}.png"]["not_drawn"] = not_drawn(result)
             p.close()
-            picture, layout[name] = compose(img, legend, _title_lines(result, frames[name], title))
+            picture, layout[name] = compose(img, legend, lines)
             paths[name] = write_png(picture, out / f"{name}.png")
             bar.update()
         if vtk:
@@ -486,11 +619,33 @@ def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900),
             bar.update()
     paths["png"] = paths["keepout"]
     paths["layout"] = layout
+    paths["figures"] = index
     return paths
 
 
+def _animation_notes(result, dyn, env, lobe_resolution_deg) -> tuple:
+    """The animation's caption naming every lobe it draws, and its figures.json notes
+    (the dynamic lobes' envelopes over the history, the other targets' static lobes)."""
+    paths, off = finding_paths(result), np.asarray(result.scene.offset_m, float)
+    dynamic = {sp.target.name for sp in dyn}
+    lobes = [(sp.target.name, "dynamic" if sp.target.name in dynamic else "static") for sp in result.spots]
+    groups = [(k, ", ".join(t for t, kk in lobes if kk == k)) for k in ("dynamic", "static")]
+    caption = "keep-out lobes, colour NOHD [m]: " + "; ".join(
+        f"{k}{' (the first frame: static)' if k == 'dynamic' else ''} {names}" for k, names in groups if names)
+    notes = []
+    for sp, (target, kind) in zip(result.spots, lobes):
+        grid = env[[s.target.name for s in dyn].index(target)] if kind == "dynamic" else \
+            lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, None, lobe_resolution_deg)
+        pts = _points(grid)
+        own = lobe_paths(paths, lobes, target, kind) + (lobe_paths(paths, [], target, "static")[:1] if kind == "dynamic" else [])
+        notes.append((own, caption, pts, "surface", pts + off))
+    return caption, notes
+
+
 def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, window_size=(800, 600)) -> dict:
-    """The dynamic lobe over the history: a GIF if imageio is installed, else PNG frames."""
+    """The dynamic lobe over the history: a GIF if imageio is installed (and its
+    figures.json entry under ``"figures"``, :func:`hazard.figure_index.view_entry`),
+    else PNG frames."""
     out = Path(outdir)
     frames_dir = out / "frames"
     frames_dir.mkdir(parents=True, exist_ok=True)
@@ -501,6 +656,7 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
     # fixed camera: fit the envelope of all frames
     env = [lobe_grid(sp, result.mpe_w_m2, result.attenuation_per_m, _time_ordered_states(result, sp), lobe_resolution_deg) for sp in dyn]
     bounds = pv.MultiBlock(env).bounds
+    caption, notes = _animation_notes(result, dyn, env, lobe_resolution_deg)
     paths = []
     with terminal_bar(len(idx), "lobe animation frames", unit="frame", leave=True) as bar:  # terminals only
         for n, i in enumerate(idx):
@@ -513,11 +669,13 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
                 p.add_mesh(g, scalars="nohd_m", cmap="viridis", clim=[0, max(e["nohd_m"].max() for e in env)],
                            scalar_bar_args={"title": "NOHD [m]", "color": "black"})
             p.add_text(f"t = {result.times_s[i]:.3g} s", font_size=12, color="black")
+            p.add_text(caption, position="upper_right", font_size=9, color="black")
             p.show_bounds(bounds=bounds, color="black", font_size=8)
             p.camera_position = "iso"
             p.reset_camera(bounds=bounds)
             f = frames_dir / f"frame_{n:03d}.png"
             p.screenshot(str(f))
+            clip = _world_to_clip(p, window_size)
             p.close()
             paths.append(f)
             bar.update()
@@ -526,6 +684,10 @@ def animate_lobe(result, outdir, *, max_frames=30, lobe_resolution_deg=4.0, wind
         import imageio.v2 as imageio
     except ImportError:
         return result_paths
+    title = f"{result.scene.name}: the dynamic keep-out lobe over the history"
+    box = np.reshape(bounds, (3, 2))
+    panel = _panel(result, Framing(box, box.mean(axis=1)), title, box)
+    result_paths["figures"] = {"lobe.gif": view_entry("animation", panel, notes, clip, {caption})}
     gif = out / "lobe.gif"
     from brdfmodels.fileio import atomic_write
 

@@ -9,7 +9,7 @@ rows' from the columns of :func:`hazard.report.observer_columns` (the ``motion_*
 
 Typed blocks forbid unknown keys (a misspelled or unannounced key fails validation) and
 give every value its JSON type; numbers may also be the strings ``"inf"``, ``"-inf"``,
-``"nan"`` (:func:`hazard.report._json_safe`: JSON has no such numbers and an infinite
+``"nan"`` (:func:`hazard.report.json_safe`: JSON has no such numbers and an infinite
 NOHD must not vanish). The blocks written by the MPE, SDZ, spill, verdict, motion and map
 modules (``mpe``, ``pulse``, ``sdz``, ``beam.spill``, ``verdict``, ``motion``, ...) are
 objects whose inner keys are not yet typed here.
