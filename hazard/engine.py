@@ -32,6 +32,7 @@ import numpy as np
 
 from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
+from .beam import HALF_WIDTH
 from .near_field import near_field_irradiance, patches_from_leaves, patches_from_pieces
 from .rays import own_object
 
@@ -250,16 +251,16 @@ class OutlineCells:
     moments: object
 
 
-def outline_cells(outline_s, n0) -> OutlineCells:
+def outline_cells(outline_s, n0, half_width=HALF_WIDTH) -> OutlineCells:
     """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
-    beam square); pieces carrying no power are dropped."""
-    from .beam import HALF_WIDTH, clip_to_box, inside_convex, polygon_moments
+    beam square of half-width ``half_width`` 1/e radii); pieces carrying no power are dropped."""
+    from .beam import clip_to_box, inside_convex, polygon_moments
 
-    d = 2 * HALF_WIDTH / n0
-    lo = np.clip(np.floor((outline_s.min(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
-    hi = np.clip(np.floor((outline_s.max(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
+    d = 2 * half_width / n0
+    lo = np.clip(np.floor((outline_s.min(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
+    hi = np.clip(np.floor((outline_s.max(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
     ii, jj = (g.ravel() for g in np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"))
-    s0, t0 = -HALF_WIDTH + ii * d, -HALF_WIDTH + jj * d
+    s0, t0 = -half_width + ii * d, -half_width + jj * d
     corners = np.stack([np.stack([s0 + a * d, t0 + b * d], axis=1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)
     full = inside_convex(corners.reshape(-1, 2), outline_s).reshape(-1, 4).all(axis=1)
     pieces = [corners[k] if full[k] else clip_to_box(outline_s, s0[k], s0[k] + d, t0[k], t0[k] + d) for k in range(len(s0))]
@@ -338,7 +339,7 @@ class ExactSamples:
     fraction: np.ndarray | None = None  # the pieces' exact beam power fractions
 
 
-def _hole_cells(outline, fronts, n0):
+def _hole_cells(outline, fronts, n0, half_width):
     """The parts of a flat target's outline hidden by exact targets in front of it, cut by
     the coarsest cells, and the power fraction by which the smallest hole (inscribed
     polygons) may fall short of the largest (circumscribed) one."""
@@ -348,7 +349,7 @@ def _hole_cells(outline, fronts, n0):
     for front in fronts:
         small = clip_convex(outline[1], front[1])
         if len(small):
-            holes.append(outline_cells(small, n0))
+            holes.append(outline_cells(small, n0, half_width))
             polys.append(small)
         if outline[0] is not outline[1] or front[0] is not front[1]:  # disks: the largest hole may be larger
             big = clip_convex(outline[0], front[0])
@@ -366,10 +367,10 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     is spread over the pieces."""
     from .beam import polygon_moments
 
-    oc = outline_cells(outline[0], n0)
+    oc = outline_cells(outline[0], n0, beam.half_width)
     if not oc.pieces:
         return None
-    holes, hole_polys, slack = _hole_cells(outline, list(fronts.values()) if fronts else [], n0)
+    holes, hole_polys, slack = _hole_cells(outline, list(fronts.values()) if fronts else [], n0, beam.half_width)
     m = _subtract_holes(oc, holes, hole_polys) if holes else oc.moments
     lit = np.flatnonzero((m.fraction > 0) & np.isfinite(m.r2_min))
     if not len(lit):

@@ -189,8 +189,7 @@ def _tail_facets(spot, faces, normals, d) -> np.ndarray:
     the cells say they are not hit) and within ``sqrt(_TAIL_EXPONENT)`` of the axis (deeper
     the engine's value is 0). A box's side face next to a front face whose edge lies beyond
     4 w got 0 before (issue 29). Facets whose outline is unknown: all facing ones."""
-    from .beam import HALF_WIDTH
-
+    half = spot.beam.half_width
     cand = np.flatnonzero((normals @ d) < 0)
     out = np.zeros(len(faces), bool)
     if not len(cand):
@@ -201,7 +200,7 @@ def _tail_facets(spot, faces, normals, d) -> np.ndarray:
         return out
     bad = ~np.all(np.isfinite(tri), axis=(1, 2))
     t = np.nan_to_num(tri)
-    inside = np.all(np.abs(t) < HALF_WIDTH, axis=(1, 2))
+    inside = np.all(np.abs(t) < half, axis=(1, 2))
     e = np.roll(t, -1, axis=1) - t
     area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
     cross = e[..., 0] * (-t[..., 1]) - e[..., 1] * (-t[..., 0])  # the origin against each edge
@@ -308,14 +307,12 @@ def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
     there). Without the facet's triangles the facet's plane counts as unbounded. Disks
     deeper than ``exp(-_TAIL_EXPONENT)`` (where the engine's value underflows to 0 anyway)
     are not tested."""
-    from .beam import HALF_WIDTH
-
     r = np.zeros(len(s)) if reach_s is None else np.asarray(reach_s, float)
     finite = np.all(np.isfinite(s), axis=1)
     s0 = np.nan_to_num(s)
     gap = np.maximum(np.sqrt((s0 * s0).sum(axis=1)) - r, 0.0)  # the disk's nearest approach to the axis
     # deeper than exp(-_TAIL_EXPONENT) the engine's own value is 0: nothing to light
-    beyond = np.flatnonzero(finite & (np.abs(s0).max(axis=1) + r >= HALF_WIDTH) & (gap * gap <= _TAIL_EXPONENT))
+    beyond = np.flatnonzero(finite & (np.abs(s0).max(axis=1) + r >= spot.beam.half_width) & (gap * gap <= _TAIL_EXPONENT))
     out = np.zeros(len(s), bool)
     if not len(beyond):
         return out
@@ -532,10 +529,8 @@ def _lit_or_tail(spot, s):
     it, which is not known there, so it is taken as lit (conservative). Before, those
     points were dark and an eye beyond the 4 w edge of a cylinder's fan or a sphere's
     cone got 0 (issue 29)."""
-    from .beam import HALF_WIDTH
-
     finite = np.all(np.isfinite(s), axis=1)
-    tail = finite & np.any(np.abs(np.nan_to_num(s)) >= HALF_WIDTH, axis=1)
+    tail = finite & np.any(np.abs(np.nan_to_num(s)) >= spot.beam.half_width, axis=1)
     return tail | _lit(spot, np.nan_to_num(s, nan=1e9))
 
 

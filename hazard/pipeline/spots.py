@@ -7,16 +7,20 @@ powers, adaptive refinement with an error bound) and turned into spots by
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..beam import HALF_WIDTH, BeamGeometry, sample_cells
+from ..beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
 from ..engine import build_spots, flat_outlines
+from ..nohd import optical_gain
 from ..results import TargetResult
+from .limits import exposure_limits
+from .lobes import scene_aids
 
-__all__ = ["BeamStage", "ray_scene", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
+__all__ = ["BeamStage", "TailSquare", "ray_scene", "sampled_square", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
 
 
 class FlatScene:
@@ -86,6 +90,7 @@ class BeamStage:
     notes: list
     detail: str
     outlines: dict  # flat targets' projected outlines: index -> (upper, lower) polygons in s
+    square: object = None  # the sampled square (:class:`TailSquare`)
 
 
 def scene_beam(scene, direction=None) -> BeamGeometry:
@@ -109,13 +114,55 @@ def mirror_aperture_m(spec) -> float:
     return aperture if aperture >= 7e-3 else 1e-3
 
 
+@dataclass
+class TailSquare:
+    """The sampled beam square chosen for a scene (:func:`sampled_square`): half-width
+    ``half_width`` [1/e radii] (a whole number of the base grid's cells beyond 4), cells per
+    side ``n0``, the limit it was sized for [W/m^2] and the bounds on what it leaves out
+    (:func:`hazard.beam.tail_bounds_w_m2`) [W/m^2]."""
+
+    half_width: float
+    n0: int
+    limit_w_m2: float
+    peak_bound_w_m2: float
+    power_bound_w_m2: float
+
+    def detail(self) -> str:
+        worst = max(self.peak_bound_w_m2, self.power_bound_w_m2)
+        return (f"beam sampled over +-{self.half_width:.4g} w ({self.n0} x {self.n0} coarsest cells); what lies outside gives at most "
+                f"{worst:.3g} W/m^2 after one reflection ({worst / self.limit_w_m2:.3g} of the smallest limit, "
+                f"{self.limit_w_m2:.4g} W/m^2)")
+
+
+def sampled_square(scene, beam, n0_base: int) -> TailSquare:
+    """The beam square for a scene: half-width ``L >= 4`` 1/e radii such that the beam
+    outside it, after any one reflection (reflectance 1), stays below ``TAIL_MARGIN`` of the
+    smallest limit any observer is held to (the MPE over the largest optical-aid gain;
+    :func:`hazard.beam.tail_half_width`), rounded up to whole cells of the base grid
+    (``n0_base`` cells over +-4 w), so the cells inside +-4 w are the base grid's."""
+    spec = scene.spec
+    gain = max([1.0] + [optical_gain(a.magnification, a.objective_diameter_m, a.transmission) for a in scene_aids(scene)])
+    limit = exposure_limits(spec).irradiance_w_m2 / gain
+    aperture_m = mirror_aperture_m(spec)
+    want = max(beam.half_width, tail_half_width(beam.power_w, beam.diameter_m, beam.divergence_rad, limit, aperture_m))
+    step = 2 * HALF_WIDTH / n0_base
+    extra = max(0, math.ceil((want - HALF_WIDTH) / step - 1e-9))
+    half = HALF_WIDTH + extra * step
+    peak, power = tail_bounds_w_m2(half, beam.power_w, beam.diameter_m, beam.divergence_rad, aperture_m)
+    if max(peak, power) > TAIL_MARGIN * limit and half < want:  # not reachable: the rounding only widens
+        raise AssertionError("sampled_square: rounding narrowed the square")
+    return TailSquare(half, n0_base + 2 * extra, limit, peak, power)
+
+
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     """Sample the beam (default: :func:`scene_beam`) against every object and build the
-    targets' spots."""
+    targets' spots. The sampled square is sized per beam (:func:`sampled_square`)."""
     spec, laser = scene.spec, scene.spec.laser
     beam = scene_beam(scene) if beam is None else beam
+    square = sampled_square(scene, beam, _level0_cells(spec.analysis.beam_samples))
+    beam = dataclasses.replace(beam, half_width=square.half_width)
     outlines = flat_outlines(beam, scene.targets)
-    cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
+    cells = sample_cells(beam, tracer, scene.targets, n0=square.n0, rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
     built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
     aperture_m = mirror_aperture_m(spec)
@@ -128,8 +175,10 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
         notes.append(f"{100 * built.blocked_w / laser.average_power_w:.3g} % of the beam is stopped by an occluder or the terrain "
                      f"(before a target or past them; see the spill)")
     notes.extend(_unreflected_notes(built.unreflected))
-    return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w),
-                     {k: v[0] for k, v in outlines.items()})
+    if max(square.peak_bound_w_m2, square.power_bound_w_m2) > TAIL_NOTE_FRACTION * square.limit_w_m2:
+        notes.append(f"the beam is sampled over its widest square, {square.detail()}: reflections of the beam beyond it are NOT computed")
+    return BeamStage(beam, cells, built, notes, square.detail() + "; " + _beam_detail(cells, built, laser.average_power_w),
+                     {k: v[0] for k, v in outlines.items()}, square)
 
 
 def _curved_mesh_notes(spots, aperture_m) -> list:
