@@ -327,7 +327,7 @@ def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
                           [], rows, _observers(scene, out, direct_beam),
                           built.spill_w, built.blocked_w, traced.beam.power_w,
                           None if fps is None else fps.static, None if fps is None else fps.dynamic, notes, built.spots,
-                          traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
+                          traced.beam, states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol, traced.square),
                           spill=spill_part, sdz=zone, motion=moving)
     _airspace(result, log, (traced, tracer, ray_scene))
     result.stages = log.stages()

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
+from ..beam import HALF_WIDTH, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
 from ..engine import build_spots, flat_outlines
 from ..nohd import optical_gain
 from ..results import TargetResult
@@ -149,8 +149,6 @@ def sampled_square(scene, beam, n0_base: int) -> TailSquare:
     extra = max(0, math.ceil((want - HALF_WIDTH) / step - 1e-9))
     half = HALF_WIDTH + extra * step
     peak, power = tail_bounds_w_m2(half, beam.power_w, beam.diameter_m, beam.divergence_rad, aperture_m)
-    if max(peak, power) > TAIL_MARGIN * limit and half < want:  # not reachable: the rounding only widens
-        raise AssertionError("sampled_square: rounding narrowed the square")
     return TailSquare(half, n0_base + 2 * extra, limit, peak, power)
 
 
@@ -211,12 +209,19 @@ def _beam_detail(cells, built, power_w) -> str:
             f"{built.error_w:.3g} W ({built.error_w / power_w:.2g} of the beam, added to the spots){exact}")
 
 
-def beam_sampling(cells, built, rtol) -> dict:
+def beam_sampling(cells, built, rtol, square=None) -> dict:
     """The beam stage's accuracy for the report: rays, levels, the bound on the power
-    misassigned between objects [W] and which targets got exact outline integrals."""
-    return {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
-            "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
-            "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected]}
+    misassigned between objects [W], which targets got exact outline integrals, and the
+    sampled square (:class:`TailSquare`): its half-width [1/e radii] and the bounds [W/m^2]
+    on what it leaves out (point after a flat or diffuse reflection; limiting aperture)."""
+    out = {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
+           "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
+           "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected],
+           "half_width_w": float(cells.half_width)}
+    if square is not None:
+        out.update(tail_point_bound_w_m2=float(square.peak_bound_w_m2), tail_aperture_bound_w_m2=float(square.power_bound_w_m2),
+                   tail_limit_w_m2=float(square.limit_w_m2))
+    return out
 
 
 def unlit_targets(targets, spots, unreflected) -> list:
@@ -242,10 +247,11 @@ TAIL_EDGE_POINTS = 65  # points per mesh edge where its distance from the beam's
 
 
 def tail_notes(scene, beam, spots, mpe_w_m2: float, mu: float) -> list[str]:
-    """A note for every target the sampled beam (+-``HALF_WIDTH`` 1/e radii) does not light
-    but whose nearest edge lies where the beam's Gaussian tail still reaches
-    ``TAIL_NOTE_FRACTION`` of the MPE: its reflection of that tail is NOT computed (a
-    mirror there reflects up to the tail's irradiance), so it is said, never dropped.
+    """A note for every target the sampled beam (+-``beam.half_width`` 1/e radii, sized by
+    :func:`sampled_square` so that this happens only where the square reached its largest,
+    ``MAX_HALF_WIDTH``) does not light but whose nearest edge lies where the beam's Gaussian
+    tail still reaches ``TAIL_NOTE_FRACTION`` of the MPE: its reflection of that tail is NOT
+    computed (a mirror there reflects up to the tail's irradiance), so it is said, never dropped.
 
     The nearest approach is taken over the mesh's edges (:func:`_nearest_in_beam`; a face
     the axis pierces is lit by the sampled beam). The tail's irradiance there:
@@ -257,12 +263,12 @@ def tail_notes(scene, beam, spots, mpe_w_m2: float, mu: float) -> list[str]:
         if t.index in lit or t is terrain:
             continue
         s_min, z = _nearest_in_beam(beam, t.mesh)
-        if s_min is None or s_min <= HALF_WIDTH:
+        if s_min is None or s_min <= beam.half_width:
             continue  # behind the laser, or inside the sampled square (the beam stage says why it is unlit)
         w = float(beam.diameter_at(z)) / 2
         e = beam.power_w / (math.pi * w * w) * math.exp(-s_min * s_min - mu * z)
         if e >= TAIL_NOTE_FRACTION * mpe_w_m2:
-            out.append(f"target {t.name!r} lies outside the sampled beam (+-{HALF_WIDTH:g} w), {s_min:.3g} w from its axis, "
+            out.append(f"target {t.name!r} lies outside the sampled beam (+-{beam.half_width:.4g} w), {s_min:.3g} w from its axis, "
                        f"where the beam's Gaussian tail still gives up to {e:.3g} W/m^2 ({e / mpe_w_m2:.3g} x MPE): "
                        f"its reflection of that tail is NOT computed")
     return out
