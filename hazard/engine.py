@@ -26,7 +26,7 @@ Physics (spec `dynamic-sh-brdf.md` section 3, `laser-safety.md` section 3.1,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -213,6 +213,7 @@ class SpotBuild:
     unreflected: list  # (target name, side, power [W]) lit but not reflected (back face without material)
     exact: list  # target names whose power is the exact outline integral
     error_w: float  # bound on the power misassigned between objects (unresolved cells + truncation)
+    negligible: list = field(default_factory=list)  # (target name, leaves, power [W], floor [W/m^2]) left out (:func:`_negligible_tail`)
 
 
 def flat_outlines(beam, targets) -> dict:
@@ -566,9 +567,33 @@ def _exact_spot(beam, cells, target, ex, tracer, outline_s, out):
     out.spots.append(_spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_s))
 
 
-def _sampled_spot(beam, cells, target, tracer, mu, out):
+def _negligible_tail(beam, cells, target, rows, tracer, floor_w_m2) -> np.ndarray:
+    """Leaves (``rows``) outside the +-``HALF_WIDTH`` core of the beam square whose incident
+    irradiance is below ``floor_w_m2`` everywhere on their footprint: the bound
+    ``P / (pi w^2) exp(-min |s|^2) sqrt(1 + |s|max^2 phi^2 / 4)`` with w at the footprint's
+    nearest axial distance (:func:`_leaf_near_axial`; unattenuated). A flat facet or a
+    diffuse surface reflects at most that (reflectance <= 1) to any eye."""
+    s0, s1, t0, t1 = cells.bounds(rows)
+    core = (s0 >= -HALF_WIDTH) & (s1 <= HALF_WIDTH) & (t0 >= -HALF_WIDTH) & (t1 <= HALF_WIDTH)
+    if np.all(core):
+        return np.zeros(len(rows), bool)
+    pts, dirs = cells.point[rows], cells.direction[rows]
+    normals = _hit_normals(target, pts, cells.faces[rows, 0], tracer)
+    _, z = beam.to_s(pts)
+    near = _leaf_near_axial(beam, cells, rows, z, beam.diameter_at(z) / 2, dirs, normals)
+    w = beam.diameter_at(near) / 2
+    s_max2 = np.maximum(s0 * s0, s1 * s1) + np.maximum(t0 * t0, t1 * t1)
+    bound = beam.power_w / (math.pi * w * w) * cells.max_profile(rows) * np.sqrt(1 + s_max2 * (beam.divergence_rad / 2) ** 2)
+    return ~core & (bound < floor_w_m2)
+
+
+def _sampled_spot(beam, cells, target, tracer, mu, out, floor_w_m2=None):
     """A target's spot from the leaves whose centre ray hits it; its total raised by the
-    power of the mixed leaves touching it and the truncated tail (conservative)."""
+    power of the mixed leaves touching it and the truncated tail (conservative). With
+    ``floor_w_m2`` (the terrain), the leaves beyond the +-4 w core whose incident
+    irradiance stays below it (:func:`_negligible_tail`) are left out of the spot's samples
+    (their power stays in its total; ``out.negligible`` says how many): a grazing beam's
+    tail stretches a terrain spot far along the ground for nothing."""
     k = target.index
     rows = np.flatnonzero(cells.labels[:, 0] == k)
     touch = np.flatnonzero(cells.mixed & np.any(cells.labels == k, axis=1))
@@ -597,11 +622,19 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     if other > 0:
         out.unreflected.append((target.name, "back" if side == "front" else "front", other))
     use = rows[back] if side == "back" else rows[~back]
+    lit = use
+    if floor_w_m2 is not None and material is not None and len(use):
+        drop = _negligible_tail(beam, cells, target, use, tracer, floor_w_m2)
+        if np.any(drop) and not np.all(drop):
+            dropped = float(cells.power_w[use[drop]].sum())
+            out.negligible.append((target.name, int(drop.sum()), dropped * scale, float(floor_w_m2)))
+            scale *= float(cells.power_w[use].sum()) / float(cells.power_w[use[~drop]].sum())  # the spot keeps its total
+            use = use[~drop]
     if material is None:
         out.unreflected.append((target.name, side, float(cells.power_w[use].sum() * scale)))
     else:
         sp = _spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False)
-        sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([use, touch]), mu)
+        sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([lit, touch]), mu)
         out.spots.append(sp)
     return whole + err
 
@@ -681,7 +714,7 @@ def _entry_distance(analytic, o, u) -> np.ndarray:
     return np.where(meet, np.maximum(lo + shift, 0.0), np.inf)
 
 
-def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) -> SpotBuild:
+def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None, ground_floor_w_m2=None) -> SpotBuild:
     """Spots from the beam's leaf cells: one per lit target (the side that most power
     reaches; a back face reflects with the target's ``back`` material or not at all),
     and one on ``ground`` (the terrain as a target, :attr:`scenes.Scene.terrain_target`)
@@ -710,7 +743,7 @@ def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) ->
             continue
         _exact_spot(beam, cells, target, ex, tracer, None if fronts else outlines[k][0], out)
     if ground is not None:
-        _sampled_spot(beam, cells, ground, tracer, mu, out)
+        _sampled_spot(beam, cells, ground, tracer, mu, out, ground_floor_w_m2)
     out.blocked_w = float(cells.power_w[cells.labels[:, 0] >= len(targets)].sum())
     out.spill_w = max(beam.power_w - totals - out.blocked_w, 0.0)  # the rest (exact where the targets' totals are)
     return out

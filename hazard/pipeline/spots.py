@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..beam import HALF_WIDTH, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
+from ..beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
 from ..engine import build_spots, flat_outlines
 from ..nohd import optical_gain
 from ..results import TargetResult
@@ -162,7 +162,7 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     outlines = flat_outlines(beam, scene.targets)
     cells = sample_cells(beam, tracer, scene.targets, n0=square.n0, rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
-    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
+    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target, TAIL_MARGIN * square.limit_w_m2)
     aperture_m = mirror_aperture_m(spec)
     for sp in built.spots:
         sp.aperture_m = aperture_m
@@ -201,6 +201,9 @@ def _level0_cells(beam_samples: int) -> int:
 
 def _beam_detail(cells, built, power_w) -> str:
     exact = f"; exact outline integrals for {', '.join(built.exact)}" if built.exact else ""
+    for name, n, p, floor in built.negligible:
+        exact += (f"; {n} tail cell(s) on {name!r} beyond +-{HALF_WIDTH:g} w left out of its spot's samples (incident below "
+                  f"{floor:.3g} W/m^2 there; their {p:.3g} W kept in its total)")
     if built.unreflected:
         exact += "; not reflected: " + ", ".join(f"{n} ({s} face, {p:.4g} W)" if s != "unresolved" else f"{n} (unresolved cells, {p:.4g} W)"
                                                  for n, s, p in built.unreflected)
