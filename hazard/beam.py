@@ -18,7 +18,9 @@ image in ``s``, density ``exp(-|s|^2) / pi``.
   A plate's outline projects to a polygon (central projection maps lines to lines); a
   disk's to an ellipse, bounded above and below by circumscribed and inscribed polygons.
 * Meshes, curved shapes, occluders and terrain are sampled by rays, one per cell of a
-  quadtree over ``s in [-L, L]^2`` (``L = 4``: the square holds all but ``1 - erf(4)^2 =
+  quadtree over ``s in [-L, L]^2`` (``L = beam.half_width >= 4``, sized per beam by
+  :func:`tail_half_width` so that the beam outside it, after one reflection, stays below
+  1 % of the smallest limit; at ``L = 4`` the square holds all but ``1 - erf(4)^2 =
   3.1e-8`` of the power), each cell carrying its exact power. A cell whose centre and four
   corners do not hit the same object is split in four, level by level, until the power
   in such mixed cells is below ``rtol`` of the beam; cells containing a target's projected

@@ -12,7 +12,8 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   length, so a mirror smaller than the beam keeps the full beam's local peak near the
   mirror and its lateral extent is cut by the mirror's outline. No diffraction credit
   (the Fraunhofer spread of a small mirror would lower far irradiance: not taken).
-  Beyond the beam's sampled square (+-4 w), where no cell says what the rays hit, the
+  Beyond the beam's sampled square (+-L w, ``beam.half_width``: at least 4, sized so that
+  the tail there is below 1 % of the limit), where no cell says what the rays hit, the
   Gaussian's tail lights a box's or mesh's facet within its own outline, unshadowed
   (conservative), facets no cell reached included (:func:`_tail_lit`,
   :func:`_tail_facets`; plates and disks have their exact outline).
@@ -297,9 +298,9 @@ def _near_triangles(p, tri, r) -> np.ndarray:
 
 def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
     """Images (transverse s (N, 2), units of w; NaN: none) of eyes lit through a flat
-    facet by the Gaussian's tail beyond the sampled square (``|s_i| >= HALF_WIDTH``),
-    where no cell says what the rays hit (issue 29): there the tail (below exp(-16) =
-    1.1e-7 of the peak, still above the MPE for a beam of tens of kilowatts) is taken to
+    facet by the Gaussian's tail beyond the sampled square (``|s_i| >= beam.half_width``),
+    where no cell says what the rays hit (issue 29): there the tail (below exp(-L^2) of the
+    peak, sized to 1 % of the limit; it was exp(-16) at the old fixed L = 4) is taken to
     reach the facet unshadowed (conservative, as :func:`_lit_or_tail` for curved sides),
     within the facet's own outline (its triangles projected into s). With ``reach_s``
     (an aperture of that radius about s): lit when the disk reaches beyond the square and
@@ -523,9 +524,9 @@ def _curved_source(spot, p, n, d, ok):
 
 def _lit_or_tail(spot, s):
     """Points (beam coordinates s, (N, 2)) of a curved side lit by the beam: a lit cell
-    (:func:`_lit`), or beyond the sampled square (``|s_i| >= HALF_WIDTH``, where no cell
-    says what the ray hits): there the Gaussian's tail (below ``exp(-16)`` = 1.1e-7 of the
-    peak, a hazard for a beam of kilowatts) reaches the surface unless something shadows
+    (:func:`_lit`), or beyond the sampled square (``|s_i| >= beam.half_width``, where no
+    cell says what the ray hits): there the Gaussian's tail (below ``exp(-L^2)`` of the
+    peak; a focusing side may gather it) reaches the surface unless something shadows
     it, which is not known there, so it is taken as lit (conservative). Before, those
     points were dark and an eye beyond the 4 w edge of a cylinder's fan or a sphere's
     cone got 0 (issue 29)."""
