@@ -17,6 +17,8 @@ from ..beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bou
 from ..engine import build_spots, flat_outlines
 from ..nohd import optical_gain
 from ..results import TargetResult
+from ..visual import applies as visual_applies
+from ..visual import level_limit_w_m2, visual_correction_factor
 from .limits import exposure_limits
 from .lobes import scene_aids
 
@@ -137,12 +139,13 @@ class TailSquare:
 def sampled_square(scene, beam, n0_base: int) -> TailSquare:
     """The beam square for a scene: half-width ``L >= 4`` 1/e radii such that the beam
     outside it, after any one reflection (reflectance 1), stays below ``TAIL_MARGIN`` of the
-    smallest limit any observer is held to (the MPE over the largest optical-aid gain;
+    smallest limit any observer is held to (the MPE over the largest optical-aid gain, and
+    the flight zones' levels (:func:`_zone_limits_w_m2`);
     :func:`hazard.beam.tail_half_width`), rounded up to whole cells of the base grid
     (``n0_base`` cells over +-4 w), so the cells inside +-4 w are the base grid's."""
     spec = scene.spec
     gain = max([1.0] + [optical_gain(a.magnification, a.objective_diameter_m, a.transmission) for a in scene_aids(scene)])
-    limit = exposure_limits(spec).irradiance_w_m2 / gain
+    limit = min([exposure_limits(spec).irradiance_w_m2 / gain] + _zone_limits_w_m2(spec))
     aperture_m = mirror_aperture_m(spec)
     want = max(beam.half_width, tail_half_width(beam.power_w, beam.diameter_m, beam.divergence_rad, limit, aperture_m))
     step = 2 * HALF_WIDTH / n0_base
@@ -150,6 +153,18 @@ def sampled_square(scene, beam, n0_base: int) -> TailSquare:
     half = HALF_WIDTH + extra * step
     peak, power = tail_bounds_w_m2(half, beam.power_w, beam.diameter_m, beam.divergence_rad, aperture_m)
     return TailSquare(half, n0_base + 2 * extra, limit, peak, power)
+
+
+def _zone_limits_w_m2(spec) -> list:
+    """The irradiances [W/m^2] at which the scene's flight zones reach their levels
+    (:func:`hazard.visual.level_limit_w_m2`: the FAA levels over the VCF, or the MPE)."""
+    air = spec.airspace
+    if air is None or not air.zones:
+        return []
+    wl = spec.laser.wavelength_nm
+    vcf = visual_correction_factor(wl, air.visual_correction) if visual_applies(wl) else 0.0
+    mpe = exposure_limits(spec).irradiance_w_m2
+    return [e for e in (level_limit_w_m2(z.limit, mpe, vcf) for z in air.zones) if math.isfinite(e)]
 
 
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
