@@ -107,7 +107,7 @@ def hazard_result(r, stages=()) -> HazardResult:
         observers=observers if ext is None else replace(observers, **ext.observer_fields()),
         spill_w=built.spill_w, blocked_w=built.blocked_w, beam_power_w=traced.beam.power_w,
         footprint_static=fp.static, footprint_dynamic=fp.dynamic, notes=notes, spots=built.spots, beam=traced.beam,
-        states=hist.states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol),
+        states=hist.states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol, traced.square),
         spill=r["spill"].summary, sdz=r["sdz"].zone if beams is None else {**r["sdz"].zone, "mirror_beams": beams},
         motion=r["motion"].motion,
         extended_source={} if ext is None else ext.summary,

@@ -18,7 +18,9 @@ image in ``s``, density ``exp(-|s|^2) / pi``.
   A plate's outline projects to a polygon (central projection maps lines to lines); a
   disk's to an ellipse, bounded above and below by circumscribed and inscribed polygons.
 * Meshes, curved shapes, occluders and terrain are sampled by rays, one per cell of a
-  quadtree over ``s in [-L, L]^2`` (``L = 4``: the square holds all but ``1 - erf(4)^2 =
+  quadtree over ``s in [-L, L]^2`` (``L = beam.half_width >= 4``, sized per beam by
+  :func:`tail_half_width` so that the beam outside it, after one reflection, stays below
+  1 % of the smallest limit; at ``L = 4`` the square holds all but ``1 - erf(4)^2 =
   3.1e-8`` of the power), each cell carrying its exact power. A cell whose centre and four
   corners do not hit the same object is split in four, level by level, until the power
   in such mixed cells is below ``rtol`` of the beam; cells containing a target's projected
@@ -33,9 +35,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["BeamGeometry", "CellSampling", "PolygonMoments", "clip_to_box", "polygon_fraction", "polygon_moments", "r2_min_outside", "rectangle_fraction", "sample_cells", "HALF_WIDTH"]
+__all__ = ["BeamGeometry", "CellSampling", "PolygonMoments", "clip_to_box", "polygon_fraction", "polygon_moments", "r2_min_outside", "rectangle_fraction", "sample_cells", "tail_half_width", "tail_bounds_w_m2", "HALF_WIDTH",
+           "TAIL_MARGIN"]
 
 HALF_WIDTH = 4.0  # beam square half-width in units of the 1/e radius (outside: 3.1e-8 of the power)
+TAIL_MARGIN = 0.01  # the beam left outside the sampled square stays below this fraction of the smallest limit
+MAX_HALF_WIDTH = 8.0  # the largest square (exp(-64) = 1.6e-28 of the peak); where even that is not enough, it is said
 MAX_LEVEL = 14  # finest cells: 2 L / n0 / 2^14 (about 1e-5 of the 1/e radius for n0 = 16)
 
 
@@ -43,6 +48,85 @@ def _erf(x):
     from scipy.special import erf
 
     return erf(x)
+
+
+def _erfc(x):
+    from scipy.special import erfc
+
+    return erfc(x)
+
+
+def tail_bounds_w_m2(half_width, power_w, diameter_m, divergence_rad, aperture_m, reflectance=1.0) -> tuple[float, float]:
+    """Upper bounds [W/m^2] on what the beam outside the square ``|s_1|, |s_2| < L``
+    (``L = half_width`` 1/e radii) can deliver to an eye after one reflection.
+
+    * ``peak``: the point irradiance after a flat or diffuse reflection (no focusing),
+      ``rho P / (pi (a/2)^2) exp(-L^2) sqrt(1 + L^2 phi^2 / 4)``: outside the square
+      ``|s| >= L``; the incident irradiance (:meth:`BeamGeometry.irradiance_w_m2`) is
+      largest at the aperture (``w = a/2``) and, for ``phi < 2.8`` rad, falls with ``|s|``;
+      a flat mirror's beam keeps spreading and a BRDF returns at most its directional
+      hemispherical reflectance ``<= rho`` times the largest incident irradiance it sees.
+    * ``power``: the power through a limiting aperture of diameter ``aperture_m`` for any
+      optics (focusing mirrors included): all the power outside the square,
+      ``P (1 - erf(L)^2)``, times rho, over the aperture's area.
+
+    Parameters
+    ----------
+    half_width : float
+        L [1/e radii].
+    power_w, diameter_m, divergence_rad : float
+        The beam's power [W], 1/e diameter at the aperture [m] and full divergence [rad].
+    aperture_m : float
+        The smallest limiting aperture's diameter [m].
+    reflectance : float, optional
+        The largest reflectance any surface can have (default 1).
+
+    Returns
+    -------
+    (peak_w_m2, power_w_m2) : tuple of float
+    """
+    big_l = float(half_width)
+    tilt = math.sqrt(1.0 + big_l * big_l * (divergence_rad / 2) ** 2)
+    peak = reflectance * power_w / (math.pi * (diameter_m / 2) ** 2) * math.exp(-big_l * big_l) * tilt
+    outside = 2.0 * float(_erfc(big_l)) - float(_erfc(big_l)) ** 2  # 1 - erf(L)^2, without cancellation
+    return peak, reflectance * power_w * outside / (math.pi * (aperture_m / 2) ** 2)
+
+
+def tail_half_width(power_w, diameter_m, divergence_rad, limit_w_m2, aperture_m, *, margin=TAIL_MARGIN, reflectance=1.0) -> float:
+    """The smallest half-width L >= ``HALF_WIDTH`` [1/e radii] (at most ``MAX_HALF_WIDTH``)
+    at which both :func:`tail_bounds_w_m2` are at most ``margin * limit_w_m2``.
+
+    The peak bound gives ``L^2 = ln(rho P / (pi (a/2)^2 margin limit))`` (plus the tilt
+    factor); the power bound is solved by bisection (it falls monotonically with L).
+
+    Parameters
+    ----------
+    power_w, diameter_m, divergence_rad, aperture_m, reflectance : float
+        As :func:`tail_bounds_w_m2`.
+    limit_w_m2 : float
+        The smallest exposure limit any observer is held to [W/m^2] (the MPE divided by
+        the largest optical-aid gain).
+    margin : float, optional
+        The fraction of the limit the left-out beam must stay below (default ``TAIL_MARGIN``).
+    """
+    if not (limit_w_m2 > 0 and margin > 0):
+        raise ValueError(f"tail_half_width: limit_w_m2 = {limit_w_m2!r} and margin = {margin!r}: expected both > 0")
+    if not diameter_m > 0:
+        return MAX_HALF_WIDTH  # a point-like aperture: no finite peak bound
+
+    def worst(big_l):
+        return max(tail_bounds_w_m2(big_l, power_w, diameter_m, divergence_rad, aperture_m, reflectance))
+
+    target = margin * limit_w_m2
+    if worst(HALF_WIDTH) <= target:
+        return HALF_WIDTH
+    if worst(MAX_HALF_WIDTH) > target:
+        return MAX_HALF_WIDTH
+    lo, hi = HALF_WIDTH, MAX_HALF_WIDTH
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if worst(mid) > target else (lo, mid)
+    return hi
 
 
 def perp_basis(axis) -> tuple[np.ndarray, np.ndarray]:
@@ -69,6 +153,7 @@ class BeamGeometry:
     power_w: float
     diameter_m: float
     divergence_rad: float
+    half_width: float = HALF_WIDTH  # the sampled square's half-width [1/e radii] (:func:`tail_half_width`)
 
     @classmethod
     def create(cls, position_m, axis, power_w, diameter_m, divergence_rad, reference=()) -> "BeamGeometry":
@@ -413,6 +498,7 @@ class CellSampling:
     levels_used: int = 0
     unresolved_w: float = 0.0  # power in mixed leaves not covered by an exact outline integral
     truncated_w: float = 0.0  # power outside the square
+    half_width: float = HALF_WIDTH  # the square's half-width L [1/e radii] (the beam's)
     exact_targets: frozenset = frozenset()  # flat targets whose outline integral is their power
     occluders: dict = field(default_factory=dict)  # exact target -> the exact targets in front of it (outlines subtracted)
     _lookup: dict = field(default_factory=dict, repr=False)
@@ -423,14 +509,14 @@ class CellSampling:
 
     def size(self, level=None) -> np.ndarray:
         lv = self.level if level is None else level
-        return 2 * HALF_WIDTH / (self.n0 * 2.0 ** lv)
+        return 2 * self.half_width / (self.n0 * 2.0 ** lv)
 
     def bounds(self, rows=None):
         """Cell bounds (s0, s1, t0, t1) of the leaves (or rows of them)."""
         sl = slice(None) if rows is None else rows
         d = self.size(self.level[sl])
-        s0 = -HALF_WIDTH + self.i[sl] * d
-        t0 = -HALF_WIDTH + self.j[sl] * d
+        s0 = -self.half_width + self.i[sl] * d
+        t0 = -self.half_width + self.j[sl] * d
         return s0, s0 + d, t0, t0 + d
 
     def moments(self, rows=None):
@@ -474,14 +560,15 @@ class CellSampling:
                 key = self.i[rows].astype(np.int64) * n + self.j[rows]
                 order = np.argsort(key)
                 self._lookup[int(lv)] = (n, key[order], rows[order])
-        inside = np.all(np.isfinite(s), axis=1) & np.all(np.abs(np.nan_to_num(s)) < HALF_WIDTH, axis=1)
+        half = self.half_width
+        inside = np.all(np.isfinite(s), axis=1) & np.all(np.abs(np.nan_to_num(s)) < half, axis=1)
         for _lv, (n, keys, rows) in self._lookup.items():
             todo = np.flatnonzero(inside & (out < 0))
             if not len(todo):
                 break
-            d = 2 * HALF_WIDTH / n
-            ii = np.floor((s[todo, 0] + HALF_WIDTH) / d).astype(np.int64)
-            jj = np.floor((s[todo, 1] + HALF_WIDTH) / d).astype(np.int64)
+            d = 2 * half / n
+            ii = np.floor((s[todo, 0] + half) / d).astype(np.int64)
+            jj = np.floor((s[todo, 1] + half) / d).astype(np.int64)
             key = ii * n + jj
             pos = np.clip(np.searchsorted(keys, key), 0, len(keys) - 1)
             found = keys[pos] == key
@@ -537,7 +624,7 @@ def target_seeds(beam: BeamGeometry, targets) -> list:
         s = s[np.all(np.isfinite(s), axis=1) & (z > 0)]
         if len(s) == 0:
             continue
-        inside = s[np.all(np.abs(s) < HALF_WIDTH, axis=1)]
+        inside = s[np.all(np.abs(s) < beam.half_width, axis=1)]
         extent = float(np.min(np.ptp(s, axis=0))) if len(s) > 1 else 0.0
         # a closed shape's projected outline is at least its bounding box's smaller side
         if len(inside):
@@ -621,8 +708,8 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
     lv = 0
     while len(level_i):
         lvl = np.full(len(level_i), lv)
-        d = 2 * HALF_WIDTH / (n0 * 2.0**lv)
-        s0, t0 = -HALF_WIDTH + level_i * d, -HALF_WIDTH + level_j * d
+        d = 2 * beam.half_width / (n0 * 2.0**lv)
+        s0, t0 = -beam.half_width + level_i * d, -beam.half_width + level_j * d
         s_rays = _ray_s(s0, t0, d)
         labels, faces, point, t, direction = _trace_cells(beam, tracer, s_rays)
         hit_by_centre.update(np.unique(labels[:, 0]).tolist())
@@ -644,10 +731,10 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
         level_j = np.concatenate([2 * level_j[split] + b for b in (0, 0, 1, 1)])
         lv += 1
     cat = {k: np.concatenate(v) for k, v in leaves.items()}
-    truncated = beam.power_w * (1.0 - float(_erf(HALF_WIDTH)) ** 2)
+    truncated = beam.power_w * (1.0 - float(_erf(beam.half_width)) ** 2)
     unresolved = float(cat["power_w"][_needs_split(cat["labels"], clean)].sum())
     out = CellSampling(n0, cat["level"], cat["i"], cat["j"], cat["power_w"], cat["labels"], cat["faces"], cat["point"], cat["t"],
-                       cat["direction"], rays, lv, unresolved, truncated)
+                       cat["direction"], rays, lv, unresolved, truncated, half_width=beam.half_width)
     out.exact_targets = frozenset(clean)
     out.occluders = {k: v for k, v in exact_classes(foreign).items() if v}
     return out

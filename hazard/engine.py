@@ -26,12 +26,13 @@ Physics (spec `dynamic-sh-brdf.md` section 3, `laser-safety.md` section 3.1,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
+from .beam import HALF_WIDTH
 from .near_field import near_field_irradiance, patches_from_leaves, patches_from_pieces
 from .rays import own_object
 
@@ -212,6 +213,7 @@ class SpotBuild:
     unreflected: list  # (target name, side, power [W]) lit but not reflected (back face without material)
     exact: list  # target names whose power is the exact outline integral
     error_w: float  # bound on the power misassigned between objects (unresolved cells + truncation)
+    negligible: list = field(default_factory=list)  # (target name, leaves, power [W], floor [W/m^2]) left out (:func:`_negligible_tail`)
 
 
 def flat_outlines(beam, targets) -> dict:
@@ -250,16 +252,16 @@ class OutlineCells:
     moments: object
 
 
-def outline_cells(outline_s, n0) -> OutlineCells:
+def outline_cells(outline_s, n0, half_width=HALF_WIDTH) -> OutlineCells:
     """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
-    beam square); pieces carrying no power are dropped."""
-    from .beam import HALF_WIDTH, clip_to_box, inside_convex, polygon_moments
+    beam square of half-width ``half_width`` 1/e radii); pieces carrying no power are dropped."""
+    from .beam import clip_to_box, inside_convex, polygon_moments
 
-    d = 2 * HALF_WIDTH / n0
-    lo = np.clip(np.floor((outline_s.min(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
-    hi = np.clip(np.floor((outline_s.max(axis=0) + HALF_WIDTH) / d).astype(int), 0, n0 - 1)
+    d = 2 * half_width / n0
+    lo = np.clip(np.floor((outline_s.min(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
+    hi = np.clip(np.floor((outline_s.max(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
     ii, jj = (g.ravel() for g in np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"))
-    s0, t0 = -HALF_WIDTH + ii * d, -HALF_WIDTH + jj * d
+    s0, t0 = -half_width + ii * d, -half_width + jj * d
     corners = np.stack([np.stack([s0 + a * d, t0 + b * d], axis=1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)
     full = inside_convex(corners.reshape(-1, 2), outline_s).reshape(-1, 4).all(axis=1)
     pieces = [corners[k] if full[k] else clip_to_box(outline_s, s0[k], s0[k] + d, t0[k], t0[k] + d) for k in range(len(s0))]
@@ -338,7 +340,7 @@ class ExactSamples:
     fraction: np.ndarray | None = None  # the pieces' exact beam power fractions
 
 
-def _hole_cells(outline, fronts, n0):
+def _hole_cells(outline, fronts, n0, half_width):
     """The parts of a flat target's outline hidden by exact targets in front of it, cut by
     the coarsest cells, and the power fraction by which the smallest hole (inscribed
     polygons) may fall short of the largest (circumscribed) one."""
@@ -348,7 +350,7 @@ def _hole_cells(outline, fronts, n0):
     for front in fronts:
         small = clip_convex(outline[1], front[1])
         if len(small):
-            holes.append(outline_cells(small, n0))
+            holes.append(outline_cells(small, n0, half_width))
             polys.append(small)
         if outline[0] is not outline[1] or front[0] is not front[1]:  # disks: the largest hole may be larger
             big = clip_convex(outline[0], front[0])
@@ -366,10 +368,10 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     is spread over the pieces."""
     from .beam import polygon_moments
 
-    oc = outline_cells(outline[0], n0)
+    oc = outline_cells(outline[0], n0, beam.half_width)
     if not oc.pieces:
         return None
-    holes, hole_polys, slack = _hole_cells(outline, list(fronts.values()) if fronts else [], n0)
+    holes, hole_polys, slack = _hole_cells(outline, list(fronts.values()) if fronts else [], n0, beam.half_width)
     m = _subtract_holes(oc, holes, hole_polys) if holes else oc.moments
     lit = np.flatnonzero((m.fraction > 0) & np.isfinite(m.r2_min))
     if not len(lit):
@@ -565,9 +567,33 @@ def _exact_spot(beam, cells, target, ex, tracer, outline_s, out):
     out.spots.append(_spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_s))
 
 
-def _sampled_spot(beam, cells, target, tracer, mu, out):
+def _negligible_tail(beam, cells, target, rows, tracer, floor_w_m2) -> np.ndarray:
+    """Leaves (``rows``) outside the +-``HALF_WIDTH`` core of the beam square whose incident
+    irradiance is below ``floor_w_m2`` everywhere on their footprint: the bound
+    ``P / (pi w^2) exp(-min |s|^2) sqrt(1 + |s|max^2 phi^2 / 4)`` with w at the footprint's
+    nearest axial distance (:func:`_leaf_near_axial`; unattenuated). A flat facet or a
+    diffuse surface reflects at most that (reflectance <= 1) to any eye."""
+    s0, s1, t0, t1 = cells.bounds(rows)
+    core = (s0 >= -HALF_WIDTH) & (s1 <= HALF_WIDTH) & (t0 >= -HALF_WIDTH) & (t1 <= HALF_WIDTH)
+    if np.all(core):
+        return np.zeros(len(rows), bool)
+    pts, dirs = cells.point[rows], cells.direction[rows]
+    normals = _hit_normals(target, pts, cells.faces[rows, 0], tracer)
+    _, z = beam.to_s(pts)
+    near = _leaf_near_axial(beam, cells, rows, z, beam.diameter_at(z) / 2, dirs, normals)
+    w = beam.diameter_at(near) / 2
+    s_max2 = np.maximum(s0 * s0, s1 * s1) + np.maximum(t0 * t0, t1 * t1)
+    bound = beam.power_w / (math.pi * w * w) * cells.max_profile(rows) * np.sqrt(1 + s_max2 * (beam.divergence_rad / 2) ** 2)
+    return ~core & (bound < floor_w_m2)
+
+
+def _sampled_spot(beam, cells, target, tracer, mu, out, floor_w_m2=None):
     """A target's spot from the leaves whose centre ray hits it; its total raised by the
-    power of the mixed leaves touching it and the truncated tail (conservative)."""
+    power of the mixed leaves touching it and the truncated tail (conservative). With
+    ``floor_w_m2`` (the terrain), the leaves beyond the +-4 w core whose incident
+    irradiance stays below it (:func:`_negligible_tail`) are left out of the spot's samples
+    (their power stays in its total; ``out.negligible`` says how many): a grazing beam's
+    tail stretches a terrain spot far along the ground for nothing."""
     k = target.index
     rows = np.flatnonzero(cells.labels[:, 0] == k)
     touch = np.flatnonzero(cells.mixed & np.any(cells.labels == k, axis=1))
@@ -596,11 +622,19 @@ def _sampled_spot(beam, cells, target, tracer, mu, out):
     if other > 0:
         out.unreflected.append((target.name, "back" if side == "front" else "front", other))
     use = rows[back] if side == "back" else rows[~back]
+    lit = use
+    if floor_w_m2 is not None and material is not None and len(use):
+        drop = _negligible_tail(beam, cells, target, use, tracer, floor_w_m2)
+        if np.any(drop) and not np.all(drop):
+            dropped = float(cells.power_w[use[drop]].sum())
+            out.negligible.append((target.name, int(drop.sum()), dropped * scale, float(floor_w_m2)))
+            scale *= float(cells.power_w[use].sum()) / float(cells.power_w[use[~drop]].sum())  # the spot keeps its total
+            use = use[~drop]
     if material is None:
         out.unreflected.append((target.name, side, float(cells.power_w[use].sum() * scale)))
     else:
         sp = _spot_from_rows(beam, cells, target, use, side, material, tracer, mu, scale, err, False)
-        sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([use, touch]), mu)
+        sp.edge_peak_w_m2, sp.edge_source_m = _edge_bound(beam, cells, target, np.concatenate([lit, touch]), mu)
         out.spots.append(sp)
     return whole + err
 
@@ -680,7 +714,7 @@ def _entry_distance(analytic, o, u) -> np.ndarray:
     return np.where(meet, np.maximum(lo + shift, 0.0), np.inf)
 
 
-def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) -> SpotBuild:
+def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None, ground_floor_w_m2=None) -> SpotBuild:
     """Spots from the beam's leaf cells: one per lit target (the side that most power
     reaches; a back face reflects with the target's ``back`` material or not at all),
     and one on ``ground`` (the terrain as a target, :attr:`scenes.Scene.terrain_target`)
@@ -709,7 +743,7 @@ def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None) ->
             continue
         _exact_spot(beam, cells, target, ex, tracer, None if fronts else outlines[k][0], out)
     if ground is not None:
-        _sampled_spot(beam, cells, ground, tracer, mu, out)
+        _sampled_spot(beam, cells, ground, tracer, mu, out, ground_floor_w_m2)
     out.blocked_w = float(cells.power_w[cells.labels[:, 0] >= len(targets)].sum())
     out.spill_w = max(beam.power_w - totals - out.blocked_w, 0.0)  # the rest (exact where the targets' totals are)
     return out

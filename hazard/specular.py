@@ -12,7 +12,8 @@ section 4.6; Kingslake, *Lens Design Fundamentals*, the sagittal and tangential 
   length, so a mirror smaller than the beam keeps the full beam's local peak near the
   mirror and its lateral extent is cut by the mirror's outline. No diffraction credit
   (the Fraunhofer spread of a small mirror would lower far irradiance: not taken).
-  Beyond the beam's sampled square (+-4 w), where no cell says what the rays hit, the
+  Beyond the beam's sampled square (+-L w, ``beam.half_width``: at least 4, sized so that
+  the tail there is below 1 % of the limit), where no cell says what the rays hit, the
   Gaussian's tail lights a box's or mesh's facet within its own outline, unshadowed
   (conservative), facets no cell reached included (:func:`_tail_lit`,
   :func:`_tail_facets`; plates and disks have their exact outline).
@@ -189,8 +190,7 @@ def _tail_facets(spot, faces, normals, d) -> np.ndarray:
     the cells say they are not hit) and within ``sqrt(_TAIL_EXPONENT)`` of the axis (deeper
     the engine's value is 0). A box's side face next to a front face whose edge lies beyond
     4 w got 0 before (issue 29). Facets whose outline is unknown: all facing ones."""
-    from .beam import HALF_WIDTH
-
+    half = spot.beam.half_width
     cand = np.flatnonzero((normals @ d) < 0)
     out = np.zeros(len(faces), bool)
     if not len(cand):
@@ -201,7 +201,7 @@ def _tail_facets(spot, faces, normals, d) -> np.ndarray:
         return out
     bad = ~np.all(np.isfinite(tri), axis=(1, 2))
     t = np.nan_to_num(tri)
-    inside = np.all(np.abs(t) < HALF_WIDTH, axis=(1, 2))
+    inside = np.all(np.abs(t) < half, axis=(1, 2))
     e = np.roll(t, -1, axis=1) - t
     area2 = e[:, 0, 0] * e[:, 1, 1] - e[:, 0, 1] * e[:, 1, 0]
     cross = e[..., 0] * (-t[..., 1]) - e[..., 1] * (-t[..., 0])  # the origin against each edge
@@ -298,9 +298,9 @@ def _near_triangles(p, tri, r) -> np.ndarray:
 
 def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
     """Images (transverse s (N, 2), units of w; NaN: none) of eyes lit through a flat
-    facet by the Gaussian's tail beyond the sampled square (``|s_i| >= HALF_WIDTH``),
-    where no cell says what the rays hit (issue 29): there the tail (below exp(-16) =
-    1.1e-7 of the peak, still above the MPE for a beam of tens of kilowatts) is taken to
+    facet by the Gaussian's tail beyond the sampled square (``|s_i| >= beam.half_width``),
+    where no cell says what the rays hit (issue 29): there the tail (below exp(-L^2) of the
+    peak, sized to 1 % of the limit; it was exp(-16) at the old fixed L = 4) is taken to
     reach the facet unshadowed (conservative, as :func:`_lit_or_tail` for curved sides),
     within the facet's own outline (its triangles projected into s). With ``reach_s``
     (an aperture of that radius about s): lit when the disk reaches beyond the square and
@@ -308,14 +308,12 @@ def _tail_lit(spot, s, faces, reach_s=None) -> np.ndarray:
     there). Without the facet's triangles the facet's plane counts as unbounded. Disks
     deeper than ``exp(-_TAIL_EXPONENT)`` (where the engine's value underflows to 0 anyway)
     are not tested."""
-    from .beam import HALF_WIDTH
-
     r = np.zeros(len(s)) if reach_s is None else np.asarray(reach_s, float)
     finite = np.all(np.isfinite(s), axis=1)
     s0 = np.nan_to_num(s)
     gap = np.maximum(np.sqrt((s0 * s0).sum(axis=1)) - r, 0.0)  # the disk's nearest approach to the axis
     # deeper than exp(-_TAIL_EXPONENT) the engine's own value is 0: nothing to light
-    beyond = np.flatnonzero(finite & (np.abs(s0).max(axis=1) + r >= HALF_WIDTH) & (gap * gap <= _TAIL_EXPONENT))
+    beyond = np.flatnonzero(finite & (np.abs(s0).max(axis=1) + r >= spot.beam.half_width) & (gap * gap <= _TAIL_EXPONENT))
     out = np.zeros(len(s), bool)
     if not len(beyond):
         return out
@@ -526,16 +524,14 @@ def _curved_source(spot, p, n, d, ok):
 
 def _lit_or_tail(spot, s):
     """Points (beam coordinates s, (N, 2)) of a curved side lit by the beam: a lit cell
-    (:func:`_lit`), or beyond the sampled square (``|s_i| >= HALF_WIDTH``, where no cell
-    says what the ray hits): there the Gaussian's tail (below ``exp(-16)`` = 1.1e-7 of the
-    peak, a hazard for a beam of kilowatts) reaches the surface unless something shadows
+    (:func:`_lit`), or beyond the sampled square (``|s_i| >= beam.half_width``, where no
+    cell says what the ray hits): there the Gaussian's tail (below ``exp(-L^2)`` of the
+    peak; a focusing side may gather it) reaches the surface unless something shadows
     it, which is not known there, so it is taken as lit (conservative). Before, those
     points were dark and an eye beyond the 4 w edge of a cylinder's fan or a sphere's
     cone got 0 (issue 29)."""
-    from .beam import HALF_WIDTH
-
     finite = np.all(np.isfinite(s), axis=1)
-    tail = finite & np.any(np.abs(np.nan_to_num(s)) >= HALF_WIDTH, axis=1)
+    tail = finite & np.any(np.abs(np.nan_to_num(s)) >= spot.beam.half_width, axis=1)
     return tail | _lit(spot, np.nan_to_num(s, nan=1e9))
 
 

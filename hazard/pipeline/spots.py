@@ -7,16 +7,22 @@ powers, adaptive refinement with an error bound) and turned into spots by
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..beam import HALF_WIDTH, BeamGeometry, sample_cells
+from ..beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
 from ..engine import build_spots, flat_outlines
+from ..nohd import optical_gain
 from ..results import TargetResult
+from ..visual import applies as visual_applies
+from ..visual import level_limit_w_m2, visual_correction_factor
+from .limits import exposure_limits
+from .lobes import scene_aids
 
-__all__ = ["BeamStage", "ray_scene", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
+__all__ = ["BeamStage", "TailSquare", "ray_scene", "sampled_square", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
 
 
 class FlatScene:
@@ -86,6 +92,7 @@ class BeamStage:
     notes: list
     detail: str
     outlines: dict  # flat targets' projected outlines: index -> (upper, lower) polygons in s
+    square: object = None  # the sampled square (:class:`TailSquare`)
 
 
 def scene_beam(scene, direction=None) -> BeamGeometry:
@@ -109,15 +116,68 @@ def mirror_aperture_m(spec) -> float:
     return aperture if aperture >= 7e-3 else 1e-3
 
 
+@dataclass
+class TailSquare:
+    """The sampled beam square chosen for a scene (:func:`sampled_square`): half-width
+    ``half_width`` [1/e radii] (a whole number of the base grid's cells beyond 4), cells per
+    side ``n0``, the limit it was sized for [W/m^2] and the bounds on what it leaves out
+    (:func:`hazard.beam.tail_bounds_w_m2`) [W/m^2]."""
+
+    half_width: float
+    n0: int
+    limit_w_m2: float
+    peak_bound_w_m2: float
+    power_bound_w_m2: float
+
+    def detail(self) -> str:
+        worst = max(self.peak_bound_w_m2, self.power_bound_w_m2)
+        return (f"beam sampled over +-{self.half_width:.4g} w ({self.n0} x {self.n0} coarsest cells); what lies outside gives at most "
+                f"{worst:.3g} W/m^2 after one reflection ({worst / self.limit_w_m2:.3g} of the smallest limit, "
+                f"{self.limit_w_m2:.4g} W/m^2)")
+
+
+def sampled_square(scene, beam, n0_base: int) -> TailSquare:
+    """The beam square for a scene: half-width ``L >= 4`` 1/e radii such that the beam
+    outside it, after any one reflection (reflectance 1), stays below ``TAIL_MARGIN`` of the
+    smallest limit any observer is held to (the MPE over the largest optical-aid gain, and
+    the flight zones' levels (:func:`_zone_limits_w_m2`);
+    :func:`hazard.beam.tail_half_width`), rounded up to whole cells of the base grid
+    (``n0_base`` cells over +-4 w), so the cells inside +-4 w are the base grid's."""
+    spec = scene.spec
+    gain = max([1.0] + [optical_gain(a.magnification, a.objective_diameter_m, a.transmission) for a in scene_aids(scene)])
+    limit = min([exposure_limits(spec).irradiance_w_m2 / gain] + _zone_limits_w_m2(spec))
+    aperture_m = mirror_aperture_m(spec)
+    want = max(beam.half_width, tail_half_width(beam.power_w, beam.diameter_m, beam.divergence_rad, limit, aperture_m))
+    step = 2 * HALF_WIDTH / n0_base
+    extra = max(0, math.ceil((want - HALF_WIDTH) / step - 1e-9))
+    half = HALF_WIDTH + extra * step
+    peak, power = tail_bounds_w_m2(half, beam.power_w, beam.diameter_m, beam.divergence_rad, aperture_m)
+    return TailSquare(half, n0_base + 2 * extra, limit, peak, power)
+
+
+def _zone_limits_w_m2(spec) -> list:
+    """The irradiances [W/m^2] at which the scene's flight zones reach their levels
+    (:func:`hazard.visual.level_limit_w_m2`: the FAA levels over the VCF, or the MPE)."""
+    air = spec.airspace
+    if air is None or not air.zones:
+        return []
+    wl = spec.laser.wavelength_nm
+    vcf = visual_correction_factor(wl, air.visual_correction) if visual_applies(wl) else 0.0
+    mpe = exposure_limits(spec).irradiance_w_m2
+    return [e for e in (level_limit_w_m2(z.limit, mpe, vcf) for z in air.zones) if math.isfinite(e)]
+
+
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
     """Sample the beam (default: :func:`scene_beam`) against every object and build the
-    targets' spots."""
+    targets' spots. The sampled square is sized per beam (:func:`sampled_square`)."""
     spec, laser = scene.spec, scene.spec.laser
     beam = scene_beam(scene) if beam is None else beam
+    square = sampled_square(scene, beam, _level0_cells(spec.analysis.beam_samples))
+    beam = dataclasses.replace(beam, half_width=square.half_width)
     outlines = flat_outlines(beam, scene.targets)
-    cells = sample_cells(beam, tracer, scene.targets, n0=_level0_cells(spec.analysis.beam_samples), rtol=spec.analysis.beam_rtol,
+    cells = sample_cells(beam, tracer, scene.targets, n0=square.n0, rtol=spec.analysis.beam_rtol,
                          outlines={k: v[1] for k, v in outlines.items()})
-    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target)
+    built = build_spots(beam, cells, scene.targets, tracer, mu, outlines, scene.terrain_target, TAIL_MARGIN * square.limit_w_m2)
     aperture_m = mirror_aperture_m(spec)
     for sp in built.spots:
         sp.aperture_m = aperture_m
@@ -128,8 +188,10 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
         notes.append(f"{100 * built.blocked_w / laser.average_power_w:.3g} % of the beam is stopped by an occluder or the terrain "
                      f"(before a target or past them; see the spill)")
     notes.extend(_unreflected_notes(built.unreflected))
-    return BeamStage(beam, cells, built, notes, _beam_detail(cells, built, laser.average_power_w),
-                     {k: v[0] for k, v in outlines.items()})
+    if max(square.peak_bound_w_m2, square.power_bound_w_m2) > TAIL_NOTE_FRACTION * square.limit_w_m2:
+        notes.append(f"the beam is sampled over its widest square, {square.detail()}: reflections of the beam beyond it are NOT computed")
+    return BeamStage(beam, cells, built, notes, square.detail() + "; " + _beam_detail(cells, built, laser.average_power_w),
+                     {k: v[0] for k, v in outlines.items()}, square)
 
 
 def _curved_mesh_notes(spots, aperture_m) -> list:
@@ -154,6 +216,9 @@ def _level0_cells(beam_samples: int) -> int:
 
 def _beam_detail(cells, built, power_w) -> str:
     exact = f"; exact outline integrals for {', '.join(built.exact)}" if built.exact else ""
+    for name, n, p, floor in built.negligible:
+        exact += (f"; {n} tail cell(s) on {name!r} beyond +-{HALF_WIDTH:g} w left out of its spot's samples (incident below "
+                  f"{floor:.3g} W/m^2 there; their {p:.3g} W kept in its total)")
     if built.unreflected:
         exact += "; not reflected: " + ", ".join(f"{n} ({s} face, {p:.4g} W)" if s != "unresolved" else f"{n} (unresolved cells, {p:.4g} W)"
                                                  for n, s, p in built.unreflected)
@@ -162,12 +227,19 @@ def _beam_detail(cells, built, power_w) -> str:
             f"{built.error_w:.3g} W ({built.error_w / power_w:.2g} of the beam, added to the spots){exact}")
 
 
-def beam_sampling(cells, built, rtol) -> dict:
+def beam_sampling(cells, built, rtol, square=None) -> dict:
     """The beam stage's accuracy for the report: rays, levels, the bound on the power
-    misassigned between objects [W] and which targets got exact outline integrals."""
-    return {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
-            "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
-            "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected]}
+    misassigned between objects [W], which targets got exact outline integrals, and the
+    sampled square (:class:`TailSquare`): its half-width [1/e radii] and the bounds [W/m^2]
+    on what it leaves out (point after a flat or diffuse reflection; limiting aperture)."""
+    out = {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
+           "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
+           "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected],
+           "half_width_w": float(cells.half_width)}
+    if square is not None:
+        out.update(tail_point_bound_w_m2=float(square.peak_bound_w_m2), tail_aperture_bound_w_m2=float(square.power_bound_w_m2),
+                   tail_limit_w_m2=float(square.limit_w_m2))
+    return out
 
 
 def unlit_targets(targets, spots, unreflected) -> list:
@@ -193,10 +265,11 @@ TAIL_EDGE_POINTS = 65  # points per mesh edge where its distance from the beam's
 
 
 def tail_notes(scene, beam, spots, mpe_w_m2: float, mu: float) -> list[str]:
-    """A note for every target the sampled beam (+-``HALF_WIDTH`` 1/e radii) does not light
-    but whose nearest edge lies where the beam's Gaussian tail still reaches
-    ``TAIL_NOTE_FRACTION`` of the MPE: its reflection of that tail is NOT computed (a
-    mirror there reflects up to the tail's irradiance), so it is said, never dropped.
+    """A note for every target the sampled beam (+-``beam.half_width`` 1/e radii, sized by
+    :func:`sampled_square` so that this happens only where the square reached its largest,
+    ``MAX_HALF_WIDTH``) does not light but whose nearest edge lies where the beam's Gaussian
+    tail still reaches ``TAIL_NOTE_FRACTION`` of the MPE: its reflection of that tail is NOT
+    computed (a mirror there reflects up to the tail's irradiance), so it is said, never dropped.
 
     The nearest approach is taken over the mesh's edges (:func:`_nearest_in_beam`; a face
     the axis pierces is lit by the sampled beam). The tail's irradiance there:
@@ -208,12 +281,12 @@ def tail_notes(scene, beam, spots, mpe_w_m2: float, mu: float) -> list[str]:
         if t.index in lit or t is terrain:
             continue
         s_min, z = _nearest_in_beam(beam, t.mesh)
-        if s_min is None or s_min <= HALF_WIDTH:
+        if s_min is None or s_min <= beam.half_width:
             continue  # behind the laser, or inside the sampled square (the beam stage says why it is unlit)
         w = float(beam.diameter_at(z)) / 2
         e = beam.power_w / (math.pi * w * w) * math.exp(-s_min * s_min - mu * z)
         if e >= TAIL_NOTE_FRACTION * mpe_w_m2:
-            out.append(f"target {t.name!r} lies outside the sampled beam (+-{HALF_WIDTH:g} w), {s_min:.3g} w from its axis, "
+            out.append(f"target {t.name!r} lies outside the sampled beam (+-{beam.half_width:.4g} w), {s_min:.3g} w from its axis, "
                        f"where the beam's Gaussian tail still gives up to {e:.3g} W/m^2 ({e / mpe_w_m2:.3g} x MPE): "
                        f"its reflection of that tail is NOT computed")
     return out
