@@ -279,7 +279,8 @@ def test_a_lobe_inside_its_spots_near_field_is_said(inc_deg, said):
                           observers=[("o", 2.0 * n, None)])
     res = hazard.analyze(scenes.loads(text))
     row = next(r for r in res.targets if r.name == "plate")
-    notes = [x for x in res.notes if x.startswith("plate: its keep-out lobe")]
+    notes = [x for x in res.notes if x.startswith("keep-out lobe(s) within") and "; plate " in x.replace(": plate ", "; plate ")]
     assert row.dynamic_lobe.max_range_m > 0
     assert bool(notes) == said, (row.dynamic_lobe.max_range_m, res.notes)
     assert all("farthest root of the near-field integral" in x for x in notes)
+    assert all(f"plate {row.dynamic_lobe.max_range_m:.4g} m" in x for x in notes)  # the target named with its reach
