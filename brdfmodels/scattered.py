@@ -100,7 +100,8 @@ PEAK_CAP = 4.0  # between samples the peak-aware value is at most this times the
 PEAK_Z_SCALE = 1.0  # |D| / 2 weighed as X (all three direction cosines, one metric) in the fits' neighbourhoods
 _COPY = np.array([-1.0, -1.0, 1.0])  # a point of :func:`_cosines` and its reciprocal copy
 _COPY_COEF = np.array([-1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0])  # :func:`_monomials`' coefficients at the copy
-_PEAK_RCOND = 1e-7  # directions the neighbours do not span get no slope or curvature (pseudo-inverse cut-off)
+_PEAK_RCOND = 1e-7
+_PEAK_SNAP = 1e-6  # barycentric weights below this are dropped from the peak-aware estimate  # directions the neighbours do not span get no slope or curvature (pseudo-inverse cut-off)
 
 
 def isotropic_coordinates(wi, wo) -> np.ndarray:
@@ -414,6 +415,8 @@ class ScatteredBRDF(BRDFModel):
             p = lf + np.einsum("nki,nki->nk", ck, _monomials(x[:, None] - xk))
             span = math.log(PEAK_CAP)  # each vertex's quadratic kept within the vertices' range widened by the cap
             p = np.clip(p, np.min(lf, axis=1, keepdims=True) - span, np.max(lf, axis=1, keepdims=True) + span)
+            b = np.where(b < _PEAK_SNAP, 0.0, b)  # the joggle's 1e-9 of a far vertex's quadratic: not at a sample
+            b /= np.sum(b, axis=1, keepdims=True)
             est = np.exp(np.minimum(np.sum(b * p, axis=1), np.log(bary) + (1.0 - guard) * math.log(PEAK_CAP)))
         return np.where(np.isfinite(est), np.maximum(bary, est), bary)
 
