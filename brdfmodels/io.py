@@ -19,8 +19,11 @@ malformed entry.
   ``theta_i, phi_i, theta_s, phi_s`` [rad] and one BRDF column [1/sr] (read here as the
   spherical angles of the directions from the sample to the source and to the receiver;
   the standard's own text on the columns was not read). Duplicate angle tuples are
-  skipped. Several value columns (wavelengths, polarisations) are refused unless all but
-  one are named in ``ignore_columns``; ``symmetry="plane"`` mirrors one-sided data.
+  skipped. Value columns named by their wavelengths (``532nm, 1064nm``: libbsdf's
+  convention) or a ``wavelength_nm`` column of the rows select the laser's wavelength as
+  the CSV's column does (``wavelength_nm``); other value columns beyond one (polarisations)
+  are refused unless all but one are named in ``ignore_columns``; ``symmetry="plane"``
+  mirrors one-sided data.
 - :func:`read_merl`: MERL ``.binary`` (Matusik et al. 2003; the format of its reference
   reader BRDFRead.cpp): three int32 dimensions (90, 90, 180 for the database: theta_h,
   theta_d, phi_d), then each colour channel's values as float64 (R block, G block, B
@@ -45,6 +48,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -220,13 +224,70 @@ def read_bsdf(path):
 
 
 # -- ASTM E1392 -----------------------------------------------------------------------
-def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
-    """Samples from an ASTM E1392 scatter table (see the module notes); ``ignore_columns``:
-    VARS names (case-insensitive) to skip, ``symmetry="plane"``: one-sided data mirrored
-    about the plane of incidence (:func:`mirror_plane_symmetric`)."""
+def read_astm_e1392(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None):
+    """Samples from an ASTM E1392 scatter table (see the module notes).
+
+    Parameters
+    ----------
+    path : path-like
+    wavelength_nm : float, optional
+        The laser's wavelength [nm]: with value columns named by their wavelength
+        (``532nm, 1064nm``: libbsdf's convention) or a ``wavelength_nm`` column of the
+        rows, the values measured there (within 0.5 nm), or the two nearest measured
+        wavelengths interpolated linearly (a note in ``info["notes"]``); refused outside
+        the measured wavelengths, and without ``wavelength_nm`` when the file holds several.
+    ignore_columns : sequence of str
+        VARS names (case-insensitive) to skip.
+    symmetry : {"plane", "none"}, optional
+        "plane": one-sided data mirrored about the plane of incidence
+        (:func:`mirror_plane_symmetric`).
+    """
     path = Path(path)
-    ignore = {c.strip().lower() for c in ignore_columns}
-    used = None
+    names, a, notes = _astm_table(path, {c.strip().lower() for c in ignore_columns})
+    if "wavelength_nm" in names:  # a column of the rows: the CSV reader's selection
+        d = {c: a[:, j] for j, c in enumerate(_ANGLES + ("brdf_per_sr", "wavelength_nm"))}
+        d = _at_wavelength(path, d, wavelength_nm, notes)
+        a = np.column_stack([d[c] for c in _ANGLES + ("brdf_per_sr",)])
+    elif len(names) > 5 or (wavelength_nm is not None and _nm(names[4]) is not None):  # columns named by wavelength
+        a = np.column_stack([a[:, :4], _astm_wavelength_column(path, names[4:], a[:, 4:], wavelength_nm, notes)])
+    keep = (np.cos(a[:, 0]) > 0) & (np.cos(a[:, 2]) > 0)
+    out = _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
+    out.info["notes"] = notes
+    return mirror_plane_symmetric(out) if _plane(path, symmetry) else out
+
+
+_NM_NAME = re.compile(r"^\s*(?:brdf_?)?([0-9]+(?:\.[0-9]*)?(?:e[+-]?[0-9]+)?)\s*_?nm\s*$", re.IGNORECASE)
+
+
+def _nm(name) -> float | None:
+    """The wavelength [nm] a VARS value column's name gives (``1064nm``, ``brdf_1064nm``), else None."""
+    m = _NM_NAME.match(name)
+    return float(m.group(1)) if m else None
+
+
+def _astm_vars(path, k, s, ignore):
+    """The VARS names used (the four angles, then value columns; ``wavelength_nm`` of the
+    rows last) and their indices among all the line's names."""
+    names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
+    if any(n in ignore for n in names[:4]):
+        raise ValueError(f"{path}: line {k}: VARS: ignore_columns names one of the four angle columns; expected "
+                         f"only value columns to skip")
+    used = [j for j, n in enumerate(names) if n not in ignore and n != "wavelength_nm"]
+    if "wavelength_nm" in names and "wavelength_nm" not in ignore:
+        used.append(names.index("wavelength_nm"))
+    vals = [names[j] for j in used[4:]]
+    by_nm = [_nm(n) for n in vals]
+    if len(used) < 5 or (len(vals) > 1 and not (all(x is not None for x in by_nm) or vals[1:] == ["wavelength_nm"])):
+        raise ValueError(f"{path}: line {k}: VARS: expected five names used (theta_i, phi_i, theta_s, phi_s and one "
+                         f"BRDF column: monochrome; several value columns are refused unless named by their wavelengths "
+                         f"(532nm, 1064nm) or with a wavelength_nm column; name the others in ignore_columns), got "
+                         f"{len(used)} of {len(names)}")
+    return [names[j] for j in used], used, len(names)
+
+
+def _astm_table(path, ignore):
+    """(the VARS names used, their rows (M, n) [rad, 1/sr, nm], notes) of an ASTM table;
+    rows repeating another's angles (and wavelength) skipped, NUM_POINTS checked."""
     text = read_input_text(path, "ASTM E1392 file")
     n_points, names, rows, seen, n_rows = None, None, [], set(), 0
     for k, line in enumerate(text.splitlines(), start=1):
@@ -237,29 +298,21 @@ def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
         if key == "NUM_POINTS":
             n_points = _count(s.split()[1:2], path, k, "NUM_POINTS")
         elif key == "VARS":
-            names = [x.strip().lower() for x in (s.split(None, 1) + [""])[1].split(",")]
-            used = [j for j, n in enumerate(names) if n not in ignore]
-            if any(n in ignore for n in names[:4]):
-                raise ValueError(f"{path}: line {k}: VARS: ignore_columns names one of the four angle columns; expected "
-                                 f"only value columns to skip")
-            if len(used) != 5:
-                raise ValueError(f"{path}: line {k}: VARS: expected five names used (theta_i, phi_i, theta_s, phi_s and one "
-                                 f"BRDF column: monochrome; several value columns are refused, name the others in "
-                                 f"ignore_columns), got {len(used)} of {len(names)}")
+            names, used, n_all = _astm_vars(path, k, s, ignore)
         elif s[0].isdigit() or s[0] in "+-.":
             cells = [x for x in s.split(",") if x.strip()]
-            if names is None or len(cells) != len(names):
-                raise ValueError(f"{path}: line {k}: expected {len(names) if names else 'VARS before the'} columns")
+            if names is None or len(cells) != n_all:
+                raise ValueError(f"{path}: line {k}: expected {n_all if names else 'VARS before the'} columns")
             vals = _numbers([cells[j] for j in used], path, k, "data row")
-            if not all(math.isfinite(v) for v in vals) or vals[4] < 0:
-                raise ValueError(f"{path}: line {k}: data row: expected finite angles [rad] and a finite BRDF >= 0")
+            if not all(math.isfinite(v) for v in vals) or min(vals[4:]) < 0:
+                raise ValueError(f"{path}: line {k}: data row: expected finite angles [rad] and finite BRDF values >= 0")
             bad = _angle_out_of_range(vals[:4], math.pi)
             if bad is not None:
                 raise ValueError(f"{path}: line {k}, column {bad + 1}: data row: expected {_ANGLE_RANGES[bad % 2]} [rad]")
             n_rows += 1
-            key4 = tuple(vals[:4])
-            if key4 not in seen:
-                seen.add(key4)
+            key_row = tuple(vals[:4]) + (tuple(vals[-1:]) if names[-1] == "wavelength_nm" else ())
+            if key_row not in seen:
+                seen.add(key_row)
                 rows.append(vals)
     if names is None:
         raise ValueError(f"{path}: expected VARS with theta_i, phi_i, theta_s, phi_s and a BRDF column")
@@ -267,10 +320,35 @@ def read_astm_e1392(path, *, ignore_columns=(), symmetry=None):
         raise ValueError(f"{path}: no data rows")
     if n_points is not None and n_points != n_rows:
         raise ValueError(f"{path}: NUM_POINTS {n_points} but {n_rows} data rows")
-    a = np.array(rows)
-    keep = (np.cos(a[:, 0]) > 0) & (np.cos(a[:, 2]) > 0)
-    out = _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
-    return mirror_plane_symmetric(out) if _plane(path, symmetry) else out
+    return names, np.array(rows), []
+
+
+def _astm_wavelength_column(path, names, values, wavelength_nm, notes) -> np.ndarray:
+    """The BRDF at the laser's wavelength from value columns named by their wavelengths
+    (``values`` (M, n) [1/sr]): the column within 0.5 nm, or the two nearest interpolated
+    linearly (said in ``notes``); refused outside them, or unnamed when several."""
+    lams = np.array([_nm(n) for n in names])
+    order = np.argsort(lams)
+    lams, values = lams[order], values[:, order]
+    listed = ", ".join(f"{x:g}" for x in lams)
+    if wavelength_nm is None:
+        if len(lams) > 1:
+            raise ValueError(f"{path}: VARS: the file holds {len(lams)} wavelengths ({listed} nm); which one is ambiguous: "
+                             f"expected the laser's wavelength (a scene gives its laser's; in Python "
+                             f"read_samples(path, wavelength_nm=...); hazard fit --wavelength-nm) or one value column")
+        return values[:, 0]
+    lam = float(wavelength_nm)
+    near = np.abs(lams - lam) <= WAVELENGTH_MATCH_NM
+    if near.any():
+        return values[:, int(np.argmin(np.abs(lams - lam)))]
+    if not lams[0] < lam < lams[-1]:
+        raise ValueError(f"{path}: VARS: the laser's {lam:g} nm is outside the measured wavelengths ({listed} nm); "
+                         f"expected a file measured at or around it")
+    j = int(np.searchsorted(lams, lam))
+    t = (lam - lams[j - 1]) / (lams[j] - lams[j - 1])
+    notes.append(f"{path.name}: f_r interpolated linearly between the measured {lams[j - 1]:g} and {lams[j]:g} nm to the "
+                 f"laser's {lam:g} nm (weight {t:.3g} on {lams[j]:g} nm)")
+    return (1 - t) * values[:, j - 1] + t * values[:, j]
 
 
 # -- generic CSV ---------------------------------------------------------------------
@@ -406,7 +484,7 @@ def _at_wavelength(path, d, wavelength_nm, notes) -> dict:
         if len(have) > 1:
             raise ValueError(f"{path}: wavelength_nm: the file holds {len(have)} wavelengths ({listed} nm); which one is "
                              f"ambiguous: expected the laser's wavelength (a scene gives its laser's; in Python "
-                             f"read_samples(path, wavelength_nm=...)) or a file of one wavelength")
+                             f"read_samples(path, wavelength_nm=...); hazard fit --wavelength-nm) or a file of one wavelength")
         return d
     lam = float(wavelength_nm)
     near = np.abs(have - lam) <= WAVELENGTH_MATCH_NM
@@ -508,7 +586,7 @@ def read_samples(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None):
     if suffix == ".bsdf":
         return read_bsdf(p)
     if suffix in (".astm", ".e1392"):
-        return read_astm_e1392(p, ignore_columns=ignore_columns, symmetry=symmetry)
+        return read_astm_e1392(p, wavelength_nm=wavelength_nm, ignore_columns=ignore_columns, symmetry=symmetry)
     if suffix == ".binary":
         return read_merl(p)
     if suffix == ".csv":

@@ -9,8 +9,8 @@ the barycentric transforms computed here, vectorised):
 - at a sample the value is the sample's (to ~1e-7 relative: the points are moved by at
   most 1e-9 rad before the triangulation, so that every sample is a vertex and no
   simplex is flat);
-- between samples it is a convex combination of the 4 vertices of the enclosing simplex,
-  so it never leaves their range (bounded by its neighbours, no overshoot);
+- between samples the barycentric value is a convex combination of the 4 vertices of the
+  enclosing simplex, so it never leaves their range (``between="linear"``);
 - the triangulation is made in (theta_h cos 2 phi_d, theta_h sin 2 phi_d, theta_d)
   (:func:`_embed`): phi_d has period 180 deg (reciprocity: swapping wi and wo turns it by
   180 deg), so the model is exactly reciprocal; at theta_h = 0 (h on the normal) an
@@ -27,6 +27,25 @@ the barycentric transforms computed here, vectorised):
   lowest ratio to the truth within 10 deg of the mirror direction at random incidences
   was 0.20 at weight 1, 0.86 at 0.3, 0.94 at 0.1 (whose wings reached 36x the truth);
   on a 5 deg Gaussian-lobe CSV 0.84, 0.88, 0.88;
+- between samples, by default (``between="peak"``), the value is the larger of that convex
+  combination and a peak-aware estimate, at most :data:`PEAK_CAP` = 4 times the convex
+  combination: a linear interpolation of a lobe is low wherever the lobe is concave
+  (near its peak: 0.83-0.88 of the truth on the files of
+  tests/validation/test_measured_scene_refs.py), not conservative. Each sample carries the
+  slope and curvature of log f from a weighted least-squares quadratic through its
+  ``PEAK_K`` = 60 nearest samples (:func:`_local_quadratic`), in direction-cosine
+  coordinates (:func:`_cosines`: X = beta_i + beta_o along and across D = beta_o - beta_i,
+  and |D| / 2), where the log of a Gaussian lobe, elliptic or off the mirror direction, is
+  quadratic; the estimate is exp(sum_k b_k p_k(x)), b_k the barycentric weights and p_k
+  vertex k's quadratic (its own log value, its fit's slope and curvature) at x, each kept
+  within the vertices' log range widened by log PEAK_CAP. It is exact at the samples and
+  for a Gaussian lobe in direction cosines whose width is at least the sample spacing
+  (the fits see its curvature). It cannot know a peak narrower than the spacing (a
+  lobe's core between two measured incidences, as the ABg core of 2 deg between the
+  .bsdf's incidences 10 deg apart: still 0.83 there), and the coordinates are singular
+  where D = 0 (wi = wo, and the mirror direction at normal incidence): within about one
+  spacing of normal incidence a peak can still be low (0.92 of a Gaussian of width
+  1.15 spacings). ``between="linear"`` keeps the convex combination alone;
 - samples at the same coordinates (a goniometer's repeated specular direction, mirrored
   copies, anisotropic rows that an isotropic table cannot separate, several states) are
   merged into their largest value, and :attr:`notes` says how many and how far apart.
@@ -63,7 +82,8 @@ from .geometry import isotropic_half_diff_rad
 from .models import BRDFModel
 from .registry import register
 
-__all__ = ["ScatteredBRDF", "SCATTERED_OUTSIDE", "DHR_TOLERANCE", "NEAREST_K", "THETA_D_SCALE", "isotropic_coordinates"]
+__all__ = ["ScatteredBRDF", "SCATTERED_OUTSIDE", "SCATTERED_BETWEEN", "DHR_TOLERANCE", "NEAREST_K", "THETA_D_SCALE",
+           "PEAK_K", "PEAK_CAP", "isotropic_coordinates"]
 
 SCATTERED_OUTSIDE = ("envelope", "fit", "error")
 DHR_TOLERANCE = 0.05  # default stated uncertainty of a measured hemispherical reflectance (absolute)
@@ -75,6 +95,14 @@ _SAME_RAD = 1e-8  # points of the interpolation this close [rad] are one (merged
 _SPREAD_NOTED = 1e-6  # merged samples differing by more than this (relative) are said in the notes
 _RETRO_COPIES = 72  # a theta_d = 0 sample (wi = wo) holds for every phi_d: copies every 2.5 deg
 _RETRO_RAD = 1e-6  # a pair closer than this to wi = wo takes the largest value over its circle of phi_d
+SCATTERED_BETWEEN = ("peak", "linear")
+PEAK_K = 60  # neighbours of the local log-quadratic fit (10 coefficients)
+PEAK_CAP = 4.0  # between samples the peak-aware value is at most this times the barycentric value
+PEAK_Z_SCALE = 1.0  # |D| / 2 weighed as X (all three direction cosines, one metric) in the fits' neighbourhoods
+_COPY = np.array([-1.0, -1.0, 1.0])  # a point of :func:`_cosines` and its reciprocal copy
+_COPY_COEF = np.array([-1.0, -1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0])  # :func:`_monomials`' coefficients at the copy
+_PEAK_RCOND = 1e-7
+_PEAK_SNAP = 1e-6  # barycentric weights below this are dropped from the peak-aware estimate  # directions the neighbours do not span get no slope or curvature (pseudo-inverse cut-off)
 
 
 def isotropic_coordinates(wi, wo) -> np.ndarray:
@@ -155,6 +183,51 @@ def _barycentric_transforms(tri) -> np.ndarray:
     return out
 
 
+def _cosines(e) -> np.ndarray:
+    """Direction-cosine coordinates (M, 3) of points of :func:`_embed`: with the direction
+    pair (wi, wo) they stand for, X = beta_i + beta_o and D = beta_o - beta_i (beta: a
+    direction's projection on the surface plane; X = beta - beta0 of Harvey's ABg and of
+    the Gaussian lobe, 0 in the mirror direction), the components of X along and across D
+    and |D| / 2. Swapping wi and wo (reciprocity) turns them into (-a, -b, c). Smooth in
+    the direction pair except where D = 0 (wo = wi): the log of a Gaussian lobe in
+    direction cosines, elliptic or off the mirror direction, is quadratic in them."""
+    from .geometry import half_diff_to_directions
+
+    q = _unembed(e)
+    wi, wo = half_diff_to_directions(q[:, 0], np.zeros(len(q)), q[:, 1], q[:, 2])
+    x, d = wi[:, :2] + wo[:, :2], wo[:, :2] - wi[:, :2]
+    n = np.hypot(d[:, 0], d[:, 1])
+    dh = np.where((n > 1e-12)[:, None], d / np.where(n > 1e-12, n, 1.0)[:, None], [1.0, 0.0])
+    return np.column_stack([np.sum(x * dh, axis=1), x[:, 0] * dh[:, 1] - x[:, 1] * dh[:, 0], 0.5 * n])
+
+
+def _monomials(d) -> np.ndarray:
+    """The 9 non-constant monomials of a quadratic in 3 variables at offsets ``d`` (..., 3)."""
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    return np.stack([x, y, z, x * x, y * y, z * z, x * y, x * z, y * z], axis=-1)
+
+
+def _local_quadratic(tq, pts, lv, tree, k=PEAK_K, chunk=20_000) -> np.ndarray:
+    """The gradient and curvature of log f at each point of ``tq`` (M, 3) (already
+    scaled, :func:`_cosines`): the coefficients (M, 9) of the monomials of
+    :func:`_monomials` (offsets from the point) of the quadratic fitted by weighted least
+    squares to the log values ``lv`` of its ``k`` nearest samples ``pts`` (``tree`` over
+    them; weights (1 - d^2 / R^2)^2, R the distance of the (k + 1)-th, so the set of
+    neighbours comes and goes with weight 0). Directions the neighbours do not span get
+    no slope or curvature (pseudo-inverse cut at ``_PEAK_RCOND`` of the largest singular
+    value). Exact where log f is quadratic in these coordinates."""
+    out = np.empty((len(tq), 9))
+    kk = min(k + 1, len(pts))
+    for a in range(0, len(tq), chunk):
+        c = tq[a:a + chunk]
+        dist, j = tree.query(c, k=kk)
+        w = np.clip(1.0 - dist[:, :-1] ** 2 / np.maximum(dist[:, -1:] ** 2, 1e-300), 0.0, None)  # sqrt of the weight
+        m = _monomials(pts[j[:, :-1]] - c[:, None, :])
+        design = np.concatenate([np.ones(m.shape[:2] + (1,)), m], axis=-1) * w[..., None]
+        out[a:a + chunk] = np.einsum("nij,nj->ni", np.linalg.pinv(design, rcond=_PEAK_RCOND), lv[j[:, :-1]] * w)[:, 1:]
+    return out
+
+
 @register("scattered-table")
 class ScatteredBRDF(BRDFModel):
     """Barycentric interpolation of scattered f_r [1/sr] samples in (theta_h, theta_d, phi_d).
@@ -171,13 +244,17 @@ class ScatteredBRDF(BRDFModel):
         What directions beyond the samples' convex hull get (module notes).
     dhr_tolerance : float
         Stated absolute uncertainty of the measurement's hemispherical reflectance, 0 to 1.
+    between : {"peak", "linear"}
+        Between samples: "peak" (default) the larger of the barycentric value and a blend
+        of local log-quadratic fits (exact for a Gaussian lobe; module notes), at most
+        :data:`PEAK_CAP` times the barycentric value; "linear" the barycentric value alone.
     notes : list of str
         Provenance notes (a reader's wavelength interpolation, say); saved with the model.
         :attr:`notes` adds the merge note of duplicate samples.
     """
 
     def __init__(self, theta_h_deg, theta_d_deg, phi_d_deg, values, outside="envelope", dhr_tolerance=DHR_TOLERANCE,
-                 notes=()):
+                 notes=(), between="peak"):
         th = _checked("theta_h_deg", theta_h_deg, 0.0, 90.0)
         td = _checked("theta_d_deg", theta_d_deg, 0.0, 90.0)
         pd = np.mod(finite_array("phi_d_deg", phi_d_deg).ravel(), 180.0)
@@ -187,6 +264,8 @@ class ScatteredBRDF(BRDFModel):
                              f">= 0), at least one; got {len(th)}, {len(td)}, {len(pd)}, {len(f)}")
         if outside not in SCATTERED_OUTSIDE:
             raise ValueError(f"outside={outside!r}: expected one of {list(SCATTERED_OUTSIDE)}")
+        if between not in SCATTERED_BETWEEN:
+            raise ValueError(f"between={between!r}: expected one of {list(SCATTERED_BETWEEN)}")
         tol = float(finite_array("dhr_tolerance", dhr_tolerance))
         if not 0.0 <= tol <= 1.0:
             raise ValueError(f"dhr_tolerance={tol!r}: expected an absolute reflectance uncertainty of 0 to 1")
@@ -195,7 +274,7 @@ class ScatteredBRDF(BRDFModel):
         self.points_deg, self.values = x, f
         for arr in (self.points_deg, self.values):
             arr.flags.writeable = False
-        self.outside, self.dhr_tolerance = outside, tol
+        self.outside, self.dhr_tolerance, self.between = outside, tol, between
         if isinstance(notes, str) or not all(isinstance(n, str) for n in notes):
             raise ValueError("notes: expected a list of strings")
         self.notes = tuple(notes) + ((f"{n_merged} sample(s) at the direction pair of another sample (isotropic "
@@ -206,7 +285,7 @@ class ScatteredBRDF(BRDFModel):
 
     @classmethod
     def from_samples(cls, wi, wo, brdf_per_sr, *, outside="envelope", dhr_tolerance=DHR_TOLERANCE,
-                     notes=()) -> "ScatteredBRDF":
+                     notes=(), between="peak") -> "ScatteredBRDF":
         """The model of measured samples (any reader's, :mod:`brdfmodels.io`): ``wi``, ``wo``
         (N, 3) directions to the source and to the observer, ``brdf_per_sr`` (N,) [1/sr]."""
         from ._checks import directions
@@ -217,7 +296,7 @@ class ScatteredBRDF(BRDFModel):
         if not (len(wi) == len(wo) == len(f)) or not len(f):
             raise ValueError("wi, wo, brdf_per_sr: expected as many directions as values, at least one")
         x = np.degrees(isotropic_coordinates(wi, wo))
-        return cls(x[:, 0], x[:, 1], x[:, 2], f, outside, dhr_tolerance, notes)
+        return cls(x[:, 0], x[:, 1], x[:, 2], f, outside, dhr_tolerance, notes, between)
 
     # -- evaluation ------------------------------------------------------------------------
     def _points(self):
@@ -259,7 +338,7 @@ class ScatteredBRDF(BRDFModel):
             except (QhullError, ValueError):  # too few or degenerate points: the policy everywhere
                 tri = None
             self._cache.update(tri=tri, tree=tree, values=np.concatenate([val, gval]), n_data=len(e), spacing_rad=spacing,
-                               z_scale=zs if tri is not None else 1.0)
+                               z_scale=zs if tri is not None else 1.0, points=e)
         c = self._cache
         return c["tri"], c["tree"], c["values"], c["n_data"]
 
@@ -281,7 +360,64 @@ class ScatteredBRDF(BRDFModel):
         v = tri.simplices[s]
         out[idx] = np.sum(b * val[v], axis=1)
         guard[idx] = np.sum(b * (v >= n_data), axis=1)
+        data = guard[idx] < 1.0 - 1e-9
+        if self.between == "peak" and data.any():
+            k = idx[data]
+            out[k] = self._peak(e[k] / [1.0, 1.0, self._cache["z_scale"]], v[data], b[data], out[k], guard[k])
         return out, guard
+
+    def _peak_fits(self):
+        """Each vertex's point (:func:`_cosines`, scaled: 1 / the data's spacing) and its
+        local log-quadratic's slope and curvature (:func:`_local_quadratic`; zero at guard
+        points, whose value is the ``outside`` policy's), made on first use; None with
+        fewer than 10 positive samples (no quadratic to fit)."""
+        if "peak" not in self._cache:
+            from scipy.spatial import cKDTree
+
+            _, _, val, n_data = self._built()
+            scale = np.array([1.0, 1.0, PEAK_Z_SCALE]) / self._cache["spacing_rad"]
+            x = _cosines(self._vertices()) * scale
+            pts = np.vstack([x[:n_data], x[:n_data] * _COPY])  # each sample and its reciprocal copy
+            v = np.concatenate([val[:n_data], val[:n_data]])
+            pos = v > 0
+            coef = np.zeros((len(x), 9))
+            if pos.sum() >= 2 * 10:
+                coef[:n_data] = _local_quadratic(x[:n_data], pts[pos], np.log(v[pos]), cKDTree(pts[pos]))
+            self._cache["peak"] = (x, coef) if pos.sum() >= 2 * 10 else None
+        return self._cache["peak"]
+
+    def _vertices(self):
+        """The triangulation's vertices as points of :func:`_embed`: the samples' (before the
+        joggle), then the guards'."""
+        n = self._cache["n_data"]
+        return np.vstack([self._cache["points"], self._cache["tri"].points[n:] / [1.0, 1.0, self._cache["z_scale"]]])
+
+    def _peak(self, e, v, b, bary, guard):
+        """Between samples (points ``e`` (M, 3) of :func:`_embed` in simplices of vertices
+        ``v`` with barycentric weights ``b`` (M, 4), barycentric values ``bary``, weight
+        ``guard`` on guard points): the larger of ``bary`` and exp(sum_k b_k p_k(x)), p_k
+        vertex k's local log-quadratic (its log value, its fit's slope and curvature) at x
+        (points of :func:`_cosines`; each vertex's reciprocal copy where nearer x), capped
+        at PEAK_CAP^(1 - guard) ``bary``. Exact at the samples and where log f is
+        quadratic in these coordinates (a Gaussian lobe in direction cosines)."""
+        fits = self._peak_fits()
+        if fits is None:
+            return bary
+        xv, coef = fits
+        x = _cosines(e) * (np.array([1.0, 1.0, PEAK_Z_SCALE]) / self._cache["spacing_rad"])
+        xk, ck = xv[v], coef[v]
+        flip = np.sum((xk - x[:, None]) ** 2, axis=2) > np.sum((xk * _COPY - x[:, None]) ** 2, axis=2)
+        xk = np.where(flip[..., None], xk * _COPY, xk)  # each vertex's reciprocal copy nearer x
+        ck = np.where(flip[..., None], ck * _COPY_COEF, ck)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            lf = np.log(self._cache["values"][v])
+            p = lf + np.einsum("nki,nki->nk", ck, _monomials(x[:, None] - xk))
+            span = math.log(PEAK_CAP)  # each vertex's quadratic kept within the vertices' range widened by the cap
+            p = np.clip(p, np.min(lf, axis=1, keepdims=True) - span, np.max(lf, axis=1, keepdims=True) + span)
+            b = np.where(b < _PEAK_SNAP, 0.0, b)  # the joggle's 1e-9 of a far vertex's quadratic: not at a sample
+            b /= np.sum(b, axis=1, keepdims=True)
+            est = np.exp(np.minimum(np.sum(b * p, axis=1), np.log(bary) + (1.0 - guard) * math.log(PEAK_CAP)))
+        return np.where(np.isfinite(est), np.maximum(bary, est), bary)
 
     def at_coordinates(self, theta_h, theta_d, phi_d) -> np.ndarray:
         """f_r [1/sr] at coordinates [rad] (any theta_h, theta_d in [0, pi/2], phi_d any real;
@@ -358,4 +494,4 @@ class ScatteredBRDF(BRDFModel):
     def _params(self):
         return {"theta_h_deg": self.points_deg[:, 0].tolist(), "theta_d_deg": self.points_deg[:, 1].tolist(),
                 "phi_d_deg": self.points_deg[:, 2].tolist(), "values": self.values.tolist(), "outside": self.outside,
-                "dhr_tolerance": self.dhr_tolerance, "notes": list(self.notes)}
+                "dhr_tolerance": self.dhr_tolerance, "notes": list(self.notes), "between": self.between}

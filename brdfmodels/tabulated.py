@@ -111,8 +111,9 @@ class TabulatedBRDF(BRDFModel):
     def from_samples(cls, wi, wo, brdf_per_sr, theta_h_deg, theta_d_deg, phi_d_deg, *, fill="envelope",
                      outside="envelope", notes=()) -> "TabulatedBRDF":
         """A table of scattered samples (any reader's, :mod:`brdfmodels.io`) on the given
-        nodes: each node takes the samples' barycentric interpolation there
-        (:class:`brdfmodels.ScatteredBRDF`: bounded by the neighbouring samples), a node
+        nodes: each node takes the samples' interpolation there
+        (:class:`brdfmodels.ScatteredBRDF`, peak-aware: at least the convex combination of
+        the neighbouring samples, at most PEAK_CAP times it), a node
         beyond the samples' hull ``fill``: ``"envelope"`` (the largest of the 4 nearest
         samples, conservative) or ``"fit"`` (a spherical-harmonic fit of the samples). The
         grid adds its own error between nodes (a peak between nodes is cut); the scattered

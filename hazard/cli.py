@@ -233,6 +233,8 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("--force", action="store_true", help="overwrite existing outputs")
         q.add_argument("--json", action="store_true", help="print the fit report as JSON")
         q.add_argument("--quiet", action="store_true", help="no progress bars")
+        if kind == "sh":
+            _fit_wavelength_option(q)
     q = _nlopt_fit_parser(fsub, "ts5", "fit the five-parameter Torrance-Sparrow model to a samples table (CSV)", 20000)
     q.add_argument("--report", action="store_true", help="print the algorithm comparison table")
     _nlopt_fit_parser(fsub, "abg", "fit an ABg scatter lobe A / (B + |beta - beta0|^g) to a samples table (CSV)", 4000)
@@ -692,7 +694,14 @@ def _nlopt_fit_parser(fsub, name, helptext, maxeval):
     q.add_argument("--force", action="store_true")
     q.add_argument("--json", action="store_true")
     q.add_argument("--quiet", action="store_true", help="no progress bars")
+    _fit_wavelength_option(q)
     return q
+
+
+def _fit_wavelength_option(q):
+    add_quantity_option(q, "--wavelength-nm", "nm", "the laser's wavelength [nm]: a measured file's rows (CSV wavelength_nm "
+                        "column) or value columns (ASTM 532nm, 1064nm) there, the two nearest interpolated with a note; "
+                        "needed when the file holds several wavelengths")
 
 
 def _state_nodes_args(state_text, states_text):
@@ -734,6 +743,8 @@ def _cmd_fit(args, out, err):
             code = _fit_oxidation(args, text)
         else:
             samples = _fit_samples(args)
+            for note in samples.info.get("notes", ()):  # a wavelength interpolated between two measured ones
+                print(f"hazard: note: {note}", file=err)
             fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
             code = fit(args, text, samples)
     out.write(text.getvalue())
@@ -772,7 +783,7 @@ def _fit_samples(args):
     if args.fit_kind != "screen":
         from brdfmodels.io import read_samples
 
-        return read_samples(args.inputs[0])  # own samples CSV/Parquet, Zemax .bsdf, ASTM E1392, generic angle CSV
+        return read_samples(args.inputs[0], wavelength_nm=args.wavelength_nm)  # own CSV/Parquet, .bsdf, ASTM, angle CSV
     parts = []
     with terminal_bar(len(args.inputs), "reducing screen tests", unit="test", leave=True) as bar:
         for p in args.inputs:

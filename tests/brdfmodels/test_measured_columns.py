@@ -2,12 +2,14 @@
 laser's rows (or interpolates the two nearest, with a note; refused when ambiguous), state
 columns go into the samples' states, an unknown column is an error naming its position
 (or skipped when listed in ``ignore_columns``); ASTM files with several value columns are
-refused; one-sided data are mirrored when declared plane-symmetric. Files written here
+refused unless named by their wavelengths (``532nm, 1064nm``), which select the laser's as
+the CSV's column does, and so does ``hazard fit --wavelength-nm``; one-sided data are mirrored when declared plane-symmetric. Files written here
 from values typed in here."""
 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -165,3 +167,110 @@ def test_a_table_key_that_would_do_nothing_is_refused(tmp_path):
         (tmp_path / "s.toml").write_text(text.replace("MORE", more))
         with pytest.raises(scenes.SceneError, match=words):
             scenes.load(tmp_path / "s.toml")
+
+
+def _astm(tmp_path, names, rows, name="m.astm"):
+    text = f"NUM_POINTS {len(rows)}\nVARS theta_i, phi_i, theta_s, phi_s, {', '.join(names)}\n"
+    (tmp_path / name).write_text(text + "\n".join(", ".join(repr(float(x)) for x in r) for r in rows) + "\n")
+    return tmp_path / name
+
+
+def _astm_rows(*columns):
+    """ASTM rows (angles in radians) of :func:`_rows`, then f(k) of each of ``columns`` for row k."""
+    return [[math.radians(r[0]), 0.0, math.radians(r[2]), math.radians(r[3])] + [c(r[4]) for c in columns] for r in _rows()]
+
+
+def test_an_astm_file_with_value_columns_named_by_wavelength_selects_the_lasers(tmp_path):
+    """libbsdf's convention: value columns named ``532nm, 1064nm``. The laser's column is
+    taken (within 0.5 nm), the two nearest interpolated between with a note, none taken
+    outside them or when no wavelength is given."""
+    f = np.array([r[4] for r in _rows()])
+    path = _astm(tmp_path, ["532nm", "1064nm"], _astm_rows(lambda v: v / 50, lambda v: v))
+    np.testing.assert_allclose(read_astm_e1392(path, wavelength_nm=1064.3).brdf_per_sr, f, rtol=1e-15)
+    np.testing.assert_allclose(read_samples(path, wavelength_nm=532.0).brdf_per_sr, f / 50, rtol=1e-15)
+    t = (800.0 - 532.0) / (1064.0 - 532.0)
+    s = read_astm_e1392(path, wavelength_nm=800.0)
+    np.testing.assert_allclose(s.brdf_per_sr, (1 - t) * f / 50 + t * f, rtol=1e-12)
+    assert "interpolated linearly between the measured 532 and 1064 nm to the laser's 800 nm" in s.info["notes"][0]
+    with pytest.raises(ValueError, match=r"holds 2 wavelengths \(532, 1064 nm\); which one is ambiguous"):
+        read_astm_e1392(path)
+    with pytest.raises(ValueError, match=r"the laser's 1550 nm is outside the measured wavelengths \(532, 1064 nm\)"):
+        read_astm_e1392(path, wavelength_nm=1550.0)
+    one = _astm(tmp_path, ["brdf_532nm"], _astm_rows(lambda v: v), name="one.astm")
+    np.testing.assert_allclose(read_astm_e1392(one).brdf_per_sr, f, rtol=1e-15)  # one column: no choice to make
+    with pytest.raises(ValueError, match=r"the laser's 1064 nm is outside the measured wavelengths \(532 nm\)"):
+        read_astm_e1392(one, wavelength_nm=1064.0)
+    mixed = _astm(tmp_path, ["532nm", "brdf_p"], _astm_rows(lambda v: v, lambda v: v), name="mixed.astm")
+    with pytest.raises(ValueError, match="several value columns are refused unless named by their wavelengths"):
+        read_astm_e1392(mixed, wavelength_nm=532.0)
+
+
+def test_an_astm_file_with_a_wavelength_column_of_the_rows_selects_the_lasers_rows(tmp_path):
+    """A ``wavelength_nm`` VARS column: the rows at the laser's wavelength, as the CSV's
+    column (the same angles at two wavelengths are not duplicates)."""
+    f = np.array([r[4] for r in _rows()])
+    rows = [r + [1064.0] for r in _astm_rows(lambda v: v)] + [r + [532.0] for r in _astm_rows(lambda v: v / 50)]
+    path = _astm(tmp_path, ["brdf", "wavelength_nm"], rows)
+    np.testing.assert_allclose(read_astm_e1392(path, wavelength_nm=1064.0).brdf_per_sr, f, rtol=1e-15)
+    np.testing.assert_allclose(read_astm_e1392(path, wavelength_nm=532.0).brdf_per_sr, f / 50, rtol=1e-15)
+    with pytest.raises(ValueError, match=r"holds 2 wavelengths \(532, 1064 nm\); which one is ambiguous"):
+        read_astm_e1392(path)
+
+
+def test_a_scene_takes_the_astm_column_at_its_lasers_wavelength(tmp_path):
+    f = np.array([r[4] for r in _rows()])
+    _astm(tmp_path, ["532nm", "1064nm"], _astm_rows(lambda v: v / 50, lambda v: v))
+    (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }',
+                                                          '{ model = "table", file = "m.astm" }'))
+    m = scenes.load(tmp_path / "s.toml").targets[0].material
+    rows = np.array([r[:4] for r in _rows()], float)
+    wi = bm.spherical_to_vector(np.radians(rows[:, 0]), np.radians(rows[:, 1]))
+    wo = bm.spherical_to_vector(np.radians(rows[:, 2]), np.radians(rows[:, 3]))
+    np.testing.assert_allclose(m.evaluate(wi, wo), f, rtol=1e-7)
+
+
+def _abg_csv_two_wavelengths(tmp_path):
+    """ABg (Harvey, direction cosines: A / (B + |beta - beta0|^g)) at 1064 nm (A 0.0025,
+    B 0.001, g 1.8) and at 532 nm (A 0.004, B 0.002, g 1.5), written from the formula at
+    the same angles, with a wavelength_nm column."""
+    ang = [(ti, 0, tr, pr) for ti in (0, 20, 40) for tr in (0, 2, 5, 10, 20, 30, 45, 60) for pr in range(0, 360, 30)]
+    rows = []
+    for lam, (a, b, g) in ((1064, (0.0025, 0.001, 1.8)), (532, (0.004, 0.002, 1.5))):
+        for ti, pi, tr, pr in ang:
+            wi = bm.spherical_to_vector(math.radians(ti), math.radians(pi))
+            wo = bm.spherical_to_vector(math.radians(tr), math.radians(pr))
+            x = math.hypot(wo[0] + wi[0], wo[1] + wi[1])
+            rows.append([ti, pi, tr, pr, a / (b + x ** g), lam])
+    return _csv(tmp_path, HEAD + ",brdf_per_sr,wavelength_nm", rows)
+
+
+@pytest.mark.parametrize("lam, want", [(1064, (0.0025, 1.8)), (532, (0.004, 1.5))])
+def test_hazard_fit_takes_the_rows_at_its_wavelength(tmp_path, lam, want):
+    import io
+    import json
+
+    from hazard.cli import main
+
+    path = _abg_csv_two_wavelengths(tmp_path)
+    out = io.StringIO()
+    argv = ["fit", "abg", str(path), "-o", str(tmp_path / "m.json"), "--json", "--quiet", "--wavelength-nm", str(lam)]
+    assert main(argv, stdout=out, stderr=io.StringIO()) == 0
+    row = json.loads(out.getvalue())["rows"][0]
+    assert row["p_a"] == pytest.approx(want[0], rel=1e-6) and row["p_g"] == pytest.approx(want[1], rel=1e-6)
+
+
+def test_hazard_fit_names_the_wavelengths_a_file_holds(tmp_path):
+    import io
+
+    from hazard.cli import main
+
+    path = _abg_csv_two_wavelengths(tmp_path)
+    for extra, words in (([], r"holds 2 wavelengths \(532, 1064 nm\); which one is ambiguous"),
+                         (["--wavelength-nm", "1550"], r"the laser's 1550 nm is outside the measured wavelengths \(532, 1064 nm\)")):
+        err = io.StringIO()
+        assert main(["fit", "sh", str(path), "-o", str(tmp_path / "m.json")] + extra, stdout=io.StringIO(), stderr=err) == 2
+        assert re.search(words, err.getvalue()) and err.getvalue().count("\n") == 1, err.getvalue()
+    err = io.StringIO()
+    assert main(["fit", "sh", str(path), "-o", str(tmp_path / "m.json"), "--quiet", "--wavelength-nm", "800"],
+                stdout=io.StringIO(), stderr=err) == 0
+    assert "note: m.csv: f_r interpolated linearly between the measured 532 and 1064 nm to the laser's 800 nm" in err.getvalue()

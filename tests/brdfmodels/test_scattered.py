@@ -1,7 +1,8 @@
 """The scattered-sample model against what it promises, with the coordinates computed here
 from the definition of Rusinkiewicz's half/difference angles: every sample reproduced,
-exact for a function linear in (theta_h, theta_d) (barycentric interpolation), inside the
-samples' range, reciprocal, where no data reach the envelope of the nearest samples (brute
+exact for a function linear in (theta_h, theta_d) (``between="linear"``: barycentric
+interpolation), inside the samples' range (the peak-aware default between that and
+PEAK_CAP times it), reciprocal, where no data reach the envelope of the nearest samples (brute
 force here), never the global maximum of a far-away peak; saved and loaded like any model."""
 
 from __future__ import annotations
@@ -43,7 +44,9 @@ def test_every_sample_is_reproduced_and_the_model_is_reciprocal(seed, n):
     a, b = _pairs(500, seed + 1)
     v = m.evaluate(a, b)
     np.testing.assert_allclose(m.evaluate(b, a), v, rtol=1e-12)
-    assert np.all(v >= f.min() * (1 - 1e-12)) and np.all(v <= f.max() * (1 + 1e-12))
+    lin = bm.ScatteredBRDF.from_samples(wi, wo, f, between="linear").evaluate(a, b)  # a convex combination of samples
+    assert np.all(lin >= f.min() * (1 - 1e-12)) and np.all(lin <= f.max() * (1 + 1e-12))
+    assert np.all(v >= lin * (1 - 1e-12)) and np.all(v <= bm.scattered.PEAK_CAP * lin * (1 + 1e-12))  # peak-aware
 
 
 @pytest.mark.slow
@@ -72,7 +75,7 @@ def test_barycentric_interpolation_is_exact_for_a_linear_function():
     ok = (wi[:, 2] > 1e-3) & (wo[:, 2] > 1e-3)
     wi, wo = wi[ok], wo[ok]
     ang = np.array([_angles(a, b) for a, b in zip(wi, wo)])
-    m = bm.ScatteredBRDF.from_samples(wi, wo, _linear(*ang.T))
+    m = bm.ScatteredBRDF.from_samples(wi, wo, _linear(*ang.T), between="linear")
     rng = np.random.default_rng(3)
     q = [_directions(*x) for x in zip(rng.uniform(0.05, 0.95, 400), rng.uniform(0.05, 0.95, 400), rng.uniform(0, math.pi, 400))]
     a, b = np.array([p[0] for p in q]), np.array([p[1] for p in q])
