@@ -26,9 +26,12 @@ added), or ``r0`` where no sample beyond ``r0`` is hazardous; the last sample is
 
 Each sample is first tested against a cheap upper bound (the spot's samples as point
 sources plus their Taylor remainders, infinite within a sample's radius; for a flat spot
-the smaller of that and ``E_inc,max I_max / P pi ln(1 + rho^2 / h^2)``, finite down to the
-surface: a spot much larger than its lobe, e.g. airspace's board lit by the beam's far
-tail, is no longer integrated point by point on its surface): only where it reaches the
+the smaller of that and ``sum_tri E_inc,tri f_max int_tri dA / R^2`` (:meth:`_flat_bound`:
+per triangle its own largest incident irradiance, ``f_max`` the material's proven largest
+``f_r cos`` where :func:`projected_brdf_max` gives one, else ``FLAT_BOUND_MARGIN I_max /
+P``), finite down to the surface: a spot much larger than its lobe, e.g. airspace's board
+lit by the beam's far tail, is no longer integrated point by point on its surface, and a
+long grazing spot's cold points near it are ruled out without the integral): only where it reaches the
 MPE is the integral evaluated. With a history a point is integrated first at its state
 of the largest point-form sum alone (hazard there decides), then only at the states whose
 own bound reaches the MPE: the same decision as the integral at every state. The integral's work per lobe function is
@@ -91,7 +94,7 @@ MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe functio
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
-FLAT_BOUND_MARGIN = 4.0  # the flat spot's bound x this: it rests on the point form's sampled largest intensity at first order
+FLAT_BOUND_MARGIN = 4.0  # the flat spot's bound x this where the material's largest f_r cos is not proven (projected_brdf_max): it then rests on the point form's sampled largest intensity
 _BOUND_BLOCK = 1 << 22  # (point, sample, state) triples of the samples' bound evaluated at once (bounded memory)
 
 
@@ -268,27 +271,34 @@ class NearLobeFn:
         keep = g > 0
         self.g_m2 = float(g.max()) if flat and len(g) and np.all(np.isfinite(g)) else math.inf
         self.g_tri, self.tri_boxes = g[keep], _triangle_boxes(loc.reshape(-1, 3, 3)[keep][..., :2])
+        self.r_spot_m = float(np.sqrt((loc[:, :2] ** 2).sum(axis=1)).max())  # the spot's radius about c (the disk form)
 
     def _flat_bound(self, pts):
         """An upper bound of the integral / MPE at world points ``pts`` (M, 3) from a flat
         spot (infinite otherwise): ``E <= sum_tri E_inc,tri int_tri f_r cos / R^2 dA`` with
         ``E_inc,tri`` the beam's largest irradiance on the triangle
-        (:func:`_incident_w_m2`), ``f_r cos <= I_max / P`` (the point form's largest
-        intensity, as the samples' bound) and ``int_tri dA / R^2`` bounded per triangle
-        (:func:`_inverse_square_bound`: finite down to the surface off the triangle's
-        own area), times ``FLAT_BOUND_MARGIN`` (``I_max`` is the point form's sampled
-        largest intensity, which this bound rests on at first order, the samples' only
-        in their remainders). Finite within a sample's radius, where the samples' bound
-        is not: a spot much larger than its lobe, or a long grazing spot."""
+        (:func:`_incident_w_m2`), ``f_r cos`` at most the material's proven largest
+        value (:func:`projected_brdf_max`: Lambertian, constant scales and sums of them)
+        or else ``I_max / P`` (the point form's sampled largest intensity, which the
+        bound then rests on at first order) times ``FLAT_BOUND_MARGIN``, and ``int_tri
+        dA / R^2`` bounded per triangle (:func:`_inverse_square_bound`: finite down to
+        the surface off the triangle's own area). Finite within a sample's radius, where the samples' bound
+        is not: a spot much larger than its lobe, or a long grazing spot. The smaller of
+        that sum and the whole spot's disk form (the largest ``E_inc`` over the disk of
+        radius ``rho`` about the point's foot, ``int dA / R^2 <= pi ln(1 + rho^2 / h^2)``)."""
         if not math.isfinite(self.g_m2):
             return np.full(len(pts), np.inf)
         step = max(1, (_BOUND_BLOCK // 4) // max(len(self.g_tri), 1))
         if len(pts) > step:
             return np.concatenate([self._flat_bound(pts[a:a + step]) for a in range(0, len(pts), step)])
         loc = (pts - self.c) @ self.frame.T
+        h2 = loc[:, 2] ** 2
         with np.errstate(invalid="ignore"):
-            b = self.g_tri[None] * _inverse_square_bound(loc[:, :2], loc[:, 2] ** 2, self.tri_boxes)
-        return np.where(np.isnan(b), np.inf, b).sum(axis=1)
+            b = self.g_tri[None] * _inverse_square_bound(loc[:, :2], h2, self.tri_boxes)
+        rho = np.sqrt(loc[:, 0] ** 2 + loc[:, 1] ** 2) + self.r_spot_m  # the whole spot in one disk, at its largest E_inc
+        with np.errstate(divide="ignore"):
+            disk = np.where(h2 > 0, self.g_m2 * math.pi * np.log1p(rho * rho / np.where(h2 > 0, h2, 1.0)), np.inf)
+        return np.minimum(np.where(np.isnan(b), np.inf, b).sum(axis=1), disk)
 
     def prepare(self, dirs, r0):
         """Set up the bounds from the point form's ranges ``r0`` on directions ``dirs``
