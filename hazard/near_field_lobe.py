@@ -26,9 +26,12 @@ added), or ``r0`` where no sample beyond ``r0`` is hazardous; the last sample is
 
 Each sample is first tested against a cheap upper bound (the spot's samples as point
 sources plus their Taylor remainders, infinite within a sample's radius; for a flat spot
-the smaller of that and ``E_inc,max I_max / P pi ln(1 + rho^2 / h^2)``, finite down to the
-surface: a spot much larger than its lobe, e.g. airspace's board lit by the beam's far
-tail, is no longer integrated point by point on its surface): only where it reaches the
+the smaller of that and ``sum_tri E_inc,tri f_max int_tri dA / R^2`` (:meth:`_flat_bound`:
+per triangle its own largest incident irradiance, ``f_max`` the material's proven largest
+``f_r cos`` where :func:`projected_brdf_max` gives one, else ``FLAT_BOUND_MARGIN I_max /
+P``), finite down to the surface: a spot much larger than its lobe, e.g. airspace's board
+lit by the beam's far tail, is no longer integrated point by point on its surface, and a
+long grazing spot's cold points near it are ruled out without the integral): only where it reaches the
 MPE is the integral evaluated. With a history a point is integrated first at its state
 of the largest point-form sum alone (hazard there decides), then only at the states whose
 own bound reaches the MPE: the same decision as the integral at every state. The integral's work per lobe function is
@@ -73,10 +76,12 @@ import weakref
 
 import numpy as np
 
+from brdfmodels import Lambertian, Scaled, StateTable, Sum
+
 from . import near_field
 from .engine import FAR_FIELD_SPOT_SIZES, near_field_w_m2, to_local, projected_brdf, spot_directions
 
-__all__ = ["NearLobeFn", "near_lobe_fn", "near_field_reach_m", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
+__all__ = ["NearLobeFn", "near_lobe_fn", "near_field_reach_m", "projected_brdf_max", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
            "STATS", "describe_since"]
 
 ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
@@ -89,7 +94,7 @@ MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe functio
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
-FLAT_BOUND_MARGIN = 4.0  # the flat spot's bound x this: it rests on the point form's sampled largest intensity at first order
+FLAT_BOUND_MARGIN = 4.0  # the flat spot's bound x this where the material's largest f_r cos is not proven (projected_brdf_max): it then rests on the point form's sampled largest intensity
 _BOUND_BLOCK = 1 << 22  # (point, sample, state) triples of the samples' bound evaluated at once (bounded memory)
 
 
@@ -118,9 +123,9 @@ def describe_since(before: dict) -> str:
             f"({now['points'] - before['points']} points; its time is in the stage's seconds)")
 
 
-def _largest_incident_w_m2(spot) -> float:
-    """Largest irradiance [W/m^2] the beam lays on the spot's surface (a bound): per
-    triangle its power density in beam coordinates ``c exp(-|s|^2)`` at its point nearest
+def _incident_w_m2(spot) -> np.ndarray:
+    """Largest irradiance [W/m^2] the beam lays on each of the spot's triangles (K,) (a
+    bound): its power density in beam coordinates ``c exp(-|s|^2)`` at its point nearest
     ``s = 0`` times ``area_s / area_x`` (the affine map's), with the spot's current
     powers; infinite for a triangle of no area on the surface."""
     p = spot.patches
@@ -140,8 +145,76 @@ def _largest_incident_w_m2(spot) -> float:
     built = np.asarray(p.sample_power_w, float)
     ratio = np.where(built > 0, np.asarray(spot.power_w, float) / np.where(built > 0, built, 1.0), 0.0)[p.sample]
     with np.errstate(divide="ignore", invalid="ignore"):
-        e = np.where(area_x > 0, p.density_w * ratio * peak * area_s / np.where(area_x > 0, area_x, 1.0), np.inf)
+        return np.where(area_x > 0, p.density_w * ratio * peak * area_s / np.where(area_x > 0, area_x, 1.0), np.inf)
+
+
+def _largest_incident_w_m2(spot) -> float:
+    """Largest irradiance [W/m^2] the beam lays on the spot's surface (a bound): the
+    largest of :func:`_incident_w_m2`."""
+    e = _incident_w_m2(spot)
     return float(e.max()) if len(e) else 0.0
+
+
+def projected_brdf_max(model):
+    """A proven largest ``f_r cos(theta_r)`` [1/sr] of ``model`` over every pair of
+    directions and state, where its form gives one: a Lambertian's ``reflectance / pi``,
+    a constant non-negative factor times its model's, a sum's parts' sum; None for any
+    other model (the lobe's flat-spot bound then rests on the point form's sampled
+    largest intensity, times ``FLAT_BOUND_MARGIN``)."""
+    if isinstance(model, Lambertian):
+        return model.reflectance / math.pi
+    if isinstance(model, Scaled) and not isinstance(model.factor, StateTable):
+        inner = projected_brdf_max(model.model)
+        return None if inner is None else float(model.factor) * inner
+    if isinstance(model, Sum):
+        parts = [projected_brdf_max(m) for m in model.models]
+        return None if any(p is None for p in parts) else float(sum(parts))
+    return None
+
+
+def _triangle_boxes(tri):
+    """Each in-plane triangle (K, 3, 2) [m] in the rectangle along its longest edge:
+    origins (K, 2), unit axes ``u`` along that edge and ``v`` across (K, 2) and the box's
+    ranges ``l`` along ``u`` and ``t`` along ``v`` (K, 2) [m] (the triangle's own extents:
+    its width across is its height over that edge)."""
+    e = np.roll(tri, -1, axis=1) - tri
+    k = np.argmax((e * e).sum(-1), axis=1)
+    u = e[np.arange(len(tri)), k]
+    u = u / np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
+    v = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    o = tri[:, 0]
+    lu, tv = ((tri - o[:, None]) * u[:, None]).sum(-1), ((tri - o[:, None]) * v[:, None]).sum(-1)
+    return o, u, v, np.stack([lu.min(1), lu.max(1)], 1), np.stack([tv.min(1), tv.max(1)], 1)
+
+
+def _inverse_square_bound(foot, h2, boxes):
+    """Upper bounds (M, K) of ``int_tri dA / R^2`` (dimensionless) from points at in-plane
+    positions ``foot`` (M, 2) and squared heights ``h2`` (M,) above a plane holding the
+    triangles of ``boxes`` (:func:`_triangle_boxes`). Over a box of ranges ``l`` and
+    ``t`` about a foot at ``(l0, t0)``, ``R^2 >= h^2 + dt^2 + (l - l0)^2`` (``dt`` the
+    foot's distance outside the ``t`` range), so the integral is at most ``(t_1 - t_0) /
+    D [atan((l_1 - l0) / D) - atan((l_0 - l0) / D)]`` with ``D^2 = h^2 + dt^2``, and the
+    same with ``l`` and ``t`` exchanged; the smaller is taken (exact for a thin strip
+    seen from above its line; infinite only on the box itself)."""
+    o, u, v, lr, tr = boxes
+    q = foot[:, None, :] - o[None]
+    l0, t0 = (q * u[None]).sum(-1), (q * v[None]).sum(-1)
+
+    def one(a0, ar, b0, br):  # integrate along a, the other axis b bounded by its width
+        db = np.maximum(np.maximum(br[None, :, 0] - b0, b0 - br[None, :, 1]), 0.0)
+        d = np.sqrt(h2[:, None] + db * db)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ang = np.where(d > 0, np.arctan((ar[None, :, 1] - a0) / d) - np.arctan((ar[None, :, 0] - a0) / d), math.pi)
+            return np.where(d > 0, (br[None, :, 1] - br[None, :, 0]) * ang / np.where(d > 0, d, 1.0), np.inf)
+
+    dl = np.maximum(np.maximum(lr[None, :, 0] - l0, l0 - lr[None, :, 1]), 0.0)
+    dt = np.maximum(np.maximum(tr[None, :, 0] - t0, t0 - tr[None, :, 1]), 0.0)
+    near2 = h2[:, None] + dl * dl + dt * dt
+    far2 = h2[:, None] + np.maximum(np.abs(lr[None, :, 0] - l0), np.abs(lr[None, :, 1] - l0)) ** 2 \
+        + np.maximum(np.abs(tr[None, :, 0] - t0), np.abs(tr[None, :, 1] - t0)) ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):  # the annulus between the box's nearest and farthest points
+        ring = np.where(near2 > 0, math.pi * np.log(far2 / np.where(near2 > 0, near2, 1.0)), np.inf)
+    return np.minimum(np.minimum(one(l0, lr, t0, tr), one(t0, tr, l0, lr)), ring)
 
 
 def _smallest_extent_m(spot, frame) -> float:
@@ -190,26 +263,42 @@ class NearLobeFn:
         self.wi = to_local(sp.frames, -sp.incoming)
         k_max = reach_m ** 2 * math.exp(min(self.mu * reach_m, 700.0))  # the largest intensity / MPE [m^2]
         self.k_i = k_max * self.p_w / max(float(self.p_w.sum()), 1e-300)
-        self.g_m2 = FLAT_BOUND_MARGIN * k_max / max(float(self.p_w.sum()), 1e-300) * _largest_incident_w_m2(sp) if self.tilt_rad == 0.0 and \
-            float(np.abs(loc[:, 2]).max()) <= 1e-9 * max(self.ext_m, 1e-300) else math.inf  # a flat spot's factor (_flat_bound)
-        self.r_spot_m = float(np.sqrt((loc[:, :2] ** 2).sum(axis=1)).max())
+        flat = self.tilt_rad == 0.0 and float(np.abs(loc[:, 2]).max()) <= 1e-9 * max(self.ext_m, 1e-300)
+        f_max = projected_brdf_max(sp.material)  # proven, else the point form's sampled largest intensity x the margin
+        self.flat_proven = f_max is not None
+        per_w = self.gain * f_max / self.mpe if self.flat_proven else FLAT_BOUND_MARGIN * k_max / max(float(self.p_w.sum()), 1e-300)
+        g = per_w * _incident_w_m2(sp)  # per triangle, times int dA / R^2: E / MPE (_flat_bound)
+        keep = g > 0
+        self.g_m2 = float(g.max()) if flat and len(g) and np.all(np.isfinite(g)) else math.inf
+        self.g_tri, self.tri_boxes = g[keep], _triangle_boxes(loc.reshape(-1, 3, 3)[keep][..., :2])
+        self.r_spot_m = float(np.sqrt((loc[:, :2] ** 2).sum(axis=1)).max())  # the spot's radius about c (the disk form)
 
     def _flat_bound(self, pts):
         """An upper bound of the integral / MPE at world points ``pts`` (M, 3) from a flat
-        spot (infinite otherwise): ``E <= E_inc,max int f_r cos / R^2 dA`` with ``f_r cos <=
-        I_max / P`` (the point form's largest intensity, as the samples' bound) and the
-        spot inside the disk of radius ``rho`` about the point's foot at height ``h``:
-        ``int dA / R^2 <= pi ln(1 + rho^2 / h^2)``, times ``FLAT_BOUND_MARGIN`` (``I_max``
-        is the point form's sampled largest intensity, which this bound rests on at first
-        order, the samples' only in their remainders). Finite within a sample's radius,
-        where the samples' bound is not: a spot much larger than its lobe."""
+        spot (infinite otherwise): ``E <= sum_tri E_inc,tri int_tri f_r cos / R^2 dA`` with
+        ``E_inc,tri`` the beam's largest irradiance on the triangle
+        (:func:`_incident_w_m2`), ``f_r cos`` at most the material's proven largest
+        value (:func:`projected_brdf_max`: Lambertian, constant scales and sums of them)
+        or else ``I_max / P`` (the point form's sampled largest intensity, which the
+        bound then rests on at first order) times ``FLAT_BOUND_MARGIN``, and ``int_tri
+        dA / R^2`` bounded per triangle (:func:`_inverse_square_bound`: finite down to
+        the surface off the triangle's own area). Finite within a sample's radius, where the samples' bound
+        is not: a spot much larger than its lobe, or a long grazing spot. The smaller of
+        that sum and the whole spot's disk form (the largest ``E_inc`` over the disk of
+        radius ``rho`` about the point's foot, ``int dA / R^2 <= pi ln(1 + rho^2 / h^2)``)."""
         if not math.isfinite(self.g_m2):
             return np.full(len(pts), np.inf)
+        step = max(1, (_BOUND_BLOCK // 4) // max(len(self.g_tri), 1))
+        if len(pts) > step:
+            return np.concatenate([self._flat_bound(pts[a:a + step]) for a in range(0, len(pts), step)])
         loc = (pts - self.c) @ self.frame.T
         h2 = loc[:, 2] ** 2
-        rho = np.sqrt(loc[:, 0] ** 2 + loc[:, 1] ** 2) + self.r_spot_m
+        with np.errstate(invalid="ignore"):
+            b = self.g_tri[None] * _inverse_square_bound(loc[:, :2], h2, self.tri_boxes)
+        rho = np.sqrt(loc[:, 0] ** 2 + loc[:, 1] ** 2) + self.r_spot_m  # the whole spot in one disk, at its largest E_inc
         with np.errstate(divide="ignore"):
-            return np.where(h2 > 0, self.g_m2 * math.pi * np.log1p(rho * rho / np.where(h2 > 0, h2, 1.0)), np.inf)
+            disk = np.where(h2 > 0, self.g_m2 * math.pi * np.log1p(rho * rho / np.where(h2 > 0, h2, 1.0)), np.inf)
+        return np.minimum(np.where(np.isnan(b), np.inf, b).sum(axis=1), disk)
 
     def prepare(self, dirs, r0):
         """Set up the bounds from the point form's ranges ``r0`` on directions ``dirs``
@@ -261,8 +350,11 @@ class NearLobeFn:
         largest point-form sum alone (reaching the MPE there decides), then only at the states whose
         own bound reaches the MPE (below it at the others: the same decision as every state)."""
         point, err = self._upper(pts)
-        err = np.minimum(err, self._flat_bound(pts))  # the smaller of two bounds (the flat one covers the point forms too)
         up = point + (err if point.ndim == 1 else err[:, None])
+        open_ = np.flatnonzero((up if up.ndim == 1 else up.max(axis=1)) >= 1.0)  # the flat bound only where the samples' does not decide
+        if len(open_):  # the smaller of two bounds (the flat one covers the point forms too)
+            err[open_] = np.minimum(err[open_], self._flat_bound(pts[open_]))
+            up = point + (err if point.ndim == 1 else err[:, None])
         top = up if up.ndim == 1 else up.max(axis=1)
         out = top >= 1.0
         cand = np.flatnonzero(out)
@@ -347,26 +439,27 @@ class NearLobeFn:
         r_hi = self._scan_start(w_loc)
         h = np.minimum(self.smallest_m, r_hi / SCAN_MIN_STEPS)
         w = w_loc @ self.frame
-        found = np.full(len(w), -1.0)
+        found, prev = np.full(len(w), -1.0), r_hi.copy()  # the first hazardous sample and the cold one before it
         floor = r_floor * (1 + FLOOR_RTOL)
-        k = 0
+        r = r_hi.copy()
         live = np.flatnonzero(r_hi > floor)
         while len(live):
-            r = np.maximum(r_hi[live] - k * h[live], floor[live])  # the last sample: just beyond the point form
-            hot = self.hazardous(self.c + r[:, None] * w[live])
-            found[live[hot]] = r[hot]
-            live = live[~hot & (r > floor[live])]
-            k += 1
+            hot = self.hazardous(self.c + r[live, None] * w[live])
+            found[live[hot]] = r[live[hot]]
+            live = live[~hot & (r[live] > floor[live])]
+            prev[live] = r[live]
+            r[live] = np.maximum(r[live] - h[live], floor[live])  # the last sample: just beyond the point form
+        step = np.where((found >= 0) & (prev > found), prev - found, h)  # the scan's resolution at the root (h, or less at the last)
         lo = np.maximum(found, 0.0)
-        hi = np.minimum(lo + h, r_hi)
-        tol = np.maximum(ROOT_RTOL * r_hi, h / 8)
+        hi = np.minimum(lo + step, r_hi)
+        tol = np.maximum(ROOT_RTOL * r_hi, step / 8)
         live = np.flatnonzero((found >= 0) & (hi - lo > tol))
         while len(live):
             mid = 0.5 * (lo[live] + hi[live])
             hot = self.hazardous(self.c + mid[:, None] * w[live])
             lo[live[hot]], hi[live[~hot]] = mid[hot], mid[~hot]
             live = live[hi[live] - lo[live] > tol[live]]
-        return np.where(found >= 0, hi + h, 0.0), h
+        return np.where(found >= 0, hi + step, 0.0), step
 
     # -- the grid and the envelope ---------------------------------------------------------------
     def _build(self):
