@@ -16,7 +16,6 @@ truth and the barycentric value). The barycentric value alone fails the first ch
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
