@@ -45,7 +45,7 @@ from .results import HazardResult, ObserverResults, Stage, TargetResult
 __all__ = ["analyze", "run_pipeline", "hazard_result", "HazardResult", "Stage", "TargetResult", "ObserverResults"]
 
 
-def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None) -> HazardResult:
+def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None, memo=None) -> HazardResult:
     """Run the hazard analysis of a loaded scene (see the module notes for the stages).
 
     Parameters
@@ -63,30 +63,34 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
         Threads for the irradiance map, the BRDF evaluations and the ray queries
         (default: :func:`brdfmodels.parallel.default_threads`, the CPUs this process may
         use). Results do not depend on it.
+    memo : hazard.pipeline.stages.StageMemo, optional
+        Reuse the stage results of earlier runs whose inputs are the same (the result is
+        identical to a fresh run's; see :mod:`hazard.pipeline.stages`).
 
     The last stage, ``extended_source``, sets the MPE per observer: the point-source MPE
     by default, C_E from the diffuse spot's angular subtense with ``[exposure]
     extended_source = true`` (:func:`hazard.extended_source.extended_source_of`).
     """
     if threads is None:
-        return _run(scene, backend, progress, keep_history, default_threads())
+        return _run(scene, backend, progress, keep_history, default_threads(), memo)
     with thread_limit(threads):  # checks it; caps every hot loop called from here
-        return _run(scene, backend, progress, keep_history, threads)
+        return _run(scene, backend, progress, keep_history, threads, memo)
 
 
-def run_pipeline(scene, *, backend="embree", progress=None, keep_history=None, threads=None):
+def run_pipeline(scene, *, backend="embree", progress=None, keep_history=None, threads=None, memo=None):
     """The stages' results of an analysis: stage name -> frozen result (the types of
     :mod:`hazard.pipeline.stages`, and :class:`hazard.extended_source.ExtendedSourceResult`),
     and the stage log. :func:`analyze` assembles its :class:`HazardResult` from them
-    (:func:`hazard_result`)."""
+    (:func:`hazard_result`). ``memo``: a :class:`~hazard.pipeline.stages.StageMemo` whose
+    results are reused where the inputs are the same."""
     log = StageLog(progress)
     inputs = {"scene": scene, "plan": plan(scene), "backend": backend,
               "threads": default_threads() if threads is None else threads, "keep_history": keep_history}
-    return run_stages(REGISTRY, derive_plan(REGISTRY, inputs), inputs, log), log
+    return run_stages(REGISTRY, derive_plan(REGISTRY, inputs), inputs, log, memo), log
 
 
-def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
-    results, log = run_pipeline(scene, backend=backend, progress=progress, keep_history=keep_history, threads=threads)
+def _run(scene, backend, progress, keep_history, threads, memo=None) -> HazardResult:
+    results, log = run_pipeline(scene, backend=backend, progress=progress, keep_history=keep_history, threads=threads, memo=memo)
     return hazard_result(results, log.stages() + [results["extended_source"].record])
 
 
