@@ -30,6 +30,7 @@ from brdfmodels.parallel import default_threads, thread_limit
 
 from . import near_field, near_field_lobe
 from .aperture import limiting_aperture_m, observer_apertures
+from .engine import FAR_FIELD_SPOT_SIZES
 from .extended_source import ExtendedSourceResult, extended_source_of
 from .nohd import group_gains
 from .specular import describe_apertures
@@ -332,13 +333,28 @@ def _targets(log, crossings, history, mpe) -> KeepoutResult:
         rows = lobes.target_results(spots, history.states, mpe.exposure.irradiance_w_m2, mpe.attenuation_per_m, a, aids)
         st.detail = (f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
                      + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else "")
-                     + f"; {near_field_lobe.describe_since(before)}")
+                     + f"; {_near_field_text(before, rows)}")
     rows = rows + beam_stage.unlit_targets(scene.targets, spots, history.traced.built.unreflected)
     notes = lobes.near_field_lobe_notes(spots, rows)
     melt_by_name = {scene.targets[k].name: m for k, m in history.melts.items()}
     for row in rows:  # this stage's own rows
         row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None
     return KeepoutResult(tuple(rows), tuple(notes))
+
+
+def _near_field_text(before, rows) -> str:
+    """:func:`hazard.near_field_lobe.describe_since` ``before``; when this run integrated
+    no direction but the lobes carry near-field grids (cached on spots a
+    :class:`~hazard.pipeline.stages.StageMemo` reused from an earlier run), says so
+    instead of "no direction ... within the near field"."""
+    if near_field_lobe.STATS.snapshot()["directions"] > before["directions"]:
+        return near_field_lobe.describe_since(before)
+    grids = {id(i): i for r in rows for lobe in (r.static_lobe, r.dynamic_lobe) if lobe is not None and (i := lobe.near_field)}
+    n = sum(int(i.get("directions_integrated", 0)) for i in grids.values())
+    if not n:
+        return near_field_lobe.describe_since(before)
+    return (f"near-field lobe: {n} grid direction(s) within {FAR_FIELD_SPOT_SIZES:g} spot sizes integrated "
+            f"in an earlier run on the same spots (grids reused: stage memo)")
 
 
 @stage("mirror_beams", needs=("crossings", "plan", "keepout", "history", "rays"), result=MirrorBeamsResult)
