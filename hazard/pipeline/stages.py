@@ -246,7 +246,8 @@ def _dropped(data: dict, drop) -> dict:
 
 
 def _feed(h, obj, seen: dict, drop=()) -> None:
-    """Feed ``obj``'s value into ``h`` (``seen``: id -> index of objects fed, for sharing and cycles)."""
+    """Feed ``obj``'s value into ``h`` (``seen``: id -> (index, object) of the objects fed, for
+    sharing and cycles)."""
     t = type(obj)
     if obj is None or t in (bool, int, float, complex, str, bytes):
         h.update(f"{t.__name__}:{obj!r};".encode())
@@ -255,9 +256,9 @@ def _feed(h, obj, seen: dict, drop=()) -> None:
         h.update(f"{t.__qualname__}:{obj!r};".encode())
         return
     if id(obj) in seen:
-        h.update(f"ref:{seen[id(obj)]};".encode())
+        h.update(f"ref:{seen[id(obj)][0]};".encode())
         return
-    seen[id(obj)] = len(seen)
+    seen[id(obj)] = (len(seen), obj)  # held: a temporary's id is not reused during the walk
     h.update(f"<{t.__module__}.{t.__qualname__}>".encode())
     if isinstance(obj, np.ndarray):
         if obj.dtype.hasobject:
@@ -285,6 +286,9 @@ def _feed(h, obj, seen: dict, drop=()) -> None:
         h.update(f"{c.co_filename}:{c.co_firstlineno}:{obj.__qualname__}".encode() + c.co_code)
         _feed(h, (c.co_consts, c.co_names, obj.__defaults__, obj.__kwdefaults__,
                   [cell.cell_contents for cell in obj.__closure__ or ()]), seen)
+    elif isinstance(obj, types.CodeType):  # a nested function's or comprehension's code
+        h.update(f"{obj.co_filename}:{obj.co_firstlineno}:{obj.co_name}".encode() + obj.co_code)
+        _feed(h, (obj.co_consts, obj.co_names), seen)
     elif isinstance(obj, types.MethodType):
         _feed(h, (obj.__func__, obj.__self__), seen)
     elif isinstance(obj, (type, types.BuiltinFunctionType, types.ModuleType)):  # code, named: the same in one process
