@@ -205,8 +205,9 @@ UNREAD_SPEC: dict[str, tuple[str, ...]] = {
 }
 #: Scene fields no stage reads (grep of ``hazard`` less its outputs, ``scenes``, ``brdfmodels``):
 #: the text's hash, the keys as given and their units, the plausibility warnings (they
-#: repeat the spec's values, knobs included). Every other field is in the key.
-UNREAD_SCENE = ("text_sha256", "source_data", "units_as_written", "warnings")
+#: repeat the spec's values, knobs included), the source's name (a study names each
+#: scenario). Every other field is in the key (``base_dir`` too).
+UNREAD_SCENE = ("text_sha256", "source_data", "units_as_written", "warnings", "source")
 #: Stages whose result carries the scene (``crossings``: the input scene with observer
 #: points added): a stage that needs one is keyed on the scene's content too, and a
 #: reused result is given the current scene (only its observers taken from the memo).
@@ -335,9 +336,18 @@ class StageMemo:
         The stages run afresh (keyed, or not: see ``uncached``).
     uncached : dict
         Stage name -> why its inputs could not be fingerprinted (it ran afresh).
+
+    Parameters
+    ----------
+    max_entries : int, optional
+        Keep at most this many stage results, the least recently used dropped first
+        (default: all, for a bounded sweep such as ``hazard convergence``).
     """
 
-    def __init__(self):
+    def __init__(self, max_entries: int | None = None):
+        if max_entries is not None and (isinstance(max_entries, bool) or not isinstance(max_entries, int) or max_entries < 1):
+            raise ValueError(f"max_entries={max_entries!r}: expected a positive integer or None")
+        self.max_entries = max_entries
         self._entries: dict[str, tuple] = {}
         self._scene_fp: dict[tuple, tuple] = {}
         self.reused: list[tuple[str, float]] = []
@@ -378,9 +388,10 @@ class StageMemo:
 
     def reuse(self, key: str, name: str, scene, log):
         """The stored result for ``key`` (its log records replayed on ``log``), or None."""
-        entry = self._entries.get(key)
+        entry = self._entries.pop(key, None)
         if entry is None:
             return None
+        self._entries[key] = entry  # the most recently used last
         out, calls, old_scene, seconds = entry
         for c in calls:
             if c[0] == "ran":
@@ -395,6 +406,8 @@ class StageMemo:
         self.computed.append(name)
         if _rebind(out, scene, scene) is not None:
             self._entries[key] = (out, tuple(calls), scene, seconds)
+            while self.max_entries is not None and len(self._entries) > self.max_entries:
+                del self._entries[next(iter(self._entries))]
 
     def reused_seconds(self, since: int = 0) -> float:
         """Seconds the reused stages took when they ran (reuses from index ``since``)."""

@@ -343,3 +343,46 @@ def test_memo_over_random_changes_equals_fresh_runs(grid, refine, step, samples,
         res = hazard.analyze(_scene(change), memo=memo)
         reused = {name for name, _ in memo.reused[n:]}
         _check_against_fresh(res, hazard.analyze(_scene(change)), reused_keepout_grids=bool(reused) and reused != ALL)
+
+
+# -- a serial study shares a memo ----------------------------------------------------------------
+def _without_time(row):
+    return {k: v for k, v in row.items() if k != "run_time_s"}
+
+
+def _study_rows(study, memo):
+    from hazard.study import base_data, run_scenario, scenarios
+
+    base, base_dir = base_data(study)
+    mc = dataclasses.asdict(study.montecarlo)
+    return [run_scenario(base, str(base_dir), s, mc, memo=memo) for s in scenarios(study)]
+
+
+def test_study_scenarios_through_one_memo_give_the_rows_of_fresh_runs(tmp_path):
+    from hazard.study import MonteCarlo, Parameter, Study
+
+    scene = tmp_path / "plate.toml"  # the plate with an [analysis] table for the sweep's path
+    scene.write_text(PLATE.read_text() + "[analysis]\ndirection_grid_deg = 2.0\n")
+    sweep = Study(name="t", scene=str(scene), kind="grid", parameters=(Parameter("analysis.direction_grid_deg", values=(4.0, 2.0)),))
+    memo = StageMemo(max_entries=40)
+    rows = _study_rows(sweep, memo)
+    assert [_without_time(r) for r in rows] == [_without_time(r) for r in _study_rows(sweep, None)]
+    assert all(r["error"] is None for r in rows) and rows[0]["keepout_volume_static_m3"] != rows[1]["keepout_volume_static_m3"]
+    assert {name for name, _ in memo.reused} == BEFORE_KEEPOUT and len(memo._entries) <= 40
+    # Monte Carlo: each draw scales the targets' materials, part of every stage's scene: nothing reused
+    mc = Study(name="t", scene=str(scene), kind="grid", parameters=(Parameter("analysis.direction_grid_deg", values=(4.0,)),),
+               montecarlo=MonteCarlo(samples=2, brdf_scale_sigma=0.3))
+    memo = StageMemo(max_entries=40)
+    rows = _study_rows(mc, memo)
+    assert all(r["error"] is None for r in rows) and len({tuple(r["brdf_scales"]) for r in rows}) == len(rows) == 2
+    assert [_without_time(r) for r in rows] == [_without_time(r) for r in _study_rows(mc, None)] and memo.reused == []
+
+
+def test_memo_keeps_at_most_max_entries():
+    memo = StageMemo(max_entries=3)
+    reg = _toy([])
+    for x in (1.0, 2.0, 3.0):
+        run_stages(reg, derive_plan(reg), {"scene": _Scene(_Spec(x)), "threads": 1}, _Log(), memo)
+    assert len(memo._entries) == 3  # the last two runs' a and b, less the oldest
+    with pytest.raises(ValueError, match="max_entries=0: expected a positive integer or None"):
+        StageMemo(max_entries=0)
