@@ -178,7 +178,7 @@ def run_stages(stages: Mapping[str, StageDef], order: Iterable[str], inputs: Map
         key = keys[name] = None if memo is None else memo.key(d, values, keys)
         out = None if key is None else memo.reuse(key, name, values.get("scene"), log)
         if out is None:
-            rec = _Recorder(log)
+            rec = log if key is None else _Recorder(log)  # without a memo the stage gets the log itself
             t0 = time.perf_counter()
             out = d.run(rec, **{n: values[n] for n in d.needs})
             if not isinstance(out, d.result):
