@@ -172,7 +172,7 @@ def run_stages(stages: Mapping[str, StageDef], order: Iterable[str], inputs: Map
     results: dict[str, Any] = {}
     keys: dict[str, str | None] = {}
     if memo is not None:
-        memo.begin()
+        memo.begin(values.get("scene"))
     for name in order:
         d = stages[name]
         key = keys[name] = None if memo is None else memo.key(d, values, keys)
@@ -354,9 +354,15 @@ class StageMemo:
         self.computed: list[str] = []
         self.uncached: dict[str, str] = {}
 
-    def begin(self) -> None:
-        """A new run: the scenes' fingerprints are computed again (a scene may have changed)."""
+    def begin(self, scene=None) -> None:
+        """A new run of ``scene``: its fingerprints computed again, before any stage runs (a
+        stage may fill a lazy cache of the scene, e.g. the observers' points)."""
         self._scene_fp.clear()
+        for drop in {(), *UNREAD_SPEC.values()}:
+            try:
+                self._scene(scene, drop)
+            except Unfingerprintable:
+                pass  # raised again where a stage needs it
 
     def key(self, d: StageDef, values: Mapping[str, Any], keys: Mapping[str, str | None]) -> str | None:
         """The key of stage ``d`` with these inputs (None: not fingerprintable)."""
