@@ -176,14 +176,14 @@ def run_stages(stages: Mapping[str, StageDef], order: Iterable[str], inputs: Map
     for name in order:
         d = stages[name]
         key = keys[name] = None if memo is None else memo.key(d, values, keys)
-        out = None if key is None else memo.reuse(key, name, values.get("scene"), log)
+        out = None if memo is None or key is None else memo.reuse(key, name, values.get("scene"), log)
         if out is None:
-            rec = log if key is None else _Recorder(log)  # without a memo the stage gets the log itself
+            rec = _Recorder(log)
             t0 = time.perf_counter()
-            out = d.run(rec, **{n: values[n] for n in d.needs})
+            out = d.run(log if key is None else rec, **{n: values[n] for n in d.needs})  # without a key: the log itself
             if not isinstance(out, d.result):
                 raise TypeError(f"stage {name!r} returned {type(out).__name__}, expected {d.result.__name__}")
-            if key is not None:
+            if memo is not None and key is not None:
                 memo.store(key, name, out, rec.calls, values.get("scene"), time.perf_counter() - t0)
         values[name] = results[name] = out
     return MappingProxyType(results)
@@ -237,8 +237,9 @@ def fingerprint(obj, *, drop=()) -> str:
 
 
 def _dropped(data: dict, drop) -> dict:
+    """``data`` (a model's dump) less the key paths ``drop`` (tuples of keys)."""
     for path in drop:
-        d = data
+        d: Any = data
         for part in path[:-1]:
             d = d.get(part) if isinstance(d, dict) else None
         if isinstance(d, dict):
@@ -371,9 +372,10 @@ class StageMemo:
             for n in d.needs:
                 h.update(f"need:{n};".encode())
                 if n in keys:
-                    if keys[n] is None:
+                    k = keys[n]
+                    if k is None:
                         raise Unfingerprintable(f"its input {n!r} was not fingerprinted")
-                    h.update(keys[n].encode())
+                    h.update(k.encode())
                 if n == "scene" or n in CARRIES_SCENE:
                     h.update(self._scene(values["scene"], UNREAD_SPEC.get(d.name, ())).encode())
                 elif n not in keys:
@@ -388,8 +390,9 @@ class StageMemo:
         if held is None or held[0] is not scene:  # the scene itself is held: its id cannot be reused meanwhile
             if not is_dataclass(scene):
                 raise Unfingerprintable(f"the scene is a {type(scene).__name__}, not a scenes.Scene")
-            parts = {f.name: getattr(scene, f.name) for f in fields(scene) if f.name not in UNREAD_SCENE and f.name != "spec"}
-            held = self._scene_fp[drop] = (scene, fingerprint((parts, fingerprint(scene.spec, drop=drop))))
+            parts = {f.name: getattr(scene, f.name) for f in fields(scene) if f.name not in UNREAD_SCENE}
+            spec = parts.pop("spec", None)  # by value, less the fields ``drop``
+            held = self._scene_fp[drop] = (scene, fingerprint((parts, fingerprint(spec, drop=drop))))
         return held[1]
 
     def reuse(self, key: str, name: str, scene, log):
