@@ -30,6 +30,7 @@ from brdfmodels.parallel import default_threads, thread_limit
 
 from . import near_field, near_field_lobe
 from .aperture import limiting_aperture_m, observer_apertures
+from .engine import FAR_FIELD_SPOT_SIZES
 from .extended_source import ExtendedSourceResult, extended_source_of
 from .nohd import group_gains
 from .specular import describe_apertures
@@ -45,7 +46,7 @@ from .results import HazardResult, ObserverResults, Stage, TargetResult
 __all__ = ["analyze", "run_pipeline", "hazard_result", "HazardResult", "Stage", "TargetResult", "ObserverResults"]
 
 
-def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None) -> HazardResult:
+def analyze(scene, *, backend="embree", progress=None, keep_history=None, threads=None, memo=None) -> HazardResult:
     """Run the hazard analysis of a loaded scene (see the module notes for the stages).
 
     Parameters
@@ -63,30 +64,34 @@ def analyze(scene, *, backend="embree", progress=None, keep_history=None, thread
         Threads for the irradiance map, the BRDF evaluations and the ray queries
         (default: :func:`brdfmodels.parallel.default_threads`, the CPUs this process may
         use). Results do not depend on it.
+    memo : hazard.pipeline.stages.StageMemo, optional
+        Reuse the stage results of earlier runs whose inputs are the same (the result is
+        identical to a fresh run's; see :mod:`hazard.pipeline.stages`).
 
     The last stage, ``extended_source``, sets the MPE per observer: the point-source MPE
     by default, C_E from the diffuse spot's angular subtense with ``[exposure]
     extended_source = true`` (:func:`hazard.extended_source.extended_source_of`).
     """
     if threads is None:
-        return _run(scene, backend, progress, keep_history, default_threads())
+        return _run(scene, backend, progress, keep_history, default_threads(), memo)
     with thread_limit(threads):  # checks it; caps every hot loop called from here
-        return _run(scene, backend, progress, keep_history, threads)
+        return _run(scene, backend, progress, keep_history, threads, memo)
 
 
-def run_pipeline(scene, *, backend="embree", progress=None, keep_history=None, threads=None):
+def run_pipeline(scene, *, backend="embree", progress=None, keep_history=None, threads=None, memo=None):
     """The stages' results of an analysis: stage name -> frozen result (the types of
     :mod:`hazard.pipeline.stages`, and :class:`hazard.extended_source.ExtendedSourceResult`),
     and the stage log. :func:`analyze` assembles its :class:`HazardResult` from them
-    (:func:`hazard_result`)."""
+    (:func:`hazard_result`). ``memo``: a :class:`~hazard.pipeline.stages.StageMemo` whose
+    results are reused where the inputs are the same."""
     log = StageLog(progress)
     inputs = {"scene": scene, "plan": plan(scene), "backend": backend,
               "threads": default_threads() if threads is None else threads, "keep_history": keep_history}
-    return run_stages(REGISTRY, derive_plan(REGISTRY, inputs), inputs, log), log
+    return run_stages(REGISTRY, derive_plan(REGISTRY, inputs), inputs, log, memo), log
 
 
-def _run(scene, backend, progress, keep_history, threads) -> HazardResult:
-    results, log = run_pipeline(scene, backend=backend, progress=progress, keep_history=keep_history, threads=threads)
+def _run(scene, backend, progress, keep_history, threads, memo=None) -> HazardResult:
+    results, log = run_pipeline(scene, backend=backend, progress=progress, keep_history=keep_history, threads=threads, memo=memo)
     return hazard_result(results, log.stages() + [results["extended_source"].record])
 
 
@@ -328,13 +333,28 @@ def _targets(log, crossings, history, mpe) -> KeepoutResult:
         rows = lobes.target_results(spots, history.states, mpe.exposure.irradiance_w_m2, mpe.attenuation_per_m, a, aids)
         st.detail = (f"{len(spots)} lobe(s) at {a.direction_grid_deg:g} deg, {a.refine_levels} refinement levels"
                      + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else "")
-                     + f"; {near_field_lobe.describe_since(before)}")
+                     + f"; {_near_field_text(before, rows)}")
     rows = rows + beam_stage.unlit_targets(scene.targets, spots, history.traced.built.unreflected)
     notes = lobes.near_field_lobe_notes(spots, rows)
     melt_by_name = {scene.targets[k].name: m for k, m in history.melts.items()}
     for row in rows:  # this stage's own rows
         row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None
     return KeepoutResult(tuple(rows), tuple(notes))
+
+
+def _near_field_text(before, rows) -> str:
+    """:func:`hazard.near_field_lobe.describe_since` ``before``; when this run integrated
+    no direction but the lobes carry near-field grids (cached on spots a
+    :class:`~hazard.pipeline.stages.StageMemo` reused from an earlier run), says so
+    instead of "no direction ... within the near field"."""
+    if near_field_lobe.STATS.snapshot()["directions"] > before["directions"]:
+        return near_field_lobe.describe_since(before)
+    grids = {id(i): i for r in rows for lobe in (r.static_lobe, r.dynamic_lobe) if lobe is not None and (i := lobe.near_field)}
+    n = sum(int(i.get("directions_integrated", 0)) for i in grids.values())
+    if not n:
+        return near_field_lobe.describe_since(before)
+    return (f"near-field lobe: {n} grid direction(s) within {FAR_FIELD_SPOT_SIZES:g} spot sizes integrated "
+            f"in an earlier run on the same spots (grids reused: stage memo)")
 
 
 @stage("mirror_beams", needs=("crossings", "plan", "keepout", "history", "rays"), result=MirrorBeamsResult)

@@ -12,6 +12,13 @@ Columns of a row: ``knob``, ``value``, each quantity in its unit (``max_nohd_m``
 ``keepout_volume_m3``, ``peak_irradiance_w_m2``, ``spot_power_w``, ``max_path_exposure_j_m2``), its relative error
 against the finest run (``rel_error_max_nohd``, ... : unitless, ``|q - q_ref| / |q_ref|``;
 0 when both are 0 and inf when only the reference is 0) and the run time ``time_s``.
+
+The runs share one :class:`~hazard.pipeline.stages.StageMemo`: a level reuses the stage
+results of an earlier run whose inputs it does not change (a keep-out knob's levels reuse
+the rays, beam, map; a level equal to the scene's own setting of another knob reuses
+everything), with results identical to a fresh run's. ``time_s`` is the wall time of the
+level's run in this sweep (stages reused cost nothing); ``ConvergenceReport.reused`` lists
+per row the stages it reused.
 """
 
 from __future__ import annotations
@@ -19,13 +26,14 @@ from __future__ import annotations
 import copy
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from brdfmodels.fileio import read_toml
 
+from .pipeline.stages import StageMemo
 from .progress import progress_to, terminal_bar
 
 __all__ = ["convergence", "ConvergenceReport", "KNOB_LEVELS", "QUANTITIES", "REL_ERROR_COLUMNS"]
@@ -60,6 +68,7 @@ class ConvergenceReport:
     rows: list  # knob, value, quantities, errors, time_s
     recommended: dict  # knob -> value
     tolerance: float
+    reused: list = field(default_factory=list)  # per row: the stages its run reused from an earlier level (StageMemo)
 
     def table(self, knob=None):
         return [r for r in self.rows if knob is None or r["knob"] == knob]
@@ -151,7 +160,7 @@ def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress
             raise ValueError(f"knob {k!r}: the scene does not use it (it uses {used})")
     say = progress or (lambda msg: None)
     plan = {knob: (levels or {}).get(knob, KNOB_LEVELS[knob]) for knob in knobs}
-    rows, recommended = [], {}
+    rows, recommended, reused, memo = [], {}, [], StageMemo()
     with terminal_bar(sum(len(v) for v in plan.values()), "convergence runs", unit="run", leave=True) as bar:
         for knob, values in plan.items():
             runs = []
@@ -159,14 +168,15 @@ def convergence(scene_path, *, knobs=None, levels=None, tolerance=0.01, progress
                 say(f"{knob} = {v}")
                 bar.set_description(f"convergence: {knob} = {v}")
                 scene = scenes.from_data(_apply(data, knob, v), source=str(path), base_dir=path.parent)
-                t0 = time.perf_counter()
+                t0, n0 = time.perf_counter(), len(memo.reused)
                 with progress_to(None):  # one bar: not the keep-out bars of every run
-                    res = analyze(scene)
+                    res = analyze(scene, memo=memo)
                 runs.append((v, _quantities(res), time.perf_counter() - t0))
+                reused.append(tuple(name for name, _ in memo.reused[n0:]))
                 bar.update()
             rows += _rows(knob, runs)
             recommended[knob] = _cheapest(rows[-len(runs):], tolerance)
-    return ConvergenceReport(rows, recommended, tolerance)
+    return ConvergenceReport(rows, recommended, tolerance, reused)
 
 
 def _rows(knob, runs) -> list:

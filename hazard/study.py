@@ -12,7 +12,10 @@ Execution: each scenario is a pure function of (base scene, overrides, seed), so
 Dask run (an embedded ``LocalCluster`` or an existing scheduler) gives exactly the results
 of a serial run. Each result is written atomically as it finishes
 (``OUTDIR/scenarios/NNNNN.json``); a restarted study skips finished scenarios and runs
-failed ones again. Every scenario's scene is validated before any work; a scenario that
+failed ones again. A serial run shares a bounded stage memo over its scenarios
+(:class:`hazard.pipeline.stages.StageMemo`): a scenario reuses the stages whose inputs it
+does not change (a sweep of ``analysis.direction_grid_deg`` reuses all before the keep-out
+lobes), with the same row. Every scenario's scene is validated before any work; a scenario that
 still fails at run time is recorded with its error and stops the study (``keep_going``
 runs the rest); either way the result says so and ``hazard study`` exits 4. At the end: ``results.csv``
 (and ``results.parquet`` with pyarrow), ``summary.json`` (percentiles for Monte Carlo)
@@ -35,6 +38,7 @@ import numpy as np
 
 from brdfmodels.fileio import atomic_write, atomic_write_text, read_toml
 
+from .pipeline.stages import StageMemo
 from .progress import progress_callback, progress_to
 
 __all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path",
@@ -481,11 +485,14 @@ def _tilt(vec, tilt_rad, rng):
     return (math.cos(ang) * v + math.sin(ang) * axis).tolist()
 
 
-def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=None) -> dict:
+def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=None, memo=None) -> dict:
     """Analyse one scenario; returns its row (inputs, outputs, run time, or the error).
 
     ``threads`` goes to :func:`hazard.analyze`; on a cluster each scenario gets one
-    (the workers are the parallelism), in a serial run it uses every CPU.
+    (the workers are the parallelism), in a serial run it uses every CPU. ``memo``: a
+    :class:`hazard.pipeline.stages.StageMemo` shared by a serial run's scenarios (the
+    stages whose inputs a scenario does not change are reused; the row is the same,
+    ``run_time_s`` then the scenario's own share).
     """
     import brdfmodels
     import scenes
@@ -514,7 +521,7 @@ def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=No
             if s != 1.0:
                 t.material = brdfmodels.Scaled(t.material, s)
         with progress_to(None):  # the study draws one bar; none per scenario (nor in Dask workers)
-            res = analyze(scene, threads=threads)
+            res = analyze(scene, threads=threads, memo=memo)
         tr = [t.to_dict() for t in res.targets]
         row.update({
             "nohd_static_m": max([t["nohd_static_m"] for t in tr], default=0.0),
@@ -535,6 +542,10 @@ def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=No
     row["run_time_s"] = time.perf_counter() - start
     return row
 
+
+#: Stage results a serial study keeps for its next scenarios (a few scenarios' worth: a
+#: Monte Carlo study changes every stage's inputs and must not grow without bound).
+MEMO_ENTRIES = 64
 
 OUTPUT_COLUMNS = ["nohd_static_m", "nohd_dynamic_m", "specular_nohd_dynamic_m", "keepout_volume_static_m3", "keepout_volume_dynamic_m3",
                   "ground_area_static_m2", "ground_area_dynamic_m2", "hazardous_observers", "hazardous_observers_static", "run_time_s"]
@@ -748,8 +759,9 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
         (sdir / f"{s['id']:05d}.json").unlink(missing_ok=True)
     if pending:
         if serial:
+            memo = StageMemo(max_entries=MEMO_ENTRIES)
             for s in pending:
-                row = run_scenario(base, str(base_dir), s, mc)
+                row = run_scenario(base, str(base_dir), s, mc, memo=memo)
                 record(row)
                 finished += 1
                 say(finished, total)
