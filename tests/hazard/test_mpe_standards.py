@@ -232,41 +232,44 @@ def test_c5_is_3_to_7_times_the_old_n_to_the_minus_quarter_in_iec_2014():
 
 
 # --- 4. worked examples ------------------------------------------------------------------
-# Each: the inputs, the printed result (numbers only) and where it is from. Labels as in the
-# spec (laser-safety.md): [C] read in the cited public source; [D] a closed-form recomputation
-# of a [C] formula; [M] a value widely quoted in training material, source not read here.
+# Each: the inputs, the printed result (numbers only) and where it is from. Labels:
+# [P] a published worked example, re-read for test_published_examples.py (which has
+#     14 such cases, every number quoted with its source);
+# [I] a value read in a public implementation (code), not a published worked example;
+# [H] hand-computed, not a published example (a closed form of a [C] formula, or a value
+#     from general knowledge of the tables, no source read).
 # The MPE always comes from hazard.mpe; the distance formulas are written out here.
 def nohd_closed_form(p_w, mpe, a_m, phi_rad):
     return (math.sqrt(4 * p_w / (math.pi * mpe)) - a_m) / phi_rad  # ANSI eq. B (spec 3.1) [C]
 
 
 def test_worked_01_cw_632_8_nm_quarter_second():
-    # barbella.ch laser-pointer page [C] (spec 3.2 #2): NOHD where the irradiance is 2.54 mW/cm^2
+    # [P] barbella.ch laser-pointer page (spec 3.2 #2; also test_published_examples p02): NOHD where the irradiance is 2.54 mW/cm^2
     # (0.25 s); the brief's training-guide form: CW 632.8 nm, 0.25 s -> 25.4 W/m^2 (to the digits printed)
     e = hz.ocular_mpe(632.8, 0.25).irradiance_w_m2
     assert math.floor(e * 10) / 10 == 25.4 and math.floor(e * 1e-4 * 1e5) / 1e5 == 2.54e-3
 
 
 def test_worked_02_03_hene_eye_and_skin():
-    # BS EN 60825-1:2014 training guide (flipbuilder page 104) [C]: HeNe CW: eye 1 mW/cm^2, skin 200 mW/cm^2
+    # [P] BS EN 60825-1:2014 training guide (flipbuilder page 104; also p01): HeNe CW: eye 1 mW/cm^2, skin 200 mW/cm^2
     assert hz.ocular_mpe(632.8, 1e4, standard=IEC).irradiance_w_m2 == pytest.approx(1e-3 * J_CM2, rel=REL)
     assert hz.skin_mpe(632.8, 1e4, standard=IEC).irradiance_w_m2 == pytest.approx(0.2 * J_CM2, rel=REL)
 
 
 def test_worked_04_nd_yag_cw_long_exposure():
-    # OLBtools Z136 module, akufcsak table_a1, Laser-Studio (spec 2.7) [C]: 1064 nm, >= 10 s: 5.0e-3 W/cm^2
+    # [I] OLBtools Z136 module, akufcsak table_a1, Laser-Studio (spec 2.7): 1064 nm, >= 10 s: 5.0e-3 W/cm^2
     for std in (ANSI, IEC):
         assert hz.ocular_mpe(1064, 100.0, standard=std).irradiance_w_m2 == pytest.approx(5.0e-3 * J_CM2, rel=REL)
 
 
 def test_worked_05_06_nd_yag_single_q_switched_pulse():
-    # spec 2.7 [C] (OLBtools, Laser-Studio): 1064 nm, 10 ns: 2.0e-6 J/cm^2 (2014), 5.0e-6 J/cm^2 (2007)
+    # [I] spec 2.7 (OLBtools, Laser-Studio): 1064 nm, 10 ns: 2.0e-6 J/cm^2 (2014), 5.0e-6 J/cm^2 (2007)
     assert h(1064, 10e-9, ANSI) == pytest.approx(2.0e-6 * J_CM2, rel=REL)
     assert h(1064, 10e-9, "ansi-z136.1-2007") == pytest.approx(5.0e-6 * J_CM2, rel=REL)
 
 
 def test_worked_07_direct_beam_nohd():
-    # spec 3.2 #4: 1064 nm, 1 W, a = 2 mm, phi = 1 mrad, MPE 50 W/m^2 -> 157.58 m [D]; a public test
+    # [H] hand-computed, not a published example. spec 3.2 #4: 1064 nm, 1 W, a = 2 mm, phi = 1 mrad, MPE 50 W/m^2 -> 157.58 m [D]; a public test
     # file prints 157.65 m citing ANSI Z136.1-2014 Table B1 [C, weak]: agrees to its 0.05 %
     mpe = hz.ocular_mpe(1064, 10.0).irradiance_w_m2
     n = hz.nohd_direct(1.0, mpe, 2e-3, 1e-3).nohd_m
@@ -275,7 +278,7 @@ def test_worked_07_direct_beam_nohd():
 
 
 def test_worked_08_diffuse_reflection():
-    # spec 3.2 #8 [D] of the ANSI diffuse form [C]: 1064 nm CW, rho = 1, theta = 0, MPE 50 W/m^2:
+    # [H] hand-computed, not a published example: spec 3.2 #8, the ANSI diffuse form [C]: 1064 nm CW, rho = 1, theta = 0, MPE 50 W/m^2:
     # NHZ = 0.252 m at 10 W, 0.798 m at 100 W
     mpe = hz.ocular_mpe(1064, 10.0).irradiance_w_m2
     for p, nhz in ((10.0, 0.252), (100.0, 0.798)):
@@ -283,14 +286,14 @@ def test_worked_08_diffuse_reflection():
 
 
 def test_worked_09_specular_flat_mirror():
-    # spec 3.2 #10 [D]: rho_s = 0.9, 10 W at 1064 nm, a = 3 mm, phi = 1 mrad: 475.7 m (direct 501.6 m)
+    # [H] hand-computed, not a published example (spec 3.2 #10): rho_s = 0.9, 10 W at 1064 nm, a = 3 mm, phi = 1 mrad: 475.7 m (direct 501.6 m)
     mpe = hz.ocular_mpe(1064, 10.0).irradiance_w_m2
     assert round(hz.nohd_specular(10.0, mpe, 3e-3, 1e-3, 0.9).nohd_m, 1) == 475.7
     assert round(hz.nohd_direct(10.0, mpe, 3e-3, 1e-3).nohd_m, 1) == 501.6
 
 
 def test_worked_10_binoculars_7x50():
-    # spec 3.1 [C] (Laser-Studio's K = min(tau M^2, tau (D_o / 7 mm)^2)): 7x50, tau = 1: K = 49 (not 51);
+    # [H] hand-computed, not a published example; gain form [I] (Laser-Studio's K = min(tau M^2, tau (D_o / 7 mm)^2)): 7x50, tau = 1: K = 49 (not 51);
     # ENOHD ~ sqrt(K) NOHD = 7 NOHD when a << R phi [D]
     k = hz.optical_gain(7, 50e-3, 1.0)
     assert k == 49.0
@@ -300,7 +303,7 @@ def test_worked_10_binoculars_7x50():
 
 
 def test_worked_11_attenuation_lambert_w():
-    # spec 3.1 [D]: for a = 0, R = (2 / mu) W(mu R0 / 2), R0 the unattenuated NOHD
+    # [H] hand-computed, not a published example (spec 3.1): for a = 0, R = (2 / mu) W(mu R0 / 2), R0 the unattenuated NOHD
     from scipy.special import lambertw
 
     mpe = hz.ocular_mpe(1064, 10.0).irradiance_w_m2
@@ -311,7 +314,7 @@ def test_worked_11_attenuation_lambert_w():
 
 
 def test_worked_12_repetitive_pulse_rule_3():
-    # classic ANSI rule 3 example [D]: 1064 nm, 10 ns, 1 kHz, 10 s: H_1 = 2.0e-6 J/cm^2,
+    # [H] hand-computed, not a published example (the ANSI rule 3 arithmetic): 1064 nm, 10 ns, 1 kHz, 10 s: H_1 = 2.0e-6 J/cm^2,
     # C_P = (1e4)^-0.25 = 0.1 -> 2.0e-7 J/cm^2 per pulse; average 5e-3 W/cm^2 x 10 s / 1e4 = 5e-6 J/cm^2
     r = hz.repetitive_pulse_mpe(1064, 10e-9, 1e3, 10.0)
     assert r.per_pulse_radiant_exposure_j_m2 == pytest.approx(2.0e-7 * J_CM2, rel=REL)
@@ -319,7 +322,7 @@ def test_worked_12_repetitive_pulse_rule_3():
 
 
 def test_worked_13_excimer_uv():
-    # KrF 248 nm / ArF 193 nm excimer, any exposure 1e-9 - 3e4 s: 3 mJ/cm^2 [M] (widely quoted;
+    # [H] not a published example: KrF 248 nm / ArF 193 nm, 1e-9 - 3e4 s: 3 mJ/cm^2 (general knowledge;
     # ANSI Table 5a 180-302 nm photochemical row)
     for wl in (193.0, 248.0):
         for t in (20e-9, 1.0, 8 * 3600.0):
@@ -327,7 +330,7 @@ def test_worked_13_excimer_uv():
 
 
 def test_worked_14_tripled_nd_yag_355_nm():
-    # 355 nm, 10 ns pulse: 0.56 t^0.25 = 5.6 mJ/cm^2 [M]; the CLI answers it end to end
+    # [H] not a published example: 355 nm, 10 ns: 0.56 t^0.25 = 5.6 mJ/cm^2 (sourced 355 nm: p10, p11); the CLI answers it end to end
     import io
 
     from hazard.cli import main
@@ -339,17 +342,17 @@ def test_worked_14_tripled_nd_yag_355_nm():
 
 
 def test_worked_15_eye_safe_rangefinder_1540_nm():
-    # Er:glass rangefinder, 1540 nm, single pulse 1e-9 - 10 s: 1.0 J/cm^2 [M] (ANSI 1500-1800 nm row)
+    # [H] not a published example: Er:glass rangefinder, 1540 nm, 1e-9 - 10 s: 1.0 J/cm^2 (ANSI 1500-1800 nm row)
     assert h(1540.0, 30e-9, ANSI) == pytest.approx(1.0 * J_CM2, rel=REL)
 
 
 def test_worked_16_co2_10_6_um():
-    # CO2 10.6 um, >= 10 s: 0.1 W/cm^2 [M] (ANSI Table 5a 1400 nm - 1 mm row)
+    # [H] not a published example: CO2 10.6 um, >= 10 s: 0.1 W/cm^2 (ANSI Table 5a 1400 nm - 1 mm row)
     assert hz.ocular_mpe(10600.0, 10.0).irradiance_w_m2 == pytest.approx(0.1 * J_CM2, rel=REL)
 
 
 def test_worked_17_nd_yag_skin():
-    # akufcsak table_a5 (IEC 2014 Table A.5) [C]: skin, 1064 nm, >= 10 s: 2000 C4 = 1e4 W/m^2 (1.0 W/cm^2)
+    # [I] akufcsak table_a5 (IEC 2014 Table A.5): skin, 1064 nm, >= 10 s: 2000 C4 = 1e4 W/m^2 (1.0 W/cm^2)
     assert hz.skin_mpe(1064, 100.0, standard=IEC).irradiance_w_m2 == pytest.approx(1.0 * J_CM2, rel=REL)
 
 
