@@ -234,7 +234,7 @@ def test_c5_is_3_to_7_times_the_old_n_to_the_minus_quarter_in_iec_2014():
 # --- 4. worked examples ------------------------------------------------------------------
 # Each: the inputs, the printed result (numbers only) and where it is from. Labels:
 # [P] a published worked example, re-read for test_published_examples.py (which has
-#     14 such cases, every number quoted with its source);
+#     15 such cases, every number quoted with its source);
 # [I] a value read in a public implementation (code), not a published worked example;
 # [H] hand-computed, not a published example (a closed form of a [C] formula, or a value
 #     from general knowledge of the tables, no source read).

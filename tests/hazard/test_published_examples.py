@@ -19,6 +19,7 @@ import pytest
 
 import hazard as hz
 from hazard.aperture import limiting_aperture_m
+from hazard.visual import LEVELS_W_M2, zone_distances_m
 
 ANSI, IEC = "ansi-z136.1-2014", "iec-60825-1-2014"
 FT = 0.3048  # m per international foot
@@ -187,3 +188,21 @@ def test_p14_1064_nm_3_ns_ranging_laser():
     # 1064 nm, 3 ns pulses: "MPE for (S) = 2e-6 J/cm^2", read off the IEC 60825 MPE chart
     # (one significant figure).
     assert within(hz.ocular_mpe(1064.0, 3e-9, standard=IEC).radiant_exposure_j_m2 * CM2, 2e-6, 0.05e-6)
+
+
+# --- aviation: visual interference levels ---------------------------------------------------
+def test_p15_five_mw_pointer_hazard_zones():
+    # lists.atmob.org/pipermail/atmob-discuss/2007-March/003105.html (ATMoB list, B. Kosicki,
+    # 8 Mar 2007, quoting the Rockwell Laser Industries pointer page rli.com/resources/pointer.asp):
+    # a typical 5 mW pointer: blink reflex 2.6e-3 W/cm^2 -> NHZ 51 ft; flash-blindness 100e-6 W/cm^2
+    # -> 262 ft; glare 5e-6 W/cm^2 -> 1,171 ft; "no effect" 50e-9 W/cm^2 -> 11,707 ft. The quoted
+    # table prints no beam data; 1 mrad (the message's own assumption) with a = 0 reproduces all
+    # four rows to the foot.
+    assert LEVELS_W_M2 == pytest.approx({"szed": 100e-6 / CM2, "czed": 5e-6 / CM2, "lfed": 50e-9 / CM2}, rel=1e-12)
+    d = zone_distances_m(5e-3, 0.0, 1e-3, 2.6e-3 / CM2, 1.0)  # VCF 1: the table applies none
+    for key, ft in (("nohd_m", 51), ("szed_m", 262), ("czed_m", 1171), ("lfed_m", 11707)):
+        assert round(d[key] / FT) == ft
+    # the table's blink MPE 2.6e-3 W/cm^2 rounds the 0.25 s value 2.546e-3 up; with the tool's
+    # value the NOHD is 51.9 ft, longer (protective)
+    own = zone_distances_m(5e-3, 0.0, 1e-3, hz.ocular_mpe(532.0, 0.25).irradiance_w_m2, 1.0)
+    assert 51 < own["nohd_m"] / FT < 52
