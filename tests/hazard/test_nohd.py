@@ -12,7 +12,7 @@ from scipy.special import lambertw
 import hazard as hz
 
 
-# --- worked examples (spec 3.2), compared to their printed digits ------------------------------
+# --- worked examples (spec 3.2): [H] hand-computed, not published (published ones: test_published_examples.py)
 def test_example_4_direct_beam():
     r = hz.nohd_direct(1.0, 50.0, 2e-3, 1e-3)
     assert round(r.nohd_m, 2) == 157.58

@@ -4,8 +4,10 @@ public source that was read for this file (address and place in a comment beside
 Only numbers are quoted. Each assertion holds the tool's value to the source's printed
 precision (stated per test: "+-" is half a unit in the last printed digit unless said).
 Where the source's own arithmetic differs from the standard (an MPE rounded, a model
-other than the Lambertian one) the test says so and checks the direction: the tool must
-be the more protective of the two, never the less.
+other than the Lambertian one) the test says so, reproduces the source's number from the
+source's own input, and pins the size and direction of the difference with the table
+value (p05 and p07: the source's lower MPE gives it the longer distance, by 0.9 % and
+10 %; p09 and p15: the tool's is the longer).
 
 Not found in a readable public source (so not here; the hand-computed examples in
 ``test_mpe_standards.py`` section 4 and ``test_nohd.py`` cover them, labelled [H]):
