@@ -24,7 +24,7 @@ Notation: ANSI C_A, C_B, C_C, C_E = IEC C4, C3, C7, C6.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -610,15 +610,57 @@ def ocular_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD, angular_
     """
     std = check_standard(standard)
     wl, t, alpha = _check_inputs(wavelength_nm, duration_s, angular_subtense_rad)
+    return _at_breakpoints("ocular", std, wl, t, alpha, _ocular_candidates)
+
+
+def _ocular_candidates(wl, t, alpha, std):
+    """Correction factors and candidate limits of the ocular MPE at (``wl``, ``t``)."""
     f = correction_factors(wl, t, alpha, std)
     if wl < 400:
-        cands = _ultraviolet(wl, t, std)
-    elif wl < 1400:
-        cands = [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std, alpha), _corneal_ansi(wl, t, std),
-                 *_anterior_dual(wl, t, f, std)]
-    else:
-        cands = [_infrared(wl, t, std)]
-    return _result("ocular", std, wl, t, alpha, f, cands)
+        return f, _ultraviolet(wl, t, std)
+    if wl < 1400:
+        return f, [_retinal_thermal(wl, t, f, std, alpha), _photochemical(wl, t, f, std, alpha), _corneal_ansi(wl, t, std),
+                   *_anterior_dual(wl, t, f, std)]
+    return f, [_infrared(wl, t, std)]
+
+
+def _skin_candidates(wl, t, alpha, std):
+    """Correction factors and candidate limits of the skin MPE at (``wl``, ``t``)."""
+    f = correction_factors(wl, t, 0.0, std)
+    if wl < 400:
+        return f, _ultraviolet(wl, t, std)  # the UV skin rows equal the eye's (IEC Table A.5, ANSI Table 7) [M]
+    return f, [_skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)]
+
+
+def _at_breakpoints(kind, std, wl, t, alpha, candidates_of) -> MPEResult:
+    """The MPE at (``wl``, ``t``); where a duration or wavelength is exactly a table
+    breakpoint (a row ends there and the next begins, or a band edge), the lower of the
+    rows that meet there: the tables print both ends ("1e-11 - 1e-9 s", "1e-9 - 1.8e-5
+    s") and a round input such as a 1 ns pulse or a 10 s exposure lands on them (IEC
+    60825-1:2007, 532 nm, 1 ns: 4.80e-3 J/m^2 from the row ending there, not 5e-3). The
+    adjacent rows are read one float step (ulp) away, so only an input exactly on a
+    breakpoint can change (10 s less one ulp is not); the steps say so when it governs."""
+    f, cands = candidates_of(wl, t, alpha, std)
+    h0 = min(c.radiant_exposure_j_m2 for c in cands if c is not None)
+    best = (h0, wl, t, f, cands)
+    ws, ts = (math.nextafter(wl, 0.0), math.nextafter(wl, math.inf)), (math.nextafter(t, 0.0), math.nextafter(t, math.inf))
+    for w, tt in [(wl, x) for x in ts] + [(x, t) for x in ws] + [(x, y) for x in ws for y in ts]:  # fewest moved first
+        if not (WAVELENGTH_MIN_NM <= w <= WAVELENGTH_MAX_NM and DURATION_MIN_S <= tt <= DURATION_MAX_S):
+            continue
+        try:
+            fn, cn = candidates_of(w, tt, alpha, std)
+        except ValueError:  # no row of this edition there (e.g. below 1e-11 s): nothing to compare
+            continue
+        h = min(c.radiant_exposure_j_m2 for c in cn if c is not None)
+        if h < best[0] * (1 - 1e-12):  # a jump, not the row's own slope over one ulp
+            best = (h, w, tt, fn, cn)
+    res = _result(kind, std, wl, t, alpha, best[3], best[4])
+    if best[0] < h0:
+        where = " and ".join(x for x, moved in (("duration", best[2] != t), ("wavelength", best[1] != wl)) if moved)
+        res = replace(res, steps=(*res.steps, f"  the {where} is a table breakpoint: the adjacent row gives {best[0]:.6g} J/m^2 "
+                                               f"there against {h0:.6g} J/m^2 from the other row meeting there; the lower is used "
+                                               "(read one float step inside that row: conservative)"))
+    return res
 
 
 def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResult:
@@ -626,12 +668,7 @@ def skin_mpe(wavelength_nm, duration_s, *, standard=DEFAULT_STANDARD) -> MPEResu
     skin MPE equals the ocular (corneal) MPE [C Laser-Studio]."""
     std = check_standard(standard)
     wl, t, _ = _check_inputs(wavelength_nm, duration_s, 0.0)
-    f = correction_factors(wl, t, 0.0, std)
-    if wl < 400:
-        cands = _ultraviolet(wl, t, std)  # the UV skin rows equal the eye's (IEC Table A.5, ANSI Table 7) [M]
-    else:
-        cands = [_skin_400_1400(wl, t, f, std) if wl < 1400 else _infrared(wl, t, std)]
-    return _result("skin", std, wl, t, 0.0, f, cands)
+    return _at_breakpoints("skin", std, wl, t, 0.0, _skin_candidates)
 
 
 # ----------------------------------------------------------------------------------------
