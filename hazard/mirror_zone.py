@@ -1,0 +1,237 @@
+"""The hazard zone of each mirror beam in plan (issue 29 item 4 / issue 34): its width.
+
+A mirror (a target with a specular lobe) sends a reflected beam; the set of points where
+that beam reaches the MPE is a long thin "cigar" about the beam's axis out to the
+specular NOHD. For a Gaussian beam of 1/e radius w(z) and on-axis irradiance E0(z)
+(E = E0 exp(-r^2 / w^2)) its half-width at range z is ``w(z) sqrt(ln(E0(z) / MPE))``.
+
+Here the half-width is not taken from a formula but solved on the observers' own function
+(:func:`hazard.specular.specular_irradiance`, point irradiance times the eye's gain, the
+largest over the target's states along its history, the same pieces the specular NOHD
+uses): scanned across the beam and its edges bisected (:func:`edges_m`) at ``SAMPLES`` ranges along the reflected beam's axis (a spot on one flat plane:
+the laser's axis reflected there, :func:`beam_axis`; else the drawn mirror line of
+:func:`hazard.plan_view.mirror_segments`, from the spot's centroid along the reported
+direction), to the NOHD or where the analysis stops the beam
+(``sdz.mirror_beams[].max_reach_m``), across the axis in the horizontal
+direction. Then, to be
+conservative:
+
+- the limiting aperture's radius (the eye's 7 mm / 2, through an aid its collecting
+  radius) is added: an average over a disk never exceeds the point irradiance at the
+  disk's point nearest the axis where the profile falls off the axis, so an eye whose
+  aperture reaches the MPE lies within the point half-width plus the radius;
+- each sample's half-width is the largest of it and its neighbours' (a profile bulging
+  between two samples stays inside).
+
+The plan outline is the cross-sections' horizontal extent joined along the axis (the
+section's vertical extent projects onto the axis's own plan direction); a beam within
+1e-3 rad of the vertical is drawn as a disk of its largest half-width. A range short of
+the reach where the scan finds no hazardous point (a sliver narrower than the scan's
+step) is counted (``axis_below_mpe_samples``), never silently dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["MirrorZone", "mirror_zones", "edges_m", "beam_axis", "beam_zone", "SAMPLES"]
+
+SAMPLES = 97  # ranges along the beam at which the half-width is solved
+PUPIL_RADIUS_M = 3.5e-3  # the 7 mm limiting aperture's radius (400-1400 nm)
+
+
+@dataclass
+class MirrorZone:
+    """One mirror beam's plan zone, scene-local x, y [m] (add the scene offset for world)."""
+
+    target: str
+    eye: str  # "naked eye" or the aid, "7x50 optics"
+    ring: np.ndarray  # (K, 2) the outline
+    nohd_m: float | None  # the specular NOHD for this eye
+    reach_m: float  # how far it is drawn from the mirror (the NOHD, or where the analysis stops the beam)
+    max_half_width_m: float  # the widest half-width, aperture radius included
+    aperture_radius_m: float  # the radius added for the aperture average
+    axis_below_mpe_samples: int  # ranges short of the reach where no hazardous point was found (module notes)
+    exact_axis: bool = True  # the laser's axis reflected on the flat mirror (False: the drawn line's axis, see the module notes)
+
+
+def _irradiance(spot, pts, gain, mu, states) -> np.ndarray:
+    from .specular import specular_irradiance
+
+    e = specular_irradiance(spot, pts, gain, mu, states)
+    return e if e.ndim == 1 else e.max(axis=1)
+
+
+SCAN = 401  # offsets across the beam scanned at each range before the edges are bisected
+
+
+def _hot(spot, pts, mpe_w_m2, gain, mu, states) -> np.ndarray:
+    return _irradiance(spot, pts, gain, mu, states) >= mpe_w_m2
+
+
+def _bisect_edge(spot, centre, across, inside, outside, mpe_w_m2, gain, mu, states) -> np.ndarray:
+    """Offsets (K,) between ``inside`` (at or above the MPE) and ``outside`` (below),
+    bisected to 1e-9 of the offset: the one at or above the MPE returned."""
+    a, b = inside.copy(), outside.copy()
+    k = np.flatnonzero(np.abs(b - a) > 1e-9 * np.maximum(np.abs(a), np.abs(b)))
+    while len(k):
+        mid = 0.5 * (a[k] + b[k])
+        up = _hot(spot, centre[k] + mid[:, None] * across, mpe_w_m2, gain, mu, states)
+        a[k] = np.where(up, mid, a[k])
+        b[k] = np.where(up, b[k], mid)
+        k = k[np.abs(b[k] - a[k]) > 1e-9 * np.maximum(np.abs(a[k]), np.abs(b[k]))]
+    return a
+
+
+def edges_m(spot, origin_m, axis, z_m, across, scale_m, mpe_w_m2, mu, states=None, gain=1.0):
+    """Signed offsets (lo, hi) [m] along the unit ``across`` of the outermost points at
+    ranges ``z_m`` (K,) along ``axis`` from ``origin_m`` where the observers' irradiance
+    (:func:`hazard.specular.specular_irradiance` times ``gain``, the largest over
+    ``states``) reaches ``mpe_w_m2``, and a mask of the ranges where any did: ``SCAN``
+    offsets over +-H scanned (H from 4 ``scale_m``, doubled while the scan's ends are
+    still hazardous), then the outer edges bisected to 1e-9 relative. A hazardous sliver
+    narrower than H / 200 between two scanned offsets is missed (said in the report)."""
+    z = np.asarray(z_m, float)
+    centre = np.asarray(origin_m, float) + z[:, None] * np.asarray(axis, float)
+    across = np.asarray(across, float)
+    h = 4.0 * np.maximum(np.asarray(scale_m, float), 1e-6) * np.ones(len(z))
+    t = np.linspace(-1.0, 1.0, SCAN)
+    for _ in range(60):
+        off = h[:, None] * t[None, :]
+        pts = centre[:, None, :] + off[..., None] * across
+        hot = _hot(spot, pts.reshape(-1, 3), mpe_w_m2, gain, mu, states).reshape(len(z), SCAN)
+        wide = hot[:, 0] | hot[:, -1]
+        if not wide.any():
+            break
+        h = np.where(wide, 2 * h, h)
+    found = hot.any(axis=1)
+    i_lo = np.where(found, np.argmax(hot, axis=1), 1)
+    i_hi = np.where(found, SCAN - 1 - np.argmax(hot[:, ::-1], axis=1), SCAN - 2)
+    rows = np.arange(len(z))
+    lo = _bisect_edge(spot, centre, across, off[rows, i_lo], off[rows, np.maximum(i_lo - 1, 0)], mpe_w_m2, gain, mu, states)
+    hi = _bisect_edge(spot, centre, across, off[rows, i_hi], off[rows, np.minimum(i_hi + 1, SCAN - 1)], mpe_w_m2, gain, mu, states)
+    return np.where(found, lo, 0.0), np.where(found, hi, 0.0), found
+
+
+def _outline(origin_m, axis, z, left, right) -> np.ndarray:
+    """(K, 2) plan ring of the cross-sections' horizontal extents (``left``, ``right``
+    half-widths at ranges ``z``), or a disk for a near-vertical beam."""
+    u = np.asarray(axis, float)
+    horiz = float(np.hypot(u[0], u[1]))
+    c = np.asarray(origin_m, float)[:2]
+    if horiz < 1e-3:
+        r = float(max(left.max(initial=0.0), right.max(initial=0.0)) + horiz * z[-1])
+        t = np.linspace(0, 2 * math.pi, 73)[:-1]
+        return c + max(r, 1e-9) * np.stack([np.cos(t), np.sin(t)], axis=1)
+    n = np.array([-u[1], u[0]]) / horiz
+    along = c + z[:, None] * u[:2]
+    return np.vstack([along + left[:, None] * n, (along - right[:, None] * n)[::-1]])
+
+
+def _bulge(h) -> np.ndarray:
+    """Each sample's half-width raised to its neighbours' (see the module notes)."""
+    out = h.copy()
+    out[1:] = np.maximum(out[1:], h[:-1])
+    out[:-1] = np.maximum(out[:-1], h[1:])
+    return out
+
+
+def _scale_m(spot, origin_m, z) -> np.ndarray:
+    """The incident beam's 1/e radius [m] after the unfolded path (laser to ``origin_m``,
+    then ``z``): the scan's scale."""
+    beam = spot.beam
+    if beam is None:
+        return np.full(len(z), 1.0)
+    path = float(np.linalg.norm(np.asarray(origin_m, float) - beam.position_m)) + z
+    return 0.5 * np.asarray(beam.diameter_at(path), float) * np.ones(len(z))
+
+
+def beam_zone(spot, origin_m, axis, reach_m, mpe_w_m2, mu, states=None, gain=1.0, aperture_radius_m=PUPIL_RADIUS_M):
+    """(ring (K, 2), largest half-width [m], ranges short of the reach with no hazardous
+    point found) of one mirror beam from ``origin_m`` along ``axis`` to ``reach_m``
+    (module notes)."""
+    u = np.asarray(axis, float) / np.linalg.norm(axis)
+    horiz = float(np.hypot(u[0], u[1]))
+    side = np.cross(u, [1.0, 0.0, 0.0])
+    n3 = np.array([-u[1], u[0], 0.0]) / horiz if horiz >= 1e-3 else side / np.linalg.norm(side)
+    z = np.linspace(0.0, float(reach_m), SAMPLES)
+    z[0] = min(1e-6 * max(float(reach_m), 1e-3), 1e-3)  # just off the mirror's surface
+    lo, hi, found = edges_m(spot, origin_m, u, z, n3, _scale_m(spot, origin_m, z), mpe_w_m2, mu, states, gain)
+    short = int(np.sum(~found & (z < 0.999 * reach_m)))
+    left = _bulge(np.maximum(hi, 0.0)) + aperture_radius_m
+    right = _bulge(np.maximum(-lo, 0.0)) + aperture_radius_m
+    z[0] = 0.0
+    return _outline(origin_m, u, z, left, right), float(max(left.max(), right.max())), short
+
+
+def beam_axis(spot, origin_m, axis) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(origin (3,), unit direction (3,), exact) of the reflected beam's axis: for a spot
+    on one flat plane (no curved side) the laser's axis reflected there (the unfolded
+    Gaussian's own axis: where the laser axis meets the plane, along ``d - 2 (d . n) n``);
+    else ``origin_m`` along ``axis`` as given (the drawn mirror line), ``exact`` False."""
+    from .specular import _planes, is_curved_mesh
+
+    u = np.asarray(axis, float) / np.linalg.norm(axis)
+    t = spot.target
+    planes = _planes(spot) if spot.beam is not None else []
+    if len(planes) != 1 or t.mesh.analytic is not None or is_curved_mesh(t):
+        return np.asarray(origin_m, float), u, False
+    n, q, _ = planes[0]
+    p, d = np.asarray(spot.beam.position_m, float), np.asarray(spot.beam.axis, float)
+    dn = float(d @ n)
+    if abs(dn) < 1e-12:
+        return np.asarray(origin_m, float), u, False
+    hit = p + d * float((np.asarray(q, float) - p) @ n) / dn
+    r = d - 2 * dn * n
+    return hit, r / np.linalg.norm(r), True
+
+
+def _eyes(result, row) -> list:
+    """(label, gain, aperture radius [m], NOHD [m], stop [m] or None) per eye: naked, then each aid."""
+    from .nohd import optical_gain
+    from .plan_view import mirror_stops_m
+
+    stops = mirror_stops_m(result)
+    entry = {m["target"]: m for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}.get(row.name, {})
+    out = [("naked eye", 1.0, PUPIL_RADIUS_M, row.specular_nohd_dynamic_m, stops.get(row.name))]
+    for a in row.aided or []:
+        nohd = a.get("specular_nohd_dynamic_m")
+        if not nohd:
+            continue
+        m, d = float(a["magnification"]), float(a["objective_diameter_m"])
+        stop = (entry.get("aided") or {}).get("max_reach_m", stops.get(row.name))
+        out.append((f"{m:g}x{1e3 * d:g} optics", optical_gain(m, d, a.get("transmission", 1.0)),
+                    0.5 * min(d, 2 * PUPIL_RADIUS_M * m), nohd, stop))
+    return out
+
+
+def mirror_zones(result) -> list:
+    """:class:`MirrorZone` of every mirror beam the plan view draws, naked eye and through
+    each aid with a longer specular NOHD (module notes)."""
+    from .engine import path_states
+    from .plan_view import mirror_segments
+
+    rows = {t.name: t for t in result.targets}
+    spots = {sp.target.name: sp for sp in result.spots}
+    mpe = float(result.mpe_w_m2)  # the exposure MPE the specular NOHDs use
+    out = []
+    for name, start, end in mirror_segments(result):
+        sp, row = spots[name], rows[name]
+        t = sp.target
+        states = path_states(t.material, result.states[t.index]) if t.index in result.states else None
+        axis = np.asarray(end, float) - np.asarray(start, float)
+        if not np.linalg.norm(axis) > 0:
+            continue
+        start, axis, exact = beam_axis(sp, start, axis)
+        for eye, gain, radius, nohd, stop in _eyes(result, row):
+            if not nohd:
+                continue
+            reach = float(nohd) if math.isfinite(nohd) else 1e5
+            if stop is not None and math.isfinite(stop) and 0.0 <= stop < reach:
+                reach = float(stop)
+            ring, widest, short = beam_zone(sp, start, axis, reach, mpe, result.attenuation_per_m, states, gain, radius)
+            out.append(MirrorZone(name, eye, ring, nohd, reach, widest, radius, short, exact))
+    return out
