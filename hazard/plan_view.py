@@ -33,6 +33,7 @@ from .plots import DisplayBase
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
+MIRROR_ZONE_LABEL = "mirror beams' hazard zones (their width; dashed: through optics)"
 SITE_CONTEXT = 3.0  # the site panel also frames occluders and safe observers this many half-widths about the hazard
 MIN_ZONE_PT = 4.0  # a danger zone drawn narrower than this [pt] is also outlined exaggerated across the aim, and said
 LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
@@ -67,6 +68,7 @@ class PlanViewDisplay(DisplayBase):
     flight_zones: list = field(default_factory=list)  # (path, (K, 2) ring, exceeded, text, spec, worst point)
     faa: list = field(default_factory=list)  # (path, text, world point) FAA visual-interference distances
     ends: list = field(default_factory=list)  # (xy, text): where the danger zone and each mirror beam end, and why
+    mirror_zones: list = field(default_factory=list)  # (target, eye, (K, 2) ring, xy start, unit plan direction): :mod:`hazard.mirror_zone`
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -98,6 +100,7 @@ class PlanViewDisplay(DisplayBase):
         d.flight_zones = flight_zone_rings(result)
         d.faa = faa_marks(result)
         d.ends = beam_ends(result, d.aim_xy[1], off)
+        d.mirror_zones = _mirror_zone_rings(result, off)
         return d
 
     def plot(self, axes=None):
@@ -252,6 +255,9 @@ class PlanViewDisplay(DisplayBase):
         for ring, name, colour, hatch, path in zones:
             if ring is not None and len(ring) >= 3:
                 _widen_thin(ax, ring, a, u, name, colour, hatch, path)
+        for target, eye, ring, start, along in self.mirror_zones:
+            _widen_thin(ax, ring, start, along, f"mirror-beam zone of {target} ({eye})", C.MIRROR, "xx",
+                        self.paths.get("mirror", {}).get(target))
 
     def _draw_lobes(self, ax):
         from .figure_index import lobe_paths, mark
@@ -280,6 +286,9 @@ class PlanViewDisplay(DisplayBase):
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
+        for i, (name, eye, ring, _, _) in enumerate(self.mirror_zones):
+            ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
+                    ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)
@@ -661,6 +670,23 @@ def mirror_segments(result) -> list:
             length = float(stop)
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
         out.append((sp.target.name, sp.centroid, sp.centroid + axis * length))
+    return out
+
+
+def _mirror_zone_rings(result, off) -> list:
+    """(target, eye, ring, start, unit plan direction) of every mirror beam's zone, world
+    x, y (:func:`hazard.mirror_zone.mirror_zones`), widest eye first."""
+    from .mirror_zone import mirror_zones
+
+    out = []
+    for m in sorted(mirror_zones(result), key=lambda m: -m.max_half_width_m * m.reach_m):
+        ring = m.ring + off[:2]
+        start = ring[0] / 2 + ring[-1] / 2  # the zone's first section's middle: on the axis at the mirror
+        mid = len(ring) // 2
+        tip = ring[mid - 1] / 2 + ring[mid] / 2
+        d = tip - start
+        if np.hypot(*d) > 0:
+            out.append((m.target, m.eye, ring, start, d / np.hypot(*d)))
     return out
 
 
