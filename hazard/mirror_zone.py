@@ -20,8 +20,9 @@ conservative:
   radius) is added: an average over a disk never exceeds the point irradiance at the
   disk's point nearest the axis where the profile falls off the axis, so an eye whose
   aperture reaches the MPE lies within the point half-width plus the radius;
-- each sample's half-width is the largest of it and its neighbours' (a profile bulging
-  between two samples stays inside).
+- each sample's half-width is raised to hold the profile between samples: the larger of
+  an interval's ends and, where the profile is concave, the crossing of its neighbouring
+  chords extended into it (:func:`_bulge`).
 
 The plan outline is the cross-sections' horizontal extent joined along the axis (the
 section's vertical extent projects onto the axis's own plan direction); a beam within
@@ -131,11 +132,32 @@ def _outline(origin_m, axis, z, left, right) -> np.ndarray:
     return np.vstack([along + left[:, None] * n, (along - right[:, None] * n)[::-1]])
 
 
-def _bulge(h) -> np.ndarray:
-    """Each sample's half-width raised to its neighbours' (see the module notes)."""
+def _bulge(z, h) -> np.ndarray:
+    """Half-widths (K,) at the samples ``z`` such that the polygon joining them holds the
+    profile between samples: on each interval the larger of its ends and, where the
+    profile is concave, the bound of the neighbouring chords extended into it (a concave
+    function lies below a chord's extension outside the chord), at their crossing; each
+    sample takes the larger bound of its two intervals (module notes)."""
+    z, h = np.asarray(z, float), np.asarray(h, float)
+    k = len(h)
+    ends = np.maximum(h[:-1], h[1:])
+    if k < 4:
+        bound = ends
+    else:
+        slope = np.diff(h) / np.maximum(np.diff(z), 1e-300)
+        s1 = np.concatenate([[np.inf], slope[:-1]])  # the chord before interval i, extended right
+        s2 = np.concatenate([slope[1:], [-np.inf]])  # the chord after it, extended left
+        x0, x1 = z[:-1], z[1:]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cross = (h[1:] - h[:-1] + s1 * x0 - s2 * x1) / (s1 - s2)  # where h0 + s1 (x - x0) = h1 + s2 (x - x1)
+        cross = np.clip(np.where(np.isfinite(cross), cross, x0), x0, x1)
+        line1 = np.where(np.isfinite(s1), h[:-1] + np.where(np.isfinite(s1), s1, 0.0) * (cross - x0), np.inf)
+        line2 = np.where(np.isfinite(s2), h[1:] + np.where(np.isfinite(s2), s2, 0.0) * (cross - x1), np.inf)
+        peak = np.minimum(line1, line2)
+        bound = np.maximum(ends, np.where(np.isfinite(peak), peak, ends))
     out = h.copy()
-    out[1:] = np.maximum(out[1:], h[:-1])
-    out[:-1] = np.maximum(out[:-1], h[1:])
+    out[:-1] = np.maximum(out[:-1], bound)
+    out[1:] = np.maximum(out[1:], bound)
     return out
 
 
@@ -161,8 +183,8 @@ def beam_zone(spot, origin_m, axis, reach_m, mpe_w_m2, mu, states=None, gain=1.0
     z[0] = min(1e-6 * max(float(reach_m), 1e-3), 1e-3)  # just off the mirror's surface
     lo, hi, found = edges_m(spot, origin_m, u, z, n3, _scale_m(spot, origin_m, z), mpe_w_m2, mu, states, gain)
     short = int(np.sum(~found & (z < 0.999 * reach_m)))
-    left = _bulge(np.maximum(hi, 0.0)) + aperture_radius_m
-    right = _bulge(np.maximum(-lo, 0.0)) + aperture_radius_m
+    left = _bulge(z, np.maximum(hi, 0.0)) + aperture_radius_m
+    right = _bulge(z, np.maximum(-lo, 0.0)) + aperture_radius_m
     z[0] = 0.0
     return _outline(origin_m, u, z, left, right), float(max(left.max(), right.max())), short
 
