@@ -65,7 +65,7 @@ LAYERS = {
     "keepout_lobe": ("Keep-out lobes (ground outline)", ("keepout_lobe",), None,
                      {"color": "#2166ac", "weight": 2, "fillOpacity": 0.15}),
     "mirror_beam": ("Mirror beams", ("mirror_beam",), None, {"color": "#e66101", "weight": 3}),
-    "mirror_beam_zone": ("Mirror beams' hazard zones (with their width)", ("mirror_beam_zone",), None,
+    "mirror_beam_zone": ("Reflected-beam hazard zones (mirrors, with their width)", ("mirror_beam_zone",), None,
                          {"color": "#e66101", "weight": 1.5, "fillOpacity": 0.25}),
     "track": ("Moving observers' tracks", ("track",), None, {"color": "#1a9641", "weight": 3, "dashArray": "8 5"}),
     "laser_targets": ("Laser and targets", ("laser", "target"), None,

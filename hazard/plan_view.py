@@ -286,7 +286,7 @@ class PlanViewDisplay(DisplayBase):
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
-        for i, (name, eye, ring, _, _) in enumerate(self.mirror_zones):
+        for i, (_, eye, ring, _, _) in enumerate(self.mirror_zones):
             ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
                     ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
         for i, (name, a, b) in enumerate(self.mirrors):

@@ -96,6 +96,10 @@ def test_the_zone_polygon_is_as_wide_as_the_formula_and_ends_at_the_nohd():
     assert zone.max_half_width_m >= ref.max() + PUPIL_RADIUS_M  # never narrower than the formula's widest
     poly = Polygon(zone.ring)
     n = np.array([-u[1], u[0]])
+    k = int(np.argmax(ref))
+    for side in (1.0, -1.0):  # the widest section's edges inside, a hand's width past them outside
+        assert poly.contains(Point(*(u[:2] * z[k] + side * ref[k] * n)))
+        assert not poly.contains(Point(*(u[:2] * z[k] + side * (ref[k] + PUPIL_RADIUS_M + 0.01) * n)))
     beyond = u[:2] * zone.reach_m * 1.02
     assert not poly.contains(Point(*beyond))  # past the NOHD: outside
 
