@@ -286,9 +286,10 @@ class PlanViewDisplay(DisplayBase):
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
-        for i, (_, eye, ring, _, _) in enumerate(self.mirror_zones):
+        for i, (name, eye, ring, _, _) in enumerate(self.mirror_zones):
             ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
                     ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
+            mark_mirror_zone(ax, self.paths, name, ring)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)
@@ -471,6 +472,14 @@ def mark_mirror(ax, paths, name, a, b):
 
     path = paths.get("mirror", {}).get(name)
     mark(ax, [path] if path else [], MIRROR_LABEL, np.array([a, b]), "line")
+
+
+def mark_mirror_zone(ax, paths, name, ring):
+    """Note a mirror beam's hazard zone drawn as ``ring`` (figures.json)."""
+    from .figure_index import mark
+
+    path = paths.get("mirror", {}).get(name)
+    mark(ax, [path] if path else [], MIRROR_ZONE_LABEL, np.asarray(ring, float), "polygon")
 
 
 def lobe_rings(result, off_xy) -> list:
