@@ -255,9 +255,9 @@ class PlanViewDisplay(DisplayBase):
         for ring, name, colour, hatch, path in zones:
             if ring is not None and len(ring) >= 3:
                 _widen_thin(ax, ring, a, u, name, colour, hatch, path)
-        for target, eye, ring, start, along in self.mirror_zones:
+        for k, (target, eye, ring, start, along) in enumerate(self.mirror_zones):  # labels staggered along the beams
             _widen_thin(ax, ring, start, along, f"mirror-beam zone of {target} ({eye})", C.MIRROR, "xx",
-                        self.paths.get("mirror", {}).get(target))
+                        self.paths.get("mirror", {}).get(target), (0.5, 0.25, 0.75, 0.15, 0.85)[k % 5])
 
     def _draw_lobes(self, ax):
         from .figure_index import lobe_paths, mark
@@ -344,7 +344,7 @@ def beam_ends(result, aim_end_xy, off) -> list:
     return out
 
 
-def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
+def _widen_thin(ax, zone, a, u, name, colour, hatch, path, along=0.5) -> None:
     """``zone`` (K, 2) [m] about the aim from ``a`` along ``u``, if drawn narrower than
     ``MIN_ZONE_PT`` in ``ax``: also outlined widened across the aim to that width, hatched,
     labelled ``name`` with its true width and the factor, noted for figures.json under
@@ -362,7 +362,7 @@ def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
     x0, x1, y0, y1 = (*ax.get_xlim(), *ax.get_ylim())
     ax.fill(*ring.T, fc="none", ec=colour, lw=0.9, hatch=hatch, zorder=3)
     label = f"{name} {_metres(width_m)} wide,\ndrawn exaggerated (x{factor:.3g} across the aim)"
-    at = _visible_middle(a, u, float(np.max((zone - a) @ u)), (x0, x1, y0, y1))
+    at = _visible_middle(a, u, float(np.max((zone - a) @ u)), (x0, x1, y0, y1), along)
     side = 1.0 if (at @ n) <= ((np.array([x0 + x1, y0 + y1]) / 2) @ n) else -1.0  # the text toward the frame's middle
     ax.annotate(label, at, xytext=tuple(8 * side * n), textcoords="offset points", fontsize=6, color=colour, zorder=9,
                 ha="left" if side * n[0] >= 0 else "right", va="center",
@@ -372,7 +372,7 @@ def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
     mark(ax, [path] if path else [], label, ring, "polygon")
 
 
-def _visible_middle(a, u, length_m, limits) -> np.ndarray:
+def _visible_middle(a, u, length_m, limits, along=0.5) -> np.ndarray:
     """The middle of the part of the aim (from ``a`` along ``u``, ``length_m`` long) in
     the frame ``limits`` (x0, x1, y0, y1) - where a label of the zone is seen -, or 55 %
     along it when no part is in the frame."""
@@ -382,7 +382,7 @@ def _visible_middle(a, u, length_m, limits) -> np.ndarray:
     seen = LineString([a, a + u * length_m]).intersection(box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)))
     if seen.is_empty or seen.length <= 0:
         return a + u * 0.55 * length_m
-    return np.asarray(seen.interpolate(0.5, normalized=True).coords[0], float)
+    return np.asarray(seen.interpolate(along, normalized=True).coords[0], float)
 
 
 def widen_across(ring, origin, direction, factor) -> np.ndarray:
