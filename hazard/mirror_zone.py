@@ -9,12 +9,11 @@ Here the half-width is not taken from a formula but solved on the observers' own
 (:func:`hazard.specular.specular_irradiance`, point irradiance times the eye's gain, the
 largest over the target's states along its history, the same pieces the specular NOHD
 uses): scanned across the beam and its edges bisected (:func:`edges_m`) at ``SAMPLES`` ranges along the reflected beam's axis (a spot on one flat plane:
-the laser's axis reflected there, :func:`beam_axis`; else the drawn mirror line of
-:func:`hazard.plan_view.mirror_segments`, from the spot's centroid along the reported
-direction), to the NOHD or where the analysis stops the beam
-(``sdz.mirror_beams[].max_reach_m``), across the axis in the horizontal
-direction. Then, to be
-conservative:
+the laser's axis reflected there, :func:`beam_axis`; else the axis of the drawn mirror
+line, :func:`hazard.plan_view.mirror_segments`: from the spot's centroid along the
+reported direction), to the NOHD or where the analysis stops the beam
+(``sdz.mirror_beams[].max_reach_m``): the cross-section's horizontal extent over all its
+heights (:func:`section_extent_m`). Then, to be conservative:
 
 - the limiting aperture's radius (the eye's 7 mm / 2, through an aid its collecting
   radius) is added: an average over a disk never exceeds the point irradiance at the
@@ -38,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MirrorZone", "mirror_zones", "edges_m", "beam_axis", "beam_zone", "SAMPLES"]
+__all__ = ["MirrorZone", "mirror_zones", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "SAMPLES"]
 
 SAMPLES = 97  # ranges along the beam at which the half-width is solved
 PUPIL_RADIUS_M = 3.5e-3  # the 7 mm limiting aperture's radius (400-1400 nm)
@@ -66,7 +65,8 @@ def _irradiance(spot, pts, gain, mu, states) -> np.ndarray:
     return e if e.ndim == 1 else e.max(axis=1)
 
 
-SCAN = 401  # offsets across the beam scanned at each range before the edges are bisected
+TOL = 1e-7  # the edges' relative tolerance (the hazardous side kept)
+SCAN = 201  # offsets across the beam scanned at each range before the edges are bisected
 
 
 def _hot(spot, pts, mpe_w_m2, gain, mu, states) -> np.ndarray:
@@ -75,35 +75,29 @@ def _hot(spot, pts, mpe_w_m2, gain, mu, states) -> np.ndarray:
 
 def _bisect_edge(spot, centre, across, inside, outside, mpe_w_m2, gain, mu, states) -> np.ndarray:
     """Offsets (K,) between ``inside`` (at or above the MPE) and ``outside`` (below),
-    bisected to 1e-9 of the offset: the one at or above the MPE returned."""
+    bisected to ``TOL`` of the offset: the one at or above the MPE returned."""
     a, b = inside.copy(), outside.copy()
-    k = np.flatnonzero(np.abs(b - a) > 1e-9 * np.maximum(np.abs(a), np.abs(b)))
+    k = np.flatnonzero(np.abs(b - a) > TOL * np.maximum(np.abs(a), np.abs(b)))
     while len(k):
         mid = 0.5 * (a[k] + b[k])
         up = _hot(spot, centre[k] + mid[:, None] * across, mpe_w_m2, gain, mu, states)
         a[k] = np.where(up, mid, a[k])
         b[k] = np.where(up, b[k], mid)
-        k = k[np.abs(b[k] - a[k]) > 1e-9 * np.maximum(np.abs(a[k]), np.abs(b[k]))]
+        k = k[np.abs(b[k] - a[k]) > TOL * np.maximum(np.abs(a[k]), np.abs(b[k]))]
     return a
 
 
-def edges_m(spot, origin_m, axis, z_m, across, scale_m, mpe_w_m2, mu, states=None, gain=1.0):
-    """Signed offsets (lo, hi) [m] along the unit ``across`` of the outermost points at
-    ranges ``z_m`` (K,) along ``axis`` from ``origin_m`` where the observers' irradiance
-    (:func:`hazard.specular.specular_irradiance` times ``gain``, the largest over
-    ``states``) reaches ``mpe_w_m2``, and a mask of the ranges where any did: ``SCAN``
-    offsets over +-H scanned (H from 4 ``scale_m``, doubled while the scan's ends are
-    still hazardous), then the outer edges bisected to 1e-9 relative. A hazardous sliver
-    narrower than H / 200 between two scanned offsets is missed (said in the report)."""
-    z = np.asarray(z_m, float)
-    centre = np.asarray(origin_m, float) + z[:, None] * np.asarray(axis, float)
-    across = np.asarray(across, float)
-    h = 4.0 * np.maximum(np.asarray(scale_m, float), 1e-6) * np.ones(len(z))
+def _scan(spot, centre, across, scale_m, mpe_w_m2, mu, states, gain):
+    """Brackets of the outermost hazardous points on the lines ``centre`` (K, 3) +
+    t ``across``: (lo inside, lo outside, hi inside, hi outside, found) [m]; see
+    :func:`edges_m`."""
+    k = len(centre)
+    h = 4.0 * np.maximum(np.asarray(scale_m, float), 1e-6) * np.ones(k)
     t = np.linspace(-1.0, 1.0, SCAN)
     for _ in range(60):
         off = h[:, None] * t[None, :]
         pts = centre[:, None, :] + off[..., None] * across
-        hot = _hot(spot, pts.reshape(-1, 3), mpe_w_m2, gain, mu, states).reshape(len(z), SCAN)
+        hot = _hot(spot, pts.reshape(-1, 3), mpe_w_m2, gain, mu, states).reshape(k, SCAN)
         wide = hot[:, 0] | hot[:, -1]
         if not wide.any():
             break
@@ -111,9 +105,57 @@ def edges_m(spot, origin_m, axis, z_m, across, scale_m, mpe_w_m2, mu, states=Non
     found = hot.any(axis=1)
     i_lo = np.where(found, np.argmax(hot, axis=1), 1)
     i_hi = np.where(found, SCAN - 1 - np.argmax(hot[:, ::-1], axis=1), SCAN - 2)
-    rows = np.arange(len(z))
-    lo = _bisect_edge(spot, centre, across, off[rows, i_lo], off[rows, np.maximum(i_lo - 1, 0)], mpe_w_m2, gain, mu, states)
-    hi = _bisect_edge(spot, centre, across, off[rows, i_hi], off[rows, np.minimum(i_hi + 1, SCAN - 1)], mpe_w_m2, gain, mu, states)
+    r = np.arange(k)
+    return off[r, i_lo], off[r, np.maximum(i_lo - 1, 0)], off[r, i_hi], off[r, np.minimum(i_hi + 1, SCAN - 1)], found
+
+
+def edges_m(spot, centre_m, across, scale_m, mpe_w_m2, mu, states=None, gain=1.0):
+    """Signed offsets (lo, hi) [m] along the unit ``across`` from the points ``centre_m``
+    (K, 3) of the outermost points on those lines where the observers' irradiance
+    (:func:`hazard.specular.specular_irradiance` times ``gain``, the largest over
+    ``states``) reaches ``mpe_w_m2``, and a mask of the lines where any did: ``SCAN``
+    offsets over +-H scanned (H from 4 ``scale_m``, doubled while the scan's ends are
+    still hazardous), then the outer edges bisected to ``TOL`` relative. A hazardous sliver
+    narrower than H / 100 between two scanned offsets is missed (said in the report)."""
+    centre = np.asarray(centre_m, float)
+    k = len(centre)
+    in_lo, out_lo, in_hi, out_hi, found = _scan(spot, centre, np.asarray(across, float), scale_m, mpe_w_m2, mu, states, gain)
+    both = _bisect_edge(spot, np.vstack([centre, centre]), across, np.concatenate([in_lo, in_hi]),
+                        np.concatenate([out_lo, out_hi]), mpe_w_m2, gain, mu, states)  # both edges in one pass
+    return np.where(found, both[:k], 0.0), np.where(found, both[k:], 0.0), found
+
+
+LEVELS = 7  # heights across the section (over its vertical extent) at which its horizontal extent is solved
+
+
+def section_extent_m(spot, centre_m, across, up, scale_m, mpe_w_m2, mu, states=None, gain=1.0):
+    """(lo, hi, found): the horizontal extent [m] along ``across`` of the hazardous
+    cross-section at each of ``centre_m`` (K, 3), over all heights: scanned through the
+    centre; then along ``up`` through that extent's middle (the section's vertical
+    extent, at the scan's resolution); then at ``LEVELS`` heights spread over it (a beam
+    whose hot part sits above or below the axis, or is cut by the mirror's outline, is
+    widest off the axis's own line); every level's edges bisected (:func:`edges_m`) in
+    one pass and the union taken."""
+    centre = np.asarray(centre_m, float)
+    across, up = np.asarray(across, float), np.asarray(up, float)
+    k = len(centre)
+    first = _scan(spot, centre, across, scale_m, mpe_w_m2, mu, states, gain)
+    mid = np.where(first[4], 0.5 * (first[0] + first[2]), 0.0)
+    vlo, _, vhi, _, vfound = _scan(spot, centre + mid[:, None] * across, up, scale_m, mpe_w_m2, mu, states, gain)
+    lines, scans = [centre], [first]
+    for f in np.linspace(0.0, 1.0, LEVELS):
+        c = centre + np.where(vfound, vlo + f * (vhi - vlo), 0.0)[:, None] * up
+        lines.append(c)
+        scans.append(_scan(spot, c, across, scale_m, mpe_w_m2, mu, states, gain))
+    c_all = np.vstack(lines + lines)
+    inside = np.concatenate([s_[0] for s_ in scans] + [s_[2] for s_ in scans])
+    outside = np.concatenate([s_[1] for s_ in scans] + [s_[3] for s_ in scans])
+    edge = _bisect_edge(spot, c_all, across, inside, outside, mpe_w_m2, gain, mu, states)
+    n = len(scans)
+    ok = np.array([s_[4] for s_ in scans])  # (n, K)
+    lo = np.where(ok, edge[:n * k].reshape(n, k), np.inf).min(axis=0)
+    hi = np.where(ok, edge[n * k:].reshape(n, k), -np.inf).max(axis=0)
+    found = ok.any(axis=0)
     return np.where(found, lo, 0.0), np.where(found, hi, 0.0), found
 
 
@@ -181,7 +223,9 @@ def beam_zone(spot, origin_m, axis, reach_m, mpe_w_m2, mu, states=None, gain=1.0
     n3 = np.array([-u[1], u[0], 0.0]) / horiz if horiz >= 1e-3 else side / np.linalg.norm(side)
     z = np.linspace(0.0, float(reach_m), SAMPLES)
     z[0] = min(1e-6 * max(float(reach_m), 1e-3), 1e-3)  # just off the mirror's surface
-    lo, hi, found = edges_m(spot, origin_m, u, z, n3, _scale_m(spot, origin_m, z), mpe_w_m2, mu, states, gain)
+    up = np.cross(n3, u)
+    centre = np.asarray(origin_m, float) + z[:, None] * u
+    lo, hi, found = section_extent_m(spot, centre, n3, up, _scale_m(spot, origin_m, z), mpe_w_m2, mu, states, gain)
     short = int(np.sum(~found & (z < 0.999 * reach_m)))
     left = _bulge(z, np.maximum(hi, 0.0)) + aperture_radius_m
     right = _bulge(z, np.maximum(-lo, 0.0)) + aperture_radius_m
@@ -231,23 +275,26 @@ def _eyes(result, row) -> list:
 
 
 def mirror_zones(result) -> list:
-    """:class:`MirrorZone` of every mirror beam the plan view draws, naked eye and through
-    each aid with a longer specular NOHD (module notes)."""
-    from .engine import path_states
-    from .plan_view import mirror_segments
+    """:class:`MirrorZone` of every lit mirror, naked eye and through each aid with a
+    specular NOHD (one only an aid reaches included), from the spot's centroid along the
+    reported direction (:func:`hazard.plan_view.mirror_segments`' axis) or, on one flat
+    plane, the laser's reflected axis (:func:`beam_axis`); module notes."""
+    from .engine import mirror_axis, path_states
 
+    cached = result.__dict__.get("_mirror_zones") if hasattr(result, "__dict__") else None
+    if cached is not None:  # the plan view and the zones file ask for the same run's zones
+        return cached
     rows = {t.name: t for t in result.targets}
-    spots = {sp.target.name: sp for sp in result.spots}
     mpe = float(result.mpe_w_m2)  # the exposure MPE the specular NOHDs use
     out = []
-    for name, start, end in mirror_segments(result):
-        sp, row = spots[name], rows[name]
+    for sp in result.spots:
+        row = rows.get(sp.target.name)
+        if row is None or not sp.material.has_specular:
+            continue
         t = sp.target
         states = path_states(t.material, result.states[t.index]) if t.index in result.states else None
-        axis = np.asarray(end, float) - np.asarray(start, float)
-        if not np.linalg.norm(axis) > 0:
-            continue
-        start, axis, exact = beam_axis(sp, start, axis)
+        axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
+        start, axis, exact = beam_axis(sp, sp.centroid, axis)
         for eye, gain, radius, nohd, stop in _eyes(result, row):
             if not nohd:
                 continue
@@ -255,5 +302,7 @@ def mirror_zones(result) -> list:
             if stop is not None and math.isfinite(stop) and 0.0 <= stop < reach:
                 reach = float(stop)
             ring, widest, short = beam_zone(sp, start, axis, reach, mpe, result.attenuation_per_m, states, gain, radius)
-            out.append(MirrorZone(name, eye, ring, nohd, reach, widest, radius, short, exact))
+            out.append(MirrorZone(t.name, eye, ring, nohd, reach, widest, radius, short, exact))
+    if hasattr(result, "__dict__"):
+        result.__dict__["_mirror_zones"] = out
     return out

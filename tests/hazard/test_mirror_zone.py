@@ -73,7 +73,7 @@ def test_the_half_width_is_the_gaussian_formula_at_several_ranges():
     z = np.array([1.0, 50.0, 300.0, 800.0, 1500.0])
     ref = _half_width_m(z, power, a, phi, r1, mu, rho, mpe)
     assert np.all(ref > 0.05)  # every range hazardous, widths well above the solver's scan floor
-    lo, hi, found = edges_m(sp, np.zeros(3), u, z, across, (a + phi * (r1 + z)) / 2, mpe, mu)
+    lo, hi, found = edges_m(sp, z[:, None] * u, across, (a + phi * (r1 + z)) / 2, mpe, mu)
     assert found.all()
     np.testing.assert_allclose(hi, ref, rtol=1e-6)
     np.testing.assert_allclose(-lo, ref, rtol=1e-6)
@@ -206,3 +206,35 @@ def test_the_drawn_zone_is_visible_in_the_plan_view():
         assert _mirror_band_pt(fig, axes[0], mid, n) < 0.9 * MIN_ZONE_PT
     finally:
         plt.close(fig)
+
+
+def test_a_beam_cut_above_its_axis_is_drawn_where_its_hot_part_is():
+    """A plate holding only the part of the beam above its axis (its lower edge 0.05 m
+    above the axis, the beam's 1/e radius 0.1 m there): every point the observers' own
+    function calls hazardous, at any height, lies in the plan zone (the section's
+    horizontal extent taken over its heights; through the axis's line alone it fails)."""
+    from shapely.geometry import Point, Polygon
+
+    from hazard.mirror_zone import mirror_zones
+    from hazard.specular import specular_irradiance
+
+    text = SCENE.format(power=2000.0, a=0.2, phi=2e-4, r1=100.0, mu=0.0, nx=0.5, ny=-math.sqrt(0.75),
+                        ny_neg=math.sqrt(0.75), rho=0.9)
+    text = text.replace("center_m = [0.0, 0.0, 0.0]", "center_m = [0.0, 0.0, 0.35]")
+    text = text.replace("size_m = [20.0, 20.0]", "size_m = [0.6, 0.6]")
+    res = hazard.analyze(scenes.loads(text))
+    (zone,) = mirror_zones(res)
+    (sp,) = res.spots
+    poly = Polygon(zone.ring).buffer(1e-9 * zone.reach_m)
+    d = np.array([0.0, 1.0, 0.0])
+    n = np.array([0.5, -math.sqrt(0.75), 0.0])
+    u = d - 2 * (d @ n) * n
+    side = np.array([-u[1], u[0], 0.0])
+    rng = np.random.default_rng(7)
+    m = 4000
+    z = rng.uniform(0.0, zone.reach_m, m)
+    w = (0.2 + 2e-4 * (100.0 + z)) / 2
+    pts = z[:, None] * u + (rng.uniform(-2, 2, m) * w)[:, None] * side + (rng.uniform(-0.5, 2.5, m) * w)[:, None] * [0, 0, 1.0]
+    hot = specular_irradiance(sp, pts, 1.0, 0.0) >= res.mpe_w_m2
+    assert hot.sum() > 100
+    assert all(poly.contains(Point(*p[:2])) for p in pts[hot])
