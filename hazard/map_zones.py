@@ -148,7 +148,7 @@ def _mirror_zones(result, off) -> list:
         poly = Polygon(m.ring + off[:2])
         out.append(Zone("mirror_beam_zone", poly if poly.is_valid else poly.buffer(0), {
             "target": m.target, "nohd_m": m.nohd_m, "reach_m": m.reach_m, "max_half_width_m": m.max_half_width_m,
-            "aperture_radius_m": m.aperture_radius_m, "exact_axis": m.exact_axis, "ranges_not_found": m.axis_below_mpe_samples,
+            "aperture_radius_m": m.aperture_radius_m, "exact_axis": m.exact_axis, "ranges_not_found": m.ranges_not_found,
             "hazard": m.eye, "eye": m.eye}))
     return out
 

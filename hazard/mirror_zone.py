@@ -24,10 +24,11 @@ heights (:func:`section_extent_m`). Then, to be conservative:
   chords extended into it (:func:`_bulge`).
 
 The plan outline is the cross-sections' horizontal extent joined along the axis (the
-section's vertical extent projects onto the axis's own plan direction); a beam within
+section's vertical extent projects onto the axis's own plan direction: the two end
+sections pushed out by their half-width times the axis's vertical component); a beam within
 1e-3 rad of the vertical is drawn as a disk of its largest half-width. A range short of
 the reach where the scan finds no hazardous point (a sliver narrower than the scan's
-step) is counted (``axis_below_mpe_samples``), never silently dropped.
+step) is counted (``ranges_not_found``), never silently dropped.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ class MirrorZone:
     reach_m: float  # how far it is drawn from the mirror (the NOHD, or where the analysis stops the beam)
     max_half_width_m: float  # the widest half-width, aperture radius included
     aperture_radius_m: float  # the radius added for the aperture average
-    axis_below_mpe_samples: int  # ranges short of the reach where no hazardous point was found (module notes)
+    ranges_not_found: int  # ranges short of the reach where no hazardous point was found (module notes)
     exact_axis: bool = True  # the laser's axis reflected on the flat mirror (False: the drawn line's axis, see the module notes)
 
 
@@ -171,6 +172,9 @@ def _outline(origin_m, axis, z, left, right) -> np.ndarray:
         return c + max(r, 1e-9) * np.stack([np.cos(t), np.sin(t)], axis=1)
     n = np.array([-u[1], u[0]]) / horiz
     along = c + z[:, None] * u[:2]
+    tilt = abs(float(u[2]))  # a section of radius h spans h |u_z| along the axis in plan: the ends pushed out by it
+    along[0] -= u[:2] / horiz * tilt * max(left[0], right[0])
+    along[-1] += u[:2] / horiz * tilt * max(left[-1], right[-1])
     return np.vstack([along + left[:, None] * n, (along - right[:, None] * n)[::-1]])
 
 

@@ -43,12 +43,17 @@ material = {{ model = "specular", reflectance = {rho} }}
 """
 
 
-def _case(power=100.0, a=0.01, phi=5e-4, r1=100.0, mu=0.0, tilt_deg=30.0, rho=0.8):
-    """The scene, its result and the reference pieces: (result, unit reflected axis, rho, MPE)."""
+def _case(power=100.0, a=0.01, phi=5e-4, r1=100.0, mu=0.0, tilt_deg=30.0, rho=0.8, nz=0.0):
+    """The scene's result and the unit reflected axis (the plate's normal tilted
+    ``tilt_deg`` in plan and given the vertical component ``nz`` before normalising)."""
     t = math.radians(tilt_deg)
-    n = np.array([math.sin(t), -math.cos(t), 0.0])  # faces the laser (beam along +y)
+    n = np.array([math.sin(t), -math.cos(t), nz])  # faces the laser (beam along +y)
+    n /= np.linalg.norm(n)
     text = SCENE.format(power=power, a=a, phi=phi, r1=r1, mu=mu, nx=n[0], ny=n[1], ny_neg=-n[1], rho=rho)
+    text = text.replace("normal = [{0}, {1}, 0.0]".format(n[0], n[1]), "normal = [{0}, {1}, {2}]".format(*n))
+    text = text.replace("tangent = [{0}, {1}, 0.0]".format(-n[1], n[0]), "tangent = [{0}, {1}, 0.0]".format(math.cos(t), math.sin(t)))
     res = hazard.analyze(scenes.loads(text))
+    assert np.allclose(res.spots[0].target.normal, n, atol=1e-9)  # the scene holds the plate as meant
     d = np.array([0.0, 1.0, 0.0])
     u = d - 2 * (d @ n) * n
     return res, u
@@ -104,12 +109,12 @@ def test_the_zone_polygon_is_as_wide_as_the_formula_and_ends_at_the_nohd():
     assert not poly.contains(Point(*beyond))  # past the NOHD: outside
 
 
-def _check_contains(power, a, phi, r1, mu, tilt_deg, rho, frac_z, frac_r):
+def _check_contains(power, a, phi, r1, mu, tilt_deg, rho, nz, frac_z, frac_r, frac_v):
     from shapely.geometry import Point, Polygon
 
     from hazard.mirror_zone import PUPIL_RADIUS_M, SAMPLES, mirror_zones
 
-    res, u = _case(power, a, phi, r1, mu, tilt_deg, rho)
+    res, u = _case(power, a, phi, r1, mu, tilt_deg, rho, nz)
     zones = mirror_zones(res)
     mpe = float(res.mpe_w_m2)
     if not zones:  # no mirror beam reaches the MPE: the formula agrees at the mirror
@@ -117,12 +122,14 @@ def _check_contains(power, a, phi, r1, mu, tilt_deg, rho, frac_z, frac_r):
         return
     (zone,) = zones
     poly = Polygon(zone.ring).buffer(1e-9 * zone.reach_m)
-    n = np.array([-u[1], u[0]])
+    side = np.array([-u[1], u[0], 0.0]) / np.hypot(u[0], u[1])  # across the axis, level
+    up = np.cross(side, u)
     z = np.asarray(frac_z) * zone.reach_m
     h = _half_width_m(z, power, a, phi, r1, mu, rho, mpe)
     r = np.asarray(frac_r) * 1.5 * np.maximum(h, 1e-3)
-    pts = z[:, None] * u[:2] + r[:, None] * n
-    inside = np.abs(r) <= h  # hazardous by the formula (point irradiance at or above the MPE)
+    v = np.asarray(frac_v) * np.sqrt(np.maximum(h * h - r * r, 0.0))  # a height inside the section where r is
+    pts = (z[:, None] * u + r[:, None] * side + v[:, None] * up)[:, :2]  # the reflected axis starts where the laser's meets the plate: the origin
+    inside = np.abs(r) <= h  # hazardous by the formula (point irradiance at or above the MPE: r^2 + v^2 <= h^2)
     dz = zone.reach_m / (SAMPLES - 1)
     widest_near = np.maximum.reduce([_half_width_m(np.clip(z + k * dz, 0, None), power, a, phi, r1, mu, rho, mpe)
                                      for k in (-1, 0, 1)])
@@ -135,9 +142,10 @@ def _check_contains(power, a, phi, r1, mu, tilt_deg, rho, frac_z, frac_r):
 
 
 CASE = dict(power=st.floats(10.0, 5000.0), a=st.floats(0.003, 0.1), phi=st.floats(1e-4, 2e-3), r1=st.floats(20.0, 500.0),
-            mu=st.floats(0.0, 1e-3), tilt_deg=st.floats(5.0, 70.0), rho=st.floats(0.05, 1.0),
+            mu=st.floats(0.0, 1e-3), tilt_deg=st.floats(5.0, 70.0), rho=st.floats(0.05, 1.0), nz=st.floats(-0.3, 0.3),
             frac_z=st.lists(st.floats(0.0, 1.0), min_size=20, max_size=20),
-            frac_r=st.lists(st.floats(-1.0, 1.0), min_size=20, max_size=20))
+            frac_r=st.lists(st.floats(-1.0, 1.0), min_size=20, max_size=20),
+            frac_v=st.lists(st.floats(-1.0, 1.0), min_size=20, max_size=20))
 
 
 @FAST_TWIN
