@@ -65,6 +65,8 @@ LAYERS = {
     "keepout_lobe": ("Keep-out lobes (ground outline)", ("keepout_lobe",), None,
                      {"color": "#2166ac", "weight": 2, "fillOpacity": 0.15}),
     "mirror_beam": ("Mirror beams", ("mirror_beam",), None, {"color": "#e66101", "weight": 3}),
+    "mirror_beam_zone": ("Reflected-beam hazard zones (mirrors, with their width)", ("mirror_beam_zone",), None,
+                         {"color": "#e66101", "weight": 1.5, "fillOpacity": 0.25}),
     "track": ("Moving observers' tracks", ("track",), None, {"color": "#1a9641", "weight": 3, "dashArray": "8 5"}),
     "laser_targets": ("Laser and targets", ("laser", "target"), None,
                       {"color": "#000000", "fillColor": "#ffffff", "radius": 7, "weight": 2.5, "fillOpacity": 1.0}),
@@ -73,7 +75,7 @@ LAYERS = {
     "observers_hazardous": ("Observers at or above the MPE", ("observer",), lambda p: p.get("hazard") not in (None, "none"),
                             {"color": "#67000d", "fillColor": "#e41a1c", "radius": 6, "weight": 1.5, "fillOpacity": 0.95}),
 }
-LEGEND_ORDER = ("observers_hazardous", "sdz", "sdz_aided", "footprint", "keepout_lobe", "mirror_beam", "track",
+LEGEND_ORDER = ("observers_hazardous", "sdz", "sdz_aided", "footprint", "keepout_lobe", "mirror_beam", "mirror_beam_zone", "track",
                 "airspace_zone", "visual_zone", "sdz_nominal", "range_boundary", "laser_targets", "observers_safe")  # findings first
 
 

@@ -15,6 +15,8 @@ silently:
 - ``keepout_lobe``: the plan outline of each target's keep-out lobe (static, dynamic) at
   eye height over terrain, else its plan projection (:mod:`hazard.lobe_outline`);
 - ``mirror_beam``: each target's mirror beam out to its specular NOHD;
+  ``mirror_beam_zone``: its hazard zone with its width (naked eye and each aid with a
+  longer specular NOHD), cut where the analysis stops the beam (:mod:`hazard.mirror_zone`);
 - ``observer``: every observer point with its verdict and hazard ratio;
 - ``range_boundary``, ``laser``, ``target``: the range and what stands on it;
 - ``track``: each moving observer's path (a 3-D line: each vertex at its own height)
@@ -32,7 +34,7 @@ import numpy as np
 
 __all__ = ["Zone", "ZONE_KINDS", "zones"]
 
-ZONE_KINDS = ("footprint", "sdz", "sdz_nominal", "sdz_aided", "keepout_lobe", "mirror_beam", "observer",
+ZONE_KINDS = ("footprint", "sdz", "sdz_nominal", "sdz_aided", "keepout_lobe", "mirror_beam", "mirror_beam_zone", "observer",
               "range_boundary", "laser", "target", "track", "airspace_zone", "visual_zone")
 
 
@@ -136,6 +138,21 @@ def _mirrors(result, off) -> list:
     return out
 
 
+def _mirror_zones(result, off) -> list:
+    from shapely.geometry import Polygon
+
+    from .mirror_zone import mirror_zones
+
+    out = []
+    for m in mirror_zones(result):
+        poly = Polygon(m.ring + off[:2])
+        out.append(Zone("mirror_beam_zone", poly if poly.is_valid else poly.buffer(0), {
+            "target": m.target, "nohd_m": m.nohd_m, "reach_m": m.reach_m, "max_half_width_m": m.max_half_width_m,
+            "aperture_radius_m": m.aperture_radius_m, "exact_axis": m.exact_axis, "ranges_not_found": m.ranges_not_found,
+            "hazard": m.eye, "eye": m.eye}))
+    return out
+
+
 MAP_OBSERVERS_MAX = 20_000  # observer points on a map: every hazardous one, then the highest ratios (all in observers.csv)
 
 
@@ -231,6 +248,7 @@ def zones(result) -> tuple[list, dict]:
     off = np.asarray(result.scene.offset_m, float)
     parts = {"footprint": _footprints(result, off) if result.scene.terrain is not None else [],
              "sdz": _sdz(result), "keepout_lobe": _lobes(result, off), "mirror_beam": _mirrors(result, off),
+             "mirror_beam_zone": _mirror_zones(result, off),
              "observer": _observers(result), "things": _things(result, off), "airspace": _airspace(result)}
     common = _common(result)
     out = [z for zs in parts.values() for z in zs]
@@ -243,6 +261,7 @@ def zones(result) -> tuple[list, dict]:
                  f"between them; the keepout_lobe outlines, drawn from the lobes themselves, show it)"),
            "sdz": "no danger zone computed", "sdz_nominal": "no sector with a pointing buffer (only then is the sector without the buffer drawn apart)",
            "sdz_aided": "no optical aids", "keepout_lobe": "no lobe with a hazardous reach", "mirror_beam": "no mirror beam",
+           "mirror_beam_zone": "no mirror beam",
            "observer": "no observers", "range_boundary": "no [range] boundary", "laser": "", "target": "",
            "track": "no moving observer (kind = 'track')", "airspace_zone": "no [airspace] zones",
            "visual_zone": ("not a visible laser (400-700 nm): the FAA visual levels do not apply"

@@ -33,6 +33,7 @@ from .plots import DisplayBase
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
+MIRROR_ZONE_LABEL = "mirror beams' hazard zones (their width; dashed: through optics)"
 SITE_CONTEXT = 3.0  # the site panel also frames occluders and safe observers this many half-widths about the hazard
 MIN_ZONE_PT = 4.0  # a danger zone drawn narrower than this [pt] is also outlined exaggerated across the aim, and said
 LABELLED = 8  # hazardous observers named in a picture (the worst by hazard ratio); the rest are counted
@@ -67,6 +68,7 @@ class PlanViewDisplay(DisplayBase):
     flight_zones: list = field(default_factory=list)  # (path, (K, 2) ring, exceeded, text, spec, worst point)
     faa: list = field(default_factory=list)  # (path, text, world point) FAA visual-interference distances
     ends: list = field(default_factory=list)  # (xy, text): where the danger zone and each mirror beam end, and why
+    mirror_zones: list = field(default_factory=list)  # (target, eye, (K, 2) ring, xy start, unit plan direction): :mod:`hazard.mirror_zone`
 
     @classmethod
     def from_result(cls, result) -> "PlanViewDisplay":
@@ -98,6 +100,7 @@ class PlanViewDisplay(DisplayBase):
         d.flight_zones = flight_zone_rings(result)
         d.faa = faa_marks(result)
         d.ends = beam_ends(result, d.aim_xy[1], off)
+        d.mirror_zones = _mirror_zone_rings(result, off)
         return d
 
     def plot(self, axes=None):
@@ -252,6 +255,9 @@ class PlanViewDisplay(DisplayBase):
         for ring, name, colour, hatch, path in zones:
             if ring is not None and len(ring) >= 3:
                 _widen_thin(ax, ring, a, u, name, colour, hatch, path)
+        for k, (target, eye, ring, start, along) in enumerate(self.mirror_zones):  # labels staggered along the beams
+            _widen_thin(ax, ring, start, along, f"mirror-beam zone of {target} ({eye})", C.MIRROR, "xx",
+                        self.paths.get("mirror", {}).get(target), (0.5, 0.25, 0.75, 0.15, 0.85)[k % 5])
 
     def _draw_lobes(self, ax):
         from .figure_index import lobe_paths, mark
@@ -280,6 +286,10 @@ class PlanViewDisplay(DisplayBase):
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
+        for i, (name, eye, ring, _, _) in enumerate(self.mirror_zones):
+            ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
+                    ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
+            mark_mirror_zone(ax, self.paths, name, ring)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)
@@ -334,7 +344,7 @@ def beam_ends(result, aim_end_xy, off) -> list:
     return out
 
 
-def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
+def _widen_thin(ax, zone, a, u, name, colour, hatch, path, along=0.5) -> None:
     """``zone`` (K, 2) [m] about the aim from ``a`` along ``u``, if drawn narrower than
     ``MIN_ZONE_PT`` in ``ax``: also outlined widened across the aim to that width, hatched,
     labelled ``name`` with its true width and the factor, noted for figures.json under
@@ -352,7 +362,7 @@ def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
     x0, x1, y0, y1 = (*ax.get_xlim(), *ax.get_ylim())
     ax.fill(*ring.T, fc="none", ec=colour, lw=0.9, hatch=hatch, zorder=3)
     label = f"{name} {_metres(width_m)} wide,\ndrawn exaggerated (x{factor:.3g} across the aim)"
-    at = _visible_middle(a, u, float(np.max((zone - a) @ u)), (x0, x1, y0, y1))
+    at = _visible_middle(a, u, float(np.max((zone - a) @ u)), (x0, x1, y0, y1), along)
     side = 1.0 if (at @ n) <= ((np.array([x0 + x1, y0 + y1]) / 2) @ n) else -1.0  # the text toward the frame's middle
     ax.annotate(label, at, xytext=tuple(8 * side * n), textcoords="offset points", fontsize=6, color=colour, zorder=9,
                 ha="left" if side * n[0] >= 0 else "right", va="center",
@@ -362,7 +372,7 @@ def _widen_thin(ax, zone, a, u, name, colour, hatch, path) -> None:
     mark(ax, [path] if path else [], label, ring, "polygon")
 
 
-def _visible_middle(a, u, length_m, limits) -> np.ndarray:
+def _visible_middle(a, u, length_m, limits, along=0.5) -> np.ndarray:
     """The middle of the part of the aim (from ``a`` along ``u``, ``length_m`` long) in
     the frame ``limits`` (x0, x1, y0, y1) - where a label of the zone is seen -, or 55 %
     along it when no part is in the frame."""
@@ -372,7 +382,7 @@ def _visible_middle(a, u, length_m, limits) -> np.ndarray:
     seen = LineString([a, a + u * length_m]).intersection(box(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)))
     if seen.is_empty or seen.length <= 0:
         return a + u * 0.55 * length_m
-    return np.asarray(seen.interpolate(0.5, normalized=True).coords[0], float)
+    return np.asarray(seen.interpolate(along, normalized=True).coords[0], float)
 
 
 def widen_across(ring, origin, direction, factor) -> np.ndarray:
@@ -462,6 +472,14 @@ def mark_mirror(ax, paths, name, a, b):
 
     path = paths.get("mirror", {}).get(name)
     mark(ax, [path] if path else [], MIRROR_LABEL, np.array([a, b]), "line")
+
+
+def mark_mirror_zone(ax, paths, name, ring):
+    """Note a mirror beam's hazard zone drawn as ``ring`` (figures.json)."""
+    from .figure_index import mark
+
+    path = paths.get("mirror", {}).get(name)
+    mark(ax, [path] if path else [], MIRROR_ZONE_LABEL, np.asarray(ring, float), "polygon")
 
 
 def lobe_rings(result, off_xy) -> list:
@@ -661,6 +679,23 @@ def mirror_segments(result) -> list:
             length = float(stop)
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
         out.append((sp.target.name, sp.centroid, sp.centroid + axis * length))
+    return out
+
+
+def _mirror_zone_rings(result, off) -> list:
+    """(target, eye, ring, start, unit plan direction) of every mirror beam's zone, world
+    x, y (:func:`hazard.mirror_zone.mirror_zones`), widest eye first."""
+    from .mirror_zone import mirror_zones
+
+    out = []
+    for m in sorted(mirror_zones(result), key=lambda m: -m.max_half_width_m * m.reach_m):
+        ring = m.ring + off[:2]
+        start = ring[0] / 2 + ring[-1] / 2  # the zone's first section's middle: on the axis at the mirror
+        mid = len(ring) // 2
+        tip = ring[mid - 1] / 2 + ring[mid] / 2
+        d = tip - start
+        if np.hypot(*d) > 0:
+            out.append((m.target, m.eye, ring, start, d / np.hypot(*d)))
     return out
 
 

@@ -109,7 +109,7 @@ def _polygons(geom) -> list:
 def test_every_zone_kind_is_exported_or_said_absent(run_dir):
     doc = _geojson(run_dir)
     kinds = {f["properties"]["kind"] for f in doc["features"]}
-    assert kinds == {"footprint", "sdz", "sdz_aided", "keepout_lobe", "mirror_beam", "observer", "range_boundary", "laser", "target"}
+    assert kinds == {"footprint", "sdz", "sdz_aided", "keepout_lobe", "mirror_beam", "mirror_beam_zone", "observer", "range_boundary", "laser", "target"}
     absent = doc["laser_hazard"]["absent"]
     assert set(absent) == {"sdz_nominal", "track", "airspace_zone", "visual_zone"} and "sector" in absent["sdz_nominal"]
     assert "not a visible laser" in absent["visual_zone"] and "no [airspace] zones" in absent["airspace_zone"]
