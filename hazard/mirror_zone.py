@@ -38,10 +38,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MirrorZone", "mirror_zones", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "SAMPLES"]
+from .aperture import PUPIL_RADIUS_M, limiting_aperture_m  # 7 mm: beam_zone's default; mirror_zones uses the scene's aperture
+from .engine import mirror_axis, path_states
+from .nohd import optical_gain
+from .specular import is_curved_mesh, lit_planes, specular_irradiance
+
+__all__ = ["MirrorZone", "mirror_zones", "mirror_stops_m", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "SAMPLES"]
 
 SAMPLES = 97  # ranges along the beam at which the half-width is solved
-PUPIL_RADIUS_M = 3.5e-3  # the 7 mm limiting aperture's radius (400-1400 nm)
 
 
 @dataclass
@@ -59,8 +63,13 @@ class MirrorZone:
     exact_axis: bool = True  # the laser's axis reflected on the flat mirror (False: the drawn line's axis, see the module notes)
 
 
+
+def mirror_stops_m(result) -> dict:
+    """Per target, where the analysis stops its mirror beam's farthest ray [m] (report.json
+    ``sdz.mirror_beams[].max_reach_m``; None or inf where nothing stops it)."""
+    return {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
+
 def _irradiance(spot, pts, gain, mu, states) -> np.ndarray:
-    from .specular import specular_irradiance
 
     e = specular_irradiance(spot, pts, gain, mu, states)
     return e if e.ndim == 1 else e.max(axis=1)
@@ -242,11 +251,10 @@ def beam_axis(spot, origin_m, axis) -> tuple[np.ndarray, np.ndarray, bool]:
     on one flat plane (no curved side) the laser's axis reflected there (the unfolded
     Gaussian's own axis: where the laser axis meets the plane, along ``d - 2 (d . n) n``);
     else ``origin_m`` along ``axis`` as given (the drawn mirror line), ``exact`` False."""
-    from .specular import _planes, is_curved_mesh
 
     u = np.asarray(axis, float) / np.linalg.norm(axis)
     t = spot.target
-    planes = _planes(spot) if spot.beam is not None else []
+    planes = lit_planes(spot) if spot.beam is not None else []
     if len(planes) != 1 or t.mesh.analytic is not None or is_curved_mesh(t):
         return np.asarray(origin_m, float), u, False
     n, q, _ = planes[0]
@@ -261,12 +269,11 @@ def beam_axis(spot, origin_m, axis) -> tuple[np.ndarray, np.ndarray, bool]:
 
 def _eyes(result, row) -> list:
     """(label, gain, aperture radius [m], NOHD [m], stop [m] or None) per eye: naked, then each aid."""
-    from .nohd import optical_gain
-    from .plan_view import mirror_stops_m
-
+    spec = result.scene.spec
+    pupil_m = 0.5 * limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s)  # the standard's aperture (7 mm at 400-1400 nm)
     stops = mirror_stops_m(result)
     entry = {m["target"]: m for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}.get(row.name, {})
-    out = [("naked eye", 1.0, PUPIL_RADIUS_M, row.specular_nohd_dynamic_m, stops.get(row.name))]
+    out = [("naked eye", 1.0, pupil_m, row.specular_nohd_dynamic_m, stops.get(row.name))]
     for a in row.aided or []:
         nohd = a.get("specular_nohd_dynamic_m")
         if not nohd:
@@ -274,7 +281,7 @@ def _eyes(result, row) -> list:
         m, d = float(a["magnification"]), float(a["objective_diameter_m"])
         stop = (entry.get("aided") or {}).get("max_reach_m", stops.get(row.name))
         out.append((f"{m:g}x{1e3 * d:g} optics", optical_gain(m, d, a.get("transmission", 1.0)),
-                    0.5 * min(d, 2 * PUPIL_RADIUS_M * m), nohd, stop))
+                    0.5 * min(d, 2 * PUPIL_RADIUS_M * m), nohd, stop))  # an aid delivers into the 7 mm pupil (hazard.aperture)
     return out
 
 
@@ -283,7 +290,6 @@ def mirror_zones(result) -> list:
     specular NOHD (one only an aid reaches included), from the spot's centroid along the
     reported direction (:func:`hazard.plan_view.mirror_segments`' axis) or, on one flat
     plane, the laser's reflected axis (:func:`beam_axis`); module notes."""
-    from .engine import mirror_axis, path_states
 
     cached = result.__dict__.get("_mirror_zones") if hasattr(result, "__dict__") else None
     if cached is not None:  # the plan view and the zones file ask for the same run's zones

@@ -28,6 +28,7 @@ import numpy as np
 
 from . import palette as C
 from .label_place import place_labels
+from .mirror_zone import mirror_stops_m, mirror_zones
 from .plots import DisplayBase
 
 __all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
@@ -652,12 +653,6 @@ def _finite_or_0(x) -> float:
     return float(x) if math.isfinite(x) else 0.0
 
 
-def mirror_stops_m(result) -> dict:
-    """Per target, where the analysis stops its mirror beam's farthest ray [m] (report.json
-    ``sdz.mirror_beams[].max_reach_m``; None or inf where nothing stops it)."""
-    return {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
-
-
 def mirror_segments(result) -> list:
     """(target, start, end) of every mirror beam along the direction the report gives
     (else the mirror axis of the spot's mean normal), scene-local 3-D points [m], to its
@@ -685,8 +680,6 @@ def mirror_segments(result) -> list:
 def _mirror_zone_rings(result, off) -> list:
     """(target, eye, ring, start, unit plan direction) of every mirror beam's zone, world
     x, y (:func:`hazard.mirror_zone.mirror_zones`), widest eye first."""
-    from .mirror_zone import mirror_zones
-
     out = []
     for m in sorted(mirror_zones(result), key=lambda m: -m.max_half_width_m * m.reach_m):
         ring = m.ring + off[:2]

@@ -143,7 +143,7 @@ def _target_faces(spot):
     return np.unique(cells.faces[cells.labels == k])
 
 
-def _planes(spot):
+def lit_planes(spot):
     """The lit flat facets of a spot: list of (side normal (3,), point (3,), face ids)."""
     if getattr(spot, "_planes_cache", None) is not None:
         return spot._planes_cache
@@ -615,7 +615,7 @@ def specular_irradiance(spot, observers_m, gain, attenuation_per_m, states=None,
         return out
     pos, mu, tangent = spot.beam.position_m, attenuation_per_m, spot.target.tangent
     reach = None if apertures is None else np.maximum(apertures.eye_radius_m, np.where(apertures.aided, apertures.collect_radius_m, 0.0))
-    for plane in _planes(spot):
+    for plane in lit_planes(spot):
         ok, e, x, d, s, z = _flat_geometry(spot, plane, obs, reach)
         _seen(ray_scene, spot, x, plane[0], obs, ok)
         if not np.any(ok):
@@ -1331,7 +1331,7 @@ def _edge_reflectance(spot, rho, states):
     face's), so it takes the largest over those facets as well (conservative)."""
     if spot.target.mesh.analytic is not None or spot.outline_s is not None:
         return rho
-    planes = _planes(spot)
+    planes = lit_planes(spot)
     if not planes:
         return rho
     normals = np.array([p[0] for p in planes])
@@ -1349,7 +1349,7 @@ def _facet_reflectance_max(spot, rho, states) -> float:
     """The highest reflectance of a faceted spot: over its samples (``rho``) and its lit
     facets at the mean incidence (largest over ``states``)."""
     best = float(np.max(rho)) if len(rho) else 0.0
-    for n, _, _ in _planes(spot):
+    for n, _, _ in lit_planes(spot):
         r = _reflectance(spot, _local(n, spot.target.tangent, -spot.mean_incoming[None, :]), states)
         best = max(best, float(np.max(r)))
     return best
@@ -1371,7 +1371,7 @@ def _curved_mesh_nohd(spot, mpe_w_m2, mu, states, gain, flat: SpecularNohd) -> S
     rho = _reflectance(spot, _local(rays.normals, spot.target.tangent, -rays.incoming), states)
     rho = rho if states is None else rho.max(axis=1)
     dist, direction = tube_nohd(rays, rho, mpe_w_m2, mu, getattr(spot, "aperture_m", 7e-3), gain)
-    if _planes(spot) and flat.nohd_m >= dist:  # flat facets lit too
+    if lit_planes(spot) and flat.nohd_m >= dist:  # flat facets lit too
         return flat
     return SpecularNohd(dist, flat.direction if direction is None else _unit(direction).tolist())
 
