@@ -244,6 +244,7 @@ def read_astm_e1392(path, *, wavelength_nm=None, ignore_columns=(), symmetry=Non
     """
     path = Path(path)
     names, a, notes = _astm_table(path, {c.strip().lower() for c in ignore_columns})
+    by_wavelength = "wavelength_nm" in names or len(names) > 5 or (wavelength_nm is not None and _nm(names[4]) is not None)
     if "wavelength_nm" in names:  # a column of the rows: the CSV reader's selection
         d = {c: a[:, j] for j, c in enumerate(_ANGLES + ("brdf_per_sr", "wavelength_nm"))}
         d = _at_wavelength(path, d, wavelength_nm, notes)
@@ -253,6 +254,7 @@ def read_astm_e1392(path, *, wavelength_nm=None, ignore_columns=(), symmetry=Non
     keep = (np.cos(a[:, 0]) > 0) & (np.cos(a[:, 2]) > 0)
     out = _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
     out.info["notes"] = notes
+    out.info["by_wavelength"] = by_wavelength  # a wavelength column or columns named by wavelength
     return mirror_plane_symmetric(out) if _plane(path, symmetry) else out
 
 
@@ -428,7 +430,8 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
     d = {c: _csv_column(path, body, idx[c], c) for c in cols if c != "test_id" and c not in ignore}
     d["test_id"] = np.array([r[idx["test_id"]] if "test_id" in idx else "0" for _, r in body])
     notes = []
-    if "wavelength_nm" in d:
+    by_wavelength = "wavelength_nm" in d
+    if by_wavelength:
         d = _at_wavelength(path, d, wavelength_nm, notes)
     f = d[value] / (math.pi if value == "reflectance_factor" else 1.0)
     wi = spherical_to_vector(np.radians(d["theta_i_deg"]), np.radians(d["phi_i_deg"]))
@@ -437,6 +440,7 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
     s = _samples(wi, wo, f, d["test_id"], d.get("time_s"), d.get("temperature_k"), d.get("weight"))
     s = s.with_states(states) if states else s
     s.info["notes"] = notes
+    s.info["by_wavelength"] = by_wavelength  # rows chosen by their wavelength (else the file names none)
     return mirror_plane_symmetric(s) if _plane(path, symmetry) else s
 
 

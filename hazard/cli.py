@@ -745,6 +745,10 @@ def _cmd_fit(args, out, err):
             samples = _fit_samples(args)
             for note in samples.info.get("notes", ()):  # a wavelength interpolated between two measured ones
                 print(f"hazard: note: {note}", file=err)
+            if getattr(args, "wavelength_nm", None) is not None and not samples.info.get("by_wavelength"):
+                print(f"hazard: note: {Path(args.inputs[0]).name} names no wavelength (no wavelength_nm column or columns "
+                      f"named by wavelength): --wavelength-nm {args.wavelength_nm:g} is not checked against it; its values "
+                      f"are fitted as measured", file=err)
             fit = {"ts5": _fit_ts5, "abg": _fit_abg}.get(args.fit_kind, _fit_sh)
             code = fit(args, text, samples)
     out.write(text.getvalue())

@@ -274,3 +274,19 @@ def test_hazard_fit_names_the_wavelengths_a_file_holds(tmp_path):
     assert main(["fit", "sh", str(path), "-o", str(tmp_path / "m.json"), "--quiet", "--wavelength-nm", "800"],
                 stdout=io.StringIO(), stderr=err) == 0
     assert "note: m.csv: f_r interpolated linearly between the measured 532 and 1064 nm to the laser's 800 nm" in err.getvalue()
+
+
+def test_hazard_fit_says_when_the_file_names_no_wavelength(tmp_path):
+    import io
+
+    from hazard.cli import main
+
+    two = _abg_csv_two_wavelengths(tmp_path)
+    lines = two.read_text().splitlines()
+    one = tmp_path / "one.csv"  # the 1064 nm rows without their wavelength column
+    one.write_text("\n".join([lines[0].rsplit(",", 1)[0]] + [r.rsplit(",", 1)[0] for r in lines[1:] if r.endswith(",1064")]) + "\n")
+    for path, said in ((one, True), (two, False)):
+        err = io.StringIO()
+        argv = ["fit", "abg", str(path), "-o", str(tmp_path / f"{path.stem}.json"), "--quiet", "--wavelength-nm", "1064"]
+        assert main(argv, stdout=io.StringIO(), stderr=err) == 0, err.getvalue()
+        assert ("one.csv names no wavelength" in err.getvalue() and "--wavelength-nm 1064 is not checked" in err.getvalue()) == said
