@@ -17,30 +17,15 @@ from hypothesis import strategies as st
 
 import hazard
 import scenes
+from tests.validation import _refs as ref
 from tests.validation._refs import FAST_TWIN, SLOW
 
-SCENE = """
-name = "zone"
-[laser]
-wavelength_nm = 1064.0
-power_w = {power}
-beam_diameter_m = {a}
-divergence_rad = {phi}
-position_m = [0.0, -{r1}, 0.0]
-aim_m = [0.0, 0.0, 0.0]
-[exposure]
-duration_s = 10.0
-[atmosphere]
-attenuation_per_m = {mu}
-[[targets]]
-name = "mirror"
-shape = "plate"
-center_m = [0.0, 0.0, 0.0]
-normal = [{nx}, {ny}, 0.0]
-tangent = [{ny_neg}, {nx}, 0.0]
-size_m = [20.0, 20.0]
-material = {{ model = "specular", reflectance = {rho} }}
-"""
+def _scene(*, power, a, phi, r1, mu, rho, normal, tangent, center=(0.0, 0.0, 0.0), size=(20.0, 20.0)):
+    """A specular plate ``mirror`` at ``center`` lit along +y by a 1064 nm laser ``r1`` m south
+    (the validation suite's scene builder; default analysis knobs)."""
+    mirror = dict(name="mirror", shape="plate", center=center, normal=normal, tangent=tangent, size=size, material=ref.specular(rho))
+    return scenes.loads(ref.scene_text(power=power, a=a, phi=phi, position=(0.0, -r1, 0.0), aim=(0.0, 0.0, 0.0), targets=[mirror],
+                                       mu=mu, analysis=""))
 
 
 def _case(power=100.0, a=0.01, phi=5e-4, r1=100.0, mu=0.0, tilt_deg=30.0, rho=0.8, nz=0.0):
@@ -49,10 +34,7 @@ def _case(power=100.0, a=0.01, phi=5e-4, r1=100.0, mu=0.0, tilt_deg=30.0, rho=0.
     t = math.radians(tilt_deg)
     n = np.array([math.sin(t), -math.cos(t), nz])  # faces the laser (beam along +y)
     n /= np.linalg.norm(n)
-    text = SCENE.format(power=power, a=a, phi=phi, r1=r1, mu=mu, nx=n[0], ny=n[1], ny_neg=-n[1], rho=rho)
-    text = text.replace("normal = [{0}, {1}, 0.0]".format(n[0], n[1]), "normal = [{0}, {1}, {2}]".format(*n))
-    text = text.replace("tangent = [{0}, {1}, 0.0]".format(-n[1], n[0]), "tangent = [{0}, {1}, 0.0]".format(math.cos(t), math.sin(t)))
-    res = hazard.analyze(scenes.loads(text))
+    res = hazard.analyze(_scene(power=power, a=a, phi=phi, r1=r1, mu=mu, rho=rho, normal=n, tangent=(math.cos(t), math.sin(t), 0.0)))
     assert np.allclose(res.spots[0].target.normal, n, atol=1e-9)  # the scene holds the plate as meant
     d = np.array([0.0, 1.0, 0.0])
     u = d - 2 * (d @ n) * n
@@ -226,11 +208,8 @@ def test_a_beam_cut_above_its_axis_is_drawn_where_its_hot_part_is():
     from hazard.mirror_zone import mirror_zones
     from hazard.specular import specular_irradiance
 
-    text = SCENE.format(power=2000.0, a=0.2, phi=2e-4, r1=100.0, mu=0.0, nx=0.5, ny=-math.sqrt(0.75),
-                        ny_neg=math.sqrt(0.75), rho=0.9)
-    text = text.replace("center_m = [0.0, 0.0, 0.0]", "center_m = [0.0, 0.0, 0.35]")
-    text = text.replace("size_m = [20.0, 20.0]", "size_m = [0.6, 0.6]")
-    res = hazard.analyze(scenes.loads(text))
+    res = hazard.analyze(_scene(power=2000.0, a=0.2, phi=2e-4, r1=100.0, mu=0.0, rho=0.9, normal=(0.5, -math.sqrt(0.75), 0.0),
+                                tangent=(math.sqrt(0.75), 0.5, 0.0), center=(0.0, 0.0, 0.35), size=(0.6, 0.6)))
     (zone,) = mirror_zones(res)
     (sp,) = res.spots
     poly = Polygon(zone.ring).buffer(1e-9 * zone.reach_m)
