@@ -145,7 +145,8 @@ def sampled_square(scene, beam, n0_base: int) -> TailSquare:
     (``n0_base`` cells over +-4 w), so the cells inside +-4 w are the base grid's."""
     spec = scene.spec
     gain = max([1.0] + [optical_gain(a.magnification, a.objective_diameter_m, a.transmission) for a in scene_aids(scene)])
-    limit = min([exposure_limits(spec).irradiance_w_m2 / gain] + _zone_limits_w_m2(spec))
+    mpe_w_m2 = exposure_limits(spec).irradiance_w_m2
+    limit = min([mpe_w_m2 / gain] + _zone_limits_w_m2(spec, mpe_w_m2))
     aperture_m = mirror_aperture_m(spec)
     want = max(beam.half_width, tail_half_width(beam.power_w, beam.diameter_m, beam.divergence_rad, limit, aperture_m))
     step = 2 * HALF_WIDTH / n0_base
@@ -155,16 +156,16 @@ def sampled_square(scene, beam, n0_base: int) -> TailSquare:
     return TailSquare(half, n0_base + 2 * extra, limit, peak, power)
 
 
-def _zone_limits_w_m2(spec) -> list:
+def _zone_limits_w_m2(spec, mpe_w_m2: float) -> list:
     """The irradiances [W/m^2] at which the scene's flight zones reach their levels
-    (:func:`hazard.visual.level_limit_w_m2`: the FAA levels over the VCF, or the MPE)."""
+    (:func:`hazard.visual.level_limit_w_m2`: the FAA levels over the VCF, or the MPE
+    ``mpe_w_m2``)."""
     air = spec.airspace
     if air is None or not air.zones:
         return []
     wl = spec.laser.wavelength_nm
     vcf = visual_correction_factor(wl, air.visual_correction) if visual_applies(wl) else 0.0
-    mpe = exposure_limits(spec).irradiance_w_m2
-    return [e for e in (level_limit_w_m2(z.limit, mpe, vcf) for z in air.zones) if math.isfinite(e)]
+    return [e for e in (level_limit_w_m2(z.limit, mpe_w_m2, vcf) for z in air.zones) if math.isfinite(e)]
 
 
 def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
