@@ -9,10 +9,13 @@ source's own input, and pins the size and direction of the difference with the t
 value (p05 and p07: the source's lower MPE gives it the longer distance, by 0.9 % and
 10 %; p09 and p15: the tool's is the longer).
 
-Not found in a readable public source (so not here; the hand-computed examples in
-``test_mpe_standards.py`` section 4 and ``test_nohd.py`` cover them, labelled [H]):
-specular (flat-mirror) NOHD, binocular (optically aided) ENOHD and NOHD with atmospheric
-attenuation.
+Specular (flat-mirror) reflection: p16, a mirror in a diverging beam (the source's mirror
+reflectance is implicitly 1). Not found in a readable public source (searched: MIL-HDBK-828,
+TB MED 524, ICAO Doc 9815, FAA AC 70-1 / Order 7400.2, the OSHA manual, SAND reports,
+university manuals; the stored copies hold their front matter, not the worked examples), so
+not here; the hand-computed examples in ``test_mpe_standards.py`` section 4 and
+``test_nohd.py`` cover them, labelled [H]: binocular (optically aided) ENOHD, NOHD with
+atmospheric attenuation, and an IEC 60825-1:2014 C5 pulse-train example.
 """
 
 import math
@@ -208,3 +211,30 @@ def test_p15_five_mw_pointer_hazard_zones():
     # value the NOHD is 51.9 ft, longer (protective)
     own = zone_distances_m(5e-3, 0.0, 1e-3, hz.ocular_mpe(532.0, 0.25).irradiance_w_m2, 1.0)
     assert 51 < own["nohd_m"] / FT < 52
+
+
+# --- specular (flat-mirror) reflection ------------------------------------------------------
+def test_p16_mirror_in_a_diverging_532_nm_beam():
+    # github.com/PablitoE/MyNotebooks, "Laser safety.ipynb", section "MPE comparations of
+    # divergent open beam @532nm CW": "a mirror is placed in the open beam path and eye/skin
+    # are exposed to the reflection"; 1 W, 532 nm, after an OD 0.5 filter, focused by an NA 0.3
+    # lens (the code's NA_lens = 0.3; the markdown says 0.5) 1 mm + 5 mm / 1.79 (sapphire) =
+    # 3.79 mm behind the window; 0.25 s eye MPE 25.46 W/m^2, skin (100 s) 2000 W/m^2: "The
+    # ocular NOHD is 0.20 m. And for the skin is 0.02 m." (from the window, along the folded
+    # path; the mirror's reflectance is taken as 1, the source gives none).
+    # The tool's flat mirror is the direct beam with rho_s P along the folded path; the beam
+    # leaves the focus as a point (a = 0) with full angle 2 tan(asin 0.3).
+    p_w = 1.0 * 10**-0.5  # the OD 0.5 filter
+    phi = 2 * math.tan(math.asin(0.3))
+    focus_to_window_m = 1e-3 + 5e-3 / 1.79
+    assert within(focus_to_window_m * 1e3, 3.79, 0.005)
+    eye = hz.ocular_mpe(532.0, 0.25, standard=IEC).irradiance_w_m2
+    skin = hz.skin_mpe(532.0, 100.0, standard=IEC).irradiance_w_m2
+    assert within(eye, 25.46, 0.005) and skin == pytest.approx(2000.0, rel=1e-12)
+    n_eye = hz.nohd_specular(p_w, eye, 0.0, phi, 1.0).nohd_m - focus_to_window_m
+    n_skin = hz.nohd_specular(p_w, skin, 0.0, phi, 1.0).nohd_m - focus_to_window_m
+    assert within(n_eye, 0.20, 0.005)  # 0.196 m
+    assert within(n_skin, 0.02, 0.005)  # 0.0188 m
+    # a partial mirror scales the power: rho_s = 0.5 shortens the folded-path NOHD by sqrt(0.5) (a = 0)
+    half = hz.nohd_specular(p_w, eye, 0.0, phi, 0.5).nohd_m
+    assert half == pytest.approx((n_eye + focus_to_window_m) * math.sqrt(0.5), rel=1e-12)
