@@ -296,7 +296,8 @@ def _cmd_mpe(args, out, err=None):
     day = ""
     if args.exposures_per_day is not None:
         each_s = args.duration_s if args.prf_hz is None else args.exposure_duration_s
-        uv = _mpe.uv_24h_mpe(args.wavelength_nm, [each_s] * args.exposures_per_day, standard=args.standard)
+        uv = _mpe.uv_24h_mpe(args.wavelength_nm, [each_s] * args.exposures_per_day, standard=args.standard,
+                             kind="skin" if args.skin else "ocular")
         doc["uv_24h"] = {**uv.to_dict(), "exposures": args.exposures_per_day,
                          "per_exposure_radiant_exposure_j_m2": uv.radiant_exposure_j_m2 / args.exposures_per_day}
         day = (f"\n{uv}\n  per exposure: {uv.radiant_exposure_j_m2:.6g} / {args.exposures_per_day} = "

@@ -700,9 +700,10 @@ class UV24hResult:
     mpe: MPEResult
     label: str
     steps: tuple
+    kind: str = "ocular"
 
     def to_dict(self) -> dict:
-        return {"wavelength_nm": self.wavelength_nm, "standard": self.standard, "accumulation_s": UV_ACCUMULATION_S,
+        return {"wavelength_nm": self.wavelength_nm, "standard": self.standard, "kind": self.kind, "accumulation_s": UV_ACCUMULATION_S,
                 "total_on_time_s": self.total_on_time_s, "radiant_exposure_j_m2": self.radiant_exposure_j_m2,
                 "average_irradiance_w_m2": self.average_irradiance_w_m2, "governing_limit": self.mpe.governing_limit,
                 "table_row": self.mpe.table_row, "label": self.label, "unverified": True, "steps": list(self.steps)}
@@ -711,8 +712,9 @@ class UV24hResult:
         return "\n".join(self.steps)
 
 
-def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD) -> UV24hResult:
-    """MPE for the UV exposures (180-400 nm) received within 24 h, which add up.
+def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD, kind="ocular") -> UV24hResult:
+    """MPE for the UV exposures (180-400 nm) of the eye or the skin received within 24 h,
+    which add up.
 
     Both standards treat the ultraviolet limits as cumulative over a day: exposures
     repeated within 24 h are summed and the sum compared with the MPE for their total
@@ -733,8 +735,15 @@ def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD
         Durations [s] of the exposures within 24 h (or their total), each > 0, summed <= 24 h.
     standard : str
         One of :data:`STANDARDS`.
+    kind : {"ocular", "skin"}
+        Whose MPE: :func:`ocular_mpe` or :func:`skin_mpe`. The skin's UV rows (ANSI
+        Z136.1-2014 Table 7, IEC 60825-1:2014 Table A.5, 180-400 nm) are the same dual
+        photochemical/thermal limits as the eye's [M], and the same 24 h summing is applied
+        to them [M] (the UV skin limits are erythema doses, cumulative like the eye's).
     """
     std = check_standard(standard)
+    if kind not in ("ocular", "skin"):
+        raise ValueError(f"kind={kind!r}: expected 'ocular' or 'skin'")
     wl, _, _ = _check_inputs(wavelength_nm, 1.0, 0.0)
     if not wl < 400.0:
         raise ValueError(f"wavelength_nm={wl!r}: the 24 h accumulation applies to the ultraviolet, expected 180 to < 400 nm")
@@ -746,17 +755,18 @@ def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD
     if not 0 < total <= UV_ACCUMULATION_S * (1 + 1e-12):
         raise ValueError(f"exposure_durations_s sum to {total!r} s: expected > 0 and at most 24 h = {UV_ACCUMULATION_S:g} s")
     t_eval = min(max(total, DURATION_MIN_S), DURATION_MAX_S)
-    res = ocular_mpe(wl, t_eval, standard=std)
+    res = ocular_mpe(wl, t_eval, standard=std) if kind == "ocular" else skin_mpe(wl, t_eval, standard=std)
     h = res.radiant_exposure_j_m2
     label = "[M] UV 24 h accumulation (ANSI Z136.1-2014 8.2, IEC 60825-1:2014 A.3; general knowledge, unverified)"
+    whose = "" if kind == "ocular" else " (skin)"
     steps = (
-        f"UV exposures within 24 h per {STANDARDS[std]} at {wl:g} nm: {len(durs)} exposure(s), total {total:.6g} s {label}",
+        f"UV exposures{whose} within 24 h per {STANDARDS[std]} at {wl:g} nm: {len(durs)} exposure(s), total {total:.6g} s {label}",
         "  limit on the summed dose = the MPE for one exposure of the total duration"
         + (f" (tables end at 3e4 s: evaluated at {t_eval:g} s, not extrapolated)" if t_eval < total else ""),
         f"  {res.governing_limit}: {res.table_row}: {res.formula} -> H = {h:.6g} J/m^2",
         f"  summed dose <= {h:.6g} J/m^2, i.e. average irradiance while exposed <= {h / total:.6g} W/m^2",
     )
-    return UV24hResult(wl, std, total, h, h / total, res, label, steps)
+    return UV24hResult(wl, std, total, h, h / total, res, label, steps, kind)
 
 
 def on_time_in_24h_s(intervals_s) -> float:

@@ -143,6 +143,29 @@ def test_uv_24h_limit_from_the_tables(std, wl, durations, expected_h, why):
     assert r.to_dict()["unverified"] and "[M]" in r.label
 
 
+@pytest.mark.parametrize("std, wl, durations, expected_h, why", [
+    # the skin's UV rows, typed from the skin tables (ANSI Z136.1-2014 Table 7, IEC 60825-1:2014
+    # Table A.5, 180-400 nm), the day's exposures summed [M]:
+    # 266 nm: 180-302 nm 3e-3 J/cm^2 = 30 J/m^2 (IEC 180-302.5 nm 30 J/m^2), 5 x 100 s
+    (ANSI, 266.0, [100.0] * 5, 30.0, "skin 180-302, 3e-3 J/cm^2"),
+    (IEC, 266.0, [100.0] * 5, 30.0, "skin 180-302.5, 30 J/m^2"),
+    # 355 nm IEC Table A.5 315-400 nm, 1e3 - 3e4 s: E = 10 W/m^2 (1 mW/cm^2); 5 x 600 s = 3000 s
+    (IEC, 355.0, [600.0] * 5, 10.0 * 3000.0, "skin 315-400, 1e3 - 3e4 s"),
+    # 355 nm ANSI Table 7 315-400 nm, 10 - 1e3 s: 1 J/cm^2 = 1e4 J/m^2; 3 x 100 s = 300 s
+    (ANSI, 355.0, [100.0] * 3, 1e4, "skin 315-400, 10 - 1e3 s"),
+    # 355 nm, 2 x 2 s = 4 s: below 10 s, C1 = 0.56 t^0.25 J/cm^2 of the total
+    (IEC, 355.0, [2.0, 2.0], 5.6e3 * 4**0.25, "skin below 10 s: C1 of the total"),
+])
+def test_uv_24h_skin_limit_from_the_tables(std, wl, durations, expected_h, why):
+    r = M.uv_24h_mpe(wl, durations, standard=std, kind="skin")
+    assert r.radiant_exposure_j_m2 == pytest.approx(expected_h, rel=REL), why
+    assert r.average_irradiance_w_m2 == pytest.approx(expected_h / sum(durations), rel=REL)
+    assert r.kind == "skin" and r.to_dict()["kind"] == "skin" and "(skin)" in str(r)
+    # one exposure of the summed duration is what the day is held to: the skin MPE of that total
+    assert r.mpe.radiant_exposure_j_m2 == hz.skin_mpe(wl, sum(durations), standard=std).radiant_exposure_j_m2
+    assert M.uv_24h_mpe(wl, durations, standard=std).kind == "ocular"
+
+
 def test_uv_24h_rejects_bad_input():
     with pytest.raises(ValueError, match="ultraviolet"):
         M.uv_24h_mpe(532.0, [10.0])
@@ -150,6 +173,8 @@ def test_uv_24h_rejects_bad_input():
         M.uv_24h_mpe(355.0, [10.0, -1.0])
     with pytest.raises(ValueError, match="24 h"):
         M.uv_24h_mpe(355.0, [5e4, 5e4])
+    with pytest.raises(ValueError, match="kind='retina'"):
+        M.uv_24h_mpe(355.0, [10.0], kind="retina")
 
 
 @pytest.mark.parametrize("windows, expected_s", [
@@ -313,6 +338,12 @@ def test_cli_exposures_per_day():
     err = io.StringIO()
     assert main(["mpe", "--wavelength-nm", "532", "--duration-s", "60", "--exposures-per-day", "5"], stdout=io.StringIO(), stderr=err) != 0
     assert "ultraviolet" in err.getvalue()
+    # --skin: the day's rule on the skin MPE; 266 nm skin 3e-3 J/cm^2 = 30 J/m^2 for the day, 6 J/m^2 each of five
+    out = io.StringIO()
+    assert main(["mpe", "--wavelength-nm", "266", "--duration-s", "60", "--skin", "--exposures-per-day", "5", "--json"], stdout=out) == 0
+    doc = json.loads(out.getvalue())
+    assert doc["uv_24h"]["kind"] == "skin" and doc["uv_24h"]["radiant_exposure_j_m2"] == pytest.approx(30.0, rel=REL)
+    assert doc["uv_24h"]["per_exposure_radiant_exposure_j_m2"] == pytest.approx(6.0, rel=REL)
 
 
 @pytest.mark.parametrize("day_limit, expected_first", [(None, None), (1e4, 1300.0)])
