@@ -181,6 +181,8 @@ class ExposureDisplay(DisplayBase):
     duration_s: float | None = None  # the exposure duration whose MPE the verdict uses [s]
     rule: str = "peak"  # the verdict's rule: "peak" (E(t) > the duration's MPE) or "window" (a window's H > its MPE)
     paths: tuple = ()  # report.json paths it draws (figures.json)
+    uv_day_j_m2: float | None = None  # 180-400 nm, where the UV day rule governs: the day's summed-dose limit [J/m^2]
+    uv_day_text: str = ""  # its legend: the exposed time in 24 h it is for
 
     @classmethod
     def from_result(cls, result, observer=0, *, irradiance_w_m2=None):
@@ -205,7 +207,8 @@ class ExposureDisplay(DisplayBase):
         obs = result.observers
         mpe = np.broadcast_to(np.asarray(result.observer_mpe_w_m2, float), (len(obs),))[observer] if len(obs) else result.mpe_w_m2
         return cls(t, row, cum, limit, obs.labels[observer], float(mpe), float(obs.first_exceedance_s[observer]),
-                   float(result.hazard_ratio[observer]), duration_s=float(spec.exposure.duration_s))
+                   float(result.hazard_ratio[observer]), duration_s=float(spec.exposure.duration_s),
+                   **_uv_day_static(getattr(result, "uv_24h", None), float(mpe), getattr(result.mpe, "irradiance_w_m2", math.inf)))
 
     @classmethod
     def from_path(cls, result, path):
@@ -223,7 +226,7 @@ class ExposureDisplay(DisplayBase):
         return cls(t, path.irradiance_w_m2, path.cumulative_j_m2, limit, f"{path.name} ({path.kind})",
                    float(result.mpe_w_m2), first, float(s["exposure_ratio"]),
                    f"worst {s['worst_window']['duration_s']:.3g} s window's H / MPE", duration_s=float(spec.exposure.duration_s),
-                   rule="window")
+                   rule="window", **_uv_day_path(s))
 
     def verdict_exceedance_s(self) -> float:
         """The first time the verdict's rule is broken [s] (NaN: never in the window).
@@ -252,6 +255,8 @@ class ExposureDisplay(DisplayBase):
             h = self.mpe_w_m2 * self.duration_s
             ax.axhline(h, c="k", lw=1.2, label=f"{limit} as exposure: {self.mpe_w_m2:.4g} W/m^2 x {self.duration_s:.4g} s "
                                                 f"= {h:.4g} J/m^2")
+        if self.uv_day_j_m2 is not None:
+            ax.axhline(self.uv_day_j_m2, c="tab:purple", ls="-.", lw=1.2, label=self.uv_day_text)
         t = self.verdict_exceedance_s()
         rule = f"E(t) first at or above {limit}" if self.rule == "peak" else f"{self.ratio_text} first over 1"
         if np.isfinite(t):
@@ -289,6 +294,31 @@ class ExposureDisplay(DisplayBase):
         ax.legend(h1 + h2, l1 + l2, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=7)
         ax.grid(alpha=0.3, which="both")
         return fig, ax
+
+
+def _uv_day_static(uv, mpe_w_m2, single_w_m2) -> dict:
+    """The UV day's limit for :class:`ExposureDisplay` of a fixed observer, when it governs
+    its MPE (:func:`hazard.pipeline.limits.exposure_limits` lowered the MPE ``mpe_w_m2`` to
+    the day's average, below the one exposure's ``single_w_m2``): the summed dose of all the
+    day's exposures, ``uv_24h.radiant_exposure_j_m2``."""
+    avg = None if not uv else uv["average_irradiance_w_m2"]
+    if avg is None or avg > mpe_w_m2 * (1 + 1e-9) or not avg < single_w_m2 * (1 - 1e-12):
+        return {}
+    return {"uv_day_j_m2": float(uv["radiant_exposure_j_m2"]),
+            "uv_day_text": (f"UV day's limit: the doses of {uv['total_on_time_s']:.4g} s exposed in 24 h add up to at most "
+                            f"{uv['radiant_exposure_j_m2']:.4g} J/m^2 (governs; [M])")}
+
+
+def _uv_day_path(summary) -> dict:
+    """The UV day's limit for :class:`ExposureDisplay` of a moving observer, when its 24 h
+    dose ratio is the path's exposure ratio (``uv_24h`` of
+    :func:`hazard.pipeline.motion_stage.path_summary`)."""
+    uv = summary.get("uv_24h")
+    if not uv or uv["ratio"] < summary["worst_window"]["ratio"]:
+        return {}
+    return {"uv_day_j_m2": float(uv["limit_j_m2"]),
+            "uv_day_text": (f"UV day's limit for {uv['exposed_s']:.4g} s exposed in 24 h: {uv['limit_j_m2']:.4g} J/m^2 "
+                            f"(the path's dose in 24 h / limit = {uv['ratio']:.3g}, governs; [M])")}
 
 
 @dataclass

@@ -7,6 +7,7 @@ import copy
 import dataclasses
 import io
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -173,3 +174,106 @@ def test_exposure_plot_below_the_verdicts_mpe_marks_nothing(tmp_path):
     _, ax = d.plot()
     labels = [t.get_text() for t in ax.get_legend().get_texts()]
     assert any(s.startswith("no exceedance in the window") for s in labels), labels
+
+
+def _uv_plate(windows=None):
+    text = Path(scenes.example_path("plate")).read_text()
+    text = text.replace("wavelength_nm = 1064.0", "wavelength_nm = 355.0").replace("power_w = 100.0", "power_w = 10000.0")
+    if windows:
+        text = text.replace("aim_m = [0.0, 0.0, 0.0]", f"aim_m = [0.0, 0.0, 0.0]\nwindows = {windows}")
+    return hazard.analyze(scenes.loads(text, base_dir=Path(scenes.example_path("plate")).parent))
+
+
+@pytest.mark.slow
+def test_exposure_plot_draws_the_uv_days_limit_where_it_governs():
+    # 355 nm, ANSI, five 600 s firing windows a day: 3000 s exposed; Table 5a 315-400 nm,
+    # 10 - 3e4 s: 1.0 J/cm^2 = 1e4 J/m^2 for the day's summed dose (3.33 W/m^2 while exposed),
+    # below one 10 s exposure's 0.56 * 10^0.25 J/cm^2 / 10 s = 995.8 W/m^2: the day's rule governs
+    win = "[[0.0, 600.0], [3600.0, 4200.0], [7200.0, 7800.0], [10800.0, 11400.0], [14400.0, 15000.0]]"
+    r = _uv_plate(win)
+    d = plots.ExposureDisplay.from_result(r, r.observers.labels.index("east"))
+    assert d.uv_day_j_m2 == pytest.approx(1e4, rel=1e-9) and d.mpe_w_m2 == pytest.approx(1e4 / 3000.0, rel=1e-9)
+    _, ax = d.plot()
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert any(s.startswith("UV day's limit") and "3000 s exposed in 24 h" in s and "1e+04 J/m^2" in s for s in labels), labels
+    flat = [ln for ln in ax.get_lines() if np.allclose(ln.get_ydata(), 1e4, rtol=1e-9)]
+    assert len(flat) == 1 and flat[0].get_color() == "tab:purple"
+    # no windows: the one 10 s exposure is the day; its MPE is the single-exposure one, no day line
+    one = _uv_plate()
+    d1 = plots.ExposureDisplay.from_result(one, one.observers.labels.index("east"))
+    assert d1.uv_day_j_m2 is None
+    _, ax1 = d1.plot()
+    assert not any(t.get_text().startswith("UV day's limit") for t in ax1.get_legend().get_texts())
+
+
+def test_exposure_plot_of_a_path_draws_the_uv_days_limit_where_it_governs():
+    from hazard.pipeline.motion_stage import path_summary
+
+    # 355 nm, ANSI: lit at 20 W/m^2 for 100 s every 1000 s, five times, sampled every 5 s: the day's dose
+    # (5 x 2100 J/m^2, trapezoids with 5 s ramps) over 1.0 J/cm^2 = 1e4 J/m^2 for 500 s exposed (Table 5a
+    # 315-400 nm, 10 - 3e4 s); every 10 s window (200 J/m^2) far below its MPE
+    t = np.arange(0.0, 4200.0, 5.0)
+    e = np.zeros_like(t)
+    for a in (10.0, 1010.0, 2010.0, 3010.0, 4010.0):
+        e[(t >= a) & (t <= a + 100.0)] = 20.0
+    for wl, day in ((355.0, 1e4), (532.0, None)):  # 532 nm: no day rule
+        p = _path(t, e)
+        p.summary = path_summary(p, 10.0, wl, "ansi-z136.1-2014")
+        result = SimpleNamespace(mpe_w_m2=1.0, scene=SimpleNamespace(spec=SimpleNamespace(
+            laser=SimpleNamespace(wavelength_nm=wl), exposure=SimpleNamespace(standard="ansi-z136.1-2014", duration_s=10.0))))
+        d = plots.ExposureDisplay.from_path(result, p)
+        _, ax = d.plot()
+        labels = [x.get_text() for x in ax.get_legend().get_texts()]
+        if day is None:
+            assert d.uv_day_j_m2 is None and not any(x.startswith("UV day's limit") for x in labels)
+            continue
+        assert d.uv_day_j_m2 == pytest.approx(day, rel=1e-9) and p.summary["uv_24h"]["ratio"] > 1.0
+        assert any(x.startswith("UV day's limit for 500 s exposed in 24 h: 1e+04 J/m^2") for x in labels), labels
+
+
+def _path(t, e):
+    from hazard.pipeline.motion import PathResult
+
+    return PathResult("p", 0, "track", t, np.zeros((len(t), 3)), e > 0, np.zeros_like(e), e, 1.0, False)
+
+
+def _fake_static(uv, mpe_w_m2, single_w_m2):
+    obs = SimpleNamespace(irradiance_w_m2=np.array([[3.5]]), labels=["east"], first_exceedance_s=np.array([np.nan]))
+    obs.__len__ = lambda: 1
+    spec = SimpleNamespace(laser=SimpleNamespace(wavelength_nm=355.0),
+                           exposure=SimpleNamespace(standard="ansi-z136.1-2014", duration_s=10.0))
+    return SimpleNamespace(observers=[0], times_s=np.array([0.0]), scene=SimpleNamespace(spec=spec), uv_24h=uv,
+                           mpe=SimpleNamespace(irradiance_w_m2=single_w_m2), mpe_w_m2=mpe_w_m2,
+                           observer_mpe_w_m2=mpe_w_m2, hazard_ratio=np.array([3.5 / mpe_w_m2]))
+
+
+@pytest.mark.parametrize("avg, mpe, single, drawn", [
+    # the fast twin of the scene test above: the day's average 1e4 J/m^2 / 3000 s set the MPE, below
+    # one 10 s exposure's 995.8 W/m^2 (ANSI Table 5a 315-400 nm): drawn
+    (1e4 / 3000.0, 1e4 / 3000.0, 995.8, True),
+    # the day is the one exposure (average == the single exposure's MPE): not a separate limit
+    (995.8, 995.8, 995.8, False),
+    # a lower limit (e.g. a pulse rule) set the MPE below the day's average: the day's rule does not govern
+    (1e4 / 3000.0, 1.0, 995.8, False),
+])
+def test_uv_day_line_only_where_the_day_rule_governs(avg, mpe, single, drawn):
+    uv = {"average_irradiance_w_m2": avg, "radiant_exposure_j_m2": avg * 3000.0, "total_on_time_s": 3000.0}
+    r = _fake_static(uv, mpe, single)
+    r.observers = SimpleNamespace(irradiance_w_m2=np.array([[3.5]]), labels=["east"], first_exceedance_s=np.array([np.nan]))
+    d = plots.ExposureDisplay.from_result(_Len1(r), 0)
+    assert (d.uv_day_j_m2 is not None) == drawn
+    if drawn:
+        assert d.uv_day_j_m2 == pytest.approx(1e4, rel=1e-12) and "3000 s exposed in 24 h" in d.uv_day_text
+
+
+class _Len1(SimpleNamespace):
+    """A fake result whose observers have one row."""
+
+    def __init__(self, r):
+        super().__init__(**vars(r))
+        self.observers = _Obs(**vars(r.observers))
+
+
+class _Obs(SimpleNamespace):
+    def __len__(self):
+        return 1
