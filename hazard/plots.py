@@ -208,7 +208,8 @@ class ExposureDisplay(DisplayBase):
         mpe = np.broadcast_to(np.asarray(result.observer_mpe_w_m2, float), (len(obs),))[observer] if len(obs) else result.mpe_w_m2
         return cls(t, row, cum, limit, obs.labels[observer], float(mpe), float(obs.first_exceedance_s[observer]),
                    float(result.hazard_ratio[observer]), duration_s=float(spec.exposure.duration_s),
-                   **_uv_day_static(getattr(result, "uv_24h", None), float(mpe), getattr(result.mpe, "irradiance_w_m2", math.inf)))
+                   **_uv_day_static(getattr(result, "uv_24h", None), float(mpe), getattr(result.mpe, "irradiance_w_m2", math.inf),
+                                    float(spec.exposure.duration_s)))
 
     @classmethod
     def from_path(cls, result, path):
@@ -296,7 +297,7 @@ class ExposureDisplay(DisplayBase):
         return fig, ax
 
 
-def _uv_day_static(uv, mpe_w_m2, single_w_m2) -> dict:
+def _uv_day_static(uv, mpe_w_m2, single_w_m2, duration_s) -> dict:
     """The UV day's limit for :class:`ExposureDisplay` of a fixed observer, when it governs
     its MPE (:func:`hazard.pipeline.limits.exposure_limits` lowered the MPE ``mpe_w_m2`` to
     the day's average, below the one exposure's ``single_w_m2``): the summed dose of all the
@@ -306,7 +307,8 @@ def _uv_day_static(uv, mpe_w_m2, single_w_m2) -> dict:
         return {}
     return {"uv_day_j_m2": float(uv["radiant_exposure_j_m2"]),
             "uv_day_text": (f"UV day's limit: the doses of {uv['total_on_time_s']:.4g} s exposed in 24 h add up to at most "
-                            f"{uv['radiant_exposure_j_m2']:.4g} J/m^2 (governs; [M])")}
+                            f"{uv['radiant_exposure_j_m2']:.4g} J/m^2 (governs; [M]); this plot is one {duration_s:.4g} s "
+                            f"exposure, held to its share (the MPE line)")}
 
 
 def _uv_day_path(summary) -> dict:
