@@ -12,10 +12,12 @@ Execution: each scenario is a pure function of (base scene, overrides, seed), so
 Dask run (an embedded ``LocalCluster`` or an existing scheduler) gives exactly the results
 of a serial run. Each result is written atomically as it finishes
 (``OUTDIR/scenarios/NNNNN.json``); a restarted study skips finished scenarios and runs
-failed ones again. A serial run shares a bounded stage memo over its scenarios
-(:class:`hazard.pipeline.stages.StageMemo`): a scenario reuses the stages whose inputs it
-does not change (a sweep of ``analysis.direction_grid_deg`` reuses all before the keep-out
-lobes), with the same row. Every scenario's scene is validated before any work; a scenario that
+failed ones again. Serial and Dask runs share one runner with ``hazard risk``
+(:mod:`hazard.runner`). Each process (the serial run's, each Dask worker) keeps a bounded
+stage memo over the scenarios it runs (:class:`hazard.pipeline.stages.StageMemo`,
+:func:`process_memo`): a scenario reuses the stages whose inputs it does not change (a
+sweep of ``analysis.direction_grid_deg`` reuses all before the keep-out lobes), with the
+same row. Every scenario's scene is validated before any work; a scenario that
 still fails at run time is recorded with its error and stops the study (``keep_going``
 runs the rest); either way the result says so and ``hazard study`` exits 4. At the end: ``results.csv``
 (and ``results.parquet`` with pyarrow), ``summary.json`` (percentiles for Monte Carlo)
@@ -25,12 +27,13 @@ and, with matplotlib, ``summary.png``.
 from __future__ import annotations
 
 import copy
+import functools
 import hashlib
 import json
 import math
-import os
 import re
 import time
+import uuid
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -40,9 +43,10 @@ from brdfmodels.fileio import atomic_write, atomic_write_text, read_toml
 
 from .pipeline.stages import StageMemo
 from .progress import progress_callback, progress_to
+from .runner import claim_folder, failure_kinds, local_cluster, run_tasks
 
 __all__ = ["Study", "Parameter", "MonteCarlo", "load_study", "scenarios", "run_scenario", "run_study", "local_cluster", "StudyResult", "set_path",
-           "check_schema_path", "validate_scenarios", "failure_kinds"]
+           "check_schema_path", "validate_scenarios", "failure_kinds", "scenario_task", "process_memo", "drop_memo"]
 
 _PATH_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(\[(\d+)\])?")
 
@@ -543,9 +547,36 @@ def run_scenario(base: dict, base_dir: str, scenario: dict, mc: dict, threads=No
     return row
 
 
-#: Stage results a serial study keeps for its next scenarios (a few scenarios' worth: a
-#: Monte Carlo study changes every stage's inputs and must not grow without bound).
+#: Stage results each process of a study (the serial run's, or each Dask worker) keeps for
+#: its next scenarios (a few scenarios' worth: a Monte Carlo study changes every stage's
+#: inputs and must not grow without bound).
 MEMO_ENTRIES = 64
+_MEMOS: dict[str, StageMemo] = {}  # per process: the study run's token -> its memo (one run at a time)
+
+
+def process_memo(token: str) -> StageMemo:
+    """This process's stage memo for the study run ``token`` (a new one, the memos of other
+    runs dropped, on the run's first scenario here): a memo lives for one driver call, as
+    the module-level settings it does not key on may change between calls."""
+    memo = _MEMOS.get(token)
+    if memo is None:
+        _MEMOS.clear()
+        memo = _MEMOS[token] = StageMemo(max_entries=MEMO_ENTRIES)
+    return memo
+
+
+def drop_memo(token: str) -> None:
+    """Drop this process's stage memo of the study run ``token`` (at the run's end)."""
+    _MEMOS.pop(token, None)
+
+
+def scenario_task(common, scenario) -> dict:
+    """One scenario's row as a task of :func:`hazard.runner.run_tasks`: ``common`` = (base
+    scene data, base folder, Monte Carlo settings, the run's token, threads (None: every
+    CPU, a serial run; 1 on a Dask worker)); the stages whose inputs the scenario does not
+    change are reused from this process's earlier scenarios of the run (:func:`process_memo`)."""
+    base, base_dir, mc, token, threads = common
+    return run_scenario(base, base_dir, scenario, mc, threads=threads, memo=process_memo(token))
 
 OUTPUT_COLUMNS = ["nohd_static_m", "nohd_dynamic_m", "specular_nohd_dynamic_m", "keepout_volume_static_m3", "keepout_volume_dynamic_m3",
                   "ground_area_static_m2", "ground_area_dynamic_m2", "hazardous_observers", "hazardous_observers_static", "run_time_s"]
@@ -565,15 +596,6 @@ class StudyResult:
     def ok(self) -> bool:
         """Every scenario ran and none failed."""
         return self.failed == 0 and self.not_run == 0
-
-
-def failure_kinds(errors) -> dict:
-    """The first error of each kind (the exception's name before ``:``) among ``errors``
-    (strings ``"Kind: message"``), in the order met."""
-    kinds: dict = {}
-    for e in errors:
-        kinds.setdefault(str(e).split(":", 1)[0], str(e))
-    return kinds
 
 
 def _safe(obj):
@@ -668,29 +690,6 @@ def _plot(study, rows, outdir):
     return atomic_write(outdir / "summary.png", lambda tmp: fig.savefig(tmp, dpi=100), keep_suffix=True)
 
 
-def local_cluster(n_workers=2):
-    """The embedded ``LocalCluster`` of :func:`run_study` (and of ``hazard risk``):
-    ``n_workers`` single-threaded worker processes on loopback. The scheduler's HTTP
-    server always starts; it takes a free port (``:0``), so a second cluster on this
-    machine does not clash on 8787.
-
-    Dask's nanny starts workers with ``MALLOC_TRIM_THRESHOLD_=65536``, which hands every
-    freed NumPy temporary back to the OS and page-faults it in again: measured 0.12 s per
-    `plate` scenario instead of 0.068 s. Scenarios are allocation-heavy, so the workers get
-    glibc's default (a value set in the user's environment still wins).
-    """
-    import dask
-    from distributed import LocalCluster
-
-    # the workers log Dask's own chatter at ERROR only, as hazard._noise does in this process
-    # (a value set in the user's environment still wins)
-    env = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-    if "DASK_LOGGING__DISTRIBUTED" not in os.environ:
-        env["distributed.nanny.pre-spawn-environ.DASK_LOGGING__DISTRIBUTED"] = "error"
-    with dask.config.set(env):
-        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=":0")
-
-
 def run_study(study: Study, outdir, *, scheduler=None, serial=False, n_workers=2, force=False, progress=None,
               keep_going=False) -> StudyResult:
     """Run a study; finished scenarios in ``outdir`` are kept (resume).
@@ -733,16 +732,10 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
     outdir = Path(outdir)
     sdir = outdir / "scenarios"
     sdir.mkdir(parents=True, exist_ok=True)
-    meta = outdir / "study.json"
     digest = study.digest()
-    if meta.exists():
-        old = json.loads(meta.read_text())
-        if old.get("digest") != digest:
-            if not force:
-                raise ValueError(f"{outdir} holds results of another study (digest {old.get('digest')}); pass --force to start over")
-            for p in sdir.glob("*.json"):
-                p.unlink()
-    atomic_write_text(meta, json.dumps({"name": study.name, "digest": digest, "study": _safe(asdict(study))}, indent=1, default=str))
+    claim_folder(outdir / "study.json", digest, json.dumps({"name": study.name, "digest": digest, "study": _safe(asdict(study))},
+                                                           indent=1, default=str),
+                 force=force, finished=sdir.glob("*.json"), held=f"{outdir} holds results of another study")
     base, base_dir = base_data(study)
     todo = scenarios(study)
     done_ids = {int(p.stem) for p in sdir.glob("*.json") if json.loads(p.read_text()).get("error") is None}  # failures run again
@@ -752,45 +745,19 @@ def _run_study(study: Study, outdir: Path, stage: Path, *, scheduler, serial, n_
     say = progress or (lambda d, t: None)
     say(finished, total)
 
-    def record(row):
+    def record(_, row):
+        nonlocal finished
         atomic_write_text(sdir / f"{row['id']:05d}.json", json.dumps(_safe(row), default=str))
+        finished += 1
+        say(finished, total)
 
     for s in pending:  # a failure of an earlier start is replaced, not kept beside a success
         (sdir / f"{s['id']:05d}.json").unlink(missing_ok=True)
     if pending:
-        if serial:
-            memo = StageMemo(max_entries=MEMO_ENTRIES)
-            for s in pending:
-                row = run_scenario(base, str(base_dir), s, mc, memo=memo)
-                record(row)
-                finished += 1
-                say(finished, total)
-                if row["error"] is not None and not keep_going:
-                    break
-        else:
-            from distributed import Client, as_completed
-
-            cluster = None
-            if scheduler is None:
-                cluster = local_cluster(n_workers)
-                client = Client(cluster)
-            else:
-                client = Client(scheduler, timeout="20s")
-            try:
-                base_f = client.scatter(base, broadcast=True)
-                futures = [client.submit(run_scenario, base_f, str(base_dir), s, mc, 1, pure=False) for s in pending]
-                for fut in as_completed(futures):
-                    row = fut.result()
-                    record(row)
-                    finished += 1
-                    say(finished, total)
-                    if row["error"] is not None and not keep_going:
-                        client.cancel([f for f in futures if not f.done()])
-                        break
-            finally:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+        token = uuid.uuid4().hex  # this run's stage memo in each process (never another run's)
+        run_tasks(scenario_task, (base, str(base_dir), mc, token, None if serial else 1), pending, record, serial=serial,
+                  workers=n_workers, scheduler=scheduler, keep_going=keep_going, failure_of=lambda row: row["error"],
+                  raise_errors=True, teardown=functools.partial(drop_memo, token))
     rows = sorted((json.loads(p.read_text()) for p in sdir.glob("*.json")), key=lambda r: r["id"])
     rows = [r for r in rows if r["id"] < total]
     summary = _summary(study, rows, total)

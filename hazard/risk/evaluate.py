@@ -2,10 +2,16 @@
 
 Per draw the engine's own pieces run, nothing re-implemented:
 
+0. The analysis's own stages (:data:`hazard.analysis.REGISTRY`): ``mpe`` (the exposure
+   limits, the attenuation) and ``rays`` (the ray scene, its BVH) run once per process
+   (:data:`SHARED_STAGES`; a draw changes neither), and their results are handed to the
+   stages a draw re-runs.
 1. The beam: the scene's, its axis turned by the pointing error
-   (:mod:`hazard.risk.inputs`). A turned beam is traced again against the same ray scene
-   (built once per process) and the dynamic targets' state histories follow its new spots
-   (:func:`hazard.pipeline.spots.trace_beam`, :mod:`hazard.pipeline.history`). A beam
+   (:mod:`hazard.risk.inputs`). A turned beam is the input scene with its
+   ``laser_direction`` turned (as the motion stage aims a beam), run through the stages
+   ``beam`` and ``history`` (:data:`DRAW_STAGES`: the trace against the same ray scene,
+   and the dynamic targets' state histories under its new spots); the observer-line
+   crossings are not searched (the draw's points are the observers' and the map's). A beam
    whose 5-radius cone clears every target's bounding sphere (and no terrain can reflect)
    is not traced: it lights nothing.
 2. The surfaces: the material of a lit face replaced by the drawn one and scaled by the
@@ -36,19 +42,28 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..analysis import REGISTRY
 from ..engine import spot_irradiance, specular_irradiance
 from ..nohd import attenuation_from_visibility, group_gains
-from ..pipeline import history, limits
+from ..pipeline import history
 from ..pipeline import spots as beam_stage
 from ..pipeline.direct import beam_at, clear_of_objects
 from ..pipeline.irradiance_map import spot_line_of_sight
+from ..pipeline.log import StageLog
 from ..pipeline.plan import plan
+from ..pipeline.stages import CrossingsResult, derive_plan, run_stages
 from .inputs import Draws, input_model
 from .physics import scintillation_sigma2
 
-__all__ = ["Evaluator", "map_points", "map_shape", "turned_axis", "pointing_basis"]
+__all__ = ["Evaluator", "map_points", "map_shape", "turned_axis", "pointing_basis", "SHARED_STAGES", "DRAW_STAGES"]
 
 CONE_RADII = 5.0  # a beam is taken to reach a target when its axis passes within 5 1/e radii of it (exp(-25) of the peak)
+#: The analysis stages run once per process (a draw changes none of their inputs).
+SHARED_STAGES = ("mpe", "rays")
+#: The analysis stages run per traced beam, given the shared stages' results and the
+#: skipped ``crossings`` (the draw's scene itself).
+DRAW_STAGES = ("beam", "history")
+derive_plan({n: REGISTRY[n] for n in DRAW_STAGES}, ("scene", "plan", *SHARED_STAGES, "crossings"))  # their needs are met
 
 
 def pointing_basis(axis) -> tuple[np.ndarray, np.ndarray]:
@@ -116,15 +131,17 @@ class Evaluator:
     def __init__(self, scene, backend: str = "embree"):
         spec = scene.spec
         self.scene = scene
-        self.exposure = limits.exposure_limits(spec)
+        self.plan = plan(scene)
+        inputs = {"scene": scene, "plan": self.plan, "backend": backend, "threads": 1, "keep_history": None}
+        self.shared = run_stages(REGISTRY, SHARED_STAGES, inputs, StageLog())  # stage name -> result, once per process
+        self.exposure = self.shared["mpe"].exposure
         self.mpe_w_m2 = float(self.exposure.irradiance_w_m2)
-        self.mu0 = limits.attenuation_per_m(spec)
-        the_plan = plan(scene)
-        self.ray_scene = beam_stage.ray_scene(scene, backend, 1) if the_plan.rays else None
-        self.tracer = self.ray_scene if self.ray_scene is not None else beam_stage.FlatScene(scene.targets)
+        self.mu0 = self.shared["mpe"].attenuation_per_m
+        self.ray_scene, self.tracer = self.shared["rays"].ray_scene, self.shared["rays"].tracer
         self.dynamic = any(t.material.is_dynamic for t in scene.targets)
+        # every time a turned beam may need (a dynamic target it lights), not only the nominal beam's
         self.times_s = history.analysis_times(spec, self.dynamic, history.series_nodes(scene.targets))
-        self.nominal = self.trace(beam_stage.scene_beam(scene))
+        self.nominal = self.trace()
         obs = scene.observers
         self.n_observers = 0 if obs is None else len(obs)
         self.points_m = np.vstack([obs.block(0, self.n_observers) if self.n_observers else np.empty((0, 3)), map_points(scene)])
@@ -176,11 +193,16 @@ class Evaluator:
         self.s2_mirror = np.stack([scintillation_sigma2(u, wl, np.linalg.norm(t.center_m - lp) + np.linalg.norm(p - t.center_m, axis=1))
                                    for t in self.scene.targets]) if self.scene.targets else np.zeros((0, len(p)))
 
-    def trace(self, beam) -> Traced:
-        """The spots of ``beam`` and the dynamic targets' states under it (the engine's beam and history stages)."""
-        tr = beam_stage.trace_beam(self.scene, self.tracer, self.mu0, beam)
-        spots, hist, _ = history.spot_states(self.scene.spec, tr.built.spots, self.times_s)
-        return Traced(beam, spots, {} if hist is None else hist.states)
+    def trace(self, direction=None, beam=None) -> Traced:
+        """The beam along ``direction`` (default: the scene's aim), its spots and the
+        dynamic targets' states under it: the analysis's stages :data:`DRAW_STAGES` run on
+        the scene aimed along ``direction``, with the shared stages' results
+        (:data:`SHARED_STAGES`) as their inputs. ``beam``: that scene's
+        :func:`~hazard.pipeline.spots.scene_beam` when the caller has it already."""
+        scene = self.scene if direction is None else replace(self.scene, laser_direction=direction)
+        inputs = {"scene": scene, "plan": self.plan, **self.shared, "crossings": CrossingsResult(scene)}
+        h = run_stages(REGISTRY, DRAW_STAGES, inputs, StageLog())["history"]
+        return Traced(beam_stage.scene_beam(scene) if beam is None else beam, h.traced.built.spots, h.states)
 
     def _reaches_any(self, beam) -> bool:
         if self.scene.terrain_target is not None:
@@ -200,8 +222,9 @@ class Evaluator:
         """The nominal trace, or the beam turned by pointing error ``e`` [rad] traced again."""
         if e is None or not np.any(e):
             return self.nominal
-        beam = beam_stage.scene_beam(self.scene, turned_axis(self.nominal.beam.axis, self.right, self.up, e))
-        return self.trace(beam) if self._reaches_any(beam) else Traced(beam, [], {})
+        direction = turned_axis(self.nominal.beam.axis, self.right, self.up, e)
+        beam = beam_stage.scene_beam(self.scene, direction)
+        return self.trace(direction, beam) if self._reaches_any(beam) else Traced(beam, [], {})
 
     # -- one draw ----------------------------------------------------------------------
     def _surface(self, sp, d: Draws, i: int, node: int, mu: float):

@@ -9,9 +9,10 @@ proposal: :class:`hazard.risk.evaluate.Evaluator`) and runs one thread, and the 
 are combined in chunk order: the same seed gives identical results serially, on an
 embedded ``LocalCluster`` or on an existing scheduler.
 
-Each finished chunk is written atomically to ``OUT/.risk/`` as it arrives; a restarted
-run with the same scene and settings skips them (``meta.json`` holds the digest; a
-different analysis in the same folder is an error unless ``force``).
+The chunks run on the task runner ``hazard study`` uses too (:mod:`hazard.runner`): each
+finished chunk is written atomically to ``OUT/.risk/`` as it arrives; a restarted run with
+the same scene and settings skips them (``meta.json`` holds the digest; a different
+analysis in the same folder is an error unless ``force``).
 """
 
 from __future__ import annotations
@@ -24,8 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from brdfmodels.fileio import atomic_write, atomic_write_text
+from brdfmodels.fileio import atomic_write
 
+from ..runner import claim_folder, failure_kinds, run_tasks
 from .columns import ColumnStore
 from .stats import weighted_counts
 
@@ -118,12 +120,14 @@ def _sensitivity_chunk(ev, s: RiskSettings, index: int, n: int) -> dict:
     return out
 
 
-def run_task(key: str, payload, s: RiskSettings, task) -> dict:
-    """One chunk (see the module notes); arrays by name. A NaN exposure ratio (a draw the
-    engine could not evaluate) fails the chunk: counted as below the MPE it would pass
-    for safe."""
+def run_task(common, task) -> dict:
+    """One chunk (see the module notes); arrays by name. ``common``: (the scene's key, the
+    payload ``(data, source, base_dir, backend)``, the :class:`RiskSettings`). A NaN
+    exposure ratio (a draw the engine could not evaluate) fails the chunk: counted as
+    below the MPE it would pass for safe."""
     from brdfmodels.parallel import thread_limit
 
+    key, payload, s = common
     ev, prop = shared(payload[:3], payload[3], key)
     kind, index, n = task
     with thread_limit(1):
@@ -165,15 +169,8 @@ def digest_of(scene, s: RiskSettings, backend: str, prop) -> str:
 def _prepare(outdir: Path, digest: str, force: bool) -> Path:
     cdir = outdir / ".risk"
     cdir.mkdir(parents=True, exist_ok=True)
-    meta = cdir / "meta.json"
-    if meta.exists():
-        old = json.loads(meta.read_text()).get("digest")
-        if old != digest:
-            if not force:
-                raise ValueError(f"{outdir} holds chunks of another risk analysis (digest {old}); pass --force to start over")
-            for p in cdir.glob("*.npz"):
-                p.unlink()
-    atomic_write_text(meta, json.dumps({"digest": digest}))
+    claim_folder(cdir / "meta.json", digest, json.dumps({"digest": digest}), force=force, finished=cdir.glob("*.npz"),
+                 held=f"{outdir} holds chunks of another risk analysis")
     return cdir
 
 
@@ -237,45 +234,6 @@ def _name(task) -> str:
     return f"{task[0]}{task[1]:06d}.npz"
 
 
-def _run_pending(pending, key, payload, s, serial, workers, scheduler, record, keep_going=False) -> dict:
-    """Run the ``pending`` chunks; returns task -> error line of the failed ones (the first
-    failure stops the rest unless ``keep_going``)."""
-    failed = {}
-    if serial:
-        for t in pending:
-            try:
-                arrays = run_task(key, payload, s, t)
-            except Exception as exc:  # noqa: BLE001 - counted and said; the run exits non-zero
-                failed[t] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-                if not keep_going:
-                    break
-                continue
-            record(t, arrays)
-        return failed
-    from distributed import Client, as_completed
-
-    from ..study import local_cluster
-
-    cluster = local_cluster(workers) if scheduler is None else None
-    client = Client(cluster) if cluster is not None else Client(scheduler, timeout="20s")
-    try:
-        pay = client.scatter(payload, broadcast=True)
-        futures = {client.submit(run_task, key, pay, s, t, pure=False): t for t in pending}
-        for fut in as_completed(futures):
-            exc = fut.exception()
-            if exc is None:
-                record(futures[fut], fut.result())
-                continue
-            failed[futures[fut]] = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-            if not keep_going:
-                client.cancel([f for f in futures if not f.done()])
-                break
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
-
-
 def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False, workers=2, scheduler=None, force=False,
                progress=None, keep_going=False) -> Chunks:
     """Every chunk of the run, computing the ones not yet in ``outdir``. Raises
@@ -296,12 +254,11 @@ def run_chunks(scene, s: RiskSettings, outdir, *, backend="embree", serial=False
 
     if pending:
         payload = (scene.source_data, scene.source, None if scene.base_dir is None else str(scene.base_dir), backend)
-        failed = _run_pending(pending, scene_key(scene, backend), payload, s, serial, workers, scheduler, record, keep_going)
+        failed = run_tasks(run_task, (scene_key(scene, backend), payload, s), pending, record, serial=serial, workers=workers,
+                           scheduler=scheduler, keep_going=keep_going)
         if failed:
-            from ..study import failure_kinds
-
             missing = [t for t in todo if not (cdir / _name(t)).exists()]
-            raise ChunksFailed(len(failed), len(todo), len(missing) - len(failed), failure_kinds(failed.values()),
-                               sum(t[2] for t in failed))
+            raise ChunksFailed(len(failed), len(todo), len(missing) - len(failed), failure_kinds(e for _, e in failed),
+                               sum(t[2] for t, _ in failed))
     return Chunks([cdir / _name(t) for t in todo if t[0] == "m"], [cdir / _name(t) for t in todo if t[0] == "s"], len(pending),
                   len(todo) - len(pending))

@@ -323,3 +323,23 @@ def test_failed_chunks_exit_4_and_write_nothing(tmp_path, monkeypatch):
     assert main(argv, stdout=out, stderr=err) == 0 and err.getvalue() == ""
     doc = json.loads((tmp_path / "out" / "risk.json").read_text())
     assert doc["run"]["ran"] == 2 and doc["run"]["reused"] == 2
+
+
+def test_draws_are_traced_by_the_analysis_stages(tmp_path):
+    """The risk's evaluator takes its limits and ray scene from the analysis's own stages
+    (``mpe``, ``rays``, once) and traces each turned beam through the stages ``beam`` and
+    ``history``: the MPE is ANSI Table 5b's, the plate (1 m, 50 m down range, no
+    atmosphere) takes the whole 100 W of the nominal beam, half of a beam turned so that its
+    axis meets the plate's edge (a Gaussian cut through its centre), none of one turned past it."""
+    from hazard.pipeline.stages import LimitsResult, RaysResult
+    from hazard.risk.evaluate import DRAW_STAGES, SHARED_STAGES, Evaluator
+
+    ev = Evaluator(scenes.loads(_small(tmp_path), base_dir=tmp_path), backend="numpy")
+    assert (SHARED_STAGES, DRAW_STAGES) == (("mpe", "rays"), ("beam", "history"))
+    assert isinstance(ev.shared["mpe"], LimitsResult) and isinstance(ev.shared["rays"], RaysResult)
+    assert ev.mpe_w_m2 == pytest.approx(MPE_1064_10S, rel=1e-12) and ev.mu0 == 0.0
+    assert sum(sp.total_power_w for sp in ev.nominal.spots) == pytest.approx(100.0, rel=1e-6)
+    half = ev.traced_for(np.array([0.5 / 50.0, 0.0]))  # the axis meets the plate's edge x = 0.5 m at y = 50 m
+    assert sum(sp.total_power_w for sp in half.spots) == pytest.approx(50.0, rel=1e-3)
+    assert not np.allclose(half.beam.axis, ev.nominal.beam.axis)
+    assert ev.traced_for(np.array([3.0 / 50.0, 0.0])).spots == []  # 2.5 m past the edge: 45 beam radii

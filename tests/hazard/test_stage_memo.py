@@ -391,3 +391,35 @@ def test_memo_keeps_at_most_max_entries():
     assert len(memo._entries) == 3  # the last two runs' a and b, less the oldest
     with pytest.raises(ValueError, match="max_entries=0: expected a positive integer or None"):
         StageMemo(max_entries=0)
+
+
+def test_dask_study_workers_reuse_stages_like_the_serial_study(tmp_path, monkeypatch):
+    """A Dask study's worker keeps a stage memo over the scenarios it runs (one in-process
+    worker here, so the memo can be read): a sweep of the keep-out grid reuses every stage
+    before the keep-out lobes, the rows equal the serial study's, and the memo is dropped
+    at the run's end (a second run starts its own)."""
+    from distributed import LocalCluster
+
+    import hazard.study as hs
+    from hazard.study import Parameter, Study, run_study
+
+    scene = tmp_path / "plate.toml"
+    scene.write_text(PLATE.read_text() + "[analysis]\ndirection_grid_deg = 2.0\n")
+    sweep = Study(name="t", scene=str(scene), kind="grid", parameters=(Parameter("analysis.direction_grid_deg", values=(4.0, 2.0, 3.0)),))
+    memos = {}  # the run's token -> the memo its process kept (read after the run dropped it)
+    real = hs.process_memo
+
+    def recording(token):  # called in the worker: in this process (an in-process cluster)
+        memos[token] = real(token)
+        return memos[token]
+
+    monkeypatch.setattr(hs, "process_memo", recording)
+    serial = run_study(sweep, tmp_path / "serial", serial=True)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
+        dask = run_study(sweep, tmp_path / "dask", scheduler=cluster.scheduler_address)
+    assert [_without_time(r) for r in dask.rows] == [_without_time(r) for r in serial.rows] and len(dask.rows) == 3
+    assert len(memos) == 2  # the serial run's and the worker's: a new memo per run
+    for memo in memos.values():
+        assert {name for name, _ in memo.reused} == BEFORE_KEEPOUT
+        assert memo.computed.count("keepout") == 3 and memo.computed.count("mpe") == 1
+    assert hs._MEMOS == {}
