@@ -216,3 +216,25 @@ def test_default_selection_reaches_the_goal_on_a_second_untuned_truth():
     model = _dynamic(samples, best["lh_max"], best["mh_max"], best["fanout"])
     errs = held_out_errors(model, truth=ggx_truth_fr)
     assert max(errs.values()) <= GOAL, (best, errs)
+
+
+def _more_diffuse(wi, wo, t_s):
+    """The first truth with a diffuse part 0.10 instead of 0.03 at t = 0 (+0.07 / pi)."""
+    return truth_fr(wi, wo, t_s) + 0.07 / math.pi
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known limit (issue 32 item 5, docs/fit-defaults.md): on the more diffuse variant "
+                   "the choice (8, 8, 0.4) predicts the out-of-plane set to 0.304 (other noise draws: 0.307-0.308); "
+                   "no leave-one-test-out rule tried reaches <= 0.30 on it and on the other truths together")
+def test_default_selection_on_the_more_diffuse_variant():
+    """Kept as a record that fails loudly (strict xfail) once a selection fixes it: the
+    error is an under-prediction (up to 12x at 1 % of the directions) where the held-out
+    40 deg vertical-groove screen reaches 69 deg from the normal across the grooves, while
+    the fit tests reach 48 deg there."""
+    samples = make_samples(FIT, truth=_more_diffuse)
+    first = samples.select(samples.time_s == 0.0)
+    best, _ = validation.choose_sh_basis(first)
+    model = _dynamic(first, best["lh_max"], best["mh_max"], best["fanout"], times=(0.0,))
+    errs = held_out_errors(model, times=(0.0,), truth=_more_diffuse)
+    assert max(errs.values()) <= GOAL, (best, errs)
