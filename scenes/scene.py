@@ -341,7 +341,9 @@ def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=N
             model = brdfmodels.model_from_dict(_with_polarization(model.to_dict(), "worst" if polarization == "unknown" else polarization))
     except ValueError as exc:
         raise SceneError(f"{where}: {exc}") from None
-    _check_dhr(model, where)
+    gridded = spec.model == "table" and "grid_deg" in spec.params  # the grid's cells spread a peak narrower than them
+    _check_dhr(model, where, why=f" (gridded at grid_deg = {spec.params['grid_deg']}: a finer grid, or none, keeps "
+                                 f"the measured peak where it was)" if gridded else "")
     return model
 
 

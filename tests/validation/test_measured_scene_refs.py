@@ -303,3 +303,8 @@ def test_a_gridded_bsdf_reaches_grazing_without_the_files_peak(tmp_path):
     wi, wo = _sph(np.array([85.0, 89.0, 80.0]), np.zeros(3)), _sph(np.array([85.0, 89.0, 60.0]), np.zeros(3))
     ratio = m.evaluate(wi, wo) / abg_truth(wi, wo)
     assert np.all((ratio >= 1.0) & (ratio <= 4.0)), ratio
+    # a grid much coarser than the 2 deg ABg core spreads the peak over its cells: refused, saying which option did it
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("grid_deg = [5, 5, 30]", "grid_deg = [7, 7, 30]"))
+    with pytest.raises(scenes.SceneError, match=r"hemispherical reflectance 1\.01\d* > 1 at 20 deg incidence \(gridded at "
+                                                r"grid_deg = \[7, 7, 30\]: a finer grid, or none"):
+        scenes.load(tmp_path / "s.toml")
