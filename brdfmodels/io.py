@@ -255,7 +255,7 @@ def read_astm_e1392(path, *, wavelength_nm=None, ignore_columns=(), symmetry=Non
     out = _samples(spherical_to_vector(a[keep, 0], a[keep, 1]), spherical_to_vector(a[keep, 2], a[keep, 3]), a[keep, 4])
     out.info["notes"] = notes
     out.info["by_wavelength"] = by_wavelength  # a wavelength column or columns named by wavelength
-    return mirror_plane_symmetric(out) if _plane(path, symmetry) else out
+    return mirror_plane_symmetric(out) if _plane(path, symmetry) else _one_sided_note(out, symmetry)
 
 
 _NM_NAME = re.compile(r"^\s*(?:brdf_?)?([0-9]+(?:\.[0-9]*)?(?:e[+-]?[0-9]+)?)\s*_?nm\s*$", re.IGNORECASE)
@@ -441,7 +441,7 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
     s = s.with_states(states) if states else s
     s.info["notes"] = notes
     s.info["by_wavelength"] = by_wavelength  # rows chosen by their wavelength (else the file names none)
-    return mirror_plane_symmetric(s) if _plane(path, symmetry) else s
+    return mirror_plane_symmetric(s) if _plane(path, symmetry) else _one_sided_note(s, symmetry)
 
 
 def _csv_column(path, body, j, c) -> np.ndarray:
@@ -512,6 +512,24 @@ def _at_wavelength(path, d, wavelength_nm, notes) -> dict:
     notes.append(f"{path.name}: f_r interpolated linearly between the measured {lo:g} and {hi:g} nm to the laser's "
                  f"{lam:g} nm (weight {t:.3g} on {hi:g} nm)")
     return out
+
+
+def _one_sided_note(s, symmetry):
+    """``s``, with a note when no symmetry was declared and every sample off its plane of
+    incidence lies on one side of it (a half-plane measurement): the other side is then
+    interpolated across the plane, not measured (issue 32: 0.97-1.20 of a symmetric truth
+    there), so the reader is told to declare ``symmetry = "plane"`` if it holds."""
+    if symmetry is not None:
+        return s
+    side = s.wi[:, 0] * s.wo[:, 1] - s.wi[:, 1] * s.wo[:, 0]  # z . (wi x wo): which side of the plane of incidence
+    off = np.abs(side) > 1e-9
+    above, below = int(np.sum(side[off] > 0)), int(np.sum(side[off] < 0))
+    if min(above, below) == 0 and max(above, below) >= 3:
+        s.info["notes"] = list(s.info.get("notes", ())) + [
+            f"all {max(above, below)} samples off their plane of incidence lie on one side of it: the other side is "
+            f"interpolated across the plane, not measured; declare symmetry = \"plane\" if the material is plane-symmetric "
+            f"(or symmetry = \"none\" to say it is not)"]
+    return s
 
 
 def mirror_plane_symmetric(s):

@@ -291,9 +291,10 @@ def _table_material(spec, base_dir, wavelength_nm=None):
         notes = tuple(s.info.get("notes", ())) + _state_note(s)
         if "grid_deg" in prm:
             dh, dd, dp = prm["grid_deg"]
-            return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, np.arange(0.0, 90.0 - 1e-9, dh),
-                                                         np.arange(0.0, 90.0 - 1e-9, dd), np.arange(0.0, 180.0 - 1e-9, dp),
-                                                         fill=fill, outside=outside, notes=notes)
+            # theta_h and theta_d nodes end at 90 deg: beyond the last node the table's `outside` policy would
+            # give the file's largest value (its peak) at grazing theta_d (a 5 deg grid's ABg file: DHR 1.73, refused)
+            return brdfmodels.TabulatedBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, _nodes_to_90(dh), _nodes_to_90(dd),
+                                                         np.arange(0.0, 180.0 - 1e-9, dp), fill=fill, outside=outside, notes=notes)
         return brdfmodels.ScatteredBRDF.from_samples(s.wi, s.wo, s.brdf_per_sr, outside=policy, notes=notes,
                                                      dhr_tolerance=prm.get("dhr_tolerance", brdfmodels.scattered.DHR_TOLERANCE))
     model = _model_file(spec.file, base_dir)
@@ -303,6 +304,12 @@ def _table_material(spec, base_dir, wavelength_nm=None):
         raise ValueError(f"file={spec.file!r}: model = 'table' needs a MERL .binary file or a saved table, got {model.name!r}")
     d = model.to_dict()["params"]
     return brdfmodels.TabulatedBRDF(d["theta_h_deg"], d["theta_d_deg"], d["phi_d_deg"], d["values"], outside)
+
+
+def _nodes_to_90(step_deg):
+    """Grid nodes [deg] every ``step_deg`` from 0, ending at 90 (the last step shorter when
+    ``step_deg`` does not divide 90)."""
+    return np.append(np.arange(0.0, 90.0 - 1e-9, step_deg), 90.0)
 
 
 def _state_note(s) -> tuple:
@@ -334,7 +341,9 @@ def _material(spec, where, base_dir, polarization="unpolarized", wavelength_nm=N
             model = brdfmodels.model_from_dict(_with_polarization(model.to_dict(), "worst" if polarization == "unknown" else polarization))
     except ValueError as exc:
         raise SceneError(f"{where}: {exc}") from None
-    _check_dhr(model, where)
+    gridded = spec.model == "table" and "grid_deg" in spec.params  # the grid's cells spread a peak narrower than them
+    _check_dhr(model, where, why=f" (gridded at grid_deg = {spec.params['grid_deg']}: a finer grid, or none, keeps "
+                                 f"the measured peak where it was)" if gridded else "")
     return model
 
 

@@ -412,8 +412,8 @@ class MaterialSpec(BaseModel):
             if (not isinstance(g, list) or len(g) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool)
                                                                   and 0.1 <= x <= 45 for x in g)):
                 raise ValueError(f"grid_deg={g!r}: expected three node spacings [theta_h, theta_d, phi_d] of 0.1 to 45 deg")
-            nodes = math.prod(math.ceil((span - 1e-9) / x) for span, x in zip((90.0, 90.0, 180.0), g))
-            check_limit("TABLE_NODES", nodes, f"grid_deg={g!r}: table nodes ((90/theta_h) x (90/theta_d) x (180/phi_d))")
+            nodes = math.prod(math.ceil((span - 1e-9) / x) + end for span, x, end in zip((90.0, 90.0, 180.0), g, (1, 1, 0)))
+            check_limit("TABLE_NODES", nodes, f"grid_deg={g!r}: table nodes ((90/theta_h + 1) x (90/theta_d + 1) x (180/phi_d))")
             if self.params.get("fill", "envelope") not in ("envelope", "fit"):
                 raise ValueError(f"fill={self.params['fill']!r}: expected 'envelope' or 'fit'")
             if self.params.get("outside", "envelope") not in ("error", "envelope", "fit"):

@@ -47,7 +47,7 @@ def test_a_wavelength_column_selects_the_lasers_rows(tmp_path):
     s = read_brdf_csv(path, wavelength_nm=1064.2)
     np.testing.assert_allclose(s.brdf_per_sr, f1064, rtol=1e-15)
     np.testing.assert_allclose(read_brdf_csv(path, wavelength_nm=532).brdf_per_sr, f1064 / 50, rtol=1e-15)
-    assert s.info["notes"] == []
+    assert not any("nm" in n for n in s.info["notes"])  # no wavelength note (the rows are one-sided: that note only)
 
 
 def test_between_two_wavelengths_the_rows_are_interpolated_with_a_note(tmp_path):
@@ -121,6 +121,11 @@ def test_one_sided_data_declared_plane_symmetric_are_mirrored(tmp_path):
     rows = [[ti, pi, tr, pr, 0.2 + 0.001 * (tr + pr)] for ti in (20, 50) for pi in (0, 40) for tr in (10, 60) for pr in (30, 120)]
     path = _csv(tmp_path, HEAD + ",brdf_per_sr", rows)
     assert len(read_brdf_csv(path)) == len(rows)
+    assert read_brdf_csv(path).info["notes"] == []  # phi_i 40 deg, phi_r 30 deg: the other side of that plane
+    half = _csv(tmp_path, HEAD + ",brdf_per_sr", [r for r in rows if r[1] == 0], name="half.csv")
+    one_sided = read_brdf_csv(half)  # undeclared: read as measured, and said
+    assert any("all 8 samples off their plane of incidence lie on one side of it" in n for n in one_sided.info["notes"])
+    assert read_brdf_csv(half, symmetry="none").info["notes"] == []  # declared not symmetric: nothing to say
     s = read_samples(path, symmetry="plane")
     assert len(s) == 2 * len(rows)
     want = {tuple(np.round(np.r_[bm.spherical_to_vector(math.radians(a), math.radians(b)),

@@ -178,7 +178,8 @@ def test_a_scene_grids_a_bsdf_file_into_a_table(tmp_path):
     (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }', mat))
     sc = scenes.load(tmp_path / "s.toml")
     m = sc.targets[0].material
-    assert isinstance(m, bm.TabulatedBRDF) and m.values.shape == (18, 18, 6) and np.all(np.isfinite(m.values))
+    # theta_h, theta_d: 0, 5, ..., 85 and the end node 90 (nothing beyond the grid); phi_d 0-150
+    assert isinstance(m, bm.TabulatedBRDF) and m.values.shape == (19, 19, 6) and np.all(np.isfinite(m.values))
     s = bm.io.read_bsdf(tmp_path / "m.bsdf")
     low = float(np.min(m.evaluate(s.wi, s.wo) / s.brdf_per_sr))  # the grid cuts the lobe between its nodes: said
     assert low < 0.99 and any(f"down to {100 * low:.3g} % of a measured sample" in w for w in sc.warnings), sc.warnings

@@ -121,11 +121,12 @@ def test_empty_or_short_history_files_are_input_errors(content, words, tmp_path)
 
 
 def test_a_table_grid_too_fine_is_refused_before_any_memory(tmp_path):
-    """grid_deg = 0.1 (the documented minimum) makes 900 x 900 x 1800 = 1.458e9 nodes: 12 GB."""
+    """grid_deg = 0.1 (the documented minimum) makes 901 x 901 x 1800 = 1.461e9 nodes (the
+    theta_h and theta_d nodes end at 90 deg): 12 GB."""
     (tmp_path / "a.bsdf").write_text(_bsdf())
     text = BASE.replace(MATERIAL, 'material = { model = "table", file = "a.bsdf", grid_deg = [0.1, 0.1, 0.1] }')
     line = _refused(tmp_path, text, "targets[0].material", "grid_deg", "HAZARD_MAX_TABLE_NODES")
-    assert f"table nodes ((90/theta_h) x (90/theta_d) x (180/phi_d)) = {900 * 900 * 1800}" in line
+    assert f"table nodes ((90/theta_h + 1) x (90/theta_d + 1) x (180/phi_d)) = {901 * 901 * 1800}" in line
 
 
 def test_the_numpy_backend_without_rtree_is_an_input_error(tmp_path, monkeypatch):

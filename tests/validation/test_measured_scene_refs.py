@@ -225,3 +225,86 @@ def test_a_valid_bsdf_with_tis_0_3_gives_the_truths_irradiance(tmp_path):
               for rr in (BSDF_RAD[k], BSDF_RAD[k + 1])]
         corners.append(cs)
     _check_between(abg_truth, wi, wo_m, corners, got[n:], "bsdf")
+
+
+# --- the other rows of issue 32's table, as a new user writes them (values, not shapes) ---
+AUDIT_TI = [25, 30, 35]
+AUDIT_TR, AUDIT_PR = list(range(0, 86, 5)), list(range(0, 360, 10))  # 1944 rows a state
+AUDIT_DIRS = [(30, 180), (35, 180), (25, 170), (20, 190), (45, 90), (10, 0), (60, 200), (40, 270)]
+
+
+def _audit_wo(dirs):
+    return _sph(np.array([d[0] for d in dirs], float), np.array([d[1] for d in dirs], float))
+
+
+def _with_column(text, name, value):
+    """The CSV ``text`` with a constant column ``name`` = ``value`` appended."""
+    head, *rows = text.strip().split("\n")
+    return "\n".join([f"{head},{name}"] + [f"{r},{value}" for r in rows]) + "\n"
+
+
+def _scaled(truth, factor):
+    return lambda wi, wo: factor * truth(wi, wo)
+
+
+@pytest.mark.slow  # ~4 s CPU each (the triangulation of ~4000 samples); the columns' fast tests: tests/brdfmodels/test_measured_columns.py
+def test_a_wavelength_column_gives_the_lasers_rows_in_a_scene(tmp_path):
+    """The issue's "532 and 1064 nm rows, 50x apart, silently mixed": here the 532 nm rows
+    are the 50x brighter ones, so a mix (or the largest of both) would show 50x; the scene's
+    1064 nm laser must see the 1064 nm truth at the sample directions (1 %)."""
+    at_1064 = _with_column(_csv_text(lobe_truth, AUDIT_TI, AUDIT_TR, AUDIT_PR), "wavelength_nm", 1064)
+    at_532 = _with_column(_csv_text(_scaled(lobe_truth, 50.0), AUDIT_TI, AUDIT_TR, AUDIT_PR), "wavelength_nm", 532)
+    text = at_1064 + "\n".join(at_532.strip().split("\n")[1:]) + "\n"
+    wo = _audit_wo(AUDIT_DIRS)
+    got, wi = _scene_irradiance(tmp_path, "m.csv", text, wo)
+    np.testing.assert_allclose(got, _expected(lobe_truth, wi, wo), rtol=0.01)
+
+
+@pytest.mark.slow  # ~4 s CPU each (the triangulation of ~4000 samples); the columns' fast tests: tests/brdfmodels/test_measured_columns.py
+def test_a_state_column_in_a_static_scene_keeps_the_brighter_state(tmp_path):
+    """A CSV with an ``extinction`` column (the same directions at extinction 0.3 and 0.8,
+    the oxidised state half as bright): the static table holds both states together (the
+    scene warns) and returns the brighter at each direction, the conservative value, never
+    a mean: the truth of extinction 0.3 at the sample directions (1 %)."""
+    fresh = _with_column(_csv_text(lobe_truth, AUDIT_TI, AUDIT_TR, AUDIT_PR), "extinction", 0.3)
+    oxide = _with_column(_csv_text(_scaled(lobe_truth, 0.5), AUDIT_TI, AUDIT_TR, AUDIT_PR), "extinction", 0.8)
+    text = oxide + "\n".join(fresh.strip().split("\n")[1:]) + "\n"
+    wo = _audit_wo(AUDIT_DIRS)
+    got, wi = _scene_irradiance(tmp_path, "m.csv", text, wo)
+    np.testing.assert_allclose(got, _expected(lobe_truth, wi, wo), rtol=0.01)
+    assert any("span several values of extinction" in w for w in scenes.load(tmp_path / "s.toml").warnings)
+
+
+@pytest.mark.slow  # ~4 s CPU each (the triangulation of ~4000 samples); the columns' fast tests: tests/brdfmodels/test_measured_columns.py
+def test_one_sided_data_declared_plane_symmetric_give_the_truth_on_the_other_side(tmp_path):
+    """One-sided data (phi_r 0-180 deg only, every 10 deg; the lobe truth is symmetric about the plane of
+    incidence) with ``symmetry = "plane"``: observers on the unmeasured side (phi_r 190-350
+    deg, the mirror images of samples) receive the truth's irradiance (1 %)."""
+    text = _csv_text(lobe_truth, AUDIT_TI, AUDIT_TR, list(range(0, 181, 10)))
+    dirs = [(30, 190), (35, 200), (25, 190), (45, 270), (60, 350), (20, 230)]
+    wo = _audit_wo(dirs)
+    got, wi = _scene_irradiance(tmp_path, "m.csv", text, wo, ', symmetry = "plane"')
+    np.testing.assert_allclose(got, _expected(lobe_truth, wi, wo), rtol=0.01)
+
+
+@pytest.mark.slow  # ~3 s CPU (the gridding of 2584 samples)
+def test_a_gridded_bsdf_reaches_grazing_without_the_files_peak(tmp_path):
+    """``grid_deg = [5, 5, 30]`` on the valid ABg ``.bsdf``: the grid's theta_h and theta_d
+    nodes end at 90 deg, so no direction falls beyond them into the ``outside`` policy,
+    which gave the file's largest value (its 10 /sr peak) at theta_d > 85 deg and had the
+    scene refused ("hemispherical reflectance 1.731 > 1 at 89 deg incidence"). At grazing
+    pairs the table now stays above the ABg truth there (~0.004 /sr) and within 4x of it
+    (measured 2.2-3.8x: the envelope of the nearest samples), far below the 10 /sr peak."""
+    (tmp_path / "m.bsdf").write_text(_bsdf_text(abg_truth))
+    (tmp_path / "s.toml").write_text(PLATE_AT_50M.replace('{ model = "lambertian", reflectance = 0.5 }',
+                                                          '{ model = "table", file = "m.bsdf", grid_deg = [5, 5, 30] }'))
+    m = scenes.load(tmp_path / "s.toml").targets[0].material
+    assert math.degrees(m.theta_h[-1]) == 90.0 and math.degrees(m.theta_d[-1]) == 90.0
+    wi, wo = _sph(np.array([85.0, 89.0, 80.0]), np.zeros(3)), _sph(np.array([85.0, 89.0, 60.0]), np.zeros(3))
+    ratio = m.evaluate(wi, wo) / abg_truth(wi, wo)
+    assert np.all((ratio >= 1.0) & (ratio <= 4.0)), ratio
+    # a grid much coarser than the 2 deg ABg core spreads the peak over its cells: refused, saying which option did it
+    (tmp_path / "s.toml").write_text((tmp_path / "s.toml").read_text().replace("grid_deg = [5, 5, 30]", "grid_deg = [7, 7, 30]"))
+    with pytest.raises(scenes.SceneError, match=r"hemispherical reflectance 1\.01\d* > 1 at 20 deg incidence \(gridded at "
+                                                r"grid_deg = \[7, 7, 30\]: a finer grid, or none"):
+        scenes.load(tmp_path / "s.toml")

@@ -70,27 +70,27 @@ def test_directions(inc_deg, groove_deg, n=31, half_deg=26.6):
 test_directions.__test__ = False  # a helper, not a test
 
 
-def make_samples(tests, *, noise=0.02, seed=0, n=31):
-    """Directly sampled truth (no camera, no saturation) of ``tests`` at TIMES."""
+def make_samples(tests, *, noise=0.02, seed=0, n=31, truth=truth_fr):
+    """Directly sampled ``truth`` (no camera, no saturation) of ``tests`` at TIMES."""
     rng = np.random.default_rng(seed)
     wi_l, wo_l, f_l, t_l, id_l = [], [], [], [], []
     for inc, g in tests:
         wi, wo = test_directions(inc, g, n)
         for t in TIMES:
-            f_l.append(truth_fr(wi, wo, t) * np.exp(noise * rng.standard_normal(len(wo))))
+            f_l.append(truth(wi, wo, t) * np.exp(noise * rng.standard_normal(len(wo))))
             wi_l.append(wi), wo_l.append(wo), t_l.append(np.full(len(wo), t)), id_l.append(np.full(len(wo), f"{inc:g}deg-g{g:g}"))
     m = sum(len(f) for f in f_l)
     return Samples(np.vstack(wi_l), np.vstack(wo_l), np.concatenate(f_l), np.concatenate(t_l), np.full(m, np.nan),
                    np.concatenate(id_l), np.zeros(m, int), np.ones(m))
 
 
-def held_out_errors(model, times=TIMES):
-    """(test, time) -> log-RMS of the model against the noise-free truth."""
+def held_out_errors(model, times=TIMES, truth=truth_fr):
+    """(test, time) -> log-RMS of the model against the noise-free ``truth``."""
     out = {}
     for inc, g in HELD:
         wi, wo = test_directions(inc, g)
         for t in times:
-            out[(f"{inc:g}deg-g{g:g}", t)] = float(np.sqrt(np.mean(np.log(model.evaluate(wi, wo, state=t) / truth_fr(wi, wo, t)) ** 2)))
+            out[(f"{inc:g}deg-g{g:g}", t)] = float(np.sqrt(np.mean(np.log(model.evaluate(wi, wo, state=t) / truth(wi, wo, t)) ** 2)))
     return out
 
 
@@ -170,3 +170,71 @@ def test_default_selection_reaches_the_goal_on_every_held_out_set(fit_samples):
     old = validation.cheapest_within(table, 0.3, key="held_out_log_rms")
     old_errs = held_out_errors(_dynamic(fit_samples, old["lh_max"], old["mh_max"], old["fanout"]))
     assert max(old_errs.values()) > GOAL, (old, old_errs)
+
+
+def ggx_truth_fr(wi, wo, t_s):
+    """A second truth, written after the selection rule was set and never used to tune it
+    (issue 32 item 5): an anisotropic Trowbridge-Reitz (GGX) lobe, long-tailed unlike the
+    Gaussian above, wider across the grooves (slope widths 0.07 / 0.18 growing 80 % / 20 %
+    over 10 s), whose centre wanders ACROSS the grooves (slope -0.05 t/10 s), whose
+    amplitude falls and partly recovers (0.7 (1 - 0.6 tau + 0.3 tau^2)), Schlick F0 0.9,
+    diffuse 0.05 -> 0.07. f_r = kd/pi + ks F D(h) / (4 cos_i cos_r) [1/sr], reciprocal."""
+    tau = np.asarray(t_s, float) / 10.0
+    ks = 0.7 * (1.0 - 0.6 * tau + 0.3 * tau ** 2)
+    ax, ay = 0.07 * (1 + 0.8 * tau), 0.18 * (1 + 0.2 * tau)
+    h = wi + wo
+    h = h / np.linalg.norm(h, axis=1, keepdims=True)
+    sx, sy = h[:, 0] / h[:, 2], h[:, 1] / h[:, 2] + 0.05 * tau
+    d = 1.0 / (math.pi * ax * ay * h[:, 2] ** 4 * (1 + sx ** 2 / ax ** 2 + sy ** 2 / ay ** 2) ** 2)
+    fresnel = 0.9 + 0.1 * (1 - np.sum(h * wi, 1)) ** 5
+    return (0.05 + 0.02 * tau) / math.pi + ks * fresnel * d / (4 * wi[:, 2] * wo[:, 2])
+
+
+@FAST
+@given(st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6), st.floats(0.0, 10.0))
+def test_the_second_truth_is_reciprocal_and_its_peak_moves_across_the_grooves(xyz, t):
+    wi = _unit([[xyz[0], xyz[1], 0.2 + abs(xyz[2])]])
+    wo = _unit([[xyz[3], xyz[4], 0.2 + abs(xyz[5])]])
+    assert ggx_truth_fr(wi, wo, t)[0] == pytest.approx(ggx_truth_fr(wo, wi, t)[0], rel=1e-12)
+    cy, wi0 = -0.05 * t / 10.0, np.array([[0.0, 0.0, 1.0]])
+
+    def at_slope(sx, sy):
+        h = _unit([[sx, sy, 1.0]])
+        return ggx_truth_fr(wi0, 2 * h[0, 2] * h - wi0, t)[0]
+
+    assert at_slope(0.0, cy) > max(at_slope(0.0, cy + 0.02), at_slope(0.0, cy - 0.02), at_slope(0.02, cy))
+
+
+@pytest.mark.slow
+def test_default_selection_reaches_the_goal_on_a_second_untuned_truth():
+    """The default selection (folds per state) on the GGX truth, sampled like the first:
+    its choice predicts every held-out set at every state to <= 0.30 log-RMS (measured:
+    (4, 2, 0.4), 0.255 in-plane and 0.227 out-of-plane, worst state; the best of the 96
+    candidates reaches 0.248, the in-plane sets' floor for this separable basis)."""
+    samples = make_samples(FIT, truth=ggx_truth_fr)
+    best, _ = validation.choose_sh_basis(samples, state="time_s")
+    model = _dynamic(samples, best["lh_max"], best["mh_max"], best["fanout"])
+    errs = held_out_errors(model, truth=ggx_truth_fr)
+    assert max(errs.values()) <= GOAL, (best, errs)
+
+
+def _more_diffuse(wi, wo, t_s):
+    """The first truth with a diffuse part 0.10 instead of 0.03 at t = 0 (+0.07 / pi)."""
+    return truth_fr(wi, wo, t_s) + 0.07 / math.pi
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known limit (issue 32 item 5, docs/fit-defaults.md): on the more diffuse variant "
+                   "the choice (8, 8, 0.4) predicts the out-of-plane set to 0.304 (other noise draws: 0.307-0.308); "
+                   "no leave-one-test-out rule tried reaches <= 0.30 on it and on the other truths together")
+def test_default_selection_on_the_more_diffuse_variant():
+    """Kept as a record that fails loudly (strict xfail) once a selection fixes it: the
+    error is an under-prediction (up to 12x at 1 % of the directions) where the held-out
+    40 deg vertical-groove screen reaches 69 deg from the normal across the grooves, while
+    the fit tests reach 48 deg there."""
+    samples = make_samples(FIT, truth=_more_diffuse)
+    first = samples.select(samples.time_s == 0.0)
+    best, _ = validation.choose_sh_basis(first)
+    model = _dynamic(first, best["lh_max"], best["mh_max"], best["fanout"], times=(0.0,))
+    errs = held_out_errors(model, times=(0.0,), truth=_more_diffuse)
+    assert max(errs.values()) <= GOAL, (best, errs)
