@@ -28,7 +28,7 @@ import numpy as np
 from . import palette as C
 from .figure_index import lobe_paths, mark
 from .label_place import place_labels
-from .plan_view import (MIRROR_LABEL, draw_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
+from .plan_view import (MIRROR_LABEL, legend_below, draw_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
                         label_points, mark_mirror, mirror_segments, square_limits, two_panels)
 from .plots import DisplayBase
 
@@ -38,6 +38,9 @@ __all__ = ["ElevationViewDisplay"]
 @dataclass
 class ElevationViewDisplay(DisplayBase):
     """Elevation-view data in (distance along the aim's azimuth, height) [m]."""
+
+    FIGSIZE_IN = (10.2, 4.6)  # printed on a landscape A4 page (hazard.canvas.PRINTED_WIDTH_IN["wide"]): 6 pt text prints at 6 pt
+    DPI = 165  # about as many pixels as the 15 in figure at 110 dpi had
 
     title: str
     laser_sz: np.ndarray  # (2,)
@@ -95,7 +98,7 @@ class ElevationViewDisplay(DisplayBase):
 
     def plot(self, axes=None):
         """Two panels: the whole range and the site. Returns (figure, axes)."""
-        fig, axes = two_panels(axes, (15, 6.5))
+        fig, axes = two_panels(axes, self.FIGSIZE_IN)
         limits = self.site_limits()
         for ax, title in ((axes[0], "the range"), (axes[1], "the site")):
             self._draw(ax)
@@ -117,7 +120,7 @@ class ElevationViewDisplay(DisplayBase):
             ax.set_ylabel(f"height [m] (vertical scale x{exaggeration:.3g})" if abs(exaggeration - 1) > 0.05
                           else "height [m] (equal scale)")
         label_points(axes[1], self.labels)
-        axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
+        legend_below(fig, axes[1])
         for ax in axes:
             draw_scale_bar(ax, "lower right")
         fig.canvas.draw()

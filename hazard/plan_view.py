@@ -31,7 +31,7 @@ from .label_place import place_labels
 from .mirror_zone import mirror_stops_m, mirror_zones
 from .plots import DisplayBase
 
-__all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
+__all__ = ["legend_below", "PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
 MIRROR_ZONE_LABEL = "mirror beams' hazard zones (their width; dashed: through optics)"
@@ -43,6 +43,9 @@ LABELLED = 8  # hazardous observers named in a picture (the worst by hazard rati
 @dataclass
 class PlanViewDisplay(DisplayBase):
     """Plan-view data in world x, y [m] (see the module notes); ``plot`` only draws."""
+
+    FIGSIZE_IN = (10.2, 5.6)  # printed on a landscape A4 page (hazard.canvas.PRINTED_WIDTH_IN["wide"]): 6 pt text prints at 6 pt
+    DPI = 165  # as many pixels as the 15 in figure at 110 dpi had
 
     title: str
     laser_xy: np.ndarray
@@ -107,7 +110,7 @@ class PlanViewDisplay(DisplayBase):
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
         targets, observers, hazardous ground). Returns (figure, axes)."""
-        fig, axes = two_panels(axes, (15, 7.5))
+        fig, axes = two_panels(axes, self.FIGSIZE_IN)
         for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
             self._draw_ground(ax)
             self._draw_zones(ax)
@@ -122,7 +125,7 @@ class PlanViewDisplay(DisplayBase):
             ax.set_ylabel("y (north) [m]")
             ax.set_title(f"{self.title}: {title}")
         label_points(axes[1], self.labels)
-        axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
+        legend_below(fig, axes[1])
         fig.tight_layout()
         fig.canvas.draw()  # settle the limits before the scale bars and the arrows
         for ax in axes:
@@ -235,7 +238,8 @@ class PlanViewDisplay(DisplayBase):
         for xy, text in self.ends:
             right, above = xy[0] > self.laser_xy[0], xy[1] > self.laser_xy[1]  # the text toward the laser: inside the frame
             ax.plot(*xy, marker="o", ms=5, mfc="white", mec="k", ls="", zorder=9)
-            ax.annotate(text, xy, xytext=(-6 if right else 6, -8 if above else 8), textcoords="offset points", fontsize=6, zorder=9,
+            ax.annotate(text.replace(" (", "\n(", 1), xy, xytext=(-6 if right else 6, -8 if above else 8), textcoords="offset points",
+                        fontsize=6, zorder=9,
                         ha="right" if right else "left", va="top" if above else "bottom",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
@@ -430,6 +434,14 @@ def square_limits(points) -> tuple:
     lo, hi = p.min(axis=0), p.max(axis=0)
     c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
     return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+
+
+def legend_below(fig, ax, fontsize=7):
+    """The legend of ``ax``'s labelled artists below the figure's panels, in two columns
+    (beside them it took 40 % of the width a printed page gives the picture)."""
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=2, fontsize=fontsize, framealpha=0.9)
 
 
 def two_panels(axes, figsize) -> tuple:
