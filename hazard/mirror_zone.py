@@ -43,7 +43,7 @@ from .engine import mirror_axis, path_states
 from .nohd import optical_gain
 from .specular import is_curved_mesh, lit_planes, specular_irradiance
 
-__all__ = ["MirrorZone", "mirror_zones", "mirror_stops_m", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "SAMPLES"]
+__all__ = ["MirrorZone", "mirror_zones", "mirror_stops_m", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "eye_rows", "SAMPLES"]
 
 SAMPLES = 97  # ranges along the beam at which the half-width is solved
 
@@ -267,8 +267,9 @@ def beam_axis(spot, origin_m, axis) -> tuple[np.ndarray, np.ndarray, bool]:
     return hit, r / np.linalg.norm(r), True
 
 
-def _eyes(result, row) -> list:
-    """(label, gain, aperture radius [m], NOHD [m], stop [m] or None) per eye: naked, then each aid."""
+def eye_rows(result, row) -> list:
+    """(label, gain, aperture radius [m], NOHD [m], stop [m] or None) per eye of target row
+    ``row``'s mirror beam: the naked eye, then each aid."""
     spec = result.scene.spec
     pupil_m = 0.5 * limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s)  # the standard's aperture (7 mm at 400-1400 nm)
     stops = mirror_stops_m(result)
@@ -305,7 +306,7 @@ def mirror_zones(result) -> list:
         states = path_states(t.material, result.states[t.index]) if t.index in result.states else None
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
         start, axis, exact = beam_axis(sp, sp.centroid, axis)
-        for eye, gain, radius, nohd, stop in _eyes(result, row):
+        for eye, gain, radius, nohd, stop in eye_rows(result, row):
             if not nohd:
                 continue
             reach = float(nohd) if math.isfinite(nohd) else 1e5
