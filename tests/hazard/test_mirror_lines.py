@@ -74,3 +74,47 @@ def test_the_drawn_mirror_line_lies_inside_its_own_zone(name):
         zone = zones[(target, eye)]
         length = float(np.linalg.norm(b - a))
         assert zone.buffer(1e-6 * length + 1e-6).contains(LineString([a[:2], b[:2]])), (target, eye, zone.distance(LineString([a[:2], b[:2]])))
+
+
+@pytest.mark.parametrize("nz", [0.0, 0.15])
+def test_the_elevation_view_draws_the_mirror_zone_holding_its_hazardous_points(nz):
+    """A 100 W beam on a flat plate (tilted 30 deg in plan, its normal given the vertical
+    component ``nz``): the elevation view draws the reflected beam's zone, and every
+    point of the Gaussian's hazardous set (radius w sqrt(ln(E0 / MPE)) about the reflected
+    axis, formulas above) at ranges along it, above and below the axis, lies inside the
+    drawn outline; a level beam's outline is no taller than the widest half-width plus the
+    eye's aperture radius (and 2 % for the sampling's hold between ranges)."""
+    from shapely.geometry import MultiPoint, Polygon
+
+    from hazard.elevation_view import ElevationViewDisplay
+
+    power, a, phi, r1, rho = 100.0, 0.01, 5e-4, 100.0, 0.8
+    t = math.radians(TILT_DEG)
+    n = np.array([math.sin(t), -math.cos(t), nz])
+    n /= np.linalg.norm(n)
+    mirror = dict(name="mirror", shape="plate", center=(0.0, 0.0, 0.0), normal=n, tangent=(math.cos(t), math.sin(t), 0.0),
+                  size=(20.0, 20.0), material=ref.specular(rho))
+    res = hazard.analyze(scenes.loads(ref.scene_text(power=power, a=a, phi=phi, position=(0.0, -r1, 0.0), aim=(0.0, 0.0, 0.0),
+                                                     targets=[mirror], analysis="")))
+    mpe = float(res.mpe_w_m2)
+    d = np.array([0.0, 1.0, 0.0])
+    u = d - 2 * (d @ n) * n
+    up = np.cross(np.array([-u[1], u[0], 0.0]) / np.hypot(u[0], u[1]), u)  # perpendicular to the axis, in its vertical plane
+    view = ElevationViewDisplay.from_result(res)
+    ((target, eye, ring),) = view.mirror_zones
+    assert target == "mirror" and eye == "naked eye"
+    zone = Polygon(ring).buffer(1e-9)
+    w0 = lambda z: (a + phi * (r1 + z)) / 2  # noqa: E731
+    e0 = lambda z: rho * power / (math.pi * w0(z) ** 2)  # noqa: E731
+    nohd = (2 * math.sqrt(rho * power / (math.pi * mpe)) - a) / phi - r1  # where the peak falls to the MPE
+    z = np.linspace(0.01, 0.98, 40) * nohd
+    hw = np.array([w0(x) * math.sqrt(math.log(e0(x) / mpe)) for x in z])
+    f = np.array([-0.999, -0.5, 0.0, 0.5, 0.999])
+    pts = (z[:, None, None] * u + (f[None, :, None] * hw[:, None, None]) * up).reshape(-1, 3)
+    sz = np.stack([pts[:, 1] + r1, pts[:, 2]], axis=1)  # distance along the aim's azimuth (+y) from the laser, height
+    assert zone.contains(MultiPoint(sz.tolist()))
+    if nz == 0.0:
+        zz = np.linspace(0.0, nohd, 20001)[1:-1]
+        widest = float(np.max(w0(zz) * np.sqrt(np.log(np.maximum(e0(zz), mpe) / mpe))))
+        pupil = 3.5e-3  # the 7 mm limiting aperture's radius at 1064 nm, 10 s
+        assert widest + pupil <= ring[:, 1].max() <= 1.02 * (widest + pupil)
