@@ -108,6 +108,7 @@ class ElevationViewDisplay(DisplayBase):
         for ax, title in ((axes[0], "the range"), (axes[1], "the site")):
             self._draw(ax)
             ax.set_xlabel("distance along the aim's azimuth from the laser [m]")
+            ax.locator_params(axis="x", nbins=5)  # five-digit distances on a 4.5 in panel: fewer ticks, none touching
             ax.set_title(f"{self.title}: {title}")
             ax.grid(alpha=0.25)
         axes[1].set_xlim(limits[0], limits[1])

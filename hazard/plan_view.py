@@ -122,6 +122,7 @@ class PlanViewDisplay(DisplayBase):
                 ax.set_xlim(limits[0], limits[1])
                 ax.set_ylim(limits[2], limits[3])
             ax.set_xlabel("x (east) [m]")
+            ax.locator_params(axis="x", nbins=5)  # five-digit distances on a 4.5 in panel: fewer ticks, none touching
             ax.set_ylabel("y (north) [m]")
             ax.set_title(f"{self.title}: {title}")
         label_points(axes[1], self.labels)

@@ -198,3 +198,17 @@ def test_no_label_of_the_plan_view_covers_a_hazardous_observer_it_does_not_name(
         for t in ax.texts:
             if isinstance(t, Annotation) and t.xycoords == "data" and t.get_visible() and t._check_xy(fig.canvas.get_renderer()):
                 assert _covering(ax, t, pts, t.xy) == 0, (ax.get_title(), t.get_text())
+
+
+@pytest.mark.parametrize("name", ["mirror_window", pytest.param("airspace", marks=pytest.mark.slow)])
+def test_no_two_tick_labels_of_a_panel_touch(name):
+    """The panels are narrower now that the pictures print at 6 pt (issue 34 leftover a):
+    airspace's elevation x labels ran together ("1000012500"); no two visible tick
+    labels of an axis overlap."""
+    for ax in _views(name):
+        r = ax.figure.canvas.get_renderer()
+        for axis, lo, hi in ((ax.xaxis, 0, 2), (ax.yaxis, 1, 3)):  # along the axis: a gap of 2 px at least
+            boxes = sorted((t.get_window_extent(r).extents for t in axis.get_ticklabels() if t.get_visible() and t.get_text()),
+                           key=lambda b: b[lo])
+            for a, b in itertools.pairwise(boxes):
+                assert b[lo] - a[hi] >= 2.0, (ax.get_title(), a, b)
