@@ -177,7 +177,7 @@ def test_labels_still_clear_each_other_before_they_clear_the_data():
     assert len(ax.texts) == 3 and not overlaps(ax) and not outside(ax)
 
 
-@pytest.mark.parametrize("name", ["range_clearance", pytest.param("airspace", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("name", ["range_clearance", pytest.param("mirror_window", marks=pytest.mark.slow)])
 def test_no_label_of_the_plan_view_covers_a_hazardous_observer_it_does_not_name(name):
     """In the plan view's panels no label covers the marker of a hazardous observer
     (report.json's observers at or above the MPE, positions from report.json) other than
