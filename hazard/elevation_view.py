@@ -28,8 +28,9 @@ import numpy as np
 from . import palette as C
 from .figure_index import lobe_paths, mark
 from .label_place import place_labels
-from .plan_view import (MIRROR_LABEL, draw_scale_bar, aim_reach_m, draw_hazardous, draw_lobe, hazardous_labels, keep_texts_inside,
-                        label_points, mark_mirror, mirror_segments, square_limits, two_panels)
+from .plan_view import (MIRROR_LABEL, MIRROR_ZONE_LABEL, aim_reach_m, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels,
+                        keep_texts_inside, label_points, legend_below, mark_mirror, mark_mirror_zone, mirror_segments, square_limits,
+                        two_panels)
 from .plots import DisplayBase
 
 __all__ = ["ElevationViewDisplay"]
@@ -38,6 +39,9 @@ __all__ = ["ElevationViewDisplay"]
 @dataclass
 class ElevationViewDisplay(DisplayBase):
     """Elevation-view data in (distance along the aim's azimuth, height) [m]."""
+
+    FIGSIZE_IN = (10.2, 4.6)  # printed on a landscape A4 page (hazard.canvas.PRINTED_WIDTH_IN["wide"]): 6 pt text prints at 6 pt
+    DPI = 165  # about as many pixels as the 15 in figure at 110 dpi had
 
     title: str
     laser_sz: np.ndarray  # (2,)
@@ -55,6 +59,7 @@ class ElevationViewDisplay(DisplayBase):
     aim_label: str = "aim line (to the danger zone's range)"
     tracks: list = field(default_factory=list)  # (paths, name, (N, 2) sz, text) moving observers
     flight_zones: list = field(default_factory=list)  # (path, (4, 2) sz box: along-aim span x floor-ceiling, exceeded, text, worst sz)
+    mirror_zones: list = field(default_factory=list)  # (target, eye, (K, 2) sz outline): :func:`hazard.mirror_zone.side_view_ring`
 
     @classmethod
     def from_result(cls, result) -> "ElevationViewDisplay":
@@ -82,6 +87,9 @@ class ElevationViewDisplay(DisplayBase):
         labels, more = hazardous_labels(result, obs_sz)
         d = cls(f"{scene.name}: elevation view", sz(scene.laser_position_m), aim, targets, lobes, mirrors,
                 _profile(scene, view, frame, obs_sz, up), obs_sz, np.asarray(result.hazardous, bool), labels, more)
+        from .mirror_zone import mirror_zones, side_view_ring
+
+        d.mirror_zones = [(m.target, m.eye, ring) for m in mirror_zones(result) if (ring := side_view_ring(m, sz)) is not None]
         d.aim_sz, d.aim_past = clip_at_ground(aim, d.profile)
         d.aim_label = "aim line (to the danger zone's range)" if zone_reach > 0 else "aim line"
         from .figure_index import finding_paths, flight_zone_rings, track_lines
@@ -95,11 +103,12 @@ class ElevationViewDisplay(DisplayBase):
 
     def plot(self, axes=None):
         """Two panels: the whole range and the site. Returns (figure, axes)."""
-        fig, axes = two_panels(axes, (15, 6.5))
+        fig, axes = two_panels(axes, self.FIGSIZE_IN)
         limits = self.site_limits()
         for ax, title in ((axes[0], "the range"), (axes[1], "the site")):
             self._draw(ax)
             ax.set_xlabel("distance along the aim's azimuth from the laser [m]")
+            ax.locator_params(axis="x", nbins=5)  # five-digit distances on a 4.5 in panel: fewer ticks, none touching
             ax.set_title(f"{self.title}: {title}")
             ax.grid(alpha=0.25)
         axes[1].set_xlim(limits[0], limits[1])
@@ -117,7 +126,7 @@ class ElevationViewDisplay(DisplayBase):
             ax.set_ylabel(f"height [m] (vertical scale x{exaggeration:.3g})" if abs(exaggeration - 1) > 0.05
                           else "height [m] (equal scale)")
         label_points(axes[1], self.labels)
-        axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
+        legend_below(fig, axes[1])
         for ax in axes:
             draw_scale_bar(ax, "lower right")
         fig.canvas.draw()
@@ -163,6 +172,10 @@ class ElevationViewDisplay(DisplayBase):
             seen.add(kind)
             for ring in rings:
                 mark(ax, lobe_paths(self.paths, self.lobes, target, kind), f"{kind} keep-out lobe (projected)", ring, "polygon")
+        for i, (name, eye, ring) in enumerate(self.mirror_zones):  # as in the plan view
+            ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
+                    ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
+            mark_mirror_zone(ax, self.paths, name, ring)
         for i, (name, a, b) in enumerate(self.mirrors):
             ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
             mark_mirror(ax, self.paths, name, a, b)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FIGURES_NAME", "mark", "arrow_to", "figure_entry", "figures_document", "report_observer_paths", "finding_paths",
+__all__ = ["FIGURES_NAME", "mark", "drawn_findings", "arrow_to", "figure_entry", "figures_document", "report_observer_paths", "finding_paths",
            "track_lines", "flight_zone_rings", "faa_marks", "lobe_paths", "view_entry"]
 
 FIGURES_NAME = "figures.json"
@@ -50,6 +50,12 @@ def mark(ax, paths, label, xy, kind="points", *, how="drawn", distance_m=None):
     xy = np.asarray(xy, float).reshape(-1, 2)
     marks = ax.figure.__dict__.setdefault("_hazard_marks", [])
     marks.append(_Mark(ax, tuple(paths), str(label), kind, xy, how, distance_m))
+
+
+def drawn_findings(ax) -> list:
+    """(kind, xy (K, 2) data coordinates) of every finding noted as drawn in ``ax``
+    (:func:`mark`): what a label placed in the panel should not cover."""
+    return [(m.kind, m.xy) for m in ax.figure.__dict__.get("_hazard_marks", []) if m.ax is ax]
 
 
 def _metres(d) -> str:
@@ -121,10 +127,13 @@ def _panel(ax) -> dict:
             "extent": [float(x0), float(x1), float(y0), float(y1)]}
 
 
-def figure_entry(fig, view: str) -> dict:
+def figure_entry(fig, view: str, dpi=None) -> dict:
     """What ``fig`` draws: its panels (title, axis labels, extent [x0, x1, y0, y1] in
     their data units) and every noted finding with its panel, whether its geometry meets
-    the panel's extent, and whether its label is among the texts the figure shows."""
+    the panel's extent, and whether its label is among the texts the figure shows; with
+    ``dpi`` (the picture's, [px/in]) also ``text_px_min``, its smallest text's height in
+    the picture [px] (:func:`hazard.canvas.smallest_text_px`: the printed report keeps it
+    at least :data:`hazard.canvas.PRINT_MIN_PT` high)."""
     shown = _shown_texts(fig)
     panels = [ax for ax in fig.axes if ax.get_title()]
     findings = []
@@ -141,7 +150,12 @@ def figure_entry(fig, view: str) -> dict:
         findings.append({"paths": list(m.paths), "label": m.label, "label_shown": m.label in shown, "panel": m.ax.get_title(),
                          "how": m.how, "geometry": m.kind, "inside": inside,
                          "bbox": bbox, **({} if not finite(m.distance_m) else {"distance_m": float(m.distance_m)})})
-    return {"view": view, "panels": [_panel(ax) for ax in panels], "findings": findings}
+    entry = {"view": view, "panels": [_panel(ax) for ax in panels], "findings": findings}
+    if dpi is not None:
+        from .canvas import smallest_text_px
+
+        entry["text_px_min"] = round(smallest_text_px(fig, dpi), 2)
+    return entry
 
 
 def figures_document(entries: dict) -> bytes:

@@ -443,6 +443,57 @@ def _mark_reach(layers: list, site: bool) -> None:
             f["properties"].pop("rise_m", None)
 
 
+THIN_LAYERS = ("sdz", "sdz_aided", "mirror_beam_zone")  # zones that can be metres wide and kilometres long
+THIN_RATIO = 20.0  # a zone longer than this many times its width gets a band of at least THIN_BAND_PX on screen
+THIN_BAND_PX = {"sdz": 12, "sdz_aided": 8, "mirror_beam_zone": 8}  # the band's width on screen [px] whatever the zoom (a
+# Leaflet line's weight); the naked-eye zone's wider, so that the aided band drawn over it leaves it seen
+EARTH_M = 6_371_008.8  # the sphere for the band's local metres (widths within 0.6 %: only the band's drawing uses them)
+
+
+def _local_m(xy: np.ndarray, site: bool) -> tuple:
+    """(metres (N, 2), back): ``xy`` in local metres (lon/lat on an equirectangular plane
+    about their mean with a site) and the function taking metres back."""
+    if not site:
+        return xy, lambda m: m
+    c = xy.mean(axis=0)
+    k = np.array([math.cos(math.radians(c[1])), 1.0]) * math.pi / 180 * EARTH_M
+    return (xy - c) * k, lambda m: np.asarray(m, float) / k + c
+
+
+def _thin_band(lid: str, title: str, f: dict, site: bool) -> dict | None:
+    """For a zone ``THIN_RATIO`` times longer than wide: its long axis (the middle line of
+    its minimum rotated rectangle, [[lat, lng], [lat, lng]]), its width [m] and the text
+    saying the band drawn along it is wider than the zone where the zone is thinner than
+    ``THIN_BAND_PX`` on screen; None for a zone that is not thin."""
+    from shapely.geometry import Polygon
+
+    xy = _coords(f.get("geometry"))
+    if lid not in THIN_LAYERS or len(xy) < 3:
+        return None
+    m, back = _local_m(xy, site)
+    rect = np.asarray(Polygon(m).minimum_rotated_rectangle.exterior.coords, float)[:4]
+    sides = np.hypot(*np.diff(np.vstack([rect, rect[:1]]), axis=0).T)
+    k = int(np.argmax(sides[:2]))  # the long sides: k and k + 2
+    length, width = float(sides[k]), float(sides[1 - k])
+    if not length > THIN_RATIO * width:
+        return None
+    ends = back(np.array([(rect[(k + 1) % 4] + rect[(k + 2) % 4]) / 2, (rect[(k + 3) % 4] + rect[k]) / 2]))
+    return {"axis": [[float(y), float(x)] for x, y in ends], "width_m": width, "band_px": THIN_BAND_PX[lid],
+            "text": f"{title} {fmt_number(width, 'm', sig=3)} wide, {fmt_number(length, 'm', sig=3)} long: also drawn as a "
+                    f"hatched band {THIN_BAND_PX[lid]} px wide on screen (exaggerated across the zone where it is thinner)"}
+
+
+def _mark_thin(layers: list, site: bool) -> None:
+    """Each thin zone's band (:func:`_thin_band`, property ``thin``), said in its layer's ``thin`` list."""
+    for lay in layers:
+        lay["thin"] = []
+        for f in lay["features"]:
+            band = _thin_band(lay["id"], lay["title"], f, site)
+            if band is not None:
+                f["properties"]["thin"] = band
+                lay["thin"].append(band["text"])
+
+
 def _extent(layers: list, skip=("visual_zone",)) -> list | None:
     """[[south, west], [north, east]] (Leaflet's lat, lng order) of every feature but ``skip``'s layers."""
     pts = [_coords(f.get("geometry")) for layer in layers if layer["id"] not in skip for f in layer["features"]]
@@ -472,6 +523,7 @@ def map_data(out_dir) -> dict:
                  "frame": info.get("frame") or data["frame"], "observers_shown": str(info.get("observers", "")),
                  "extent": _extent(layers, skip=FAR_LAYERS) or _extent(layers, skip=()), "extent_all": _extent(layers, skip=())})
     _mark_reach(layers, site)
+    _mark_thin(layers, site)
     if site and not _has_pyproj():
         data["distance_note"] = ("Distances from the laser are on a sphere (pyproj is not installed here: pip install "
                                  "'laser-hazard[geo]' for the ellipsoid's geodesics), within 0.6 %.")

@@ -121,19 +121,17 @@ def _lobes(result, off) -> list:
 def _mirrors(result, off) -> list:
     from shapely.geometry import LineString
 
-    from .plan_view import mirror_segments, mirror_stops_m
+    from .mirror_zone import eye_rows
+    from .plan_view import mirror_lines
 
     rows = {t.name: t for t in result.targets}
-    stops = mirror_stops_m(result)
     out = []
-    for target, start, end in mirror_segments(result):
-        row = rows.get(target)
-        nohd = None if row is None else row.specular_nohd_dynamic_m
+    for target, start, end, eye in mirror_lines(result):
+        nohd, stop = next(((n, st) for e, _, _, n, st in eye_rows(result, rows[target]) if e == eye), (None, None))
         a, b = np.asarray(start) + off, np.asarray(end) + off
-        stop = stops.get(target)
         # how far the hazard goes from the mirror: the NOHD, or sooner where every ray is stopped
         reach = nohd if stop is None or nohd is None or not (0.0 <= stop < nohd) else float(stop)
-        out.append(Zone("mirror_beam", LineString([a[:2], b[:2]]), {"target": target, "nohd_m": nohd, "reach_m": reach, "hazard": "naked eye",
+        out.append(Zone("mirror_beam", LineString([a[:2], b[:2]]), {"target": target, "nohd_m": nohd, "reach_m": reach, "hazard": eye,
                                                                      "start_height_m": float(a[2]), "end_height_m": float(b[2])}))
     return out
 

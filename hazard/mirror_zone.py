@@ -43,7 +43,7 @@ from .engine import mirror_axis, path_states
 from .nohd import optical_gain
 from .specular import is_curved_mesh, lit_planes, specular_irradiance
 
-__all__ = ["MirrorZone", "mirror_zones", "mirror_stops_m", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "SAMPLES"]
+__all__ = ["MirrorZone", "mirror_zones", "mirror_stops_m", "edges_m", "section_extent_m", "beam_axis", "beam_zone", "eye_rows", "side_view_ring", "SAMPLES"]
 
 SAMPLES = 97  # ranges along the beam at which the half-width is solved
 
@@ -61,6 +61,33 @@ class MirrorZone:
     aperture_radius_m: float  # the radius added for the aperture average
     ranges_not_found: int  # ranges short of the reach where no hazardous point was found (module notes)
     exact_axis: bool = True  # the laser's axis reflected on the flat mirror (False: the drawn line's axis, see the module notes)
+    # the cross-sections in 3-D, scene-local: centre_m (K, 3) on the axis, the unit vectors across (horizontal) and up
+    # (perpendicular to the axis), and the half-extents left/right along across, above/below along up [m] (aperture included)
+    sections: dict | None = None
+
+
+def side_view_ring(zone: MirrorZone, to_2d) -> np.ndarray | None:
+    """(K, 2) outline of the zone seen from the side: every cross-section taken as the
+    rectangle of its extents across and up (which holds it), the eight corners of each two
+    neighbouring sections projected by ``to_2d`` ((N, 3) scene-local points -> (N, 2)) and
+    the union of their convex hulls taken (so the outline holds the projected zone);
+    None without sections."""
+    from shapely.geometry import MultiPoint, Polygon
+    from shapely.ops import unary_union
+
+    s = zone.sections
+    if not s:
+        return None
+    a = np.stack([s["left_m"], -s["right_m"], -s["right_m"], s["left_m"]], axis=1)  # (K, 4) along across
+    b = np.stack([s["above_m"], s["above_m"], -s["below_m"], -s["below_m"]], axis=1)  # (K, 4) along up
+    corners = s["centre_m"][:, None, :] + a[..., None] * s["across"] + b[..., None] * s["up"]  # (K, 4, 3)
+    flat = np.asarray(to_2d(corners.reshape(-1, 3)), float).reshape(len(corners), 4, 2)
+    hulls = [MultiPoint(np.vstack([flat[i], flat[i + 1]]).tolist()).convex_hull for i in range(len(flat) - 1)]
+    shape = unary_union([h for h in hulls if isinstance(h, Polygon)])
+    if shape.is_empty:
+        return None
+    shape = shape if shape.geom_type == "Polygon" else shape.convex_hull
+    return np.asarray(shape.exterior.coords, float)
 
 
 
@@ -238,12 +265,16 @@ def beam_zone(spot, origin_m, axis, reach_m, mpe_w_m2, mu, states=None, gain=1.0
     z[0] = min(1e-6 * max(float(reach_m), 1e-3), 1e-3)  # just off the mirror's surface
     up = np.cross(n3, u)
     centre = np.asarray(origin_m, float) + z[:, None] * u
-    lo, hi, found = section_extent_m(spot, centre, n3, up, _scale_m(spot, origin_m, z), mpe_w_m2, mu, states, gain)
+    scale = _scale_m(spot, origin_m, z)
+    lo, hi, found = section_extent_m(spot, centre, n3, up, scale, mpe_w_m2, mu, states, gain)
     short = int(np.sum(~found & (z < 0.999 * reach_m)))
     left = _bulge(z, np.maximum(hi, 0.0)) + aperture_radius_m
     right = _bulge(z, np.maximum(-lo, 0.0)) + aperture_radius_m
+    vlo, vhi, _ = section_extent_m(spot, centre, up, n3, scale, mpe_w_m2, mu, states, gain)  # along up, over all offsets across
     z[0] = 0.0
-    return _outline(origin_m, u, z, left, right), float(max(left.max(), right.max())), short
+    sections = {"centre_m": np.asarray(origin_m, float) + z[:, None] * u, "across": n3, "up": up, "left_m": left, "right_m": right,
+                "above_m": _bulge(z, np.maximum(vhi, 0.0)) + aperture_radius_m, "below_m": _bulge(z, np.maximum(-vlo, 0.0)) + aperture_radius_m}
+    return _outline(origin_m, u, z, left, right), float(max(left.max(), right.max())), short, sections
 
 
 def beam_axis(spot, origin_m, axis) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -267,8 +298,9 @@ def beam_axis(spot, origin_m, axis) -> tuple[np.ndarray, np.ndarray, bool]:
     return hit, r / np.linalg.norm(r), True
 
 
-def _eyes(result, row) -> list:
-    """(label, gain, aperture radius [m], NOHD [m], stop [m] or None) per eye: naked, then each aid."""
+def eye_rows(result, row) -> list:
+    """(label, gain, aperture radius [m], NOHD [m], stop [m] or None) per eye of target row
+    ``row``'s mirror beam: the naked eye, then each aid."""
     spec = result.scene.spec
     pupil_m = 0.5 * limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s)  # the standard's aperture (7 mm at 400-1400 nm)
     stops = mirror_stops_m(result)
@@ -305,14 +337,14 @@ def mirror_zones(result) -> list:
         states = path_states(t.material, result.states[t.index]) if t.index in result.states else None
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
         start, axis, exact = beam_axis(sp, sp.centroid, axis)
-        for eye, gain, radius, nohd, stop in _eyes(result, row):
+        for eye, gain, radius, nohd, stop in eye_rows(result, row):
             if not nohd:
                 continue
             reach = float(nohd) if math.isfinite(nohd) else 1e5
             if stop is not None and math.isfinite(stop) and 0.0 <= stop < reach:
                 reach = float(stop)
-            ring, widest, short = beam_zone(sp, start, axis, reach, mpe, result.attenuation_per_m, states, gain, radius)
-            out.append(MirrorZone(t.name, eye, ring, nohd, reach, widest, radius, short, exact))
+            ring, widest, short, sections = beam_zone(sp, start, axis, reach, mpe, result.attenuation_per_m, states, gain, radius)
+            out.append(MirrorZone(t.name, eye, ring, nohd, reach, widest, radius, short, exact, sections))
     if hasattr(result, "__dict__"):
         result.__dict__["_mirror_zones"] = out
     return out

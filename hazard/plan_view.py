@@ -28,10 +28,10 @@ import numpy as np
 
 from . import palette as C
 from .label_place import place_labels
-from .mirror_zone import mirror_stops_m, mirror_zones
+from .mirror_zone import mirror_zones
 from .plots import DisplayBase
 
-__all__ = ["PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments"]
+__all__ = ["legend_below", "PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments", "mirror_lines"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
 MIRROR_ZONE_LABEL = "mirror beams' hazard zones (their width; dashed: through optics)"
@@ -43,6 +43,9 @@ LABELLED = 8  # hazardous observers named in a picture (the worst by hazard rati
 @dataclass
 class PlanViewDisplay(DisplayBase):
     """Plan-view data in world x, y [m] (see the module notes); ``plot`` only draws."""
+
+    FIGSIZE_IN = (10.2, 5.6)  # printed on a landscape A4 page (hazard.canvas.PRINTED_WIDTH_IN["wide"]): 6 pt text prints at 6 pt
+    DPI = 165  # as many pixels as the 15 in figure at 110 dpi had
 
     title: str
     laser_xy: np.ndarray
@@ -107,7 +110,7 @@ class PlanViewDisplay(DisplayBase):
     def plot(self, axes=None):
         """Two panels: the whole range (the zone may reach tens of km) and the site (laser,
         targets, observers, hazardous ground). Returns (figure, axes)."""
-        fig, axes = two_panels(axes, (15, 7.5))
+        fig, axes = two_panels(axes, self.FIGSIZE_IN)
         for ax, title, limits in ((axes[0], "the range", None), (axes[1], "the site", self.site_limits())):
             self._draw_ground(ax)
             self._draw_zones(ax)
@@ -119,10 +122,11 @@ class PlanViewDisplay(DisplayBase):
                 ax.set_xlim(limits[0], limits[1])
                 ax.set_ylim(limits[2], limits[3])
             ax.set_xlabel("x (east) [m]")
+            ax.locator_params(axis="x", nbins=5)  # five-digit distances on a 4.5 in panel: fewer ticks, none touching
             ax.set_ylabel("y (north) [m]")
             ax.set_title(f"{self.title}: {title}")
         label_points(axes[1], self.labels)
-        axes[1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=7, framealpha=0.9)
+        legend_below(fig, axes[1])
         fig.tight_layout()
         fig.canvas.draw()  # settle the limits before the scale bars and the arrows
         for ax in axes:
@@ -235,7 +239,8 @@ class PlanViewDisplay(DisplayBase):
         for xy, text in self.ends:
             right, above = xy[0] > self.laser_xy[0], xy[1] > self.laser_xy[1]  # the text toward the laser: inside the frame
             ax.plot(*xy, marker="o", ms=5, mfc="white", mec="k", ls="", zorder=9)
-            ax.annotate(text, xy, xytext=(-6 if right else 6, -8 if above else 8), textcoords="offset points", fontsize=6, zorder=9,
+            ax.annotate(text.replace(" (", "\n(", 1), xy, xytext=(-6 if right else 6, -8 if above else 8), textcoords="offset points",
+                        fontsize=6, zorder=9,
                         ha="right" if right else "left", va="top" if above else "bottom",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8))
 
@@ -336,12 +341,15 @@ def beam_ends(result, aim_end_xy, off) -> list:
         if horizontal > 0 and run < 0.99 * min(r, 1e5) * horizontal:  # the aim's own direction stops sooner
             text = f"aim line ends at {_metres(run / horizontal)}; the zone reaches {_metres(min(r, 1e5))} ({why})"
         out.append((np.asarray(aim_end_xy, float), text))
-    nohd = {t.name: t.specular_nohd_dynamic_m for t in result.targets}
-    for name, a, b in mirror_segments(result):
+    from .mirror_zone import eye_rows
+
+    rows = {t.name: t for t in result.targets}
+    for name, a, b, eye in mirror_lines(result):
         length = float(np.linalg.norm(b - a))
-        full = float(nohd.get(name) or 0.0)
+        full = float({e: nohd for e, _, _, nohd, _ in eye_rows(result, rows[name])}.get(eye) or 0.0)
         why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
-        out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why})"))
+        whom = "" if eye == "naked eye" else f", hazardous only through {eye}"
+        out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why}{whom})"))
     return out
 
 
@@ -430,6 +438,14 @@ def square_limits(points) -> tuple:
     lo, hi = p.min(axis=0), p.max(axis=0)
     c, half = (lo + hi) / 2, max(float((hi - lo).max()) * 0.55, 10.0)
     return c[0] - half, c[0] + half, c[1] - half, c[1] + half
+
+
+def legend_below(fig, ax, fontsize=7):
+    """The legend of ``ax``'s labelled artists below the figure's panels, in two columns
+    (beside them it took 40 % of the width a printed page gives the picture)."""
+    handles, labels = ax.get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=2, fontsize=fontsize, framealpha=0.9)
 
 
 def two_panels(axes, figsize) -> tuple:
@@ -653,28 +669,44 @@ def _finite_or_0(x) -> float:
     return float(x) if math.isfinite(x) else 0.0
 
 
-def mirror_segments(result) -> list:
-    """(target, start, end) of every mirror beam along the direction the report gives
-    (else the mirror axis of the spot's mean normal), scene-local 3-D points [m], to its
-    dynamic specular NOHD or, when every ray of it is stopped sooner, to where the
-    analysis stops its farthest ray (``sdz.mirror_beams[].max_reach_m``): never past
-    where the text says it ends; an infinite NOHD drawn 100 km."""
+def mirror_lines(result) -> list:
+    """(target, start, end, eye) of every mirror beam with a specular NOHD, scene-local
+    3-D points [m], on its hazard zone's own axis (:func:`hazard.mirror_zone.beam_axis`:
+    on one flat plane the laser's axis reflected where it meets the plane, else from the
+    spot's centroid along the reported direction or the mirror axis of the spot's mean
+    normal), drawn to the naked eye's dynamic specular NOHD or, when every ray of it is
+    stopped sooner, to where the analysis stops its farthest ray
+    (``sdz.mirror_beams[].max_reach_m``): never past where the text says it ends; an
+    infinite NOHD drawn 100 km. A beam only an optical aid makes hazardous is drawn to
+    that aid's NOHD (the farthest such), ``eye`` naming the aid ("naked eye" otherwise)."""
     from .engine import mirror_axis
+    from .mirror_zone import beam_axis, eye_rows
 
     out = []
     rows = {t.name: t for t in result.targets}
-    reach = mirror_stops_m(result)
     for sp in result.spots:
         row = rows.get(sp.target.name)
-        if not sp.material.has_specular or row is None or not row.specular_nohd_dynamic_m:
+        if not sp.material.has_specular or row is None:
             continue
-        length = float(row.specular_nohd_dynamic_m) if math.isfinite(row.specular_nohd_dynamic_m) else 1e5
-        stop = reach.get(sp.target.name)
-        if stop is not None and math.isfinite(stop) and 0.0 <= stop < length:
-            length = float(stop)
+        reach = [(eye, _drawn_length_m(nohd, stop)) for eye, _, _, nohd, stop in eye_rows(result, row) if nohd]
+        if not reach:
+            continue
+        eye, length = reach[0] if reach[0][0] == "naked eye" else max(reach, key=lambda e: e[1])
         axis = np.asarray(row.specular_direction, float) if row.specular_direction is not None else mirror_axis(sp)
-        out.append((sp.target.name, sp.centroid, sp.centroid + axis * length))
+        start, u, _ = beam_axis(sp, sp.centroid, axis)
+        out.append((sp.target.name, start, start + u * length, eye))
     return out
+
+
+def _drawn_length_m(nohd_m, stop_m) -> float:
+    """How far a mirror beam is drawn [m]: its NOHD (100 km when infinite), or where the analysis stops it when sooner."""
+    length = float(nohd_m) if math.isfinite(nohd_m) else 1e5
+    return float(stop_m) if stop_m is not None and math.isfinite(stop_m) and 0.0 <= stop_m < length else length
+
+
+def mirror_segments(result) -> list:
+    """(target, start, end) of every mirror beam (:func:`mirror_lines` without the eye)."""
+    return [(name, a, b) for name, a, b, _ in mirror_lines(result)]
 
 
 def _mirror_zone_rings(result, off) -> list:

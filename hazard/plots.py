@@ -28,7 +28,11 @@ def _axes(ax):
 
 class DisplayBase:
     """Base of the Display objects: ``save`` (atomic PNG), ``png_bytes`` and
-    ``png_and_entry`` around the subclass's ``plot(**kw) -> (fig, ax)``."""
+    ``png_and_entry`` around the subclass's ``plot(**kw) -> (fig, ax)``. ``DPI``: the
+    pictures' resolution [px/in]; with the figure's size [in] it sets how large its text
+    prints (:data:`hazard.canvas.PRINT_MIN_PT`)."""
+
+    DPI = 110
 
     def save(self, path, **plot_kw) -> Path:
         fig, _ = self.plot(**plot_kw)
@@ -36,7 +40,7 @@ class DisplayBase:
         from brdfmodels.fileio import atomic_write
 
         # a legend beside or below the axes stays whole
-        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, bbox_inches="tight"), keep_suffix=True)
+        atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=self.DPI, bbox_inches="tight"), keep_suffix=True)
         return path  # a figure drawn here is in no pyplot manager (nothing to close); a caller's ``ax`` stays the caller's
 
     def png_bytes(self, **plot_kw) -> bytes:
@@ -50,8 +54,8 @@ class DisplayBase:
 
         fig, _ = self.plot(**plot_kw)
         buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")  # a legend below the axes stays whole
-        return buf.getvalue(), figure_entry(fig, view)
+        fig.savefig(buf, format="png", dpi=self.DPI, bbox_inches="tight")  # a legend below the axes stays whole
+        return buf.getvalue(), figure_entry(fig, view, dpi=self.DPI)
 
 
 def _state_label(name, s) -> str:
@@ -292,7 +296,7 @@ class ExposureDisplay(DisplayBase):
         _mark_curve(ax, self.paths, self.times_s[1:], np.maximum(self.exposure_j_m2[1:], 1e-12))
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = ax2.get_legend_handles_labels()
-        ax.legend(h1 + h2, l1 + l2, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=7)
+        ax.legend(h1 + h2, l1 + l2, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=8)
         ax.grid(alpha=0.3, which="both")
         return fig, ax
 

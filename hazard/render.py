@@ -210,9 +210,9 @@ def _points(mesh) -> np.ndarray:
 
 def _hazard_points(result, blocks) -> np.ndarray:
     """Everything the overview must hold: lobes, targets, laser, mirror beams to their
-    NOHD, the aim line to the danger zone's range, the hazardous ground and every
-    observer (the hazardous ones among them)."""
-    keep = ("lobe_", "target_", "mirror_", "beam_", "aim", "laser", "observers")
+    NOHD, the aim line to the danger zone's range, the hazardous ground, every observer
+    (the hazardous ones among them), the moving observers' tracks and the flight zones."""
+    keep = ("lobe_", "target_", "mirror_", "beam_", "aim", "laser", "observers", "track_", "airspace_")
     pts = [_points(blocks[k]) for k in blocks.keys() if k.startswith(keep)]
     if result.footprint_dynamic is not None and result.footprint_dynamic.mask.any():
         t = result.scene.terrain
@@ -388,6 +388,41 @@ def _add_objects(p, blocks, framing, tube, legend):
             _once(legend, ("laser", "#000000", "marker"))
 
 
+def airspace_entries(result) -> list:
+    """(block name, report.json paths, legend text, colour, kind) of every moving
+    observer's track (red over the MPE, else green) and flight zone (red exceeded, else
+    blue) the 3-D pictures draw, their texts the plan view's
+    (:func:`hazard.figure_index.track_lines`, :func:`hazard.figure_index.flight_zone_rings`)."""
+    from .figure_index import flight_zone_rings, track_lines
+
+    paths = finding_paths(result)
+    tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
+    out = [(f"track_{name}", ps, text, C.HAZARDOUS if t.summary.get("hazardous") else C.SAFE, "line")
+           for (ps, name, _, text), t in zip(track_lines(result, paths), tracks)]
+    specs = [] if result.scene.spec.airspace is None else list(result.scene.spec.airspace.zones)
+    out += [(f"airspace_{spec.name}", (path,), text, C.ZONE if exceeded else C.STATIC, "patch")
+            for (path, _, exceeded, text, spec, _), spec in zip(flight_zone_rings(result), specs)]
+    return out
+
+
+def _add_airspace(p, result, blocks, framing, tube, legend):
+    """Each track as a tube, each flight zone as a see-through prism with its edges; in a
+    true-scale picture only those meeting its box (the close view: figures.json then says
+    the others are not in it)."""
+    for name, _, text, colour, kind in airspace_entries(result):
+        if name not in blocks.keys():
+            continue
+        mesh = framing.mesh(blocks[name])
+        lo, hi = np.asarray(mesh.bounds, float).reshape(3, 2).T
+        if not framing.compressed and (np.any(lo > framing.bounds[:, 1]) or np.any(hi < framing.bounds[:, 0])):
+            continue
+        if kind == "line":
+            p.add_mesh(mesh.tube(radius=tube) if mesh.n_cells else mesh, color=colour, lighting=False, point_size=8)
+        else:
+            p.add_mesh(mesh, color=colour, opacity=0.18, show_edges=True, edge_color=colour, line_width=1.5, lighting=False)
+        legend.append((text, colour, kind))
+
+
 def _add_observers(p, result, blocks, framing, legend):
     """Safe observers small and green; hazardous ones large and red, the worst numbered in
     the picture and named in the legend (a number is never cut at the picture's edge)."""
@@ -447,6 +482,7 @@ def _draw(result, blocks, framing, window_size):
     _add_rings(p, result, framing, legend, limit)
     _add_lobes(p, result, blocks, framing, legend)
     _add_objects(p, blocks, framing, tube, legend)
+    _add_airspace(p, result, blocks, framing, tube, legend)
     _add_observers(p, result, blocks, framing, legend)
     _add_nohd_labels(p, result, framing, legend)
     p.show_axes()
@@ -498,6 +534,9 @@ def _notes(result, blocks, framing, legend) -> list:
         add([paths["mirror"].get(name[len("mirror_"):])], "mirror beam to its NOHD or its backstop", _points(blocks[name]), "line")
     if "aim" in blocks.keys():
         add([paths["zone"]], "aim line to the danger zone's range", _points(blocks["aim"]), "line")
+    for name, ps, text, _, kind in airspace_entries(result):  # drawn, or outside the close view's box (said by "inside")
+        if name in blocks.keys():
+            add(list(ps), text, _points(blocks[name]), "line" if kind == "line" else "surface")
     _observer_notes(result, paths, texts, add)
     _footprint_notes(result, framing, paths, texts, add)
     return notes
@@ -555,21 +594,16 @@ def _title_lines(result, framing, title) -> list:
 
 
 def not_drawn(result) -> dict:
-    """The report.json findings the 3-D pictures do not draw - the moving observers'
-    tracks (and their observer rows), the flight zones, the direct beam's FAA distances,
-    the danger zones through optics -, the line saying so and where they are drawn
-    (``see``: the plan and elevation views)."""
+    """The report.json findings the 3-D pictures do not draw - the direct beam's FAA
+    distances, the danger zones through optics (the tracks and flight zones they draw:
+    :func:`airspace_entries`) -, the line saying so and where they are drawn (``see``:
+    the plan and elevation views)."""
     from .figure_index import faa_marks
 
     paths = finding_paths(result)
-    tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
-    zones = (getattr(result, "airspace", None) or {}).get("zones") or []
     faa = faa_marks(result)
-    rows = [p for r, p in sorted(paths["observers"].items()) if r >= len(result.observers)]
-    out = [f"tracks[{k}]" for k in range(len(tracks))] + rows + [f"airspace.zones[{k}]" for k in range(len(zones))]
-    out += [p for p, *_ in faa] + list(paths["aided"])
+    out = [p for p, *_ in faa] + list(paths["aided"])
     what = [f"{n} {one if n == 1 else many}" for n, one, many in (
-        (len(tracks), "moving observer's track", "moving observers' tracks"), (len(zones), "flight zone", "flight zones"),
         (len(faa), "FAA distance", "FAA distances"), (len(paths["aided"]), "danger zone through optics", "danger zones through optics"))
         if n]
     label = f"not drawn here, see plan.png and elevation.png: {', '.join(what)}" if what else ""

@@ -109,3 +109,106 @@ def _views(name):
 def test_no_two_labels_of_a_panel_overlap(name):
     for ax in _views(name):
         assert not overlaps(ax), (ax.get_title(), overlaps(ax))
+
+
+def _line_px(ax, a, b, step_px=1.0) -> np.ndarray:
+    """Points [px] every ``step_px`` along the data segment a-b (sampled here, not by the placer)."""
+    pa, pb = ax.transData.transform(np.array([a, b], float))
+    n = int(np.ceil(np.hypot(*(pb - pa)) / step_px)) + 1
+    return pa + np.linspace(0.0, 1.0, n)[:, None] * (pb - pa)
+
+
+def _covering(ax, t, pts, own_xy, own_px=14.0) -> int:
+    """How many of ``pts`` [px] the box of text ``t`` covers, those within ``own_px`` of its own point aside."""
+    from matplotlib.text import Text
+
+    b = Text.get_window_extent(t, ax.figure.canvas.get_renderer())
+    far = pts[np.hypot(*(pts - ax.transData.transform(own_xy)).T) > own_px]
+    return int(np.sum((far[:, 0] >= b.x0) & (far[:, 0] <= b.x1) & (far[:, 1] >= b.y0) & (far[:, 1] <= b.y1)))
+
+
+def test_a_label_over_a_drawn_finding_moves_off_it_and_one_over_unmarked_data_stays():
+    """A label drawn across a finding's line and points (noted with figure_index.mark) is
+    moved off them (issue 34 leftover: range_clearance's terrain label over the danger
+    zone's end); a label over a line that is no finding stays where it was."""
+    from hazard.canvas import subplots
+    from hazard.figure_index import mark
+    from hazard.label_place import place_labels
+
+    fig, ax = subplots(figsize=(5, 4))
+    ax.set_xlim(0, 100)
+    ax.set_ylim(0, 100)
+    ax.plot([50, 50], [0, 100], c="r")
+    mark(ax, ["sdz"], "zone", [[50, 0], [50, 100]], "line")
+    crosses = np.array([[30.0, 62.0], [70.0, 62.0]])
+    ax.plot(*crosses.T, "rx")
+    mark(ax, ["observers[0]", "observers[1]"], "hazardous observers", crosses, "points")
+    ax.plot([0, 100], [20, 20], c="k")  # no finding: the placer may cover it
+    over = ax.annotate("a label across the beam", (40.0, 60.0), xytext=(0, 0), textcoords="offset points", fontsize=8)
+    stays = ax.annotate("a label over a plain line", (3.0, 20.0), xytext=(0, 0), textcoords="offset points", fontsize=8)
+    fig.canvas.draw()
+    beam = _line_px(ax, (50, 0), (50, 100))
+    pts = np.vstack([beam, ax.transData.transform(crosses)])
+    assert _covering(ax, over, pts, (40.0, 60.0)) > 0  # before: across the beam
+    before = stays.get_window_extent().frozen()
+    assert place_labels(ax) == 1
+    fig.canvas.draw()
+    assert _covering(ax, over, pts, (40.0, 60.0)) == 0
+    assert np.allclose(stays.get_window_extent().get_points(), before.get_points())
+
+
+def test_labels_still_clear_each_other_before_they_clear_the_data():
+    """Three labels on one point between two finding lines closer than a label's width:
+    no place clears the data, so each clears the labels (none dropped, none on another)."""
+    from hazard.canvas import subplots
+    from hazard.figure_index import mark
+    from hazard.label_place import place_labels
+
+    fig, ax = subplots(figsize=(3, 3))
+    ax.set_xlim(0, 100)
+    ax.set_ylim(0, 100)
+    for x in np.arange(5.0, 100.0, 10.0):
+        mark(ax, [f"tracks[{int(x)}]"], "track", [[x, 0], [x, 100]], "line")
+    for k in range(3):
+        ax.annotate(f"label {k} of the point", (48.0, 50.0), xytext=(0, 0), textcoords="offset points", fontsize=8)
+    fig.canvas.draw()
+    place_labels(ax)
+    fig.canvas.draw()
+    assert len(ax.texts) == 3 and not overlaps(ax) and not outside(ax)
+
+
+@pytest.mark.parametrize("name", ["range_clearance", pytest.param("mirror_window", marks=pytest.mark.slow)])
+def test_no_label_of_the_plan_view_covers_a_hazardous_observer_it_does_not_name(name):
+    """In the plan view's panels no label covers the marker of a hazardous observer
+    (report.json's observers at or above the MPE, positions from report.json) other than
+    near its own point."""
+    from hazard.plan_view import PlanViewDisplay
+    from hazard.report import report_dict
+    from matplotlib.text import Annotation
+
+    doc = report_dict(bundled(name))
+    xy = np.array([o["position_m"][:2] for o in doc["observers"] if o.get("hazardous")], float)
+    assert len(xy)
+    fig, axes = PlanViewDisplay.from_result(bundled(name)).plot()
+    fig.canvas.draw()
+    for ax in axes:
+        pts = ax.transData.transform(xy)
+        f = ax.get_window_extent()
+        pts = pts[(pts[:, 0] >= f.x0) & (pts[:, 0] <= f.x1) & (pts[:, 1] >= f.y0) & (pts[:, 1] <= f.y1)]
+        for t in ax.texts:
+            if isinstance(t, Annotation) and t.xycoords == "data" and t.get_visible() and t._check_xy(fig.canvas.get_renderer()):
+                assert _covering(ax, t, pts, t.xy) == 0, (ax.get_title(), t.get_text())
+
+
+@pytest.mark.parametrize("name", ["mirror_window", pytest.param("airspace", marks=pytest.mark.slow)])
+def test_no_two_tick_labels_of_a_panel_touch(name):
+    """The panels are narrower now that the pictures print at 6 pt (issue 34 leftover a):
+    airspace's elevation x labels ran together ("1000012500"); no two visible tick
+    labels of an axis overlap."""
+    for ax in _views(name):
+        r = ax.figure.canvas.get_renderer()
+        for axis, lo, hi in ((ax.xaxis, 0, 2), (ax.yaxis, 1, 3)):  # along the axis: a gap of 2 px at least
+            boxes = sorted((t.get_window_extent(r).extents for t in axis.get_ticklabels() if t.get_visible() and t.get_text()),
+                           key=lambda b: b[lo])
+            for a, b in itertools.pairwise(boxes):
+                assert b[lo] - a[hi] >= 2.0, (ax.get_title(), a, b)

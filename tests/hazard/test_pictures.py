@@ -173,10 +173,12 @@ def test_the_elevation_projects_across_the_aim(svc):
     scene = svc.scene
     u = np.array([scene.laser_direction[0], scene.laser_direction[1], 0.0])
     u /= np.linalg.norm(u)
+    from hazard.plan_view import mirror_lines
+
+    ends = {name: end for name, _, end, _ in mirror_lines(svc)}  # scene-local 3-D, on the zone's axis (tests/hazard/test_mirror_lines.py)
+    assert set(ends) == {name for name, _, _ in d.mirrors}
     for name, _a, b in d.mirrors:  # each end: distance along the aim's azimuth from the laser, world height
-        sp = next(s for s in svc.spots if s.target.name == name)
-        row = next(t for t in svc.targets if t.name == name)
-        end = sp.centroid + np.asarray(row.specular_direction) * row.specular_nohd_dynamic_m
+        end = ends[name]
         want = [float((end - scene.laser_position_m)[:2] @ u[:2]), float(end[2] + scene.offset_m[2])]
         np.testing.assert_allclose(b, want, rtol=1e-6, atol=1e-6)
     assert {(t, k) for t, k, _ in d.lobes} == {("copper", "static"), ("copper", "dynamic"), ("stainless", "static"), ("stainless", "dynamic")}

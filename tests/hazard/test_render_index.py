@@ -20,7 +20,7 @@ from tests.hazard.test_figure_index import hazardous_paths
 pv = pytest.importorskip("pyvista")
 
 SMALL = (640, 560)  # window [px]: the legend (up to ~24 entries) fits beside it; quick to render
-NOT_IN_3D = ("tracks", "airspace.zones", "visual_interference", "sdz.aided")  # the plan and elevation views draw these
+NOT_IN_3D = ("visual_interference", "sdz.aided")  # only the plan and elevation views draw these
 
 
 def _report(result) -> dict:
@@ -80,16 +80,13 @@ def _render(name, tmp_path):
 
 def check_3d_coverage(doc, entry) -> list:
     """The hazardous findings of report.json the overview (everything hazardous) must draw
-    - every one but those only the 2-D views draw (tracks and the moving observers' rows,
-    flight zones, FAA distances, the aided zones) - that it does not draw in view with
-    its label shown; [] when it draws them all."""
-    tracks = {t["name"] for t in doc.get("tracks") or []}
-    moving = {f"observers[{i}]" for i, o in enumerate(doc["observers"]) if o["name"] in tracks}
+    - every one but those only the 2-D views draw (FAA distances, the aided zones) - that
+    it does not draw in view with its label shown; [] when it draws them all."""
     drawn = {}
     for f in entry["findings"]:
         for path, inside in zip(f["paths"], f["inside"]):
             drawn.setdefault(path, []).append(inside and f["label_shown"])
-    return [p for p in hazardous_paths(doc) if not p.startswith(NOT_IN_3D) and p not in moving and not any(drawn.get(p, []))]
+    return [p for p in hazardous_paths(doc) if not p.startswith(NOT_IN_3D) and not any(drawn.get(p, []))]
 
 
 def dark_edges(png) -> list:
@@ -180,18 +177,38 @@ def test_a_run_after_a_render_still_lists_the_3d_pictures_it_keeps(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_3d_pictures_say_which_findings_they_leave_to_the_2d_views(tmp_path):
-    """airspace: its track, flight zones and FAA distances are not drawn in 3-D; the
-    overview says so in its title and figures.json lists them under ``not_drawn``."""
+def test_the_3d_overview_draws_the_tracks_and_flight_zones_and_says_what_it_leaves_to_the_2d_views(tmp_path):
+    """airspace (issue 34 leftover d): the overview draws the helicopter's track (its
+    ``tracks[k]`` and its observer row) and every flight zone in view with their plan-view
+    texts in its legend, the exceeded zone in the danger zone's red at its place in the
+    picture; its FAA distances are not drawn in 3-D, said in the title and listed under
+    ``not_drawn``."""
+    import matplotlib.image as mpimg
+
     res, figs = _render("airspace", tmp_path)
     doc = _report(res)
+    over = figs["overview.png"]
+    drawn = {p: f for f in over["findings"] for p in f["paths"]}
+    tracks = [f"tracks[{k}]" for k in range(len(doc["tracks"]))]
+    zones = [f"airspace.zones[{k}]" for k in range(len(doc["airspace"]["zones"]))]
+    assert tracks and zones
+    for p in tracks + zones:
+        assert all(drawn[p]["inside"]) and drawn[p]["label_shown"], (p, drawn.get(p))
+    rows = [f"observers[{i}]" for i, o in enumerate(doc["observers"]) if o["name"] in {t["name"] for t in doc["tracks"]}]
+    assert rows and all(all(drawn[r]["inside"]) for r in rows)
     left = [p for p in hazardous_paths(doc) if p.startswith(NOT_IN_3D)]
-    assert left and "airspace.zones[0]" in left
+    assert left
     for fname in ("keepout.png", "overview.png"):
         nd = figs[fname]["not_drawn"]
         assert set(left) <= set(nd["paths"]) and nd["see"] == ["plan.png", "elevation.png"]
-        assert "1 moving observer's track" in nd["label"] and "flight zones" in nd["label"]
+        assert not any(p.startswith(("tracks", "airspace.zones")) for p in nd["paths"])
+        assert "FAA distance" in nd["label"] and "track" not in nd["label"] and "flight zone" not in nd["label"]
     from hazard import render
 
     framing = render.Framing(np.zeros((3, 2)), np.zeros(3))
-    assert figs["overview.png"]["not_drawn"]["label"] in render._title_lines(res, framing, "t")  # said in the title strip
+    assert over["not_drawn"]["label"] in render._title_lines(res, framing, "t")  # said in the title strip
+    exceeded = [k for k, z in enumerate(doc["airspace"]["zones"]) if not z["holds"]]
+    assert exceeded  # the EXCEEDED airfield zone is drawn red: the zone's colour is in the picture
+    img = (mpimg.imread(tmp_path / "overview.png")[..., :3] * 255).round().astype(int)
+    red = (img[..., 0] > 200) & (img[..., 1] < 120) & (img[..., 2] < 120)
+    assert red.sum() > 50
