@@ -33,7 +33,7 @@ import numpy as np
 from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
 
 from .beam import HALF_WIDTH
-from .near_field import near_field_irradiance, patches_from_leaves, patches_from_pieces
+from .near_field import leaf_corners_s, near_field_irradiance, patches_from_leaves, patches_from_pieces, perspective_weights
 from .rays import own_object
 
 __all__ = ["Spot", "build_spots", "projected_brdf", "spot_irradiance", "specular_irradiance", "FAR_FIELD_SPOT_SIZES",
@@ -476,6 +476,30 @@ def _edge_bound(beam, cells, target, rows, mu):
     return peak, float(beam.source_distance_m(z))
 
 
+def _leaf_corners(beam, s_lo, s_hi, centre_x, normals, jac):
+    """Where a diverging beam's rays through each leaf's corners meet the leaf's tangent
+    plane (through its centre ray's hit ``centre_x`` (L, 3), normal ``normals``) and their
+    perspective weights (``hazard.near_field``): (L, 4, 3) [m] and (L, 4); (None, None)
+    for a collimated beam (the affine map through ``jac`` is exact there). A leaf whose
+    corner ray runs parallel to or away from that plane keeps the affine corners."""
+    if not beam.divergence_rad > 0 or not len(centre_x):
+        return None, None
+    cs = leaf_corners_s(s_lo, s_hi)
+    o, d = beam.rays(cs.reshape(-1, 2))
+    n = np.repeat(normals, 4, axis=0)
+    dn = np.einsum("ij,ij->i", d, n)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.einsum("ij,ij->i", np.repeat(centre_x, 4, axis=0) - o, n) / dn
+    x = o + t[:, None] * d
+    ok = (np.isfinite(t) & (t > 0)).reshape(-1, 4).all(axis=1)
+    ds = cs - 0.5 * (s_lo + s_hi)[:, None, :]
+    affine = centre_x[:, None, :] + ds[:, :, :1] * jac[0][:, None, :] + ds[:, :, 1:] * jac[1][:, None, :]
+    x = np.where(ok[:, None, None], x.reshape(-1, 4, 3), affine)
+    g = perspective_weights(beam.source_distance_m((x.reshape(-1, 3) - beam.position_m) @ beam.axis).reshape(-1, 4))
+    g[~ok] = 1.0
+    return x, g
+
+
 def _nearest_axial(beam, target) -> float:
     """The target's smallest axial distance from the laser [m] (over its vertices)."""
     v = np.asarray(target.mesh.vertices, float)
@@ -520,8 +544,9 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     inc = means[:, 3:6] / np.linalg.norm(means[:, 3:6], axis=1, keepdims=True)
     s0, s1, t0, t1 = cells.bounds(rows)
     sample_power = np.bincount(inv, power, n_g)
+    corners_x, corners_g = _leaf_corners(beam, np.stack([s0, t0], 1), np.stack([s1, t1], 1), centre_x, normals, jac)
     patches = patches_from_leaves(centre_x, jac, np.stack([s0, t0], 1), np.stack([s1, t1], 1), power, inv, means[:, 0:3],
-                                  sample_power)
+                                  sample_power, corners_x, corners_g)
     return Spot(target, means[:, 0:3], sample_power, inc, _frames(target, nrm), means[:, 9], pk,
                 p_near, material, side, float(error_w), exact, area, cells, beam,
                 _target_ray_faces(tracer, target), spread_m2=scatter, patches=patches)
@@ -540,7 +565,7 @@ def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_
     patches = None
     if ex.pieces is not None and len(ex.pieces):
         patches = patches_from_pieces(list(ex.pieces), ex.fraction, ex.power_w, lambda s: _plane_hits(beam, target, s)[0],
-                                      ex.points)
+                                      ex.points, lambda x: beam.source_distance_m((x - beam.position_m) @ beam.axis))
     return Spot(target, ex.points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
                 beam.source_distance_m(ex.axial_m if ex.near_axial_m is None else ex.near_axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
                 cells, beam, _target_ray_faces(tracer, target), outline_s, spread, patches=patches)

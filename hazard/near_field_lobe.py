@@ -127,7 +127,8 @@ def _incident_w_m2(spot) -> np.ndarray:
     """Largest irradiance [W/m^2] the beam lays on each of the spot's triangles (K,) (a
     bound): its power density in beam coordinates ``c exp(-|s|^2)`` at its point nearest
     ``s = 0`` times ``area_s / area_x`` (the affine map's), with the spot's current
-    powers; infinite for a triangle of no area on the surface."""
+    powers, raised by the perspective map's largest stretch over the triangle;
+    infinite for a triangle of no area on the surface."""
     p = spot.patches
     v = p.tri_s
     d2 = np.full(len(v), np.inf)  # squared distance of s = 0 from each triangle's edges
@@ -144,8 +145,12 @@ def _incident_w_m2(spot) -> np.ndarray:
     area_x = 0.5 * np.linalg.norm(np.cross(p.tri_x[:, 1] - p.tri_x[:, 0], p.tri_x[:, 2] - p.tri_x[:, 0]), axis=1)
     built = np.asarray(p.sample_power_w, float)
     ratio = np.where(built > 0, np.asarray(spot.power_w, float) / np.where(built > 0, built, 1.0), 0.0)[p.sample]
+    # a diverging beam's map has d(area_x) / d(area_s) ~ 1 / g^3 (g the perspective weight,
+    # affine in s): area_s / area_x is its mean, the largest is at most (g_max / g_min)^3 of that
+    g = p.weights()
+    stretch = (g.max(axis=1) / np.maximum(g.min(axis=1), 1e-300)) ** 3
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(area_x > 0, p.density_w * ratio * peak * area_s / np.where(area_x > 0, area_x, 1.0), np.inf)
+        return np.where(area_x > 0, p.density_w * ratio * peak * stretch * area_s / np.where(area_x > 0, area_x, 1.0), np.inf)
 
 
 def _largest_incident_w_m2(spot) -> float:

@@ -36,8 +36,11 @@ import hazard
 import scenes
 from hazard import near_field_lobe
 from hazard.keepout import nohd_range_fn
+from hazard.mpe import ocular_mpe
+from hazard.pipeline.spots import ray_scene, trace_beam
 
 from . import _refs as ref
+from .test_near_field_spot import _diverging_reference
 
 A, PHI, R1 = 0.05, 1e-9, 2000.0  # collimated (w = a / 2 on the plate), from beyond the spot's far end
 W = (A + R1 * PHI) / 2
@@ -453,3 +456,36 @@ def test_projected_brdf_max_is_the_models_largest_value():
     glossy = brdfmodels.TorranceSparrow5(kb=1.0, kr=0.5, a=0.1, b=0.2, kd=0.1)
     assert near_field_lobe.projected_brdf_max(glossy) is None
     assert near_field_lobe.projected_brdf_max(brdfmodels.Sum([lam, glossy])) is None
+
+
+def _diverging_flat_bound_case(inc, phi, rng_m, h, along):
+    """The flat spot's bound (as ``_flat_bound_case``) for a diverging beam: the plate ``rng_m`` from a 1 kW, 5 cm
+    laser of divergence ``phi`` at incidence ``inc``; the reference traces the rays from the virtual source
+    (``test_near_field_spot._diverging_reference``)."""
+    n, b, t = _frame(inc)
+    ell = (0.05 + rng_m * phi) / 2 / math.cos(math.radians(inc))
+    half_len = min(3 * ell, 0.75 * rng_m)
+    plate = dict(name="plate", shape="plate", center=np.zeros(3), normal=n, tangent=t, size=(1.0, 2 * half_len),
+                 material=ref.lambertian(RHO))
+    laser = np.array([0.0, -rng_m, 0.0])
+    scene = scenes.loads(ref.scene_text(power=1000.0, a=0.05, phi=phi, position=laser, aim=np.zeros(3), targets=[plate]))
+    spot = trace_beam(scene, ray_scene(scene, "embree", 1), 0.0).built.spots[0]
+    mpe = ocular_mpe(1064.0, 10.0).irradiance_w_m2  # scene_text's 1064 nm, 10 s: an input, not under test
+    fn = nohd_range_fn(spot, mpe, 0.0, 1.0, None)
+    probe = np.array([_grid_dir(th, p) for th in near_field_lobe.THETA_ROWS_DEG for p in range(-180, 181, 30)])
+    fn.prepare(probe, fn.base(probe))
+    o = h * n + along * min(ell, 0.5 * rng_m) * b
+    off = np.asarray(scene.offset_m, float)
+    bound = fn._flat_bound((o - off)[None, :])
+    want = _diverging_reference(1000.0, 0.05, phi, laser, np.zeros(3), np.zeros(3), n, b, t, half_len, 0.5, o, rho=RHO)
+    assert np.all(np.isfinite(bound)) and bound[0] >= want / mpe, (bound, want / mpe)
+
+
+@settings(ref.FAST, max_examples=4)
+@given(inc=st.floats(80.0, 89.99), phi=ref.log_uniform(1e-5, 2e-3), rng_m=ref.log_uniform(50.0, 3000.0),
+       h=ref.log_uniform(0.05, 3.0), along=st.floats(-1.5, 1.5))
+def test_flat_spot_bound_is_above_the_integral_of_a_diverging_beam(inc, phi, rng_m, h, along):
+    """A diverging beam at grazing incidence lays its power unevenly over each triangle of the spot (the perspective
+    map, hazard.near_field): the bound takes each triangle's largest stretch and stays above the integral of the rays
+    traced from the virtual source at random points above the plate."""
+    _diverging_flat_bound_case(inc, phi, rng_m, h, along)
