@@ -1,16 +1,22 @@
 """The README works as written (issue 31 item 5): every relative link resolves to a file
 that ships in the repository (and its #anchor to a heading there), every ``hazard``
 command in its bash blocks parses, no command reuses an output folder it owns without
-``--force``, and the blocks run in order in a fresh folder.
+``--force``, and every block runs, in the default suite.
 
 Skipped: the set-up install commands (``pip install ...`` parts of a line), the CI's own
 test command (the block after ``<!-- test-command -->``, run by ``.ci/run``) and blocks
-marked ``<!-- no-run -->`` (placeholders: your own scene, a scheduler's address). The
-quick blocks (``hazard mpe``, ``nohd``, ``validate``, ``models``, ``schema`` only) run in
-the default suite; all of them in order run under ``-m slow``: long (measured on the shared
-2-core machine under load: 20 min up to and through the first risk run, of which that run
-14 min, then 6 min for range_clearance, the study, convergence and the render; the
-50,000-draw risk run was not timed there).
+marked ``<!-- no-run -->`` (placeholders: your own scene, a scheduler's address).
+
+The README's examples are quick by design (a few hundred risk draws, a three-run study,
+one convergence knob, a static render; the text says how to scale each up). Each block
+runs as one piece, its commands in order, in a fresh folder (``test_readme_block_runs``,
+one test per block, so ``pytest -n auto`` spreads them over the cores); no block reads
+what an earlier block wrote (``test_no_readme_block_reads_an_earlier_blocks_output``), so
+the pieces are independent. Measured on the shared 2-core machine (load 15-20): every
+block, CPU README_CPU (was: tens of minutes of wall time, only under ``-m slow``, with the
+20,000-draw and 50,000-draw risk runs, a four-run study of steel_vs_copper, every
+convergence knob and an animated render). ``-m slow`` still runs the whole README in
+order in one folder, as a reader would.
 """
 
 from __future__ import annotations
@@ -190,13 +196,48 @@ def _run_blocks(blocks, tmp_path: Path) -> None:
             assert ok, f"README line {line}: {c!r} exited {done.returncode}:\n{done.stderr[-2000:]}"
 
 
-def test_quick_readme_blocks_run(tmp_path):
-    quick = [(line, cmds) for line, cmds in runnable() if all(_argv(c)[1] in QUICK_VERBS for c in cmds)]
-    assert quick, "no quick block (hazard mpe / nohd ...) found in the README"
-    _run_blocks(quick, tmp_path)
+def _written_folders(cmd: str, parser) -> set:
+    """The folders a command writes (``-o``) or paths it writes (``--plot FILE``)."""
+    args = parser.parse_args(_argv(cmd)[1:])
+    return {str(v) for k in ("output", "plot") if isinstance(v := getattr(args, k, None), str)}
 
 
-@pytest.mark.slow  # every README block in order: tens of minutes (examples with pictures, two risk runs, a study, renders)
+def test_no_readme_block_reads_an_earlier_blocks_output():
+    """Each block runs alone in a fresh folder (in parallel under xdist): a command naming
+    a folder that only an earlier block wrote (``hazard report out`` with ``out`` from the
+    block before) would fail there, so the two would have to be one piece."""
+    from hazard.cli import build_parser
+
+    parser, earlier, bad = build_parser(), {}, []
+    for line, cmds in runnable():
+        own = set()
+        for c in cmds:
+            writes = _written_folders(c, parser)
+            for token in _argv(c)[1:]:
+                if token in earlier and token not in own and token not in writes:
+                    bad.append(f"README line {line}: {c!r} reads {token}, written by the block at line {earlier[token]}")
+            own |= writes
+        for folder in own:
+            earlier.setdefault(folder, line)
+    assert bad == [], "\n".join(bad)
+
+
+@pytest.mark.parametrize("line", [line for line, _ in runnable()])
+def test_readme_block_runs(line, tmp_path):
+    """One README block, its commands in order, in a fresh folder (see the module notes)."""
+    _run_blocks([(b, cmds) for b, cmds in runnable() if b == line], tmp_path)
+
+
+def test_every_runnable_block_is_a_piece():
+    """The parametrised pieces are every runnable block once, in the README's order, and
+    the quick verbs are among them (a README rewrite cannot drop them silently)."""
+    lines = [line for line, _ in runnable()]
+    assert lines == sorted(set(lines)) and len(lines) >= 8
+    verbs = {_argv(c)[1] for _, cmds in runnable() for c in cmds}
+    assert QUICK_VERBS | WRITING_VERBS | {"study", "convergence", "report", "compare"} <= verbs, verbs
+
+
+@pytest.mark.slow  # the whole README in order in one folder, as a reader would run it (the pieces above run it by block)
 def test_every_readme_block_runs_in_order(tmp_path):
     _run_blocks(runnable(), tmp_path)
 

@@ -309,6 +309,52 @@ def test_one_headline_on_stdout_report_json_and_the_review_page(name, tmp_path):
         assert doc["verdict"]["headline"].startswith("No listed observer at or above its limit (0 of 29")
 
 
+def _pages_agree(name, result, folder):
+    """The headline of stdout's answer, report.json, report.html and map.html for one
+    analysis, written by the functions ``hazard run --report`` calls (the map files and
+    the output folder's unit left out)."""
+    from hazard.map_outputs import map_files
+    from hazard.map_page import write_map_page
+    from hazard.report import summary_text, write_set
+    from hazard.review import write_review
+
+    folder.mkdir()
+    maps, section = map_files(result)
+    write_set(result, folder, extra=maps, sections={"map_outputs": section})
+    write_map_page(folder)
+    write_review(folder)
+    doc = json.loads((folder / "report.json").read_text())
+    headline = doc["verdict"]["headline"]
+    assert summary_text(result).splitlines()[0] == f"Scene {name!r}: {headline}."
+    page = html.unescape((folder / "report.html").read_text())
+    head = re.search(r'<div class="head">\s*<span class="(\w+)">(.*?)</span>\.', page, re.S)
+    assert head is not None and head[2] == headline
+    mp = re.search(r'<p id="headline" class="(\w*)">(.*?)</p>', html.unescape((folder / "map.html").read_text()), re.S)
+    assert mp is not None and mp[2] == headline and (mp[1] == "hazard") is headline.startswith("HAZARD")
+    bad = doc["hazard_at_observers"] or doc["hazard_zones"]
+    assert (head[1] == "hazard") is bad and headline.startswith("HAZARD") is bad
+    return doc
+
+
+@pytest.mark.parametrize("name", sorted(set(scenes.examples()) - set(FAST_EXAMPLES)))
+def test_one_headline_everywhere_for_the_slower_examples_from_the_shared_analysis(name, tmp_path):
+    """The fast equivalent of the test above for the examples it runs only under ``-m slow``
+    (issue 31: every bundled example, by default): the session's one analysis of the
+    example (tests/_bundled.py, shared with the modules that read it) written out as
+    ``hazard run --report`` writes it."""
+    from tests._bundled import bundled
+
+    doc = _pages_agree(name, bundled(name), tmp_path / "o")
+    if name == "range_geo":
+        assert doc["hazard_at_observers"] is False and doc["hazard_zones"] is False and doc["any_hazard"] is True
+
+
+def test_every_bundled_example_has_its_headline_checked_by_default():
+    """Eleven bundled examples: the fast five by the CLI, the rest from the shared analysis."""
+    names = set(scenes.examples())
+    assert len(names) >= 11 and set(FAST_EXAMPLES) <= names
+
+
 # -- properties on random input nobody tuned -----------------------------------------------------
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
