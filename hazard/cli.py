@@ -174,7 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", action="store_true", help="print the JSON schema of report.json instead (hazard.report_schema)")
 
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
-    p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars)")
+    p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars, plate_power)")
     p.add_argument("-o", "--output", required=True, help="output folder (a restarted study resumes there)")
     _add_dask_args(p, "study", "print the summary as JSON")
 

@@ -31,6 +31,7 @@ import tempfile
 from pathlib import Path
 
 from brdfmodels.fileio import atomic_write, atomic_write_text, check_input_file
+from scenes.conventions import beam_headline
 
 from .page_format import fmt_distance, fmt_number, fmt_percent_change, fmt_vector, optics_text, report_number, template_environment
 from .plots import file_part
@@ -747,13 +748,16 @@ def _verdict(doc: dict, obs: dict) -> dict:
 def _headline_view(doc: dict, any_hazard) -> dict:
     """report.json's ``verdict``: its headline as it is (the same text ``hazard run``
     printed, :func:`hazard.verdict.verdict`), the zones not contained with why, the
-    plausibility ``warnings`` and the box's style (``bad``: a hazard at the observers or
+    plausibility ``warnings``, the beam convention line (``beam``: the standards' 1/e form,
+    given or the default, converted or not; "" for a report without it) and the box's style (``bad``: a hazard at the observers or
     in the zones; ``contained``: hazard zones exist, all contained; ``good``: none).
     A report without ``verdict`` (older) gets ``headline`` None: the page says so."""
     v = doc.get("verdict") if isinstance(doc.get("verdict"), dict) else {}
     bad = bool(v.get("hazard_at_observers") or v.get("hazard_zones")) if v else bool(any_hazard)
     style = "bad" if bad or (not v and any_hazard) else ("contained" if any_hazard else "good")
+    scene = doc.get("scene") if isinstance(doc.get("scene"), dict) else {}
     return {"headline": v.get("headline"), "zones": [str(z) for z in v.get("zones") or []],
+            "beam": beam_headline(scene.get("beam_conventions")),  # the answer's beam line, as stdout says it
             "at_observers": bool(v.get("hazard_at_observers")) if v else bool(any_hazard),
             "warnings": [str(w) for w in doc.get("warnings") or []], "style": style}
 

@@ -121,10 +121,10 @@ def beam_headline(rec: dict | None) -> str:
     if rec is None:
         return ""
     given = [k for k in ("diameter_definition", "divergence_definition") if rec.get(k) is not None]
-    how = ("as given" if len(given) == 2 else
+    how = ("both definitions given in the scene" if len(given) == 2 else
            "default, not given in the scene" if not given else f"{given[0]} given, the other the default")
-    conv = "" if not rec.get("steps") else " (converted from the scene's definitions: see the notes)"
-    return f"beam: 1/e-irradiance diameter and 1/e full-angle divergence, the standards' form ({how}){conv}"
+    conv = "" if not rec.get("steps") else "; the scene's values converted to it: see the notes"
+    return f"beam: 1/e-irradiance diameter and 1/e full-angle divergence, the standards' form ({how}{conv})"
 
 
 def beam_notes(rec: dict | None) -> list:

@@ -1,20 +1,32 @@
 """The README works as written (issue 31 item 5): every relative link resolves to a file
 that ships in the repository (and its #anchor to a heading there), every ``hazard``
 command in its bash blocks parses, no command reuses an output folder it owns without
-``--force``, and the blocks run in order in a fresh folder.
+``--force``, and every block runs, in the default suite.
 
 Skipped: the set-up install commands (``pip install ...`` parts of a line), the CI's own
 test command (the block after ``<!-- test-command -->``, run by ``.ci/run``) and blocks
-marked ``<!-- no-run -->`` (placeholders: your own scene, a scheduler's address). The
-quick blocks (``hazard mpe``, ``nohd``, ``validate``, ``models``, ``schema`` only) run in
-the default suite; all of them in order run under ``-m slow``: long (measured on the shared
-2-core machine under load: 20 min up to and through the first risk run, of which that run
-14 min, then 6 min for range_clearance, the study, convergence and the render; the
-50,000-draw risk run was not timed there).
+marked ``<!-- no-run -->`` (placeholders: your own scene, a scheduler's address).
+
+The README's examples are quick by design (a few hundred risk draws, a three-run study,
+one convergence knob, a static render; the text says how to scale each up). Each block
+is one piece (``test_readme_block_runs``, one test per block, so ``pytest -n auto``
+spreads them over the cores): its commands in order, in a fresh folder, in one Python
+process through the ``hazard`` script's own entry (the set-up line through bash and a
+``hazard`` on PATH, as typed). No block reads what an earlier block wrote
+(``test_no_readme_block_reads_an_earlier_blocks_output``), so the pieces are independent.
+Measured on the shared 2-core machine (load 5-9), ``-n 2``: every block, 110 s CPU in
+all (pytest and its two workers included), 3.5 min wall; the longest piece is the
+airspace block (its run and its render), 89 s wall. With a process per command it was
+138 s CPU. Before (the 20,000- and 50,000-draw risk runs, a four-run study of
+steel_vs_copper, every convergence knob, an animated render) the default suite ran only
+the quick blocks (about 6 s CPU) and the whole README only under ``-m slow``: the old
+blocks less the two risk runs took 245 s CPU, the first risk run 14 min wall. ``-m slow``
+still runs the whole README in order in one folder, each command through bash.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -177,12 +189,19 @@ def _shim(tmp_path: Path) -> dict:
     return env
 
 
-def _run_blocks(blocks, tmp_path: Path) -> None:
-    env = _shim(tmp_path)
+def _work(tmp_path: Path) -> Path:
+    """The fresh folder the commands run in."""
     work = tmp_path / "work"
     work.mkdir()
     (work / "examples").symlink_to(ROOT / "examples")  # commands name examples/*.py
     (work / "hazard").symlink_to(ROOT / "hazard")  # and hazard/studies/*.toml (the same package as on PYTHONPATH)
+    return work
+
+
+def _run_blocks(blocks, tmp_path: Path) -> None:
+    """Each command through bash and the ``hazard`` shim, as a reader types it."""
+    env = _shim(tmp_path)
+    work = _work(tmp_path)
     for line, cmds in blocks:
         for c in cmds:
             done = subprocess.run(["bash", "-c", c], cwd=work, env=env, capture_output=True, text=True, timeout=3600)
@@ -190,13 +209,85 @@ def _run_blocks(blocks, tmp_path: Path) -> None:
             assert ok, f"README line {line}: {c!r} exited {done.returncode}:\n{done.stderr[-2000:]}"
 
 
-def test_quick_readme_blocks_run(tmp_path):
-    quick = [(line, cmds) for line, cmds in runnable() if all(_argv(c)[1] in QUICK_VERBS for c in cmds)]
-    assert quick, "no quick block (hazard mpe / nohd ...) found in the README"
-    _run_blocks(quick, tmp_path)
+def _written_folders(cmd: str, parser) -> set:
+    """The folders a command writes (``-o``) or paths it writes (``--plot FILE``)."""
+    args = parser.parse_args(_argv(cmd)[1:])
+    return {str(v) for k in ("output", "plot") if isinstance(v := getattr(args, k, None), str)}
 
 
-@pytest.mark.slow  # every README block in order: tens of minutes (examples with pictures, two risk runs, a study, renders)
+def test_no_readme_block_reads_an_earlier_blocks_output():
+    """Each block runs alone in a fresh folder (in parallel under xdist): a command naming
+    a folder that only an earlier block wrote (``hazard report out`` with ``out`` from the
+    block before) would fail there, so the two would have to be one piece."""
+    from hazard.cli import build_parser
+
+    parser, earlier, bad = build_parser(), {}, []
+    for line, cmds in runnable():
+        own = set()
+        for c in cmds:
+            writes = _written_folders(c, parser)
+            for token in _argv(c)[1:]:
+                if token in earlier and token not in own and token not in writes:
+                    bad.append(f"README line {line}: {c!r} reads {token}, written by the block at line {earlier[token]}")
+            own |= writes
+        for folder in own:
+            earlier.setdefault(folder, line)
+    assert bad == [], "\n".join(bad)
+
+
+# One Python process per block runs its commands in order through the console script's own
+# entry (sys.argv set, hazard.cli.main() as the ``hazard`` script calls it): the block is one
+# shell session without paying Python's and the packages' start-up per command (about 1 s
+# of CPU each). Nothing is shared between blocks or with the test process.
+_BLOCK_DRIVER = """
+import json, shlex, sys
+from hazard.cli import main
+cmds, result, codes = json.loads(sys.argv[1]), sys.argv[2], []
+for c in cmds:
+    sys.argv = shlex.split(c, comments=True)
+    try:
+        code = main()
+    except SystemExit as exc:
+        code = exc.code if isinstance(exc.code, int) else 1
+    codes.append(code)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    if not (code == 0 or (code == 3 and "--fail-on-hazard" in c)):
+        break
+with open(result, "w") as f:
+    json.dump(codes, f)
+"""
+SHELL_SYNTAX = re.compile(r"[|;&<>`$()]")
+
+
+@pytest.mark.parametrize("line, cmds", runnable(), ids=[f"line{line}" for line, _ in runnable()])
+def test_readme_block_runs(line, cmds, tmp_path):
+    """One README block, its commands in order, in a fresh folder (see the module notes);
+    the commands as collected (a README edited during the run changes nothing)."""
+    assert cmds
+    first = line == runnable()[0][0]  # the set-up line goes through bash and the hazard script, as typed
+    if first or any(SHELL_SYNTAX.search(re.sub(r"\s#.*$", "", c)) for c in cmds):  # as does a pipe or redirection
+        _run_blocks([(line, cmds)], tmp_path)
+        return
+    env, work = _shim(tmp_path), _work(tmp_path)
+    result = tmp_path / "codes.json"
+    done = subprocess.run([sys.executable, "-c", _BLOCK_DRIVER, json.dumps(cmds), str(result)], cwd=work, env=env,
+                          capture_output=True, text=True, timeout=1800)
+    codes = json.loads(result.read_text()) if result.exists() else []
+    assert done.returncode == 0 and len(codes) == len(cmds), \
+        f"README line {line}: stopped after {len(codes)} of {len(cmds)} commands (exit codes {codes}):\n{done.stderr[-3000:]}"
+
+
+def test_every_runnable_block_is_a_piece():
+    """The parametrised pieces are every runnable block once, in the README's order, and
+    the quick verbs are among them (a README rewrite cannot drop them silently)."""
+    lines = [line for line, _ in runnable()]
+    assert lines == sorted(set(lines)) and len(lines) >= 8
+    verbs = {_argv(c)[1] for _, cmds in runnable() for c in cmds}
+    assert QUICK_VERBS | WRITING_VERBS | {"study", "convergence", "report", "compare"} <= verbs, verbs
+
+
+@pytest.mark.slow  # the whole README in order in one folder, as a reader would run it (the pieces above run it by block)
 def test_every_readme_block_runs_in_order(tmp_path):
     _run_blocks(runnable(), tmp_path)
 

@@ -234,3 +234,19 @@ def test_dask_run_stops_at_the_first_failure(tmp_path, monkeypatch):
         assert stop.not_run + stop.ran == 6 and len(stop.rows) == stop.ran
         go = run_study(study, tmp_path / "b", scheduler=cluster.scheduler_address, keep_going=True)
     assert (go.failed, go.not_run, go.ran) == (1, 0, 6)
+
+
+def test_every_bundled_study_loads_and_is_named_in_the_help():
+    """``hazard study NAME``: each bundled study (hazard/studies/*.toml, package data)
+    validates and ``hazard study --help`` names it (plate_power, the README's quick study,
+    was added beside power_sweep)."""
+    from hazard.cli import build_parser
+    from hazard.study import examples
+
+    names = set(examples())
+    assert {"power_sweep", "montecarlo_binoculars", "plate_power"} <= names
+    action = next(a for a in build_parser()._subparsers._group_actions[0].choices["study"]._actions if a.dest == "study")
+    assert all(n in action.help for n in names), action.help
+    for name in names:
+        assert len(scenarios(load_study(name))) >= 2, name
+    assert [p.values for p in load_study("plate_power").parameters] == [(1000.0, 10000.0, 100000.0)]

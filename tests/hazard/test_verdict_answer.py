@@ -289,6 +289,7 @@ def _headline_everywhere(name, tmp_path):
     page = html.unescape((tmp_path / "o" / "report.html").read_text())
     head = re.search(r'<div class="head">\s*<span class="(\w+)">(.*?)</span>\.', page, re.S)
     assert head is not None and head[2] == headline
+    _beam_line_agrees(out.getvalue().splitlines(), page)
     mp = re.search(r'<p id="headline" class="(\w*)">(.*?)</p>', html.unescape((tmp_path / "o" / "map.html").read_text()), re.S)
     assert mp is not None and mp[2] == headline and (mp[1] == "hazard") is headline.startswith("HAZARD")  # map.html too
     bad = doc["hazard_at_observers"] or doc["hazard_zones"]
@@ -307,6 +308,67 @@ def test_one_headline_on_stdout_report_json_and_the_review_page(name, tmp_path):
     if name == "range_geo":  # it said "no observer point reaches the MPE" on stdout and "HAZARD" on the page
         assert doc["hazard_at_observers"] is False and doc["hazard_zones"] is False and doc["any_hazard"] is True
         assert doc["verdict"]["headline"].startswith("No listed observer at or above its limit (0 of 29")
+
+
+def _beam_line_agrees(answer_lines, page):
+    """The beam convention line at the top of stdout's answer is in the review page's
+    verdict box too (issue 31 item 2: said at the top of every answer)."""
+    top = next(i for i, line in enumerate(answer_lines) if line.startswith("Scene "))  # below the warnings
+    (beam,) = [line.strip() for line in answer_lines[top + 1:top + 3] if line.startswith("  beam: ")]
+    box = page[page.index('id="verdict"'):page.index('id="scene"')]
+    assert f'<p class="beam">{beam}</p>' in box
+
+
+def test_the_beam_convention_heads_the_review_page_as_it_heads_stdout(tmp_path):
+    """1/e^2 values converted: the same beam line on stdout and in the page's verdict box."""
+    text = scene_text().replace("[exposure]", 'diameter_definition = "1/e2"\ndivergence_definition = "full_1/e2"\n[exposure]', 1)
+    code, out, _, folder = run_scene(tmp_path, text, name="e2")
+    assert code == 0 and main(["report", str(folder)], stdout=io.StringIO(), stderr=io.StringIO()) == 0
+    page = html.unescape((folder / "report.html").read_text())
+    _beam_line_agrees(out.splitlines(), page)
+    assert "(both definitions given in the scene; the scene's values converted to it: see the notes)" in page
+
+
+def _pages_agree(name, result, folder):
+    """The headline of stdout's answer, report.json and report.html for one analysis,
+    written by the functions ``hazard run --report`` calls (left out: the map files and
+    map.html, whose headline the CLI test above checks, and the output folder's unit)."""
+    from hazard.report import summary_text, write_set
+    from hazard.review import write_review
+
+    folder.mkdir()
+    write_set(result, folder)
+    write_review(folder)
+    doc = json.loads((folder / "report.json").read_text())
+    headline = doc["verdict"]["headline"]
+    answer = summary_text(result).splitlines()
+    assert answer[0] == f"Scene {name!r}: {headline}."
+    page = html.unescape((folder / "report.html").read_text())
+    head = re.search(r'<div class="head">\s*<span class="(\w+)">(.*?)</span>\.', page, re.S)
+    assert head is not None and head[2] == headline
+    _beam_line_agrees(answer, page)
+    bad = doc["hazard_at_observers"] or doc["hazard_zones"]
+    assert (head[1] == "hazard") is bad and headline.startswith("HAZARD") is bad
+    return doc
+
+
+@pytest.mark.parametrize("name", sorted(set(scenes.examples()) - set(FAST_EXAMPLES)))
+def test_one_headline_everywhere_for_the_slower_examples_from_the_shared_analysis(name, tmp_path):
+    """The fast equivalent of the test above for the examples it runs only under ``-m slow``
+    (issue 31: every bundled example, by default): the session's one analysis of the
+    example (tests/_bundled.py, shared with the modules that read it) written out as
+    ``hazard run --report`` writes it."""
+    from tests._bundled import bundled
+
+    doc = _pages_agree(name, bundled(name), tmp_path / "o")
+    if name == "range_geo":
+        assert doc["hazard_at_observers"] is False and doc["hazard_zones"] is False and doc["any_hazard"] is True
+
+
+def test_every_bundled_example_has_its_headline_checked_by_default():
+    """Eleven bundled examples: the fast five by the CLI, the rest from the shared analysis."""
+    names = set(scenes.examples())
+    assert len(names) >= 11 and set(FAST_EXAMPLES) <= names
 
 
 # -- properties on random input nobody tuned -----------------------------------------------------

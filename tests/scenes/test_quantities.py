@@ -420,3 +420,20 @@ def test_validate_prints_the_warnings_a_run_would_put_above_its_verdict(tmp_path
     assert "laser.divergence_rad = 0.05" in rest
     code, out, _ = _cli(tmp_path, _scene())
     assert code == 0 and "CHECK FIRST" not in out
+
+
+@pytest.mark.parametrize("defs, how", [
+    ('diameter_definition = "1/e2"\ndivergence_definition = "full_1/e2"',
+     "(both definitions given in the scene; the scene's values converted to it: see the notes)"),
+    ('diameter_definition = "1/e"\ndivergence_definition = "full_1/e"', "(both definitions given in the scene)"),
+    ('diameter_definition = "1/e2"', "(diameter_definition given, the other the default; the scene's values converted to it"),
+    ("", "(default, not given in the scene)")])
+def test_the_beam_headline_says_what_was_given_and_what_was_converted(defs, how):
+    """The answer's first beam line read "the standards' form (as given) (converted from the
+    scene's definitions ...)" for 1/e^2 values: "as given" beside "converted" (issue 31 audit)."""
+    from scenes.conventions import beam_headline
+
+    laser = f"wavelength_nm = 1064.0\npower_w = 20.0\nbeam_diameter_m = 0.007\ndivergence_rad = 0.0005\n{defs}"
+    line = beam_headline(_load(_scene(laser=laser)).beam_conventions)
+    assert line.startswith("beam: 1/e-irradiance diameter and 1/e full-angle divergence, the standards' form ") and how in line
+    assert "as given" not in line
