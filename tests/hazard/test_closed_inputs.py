@@ -83,6 +83,12 @@ CASES = {
         {"file": "/dev/zero"}]}]}, {}, ["uncertainty.materials['panel'].materials[0]", "not a regular file"]),
     "a 0.1 deg table grid": (PLATE, {("targets", 0, "material"): TABLE}, {}, ["grid_deg", "HAZARD_MAX_TABLE_NODES"]),
     "a scene text over the limit": (PLATE, {}, {"HAZARD_MAX_SCENE_MB": "1e-4"}, ["scene text size", "HAZARD_MAX_SCENE_MB"]),
+    # 10 s / 1e-5 s = 1e6 steps of the heating history (the limit 1e5)
+    "time steps over the limit": (MELT, {("analysis", "time_step_s"): 1e-5}, {},
+                                  ["time steps (time_end_s 10 s / time_step_s 1e-05 s)", "HAZARD_MAX_TIME_STEPS"]),
+    # 49 + 65 + 400 observer points x 10 s / 0.05 s = 200 steps: 102 800 > 1e5
+    "observer points x time steps over the limit": (MELT, {}, {"HAZARD_MAX_OBSERVER_STEPS": "1e5"},
+                                                    ["observer points x time steps (514 x 200)", "HAZARD_MAX_OBSERVER_STEPS"]),
 }
 
 
@@ -265,3 +271,20 @@ def test_validate_checks_a_study_as_study_does(tmp_path):
     assert not (tmp_path / "out").exists()
     code, lines = _cli("validate", "power_sweep")
     assert code == 0 and not lines
+
+
+@pytest.mark.parametrize("limit, what", [("1000", "_ps.npy values"), ("3000", "_frames.npz[frames] size (8-byte values)")])
+def test_screen_test_images_are_bounded(limit, what, tmp_path, monkeypatch):
+    """HAZARD_MAX_SAMPLES bounds each image of a witness-screen test (48 x 48 = 2304 values in
+    the point-source image, 2 x 48 x 48 = 4608 in the frames, read from the zip member's
+    declared size before it is unpacked): over it, ``hazard fit screen`` refuses in one line
+    naming the file and the variable, before any fit."""
+    from brdfmodels import validation
+    from tests.hazard.test_cli_fit import write_test
+
+    test = write_test(tmp_path, "t0", validation.SyntheticGroovedMetal(), *validation.FIT_TESTS[0])
+    monkeypatch.setenv("HAZARD_MAX_SAMPLES", limit)
+    code, lines = _cli("fit", "screen", str(test), "-o", str(tmp_path / "m.json"))
+    assert code == 2 and len(lines) == 1, lines
+    assert "t0.toml" in lines[0] and what in lines[0] and "HAZARD_MAX_SAMPLES" in lines[0], lines[0]
+    assert not (tmp_path / "m.json").exists()
