@@ -72,6 +72,11 @@ def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=No
 
 # -- Zemax / Radiant .bsdf -------------------------------------------------------------
 _BSDF_LISTS = ("samplerotation", "angleofincidence", "scatterazimuth", "scatterradial")
+# the header's other keywords (the format's: Source, Symmetry, SpectralContent, ScatterType, and the
+# channel line before DataBegin, Monochrome or TristimulusX/Y/Z); anything else is no header line
+_BSDF_WORDS = {"source": "Source", "symmetry": "Symmetry", "spectralcontent": "SpectralContent", "scattertype": "ScatterType",
+               "monochrome": "Monochrome", "tristimulusx": "TristimulusX", "tristimulusy": "TristimulusY",
+               "tristimulusz": "TristimulusZ"}
 
 
 def _numbers(tokens, path, line_no, what, first_column=1):
@@ -115,13 +120,22 @@ def _angles(vals, path, line_no, key) -> np.ndarray:
 
 
 def _bsdf_header(lines, path):
-    """Header keywords -> values, and the index of the line after ``DataBegin``."""
-    head, i = {}, 0
+    """Header keywords -> values, and the index of the line after ``DataBegin``. A keyword
+    the format does not have (a damaged ``ScatterType`` was skipped and BRDF assumed) and
+    a keyword given twice (the last was kept) are refused, naming the lines only."""
+    head, i, seen = {}, 0, {}
     while i < len(lines):
         no, toks = lines[i]
         key = toks[0].lower()
         if key == "databegin":
             return head, i + 1
+        if key in seen:
+            raise ValueError(f"{path}: line {no}: {_BSDF_WORDS.get(key) or _BSDF_RANGES[key][0]} is given a second time "
+                             f"(first on line {seen[key]}); expected each header keyword once")
+        if key not in _BSDF_LISTS and key not in _BSDF_WORDS and not (key[0].isdigit() or key[0] in "+-."):
+            raise ValueError(f"{path}: line {no}: not a keyword of the .bsdf header; expected one of "
+                             f"{', '.join([*_BSDF_WORDS.values()][:4] + [_BSDF_RANGES[k][0] for k in _BSDF_LISTS])} or DataBegin")
+        seen[key] = no
         if key in _BSDF_LISTS:
             name = _BSDF_RANGES[key][0]
             n = _count(toks[1:2], path, no, name)
@@ -180,7 +194,9 @@ def read_bsdf(path):
              if ln.strip() and not ln.lstrip().startswith("#")]
     head, i = _bsdf_header(lines, path)
     for key, name, want in (("spectralcontent", "SpectralContent", "Monochrome"), ("scattertype", "ScatterType", "BRDF")):
-        if head.get(key, want).lower() != want.lower():
+        if key not in head:  # was taken as BRDF: a BTDF (transmission) file whose ScatterType line was lost read as reflection
+            raise ValueError(f"{path}: the header has no {name} line; expected {name} {want}")
+        if head[key].lower() != want.lower():
             raise ValueError(f"{path}: {name}: only {want} data are read (expected {name} {want})")
     sym = head.get("symmetry", "").lower()
     if sym not in ("planesymmetrical", "asymmetrical", "asymmetrical4d"):
@@ -220,6 +236,11 @@ def read_bsdf(path):
         tid += [f"aoi{math.degrees(t):g}"] * int(keep.sum())
     if values[pos:] and values[pos].lower() != "dataend":
         raise ValueError(f"{path}: line {tokens[pos][0]}, column {tokens[pos][1]}: expected DataEnd after the last block")
+    if not values[pos:]:  # was accepted: a file cut at a block's end
+        raise ValueError(f"{path}: the file ends after the last block without DataEnd (truncated?); expected DataEnd")
+    if values[pos + 1:]:  # was ignored: a second set of blocks (two files joined) or anything else
+        raise ValueError(f"{path}: line {tokens[pos + 1][0]}, column {tokens[pos + 1][1]}: data after DataEnd; "
+                         "expected the file to end there")
     return _samples(np.vstack(wi), np.vstack(wo), np.concatenate(f), tid)
 
 

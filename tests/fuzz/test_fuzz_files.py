@@ -239,3 +239,34 @@ def test_a_dted_column_with_a_zeroed_block_is_refused(tmp_path):
         assert (ds.read(1)[:, 60] == 0).sum() == 20  # what was read as terrain before
     _one_line_refusal(tmp_path, tmp_path / "s.toml", "terrain.file='n32_w107.dt0'", "cannot read the DEM's cells",
                       "checksums")
+
+
+@pytest.mark.parametrize("change, words", [
+    (("ScatterType  BRDF\n", "ScattebType  BRDF\n"), "line 4: not a keyword of the .bsdf header; expected one of Source"),
+    (("ScatterType  BRDF\n", ""), "the header has no ScatterType line; expected ScatterType BRDF"),
+    (("SpectralContent  Monochrome\n", "Spect\0ralContent  Monochrome\n"), "line 3: not a keyword"),
+    (("SpectralContent  Monochrome\n", ""), "the header has no SpectralContent line"),
+    (("Symmetry  PlaneSymmetrical\n", "Symmetry  PlaneSymmetrical\nSymmetry  Asymmetrical\n"),
+     "line 3: Symmetry is given a second time (first on line 2); expected each header keyword once"),
+    (("Source  Measured\n", "Source  Measured\nSource  Measured\n"), "line 2: Source is given a second time"),
+    (("DataEnd\n", ""), "the file ends after the last block without DataEnd (truncated?)"),
+    (("DataEnd\n", "DataEnd\nTIS 0.5\n0.1 0.1\n0.1 0.1\nDataEnd\n"), "line 21, column 1: data after DataEnd"),
+    (("DataEnd\n", "DataEnd\nDataEnd\n"), "line 21, column 1: data after DataEnd"),
+], ids=["misspelled ScatterType", "no ScatterType", "a NUL in SpectralContent", "no SpectralContent", "Symmetry twice",
+        "Source twice", "no DataEnd", "a block after DataEnd", "DataEnd twice"])
+def test_a_bsdf_header_is_the_formats_and_the_file_ends_at_dataend(change, words, tmp_path):
+    """Accepted in the whole-corpus file fuzz (bsdf: flip #17, nul #4/#8/#15, dup_line #8/#11/#13/#15,
+    del_line #9): a damaged or missing ScatterType line was skipped and BRDF assumed (a BTDF,
+    transmission, file whose line was lost would be read as reflection), a keyword given twice
+    kept the last, a file cut at a block's end or with blocks after DataEnd was read as
+    whole. Each is refused naming the line, never quoting it."""
+    from tests.fuzz.test_input_trust import _bsdf
+
+    text = _bsdf(aoi="10 30", value="0.16")
+    assert change[0] in text
+    scene = _table_scene(tmp_path, "a.bsdf", text.replace(change[0], change[1], 1))
+    _one_line_refusal(tmp_path, scene, "a.bsdf", words)
+    ok = _table_scene(tmp_path, "ok.bsdf", "# a comment\n" + text.replace("DataBegin", "Monochrome\nDataBegin"))
+    from brdfmodels.io import read_bsdf
+
+    assert len(read_bsdf(tmp_path / "ok.bsdf")) > 0 and ok.exists()  # comments and the channel line are the format's
