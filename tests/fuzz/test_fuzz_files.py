@@ -270,3 +270,24 @@ def test_a_bsdf_header_is_the_formats_and_the_file_ends_at_dataend(change, words
     from brdfmodels.io import read_bsdf
 
     assert len(read_bsdf(tmp_path / "ok.bsdf")) > 0 and ok.exists()  # comments and the channel line are the format's
+
+
+def test_a_history_cut_short_says_its_end_states_are_held(tmp_path):
+    """Accepted silently in the whole-corpus file fuzz (history_csv truncate #10): h.csv cut
+    after "4,0" (of 4,0.8 and 10,0.6) held a reflectance factor 0 from 4 to 10 s with
+    extrapolation = 'clamp': a quieter plate, unsaid. Now a warning in the stdout answer
+    and report.json; the same file covering the analysis gives none."""
+    import json
+
+    from tests.fuzz._file_corpus import HISTORY, MATERIAL, _argv, _cli, _with_material
+
+    (tmp_path / "s.toml").write_text(_with_material(MATERIAL + HISTORY))
+    warning = "targets[0].history: the series covers [0, 4] s of the analysis' [0, 10] s; its end states are held " \
+              "(extrapolation = 'clamp') for 6 s"
+    for content, warned in ((b"time_s,reflectance_factor\n0,1\n4,0", True),
+                            (b"time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n", False)):
+        (tmp_path / "h.csv").write_bytes(content)
+        code, out, err, raw = _cli(_argv("run", tmp_path, tmp_path / "s.toml"))
+        assert code == 0 and not raw, err
+        doc = json.loads((tmp_path / "out_run" / "report.json").read_text())
+        assert (warning in doc["warnings"]) == warned and (warning in out + err) == warned, (doc["warnings"], out)
