@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .fileio import read_csv_columns, read_input_text
+from .fileio import check_limit, read_csv_columns, read_input_text
 from .geometry import spherical_to_vector
 from .screen import Samples
 
@@ -435,7 +435,9 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
         "plane": the data are one side of the plane of incidence; mirrored to the other.
     """
     path = Path(path)
-    rows = list(csv.reader(read_input_text(path, "BRDF CSV").splitlines()))
+    text = read_input_text(path, "BRDF CSV")
+    check_limit("CSV_ROWS", text.count("\n") + 1, f"{path}: lines")  # before any row is parsed
+    rows = list(csv.reader(text.splitlines()))
     if not rows:
         raise ValueError(f"{path}: empty file")
     cols = [c.strip() for c in rows[0]]

@@ -294,3 +294,27 @@ def test_screen_test_images_are_bounded(limit, what, tmp_path, monkeypatch):
     assert code == 2 and len(lines) == 1, lines
     assert "t0.toml" in lines[0] and what in lines[0] and "HAZARD_MAX_SAMPLES" in lines[0], lines[0]
     assert not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.parametrize("kind", ["history", "brdf table"])
+def test_csv_lines_are_counted_before_parsing(kind, tmp_path, monkeypatch):
+    """HAZARD_MAX_FILE_MB (256) alone let a 250 MB history CSV of 1.04e7 rows through:
+    validate passed 4.4 GB before it was stopped. HAZARD_MAX_CSV_ROWS counts the lines
+    first: over it, validate and run refuse in one line naming the file and the variable."""
+    from tests.fuzz._file_corpus import HISTORY, MATERIAL, _with_material
+
+    if kind == "history":
+        (tmp_path / "h.csv").write_text("time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n")  # 5 lines with the last newline
+        text, name = _with_material(MATERIAL + HISTORY), "h.csv"
+    else:
+        (tmp_path / "t.csv").write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,brdf_per_sr\n10,0,10,180,0.159\n"
+                                        "20,0,20,180,0.159\n30,0,30,180,0.159\n")
+        text, name = _with_material('material = { model = "table", file = "t.csv" }'), "t.csv"
+    (tmp_path / "s.toml").write_text(text)
+    monkeypatch.setenv("HAZARD_MAX_CSV_ROWS", "4")
+    for verb, extra in (("validate", []), ("run", ["-o", str(tmp_path / "out"), "--quiet"])):
+        code, lines = _cli(verb, str(tmp_path / "s.toml"), *extra)
+        assert code == 2 and len(lines) == 1, lines
+        assert f"{name}: lines = 5 exceeds the limit 4" in lines[0] and "HAZARD_MAX_CSV_ROWS" in lines[0], lines[0]
+    monkeypatch.setenv("HAZARD_MAX_CSV_ROWS", "5")
+    assert _cli("validate", str(tmp_path / "s.toml"))[0] == 0
