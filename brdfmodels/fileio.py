@@ -106,8 +106,8 @@ def read_input_text(path, what: str | None = None) -> str:
         raise ValueError(f"{path}: cannot read{' the ' + what if what else ''} ({exc.strerror})") from None
     if len(data) > limit("FILE_MB") * 1e6:
         check_limit("FILE_MB", len(data) / 1e6, f"{path}: size [MB]")
-    try:
-        return data.decode("utf-8")
+    try:  # a leading byte-order mark (Excel's "CSV UTF-8", Notepad) is no content: the first keyword or column was misread
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start})") from None
 

@@ -291,3 +291,28 @@ def test_a_history_cut_short_says_its_end_states_are_held(tmp_path):
         assert code == 0 and not raw, err
         doc = json.loads((tmp_path / "out_run" / "report.json").read_text())
         assert (warning in doc["warnings"]) == warned and (warning in out + err) == warned, (doc["warnings"], out)
+
+
+def test_a_byte_order_mark_is_no_content(tmp_path):
+    """A UTF-8 byte-order mark (Excel's "CSV UTF-8") made the first keyword or column name
+    another word: a .bsdf with one was refused ("not a keyword"), a history CSV "missing
+    time_s". Each is now read as the same file without it."""
+    import json
+
+    from brdfmodels.io import read_bsdf
+    from tests.fuzz._file_corpus import HISTORY, MATERIAL, _argv, _cli, _with_material
+    from tests.fuzz.test_input_trust import _bsdf
+
+    text = _bsdf(aoi="10 30", value="0.16")
+    (tmp_path / "a.bsdf").write_text(text)
+    (tmp_path / "b.bsdf").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    plain, marked = read_bsdf(tmp_path / "a.bsdf"), read_bsdf(tmp_path / "b.bsdf")
+    assert len(plain) == len(marked) > 0 and (plain.brdf_per_sr == marked.brdf_per_sr).all()
+    (tmp_path / "s.toml").write_text(_with_material(MATERIAL + HISTORY))
+    reports = []
+    for bom in (b"", b"\xef\xbb\xbf"):
+        (tmp_path / "h.csv").write_bytes(bom + b"time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n")
+        code, out, err, raw = _cli(_argv("run", tmp_path, tmp_path / "s.toml"))
+        assert code == 0 and not raw, err
+        reports.append(json.loads((tmp_path / "out_run" / "report.json").read_text())["observers"])
+    assert reports[0] == reports[1]
