@@ -14,7 +14,7 @@ validate refuses what the others would is tests/fuzz/test_validate_equals_run.py
 
 Good: exit 0 with finite results (warnings stated), or exit 2 with one line naming the
 mutated file. A defect: another exit code, a traceback, a raw NumPy / Python warning, a
-run over 120 s, non-finite numbers in a JSON the verb writes, an error or answer that
+run over 120 s of CPU (600 s wall), non-finite numbers in a JSON the verb writes, an error or answer that
 quotes a data file (a scene or study TOML's bad value is echoed beside its field, by
 design). Accepted nonsense cannot be told apart automatically: the accepted cases were
 read, and what was nonsense is now refused, each with a regression test below.
