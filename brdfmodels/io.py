@@ -305,6 +305,9 @@ def _astm_vars(path, k, s, ignore):
                          f"BRDF column: monochrome; several value columns are refused unless named by their wavelengths "
                          f"(532nm, 1064nm) or with a wavelength_nm column; name the others in ignore_columns), got "
                          f"{len(used)} of {len(names)}")
+    if [names[j] for j in used[:4]] != ["theta_i", "phi_i", "theta_s", "phi_s"]:  # were read by position, whatever named
+        raise ValueError(f"{path}: line {k}: VARS: expected the angle columns theta_i, phi_i, theta_s, phi_s first, in "
+                         f"that order (the rows are read by position)")
     return [names[j] for j in used], used, len(names)
 
 
@@ -312,12 +315,19 @@ def _astm_table(path, ignore):
     """(the VARS names used, their rows (M, n) [rad, 1/sr, nm], notes) of an ASTM table;
     rows repeating another's angles (and wavelength) skipped, NUM_POINTS checked."""
     text = read_input_text(path, "ASTM E1392 file")
-    n_points, names, rows, seen, n_rows = None, None, [], set(), 0
+    n_points, names, rows, seen, n_rows, first = None, None, [], set(), 0, {}
     for k, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
         key = s.split(None, 1)[0].upper()
+        if key in first:  # the second was read over the first
+            raise ValueError(f"{path}: line {k}: {key} is given a second time (first on line {first[key]}); expected it once")
+        if key in ("NUM_POINTS", "VARS"):
+            first[key] = k
+        elif not (s[0].isdigit() or s[0] in "+-."):  # was skipped silently (a damaged NUM_POINTS: its check with it)
+            raise ValueError(f"{path}: line {k}: not a header keyword or a data row; expected NUM_POINTS, VARS, numbers "
+                             f"or a '#' comment")
         if key == "NUM_POINTS":
             n_points = _count(s.split()[1:2], path, k, "NUM_POINTS")
         elif key == "VARS":

@@ -316,3 +316,29 @@ def test_a_byte_order_mark_is_no_content(tmp_path):
         assert code == 0 and not raw, err
         reports.append(json.loads((tmp_path / "out_run" / "report.json").read_text())["observers"])
     assert reports[0] == reports[1]
+
+
+@pytest.mark.parametrize("change, words", [
+    (("VARS theta_i,phi_i,theta_s,phi_s,brdf", "VARS zq9SECRETzq9,phi_i,theta_s,phi_s,brdf"),
+     "line 2: VARS: expected the angle columns theta_i, phi_i, theta_s, phi_s first"),
+    (("VARS theta_i,phi_i,theta_s,phi_s,brdf", "VARS phi_i,theta_i,theta_s,phi_s,brdf"), "line 2: VARS: expected the angle"),
+    (("VARS theta_i,phi_i,theta_s,phi_s,brdf\n", "VARS theta_i,phi_i,theta_s,phi_s,brdf\nVARS theta_i,phi_i,theta_s,phi_s,brdf\n"),
+     "line 3: VARS is given a second time (first on line 2); expected it once"),
+    (("NUM_POINTS 2\n", "NUM_POINTS 2\nNUM_POINTS 3\n"), "line 2: NUM_POINTS is given a second time"),
+    (("NUM_POINTS 2\n", "zq9SECRETzq9 2\n"), "line 1: not a header keyword or a data row"),
+    (("0.2,0.0,0.2,3.14159,0.159", "nan,0.0,0.2,3.14159,0.159"), "line 3: not a header keyword or a data row"),
+], ids=["an angle renamed", "angles swapped", "VARS twice", "NUM_POINTS twice", "a damaged NUM_POINTS", "a NaN row"])
+def test_an_astm_header_is_checked_not_skipped(change, words, tmp_path):
+    """Accepted in the whole-corpus file fuzz (astm: string #1/#3, flip #19, dup_line #5): the
+    four angle columns were read by position whatever VARS named them (phi_i before theta_i
+    read azimuths as polar angles), a second VARS line was read over the first, and a line
+    that was neither a keyword nor a number (a damaged NUM_POINTS, a row starting with nan)
+    was skipped, its check or data with it."""
+    text = "NUM_POINTS 2\nVARS theta_i,phi_i,theta_s,phi_s,brdf\n0.2,0.0,0.2,3.14159,0.159\n0.3,0.0,0.3,3.14159,0.159\n"
+    assert change[0] in text
+    scene = _table_scene(tmp_path, "a.astm", text.replace(change[0], change[1], 1))
+    _one_line_refusal(tmp_path, scene, "a.astm", words)
+    from brdfmodels.io import read_astm_e1392
+
+    (tmp_path / "ok.astm").write_text("# a comment\n" + text)
+    assert len(read_astm_e1392(tmp_path / "ok.astm")) > 0
