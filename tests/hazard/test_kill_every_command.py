@@ -145,7 +145,7 @@ def test_hazard_report_interrupted_at_a_rename_keeps_the_run_whole(tmp_path, mon
     assert run("report", out, "--quiet")[0] == 0 and {"map.html", "report.html"} <= set(snapshot(out))
 
 
-@pytest.mark.parametrize("k", (1, 2))
+@pytest.mark.parametrize("k", (pytest.param(1, marks=pytest.mark.slow), 2))  # two studies each: 3-4 s at load 10
 def test_hazard_study_interrupted_at_a_rename_keeps_one_whole_summary(tmp_path, monkeypatch, k):
     from hazard.study import Parameter, Study, run_study
 
