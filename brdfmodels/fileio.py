@@ -40,9 +40,12 @@ LIMITS = {
     "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
     "TABLE_NODES": (2_000_000, "nodes of a BRDF table gridded from samples (grid_deg; a MERL table has 1.46e6)"),
     "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
+    "KEEPOUT_STATE_CELLS": (2e9, "worst-case keep-out cells x time steps of a dynamic lobe (each cell's maximum over the states)"),
     "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
     "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
     "SCATTERED_SAMPLES": (200_000, "measured samples triangulated into a scattered BRDF table (1e5 took 35 s to build)"),
+    "CSV_ROWS": (2_000_000, "lines of a CSV file read as columns (a history, pyrometer, oxidation or BRDF-angle table); "
+                 "counted before parsing: a 250 MB history of 1e7 rows took past 4.4 GB"),
     "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
@@ -103,8 +106,8 @@ def read_input_text(path, what: str | None = None) -> str:
         raise ValueError(f"{path}: cannot read{' the ' + what if what else ''} ({exc.strerror})") from None
     if len(data) > limit("FILE_MB") * 1e6:
         check_limit("FILE_MB", len(data) / 1e6, f"{path}: size [MB]")
-    try:
-        return data.decode("utf-8")
+    try:  # a leading byte-order mark (Excel's "CSV UTF-8", Notepad) is no content: the first keyword or column was misread
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start})") from None
 
@@ -301,7 +304,9 @@ def read_csv_columns(path, columns, what: str = "CSV file") -> dict:
     line and the column and what was expected; nothing of the file is quoted (an empty
     file, a missing column, a short row, a cell that is not a finite number, no rows)."""
     path = Path(path)
-    lines = read_input_text(path, what).splitlines()
+    text = read_input_text(path, what)
+    check_limit("CSV_ROWS", text.count("\n") + 1, f"{path}: lines")  # before any row is parsed (FILE_MB alone allowed 4 GB)
+    lines = text.splitlines()
     start = next((k for k, ln in enumerate(lines) if ln.strip()), None)
     if start is None:
         raise ValueError(f"{path}: empty file; expected a header line naming the columns {', '.join(columns)}")

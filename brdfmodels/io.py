@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .fileio import read_csv_columns, read_input_text
+from .fileio import check_limit, read_csv_columns, read_input_text
 from .geometry import spherical_to_vector
 from .screen import Samples
 
@@ -72,6 +72,11 @@ def _samples(wi, wo, f, test_id=None, time_s=None, temperature_k=None, weight=No
 
 # -- Zemax / Radiant .bsdf -------------------------------------------------------------
 _BSDF_LISTS = ("samplerotation", "angleofincidence", "scatterazimuth", "scatterradial")
+# the header's other keywords (the format's: Source, Symmetry, SpectralContent, ScatterType, and the
+# channel line before DataBegin, Monochrome or TristimulusX/Y/Z); anything else is no header line
+_BSDF_WORDS = {"source": "Source", "symmetry": "Symmetry", "spectralcontent": "SpectralContent", "scattertype": "ScatterType",
+               "monochrome": "Monochrome", "tristimulusx": "TristimulusX", "tristimulusy": "TristimulusY",
+               "tristimulusz": "TristimulusZ"}
 
 
 def _numbers(tokens, path, line_no, what, first_column=1):
@@ -115,13 +120,22 @@ def _angles(vals, path, line_no, key) -> np.ndarray:
 
 
 def _bsdf_header(lines, path):
-    """Header keywords -> values, and the index of the line after ``DataBegin``."""
-    head, i = {}, 0
+    """Header keywords -> values, and the index of the line after ``DataBegin``. A keyword
+    the format does not have (a damaged ``ScatterType`` was skipped and BRDF assumed) and
+    a keyword given twice (the last was kept) are refused, naming the lines only."""
+    head, i, seen = {}, 0, {}
     while i < len(lines):
         no, toks = lines[i]
         key = toks[0].lower()
         if key == "databegin":
             return head, i + 1
+        if key in seen:
+            raise ValueError(f"{path}: line {no}: {_BSDF_WORDS.get(key) or _BSDF_RANGES[key][0]} is given a second time "
+                             f"(first on line {seen[key]}); expected each header keyword once")
+        if key not in _BSDF_LISTS and key not in _BSDF_WORDS and not (key[0].isdigit() or key[0] in "+-."):
+            raise ValueError(f"{path}: line {no}: not a keyword of the .bsdf header; expected one of "
+                             f"{', '.join([*_BSDF_WORDS.values()][:4] + [_BSDF_RANGES[k][0] for k in _BSDF_LISTS])} or DataBegin")
+        seen[key] = no
         if key in _BSDF_LISTS:
             name = _BSDF_RANGES[key][0]
             n = _count(toks[1:2], path, no, name)
@@ -180,7 +194,9 @@ def read_bsdf(path):
              if ln.strip() and not ln.lstrip().startswith("#")]
     head, i = _bsdf_header(lines, path)
     for key, name, want in (("spectralcontent", "SpectralContent", "Monochrome"), ("scattertype", "ScatterType", "BRDF")):
-        if head.get(key, want).lower() != want.lower():
+        if key not in head:  # was taken as BRDF: a BTDF (transmission) file whose ScatterType line was lost read as reflection
+            raise ValueError(f"{path}: the header has no {name} line; expected {name} {want}")
+        if head[key].lower() != want.lower():
             raise ValueError(f"{path}: {name}: only {want} data are read (expected {name} {want})")
     sym = head.get("symmetry", "").lower()
     if sym not in ("planesymmetrical", "asymmetrical", "asymmetrical4d"):
@@ -220,6 +236,11 @@ def read_bsdf(path):
         tid += [f"aoi{math.degrees(t):g}"] * int(keep.sum())
     if values[pos:] and values[pos].lower() != "dataend":
         raise ValueError(f"{path}: line {tokens[pos][0]}, column {tokens[pos][1]}: expected DataEnd after the last block")
+    if not values[pos:]:  # was accepted: a file cut at a block's end
+        raise ValueError(f"{path}: the file ends after the last block without DataEnd (truncated?); expected DataEnd")
+    if values[pos + 1:]:  # was ignored: a second set of blocks (two files joined) or anything else
+        raise ValueError(f"{path}: line {tokens[pos + 1][0]}, column {tokens[pos + 1][1]}: data after DataEnd; "
+                         "expected the file to end there")
     return _samples(np.vstack(wi), np.vstack(wo), np.concatenate(f), tid)
 
 
@@ -284,6 +305,9 @@ def _astm_vars(path, k, s, ignore):
                          f"BRDF column: monochrome; several value columns are refused unless named by their wavelengths "
                          f"(532nm, 1064nm) or with a wavelength_nm column; name the others in ignore_columns), got "
                          f"{len(used)} of {len(names)}")
+    if [names[j] for j in used[:4]] != ["theta_i", "phi_i", "theta_s", "phi_s"]:  # were read by position, whatever named
+        raise ValueError(f"{path}: line {k}: VARS: expected the angle columns theta_i, phi_i, theta_s, phi_s first, in "
+                         f"that order (the rows are read by position)")
     return [names[j] for j in used], used, len(names)
 
 
@@ -291,12 +315,19 @@ def _astm_table(path, ignore):
     """(the VARS names used, their rows (M, n) [rad, 1/sr, nm], notes) of an ASTM table;
     rows repeating another's angles (and wavelength) skipped, NUM_POINTS checked."""
     text = read_input_text(path, "ASTM E1392 file")
-    n_points, names, rows, seen, n_rows = None, None, [], set(), 0
+    n_points, names, rows, seen, n_rows, first = None, None, [], set(), 0, {}
     for k, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue
         key = s.split(None, 1)[0].upper()
+        if key in first:  # the second was read over the first
+            raise ValueError(f"{path}: line {k}: {key} is given a second time (first on line {first[key]}); expected it once")
+        if key in ("NUM_POINTS", "VARS"):
+            first[key] = k
+        elif not (s[0].isdigit() or s[0] in "+-."):  # was skipped silently (a damaged NUM_POINTS: its check with it)
+            raise ValueError(f"{path}: line {k}: not a header keyword or a data row; expected NUM_POINTS, VARS, numbers "
+                             f"or a '#' comment")
         if key == "NUM_POINTS":
             n_points = _count(s.split()[1:2], path, k, "NUM_POINTS")
         elif key == "VARS":
@@ -414,7 +445,9 @@ def read_brdf_csv(path, *, wavelength_nm=None, ignore_columns=(), symmetry=None)
         "plane": the data are one side of the plane of incidence; mirrored to the other.
     """
     path = Path(path)
-    rows = list(csv.reader(read_input_text(path, "BRDF CSV").splitlines()))
+    text = read_input_text(path, "BRDF CSV")
+    check_limit("CSV_ROWS", text.count("\n") + 1, f"{path}: lines")  # before any row is parsed
+    rows = list(csv.reader(text.splitlines()))
     if not rows:
         raise ValueError(f"{path}: empty file")
     cols = [c.strip() for c in rows[0]]

@@ -53,6 +53,7 @@ __all__ = ["MANIFEST", "OutputUnit", "output_unit", "recover", "read_manifest", 
 
 MANIFEST = ".laser-hazard.json"
 _ACTIVE: set = set()  # staging folders of this process still being written
+_ACTIVE_FILES: set = set()  # FileSet temporaries of this process still being written
 
 
 class OutputFolderError(ValueError):
@@ -397,7 +398,9 @@ class FileSet:
         self.recovered = recover_file_sets(finals)  # what an interrupted earlier switch needed (said by the caller)
         self.token = secrets.token_hex(8)
         self.finals = finals
-        self.temps = {p: p.parent / f".{p.name}.{self.token}.tmp{p.suffix}" for p in finals}
+        # the writer's pid in every temporary's and backup's name: the next set removes those of dead processes
+        self.temps = {p: p.parent / f".{p.name}.{os.getpid()}.{self.token}.tmp{p.suffix}" for p in finals}
+        _ACTIVE_FILES.update(self.temps.values())
 
     def _journal(self, p: Path) -> Path:
         return p.parent / f".{p.name}.{self.token}.journal"
@@ -413,7 +416,7 @@ class FileSet:
         try:
             for p in todo:
                 if os.path.lexists(p):
-                    backups[p] = p.parent / f".{p.name}.{self.token}.old"
+                    backups[p] = p.parent / f".{p.name}.{os.getpid()}.{self.token}.old"
                     _link_or_copy(p, backups[p])
             self._write_journals(todo, backups)
             for k, p in enumerate(todo):
@@ -437,6 +440,7 @@ class FileSet:
                     os.unlink(self._journal(p))
             for p in {p.parent for p in todo}:
                 fsync_dir(p)
+            _ACTIVE_FILES.difference_update(self.temps[p] for p in todo)
 
     def _write_journals(self, todo, backups) -> None:
         """The set's journal beside each of its final files (written and synced before any rename)."""
@@ -454,15 +458,32 @@ class FileSet:
         for t in self.temps.values():
             if os.path.lexists(t):
                 os.unlink(t)
+        _ACTIVE_FILES.difference_update(self.temps.values())
 
 
 def recover_file_sets(paths) -> list[str]:
     """Finish every interrupted :class:`FileSet` switch whose journal lies beside one of
     ``paths``: forward when all its temporaries were renamed in (remove the backups), else
     back (restore every backup over its final file, remove the finals that had none, remove
-    the temporaries). Returns what was done, one line per set."""
+    the temporaries). Then remove the temporaries and backups of ``paths`` that a process no
+    longer running left outside any switch (killed while writing, before its journal).
+    Returns what was done, one line per set or file."""
+    finals = [Path(os.path.abspath(q)) for q in paths]
+    done = _finish_journals(finals)
+    for p in finals:
+        pat = re.compile(r"^\." + re.escape(p.name) + r"\.(\d+)\.[0-9a-f]{16}\.(tmp" + re.escape(p.suffix) + r"|old)$")
+        for e in sorted(os.listdir(p.parent)) if p.parent.is_dir() else ():
+            m, q = pat.match(e), p.parent / e
+            if m and q.is_file() and not q.is_symlink() and q not in _ACTIVE_FILES and not _alive(int(m.group(1))):
+                os.unlink(q)
+                done.append(f"removed the stale {e} beside {p.name} (left by an interrupted write)")
+    return done
+
+
+def _finish_journals(finals) -> list[str]:
+    """The journal part of :func:`recover_file_sets`."""
     done = []
-    for p in [Path(os.path.abspath(q)) for q in paths]:
+    for p in finals:
         for journal in sorted(p.parent.glob(f".{glob.escape(p.name)}.*.journal")):
             try:
                 doc = json.loads(journal.read_text(encoding="utf-8"))

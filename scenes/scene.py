@@ -423,18 +423,26 @@ def _history(spec, where, base_dir):
         raise SceneError(f"{where}: {exc}") from None
 
 
-def _check_series_cover(spec: SceneSpec, targets) -> None:
+def _check_series_cover(spec: SceneSpec, targets) -> list:
     """A measured series with ``extrapolation = 'error'`` must cover the analysis times,
-    0 to ``time_end_s`` (default the exposure duration), or the run would stop there."""
+    0 to ``time_end_s`` (default the exposure duration), or the run would stop there; one
+    with ``'clamp'`` that does not is a warning (returned): its end states are held (a
+    history CSV cut after 4 s of 10 held its last row, a reflectance factor 0, for 6 s,
+    unsaid)."""
     t_end = spec.analysis.time_end_s or spec.exposure.duration_s
+    held = []
     for i, t in enumerate(targets):
         h = t.history
-        if h is None or spec.targets[i].history.extrapolation != "error":
+        if h is None or getattr(spec.targets[i].history, "extrapolation", None) not in ("error", "clamp"):
             continue
         t0, t1 = float(h.times_s[0]), float(h.times_s[-1])
-        if t0 > 0.0 or t1 < t_end:
+        if (t0 > 0.0 or t1 < t_end) and spec.targets[i].history.extrapolation == "clamp":
+            held.append(f"targets[{i}].history: the series covers [{t0:g}, {t1:g}] s of the analysis' [0, {t_end:g}] s; "
+                        f"its end states are held (extrapolation = 'clamp') for {max(t0, 0.0) + max(t_end - t1, 0.0):g} s")
+        elif t0 > 0.0 or t1 < t_end:
             raise SceneError(f"targets[{i}].history: the series covers [{t0:g}, {t1:g}] s but the analysis runs from 0 to "
                              f"{t_end:g} s; extend it, or set extrapolation = 'clamp' to hold its end states")
+    return held
 
 
 def _inside_solid(p, spec) -> np.ndarray:
@@ -917,7 +925,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
     d = d / norm
 
     targets = [_target(i, ts, offset, base_dir, spec.laser.polarization, spec.laser.wavelength_nm) for i, ts in enumerate(spec.targets)]
-    _check_series_cover(spec, targets)
+    held = _check_series_cover(spec, targets)
     occluders = []
     for i, os_ in enumerate(spec.occluders):
         try:
@@ -953,7 +961,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         terrain_target=terrain_target,
         warnings=(_warnings(spec) + _buried_targets(targets, terrain) + _material_notes(targets)
                   + ([] if site is None else site.warnings)
-                  + _near_aperture(observers, lp - offset, d)),
+                  + _near_aperture(observers, lp - offset, d) + held),
         site=site,
     )
     _check_work(scene)

@@ -1076,4 +1076,8 @@ class SceneSpec(_Strict):
             steps = t_end / (a.time_step_s or t_end / 100.0)
             check_limit("TIME_STEPS", steps, f"time steps (time_end_s {t_end:g} s / time_step_s {a.time_step_s or t_end / 100:g} s)")
             check_limit("OBSERVER_STEPS", n_obs * steps, f"observer points x time steps ({n_obs} x {steps:.0f})")
+            g = a.direction_grid_deg  # a dynamic lobe takes each cell's maximum over the states: 1e4 steps ran past 10 min
+            cells = max(2, round(90 / g)) * max(4, round(360 / g)) * 4.0**a.refine_levels
+            check_limit("KEEPOUT_STATE_CELLS", cells * steps, f"keep-out cells x time steps ({cells:.0f} x {steps:.0f}; "
+                        "fewer with a coarser analysis.direction_grid_deg or refine_levels, or a longer time_step_s)")
         return self

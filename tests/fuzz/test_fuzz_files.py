@@ -14,7 +14,7 @@ validate refuses what the others would is tests/fuzz/test_validate_equals_run.py
 
 Good: exit 0 with finite results (warnings stated), or exit 2 with one line naming the
 mutated file. A defect: another exit code, a traceback, a raw NumPy / Python warning, a
-run over 120 s, non-finite numbers in a JSON the verb writes, an error or answer that
+run over 120 s of CPU (600 s wall), non-finite numbers in a JSON the verb writes, an error or answer that
 quotes a data file (a scene or study TOML's bad value is echoed beside its field, by
 design). Accepted nonsense cannot be told apart automatically: the accepted cases were
 read, and what was nonsense is now refused, each with a regression test below.
@@ -239,3 +239,106 @@ def test_a_dted_column_with_a_zeroed_block_is_refused(tmp_path):
         assert (ds.read(1)[:, 60] == 0).sum() == 20  # what was read as terrain before
     _one_line_refusal(tmp_path, tmp_path / "s.toml", "terrain.file='n32_w107.dt0'", "cannot read the DEM's cells",
                       "checksums")
+
+
+@pytest.mark.parametrize("change, words", [
+    (("ScatterType  BRDF\n", "ScattebType  BRDF\n"), "line 4: not a keyword of the .bsdf header; expected one of Source"),
+    (("ScatterType  BRDF\n", ""), "the header has no ScatterType line; expected ScatterType BRDF"),
+    (("SpectralContent  Monochrome\n", "Spect\0ralContent  Monochrome\n"), "line 3: not a keyword"),
+    (("SpectralContent  Monochrome\n", ""), "the header has no SpectralContent line"),
+    (("Symmetry  PlaneSymmetrical\n", "Symmetry  PlaneSymmetrical\nSymmetry  Asymmetrical\n"),
+     "line 3: Symmetry is given a second time (first on line 2); expected each header keyword once"),
+    (("Source  Measured\n", "Source  Measured\nSource  Measured\n"), "line 2: Source is given a second time"),
+    (("DataEnd\n", ""), "the file ends after the last block without DataEnd (truncated?)"),
+    (("DataEnd\n", "DataEnd\nTIS 0.5\n0.1 0.1\n0.1 0.1\nDataEnd\n"), "line 21, column 1: data after DataEnd"),
+    (("DataEnd\n", "DataEnd\nDataEnd\n"), "line 21, column 1: data after DataEnd"),
+], ids=["misspelled ScatterType", "no ScatterType", "a NUL in SpectralContent", "no SpectralContent", "Symmetry twice",
+        "Source twice", "no DataEnd", "a block after DataEnd", "DataEnd twice"])
+def test_a_bsdf_header_is_the_formats_and_the_file_ends_at_dataend(change, words, tmp_path):
+    """Accepted in the whole-corpus file fuzz (bsdf: flip #17, nul #4/#8/#15, dup_line #8/#11/#13/#15,
+    del_line #9): a damaged or missing ScatterType line was skipped and BRDF assumed (a BTDF,
+    transmission, file whose line was lost would be read as reflection), a keyword given twice
+    kept the last, a file cut at a block's end or with blocks after DataEnd was read as
+    whole. Each is refused naming the line, never quoting it."""
+    from tests.fuzz.test_input_trust import _bsdf
+
+    text = _bsdf(aoi="10 30", value="0.16")
+    assert change[0] in text
+    scene = _table_scene(tmp_path, "a.bsdf", text.replace(change[0], change[1], 1))
+    _one_line_refusal(tmp_path, scene, "a.bsdf", words)
+    ok = _table_scene(tmp_path, "ok.bsdf", "# a comment\n" + text.replace("DataBegin", "Monochrome\nDataBegin"))
+    from brdfmodels.io import read_bsdf
+
+    assert len(read_bsdf(tmp_path / "ok.bsdf")) > 0 and ok.exists()  # comments and the channel line are the format's
+
+
+def test_a_history_cut_short_says_its_end_states_are_held(tmp_path):
+    """Accepted silently in the whole-corpus file fuzz (history_csv truncate #10): h.csv cut
+    after "4,0" (of 4,0.8 and 10,0.6) held a reflectance factor 0 from 4 to 10 s with
+    extrapolation = 'clamp': a quieter plate, unsaid. Now a warning in the stdout answer
+    and report.json; the same file covering the analysis gives none."""
+    import json
+
+    from tests.fuzz._file_corpus import HISTORY, MATERIAL, _argv, _cli, _with_material
+
+    (tmp_path / "s.toml").write_text(_with_material(MATERIAL + HISTORY))
+    warning = "targets[0].history: the series covers [0, 4] s of the analysis' [0, 10] s; its end states are held " \
+              "(extrapolation = 'clamp') for 6 s"
+    for content, warned in ((b"time_s,reflectance_factor\n0,1\n4,0", True),
+                            (b"time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n", False)):
+        (tmp_path / "h.csv").write_bytes(content)
+        code, out, err, raw = _cli(_argv("run", tmp_path, tmp_path / "s.toml"))
+        assert code == 0 and not raw, err
+        doc = json.loads((tmp_path / "out_run" / "report.json").read_text())
+        assert (warning in doc["warnings"]) == warned and (warning in out + err) == warned, (doc["warnings"], out)
+
+
+def test_a_byte_order_mark_is_no_content(tmp_path):
+    """A UTF-8 byte-order mark (Excel's "CSV UTF-8") made the first keyword or column name
+    another word: a .bsdf with one was refused ("not a keyword"), a history CSV "missing
+    time_s". Each is now read as the same file without it."""
+    import json
+
+    from brdfmodels.io import read_bsdf
+    from tests.fuzz._file_corpus import HISTORY, MATERIAL, _argv, _cli, _with_material
+    from tests.fuzz.test_input_trust import _bsdf
+
+    text = _bsdf(aoi="10 30", value="0.16")
+    (tmp_path / "a.bsdf").write_text(text)
+    (tmp_path / "b.bsdf").write_bytes(b"\xef\xbb\xbf" + text.encode())
+    plain, marked = read_bsdf(tmp_path / "a.bsdf"), read_bsdf(tmp_path / "b.bsdf")
+    assert len(plain) == len(marked) > 0 and (plain.brdf_per_sr == marked.brdf_per_sr).all()
+    (tmp_path / "s.toml").write_text(_with_material(MATERIAL + HISTORY))
+    reports = []
+    for bom in (b"", b"\xef\xbb\xbf"):
+        (tmp_path / "h.csv").write_bytes(bom + b"time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n")
+        code, out, err, raw = _cli(_argv("run", tmp_path, tmp_path / "s.toml"))
+        assert code == 0 and not raw, err
+        reports.append(json.loads((tmp_path / "out_run" / "report.json").read_text())["observers"])
+    assert reports[0] == reports[1]
+
+
+@pytest.mark.parametrize("change, words", [
+    (("VARS theta_i,phi_i,theta_s,phi_s,brdf", "VARS zq9SECRETzq9,phi_i,theta_s,phi_s,brdf"),
+     "line 2: VARS: expected the angle columns theta_i, phi_i, theta_s, phi_s first"),
+    (("VARS theta_i,phi_i,theta_s,phi_s,brdf", "VARS phi_i,theta_i,theta_s,phi_s,brdf"), "line 2: VARS: expected the angle"),
+    (("VARS theta_i,phi_i,theta_s,phi_s,brdf\n", "VARS theta_i,phi_i,theta_s,phi_s,brdf\nVARS theta_i,phi_i,theta_s,phi_s,brdf\n"),
+     "line 3: VARS is given a second time (first on line 2); expected it once"),
+    (("NUM_POINTS 2\n", "NUM_POINTS 2\nNUM_POINTS 3\n"), "line 2: NUM_POINTS is given a second time"),
+    (("NUM_POINTS 2\n", "zq9SECRETzq9 2\n"), "line 1: not a header keyword or a data row"),
+    (("0.2,0.0,0.2,3.14159,0.159", "nan,0.0,0.2,3.14159,0.159"), "line 3: not a header keyword or a data row"),
+], ids=["an angle renamed", "angles swapped", "VARS twice", "NUM_POINTS twice", "a damaged NUM_POINTS", "a NaN row"])
+def test_an_astm_header_is_checked_not_skipped(change, words, tmp_path):
+    """Accepted in the whole-corpus file fuzz (astm: string #1/#3, flip #19, dup_line #5): the
+    four angle columns were read by position whatever VARS named them (phi_i before theta_i
+    read azimuths as polar angles), a second VARS line was read over the first, and a line
+    that was neither a keyword nor a number (a damaged NUM_POINTS, a row starting with nan)
+    was skipped, its check or data with it."""
+    text = "NUM_POINTS 2\nVARS theta_i,phi_i,theta_s,phi_s,brdf\n0.2,0.0,0.2,3.14159,0.159\n0.3,0.0,0.3,3.14159,0.159\n"
+    assert change[0] in text
+    scene = _table_scene(tmp_path, "a.astm", text.replace(change[0], change[1], 1))
+    _one_line_refusal(tmp_path, scene, "a.astm", words)
+    from brdfmodels.io import read_astm_e1392
+
+    (tmp_path / "ok.astm").write_text("# a comment\n" + text)
+    assert len(read_astm_e1392(tmp_path / "ok.astm")) > 0

@@ -96,7 +96,7 @@ def test_material_json_errors_name_the_file_not_its_contents(doc, words, tmp_pat
 
 
 @pytest.mark.parametrize("name, content, words", [
-    ("a.astm", f"NUM_POINTS 1\nVARS a,b,c,d,e\n0.1,0.2,0.3,0.4,{SECRET}\n", ["line 3, column 5", "expected a number"]),
+    ("a.astm", f"NUM_POINTS 1\nVARS theta_i,phi_i,theta_s,phi_s,e\n0.1,0.2,0.3,0.4,{SECRET}\n", ["line 3, column 5", "expected a number"]),
     ("b.astm", f"NUM_POINTS 1\nVARS {SECRET},b\n", ["line 2: VARS", "five names"]),
     ("c.bsdf", _bsdf(symmetry=SECRET), ["Symmetry: expected PlaneSymmetrical"]),
     ("d.bsdf", _bsdf(value=SECRET), ["line 15, column 1", "finite BRDF >= 0"]),

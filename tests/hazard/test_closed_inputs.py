@@ -83,6 +83,16 @@ CASES = {
         {"file": "/dev/zero"}]}]}, {}, ["uncertainty.materials['panel'].materials[0]", "not a regular file"]),
     "a 0.1 deg table grid": (PLATE, {("targets", 0, "material"): TABLE}, {}, ["grid_deg", "HAZARD_MAX_TABLE_NODES"]),
     "a scene text over the limit": (PLATE, {}, {"HAZARD_MAX_SCENE_MB": "1e-4"}, ["scene text size", "HAZARD_MAX_SCENE_MB"]),
+    # 10 s / 1e-5 s = 1e6 steps of the heating history (the limit 1e5)
+    "time steps over the limit": (MELT, {("analysis", "time_step_s"): 1e-5}, {},
+                                  ["time steps (time_end_s 10 s / time_step_s 1e-05 s)", "HAZARD_MAX_TIME_STEPS"]),
+    # (90/2)(360/2) 4^3 = 518 400 cells x 10 s / 1e-3 s = 1e4 steps: 5.2e9 > 2e9 (it ran past 10 min at 1e4 steps,
+    # and at 1e5, the time-step limit, past 6.6 GB)
+    "a dynamic keep-out of 1e4 steps": (MELT, {("analysis", "time_step_s"): 1e-3}, {},
+                                        ["keep-out cells x time steps (518400 x 10000", "HAZARD_MAX_KEEPOUT_STATE_CELLS"]),
+    # 49 + 65 + 400 observer points x 10 s / 0.05 s = 200 steps: 102 800 > 1e5
+    "observer points x time steps over the limit": (MELT, {}, {"HAZARD_MAX_OBSERVER_STEPS": "1e5"},
+                                                    ["observer points x time steps (514 x 200)", "HAZARD_MAX_OBSERVER_STEPS"]),
 }
 
 
@@ -124,13 +134,15 @@ def test_validate_run_and_risk_refuse_alike(case, tmp_path, monkeypatch):
 def test_just_inside_the_limits_loads(tmp_path, monkeypatch):
     """The counterparts the limits accept: 100 targets, 5 points at HAZARD_MAX_POINTS = 5, a
     1e-9 rad divergence, a 1e-13 s window, 2e6 motion samples, an aim passing 1 mm from the
-    aperture, the bundled risk example (3.1e7 point evaluations), a 1 deg x 1 deg x 2 deg table."""
+    aperture, the bundled risk example (3.1e7 point evaluations), a dynamic keep-out of 3858
+    steps (2.0e9 cell-steps), a 1 deg x 1 deg x 2 deg table."""
     monkeypatch.setenv("HAZARD_MAX_POINTS", "5")
     near = {"times_s": [0.0, 10.0], "aim_m": [[0.001, -60.0, 0.0], [0.001, -40.0, 0.0]]}
     for base, changes in ((PLATE, {("targets",): _targets(100)}), (PLATE, {("observers",): _points(5)}),
                           (MELT, {("laser", "divergence_rad"): 1e-9}), (MELT, {("analysis", "time_end_s"): 1e-13}),
                           (PLATE, {("laser", "aim_track"): SLEW, ("motion",): {"time_step_s": 10.0 / 1_999_999}}),
-                          (PLATE, {("laser", "aim_track"): near}), (RISK, {})):
+                          (PLATE, {("laser", "aim_track"): near}), (RISK, {}),
+                          (MELT, {("analysis", "time_step_s"): 10.0 / 3858})):  # 518 400 x 3858 = 2.0e9
         scenes.load(_write(tmp_path, _with(base, changes)))
     d = _with(PLATE, {("targets", 0, "material"): dict(TABLE, grid_deg=[1.0, 1.0, 2.0])})
     with pytest.raises(scenes.SceneError, match="samples.csv"):  # past the node count: the missing file is the error
@@ -265,3 +277,44 @@ def test_validate_checks_a_study_as_study_does(tmp_path):
     assert not (tmp_path / "out").exists()
     code, lines = _cli("validate", "power_sweep")
     assert code == 0 and not lines
+
+
+@pytest.mark.parametrize("limit, what", [("1000", "_ps.npy values"), ("3000", "_frames.npz[frames] size (8-byte values)")])
+def test_screen_test_images_are_bounded(limit, what, tmp_path, monkeypatch):
+    """HAZARD_MAX_SAMPLES bounds each image of a witness-screen test (48 x 48 = 2304 values in
+    the point-source image, 2 x 48 x 48 = 4608 in the frames, read from the zip member's
+    declared size before it is unpacked): over it, ``hazard fit screen`` refuses in one line
+    naming the file and the variable, before any fit."""
+    from brdfmodels import validation
+    from tests.hazard.test_cli_fit import write_test
+
+    test = write_test(tmp_path, "t0", validation.SyntheticGroovedMetal(), *validation.FIT_TESTS[0])
+    monkeypatch.setenv("HAZARD_MAX_SAMPLES", limit)
+    code, lines = _cli("fit", "screen", str(test), "-o", str(tmp_path / "m.json"))
+    assert code == 2 and len(lines) == 1, lines
+    assert "t0.toml" in lines[0] and what in lines[0] and "HAZARD_MAX_SAMPLES" in lines[0], lines[0]
+    assert not (tmp_path / "m.json").exists()
+
+
+@pytest.mark.parametrize("kind", ["history", "brdf table"])
+def test_csv_lines_are_counted_before_parsing(kind, tmp_path, monkeypatch):
+    """HAZARD_MAX_FILE_MB (256) alone let a 250 MB history CSV of 1.04e7 rows through:
+    validate passed 4.4 GB before it was stopped. HAZARD_MAX_CSV_ROWS counts the lines
+    first: over it, validate and run refuse in one line naming the file and the variable."""
+    from tests.fuzz._file_corpus import HISTORY, MATERIAL, _with_material
+
+    if kind == "history":
+        (tmp_path / "h.csv").write_text("time_s,reflectance_factor\n0,1\n4,0.8\n10,0.6\n")  # 5 lines with the last newline
+        text, name = _with_material(MATERIAL + HISTORY), "h.csv"
+    else:
+        (tmp_path / "t.csv").write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,brdf_per_sr\n10,0,10,180,0.159\n"
+                                        "20,0,20,180,0.159\n30,0,30,180,0.159\n")
+        text, name = _with_material('material = { model = "table", file = "t.csv" }'), "t.csv"
+    (tmp_path / "s.toml").write_text(text)
+    monkeypatch.setenv("HAZARD_MAX_CSV_ROWS", "4")
+    for verb, extra in (("validate", []), ("run", ["-o", str(tmp_path / "out"), "--quiet"])):
+        code, lines = _cli(verb, str(tmp_path / "s.toml"), *extra)
+        assert code == 2 and len(lines) == 1, lines
+        assert f"{name}: lines = 5 exceeds the limit 4" in lines[0] and "HAZARD_MAX_CSV_ROWS" in lines[0], lines[0]
+    monkeypatch.setenv("HAZARD_MAX_CSV_ROWS", "5")
+    assert _cli("validate", str(tmp_path / "s.toml"))[0] == 0
