@@ -6,7 +6,7 @@ import time
 from contextlib import contextmanager
 
 from ..results import Stage
-from .plan import STAGES
+from .stages import stage_records
 
 __all__ = ["StageLog"]
 
@@ -45,7 +45,8 @@ class StageLog:
         self._done[st.name] = st
 
     def stages(self) -> list:
-        missing = [n for n in STAGES if n not in self._done and n != "extended_source"]
+        order = stage_records()  # derived from the stages' declarations
+        missing = [n for n in order if n not in self._done and n != "extended_source"]
         if missing:
             raise RuntimeError(f"stages never recorded: {missing}")
-        return [self._done[n] for n in STAGES if n in self._done]
+        return [self._done[n] for n in order if n in self._done]

@@ -16,11 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Plan", "plan", "STAGES"]
-
-STAGES = ("mpe", "rays", "beam", "crossings", "direct", "spill", "sdz", "history", "specular", "line_of_sight", "static", "dynamic", "exposure", "keepout",
-          "mirror_beams", "footprint", "motion", "airspace", "extended_source")
-
+__all__ = ["Plan", "plan"]
 
 @dataclass(frozen=True)
 class Plan:

@@ -156,6 +156,22 @@ def derive_plan(stages: Mapping[str, StageDef], inputs: Iterable[str] = INPUTS) 
     return tuple(order)
 
 
+def stage_records(stages: Mapping[str, StageDef] | None = None) -> tuple[str, ...]:
+    """The names of the stage records (report.json's ``stages`` list), in the order of the
+    plan :func:`derive_plan` derives from the declarations (``REGISTRY`` by default: the
+    analysis's stages, declared when :mod:`hazard.analysis` is imported).
+
+    Raises
+    ------
+    StagePlanError
+        No stage is declared (the registry is empty).
+    """
+    reg = REGISTRY if stages is None else stages
+    if not reg:
+        raise StagePlanError("no stage is declared: the analysis's stages are declared by importing hazard.analysis")
+    return tuple(r for n in derive_plan(reg) for r in reg[n].records)
+
+
 def run_stages(stages: Mapping[str, StageDef], order: Iterable[str], inputs: Mapping[str, Any], log,
                memo: StageMemo | None = None) -> Mapping[str, Any]:
     """Run the stages in ``order``, each with what it declared; stage name -> result.
