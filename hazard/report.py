@@ -431,6 +431,9 @@ def _arrow_floats(arrow, v: np.ndarray, blank: bool):
     pa, pc, _ = arrow
     mask = np.isnan(v) if blank else None
     bits = v.view(np.int64)
+    if len(bits) and (bits == bits[0]).all():  # one value (a constant MPE, an unused column): no hash, one text
+        text = pc.cast(pa.array(v[:1]), pa.string())
+        return pa.DictionaryArray.from_arrays(np.zeros(len(v), np.int32), text, mask=mask)
     sample = bits[::max(1, len(bits) // 2048)]  # spread over the block (a grid's x repeats row by row)
     if len(np.unique(sample)) * 10 > 9 * len(sample):  # mostly distinct: every value formatted
         return pa.array(v, mask=mask)

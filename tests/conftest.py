@@ -1,4 +1,16 @@
-"""Test-suite configuration: deterministic property tests on CI."""
+"""Test-suite configuration: deterministic property tests on CI; one BLAS thread per
+xdist worker.
+
+``pytest -n auto`` runs one worker per core. Each worker's OpenBLAS would start a pool of
+one thread per core as well, so two workers on two cores ran four BLAS threads, and
+OpenBLAS's threads spin while they wait: a 1452 x 37 SVD (a fit with its horizon rows)
+took 0.235 s of CPU on two threads against 0.0016 s on one on this 2-core machine at load
+20 (`test_fold_solver_equals_fit_sh_per_fold` 5.3-6.6 s -> 0.2 s). A worker therefore holds
+BLAS to one thread (threadpoolctl, and the environment for the processes it starts). The
+engine's own thread blocks (``brdfmodels.parallel``) already run BLAS on one thread; the
+results do not depend on the BLAS thread count (``tests/brdfmodels/test_parallel.py``
+raises it to two where it checks the blocks' limit).
+"""
 
 import os
 
@@ -7,3 +19,19 @@ from hypothesis import settings
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("dev", deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+_BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+_blas_limit = []  # the worker's threadpoolctl limit, held for the session
+
+
+def pytest_configure(config):
+    """In an xdist worker: BLAS on one thread (see the module's docstring)."""
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    for var in _BLAS_VARS:
+        os.environ.setdefault(var, "1")
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # numpy not loaded yet: the environment above is enough
+        return
+    _blas_limit.append(threadpool_limits(limits=1, user_api="blas"))

@@ -17,25 +17,27 @@ def test_blocks_in_order_cover_every_row():
 
 
 def test_blocks_run_on_worker_threads_with_one_blas_thread_and_no_nesting():
-    from threadpoolctl import threadpool_info
+    from threadpoolctl import threadpool_info, threadpool_limits
 
     main = threading.get_ident()
 
     def blas_threads():
         return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
 
-    before = blas_threads()
-
     def block(a, b):
         blas = blas_threads()
         inner = map_blocks(lambda c, d: threading.get_ident(), 4, 1)  # would nest: runs inline
         return threading.get_ident(), default_threads(), blas, set(inner)
 
-    res = map_blocks(block, 8, 2, threads=2)
-    for ident, cap, blas, inner in res:
-        assert ident != main and cap == 1 and inner == {ident}
-        assert all(n == 1 for n in blas)
-    assert blas_threads() == before  # restored after the blocks
+    # two BLAS threads outside (an xdist worker holds one: tests/conftest.py), one inside the blocks
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = blas_threads()
+        assert before and all(n == 2 for n in before)
+        res = map_blocks(block, 8, 2, threads=2)
+        for ident, cap, blas, inner in res:
+            assert ident != main and cap == 1 and inner == {ident}
+            assert all(n == 1 for n in blas)
+        assert blas_threads() == before  # restored after the blocks
 
 
 def test_thread_limit_caps_and_nests():

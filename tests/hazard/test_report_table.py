@@ -187,6 +187,7 @@ def _bits_round_trip(bits, blank):
     v = np.asarray(bits, np.uint64).view(np.float64)
     _column_round_trip(v, blank)
     _column_round_trip(np.repeat(v, 3), blank)  # repeated values: formatted once (a dictionary column)
+    _column_round_trip(np.full(4, v[0]), blank)  # one value throughout (a constant column): formatted once, no hash
 
 
 def _column_round_trip(v, blank):

@@ -219,6 +219,28 @@ def test_a_target_that_reflects_nothing_is_warned(tmp_path):
     assert w[0][len("  warning: "):] in json.loads((folder / "report.json").read_text())["warnings"]
 
 
+def test_a_spots_reflectance_is_integrated_once_per_run(tmp_path, monkeypatch):
+    """report.json, the answer and the exit code each ask for the verdict: the lit spot's
+    hemispherical reflectance (seconds for a measured table) is integrated once, and a
+    material is never given another's value (a Lambertian's is its reflectance)."""
+    import brdfmodels as bm
+    import brdfmodels.analysis as bma
+    from hazard import plausibility
+
+    calls = []
+    real = bma.hemispherical_reflectance
+    monkeypatch.setattr(bma, "hemispherical_reflectance", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
+    text = scene_text().replace('{ model = "lambertian", reflectance = 0.5 }', '{ model = "lambertian", reflectance = 0.0 }')
+    code, out, _, _ = run_scene(tmp_path, text, name="black2")
+    assert code == 0 and "reflects nothing" in out and len(calls) == 1
+    up = np.eye(3)
+    for rho in (0.0, 0.5, 0.25):  # the same incidence, another material each time
+        sp = SimpleNamespace(mean_frame=up, mean_incoming=np.array([0.0, 0.0, -1.0]), material=bm.Lambertian(rho))
+        assert plausibility._spot_reflectance(sp) == pytest.approx(rho, abs=1e-12)
+        assert plausibility._spot_reflectance(sp) == pytest.approx(rho, abs=1e-12)  # remembered
+    assert len(calls) == 4
+
+
 # -- cause shares ---------------------------------------------------------------------------------
 def _result(peak, direct, specular, at_aim=None):
     obs = SimpleNamespace(peak_irradiance_w_m2=np.array([peak]), direct_irradiance_w_m2=np.array([direct]),
