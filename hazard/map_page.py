@@ -471,13 +471,21 @@ def _thin_band(lid: str, title: str, f: dict, site: bool) -> dict | None:
     if lid not in THIN_LAYERS or len(xy) < 3:
         return None
     m, back = _local_m(xy, site)
-    rect = np.asarray(Polygon(m).minimum_rotated_rectangle.exterior.coords, float)[:4]
-    sides = np.hypot(*np.diff(np.vstack([rect, rect[:1]]), axis=0).T)
-    k = int(np.argmax(sides[:2]))  # the long sides: k and k + 2
-    length, width = float(sides[k]), float(sides[1 - k])
+    box = Polygon(m).minimum_rotated_rectangle
+    if box.geom_type == "LineString":  # every vertex on one line: a zone of no width along it
+        ends_m = np.asarray(box.coords, float)[[0, -1]]
+        length, width = float(np.hypot(*(ends_m[1] - ends_m[0]))), 0.0
+    elif box.geom_type == "Polygon":
+        rect = np.asarray(box.exterior.coords, float)[:4]
+        sides = np.hypot(*np.diff(np.vstack([rect, rect[:1]]), axis=0).T)
+        k = int(np.argmax(sides[:2]))  # the long sides: k and k + 2
+        length, width = float(sides[k]), float(sides[1 - k])
+        ends_m = np.array([(rect[(k + 1) % 4] + rect[(k + 2) % 4]) / 2, (rect[(k + 3) % 4] + rect[k]) / 2])
+    else:  # every vertex at one point: nothing to draw along
+        return None
     if not length > THIN_RATIO * width:
         return None
-    ends = back(np.array([(rect[(k + 1) % 4] + rect[(k + 2) % 4]) / 2, (rect[(k + 3) % 4] + rect[k]) / 2]))
+    ends = back(ends_m)
     return {"axis": [[float(y), float(x)] for x, y in ends], "width_m": width, "band_px": THIN_BAND_PX[lid],
             "text": f"{title} {fmt_number(width, 'm', sig=3)} wide, {fmt_number(length, 'm', sig=3)} long: also drawn as a "
                     f"hatched band {THIN_BAND_PX[lid]} px wide on screen (exaggerated across the zone where it is thinner)"}

@@ -101,3 +101,16 @@ def test_the_band_is_drawn_in_chromium_at_its_screen_width(out, browser):  # noq
         coloured = (px[:, 0] - px[:, 1] > 60) & (px[:, 0] > 150)  # red or orange (#d7191c, #f39c12), not grey, white or green
         spans.append(int(np.ptp(s[coloured]) + 1) if coloured.any() else 0)
     assert max(spans) >= 8, spans
+
+
+def test_a_zone_of_no_width_or_no_size_is_not_an_error():
+    """A danger zone whose vertices lie on one line (no width: a beam below the MPE from
+    its aperture on gives a polygon of coincident or collinear vertices) made `hazard
+    report` fail with an internal error; a line gets a band along it, a point none."""
+    from hazard.map_page import _thin_band
+
+    line = {"geometry": {"type": "Polygon", "coordinates": [[[0.0, 0.0], [100.0, 0.0], [50.0, 0.0], [0.0, 0.0]]]}}
+    band = _thin_band("sdz", "danger zone", line, site=False)
+    assert band["width_m"] == 0.0 and sorted(p[1] for p in band["axis"]) == [0.0, 100.0]
+    point = {"geometry": {"type": "Polygon", "coordinates": [[[5.0, 5.0], [5.0, 5.0], [5.0, 5.0], [5.0, 5.0]]]}}
+    assert _thin_band("sdz", "danger zone", point, site=False) is None
