@@ -547,9 +547,21 @@ def _spot_from_rows(beam, cells, target, rows, side, material, tracer, mu, scale
     corners_x, corners_g = _leaf_corners(beam, np.stack([s0, t0], 1), np.stack([s1, t1], 1), centre_x, normals, jac)
     patches = patches_from_leaves(centre_x, jac, np.stack([s0, t0], 1), np.stack([s1, t1], 1), power, inv, means[:, 0:3],
                                   sample_power, corners_x, corners_g)
-    return Spot(target, means[:, 0:3], sample_power, inc, _frames(target, nrm), means[:, 9], pk,
+    points, scatter = _centroids(patches, means[:, 0:3], scatter)
+    return Spot(target, points, sample_power, inc, _frames(target, nrm), means[:, 9], pk,
                 p_near, material, side, float(error_w), exact, area, cells, beam,
                 _target_ray_faces(tracer, target), spread_m2=scatter, patches=patches)
+
+
+def _centroids(patches, points, spread_m2):
+    """The samples' power centroids and variances [m^2] on the surface: for a diverging
+    beam's patches those of the rays' perspective map (:attr:`SpotPatches.moments`; the
+    hit of the ray through a sample's beam-coordinate centroid is off its power centroid
+    at grazing incidence, a first-order error of every point form about it), else as given."""
+    if patches is None or patches.tri_g is None:
+        return points, spread_m2
+    c, v, _, has = patches.moments
+    return np.where(has[:, None], c, points), np.where(has, v, spread_m2)
 
 
 def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_s):
@@ -566,7 +578,8 @@ def _spot_from_outline(beam, cells, target, ex, side, material, tracer, outline_
     if ex.pieces is not None and len(ex.pieces):
         patches = patches_from_pieces(list(ex.pieces), ex.fraction, ex.power_w, lambda s: _plane_hits(beam, target, s)[0],
                                       ex.points, lambda x: beam.source_distance_m((x - beam.position_m) @ beam.axis))
-    return Spot(target, ex.points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
+    points, spread = _centroids(patches, ex.points, spread)
+    return Spot(target, points, ex.power_w, ex.directions, _frames(target, normals), ex.path_m, ex.peak_irradiance_w_m2,
                 beam.source_distance_m(ex.axial_m if ex.near_axial_m is None else ex.near_axial_m), material, side, float(ex.error_w), True, float(np.sum(ex.area_s * w * w)),
                 cells, beam, _target_ray_faces(tracer, target), outline_s, spread, patches=patches)
 

@@ -49,6 +49,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -57,6 +58,7 @@ __all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_fi
 
 NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
 RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
+MOMENT_LEVEL = 3  # the point form's centroid and spread: the 7-point rule on 4**this sub-triangles of each triangle
 MAX_DEPTH = 40  # bisections of a triangle at most (its area / 1e12)
 _NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
 _PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
@@ -93,6 +95,13 @@ class SpotPatches:
     def weights(self) -> np.ndarray:
         """The perspective weights (K, 3): ``tri_g``, or ones where the map is affine."""
         return np.ones(self.tri_s.shape[:2]) if self.tri_g is None else self.tri_g
+
+    @cached_property
+    def moments(self):
+        """Per sample, from its triangles as the beam's rays map them: the power centroid
+        (n, 3) [m], the variance about it (n,) [m^2], the largest vertex distance from it
+        (n,) [m] and where these exist (n,) (:func:`patch_moments`); computed once."""
+        return patch_moments(self)
 
 
 class _Stats:
@@ -227,6 +236,70 @@ def perspective_weights(distance_m) -> np.ndarray | None:
     return g
 
 
+def _sub_rule(level=MOMENT_LEVEL):
+    """The 7-point rule on each of the ``4**level`` congruent sub-triangles of a triangle:
+    barycentric nodes (Q, 3) and weights (Q,) summing to 1."""
+    n = 2 ** level
+    subs = []
+    for i in range(n):
+        for j in range(n - i):
+            a, b, c = (i, j), (i + 1, j), (i, j + 1)
+            subs.append((a, b, c))
+            if i + j < n - 1:
+                subs.append(((i + 1, j), (i + 1, j + 1), (i, j + 1)))
+    corners = np.array([[[1 - (u + v) / n, u / n, v / n] for u, v in tri] for tri in subs])  # (S, 3, 3)
+    nodes = np.einsum("qk,skc->sqc", RULE_BARY, corners).reshape(-1, 3)
+    return nodes, np.tile(RULE_W, len(subs)) / len(subs)
+
+
+def patch_moments(patches: SpotPatches):
+    """Per sample: the power centroid (n, 3) [m] of its triangles on the surface, the
+    power-weighted variance about it (n,) [m^2] and its radius (n,) [m] (largest vertex
+    distance from the centroid; the rays map a triangle's edges to straight segments on a
+    flat target or a leaf's tangent plane). The power density ``c exp(-|s|^2)`` is
+    integrated in ``s`` with the 7-point rule on ``4**MOMENT_LEVEL`` sub-triangles of each
+    triangle, its nodes mapped as the rays map them (perspective-correct for a diverging
+    beam); these are the point form's inputs (a centroid off the power centroid adds a
+    first-order error the Taylor bound of :func:`point_form_ok` does not cover). Also
+    returns the mask (n,) of samples with power on their triangles (the others' values are 0)."""
+    nb, nw = _sub_rule()
+    n = len(patches.sample_power_w)
+    m0, m1, m2 = np.zeros(n), np.zeros((n, 3)), np.zeros(n)
+    ref = patches.tri_x[:, 0, :]  # each triangle's first vertex (its nodes are mapped about it)
+    base = patches.tri_x[_first_of(patches.sample, np.arange(n)), 0] if len(patches.sample) else np.zeros((n, 3))
+    g_all = patches.weights()
+    step = max(1, _NODE_BLOCK // len(nw))
+    for a in range(0, len(patches.sample), step):
+        sl = slice(a, a + step)
+        ss, xs, gs = patches.tri_s[sl], patches.tri_x[sl] - ref[sl, None, :], g_all[sl]
+        s = np.einsum("qk,pkc->pqc", nb, ss)
+        bg = nb[None, :, :] * gs[:, None, :]
+        x = bg @ xs / bg.sum(-1, keepdims=True)  # (P, Q, 3) about ref
+        w = (_area_s(ss) * patches.density_w[sl])[:, None] * nw[None, :] * np.exp(-(s * s).sum(-1))
+        smp = patches.sample[sl]
+        x = x + (ref[sl] - base[smp])[:, None, :]  # about the sample's first vertex (no cancellation far from the origin)
+        np.add.at(m0, smp, w.sum(1))
+        np.add.at(m1, smp, np.einsum("pq,pqc->pc", w, x))
+        np.add.at(m2, smp, np.einsum("pq,pq->p", w, (x * x).sum(-1)))
+    has = m0 > 0
+    mean = np.where(has[:, None], m1 / np.where(has, m0, 1.0)[:, None], 0.0)
+    var = np.where(has, np.maximum(m2 / np.where(has, m0, 1.0) - (mean * mean).sum(1), 0.0), 0.0)
+    centre = np.where(has[:, None], base + mean, 0.0)
+    rad = np.sqrt(((patches.tri_x - centre[patches.sample][:, None, :]) ** 2).sum(-1)).max(axis=1)
+    radius = np.zeros(n)
+    np.maximum.at(radius, patches.sample, np.where(has[patches.sample], rad, 0.0))
+    return centre, var, radius, has
+
+
+def _first_of(sample, which):
+    """Index of the first triangle of each sample in ``which`` (samples without one: 0)."""
+    first = np.zeros(int(sample.max()) + 1 if len(sample) else 1, int)
+    idx = np.arange(len(sample))[::-1]
+    first[sample[::-1]] = idx
+    which = np.asarray(which, int)
+    return np.where(which < len(first), first[np.minimum(which, len(first) - 1)], 0)
+
+
 def point_form_ok(radius_m, distance_m, rtol=NEAR_FIELD_RTOL, spread_m2=None):
     """True where a source of radius ``a`` (and power-weighted variance ``sigma^2`` about
     its power centroid, default ``a^2``) seen from ``d`` is a point source to ``rtol`` of
@@ -317,7 +390,9 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
     else by the adaptive triangle rule (module notes).
 
     ``points``, ``spread_m2``, ``normals``, ``power_w``: the samples' power centroids,
-    variances about them [m^2], lit-side normals and powers now; ``weight`` (M,) the
+    variances about them [m^2], lit-side normals and powers now (for a diverging beam's
+    patches the centroids, variances and radii of :attr:`SpotPatches.moments` replace
+    them in the point form: the affine ones can sit off the rays' power centroid); ``weight`` (M,) the
     observers' factor (gain x line of sight); ``kernel(samples, x, o, scale)`` gives
     ``f_r cos(theta_r) exp(-mu R) scale / R^2`` for source points ``x`` of ``samples``
     and observers ``o`` (rows, shape (N,) or (N, T)). Observers go in blocks (bounded
@@ -330,7 +405,12 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
         return e
     ratio = np.where(patches.sample_power_w > 0, power_w / np.where(patches.sample_power_w > 0, patches.sample_power_w, 1.0), 0.0)
     spread = np.zeros(len(points)) if spread_m2 is None else np.asarray(spread_m2, float)
-    src = _Sources(patches, points, spread, normals, power_w, ratio, kernel)
+    radius = patches.radius_m
+    if patches.tri_g is not None:  # diverging: the point form about the power centroid of the rays' own map
+        c, v, r, has = patches.moments
+        points = np.where(has[:, None], c, points)
+        spread, radius = np.where(has, v, spread), np.where(has, r, radius)
+    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel)
     counts = np.zeros(4, int)
     block = max(1, _PAIR_BLOCK // max(len(points), len(patches.sample), 1))
     for a in range(0, len(live), block):
@@ -346,6 +426,7 @@ class _Sources:
     patches: SpotPatches
     points: np.ndarray
     spread_m2: np.ndarray
+    radius_m: np.ndarray
     normals: np.ndarray
     power_w: np.ndarray
     ratio: np.ndarray
@@ -358,7 +439,7 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     kernel evaluations, pairs unresolved at ``MAX_DEPTH``)."""
     pt = src.points
     d = np.linalg.norm(obs[rows][:, None, :] - pt[None, :, :], axis=-1)
-    ok = point_form_ok(src.patches.radius_m[None, :], d, rtol, src.spread_m2[None, :])
+    ok = point_form_ok(src.radius_m[None, :], d, rtol, src.spread_m2[None, :])
     po, ps = np.nonzero(ok)
     io, is_ = np.nonzero(~ok)
     po, io = rows[po], rows[io]
