@@ -602,6 +602,7 @@ def sensitivity_scene(draws, seed, sampling, sensitivity_draws):
                       uncertainty=unc)
 
 
+@pytest.mark.slow  # ~24 s CPU with its 2-worker cluster; the default run: tests/hazard/test_runner.py (the one runner study and risk share: Dask records the serial results) and test_study.py::test_serial_equals_dask_embedded_and_existing_scheduler
 def test_serial_and_cluster_identical(tmp_path):
     """A fixed seed gives the same results serially and on a 2-worker dask LocalCluster:
     risk.csv byte for byte, risk.json's observers equal."""
