@@ -13,7 +13,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from hazard.study import load_study, progress_bar, run_study
+from hazard.drivers.study import load_study, progress_bar, run_study
 
 HERE = Path(__file__).resolve().parent
 

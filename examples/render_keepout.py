@@ -17,7 +17,7 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "out", "render"))
     ap.add_argument("--frames", type=int, default=20)
     args = ap.parse_args(argv)
-    from hazard import render
+    from hazard.pictures import render
 
     path = scenes.example_path(args.scene) if args.scene in scenes.examples() else args.scene
     res = hazard.analyze(scenes.load(path))

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import hazard
 import scenes
-from hazard import plots
+from hazard.pictures import plots
 
 
 def main(argv=None):

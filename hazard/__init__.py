@@ -6,7 +6,7 @@ time, keep-out zones and reports. ``import hazard`` is light: heavy dependencies
 tracing, rendering, clusters) load only in the stages that need them.
 """
 
-from .mpe import (
+from hazard.physics.mpe import (
     DEFAULT_STANDARD,
     STANDARDS,
     MPEResult,
@@ -15,7 +15,7 @@ from .mpe import (
     repetitive_pulse_mpe,
     skin_mpe,
 )
-from .nohd import (
+from hazard.physics.nohd import (
     NOHDResult,
     attenuation_from_visibility,
     hazard_distance,
@@ -31,16 +31,18 @@ __version__ = "0.1.0"
 
 def __getattr__(name):
     # heavy modules load on first use (pyvista, matplotlib): ``import hazard`` stays light
-    if name in ("render", "plots", "study", "convergence"):
+    lazy = {"render": "hazard.pictures.render", "plots": "hazard.pictures.plots",
+            "study": "hazard.drivers.study", "convergence": "hazard.drivers.convergence"}
+    if name in lazy:
         import importlib
 
-        return importlib.import_module(f".{name}", __name__)
+        return importlib.import_module(lazy[name])
     raise AttributeError(f"module 'hazard' has no attribute {name!r}")
 
 
 def analyze(scene, **kwargs):
-    """Run the hazard analysis of a loaded scene; see :func:`hazard.analysis.analyze`."""
-    from .analysis import analyze as _analyze
+    """Run the hazard analysis of a loaded scene; see :func:`hazard.pipeline.analysis.analyze`."""
+    from hazard.pipeline.analysis import analyze as _analyze
 
     return _analyze(scene, **kwargs)
 

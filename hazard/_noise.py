@@ -14,7 +14,7 @@ no global state at import):
 * Dask's cluster chatter (``distributed`` loggers below ERROR: a nanny "killing" a worker
   that did not stop within its grace time at the end of a run, closed comms) is not shown;
   the workers of the embedded cluster start with the same level
-  (:func:`hazard.runner.local_cluster`);
+  (:func:`hazard.drivers.runner.local_cluster`);
 * VTK's own log on stderr (``bad X server connection`` with raw terminal escape codes,
   from an off-screen render without a display) is turned off during ``hazard render``;
   a render that really fails still raises, and says so in the one error line.

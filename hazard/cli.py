@@ -43,9 +43,9 @@ import sys
 from pathlib import Path
 
 
-from . import mpe as _mpe
-from . import nohd as _nohd
-from .cli_units import add_quantity_option
+from hazard.physics import mpe as _mpe
+from hazard.physics import nohd as _nohd
+from hazard.cli_units import add_quantity_option
 
 __all__ = ["main", "build_parser"]
 
@@ -130,7 +130,7 @@ _PROVENANCE = ("Every step ends with its provenance label: [C] read in the cited
 
 
 def _version_line() -> str:
-    from . import __version__
+    from hazard import __version__
 
     return f"hazard (laser-hazard) {__version__}"
 
@@ -171,7 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="write to this file instead of stdout")
     p.add_argument("--markdown", action="store_true", help="print the scene reference as Markdown (key path, type, unit, "
                    "default, description), as kept in docs/scene-reference.md")
-    p.add_argument("--report", action="store_true", help="print the JSON schema of report.json instead (hazard.report_schema)")
+    p.add_argument("--report", action="store_true", help="print the JSON schema of report.json instead (hazard.outputs.report_schema)")
 
     p = sub.add_parser("study", help="scenario study: sweeps and Monte Carlo over a base scene, on Dask")
     p.add_argument("study", help="study TOML, or a bundled example study's name (power_sweep, montecarlo_binoculars, plate_power)")
@@ -252,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--explain", action="store_true", help="also say which rule governed and why (the candidate limits compared)")
     p.add_argument("--exposures-per-day", type=_positive_int, help=(
         "180-400 nm: this many such exposures (or trains) within 24 h; their doses add up and the sum is held to "
-        "the MPE of their total duration (hazard.mpe.uv_24h_mpe, [M])"))
+        "the MPE of their total duration (hazard.physics.mpe.uv_24h_mpe, [M])"))
     p.add_argument("--json", action="store_true", help="print JSON")
 
     p = sub.add_parser("nohd", help="nominal ocular hazard distance with every step", epilog=_PROVENANCE)
@@ -433,8 +433,8 @@ def _stage_lines(args, err):
 
 def _analyse(args, err):
     """Load and analyse ``args.scene``: stage lines and (on a terminal) bars on ``err``."""
-    from .analysis import analyze
-    from .progress import progress_to
+    from hazard.pipeline.analysis import analyze
+    from hazard.progress import progress_to
 
     if getattr(args, "backend", "embree") == "numpy":  # before any work, whatever the scene needs (issue 30)
         _needs("rtree", "numpy-backend")
@@ -444,8 +444,8 @@ def _analyse(args, err):
 
 
 def _finish(args, result):
-    """EXIT_HAZARD when ``--fail-on-hazard WHICH`` finds its kind of hazard (:func:`hazard.verdict.fails`)."""
-    from .verdict import fails, verdict
+    """EXIT_HAZARD when ``--fail-on-hazard WHICH`` finds its kind of hazard (:func:`hazard.pipeline.verdict.fails`)."""
+    from hazard.pipeline.verdict import fails, verdict
 
     return EXIT_HAZARD if (args.fail_on_hazard and fails(verdict(result), args.fail_on_hazard)) else EXIT_OK
 
@@ -453,11 +453,11 @@ def _finish(args, result):
 def _cmd_run(args, out, err):
     from brdfmodels.output_sets import output_unit
 
-    from .report import json_safe, report_dict, summary_text, write_set
+    from hazard.outputs.report import json_safe, report_dict, summary_text, write_set
 
-    from .figures import FIXED_NAMES
+    from hazard.pictures.figures import FIXED_NAMES
 
-    from .map_outputs import MAP_NAMES, map_files
+    from hazard.outputs.map_outputs import MAP_NAMES, map_files
 
     names = ("report.json", "observers.csv") + MAP_NAMES
     _check_outdir(args.output, names + (FIXED_NAMES if args.plot else ()), args.force)
@@ -469,7 +469,7 @@ def _cmd_run(args, out, err):
         result = _analyse(args, err)
         extra = {}
         if args.plot:
-            from .figures import kept_render_entries, run_figures
+            from hazard.pictures.figures import kept_render_entries, run_figures
 
             extra = run_figures(result, progress=None if args.quiet else (lambda name: err.write(f"hazard: drawing {name}...\n")),
                                 rendered=kept_render_entries(unit))  # hazard render's 3-D pictures kept beside: still listed
@@ -543,7 +543,7 @@ def _as_study(name):
     bundled study), validated as ``hazard study`` would before work; None if it is not one."""
     import scenes
 
-    from .study import examples, load_study
+    from hazard.drivers.study import examples, load_study
 
     path = Path(name)
     if not path.exists():
@@ -560,7 +560,7 @@ def _as_study(name):
 def _validate_study(study, args, out):
     import scenes
 
-    from .study import base_data, scenarios
+    from hazard.drivers.study import base_data, scenarios
 
     base, base_dir = base_data(study)  # its warnings, as the run's answers would put them above their verdicts
     warned = list(scenes.from_data(base, source=f"scene={study.scene!r}", base_dir=base_dir).warnings)
@@ -637,7 +637,7 @@ def _cmd_schema(args, out, err):
         err.write("hazard schema: --report and --markdown: choose one (--report prints report.json's JSON schema)\n")
         return EXIT_ERROR
     if args.report:
-        from .report_schema import report_schema
+        from hazard.outputs.report_schema import report_schema
 
         text = json.dumps(report_schema(), indent=1)
     elif args.markdown:
@@ -647,7 +647,7 @@ def _cmd_schema(args, out, err):
     else:
         text = json.dumps(scenes.json_schema(), indent=1)
     if args.output:
-        from .report import atomic_write_text
+        from hazard.outputs.report import atomic_write_text
 
         atomic_write_text(Path(args.output), text)
     else:
@@ -730,7 +730,7 @@ def _cmd_fit(args, out, err):
 
     from brdfmodels.output_sets import output_files
 
-    from .progress import progress_to
+    from hazard.progress import progress_to
 
     finals = [args.output] + [p for p in (getattr(args, "envelope_output", None), getattr(args, "samples_output", None)) if p]
     for p in finals:
@@ -783,7 +783,7 @@ def _fit_samples(args):
     """The samples to fit: witness-screen tests reduced (a bar per test), or a table."""
     from brdfmodels import screen
 
-    from .progress import terminal_bar
+    from hazard.progress import terminal_bar
 
     if args.fit_kind != "screen":
         from brdfmodels.io import read_samples
@@ -804,7 +804,7 @@ def _fit_ts5(args, out, samples):
     import brdfmodels
     from brdfmodels import fitting
 
-    from .progress import progress_callback
+    from hazard.progress import progress_callback
 
     if args.report:
         rows = fitting.compare_ts5_methods(samples.wi, samples.wo, samples.brdf_per_sr,
@@ -836,7 +836,7 @@ def _fit_sh(args, out, samples):
     import brdfmodels
     from brdfmodels import fitting
 
-    from .progress import progress_callback
+    from hazard.progress import progress_callback
 
     basis = _basis_arg(args.basis)
     if args.report:
@@ -874,7 +874,7 @@ def _fit_sh(args, out, samples):
 
 
 def _cmd_study(args, out, err):
-    from .study import load_study, progress_bar, run_study
+    from hazard.drivers.study import load_study, progress_bar, run_study
 
     study = load_study(args.study)
     res = run_study(study, args.output, scheduler=args.scheduler, serial=args.serial, n_workers=args.workers, force=args.force,
@@ -901,7 +901,7 @@ def _cmd_study(args, out, err):
 def _risk_listing(doc, out, shown=20, unresolved_shown=5):
     """hazard risk's lines: the resolved points (an exceedance seen) by the estimate first,
     then the unresolved (zero hits, only an upper bound) by their bound; the rest counted."""
-    from .risk.page import split_rows
+    from hazard.outputs.risk_page import split_rows
 
     resolved, unresolved = split_rows(doc["observers"])
     out.write(f"  resolved (at least one exceedance in the draws; highest estimate first): {len(resolved)} point(s)\n")
@@ -921,10 +921,10 @@ def _risk_listing(doc, out, shown=20, unresolved_shown=5):
 
 
 def _cmd_risk(args, out, err):
-    from .progress import progress_callback
-    from .risk import run_risk
+    from hazard.progress import progress_callback
+    from hazard.drivers.risk import run_risk
 
-    from .risk.run import ChunksFailed
+    from hazard.drivers.risk.run import ChunksFailed
 
     scene = _load_scene(args.scene, err)
     try:
@@ -950,8 +950,8 @@ def _cmd_risk(args, out, err):
 def _cmd_render(args, out, err):
     from brdfmodels.output_sets import output_unit
 
-    from . import render
-    from .progress import progress_to
+    from hazard.pictures import render
+    from hazard.progress import progress_to
 
     with output_unit(args.output, command="render", overwrite=args.force, force=args.force,  # all renders as one unit
                      source=_scene_source(args.scene)) as unit:
@@ -960,7 +960,7 @@ def _cmd_render(args, out, err):
         with progress_to(None if args.quiet else err):  # bars on a terminal only
             paths = render.keepout(result, unit.stage, lobe_resolution_deg=args.resolution_deg, force=args.force)
             lines = [f"  wrote {unit.final(p)}" for k, p in paths.items() if k not in ("png", "layout", "figures")]
-            from .figures import run_figures, write_figures
+            from hazard.pictures.figures import run_figures, write_figures
 
             if not args.no_animation and result.states:  # before the 2-D pictures: figures.json lists the GIF too
                 anim = render.animate_lobe(result, unit.stage)
@@ -974,9 +974,9 @@ def _cmd_render(args, out, err):
 
 
 def _cmd_convergence(args, out, err):
-    from . import convergence as conv
-    from .progress import progress_stream, progress_to
-    from .report import json_safe
+    from hazard.drivers import convergence as conv
+    from hazard.progress import progress_stream, progress_to
+    from hazard.outputs.report import json_safe
 
     with progress_to(None if args.quiet else err):
         # a bar of the runs on a terminal; elsewhere one line per run (as the stage lines of run)
@@ -996,10 +996,10 @@ def _cmd_convergence(args, out, err):
 
 
 def _write_review(out_dir, args, err, pdf=False) -> list:
-    """map.html (hazard.map_page) then hazard.review.write_review, with the stage lines of
+    """map.html (hazard.outputs.map_page) then hazard.outputs.review.write_review, with the stage lines of
     the other verbs on ``err``; a PdfError carries both pages in ``written``."""
-    from .map_page import write_map_page
-    from .review import PdfError, write_review
+    from hazard.outputs.map_page import write_map_page
+    from hazard.outputs.review import PdfError, write_review
 
     say = _stage_lines(args, err)
     page = write_map_page(out_dir, progress=say)
@@ -1013,7 +1013,7 @@ def _write_review(out_dir, args, err, pdf=False) -> list:
 def _cmd_report(args, out, err):
     from brdfmodels.output_sets import output_unit, read_sources
 
-    from .review import PdfError, read_report
+    from hazard.outputs.review import PdfError, read_report
 
     read_report(args.out_dir)  # a clear line naming the folder before anything is staged
     failed = None
@@ -1074,15 +1074,15 @@ def main(argv=None, *, stdout=None, stderr=None) -> int:
         return EXIT_ERROR
     except SystemExit as exc:  # --help
         return int(exc.code or 0) if not isinstance(exc.code, str) else EXIT_ERROR
-    from ._cli_env import headless
-    from .report import OutputExistsError
+    from hazard._cli_env import headless
+    from hazard.outputs.report import OutputExistsError
 
     where = _input_of(args)
     try:
         with headless():  # the CLI's process draws headless; the library itself changes no global state
             if not as_command:
                 return _COMMANDS[args.verb](args, out, err)
-            from ._noise import quiet_dependencies
+            from hazard._noise import quiet_dependencies
 
             with quiet_dependencies(err, args.verb, serial=bool(getattr(args, "serial", False))):
                 return _COMMANDS[args.verb](args, out, err)

@@ -47,7 +47,7 @@ __all__ = [
     "check_risk",
 ]
 
-# the standards hazard.mpe knows; kept here because scenes may not import hazard
+# the standards hazard.physics.mpe knows; kept here because scenes may not import hazard
 STANDARD_KEYS = ("ansi-z136.1-2014", "iec-60825-1-2014", "ansi-z136.1-2007", "iec-60825-1-2007")
 
 # the smallest non-zero divergence: a Gaussian beam's 1/e full angle is at least 2 lambda / (pi D) (D its 1/e diameter),
@@ -173,7 +173,7 @@ class LaserSpec(_Strict):
     """The laser: CW (``power_w``) or pulsed (``pulse_energy_j``, ``pulse_duration_s``, ``prf_hz``)."""
 
     wavelength_nm: float = Field(ge=180.0, le=1.0e6, description=(
-        "wavelength [nm], 180 nm to 1 mm (the MPE tables' range; the UV rows, 180-400 nm, are [M]: see hazard.mpe)"))
+        "wavelength [nm], 180 nm to 1 mm (the MPE tables' range; the UV rows, 180-400 nm, are [M]: see hazard.physics.mpe)"))
     power_w: float | None = Field(default=None, ge=1e-9, le=1e9, description="CW power [W], 1 nW to 1 GW")
     pulse_energy_j: float | None = Field(default=None, ge=1e-15, le=1e7, description="energy per pulse [J], 1 fJ to 10 MJ")
     pulse_duration_s: float | None = Field(default=None, ge=1e-13, le=3e4, description="pulse duration [s] (the MPE tables start at 1e-13 s)")
@@ -846,7 +846,7 @@ def _check_weights(weights, n: int, what: str) -> None:
 
 class VisibilityDistributionSpec(_Strict):
     """How the meteorological visibility varies between operations (the attenuation per
-    draw follows from it by the Kruse model, :func:`hazard.nohd.attenuation_from_visibility`)."""
+    draw follows from it by the Kruse model, :func:`hazard.physics.nohd.attenuation_from_visibility`)."""
 
     distribution: Literal["lognormal", "uniform", "discrete"] = Field(description=(
         "lognormal: median_km and sigma (of ln V); uniform: low_km to high_km; discrete: values_km with weights"))
@@ -970,7 +970,7 @@ class UncertaintySpec(_Strict):
 
 def uncertain_inputs(spec: "SceneSpec") -> list:
     """The ``[uncertainty]`` input groups that vary between draws, in the order of
-    :data:`hazard.risk.inputs.GROUPS` (the rule of ``RiskModel.active``; the bias alone is
+    :data:`hazard.drivers.risk.inputs.GROUPS` (the rule of ``RiskModel.active``; the bias alone is
     not random, a tilt needs a plate or disk target, an observer spread needs observers)."""
     u = spec.uncertainty
     if u is None:

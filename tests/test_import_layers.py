@@ -26,8 +26,8 @@ PACKAGES = ("brdfmodels", "scenes", "hazard")
 # (module, module): a cycle of the whole graph that is allowed, and why
 ALLOWED_CYCLES = {
     # hazard.analyze imports the engine on first call so that `import hazard` stays light
-    # (MPE and NOHD only); hazard.analysis reads hazard.__version__ inside a function
-    frozenset({"hazard", "hazard.analysis"}),
+    # (MPE and NOHD only); hazard.pipeline.analysis reads hazard.__version__ inside a function
+    frozenset({"hazard", "hazard.pipeline.analysis"}),
 }
 DEPRECATED = {"brdfmodels._io", "brdfmodels._unit"}  # thin re-exports kept one release
 

@@ -105,7 +105,7 @@ def draw(mode):
             pictures.append(os.path.basename(str(study._plot(SimpleNamespace(name="s"), runs, pathlib.Path(tmp)))))
     else:  # the bundled example's every picture, and the 3-D render
         import hazard, scenes
-        from hazard.figures import run_figures
+        from hazard.pictures.figures import run_figures
 
         result = hazard.analyze(scenes.load(scenes.example_path(mode)), keep_history=True)
         pictures = sorted(run_figures(result))

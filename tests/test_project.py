@@ -67,7 +67,7 @@ def test_every_package_is_in_the_wheel():
     assert "package-dir" not in config and find.get("namespaces") is False
     found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("brdfmodels", "scenes", "hazard")
              for p in (ROOT / top).rglob("__init__.py")}
-    assert {"hazard.pipeline", "hazard.risk"} <= found
+    assert {"hazard.pipeline", "hazard.drivers.risk"} <= found
     assert set(find_packages(str(ROOT), include=find["include"])) == found
 
 

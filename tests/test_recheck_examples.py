@@ -53,8 +53,8 @@ def test_real_runs_power_doubled(tmp_path, capsys, monkeypatch):
     observer's ratio x2 (the other is behind a box: 0 both times), the diffuse NOHD
     sqrt(rho P / (pi MPE)) x sqrt(2) and the lobe's volume (NOHD^3) x 2^1.5, from the formulas
     (the point-form lobe: the plate's lobe lies within its spot's near field, where
-    hazard.near_field_lobe integrates it; tests/validation/test_near_field_lobes.py)."""
-    from hazard import near_field_lobe
+    hazard.physics.near_field_lobe integrates it; tests/validation/test_near_field_lobes.py)."""
+    from hazard.physics import near_field_lobe
     from hazard.cli import main as hazard_main
 
     monkeypatch.setattr(near_field_lobe, "ENABLED", False)

@@ -4,7 +4,7 @@ A zone is a polygon extruded from ``floor_agl_m`` to ``ceiling_agl_m`` above the
 (the terrain under each point, or z = 0 without one; range-safety.md section 5: "the zone
 is a volume: test the beam path against the zone polyhedra, not a ground distance"). Its
 limit is an effective irradiance VCF x E (``lfed``, ``czed``, ``szed``;
-:mod:`hazard.visual`) or the MPE (``nohd``, no VCF). It holds when the largest effective
+:mod:`hazard.physics.visual`) or the MPE (``nohd``, no VCF). It holds when the largest effective
 irradiance inside it, at every time the laser lases, stays below the limit.
 
 Where the largest value is looked for, at each analysed time (every beam state's time
@@ -33,8 +33,8 @@ import math
 
 import numpy as np
 
-from ..engine import mirror_axis, specular_irradiance, spot_irradiance, spot_line_of_sight
-from ..visual import level_limit_w_m2
+from hazard.physics.engine import mirror_axis, specular_irradiance, spot_irradiance, spot_line_of_sight
+from hazard.physics.visual import level_limit_w_m2
 
 __all__ = ["check_zones", "TIMES_MAX", "LATTICE", "LEVELS"]
 
@@ -111,7 +111,7 @@ def _times(result):
     if run.motion.aim is None:
         t = np.asarray([bs.time_s for bs in run.states_list])
     else:
-        from .motion import base_grid
+        from hazard.pipeline.motion import base_grid
 
         t = base_grid(run.motion, run.motion.t_start_s, run.motion.t_end_s)
         t = np.unique(np.concatenate([t[:: max(1, len(t) // TIMES_MAX)], run.key_times_s]))
@@ -142,7 +142,7 @@ def _axis_entry(zone, o, u, span_m) -> np.ndarray | None:
 
 def _direct_at(result, p, u, tracer, mu) -> np.ndarray:
     """The direct beam along direction ``u`` at points ``p`` (N, 3), blocked by objects."""
-    from .motion import blocked, gaussian_along_w_m2
+    from hazard.pipeline.motion import blocked, gaussian_along_w_m2
 
     e, _, dist = gaussian_along_w_m2(result.beam, u, p, mu)
     live = np.flatnonzero(e > 0)
@@ -217,7 +217,7 @@ def _pointing_ring(u, b) -> list:
     (:func:`hazard.pipeline.sdz.cone_directions`, 8 directions for a small buffer)."""
     if b <= 0:
         return [u]
-    from .sdz import cone_directions
+    from hazard.pipeline.sdz import cone_directions
 
     return list(cone_directions(np.asarray(u, float), b, b))
 

@@ -35,10 +35,10 @@ import dataclasses
 
 import numpy as np
 
-from ..aperture import observer_apertures
-from ..engine import specular_irradiance
-from .direct import beam_at, clear_of_objects
-from .surfaces import Polyline, observer_surfaces
+from hazard.physics.aperture import observer_apertures
+from hazard.physics.engine import specular_irradiance
+from hazard.pipeline.direct import beam_at, clear_of_objects
+from hazard.pipeline.surfaces import Polyline, observer_surfaces
 
 __all__ = ["add_crossings", "SUBSAMPLES", "GAIN", "STEP_DIAMETERS"]
 
@@ -129,7 +129,7 @@ def _sources(beam, spots, mu, tracer, spill_s, apertures=None):
 
 def _group_apertures(scene, g):
     """n -> the apertures of n points of observer group ``g`` (its optics, the scene's
-    wavelength and exposure duration: :func:`hazard.aperture.observer_apertures`)."""
+    wavelength and exposure duration: :func:`hazard.physics.aperture.observer_apertures`)."""
     obs, spec = scene.observers, scene.spec
     optics = [obs.optics[g] if g < len(obs.optics) else None]
 

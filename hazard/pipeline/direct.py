@@ -1,14 +1,14 @@
 """Stage ``direct``: the laser's own beam at the observers (spec `range-safety.md` sections 2 and 10).
 
 An observer in the beam receives the Gaussian profile at its range (rays from the
-virtual point source, :class:`hazard.beam.BeamGeometry`):
+virtual point source, :class:`hazard.physics.beam.BeamGeometry`):
 ``E = P / (pi w(z)^2) exp(-|s|^2) sqrt(1 + |s|^2 phi^2 / 4) exp(-mu L)`` with ``s`` its
 transverse position in units of the 1/e radius ``w(z) = (a + z phi) / 2`` and ``L`` the
 path from the aperture (Beer-Lambert once): the point value. The verdict compares the
 MPE with the power through the limiting aperture (7 mm at 400-1400 nm; ANSI Z136.1-2014
 sec. 8.3 / Table 8, IEC 60825-1:2014 Table A.5) centred on the eye, or through an optical
 aid's collecting disk ``min(D_o, 7 mm M)`` delivered into the 7 mm pupil
-(:func:`hazard.aperture.aperture_irradiance_w_m2`: exact Marcum-Q fraction of the
+(:func:`hazard.physics.aperture.aperture_irradiance_w_m2`: exact Marcum-Q fraction of the
 Gaussian at offset ``|s| w`` from the axis, times the same tilt and attenuation). Beside
 a beam narrower than the aperture that exceeds the point value by orders of magnitude;
 on the axis of such a beam it is below it (the standard's quantity). Nothing reaches
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..aperture import Apertures, aperture_irradiance_w_m2
+from hazard.physics.aperture import Apertures, aperture_irradiance_w_m2
 
 __all__ = ["BeamAt", "DirectBeam", "beam_at", "direct_beam", "gaussian_aperture_w_m2", "rim_clear", "with_pointing"]
 
@@ -67,7 +67,7 @@ class DirectBeam:
 def with_pointing(d: DirectBeam, scene, beam, observers, mu, ray_scene, apertures: Apertures) -> DirectBeam:
     """``d`` with each observer's direct beam raised to its worst over the directions the
     beam may point in (:func:`hazard.pipeline.pointing.pointing_worst_w_m2`)."""
-    from .pointing import pointing_worst_w_m2
+    from hazard.pipeline.pointing import pointing_worst_w_m2
 
     def through(rows, point_w_m2, axial_m, offset_m, path_m):
         return gaussian_aperture_w_m2(beam, axial_m, offset_m, path_m, mu, apertures.take(rows))
@@ -81,7 +81,7 @@ def with_pointing(d: DirectBeam, scene, beam, observers, mu, ray_scene, aperture
 
 def gaussian_aperture_w_m2(beam, axial_m, offset_m, path_m, mu, apertures: Apertures) -> np.ndarray:
     """The beam's irradiance through each observer's aperture [W/m^2]
-    (:func:`hazard.aperture.aperture_irradiance_w_m2`) at axial distance ``axial_m``,
+    (:func:`hazard.physics.aperture.aperture_irradiance_w_m2`) at axial distance ``axial_m``,
     ``offset_m`` from the axis, ``path_m`` from the aperture (attenuation), with the
     ray tilt ``sqrt(1 + |s|^2 phi^2 / 4)`` of the point value at the eye."""
     w = beam.diameter_at(np.asarray(axial_m, float)) / 2
@@ -175,7 +175,7 @@ def rim_clear(origin_m, points_m, radius_m, tracer, n=RIM_POINTS) -> np.ndarray:
 def direct_beam(beam, observers, tracer, mu, apertures: Apertures) -> DirectBeam:
     """The direct beam at every observer (see the module notes), in blocks of observers
     on threads; ``tracer`` answers ``first_hit(origins, directions)`` against every
-    object in the scene; ``apertures`` (:func:`hazard.aperture.observer_apertures`) the
+    object in the scene; ``apertures`` (:func:`hazard.physics.aperture.observer_apertures`) the
     observers' limiting apertures and aids."""
     out, point = np.zeros(len(observers)), np.zeros(len(observers))
 

@@ -6,10 +6,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .. import near_field as _near
-from ..keepout import Footprint, ground_footprint
-from .direct import beam_at, clear_of_objects
-from .slump import held_slump
+from hazard.physics import near_field as _near
+from hazard.physics.keepout import Footprint, ground_footprint
+from hazard.pipeline.direct import beam_at, clear_of_objects
+from hazard.physics.slump import held_slump
 
 __all__ = ["Footprints", "footprints"]
 
@@ -48,10 +48,10 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
 def direct_ratio(beam, terrain, ray_scene, mu, eye_height_m, mpe_w_m2, aperture_m=None) -> np.ndarray:
     """The laser's own beam at each terrain node's eye-height point, as a hazard ratio
     (nominal aim, naked eye, :func:`hazard.pipeline.direct.beam_at`; through the limiting
-    aperture of diameter ``aperture_m`` when given, :mod:`hazard.aperture`; zero where an
+    aperture of diameter ``aperture_m`` when given, :mod:`hazard.physics.aperture`; zero where an
     object stands between the aperture and the eye's centre)."""
-    from ..aperture import Apertures
-    from .direct import gaussian_aperture_w_m2
+    from hazard.physics.aperture import Apertures
+    from hazard.pipeline.direct import gaussian_aperture_w_m2
 
     ny, nx = terrain.heights.shape
     gx, gy = np.meshgrid(terrain.x0 + terrain.dx * np.arange(nx), terrain.y0 + terrain.dx * np.arange(ny))

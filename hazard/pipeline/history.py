@@ -144,11 +144,11 @@ def spot_states(spec, spots, times):
 
 def with_slumps(spots, melts: dict, step_deg: float = 2.0):
     """The spots, each whose target's material declares a slump given its
-    :class:`~hazard.pipeline.slump.SpotSlump` over the analysis times (the lobe's union
+    :class:`~hazard.physics.slump.SpotSlump` over the analysis times (the lobe's union
     sampled every ``step_deg``); and a note per slumping target for the stage record."""
     from dataclasses import replace
 
-    from .slump import spot_slump
+    from hazard.physics.slump import spot_slump
 
     out, notes = [], []
     for sp in spots:

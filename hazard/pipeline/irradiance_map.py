@@ -20,10 +20,10 @@ import numpy as np
 
 from brdfmodels.parallel import block_rows, map_blocks
 
-from .. import mpe as _mpe
-from .. import near_field as _near
-from .. import specular as _specular
-from ..engine import spot_irradiance, spot_line_of_sight, specular_irradiance
+from hazard.physics import mpe as _mpe
+from hazard.physics import near_field as _near
+from hazard.physics import specular as _specular
+from hazard.physics.engine import spot_irradiance, spot_line_of_sight, specular_irradiance
 
 __all__ = ["MapInputs", "MapOutputs", "irradiance_map", "spot_line_of_sight", "sliding_max_integral", "HISTORY_KEEP_MAX", "MAP_CHUNK"]
 
@@ -57,7 +57,7 @@ class MapInputs:
     chunk: int = MAP_CHUNK
     direct_w_m2: np.ndarray | None = None  # the laser's own beam at each observer (constant in time), added to the map
     pulse_limit_w_m2: float | None = None  # pulsed: per-pulse MPE x PRF (the first pulse above it is an exceedance)
-    apertures: object | None = None  # hazard.aperture.Apertures per observer: flat mirrors' beams through them (None: point x gain)
+    apertures: object | None = None  # hazard.physics.aperture.Apertures per observer: flat mirrors' beams through them (None: point x gain)
     uv_day_limit_j_m2: float | None = None  # 180-400 nm: the day's summed-dose limit (hazard.pipeline.limits.uv_24h_limit)
 
 
@@ -82,8 +82,8 @@ class MapOutputs:
     exposure_seconds: float = 0.0
     map_seconds: float = 0.0
     chunk: int = 0  # observers per block
-    near_field: dict = field(default_factory=dict)  # hazard.near_field counts of this map
-    apertures: dict = field(default_factory=dict)  # hazard.specular.aperture_stats_since: mirror beams averaged over apertures
+    near_field: dict = field(default_factory=dict)  # hazard.physics.near_field counts of this map
+    apertures: dict = field(default_factory=dict)  # hazard.physics.specular.aperture_stats_since: mirror beams averaged over apertures
     workers: int = 1
     segments: list = field(default_factory=list)
 
@@ -113,7 +113,7 @@ def sliding_max_integral(times, e, window):
 
 class _Exposure:
     """Peak, exposure and first exceedance of rows of E(t) (the MPE for each elapsed time
-    from :func:`hazard.mpe.ocular_mpe`; no exceedance is possible below ``e_floor``)."""
+    from :func:`hazard.physics.mpe.ocular_mpe`; no exceedance is possible below ``e_floor``)."""
 
     def __init__(self, inp: MapInputs, out: MapOutputs):
         self.times, self.t_exp, self.mpe_w_m2, self.out = inp.times_s, inp.duration_s, inp.mpe_w_m2, out

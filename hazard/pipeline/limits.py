@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .. import mpe as _mpe
-from ..nohd import attenuation_from_visibility
+from hazard.physics import mpe as _mpe
+from hazard.physics.nohd import attenuation_from_visibility
 
 __all__ = ["ExposureLimits", "exposure_limits", "uv_24h_limit", "attenuation_per_m"]
 
@@ -21,13 +21,13 @@ class ExposureLimits:
     irradiance_w_m2: float
     radiant_exposure_j_m2: float
     detail: str
-    uv_24h: object | None = None  # hazard.mpe.UV24hResult (180-400 nm): the day's summed dose limit
+    uv_24h: object | None = None  # hazard.physics.mpe.UV24hResult (180-400 nm): the day's summed dose limit
     notes: list = field(default_factory=list)
 
 
 def exposure_limits(spec) -> ExposureLimits:
     """Ocular MPE for the laser and exposure of a scene spec (ANSI Z136.1 / IEC 60825-1
-    tables via :mod:`hazard.mpe`); pulsed lasers take the smaller of the average-power
+    tables via :mod:`hazard.physics.mpe`); pulsed lasers take the smaller of the average-power
     MPE and the per-pulse MPE times the PRF (the repetitive-pulse rules). In the UV the
     limit is also held to the day's summed dose (:func:`uv_24h_limit`), the lowest governing."""
     laser = spec.laser
@@ -52,11 +52,11 @@ def exposure_limits(spec) -> ExposureLimits:
 
 
 def uv_24h_limit(spec):
-    """The UV (180-400 nm) day's limit of a scene (:func:`hazard.mpe.uv_24h_mpe`) and a note.
+    """The UV (180-400 nm) day's limit of a scene (:func:`hazard.physics.mpe.uv_24h_mpe`) and a note.
 
     An observer held in place is exposed whenever the laser fires: the exposure time in 24 h
     is the largest lased time of the firing windows (``[laser] windows``) within any 24 h
-    (:func:`hazard.mpe.on_time_in_24h_s`), or ``exposure.duration_s`` if longer or when no
+    (:func:`hazard.physics.mpe.on_time_in_24h_s`), or ``exposure.duration_s`` if longer or when no
     windows are given (then the exposure duration is taken as the day's whole exposure).
     """
     laser, t_exp = spec.laser, spec.exposure.duration_s
@@ -77,7 +77,7 @@ def uv_24h_limit(spec):
 
 def attenuation_per_m(spec) -> float:
     """Beer-Lambert coefficient mu [1/m]: given, or from the visibility (Kruse model,
-    :func:`hazard.nohd.attenuation_from_visibility`), else 0."""
+    :func:`hazard.physics.nohd.attenuation_from_visibility`), else 0."""
     atm = spec.atmosphere
     if atm.attenuation_per_m is not None:
         return atm.attenuation_per_m

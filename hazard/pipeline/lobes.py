@@ -7,17 +7,17 @@ import math
 
 import numpy as np
 
-from ..engine import FAR_FIELD_SPOT_SIZES, path_states
-from ..keepout import nohd_range_fn, hazard_lobe
-from ..nohd import optical_gain
-from ..results import TargetResult
-from ..specular import specular_nohd
+from hazard.physics.engine import FAR_FIELD_SPOT_SIZES, path_states
+from hazard.physics.keepout import nohd_range_fn, hazard_lobe
+from hazard.physics.nohd import optical_gain
+from hazard.pipeline.results import TargetResult
+from hazard.physics.specular import specular_nohd
 
 __all__ = ["target_results", "near_field_lobe_notes"]
 
 
 def _dynamic_states(target, states):
-    """States a dynamic target passes through (:func:`hazard.engine.path_states`: for
+    """States a dynamic target passes through (:func:`hazard.physics.engine.path_states`: for
     one state its history plus the material's nodes inside that range, so no peak
     between nodes is missed; for two states the path in time order); None for a static
     target."""
@@ -164,7 +164,7 @@ def near_field_lobe_notes(spots, rows) -> list[str]:
     """Notes on the lit targets whose keep-out lobe ends within ``FAR_FIELD_SPOT_SIZES``
     spot sizes (the map's far-field rule), one note per kind, every such target named with its
     reach: where the lobe there is the farthest root of the near-field integral over the spot
-    (:mod:`hazard.near_field_lobe`), how it was found and its tolerance; where it could not be
+    (:mod:`hazard.physics.near_field_lobe`), how it was found and its tolerance; where it could not be
     (a slumping spot, a spot without its triangles), that the lobe is the point-source form
     from the spot's centroid, which is short along a spot stretched by grazing incidence (a
     plate at 89.9 deg: 0.52 m where the integral reaches 6.30 m)."""

@@ -1,12 +1,12 @@
-"""The record of an analysis run: one :class:`~hazard.results.Stage` per planned stage."""
+"""The record of an analysis run: one :class:`~hazard.pipeline.results.Stage` per planned stage."""
 
 from __future__ import annotations
 
 import time
 from contextlib import contextmanager
 
-from ..results import Stage
-from .stages import stage_records
+from hazard.pipeline.results import Stage
+from hazard.pipeline.stages import stage_records
 
 __all__ = ["StageLog"]
 

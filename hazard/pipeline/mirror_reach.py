@@ -1,7 +1,7 @@
 """Stage ``mirror_beams``: where each mirror beam ends, beside the danger zone.
 
 A mirror (a target with an ideal specular lobe) sends a hazardous beam out to its
-specular NOHD (:func:`hazard.specular.specular_nohd`); the range must contain it like the
+specular NOHD (:func:`hazard.physics.specular.specular_nohd`); the range must contain it like the
 direct beam (range-safety.md section 3: reflections are folded into the zone). For each
 lit mirror, every spot sample's reflected ray (``d - 2 (d . n) n``, the reflection law on
 the sample's surface normal) is cast from the sample against the terrain and the
@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..specular import mirror_directions
-from .backstops import first_backstop_rays
-from .sdz import UNBOUNDED_DRAW_M, boundary_polygon
+from hazard.physics.specular import mirror_directions
+from hazard.pipeline.backstops import first_backstop_rays
+from hazard.pipeline.sdz import UNBOUNDED_DRAW_M, boundary_polygon
 
 __all__ = ["mirror_beams", "summary"]
 

@@ -9,12 +9,12 @@ What one path (an observer's position over time) receives at time t:
   the aperture; zero where something lies on the segment from the aperture to the eye
   (terrain, occluders and the targets where they are at t) or the laser is not lasing
   (``[laser] windows``). The verdict's value is the power through the limiting aperture
-  about the eye, or through the group's aid's collecting disk (:mod:`hazard.aperture`,
+  about the eye, or through the group's aid's collecting disk (:mod:`hazard.physics.aperture`,
   as for fixed observers; the line to the eye's centre decides what blocks it).
 - **reflections**: the spots of the beam at t (:func:`hazard.pipeline.spots.trace_beam`
   on the scene with the aim and target positions of t: a *beam state*), evaluated as the
-  irradiance map does (:func:`hazard.engine.spot_irradiance`, the mirror lobes by
-  :func:`hazard.engine.specular_irradiance`), with the line of sight from each spot.
+  irradiance map does (:func:`hazard.physics.engine.spot_irradiance`, the mirror lobes by
+  :func:`hazard.physics.engine.specular_irradiance`), with the line of sight from each spot.
   When the beam moves, beam states are traced at key times chosen so that the spot moves
   at most half the beam's 1/e diameter at the target between them (at most
   ``BEAM_STATES_MAX``; a coarser step is said), and each time takes its nearest state.
@@ -46,7 +46,7 @@ within it, :mod:`hazard.pipeline.pointing`).
 Exposure along a path: the peak; the radiant exposure as the largest integral of E over
 any window of ``[exposure] duration_s`` (trapezoids); the path's whole integral; and the
 verdict: the largest ratio of the exposure in any window of length T to the MPE at T
-(:func:`hazard.mpe.ocular_mpe`, as radiant exposure), over T from the smallest step to
+(:func:`hazard.physics.mpe.ocular_mpe`, as radiant exposure), over T from the smallest step to
 the exposure duration (``WINDOW_DURATIONS`` log-spaced): for a crossing this includes its
 effective duration sqrt(pi) w / v (range-safety.md section 2). The integral's error is
 estimated by comparing the trapezoid sum with the sum over every second sample (its
@@ -62,9 +62,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..engine import spot_irradiance, spot_line_of_sight, specular_irradiance
-from ..nohd import optical_gain
-from ..aperture import aperture_irradiance_w_m2, observer_apertures
+from hazard.physics.engine import spot_irradiance, spot_line_of_sight, specular_irradiance
+from hazard.physics.nohd import optical_gain
+from hazard.physics.aperture import aperture_irradiance_w_m2, observer_apertures
 
 __all__ = ["PathResult", "MotionRun", "bias_frame", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
 
@@ -136,8 +136,8 @@ class MotionRun:
     notes: list = field(default_factory=list)
     key_step_text: str = ""
     dwell_keys_s: np.ndarray | None = None  # per beam state: lased time of the surface under its spot before it (made once)
-    beam: object = None  # hazard.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
-    aperture_reach_m: float = 0.0  # the largest collecting radius of any path's eye or aid (hazard.aperture)
+    beam: object = None  # hazard.physics.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
+    aperture_reach_m: float = 0.0  # the largest collecting radius of any path's eye or aid (hazard.physics.aperture)
 
     # -- the schedule ----------------------------------------------------------------
     bias_rad: tuple = (0.0, 0.0)  # a constant pointing bias across the aim (bias_frame): the worst within the buffer
@@ -249,7 +249,7 @@ def _key_times(run: MotionRun, grid: np.ndarray) -> tuple[np.ndarray, str]:
 def beam_states(run: MotionRun, grid: np.ndarray, first) -> None:
     """Trace the beam at the key times (``first``: the static analysis's own trace, used
     when nothing moves)."""
-    from . import spots as beam_stage
+    from hazard.pipeline import spots as beam_stage
 
     run.key_times_s, run.key_step_text = _key_times(run, grid)
     if not run.motion.beam_moves:
@@ -274,9 +274,9 @@ def beam_states(run: MotionRun, grid: np.ndarray, first) -> None:
 
 # -- irradiance at samples -------------------------------------------------------------
 def gaussian_along_w_m2(beam, u, p, mu) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The Gaussian beam of ``beam`` (:class:`hazard.beam.BeamGeometry`: power, diameter,
+    """The Gaussian beam of ``beam`` (:class:`hazard.physics.beam.BeamGeometry`: power, diameter,
     divergence, aperture) pointed along unit directions ``u`` (N, 3) or (3,), at points
-    ``p`` (N, 3): its irradiance [W/m^2] (:meth:`~hazard.beam.BeamGeometry.irradiance_w_m2`,
+    ``p`` (N, 3): its irradiance [W/m^2] (:meth:`~hazard.physics.beam.BeamGeometry.irradiance_w_m2`,
     attenuated along the path; 0 behind the aperture), 1/e radius [m] and path [m]."""
     rel = np.asarray(p, float) - beam.position_m
     z = rel @ u if np.ndim(u) == 1 else np.einsum("ij,ij->i", rel, u)
@@ -295,7 +295,7 @@ def blocked(tracer, origin, p, dist) -> np.ndarray:
 
 def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
     """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes),
-    through the limiting aperture or the aid's collecting disk (:mod:`hazard.aperture`)."""
+    through the limiting aperture or the aid's collecting disk (:mod:`hazard.physics.aperture`)."""
     u = run.direction(t)
     e, w, dist = gaussian_along_w_m2(run.beam, u, p, run.mu)
     z = np.einsum("ij,ij->i", np.asarray(p, float) - run.beam.position_m, np.broadcast_to(u, np.shape(p)))

@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import mpe as _mpe
-from .motion import FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, base_grid, beam_states, evaluate
-from .motion_steps import crossing_times, refine_by_change
+from hazard.physics import mpe as _mpe
+from hazard.pipeline.motion import FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, base_grid, beam_states, evaluate
+from hazard.pipeline.motion_steps import crossing_times, refine_by_change
 
 __all__ = ["MotionResult", "run_motion", "path_summary"]
 
@@ -92,7 +92,7 @@ def _windows(t, cum, lengths, idx):
 
 
 def _uv_limits_j_m2(wavelength_nm, standard, on_s) -> np.ndarray:
-    """The day's limit H(T) (:func:`hazard.mpe.uv_24h_mpe`) for each exposed time T [s],
+    """The day's limit H(T) (:func:`hazard.physics.mpe.uv_24h_mpe`) for each exposed time T [s],
     T rounded down to 1 % log bins (H never decreases with T in the UV rows, so the limit
     is never raised by it; at most 1 % low where H grows as T, 0.25 % where as T^0.25)."""
     on = np.asarray(on_s, float)
@@ -109,14 +109,14 @@ def _uv_limits_j_m2(wavelength_nm, standard, on_s) -> np.ndarray:
 
 @functools.lru_cache(maxsize=65536)
 def _uv_day_h_j_m2(wavelength_nm, bin_k, standard) -> float:
-    """H of :func:`hazard.mpe.uv_24h_mpe` at the lower edge of 1 % log bin ``bin_k`` (cached:
+    """H of :func:`hazard.physics.mpe.uv_24h_mpe` at the lower edge of 1 % log bin ``bin_k`` (cached:
     the paths of one run share their bins)."""
     return _mpe.uv_24h_mpe(wavelength_nm, _mpe.DURATION_MIN_S * 1.01**bin_k, standard=standard).radiant_exposure_j_m2
 
 
 def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> dict:
     """UV (180-400 nm): the largest dose of the path within any 24 h against the limit for
-    the time exposed in that 24 h (the exposures of a day add up: :func:`hazard.mpe.uv_24h_mpe`).
+    the time exposed in that 24 h (the exposures of a day add up: :func:`hazard.physics.mpe.uv_24h_mpe`).
 
     Exposed time counts the steps with irradiance at both ends (never more than the true
     time, so the limit is never raised; a 24 h lit only at isolated samples counts the
@@ -223,7 +223,7 @@ def _bias_candidates(run: MotionRun, pr: PathResult, b: float) -> list:
     """Constant pointing biases (across the aim, within the buffer ``b``) that turn the
     beam onto the track where it comes closest to the aim: at each local minimum of its
     angular offset within b plus five 1/e beam radii, the offset clipped to b."""
-    from .motion import bias_frame
+    from hazard.pipeline.motion import bias_frame
 
     u = run.nominal_direction(pr.times_s)
     q = pr.positions_m - np.asarray(run.scene.laser_position_m, float)
@@ -310,8 +310,8 @@ def _fixed_paths(run: MotionRun, notes) -> list:
 
 def _aperture_reach_m(scene, motion) -> float:
     """The largest radius [m] over which an eye or an aid of any path collects the direct
-    beam (:mod:`hazard.aperture`): the crossing refinement reaches that much farther."""
-    from ..aperture import observer_apertures
+    beam (:mod:`hazard.physics.aperture`): the crossing refinement reaches that much farther."""
+    from hazard.physics.aperture import observer_apertures
 
     optics = list(scene.observers.optics) + [tr.optics for tr in motion.tracks] + [None]  # None: the naked eye
     ap = observer_apertures(optics, np.arange(len(optics)), scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s)
@@ -357,6 +357,6 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
 
 
 def _max_dwell(run: MotionRun) -> float:
-    from .motion import lased_time_s
+    from hazard.pipeline.motion import lased_time_s
 
     return float(lased_time_s(run, np.array([run.motion.t_end_s]))[0])

@@ -8,10 +8,10 @@ import math
 
 import numpy as np
 
-from ..engine import mirror_axis
+from hazard.physics.engine import mirror_axis
 from scenes.motion import samples_max
 
-from .motion import CROSSING_REACH, MIN_STEP_S, REFINE_PASSES, REL_CHANGE
+from hazard.pipeline.motion import CROSSING_REACH, MIN_STEP_S, REFINE_PASSES, REL_CHANGE
 
 __all__ = ["axes_at", "crossing_times", "refine_by_change"]
 

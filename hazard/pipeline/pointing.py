@@ -13,7 +13,7 @@ theta_b (``[laser] pointing_error_rad``, a bound or k sigma) about the aim, and/
 For an observer at distance L in direction u from the aperture, the nearest direction
 of A is at angle delta = max(0, dist(u, core) - theta_b) (the core: the sector or the
 aim; the widening by theta_b is a Minkowski sum on the sphere, exact). The Gaussian beam
-pointed there gives (range-safety.md section 1; :class:`hazard.beam.BeamGeometry`)
+pointed there gives (range-safety.md section 1; :class:`hazard.physics.beam.BeamGeometry`)
 
     E = P / (pi w^2) exp(-s^2) sqrt(1 + s^2 phi^2 / 4) exp(-mu L),
     z = L cos delta, r = L sin delta, w = (a + z phi) / 2, s = r / w,
@@ -21,7 +21,7 @@ pointed there gives (range-safety.md section 1; :class:`hazard.beam.BeamGeometry
 its largest value over A (E falls with delta wherever 4 L / (a + L phi) > phi, i.e.
 beyond micrometres of the aperture); the verdict's value is the power through the
 observer's limiting aperture or its aid's collecting disk at offset ``r`` from that
-axis (:mod:`hazard.aperture`), also largest at the smallest ``r``. The distance from u to
+axis (:mod:`hazard.physics.aperture`), also largest at the smallest ``r``. The distance from u to
 the sector (azimuth [A0, A1] clockwise from +y, elevation [E0, E1]) is exact
 (:func:`scenes.geometry.angle_to_sector_rad`, shared with the danger zone's directions):
 inside it is 0; else the least angle to its edges, the two meridian arcs (the foot of u
@@ -50,7 +50,7 @@ import numpy as np
 
 from scenes.geometry import angle_to_sector_rad, direction_in_sector
 
-from .backstops import first_backstop_rays
+from hazard.pipeline.backstops import first_backstop_rays
 
 __all__ = ["angle_to_sector_rad", "pointing_offset_rad", "beam_at_offset_w_m2", "pointing_worst_w_m2", "aim_track_directions"]
 
@@ -117,7 +117,7 @@ def pointing_offset_rad(scene, u, track=None) -> np.ndarray:
 
 def beam_at_offset_w_m2(beam, distance_m, delta_rad, mu) -> tuple[np.ndarray, np.ndarray]:
     """Irradiance [W/m^2] at distance L from the aperture, angle delta off the axis of
-    ``beam`` (:class:`hazard.beam.BeamGeometry`, turned toward the point; see the module
+    ``beam`` (:class:`hazard.physics.beam.BeamGeometry`, turned toward the point; see the module
     notes), and the beam's 1/e diameter there [m]."""
     L, delta = np.asarray(distance_m, float), np.asarray(delta_rad, float)
     z = np.maximum(L * np.cos(delta), 0.0)
@@ -132,7 +132,7 @@ def pointing_worst_w_m2(scene, beam, observers, mu, ray_scene, aperture_fn) -> t
     observer over the directions it may point in, in blocks on threads
     (:meth:`scenes.Observers.map_blocks`): (the aperture value the verdict uses, the point
     value at the eye). ``aperture_fn(rows, point_w_m2, axial_m, offset_m, path_m)`` gives
-    the aperture value of those observers (:mod:`hazard.aperture`; the power through a
+    the aperture value of those observers (:mod:`hazard.physics.aperture`; the power through a
     disk about the eye falls as the axis moves away, so the nearest direction is the
     worst for it too); ``ray_scene`` (None: nothing blocks) answers the line from the
     aperture to each eye through the targets."""

@@ -5,7 +5,7 @@ MCO P3570.1A; MIL-HDBK-828B): the beam may point anywhere within its aiming erro
 around the aim (``[laser] pointing_error_rad``, a bound or ``pointing_error_sigmas``
 standard deviations: the buffer angle theta_b) or within a ``[laser] sector`` widened
 by theta_b. Along each direction the hazard reaches L = min(NOHD, the first backstop):
-the direct-beam NOHD (with attenuation; :func:`hazard.nohd.nohd_direct`), cut where the
+the direct-beam NOHD (with attenuation; :func:`hazard.physics.nohd.nohd_direct`), cut where the
 ray meets the terrain or an occluder. The LSDZ is the ground projection of those
 segments, widened by the beam's own hazardous half-width.
 
@@ -47,10 +47,10 @@ import numpy as np
 
 from scenes.geometry import direction_in_sector, widened_azimuths_rad
 
-from ..beam import perp_basis
-from .backstops import first_backstop_rays
-from .pointing import aim_track_directions
-from .spill import direct_nohds
+from hazard.physics.beam import perp_basis
+from hazard.pipeline.backstops import first_backstop_rays
+from hazard.pipeline.pointing import aim_track_directions
+from hazard.pipeline.spill import direct_nohds
 
 __all__ = ["Directions", "pointing_directions", "bearing_vectors", "danger_zone", "zone_polygon", "MAX_RAYS"]
 

@@ -1,11 +1,11 @@
 """Stage ``spill``: where the part of the beam that misses every target goes.
 
-The beam's cells (:mod:`hazard.beam`) that hit no target either stop on an occluder or
+The beam's cells (:mod:`hazard.physics.beam`) that hit no target either stop on an occluder or
 the terrain (where, how much) or leave the scene. What lands on the terrain is reflected
 by it: the beam stage gives the terrain a spot of its own (target ``terrain``, its
 ``[terrain] material`` or a Lambertian of reflectance 1); occluders absorb. Along the part that leaves, the direct
 beam keeps the full beam's profile (range-safety.md section 2): its hazard distance is
-the direct-beam NOHD (:func:`hazard.nohd.nohd_direct`) of the beam scaled by the highest
+the direct-beam NOHD (:func:`hazard.physics.nohd.nohd_direct`) of the beam scaled by the highest
 Gaussian value ``exp(-min |s|^2)`` among those cells, so a spill made only of the
 beam's wings reaches less far than the whole beam. Through an optical aid the gain
 ``K = min(tau M^2, tau (D_o / 7 mm)^2)`` multiplies it (without the beam-size limit: an
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..nohd import nohd_direct, optical_gain
+from hazard.physics.nohd import nohd_direct, optical_gain
 
 __all__ = ["spill_summary", "direct_nohds", "spill_profile", "hottest_spill_s"]
 
@@ -63,7 +63,7 @@ def _cell_profile(cells, row, outlines) -> tuple[float, np.ndarray | None]:
     target's outline (those whose edges cross it); the whole cell's when another object
     shares it. Points within 1e-9 w of an outline count as covered, so two plates meeting
     edge to edge leave no gap. With it, the point s where it is found (None: none)."""
-    from ..beam import clip_to_box, r2_min_outside
+    from hazard.physics.beam import clip_to_box, r2_min_outside
 
     labels = set(cells.labels[row].tolist()) - {-1}
     s0, s1, t0, t1 = (float(v[0]) for v in cells.bounds(np.array([row])))

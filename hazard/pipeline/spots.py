@@ -1,8 +1,8 @@
 """Stages ``rays`` and ``beam``: the ray scene, and the beam's spots on the targets.
 
-The beam's cross-section is integrated by :mod:`hazard.beam` (exact cell and outline
+The beam's cross-section is integrated by :mod:`hazard.physics.beam` (exact cell and outline
 powers, adaptive refinement with an error bound) and turned into spots by
-:func:`hazard.engine.build_spots`.
+:func:`hazard.physics.engine.build_spots`.
 """
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
-from ..engine import build_spots, flat_outlines
-from ..nohd import optical_gain
-from ..results import TargetResult
-from ..visual import applies as visual_applies
-from ..visual import level_limit_w_m2, visual_correction_factor
-from .limits import exposure_limits
-from .lobes import scene_aids
+from hazard.physics.beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
+from hazard.physics.engine import build_spots, flat_outlines
+from hazard.physics.nohd import optical_gain
+from hazard.pipeline.results import TargetResult
+from hazard.physics.visual import applies as visual_applies
+from hazard.physics.visual import level_limit_w_m2, visual_correction_factor
+from hazard.pipeline.limits import exposure_limits
+from hazard.pipeline.lobes import scene_aids
 
 __all__ = ["BeamStage", "TailSquare", "ray_scene", "sampled_square", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
 
@@ -36,7 +36,7 @@ class FlatScene:
         return np.stack([self.targets[f].normal for f in faces]) if len(faces) else np.empty((0, 3))
 
     def first_hit(self, origins, directions):
-        from ..rays import Hits
+        from hazard.physics.rays import Hits
 
         o = np.asarray(origins, float)
         d = np.asarray(directions, float)
@@ -76,15 +76,15 @@ def ray_meshes(scene) -> list:
 def ray_scene(scene, backend, threads):
     """The ray scene of every object (Embree, or trimesh's numpy engine), from the cache
     when an earlier analysis (a study's scenario) had the same geometry."""
-    from ..rays import cached_ray_scene
+    from hazard.physics.rays import cached_ray_scene
 
     return cached_ray_scene(ray_meshes(scene), backend=backend, threads=threads)
 
 
 @dataclass
 class BeamStage:
-    """The beam (:class:`hazard.beam.BeamGeometry`), its cells, the spots built from
-    them (:class:`hazard.engine.SpotBuild`) and the notes the stage leaves."""
+    """The beam (:class:`hazard.physics.beam.BeamGeometry`), its cells, the spots built from
+    them (:class:`hazard.physics.engine.SpotBuild`) and the notes the stage leaves."""
 
     beam: BeamGeometry
     cells: object
@@ -107,10 +107,10 @@ def scene_beam(scene, direction=None) -> BeamGeometry:
 
 def mirror_aperture_m(spec) -> float:
     """The limiting aperture [m] a mirror beam's power is averaged over: the exposure's
-    (:func:`hazard.mpe.ocular_mpe`) when it is the retina's 7 mm, else 1 mm, the cornea's
+    (:func:`hazard.physics.mpe.ocular_mpe`) when it is the retina's 7 mm, else 1 mm, the cornea's
     below 0.3 s and the smallest any band uses (the corneal aperture grows with the
     elapsed time the map checks: the smallest is the conservative one)."""
-    from ..mpe import ocular_mpe
+    from hazard.physics.mpe import ocular_mpe
 
     aperture = ocular_mpe(spec.laser.wavelength_nm, spec.exposure.duration_s, standard=spec.exposure.standard).limiting_aperture_m
     return aperture if aperture >= 7e-3 else 1e-3
@@ -121,7 +121,7 @@ class TailSquare:
     """The sampled beam square chosen for a scene (:func:`sampled_square`): half-width
     ``half_width`` [1/e radii] (a whole number of the base grid's cells beyond 4), cells per
     side ``n0``, the limit it was sized for [W/m^2] and the bounds on what it leaves out
-    (:func:`hazard.beam.tail_bounds_w_m2`) [W/m^2]."""
+    (:func:`hazard.physics.beam.tail_bounds_w_m2`) [W/m^2]."""
 
     half_width: float
     n0: int
@@ -141,7 +141,7 @@ def sampled_square(scene, beam, n0_base: int) -> TailSquare:
     outside it, after any one reflection (reflectance 1), stays below ``TAIL_MARGIN`` of the
     smallest limit any observer is held to (the MPE over the largest optical-aid gain, and
     the flight zones' levels (:func:`_zone_limits_w_m2`);
-    :func:`hazard.beam.tail_half_width`), rounded up to whole cells of the base grid
+    :func:`hazard.physics.beam.tail_half_width`), rounded up to whole cells of the base grid
     (``n0_base`` cells over +-4 w), so the cells inside +-4 w are the base grid's."""
     spec = scene.spec
     gain = max([1.0] + [optical_gain(a.magnification, a.objective_diameter_m, a.transmission) for a in scene_aids(scene)])
@@ -158,7 +158,7 @@ def sampled_square(scene, beam, n0_base: int) -> TailSquare:
 
 def _zone_limits_w_m2(spec, mpe_w_m2: float) -> list:
     """The irradiances [W/m^2] at which the scene's flight zones reach their levels
-    (:func:`hazard.visual.level_limit_w_m2`: the FAA levels over the VCF, or the MPE
+    (:func:`hazard.physics.visual.level_limit_w_m2`: the FAA levels over the VCF, or the MPE
     ``mpe_w_m2``)."""
     air = spec.airspace
     if air is None or not air.zones:
@@ -197,7 +197,7 @@ def trace_beam(scene, tracer, mu, beam=None) -> BeamStage:
 
 def _curved_mesh_notes(spots, aperture_m) -> list:
     """A note per spot on a curved mesh with a mirror lobe: how its reflection is computed."""
-    from ..mesh_mirror import MESH_MIRROR_RAYS, MIN_RAYS_IN_APERTURE, is_curved_mesh
+    from hazard.physics.mesh_mirror import MESH_MIRROR_RAYS, MIN_RAYS_IN_APERTURE, is_curved_mesh
 
     out = []
     for sp in spots:

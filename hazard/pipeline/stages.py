@@ -27,7 +27,7 @@ fields :data:`UNREAD_SPEC` proves the stage never reads and the scene fields
 that stage's key (and, for a stage whose result carries the scene, :data:`CARRIES_SCENE`,
 the scene's content as well). An input that cannot be fingerprinted (a function, a C
 object) makes the stage, and every stage after it, run afresh: the memo never guesses.
-Module-level settings (``hazard.near_field_lobe.ENABLED``, ``MAP_CHUNK``) are not in the
+Module-level settings (``hazard.physics.near_field_lobe.ENABLED``, ``MAP_CHUNK``) are not in the
 key: a memo lives for one driver call (one ``hazard convergence``), never across calls.
 """
 
@@ -48,12 +48,12 @@ import numpy as np
 from pydantic import BaseModel
 
 if TYPE_CHECKING:  # annotations only (no import at run time: the stages' modules import this one)
-    from ..keepout import Footprint
-    from ..results import ObserverResults, TargetResult
-    from .direct import DirectBeam
-    from .limits import ExposureLimits
-    from .motion_stage import MotionResult
-    from .spots import BeamStage
+    from hazard.physics.keepout import Footprint
+    from hazard.pipeline.results import ObserverResults, TargetResult
+    from hazard.pipeline.direct import DirectBeam
+    from hazard.pipeline.limits import ExposureLimits
+    from hazard.pipeline.motion_stage import MotionResult
+    from hazard.pipeline.spots import BeamStage
 
 __all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS",
            "StageMemo", "Unfingerprintable", "fingerprint", "UNREAD_SPEC", "UNREAD_SCENE", "CARRIES_SCENE",
@@ -159,7 +159,7 @@ def derive_plan(stages: Mapping[str, StageDef], inputs: Iterable[str] = INPUTS) 
 def stage_records(stages: Mapping[str, StageDef] | None = None) -> tuple[str, ...]:
     """The names of the stage records (report.json's ``stages`` list), in the order of the
     plan :func:`derive_plan` derives from the declarations (``REGISTRY`` by default: the
-    analysis's stages, declared when :mod:`hazard.analysis` is imported).
+    analysis's stages, declared when :mod:`hazard.pipeline.analysis` is imported).
 
     Raises
     ------
@@ -168,7 +168,7 @@ def stage_records(stages: Mapping[str, StageDef] | None = None) -> tuple[str, ..
     """
     reg = REGISTRY if stages is None else stages
     if not reg:
-        raise StagePlanError("no stage is declared: the analysis's stages are declared by importing hazard.analysis")
+        raise StagePlanError("no stage is declared: the analysis's stages are declared by importing hazard.pipeline.analysis")
     return tuple(r for n in derive_plan(reg) for r in reg[n].records)
 
 
@@ -211,8 +211,8 @@ _TIME_KNOBS = ("analysis.time_step_s", "analysis.time_end_s")
 
 #: Spec fields (dotted paths) each stage is proven not to read: grep of the stage and every
 #: function it calls (``direction_grid_deg`` and ``refine_levels`` are read only by
-#: ``hazard.pipeline.lobes`` and ``hazard.keepout`` (stage ``keepout``) and
-#: ``hazard.visual`` (stage ``airspace``); ``analysis.time_step_s`` and ``time_end_s`` only
+#: ``hazard.pipeline.lobes`` and ``hazard.physics.keepout`` (stage ``keepout``) and
+#: ``hazard.physics.visual`` (stage ``airspace``); ``analysis.time_step_s`` and ``time_end_s`` only
 #: by ``hazard.pipeline.history`` (stage ``history``) and the scene loader's checks). A
 #: stage not listed is keyed on the whole spec.
 UNREAD_SPEC: dict[str, tuple[str, ...]] = {
@@ -528,7 +528,7 @@ class HistoryResult:
 class MapResult:
     """Stages ``specular``, ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``: the
     per-observer irradiances [W/m^2], exposures [J/m^2] and times [s]
-    (:class:`hazard.results.ObserverResults`, point-source MPE) and the map's notes."""
+    (:class:`hazard.pipeline.results.ObserverResults`, point-source MPE) and the map's notes."""
 
     observers: ObserverResults
     notes: tuple[str, ...]
@@ -536,7 +536,7 @@ class MapResult:
 
 @dataclass(frozen=True)
 class KeepoutResult:
-    """Stage ``keepout``: a :class:`hazard.results.TargetResult` per target (lit or not;
+    """Stage ``keepout``: a :class:`hazard.pipeline.results.TargetResult` per target (lit or not;
     lobes, NOHDs [m], melt) and the near-field lobe notes."""
 
     targets: tuple[TargetResult, ...]
@@ -554,7 +554,7 @@ class MirrorBeamsResult:
 @dataclass(frozen=True)
 class FootprintResult:
     """Stage ``footprint``: hazardous ground with the initial states held (``static``) and
-    over the history (``dynamic``), :class:`hazard.keepout.Footprint`; None when skipped."""
+    over the history (``dynamic``), :class:`hazard.physics.keepout.Footprint`; None when skipped."""
 
     static: Footprint | None = None
     dynamic: Footprint | None = None

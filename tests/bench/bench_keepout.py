@@ -24,7 +24,7 @@ import numpy as np
 import hazard
 import scenes
 from brdfmodels.fileio import read_toml
-from hazard import keepout
+from hazard.physics import keepout
 from scenes.spec import AnalysisSpec
 
 LEVELS = (0, 1, 2, 3, 4)
@@ -52,7 +52,7 @@ def scene_data() -> list:
 
 @contextmanager
 def volume_rtol(value):
-    """Set ``hazard.keepout.VOLUME_RTOL`` (the default of every lobe) for a block."""
+    """Set ``hazard.physics.keepout.VOLUME_RTOL`` (the default of every lobe) for a block."""
     old = keepout.VOLUME_RTOL
     keepout.VOLUME_RTOL = float(value)
     try:

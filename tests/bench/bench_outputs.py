@@ -7,8 +7,8 @@ with its two observers replaced by a ``rows x rows`` grid at 1.5 m in front of t
 (1000 x 1000: the 1e6-observer run of the README). Timed, median of ``repeat``, in one
 process: ``hazard.analyze`` of the loaded scene (the ray cache kept: a run builds its
 14 triangles once), and the outputs ``hazard run`` writes after it: the map files
-(:func:`hazard.map_outputs.map_files`) and report.json + observers.csv
-(:func:`hazard.report.write_set`, each file fsynced) into a temporary folder. Goal
+(:func:`hazard.outputs.map_outputs.map_files`) and report.json + observers.csv
+(:func:`hazard.outputs.report.write_set`, each file fsynced) into a temporary folder. Goal
 (issue 37): outputs / analysis <= 1. CPU seconds (every thread) are printed beside the
 wall times: on a shared machine they are the steadier figure.
 """
@@ -23,8 +23,8 @@ from pathlib import Path
 
 import hazard
 import scenes
-from hazard import report
-from hazard.map_outputs import map_files
+from hazard.outputs import report
+from hazard.outputs.map_outputs import map_files
 
 from ._floor import REPEAT
 

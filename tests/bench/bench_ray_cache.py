@@ -4,8 +4,8 @@ Run on demand:  python -m tests.bench.bench_ray_cache   (or pytest tests/bench -
 
 Scene: the bundled `range_terrain` with its ground at 1.7 m resolution (about 1e6
 triangles). Timed, best of 3: the triangles of the scene (targets, bunker, terrain mesh:
-paid by every scenario either way), the Embree build (:class:`hazard.rays.RayScene`: a
-miss) and :func:`hazard.rays.cached_ray_scene` on a hit (the content hash and the lookup).
+paid by every scenario either way), the Embree build (:class:`hazard.physics.rays.RayScene`: a
+miss) and :func:`hazard.physics.rays.cached_ray_scene` on a hit (the content hash and the lookup).
 The saving per scenario that shares the geometry is the build minus the hit.
 """
 
@@ -16,9 +16,9 @@ import copy
 
 import scenes
 from brdfmodels.fileio import read_toml
-from hazard import rays
+from hazard.physics import rays
 from hazard.pipeline.spots import ray_meshes as _meshes  # the meshes in the order analyze uses
-from hazard.rays import RayScene, cached_ray_scene
+from hazard.physics.rays import RayScene, cached_ray_scene
 
 from .bench_whole_run import _best
 

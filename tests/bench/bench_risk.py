@@ -22,11 +22,11 @@ import numpy as np
 
 import scenes
 from brdfmodels.parallel import thread_limit
-from hazard.engine import spot_irradiance, specular_irradiance
+from hazard.physics.engine import spot_irradiance, specular_irradiance
 from hazard.pipeline import spots as beam_stage
 from hazard.pipeline.direct import beam_at
-from hazard.risk.evaluate import turned_axis
-from hazard.risk.run import shared
+from hazard.drivers.risk.evaluate import turned_axis
+from hazard.drivers.risk.run import shared
 
 N = 200
 

@@ -29,9 +29,9 @@ import numpy as np
 import brdfmodels as bm
 import hazard
 import scenes
-from hazard import rays
-from hazard.engine import projected_brdf, spot_directions
-from hazard.keepout import _cell_points, _grid_cells
+from hazard.physics import rays
+from hazard.physics.engine import projected_brdf, spot_directions
+from hazard.physics.keepout import _cell_points, _grid_cells
 
 from ._floor import MapFloor, RawEmbree, median_s
 from .bench_engine import SCENE, write_material

@@ -10,7 +10,7 @@
 * keep-out lobe at 0.25 deg (no refinement) of the glossy copper panel (`binoculars`).
   Floor: one BRDF evaluation call over the same number of directions, and the range from
   each intensity with attenuation (one vectorised Lambert W over as many values).
-* render: `hazard.render.keepout` of `steel_vs_copper` (close view + overview + VTK).
+* render: `hazard.pictures.render.keepout` of `steel_vs_copper` (close view + overview + VTK).
   Floor: the same meshes made (the lobe surfaces) and two screenshots of them added as
   one MultiBlock, no styling, no legend, no log-distance copy.
 """
@@ -26,7 +26,7 @@ import numpy as np
 
 import hazard
 import scenes
-from hazard.study import MonteCarlo, Study, run_scenario, run_study, scenarios
+from hazard.drivers.study import MonteCarlo, Study, run_scenario, run_study, scenarios
 
 from ._floor import median_s
 
@@ -53,9 +53,9 @@ def bench_study(n=200, workers=2):
 
 
 def bench_lobe(grid_deg=0.25):
-    from hazard.engine import projected_brdf, spot_directions
-    from hazard.keepout import hazard_lobe
-    from hazard.nohd import _lambertw0
+    from hazard.physics.engine import projected_brdf, spot_directions
+    from hazard.physics.keepout import hazard_lobe
+    from hazard.physics.nohd import _lambertw0
 
     res = hazard.analyze(scenes.load(scenes.example_path("binoculars")))
     spot = res.spots[0]
@@ -78,7 +78,7 @@ def bench_lobe(grid_deg=0.25):
 def bench_render():
     import pyvista as pv
 
-    from hazard import render
+    from hazard.pictures import render
 
     res = hazard.analyze(scenes.load(scenes.example_path("steel_vs_copper")))
     with tempfile.TemporaryDirectory() as tmp:

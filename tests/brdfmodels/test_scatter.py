@@ -176,7 +176,7 @@ def test_an_abg_target_in_a_scene_peaks_at_a_over_b():
     and an observer 200 m out along the normal gets P (A / B) / R^2."""
     import hazard
     import scenes
-    from hazard.mpe import ocular_mpe
+    from hazard.physics.mpe import ocular_mpe
 
     from tests._scene_text import PLATE_AT_50M
 

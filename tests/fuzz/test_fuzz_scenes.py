@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 import hazard
 import scenes
 from hazard.cli import main
-from hazard.report import report_dict
+from hazard.outputs.report import report_dict
 
 # every declared target must be in the report, hit by the beam or not (False: only count)
 REQUIRE_ALL_TARGETS = True

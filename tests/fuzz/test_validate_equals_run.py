@@ -3,8 +3,8 @@ goes through ``hazard validate`` and through ``hazard run`` (and ``hazard risk``
 base with ``[uncertainty]``) up to the point where the run's work starts; the three must
 agree: all accept, or all refuse with exit 2 and the same one-line message.
 
-"Where the work starts" is the first call of the analysis (``hazard.analysis.analyze``)
-or of the risk's shared evaluator (``hazard.risk.run.shared``): both are replaced by a
+"Where the work starts" is the first call of the analysis (``hazard.pipeline.analysis.analyze``)
+or of the risk's shared evaluator (``hazard.drivers.risk.run.shared``): both are replaced by a
 stub that records the acceptance and stops, so the check costs a load per verb. Whether
 the analysis itself then refuses an accepted mutant is the other fuzz test's question
 (``run_case``: "accepted by loads but the analysis refused it").
@@ -61,8 +61,8 @@ def check_agreement(case, tmp, monkeypatch) -> str:
             shutil.copy(f, tmp / f.name)
     scene = tmp / "mutant.toml"
     scene.write_text(to_toml(mutant))
-    monkeypatch.setattr("hazard.analysis.analyze", _stop)
-    monkeypatch.setattr("hazard.risk.run.shared", _stop)
+    monkeypatch.setattr("hazard.pipeline.analysis.analyze", _stop)
+    monkeypatch.setattr("hazard.drivers.risk.run.shared", _stop)
     label = f"{name}: {'.'.join(map(str, path))} <- {kind}"
     verbs = ["validate", "run"] + (["risk"] if "uncertainty" in data else [])
     got = {v: _outcome(v, scene, tmp) for v in verbs}

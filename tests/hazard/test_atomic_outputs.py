@@ -337,7 +337,7 @@ def test_hazard_risk_interrupted_keeps_one_whole_set(tmp_path, monkeypatch, how)
 def test_folder_of_an_older_version_drops_its_stale_pictures(tmp_path, monkeypatch, results):
     """A run folder without a manifest (older laser-hazard): with --force its named outputs
     are replaced or dropped (no old plan.png beside a new report), other files kept."""
-    from hazard.figures import FIXED_NAMES
+    from hazard.pictures.figures import FIXED_NAMES
 
     monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
     out = tmp_path / "o"
@@ -384,7 +384,7 @@ def test_hazard_report_interrupted_keeps_the_run_whole(tmp_path, monkeypatch, re
 
 @pytest.mark.parametrize("step", ["moved", pytest.param("switched", marks=pytest.mark.slow)])
 def test_hazard_study_interrupted_keeps_one_whole_summary(tmp_path, monkeypatch, step):
-    from hazard.study import Parameter, Study, run_study
+    from hazard.drivers.study import Parameter, Study, run_study
 
     def study(powers):
         return Study(name="t", scene="plate", kind="grid", parameters=(Parameter("laser.power_w", values=powers),))
@@ -451,7 +451,7 @@ def test_force_into_another_scenes_folder_replaces_the_runs_set(tmp_path, monkey
     hazard_local_frame.tif (a scene with a ground grid); the new scene writes none: the
     stale grid goes (the new report says it was not written, and it is not there), while
     files hazard did not write and another command's pictures stay, each said on stdout."""
-    from hazard import map_outputs
+    from hazard.outputs import map_outputs
 
     monkeypatch.setattr(cli, "_analyse", lambda args, err: results["plate"])
     real = map_outputs.map_files

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from scipy import integrate, special, stats
 
 import scenes
-from hazard.beam import BeamGeometry, inside_convex, polygon_fraction, rectangle_fraction, sample_cells
+from hazard.physics.beam import BeamGeometry, inside_convex, polygon_fraction, rectangle_fraction, sample_cells
 
 
 def _poly_rect(x0, x1, y0, y1):
@@ -106,7 +106,7 @@ def test_tiny_box_inside_the_beam_is_hit(x):
     scene = scenes.loads(SCENE.format(shape="box", x=x, size="[0.004, 0.004, 0.004]"))
     beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, 1000.0, 0.2, 0.0)
     from hazard.pipeline.spots import ray_meshes as _ray_meshes
-    from hazard.rays import RayScene
+    from hazard.physics.rays import RayScene
 
     rs = RayScene(_ray_meshes(scene))
     cells = sample_cells(beam, rs, scene.targets, rtol=1e-5)
@@ -143,7 +143,7 @@ def test_inside_convex_many_matches_the_edge_test(seed, n, sx, sy):
     """The O(log V) point-in-convex-polygon test used on spheres' and cylinders' outlines
     agrees with the all-edges test on random hulls and points (points within 1e-9 of an
     edge may go either way)."""
-    from hazard.beam import _hull_s, inside_convex_many
+    from hazard.physics.beam import _hull_s, inside_convex_many
 
     rng = np.random.default_rng(seed)
     poly = _hull_s(rng.normal(size=(n, 2)) * [sx, sy] + rng.normal(size=2))

@@ -76,7 +76,7 @@ def test_a_dependency_warning_is_one_plain_line(tmp_path):
         "    warnings.warn('the frobnicator is deprecated', DeprecationWarning)\n"
         "    np.exp(np.array([1e4]))\n    np.exp(np.array([2e4]))\n")
     (tmp_path / "sitecustomize.py").write_text(
-        "import fakedep\nimport hazard.mpe as m\n_real = m.ocular_mpe\n\n\n"
+        "import fakedep\nimport hazard.physics.mpe as m\n_real = m.ocular_mpe\n\n\n"
         "def ocular_mpe(*a, **k):\n    fakedep.noisy()\n    return _real(*a, **k)\n\n\nm.ocular_mpe = ocular_mpe\n")
     env_path = os.pathsep.join([str(tmp_path), str(tmp_path / "site-packages"), str(ROOT)])
     env = {**os.environ, "PYTHONPATH": env_path, "PYTHONWARNINGS": "default"}

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import hazard
-from hazard import convergence as conv
+from hazard.drivers import convergence as conv
 from hazard.cli import main
-from hazard.report import ANSWER_MAX_OBSERVERS
+from hazard.outputs.report import ANSWER_MAX_OBSERVERS
 from tests._bundled import bundled
 
 

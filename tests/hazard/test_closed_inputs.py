@@ -180,8 +180,8 @@ def _risk_variant(pointing, scale, tilt, shape, visibility, scint, spread, obser
        spread=st.sampled_from([0.0, 0.5]), observers=st.booleans())
 def test_uncertain_inputs_are_the_risk_models(pointing, scale, tilt, shape, visibility, scint, spread, observers):
     """The load-time rule (scenes.spec.uncertain_inputs) names the inputs the risk model
-    draws (hazard.risk.inputs.InputModel.active), and refuses exactly when it names none."""
-    from hazard.risk.inputs import input_model
+    draws (hazard.drivers.risk.inputs.InputModel.active), and refuses exactly when it names none."""
+    from hazard.drivers.risk.inputs import input_model
 
     d = _risk_variant(pointing, scale, tilt, shape, visibility, scint, spread, observers)
     expect = [g for g, on in (("pointing", pointing > 0), ("material", scale > 0), ("tilt", tilt > 0 and shape == "plate"),

@@ -8,8 +8,8 @@ import pytest
 
 import hazard
 import scenes
-from hazard import convergence as conv
-from hazard import near_field_lobe
+from hazard.drivers import convergence as conv
+from hazard.physics import near_field_lobe
 from hazard.cli import main
 
 

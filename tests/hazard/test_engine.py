@@ -15,7 +15,7 @@ import hazard
 import scenes
 from hazard.pipeline.irradiance_map import sliding_max_integral as _sliding_max_integral
 from hazard.cli import main
-from hazard.report import write_outputs
+from hazard.outputs.report import write_outputs
 from tests._bundled import bundled
 
 PLATE = """
@@ -197,8 +197,8 @@ def test_dynamic_scene_states_and_verdicts():
 def _flat_spot(scene, power_w, diameter_m, divergence_rad):
     """The one spot of a scene of flat targets, built as the analysis builds it."""
     from hazard.pipeline.spots import FlatScene as _FlatScene
-    from hazard.beam import BeamGeometry, sample_cells
-    from hazard.engine import build_spots, flat_outlines
+    from hazard.physics.beam import BeamGeometry, sample_cells
+    from hazard.physics.engine import build_spots, flat_outlines
 
     beam = BeamGeometry.create(scene.laser_position_m, scene.laser_direction, power_w, diameter_m, divergence_rad)
     tracer = _FlatScene(scene.targets)
@@ -222,7 +222,7 @@ def _static_at(model, state):
 
 
 def test_dynamic_irradiance_equals_static_material_at_that_state():
-    from hazard.engine import Spot, spot_irradiance
+    from hazard.physics.engine import Spot, spot_irradiance
 
     scene = scenes.load(scenes.example_path("witness_screen"))
     res = hazard.analyze(scene)
@@ -314,7 +314,7 @@ def test_footprint_with_dynamic_materials_on_terrain():
 
 
 def test_sparse_map_rows_equal_dense():
-    from hazard.engine import spot_irradiance
+    from hazard.physics.engine import spot_irradiance
 
     scene = scenes.load(scenes.example_path("witness_screen"))
     spot = _flat_spot(scene, 230.0, 0.005, 0.001)
@@ -364,7 +364,7 @@ def test_mesh_file_target_and_heightmap_terrain(tmp_path):
 def test_map_on_threads_equals_serial_map(name, monkeypatch):
     # the map runs in blocks on threads (line of sight, BRDF, exposure per block); tiny
     # blocks force many of them, with the multi-spot, single-spot and static paths
-    import hazard.analysis as ha
+    import hazard.pipeline.analysis as ha
 
     monkeypatch.setattr(ha, "MAP_CHUNK", 5)
     scene = scenes.load(scenes.example_path(name))
@@ -388,7 +388,7 @@ def test_threads_must_be_positive():
 def test_projected_brdf_max_over_states_for_every_model_kind():
     # keep-out lobes take the max over the states without forming (N, T) where they can
     import brdfmodels as bm
-    from hazard.engine import projected_brdf
+    from hazard.physics.engine import projected_brdf
 
     rng = np.random.default_rng(11)
     basis = bm.SHBasis(4, 2, 2, 0)
@@ -417,10 +417,10 @@ def test_projected_brdf_max_over_states_for_every_model_kind():
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(1, 300), t=st.integers(2, 40), block=st.integers(1, 64))
 def test_state_looping_models_in_one_call_equal_the_loop(seed, n, t, block):
     # a model without a vectorised state path is evaluated over all states in one call per block
-    # (hazard.engine._per_state): the per-state loop to rounding (a dynamic SH part sums its basis in
+    # (hazard.physics.engine._per_state): the per-state loop to rounding (a dynamic SH part sums its basis in
     # another order with per-row states: 1 ulp), whatever the block size
     import brdfmodels as bm
-    from hazard import engine
+    from hazard.physics import engine
 
     rng = np.random.default_rng(seed)
     basis = bm.SHBasis(4, 2, 2, 0)
@@ -441,7 +441,7 @@ def test_state_looping_models_in_one_call_equal_the_loop(seed, n, t, block):
 
 def test_long_histories_get_smaller_map_blocks(monkeypatch):
     # memory per block is capped in observer x time values, whatever the history length
-    import hazard.analysis as ha
+    import hazard.pipeline.analysis as ha
 
     scene = scenes.load(scenes.example_path("witness_screen"))
     ref = hazard.analyze(scene)
@@ -461,7 +461,7 @@ def test_footprint_sums_the_spots():
     # two Lambertian plates side by side under one wide beam light the same ground: a
     # node is hazardous when the SUM of their irradiances passes the MPE, even where
     # neither does alone (the observer map sums them too)
-    from hazard.keepout import ground_footprint
+    from hazard.physics.keepout import ground_footprint
 
     text = PLATE.format(power=3.0e4, mu=0.0, material='{ model = "lambertian", reflectance = 0.5 }', extra="", samples=1024,
                         grid=4.0, levels=0)
@@ -473,7 +473,7 @@ def test_footprint_sums_the_spots():
     scene = scenes.loads(text)
     res = hazard.analyze(scene)
     assert len(res.spots) == 2
-    from hazard.engine import spot_irradiance
+    from hazard.physics.engine import spot_irradiance
 
     t = scene.terrain
     ny, nx = t.heights.shape
@@ -490,7 +490,7 @@ def test_footprint_sums_the_spots():
 
 def _ray_scene_of(scene):
     from hazard.pipeline.spots import ray_meshes as _ray_meshes
-    from hazard.rays import RayScene
+    from hazard.physics.rays import RayScene
 
     return RayScene(_ray_meshes(scene))
 

@@ -20,8 +20,8 @@ import pytest
 
 import hazard
 import scenes
-from hazard.extended_source import apply_extended_source, extended_source_mpe, observer_subtense_rad
-from hazard.report import report_dict, write_outputs
+from hazard.pipeline.extended_source import apply_extended_source, extended_source_mpe, observer_subtense_rad
+from hazard.outputs.report import report_dict, write_outputs
 
 A, PHI, R_L = 0.1, 1e-4, 10.0
 D = A + R_L * PHI  # 1/e spot diameter on the plate [m]
@@ -107,7 +107,7 @@ def test_truncated_spot_subtense(samples):
     # the scatter of the engine's samples leaves out the spread within each sample (low at
     # coarse sampling), but its edge samples sit at the centroid of their whole beam cell,
     # part of it off the plate (high by up to 0.7 % in alpha at 16384 samples: Spot.size_m
-    # is 0.9 % high here at every sampling). Known limitation, see hazard.extended_source.
+    # is 0.9 % high here at every sampling). Known limitation, see hazard.pipeline.extended_source.
     assert alpha <= truth * 1.01
     assert alpha >= 0.75 * truth
 
@@ -319,7 +319,7 @@ def test_report_columns(tmp_path):
 def test_projected_minor_axis_matches_an_eigen_decomposition():
     """The closed form (trace and cofactor of the projected second moments) against
     numpy's eigenvalues of P C P, for a tilted elongated spot and random eyes."""
-    from hazard.extended_source import _second_moments, spot_subtense_rad
+    from hazard.pipeline.extended_source import _second_moments, spot_subtense_rad
 
     rng = np.random.default_rng(1)
     rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]

@@ -100,9 +100,9 @@ def entry_view(figures, fname) -> str:
 
 
 def _spatial_figures(result) -> dict:
-    from hazard.elevation_view import ElevationViewDisplay
-    from hazard.figure_index import figures_document
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
+    from hazard.outputs.figure_index import figures_document
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     entries = {}
     for name, display, view in (("plan.png", PlanViewDisplay, "plan"), ("elevation.png", ElevationViewDisplay, "elevation")):
@@ -111,7 +111,7 @@ def _spatial_figures(result) -> dict:
 
 
 def _report(result) -> dict:
-    from hazard.report import report_dict
+    from hazard.outputs.report import report_dict
 
     return json.loads(json.dumps(report_dict(result), allow_nan=False))
 
@@ -145,7 +145,7 @@ def test_airspace_draws_its_flight_zones_track_and_faa_distances_with_arrows_off
 
 def test_a_finding_off_the_frame_gets_an_arrow_inside_it_with_its_distance():
     from hazard.canvas import subplots
-    from hazard.figure_index import arrow_to, figure_entry
+    from hazard.outputs.figure_index import arrow_to, figure_entry
 
     fig, ax = subplots(figsize=(4, 4))
     ax.set_xlim(-100, 100)
@@ -163,7 +163,7 @@ def test_a_finding_off_the_frame_gets_an_arrow_inside_it_with_its_distance():
 
 def test_a_finding_drawn_off_the_panel_is_not_inside_and_its_label_must_be_shown():
     from hazard.canvas import subplots
-    from hazard.figure_index import figure_entry, mark
+    from hazard.outputs.figure_index import figure_entry, mark
 
     fig, ax = subplots(figsize=(4, 4))
     ax.set_title("panel")
@@ -187,7 +187,7 @@ def test_an_unbounded_curve_still_makes_valid_json():
     import math
 
     from hazard.canvas import subplots
-    from hazard.figure_index import figure_entry, figures_document, mark
+    from hazard.outputs.figure_index import figure_entry, figures_document, mark
 
     fig, ax = subplots(figsize=(3, 3))
     ax.set_title("target t: diffuse-lobe NOHD vs time")

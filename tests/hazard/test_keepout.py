@@ -11,7 +11,7 @@ import brdfmodels
 import hazard
 import scenes
 from brdfmodels.fileio import read_toml
-from hazard import keepout, near_field_lobe
+from hazard.physics import keepout, near_field_lobe
 
 BACKSCATTER = {"model": "torrance-sparrow-5", "kb": 0.072, "kr": 16.125, "b": -29.917, "a": 0.959, "kd": 0.081}  # range_terrain's steel
 
@@ -104,7 +104,7 @@ def test_the_default_tolerance_is_read_when_called(monkeypatch):
 
 
 def test_point_form_max_range_is_the_lobe_max_beyond_the_near_field(monkeypatch):
-    # hazard.visual takes the point-form lobe's largest range where it reaches the near field's
+    # hazard.physics.visual takes the point-form lobe's largest range where it reaches the near field's
     # cap (near_field_lobe.near_field_reach_m): the near-field envelope stays within the cap, so the
     # lobe with the near field has the same largest range there
     from tests._bundled import bundled

@@ -45,7 +45,7 @@ def run(*argv):
 def stub_render(monkeypatch):
     """``hazard render`` without drawing: each call writes keepout.png, keepout.vtm and
     overview.png holding the tag set in the returned dict (one file per kind of output)."""
-    from hazard import figures, render
+    from hazard.pictures import figures, render
 
     tag = {"now": "old"}
     monkeypatch.setattr(cli, "_analyse", lambda args, err: types.SimpleNamespace(states=(), scene=types.SimpleNamespace(name="plate")))
@@ -147,7 +147,7 @@ def test_hazard_report_interrupted_at_a_rename_keeps_the_run_whole(tmp_path, mon
 
 @pytest.mark.parametrize("k", (pytest.param(1, marks=pytest.mark.slow), 2))  # two studies each: 3-4 s at load 10
 def test_hazard_study_interrupted_at_a_rename_keeps_one_whole_summary(tmp_path, monkeypatch, k):
-    from hazard.study import Parameter, Study, run_study
+    from hazard.drivers.study import Parameter, Study, run_study
 
     def study(powers):
         return Study(name="t", scene="plate", kind="grid", parameters=(Parameter("laser.power_w", values=powers),))

@@ -44,7 +44,7 @@ def outside(ax) -> list:
 
 def test_labels_at_one_point_are_spread_apart_inside_the_panel_each_tied_to_its_point():
     from hazard.canvas import subplots
-    from hazard.label_place import place_labels
+    from hazard.pictures.label_place import place_labels
 
     fig, ax = subplots(figsize=(5, 4))
     ax.set_xlim(0, 100)
@@ -79,7 +79,7 @@ def test_labels_at_one_point_are_spread_apart_inside_the_panel_each_tied_to_its_
 
 def test_a_label_with_no_free_place_stays():
     from hazard.canvas import subplots
-    from hazard.label_place import place_labels
+    from hazard.pictures.label_place import place_labels
 
     fig, ax = subplots(figsize=(1.2, 0.6))
     ax.set_xlim(0, 1)
@@ -92,8 +92,8 @@ def test_a_label_with_no_free_place_stays():
 
 
 def _views(name):
-    from hazard.elevation_view import ElevationViewDisplay
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     res = bundled(name)
     out = []
@@ -132,8 +132,8 @@ def test_a_label_over_a_drawn_finding_moves_off_it_and_one_over_unmarked_data_st
     moved off them (issue 34 leftover: range_clearance's terrain label over the danger
     zone's end); a label over a line that is no finding stays where it was."""
     from hazard.canvas import subplots
-    from hazard.figure_index import mark
-    from hazard.label_place import place_labels
+    from hazard.outputs.figure_index import mark
+    from hazard.pictures.label_place import place_labels
 
     fig, ax = subplots(figsize=(5, 4))
     ax.set_xlim(0, 100)
@@ -161,8 +161,8 @@ def test_labels_still_clear_each_other_before_they_clear_the_data():
     """Three labels on one point between two finding lines closer than a label's width:
     no place clears the data, so each clears the labels (none dropped, none on another)."""
     from hazard.canvas import subplots
-    from hazard.figure_index import mark
-    from hazard.label_place import place_labels
+    from hazard.outputs.figure_index import mark
+    from hazard.pictures.label_place import place_labels
 
     fig, ax = subplots(figsize=(3, 3))
     ax.set_xlim(0, 100)
@@ -182,8 +182,8 @@ def test_no_label_of_the_plan_view_covers_a_hazardous_observer_it_does_not_name(
     """In the plan view's panels no label covers the marker of a hazardous observer
     (report.json's observers at or above the MPE, positions from report.json) other than
     near its own point."""
-    from hazard.plan_view import PlanViewDisplay
-    from hazard.report import report_dict
+    from hazard.pictures.plan_view import PlanViewDisplay
+    from hazard.outputs.report import report_dict
     from matplotlib.text import Annotation
 
     doc = report_dict(bundled(name))

@@ -20,7 +20,7 @@ pyproj = pytest.importorskip("pyproj")
 rasterio = pytest.importorskip("rasterio")
 
 from hazard.cli import main  # noqa: E402
-from hazard.map_zones import ZONE_KINDS  # noqa: E402
+from hazard.outputs.map_zones import ZONE_KINDS  # noqa: E402
 
 # a site scene with every kind of zone but the sector's nominal one: a Lambertian board
 # (ground footprint, keep-out lobe) beside a mirror (mirror beam), a pointing error (the
@@ -228,8 +228,8 @@ def test_point_features_converted_at_once_are_the_one_by_one_values(text):
 
     import hazard
     import scenes
-    from hazard import map_outputs
-    from hazard.map_zones import zones
+    from hazard.outputs import map_outputs
+    from hazard.outputs.map_zones import zones
 
     res = hazard.analyze(scenes.loads(text) if text else scenes.load(scenes.example_path("range_terrain")))
     zs, absent = zones(res)

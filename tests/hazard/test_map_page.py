@@ -23,8 +23,8 @@ import numpy as np
 import pytest
 
 from hazard.cli import main
-from hazard.map_page import LAYERS, MAP_NAME, hillshade, png_gray_alpha, write_map_page
-from hazard.review import fmt_number
+from hazard.outputs.map_page import LAYERS, MAP_NAME, hillshade, png_gray_alpha, write_map_page
+from hazard.outputs.review import fmt_number
 from tests.hazard.test_review_report import NASTY, BROWSER_ARGS, _console_errors, os_chromium  # noqa: F401
 from tests.hazard.test_review_report import SCENE as PLATE_FAN
 
@@ -382,8 +382,8 @@ def test_the_map_in_a_real_headless_chromium(site, browser, tmp_path):
 @pytest.mark.parametrize("example", ["range_geo", "airspace", "range_terrain", "steel_vs_copper"])
 def test_bundled_examples_maps_in_chromium(example, browser, tmp_path):
     """Each bundled example's map (the cached analyses of tests._bundled; up to 25 s each)."""
-    from hazard.map_outputs import map_files
-    from hazard.report import write_outputs
+    from hazard.outputs.map_outputs import map_files
+    from hazard.outputs.report import write_outputs
     from tests._bundled import bundled
 
     result = bundled(example)
@@ -428,7 +428,7 @@ def test_the_local_frame_map_in_a_real_headless_chromium(local, browser, tmp_pat
 def test_a_mirror_beam_stopped_by_a_backstop_is_not_said_short():
     """A mirror beam the analysis stops at a wall 188 m out (its NOHD 1121 m) is drawn to the
     wall; the page takes that stop as its reach, not the NOHD (no false "reaches farther")."""
-    from hazard.map_page import _reported_reach_m
+    from hazard.outputs.map_page import _reported_reach_m
 
     assert _reported_reach_m({"kind": "mirror_beam", "nohd_m": 1121.0, "reach_m": 188.0}, {}) == 188.0
     assert _reported_reach_m({"kind": "mirror_beam", "nohd_m": 1121.0}, {}) == 1121.0  # an older GeoJSON

@@ -21,9 +21,9 @@ NAME = "range_clearance"
 
 @pytest.fixture(scope="module")
 def out(tmp_path_factory):
-    from hazard.map_outputs import map_files
-    from hazard.map_page import write_map_page
-    from hazard.report import write_outputs
+    from hazard.outputs.map_outputs import map_files
+    from hazard.outputs.map_page import write_map_page
+    from hazard.outputs.report import write_outputs
 
     result = bundled(NAME)
     maps, section = map_files(result)
@@ -42,7 +42,7 @@ def _aim(doc):
 
 
 def test_each_thin_zone_has_a_band_along_its_axis_with_its_true_width_said(out):
-    from hazard.map_page import map_data
+    from hazard.outputs.map_page import map_data
 
     doc = json.loads((out / "report.json").read_text())
     laser, u, n = _aim(doc)
@@ -107,7 +107,7 @@ def test_a_zone_of_no_width_or_no_size_is_not_an_error():
     """A danger zone whose vertices lie on one line (no width: a beam below the MPE from
     its aperture on gives a polygon of coincident or collinear vertices) made `hazard
     report` fail with an internal error; a line gets a band along it, a point none."""
-    from hazard.map_page import _thin_band
+    from hazard.outputs.map_page import _thin_band
 
     line = {"geometry": {"type": "Polygon", "coordinates": [[[0.0, 0.0], [100.0, 0.0], [50.0, 0.0], [0.0, 0.0]]]}}
     band = _thin_band("sdz", "danger zone", line, site=False)

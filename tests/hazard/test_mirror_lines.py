@@ -36,7 +36,8 @@ def _aid_only():
 
 
 def test_a_beam_only_binoculars_make_hazardous_is_drawn_on_its_axis_to_the_aided_nohd():
-    from hazard.plan_view import PlanViewDisplay, beam_ends, mirror_lines
+    from hazard.pictures.plan_view import PlanViewDisplay, beam_ends
+    from hazard.outputs.finding_geometry import mirror_lines
 
     res, n = _aid_only()
     mpe = float(res.mpe_w_m2)
@@ -63,8 +64,8 @@ def test_the_drawn_mirror_line_lies_inside_its_own_zone(name):
     off its zone at 20 km in steel_vs_copper)."""
     from shapely.geometry import LineString, Polygon
 
-    from hazard.mirror_zone import mirror_zones
-    from hazard.plan_view import mirror_lines
+    from hazard.physics.mirror_zone import mirror_zones
+    from hazard.outputs.finding_geometry import mirror_lines
 
     res = bundled(name)
     zones = {(m.target, m.eye): Polygon(m.ring).buffer(0) for m in mirror_zones(res)}
@@ -86,7 +87,7 @@ def test_the_elevation_view_draws_the_mirror_zone_holding_its_hazardous_points(n
     eye's aperture radius (and 2 % for the sampling's hold between ranges)."""
     from shapely.geometry import MultiPoint, Polygon
 
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     power, a, phi, r1, rho = 100.0, 0.01, 5e-4, 100.0, 0.8
     t = math.radians(TILT_DEG)

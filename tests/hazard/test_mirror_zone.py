@@ -50,7 +50,7 @@ def _half_width_m(z, power, a, phi, r1, mu, rho, mpe):
 
 
 def test_the_half_width_is_the_gaussian_formula_at_several_ranges():
-    from hazard.mirror_zone import edges_m
+    from hazard.physics.mirror_zone import edges_m
 
     power, a, phi, r1, mu, rho = 100.0, 0.01, 5e-4, 100.0, 2e-4, 0.8
     res, u = _case(power, a, phi, r1, mu, 30.0, rho)
@@ -69,7 +69,7 @@ def test_the_half_width_is_the_gaussian_formula_at_several_ranges():
 def test_the_zone_polygon_is_as_wide_as_the_formula_and_ends_at_the_nohd():
     from shapely.geometry import Point, Polygon
 
-    from hazard.mirror_zone import PUPIL_RADIUS_M, mirror_zones
+    from hazard.physics.mirror_zone import PUPIL_RADIUS_M, mirror_zones
 
     power, a, phi, r1, mu, rho = 100.0, 0.01, 5e-4, 100.0, 0.0, 0.8
     res, u = _case(power, a, phi, r1, mu, 30.0, rho)
@@ -94,7 +94,7 @@ def test_the_zone_polygon_is_as_wide_as_the_formula_and_ends_at_the_nohd():
 def _check_contains(power, a, phi, r1, mu, tilt_deg, rho, nz, frac_z, frac_r, frac_v):
     from shapely.geometry import Point, Polygon
 
-    from hazard.mirror_zone import PUPIL_RADIUS_M, SAMPLES, mirror_zones
+    from hazard.physics.mirror_zone import PUPIL_RADIUS_M, SAMPLES, mirror_zones
 
     res, u = _case(power, a, phi, r1, mu, tilt_deg, rho, nz)
     zones = mirror_zones(res)
@@ -148,7 +148,7 @@ def _mirror_band_pt(fig, ax, mid, n) -> float:
     (data x, y) along the unit normal ``n``, in the rendered ``fig``."""
     from matplotlib.colors import to_rgb
 
-    from hazard import palette as C
+    from hazard.pictures import palette as C
 
     fig.canvas.draw()
     img = np.asarray(fig.canvas.buffer_rgba())[..., :3].astype(float) / 255
@@ -175,7 +175,7 @@ def test_the_drawn_zone_is_visible_in_the_plan_view():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hazard.plan_view import MIN_ZONE_PT, PlanViewDisplay
+    from hazard.pictures.plan_view import MIN_ZONE_PT, PlanViewDisplay
 
     res, u = _case()
     d = PlanViewDisplay.from_result(res)
@@ -205,8 +205,8 @@ def test_a_beam_cut_above_its_axis_is_drawn_where_its_hot_part_is():
     horizontal extent taken over its heights; through the axis's line alone it fails)."""
     from shapely.geometry import Point, Polygon
 
-    from hazard.mirror_zone import mirror_zones
-    from hazard.specular import specular_irradiance
+    from hazard.physics.mirror_zone import mirror_zones
+    from hazard.physics.specular import specular_irradiance
 
     res = hazard.analyze(_scene(power=2000.0, a=0.2, phi=2e-4, r1=100.0, mu=0.0, rho=0.9, normal=(0.5, -math.sqrt(0.75), 0.0),
                                 tangent=(math.sqrt(0.75), 0.5, 0.0), center=(0.0, 0.0, 0.35), size=(0.6, 0.6)))

@@ -222,7 +222,7 @@ positions_geo = [[32.55, -106.40, 3000.0], [32.70, -106.20, 3000.0]]
 
 def test_the_vtk_output_holds_the_zones_as_volumes():
     pytest.importorskip("pyvista")
-    from hazard import render
+    from hazard.pictures import render
 
     res = bundled("airspace")
     blocks = render._scene_blocks(res, 6.0)
@@ -236,7 +236,7 @@ def test_the_vtk_output_holds_the_zones_as_volumes():
 
 def test_each_track_gets_its_exposure_plot():
     pytest.importorskip("matplotlib")
-    from hazard.plots import time_figures
+    from hazard.pictures.plots import time_figures
 
     res = bundled("airspace")
     figs = time_figures(res, worst=0)
@@ -298,7 +298,7 @@ def test_the_elevation_view_puts_observers_where_they_are():
     """The observers were drawn with the scene's offset added twice (a scene whose first
     target is not at the origin: the post of `airspace`, 20 m up, was drawn 120 m up)."""
     pytest.importorskip("matplotlib")
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     res = bundled("airspace")
     d = ElevationViewDisplay.from_result(res)
@@ -330,7 +330,7 @@ time_end_s = 5.0
     notes = " ".join(res.motion.notes)
     assert "track late ([50, 60] s) lies outside the analysed span [0, 5] s: NOT evaluated" in notes
     assert "track early: only [0, 5] s of its [0, 10] s" in notes
-    from hazard.report import answer_text
+    from hazard.outputs.report import answer_text
 
     assert "track late" in answer_text(res)
 

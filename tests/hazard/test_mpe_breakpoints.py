@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-import hazard.mpe as m
+import hazard.physics.mpe as m
 
 WAVELENGTHS_NM = [193, 248, 266, 302.5, 308, 315, 337, 355, 400, 405, 450, 500, 532, 600, 633, 700, 750, 808, 905, 1000,
                   1050, 1064, 1150, 1200, 1300, 1319, 1380, 1400, 1500, 1550, 1800, 2600, 3000, 10600, 1e5]

@@ -2,9 +2,9 @@
 
 Every expected value here is typed by hand from the standards' tables (edition, table and
 row cited in a comment beside it) or from the published worked examples (source in a
-comment, numbers only); none is computed with :mod:`hazard.mpe`'s own tables or factors.
+comment, numbers only); none is computed with :mod:`hazard.physics.mpe`'s own tables or factors.
 Rows the project could not read in the standard's text are marked [M] as in
-``hazard/mpe.py``; there the test pins the protective choice the code documents.
+``hazard/physics/mpe.py``; there the test pins the protective choice the code documents.
 """
 
 import math
@@ -238,7 +238,7 @@ def test_c5_is_3_to_7_times_the_old_n_to_the_minus_quarter_in_iec_2014():
 # [I] a value read in a public implementation (code), not a published worked example;
 # [H] hand-computed, not a published example (a closed form of a [C] formula, or a value
 #     from general knowledge of the tables, no source read).
-# The MPE always comes from hazard.mpe; the distance formulas are written out here.
+# The MPE always comes from hazard.physics.mpe; the distance formulas are written out here.
 def nohd_closed_form(p_w, mpe, a_m, phi_rad):
     return (math.sqrt(4 * p_w / (math.pi * mpe)) - a_m) / phi_rad  # ANSI eq. B (spec 3.1) [C]
 

@@ -1,8 +1,8 @@
 """Issue 33 leftovers: the UV 24 h accumulation and the photochemical field of view.
 
 Expected values are typed by hand from the standards' tables (edition, table and row in a
-comment beside each); none is computed with :mod:`hazard.mpe`'s own tables or factors.
-Rows the project could not read in the standards' text are [M], as in ``hazard/mpe.py``:
+comment beside each); none is computed with :mod:`hazard.physics.mpe`'s own tables or factors.
+Rows the project could not read in the standards' text are [M], as in ``hazard/physics/mpe.py``:
 there the test pins the protective reading the code documents.
 """
 
@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import hazard as hz
-from hazard import mpe as M
+from hazard.physics import mpe as M
 
 ANSI, IEC = "ansi-z136.1-2014", "iec-60825-1-2014"
 REL = 1e-9
@@ -458,8 +458,8 @@ def test_a_uv_day_report_validates_against_the_report_schema():
     # report.json's uv_24h block (a dict in the UV, null elsewhere) is part of the published schema
     import json
 
-    from hazard.report import report_dict
-    from hazard.report_schema import validate_report
+    from hazard.outputs.report import report_dict
+    from hazard.outputs.report_schema import validate_report
 
     win = "[[0.0, 600.0], [3600.0, 4200.0]]"
     doc = json.loads(json.dumps(report_dict(hz.analyze(_plate_scene(355.0, 1e4, win)))))

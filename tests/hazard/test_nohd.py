@@ -211,7 +211,7 @@ def test_bad_input(call, match):
 def test_vectorised_lambert_w_against_scipy_and_its_equation():
     import numpy as np
 
-    from hazard.nohd import _lambertw0
+    from hazard.physics.nohd import _lambertw0
 
     z = np.concatenate([np.logspace(-8, 300, 20001), np.linspace(0.0, 10.0, 2001)[1:], [1.7e308]])
     w = _lambertw0(z)
@@ -223,7 +223,7 @@ def test_vectorised_lambert_w_against_scipy_and_its_equation():
 def test_range_from_intensity_matches_the_scalar_nohd():
     import numpy as np
 
-    from hazard.nohd import range_from_intensity
+    from hazard.physics.nohd import range_from_intensity
 
     i = np.array([0.0, 1e-12, 1e-3, 1.0, 1e3, 1e9, 1e30, np.inf])
     for mu in (1e-12, 1e-4, 0.5):
@@ -236,7 +236,7 @@ def test_range_from_intensity_matches_the_scalar_nohd():
 def test_range_from_intensity_with_a_subnormal_attenuation_is_the_unattenuated_range():
     """mu = 5e-324: mu R0 / 2 underflows to 0 and the range came out 0 (hypothesis found it
     through the keep-out lobe); with W(z) ~ z it is R0 (1 - z) = R0."""
-    from hazard.nohd import range_from_intensity
+    from hazard.physics.nohd import range_from_intensity
 
     i = np.array([1.0, 100.0, 0.0])
     np.testing.assert_array_equal(range_from_intensity(i, 50.0, 5e-324), np.sqrt(i / 50.0))

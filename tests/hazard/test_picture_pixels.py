@@ -18,7 +18,7 @@ pytest.importorskip("matplotlib")
 
 FAST = ["mirror_window"]
 SLOW = sorted(set(scenes.examples()) - set(FAST))
-DPI = 110  # the pictures' resolution (hazard.plots.DisplayBase)
+DPI = 110  # the pictures' resolution (hazard.pictures.plots.DisplayBase)
 RENDER_S = 120.0  # every picture of one example (run_figures), on a 2-core machine shared by five runs (mirror_window: 4 to 19 s)
 
 
@@ -90,8 +90,8 @@ def figure_problems(fig) -> list:
 
 def _checked(result, monkeypatch):
     """run_figures of ``result`` with each figure kept for inspection (in drawing order)."""
-    from hazard import figure_index
-    from hazard.figures import run_figures
+    from hazard.outputs import figure_index
+    from hazard.pictures.figures import run_figures
 
     figs = []
     entry = figure_index.figure_entry
@@ -103,8 +103,8 @@ def _checked(result, monkeypatch):
 
 @pytest.mark.slow  # 3 to 20 s on a loaded machine; the default suite checks the PNGs of tests/hazard/test_plan_view.py's run
 def test_the_plan_and_elevation_views_are_whole_and_keep_their_text_inside():
-    from hazard.elevation_view import ElevationViewDisplay
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     res = bundled("mirror_window")
     for display in (PlanViewDisplay, ElevationViewDisplay):

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hazard import palette as C
-from hazard.palette import rgb
+from hazard.pictures import palette as C
+from hazard.pictures.palette import rgb
 from tests._bundled import bundled
 
 pytest.importorskip("matplotlib")
@@ -34,7 +34,7 @@ def renders(svc, tmp_path_factory):
     pytest.importorskip("pyvista")
     import matplotlib.image as mpimg
 
-    from hazard import render
+    from hazard.pictures import render
 
     out = tmp_path_factory.mktemp("renders")
     paths = render.keepout(svc, out, vtk=False)
@@ -74,7 +74,7 @@ def test_each_legend_colour_is_in_the_legend_and_in_the_close_view(renders, colo
 
 
 def test_the_overview_holds_the_mirror_beam_to_its_nohd(svc, renders):
-    from hazard import render
+    from hazard.pictures import render
 
     paths, imgs = renders
     scene = _region(imgs["overview"], paths["layout"]["overview"]["scene"])
@@ -93,7 +93,7 @@ def test_the_overview_holds_the_mirror_beam_to_its_nohd(svc, renders):
 
 
 def test_log_distance_is_continuous_monotone_and_true_inside():
-    from hazard.render import Framing
+    from hazard.pictures.render import Framing
 
     f = Framing(np.zeros((3, 2)), np.array([1.0, 2.0, 3.0]), 10.0)
     r = np.array([0.0, 5.0, 10.0 - 1e-9, 10.0, 10.0 + 1e-9, 20.0, 1e3, 1e5])
@@ -107,7 +107,7 @@ def test_log_distance_is_continuous_monotone_and_true_inside():
 
 
 def test_ring_radii_are_round_and_reach_the_extent():
-    from hazard.render import ring_radii
+    from hazard.pictures.render import ring_radii
 
     assert ring_radii(63.0, False) == [10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
     log_rings = ring_radii(7968.0, True)
@@ -118,7 +118,7 @@ def test_a_two_state_dynamic_lobe_is_drawn_from_its_history_in_time_order():
     """It crashed (np.unique flattened the (T, 2) states), and a sorted history would
     have dropped the slump: the drawn lobe reaches the reported dynamic NOHD."""
     pytest.importorskip("pyvista")
-    from hazard import render
+    from hazard.pictures import render
 
     res = bundled("stainless_melt")
     blocks = render._scene_blocks(res, 6.0)
@@ -132,7 +132,7 @@ def test_a_two_state_dynamic_lobe_is_drawn_from_its_history_in_time_order():
 
 @pytest.fixture(scope="module")
 def plan(svc):
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     return PlanViewDisplay.from_result(svc)
 
@@ -167,13 +167,13 @@ def test_the_plan_picture_shows_outlines_rings_and_labels(plan):
 
 
 def test_the_elevation_projects_across_the_aim(svc):
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     d = ElevationViewDisplay.from_result(svc)
     scene = svc.scene
     u = np.array([scene.laser_direction[0], scene.laser_direction[1], 0.0])
     u /= np.linalg.norm(u)
-    from hazard.plan_view import mirror_lines
+    from hazard.outputs.finding_geometry import mirror_lines
 
     ends = {name: end for name, _, end, _ in mirror_lines(svc)}  # scene-local 3-D, on the zone's axis (tests/hazard/test_mirror_lines.py)
     assert set(ends) == {name for name, _, _ in d.mirrors}
@@ -185,7 +185,7 @@ def test_the_elevation_projects_across_the_aim(svc):
 
 
 def test_the_elevation_of_a_scene_with_ground_draws_the_terrain_under_the_aim():
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     res = bundled("range_terrain")
     d = ElevationViewDisplay.from_result(res)

@@ -32,8 +32,9 @@ def mirror_wall(tmp_path_factory):
 
 
 def test_a_mirror_beam_stopped_by_a_wall_is_drawn_to_the_wall_and_says_so(mirror_wall):
-    from hazard.elevation_view import ElevationViewDisplay
-    from hazard.plan_view import PlanViewDisplay, mirror_segments
+    from hazard.pictures.elevation_view import ElevationViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
+    from hazard.outputs.finding_geometry import mirror_segments
 
     row = next(t for t in mirror_wall.targets if t.name == "window")
     ((name, a, b),) = mirror_segments(mirror_wall)
@@ -51,7 +52,7 @@ def test_a_mirror_beam_stopped_by_a_wall_is_drawn_to_the_wall_and_says_so(mirror
 
 
 def test_without_a_backstop_the_mirror_beam_is_drawn_to_its_nohd():
-    from hazard.plan_view import mirror_segments
+    from hazard.outputs.finding_geometry import mirror_segments
 
     res = bundled("mirror_window")
     ((_, a, b),) = mirror_segments(res)
@@ -60,7 +61,7 @@ def test_without_a_backstop_the_mirror_beam_is_drawn_to_its_nohd():
 
 
 def test_the_elevation_aim_line_stops_where_its_centre_meets_a_hill(tmp_path):
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     text = scenes.example_path("range_terrain").read_text()  # a hill 40 m high 850 m down range, behind the target
     text = text.replace("center_m = [200.0, 100.0, 0.0]", "center_m = [0.0, 450.0, 0.0]").replace("height_m = 25.0", "height_m = 40.0")
@@ -92,7 +93,7 @@ def _exaggeration(ax) -> float:
 
 
 def test_the_elevation_range_panel_exaggerates_at_most_ten_times_and_says_so():
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     fig, axes = ElevationViewDisplay.from_result(bundled("mirror_window")).plot()  # a level scene: x4300 before
     fig.canvas.draw()
@@ -104,7 +105,7 @@ def test_the_elevation_range_panel_exaggerates_at_most_ten_times_and_says_so():
 def test_hazardous_ground_is_drawn_as_cells_of_their_true_size_and_the_site_frames_what_stands_around():
     from matplotlib.collections import PolyCollection
 
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     res = bundled("range_terrain")
     fig, axes = PlanViewDisplay.from_result(res).plot()
@@ -124,7 +125,7 @@ def test_hazardous_ground_is_drawn_as_cells_of_their_true_size_and_the_site_fram
 
 
 def test_the_first_range_ring_says_what_the_rings_are_centred_on():
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     fig, axes = PlanViewDisplay.from_result(bundled("range_terrain")).plot()
     rng = [t.get_text() for t in axes[0].texts if t.get_text().endswith(" from the laser")]
@@ -134,7 +135,7 @@ def test_the_first_range_ring_says_what_the_rings_are_centred_on():
 
 def test_the_scale_bar_takes_a_corner_that_covers_nothing_and_safe_observers_stay_over_the_crosses():
     from hazard.canvas import subplots
-    from hazard.plan_view import PlanViewDisplay, quiet_corner
+    from hazard.pictures.plan_view import PlanViewDisplay, quiet_corner
 
     _, ax = subplots(figsize=(4, 4))
     ax.set_xlim(0, 100)
@@ -152,7 +153,7 @@ def test_the_scale_bar_takes_a_corner_that_covers_nothing_and_safe_observers_sta
 
 
 def test_a_site_kilometres_long_is_not_drawn_flat():
-    from hazard.elevation_view import ElevationViewDisplay
+    from hazard.pictures.elevation_view import ElevationViewDisplay
 
     d = ElevationViewDisplay("t", np.array([0.0, 0.0]), np.array([[0.0, 0.0], [6000.0, 60.0]]),
                              targets=[("a", np.array([100.0, 10.0])), ("b", np.array([5000.0, 60.0]))])
@@ -165,7 +166,7 @@ def test_a_site_kilometres_long_is_not_drawn_flat():
 
 
 def test_the_plan_aim_line_ends_where_the_zone_does_along_the_aim():
-    from hazard.plan_view import clip_to_zone
+    from hazard.pictures.plan_view import clip_to_zone
 
     deg = np.radians
     ring = [[0.0, 0.0]] + [[1000 * np.sin(deg(a)), 1000 * np.cos(deg(a))] for a in (-10, -1)]  # a wall stops the aim's

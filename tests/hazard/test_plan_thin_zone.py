@@ -18,7 +18,7 @@ MIN_PX = 4.0 * 100 / 72 - 1.5  # the drawn minimum (4 pt at the figure's 100 dpi
 
 
 def _figure(name):
-    from hazard.plan_view import PlanViewDisplay
+    from hazard.pictures.plan_view import PlanViewDisplay
 
     fig, axes = PlanViewDisplay.from_result(bundled(name)).plot()
     fig.canvas.draw()
@@ -29,7 +29,7 @@ def _figure(name):
 def _true_width(name, aided=None):
     """The zone's width across the aim [m] (the naked-eye zone, or ``sdz.aided[aided]``),
     from report.json's outline and the scene file."""
-    from hazard.report import report_dict
+    from hazard.outputs.report import report_dict
 
     res = bundled(name)
     z = report_dict(res)["sdz"]
@@ -75,7 +75,7 @@ def test_a_hairline_danger_zone_is_drawn_wide_enough_to_see_and_says_its_true_wi
 
 
 def test_widening_keeps_along_offsets_and_multiplies_across_offsets():
-    from hazard.plan_view import widen_across
+    from hazard.pictures.plan_view import widen_across
 
     ring = np.array([[1.0, 0.0], [10.0, 1.0], [10.0, -2.0]])
     origin, u = np.array([1.0, 0.0]), np.array([1.0, 0.0])

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from hazard.cli import main
-from hazard import palette as C
-from hazard.palette import rgb
-from hazard.plan_view import PlanViewDisplay, nice_length_m
+from hazard.pictures import palette as C
+from hazard.pictures.palette import rgb
+from hazard.pictures.plan_view import PlanViewDisplay, nice_length_m
 
 pytest.importorskip("matplotlib")
 imageio = pytest.importorskip("imageio.v3")

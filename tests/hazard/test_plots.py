@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import brdfmodels as bm
-from hazard import plots
+from hazard.pictures import plots
 from tests._bundled import bundled
 
 pytest.importorskip("matplotlib")

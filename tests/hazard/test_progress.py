@@ -13,7 +13,7 @@ import scenes
 from brdfmodels import fitting, validation
 from hazard.cli import main
 from hazard.progress import progress_callback, progress_to, terminal_bar
-from hazard.study import Parameter, Study, progress_bar, run_study
+from hazard.drivers.study import Parameter, Study, progress_bar, run_study
 
 
 class Terminal(io.StringIO):

@@ -23,8 +23,8 @@ import math
 import pytest
 
 import hazard as hz
-from hazard.aperture import limiting_aperture_m
-from hazard.visual import LEVELS_W_M2, zone_distances_m
+from hazard.physics.aperture import limiting_aperture_m
+from hazard.physics.visual import LEVELS_W_M2, zone_distances_m
 
 ANSI, IEC = "ansi-z136.1-2014", "iec-60825-1-2014"
 FT = 0.3048  # m per international foot

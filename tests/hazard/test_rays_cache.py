@@ -1,12 +1,12 @@
-"""The per-process cache of ray scenes (hazard.rays.cached_ray_scene)."""
+"""The per-process cache of ray scenes (hazard.physics.rays.cached_ray_scene)."""
 
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
 
-from hazard import rays
-from hazard.rays import RayScene, cached_ray_scene, clear_ray_cache, ray_cache_info
+from hazard.physics import rays
+from hazard.physics.rays import RayScene, cached_ray_scene, clear_ray_cache, ray_cache_info
 
 
 @pytest.fixture(autouse=True)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import scenes
-from hazard.rays import CONVEX_SHAPES, RayScene, own_object
+from hazard.physics.rays import CONVEX_SHAPES, RayScene, own_object
 from scenes.geometry import shape_mesh
 from scenes.spec import OccluderSpec
 

@@ -25,7 +25,7 @@ def _rgb(path):
 
 
 def test_keepout_render_shows_both_lobes(mirror_result, tmp_path):
-    from hazard import render
+    from hazard.pictures import render
 
     paths = render.keepout(mirror_result, tmp_path)
     r0, r1, c0, c1 = paths["layout"]["keepout"]["scene"]
@@ -46,7 +46,7 @@ def test_keepout_render_shows_both_lobes(mirror_result, tmp_path):
 
 
 def test_lobe_animation(mirror_result, tmp_path):
-    from hazard import render
+    from hazard.pictures import render
 
     anim = render.animate_lobe(mirror_result, tmp_path, max_frames=4, window_size=(320, 240))
     assert len(anim["frames"]) == 4 and all(f.stat().st_size > 2000 for f in anim["frames"])
@@ -60,7 +60,7 @@ def test_render_cli_and_static_scene(tmp_path):
     assert (tmp_path / "keepout.png").exists() and not (tmp_path / "lobe.gif").exists()  # static: no animation
     assert (tmp_path / "plan.png").stat().st_size > 20_000 and "plan.png" in out.getvalue()
     img = _rgb(tmp_path / "keepout.png")
-    footprint = np.all(np.abs(img - np.array([165, 15, 21])) <= 40, axis=-1)  # hazard.palette.FOOTPRINT, shaded
+    footprint = np.all(np.abs(img - np.array([165, 15, 21])) <= 40, axis=-1)  # hazard.pictures.palette.FOOTPRINT, shaded
     assert footprint.sum() > 1000  # the hazardous ground footprint is drawn
 
 

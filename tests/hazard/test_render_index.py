@@ -24,7 +24,7 @@ NOT_IN_3D = ("visual_interference", "sdz.aided")  # only the plan and elevation 
 
 
 def _report(result) -> dict:
-    from hazard.report import report_dict
+    from hazard.outputs.report import report_dict
 
     return json.loads(json.dumps(report_dict(result), allow_nan=False))
 
@@ -37,8 +37,8 @@ def _pixel(clip_matrix, point, size) -> tuple:
 
 
 def test_the_camera_answer_is_where_the_picture_draws_the_point_and_a_line_through_the_view_is_in_it():
-    from hazard.figure_index import view_entry
-    from hazard.render import _world_to_clip
+    from hazard.outputs.figure_index import view_entry
+    from hazard.pictures.render import _world_to_clip
 
     size = (400, 300)
     p = pv.Plotter(off_screen=True, window_size=list(size))
@@ -71,7 +71,7 @@ def test_the_camera_answer_is_where_the_picture_draws_the_point_and_a_line_throu
 
 
 def _render(name, tmp_path):
-    from hazard import render
+    from hazard.pictures import render
 
     res = bundled(name)
     paths = render.keepout(res, tmp_path, window_size=SMALL, vtk=False)
@@ -137,7 +137,7 @@ def test_every_bundled_overview_draws_every_hazardous_finding(name, tmp_path):
 
 
 def test_lobe_animation_lists_its_lobes_with_their_caption(tmp_path):
-    from hazard import render
+    from hazard.pictures import render
 
     res = bundled("steel_vs_copper")
     anim = render.animate_lobe(res, tmp_path, max_frames=2, window_size=(320, 240))
@@ -203,7 +203,7 @@ def test_the_3d_overview_draws_the_tracks_and_flight_zones_and_says_what_it_leav
         assert set(left) <= set(nd["paths"]) and nd["see"] == ["plan.png", "elevation.png"]
         assert not any(p.startswith(("tracks", "airspace.zones")) for p in nd["paths"])
         assert "FAA distance" in nd["label"] and "track" not in nd["label"] and "flight zone" not in nd["label"]
-    from hazard import render
+    from hazard.pictures import render
 
     framing = render.Framing(np.zeros((3, 2)), np.zeros(3))
     assert over["not_drawn"]["label"] in render._title_lines(res, framing, "t")  # said in the title strip

@@ -1,4 +1,4 @@
-"""report.json's JSON Schema (hazard.report_schema, ``hazard schema --report``): every
+"""report.json's JSON Schema (hazard.outputs.report_schema, ``hazard schema --report``): every
 bundled example's report validates; a wrong type, an unknown or a missing key does not."""
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ from pydantic import ValidationError
 
 import scenes
 from hazard.cli import main
-from hazard.motion_outputs import MOTION_COLUMNS
-from hazard.report import observer_columns, report_dict
-from hazard.report_schema import ObserverRow, StageRecord, TargetReport, report_schema, validate_report
-from hazard.results import Stage
+from hazard.outputs.motion_outputs import MOTION_COLUMNS
+from hazard.outputs.report import observer_columns, report_dict
+from hazard.outputs.report_schema import ObserverRow, StageRecord, TargetReport, report_schema, validate_report
+from hazard.pipeline.results import Stage
 from tests._bundled import bundled
 
 EXAMPLES = sorted(Path(p).stem for p in Path(scenes.example_path("plate")).parent.glob("*.toml"))

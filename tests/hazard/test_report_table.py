@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import hazard
 import scenes
-from hazard import report
+from hazard.outputs import report
 
 SCENE = """
 name = "table"

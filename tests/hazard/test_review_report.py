@@ -1,4 +1,4 @@
-"""The report for the review board (hazard.review, `hazard report`, `hazard run --report`):
+"""The report for the review board (hazard.outputs.review, `hazard report`, `hazard run --report`):
 one self-contained HTML file with every section, its numbers as report.json holds them,
 absent pieces said, clear errors; and (slow) the page in a real headless Chromium."""
 
@@ -16,9 +16,9 @@ from pathlib import Path
 import markupsafe
 import pytest
 
-from hazard import review
+from hazard.outputs import review
 from hazard.cli import main
-from hazard.review import OBSERVERS_SHOWN, SECTIONS, fmt_distance, fmt_number, write_review
+from hazard.outputs.review import OBSERVERS_SHOWN, SECTIONS, fmt_distance, fmt_number, write_review
 from tests._scene_text import PLATE_AT_50M
 
 HAS_MPL = importlib.util.find_spec("matplotlib") is not None

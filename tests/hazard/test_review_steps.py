@@ -19,7 +19,7 @@ from scipy.special import lambertw
 
 import scenes
 from hazard.cli import main
-from hazard.review_steps import analysed_times_text
+from hazard.outputs.review_steps import analysed_times_text
 
 NUM = r"([-+]?(?:\d+\.?\d*(?:e[-+]?\d+)?|inf))"
 
@@ -214,7 +214,7 @@ def test_analysed_window_of_a_time_run():
 def test_a_moving_observer_takes_its_worst_window():
     """A track's hazard ratio is its worst window's exposure, raised by the integral's
     relative error estimate, over that window's MPE (hazard.pipeline.motion_stage)."""
-    from hazard.review_steps import steps_section
+    from hazard.outputs.review_steps import steps_section
 
     h_w, err, path, limit = 0.1926532025278637, 2.155667067793576e-06, 0.2898293597913221, 0.5241469051493551
     ratio = h_w * (1 + err / path) / limit
@@ -236,7 +236,7 @@ def test_a_moving_observer_takes_its_worst_window():
 
 
 def test_named_observers_beyond_the_top_ten_are_added():
-    from hazard.review_steps import steps_section
+    from hazard.outputs.review_steps import steps_section
 
     rows = [{"name": f"o{k}", "peak_irradiance_w_m2": float(k), "direct_irradiance_w_m2": 0.0, "reflected_irradiance_w_m2": float(k),
              "mpe_w_m2": 50.0, "hazard_ratio": k / 50.0, "radiant_exposure_j_m2": 10.0 * k} for k in range(30)]

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from scipy.stats import binomtest, ncx2, norm
 
 import scenes
-from hazard.risk import run_risk
+from hazard.drivers.risk import run_risk
 
 BASE = '''name = "risk-test"
 [laser]
@@ -84,7 +84,7 @@ def test_no_uncertainty_is_a_clear_error(tmp_path):
 
 def test_wander_is_a_stationary_ou_process(tmp_path):
     """Node-to-node correlation exp(-dt/tau) and the stated sigma at every node."""
-    from hazard.risk.evaluate import Evaluator
+    from hazard.drivers.risk.evaluate import Evaluator
 
     text = (BASE.format(power=1.0, aim_y=10.0) + _plate("t", [0, 10, 0], [0, -1, 0], [1, 0, 0], 1.0, '{ model = "lambertian", reflectance = 0.5 }')
             + "[uncertainty]\nnormal_tilt_sigma_deg = 1.0\nnormal_wander_correlation_time_s = 5.0\nwander_nodes = 8\n")
@@ -288,7 +288,7 @@ def test_failed_chunks_exit_4_and_write_nothing(tmp_path, monkeypatch):
     chunks are kept, and --keep-going runs the rest before failing the same way."""
     import io
 
-    import hazard.risk.run as rr
+    import hazard.drivers.risk.run as rr
     from hazard.cli import main
 
     real = rr._main_chunk
@@ -332,7 +332,7 @@ def test_draws_are_traced_by_the_analysis_stages(tmp_path):
     atmosphere) takes the whole 100 W of the nominal beam, half of a beam turned so that its
     axis meets the plate's edge (a Gaussian cut through its centre), none of one turned past it."""
     from hazard.pipeline.stages import LimitsResult, RaysResult
-    from hazard.risk.evaluate import DRAW_STAGES, SHARED_STAGES, Evaluator
+    from hazard.drivers.risk.evaluate import DRAW_STAGES, SHARED_STAGES, Evaluator
 
     ev = Evaluator(scenes.loads(_small(tmp_path), base_dir=tmp_path), backend="numpy")
     assert (SHARED_STAGES, DRAW_STAGES) == (("mpe", "rays"), ("beam", "history"))

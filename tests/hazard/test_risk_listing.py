@@ -23,9 +23,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hazard.cli import _risk_listing
-from hazard.risk.page import (MAP_LEVELS, UNRESOLVED_COLOUR, ZERO_QUANTILES, map_layers, map_png, risk_page, split_rows,
+from hazard.outputs.risk_page import (MAP_LEVELS, UNRESOLVED_COLOUR, ZERO_QUANTILES, map_layers, map_png, risk_page, split_rows,
                               statement_section)
-from hazard.risk.results import lit_quantiles
+from hazard.drivers.risk.results import lit_quantiles
 from tests.validation._refs import FAST, SLOW
 
 HAS_MPL = importlib.util.find_spec("matplotlib") is not None
@@ -185,7 +185,7 @@ def test_contours_count_the_cells_only_bounded():
     from types import SimpleNamespace
 
     pytest.importorskip("shapely")
-    from hazard.risk.outputs import contours
+    from hazard.outputs.risk_outputs import contours
 
     c = _cells()
     mp = {"points_m": np.column_stack([c["x"], c["y"], np.full(c["x"].size, 1.7)]), "ci_high": c["hi"], "hits": c["hits"],

@@ -1,4 +1,4 @@
-"""The page of a risk analysis (hazard.risk.page: risk.html, probability_map.png) and the
+"""The page of a risk analysis (hazard.outputs.risk_page: risk.html, probability_map.png) and the
 "Probabilistic risk" section of the review page (`hazard report` after `hazard risk`)."""
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import pytest
 
 import scenes
 from hazard.cli import main
-from hazard.risk import page as risk_page_module
-from hazard.risk import run_risk
-from hazard.risk.page import HTML_NAME, PNG_NAME, ROWS_SHOWN, fmt_p, risk_page, statement_section, write_risk_page
+from hazard.outputs import risk_page as risk_page_module
+from hazard.drivers.risk import run_risk
+from hazard.outputs.risk_page import HTML_NAME, PNG_NAME, ROWS_SHOWN, fmt_p, risk_page, statement_section, write_risk_page
 
 HAS_MPL = importlib.util.find_spec("matplotlib") is not None
 HOSTILE = "<script>x</script>"

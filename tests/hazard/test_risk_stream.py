@@ -24,8 +24,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import scenes
-from hazard.risk.columns import ColumnStore, block_bounds
-from hazard.risk.results import observer_stats
+from hazard.drivers.risk.columns import ColumnStore, block_bounds
+from hazard.drivers.risk.results import observer_stats
 from tests._scene_text import PLATE_AT_50M
 
 QS = (0.50, 0.95, 0.99)
@@ -125,8 +125,8 @@ CHILD = textwrap.dedent('''
     from types import SimpleNamespace
     import numpy as np
     import scenes
-    from hazard.risk.results import observer_stats
-    from hazard.risk.run import Chunks, gather
+    from hazard.drivers.risk.results import observer_stats
+    from hazard.drivers.risk.run import Chunks, gather
 
     def hwm_mb():
         with open("/proc/self/status") as f:

@@ -1,4 +1,4 @@
-"""hazard.runner: the one resumable task runner of ``hazard study`` and ``hazard risk``.
+"""hazard.drivers.runner: the one resumable task runner of ``hazard study`` and ``hazard risk``.
 
 Serial and Dask runs of the same tasks record the same results; the first failure (a task
 that raised, or a result that records its failure) stops the rest unless ``keep_going``;
@@ -13,7 +13,7 @@ import json
 
 import pytest
 
-from hazard.runner import claim_folder, error_line, failure_kinds, run_tasks
+from hazard.drivers.runner import claim_folder, error_line, failure_kinds, run_tasks
 
 TORN_DOWN: list = []  # teardown calls (module level: a Dask worker in this process appends here)
 

@@ -1,4 +1,4 @@
-"""hazard._select.top_rows (issue 37: the rows report.json and the map list, found by one
+"""hazard.outputs._select.top_rows (issue 37: the rows report.json and the map list, found by one
 partition instead of a sort of every row) against the stable sort it replaces, and the
 map's choice against its lexsort, on random columns with ties, zeros, -0.0 and inf."""
 
@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hazard._select import top_rows
+from hazard.outputs._select import top_rows
 
 _VALUES = st.lists(st.sampled_from([0.0, -0.0, 0.5, 1.0, 1.0, 2.0, 3.5, np.inf, 1e-300, 7.0]) | st.floats(0, 1e6),
                    min_size=1, max_size=300)
@@ -46,7 +46,7 @@ class _Result:
 def test_map_shows_every_hazardous_then_the_highest(values, nan, extra, k):
     """observers_on_map: the first max(k, hazardous) of the lexsort (hazardous first, then
     by ratio, NaN highest), in row order; hazardous also where the ratio is below 1 (over time)."""
-    from hazard import map_zones
+    from hazard.outputs import map_zones
 
     ratio = np.array(values, float)
     ratio[np.array(nan[:len(ratio)])] = np.nan

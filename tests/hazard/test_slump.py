@@ -1,4 +1,4 @@
-"""The slump's sampling (hazard.pipeline.slump) and the melt times of series histories."""
+"""The slump's sampling (hazard.physics.slump) and the melt times of series histories."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import brdfmodels as bm
 from hazard.pipeline.history import series_melt
-from hazard.pipeline.slump import SpotSlump, _chunks, _disk_offsets, normal_rotations, rotation
+from hazard.physics.slump import SpotSlump, _chunks, _disk_offsets, normal_rotations, rotation
 
 
 def _angle(a, b):
@@ -102,6 +102,6 @@ def test_slumping_target_reports_melt_times_sampling_and_what_is_left_out():
     assert sl["normals_sampled"] > 1 and sl["normals_sampled_half_step"] > sl["normals_sampled"]
     assert row["nohd_dynamic_m"] >= sl["max_nohd_half_step_m"]
     assert "wander at the observers" in sl["left_out"] and "behind the plate" in sl["left_out"]
-    from hazard.report import summary_text
+    from hazard.outputs.report import summary_text
 
     assert "slump left out: the wander at the observers" in summary_text(res)

@@ -3,7 +3,7 @@ the same inputs, every stage a change reaches runs again, and a run with the mem
 what a fresh hazard.analyze() gives, to the bit.
 
 The expected reuse of each change is written here from the stages' declared needs and
-what each reads (hazard.analysis), not taken from the memo's own tables; the fresh run is
+what each reads (hazard.pipeline.analysis), not taken from the memo's own tables; the fresh run is
 the oracle of the values, compared by an independent walk (arrays by their bytes)."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from hypothesis import given, settings, strategies as st
 import hazard
 import scenes
 from brdfmodels.fileio import read_toml
-from hazard.analysis import run_pipeline
+from hazard.pipeline.analysis import run_pipeline
 from hazard.pipeline.stages import REGISTRY, StageMemo, Unfingerprintable, derive_plan, fingerprint, run_stages, stage
 
 FAST = settings(max_examples=15, derandomize=True, deadline=None, database=None)
@@ -356,7 +356,7 @@ def _without_time(row):
 
 
 def _study_rows(study, memo):
-    from hazard.study import base_data, run_scenario, scenarios
+    from hazard.drivers.study import base_data, run_scenario, scenarios
 
     base, base_dir = base_data(study)
     mc = dataclasses.asdict(study.montecarlo)
@@ -364,7 +364,7 @@ def _study_rows(study, memo):
 
 
 def test_study_scenarios_through_one_memo_give_the_rows_of_fresh_runs(tmp_path):
-    from hazard.study import MonteCarlo, Parameter, Study
+    from hazard.drivers.study import MonteCarlo, Parameter, Study
 
     scene = tmp_path / "plate.toml"  # the plate with an [analysis] table for the sweep's path
     scene.write_text(PLATE.read_text() + "[analysis]\ndirection_grid_deg = 2.0\n")
@@ -400,8 +400,8 @@ def test_dask_study_workers_reuse_stages_like_the_serial_study(tmp_path, monkeyp
     at the run's end (a second run starts its own)."""
     from distributed import LocalCluster
 
-    import hazard.study as hs
-    from hazard.study import Parameter, Study, run_study
+    import hazard.drivers.study as hs
+    from hazard.drivers.study import Parameter, Study, run_study
 
     scene = tmp_path / "plate.toml"
     scene.write_text(PLATE.read_text() + "[analysis]\ndirection_grid_deg = 2.0\n")

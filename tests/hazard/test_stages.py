@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 import scenes
-from hazard.analysis import hazard_result, run_pipeline
+from hazard.pipeline.analysis import hazard_result, run_pipeline
 from hazard.pipeline.log import StageLog
 from hazard.pipeline.plan import plan
 from hazard.pipeline.stages import INPUTS, REGISTRY, StagePlanError, derive_plan, run_stages, stage, stage_records

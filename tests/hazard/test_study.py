@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from hazard.study import MonteCarlo, Parameter, Study, load_study, run_study, scenarios, set_path
+from hazard.drivers.study import MonteCarlo, Parameter, Study, load_study, run_study, scenarios, set_path
 
 
 def plate_study(**kw):
@@ -31,7 +31,7 @@ def test_set_path():
 
 
 def test_schema_path_names_the_closest_field():
-    from hazard.study import check_schema_path
+    from hazard.drivers.study import check_schema_path
 
     for ok in ("laser.power_w", "targets[0].material.rho_d", "observers[2].points_m", "analysis.beam_samples"):
         check_schema_path(ok)
@@ -79,17 +79,17 @@ def test_study_file_validated_in_full_before_work(tmp_path):
 
 
 def test_cli_study_exit_codes_and_keep_going(tmp_path, monkeypatch):
-    import hazard.analysis
+    import hazard.pipeline.analysis
     from hazard.cli import main
 
-    real = hazard.analysis.analyze
+    real = hazard.pipeline.analysis.analyze
 
     def flaky(scene, **kw):  # an injected run-time failure of the scenarios at 100 W and 1000 W
         if scene.spec.laser.power_w > 50:
             raise RuntimeError(f"injected at {scene.spec.laser.power_w:g} W")
         return real(scene, **kw)
 
-    monkeypatch.setattr(hazard.analysis, "analyze", flaky)
+    monkeypatch.setattr(hazard.pipeline.analysis, "analyze", flaky)
     p = _study_file(tmp_path, '[sweep]\nkind = "grid"\n[[sweep.parameters]]\npath = "laser.power_w"\nvalues = [10.0, 100.0, 1000.0, 20.0]\n')
     import io
 
@@ -107,7 +107,7 @@ def test_cli_study_exit_codes_and_keep_going(tmp_path, monkeypatch):
     assert (doc["succeeded"], doc["failed"], doc["not_run"]) == (2, 2, 0)
     assert list(doc["failure_kinds"]) == ["RuntimeError"]
     # fixed: the restart runs the failed scenarios again and exits 0
-    monkeypatch.setattr(hazard.analysis, "analyze", real)
+    monkeypatch.setattr(hazard.pipeline.analysis, "analyze", real)
     err = io.StringIO()
     assert main(["study", str(p), "-o", str(tmp_path / "b"), "--serial", "--quiet"], stdout=out, stderr=err) == 0
     assert "2 run now, 2 already done" in out.getvalue()
@@ -136,7 +136,7 @@ def test_serial_equals_dask_embedded_and_existing_scheduler(tmp_path):
 
     from distributed import Client
 
-    from hazard.study import local_cluster
+    from hazard.drivers.study import local_cluster
 
     user_trim = os.environ.get("MALLOC_TRIM_THRESHOLD_")  # before any cluster could set it
     study = plate_study(montecarlo=MonteCarlo(samples=2, brdf_scale_sigma=0.3, normal_tilt_deg=2.0), seed=3)
@@ -156,16 +156,16 @@ def test_serial_equals_dask_embedded_and_existing_scheduler(tmp_path):
 
 
 def test_resume_after_a_kill_and_failures_recorded(tmp_path, monkeypatch):
-    import hazard.analysis
+    import hazard.pipeline.analysis
 
-    real = hazard.analysis.analyze
+    real = hazard.pipeline.analysis.analyze
 
     def flaky(scene, **kw):  # an injected run-time failure (the scene itself is valid)
         if scene.spec.laser.power_w == 100.0:
             raise RuntimeError("injected power_w failure")
         return real(scene, **kw)
 
-    monkeypatch.setattr(hazard.analysis, "analyze", flaky)
+    monkeypatch.setattr(hazard.pipeline.analysis, "analyze", flaky)
     study = plate_study(parameters=(Parameter("laser.power_w", values=(10.0, 100.0, 1000.0, 50.0)),))
     first = run_study(study, tmp_path, serial=True, keep_going=True)
     assert first.failed == 1 and first.summary["failures"][0]["id"] == 1 and not first.ok
@@ -176,7 +176,7 @@ def test_resume_after_a_kill_and_failures_recorded(tmp_path, monkeypatch):
     again = run_study(study, tmp_path, serial=True, keep_going=True)
     assert again.ran == 3 and again.skipped == 1
     assert _rows(again) == _rows(first)
-    monkeypatch.setattr(hazard.analysis, "analyze", real)
+    monkeypatch.setattr(hazard.pipeline.analysis, "analyze", real)
     other = plate_study(seed=99)
     with pytest.raises(ValueError, match="holds results of another study"):
         run_study(other, tmp_path, serial=True)
@@ -216,17 +216,17 @@ def test_load_study_errors(tmp_path):
 def test_dask_run_stops_at_the_first_failure(tmp_path, monkeypatch):
     """On Dask the remaining scenarios are cancelled after a failure (an in-process cluster,
     so the injected failure reaches the workers); --keep-going runs them all."""
-    import hazard.analysis
+    import hazard.pipeline.analysis
     from distributed import LocalCluster
 
-    real = hazard.analysis.analyze
+    real = hazard.pipeline.analysis.analyze
 
     def flaky(scene, **kw):
         if scene.spec.laser.power_w == 10.0:
             raise RuntimeError("injected")
         return real(scene, **kw)
 
-    monkeypatch.setattr(hazard.analysis, "analyze", flaky)
+    monkeypatch.setattr(hazard.pipeline.analysis, "analyze", flaky)
     study = plate_study(parameters=(Parameter("laser.power_w", values=(10.0, 20.0, 30.0, 40.0, 50.0, 60.0)),))
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
         stop = run_study(study, tmp_path / "a", scheduler=cluster.scheduler_address)
@@ -241,7 +241,7 @@ def test_every_bundled_study_loads_and_is_named_in_the_help():
     validates and ``hazard study --help`` names it (plate_power, the README's quick study,
     was added beside power_sweep)."""
     from hazard.cli import build_parser
-    from hazard.study import examples
+    from hazard.drivers.study import examples
 
     names = set(examples())
     assert {"power_sweep", "montecarlo_binoculars", "plate_power"} <= names

@@ -1,4 +1,4 @@
-"""hazard.plots.time_figures: NOHD vs time per lit target and exposure vs time for the
+"""hazard.pictures.plots.time_figures: NOHD vs time per lit target and exposure vs time for the
 worst observers, as PNG bytes (checked in their pixels), with or without a kept history."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 
 import hazard
 import scenes
-from hazard import plots
+from hazard.pictures import plots
 from tests._bundled import bundled
 
 pytest.importorskip("matplotlib")
@@ -145,7 +145,7 @@ def test_exposure_plot_marks_the_exceedance_by_the_verdicts_rule_and_names_its_m
     """Issue 34: a static observer over the 10 s MPE had "first exceedance t = 0 s" drawn
     while H(t) was below the elapsed-time MPE curve. The plot now names the MPE the verdict
     uses (the exposure duration's) and marks the exceedance by that rule (E >= that MPE)."""
-    from hazard import mpe as _mpe
+    from hazard.physics import mpe as _mpe
 
     r = _hot_plate(tmp_path, 100.0 * 1.5 / 0.0007053)  # hazard ratio ~1.5 at "east"
     i = r.observers.labels.index("east")

@@ -23,7 +23,7 @@ import pytest
 
 import scenes
 from hazard.cli import main
-from hazard.report import cause_shares
+from hazard.outputs.report import cause_shares
 
 P, LAM_M, A, PHI = 20.0, 1064e-9, 0.02, 5e-5
 MPE = 10 * 5.0 * 1.0  # ANSI Z136.1-2014, 1064 nm, 10 s: 10 C_A C_C W/m^2 with C_A = 5, C_C = 1
@@ -225,7 +225,7 @@ def test_a_spots_reflectance_is_integrated_once_per_run(tmp_path, monkeypatch):
     material is never given another's value (a Lambertian's is its reflectance)."""
     import brdfmodels as bm
     import brdfmodels.analysis as bma
-    from hazard import plausibility
+    from hazard.pipeline import plausibility
 
     calls = []
     real = bma.hemispherical_reflectance
@@ -355,8 +355,8 @@ def _pages_agree(name, result, folder):
     """The headline of stdout's answer, report.json and report.html for one analysis,
     written by the functions ``hazard run --report`` calls (left out: the map files and
     map.html, whose headline the CLI test above checks, and the output folder's unit)."""
-    from hazard.report import summary_text, write_set
-    from hazard.review import write_review
+    from hazard.outputs.report import summary_text, write_set
+    from hazard.outputs.review import write_review
 
     folder.mkdir()
     write_set(result, folder)
@@ -477,7 +477,7 @@ def _lobe_case(plate_result, monkeypatch, edges):
     from shapely.geometry import box
 
     import hazard.pipeline.sdz as sdz
-    from hazard.verdict import zone_findings
+    from hazard.pipeline.verdict import zone_findings
 
     r = math.sqrt(0.5 * 100.0 / (math.pi * MPE))
     assert r == pytest.approx(0.5642, abs=1e-4)

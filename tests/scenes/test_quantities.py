@@ -243,7 +243,7 @@ def unit_scenes(draw):
 
 def _report(text):
     from hazard import analyze
-    from hazard.report import report_dict
+    from hazard.outputs.report import report_dict
 
     doc = report_dict(analyze(_load(text), threads=1))
     for key in ("units_as_written", "sha256", "source"):  # the units echo and the text's own identity differ
@@ -304,7 +304,7 @@ def test_cylinder_and_sphere_sizes_are_said():
 
 
 def test_study_sweeps_values_with_units(tmp_path):
-    from hazard.study import load_study, scenarios
+    from hazard.drivers.study import load_study, scenarios
 
     (tmp_path / "s.toml").write_text(_scene(laser='wavelength_nm = 1064.0\npower = "20 W"\nbeam_diameter_m = 0.007\ndivergence_rad = 0.0005'))
     (tmp_path / "study.toml").write_text('name = "u"\nscene = "s.toml"\n[sweep]\nkind = "random"\nsamples = 2\n'
@@ -318,7 +318,7 @@ def test_study_sweeps_values_with_units(tmp_path):
     (tmp_path / "bad.toml").write_text('name = "u"\nscene = "s.toml"\n[[sweep.parameters]]\npath = "laser.power"\nvalues = [20]\n')
     with pytest.raises(ValueError, match=r"sweep.parameters\[0\].values\[0\] = 20: a bare number"):
         load_study(tmp_path / "bad.toml")
-    from hazard.study import set_path
+    from hazard.drivers.study import set_path
 
     base = {"laser": {"power": "20 W"}}
     set_path(base, "laser.power_w", 30.0)

@@ -1,7 +1,7 @@
 """Independent reference formulas for the validation suite (numpy/scipy only).
 
-Nothing here imports the engine (``hazard.engine``, ``hazard.analysis``, ``hazard.keepout``,
-``hazard.nohd``): every number is written out from the formulas of
+Nothing here imports the engine (``hazard.physics.engine``, ``hazard.pipeline.analysis``, ``hazard.physics.keepout``,
+``hazard.physics.nohd``): every number is written out from the formulas of
 /work/shared/spec/range-safety.md (sections 1, 2, 4) and /work/shared/spec/laser-safety.md
 (sections 3.1: NOHD, diffuse reflection, Beer-Lambert attenuation, ENOHD gain).
 The functions are themselves checked in ``test_reference_selfcheck.py`` against brute-force

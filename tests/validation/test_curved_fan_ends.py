@@ -196,7 +196,7 @@ def _prefilter_case(kind, r, tilt, w, L, q, end_s, spread):
 
 
 def _check_prefilter(kind, r, tilt, w, L, q, end_s, spread, aided, n_dir=80):
-    import hazard.specular as sp
+    import hazard.physics.specular as sp
 
     spot, obs = _prefilter_case(kind, r, tilt, w, L, q, end_s, spread)
     an = spot.target.mesh.analytic

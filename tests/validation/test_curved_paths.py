@@ -39,7 +39,7 @@ from hypothesis import strategies as st
 
 import hazard
 import scenes
-from hazard.mpe import ocular_mpe
+from hazard.physics.mpe import ocular_mpe
 
 from . import _refs as ref
 

@@ -30,7 +30,7 @@ from hypothesis import strategies as st
 import hazard
 import scenes
 from hazard.pipeline.spots import ray_scene, trace_beam
-from hazard.specular import specular_irradiance
+from hazard.physics.specular import specular_irradiance
 
 from . import _refs as ref
 

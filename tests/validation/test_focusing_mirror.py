@@ -29,10 +29,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hazard
-import hazard.mesh_mirror as mesh_mirror
+import hazard.physics.mesh_mirror as mesh_mirror
 import scenes
 from hazard.pipeline.spots import ray_scene, trace_beam
-from hazard.specular import mesh_mirror_irradiance, reflected_power_w
+from hazard.physics.specular import mesh_mirror_irradiance, reflected_power_w
 
 from . import _refs as ref
 

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 import hazard
 import scenes
-from hazard.aperture import disk_fraction, limiting_aperture_m, observer_apertures
+from hazard.physics.aperture import disk_fraction, limiting_aperture_m, observer_apertures
 
 from . import _refs as ref
 
@@ -272,7 +272,7 @@ def test_report_json_and_csv_carry_point_aperture_and_diameter(tmp_path):
     import csv
     import json
 
-    from hazard.report import write_outputs
+    from hazard.outputs.report import write_outputs
 
     res = hazard.analyze(_scene([("d", np.array([4e-3, -50.0, 0.0]), None)], power=1.0))
     write_outputs(res, tmp_path / "o")
@@ -414,7 +414,7 @@ def test_a_track_beside_a_narrow_beam_is_judged_through_the_aperture():
 
 def test_report_json_names_the_limiting_aperture():
     """report.json says which aperture the verdict used and where it comes from."""
-    from hazard.report import report_dict
+    from hazard.outputs.report import report_dict
 
     res = hazard.analyze(_scene([("d", np.array([4e-3, -50.0, 0.0]), None)], power=1.0))
     la = report_dict(res)["limiting_aperture"]

@@ -1,5 +1,5 @@
-"""Keep-out lobe outlines (hazard.lobe_outline) against references written from the
-formulas alone (not from hazard.keepout nor hazard.lobe_outline's code).
+"""Keep-out lobe outlines (hazard.outputs.lobe_outline) against references written from the
+formulas alone (not from hazard.physics.keepout nor hazard.outputs.lobe_outline's code).
 
 Physics (laser-safety.md 3.1, diffuse reflection; the keep-out contract):
   a spot of power P on a Lambertian surface of reflectance rho_d reflects the radiant
@@ -42,9 +42,9 @@ from scipy.integrate import quad
 from scipy.special import lambertw
 
 import scenes
-from hazard import near_field_lobe
-from hazard.analysis import analyze
-from hazard.lobe_outline import elevation_frame, lobe_outlines, plan_view_frame
+from hazard.physics import near_field_lobe
+from hazard.pipeline.analysis import analyze
+from hazard.outputs.lobe_outline import elevation_frame, lobe_outlines, plan_view_frame
 
 
 @pytest.fixture(autouse=True)

@@ -128,7 +128,7 @@ def _check_nohds(base, scaled, beam, mu, k, mirror, size):
         if r0 > 0 and not any(raised):  # both the point form's NOHD (the near-field integral left every node alone)
             want = _root(lambda r: -mu * r - 2 * math.log(r), r0, k)
             assert tk.static_lobe.max_range_m == pytest.approx(want, rel=1e-7), "Lambertian lobe NOHD"
-        elif r0 > 0:  # a lobe near its spot (hazard.near_field_lobe): more power never shortens it
+        elif r0 > 0:  # a lobe near its spot (hazard.physics.near_field_lobe): more power never shortens it
             assert (tk.static_lobe.max_range_m - r0) * (k - 1) >= 0, "lobe NOHD monotone in power"
 
 

@@ -10,7 +10,7 @@ across 10 w, 8 nodes on each of 40-2000 panels along it, each at most 5 cm long 
 from the spot's power centroid (the lobe's origin) is the farthest radius where E
 reaches the MPE: scanned at 0.4 % steps of the scan range, bisected to 1e-7.
 
-The lobe (hazard.near_field_lobe) reports on its direction grid the farthest root of the
+The lobe (hazard.physics.near_field_lobe) reports on its direction grid the farthest root of the
 engine's near-field integral plus the scan's step, never below the point form; between
 grid nodes the largest of the cell's nodes plus a curvature margin. Checks:
 
@@ -34,9 +34,9 @@ from hypothesis import strategies as st
 
 import hazard
 import scenes
-from hazard import near_field_lobe
-from hazard.keepout import nohd_range_fn
-from hazard.mpe import ocular_mpe
+from hazard.physics import near_field_lobe
+from hazard.physics.keepout import nohd_range_fn
+from hazard.physics.mpe import ocular_mpe
 from hazard.pipeline.spots import ray_scene, trace_beam
 
 from . import _refs as ref
@@ -46,7 +46,7 @@ A, PHI, R1 = 0.05, 1e-9, 2000.0  # collimated (w = a / 2 on the plate), from bey
 W = (A + R1 * PHI) / 2
 RHO = 0.8
 PANEL_M = 0.05  # the reference's Gauss-Legendre panels along the spot: at most this long on the plate (40 to 2000)
-RANGE_TOL = 0.005  # the integral's 1 % tolerance (hazard.near_field.NEAR_FIELD_RTOL) in range: half of it
+RANGE_TOL = 0.005  # the integral's 1 % tolerance (hazard.physics.near_field.NEAR_FIELD_RTOL) in range: half of it
 FEW = settings(ref.FAST, max_examples=2)
 MANY = settings(ref.SLOW, max_examples=20)
 
@@ -301,12 +301,12 @@ def _history_lobe(n_states):
 @given(seed=st.integers(0, 2**31 - 1), n_states=st.integers(2, 24))
 def test_history_state_shortcut_decides_as_every_state(seed, n_states):
     """With a history the lobe integrates each point first at its state of the largest bound,
-    then only at the states whose own bound reaches the MPE (hazard.near_field_lobe
+    then only at the states whose own bound reaches the MPE (hazard.physics.near_field_lobe
     NearLobeFn.hazardous): at random points near the spot (inside the point form's reach)
     the decision equals the integral at every state reaching the MPE (the bound below the
     MPE at a state: the integral there is too). Radii log-uniform from 1e-3 of the point
     form's reach: near the spot every state's bound is infinite."""
-    from hazard.engine import near_field_w_m2
+    from hazard.physics.engine import near_field_w_m2
 
     spot, fn, mpe, reach = _history_lobe(n_states)
     rng = np.random.default_rng(seed)
@@ -339,7 +339,7 @@ def _flat_bound_case(inc, power, h, along, across):
 @given(inc=st.floats(0.0, 89.9), power=ref.log_uniform(1.0, 3000.0), h=ref.log_uniform(0.02, 2.0),
        along=st.floats(-3.0, 3.0), across=st.floats(-3.0, 3.0))
 def test_flat_spot_bound_is_above_the_integral(inc, power, h, along, across):
-    """The lobe's bound for a flat spot (hazard.near_field_lobe NearLobeFn._flat_bound:
+    """The lobe's bound for a flat spot (hazard.physics.near_field_lobe NearLobeFn._flat_bound:
     the largest incident irradiance x the point form's largest intensity / P x pi ln(1 +
     rho^2 / h^2)) is finite and never below the section-10 integral (coded here) at random
     points above a Lambertian plate, down to 2 cm above it."""
@@ -423,7 +423,7 @@ def _triangle_quadrature(tri, foot, h):
 @given(tri=st.lists(st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0)), min_size=3, max_size=3),
        stretch=ref.log_uniform(1.0, 50.0), foot=st.tuples(st.floats(-3.0, 3.0), st.floats(-3.0, 3.0)), h=ref.log_uniform(0.1, 3.0))
 def test_inverse_square_bound_is_above_the_quadrature(tri, stretch, foot, h):
-    """hazard.near_field_lobe._inverse_square_bound (strip, transposed strip and annulus
+    """hazard.physics.near_field_lobe._inverse_square_bound (strip, transposed strip and annulus
     forms) is never below int_tri dA / R^2 (Gauss-Legendre coded here) on random
     triangles, stretched up to 50:1 as a grazing spot's are."""
     t = np.array(tri) * np.array([stretch, 1.0])
@@ -438,7 +438,7 @@ def test_inverse_square_bound_is_above_the_quadrature(tri, stretch, foot, h):
 
 
 def test_projected_brdf_max_is_the_models_largest_value():
-    """The proven largest f_r cos (hazard.near_field_lobe.projected_brdf_max) of a
+    """The proven largest f_r cos (hazard.physics.near_field_lobe.projected_brdf_max) of a
     Lambertian (rho / pi, reached at the normal), a constant scale of it and a sum; None
     for a model whose largest value has no closed form here (a glossy lobe)."""
     import brdfmodels
@@ -486,6 +486,6 @@ def _diverging_flat_bound_case(inc, phi, rng_m, h, along):
        h=ref.log_uniform(0.05, 3.0), along=st.floats(-1.5, 1.5))
 def test_flat_spot_bound_is_above_the_integral_of_a_diverging_beam(inc, phi, rng_m, h, along):
     """A diverging beam at grazing incidence lays its power unevenly over each triangle of the spot (the perspective
-    map, hazard.near_field): the bound takes each triangle's largest stretch and stays above the integral of the rays
+    map, hazard.physics.near_field): the bound takes each triangle's largest stretch and stays above the integral of the rays
     traced from the virtual source at random points above the plate."""
     _diverging_flat_bound_case(inc, phi, rng_m, h, along)

@@ -268,7 +268,7 @@ def test_flat_terrain_under_a_grazing_100_kW_beam_fine_grid():
 @pytest.mark.parametrize("inc_deg, said", [(0.0, False), (89.9, True)])
 def test_a_lobe_inside_its_spots_near_field_is_said(inc_deg, said):
     """A keep-out lobe ending within 20 spot sizes of its spot is the near-field
-    integral's farthest root there (hazard.near_field_lobe; the point-source form alone
+    integral's farthest root there (hazard.physics.near_field_lobe; the point-source form alone
     was short along a grazing spot): the report says so, naming the target; a spot at
     normal incidence, whose lobe reaches far past it, gets no such note."""
     n, b, t = _frame(inc_deg)
@@ -329,7 +329,7 @@ def _diverging_reference(power, a, phi, laser, aim, centre, n, b, t, half_len, h
 def _spot_near_field(scene, pts):
     """The near-field integral of the scene's brightest spot at ``pts`` (world) as the analysis evaluates it for near
     observers (its patches), without the rest of the analysis (lobes, maps)."""
-    from hazard.engine import near_field_w_m2
+    from hazard.physics.engine import near_field_w_m2
     from hazard.pipeline.spots import ray_scene, trace_beam
 
     spot = max(trace_beam(scene, ray_scene(scene, "embree", 1), 0.0).built.spots, key=lambda s: s.total_power_w)
@@ -418,7 +418,7 @@ def test_diverging_beam_on_grazing_terrain_leaf_cells():
 
 
 # ------------------------------------------------------------------ a diverging beam where the engine takes the point form
-# Past a sample's switch distance (12 sigma^2 d^2 <= rtol (d - a)^4, hazard.near_field.point_form_ok) the engine sums the
+# Past a sample's switch distance (12 sigma^2 d^2 <= rtol (d - a)^4, hazard.physics.near_field.point_form_ok) the engine sums the
 # sample as one point source at its centroid. The Taylor bound behind that switch holds about the sample's POWER centroid
 # on the surface; for a diverging beam at grazing incidence the ray through the centroid in beam coordinates lands far
 # from it (the rays' map is perspective, not affine). The reference is the same traced-ray sum as above.
@@ -461,7 +461,7 @@ def _point_form_case(inc_deg, phi, rng, eyes, a=0.05, power=1000.0, far=False):
         z, e = math.radians(az), math.radians(el)
         pts.append(c + f * r_all * (math.cos(e) * (math.cos(z) * b + math.sin(z) * t) + math.sin(e) * n))
     if far:
-        from hazard.engine import spot_irradiance
+        from hazard.physics.engine import spot_irradiance
 
         got, is_far = spot_irradiance(spot, np.asarray(pts) - np.asarray(scene.offset_m, float), np.ones(len(pts)), 0.0)
         assert is_far.all()

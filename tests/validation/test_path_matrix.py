@@ -168,7 +168,7 @@ def _slump(tmp):
 
 # --------------------------------------------------------------------------- known defects
 # None open. Fixed: the beam's cross-section was sampled on a grid whose transverse axes
-# came from the world axes (hazard.beam.perp_basis), so a rotated scene put the cells
+# came from the world axes (hazard.physics.beam.perp_basis), so a rotated scene put the cells
 # elsewhere on the target and moved its peak irradiance and specular NOHD by 1e-5 to
 # 2e-4 (fresnel-glass-45: peak 52639.518 -> 52650.417 W/m^2, specular NOHD 1945.2745 ->
 # 1945.4861 m; slump-heating: an observer on the slumped lobe's flank by 0.43 %); the

@@ -1,4 +1,4 @@
-"""Probabilistic risk (``hazard risk``, :func:`hazard.risk.run_risk`) against references
+"""Probabilistic risk (``hazard risk``, :func:`hazard.drivers.risk.run_risk`) against references
 written here from the formulas of /work/shared/spec/range-safety.md (sections 1, 2, 6, 8)
 with numpy/scipy, never from the engine's functions.
 
@@ -227,7 +227,7 @@ def observer_names(group, n):
 
 def run(text, tmp_path, sub="out", **kw):
     """Load the scene, run the risk analysis serially; returns (risk.json, {name: csv row})."""
-    from hazard.risk import run_risk
+    from hazard.drivers.risk import run_risk
 
     scene = scenes.loads(text, base_dir=tmp_path)
     out = tmp_path / sub
@@ -607,7 +607,7 @@ def test_serial_and_cluster_identical(tmp_path):
     """A fixed seed gives the same results serially and on a 2-worker dask LocalCluster:
     risk.csv byte for byte, risk.json's observers equal."""
     pytest.importorskip("distributed")
-    from hazard.risk import run_risk
+    from hazard.drivers.risk import run_risk
 
     # 1000 draws: two main chunks of 500 (2 observers) and one sensitivity chunk, so the two
     # workers share the chunks and their results are combined in chunk order; the identity

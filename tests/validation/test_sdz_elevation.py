@@ -41,7 +41,7 @@ from shapely.geometry import Point, Polygon
 
 import hazard
 import scenes
-from hazard.mpe import ocular_mpe
+from hazard.physics.mpe import ocular_mpe
 
 from . import _refs as ref
 

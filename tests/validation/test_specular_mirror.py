@@ -31,7 +31,7 @@ from hypothesis import strategies as st
 
 import hazard
 import scenes
-from hazard.mpe import ocular_mpe
+from hazard.physics.mpe import ocular_mpe
 
 from . import _refs as ref
 

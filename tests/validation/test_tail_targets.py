@@ -1,6 +1,6 @@
 """Targets only the beam's Gaussian tail reaches (issue 29 leftovers), against formulas written here.
 
-The engine samples the beam on a square of +-L 1/e radii (``hazard.beam``). It was a fixed
+The engine samples the beam on a square of +-L 1/e radii (``hazard.physics.beam``). It was a fixed
 L = 4: a separate box or mesh wholly outside it got no spot, and only a note said so,
 although the tail there (exp(-16) = 1.1e-7 of the peak at 4 w) reaches hundreds of W/m^2
 for a 100 kW beam of w = 2 mm. L is now sized per beam so that what lies outside gives at
@@ -34,7 +34,7 @@ from hypothesis import strategies as st
 from scipy.special import erf
 
 import hazard
-import hazard.beam as hbeam
+import hazard.physics.beam as hbeam
 import scenes
 
 from . import _refs as ref

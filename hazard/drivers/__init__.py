@@ -1,0 +1,1 @@
+"""Drivers on top of the pipeline: scenario studies, convergence tables, probabilistic risk."""

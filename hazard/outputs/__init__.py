@@ -1,0 +1,1 @@
+"""What a run writes: report.json and its schema, the review page, maps, CSV tables."""

@@ -1,0 +1,329 @@
+"""Map outputs of a run: ``zones.geojson``, ``zones.kml`` and ``hazard.tif``.
+
+With a ``[site]`` (:mod:`scenes.geo`) the zones of :mod:`hazard.outputs.map_zones` are converted
+exactly from the site's ENU frame to WGS 84 longitude and latitude (each vertex at its
+ground's height, or its own for points) and written as
+
+- ``zones.geojson``: RFC 7946 (lon/lat order, WGS 84, exterior rings counter-clockwise
+  and holes clockwise, closed rings), one Feature per zone with its properties;
+- ``zones.kml``: the same for Google Earth (OGC KML 2.2), styled: red hazardous (naked
+  eye), amber aided-only, blue static and orange dynamic keep-out lobes, green observers
+  below the MPE;
+- ``hazard.tif``: a GeoTIFF of the peak hazard ratio at eye height over the terrain grid
+  (band 1: reflections + direct beam; 2: reflections, dynamic; 3: reflections, static;
+  4: direct beam), float32, NaN where not evaluated (beyond every NOHD: below 1). Its CRS
+  is the ellipsoidal orthographic projection about the site origin, whose x, y are the ENU
+  frame's exactly on the ellipsoid; a node at height h above it, d from the origin, is
+  registered h d / R off (the file's tags give the largest: 0.35 m for 1.2 km at 1.9 km).
+
+Without a site the same zones are written in the scene's local frame, named so:
+``zones_local_frame.json`` (GeoJSON's shape, local metres: RFC 7946 allows no other CRS)
+and ``hazard_local_frame.tif`` (no CRS); no KML (KML is WGS 84 only). Every file states
+its frame; every kind of zone the run lacks is listed with the reason (``absent``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from hazard.outputs.map_zones import ZONE_KINDS, observers_on_map, zones
+
+__all__ = ["MAP_NAMES", "map_files", "map_names", "geojson_document", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
+
+DEGREE_DECIMALS = 8  # 1e-8 deg = 1.1 mm: below any outline's own resolution
+
+
+MAP_NAMES = ("zones.geojson", "zones.kml", "hazard.tif", "zones_local_frame.json", "hazard_local_frame.tif")  # every one
+
+
+def map_names(scene) -> tuple:
+    """The map files a run of ``scene`` may write (for the output folder's check)."""
+    if getattr(scene, "site", None) is not None:
+        return ("zones.geojson", "zones.kml", "hazard.tif")
+    return ("zones_local_frame.json", "hazard_local_frame.tif")
+
+
+def _height_fn(result, eye_m):
+    """World z [m] below plan points (N, 2): the terrain plus ``eye_m``, else the frame's 0."""
+    scene = result.scene
+    off = np.asarray(scene.offset_m, float)
+    if scene.terrain is None:
+        return lambda xy: np.zeros(len(xy))
+    return lambda xy: scene.terrain.height_at(xy[:, 0] - off[0], xy[:, 1] - off[1]) + off[2] + eye_m
+
+
+def to_lonlat(geom, frame, height, z_m=None):
+    """``geom`` (world x, y) in lon/lat [deg], rings oriented by RFC 7946 section 3.1.6."""
+    import shapely
+
+    def fn(xy):
+        if z_m is None:
+            z = height(xy)
+        else:
+            z = np.asarray(z_m, float) if np.ndim(z_m) else np.full(len(xy), z_m)
+        lat, lon, _ = frame.geodetic(np.column_stack([xy, z]))
+        return np.round(np.column_stack([lon, lat]), DEGREE_DECIMALS)
+
+    g = shapely.transform(geom, fn)
+    return shapely.orient_polygons(g) if g.geom_type in ("Polygon", "MultiPolygon") else g
+
+
+def _local(geom):
+    import shapely
+
+    g = shapely.transform(geom, lambda xy: np.round(xy, 4))
+    return shapely.orient_polygons(g) if g.geom_type in ("Polygon", "MultiPolygon") else g
+
+
+def _jsonable(v):
+    if type(v) is float:  # the common cases first (20 000 observer features)
+        return v if math.isfinite(v) else ("inf" if v > 0 else ("-inf" if v < 0 else "nan"))
+    if type(v) in (str, bool, int) or v is None:
+        return v
+    if isinstance(v, float) and not np.isfinite(v):
+        return "inf" if v > 0 else ("-inf" if v < 0 else "nan")
+    if isinstance(v, (np.floating, np.integer)):
+        return _jsonable(v.item())
+    return v
+
+
+def _points(zs, frame, height) -> dict:
+    """GeoJSON geometry of each point zone (index -> mapping), all converted at once: the
+    values :func:`to_lonlat` (``frame``) or :func:`_local` give one by one."""
+    import shapely
+
+    at = [i for i, z in enumerate(zs) if z.geometry.geom_type == "Point" and not z.geometry.is_empty and not np.ndim(z.z_m)]
+    if not at:
+        return {}
+    xy = shapely.get_coordinates(np.array([zs[i].geometry for i in at], dtype=object))
+    if frame is None:
+        out = np.round(xy, 4)
+    else:
+        known = np.array([zs[i].z_m is not None for i in at])
+        z = np.where(known, np.array([zs[i].z_m if zs[i].z_m is not None else np.nan for i in at], float), 0.0)
+        if not known.all():
+            z[~known] = height(xy[~known])
+        lat, lon, _ = frame.geodetic(np.column_stack([xy, z]))
+        out = np.round(np.column_stack([lon, lat]), DEGREE_DECIMALS)
+    return {i: {"type": "Point", "coordinates": tuple(c)} for i, c in zip(at, out.tolist())}
+
+
+def geojson_document(result, zs, absent, frame_info) -> dict:
+    """The FeatureCollection: lon/lat with a site, else local metres (and named so)."""
+    from shapely.geometry import mapping
+
+    site = result.scene.site
+    height = _height_fn(result, result.scene.spec.analysis.footprint_eye_height_m)
+    feats = []
+    points = _points(zs, None if site is None else site.frame, height)
+    for i, z in enumerate(zs):
+        g = points.get(i) or mapping(to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else _local(z.geometry))
+        feats.append({"type": "Feature", "geometry": g,
+                      "properties": {k: _jsonable(v) for k, v in z.properties.items()}})
+    _, which = observers_on_map(result)
+    doc: dict = {"type": "FeatureCollection", "features": feats}
+    doc["laser_hazard"] = {"frame": frame_info, "kinds": list(ZONE_KINDS), "absent": absent, "observers": which,
+                           "scene": result.scene.name, "scene_sha256": result.scene.text_sha256}
+    return doc
+
+
+# --- KML -----------------------------------------------------------------------------------
+_KML_NS = "http://www.opengis.net/kml/2.2"
+_STYLES = {  # id -> (line aabbggrr, fill aabbggrr, width)
+    "hazardous": ("ff1c1ae4", "661c1ae4", 2), "aided": ("ff00a5ff", "5500a5ff", 2),
+    "static": ("ffb27200", "40b27200", 2), "dynamic": ("ff009fe6", "30009fe6", 2),
+    "footprint": ("ff150fa5", "80150fa5", 1), "boundary": ("ff000000", "00000000", 2),
+    "safe": ("ff739e00", "ff739e00", 1), "thing": ("ff333333", "ff333333", 1),
+}
+
+
+def _style(z) -> str:
+    k, p = z.kind, z.properties
+    if k == "keepout_lobe":
+        return p.get("variant", "static")
+    if k == "footprint":
+        return "footprint"
+    if k in ("range_boundary",):
+        return "boundary"
+    if k in ("laser", "target"):
+        return "thing"
+    if k in ("observer", "track", "airspace_zone"):
+        return {"naked eye": "hazardous", "aided only": "aided"}.get(p.get("hazard"), "safe")
+    if k == "visual_zone":
+        return "aided"
+    return "aided" if p.get("hazard") == "aided only" else "hazardous"
+
+
+def _kml_coords(coords) -> str:
+    return " ".join(f"{x:.{DEGREE_DECIMALS}f},{y:.{DEGREE_DECIMALS}f},0" for x, y in np.asarray(coords)[:, :2])
+
+
+def _kml_geometry(parent, g) -> None:
+    t = g.geom_type
+    if t.startswith("Multi") or t == "GeometryCollection":
+        multi = ET.SubElement(parent, "MultiGeometry")
+        for part in g.geoms:
+            _kml_geometry(multi, part)
+    elif t == "Polygon":
+        poly = ET.SubElement(parent, "Polygon")
+        ring = ET.SubElement(ET.SubElement(poly, "outerBoundaryIs"), "LinearRing")
+        ET.SubElement(ring, "coordinates").text = _kml_coords(g.exterior.coords)
+        for h in g.interiors:
+            ring = ET.SubElement(ET.SubElement(poly, "innerBoundaryIs"), "LinearRing")
+            ET.SubElement(ring, "coordinates").text = _kml_coords(h.coords)
+    elif t == "LineString":
+        ET.SubElement(ET.SubElement(parent, "LineString"), "coordinates").text = _kml_coords(g.coords)
+    elif t == "Point":
+        ET.SubElement(ET.SubElement(parent, "Point"), "coordinates").text = _kml_coords(g.coords)
+
+
+def _kml_styles(doc) -> None:
+    for sid, (line, fill, width) in _STYLES.items():
+        st = ET.SubElement(doc, "Style", id=sid)
+        ls = ET.SubElement(st, "LineStyle")
+        ET.SubElement(ls, "color").text, ET.SubElement(ls, "width").text = line, str(width)
+        ET.SubElement(ET.SubElement(st, "PolyStyle"), "color").text = fill
+        icon = ET.SubElement(st, "IconStyle")
+        ET.SubElement(icon, "color").text = line
+        ET.SubElement(icon, "scale").text = "0.8"
+
+
+def _placemark(folder, z, feature) -> None:
+    from shapely.geometry import shape
+
+    pm = ET.SubElement(folder, "Placemark")
+    p = z.properties
+    ET.SubElement(pm, "name").text = str(p.get("name") or p.get("target") or z.kind) + (
+        f" ({p['variant']})" if p.get("variant") else "")
+    ET.SubElement(pm, "styleUrl").text = f"#{_style(z)}"
+    data = ET.SubElement(pm, "ExtendedData")
+    for k, v in feature["properties"].items():
+        d = ET.SubElement(data, "Data", name=str(k))
+        ET.SubElement(d, "value").text = json.dumps(v) if not isinstance(v, str) else v
+    _kml_geometry(pm, shape(feature["geometry"]))
+
+
+def kml_document(zs, geojson: dict) -> bytes:
+    """KML 2.2 of the zones (from the GeoJSON's lon/lat geometry), one folder per kind."""
+    ET.register_namespace("", _KML_NS)
+    root = ET.Element("kml", xmlns=_KML_NS)
+    doc = ET.SubElement(root, "Document")
+    info = geojson["laser_hazard"]
+    ET.SubElement(doc, "name").text = f"laser-hazard: {info['scene']}"
+    ET.SubElement(doc, "description").text = (info["frame"]["statement"] + " Absent: "
+                                              + "; ".join(f"{k}: {v}" for k, v in info["absent"].items() if v))
+    _kml_styles(doc)
+    folders = {}
+    for z, f in zip(zs, geojson["features"]):
+        if z.kind not in folders:
+            folders[z.kind] = ET.SubElement(doc, "Folder")
+            ET.SubElement(folders[z.kind], "name").text = z.kind
+        _placemark(folders[z.kind], z, f)
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
+# --- GeoTIFF --------------------------------------------------------------------------------
+def _bands(result) -> tuple[np.ndarray, list] | None:
+    fd, fs = result.footprint_dynamic, result.footprint_static
+    if fd is None or fd.ratio is None:
+        return None
+    direct = fd.direct_ratio if fd.direct_ratio is not None else np.zeros_like(fd.ratio)
+    reflected = fd.ratio
+    static = fs.ratio if fs is not None and fs.ratio is not None else np.full_like(fd.ratio, np.nan)
+    total = np.where(np.isnan(reflected), direct, reflected + direct)  # not evaluated: the reflections are below 1
+    names = ["peak hazard ratio at eye height: reflections (dynamic) + direct beam",
+             "reflections, dynamic (max over time)", "reflections, static", "direct beam (nominal aim)"]
+    return np.stack([total, reflected, static, direct]).astype("float32")[:, ::-1, :], names  # rows north to south
+
+
+def site_crs(scene):
+    """The PROJ string of the ellipsoidal orthographic projection about ``scene``'s site
+    origin (its x, y are the ENU frame's on the ellipsoid); None without a site."""
+    site = scene.site
+    if site is None:
+        return None
+    lat, lon, _ = site.frame.origin_deg_m
+    return f"+proj=ortho +lat_0={lat!r} +lon_0={lon!r} +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+
+
+def _registration_m(result) -> float:
+    """Largest horizontal offset h d / R of a node from its orthographic position [m]."""
+    site, t = result.scene.site, result.scene.terrain
+    off = np.asarray(result.scene.offset_m, float)
+    ny, nx = t.heights.shape
+    x = t.x0 + off[0] + t.dx * np.array([0, nx - 1])
+    y = t.y0 + off[1] + t.dx * np.array([0, ny - 1])
+    d = float(np.max(np.hypot(*np.meshgrid(x, y))))
+    h = float(np.max(np.abs(t.heights + off[2]))) + site.frame.h0_m
+    return h * d / site.frame.radius_m
+
+
+def hazard_tiff(result, frame_info) -> bytes | None:
+    """The GeoTIFF of the hazard ratio at eye height (None without a footprint grid)."""
+    got = _bands(result)
+    if got is None:
+        return None
+    from rasterio.io import MemoryFile
+    from rasterio.transform import from_origin
+
+    bands, names = got
+    t, off = result.scene.terrain, np.asarray(result.scene.offset_m, float)
+    ny, nx = t.heights.shape
+    transform = from_origin(t.x0 + off[0] - t.dx / 2, t.y0 + off[1] + t.dx * (ny - 1) + t.dx / 2, t.dx, t.dx)
+    crs = site_crs(result.scene)
+    tags = {"frame": frame_info["statement"], "nan": "not evaluated: beyond every target's NOHD (ratio below 1)",
+            "sampling": (f"the ratio at each terrain node (every {t.dx:g} m) at eye height: a zone smaller than a cell can "
+                         f"fall between nodes; the keepout_lobe outlines of zones.geojson are drawn from the lobes themselves"),
+            "eye_height_m": str(result.footprint_dynamic.eye_height_m), "scene": result.scene.name,
+            "scene_sha256": result.scene.text_sha256, "mpe_w_m2": repr(float(result.mpe_w_m2))}
+    if crs is not None:
+        tags["registration_m"] = f"{_registration_m(result):.3g} (largest offset h d / R of a node from its orthographic position)"
+    with MemoryFile() as mem:
+        with mem.open(driver="GTiff", width=nx, height=ny, count=4, dtype="float32", crs=crs, transform=transform,
+                      nodata=float("nan"), compress="deflate") as ds:
+            ds.write(bands)
+            ds.update_tags(**tags)
+            for i, n in enumerate(names, 1):
+                ds.set_band_description(i, n)
+        return mem.read()
+
+
+def _frame_info(result) -> dict:
+    site = result.scene.site
+    if site is not None:
+        return site.frame.describe()
+    return {"kind": "local", "statement": "the scene's local frame: x, y, z [m] as the scene file gives them "
+            "(no [site]: not placed on the earth; no CRS)"}
+
+
+def map_files(result) -> tuple[dict, dict]:
+    """The map files (name -> bytes) of ``result`` and report.json's ``map_outputs``."""
+    import importlib.util
+
+    zs, absent = zones(result)
+    frame = _frame_info(result)
+    gj = geojson_document(result, zs, absent, frame)
+    site = result.scene.site is not None
+    names = map_names(result.scene)
+    files = {names[0]: json.dumps(gj, indent=None, allow_nan=False).encode()}
+    not_written = {}
+    if site:
+        files["zones.kml"] = kml_document(zs, gj)
+    else:
+        not_written["zones.kml"] = "KML is WGS 84 only: give the scene a [site] to place it on the earth"
+    tif = names[-1]
+    if importlib.util.find_spec("rasterio") is None:
+        not_written[tif] = "rasterio is not installed: pip install 'laser-hazard[geo]'"
+    else:
+        data = hazard_tiff(result, frame)
+        if data is None:
+            not_written[tif] = "no ground grid at eye height (the scene has no terrain, or no spot to reflect)"
+        else:
+            files[tif] = data
+    counts = {k: sum(z.kind == k for z in zs) for k in ZONE_KINDS}
+    return files, {"files": sorted(files), "not_written": not_written, "frame": frame["kind"], "features": counts,
+                   "absent": absent}
