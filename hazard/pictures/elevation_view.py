@@ -28,7 +28,7 @@ import numpy as np
 from hazard.pictures import palette as C
 from hazard.outputs.figure_index import lobe_paths, mark
 from hazard.pictures.label_place import place_labels
-from hazard.pictures.plan_view import MIRROR_LABEL, MIRROR_ZONE_LABEL, aim_reach_m, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, mark_mirror, mark_mirror_zone, square_limits, two_panels
+from hazard.pictures.plan_view import aim_reach_m, draw_mirrors, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, square_limits, two_panels
 from hazard.outputs.finding_geometry import mirror_segments
 from hazard.pictures.plots import DisplayBase
 
@@ -171,13 +171,7 @@ class ElevationViewDisplay(DisplayBase):
             seen.add(kind)
             for ring in rings:
                 mark(ax, lobe_paths(self.paths, self.lobes, target, kind), f"{kind} keep-out lobe (projected)", ring, "polygon")
-        for i, (name, eye, ring) in enumerate(self.mirror_zones):  # as in the plan view
-            ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
-                    ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
-            mark_mirror_zone(ax, self.paths, name, ring)
-        for i, (name, a, b) in enumerate(self.mirrors):
-            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
-            mark_mirror(ax, self.paths, name, a, b)
+        draw_mirrors(ax, self.paths, self.mirror_zones, self.mirrors)  # as in the plan view
         self._draw_airspace(ax)
         ax.plot(*self.laser_sz, marker="^", ms=10, c="k", ls="", label="laser")
         for i, (name, sz) in enumerate(self.targets):

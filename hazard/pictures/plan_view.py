@@ -293,13 +293,7 @@ class PlanViewDisplay(DisplayBase):
             if aided > nohd:
                 ax.add_patch(matplotlib_circle(xy, aided, "#a65628", "-.", "target's diffuse NOHD through optics" if i == 0 else None))
             ax.annotate(name, xy, xytext=(4, 4 - 12 * (i % 2)), textcoords="offset points", fontsize=7)
-        for i, (name, eye, ring, _, _) in enumerate(self.mirror_zones):
-            ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
-                    ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
-            mark_mirror_zone(ax, self.paths, name, ring)
-        for i, (name, a, b) in enumerate(self.mirrors):
-            ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
-            mark_mirror(ax, self.paths, name, a, b)
+        draw_mirrors(ax, self.paths, [z[:3] for z in self.mirror_zones], self.mirrors)
         if len(self.observers_xy):
             safe = ~self.hazardous
             ax.scatter(*self.observers_xy[safe].T, s=6, c=C.SAFE, lw=0, zorder=11,  # over the crosses: a safe one beside a hazardous one stays seen
@@ -482,6 +476,19 @@ def draw_hazardous(ax, xy, unlabelled, paths=None):
     ax.scatter(*xy.T, s=70, c=C.HAZARDOUS, marker="X", edgecolors="k", lw=0.6, zorder=10, label=label)
     keep = [k for k, p in enumerate(paths or []) if p]
     mark(ax, [paths[k] for k in keep], label, xy[keep], "points")
+
+
+def draw_mirrors(ax, paths, zones, lines) -> None:
+    """Mirror beams' hazard zones (``zones``: (target, eye, (K, 2) ring)) filled, solid for
+    the naked eye and dashed through optics, and their lines (``lines``: (target, start,
+    end)), each recorded for figures.json; the plan and elevation views draw them alike."""
+    for i, (name, eye, ring) in enumerate(zones):
+        ax.fill(*ring.T, fc=C.MIRROR, alpha=0.3 if eye == "naked eye" else 0.12, ec=C.MIRROR, lw=0.8,
+                ls="-" if eye == "naked eye" else "--", label=MIRROR_ZONE_LABEL if i == 0 else None)
+        mark_mirror_zone(ax, paths, name, ring)
+    for i, (name, a, b) in enumerate(lines):
+        ax.plot([a[0], b[0]], [a[1], b[1]], c=C.MIRROR, lw=1.6, label=MIRROR_LABEL if i == 0 else None)
+        mark_mirror(ax, paths, name, a, b)
 
 
 def mark_mirror(ax, paths, name, a, b):
