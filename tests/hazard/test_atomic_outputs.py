@@ -382,16 +382,23 @@ def test_hazard_report_interrupted_keeps_the_run_whole(tmp_path, monkeypatch, re
     assert ("report.html" in now) == ("map.html" in now) == (step == "switched")
 
 
+def plate_study(powers):
+    """A grid study of the bundled plate over ``powers`` [W]."""
+    from hazard.drivers.study import Parameter, Study
+
+    return Study(name="t", scene="plate", kind="grid", parameters=(Parameter("laser.power_w", values=powers),))
+
+
+def study_view(out):
+    """A study folder's visible file names and its results.csv bytes."""
+    return sorted(p.name for p in out.iterdir() if not p.name.startswith(".")), (out / "results.csv").read_bytes()
+
+
 @pytest.mark.parametrize("step", ["moved", pytest.param("switched", marks=pytest.mark.slow)])
 def test_hazard_study_interrupted_keeps_one_whole_summary(tmp_path, monkeypatch, step):
-    from hazard.drivers.study import Parameter, Study, run_study
+    from hazard.drivers.study import run_study
 
-    def study(powers):
-        return Study(name="t", scene="plate", kind="grid", parameters=(Parameter("laser.power_w", values=powers),))
-
-    def view(out):
-        return sorted(p.name for p in out.iterdir() if not p.name.startswith(".")), (out / "results.csv").read_bytes()
-
+    study, view = plate_study, study_view
     out = tmp_path / "o"
     run_study(study((10.0,)), out, serial=True)
     old = view(out)

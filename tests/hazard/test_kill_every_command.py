@@ -147,13 +147,8 @@ def test_hazard_report_interrupted_at_a_rename_keeps_the_run_whole(tmp_path, mon
 
 @pytest.mark.parametrize("k", (pytest.param(1, marks=pytest.mark.slow), 2))  # two studies each: 3-4 s at load 10
 def test_hazard_study_interrupted_at_a_rename_keeps_one_whole_summary(tmp_path, monkeypatch, k):
-    from hazard.drivers.study import Parameter, Study, run_study
-
-    def study(powers):
-        return Study(name="t", scene="plate", kind="grid", parameters=(Parameter("laser.power_w", values=powers),))
-
-    def view(out):
-        return sorted(p.name for p in out.iterdir() if not p.name.startswith(".")), (out / "results.csv").read_bytes()
+    from hazard.drivers.study import run_study
+    from tests.hazard.test_atomic_outputs import plate_study as study, study_view as view
 
     out = tmp_path / "o"
     run_study(study((10.0,)), out, serial=True)
