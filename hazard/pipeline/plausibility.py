@@ -56,30 +56,26 @@ def _short_nohd(result) -> list:
 
 
 REFLECTS_NOTHING = 1e-12  # a lit material's directional-hemispherical reflectance at the spot's incidence under this: nothing
-_RHO_ENTRIES = 8  # spot reflectances remembered (a run asks for its verdict two or three times: report, answer, exit code)
-_rho_memo: dict = {}  # (id(material), incidence bits) -> (material, reflectance); the material held, so its id stays its own
+_RHO_ATTR = "_lit_reflectance"  # where a spot keeps its reflectance once integrated (its material and incidence never change)
 
 
 def _spot_reflectance(sp):
     """The directional-hemispherical reflectance [-] of a spot's lit material at its mean
     incidence (delta lobes included; :func:`brdfmodels.analysis.hemispherical_reflectance`
-    to 1 %), None where it cannot be said (a dynamic material, grazing incidence). The
-    last few are remembered by material and incidence (a measured table's integral is
-    seconds, and a run's report.json, answer and exit code each ask for the verdict)."""
+    to 1 %), None where it cannot be said (a dynamic material, grazing incidence). Kept on
+    the spot once integrated (a measured table's integral is seconds, and a run's
+    report.json, answer and exit code each ask for the verdict); nothing is kept beyond
+    the spot's own life."""
     from brdfmodels.analysis import hemispherical_reflectance
 
+    if _RHO_ATTR in vars(sp):
+        return vars(sp)[_RHO_ATTR]
     wi = np.asarray(sp.mean_frame, float) @ -np.asarray(sp.mean_incoming, float)
-    if getattr(sp.material, "is_dynamic", False) or not wi[2] > 1e-9:
-        return None
-    wi = wi / np.linalg.norm(wi)
-    key = (id(sp.material), wi.tobytes())
-    known = _rho_memo.get(key)
-    if known is not None and known[0] is sp.material:
-        return known[1]
-    rho = hemispherical_reflectance(sp.material, wi, rtol=1e-2, atol=0.0, max_evaluations=200_000).value
-    while len(_rho_memo) >= _RHO_ENTRIES:
-        _rho_memo.pop(next(iter(_rho_memo)), None)
-    _rho_memo[key] = (sp.material, rho)
+    rho = None
+    if not getattr(sp.material, "is_dynamic", False) and wi[2] > 1e-9:
+        wi = wi / np.linalg.norm(wi)
+        rho = hemispherical_reflectance(sp.material, wi, rtol=1e-2, atol=0.0, max_evaluations=200_000).value
+    setattr(sp, _RHO_ATTR, rho)
     return rho
 
 
