@@ -443,17 +443,19 @@ def _analyse(args, err):
         return analyze(scene, backend=args.backend, progress=_stage_lines(args, err), threads=getattr(args, "threads", None))
 
 
-def _finish(args, result):
-    """EXIT_HAZARD when ``--fail-on-hazard WHICH`` finds its kind of hazard (:func:`hazard.pipeline.verdict.fails`)."""
+def _finish(args, result, v=None):
+    """EXIT_HAZARD when ``--fail-on-hazard WHICH`` finds its kind of hazard (:func:`hazard.pipeline.verdict.fails`;
+    ``v``: the run's verdict when the caller has it)."""
     from hazard.pipeline.verdict import fails, verdict
 
-    return EXIT_HAZARD if (args.fail_on_hazard and fails(verdict(result), args.fail_on_hazard)) else EXIT_OK
+    return EXIT_HAZARD if (args.fail_on_hazard and fails(verdict(result) if v is None else v, args.fail_on_hazard)) else EXIT_OK
 
 
 def _cmd_run(args, out, err):
     from brdfmodels.output_sets import output_unit
 
     from hazard.outputs.report import json_safe, report_dict, summary_text, write_set
+    from hazard.pipeline.verdict import verdict
 
     from hazard.pictures.figures import FIXED_NAMES
 
@@ -467,6 +469,7 @@ def _cmd_run(args, out, err):
                      claims=names + FIXED_NAMES, source=_scene_source(args.scene)) as unit:
         err.write("".join(f"hazard: {n}\n" for n in unit.notes))  # a crash of an earlier run recovered: said
         result = _analyse(args, err)
+        v = verdict(result)  # once: report.json, the printed answer and --fail-on-hazard
         extra = {}
         if args.plot:
             from hazard.pictures.figures import kept_render_entries, run_figures
@@ -476,18 +479,18 @@ def _cmd_run(args, out, err):
         if not args.quiet:
             err.write("hazard: map outputs...\n")
         maps, section = map_files(result)
-        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section})
+        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section}, verdict_doc=v)
         if args.report:  # the review page embeds the pictures just written (and those of hazard render, carried over)
             unit.carry()
             names += [p.name for p in _write_review(unit.stage, args, err)]
     paths = [Path(args.output) / n for n in names]
     if args.json:
-        out.write(json.dumps({**report_dict(result), "map_outputs": json_safe(section)}, indent=1) + "\n")
+        out.write(json.dumps({**report_dict(result, verdict_doc=v), "map_outputs": json_safe(section)}, indent=1) + "\n")
         err.write(_kept_lines(unit))
     else:
-        out.write(summary_text(result, verbose=args.verbose) + "\n")
+        out.write(summary_text(result, verbose=args.verbose, verdict_doc=v) + "\n")
         out.write("".join(f"wrote {p}\n" for p in paths) + _kept_lines(unit))
-    return _finish(args, result)
+    return _finish(args, result, v)
 
 
 def _kept_lines(unit) -> str:

@@ -221,12 +221,14 @@ def _limiting_aperture(scene) -> dict:
                           "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
 
 
-def report_dict(result, cols=None, *, row_dicts=True) -> dict:
+def report_dict(result, cols=None, *, row_dicts=True, verdict_doc=None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
     (``cols``: :func:`observer_columns` of ``result`` when the caller has them). With
     ``row_dicts=False`` the ``observers`` entry is the listed rows' indices into ``cols``
-    (:func:`report_json_text` writes them from the columns, no dict per row)."""
+    (:func:`report_json_text` writes them from the columns, no dict per row).
+    ``verdict_doc``: :func:`hazard.pipeline.verdict.verdict` of ``result`` when the caller has
+    it (computed once per run: the report, the printed answer and ``--fail-on-hazard``); not changed."""
     from hazard.pipeline.analysis import versions
 
     scene = result.scene
@@ -241,7 +243,7 @@ def report_dict(result, cols=None, *, row_dicts=True) -> dict:
     else:
         listed = listed_rows(cols, len(cols["labels"]))
         which = _listed_statement(len(cols["labels"]), len(listed))
-    v = verdict(result)
+    v = dict(verdict(result) if verdict_doc is None else verdict_doc)
     warnings = v.pop("warnings")  # report.json's top-level "warnings"
     doc = json_safe({
         "format": REPORT_FORMAT,
@@ -546,15 +548,16 @@ def _write_synced(path: Path, data) -> None:
         os.fsync(fh.fileno())
 
 
-def write_set(result, folder, *, extra=None, sections=None) -> list:
+def write_set(result, folder, *, extra=None, sections=None, verdict_doc=None) -> list:
     """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
     ``folder`` (a staging folder of :class:`brdfmodels.output_sets.OutputUnit`), each fsynced;
-    returns the names written."""
+    returns the names written. ``verdict_doc``: the run's verdict, when the caller has it
+    (:func:`report_dict`)."""
     folder = Path(folder)
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
     cols = observer_columns(result)  # once, for the report and the table
-    doc = report_dict(result, cols, row_dicts=False)  # the listed rows written from the columns
+    doc = report_dict(result, cols, row_dicts=False, verdict_doc=verdict_doc)  # the listed rows written from the columns
     doc.update(json_safe(dict(sections or {})))
     texts = {"report.json": report_json_pieces(doc, cols), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
@@ -852,7 +855,7 @@ def _not_modelled_lines(result) -> list:
     return lines
 
 
-def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
+def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS, *, verdict_doc=None) -> str:
     """What a range safety officer asks first, in plain text.
 
     Parameters
@@ -861,6 +864,9 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
     max_observers : int
         Hazardous observers listed by name, highest hazard ratio (peak irradiance / MPE,
         unitless) first; the others are counted.
+    verdict_doc : dict, optional
+        :func:`hazard.pipeline.verdict.verdict` of ``result`` when the caller has it (else
+        computed here).
 
     Returns
     -------
@@ -874,7 +880,7 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS) -> str:
         every target (diffuse and specular, static and dynamic); the skipped stages,
         notes and what the tool never models.
     """
-    lines = _observer_lines(result, max_observers) + _motion_lines(result) + _nohd_lines(result) + _not_modelled_lines(result)
+    lines = _observer_lines(result, max_observers, verdict_doc) + _motion_lines(result) + _nohd_lines(result) + _not_modelled_lines(result)
     return "\n".join(lines)
 
 
@@ -928,7 +934,8 @@ def stages_text(result) -> str:
     return "\n".join(lines)
 
 
-def summary_text(result, *, verbose=False, max_observers=ANSWER_MAX_OBSERVERS) -> str:
-    """The text of ``hazard run``: :func:`answer_text`, then (``verbose``) :func:`stages_text`."""
-    text = answer_text(result, max_observers)
+def summary_text(result, *, verbose=False, max_observers=ANSWER_MAX_OBSERVERS, verdict_doc=None) -> str:
+    """The text of ``hazard run``: :func:`answer_text`, then (``verbose``) :func:`stages_text`
+    (``verdict_doc``: the run's verdict when the caller has it)."""
+    text = answer_text(result, max_observers, verdict_doc=verdict_doc)
     return text + "\n" + stages_text(result) if verbose else text

@@ -279,16 +279,30 @@ EXPECTED = {  # flag -> exit code per case
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_fail_on_hazard_exit_codes(case, tmp_path):
+def test_fail_on_hazard_exit_codes(case, tmp_path, monkeypatch):
+    """... and each run computes its verdict once (issue 35): report.json, the printed answer
+    (or ``--json``, on the last run) and the exit code share it."""
+    import hazard.outputs.report as report
+    import hazard.pipeline.verdict as verdict_module
+
+    calls = []
+    real = verdict_module.verdict
+    counting = lambda result: calls.append(result) or real(result)  # noqa: E731
+    monkeypatch.setattr(verdict_module, "verdict", counting)  # the CLI's import
+    monkeypatch.setattr(report, "verdict", counting)  # report.py's own name
     text = scene_text(**CASES[case])
     assert math.sqrt(0.5 * P / (math.pi * MPE)) < 0.26  # the lobe: well inside the range
-    codes = {}
+    codes, per_run = {}, []
     for flag in EXPECTED[case]:
-        flags = ["--force"] + ([] if flag is None else [f"--fail-on-hazard{flag}"])
+        flags = ["--force"] + ([] if flag is None else [f"--fail-on-hazard{flag}"]) + (["--json"] if flag == "=any" else [])
+        calls.clear()
         codes[flag], out, _, folder = run_scene(tmp_path, text, *flags, name="f")
+        per_run.append(len(calls))
     doc = json.loads((folder / "report.json").read_text())
     assert doc["hazard_at_observers"] is (case == "observers only") and doc["hazard_zones"] is (case == "zones only")
     assert codes == EXPECTED[case]
+    assert per_run == [1] * len(EXPECTED[case])
+    assert json.loads(out)["verdict"] == doc["verdict"]  # the last run's --json
 
 
 def test_fail_on_hazard_refuses_an_unknown_choice(tmp_path):
