@@ -7,12 +7,25 @@ source of truth: a field added there is in the schema), the targets' from the ke
 rows' from the columns of :func:`hazard.outputs.report.observer_columns` (the ``motion_*`` ones,
 :data:`hazard.outputs.motion_outputs.MOTION_COLUMNS`, present only when something moves).
 
-Typed blocks forbid unknown keys (a misspelled or unannounced key fails validation) and
-give every value its JSON type; numbers may also be the strings ``"inf"``, ``"-inf"``,
+Every block forbids unknown keys (a misspelled or unannounced key fails validation) and
+gives every value its JSON type; numbers may also be the strings ``"inf"``, ``"-inf"``,
 ``"nan"`` (:func:`hazard.outputs.report.json_safe`: JSON has no such numbers and an infinite
-NOHD must not vanish). The blocks written by the MPE, SDZ, spill, verdict, motion and map
-modules (``mpe``, ``pulse``, ``sdz``, ``beam.spill``, ``verdict``, ``motion``, ...) are
-objects whose inner keys are not yet typed here.
+NOHD must not vanish). The blocks of the stages (issue 35):
+
+- from the result dataclasses' own fields: ``mpe`` (:class:`hazard.physics.mpe.MPEResult`,
+  its ``factors`` :class:`~hazard.physics.mpe.CorrectionFactors`), ``pulse``
+  (:class:`~hazard.physics.mpe.RepetitivePulseResult`), ``frame.dem``
+  (:class:`scenes.dem.DemInfo`): a field added there is in the schema;
+- from the dicts the stages write (their keys written once here, beside the function that
+  writes them; ``tests/hazard/test_report_schema.py`` checks every bundled example and the
+  scenes that write the optional keys): ``uv_24h``, ``frame``, ``extended_source``,
+  ``beam.sampling``, ``beam.spill``, ``sdz``, ``verdict``, ``visual_interference``,
+  ``airspace``, ``motion``, ``tracks`` and ``map_outputs``.
+
+A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
+escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
+Left as free objects: ``scene.echo`` and ``scene.units_as_written`` (the scene file as
+read), ``targets[].melt``/``slump``/``aided`` and ``keepout_*.near_field``.
 """
 
 from __future__ import annotations
@@ -22,9 +35,12 @@ from typing import Any, Literal, Optional, get_type_hints
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
+from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
+from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult
 from hazard.pipeline.results import Stage
+from scenes.dem import DemInfo
 
 __all__ = ["ReportModel", "report_schema", "validate_report"]
 
@@ -37,12 +53,35 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-def _from_dataclass(cls, name: str) -> type[BaseModel]:
-    """A strict model with the fields of dataclass ``cls`` (types from its annotations;
-    floats may be written as "inf"/"nan")."""
+def _json_type(hint: Any) -> Any:
+    """The JSON type of a dataclass field's annotation: floats may be "inf"/"nan", a tuple
+    is written as a list of str (the steps) unless the caller says otherwise."""
+    if hint is float:
+        return Number
+    if hint == (float | None) or hint == Optional[float]:
+        return Optional[Number]
+    if hint is tuple:
+        return list[str]
+    return hint
+
+
+def _from_dataclass(cls, name: str, *, override: Optional[dict[str, Any]] = None, add: Optional[dict[str, Any]] = None) -> type[BaseModel]:
+    """A strict model with the fields of dataclass ``cls`` (types from its annotations via
+    :func:`_json_type`; ``override``: field -> JSON type where its ``to_dict`` writes it
+    otherwise; ``add``: keys its ``to_dict`` writes beyond the fields)."""
     hints = get_type_hints(cls)
-    fields: dict[str, Any] = {f.name: (Number if hints[f.name] is float else hints[f.name], ...) for f in dataclasses.fields(cls)}
+    over = dict(override or {})
+    fields: dict[str, Any] = {f.name: (over.pop(f.name) if f.name in over else _json_type(hints[f.name]), ...)
+                              for f in dataclasses.fields(cls)}
+    if over:
+        raise TypeError(f"{cls.__name__} has no field(s) {sorted(over)}")
+    fields.update({k: (t, ...) for k, t in (add or {}).items()})
     return create_model(name, __config__=ConfigDict(extra="forbid"), **fields)
+
+
+def _absent_or(t: Any) -> Any:
+    """A key the stage writes only in some cases: absent, or of type ``t``."""
+    return (t, Field(default=None))
 
 
 StageRecord = _from_dataclass(Stage, "StageRecord")
@@ -62,8 +101,8 @@ class BeamBlock(_Strict):
     power_w: Number
     spill_w: Number
     blocked_w: Number
-    sampling: Block
-    spill: Block
+    sampling: Optional[SamplingBlock]
+    spill: Optional[SpillBlock]
 
 
 class TimesBlock(_Strict):
@@ -119,6 +158,15 @@ class FootprintArea(_Strict):
     cells: int = Field(ge=0)
 
 
+class LimitingAperture(_Strict):
+    """What the MPE is compared with (:func:`hazard.outputs.report._limiting_aperture`)."""
+
+    diameter_m: Number
+    source: str
+    optical_aids: str
+    applies_to: str
+
+
 class ObserversListed(_Strict):
     count: int = Field(ge=0)
     listed: int = Field(ge=0)
@@ -140,6 +188,393 @@ _ROW_FIELDS: dict[str, Any] = {
 ObserverRow = create_model("ObserverRow", __config__=ConfigDict(extra="forbid"), **_ROW_FIELDS)
 
 
+# -- the stages' blocks ---------------------------------------------------------------------
+ABSENT: Any = Field(default=None)  # a key written only in some cases (see the module notes): absent, or typed
+
+
+class MpeLimit(_Strict):
+    """One candidate limit of :attr:`hazard.physics.mpe.MPEResult.limits`."""
+
+    name: str
+    radiant_exposure_j_m2: Number
+    label: str
+
+
+MpeBlock = _from_dataclass(MPEResult, "MpeBlock", override={"factors": _from_dataclass(CorrectionFactors, "CorrectionFactorsBlock"),
+                                                             "limits": list[MpeLimit]}, add={"standard_title": str})
+
+
+class PulseRule(_Strict):
+    rule: str
+    per_pulse_radiant_exposure_j_m2: Number
+
+
+PulseBlock = _from_dataclass(RepetitivePulseResult, "PulseBlock", override={"rules": list[PulseRule], "pulses": Number, "pulse_groups": Number})
+
+
+class Uv24hBlock(_Strict):
+    """:meth:`hazard.physics.mpe.UV24hResult.to_dict`: the day's summed-dose limit (180-400 nm)."""
+
+    wavelength_nm: Number
+    standard: str
+    kind: str
+    accumulation_s: Number
+    total_on_time_s: Number
+    radiant_exposure_j_m2: Number
+    average_irradiance_w_m2: Number
+    governing_limit: str
+    table_row: str
+    label: str
+    unverified: bool
+    steps: list[str]
+
+
+class Conversion(_Strict):
+    """A ``*_geo`` value converted to the local frame (:mod:`scenes.geo_input`)."""
+
+    key: str
+    given: list[Number] | list[list[Number]]  # as written: [lat_deg, lon_deg(, height_m)], or a list of them
+    m: list[Number] | list[list[Number]]
+
+
+DemBlock = _from_dataclass(DemInfo, "DemBlock")  # frame.dem: scenes.dem.DemInfo
+
+
+class FrameBlock(_Strict):
+    """``frame``: the local frame, or :meth:`scenes.geo.SiteFrame.describe` (with ``dem``
+    and ``converted`` from :mod:`scenes.geo_input`)."""
+
+    kind: Literal["local", "site"]
+    statement: str
+    origin_deg_m: list[Number] = ABSENT
+    origin_ellipsoidal_height_m: Number = ABSENT
+    vertical: str = ABSENT
+    crs: str = ABSENT
+    refraction_k: Number = ABSENT
+    earth_radius_m: Number = ABSENT
+    laser_xy_m: list[Number] = ABSENT
+    dem: DemBlock = ABSENT  # type: ignore[valid-type]
+    converted: list[Conversion] = ABSENT
+
+
+class ExtendedMpe(_Strict):
+    """:func:`hazard.pipeline.extended_source._mpe_entry`: the MPE at one angular subtense."""
+
+    alpha_rad: Number
+    c_e: Number
+    alpha_max_rad: Number
+    T2_s: Number
+    mpe_w_m2: Number
+    table_row: str
+    formula: str
+    label: str
+    unverified: bool
+    steps: list[str]
+    pulse: Optional[PulseBlock]  # type: ignore[valid-type]
+
+
+class ExtendedSourceBlock(_Strict):
+    """``extended_source`` (:func:`hazard.pipeline.extended_source._summary`; ``applied``
+    alone when the stage did not apply C_E)."""
+
+    applied: bool
+    alpha_min_rad: Number = ABSENT
+    alpha_max_rad: Number = ABSENT
+    spot_size: str = ABSENT
+    point_sources: str = ABSENT
+    exact: bool = ABSENT
+    observers_above_alpha_min: int = ABSENT
+    observers_kept_specular: int = ABSENT
+    mpe_smallest_alpha: Optional[ExtendedMpe] = ABSENT
+    mpe_largest_alpha: Optional[ExtendedMpe] = ABSENT
+
+
+class NotReflected(_Strict):
+    target: str
+    side: str
+    power_w: Number
+
+
+class SamplingBlock(_Strict):
+    """``beam.sampling`` (:func:`hazard.pipeline.spots.beam_sampling`; the ``tail_*`` bounds
+    [W/m^2] with a sampled square)."""
+
+    rays: int
+    levels: int
+    rtol: Number
+    error_bound_w: Number
+    exact_targets: list[str]
+    not_reflected: list[NotReflected]
+    half_width_w: Number
+    tail_point_bound_w_m2: Number = ABSENT
+    tail_aperture_bound_w_m2: Number = ABSENT
+    tail_limit_w_m2: Number = ABSENT
+
+
+class AidedNohd(_Strict):
+    """A direct-beam NOHD [m] through one optical aid (:func:`hazard.pipeline.spill.direct_nohds`)."""
+
+    magnification: Number
+    objective_diameter_m: Number
+    transmission: Number
+    gain: Number
+    nohd_m: Number
+
+
+class Stopped(_Strict):
+    """Where a stopper takes the spill (:func:`hazard.pipeline.spill._stopped`)."""
+
+    object: str
+    power_w: Number
+    range_m: Number
+    peak_irradiance_w_m2: Number
+    hazard_ratio: Number
+    from_range_m: Number
+    reflected: str
+
+
+class SpillBlock(_Strict):
+    """``beam.spill`` (:func:`hazard.pipeline.spill.spill_summary`)."""
+
+    leaves_scene_w: Number
+    shared_w: Number
+    peak_profile: Number
+    stopped: list[Stopped]
+    nohd_m: Number
+    aided: list[AidedNohd]
+
+
+class SdzDirections(_Strict):
+    kind: str
+    aim_track: bool
+    count: int
+    step_rad: Number
+    buffer_rad: Number
+    pointing_error_rad: Number
+    pointing_error_kind: str
+    pointing_error_sigmas: Optional[Number]
+    pointing_error_source: str
+
+
+class _ZoneFields(_Strict):
+    """:func:`hazard.pipeline.sdz._zone_dict`: one zone in world coordinates."""
+
+    nohd_m: Number
+    polygon_m: list[list[Number]]
+    area_m2: Number
+    unbounded: bool
+    max_range_m: Number
+    hazard_half_width_m: Number
+    contained: bool
+    escaping_directions: int
+    above_horizon: bool
+    escaping_bearing_deg: list[Number] = ABSENT  # when some direction escapes
+    escaping_elevation_deg: list[Number] = ABSENT
+    leaves_boundary: bool = ABSENT  # with a [range]
+    outside_boundary_m2: Number = ABSENT
+
+
+class AidedZone(AidedNohd, _ZoneFields):
+    """``sdz.aided[]``: the aid and its zone."""
+
+
+class NominalZone(_Strict):
+    polygon_m: list[list[Number]]
+    area_m2: Number
+
+
+class MirrorReach(_Strict):
+    nohd_m: Number
+    max_reach_m: Number
+    contained: bool
+    above_horizon: bool
+    leaves_boundary: bool = ABSENT
+
+
+class MirrorBeam(MirrorReach):
+    """``sdz.mirror_beams[]`` (:func:`hazard.pipeline.mirror_reach.mirror_beams`; ``aided``
+    when an aid reaches further)."""
+
+    target: str
+    rays: int
+    aided: MirrorReach = ABSENT
+
+
+class SdzBlock(_ZoneFields):
+    """``sdz`` (:func:`hazard.pipeline.sdz.danger_zone`, ``mirror_beams`` from the stage of that name)."""
+
+    directions: SdzDirections
+    nominal: NominalZone = ABSENT  # a sector with a buffer: the sector itself
+    aided: list[AidedZone]
+    mirror_beams: list[MirrorBeam] = ABSENT
+
+
+class VerdictCounts(_Strict):
+    hazardous: int
+    total: int
+    tracks_hazardous: int
+    tracks: int
+    flight_zones_exceeded: int
+    flight_zones: int
+
+
+class VerdictBlock(_Strict):
+    """``verdict``: :func:`hazard.pipeline.verdict.verdict` without ``warnings`` (report.json's top level)."""
+
+    headline: str
+    hazard_at_observers: bool
+    hazard_zones: bool
+    any_hazard: bool
+    zones: list[str]
+    observers: VerdictCounts
+
+
+class LevelDistances(_Strict):
+    lfed_m: Optional[Number]
+    czed_m: Optional[Number]
+    szed_m: Optional[Number]
+    nohd_m: Number
+
+
+class TargetLevels(LevelDistances):
+    beam_states: int
+
+
+class VisualBlock(_Strict):
+    """``visual_interference`` (:func:`hazard.physics.visual.visual_interference`)."""
+
+    applies: bool
+    wavelength_nm: Number
+    vcf: Number
+    weighting: str
+    attenuation_credited: bool
+    attenuation_per_m: Number
+    levels_w_m2: dict[Literal["lfed", "czed", "szed"], Number]
+    levels: dict[Literal["lfed", "czed", "szed", "nohd"], str]
+    mpe_w_m2: Number
+    source: str
+    reason: str = ABSENT  # not visible
+    direct: LevelDistances
+    targets: dict[str, TargetLevels]
+    nohd_attenuation: str
+
+
+class FlightZone(_Strict):
+    """:func:`hazard.pipeline.airspace._zone_check`."""
+
+    name: str
+    limit: str
+    limit_w_m2: Optional[Number]
+    floor_agl_m: Number
+    ceiling_agl_m: Number
+    holds: bool
+    worst_effective_irradiance_w_m2: Number
+    worst_point_m: Optional[list[Number]]
+    worst_time_s: Optional[Number]
+    worst_path: Optional[str]
+    vcf_applied: Number
+    lattice_spacing_m: Number
+    times_checked: int
+
+
+class AirspaceBlock(_Strict):
+    """``airspace`` (:func:`hazard.pipeline.airspace.check_zones`)."""
+
+    zones: list[FlightZone]
+    method: str
+    visual_correction_factor: Number
+    note: str = ABSENT  # not visible
+
+
+class WorstWindow(_Strict):
+    duration_s: Number
+    exposure_j_m2: Number
+    mpe_radiant_exposure_j_m2: Number
+    ratio: Number
+
+
+class PathUv24h(_Strict):
+    """:func:`hazard.pipeline.motion_stage._uv_24h`."""
+
+    dose_j_m2: Number
+    exposed_s: Number
+    limit_j_m2: Number
+    ratio: Number
+    window_end_s: Number
+    first_exceedance_s: Optional[Number]
+    label: str
+
+
+class PathBlock(_Strict):
+    """A track or a fixed observer over time: :func:`hazard.pipeline.motion_stage.path_summary`
+    and :func:`hazard.outputs.motion_outputs._track_dict` (``csv`` null for a fixed observer)."""
+
+    name: str
+    kind: str
+    peak_irradiance_w_m2: Number
+    peak_time_s: Number
+    worst_point_m: list[Number] = Field(min_length=3, max_length=3)
+    peak_direct_w_m2: Number
+    peak_reflected_w_m2: Number
+    radiant_exposure_j_m2: Number
+    path_exposure_j_m2: Number
+    exposure_error_estimate_j_m2: Number
+    worst_window: WorstWindow
+    exposure_ratio: Number
+    hazardous: bool
+    uv_24h: Optional[PathUv24h]
+    first_exceedance_s: Optional[Number]
+    time_span_s: list[Number]
+    samples: int
+    base_step_s: Number
+    min_step_s: Number
+    adaptive: bool
+    lased_s: Number
+    pointing_bias_rad: list[Number] = ABSENT  # the worst pointing bias of a path (motion_stage)
+    pointing_buffer_rad: Number = ABSENT
+    peak_effective_irradiance_w_m2: Optional[Number]
+    visual_levels_reached: list[str]
+    csv: Optional[str]
+    group: str
+
+
+class AimTrack(_Strict):
+    """:meth:`scenes.motion.AimTrack.describe`."""
+
+    times_s: list[Number]
+    knots: int
+    azimuth_rate_deg_s: Number = ABSENT
+    elevation_rate_deg_s: Number = ABSENT
+
+
+class MotionBlock(_Strict):
+    """``motion`` (:func:`hazard.outputs.motion_outputs.motion_sections`)."""
+
+    time_span_s: list[Number]
+    beam_states: int
+    beam_state_step: str
+    aim_track: Optional[AimTrack]
+    windows_s: Optional[list[list[Number]]]
+    target_tracks: list[str]
+    time_step_s: Number
+    adaptive: bool
+    samples_per_width: int
+    fixed_observers: list[PathBlock]
+    notes: list[str]
+    seconds: Number
+    method: str
+
+
+class MapOutputsBlock(_Strict):
+    """``map_outputs`` (:func:`hazard.outputs.map_outputs.map_files`)."""
+
+    files: list[str]
+    not_written: dict[str, str]
+    frame: Literal["local", "site"]
+    features: dict[Literal[ZONE_KINDS], int]  # type: ignore[valid-type]
+    absent: dict[Literal[ZONE_KINDS], str]  # type: ignore[valid-type]
+
+
 class ReportModel(_Strict):
     """``report.json`` (:func:`hazard.outputs.report.report_dict`; ``map_outputs`` added by
     ``hazard run`` when it writes the maps)."""
@@ -150,16 +585,16 @@ class ReportModel(_Strict):
     version: Literal[REPORT_VERSION]  # type: ignore[valid-type]
     versions: dict[str, str]
     scene: SceneEcho
-    frame: dict[str, Any]
-    mpe: dict[str, Any]
-    pulse: Block
+    frame: FrameBlock
+    mpe: MpeBlock  # type: ignore[valid-type]
+    pulse: Optional[PulseBlock]  # type: ignore[valid-type]
     mpe_w_m2: Number
-    uv_24h: Block  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
-    extended_source: dict[str, Any]
+    uv_24h: Optional[Uv24hBlock]  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
+    extended_source: ExtendedSourceBlock
     attenuation_per_m: Number
-    limiting_aperture: dict[str, Any]
+    limiting_aperture: LimitingAperture
     beam: BeamBlock
-    sdz: Block
+    sdz: Optional[SdzBlock]
     stages: list[StageRecord]  # type: ignore[valid-type]
     times_s: TimesBlock
     targets: list[TargetReport]
@@ -167,17 +602,17 @@ class ReportModel(_Strict):
     observers: list[ObserverRow]  # type: ignore[valid-type]
     observers_listed: ObserversListed
     verdict_changes: list[str]
-    verdict: dict[str, Any]
+    verdict: VerdictBlock
     hazard_at_observers: bool
     hazard_zones: bool
     any_hazard: bool
-    warnings: list[Any]
+    warnings: list[str]
     notes: list[str]
-    visual_interference: Block
-    airspace: Block
-    motion: Block
-    tracks: list[dict[str, Any]]
-    map_outputs: Block = None
+    visual_interference: Optional[VisualBlock]
+    airspace: Optional[AirspaceBlock]
+    motion: Optional[MotionBlock]
+    tracks: list[PathBlock]
+    map_outputs: Optional[MapOutputsBlock] = None
 
 
 def report_schema() -> dict:

@@ -22,6 +22,7 @@ import hazard
 import scenes
 from hazard.pipeline.extended_source import apply_extended_source, extended_source_mpe, observer_subtense_rad
 from hazard.outputs.report import report_dict, write_outputs
+from hazard.outputs.report_schema import validate_report
 
 A, PHI, R_L = 0.1, 1e-4, 10.0
 D = A + R_L * PHI  # 1/e spot diameter on the plate [m]
@@ -238,6 +239,10 @@ def test_pulsed_applies_c_e_per_pulse_duration():
     c_e_pulse = 5e-3 / ALPHA_MIN  # 5.05 mrad > alpha_max = 5 mrad at 10 ns
     np.testing.assert_allclose(on.observers.mpe_w_m2, [point * c_e_pulse, point], rtol=1e-9)
     np.testing.assert_allclose(on.hazard_ratio, off.hazard_ratio * [1 / c_e_pulse, 1.0], rtol=1e-9)
+    for res in (off, on):  # report.json's pulse block, and extended_source's MPE entries with their pulse (issue 35)
+        doc = json.loads(json.dumps(report_dict(res)))
+        validate_report(doc)
+    assert doc["pulse"]["governing_rule"] and doc["extended_source"]["mpe_smallest_alpha"]["pulse"]["rules"]
 
 
 def test_several_spots_smallest_subtense_and_elongated_spot():
@@ -313,6 +318,7 @@ def test_report_columns(tmp_path):
     assert any(s["name"] == "extended_source" and s["ran"] for s in doc["stages"])
     off = report_dict(hazard.analyze(scene(pts)))
     assert off["extended_source"] == {"applied": False}
+    validate_report(doc)  # the applied block against its schema (issue 35)
     assert [o["c_e"] for o in off["observers"]] == [1.0, 1.0]
 
 

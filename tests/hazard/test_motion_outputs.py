@@ -18,6 +18,8 @@ import pytest
 import hazard
 import scenes
 from hazard.cli import main
+from hazard.outputs.report import report_dict
+from hazard.outputs.report_schema import validate_report
 from tests._scene_text import PLATE_AT_50M
 from tests._bundled import bundled
 
@@ -119,6 +121,9 @@ def test_the_static_analysis_holds_the_beam_anywhere_on_its_slew():
     assert res.observers.direct_irradiance_w_m2[0] == pytest.approx(on_axis, rel=2e-3)
     assert res.observers.direct_at_aim_irradiance_w_m2[0] == 0.0  # 5 deg off the nominal aim
     assert res.sdz["directions"]["aim_track"] and res.hazardous[0]
+    doc = json.loads(json.dumps(report_dict(res)))
+    validate_report(doc)  # the motion block with an aim track's rates, and a fixed observer over time (issue 35)
+    assert doc["motion"]["aim_track"]["azimuth_rate_deg_s"] == 1.0 and doc["motion"]["fixed_observers"]
 
 
 def test_a_fixed_observer_list_too_long_for_time_steps_is_said(monkeypatch):
@@ -256,6 +261,7 @@ ceiling_agl_m = 100.0
     vi = res.visual_interference
     assert not vi["applies"] and vi["direct"]["lfed_m"] is None and vi["direct"]["nohd_m"] > 0
     assert res.airspace["zones"][0]["holds"] and "not visible" in res.airspace["note"]
+    validate_report(json.loads(json.dumps(report_dict(res))))  # visual_interference's reason, airspace's note (issue 35)
 
 
 def test_a_track_within_the_pointing_error_of_the_beam_is_crossed_through_its_axis():
@@ -272,6 +278,9 @@ def test_a_track_within_the_pointing_error_of_the_beam_is_crossed_through_its_ax
     assert s["radiant_exposure_j_m2"] == pytest.approx(h, rel=1e-3)
     assert math.hypot(*s["pointing_bias_rad"]) == pytest.approx(3.0 / 5000.0, rel=1e-3)
     assert "worst constant pointing bias" in biased.stage("motion").detail
+    doc = json.loads(json.dumps(report_dict(biased)))
+    assert doc["tracks"][0]["pointing_bias_rad"] == list(s["pointing_bias_rad"]) and doc["tracks"][0]["pointing_buffer_rad"] == 0.001
+    validate_report(doc)  # a track's pointing_bias_rad against its schema (issue 35)
 
 
 def test_the_dwell_time_counts_only_the_time_the_surface_was_under_the_spot():

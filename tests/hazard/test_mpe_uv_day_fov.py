@@ -297,6 +297,9 @@ def test_path_summary_holds_the_day_dose():
     assert uv["dose_j_m2"] == pytest.approx(3 * 2020.0, rel=1e-12) and not s3["hazardous"]
     assert 0.606 <= uv["ratio"] <= 0.606 * 1.01  # x (1 + the integral's relative error estimate)
     assert s3["worst_window"]["ratio"] < 0.1
+    from hazard.outputs.report_schema import PathUv24h
+
+    PathUv24h.model_validate(s3["uv_24h"], strict=True)  # report.json's tracks[].uv_24h (issue 35)
     # five periods: 1.01e4 J/m^2 > 1e4 J/m^2: hazardous, though no exposure of duration_s is
     s5 = path_summary(_lit([10.0 + 3600.0 * k for k in range(5)], 100.0, 20.0, 18100.0), 10.0, 355.0, ANSI)
     assert s5["hazardous"] and s5["uv_24h"]["ratio"] >= 1.0 and s5["exposure_ratio"] == s5["uv_24h"]["ratio"]

@@ -17,8 +17,11 @@ import scenes
 from hazard.cli import main
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import observer_columns, report_dict
-from hazard.outputs.report_schema import ObserverRow, StageRecord, TargetReport, report_schema, validate_report
+from hazard.outputs.report_schema import (DemBlock, MpeBlock, ObserverRow, PulseBlock, StageRecord, TargetReport, Uv24hBlock, report_schema,
+                                          validate_report)
+from hazard.physics.mpe import MPEResult, RepetitivePulseResult, uv_24h_mpe
 from hazard.pipeline.results import Stage
+from scenes.dem import DemInfo
 from tests._bundled import bundled
 
 EXAMPLES = sorted(Path(p).stem for p in Path(scenes.example_path("plate")).parent.glob("*.toml"))
@@ -60,6 +63,11 @@ def test_written_report_json_validates(tmp_path, validator):
     validate_report(doc)
 
 
+def _flat(errors) -> list:
+    """The errors and, under an ``anyOf`` (a block or null), the errors of each branch."""
+    return [x for e in errors for x in [e] + _flat(e.context or [])]
+
+
 @pytest.mark.parametrize("edit, where", [
     (lambda d: d.__setitem__("mpe_w_m2", "fifty"), "mpe_w_m2"),  # a number as a word
     (lambda d: d["stages"][0].__setitem__("ran", "yes"), "ran"),  # a bool as a string
@@ -73,6 +81,24 @@ def test_written_report_json_validates(tmp_path, validator):
     (lambda d: d["targets"][0].__setitem__("nohd_statc_m", 3.0), "nohd_statc_m"),  # misspelled
     (lambda d: d.pop("any_hazard"), "any_hazard"),  # a key missing
     (lambda d: d["targets"][0].__setitem__("hit", "grazed"), "hit"),
+    # the stages' blocks (issue 35): typed inside, no unknown key
+    (lambda d: d["mpe"]["factors"].__setitem__("C_X", 1.0), "C_X"),
+    (lambda d: d["mpe"]["limits"][0].__setitem__("radiant_exposure_j_m2", None), "radiant_exposure_j_m2"),
+    (lambda d: d["verdict"]["observers"].__setitem__("total", "3"), "total"),
+    (lambda d: d["verdict"].__setitem__("warnings", []), "warnings"),  # written at the top level only
+    (lambda d: d["sdz"].__setitem__("nohd_mm", 1.0), "nohd_mm"),
+    (lambda d: d["sdz"]["directions"].__setitem__("count", 2.5), "count"),
+    (lambda d: d["sdz"]["polygon_m"].__setitem__(0, ["0", 0.0]), "polygon_m"),
+    (lambda d: d["beam"]["spill"].pop("leaves_scene_w"), "leaves_scene_w"),
+    (lambda d: d["beam"]["sampling"].__setitem__("rays", 1.5), "rays"),
+    (lambda d: d["frame"].__setitem__("kind", "global"), "kind"),
+    (lambda d: d["extended_source"].__setitem__("aplied", True), "aplied"),
+    (lambda d: d["limiting_aperture"].__setitem__("diameter_mm", 7.0), "diameter_mm"),
+    (lambda d: d.__setitem__("tracks", [{"name": "t"}]), "peak_irradiance_w_m2"),
+    (lambda d: d.__setitem__("motion", {"notes": []}), "time_span_s"),
+    (lambda d: d.__setitem__("airspace", {"zones": [], "method": "m", "visual_correction_factor": 1.0, "nte": "x"}), "nte"),
+    (lambda d: d.__setitem__("map_outputs", {"files": [], "not_written": {}, "frame": "local", "features": {"lobe": 1},
+                                             "absent": {}}), "lobe"),
 ])
 def test_schema_rejects(edit, where, validator):
     doc = _doc("plate")
@@ -80,10 +106,47 @@ def test_schema_rejects(edit, where, validator):
     bad = copy.deepcopy(doc)
     edit(bad)
     errors = list(validator.iter_errors(bad))
-    assert errors and any(where in (list(e.path) + [e.message]) or where in e.message for e in errors), \
+    assert errors and any(where in (list(e.path) + [e.message]) or where in e.message for e in _flat(errors)), \
         [(list(e.path), e.message) for e in errors]
     with pytest.raises(ValidationError, match=where):
         validate_report(bad)
+
+
+# the free objects left in the schema: the scene as read, and the targets' melt, slump, aids and
+# near-field lobe (module notes of hazard.outputs.report_schema); every other object lists its keys
+FREE = {"SceneEcho.echo", "SceneEcho.units_as_written", "SceneEcho.beam_conventions", "KeepoutSummary.near_field",
+        "TargetReport.state_name", "TargetReport.state_range", "TargetReport.melt", "TargetReport.slump", "TargetReport.aided"}
+_TYPED = {"type", "$ref", "anyOf", "oneOf", "allOf", "enum", "const"}
+
+
+def _loose(schema: dict, where: str, node) -> set:
+    """The properties under ``node`` whose schema leaves keys or types open."""
+    if not isinstance(node, dict):
+        return set()
+    loose = set()
+    if not (_TYPED & set(node)) or node.get("additionalProperties") is True or (node.get("type") == "object" and "properties" not in node
+                                                                                   and not isinstance(node.get("additionalProperties"), dict)):
+        loose.add(where)
+    if node.get("type") == "object" and "properties" in node and node.get("additionalProperties") is not False:
+        loose.add(where + " (extra keys)")
+    for key in ("items", "additionalProperties"):
+        loose |= _loose(schema, where, node.get(key)) if isinstance(node.get(key), dict) else set()
+    for alt in node.get("anyOf", []) + node.get("prefixItems", []):
+        loose |= _loose(schema, where, alt)
+    return loose
+
+
+def test_only_the_documented_objects_are_free():
+    """Every block of the stages (mpe, pulse, sdz, beam sampling and spill, verdict, motion,
+    tracks, frame, extended_source, airspace, map_outputs, ...) lists its keys and their
+    types: no free object, no additionalProperties loophole (issue 35)."""
+    schema = report_schema()
+    loose = set()
+    for name, model in [("ReportModel", schema)] + list(schema["$defs"].items()):
+        assert model.get("additionalProperties") is False, name
+        for key, sub in model["properties"].items():
+            loose |= _loose(schema, f"{name}.{key}", sub)
+    assert loose == FREE
 
 
 def test_non_finite_numbers_are_the_strings_report_writes(validator):
@@ -102,6 +165,15 @@ def test_schema_follows_the_result_types():
     assert set(TargetReport.model_fields) == set(result.targets[0].to_dict()) | {"hit"}
     cols = set(observer_columns(result)) - {"labels"}
     assert set(ObserverRow.model_fields) == cols | {"name"} | set(MOTION_COLUMNS)
+    # the blocks generated from the MPE's, the pulse train's and the DEM's dataclasses: their fields
+    # and what their to_dict writes (issue 35)
+    fields = {f.name for f in dataclasses.fields(MPEResult)} | {"standard_title"}
+    assert set(MpeBlock.model_fields) == fields == set(result.mpe.to_dict())
+    pulse = RepetitivePulseResult(1.0, "single pulse", (("single pulse", 1.0),), 1.0, 1.0, 1.0, ("step",))
+    assert set(PulseBlock.model_fields) == {f.name for f in dataclasses.fields(RepetitivePulseResult)} == set(pulse.to_dict())
+    PulseBlock.model_validate(json.loads(json.dumps(pulse.to_dict())), strict=True)
+    assert set(Uv24hBlock.model_fields) == set(uv_24h_mpe(355.0, [60.0]).to_dict())
+    assert set(DemBlock.model_fields) == {f.name for f in dataclasses.fields(DemInfo)}
 
 
 def test_cli_prints_the_schema():

@@ -75,6 +75,12 @@ def test_a_mirror_beam_in_the_open_is_not_contained_and_is_a_hazard():
     # no terrain: nothing stops it; its ground track (along +x from x ~ 0) crosses x = nohd / 2
     assert e["contained"] is False and e["leaves_boundary"] is True and e["above_horizon"] is False
     assert res.any_hazard
+    import json
+
+    from hazard.outputs.report import report_dict
+    from hazard.outputs.report_schema import validate_report
+
+    validate_report(json.loads(json.dumps(report_dict(res))))  # sdz.mirror_beams[].leaves_boundary against its schema (issue 35)
 
 
 def test_a_mirror_beam_inside_a_large_range_still_reaches_its_nohd_in_the_open():

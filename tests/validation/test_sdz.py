@@ -171,6 +171,13 @@ def test_a_sector_and_a_range_boundary():
     from shapely.geometry import box
     outside = sector.difference(box(-1500.0, -1500.0, 1500.0, 1500.0)).area
     assert z["outside_boundary_m2"] >= outside * (1 - 1e-6)
+    # report.json's sdz block with its optional keys (nominal, leaves_boundary, escaping_*) against its schema (issue 35)
+    import json
+
+    from hazard.outputs.report import report_dict
+    from hazard.outputs.report_schema import validate_report
+
+    validate_report(json.loads(json.dumps(report_dict(res))))
 
 
 def test_a_sigma_pointing_error_needs_its_multiple_and_uses_it():
