@@ -16,9 +16,9 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   its ``factors`` :class:`~hazard.physics.mpe.CorrectionFactors`), ``pulse``
   (:class:`~hazard.physics.mpe.RepetitivePulseResult`), ``frame.dem``
   (:class:`scenes.dem.DemInfo`): a field added there is in the schema;
-- from the dicts the stages write (their keys written once here, beside the function that
-  writes them; ``tests/hazard/test_report_schema.py`` checks every bundled example and the
-  scenes that write the optional keys): ``uv_24h``, ``frame``, ``extended_source``,
+- from the dicts the stages write (their keys written once here, each model naming the
+  function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
+  example, and the tests of the scenes that write the optional keys validate theirs): ``uv_24h``, ``frame``, ``extended_source``,
   ``beam.sampling``, ``beam.spill``, ``sdz``, ``verdict``, ``visual_interference``,
   ``airspace``, ``motion``, ``tracks`` and ``map_outputs``.
 
@@ -77,11 +77,6 @@ def _from_dataclass(cls, name: str, *, override: Optional[dict[str, Any]] = None
         raise TypeError(f"{cls.__name__} has no field(s) {sorted(over)}")
     fields.update({k: (t, ...) for k, t in (add or {}).items()})
     return create_model(name, __config__=ConfigDict(extra="forbid"), **fields)
-
-
-def _absent_or(t: Any) -> Any:
-    """A key the stage writes only in some cases: absent, or of type ``t``."""
-    return (t, Field(default=None))
 
 
 StageRecord = _from_dataclass(Stage, "StageRecord")

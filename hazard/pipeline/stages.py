@@ -498,7 +498,7 @@ class DirectResult:
 @dataclass(frozen=True)
 class SpillResult:
     """Stage ``spill``: report.json ``spill`` (the beam past the targets: powers [W],
-    where it is stopped, its NOHD [m])."""
+    where it is stopped, its NOHD [m]; keys and types: :class:`hazard.outputs.report_schema.SpillBlock`)."""
 
     summary: dict
 
@@ -506,7 +506,8 @@ class SpillResult:
 @dataclass(frozen=True)
 class SdzResult:
     """Stage ``sdz``: report.json ``sdz`` without ``mirror_beams`` (the laser surface
-    danger zone of the direct beam: area [m^2], reach [m], containment)."""
+    danger zone of the direct beam: area [m^2], reach [m], containment; keys and types:
+    :class:`hazard.outputs.report_schema.SdzBlock`)."""
 
     zone: dict
 
@@ -546,7 +547,7 @@ class KeepoutResult:
 @dataclass(frozen=True)
 class MirrorBeamsResult:
     """Stage ``mirror_beams``: report.json ``sdz.mirror_beams`` (each mirror beam's reach
-    [m] and containment); None when skipped (the key is then absent)."""
+    [m] and containment, :class:`hazard.outputs.report_schema.MirrorBeam`); None when skipped (the key is then absent)."""
 
     beams: list | None
 
@@ -571,7 +572,8 @@ class MotionStageResult:
 @dataclass(frozen=True)
 class AirspaceResult:
     """Stage ``airspace``: report.json ``visual_interference`` (FAA levels' distances [m])
-    and ``airspace`` (the flight zones' checks; empty without ``[airspace]`` zones)."""
+    and ``airspace`` (the flight zones' checks; empty without ``[airspace]`` zones); keys and types:
+    :class:`hazard.outputs.report_schema.VisualBlock`, :class:`~hazard.outputs.report_schema.AirspaceBlock`."""
 
     visual_interference: dict
     zones: dict = field(default_factory=dict)
