@@ -310,3 +310,20 @@ def test_observers_hazardous_over_time_are_listed_before_higher_static_ratios(mo
     rows = report.listed_rows({"hazard_ratio": ratio, "hazardous": hazardous}, len(ratio))
     assert rows.tolist() == [1, 3, 5, 6]  # the three hazardous and the unknown (NaN) ratio, in the scene's order
     assert ratio[1] == 0.01  # the caller's column is not changed
+
+
+def test_rows_json_names_of_groups_escaped_once_each():
+    """report.json's names made from the groups (each group's JSON text once, ``[i]`` put
+    inside its closing quote) load as the row dicts' names: quotes, backslashes and
+    non-ASCII in a grid group's and a one-point group's name."""
+    pytest.importorskip("pyarrow")
+    text = SCENE.replace('name = "field, west"', 'name = "yard \\"B\\" \\u00e9t\\u00e9 \\\\ 1"')
+    text += '[[observers]]\nname = "tower \\"T\\""\npoints_m = [[0.5, -20.0, 0.0]]\n'
+    res = hazard.analyze(scenes.loads(text))
+    cols = report.observer_columns(res)
+    labels = list(res.observers.labels)
+    rows = np.array([0, 7, labels.index('tower "T"'), len(labels) - 1])  # the last: a crossing point, if any
+    got = _rows_from_columns(cols, rows)
+    assert [r["name"] for r in got[:3]] == ['yard "B" \u00e9t\u00e9 \\ 1[0]', 'yard "B" \u00e9t\u00e9 \\ 1[7]', 'tower "T"']
+    assert [r["name"] for r in got] == [labels[i] for i in rows]
+    assert _same(got, json.loads(json.dumps(report.observer_rows(None, rows, cols))))
