@@ -425,7 +425,9 @@ def _arrow_block(arrow, names, values, keys):
     reads back as the same double (``1``, ``-0``, ``0.00001``, ``1e+15``; Python's repr
     writes ``1.0``, ``-0.0``, ``1e-05``, ``1000000000000000.0``), nan and inf as repr does,
     an empty cell where NaN means "not applicable", True/False. A column with the bits of
-    an earlier one (peak = static = reflected in a static scene) is formatted once."""
+    an earlier one (peak = static = reflected in a static scene) is formatted once, and
+    one that has an earlier one's bits in most rows only in the others (the exposure ratio
+    H / MPE_H is the hazard ratio E / MPE in 78 % of the rows of a static scene)."""
     pa, pc, csv = arrow
     arrays, done = [names], []
     for v, k in zip(values, keys):
@@ -436,7 +438,11 @@ def _arrow_block(arrow, names, values, keys):
         if same:
             arrays.append(same[0])
             continue
-        a = pc.if_else(pa.array(v.view(bool)), "True", "False") if v.dtype == np.int8 else _arrow_floats(arrow, v, key[1])
+        if v.dtype == np.int8:
+            a = pc.if_else(pa.array(v.view(bool)), "True", "False")
+        else:
+            near = [(w, a) for (w, kw, a) in done if kw == key and np.count_nonzero(w[:64].view(np.int64) == v[:64].view(np.int64)) * 2 > min(len(v), 64)]
+            a = _arrow_floats_like(arrow, v, key[1], *near[0]) if near else _arrow_floats(arrow, v, key[1])
         done.append((v, key, a))
         arrays.append(a)
     table = pa.Table.from_arrays(arrays, names=[str(i) for i in range(len(arrays))])
@@ -465,6 +471,18 @@ def _arrow_floats(arrow, v: np.ndarray, blank: bool):
     if nulls is None:
         return text
     return pa.StringArray.from_buffers(len(text), text.buffers()[1], text.buffers()[2], nulls, offset=text.offset)
+
+
+def _arrow_floats_like(arrow, v: np.ndarray, blank: bool, w: np.ndarray, w_text):
+    """:func:`_arrow_floats` of ``v``, the rows where it has the bits of ``w`` (whose text is
+    ``w_text``) taken from ``w_text``, the others formatted (all of them when under half match)."""
+    pa, _, _ = arrow
+    differ = np.flatnonzero(v.view(np.int64) != w.view(np.int64))
+    if 2 * len(differ) > len(v):
+        return _arrow_floats(arrow, v, blank)
+    index = np.arange(len(v))
+    index[differ] = len(v) + np.arange(len(differ))
+    return pa.concat_arrays([w_text, _arrow_floats(arrow, v[differ], blank)]).take(pa.array(index))
 
 
 def _validity(null: np.ndarray):

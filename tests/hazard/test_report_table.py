@@ -226,6 +226,31 @@ def test_arrow_cells_round_trip_any_double_many(bits, blank):
     _bits_round_trip(bits, blank)
 
 
+def _cell_is(cell, x, blank):
+    if x != x:
+        return cell == ("" if blank else "nan")
+    return np.float64(float(cell)).view(np.uint64) == np.float64(x).view(np.uint64)
+
+
+@settings(derandomize=True, deadline=None, max_examples=20)
+@given(bits=_BITS, other=_BITS, blank=st.booleans())
+def test_arrow_cells_of_a_column_mostly_equal_to_an_earlier_one(bits, other, blank):
+    """A column with an earlier column's bits in most rows (its text taken from that
+    column's, the other rows formatted): every cell of both reads back as its own double."""
+    arrow = report._arrow() or pytest.skip("pyarrow is not installed")
+    v = np.asarray(bits, np.uint64).view(np.float64)
+    w = v.copy()
+    changed = w[1::2]  # every other row, up to the other draw's length: at most half
+    changed[:len(other)] = np.asarray(other, np.uint64).view(np.float64)[:len(changed)]
+    key = "first_exceedance_s" if blank else "x"
+    names = arrow[0].array([f"o[{i}]" for i in range(len(v))])
+    lines = bytes(report._arrow_block(arrow, names, [v, w], [key, key])).decode().split("\r\n")
+    assert lines[-1] == "" and len(lines) == len(v) + 1
+    for line, x, y in zip(lines, v.tolist(), w.tolist()):
+        _, a, b = line.split(",")
+        assert _cell_is(a, x, blank) and _cell_is(b, y, blank), (line, x, y)
+
+
 def test_csv_reprs_of_repeated_and_signed_values():
     """A column's repeated values are formatted once: -0.0, NaN and inf keep their own text."""
     v = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, 0.1] * 50 + [2.5] * 30)
