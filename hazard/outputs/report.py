@@ -400,8 +400,11 @@ def _group_names(arrow, obs, rows, bases: list):
     :func:`_json_names`)."""
     pa, pc, _ = arrow
     g = obs.group[rows]
+    index = pc.cast(pa.array(obs.index_in_group[rows]), pa.string())
+    if len(g) and (g == g[0]).all() and obs.group_sizes[g[0]] > 1:  # rows of one grid (the common block): no take, no choice
+        return pc.binary_join_element_wise(bases[g[0]] + "[", index, "]", "")
     base = pa.array(bases, pa.string()).take(pa.array(g))
-    indexed = pc.binary_join_element_wise(base, "[", pc.cast(pa.array(obs.index_in_group[rows]), pa.string()), "]", "")
+    indexed = pc.binary_join_element_wise(base, "[", index, "]", "")
     return pc.if_else(pa.array(obs.group_sizes[g] == 1), base, indexed)
 
 
