@@ -96,10 +96,12 @@ def _points(zs, frame, height) -> dict:
     values :func:`to_lonlat` (``frame``) or :func:`_local` give one by one."""
     import shapely
 
-    at = [i for i, z in enumerate(zs) if z.geometry.geom_type == "Point" and not z.geometry.is_empty and not np.ndim(z.z_m)]
+    geoms = np.array([z.geometry for z in zs], dtype=object)
+    point = (shapely.get_type_id(geoms) == 0) & ~shapely.is_empty(geoms) if len(zs) else np.zeros(0, bool)  # 0: Point
+    at = [i for i in np.flatnonzero(point).tolist() if zs[i].z_m is None or type(zs[i].z_m) is float or not np.ndim(zs[i].z_m)]
     if not at:
         return {}
-    xy = shapely.get_coordinates(np.array([zs[i].geometry for i in at], dtype=object))
+    xy = shapely.get_coordinates(geoms[at])
     if frame is None:
         out = np.round(xy, 4)
     else:

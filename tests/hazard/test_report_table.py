@@ -226,6 +226,42 @@ def test_arrow_cells_round_trip_any_double_many(bits, blank):
     _bits_round_trip(bits, blank)
 
 
+def _cell_is(cell, x, blank):
+    if x != x:
+        return cell == ("" if blank else "nan")
+    return np.float64(float(cell)).view(np.uint64) == np.float64(x).view(np.uint64)
+
+
+@settings(derandomize=True, deadline=None, max_examples=10)
+@given(bits=_BITS, other=_BITS, blank=st.booleans())
+def test_arrow_cells_of_a_column_mostly_equal_to_an_earlier_one(bits, other, blank):
+    """A column with an earlier column's bits in most rows (its text taken from that
+    column's, the other rows formatted): every cell of both reads back as its own double."""
+    _mostly_equal_round_trip(bits, other, blank)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=300)
+@given(bits=_BITS, other=_BITS, blank=st.booleans())
+def test_arrow_cells_of_a_column_mostly_equal_to_an_earlier_one_many(bits, other, blank):
+    _mostly_equal_round_trip(bits, other, blank)
+
+
+def _mostly_equal_round_trip(bits, other, blank):
+    arrow = report._arrow() or pytest.skip("pyarrow is not installed")
+    v = np.asarray(bits, np.uint64).view(np.float64)
+    w = v.copy()
+    changed = w[1::2]  # every other row, up to the other draw's length: at most half
+    changed[:len(other)] = np.asarray(other, np.uint64).view(np.float64)[:len(changed)]
+    key = "first_exceedance_s" if blank else "x"
+    names = arrow[0].array([f"o[{i}]" for i in range(len(v))])
+    lines = bytes(report._arrow_block(arrow, names, [v, w], [key, key])).decode().split("\r\n")
+    assert lines[-1] == "" and len(lines) == len(v) + 1
+    for line, x, y in zip(lines, v.tolist(), w.tolist()):
+        _, a, b = line.split(",")
+        assert _cell_is(a, x, blank) and _cell_is(b, y, blank), (line, x, y)
+
+
 def test_csv_reprs_of_repeated_and_signed_values():
     """A column's repeated values are formatted once: -0.0, NaN and inf keep their own text."""
     v = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e-300, 0.1] * 50 + [2.5] * 30)
@@ -310,3 +346,24 @@ def test_observers_hazardous_over_time_are_listed_before_higher_static_ratios(mo
     rows = report.listed_rows({"hazard_ratio": ratio, "hazardous": hazardous}, len(ratio))
     assert rows.tolist() == [1, 3, 5, 6]  # the three hazardous and the unknown (NaN) ratio, in the scene's order
     assert ratio[1] == 0.01  # the caller's column is not changed
+
+
+def test_rows_json_names_of_groups_escaped_once_each():
+    """report.json's names made from the groups (each group's JSON text once, ``[i]`` put
+    inside its closing quote) load as the row dicts' names: quotes, backslashes and
+    non-ASCII in a grid group's and a one-point group's name, rows in any order."""
+    pytest.importorskip("pyarrow")
+    from hazard.pipeline.results import ObserverLabels
+    from scenes.observers import Observers
+
+    group = np.array([0] * 9 + [1] + [2] * 3)
+    index = np.array(list(range(9)) + [0] + list(range(3)))
+    obs = Observers.from_points(np.arange(39.0).reshape(13, 3), group, index, ['yard "B" \u00e9t\u00e9 \\ 1', 'tower "T"', "plain"])
+    cols = {"labels": ObserverLabels(obs), "position_m": obs.take(np.arange(13)), "hazard_ratio": np.linspace(0.0, 2.0, 13),
+            "hazardous": np.arange(13) > 6}
+    rows = np.array([9, 0, 7, 12, 10])
+    got = _rows_from_columns(cols, rows)
+    assert [r["name"] for r in got] == ['tower "T"', 'yard "B" \u00e9t\u00e9 \\ 1[0]', 'yard "B" \u00e9t\u00e9 \\ 1[7]', "plain[2]", "plain[0]"]
+    assert _same(got, json.loads(json.dumps(report.observer_rows(None, rows, cols))))
+    block = np.arange(9)  # rows of one grid: the names by one join
+    assert [r["name"] for r in _rows_from_columns(cols, block)] == [f'yard "B" \u00e9t\u00e9 \\ 1[{i}]' for i in range(9)]
