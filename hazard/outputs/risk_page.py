@@ -379,7 +379,7 @@ def map_png(doc: dict, cells: dict) -> tuple[bytes, dict]:
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
-    from hazard.canvas import new_figure
+    from hazard.canvas import new_figure, smallest_text_px
     from hazard.pictures.label_place import place_labels, text_boxes
 
     m = doc.get("map") or {}
@@ -421,6 +421,7 @@ def map_png(doc: dict, cells: dict) -> tuple[bytes, dict]:
     place_labels(ax)  # no name over another (a road's neighbouring points)
     fig.canvas.draw()
     seen["labels"] = [(t.get_text(), box.tolist()) for t, box in text_boxes(ax)]  # the names and their boxes [x0, y0, x1, y1] px
+    seen["text_px_min"], seen["width_px"] = smallest_text_px(fig, fig.dpi), int(round(fig.get_figwidth() * fig.dpi))  # its print size
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     seen |= {k: layers[k] for k in ("resolved_cells", "unresolved_cells", "below_floor", "bound")} | {"legend": lines}

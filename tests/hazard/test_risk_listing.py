@@ -220,3 +220,18 @@ def test_map_names_only_resolved_points_with_their_estimate_and_no_name_covers_a
         for j in range(i + 1, len(boxes)):
             a, b = boxes[i], boxes[j]
             assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (names[i], names[j])
+
+
+@pytest.mark.skipif(not HAS_MPL, reason="matplotlib not installed")
+def test_map_prints_its_smallest_text_at_6_pt_on_the_portrait_page():
+    """probability_map.png goes full width on a portrait A4 page (210 mm less 2 x 12 mm
+    margins) in the review page and risk.html (issue 34 leftover d)."""
+    from matplotlib.image import imread
+
+    from tests.hazard.test_picture_print import printed_pt
+
+    doc = {"scene": "s", "draws": DRAWS, "observers": [], "map": {"spacing_m": 10.0, "eye_height_m": 1.7}}
+    png, seen = map_png(doc, _cells())
+    width_px = imread(io.BytesIO(png)).shape[1]
+    assert width_px == seen["width_px"]
+    assert printed_pt(seen["text_px_min"], width_px, page_in=(210.0 - 2 * 12.0) / 25.4) >= 6.0
