@@ -132,6 +132,23 @@ def _check_ends(result):
         reach = min(float(nohd), 1e5, math.inf if stop is None else float(stop))
         assert float(((ring - start) @ u).max()) <= reach * (1 + 1e-6) + 1e-3, (target, eye)
     assert all("(" in t for t in texts)  # every end says why
+    _check_elevation(result)
+
+
+def _check_elevation(result):
+    """The elevation view: the aim line (solid and dotted past the ground) no longer than
+    the danger zone's reach, each mirror beam no longer than its plan line (a projection)."""
+    from hazard.outputs.finding_geometry import mirror_segments
+    from hazard.pictures.elevation_view import ElevationViewDisplay
+
+    e = ElevationViewDisplay.from_result(result)
+    r = float((result.sdz or {}).get("max_range_m") or 0.0)
+    ends = [e.aim_sz[1]] + ([e.aim_past[1]] if e.aim_past is not None else [])
+    drawn = max(float(np.hypot(*(p - e.aim_sz[0]))) for p in ends)
+    assert drawn <= min(r, 1e5) * (1 + 1e-9) + 1e-6, (drawn, r)
+    plan = {name: float(np.linalg.norm(b - a)) for name, a, b in mirror_segments(result)}
+    for name, a, b in e.mirrors:
+        assert float(np.hypot(*(b - a))) <= plan[name] * (1 + 1e-9) + 1e-6, name
 
 
 @pytest.mark.slow  # 4.4 s (the mirror zones); the berm scene above is its fast twin
