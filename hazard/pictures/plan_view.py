@@ -331,10 +331,9 @@ def beam_ends(result, aim_end_xy, off) -> list:
     laser = (np.asarray(result.scene.laser_position_m, float) + off)[:2]
     aim = np.asarray(result.scene.laser_direction, float)[:2]
     horizontal = float(np.hypot(*aim))
-    passes = _passed_targets(result)
     if z.get("polygon_m"):
         r = float(z.get("max_range_m") or 0.0)
-        why = _zone_why(z, r, passes)
+        why = _zone_why(result, z, r)
         run = float(np.hypot(*(np.asarray(aim_end_xy, float) - laser)))
         text = f"danger zone ends at {_metres(min(r, 1e5))} ({why})"
         if horizontal > 0 and run < 0.99 * min(r, 1e5) * horizontal:  # the aim's own direction stops sooner
@@ -347,23 +346,26 @@ def beam_ends(result, aim_end_xy, off) -> list:
         ring = np.asarray(a["polygon_m"], float)
         end = clip_to_zone(np.array([laser, laser + aim * min(r, 1e5)]), ring)[1]
         eye = f"{a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics"
-        out.append((end, f"danger zone through {eye} ends at {_metres(min(r, 1e5))} ({_zone_why(a, r, passes)})"))
+        out.append((end, f"danger zone through {eye} ends at {_metres(min(r, 1e5))} ({_zone_why(result, a, r)})"))
     out += _mirror_ends(result, off)
     return out
 
 
-def _passed_targets(result) -> str:
+def _passed_targets(result, reach_m) -> str:
     """``"; 'a', 'b' not a backstop (the beam can miss it)"`` for the lit targets a danger
-    zone runs past (the text's reason, :mod:`hazard.pipeline.verdict`), or ""."""
-    lit = [t.name for t in result.targets if t.spot_power_w > 0]
+    zone reaching ``reach_m`` [m] from the laser runs past (the text's reason,
+    :mod:`hazard.pipeline.verdict`; a target beyond the zone's end is not named), or ""."""
+    near = {sp.target.name: float(np.min(sp.range_from_laser_m)) for sp in result.spots if len(sp.range_from_laser_m)}
+    lit = [t.name for t in result.targets if t.spot_power_w > 0 and near.get(t.name, math.inf) < reach_m]
     if not lit:
         return ""
     names = ", ".join(repr(n) for n in lit[:3]) + (", ..." if len(lit) > 3 else "")
     return f"; {names} not a backstop: the beam can miss {'it' if len(lit) == 1 else 'them'}"
 
 
-def _zone_why(zone, reach_m, passes) -> str:
+def _zone_why(result, zone, reach_m) -> str:
     """Why a danger zone ``zone`` (report.json ``sdz`` or one of its ``aided``) ends at ``reach_m``."""
+    passes = _passed_targets(result, reach_m)
     if zone.get("contained"):
         return "every direction stopped by a backstop"
     if not math.isfinite(reach_m) or reach_m > 1e5:

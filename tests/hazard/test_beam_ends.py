@@ -9,6 +9,7 @@ not from the engine."""
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -120,6 +121,11 @@ def _check_ends(result):
         if math.isfinite(r):  # drawn no farther than its reach, plus its half-width padded (shapely's cap circumscribed)
             pad = zone["hazard_half_width_m"] / math.cos(math.pi / (4 * BUFFER_QUAD_SEGS))
             assert np.hypot(*(ring - laser[:2]).T).max() <= r + pad + 1e-3, name
+        near = {sp.target.name: float(np.min(sp.range_from_laser_m)) for sp in result.spots}
+        for t in texts:  # a target named as passed lies within the zone's reach (airspace's board, 2 km out, is past its 990 m)
+            if t.startswith(f"{name} ends at") and "not a backstop" in t:
+                named = re.findall(r"'([^']+)'", t.split("(its NOHD; ", 1)[1] if "(its NOHD; " in t else t)
+                assert named and all(near[n] < min(r, 1e5) for n in named), (t, near, r)
         shared = name != "danger zone" and r <= float(z.get("max_range_m", 0.0)) * (1 + 1e-9)
         assert shared or any(t.startswith(f"{name} ends at") or (name == "danger zone" and t.startswith("aim line ends")) for t in texts), name
     for m in (z.get("mirror_beams") or []):
@@ -149,6 +155,17 @@ def _check_elevation(result):
     plan = {name: float(np.linalg.norm(b - a)) for name, a, b in mirror_segments(result)}
     for name, a, b in e.mirrors:
         assert float(np.hypot(*(b - a))) <= plan[name] * (1 + 1e-9) + 1e-6, name
+
+
+@pytest.mark.slow  # a second analysis (2 s); the bundled airspace case of the test below checks the same
+def test_a_target_beyond_the_zones_end_is_not_named_as_passed(tmp_path):
+    """The glass moved 400 m out, past the naked zone's 306 m end: that end says only "its
+    NOHD" (airspace's said the board 2 km out was no backstop for a 990 m zone)."""
+    path = tmp_path / "far.toml"
+    path.write_text(SCENE.replace("center_m = [0.0, 0.0, 0.0]", "center_m = [0.0, 300.0, 0.0]"))
+    res = hazard.analyze(scenes.load(path))
+    (text,) = [t for _, t in _ends(res) if t.startswith("danger zone ends")]
+    assert text == f"danger zone ends at {_direct_nohd_m():.3g} m (its NOHD)"
 
 
 @pytest.mark.slow  # 4.4 s (the mirror zones); the berm scene above is its fast twin
