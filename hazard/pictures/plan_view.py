@@ -32,7 +32,7 @@ from hazard.physics.mirror_zone import mirror_zones
 from hazard.pictures.plots import DisplayBase
 from hazard.outputs.finding_geometry import drawn_length_m as _drawn_length_m, lobe_rings, mirror_lines, mirror_segments
 
-__all__ = ["legend_below", "PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments", "mirror_lines"]
+__all__ = ["legend_below", "two_lines", "PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments", "mirror_lines"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
 MIRROR_ZONE_LABEL = "mirror beams' hazard zones (their width; dashed: through optics)"
@@ -157,6 +157,7 @@ class PlanViewDisplay(DisplayBase):
                     label="flight zones' worst points (FAA levels)" if k == 0 else None)
             closed = np.vstack([ring, ring[:1]])
             ax.fill(*closed.T, fc="none", ec=colour, lw=1.4, hatch="//" if exceeded else None, ls="-" if exceeded else "--")
+            text = two_lines(text)  # one line of ~95 characters ran out of a 4.5 in panel
             ax.annotate(text, ring.mean(axis=0), fontsize=6, ha="center", va="center",
                         color=colour, zorder=11, bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
             mark(ax, [path], text, closed, "polygon")
@@ -314,6 +315,11 @@ class PlanViewDisplay(DisplayBase):
     def _hazardous_paths(self) -> list:
         rows = self.paths.get("observers", {})
         return [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)]
+
+
+def two_lines(text: str) -> str:
+    """A flight zone's label broken after its name (``"name (...): verdict"``), or as it is."""
+    return text.replace("): ", "):\n", 1)
 
 
 def _metres(d) -> str:
