@@ -34,7 +34,7 @@ def mirror_lines(result) -> list:
         row = rows.get(sp.target.name)
         if not sp.material.has_specular or row is None:
             continue
-        reach = [(eye, _drawn_length_m(nohd, stop)) for eye, _, _, nohd, stop in eye_rows(result, row) if nohd]
+        reach = [(eye, drawn_length_m(nohd, stop)) for eye, _, _, nohd, stop in eye_rows(result, row) if nohd]
         if not reach:
             continue
         eye, length = reach[0] if reach[0][0] == "naked eye" else max(reach, key=lambda e: e[1])
@@ -44,7 +44,7 @@ def mirror_lines(result) -> list:
     return out
 
 
-def _drawn_length_m(nohd_m, stop_m) -> float:
+def drawn_length_m(nohd_m, stop_m) -> float:
     """How far a mirror beam is drawn [m]: its NOHD (100 km when infinite), or where the analysis stops it when sooner."""
     length = float(nohd_m) if math.isfinite(nohd_m) else 1e5
     return float(stop_m) if stop_m is not None and math.isfinite(stop_m) and 0.0 <= stop_m < length else length

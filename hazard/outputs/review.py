@@ -74,7 +74,8 @@ CAPTIONS = {
     "keepout.png": "3-D close view of the keep-out lobes at true scale",
     "overview.png": "3-D overview of everything hazardous",
     "lobe.gif": "The dynamic lobe over the history (animation; a PDF shows its first frame)",
-    "probability_map.png": "Probabilistic risk (hazard risk): the 95 % upper bound of P(E > MPE) per map cell, observers overlaid",
+    "probability_map.png": ("Probabilistic risk (hazard risk): the estimate of P(E > MPE) per map cell where resolved, hatched where "
+                            "only the 95 % upper bound is known, observers overlaid"),
 }
 MIME = {".png": "image/png", ".gif": "image/gif"}
 SECTIONS = {  # id -> heading, in page order

@@ -83,11 +83,13 @@ def direct_steps(title: str, p_w: float, limit_w_m2: float, a_m: float, phi_rad:
     return {"title": title, "lines": lines + more, "result_m": r, "check": _check(r, reported, key), "key": key}
 
 
-def lobe_steps(title: str, lobe: dict, mpe_w_m2: float, mu_per_m: float, key: str) -> dict:
+def lobe_steps(title: str, lobe: dict, mpe_w_m2: float, mu_per_m: float, key: str, gain: float = 1.0, reported=None) -> dict:
     """A reflected lobe's NOHD from its peak radiant intensity (``keepout_*``), or why there
-    is no closed-form step."""
+    is no closed-form step; through an optical aid (``gain`` K, ``reported`` the aid's
+    NOHD) the ENOHD, K I in place of I (ANSI Z136.1 B5: the aid collects K times the
+    eye's power)."""
     i_w_sr, p_w = lobe.get("peak_intensity_w_sr"), lobe.get("power_w")
-    reported = lobe.get("max_nohd_m")
+    reported = lobe.get("max_nohd_m") if reported is None else reported
     if i_w_sr is None:
         why = ("report.json holds no peak intensity for it (a report of an older version, a lobe that reaches nothing, "
                "or a slumping spot whose NOHD is the union over its surface normals)")
@@ -98,8 +100,12 @@ def lobe_steps(title: str, lobe: dict, mpe_w_m2: float, mu_per_m: float, key: st
     fr = f", f_r cos(theta_r) = I / P = {g(i_w_sr / p_w)} 1/sr" if p_w else ""
     lines.append(f"P = {g(p_w) if p_w is not None else 'not given'} W (the spot's power), I = {g(i_w_sr)} W/sr{fr}, "
                  f"MPE = {g(mpe_w_m2)} W/m², mu = {g(mu_per_m)} 1/m")
-    r0 = math.sqrt(i_w_sr / mpe_w_m2)
-    lines.append(f"R0 = sqrt(I / MPE) = sqrt({g(i_w_sr)} / {g(mpe_w_m2)}) = {g(r0)} m")
+    if gain != 1.0:
+        lines[0] = "K I exp(-mu R) / R^2 = MPE, I = f_r cos(theta_r) P: the lobe's radiant intensity toward its farthest direction"
+        lines.append(f"K = {g(gain)} (the aid's gain), K I = {g(gain)} * {g(i_w_sr)} = {g(gain * i_w_sr)} W/sr")
+    r0 = math.sqrt(gain * i_w_sr / mpe_w_m2)
+    lines.append(f"R0 = sqrt(I / MPE) = sqrt({g(i_w_sr)} / {g(mpe_w_m2)}) = {g(r0)} m" if gain == 1.0 else
+                 f"R0 = sqrt(K I / MPE) = sqrt({g(gain * i_w_sr)} / {g(mpe_w_m2)}) = {g(r0)} m")
     if mu_per_m == 0.0 or r0 == 0.0:
         r = r0
         lines.append(f"mu = 0: NOHD = R0 = {g(r)} m")
@@ -268,12 +274,28 @@ def _lobe_blocks(doc: dict, ln: dict) -> list:
         if dy.get("max_nohd_m") and dy != st:
             out.append(lobe_steps(f"target {name}: reflected lobe NOHD (dynamic)", dy, ln["mpe"], ln["mu"],
                                   f"targets[{name}].keepout_dynamic.max_nohd_m"))
+        out += _aided_lobe_blocks(t, st, dy, ln)
         if t.get("specular_nohd_static_m") is not None:
             out.append({"title": f"target {name}: mirror beam NOHD", "result_m": None, "key": "specular_nohd_static_m",
                         "lines": ["no closed-form step: the mirror beam's NOHD is solved per sample of the spot from its peak "
                                   "and wavefront radius (hazard.physics.specular), not one formula; report.json "
                                   f"specular_nohd_static_m = {g(t['specular_nohd_static_m'])} m"],
                         "check": {"text": "", "agrees": None}})
+    return out
+
+
+def _aided_lobe_blocks(t: dict, st: dict, dy: dict, ln: dict) -> list:
+    """A target's lobe ENOHDs through each optical aid (``targets[].aided``), static and
+    (when it differs) dynamic, from the lobe's peak intensity times the aid's gain."""
+    out, name = [], t.get("name", "?")
+    for i, a in enumerate(t.get("aided") or []):
+        k = a.get("gain")
+        eye = f"{g(a.get('magnification'))}x{g(1e3 * float(a.get('objective_diameter_m') or 0.0))} optics"
+        for kind, lobe, field in (("static", st, "nohd_static_m"), ("dynamic", dy, "nohd_dynamic_m")):
+            if k is None or not a.get(field) or (kind == "dynamic" and dy == st and a.get(field) == a.get("nohd_static_m")):
+                continue
+            out.append(lobe_steps(f"target {name}: reflected lobe ENOHD through {eye} ({kind})", lobe, ln["mpe"], ln["mu"],
+                                  f"targets[{name}].aided[{i}].{field}", gain=float(k), reported=a.get(field)))
     return out
 
 

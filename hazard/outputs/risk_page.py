@@ -41,7 +41,7 @@ HTML_NAME = "risk.html"
 PNG_NAME = "probability_map.png"
 MAP_CSV_NAME = "probability_map.csv"
 ROWS_SHOWN = 200  # observer rows per list on the page (resolved, unresolved); the rest are counted
-MAP_LABELS_SHOWN = 20  # observers named on the map (the highest estimates); the others are drawn unlabelled
+MAP_LABELS_SHOWN = 8  # resolved observers named on the map with their estimate (the highest); the others are drawn unlabelled
 MAP_LEVELS = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1.0)  # the map's colour bands (log scale)
 MAP_TITLE = "P(E > MPE): the estimate where resolved, hatched where only a bound is known"
 UNDER_COLOUR = "#d6e2ee"  # resolved cells whose estimate is below the floor MAP_LEVELS[0]
@@ -336,7 +336,10 @@ def _hatch_cells(ax, layers: dict) -> None:
 
 
 def _draw_observers(ax, observers: list, xe, ye) -> dict:
-    """Observer points inside the map as black dots, the ``MAP_LABELS_SHOWN`` worst named."""
+    """Observer points inside the map as black dots; the ``MAP_LABELS_SHOWN`` resolved ones
+    with the highest estimates named with it (a zero-hit point has no estimate to name:
+    named, the 20 of a road crowded each other illegible and hid the hot spot), placed
+    apart (:func:`hazard.pictures.label_place.place_labels`)."""
     import matplotlib.patheffects as pe
 
     inside = [r for r in sorted(observers, key=worst_first)
@@ -345,10 +348,12 @@ def _draw_observers(ax, observers: list, xe, ye) -> dict:
         xy = np.array([r["position_m"][:2] for r in inside], float)
         ax.scatter(xy[:, 0], xy[:, 1], s=22, c="black", edgecolors="white", linewidths=0.8, zorder=3)
     halo = [pe.withStroke(linewidth=2.5, foreground="white")]
-    for r in inside[:MAP_LABELS_SHOWN]:
-        ax.annotate(str(r.get("name", "?")), r["position_m"][:2], xytext=(5, 4), textcoords="offset points", fontsize=8,
-                    zorder=4, path_effects=halo, parse_math=False, annotation_clip=True)
-    return {"drawn": len(inside), "labelled": min(len(inside), MAP_LABELS_SHOWN), "outside": len(observers) - len(inside)}
+    named = [r for r in inside if is_resolved(r)][:MAP_LABELS_SHOWN]
+    for r in named:
+        ax.annotate(f"{r.get('name', '?')}: P {fmt_p(r.get('probability_exceed'), sig=2)}", r["position_m"][:2], xytext=(5, 4),
+                    textcoords="offset points", fontsize=8, zorder=4, path_effects=halo, parse_math=False, annotation_clip=True)
+    return {"drawn": len(inside), "labelled": len(named), "outside": len(observers) - len(inside),
+            "unresolved_drawn": sum(not is_resolved(r) for r in inside)}
 
 
 def _legend_text(layers: dict, draws) -> list:
@@ -372,8 +377,10 @@ def map_png(doc: dict, cells: dict) -> tuple[bytes, dict]:
     what was drawn (observers drawn, labelled and left outside; cell counts; the bound)."""
     from matplotlib import colormaps
     from matplotlib.colors import BoundaryNorm, ListedColormap
-    from matplotlib.figure import Figure
     from matplotlib.patches import Patch
+
+    from hazard.canvas import new_figure, smallest_text_px
+    from hazard.pictures.label_place import place_labels, text_boxes
 
     m = doc.get("map") or {}
     layers = map_layers(cells, m.get("spacing_m"))
@@ -381,7 +388,7 @@ def map_png(doc: dict, cells: dict) -> tuple[bytes, dict]:
     colours = colormaps["YlOrRd"](np.linspace(0.12, 1.0, len(MAP_LEVELS) - 1))
     cmap = ListedColormap(colours).with_extremes(under=UNDER_COLOUR, bad=(0, 0, 0, 0))
     norm = BoundaryNorm(MAP_LEVELS, cmap.N)
-    fig = Figure(figsize=(8.0, 7.6), dpi=110, layout="constrained")
+    fig = new_figure((8.0, 7.6), 110, layout="constrained")  # an Agg canvas: the labels are placed on its renderer
     ax = fig.add_subplot()
     few = max(layers["estimate"].shape) <= 60  # cells large enough on the page to outline
     mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(layers["estimate"]), cmap=cmap, norm=norm, zorder=2,
@@ -410,6 +417,11 @@ def map_png(doc: dict, cells: dict) -> tuple[bytes, dict]:
                  f"{fmt_number(m.get('eye_height_m'), 'm')}; {layers['resolved_cells']} cell(s) resolved, "
                  f"{layers['unresolved_cells']} only bounded", fontsize=9, color="#5a5a5a", parse_math=False)
     ax.grid(True, color="#888888", linewidth=0.3, alpha=0.5)
+    fig.canvas.draw()
+    place_labels(ax)  # no name over another (a road's neighbouring points)
+    fig.canvas.draw()
+    seen["labels"] = [(t.get_text(), box.tolist()) for t, box in text_boxes(ax)]  # the names and their boxes [x0, y0, x1, y1] px
+    seen["text_px_min"], seen["width_px"] = smallest_text_px(fig, fig.dpi), int(round(fig.get_figwidth() * fig.dpi))  # its print size
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     seen |= {k: layers[k] for k in ("resolved_cells", "unresolved_cells", "below_floor", "bound")} | {"legend": lines}
@@ -439,7 +451,8 @@ def _map_picture(doc: dict, out: Path) -> tuple[dict | None, str]:
     uri = f"data:image/png;base64,{base64.b64encode(data).decode('ascii')}"
     said = (f"{seen['resolved_cells']} cell(s) resolved (the estimate drawn), {seen['unresolved_cells']} without an "
             f"exceedance (hatched: only the upper bound known)" + "".join(f"; {x}" for x in seen["legend"])
-            + f". {seen['drawn']} observer point(s) drawn, {seen['labelled']} named (the highest estimates)"
+            + f". {seen['drawn']} observer point(s) drawn, {seen['labelled']} named with their estimate (the highest resolved; "
+            f"the {seen.get('unresolved_drawn', 0)} without an exceedance unnamed)"
             + (f"; {seen['outside']} outside the map not drawn" if seen["outside"] else "") + f"; saved as {PNG_NAME}.")
     return {"name": PNG_NAME, "caption": MAP_CAPTION, "uri": uri, "kb": len(data) / 1024.0, "stale": False}, said
 

@@ -28,7 +28,7 @@ import numpy as np
 from hazard.pictures import palette as C
 from hazard.outputs.figure_index import lobe_paths, mark
 from hazard.pictures.label_place import place_labels
-from hazard.pictures.plan_view import aim_reach_m, draw_mirrors, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, square_limits, two_panels
+from hazard.pictures.plan_view import aim_reach_m, draw_mirrors, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, square_limits, two_lines, two_panels
 from hazard.outputs.finding_geometry import mirror_segments
 from hazard.pictures.plots import DisplayBase
 
@@ -194,6 +194,7 @@ class ElevationViewDisplay(DisplayBase):
                     label="flight zones' worst points (FAA levels)" if k == 0 else None)
             closed = np.vstack([box, box[:1]])
             ax.fill(*closed.T, fc="none", ec=colour, lw=1.2, hatch="//" if exceeded else None, ls="-" if exceeded else "--")
+            text = two_lines(text)  # as in the plan view: one line ran out of the panel
             ax.annotate(text, box.mean(axis=0), fontsize=6, ha="center", va="center", color=colour, zorder=11, wrap=True,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
             mark(ax, [path], text, closed, "polygon")

@@ -30,9 +30,9 @@ from hazard.pictures import palette as C
 from hazard.pictures.label_place import place_labels
 from hazard.physics.mirror_zone import mirror_zones
 from hazard.pictures.plots import DisplayBase
-from hazard.outputs.finding_geometry import lobe_rings, mirror_lines, mirror_segments
+from hazard.outputs.finding_geometry import drawn_length_m as _drawn_length_m, lobe_rings, mirror_lines, mirror_segments
 
-__all__ = ["legend_below", "PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments", "mirror_lines"]
+__all__ = ["legend_below", "two_lines", "PlanViewDisplay", "hazardous_labels", "lobe_rings", "label_points", "mirror_segments", "mirror_lines"]
 
 MIRROR_LABEL = "mirror beams (to the specular NOHD, or where a backstop stops them)"
 MIRROR_ZONE_LABEL = "mirror beams' hazard zones (their width; dashed: through optics)"
@@ -157,6 +157,7 @@ class PlanViewDisplay(DisplayBase):
                     label="flight zones' worst points (FAA levels)" if k == 0 else None)
             closed = np.vstack([ring, ring[:1]])
             ax.fill(*closed.T, fc="none", ec=colour, lw=1.4, hatch="//" if exceeded else None, ls="-" if exceeded else "--")
+            text = two_lines(text)  # one line of ~95 characters ran out of a 4.5 in panel
             ax.annotate(text, ring.mean(axis=0), fontsize=6, ha="center", va="center",
                         color=colour, zorder=11, bbox=dict(boxstyle="round,pad=0.2", fc="white", ec=colour, lw=0.5, alpha=0.85))
             mark(ax, [path], text, closed, "polygon")
@@ -316,35 +317,87 @@ class PlanViewDisplay(DisplayBase):
         return [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)]
 
 
+def two_lines(text: str) -> str:
+    """A flight zone's label broken after its name (``"name (...): verdict"``), or as it is."""
+    return text.replace("): ", "):\n", 1)
+
+
 def _metres(d) -> str:
     return f"{d / 1000:.3g} km" if d >= 1000 else f"{d:.3g} m"
 
 
 def beam_ends(result, aim_end_xy, off) -> list:
-    """(xy, text) where the drawn danger zone's aim line and each mirror beam end, world
-    x, y, and why there: the NOHD, a backstop, or the 100 km drawn of an unbounded zone."""
+    """(xy, text) where the drawn danger zone's aim line, each aided danger zone and each
+    mirror beam (naked eye and through each aid) end, world x, y, and why there: the NOHD
+    (with the lit targets named when the beam passes them: a target is not a backstop), a
+    backstop, or the 100 km drawn of an unbounded zone. The same reach and reason as the
+    text (report.json ``sdz``), so picture and text agree."""
     z = getattr(result, "sdz", None) or {}
     out = []
+    laser = (np.asarray(result.scene.laser_position_m, float) + off)[:2]
+    aim = np.asarray(result.scene.laser_direction, float)[:2]
+    horizontal = float(np.hypot(*aim))
     if z.get("polygon_m"):
         r = float(z.get("max_range_m") or 0.0)
-        why = ("every direction stopped by a backstop" if z.get("contained") else
-               "unbounded: drawn to 100 km" if not math.isfinite(r) or r > 1e5 else "its NOHD")
-        laser = (np.asarray(result.scene.laser_position_m, float) + off)[:2]
+        why = _zone_why(result, z, r)
         run = float(np.hypot(*(np.asarray(aim_end_xy, float) - laser)))
-        horizontal = float(np.hypot(*np.asarray(result.scene.laser_direction, float)[:2]))
         text = f"danger zone ends at {_metres(min(r, 1e5))} ({why})"
         if horizontal > 0 and run < 0.99 * min(r, 1e5) * horizontal:  # the aim's own direction stops sooner
             text = f"aim line ends at {_metres(run / horizontal)}; the zone reaches {_metres(min(r, 1e5))} ({why})"
         out.append((np.asarray(aim_end_xy, float), text))
+    for a in z.get("aided") or []:
+        r = float(a.get("max_range_m") or 0.0)
+        if not (a.get("polygon_m") and r > float(z.get("max_range_m") or 0.0) * (1 + 1e-9) and horizontal > 0):
+            continue  # an aided zone ending where the naked one does shares its end mark
+        ring = np.asarray(a["polygon_m"], float)
+        end = clip_to_zone(np.array([laser, laser + aim * min(r, 1e5)]), ring)[1]
+        eye = f"{a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics"
+        out.append((end, f"danger zone through {eye} ends at {_metres(min(r, 1e5))} ({_zone_why(result, a, r)})"))
+    out += _mirror_ends(result, off)
+    return out
+
+
+def _passed_targets(result, reach_m) -> str:
+    """``"; 'a', 'b' not a backstop (the beam can miss it)"`` for the lit targets a danger
+    zone reaching ``reach_m`` [m] from the laser runs past (the text's reason,
+    :mod:`hazard.pipeline.verdict`; a target beyond the zone's end is not named), or ""."""
+    near = {sp.target.name: float(np.min(sp.range_from_laser_m)) for sp in result.spots if len(sp.range_from_laser_m)}
+    lit = [t.name for t in result.targets if t.spot_power_w > 0 and near.get(t.name, math.inf) < reach_m]
+    if not lit:
+        return ""
+    names = ", ".join(repr(n) for n in lit[:3]) + (", ..." if len(lit) > 3 else "")
+    return f"; {names} not a backstop: the beam can miss {'it' if len(lit) == 1 else 'them'}"
+
+
+def _zone_why(result, zone, reach_m) -> str:
+    """Why a danger zone ``zone`` (report.json ``sdz`` or one of its ``aided``) ends at ``reach_m``."""
+    passes = _passed_targets(result, reach_m)
+    if zone.get("contained"):
+        return "every direction stopped by a backstop"
+    if not math.isfinite(reach_m) or reach_m > 1e5:
+        return "unbounded: drawn to 100 km" + passes
+    return "its NOHD" + passes
+
+
+def _mirror_ends(result, off) -> list:
+    """(xy, text) where each mirror beam's line ends and, for each aid whose zone is drawn
+    farther, where that zone ends, world x, y, with why (report.json ``sdz.mirror_beams``)."""
     from hazard.physics.mirror_zone import eye_rows
 
+    out = []
     rows = {t.name: t for t in result.targets}
     for name, a, b, eye in mirror_lines(result):
         length = float(np.linalg.norm(b - a))
-        full = float({e: nohd for e, _, _, nohd, _ in eye_rows(result, rows[name])}.get(eye) or 0.0)
-        why = "stopped by a backstop" if length < min(full, 1e5) * (1 - 1e-9) else "its specular NOHD"
-        whom = "" if eye == "naked eye" else f", hazardous only through {eye}"
-        out.append(((b + off)[:2], f"mirror beam of {name} ends at {_metres(length)} ({why}{whom})"))
+        u = (b - a) / length if length > 0 else np.zeros(3)
+        for e, _, _, nohd, stop in eye_rows(result, rows[name]):
+            drawn = _drawn_length_m(float(nohd), stop) if nohd else 0.0
+            if e != eye and not drawn > length * (1 + 1e-9):
+                continue  # an aid's beam ending where the drawn line does shares its end mark
+            full = min(float(nohd), 1e5)
+            why = "stopped by a backstop" if drawn < full * (1 - 1e-9) else "its specular NOHD"
+            whom = "" if eye == "naked eye" or e != eye else f", hazardous only through {eye}"
+            through = "" if e == eye else f" through {e}"
+            out.append(((a + u * drawn + off)[:2], f"mirror beam of {name}{through} ends at {_metres(drawn)} ({why}{whom})"))
     return out
 
 

@@ -44,7 +44,7 @@ from hazard.pictures import palette as C
 from hazard.physics.beam import perp_basis as _perp_basis
 from hazard.physics.keepout import nohd_range_fn
 from hazard.outputs.figure_index import finding_paths, lobe_paths, view_entry
-from hazard.pictures.picture import compose, write_png
+from hazard.pictures.picture import TAG_PX, compose, text_px_min, write_png
 from hazard.pictures.plan_view import LABELLED, nice_length_m, aim_reach_m, hazardous_labels
 from hazard.outputs.finding_geometry import mirror_segments
 from hazard.progress import terminal_bar
@@ -334,7 +334,7 @@ def _add_rings(p, result, framing, legend, limit=None):
         where.append(drawn[30])
     if labels:
         p.__dict__.setdefault("_hazard_tags", []).extend(labels)
-        p.add_point_labels(np.array(where), labels, font_size=11, text_color="#444444", shape_opacity=0.0, show_points=False,
+        p.add_point_labels(np.array(where), labels, font_size=TAG_PX, text_color="#444444", shape_opacity=0.0, show_points=False,
                            always_visible=True)
         legend.append(("range rings about the laser" + (" (true distances)" if framing.compressed else ""), C.RINGS, "line"))
 
@@ -439,7 +439,7 @@ def _add_observers(p, result, blocks, framing, legend):
     p.add_mesh(pv.PolyData(obs.points[bad]), color=C.HAZARDOUS, point_size=18, render_points_as_spheres=True, lighting=False)
     labels, more = hazardous_labels(result, obs.points)
     p.__dict__.setdefault("_hazard_tags", []).extend(str(k + 1) for k in range(len(labels)))
-    p.add_point_labels(np.array([xy for xy, _ in labels]), [str(k + 1) for k in range(len(labels))], font_size=12, bold=True,
+    p.add_point_labels(np.array([xy for xy, _ in labels]), [str(k + 1) for k in range(len(labels))], font_size=TAG_PX, bold=True,
                        text_color="black", shape_color="white", shape_opacity=0.85, show_points=False, always_visible=True)
     extra = f"; {more} more in observers.csv" if more else ""
     legend.append((f"observers at or above the MPE ({int(bad.sum())}{extra}), the worst numbered:", C.HAZARDOUS, "marker"))
@@ -463,7 +463,7 @@ def _add_nohd_labels(p, result, framing, legend):
         points.append(sp.centroid + tr.dynamic_lobe.max_direction_world * tr.dynamic_lobe.max_range_m)
     if points:
         p.__dict__.setdefault("_hazard_tags", []).extend(names)
-        p.add_point_labels(framing.draw(np.array(points)), names, font_size=12, text_color="black", shape_color="white",
+        p.add_point_labels(framing.draw(np.array(points)), names, font_size=TAG_PX, text_color="black", shape_color="white",
                            shape_opacity=0.8, always_visible=True, show_points=False)
 
 
@@ -486,7 +486,8 @@ def _draw(result, blocks, framing, window_size):
     _add_airspace(p, result, blocks, framing, tube, legend)
     _add_observers(p, result, blocks, framing, legend)
     _add_nohd_labels(p, result, framing, legend)
-    p.show_axes()
+    p.add_axes(labels_off=True, line_width=3)  # its X Y Z letters printed at 3 pt: said in the legend instead
+    legend.append(("axes, lower left: red x (east), green y (north), blue z (up)", None, "text"))
     c = framing.bounds.mean(axis=1)
     p.camera_position = [tuple(c + ISO_VIEW), tuple(c), (0.0, 0.0, 1.0)]
     p.reset_camera(bounds=framing.bounds.ravel())
@@ -642,6 +643,7 @@ def keepout(result, outdir, *, lobe_resolution_deg=3.0, window_size=(1280, 900),
             index[f"{name}.png"] = view_entry("3d", _panel(result, frames[name], title), _notes(result, blocks, frames[name], legend),
                                               _world_to_clip(p, window_size), shown)
             index[f"{name}.png"]["not_drawn"] = not_drawn(result)
+            index[f"{name}.png"]["text_px_min"] = round(text_px_min(legend, lines, TAG_PX if p.__dict__.get("_hazard_tags") else None), 2)
             p.close()
             picture, layout[name] = compose(img, legend, lines)
             paths[name] = write_png(picture, out / f"{name}.png")

@@ -95,7 +95,7 @@ def _checked(result, monkeypatch):
 
     figs = []
     entry = figure_index.figure_entry
-    monkeypatch.setattr(figure_index, "figure_entry", lambda fig, view: (figs.append(fig), entry(fig, view))[1])
+    monkeypatch.setattr(figure_index, "figure_entry", lambda fig, view, **kw: (figs.append(fig), entry(fig, view, **kw))[1])
     t = time.perf_counter()
     out = run_figures(result)
     return out, figs, time.perf_counter() - t

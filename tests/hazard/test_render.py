@@ -9,6 +9,7 @@ import pytest
 
 from hazard.cli import main
 from tests._bundled import bundled
+from tests.hazard.test_picture_print import printed_pt
 
 pv = pytest.importorskip("pyvista")
 
@@ -34,6 +35,9 @@ def test_keepout_render_shows_both_lobes(mirror_result, tmp_path):
     non_white = np.any(img < 235, axis=-1).mean()
     assert non_white > 0.05  # not a blank picture (colours per legend entry: tests/hazard/test_pictures.py)
     assert paths["overview"].stat().st_size > 10_000
+    for name in ("keepout", "overview"):  # printed on a landscape A4 page: the smallest text at least 6 pt (issue 34 leftover d)
+        width_px = _rgb(paths[name]).shape[1]
+        assert printed_pt(paths["figures"][f"{name}.png"]["text_px_min"], width_px) >= 6.0, name
     with pytest.raises(FileExistsError):
         render.keepout(mirror_result, tmp_path)
     blocks = pv.read(paths["vtm"])

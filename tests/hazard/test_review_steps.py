@@ -114,8 +114,9 @@ def _check_block(title, lines, checks, doc):
         d, d0b, d_b = float(m.group(1)), float(m.group(2)), float(m.group(3))
         assert d0b == d0 and d_b == d and (d == d_star or not 0 <= r_star <= length)
         return d / 2 * math.sqrt(2 * math.log(d0 / d)) * (1 + 1e-6), _reported(checks, "report.json")
-    if "reflected lobe" in title:
-        r = _point_range(_get(text, "I"), _get(text, "MPE"), _get(text, "mu"))
+    if "reflected lobe" in title:  # through an aid (ENOHD) K I in place of I
+        k = _get(text, "K") if "ENOHD" in title else 1.0
+        r = _point_range(k * _get(text, "I"), _get(text, "MPE"), _get(text, "mu"))
         return r, _reported(checks, "report.json")
     raise AssertionError(title)
 
@@ -182,7 +183,8 @@ def test_every_distance_redone_from_the_page(green):
     assert any(t.startswith("Direct-beam ENOHD through optics") for t in titles)  # the binoculars
     assert sum(t.startswith("FAA") for t in titles) == 3
     assert any("reflected lobe NOHD (static)" in t for t in titles)
-    assert done >= 6 and not any("half-width" in t for t in titles)  # with attenuation: a numerical search, no step
+    assert any("reflected lobe ENOHD through 7x50 optics (static)" in t for t in titles)  # the plate's lobe through binoculars
+    assert done >= 7 and not any("half-width" in t for t in titles)  # with attenuation: a numerical search, no step
     assert not re.search(r"DIFFERS", page)
 
 

@@ -196,3 +196,42 @@ def test_contours_count_the_cells_only_bounded():
     assert by_level[1e-4] == by_level[1e-4] | {"cells": 30, "unresolved_cells": 28}  # 1.8e-4 >= 1e-4: all inside
     assert by_level[1e-3] == by_level[1e-3] | {"cells": 1, "unresolved_cells": 0}  # only the 2.8e-3 cell
     assert 1e-2 not in by_level
+
+
+@pytest.mark.skipif(not HAS_MPL, reason="matplotlib not installed")
+def test_map_names_only_resolved_points_with_their_estimate_and_no_name_covers_another():
+    """A road of 20 points 2 m apart across the map (issue 34 item 3 re-check: the 20
+    highest were named, zero-hit ones too, and a road's names covered each other): the
+    resolved ones are named with their estimate, the highest first, at most 8; none of
+    the zero-hit ones; no two names overlap."""
+    est = [3e-4, 1e-4, 2e-5, 7e-6, 4e-7]  # five resolved points in the middle of the road
+    obs = []
+    for k in range(20):
+        p = est[k - 8] if 8 <= k < 13 else 0.0
+        obs.append({"name": f"road[{k}]", "position_m": [5.0 + 2.0 * k, 25.0, 1.7], "probability_exceed": p,
+                    "probability_ci_high": 2e-3 if p else 1.5e-4, "hits": 3 if p else 0})
+    doc = {"scene": "s", "draws": DRAWS, "observers": obs, "map": {"spacing_m": 10.0, "eye_height_m": 1.7}}
+    _, seen = map_png(doc, _cells())
+    names = [t for t, _ in seen["labels"] if t.startswith("road[")]
+    assert sorted(names) == sorted(f"road[{8 + i}]: P {p}" for i, p in enumerate(("3.0e-4", "1.0e-4", "2.0e-5", "7.0e-6", "4.0e-7")))
+    assert seen["labelled"] == 5 and seen["drawn"] == 20 and seen["unresolved_drawn"] == 15
+    boxes = np.array([b for t, b in seen["labels"] if t.startswith("road[")])
+    for i in range(len(boxes)):
+        for j in range(i + 1, len(boxes)):
+            a, b = boxes[i], boxes[j]
+            assert a[2] <= b[0] or b[2] <= a[0] or a[3] <= b[1] or b[3] <= a[1], (names[i], names[j])
+
+
+@pytest.mark.skipif(not HAS_MPL, reason="matplotlib not installed")
+def test_map_prints_its_smallest_text_at_6_pt_on_the_portrait_page():
+    """probability_map.png goes full width on a portrait A4 page (210 mm less 2 x 12 mm
+    margins) in the review page and risk.html (issue 34 leftover d)."""
+    from matplotlib.image import imread
+
+    from tests.hazard.test_picture_print import printed_pt
+
+    doc = {"scene": "s", "draws": DRAWS, "observers": [], "map": {"spacing_m": 10.0, "eye_height_m": 1.7}}
+    png, seen = map_png(doc, _cells())
+    width_px = imread(io.BytesIO(png)).shape[1]
+    assert width_px == seen["width_px"]
+    assert printed_pt(seen["text_px_min"], width_px, page_in=(210.0 - 2 * 12.0) / 25.4) >= 6.0
