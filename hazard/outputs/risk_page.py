@@ -31,6 +31,7 @@ import numpy as np
 
 from brdfmodels.fileio import atomic_write, atomic_write_text, check_input_file
 
+from hazard.outputs.label_place import place_labels, text_boxes
 from hazard.outputs.page_format import fmt_number, fmt_vector, optics_text, plain_number, report_number, template_environment
 from hazard.outputs.risk_outputs import CONTOUR_LEVELS
 
@@ -339,7 +340,7 @@ def _draw_observers(ax, observers: list, xe, ye) -> dict:
     """Observer points inside the map as black dots; the ``MAP_LABELS_SHOWN`` resolved ones
     with the highest estimates named with it (a zero-hit point has no estimate to name:
     named, the 20 of a road crowded each other illegible and hid the hot spot), placed
-    apart (:func:`hazard.pictures.label_place.place_labels`)."""
+    apart (:func:`hazard.outputs.label_place.place_labels`)."""
     import matplotlib.patheffects as pe
 
     inside = [r for r in sorted(observers, key=worst_first)
@@ -380,7 +381,6 @@ def map_png(doc: dict, cells: dict) -> tuple[bytes, dict]:
     from matplotlib.patches import Patch
 
     from hazard.canvas import new_figure, smallest_text_px
-    from hazard.pictures.label_place import place_labels, text_boxes
 
     m = doc.get("map") or {}
     layers = map_layers(cells, m.get("spacing_m"))

@@ -27,7 +27,7 @@ import numpy as np
 
 from hazard.pictures import palette as C
 from hazard.outputs.figure_index import lobe_paths, mark
-from hazard.pictures.label_place import place_labels
+from hazard.outputs.label_place import place_labels
 from hazard.pictures.plan_view import aim_reach_m, draw_mirrors, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, square_limits, two_lines, two_panels
 from hazard.outputs.finding_geometry import mirror_segments
 from hazard.pictures.plots import DisplayBase

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hazard.pictures import palette as C
-from hazard.pictures.label_place import place_labels
+from hazard.outputs.label_place import place_labels
 from hazard.physics.mirror_zone import mirror_zones
 from hazard.pictures.plots import DisplayBase
 from hazard.outputs.finding_geometry import drawn_length_m as _drawn_length_m, lobe_rings, mirror_lines, mirror_segments

@@ -44,7 +44,7 @@ def outside(ax) -> list:
 
 def test_labels_at_one_point_are_spread_apart_inside_the_panel_each_tied_to_its_point():
     from hazard.canvas import subplots
-    from hazard.pictures.label_place import place_labels
+    from hazard.outputs.label_place import place_labels
 
     fig, ax = subplots(figsize=(5, 4))
     ax.set_xlim(0, 100)
@@ -79,7 +79,7 @@ def test_labels_at_one_point_are_spread_apart_inside_the_panel_each_tied_to_its_
 
 def test_a_label_with_no_free_place_stays():
     from hazard.canvas import subplots
-    from hazard.pictures.label_place import place_labels
+    from hazard.outputs.label_place import place_labels
 
     fig, ax = subplots(figsize=(1.2, 0.6))
     ax.set_xlim(0, 1)
@@ -133,7 +133,7 @@ def test_a_label_over_a_drawn_finding_moves_off_it_and_one_over_unmarked_data_st
     zone's end); a label over a line that is no finding stays where it was."""
     from hazard.canvas import subplots
     from hazard.outputs.figure_index import mark
-    from hazard.pictures.label_place import place_labels
+    from hazard.outputs.label_place import place_labels
 
     fig, ax = subplots(figsize=(5, 4))
     ax.set_xlim(0, 100)
@@ -162,7 +162,7 @@ def test_labels_still_clear_each_other_before_they_clear_the_data():
     no place clears the data, so each clears the labels (none dropped, none on another)."""
     from hazard.canvas import subplots
     from hazard.outputs.figure_index import mark
-    from hazard.pictures.label_place import place_labels
+    from hazard.outputs.label_place import place_labels
 
     fig, ax = subplots(figsize=(3, 3))
     ax.set_xlim(0, 100)
