@@ -104,7 +104,12 @@ def nohd_range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None, n
         return range_from_intensity(intensity(wo), mpe_w_m2, mu)
 
     fn.intensity = intensity
-    return near_lobe_fn(spot, fn, mpe_w_m2, mu, gain, st) if near_field else fn
+    if not near_field:
+        return fn
+    lobe = near_lobe_fn(spot, fn, mpe_w_m2, mu, gain, st)
+    if gain > 1.0 and lobe is not fn:  # an aid (K >= 1) sees at least what the naked eye sees, per direction
+        lobe.floor = nohd_range_fn(spot, mpe_w_m2, mu, 1.0, states)
+    return lobe
 
 
 def _grid_cells(grid_deg):

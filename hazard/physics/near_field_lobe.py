@@ -249,6 +249,7 @@ class NearLobeFn:
         self.far_m = FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
         self._grid = None
         self.info = None
+        self.floor = None  # through an aid (gain > 1): the naked eye's lobe, which it never falls below
         self.evaluations = self.bound_points = 0  # kernel evaluations of the integral; points the bound decided
 
     # -- the integral ------------------------------------------------------------------------
@@ -521,7 +522,8 @@ class NearLobeFn:
     def __call__(self, wo):
         wo = np.asarray(wo, float)
         r0 = np.asarray(self.base(wo), float)
-        return np.maximum(r0, self.envelope(wo))
+        out = np.maximum(r0, self.envelope(wo))
+        return out if self.floor is None else np.maximum(out, self.floor(wo))
 
     def max_range(self, wo) -> float:
         """The largest range [m] over directions ``wo`` (N, 3), without integrating where
