@@ -107,6 +107,7 @@ class RayScene:
         """Memory held by the scene [bytes]: its arrays plus ``ENGINE_BYTES_PER_TRIANGLE``
         per triangle for the ray engine (an estimate: the engine's memory is not exposed)."""
         arrays = self.vertices.nbytes + self.faces.nbytes + self.face_object.nbytes
+        arrays += self.__dict__["_normals"].nbytes if "_normals" in self.__dict__ else 0  # made on first use
         return int(arrays + ENGINE_BYTES_PER_TRIANGLE * self.n_triangles)
 
     def with_threads(self, threads):
@@ -120,9 +121,19 @@ class RayScene:
         return view
 
     def face_normals(self, faces) -> np.ndarray:
-        v = self.vertices[self.faces[faces]]
-        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
+        """Unit normals (N, 3) of triangles ``faces`` (``(v1 - v0) x (v2 - v0)``, normalised)."""
+        return self._all_normals()[faces]
+
+    def _all_normals(self) -> np.ndarray:
+        """Every triangle's unit normal, computed once per scene on first use (row by row
+        the same numbers as computing them for a subset: the operations are per row)."""
+        nrm = self.__dict__.get("_normals")
+        if nrm is None:
+            v = self.vertices[self.faces]
+            nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+            self._normals = nrm  # a race computes it twice, identically
+        return nrm
 
     def first_hit(self, origins, directions) -> Hits:
         """Nearest hit along each ray (directions need not be unit length; ``t`` is in m)."""
@@ -132,23 +143,31 @@ class RayScene:
         n = len(o)
         if self._impl is None or n == 0:
             return Hits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1), np.full(n, -1), np.full((n, 3), np.nan))
-        face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), n, 2)
+        face, t, obj = self._first(o, d)
         hit = face >= 0
-        if np.any(hit):
-            # refine t in float64 against the hit triangle's plane (Embree works in float32)
-            f = face[hit]
-            nrm = self.face_normals(f)
-            v0 = self.vertices[self.faces[f, 0]]
-            den = np.einsum("ij,ij->i", d[hit], nrm)
-            good = np.abs(den) > 1e-12
-            t_ref = t[hit].copy()
-            t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[hit][good], nrm[good]) / den[good]
-            t = t.copy()
-            t[hit] = t_ref
-        t = np.where(hit, t, np.inf)
         point = np.where(hit[:, None], o + d * np.where(hit, t, 0.0)[:, None], np.nan)
-        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
         return Hits(hit, t, face, obj, point)
+
+    def _first(self, o, d, skip_obj=None):
+        """Face (-1: none), distance [m] (inf: none) and object (-1: none) of the nearest
+        hit along unit directions ``d`` from ``o``; ``t`` refined in float64 against the
+        hit triangle's plane (Embree works in float32), except on hits of ``skip_obj``
+        (a caller that discards them), whose ``t`` stays Embree's."""
+        face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), len(o), 2)
+        hit = face >= 0
+        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
+        ref = np.flatnonzero(hit if skip_obj is None else hit & (obj != skip_obj))
+        if len(ref):
+            f = face[ref]
+            nrm = self._all_normals()[f]
+            v0 = self.vertices[self.faces[f, 0]]
+            den = np.einsum("ij,ij->i", d[ref], nrm)
+            good = np.abs(den) > 1e-12
+            t_ref = t[ref]
+            t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[ref][good], nrm[good]) / den[good]
+            t = t.copy()
+            t[ref] = t_ref
+        return face, np.where(hit, t, np.inf), obj
 
     def off_surface(self, point_m, normal) -> np.ndarray:
         """A segment start just off a surface (tnear is 0, so a ray leaving a surface
@@ -188,8 +207,11 @@ class RayScene:
         ``own``. With ``own`` convex and the start on or inside it, whatever lies between
         ``own`` and the end is seen from the end before ``own``."""
         back = (s - e) / np.maximum(length, 1e-300)[:, None]
-        hits = self.first_hit(e + back * np.minimum(clear, 0.5 * length)[:, None], back)
-        return hits.hit & (hits.t < length - clear) & (hits.obj != own)
+        start = e + back * np.minimum(clear, 0.5 * length)[:, None]
+        # only whether a hit of another object lies within the segment: Embree's t is
+        # refined on those hits only, and no hit points are made
+        face, t, obj = self._first(start, back / np.linalg.norm(back, axis=1, keepdims=True), skip_obj=own)
+        return (face >= 0) & (t < length - clear) & (obj != own)
 
     def _map(self, fn, n, n_out):
         threads = default_threads() if self.threads is None else min(self.threads, default_threads())  # 1 inside a block
