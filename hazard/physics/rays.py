@@ -148,26 +148,48 @@ class RayScene:
         point = np.where(hit[:, None], o + d * np.where(hit, t, 0.0)[:, None], np.nan)
         return Hits(hit, t, face, obj, point)
 
-    def _first(self, o, d, skip_obj=None):
+    def _first(self, o, d):
         """Face (-1: none), distance [m] (inf: none) and object (-1: none) of the nearest
-        hit along unit directions ``d`` from ``o``; ``t`` refined in float64 against the
-        hit triangle's plane (Embree works in float32), except on hits of ``skip_obj``
-        (a caller that discards them), whose ``t`` stays Embree's."""
+        hit along unit directions ``d`` from ``o``, ``t`` refined in float64 against the
+        hit triangle's plane (Embree works in float32)."""
         face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), len(o), 2)
         hit = face >= 0
-        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
-        ref = np.flatnonzero(hit if skip_obj is None else hit & (obj != skip_obj))
+        ref = np.flatnonzero(hit)
         if len(ref):
-            f = face[ref]
-            nrm = self._all_normals()[f]
-            v0 = self.vertices[self.faces[f, 0]]
-            den = np.einsum("ij,ij->i", d[ref], nrm)
-            good = np.abs(den) > 1e-12
-            t_ref = t[ref]
-            t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[ref][good], nrm[good]) / den[good]
+            t_ref, good = self._plane_t(o, d, face, ref)
+            t_ref[~good] = t[ref[~good]]
             t = t.copy()
             t[ref] = t_ref
-        return face, np.where(hit, t, np.inf), obj
+        return face, np.where(hit, t, np.inf), np.where(hit, self.face_object[np.maximum(face, 0)], -1)
+
+    def _plane_t(self, o, d, face, ref):
+        """Distance [m] in float64 from ``o`` along ``d`` to the plane of each hit
+        triangle (rows ``ref``), and where it is defined (the ray not parallel to it)."""
+        f = face[ref]
+        nrm = self._all_normals()[f]
+        v0 = self.vertices[self.faces[f, 0]]
+        den = np.einsum("ij,ij->i", d[ref], nrm)
+        good = np.abs(den) > 1e-12
+        t_ref = np.empty(len(ref))
+        t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[ref][good], nrm[good]) / den[good]
+        return t_ref, good
+
+    def _first_other(self, o, d, own):
+        """As :meth:`_first`, for a caller that discards the hits of object ``own``: only
+        the faces are asked of the engine, and ``t`` is made on the other objects' hits
+        (inf on ``own``'s; Embree's own ``t`` asked again only where a ray is parallel to
+        its triangle's plane)."""
+        (face,) = self._map(lambda a, b: (self._impl.first_face(o[a:b], d[a:b]),), len(o), 1)
+        hit = face >= 0
+        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
+        ref = np.flatnonzero(hit & (obj != own))
+        t = np.full(len(o), np.inf)
+        if len(ref):
+            t_ref, good = self._plane_t(o, d, face, ref)
+            if not good.all():
+                t_ref[~good] = self._impl.first(o[ref[~good]], d[ref[~good]])[1]
+            t[ref] = t_ref
+        return face, t, obj
 
     def off_surface(self, point_m, normal) -> np.ndarray:
         """A segment start just off a surface (tnear is 0, so a ray leaving a surface
@@ -210,7 +232,7 @@ class RayScene:
         start = e + back * np.minimum(clear, 0.5 * length)[:, None]
         # only whether a hit of another object lies within the segment: Embree's t is
         # refined on those hits only, and no hit points are made
-        face, t, obj = self._first(start, back / np.linalg.norm(back, axis=1, keepdims=True), skip_obj=own)
+        face, t, obj = self._first_other(start, back / np.linalg.norm(back, axis=1, keepdims=True), own)
         return (face >= 0) & (t < length - clear) & (obj != own)
 
     def _map(self, fn, n, n_out):
@@ -350,6 +372,9 @@ class _EmbreeImpl:
         face = out["primID"].astype(np.int64)
         return face, out["tfar"].astype(float)
 
+    def first_face(self, o, d):
+        return self.scene.run(o.astype(np.float32), d.astype(np.float32), query="INTERSECT").astype(np.int64)
+
     def occluded(self, s, vec, frac):
         # dists is tfar in units of |dir|; a fresh float32 array each call (Embree writes it)
         res = self.scene.run(s.astype(np.float32), vec.astype(np.float32), dists=frac.astype(np.float32), query="OCCLUDED")
@@ -385,6 +410,9 @@ class _NumpyImpl:
             face[r[first]] = f[first]
             t[r[first]] = dd[first]
         return face, t
+
+    def first_face(self, o, d):
+        return self.first(o, d)[0]
 
     def occluded(self, s, vec, frac):
         length = np.linalg.norm(vec, axis=1)
