@@ -9,6 +9,7 @@ benchmark section). Without it: the issues' sizes and goals.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import statistics
@@ -31,6 +32,34 @@ def median_s(fn, repeat=REPEAT):
         out = fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times), out
+
+
+def cpu_s(fn):
+    """CPU time [s] of one call of ``fn`` (``time.process_time``: every thread of this
+    process, so a shared machine's load does not enter), and its result."""
+    t0 = time.process_time()
+    out = fn()
+    return time.process_time() - t0, out
+
+
+@contextlib.contextmanager
+def map_cpu():
+    """Record the CPU time [s] of every irradiance map made inside (the map stages:
+    ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``) in the yielded list."""
+    from hazard.pipeline import irradiance_map as module
+
+    made, real = [], module.irradiance_map
+
+    def timed(inp):
+        t, out = cpu_s(lambda: real(inp))
+        made.append(t)
+        return out
+
+    module.irradiance_map = timed
+    try:
+        yield made
+    finally:
+        module.irradiance_map = real
 
 
 RESULTS: list = []  # (name, ratio, goal) of every check this session: tests/bench/conftest.py prints them
