@@ -51,6 +51,12 @@ def own_object(target) -> int | None:
     return target.index if getattr(target.spec, "shape", None) in CONVEX_SHAPES else None
 
 
+def _unit_normals(v) -> np.ndarray:
+    """Unit normals of triangles ``v`` (N, 3 vertices, 3)."""
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
 @dataclass
 class Hits:
     """First hits of N rays: ``hit`` mask, distance ``t`` [m], ``face`` and ``obj`` index
@@ -94,6 +100,7 @@ class RayScene:
         self.backend = backend
         self.threads = None if threads is None else max(1, int(threads))
         self.scale_m = float(np.ptp(self.vertices, axis=0).max()) if len(self.vertices) else 1.0
+        self._kept = {}  # arrays made on first use, shared with the views (with_threads)
         self._impl = None
         if len(self.faces):
             self._impl = _EmbreeImpl(self.vertices, self.faces) if backend == "embree" else _NumpyImpl(self.vertices, self.faces)
@@ -107,7 +114,7 @@ class RayScene:
         """Memory held by the scene [bytes]: its arrays plus ``ENGINE_BYTES_PER_TRIANGLE``
         per triangle for the ray engine (an estimate: the engine's memory is not exposed)."""
         arrays = self.vertices.nbytes + self.faces.nbytes + self.face_object.nbytes
-        arrays += self.__dict__["_normals"].nbytes if "_normals" in self.__dict__ else 0  # made on first use
+        arrays += sum(a.nbytes for a in self._kept.values() if isinstance(a, np.ndarray))  # made on first use
         return int(arrays + ENGINE_BYTES_PER_TRIANGLE * self.n_triangles)
 
     def with_threads(self, threads):
@@ -122,18 +129,20 @@ class RayScene:
 
     def face_normals(self, faces) -> np.ndarray:
         """Unit normals (N, 3) of triangles ``faces`` (``(v1 - v0) x (v2 - v0)``, normalised)."""
-        return self._all_normals()[faces]
+        return self._face_arrays(faces)[0]
 
-    def _all_normals(self) -> np.ndarray:
-        """Every triangle's unit normal, computed once per scene on first use (row by row
-        the same numbers as computing them for a subset: the operations are per row)."""
-        nrm = self.__dict__.get("_normals")
-        if nrm is None:
-            v = self.vertices[self.faces]
-            nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-            nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
-            self._normals = nrm  # a race computes it twice, identically
-        return nrm
+    def _face_arrays(self, faces):
+        """Unit normals and first vertices of triangles ``faces``. Once a quarter of the
+        triangles' worth has been asked for (over all calls), every triangle's are made
+        and kept for the scene and its views (row by row the same numbers)."""
+        kept = self._kept
+        if "normals" not in kept:
+            kept["asked"] = kept.get("asked", 0) + len(faces)  # the views share the count (a race only delays it)
+            if 4 * kept["asked"] < self.n_triangles:
+                return _unit_normals(self.vertices[self.faces[faces]]), self.vertices[self.faces[faces, 0]]
+            kept["first_vertex"] = self.vertices[self.faces[:, 0]]
+            kept["normals"] = _unit_normals(self.vertices[self.faces])
+        return kept["normals"][faces], kept["first_vertex"][faces]
 
     def first_hit(self, origins, directions) -> Hits:
         """Nearest hit along each ray (directions need not be unit length; ``t`` is in m)."""
@@ -165,9 +174,7 @@ class RayScene:
     def _plane_t(self, o, d, face, ref):
         """Distance [m] in float64 from ``o`` along ``d`` to the plane of each hit
         triangle (rows ``ref``), and where it is defined (the ray not parallel to it)."""
-        f = face[ref]
-        nrm = self._all_normals()[f]
-        v0 = self.vertices[self.faces[f, 0]]
+        nrm, v0 = self._face_arrays(face[ref])
         den = np.einsum("ij,ij->i", d[ref], nrm)
         good = np.abs(den) > 1e-12
         t_ref = np.empty(len(ref))
