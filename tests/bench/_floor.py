@@ -62,6 +62,12 @@ def map_cpu():
         module.irradiance_map = real
 
 
+def blas_one_thread():
+    """BLAS on one thread (threadpoolctl) while timing CPU: the protocol of issue 37's
+    figures (``OPENBLAS_NUM_THREADS=1``) whatever the environment says."""
+    return threadpool_limits(1, user_api="blas")
+
+
 RESULTS: list = []  # (name, ratio, goal) of every check this session: tests/bench/conftest.py prints them
 
 
