@@ -251,6 +251,7 @@ class NearLobeFn:
         self.info = None
         self.floor = None  # through an aid (gain > 1): the naked eye's lobe, which it never falls below
         self.evaluations = self.bound_points = 0  # kernel evaluations of the integral; points the bound decided
+        self.state_evaluations = 0  # those evaluations times the states each was evaluated at
 
     # -- the integral ------------------------------------------------------------------------
     def _setup(self, reach_m, peaks):
@@ -344,7 +345,9 @@ class NearLobeFn:
         (None: no history); counts its kernel evaluations."""
         before = near_field.STATS.snapshot()
         e = near_field_w_m2(self.spot, pts, np.full(len(pts), self.gain), self.mu, states)
-        self.evaluations += near_field.stats_since(before)["evaluations"]
+        n = near_field.stats_since(before)["evaluations"]
+        self.evaluations += n
+        self.state_evaluations += n * (1 if states is None else len(states))
         STATS.points += len(pts)
         return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
 
@@ -503,7 +506,8 @@ class NearLobeFn:
         STATS.seconds += dt
         self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
                      "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
-                     "kernel_evaluations": int(self.evaluations), "points_by_bound": int(self.bound_points)}
+                     "kernel_evaluations": int(self.evaluations),
+                     "kernel_state_evaluations": int(self.state_evaluations), "points_by_bound": int(self.bound_points)}
 
     def envelope(self, wo):
         """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in

@@ -51,6 +51,12 @@ def own_object(target) -> int | None:
     return target.index if getattr(target.spec, "shape", None) in CONVEX_SHAPES else None
 
 
+def _unit_normals(v) -> np.ndarray:
+    """Unit normals of triangles ``v`` (N, 3 vertices, 3)."""
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
 @dataclass
 class Hits:
     """First hits of N rays: ``hit`` mask, distance ``t`` [m], ``face`` and ``obj`` index
@@ -94,6 +100,7 @@ class RayScene:
         self.backend = backend
         self.threads = None if threads is None else max(1, int(threads))
         self.scale_m = float(np.ptp(self.vertices, axis=0).max()) if len(self.vertices) else 1.0
+        self._kept = {}  # arrays made on first use, shared with the views (with_threads)
         self._impl = None
         if len(self.faces):
             self._impl = _EmbreeImpl(self.vertices, self.faces) if backend == "embree" else _NumpyImpl(self.vertices, self.faces)
@@ -107,6 +114,7 @@ class RayScene:
         """Memory held by the scene [bytes]: its arrays plus ``ENGINE_BYTES_PER_TRIANGLE``
         per triangle for the ray engine (an estimate: the engine's memory is not exposed)."""
         arrays = self.vertices.nbytes + self.faces.nbytes + self.face_object.nbytes
+        arrays += sum(a.nbytes for a in self._kept.values() if isinstance(a, np.ndarray))  # made on first use
         return int(arrays + ENGINE_BYTES_PER_TRIANGLE * self.n_triangles)
 
     def with_threads(self, threads):
@@ -120,9 +128,21 @@ class RayScene:
         return view
 
     def face_normals(self, faces) -> np.ndarray:
-        v = self.vertices[self.faces[faces]]
-        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
+        """Unit normals (N, 3) of triangles ``faces`` (``(v1 - v0) x (v2 - v0)``, normalised)."""
+        return self._face_arrays(faces)[0]
+
+    def _face_arrays(self, faces):
+        """Unit normals and first vertices of triangles ``faces``. Once a quarter of the
+        triangles' worth has been asked for (over all calls), every triangle's are made
+        and kept for the scene and its views (row by row the same numbers)."""
+        kept = self._kept
+        if "normals" not in kept:
+            kept["asked"] = kept.get("asked", 0) + len(faces)  # the views share the count (a race only delays it)
+            if 4 * kept["asked"] < self.n_triangles:
+                return _unit_normals(self.vertices[self.faces[faces]]), self.vertices[self.faces[faces, 0]]
+            kept["first_vertex"] = self.vertices[self.faces[:, 0]]
+            kept["normals"] = _unit_normals(self.vertices[self.faces])
+        return kept["normals"][faces], kept["first_vertex"][faces]
 
     def first_hit(self, origins, directions) -> Hits:
         """Nearest hit along each ray (directions need not be unit length; ``t`` is in m)."""
@@ -132,23 +152,51 @@ class RayScene:
         n = len(o)
         if self._impl is None or n == 0:
             return Hits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1), np.full(n, -1), np.full((n, 3), np.nan))
-        face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), n, 2)
+        face, t, obj = self._first(o, d)
         hit = face >= 0
-        if np.any(hit):
-            # refine t in float64 against the hit triangle's plane (Embree works in float32)
-            f = face[hit]
-            nrm = self.face_normals(f)
-            v0 = self.vertices[self.faces[f, 0]]
-            den = np.einsum("ij,ij->i", d[hit], nrm)
-            good = np.abs(den) > 1e-12
-            t_ref = t[hit].copy()
-            t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[hit][good], nrm[good]) / den[good]
-            t = t.copy()
-            t[hit] = t_ref
-        t = np.where(hit, t, np.inf)
         point = np.where(hit[:, None], o + d * np.where(hit, t, 0.0)[:, None], np.nan)
-        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
         return Hits(hit, t, face, obj, point)
+
+    def _first(self, o, d):
+        """Face (-1: none), distance [m] (inf: none) and object (-1: none) of the nearest
+        hit along unit directions ``d`` from ``o``, ``t`` refined in float64 against the
+        hit triangle's plane (Embree works in float32)."""
+        face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), len(o), 2)
+        hit = face >= 0
+        ref = np.flatnonzero(hit)
+        if len(ref):
+            t_ref, good = self._plane_t(o, d, face, ref)
+            t_ref[~good] = t[ref[~good]]
+            t = t.copy()
+            t[ref] = t_ref
+        return face, np.where(hit, t, np.inf), np.where(hit, self.face_object[np.maximum(face, 0)], -1)
+
+    def _plane_t(self, o, d, face, ref):
+        """Distance [m] in float64 from ``o`` along ``d`` to the plane of each hit
+        triangle (rows ``ref``), and where it is defined (the ray not parallel to it)."""
+        nrm, v0 = self._face_arrays(face[ref])
+        den = np.einsum("ij,ij->i", d[ref], nrm)
+        good = np.abs(den) > 1e-12
+        t_ref = np.empty(len(ref))
+        t_ref[good] = np.einsum("ij,ij->i", v0[good] - o[ref][good], nrm[good]) / den[good]
+        return t_ref, good
+
+    def _first_other(self, o, d, own):
+        """As :meth:`_first`, for a caller that discards the hits of object ``own``: only
+        the faces are asked of the engine, and ``t`` is made on the other objects' hits
+        (inf on ``own``'s; Embree's own ``t`` asked again only where a ray is parallel to
+        its triangle's plane)."""
+        (face,) = self._map(lambda a, b: (self._impl.first_face(o[a:b], d[a:b]),), len(o), 1)
+        hit = face >= 0
+        obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
+        ref = np.flatnonzero(hit & (obj != own))
+        t = np.full(len(o), np.inf)
+        if len(ref):
+            t_ref, good = self._plane_t(o, d, face, ref)
+            if not good.all():
+                t_ref[~good] = self._impl.first(o[ref[~good]], d[ref[~good]])[1]
+            t[ref] = t_ref
+        return face, t, obj
 
     def off_surface(self, point_m, normal) -> np.ndarray:
         """A segment start just off a surface (tnear is 0, so a ray leaving a surface
@@ -188,8 +236,11 @@ class RayScene:
         ``own``. With ``own`` convex and the start on or inside it, whatever lies between
         ``own`` and the end is seen from the end before ``own``."""
         back = (s - e) / np.maximum(length, 1e-300)[:, None]
-        hits = self.first_hit(e + back * np.minimum(clear, 0.5 * length)[:, None], back)
-        return hits.hit & (hits.t < length - clear) & (hits.obj != own)
+        start = e + back * np.minimum(clear, 0.5 * length)[:, None]
+        # only whether a hit of another object lies within the segment: Embree's t is
+        # refined on those hits only, and no hit points are made
+        face, t, obj = self._first_other(start, back / np.linalg.norm(back, axis=1, keepdims=True), own)
+        return (face >= 0) & (t < length - clear) & (obj != own)
 
     def _map(self, fn, n, n_out):
         threads = default_threads() if self.threads is None else min(self.threads, default_threads())  # 1 inside a block
@@ -328,6 +379,9 @@ class _EmbreeImpl:
         face = out["primID"].astype(np.int64)
         return face, out["tfar"].astype(float)
 
+    def first_face(self, o, d):
+        return self.scene.run(o.astype(np.float32), d.astype(np.float32), query="INTERSECT").astype(np.int64)
+
     def occluded(self, s, vec, frac):
         # dists is tfar in units of |dir|; a fresh float32 array each call (Embree writes it)
         res = self.scene.run(s.astype(np.float32), vec.astype(np.float32), dists=frac.astype(np.float32), query="OCCLUDED")
@@ -363,6 +417,9 @@ class _NumpyImpl:
             face[r[first]] = f[first]
             t[r[first]] = dd[first]
         return face, t
+
+    def first_face(self, o, d):
+        return self.first(o, d)[0]
 
     def occluded(self, s, vec, frac):
         length = np.linalg.norm(vec, axis=1)

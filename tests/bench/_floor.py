@@ -9,6 +9,7 @@ benchmark section). Without it: the issues' sizes and goals.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import statistics
@@ -31,6 +32,40 @@ def median_s(fn, repeat=REPEAT):
         out = fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times), out
+
+
+def cpu_s(fn):
+    """CPU time [s] of one call of ``fn`` (``time.process_time``: every thread of this
+    process, so a shared machine's load does not enter), and its result."""
+    t0 = time.process_time()
+    out = fn()
+    return time.process_time() - t0, out
+
+
+@contextlib.contextmanager
+def map_cpu():
+    """Record the CPU time [s] of every irradiance map made inside (the map stages:
+    ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``) in the yielded list."""
+    from hazard.pipeline import irradiance_map as module
+
+    made, real = [], module.irradiance_map
+
+    def timed(inp):
+        t, out = cpu_s(lambda: real(inp))
+        made.append(t)
+        return out
+
+    module.irradiance_map = timed
+    try:
+        yield made
+    finally:
+        module.irradiance_map = real
+
+
+def blas_one_thread():
+    """BLAS on one thread (threadpoolctl) while timing CPU: the protocol of issue 37's
+    figures (``OPENBLAS_NUM_THREADS=1``) whatever the environment says."""
+    return threadpool_limits(1, user_api="blas")
 
 
 RESULTS: list = []  # (name, ratio, goal) of every check this session: tests/bench/conftest.py prints them
@@ -70,9 +105,11 @@ class MapFloor:
     """The complete floor of the irradiance map of one flat dynamic-SH target: per block of
     observers (on as many threads as the map, BLAS on one thread each) the points, the
     occlusion query from the spot, the directions in the target's frame, the basis, one
-    GEMM with the (ln gain - ln cos i) row, exp, the peak over time and the exposure
-    (trapezoid over the history). Everything the map computes and nothing else; no
-    checks, no near field, no sparse bookkeeping."""
+    GEMM with the (ln gain - ln cos i) row, exp, the peak and its time, the value at
+    t = 0, the exposure (trapezoid over the history) and the first exceedance (the
+    accumulated exposure against the MPE of each elapsed time, on the rows whose peak
+    could exceed it). Everything the map computes and nothing else; no checks, no near
+    field, no sparse bookkeeping."""
 
     def __init__(self, scene, material, times_s, tracer, threads=None):
         from brdfmodels.states import interpolation_weights
@@ -98,11 +135,16 @@ class MapFloor:
         self.trap = np.zeros(len(times))
         self.trap[1:] += 0.5 * np.diff(times)
         self.trap[:-1] += 0.5 * np.diff(times)
+        self.times, self.half_dt = times, 0.5 * np.diff(times)
+        self.mpe_h_j_m2, self.e_floor_w_m2 = mpe_of_elapsed(scene, times)
         self.tracer = tracer
         self.n = len(scene.observers)
         self.threads = threads or min(2, os.cpu_count() or 1)
         self.peak = np.zeros(self.n)
+        self.peak_time = np.zeros(self.n)
+        self.static = np.zeros(self.n)
         self.exposure = np.zeros(self.n)
+        self.first = np.full(self.n, np.nan)
 
     def block(self, a0, a1):
         from brdfmodels.geometry import half_diff_parts
@@ -122,14 +164,36 @@ class MapFloor:
         ev = y.T @ self.coef
         np.exp(ev, out=ev)
         idx = ev.argmax(axis=1)
-        self.peak[a0 + live] = ev[np.arange(m), idx]
-        self.exposure[a0 + live] = ev @ self.trap
+        rows = a0 + live
+        pk = ev[np.arange(m), idx]
+        self.peak[rows], self.peak_time[rows], self.static[rows] = pk, self.times[idx], ev[:, 0]
+        self.exposure[rows] = ev @ self.trap
+        hot = np.flatnonzero(pk >= self.e_floor_w_m2)
+        if len(hot):
+            cum = ev[hot, 1:] + ev[hot, :-1]
+            cum *= self.half_dt
+            over = np.cumsum(cum, axis=1, out=cum) > self.mpe_h_j_m2
+            some = over.any(axis=1)
+            self.first[rows[hot[some]]] = self.times[1 + over[some].argmax(axis=1)]
 
     def __call__(self):
         bounds = [(a, min(a + MAP_BLOCK, self.n)) for a in range(0, self.n, MAP_BLOCK)]
         with threadpool_limits(1, user_api="blas"), ThreadPoolExecutor(self.threads) as pool:
             list(pool.map(lambda ab: self.block(*ab), bounds))
         return self.peak
+
+
+def mpe_of_elapsed(scene, times_s):
+    """The MPE radiant exposure [J/m^2] for each elapsed time of the history after the
+    first, and the smallest irradiance [W/m^2] that can reach it (rows below it need no
+    accumulation): the map's inputs of its first exceedance, made once."""
+    from hazard.physics.mpe import DURATION_MAX_S, DURATION_MIN_S, ocular_mpe
+
+    spec = scene.spec
+    elapsed = np.asarray(times_s[1:], float) - times_s[0]
+    h = np.array([ocular_mpe(spec.laser.wavelength_nm, t, standard=spec.exposure.standard).radiant_exposure_j_m2
+                  for t in np.clip(elapsed, DURATION_MIN_S, DURATION_MAX_S)])
+    return h, float(np.min(h / np.maximum(elapsed, 1e-300)))
 
 
 def states_at(scene, times_s):

@@ -3,6 +3,8 @@ block it; anything else on the segment still does (both ray engines)."""
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import scenes
 from hazard.physics.rays import CONVEX_SHAPES, RayScene, own_object
@@ -60,3 +62,40 @@ resolution_m = 10.0
     sc = scenes.loads(text)
     assert own_object(sc.targets[0]) == sc.targets[0].index == 0
     assert own_object(sc.terrain_target) is None
+
+
+def _traced_back_by_first_hit(scene, start, end, own):
+    """The trace-back written with the public first hit (its refined t and objects): a
+    segment is blocked when the first hit seen from its end (moved the scene's clearance
+    towards the start) is another object's and lies within the segment."""
+    clear = 1e-6 * scene.scale_m
+    vec = end - start
+    length = np.linalg.norm(vec, axis=1)
+    back = -vec / length[:, None]
+    hits = scene.first_hit(end + back * np.minimum(clear, 0.5 * length)[:, None], back)
+    blocked_all = scene.occluded(start, end)
+    return blocked_all & hits.hit & (hits.t < length - clear) & (hits.obj != own)
+
+
+@pytest.mark.parametrize("backend", ["embree", pytest.param("numpy", marks=pytest.mark.slow)])  # numpy: 56 s
+@settings(derandomize=True, deadline=None, max_examples=5)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_transparent_equals_the_first_hit_trace_back(backend, seed):
+    """``occluded(..., transparent=)`` (faces only from the engine, t on the other
+    objects' hits) gives exactly the booleans of the trace-back written with
+    ``first_hit``, on random segments from inside and around the sphere to random
+    points around both objects; and the per-scene normals are the per-call ones."""
+    pytest.importorskip("rtree") if backend == "numpy" else pytest.importorskip("embreex")
+    scene = RayScene(_objects(), backend=backend)
+    rng = np.random.default_rng(seed)
+    n = 400
+    start = rng.normal(size=(n, 3))
+    start *= (rng.uniform(0.0, 1.5, n) / np.linalg.norm(start, axis=1))[:, None]
+    end = rng.uniform([-8.0, -6.0, -6.0], [12.0, 6.0, 6.0], size=(n, 3))
+    got = scene.occluded(start, end, transparent=0)
+    np.testing.assert_array_equal(got, _traced_back_by_first_hit(scene, start, end, 0))
+    assert got.any() and not got.all()  # both outcomes occur
+    faces = rng.integers(0, scene.n_triangles, 50)
+    v = scene.vertices[scene.faces[faces]]
+    nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    np.testing.assert_array_equal(scene.face_normals(faces), nrm / np.linalg.norm(nrm, axis=1, keepdims=True))

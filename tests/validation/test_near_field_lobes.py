@@ -517,3 +517,39 @@ def test_flat_spot_bound_is_above_the_integral_of_a_diverging_beam(inc, phi, rng
     map, hazard.physics.near_field): the bound takes each triangle's largest stretch and stays above the integral of the rays
     traced from the virtual source at random points above the plate."""
     _diverging_flat_bound_case(inc, phi, rng_m, h, along)
+
+
+@settings(ref.FAST, max_examples=2)
+@given(seed=st.integers(0, 2**31 - 1), n_states=st.integers(2, 24))
+def test_state_evaluations_count_each_kernel_evaluation_at_its_states(seed, n_states):
+    """The lobe's ``kernel_state_evaluations`` (the work the near-field floor of
+    tests/bench/bench_whole_run.py repeats) is the sum over its integrals of the kernel
+    evaluations each made times the states it was evaluated at, counted here around every
+    call of the integral; with the states' shortcut it lies between one state per
+    evaluation and every state."""
+    from hazard.physics import near_field
+
+    spot, fn, mpe, reach = _history_lobe(n_states)
+    calls, real = [], near_field_lobe.near_field_w_m2
+
+    def counted(sp, pts, weight, mu, states):
+        before = near_field.STATS.snapshot()["evaluations"]
+        out = real(sp, pts, weight, mu, states)
+        calls.append((near_field.STATS.snapshot()["evaluations"] - before, 1 if states is None else len(states)))
+        return out
+
+    rng = np.random.default_rng(seed)
+    w = rng.normal(size=(40, 3))
+    w[:, 2] = np.abs(w[:, 2])
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    pts = spot.centroid + (np.exp(rng.uniform(math.log(1e-3), math.log(1.2), 40)) * reach)[:, None] * (w @ spot.mean_frame)
+    before = fn.evaluations, fn.state_evaluations  # the lobe function is shared (memoised per spot and states)
+    near_field_lobe.near_field_w_m2 = counted
+    try:
+        fn.hazardous(pts)
+    finally:
+        near_field_lobe.near_field_w_m2 = real
+    n, n_states_done = sum(c for c, _ in calls), sum(c * q for c, q in calls)
+    made = fn.evaluations - before[0], fn.state_evaluations - before[1]
+    assert n > 0 and made == (n, n_states_done)
+    assert n <= made[1] <= n * n_states
