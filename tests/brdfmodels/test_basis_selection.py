@@ -69,7 +69,7 @@ def test_table_equals_fit_sh_per_fold(small):
         assert row["held_out_log_rms"] == pytest.approx(np.mean([e for _, e in ref]), rel=1e-9)
         assert row["worst_fold_log_rms"] == pytest.approx(max(e for _, e in ref), rel=1e-9)
         assert sorted(row["fold_log_rms"]) == sorted(str(t) for t in np.unique(small.test_id))
-        assert set(row) == {"lh_max", "mh_max", "fanout", "coefficients", "held_out_log_rms", "worst_fold_log_rms",
+        assert set(row) == {"lh_max", "mh_max", "fanout", "smoothing", "coefficients", "held_out_log_rms", "worst_fold_log_rms",
                             "fold_log_rms", "fit_time_s", "eval_s_per_1e6"}
         assert row["fit_time_s"] > 0 and row["eval_s_per_1e6"] > 0
     assert best in table
