@@ -167,6 +167,11 @@ def _hemisphere_grid(n_theta=12, n_phi=24):
     return wi, wo
 
 
+def default_rcond(smoothing) -> float:
+    """rcond of a fit when none is given: ``DEFAULT_RCOND`` without smoothing, 0 with it."""
+    return DEFAULT_RCOND if smoothing == 0 else 0.0
+
+
 def smoothing_rows(basis: SHBasis, smoothing, power, n_data):
     """Tikhonov rows of a smoothness (Laplace-Beltrami) penalty on SH coefficients.
 
@@ -216,7 +221,9 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         Total weight of the horizon rows as a fraction of the data's
         (default ``DEFAULT_HORIZON_WEIGHT``).
     rcond : float
-        Singular values below ``rcond * s_max`` are pruned (default ``DEFAULT_RCOND``).
+        Singular values below ``rcond * s_max`` are pruned (default ``DEFAULT_RCOND``
+        without smoothing, 0 with it: the penalty regularises, and pruning relative to
+        the penalty rows' largest singular value would drop data modes).
     smoothing : float
         Tikhonov strength alpha (0: none) of a smoothness penalty on the coefficients,
         ``alpha N sum_k (l_k (l_k + 1))^p c_k^2`` (N data rows; :func:`smoothing_rows`):
@@ -240,7 +247,9 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
     k = basis.size
     if len(f) < k:
         raise ValueError(f"underdetermined fit: {len(f)} samples for {k} coefficients; give at least {k} samples or a smaller basis")
-    rcond = DEFAULT_RCOND if rcond is None else finite_scalar("rcond", rcond, minimum=0.0, maximum=1.0)
+    smoothing = finite_scalar("smoothing", smoothing, minimum=0.0)
+    smoothing_power = finite_scalar("smoothing_power", smoothing_power, minimum=0.0)
+    rcond = default_rcond(smoothing) if rcond is None else finite_scalar("rcond", rcond, minimum=0.0, maximum=1.0)
     hw = DEFAULT_HORIZON_WEIGHT if horizon_weight is None else finite_scalar("horizon_weight", horizon_weight, minimum=0.0)
     ft = wi[:, 2] * wo[:, 2] * f  # f~ (Eq. 17)
     if log:
@@ -262,8 +271,6 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
     big_a = np.vstack(rows_a)
     big_y = np.concatenate(rows_y)
     sw = np.sqrt(np.concatenate(rows_w))
-    smoothing = finite_scalar("smoothing", smoothing, minimum=0.0)
-    smoothing_power = finite_scalar("smoothing_power", smoothing_power, minimum=0.0)
     b_mat, z = big_a * sw[:, None], big_y * sw
     if smoothing > 0:
         b_mat = np.vstack([b_mat, smoothing_rows(basis, smoothing, smoothing_power, len(f))])
