@@ -216,8 +216,8 @@ _EVAL_PAIRS = 100_000
 def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEFAULT_MH_MAXES, fanouts=DEFAULT_FANOUTS,
                     ld_max=2, md_max=0, tolerance=DEFAULT_BASIS_TOLERANCE, state=None, states=None, progress=None,
                     smoothings=DEFAULT_SMOOTHINGS, **fit_kwargs):
-    """Basis orders and fan-out by leave-one-test-out cross-validation, scored by the
-    worst held-out test.
+    """Basis orders, fan-out and smoothing strength by leave-one-test-out
+    cross-validation, scored by the worst held-out test.
 
     Each test (one incidence and groove orientation) is held out in turn and predicted by
     a :func:`brdfmodels.fitting.fit_sh` fit of the others (per state group when ``state``
@@ -237,7 +237,8 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
         Difference-angle orders (fixed).
     tolerance : float
         The chosen setting is the cheapest (fewest coefficients) whose worst-fold error is
-        at most ``(1 + tolerance)`` times the lowest.
+        at most ``(1 + tolerance)`` times the lowest (default 0: the lowest; the
+        smoothing, not the basis size, limits what the fit does beyond the data).
     state : str, optional
         A state column (``"time_s"``, ``"temperature_k"``, a named state): the folds are
         made within each state group, and the worst is over every group's folds (one
@@ -247,16 +248,20 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
         The state nodes samples are grouped to (default: the column's distinct values).
     progress : callable, optional
         Called with (settings done, settings) before each setting and at the end.
+    smoothings : sequence of float
+        Tikhonov strengths alpha >= 0 to try per basis (``fit_sh``'s ``smoothing``;
+        default ``DEFAULT_SMOOTHINGS``, 1e-7 to 1e-3; ``(0.0,)`` with ``tolerance=0.1``
+        is the earlier truncated-SVD selection).
     **fit_kwargs
         Passed on to ``fit_sh``: ``rcond``, ``horizon``, ``horizon_weight``, ``log``,
-        ``method``.
+        ``method``, ``smoothing_power``.
 
     Returns
     -------
     best : dict
         The chosen row of ``table``.
     table : list of dict
-        Every setting fitted: ``lh_max, mh_max, fanout, coefficients``,
+        Every setting fitted: ``lh_max, mh_max, fanout, smoothing, coefficients``,
         ``worst_fold_log_rms`` (the score), ``held_out_log_rms`` (mean over the folds),
         ``fold_log_rms`` (fold name -> error; ``"<test>@<state>"`` with ``state``),
         ``fit_time_s`` (one ``fit_sh`` of all samples (of the first state group) with that
@@ -270,8 +275,10 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
     each test's weighted design rows of that basis are reduced once to a QR factor; a
     fold stacks the other tests' factors and the horizon rows' and factors them again
     (B = Q R). A basis's fold matrix is then Q R[:, cols], and the truncated SVD of the
-    small R[:, cols] gives the same coefficients as ``fit_sh`` on the fold, up to
-    rounding (``tests/brdfmodels/test_basis_selection.py``).
+    small R[:, cols] (with the smoothing rows stacked under it) gives the same
+    coefficients as ``fit_sh`` on the fold, up to rounding
+    (``tests/brdfmodels/test_basis_selection.py``). A log fold's error is computed from
+    the held-out test's own design rows.
     """
     groups = _state_groups(samples, state, states)
     splits = {g: _loto_split(s) for g, s in groups.items()}
