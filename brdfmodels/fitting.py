@@ -167,8 +167,38 @@ def _hemisphere_grid(n_theta=12, n_phi=24):
     return wi, wo
 
 
+def default_rcond(smoothing) -> float:
+    """rcond of a fit when none is given: ``DEFAULT_RCOND`` without smoothing, 0 with it."""
+    return DEFAULT_RCOND if smoothing == 0 else 0.0
+
+
+def smoothing_rows(basis: SHBasis, smoothing, power, n_data):
+    """Tikhonov rows of a smoothness (Laplace-Beltrami) penalty on SH coefficients.
+
+    Parameters
+    ----------
+    basis : SHBasis
+    smoothing : float
+        Strength alpha >= 0, relative to the data: the penalty is
+        ``alpha * n_data * sum_k (l_k (l_k + 1))^power c_k^2``.
+    power : float
+        1: the gradient energy of the fitted function on the (fanned-out) sphere; 2: the
+        squared Laplacian. Product columns take l_h (l_h + 1) + l_d (l_d + 1).
+    n_data : float
+        Sum of the data rows' (normalised) weights.
+
+    Returns
+    -------
+    ndarray, shape (K, K)
+        Diagonal rows ``sqrt(alpha n_data (l(l+1))^power)`` to stack under the weighted
+        design matrix (right-hand side 0).
+    """
+    eig = np.array([c[1] * (c[1] + 1) if c[0] != "hd" else c[1] * (c[1] + 1) + c[3] * (c[3] + 1) for c in basis.columns], float)
+    return np.diag(np.sqrt(smoothing * n_data * eig ** power))
+
+
 def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights=None, horizon=True,
-           horizon_weight=None, rcond=None, method="tsvd") -> FitResult:
+           horizon_weight=None, rcond=None, method="tsvd", smoothing=0.0, smoothing_power=2.0) -> FitResult:
     """Least-squares spherical-harmonic fit (truncated SVD) of measured f_r.
 
     Parameters
@@ -191,7 +221,15 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         Total weight of the horizon rows as a fraction of the data's
         (default ``DEFAULT_HORIZON_WEIGHT``).
     rcond : float
-        Singular values below ``rcond * s_max`` are pruned (default ``DEFAULT_RCOND``).
+        Singular values below ``rcond * s_max`` are pruned (default ``DEFAULT_RCOND``
+        without smoothing, 0 with it: the penalty regularises, and pruning relative to
+        the penalty rows' largest singular value would drop data modes).
+    smoothing : float
+        Tikhonov strength alpha (0: none) of a smoothness penalty on the coefficients,
+        ``alpha N sum_k (l_k (l_k + 1))^p c_k^2`` (N data rows; :func:`smoothing_rows`):
+        where nothing was measured the fit continues as smoothly as the data allow.
+    smoothing_power : float
+        p of the penalty (2: squared Laplace-Beltrami operator, 1: gradient energy).
     method : {"tsvd", "constrained"}
         Truncated SVD, or constrained least squares: the same weighted problem subject to
         the fitted ln f~ staying at or below the largest measured value over a grid of
@@ -209,7 +247,9 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
     k = basis.size
     if len(f) < k:
         raise ValueError(f"underdetermined fit: {len(f)} samples for {k} coefficients; give at least {k} samples or a smaller basis")
-    rcond = DEFAULT_RCOND if rcond is None else finite_scalar("rcond", rcond, minimum=0.0, maximum=1.0)
+    smoothing = finite_scalar("smoothing", smoothing, minimum=0.0)
+    smoothing_power = finite_scalar("smoothing_power", smoothing_power, minimum=0.0)
+    rcond = default_rcond(smoothing) if rcond is None else finite_scalar("rcond", rcond, minimum=0.0, maximum=1.0)
     hw = DEFAULT_HORIZON_WEIGHT if horizon_weight is None else finite_scalar("horizon_weight", horizon_weight, minimum=0.0)
     ft = wi[:, 2] * wo[:, 2] * f  # f~ (Eq. 17)
     if log:
@@ -231,9 +271,13 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
     big_a = np.vstack(rows_a)
     big_y = np.concatenate(rows_y)
     sw = np.sqrt(np.concatenate(rows_w))
-    u, s, vt = np.linalg.svd(big_a * sw[:, None], full_matrices=False)
+    b_mat, z = big_a * sw[:, None], big_y * sw
+    if smoothing > 0:
+        b_mat = np.vstack([b_mat, smoothing_rows(basis, smoothing, smoothing_power, len(f))])
+        z = np.concatenate([z, np.zeros(k)])
+    u, s, vt = np.linalg.svd(b_mat, full_matrices=False)
     keep = s > rcond * s[0]
-    coef = vt[keep].T @ ((u[:, keep].T @ (big_y * sw)) / s[keep])
+    coef = vt[keep].T @ ((u[:, keep].T @ z) / s[keep])
     if method not in ("tsvd", "constrained"):
         raise ValueError(f"method={method!r}: expected 'tsvd' or 'constrained'")
     n_active = 0
@@ -244,8 +288,6 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         g = _design(basis, gwi, gwo, fanout)
         cap = float(y.max()) if log else float(ft.max())
         # the cap applies to ln f~ (or f~); grid pairs carry their own cos factors already
-        b_mat = big_a * sw[:, None]
-        z = big_y * sw
         scale = float(np.sum(z * z)) or 1.0
         res = minimize(lambda c: 0.5 * float(np.sum((b_mat @ c - z) ** 2)) / scale, coef,
                        jac=lambda c: (b_mat.T @ (b_mat @ c - z)) / scale, method="SLSQP",
@@ -270,7 +312,8 @@ def fit_sh(wi, wo, brdf_per_sr, basis: SHBasis, *, fanout=0.6, log=True, weights
         evaluations=1,
         fit_time_s=time.perf_counter() - start,
         method="truncated SVD" if method == "tsvd" else "constrained least squares (SLSQP)",
-        details={"active_constraints": n_active, "rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_per_sr": floor or 0.0, "log": log, "fanout": fanout},
+        details={"active_constraints": n_active, "rcond": rcond, "horizon_weight": hw if horizon else 0.0, "horizon_floor_per_sr": floor or 0.0, "log": log, "fanout": fanout,
+                 "smoothing": smoothing, "smoothing_power": smoothing_power},
     )
 
 

@@ -201,15 +201,23 @@ def _hemisphere(rng, n, min_cos):
 DEFAULT_LH_MAXES = (4, 6, 8, 10, 12, 14, 16)
 DEFAULT_MH_MAXES = (0, 2, 4, 6, 8)
 DEFAULT_FANOUTS = (0.4, 0.6, 0.8)
-DEFAULT_BASIS_TOLERANCE = 0.1
-_FAST_FIT_OPTIONS = ("rcond", "horizon", "horizon_weight", "log", "method")
+# Tikhonov smoothing (issue 32 item 5, later round): every fit is regularised by
+# alpha N sum (l(l+1))^2 c^2 with alpha from this decade grid, chosen by the same folds, and
+# the setting with the lowest worst fold wins (tolerance 0). On every truth of
+# docs/fit-defaults.md (peak table and the camera-sampled grooved metal) its choice predicts
+# every held-out set to <= 0.25; alpha = 0 in the grid let the camera grooved metal pick an
+# unregularised (12, 6, 0.6), 0.58, and tolerances 0.05-0.1 picked 0.31-0.32 on one lobe.
+DEFAULT_BASIS_TOLERANCE = 0.0
+DEFAULT_SMOOTHINGS = (1e-7, 1e-6, 1e-5, 1e-4, 1e-3)
+_FAST_FIT_OPTIONS = ("rcond", "horizon", "horizon_weight", "log", "method", "smoothing_power")
 _EVAL_PAIRS = 100_000
 
 
 def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEFAULT_MH_MAXES, fanouts=DEFAULT_FANOUTS,
-                    ld_max=2, md_max=0, tolerance=DEFAULT_BASIS_TOLERANCE, state=None, states=None, progress=None, **fit_kwargs):
-    """Basis orders and fan-out by leave-one-test-out cross-validation, scored by the
-    worst held-out test.
+                    ld_max=2, md_max=0, tolerance=DEFAULT_BASIS_TOLERANCE, state=None, states=None, progress=None,
+                    smoothings=DEFAULT_SMOOTHINGS, **fit_kwargs):
+    """Basis orders, fan-out and smoothing strength by leave-one-test-out
+    cross-validation, scored by the worst held-out test.
 
     Each test (one incidence and groove orientation) is held out in turn and predicted by
     a :func:`brdfmodels.fitting.fit_sh` fit of the others (per state group when ``state``
@@ -229,7 +237,8 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
         Difference-angle orders (fixed).
     tolerance : float
         The chosen setting is the cheapest (fewest coefficients) whose worst-fold error is
-        at most ``(1 + tolerance)`` times the lowest.
+        at most ``(1 + tolerance)`` times the lowest (default 0: the lowest; the
+        smoothing, not the basis size, limits what the fit does beyond the data).
     state : str, optional
         A state column (``"time_s"``, ``"temperature_k"``, a named state): the folds are
         made within each state group, and the worst is over every group's folds (one
@@ -239,16 +248,20 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
         The state nodes samples are grouped to (default: the column's distinct values).
     progress : callable, optional
         Called with (settings done, settings) before each setting and at the end.
+    smoothings : sequence of float
+        Tikhonov strengths alpha >= 0 to try per basis (``fit_sh``'s ``smoothing``;
+        default ``DEFAULT_SMOOTHINGS``, 1e-7 to 1e-3; ``(0.0,)`` with ``tolerance=0.1``
+        is the earlier truncated-SVD selection).
     **fit_kwargs
         Passed on to ``fit_sh``: ``rcond``, ``horizon``, ``horizon_weight``, ``log``,
-        ``method``.
+        ``method``, ``smoothing_power``.
 
     Returns
     -------
     best : dict
         The chosen row of ``table``.
     table : list of dict
-        Every setting fitted: ``lh_max, mh_max, fanout, coefficients``,
+        Every setting fitted: ``lh_max, mh_max, fanout, smoothing, coefficients``,
         ``worst_fold_log_rms`` (the score), ``held_out_log_rms`` (mean over the folds),
         ``fold_log_rms`` (fold name -> error; ``"<test>@<state>"`` with ``state``),
         ``fit_time_s`` (one ``fit_sh`` of all samples (of the first state group) with that
@@ -262,13 +275,16 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
     each test's weighted design rows of that basis are reduced once to a QR factor; a
     fold stacks the other tests' factors and the horizon rows' and factors them again
     (B = Q R). A basis's fold matrix is then Q R[:, cols], and the truncated SVD of the
-    small R[:, cols] gives the same coefficients as ``fit_sh`` on the fold, up to
-    rounding (``tests/brdfmodels/test_basis_selection.py``).
+    small R[:, cols] (with the smoothing rows stacked under it) gives the same
+    coefficients as ``fit_sh`` on the fold, up to rounding
+    (``tests/brdfmodels/test_basis_selection.py``). A log fold's error is computed from
+    the held-out test's own design rows.
     """
     groups = _state_groups(samples, state, states)
     splits = {g: _loto_split(s) for g, s in groups.items()}
     lh_maxes, mh_maxes, fanouts, tolerance = _check_grid(lh_maxes, mh_maxes, fanouts, tolerance)
     opts = _fit_options(fit_kwargs)
+    smoothings = _check_smoothings(smoothings)
     settings = [(fan, mh, lh) for fan in fanouts for mh in mh_maxes for lh in lh_maxes if mh <= lh]
     master = SHBasis(max(lh_maxes), max(mh for _, mh, _ in settings), ld_max, md_max)
     rng = np.random.default_rng(0)
@@ -284,19 +300,20 @@ def choose_sh_basis(samples: Samples, *, lh_maxes=DEFAULT_LH_MAXES, mh_maxes=DEF
                 continue  # a fold with fewer samples than coefficients: fit_sh refuses it
             if data is not None and (not solvers or next(iter(solvers.values())).fanout != fan):
                 solvers = {g: _FoldSolver(data[g], splits[g][0], fan, master, opts) for g in groups}
-            folds = _group_fold_errors(groups, splits, solvers, basis, fan, fit_kwargs, state is not None)
             if (lh, mh) not in costs:  # fit and evaluation cost depend on the basis, not the fan-out
                 costs[(lh, mh)] = _basis_costs(next(iter(groups.values())), basis, fan, fit_kwargs, pairs)
-            table.append({"lh_max": lh, "mh_max": mh, "fanout": fan, "coefficients": basis.size,
-                          "worst_fold_log_rms": max(folds.values()), "held_out_log_rms": float(np.mean(list(folds.values()))),
-                          "fold_log_rms": folds, "fit_time_s": costs[(lh, mh)][0], "eval_s_per_1e6": costs[(lh, mh)][1]})
+            for sm in smoothings:
+                folds = _group_fold_errors(groups, splits, solvers, basis, fan, {**fit_kwargs, "smoothing": sm}, state is not None)
+                table.append({"lh_max": lh, "mh_max": mh, "fanout": fan, "smoothing": sm, "coefficients": basis.size,
+                              "worst_fold_log_rms": max(folds.values()), "held_out_log_rms": float(np.mean(list(folds.values()))),
+                              "fold_log_rms": folds, "fit_time_s": costs[(lh, mh)][0], "eval_s_per_1e6": costs[(lh, mh)][1]})
     if progress is not None:
         progress(len(settings), len(settings))
     if not table:
         raise ValueError(f"choose_sh_basis: {len(samples)} samples; every basis in the grid has more coefficients than a "
                          "leave-one-test-out fold has samples: give more samples or smaller lh_maxes/mh_maxes")
     fan_rank = {f: i for i, f in enumerate(fanouts)}
-    table.sort(key=lambda r: (r["lh_max"], r["mh_max"], fan_rank[r["fanout"]]))
+    table.sort(key=lambda r: (r["lh_max"], r["mh_max"], fan_rank[r["fanout"]], r["smoothing"]))
     return cheapest_within(table, tolerance), table
 
 
@@ -322,7 +339,7 @@ def _group_fold_errors(groups, splits, solvers, basis, fan, fit_kwargs, named):
         if solvers.get(g) is None:
             errs = _fold_errors_fit_sh(s, tests, held, basis, fan, fit_kwargs)
         else:
-            errs = [prediction_error(model, test)["log_rms"] for model, test in zip(solvers[g].models(basis), held)]
+            errs = solvers[g].fold_errors(basis, fit_kwargs.get("smoothing", 0.0), held)
         for test, e in zip(held, errs):
             out[f"{test.test_id[0]}@{g:g}" if named else str(test.test_id[0])] = float(e)
     return out
@@ -378,10 +395,19 @@ def _check_grid(lh_maxes, mh_maxes, fanouts, tolerance):
     return orders[0], orders[1], fans, finite_scalar("tolerance", tolerance, minimum=0.0)
 
 
+def _check_smoothings(smoothings):
+    """Validated tuple of Tikhonov strengths (>= 0) to try."""
+    from ._checks import finite_scalar
+
+    if not isinstance(smoothings, (tuple, list, np.ndarray)) or len(smoothings) == 0:
+        raise ValueError(f"smoothings={smoothings!r}: expected a non-empty sequence of numbers >= 0")
+    return tuple(finite_scalar("smoothings", v, minimum=0.0) for v in smoothings)
+
+
 def _fit_options(fit_kwargs):
     """fit_sh's options as the fold solver uses them (its defaults, its checks)."""
     from ._checks import finite_scalar
-    from .fitting import DEFAULT_HORIZON_WEIGHT, DEFAULT_RCOND
+    from .fitting import DEFAULT_HORIZON_WEIGHT
 
     unknown = sorted(set(fit_kwargs) - set(_FAST_FIT_OPTIONS))
     if unknown:
@@ -390,9 +416,10 @@ def _fit_options(fit_kwargs):
     method = fit_kwargs.get("method", "tsvd")
     if method not in ("tsvd", "constrained"):
         raise ValueError(f"method={method!r}: expected 'tsvd' or 'constrained'")
-    return {"rcond": DEFAULT_RCOND if rc is None else finite_scalar("rcond", rc, minimum=0.0, maximum=1.0),
+    return {"rcond": None if rc is None else finite_scalar("rcond", rc, minimum=0.0, maximum=1.0),  # None: fit_sh's default
             "horizon_weight": DEFAULT_HORIZON_WEIGHT if hw is None else finite_scalar("horizon_weight", hw, minimum=0.0),
-            "horizon": bool(fit_kwargs.get("horizon", True)), "log": bool(fit_kwargs.get("log", True)), "method": method}
+            "horizon": bool(fit_kwargs.get("horizon", True)), "log": bool(fit_kwargs.get("log", True)), "method": method,
+            "smoothing_power": finite_scalar("smoothing_power", fit_kwargs.get("smoothing_power", 2.0), minimum=0.0)}
 
 
 def _fold_errors_fit_sh(samples, tests, held, basis, fanout, fit_kwargs):
@@ -438,13 +465,17 @@ class _FoldSolver:
         wi, wo, f, w, y = data
         self.fanout, self.opts, self.master = fanout, opts, master
         self.index = {c: i for i, c in enumerate(master.columns)}
-        per_test = [self._factor(wi[m], wo[m], y[m], np.sqrt(w[m])) for m in tests]
+        designs = [self.master.evaluate_directions(wi[m], wo[m], fanout=fanout) for m in tests]
+        # each test's own design rows and ln(cos_i cos_r), for its held-out error (log fits)
+        self.held = [(a, np.log(wi[m][:, 2] * wo[m][:, 2])) for a, m in zip(designs, tests)] if opts["log"] else None
+        per_test = [self._factor(a, y[m], np.sqrt(w[m])) for a, m in zip(designs, tests)]
         horizon = self._horizon_factor() if opts["horizon"] and opts["horizon_weight"] > 0 else None
         self.folds = [self._merge(per_test, k, ~m, f, w, horizon) for k, m in enumerate(tests)]
+        self.n_train = [int(np.sum(~m)) for m in tests]
 
-    def _factor(self, wi, wo, y, sw):
+    def _factor(self, a, y, sw):
         """R and Q^T z of one test's weighted design rows."""
-        q, r = np.linalg.qr(self.master.evaluate_directions(wi, wo, fanout=self.fanout) * sw[:, None])
+        q, r = np.linalg.qr(a * sw[:, None])
         return r, q.T @ (y * sw)
 
     def _horizon_factor(self):
@@ -469,9 +500,28 @@ class _FoldSolver:
         q, r = np.linalg.qr(np.vstack(rs))
         return r, q.T @ np.concatenate(cs)
 
-    def models(self, basis):
+    def fold_errors(self, basis, smoothing, held):
+        """Held-out log-RMS of each fold's fit: for log fits from the held-out test's own
+        design rows (ln f_model = min(A c - ln(cos_i cos_r), ln FR_MAX), as the model
+        evaluates it), otherwise by evaluating the models."""
+        from .models import FR_MAX
+
+        models = self.models(basis, smoothing)
+        if self.held is None:
+            return [prediction_error(model, test)["log_rms"] for model, test in zip(models, held)]
+        cols = [self.index[c] for c in basis.columns]
+        out = []
+        for model, (a, log_cos), test in zip(models, self.held, held):
+            ln_f = np.minimum(a[:, cols] @ model.coefficients - log_cos, math.log(FR_MAX))
+            out.append(float(np.sqrt(np.mean((ln_f - np.log(test.brdf_per_sr)) ** 2))))
+        return out
+
+    def models(self, basis, smoothing=0.0):
         """The fit of each fold with ``basis``: the fold's rows times ``basis``'s columns
-        are Q R[:, cols], so their SVD is Q times that of R[:, cols]."""
+        are Q R[:, cols], so their SVD is Q times that of R[:, cols] (with ``smoothing``,
+        the penalty rows of :func:`brdfmodels.fitting.smoothing_rows` stacked under it)."""
+        from .fitting import default_rcond, smoothing_rows
+
         from .models import SphericalHarmonicBRDF
 
         missing = [c for c in basis.columns if c not in self.index]
@@ -479,9 +529,14 @@ class _FoldSolver:
             raise ValueError(f"basis={basis!r}: columns {missing[:3]} are not in the fold solver's {self.master!r}")
         cols = [self.index[c] for c in basis.columns]
         out = []
-        for r, d in self.folds:
-            u, s, vt = np.linalg.svd(r[:, cols], full_matrices=False)
-            keep = s > self.opts["rcond"] * s[0]
+        for (r, d), n in zip(self.folds, self.n_train):
+            r = r[:, cols]
+            if smoothing > 0:
+                r = np.vstack([r, smoothing_rows(basis, smoothing, self.opts["smoothing_power"], n)])
+                d = np.concatenate([d, np.zeros(len(cols))])
+            u, s, vt = np.linalg.svd(r, full_matrices=False)
+            rcond = default_rcond(smoothing) if self.opts["rcond"] is None else self.opts["rcond"]
+            keep = s > rcond * s[0]
             coef = vt[keep].T @ ((u[:, keep].T @ d) / s[keep])
             out.append(SphericalHarmonicBRDF(basis, coef, fanout=self.fanout, log=self.opts["log"]))
         return out

@@ -222,6 +222,8 @@ def build_parser() -> argparse.ArgumentParser:
         q.add_argument("-o", "--output", required=True, help="model file to write (JSON)")
         q.add_argument("--basis", default="8,4,2,0", help="lh_max,mh_max,ld_max,md_max (default 8,4,2,0: 37 harmonics)")
         q.add_argument("--fanout", type=float, default=0.6, help="fan-out exponent s_e (default 0.6)")
+        q.add_argument("--smoothing", type=float, default=0.0, help="Tikhonov smoothness strength of the SH fit (default 0: "
+                                                                    "none; --report's choice prints it)")
         q.add_argument("--state", help="fit one model per state: time_s, temperature_k or a state column of the samples; "
                                        "two names (extinction,melt_fraction) fit a two-state model")
         q.add_argument("--states", help="comma-separated state values to group the samples at (with --state); for two "
@@ -854,12 +856,13 @@ def _fit_sh(args, out, samples):
         _print_report(out, "leave-one-test-out (scored by the worst fold): basis orders and fan-out", table, args.json, {"best": best})
     if args.state:
         state, nodes = _state_nodes_args(args.state, args.states)
-        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=state, fanout=args.fanout,
+        res = fitting.fit_dynamic_sh(samples, basis, nodes, state=state, fanout=args.fanout, smoothing=args.smoothing,
                                      progress=progress_callback("SH fit per state", unit="state"))
         model = res.model
         rows = [{"state": k, **v.summary()} for k, v in res.fits.items()]
     else:
-        r = fitting.fit_sh(samples.wi, samples.wo, samples.brdf_per_sr, basis, fanout=args.fanout, weights=samples.weight)
+        r = fitting.fit_sh(samples.wi, samples.wo, samples.brdf_per_sr, basis, fanout=args.fanout, weights=samples.weight,
+                             smoothing=args.smoothing)
         model = r.model
         rows = [r.summary()]
     extra = {"wrote": str(args.output)}

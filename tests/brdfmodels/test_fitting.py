@@ -165,3 +165,52 @@ def test_fit_defaults_are_best_on_held_out_data():
     assert (best["rcond"], best["horizon_weight"]) == (fitting.DEFAULT_RCOND, fitting.DEFAULT_HORIZON_WEIGHT)
     no_horizon = [r for r in rows if r["horizon_weight"] == 0.0 and r["rcond"] == 1e-4][0]
     assert no_horizon["train_log_rms"] < best["train_log_rms"] and no_horizon["hemisphere_log_rms"] > 5 * best["hemisphere_log_rms"]
+
+
+def _l_of_columns(basis):
+    """Degree l of each column of a separable basis (its descriptor ('h'|'d', l, m))."""
+    return np.array([c[1] for c in basis.columns], float)
+
+
+def test_fit_sh_smoothing_is_the_tikhonov_solution():
+    """With smoothing alpha the coefficients solve the normal equations
+    (A^T W A + alpha N diag((l(l+1))^p)) c = A^T W y, written out here (no horizon, rcond 0);
+    smoothing 0 is the unregularised fit; a larger alpha never raises the penalty."""
+    basis = bm.SHBasis(6, 4, 2, 0)
+    wi, wo = _pairs(400, seed=3)
+    rng = np.random.default_rng(4)
+    f = np.exp(rng.normal(size=400)) / (wi[:, 2] * wo[:, 2])
+    w = rng.uniform(0.5, 2.0, 400)
+    a = basis.evaluate_directions(wi, wo, fanout=0.5)
+    y = np.log(wi[:, 2] * wo[:, 2] * f)
+    wn = w / w.mean()
+    ll = _l_of_columns(basis) * (_l_of_columns(basis) + 1)
+    penalties = []
+    for alpha, p in ((0.0, 2.0), (1e-5, 2.0), (1e-3, 1.0), (1e-1, 2.0)):
+        r = fitting.fit_sh(wi, wo, f, basis, fanout=0.5, weights=w, horizon=False, rcond=0.0, smoothing=alpha, smoothing_power=p)
+        lhs = a.T @ (wn[:, None] * a) + alpha * 400 * np.diag(ll ** p)
+        np.testing.assert_allclose(r.model.coefficients, np.linalg.solve(lhs, a.T @ (wn * y)), rtol=1e-8, atol=1e-10)
+        assert r.details["smoothing"] == alpha and r.details["smoothing_power"] == p
+        if p == 2.0:
+            penalties.append(float(np.sum(ll ** 2 * r.model.coefficients ** 2)))
+    assert penalties[0] > penalties[1] > penalties[2]
+
+
+def test_fit_sh_smoothing_leaves_a_constant_untouched():
+    """The constant harmonic (l = 0) is not penalised: f~ = const is recovered exactly
+    at any smoothing, with the horizon rows off."""
+    basis = bm.SHBasis(8, 4, 2, 0)
+    wi, wo = _pairs(500, seed=5)
+    f = 0.37 / (wi[:, 2] * wo[:, 2])
+    for alpha in (1e-6, 1.0, 1e3):
+        r = fitting.fit_sh(wi, wo, f, basis, horizon=False, smoothing=alpha)
+        np.testing.assert_allclose(r.model.evaluate(wi, wo), f, rtol=1e-9)
+
+
+def test_fit_sh_smoothing_errors():
+    basis = bm.SHBasis(4, 2, 2, 0)
+    wi, wo = _pairs(100)
+    for kw, field in (({"smoothing": -1e-3}, "smoothing"), ({"smoothing": float("nan")}, "smoothing"),
+                      ({"smoothing": 1e-3, "smoothing_power": -1.0}, "smoothing_power")):
+        with pytest.raises(ValueError, match=field):
+            fitting.fit_sh(wi, wo, np.ones(100), basis, **kw)

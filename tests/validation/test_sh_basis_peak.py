@@ -12,7 +12,9 @@ Protocol (seed 000, Sec. V; spec dynamic-sh-brdf.md section 13), typed in: fit w
 incidence -20, 0.3, 5, 20, 40 deg (grooves horizontal: plane of incidence along the
 grooves) and 20 deg (grooves vertical: plane of incidence across them); predict the
 held-out 10 and 30 deg (horizontal) and 40 deg (vertical, the out-of-plane set) at each
-state. Goal: log-RMS <= 0.30 on every held-out set at every state. The error is computed
+state. Goal: log-RMS <= 0.30 on every held-out set at every state, here on the test's truth,
+on a GGX truth nobody tuned for, on a more diffuse variant (three noise draws) and on the
+grooved metal of brdfmodels.validation sampled at its peak. The error is computed
 here from its definition, sqrt(mean(ln(f_model / f_true)^2)), against the noise-free truth.
 """
 
@@ -99,9 +101,14 @@ def fit_samples():
     return make_samples(FIT)
 
 
-def _dynamic(samples, lh, mh, fanout, times=TIMES):
+def _dynamic(samples, lh, mh, fanout, times=TIMES, smoothing=0.0):
     """One SH fit per state (the library's dynamic fit) with basis (lh, mh, 2, 0)."""
-    return fit_dynamic_sh(samples, SHBasis(lh, mh, 2, 0), list(times), state="time_s", fanout=fanout).model
+    return fit_dynamic_sh(samples, SHBasis(lh, mh, 2, 0), list(times), state="time_s", fanout=fanout, smoothing=smoothing).model
+
+
+def _chosen(samples, best, times=TIMES):
+    """The dynamic fit with a choose_sh_basis row's setting (its smoothing included)."""
+    return _dynamic(samples, best["lh_max"], best["mh_max"], best["fanout"], times=times, smoothing=best["smoothing"])
 
 
 def _unit(v):
@@ -144,31 +151,33 @@ def test_samples_hold_the_unsaturated_peak(fit_samples):
     assert peaks[1] > peaks[0] > 4.0 and peaks[2] < 0.2 * peaks[1]
 
 
-def test_chosen_basis_reaches_the_goal_at_the_first_state(fit_samples):
-    """At t = 0 (the sharpest lobe, where the old rule fails worst): the default
-    selection's choice on this truth, (8, 8, 0.4) (the slow test below runs the selection
-    over all states), predicts every held-out set to <= 0.30 (measured max 0.25); the old
-    rule's choice (mean over folds, tolerance 0.3), (10, 8, 0.4), misses it on the
-    out-of-plane set (measured 0.54) while predicting the in-plane sets to 0.11."""
-    first = fit_samples.select(fit_samples.time_s == 0.0)
-    new = held_out_errors(_dynamic(first, 8, 8, 0.4, times=(0.0,)), times=(0.0,))
-    assert max(new.values()) <= GOAL, new
-    old = held_out_errors(_dynamic(first, 10, 8, 0.4, times=(0.0,)), times=(0.0,))
-    assert old[("40deg-g90", 0.0)] > GOAL + 0.1
-    assert max(v for (k, _), v in old.items() if k != "40deg-g90") < GOAL  # the in-plane sets were fine
+def test_smoothing_bounds_the_extrapolation_at_the_first_state():
+    """The mechanism of the default (Tikhonov smoothing, issue 32 item 5), fast: on the
+    more diffuse variant at t = 0 the truncated-SVD fit with (10, 8, 0.4) predicts the
+    out-of-plane set to 0.44 (measured; the erratic extrapolation beyond the elevation the
+    fit tests reached), the same basis with the smoothing strength the selection picks
+    there, 1e-6, to 0.23 (<= 0.30), the in-plane sets staying at about 0.1."""
+    samples = make_samples(FIT, truth=_more_diffuse)
+    first = samples.select(samples.time_s == 0.0)
+    smooth = held_out_errors(_dynamic(first, 10, 8, 0.4, times=(0.0,), smoothing=1e-6), times=(0.0,), truth=_more_diffuse)
+    assert max(smooth.values()) <= GOAL, smooth
+    tsvd = held_out_errors(_dynamic(first, 10, 8, 0.4, times=(0.0,)), times=(0.0,), truth=_more_diffuse)
+    assert tsvd[("40deg-g90", 0.0)] > GOAL + 0.1
+    assert max(v for (k, _), v in tsvd.items() if k != "40deg-g90") < 0.15  # the in-plane sets were fine
 
 
 @pytest.mark.slow
 def test_default_selection_reaches_the_goal_on_every_held_out_set(fit_samples):
     """choose_sh_basis with its defaults, folds per state: its choice, fitted per state,
     predicts every held-out set of the protocol at every state to <= 0.30 log-RMS; the
-    same table ranked by the old rule (mean of folds, tolerance 0.3) does not."""
+    unregularised table ranked by the older rule (mean of folds, tolerance 0.3) does not."""
     best, table = validation.choose_sh_basis(fit_samples, state="time_s")
-    assert len(table) == 96 and all(len(r["fold_log_rms"]) == 6 * len(TIMES) for r in table)
-    errs = held_out_errors(_dynamic(fit_samples, best["lh_max"], best["mh_max"], best["fanout"]))
+    assert len(table) == 96 * len(validation.DEFAULT_SMOOTHINGS) and all(len(r["fold_log_rms"]) == 6 * len(TIMES) for r in table)
+    errs = held_out_errors(_chosen(fit_samples, best))
     assert max(errs.values()) <= GOAL, (best, errs)
-    old = validation.cheapest_within(table, 0.3, key="held_out_log_rms")
-    old_errs = held_out_errors(_dynamic(fit_samples, old["lh_max"], old["mh_max"], old["fanout"]))
+    _, tsvd = validation.choose_sh_basis(fit_samples, state="time_s", smoothings=(0.0,))
+    old = validation.cheapest_within(tsvd, 0.3, key="held_out_log_rms")
+    old_errs = held_out_errors(_chosen(fit_samples, old))
     assert max(old_errs.values()) > GOAL, (old, old_errs)
 
 
@@ -209,12 +218,11 @@ def test_the_second_truth_is_reciprocal_and_its_peak_moves_across_the_grooves(xy
 def test_default_selection_reaches_the_goal_on_a_second_untuned_truth():
     """The default selection (folds per state) on the GGX truth, sampled like the first:
     its choice predicts every held-out set at every state to <= 0.30 log-RMS (measured:
-    (4, 2, 0.4), 0.255 in-plane and 0.227 out-of-plane, worst state; the best of the 96
-    candidates reaches 0.248, the in-plane sets' floor for this separable basis)."""
+    (8, 6, 0.4) with smoothing 1e-5, 0.248 in-plane and 0.218 out-of-plane, worst state;
+    the truncated-SVD selection's (4, 2, 0.4): 0.255 / 0.227)."""
     samples = make_samples(FIT, truth=ggx_truth_fr)
     best, _ = validation.choose_sh_basis(samples, state="time_s")
-    model = _dynamic(samples, best["lh_max"], best["mh_max"], best["fanout"])
-    errs = held_out_errors(model, truth=ggx_truth_fr)
+    errs = held_out_errors(_chosen(samples, best), truth=ggx_truth_fr)
     assert max(errs.values()) <= GOAL, (best, errs)
 
 
@@ -224,17 +232,43 @@ def _more_diffuse(wi, wo, t_s):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="known limit (issue 32 item 5, docs/fit-defaults.md): on the more diffuse variant "
-                   "the choice (8, 8, 0.4) predicts the out-of-plane set to 0.304 (other noise draws: 0.307-0.308); "
-                   "no leave-one-test-out rule tried reaches <= 0.30 on it and on the other truths together")
-def test_default_selection_on_the_more_diffuse_variant():
-    """Kept as a record that fails loudly (strict xfail) once a selection fixes it: the
-    error is an under-prediction (up to 12x at 1 % of the directions) where the held-out
-    40 deg vertical-groove screen reaches 69 deg from the normal across the grooves, while
-    the fit tests reach 48 deg there."""
-    samples = make_samples(FIT, truth=_more_diffuse)
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_default_selection_on_the_more_diffuse_variant(seed):
+    """A strict xfail until the Tikhonov smoothing (issue 32 item 5, later round): the
+    truncated-SVD choice (8, 8, 0.4) predicted the out-of-plane set to 0.304-0.308, low by
+    up to 12x where the held-out 40 deg vertical-groove screen reaches 69 deg from the normal
+    across the grooves (the fit tests: 48 deg). The default selection now predicts every
+    held-out set to <= 0.30 for every noise draw."""
+    samples = make_samples(FIT, truth=_more_diffuse, seed=seed)
     first = samples.select(samples.time_s == 0.0)
     best, _ = validation.choose_sh_basis(first)
-    model = _dynamic(first, best["lh_max"], best["mh_max"], best["fanout"], times=(0.0,))
-    errs = held_out_errors(model, times=(0.0,), truth=_more_diffuse)
+    errs = held_out_errors(_chosen(first, best, times=(0.0,)), times=(0.0,), truth=_more_diffuse)
+    assert max(errs.values()) <= GOAL, (best, errs)
+
+
+def grooved_metal_fr(wi, wo, t_s):
+    """The grooved metal of brdfmodels.validation (SyntheticGroovedMetal, its defaults),
+    typed in again: kd (1 + 0.3 (s - 0.311)) / pi + ks e^-(s - 0.311) exp(-(hx^2/ax^2 +
+    hy^2/ay^2) / hz^2) / (4 pi ax ay sqrt(cos_i cos_r)), widths 0.06 / 0.15 growing 60 % per
+    unit of the oxide state s = 0.311 + 0.1189 t [1/s]; ks 0.5, kd 0.03."""
+    s = 0.311 + (1.5 - 0.311) * np.asarray(t_s, float) / 10.0
+    grow = 1.0 + 0.6 * (s - 0.311)
+    ax, ay = 0.06 * grow, 0.15 * grow
+    h = wi + wo
+    h = h / np.linalg.norm(h, axis=1, keepdims=True)
+    e = (h[:, 0] ** 2 / ax ** 2 + h[:, 1] ** 2 / ay ** 2) / h[:, 2] ** 2
+    lobe = np.exp(-e) / (4 * math.pi * ax * ay * np.sqrt(wi[:, 2] * wo[:, 2]))
+    return 0.03 * (1 + 0.3 * (s - 0.311)) / math.pi + 0.5 * np.exp(-(s - 0.311)) * lobe
+
+
+@pytest.mark.slow
+def test_default_selection_on_the_grooved_metal_sampled_at_its_peak():
+    """The grooved metal sampled directly (not through the saturating camera) at t = 0:
+    the truncated-SVD choice (8, 6, 0.4) predicted the out-of-plane set to 0.373 (4.4x high
+    at 1 % of the directions, beyond the measured elevation); the default selection now
+    predicts every held-out set to <= 0.30."""
+    samples = make_samples(FIT, truth=grooved_metal_fr)
+    first = samples.select(samples.time_s == 0.0)
+    best, _ = validation.choose_sh_basis(first)
+    errs = held_out_errors(_chosen(first, best, times=(0.0,)), times=(0.0,), truth=grooved_metal_fr)
     assert max(errs.values()) <= GOAL, (best, errs)
