@@ -13,7 +13,10 @@ from hazard.physics.keepout import Footprint, Lobe
 if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
     from scenes.observers import Observers
 
+    from hazard.pipeline.extended_source import ExtendedSourceSummary
     from hazard.pipeline.motion_stage import MotionResult
+    from hazard.pipeline.spill import SpillSummary
+    from hazard.pipeline.spots import BeamSampling
 
 __all__ = ["Stage", "TargetResult", "ObserverResults", "HazardResult"]
 
@@ -206,9 +209,9 @@ class HazardResult:
     spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
     beam: object | None = None
     states: dict = field(default_factory=dict)  # target index -> states over times_s
-    extended_source: dict = field(default_factory=dict)  # C_E summary for the report (hazard.pipeline.extended_source)
-    beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
-    spill: dict = field(default_factory=dict)  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill)
+    extended_source: ExtendedSourceSummary | None = None  # C_E summary for the report (hazard.pipeline.extended_source); None: not run
+    beam_sampling: BeamSampling | None = None  # rays, levels, error bound, exact targets (hazard.pipeline.spots.beam_sampling); None: not traced
+    spill: SpillSummary | None = None  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill); None: not run
     sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.physics.visual)

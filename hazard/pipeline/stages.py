@@ -53,6 +53,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.pipeline.direct import DirectBeam
     from hazard.pipeline.limits import ExposureLimits
     from hazard.pipeline.motion_stage import MotionResult
+    from hazard.pipeline.spill import SpillSummary
     from hazard.pipeline.spots import BeamStage
 
 __all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS",
@@ -497,10 +498,11 @@ class DirectResult:
 
 @dataclass(frozen=True)
 class SpillResult:
-    """Stage ``spill``: report.json ``spill`` (the beam past the targets: powers [W],
-    where it is stopped, its NOHD [m]; keys and types: :class:`hazard.outputs.report_schema.SpillBlock`)."""
+    """Stage ``spill``: report.json ``beam.spill`` (the beam past the targets: powers [W],
+    where it is stopped, its NOHD [m]; :class:`hazard.pipeline.spill.SpillSummary`, the schema's
+    ``SpillBlock`` generated from it)."""
 
-    summary: dict
+    summary: SpillSummary
 
 
 @dataclass(frozen=True)
