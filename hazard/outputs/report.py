@@ -910,10 +910,11 @@ def _motion_lines(result) -> list:
     if fixed:
         n = sum(p.summary["hazardous"] for p in fixed)
         out.append(f"  over time (the beam or a target moves): {n} of {len(fixed)} fixed observer(s) hazardous")
-    for z in (getattr(result, "airspace", None) or {}).get("zones", []):
-        out.append(f"  flight zone {z['name']} ({z['limit']}): " + ("holds" if z["holds"] else
-                   f"EXCEEDED: {z['worst_effective_irradiance_w_m2']:.4g} W/m^2 effective at t = {z['worst_time_s']:.6g} s "
-                   f"(limit {z['limit_w_m2']:.4g}, {z['worst_path']})"))
+    air = getattr(result, "airspace", None)
+    for z in () if air is None else air.zones:
+        out.append(f"  flight zone {z.name} ({z.limit}): " + ("holds" if z.holds else
+                   f"EXCEEDED: {z.worst_effective_irradiance_w_m2:.4g} W/m^2 effective at t = {z.worst_time_s:.6g} s "
+                   f"(limit {z.limit_w_m2:.4g}, {z.worst_path})"))
     vi = getattr(result, "visual_interference", None) or {}
     if vi.get("applies"):
         d = vi["direct"]

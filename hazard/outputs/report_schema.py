@@ -19,13 +19,14 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   (:class:`scenes.dem.DemInfo`), ``verdict`` (:class:`hazard.pipeline.verdict.Verdict`
   without ``warnings``), ``beam.sampling`` (:class:`hazard.pipeline.spots.BeamSampling`),
   ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
-  (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`) and the aid's part of
+  (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`), ``airspace``
+  (:class:`hazard.pipeline.airspace.AirspaceCheck`) and the aid's part of
   ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`): a field added there is in
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
   example, and the tests of the scenes that write the optional keys validate theirs): ``uv_24h``, ``frame``,
-  ``sdz``, ``visual_interference``, ``airspace``, ``motion``, ``tracks`` and ``map_outputs``.
+  ``sdz``, ``visual_interference``, ``motion``, ``tracks`` and ``map_outputs``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -44,6 +45,7 @@ from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
 from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult
+from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
 from hazard.pipeline.extended_source import ExtendedSourceSummary
 from hazard.pipeline.results import Stage
@@ -70,7 +72,7 @@ class _Strict(BaseModel):
 def _json_type(hint: Any) -> Any:
     """The JSON type of a dataclass field's annotation: floats may be "inf"/"nan", a bare
     tuple is written as a list of str (the steps) unless the caller says otherwise, a
-    ``tuple[X, ...]`` as a list of X, a nested dataclass as its own strict model
+    ``tuple[X, ...]`` as a list of X, ``X | None`` as X's type or null, a nested dataclass as its own strict model
     (:func:`_from_dataclass`, named as the class)."""
     if hint is float:
         return Number
@@ -78,6 +80,8 @@ def _json_type(hint: Any) -> Any:
         return Optional[Number]
     if hint is tuple:
         return list[str]
+    if type(None) in get_args(hint) and len(get_args(hint)) == 2:  # X | None: X's JSON type, or null
+        return Optional[_json_type(next(a for a in get_args(hint) if a is not type(None)))]
     if get_origin(hint) is tuple and len(get_args(hint)) == 2 and get_args(hint)[1] is Ellipsis:
         return list[_json_type(get_args(hint)[0])]  # type: ignore[misc]
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
@@ -404,31 +408,9 @@ class VisualBlock(_Strict):
     nohd_attenuation: str
 
 
-class FlightZone(_Strict):
-    """:func:`hazard.pipeline.airspace._zone_check`."""
-
-    name: str
-    limit: str
-    limit_w_m2: Optional[Number]
-    floor_agl_m: Number
-    ceiling_agl_m: Number
-    holds: bool
-    worst_effective_irradiance_w_m2: Number
-    worst_point_m: Optional[list[Number]]
-    worst_time_s: Optional[Number]
-    worst_path: Optional[str]
-    vcf_applied: Number
-    lattice_spacing_m: Number
-    times_checked: int
-
-
-class AirspaceBlock(_Strict):
-    """``airspace`` (:func:`hazard.pipeline.airspace.check_zones`)."""
-
-    zones: list[FlightZone]
-    method: str
-    visual_correction_factor: Number
-    note: str = ABSENT  # not visible
+# ``airspace``: :class:`hazard.pipeline.airspace.AirspaceCheck` (``note`` only for a laser that is not visible),
+# its zones :class:`~hazard.pipeline.airspace.FlightZoneCheck`
+AirspaceBlock = _from_dataclass(AirspaceCheck, "AirspaceBlock", override={"zones": list[_from_dataclass(FlightZoneCheck, "FlightZone")]})  # type: ignore[misc]
 
 
 class WorstWindow(_Strict):
@@ -554,7 +536,7 @@ class ReportModel(_Strict):
     warnings: list[str]
     notes: list[str]
     visual_interference: Optional[VisualBlock]
-    airspace: Optional[AirspaceBlock]
+    airspace: Optional[AirspaceBlock]  # type: ignore[valid-type]
     motion: Optional[MotionBlock]
     tracks: list[PathBlock]
     map_outputs: Optional[MapOutputsBlock] = None

@@ -117,7 +117,7 @@ def hazard_result(r, stages=()) -> HazardResult:
         motion=r["motion"].motion,
         extended_source=None if ext is None else ext.summary,
         visual_interference={} if air is None else air.visual_interference,
-        airspace={} if air is None else air.zones,
+        airspace=None if air is None else air.zones,
         uv_24h=None if exposure.uv_24h is None else exposure.uv_24h.to_dict(),
     )
 
@@ -419,7 +419,7 @@ def _airspace(log, **r) -> AirspaceResult:
 
     result = hazard_result(r)
     first = (r["history"].traced, r["rays"].tracer, r["rays"].ray_scene)
-    spec, zones = result.scene.spec, {}
+    spec, zones = result.scene.spec, None
     with log.run("airspace") as st:
         vi = visual_interference(result)
         st.detail = (("visual levels apply: " if vi["applies"] else "not a visible laser: ")
@@ -428,8 +428,8 @@ def _airspace(log, **r) -> AirspaceResult:
             from hazard.pipeline.airspace import check_zones
 
             zones = check_zones(replace(result, visual_interference=vi), first)
-            held = sum(z["holds"] for z in zones["zones"])
-            st.detail += f"; {held} of {len(zones['zones'])} flight zone(s) hold their limit"
+            held = sum(z.holds for z in zones.zones)
+            st.detail += f"; {held} of {len(zones.zones)} flight zone(s) hold their limit"
     return AirspaceResult(vi, zones)
 
 

@@ -13,6 +13,7 @@ from hazard.physics.keepout import Footprint, Lobe
 if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
     from scenes.observers import Observers
 
+    from hazard.pipeline.airspace import AirspaceCheck
     from hazard.pipeline.extended_source import ExtendedSourceSummary
     from hazard.pipeline.motion_stage import MotionResult
     from hazard.pipeline.spill import SpillSummary
@@ -215,7 +216,7 @@ class HazardResult:
     sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.physics.visual)
-    airspace: dict = field(default_factory=dict)  # the flight zones' checks (hazard.pipeline.airspace)
+    airspace: AirspaceCheck | None = None  # the flight zones' checks (hazard.pipeline.airspace); None: no [airspace] zones
     uv_24h: dict | None = None  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe, [M]), else None
 
     @property
@@ -258,9 +259,9 @@ class HazardResult:
             return x is not None and x > 0
 
         tracks = [] if self.motion is None else self.motion.tracks()
-        zones = (self.airspace or {}).get("zones") or []
+        zones = () if self.airspace is None else self.airspace.zones
         return bool(np.any(self.hazardous)) or positive((self.sdz or {}).get("nohd_m")) or any(
-            p.summary["hazardous"] for p in tracks) or any(not z["holds"] for z in zones) or any(
+            p.summary["hazardous"] for p in tracks) or any(not z.holds for z in zones) or any(
             (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
             or positive(t.specular_nohd_static_m) or positive(t.specular_nohd_dynamic_m)
             for t in self.targets

@@ -322,7 +322,7 @@ def unlit_targets(targets, spots, unreflected) -> list:
     """A row for every target without a spot (after the spots' rows, same order as the
     file), so no target disappears from a report: what reached it and why nothing reflects."""
     lit = {sp.target.index for sp in spots}
-    why = {}
+    why: dict[str, list[tuple[str, float]]] = {}
     for name, side, p in unreflected:
         why.setdefault(name, []).append((side, p))
     rows = []

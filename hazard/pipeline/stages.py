@@ -39,7 +39,7 @@ import time
 import types
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field, fields, is_dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import PurePath
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
@@ -53,6 +53,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.pipeline.direct import DirectBeam
     from hazard.pipeline.limits import ExposureLimits
     from hazard.pipeline.motion_stage import MotionResult
+    from hazard.pipeline.airspace import AirspaceCheck
     from hazard.pipeline.spill import SpillSummary
     from hazard.pipeline.spots import BeamStage
 
@@ -574,8 +575,8 @@ class MotionStageResult:
 @dataclass(frozen=True)
 class AirspaceResult:
     """Stage ``airspace``: report.json ``visual_interference`` (FAA levels' distances [m])
-    and ``airspace`` (the flight zones' checks; empty without ``[airspace]`` zones); keys and types:
-    :class:`hazard.outputs.report_schema.VisualBlock`, :class:`~hazard.outputs.report_schema.AirspaceBlock`."""
+    and ``airspace`` (the flight zones' checks, :class:`hazard.pipeline.airspace.AirspaceCheck`; None
+    without ``[airspace]`` zones); keys and types of the first: :class:`hazard.outputs.report_schema.VisualBlock`."""
 
     visual_interference: dict
-    zones: dict = field(default_factory=dict)
+    zones: AirspaceCheck | None = None

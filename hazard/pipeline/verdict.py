@@ -106,10 +106,11 @@ class Verdict:
 def _observer_counts(result) -> VerdictCounts:
     """Hazardous fixed observer points, moving observers and exceeded flight zones."""
     tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
-    zones = (getattr(result, "airspace", None) or {}).get("zones") or []
+    air = getattr(result, "airspace", None)
+    zones = () if air is None else air.zones
     return VerdictCounts(hazardous=int(np.sum(result.hazardous)), total=len(result.observers),
                          tracks_hazardous=sum(bool(p.summary["hazardous"]) for p in tracks), tracks=len(tracks),
-                         flight_zones_exceeded=sum(not z["holds"] for z in zones), flight_zones=len(zones))
+                         flight_zones_exceeded=sum(not z.holds for z in zones), flight_zones=len(zones))
 
 
 def _observers_text(c: VerdictCounts) -> str:

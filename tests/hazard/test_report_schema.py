@@ -18,10 +18,11 @@ from hazard.cli import main
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import observer_columns, report_dict
 from hazard.outputs.report_schema import (DemBlock, MpeBlock, ObserverRow, PulseBlock, StageRecord, TargetReport, Uv24hBlock, VerdictBlock,
-                                          SamplingBlock, SpillBlock, ExtendedSourceBlock,
+                                          SamplingBlock, SpillBlock, ExtendedSourceBlock, AirspaceBlock,
                                           report_schema, validate_report)
 from hazard.physics.mpe import MPEResult, RepetitivePulseResult, uv_24h_mpe
 from hazard.pipeline.results import Stage
+from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import NOT_APPLIED, ExtendedMpe, ExtendedSourceSummary
 from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
 from hazard.pipeline.spots import BeamSampling, NotReflected
@@ -211,6 +212,14 @@ def test_schema_follows_the_result_types():
     ExtendedSourceBlock.model_validate(doc, strict=True)
     with pytest.raises(ValidationError, match="alpha_min_rad"):  # written only when applied, and never null
         ExtendedSourceBlock.model_validate({**doc, "alpha_min_rad": None}, strict=True)
+    # airspace: AirspaceCheck's fields (note only for a laser that is not visible), its zones FlightZoneCheck's
+    zone = FlightZoneCheck("z", "lfed", 5e-4, 0.0, 300.0, False, 1e-3, (1.0, 2.0, 3.0), 0.0, "direct", 0.5, 50.0, 1)
+    air = AirspaceCheck((zone,), "lattice", 0.5)
+    doc = json.loads(json.dumps(air.to_dict()))
+    assert set(doc) == set(AirspaceBlock.model_fields) - {"note"} and set(doc["zones"][0]) == {f.name for f in dataclasses.fields(FlightZoneCheck)}
+    assert set(AirspaceBlock.model_fields) == {f.name for f in dataclasses.fields(AirspaceCheck)}
+    AirspaceBlock.model_validate(doc, strict=True)
+    AirspaceBlock.model_validate({**doc, "note": "not visible"}, strict=True)
 
 
 def test_cli_prints_the_schema():
