@@ -20,6 +20,7 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
+from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
 from scenes.quantities import as_written_lines
@@ -208,19 +209,6 @@ def _frame(scene) -> dict:
     return site.describe()
 
 
-def _limiting_aperture(scene) -> dict:
-    """What the MPE is compared with (:mod:`hazard.physics.aperture`), for report.json."""
-    from hazard.physics.aperture import limiting_aperture_m
-
-    spec = scene.spec
-    return {"diameter_m": limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s),
-            "source": "ANSI Z136.1-2014 sec. 8.3 / Table 8; IEC 60825-1:2014 Table A.5",
-            "optical_aids": "collect over min(D_o, 7 mm M), delivered into the 7 mm pupil (tau P / (pi (3.5 mm)^2)); "
-                            "the naked eye's value if larger",
-            "applies_to": "the direct beam and flat mirrors' beams (exact Gaussian power through the disk); diffuse "
-                          "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
-
-
 def report_dict(result, cols=None, *, row_dicts=True, verdict_doc: Verdict | None = None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
@@ -260,7 +248,7 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc: Verdict | Non
         "extended_source": ({"applied": False} if getattr(result, "extended_source", None) is None
                             else result.extended_source.to_dict()),  # hazard.pipeline.extended_source.ExtendedSourceSummary
         "attenuation_per_m": result.attenuation_per_m,
-        "limiting_aperture": _limiting_aperture(scene),
+        "limiting_aperture": limiting_aperture(scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s).to_dict(),
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
                  "sampling": None if getattr(result, "beam_sampling", None) is None else result.beam_sampling.to_dict(),
                  "spill": None if getattr(result, "spill", None) is None else result.spill.to_dict()},

@@ -20,7 +20,8 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   without ``warnings``), ``beam.sampling`` (:class:`hazard.pipeline.spots.BeamSampling`),
   ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
   (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`), ``airspace``
-  (:class:`hazard.pipeline.airspace.AirspaceCheck`) and the aid's part of
+  (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``limiting_aperture``
+  (:class:`hazard.physics.aperture.LimitingAperture`) and the aid's part of
   ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`): a field added there is in
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
@@ -44,6 +45,7 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
+from hazard.physics.aperture import LimitingAperture as LimitingApertureInfo
 from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
@@ -193,13 +195,8 @@ class FootprintArea(_Strict):
     cells: int = Field(ge=0)
 
 
-class LimitingAperture(_Strict):
-    """What the MPE is compared with (:func:`hazard.outputs.report._limiting_aperture`)."""
-
-    diameter_m: Number
-    source: str
-    optical_aids: str
-    applies_to: str
+# ``limiting_aperture``: what the MPE is compared with, :class:`hazard.physics.aperture.LimitingAperture`
+LimitingAperture = _from_dataclass(LimitingApertureInfo, "LimitingAperture")
 
 
 class ObserversListed(_Strict):
@@ -519,7 +516,7 @@ class ReportModel(_Strict):
     uv_24h: Optional[Uv24hBlock]  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
     extended_source: ExtendedSourceBlock  # type: ignore[valid-type]
     attenuation_per_m: Number
-    limiting_aperture: LimitingAperture
+    limiting_aperture: LimitingAperture  # type: ignore[valid-type]
     beam: BeamBlock
     sdz: Optional[SdzBlock]
     stages: list[StageRecord]  # type: ignore[valid-type]

@@ -14,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hazard.outputs.report import json_safe
-from hazard.outputs.report_schema import AirspaceBlock, ExtendedSourceBlock, SamplingBlock, SpillBlock, VerdictBlock
+from hazard.outputs.report_schema import AirspaceBlock, ExtendedSourceBlock, LimitingAperture, SamplingBlock, SpillBlock, VerdictBlock
+from hazard.physics import aperture
 from hazard.physics.mpe import RepetitivePulseResult
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe, ExtendedSourceSummary
@@ -48,9 +49,10 @@ extended = st.just(ExtendedSourceSummary(applied=False)) | st.builds(
 zone_checks = st.builds(FlightZoneCheck, text, text, maybe, num, num, st.booleans(), num, st.none() | st.tuples(num, num, num),
                         maybe, st.none() | text, num, num, count)
 airspaces = st.builds(AirspaceCheck, _tuple(zone_checks), text, num, st.none() | text)
+apertures = st.builds(aperture.limiting_aperture, st.floats(180.0, 1e6), st.floats(1e-13, 3e4))  # the whole table's domain
 
 CASES = [(verdicts, VerdictBlock), (samplings, SamplingBlock), (spills, SpillBlock), (extended, ExtendedSourceBlock),
-         (airspaces, AirspaceBlock)]
+         (airspaces, AirspaceBlock), (apertures, LimitingAperture)]
 
 
 def _written(block) -> dict:
