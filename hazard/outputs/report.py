@@ -244,7 +244,7 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc: Verdict | Non
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),
         "mpe_w_m2": result.mpe_w_m2,
-        "uv_24h": result.uv_24h,  # UV: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), else None
+        "uv_24h": None if result.uv_24h is None else result.uv_24h.to_dict(),  # UV: the day's summed-dose limit (hazard.physics.mpe.UV24hResult)
         "extended_source": ({"applied": False} if getattr(result, "extended_source", None) is None
                             else result.extended_source.to_dict()),  # hazard.pipeline.extended_source.ExtendedSourceSummary
         "attenuation_per_m": result.attenuation_per_m,

@@ -15,7 +15,7 @@ NOHD must not vanish). The blocks of the stages (issue 35):
 - from the frozen result dataclasses' own fields (:func:`_from_dataclass`): ``mpe``
   (:class:`hazard.physics.mpe.MPEResult`, its ``factors``
   :class:`~hazard.physics.mpe.CorrectionFactors`), ``pulse``
-  (:class:`~hazard.physics.mpe.RepetitivePulseResult`), ``frame.dem``
+  (:class:`~hazard.physics.mpe.RepetitivePulseResult`), ``uv_24h`` (:class:`~hazard.physics.mpe.UV24hResult`), ``frame.dem``
   (:class:`scenes.dem.DemInfo`), ``verdict`` (:class:`hazard.pipeline.verdict.Verdict`
   without ``warnings``), ``beam.sampling`` (:class:`hazard.pipeline.spots.BeamSampling`),
   ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
@@ -26,7 +26,7 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
-  example, and the tests of the scenes that write the optional keys validate theirs): ``uv_24h``, ``frame``,
+  example, and the tests of the scenes that write the optional keys validate theirs): ``frame``,
   ``sdz``, ``visual_interference``, ``motion``, ``tracks`` and ``map_outputs``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
@@ -46,7 +46,7 @@ from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
 from hazard.physics.aperture import LimitingAperture as LimitingApertureInfo
-from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult
+from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult, UV24hResult
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
 from hazard.pipeline.extended_source import ExtendedSourceSummary
@@ -96,7 +96,7 @@ def _from_dataclass(cls, name: str, *, override: Optional[dict[str, Any]] = None
     """A strict model with the fields of dataclass ``cls`` (types from its annotations via
     :func:`_json_type`; ``override``: field -> JSON type where its ``to_dict`` writes it
     otherwise; ``add``: keys its ``to_dict`` writes beyond the fields; ``omit``: fields its
-    ``to_dict`` writes elsewhere in the report). A field the class lists in its
+    ``to_dict`` does not write as such: elsewhere in the report, or as the keys of ``add``). A field the class lists in its
     ``ABSENT_WHEN_NONE`` (its ``to_dict`` leaves the key out when the value is None), or
     ``optional`` names (keys its ``to_dict`` writes only in some cases), is an optional key,
     typed when present: as ``override`` says, else its annotation without None (never null)."""
@@ -243,21 +243,10 @@ class PulseRule(_Strict):
 PulseBlock = _from_dataclass(RepetitivePulseResult, "PulseBlock", override={"rules": list[PulseRule], "pulses": Number, "pulse_groups": Number})
 
 
-class Uv24hBlock(_Strict):
-    """:meth:`hazard.physics.mpe.UV24hResult.to_dict`: the day's summed-dose limit (180-400 nm)."""
-
-    wavelength_nm: Number
-    standard: str
-    kind: str
-    accumulation_s: Number
-    total_on_time_s: Number
-    radiant_exposure_j_m2: Number
-    average_irradiance_w_m2: Number
-    governing_limit: str
-    table_row: str
-    label: str
-    unverified: bool
-    steps: list[str]
+# ``uv_24h``: :meth:`hazard.physics.mpe.UV24hResult.to_dict`, the day's summed-dose limit (180-400 nm): its
+# fields but ``mpe``, of which it writes ``governing_limit`` and ``table_row``, with the accumulation time and the [M] flag
+Uv24hBlock = _from_dataclass(UV24hResult, "Uv24hBlock", omit=("mpe",), add={
+    "accumulation_s": Number, "governing_limit": str, "table_row": str, "unverified": bool})
 
 
 class Conversion(_Strict):
@@ -513,7 +502,7 @@ class ReportModel(_Strict):
     mpe: MpeBlock  # type: ignore[valid-type]
     pulse: Optional[PulseBlock]  # type: ignore[valid-type]
     mpe_w_m2: Number
-    uv_24h: Optional[Uv24hBlock]  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
+    uv_24h: Optional[Uv24hBlock]  # type: ignore[valid-type]  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
     extended_source: ExtendedSourceBlock  # type: ignore[valid-type]
     attenuation_per_m: Number
     limiting_aperture: LimitingAperture  # type: ignore[valid-type]

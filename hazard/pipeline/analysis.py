@@ -118,7 +118,7 @@ def hazard_result(r, stages=()) -> HazardResult:
         extended_source=None if ext is None else ext.summary,
         visual_interference={} if air is None else air.visual_interference,
         airspace=None if air is None else air.zones,
-        uv_24h=None if exposure.uv_24h is None else exposure.uv_24h.to_dict(),
+        uv_24h=exposure.uv_24h,
     )
 
 

@@ -13,6 +13,7 @@ from hazard.physics.keepout import Footprint, Lobe
 if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
     from scenes.observers import Observers
 
+    from hazard.physics.mpe import UV24hResult
     from hazard.pipeline.airspace import AirspaceCheck
     from hazard.pipeline.extended_source import ExtendedSourceSummary
     from hazard.pipeline.motion_stage import MotionResult
@@ -217,7 +218,7 @@ class HazardResult:
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.physics.visual)
     airspace: AirspaceCheck | None = None  # the flight zones' checks (hazard.pipeline.airspace); None: no [airspace] zones
-    uv_24h: dict | None = None  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe, [M]), else None
+    uv_24h: UV24hResult | None = None  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe, [M]), else None
 
     @property
     def motion_hazardous(self) -> np.ndarray | None:

@@ -14,9 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hazard.outputs.report import json_safe
-from hazard.outputs.report_schema import AirspaceBlock, ExtendedSourceBlock, LimitingAperture, SamplingBlock, SpillBlock, VerdictBlock
+from hazard.outputs.report_schema import AirspaceBlock, ExtendedSourceBlock, LimitingAperture, SamplingBlock, SpillBlock, Uv24hBlock, VerdictBlock
 from hazard.physics import aperture
-from hazard.physics.mpe import RepetitivePulseResult
+from hazard.physics.mpe import RepetitivePulseResult, UV24hResult, uv_24h_mpe
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe, ExtendedSourceSummary
 from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
@@ -91,6 +91,17 @@ def test_every_block_validates_against_the_model_of_its_type_many(strategy, mode
         _check(block, model)
 
     run()
+
+
+@FEW
+@given(st.floats(180.0, 400.0), st.lists(st.floats(1e-9, 3e4), min_size=1, max_size=4), st.sampled_from(["ocular", "skin"]))
+def test_the_uv_day_block_is_its_type_less_the_mpe_plus_what_it_writes_of_it(wavelength_nm, durations_s, kind):
+    """``uv_24h``: UV24hResult's fields but ``mpe`` (of which it writes ``governing_limit`` and
+    ``table_row``), with ``accumulation_s`` and ``unverified``."""
+    doc = _written(uv_24h_mpe(wavelength_nm, durations_s, kind=kind))
+    assert set(doc) == set(Uv24hBlock.model_fields)
+    assert set(doc) - {"accumulation_s", "governing_limit", "table_row", "unverified"} == {f.name for f in dataclasses.fields(UV24hResult)} - {"mpe"}
+    Uv24hBlock.model_validate(doc, strict=True)
 
 
 def test_a_block_is_frozen_and_its_dict_a_copy():
