@@ -228,15 +228,16 @@ def track_lines(result, paths) -> list:
 def flight_zone_rings(result) -> list:
     """(path, (K, 2) world ring, exceeded, text, spec, worst point (3,) world) of every
     flight zone (``airspace.zones``)."""
-    zones = (getattr(result, "airspace", None) or {}).get("zones") or []
+    air = getattr(result, "airspace", None)
+    zones = () if air is None else air.zones  # hazard.pipeline.airspace.FlightZoneCheck
     specs = [] if result.scene.spec.airspace is None else list(result.scene.spec.airspace.zones)
     out = []
     for k, (z, spec) in enumerate(zip(zones, specs)):
-        exceeded = not z["holds"]
-        text = (f"flight zone {z['name']} ({z['limit'].upper()}, {z['floor_agl_m']:g}-{z['ceiling_agl_m']:g} m AGL): "
-                f"{'EXCEEDED' if exceeded else 'holds'} (worst {z['worst_effective_irradiance_w_m2']:.3g} W/m^2, "
-                f"limit {z['limit_w_m2']:g} W/m^2)")
-        worst = np.asarray(z.get("worst_point_m") or [math.nan] * 3, float)  # world already (hazard.pipeline.airspace)
+        exceeded = not z.holds
+        text = (f"flight zone {z.name} ({z.limit.upper()}, {z.floor_agl_m:g}-{z.ceiling_agl_m:g} m AGL): "
+                f"{'EXCEEDED' if exceeded else 'holds'} (worst {z.worst_effective_irradiance_w_m2:.3g} W/m^2, "
+                f"limit {z.limit_w_m2:g} W/m^2)")
+        worst = np.asarray(z.worst_point_m or [math.nan] * 3, float)  # world already (hazard.pipeline.airspace)
         out.append((f"airspace.zones[{k}]", np.asarray(spec.boundary_m, float), exceeded, text, spec, worst))
     return out
 

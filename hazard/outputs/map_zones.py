@@ -223,7 +223,7 @@ def _airspace(result) -> list:
                                         "hazard": "naked eye" if s["hazardous"] else "none", "exposure_ratio": s["exposure_ratio"],
                                         "peak_time_s": s["peak_time_s"], "first_exceedance_s": s["first_exceedance_s"]},
                         z_m=xyz[:, 2] if len(xyz) > 1 else float(xyz[0, 2])))
-    zone_rows = {z["name"]: z for z in (result.airspace or {}).get("zones", [])}
+    zone_rows = {z.name: z.to_dict() for z in (() if result.airspace is None else result.airspace.zones)}
     for zs in ([] if result.scene.spec.airspace is None else result.scene.spec.airspace.zones):
         row = zone_rows.get(zs.name, {})
         out.append(Zone("airspace_zone", Polygon(zs.boundary_m), {

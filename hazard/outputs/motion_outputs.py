@@ -52,7 +52,7 @@ def _track_dict(result, p) -> dict:
 def motion_sections(result) -> dict:
     """The report sections of the motion and airspace stages (absent stages: None, said)."""
     m = result.motion
-    out = {"visual_interference": result.visual_interference or None, "airspace": result.airspace or None}
+    out = {"visual_interference": result.visual_interference or None, "airspace": None if result.airspace is None else result.airspace.to_dict()}
     if m is None:
         out.update(motion=None, tracks=[])
         return out

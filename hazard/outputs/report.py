@@ -20,7 +20,8 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
-from hazard.pipeline.verdict import escape_way, verdict
+from hazard.physics.aperture import limiting_aperture
+from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
 from scenes.quantities import as_written_lines
 
@@ -208,27 +209,14 @@ def _frame(scene) -> dict:
     return site.describe()
 
 
-def _limiting_aperture(scene) -> dict:
-    """What the MPE is compared with (:mod:`hazard.physics.aperture`), for report.json."""
-    from hazard.physics.aperture import limiting_aperture_m
-
-    spec = scene.spec
-    return {"diameter_m": limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s),
-            "source": "ANSI Z136.1-2014 sec. 8.3 / Table 8; IEC 60825-1:2014 Table A.5",
-            "optical_aids": "collect over min(D_o, 7 mm M), delivered into the 7 mm pupil (tau P / (pi (3.5 mm)^2)); "
-                            "the naked eye's value if larger",
-            "applies_to": "the direct beam and flat mirrors' beams (exact Gaussian power through the disk); diffuse "
-                          "reflections and curved mirrors keep the point value (times the aid's fixed gain)"}
-
-
-def report_dict(result, cols=None, *, row_dicts=True, verdict_doc=None) -> dict:
+def report_dict(result, cols=None, *, row_dicts=True, verdict_doc: Verdict | None = None) -> dict:
     """The report as plain data: versions, scene echo and hash, MPE with its steps,
     stages, per-target NOHD and keep-out summaries, per-observer verdicts
     (``cols``: :func:`observer_columns` of ``result`` when the caller has them). With
     ``row_dicts=False`` the ``observers`` entry is the listed rows' indices into ``cols``
     (:func:`report_json_text` writes them from the columns, no dict per row).
-    ``verdict_doc``: :func:`hazard.pipeline.verdict.verdict` of ``result`` when the caller has
-    it (computed once per run: the report, the printed answer and ``--fail-on-hazard``); not changed."""
+    ``verdict_doc``: :func:`hazard.pipeline.verdict.verdict` of ``result`` (a frozen
+    :class:`~hazard.pipeline.verdict.Verdict`) when the caller has it (computed once per run: the report, the printed answer and ``--fail-on-hazard``); not changed."""
     from hazard.pipeline.analysis import versions
 
     scene = result.scene
@@ -243,8 +231,7 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc=None) -> dict:
     else:
         listed = listed_rows(cols, len(cols["labels"]))
         which = _listed_statement(len(cols["labels"]), len(listed))
-    v = dict(verdict(result) if verdict_doc is None else verdict_doc)
-    warnings = v.pop("warnings")  # report.json's top-level "warnings"
+    v = verdict(result) if verdict_doc is None else verdict_doc
     doc = json_safe({
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
@@ -257,13 +244,14 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc=None) -> dict:
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),
         "mpe_w_m2": result.mpe_w_m2,
-        "uv_24h": result.uv_24h,  # UV: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), else None
-        "extended_source": getattr(result, "extended_source", None) or {"applied": False},
+        "uv_24h": None if result.uv_24h is None else result.uv_24h.to_dict(),  # UV: the day's summed-dose limit (hazard.physics.mpe.UV24hResult)
+        "extended_source": ({"applied": False} if getattr(result, "extended_source", None) is None
+                            else result.extended_source.to_dict()),  # hazard.pipeline.extended_source.ExtendedSourceSummary
         "attenuation_per_m": result.attenuation_per_m,
-        "limiting_aperture": _limiting_aperture(scene),
+        "limiting_aperture": limiting_aperture(scene.spec.laser.wavelength_nm, scene.spec.exposure.duration_s).to_dict(),
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
-                 "sampling": getattr(result, "beam_sampling", None) or None,
-                 "spill": getattr(result, "spill", None) or None},
+                 "sampling": None if getattr(result, "beam_sampling", None) is None else result.beam_sampling.to_dict(),
+                 "spill": None if getattr(result, "spill", None) is None else result.spill.to_dict()},
         "sdz": getattr(result, "sdz", None) or None,
         "stages": [s.to_dict() for s in result.stages],
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
@@ -272,11 +260,11 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc=None) -> dict:
         "observers": None,  # the listed rows below: JSON-safe already (observer_rows), not walked again
         "observers_listed": which,
         "verdict_changes": result.verdict_changes(),
-        "verdict": v,  # the headline stdout and the review page print (hazard.pipeline.verdict)
-        "hazard_at_observers": v["hazard_at_observers"],  # a listed observer, track or flight zone at or above its limit
-        "hazard_zones": v["hazard_zones"],  # a danger zone, mirror beam or keep-out lobe not contained or beyond the range
-        "any_hazard": v["any_hazard"],  # either, or any NOHD > 0 even contained (the old flag, kept for compatibility)
-        "warnings": warnings,  # plausibility warnings (hazard.pipeline.plausibility): each can change the verdict
+        "verdict": v.to_dict(),  # the headline stdout and the review page print (hazard.pipeline.verdict.Verdict)
+        "hazard_at_observers": v.hazard_at_observers,  # a listed observer, track or flight zone at or above its limit
+        "hazard_zones": v.hazard_zones,  # a danger zone, mirror beam or keep-out lobe not contained or beyond the range
+        "any_hazard": v.any_hazard,  # either, or any NOHD > 0 even contained (the old flag, kept for compatibility)
+        "warnings": list(v.warnings),  # plausibility warnings (hazard.pipeline.plausibility): each can change the verdict
         "notes": list(result.notes),
         **motion_sections(result),
     })
@@ -634,7 +622,7 @@ def _write_synced(path: Path, data) -> None:
         os.fsync(fh.fileno())
 
 
-def write_set(result, folder, *, extra=None, sections=None, verdict_doc=None) -> list:
+def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict | None = None) -> list:
     """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
     ``folder`` (a staging folder of :class:`brdfmodels.output_sets.OutputUnit`), each fsynced;
     returns the names written. ``verdict_doc``: the run's verdict, when the caller has it
@@ -806,13 +794,13 @@ def _observer_lines(result, max_observers, v=None) -> list:
     hazardous observers."""
     v = verdict(result) if v is None else v
     mpe = (f"{result.mpe_w_m2:.6g} W/m^2, {result.mpe.standard}, {result.mpe.duration_s:g} s"
-           + (", C_E per observer" if (getattr(result, "extended_source", None) or {}).get("applied") else ""))
+           + (", C_E per observer" if getattr(getattr(result, "extended_source", None), "applied", False) else ""))
     static = f"; hazardous with the static material: {int(np.sum(result.hazardous_static))}" if result.states else ""
-    lines = _warning_lines(v["warnings"]) + [f"Scene {result.scene.name!r}: {v['headline']}.", f"  MPE {mpe}{static}"]
+    lines = _warning_lines(v.warnings) + [f"Scene {result.scene.name!r}: {v.headline}.", f"  MPE {mpe}{static}"]
     beam = beam_headline(getattr(result.scene, "beam_conventions", None))
     lines += [f"  {beam}"] if beam else []
     lines += _units_lines(result.scene)
-    lines += [f"  zone: {z}" for z in v["zones"]]
+    lines += [f"  zone: {z}" for z in v.zones]
     hazardous = np.flatnonzero(result.hazardous)
     if not len(hazardous):
         return lines + ["  The observers are only the points the scene lists: anyone inside a NOHD below is at risk."]
@@ -872,16 +860,15 @@ def _nohd_lines(result) -> list:
             spec_a = "" if a["specular_nohd_dynamic_m"] is None else f"; specular {a['specular_nohd_dynamic_m']:.4g} m"
             lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics (gain {a['gain']:.3g}): "
                          f"diffuse {a['nohd_dynamic_m']:.4g} m{spec_a}")
-    sp = getattr(result, "spill", None) or {}
-    if sp.get("nohd_m"):
-        aided = "".join(f"; through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics {a['nohd_m']:.4g} m"
-                        for a in sp["aided"])
-        lines.append(f"  the beam past the targets ({sp['leaves_scene_w']:.4g} W leaves the scene): direct-beam NOHD "
-                     f"{sp['nohd_m']:.4g} m from the laser{aided}")
-    for d in sp.get("stopped", []):
-        way = (f" (up to {d['peak_irradiance_w_m2']:.3g} W/m^2 on its way from {d['from_range_m']:.4g} m, hazard ratio "
-               f"{d['hazard_ratio']:.3g}: an eye in it is at risk)" if d.get("hazard_ratio", 0) >= 1 else "")
-        lines.append(f"  {d['power_w']:.4g} W of the beam stopped by {d['object']} at {d['range_m']:.4g} m{way}: {d['reflected']}")
+    sp = getattr(result, "spill", None)
+    if sp is not None and sp.nohd_m:
+        aided = "".join(f"; through {a.magnification:g}x{1e3 * a.objective_diameter_m:g} optics {a.nohd_m:.4g} m" for a in sp.aided)
+        lines.append(f"  the beam past the targets ({sp.leaves_scene_w:.4g} W leaves the scene): direct-beam NOHD "
+                     f"{sp.nohd_m:.4g} m from the laser{aided}")
+    for d in () if sp is None else sp.stopped:
+        way = (f" (up to {d.peak_irradiance_w_m2:.3g} W/m^2 on its way from {d.from_range_m:.4g} m, hazard ratio "
+               f"{d.hazard_ratio:.3g}: an eye in it is at risk)" if d.hazard_ratio >= 1 else "")
+        lines.append(f"  {d.power_w:.4g} W of the beam stopped by {d.object} at {d.range_m:.4g} m{way}: {d.reflected}")
     lines += _sdz_lines(getattr(result, "sdz", None) or {})
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
@@ -941,7 +928,7 @@ def _not_modelled_lines(result) -> list:
     return lines
 
 
-def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS, *, verdict_doc=None) -> str:
+def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS, *, verdict_doc: Verdict | None = None) -> str:
     """What a range safety officer asks first, in plain text.
 
     Parameters
@@ -950,7 +937,7 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS, *, verdict_doc=None)
     max_observers : int
         Hazardous observers listed by name, highest hazard ratio (peak irradiance / MPE,
         unitless) first; the others are counted.
-    verdict_doc : dict, optional
+    verdict_doc : hazard.pipeline.verdict.Verdict, optional
         :func:`hazard.pipeline.verdict.verdict` of ``result`` when the caller has it (else
         computed here).
 
@@ -997,10 +984,11 @@ def _motion_lines(result) -> list:
     if fixed:
         n = sum(p.summary["hazardous"] for p in fixed)
         out.append(f"  over time (the beam or a target moves): {n} of {len(fixed)} fixed observer(s) hazardous")
-    for z in (getattr(result, "airspace", None) or {}).get("zones", []):
-        out.append(f"  flight zone {z['name']} ({z['limit']}): " + ("holds" if z["holds"] else
-                   f"EXCEEDED: {z['worst_effective_irradiance_w_m2']:.4g} W/m^2 effective at t = {z['worst_time_s']:.6g} s "
-                   f"(limit {z['limit_w_m2']:.4g}, {z['worst_path']})"))
+    air = getattr(result, "airspace", None)
+    for z in () if air is None else air.zones:
+        out.append(f"  flight zone {z.name} ({z.limit}): " + ("holds" if z.holds else
+                   f"EXCEEDED: {z.worst_effective_irradiance_w_m2:.4g} W/m^2 effective at t = {z.worst_time_s:.6g} s "
+                   f"(limit {z.limit_w_m2:.4g}, {z.worst_path})"))
     vi = getattr(result, "visual_interference", None) or {}
     if vi.get("applies"):
         d = vi["direct"]
@@ -1020,7 +1008,7 @@ def stages_text(result) -> str:
     return "\n".join(lines)
 
 
-def summary_text(result, *, verbose=False, max_observers=ANSWER_MAX_OBSERVERS, verdict_doc=None) -> str:
+def summary_text(result, *, verbose=False, max_observers=ANSWER_MAX_OBSERVERS, verdict_doc: Verdict | None = None) -> str:
     """The text of ``hazard run``: :func:`answer_text`, then (``verbose``) :func:`stages_text`
     (``verdict_doc``: the run's verdict when the caller has it)."""
     text = answer_text(result, max_observers, verdict_doc=verdict_doc)

@@ -12,15 +12,22 @@ gives every value its JSON type; numbers may also be the strings ``"inf"``, ``"-
 ``"nan"`` (:func:`hazard.outputs.report.json_safe`: JSON has no such numbers and an infinite
 NOHD must not vanish). The blocks of the stages (issue 35):
 
-- from the result dataclasses' own fields: ``mpe`` (:class:`hazard.physics.mpe.MPEResult`,
-  its ``factors`` :class:`~hazard.physics.mpe.CorrectionFactors`), ``pulse``
-  (:class:`~hazard.physics.mpe.RepetitivePulseResult`), ``frame.dem``
-  (:class:`scenes.dem.DemInfo`): a field added there is in the schema;
-- from the dicts the stages write (their keys written once here, each model naming the
+- from the frozen result dataclasses' own fields (:func:`_from_dataclass`): ``mpe``
+  (:class:`hazard.physics.mpe.MPEResult`, its ``factors``
+  :class:`~hazard.physics.mpe.CorrectionFactors`), ``pulse``
+  (:class:`~hazard.physics.mpe.RepetitivePulseResult`), ``uv_24h`` (:class:`~hazard.physics.mpe.UV24hResult`), ``frame.dem``
+  (:class:`scenes.dem.DemInfo`), ``verdict`` (:class:`hazard.pipeline.verdict.Verdict`
+  without ``warnings``), ``beam.sampling`` (:class:`hazard.pipeline.spots.BeamSampling`),
+  ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
+  (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`), ``airspace``
+  (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``limiting_aperture``
+  (:class:`hazard.physics.aperture.LimitingAperture`) and the aid's part of
+  ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`): a field added there is in
+  the schema;
+- still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
-  example, and the tests of the scenes that write the optional keys validate theirs): ``uv_24h``, ``frame``, ``extended_source``,
-  ``beam.sampling``, ``beam.spill``, ``sdz``, ``verdict``, ``visual_interference``,
-  ``airspace``, ``motion``, ``tracks`` and ``map_outputs``.
+  example, and the tests of the scenes that write the optional keys validate theirs): ``frame``,
+  ``sdz``, ``visual_interference``, ``motion``, ``tracks`` and ``map_outputs``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -31,15 +38,23 @@ read), ``targets[].melt``/``slump``/``aided`` and ``keepout_*.near_field``.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Literal, Optional, get_type_hints
+from typing import Any, Literal, Optional, get_args, get_origin, get_type_hints
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
 from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
-from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult
+from hazard.physics.aperture import LimitingAperture as LimitingApertureInfo
+from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult, UV24hResult
+from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
+from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
+from hazard.pipeline.extended_source import ExtendedSourceSummary
 from hazard.pipeline.results import Stage
+from hazard.pipeline.spill import AidedNohd as SpillAidedNohd
+from hazard.pipeline.spill import SpillSummary, StoppedSpill
+from hazard.pipeline.spots import BeamSampling
+from hazard.pipeline.verdict import Verdict
 from scenes.dem import DemInfo
 
 __all__ = ["ReportModel", "report_schema", "validate_report"]
@@ -49,30 +64,57 @@ Number = float | Literal["inf", "-inf", "nan"]
 Block = Optional[dict[str, Any]]  # a block whose inner keys are not typed here (null when absent)
 
 
+ABSENT: Any = Field(default=None)  # a key written only in some cases (see the module notes): absent, or typed
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
 def _json_type(hint: Any) -> Any:
-    """The JSON type of a dataclass field's annotation: floats may be "inf"/"nan", a tuple
-    is written as a list of str (the steps) unless the caller says otherwise."""
+    """The JSON type of a dataclass field's annotation: floats may be "inf"/"nan", a bare
+    tuple is written as a list of str (the steps) unless the caller says otherwise, a
+    ``tuple[X, ...]`` as a list of X, ``X | None`` as X's type or null, a nested dataclass as its own strict model
+    (:func:`_from_dataclass`, named as the class)."""
     if hint is float:
         return Number
     if hint == (float | None) or hint == Optional[float]:
         return Optional[Number]
     if hint is tuple:
         return list[str]
+    if type(None) in get_args(hint) and len(get_args(hint)) == 2:  # X | None: X's JSON type, or null
+        return Optional[_json_type(next(a for a in get_args(hint) if a is not type(None)))]
+    if get_origin(hint) is tuple and len(get_args(hint)) == 2 and get_args(hint)[1] is Ellipsis:
+        return list[_json_type(get_args(hint)[0])]  # type: ignore[misc]
+    if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+        return _from_dataclass(hint, hint.__name__)
     return hint
 
 
-def _from_dataclass(cls, name: str, *, override: Optional[dict[str, Any]] = None, add: Optional[dict[str, Any]] = None) -> type[BaseModel]:
+def _from_dataclass(cls, name: str, *, override: Optional[dict[str, Any]] = None, add: Optional[dict[str, Any]] = None,
+                    omit: tuple[str, ...] = (), optional: tuple[str, ...] = ()) -> type[BaseModel]:
     """A strict model with the fields of dataclass ``cls`` (types from its annotations via
     :func:`_json_type`; ``override``: field -> JSON type where its ``to_dict`` writes it
-    otherwise; ``add``: keys its ``to_dict`` writes beyond the fields)."""
+    otherwise; ``add``: keys its ``to_dict`` writes beyond the fields; ``omit``: fields its
+    ``to_dict`` does not write as such: elsewhere in the report, or as the keys of ``add``). A field the class lists in its
+    ``ABSENT_WHEN_NONE`` (its ``to_dict`` leaves the key out when the value is None), or
+    ``optional`` names (keys its ``to_dict`` writes only in some cases), is an optional key,
+    typed when present: as ``override`` says, else its annotation without None (never null)."""
     hints = get_type_hints(cls)
     over = dict(override or {})
-    fields: dict[str, Any] = {f.name: (over.pop(f.name) if f.name in over else _json_type(hints[f.name]), ...)
-                              for f in dataclasses.fields(cls)}
+    names = {f.name for f in dataclasses.fields(cls)}
+    absent = set(getattr(cls, "ABSENT_WHEN_NONE", ())) | set(optional)
+    if (set(omit) | absent) - names:
+        raise TypeError(f"{cls.__name__} has no field(s) {sorted((set(omit) | absent) - names)} to omit or leave absent")
+
+    def entry(name: str) -> tuple[Any, Any]:
+        if name in over:
+            return over.pop(name), (ABSENT if name in absent else ...)
+        if name in absent:  # Optional[X] written only when set: X, or the key absent
+            return _json_type(next(a for a in get_args(hints[name]) if a is not type(None))), ABSENT
+        return _json_type(hints[name]), ...
+
+    fields: dict[str, Any] = {f.name: entry(f.name) for f in dataclasses.fields(cls) if f.name not in omit}
     if over:
         raise TypeError(f"{cls.__name__} has no field(s) {sorted(over)}")
     fields.update({k: (t, ...) for k, t in (add or {}).items()})
@@ -96,8 +138,8 @@ class BeamBlock(_Strict):
     power_w: Number
     spill_w: Number
     blocked_w: Number
-    sampling: Optional[SamplingBlock]
-    spill: Optional[SpillBlock]
+    sampling: Optional[SamplingBlock]  # type: ignore[valid-type]
+    spill: Optional[SpillBlock]  # type: ignore[valid-type]
 
 
 class TimesBlock(_Strict):
@@ -153,13 +195,8 @@ class FootprintArea(_Strict):
     cells: int = Field(ge=0)
 
 
-class LimitingAperture(_Strict):
-    """What the MPE is compared with (:func:`hazard.outputs.report._limiting_aperture`)."""
-
-    diameter_m: Number
-    source: str
-    optical_aids: str
-    applies_to: str
+# ``limiting_aperture``: what the MPE is compared with, :class:`hazard.physics.aperture.LimitingAperture`
+LimitingAperture = _from_dataclass(LimitingApertureInfo, "LimitingAperture")
 
 
 class ObserversListed(_Strict):
@@ -184,7 +221,6 @@ ObserverRow = create_model("ObserverRow", __config__=ConfigDict(extra="forbid"),
 
 
 # -- the stages' blocks ---------------------------------------------------------------------
-ABSENT: Any = Field(default=None)  # a key written only in some cases (see the module notes): absent, or typed
 
 
 class MpeLimit(_Strict):
@@ -207,21 +243,10 @@ class PulseRule(_Strict):
 PulseBlock = _from_dataclass(RepetitivePulseResult, "PulseBlock", override={"rules": list[PulseRule], "pulses": Number, "pulse_groups": Number})
 
 
-class Uv24hBlock(_Strict):
-    """:meth:`hazard.physics.mpe.UV24hResult.to_dict`: the day's summed-dose limit (180-400 nm)."""
-
-    wavelength_nm: Number
-    standard: str
-    kind: str
-    accumulation_s: Number
-    total_on_time_s: Number
-    radiant_exposure_j_m2: Number
-    average_irradiance_w_m2: Number
-    governing_limit: str
-    table_row: str
-    label: str
-    unverified: bool
-    steps: list[str]
+# ``uv_24h``: :meth:`hazard.physics.mpe.UV24hResult.to_dict`, the day's summed-dose limit (180-400 nm): its
+# fields but ``mpe``, of which it writes ``governing_limit`` and ``table_row``, with the accumulation time and the [M] flag
+Uv24hBlock = _from_dataclass(UV24hResult, "Uv24hBlock", omit=("mpe",), add={
+    "accumulation_s": Number, "governing_limit": str, "table_row": str, "unverified": bool})
 
 
 class Conversion(_Strict):
@@ -252,91 +277,22 @@ class FrameBlock(_Strict):
     converted: list[Conversion] = ABSENT
 
 
-class ExtendedMpe(_Strict):
-    """:func:`hazard.pipeline.extended_source._mpe_entry`: the MPE at one angular subtense."""
-
-    alpha_rad: Number
-    c_e: Number
-    alpha_max_rad: Number
-    T2_s: Number
-    mpe_w_m2: Number
-    table_row: str
-    formula: str
-    label: str
-    unverified: bool
-    steps: list[str]
-    pulse: Optional[PulseBlock]  # type: ignore[valid-type]
+# ``extended_source``: :class:`hazard.pipeline.extended_source.ExtendedSourceSummary` (``applied`` alone when the
+# stage did not apply C_E: its other keys optional; the MPE at a subtense :class:`~hazard.pipeline.extended_source.ExtendedMpe`)
+ExtendedMpe = _from_dataclass(ExtendedMpeResult, "ExtendedMpe", override={"pulse": Optional[PulseBlock]})  # type: ignore[valid-type]
+ExtendedSourceBlock = _from_dataclass(ExtendedSourceSummary, "ExtendedSourceBlock", optional=ExtendedSourceSummary.ONLY_WHEN_APPLIED,
+                                      override={k: Optional[ExtendedMpe] for k in ("mpe_smallest_alpha", "mpe_largest_alpha")})  # type: ignore[valid-type]
 
 
-class ExtendedSourceBlock(_Strict):
-    """``extended_source`` (:func:`hazard.pipeline.extended_source._summary`; ``applied``
-    alone when the stage did not apply C_E)."""
-
-    applied: bool
-    alpha_min_rad: Number = ABSENT
-    alpha_max_rad: Number = ABSENT
-    spot_size: str = ABSENT
-    point_sources: str = ABSENT
-    exact: bool = ABSENT
-    observers_above_alpha_min: int = ABSENT
-    observers_kept_specular: int = ABSENT
-    mpe_smallest_alpha: Optional[ExtendedMpe] = ABSENT
-    mpe_largest_alpha: Optional[ExtendedMpe] = ABSENT
+# ``beam.sampling``: :class:`hazard.pipeline.spots.BeamSampling` (the ``tail_*`` bounds [W/m^2] with a sampled square)
+SamplingBlock = _from_dataclass(BeamSampling, "SamplingBlock")
 
 
-class NotReflected(_Strict):
-    target: str
-    side: str
-    power_w: Number
-
-
-class SamplingBlock(_Strict):
-    """``beam.sampling`` (:func:`hazard.pipeline.spots.beam_sampling`; the ``tail_*`` bounds
-    [W/m^2] with a sampled square)."""
-
-    rays: int
-    levels: int
-    rtol: Number
-    error_bound_w: Number
-    exact_targets: list[str]
-    not_reflected: list[NotReflected]
-    half_width_w: Number
-    tail_point_bound_w_m2: Number = ABSENT
-    tail_aperture_bound_w_m2: Number = ABSENT
-    tail_limit_w_m2: Number = ABSENT
-
-
-class AidedNohd(_Strict):
-    """A direct-beam NOHD [m] through one optical aid (:func:`hazard.pipeline.spill.direct_nohds`)."""
-
-    magnification: Number
-    objective_diameter_m: Number
-    transmission: Number
-    gain: Number
-    nohd_m: Number
-
-
-class Stopped(_Strict):
-    """Where a stopper takes the spill (:func:`hazard.pipeline.spill._stopped`)."""
-
-    object: str
-    power_w: Number
-    range_m: Number
-    peak_irradiance_w_m2: Number
-    hazard_ratio: Number
-    from_range_m: Number
-    reflected: str
-
-
-class SpillBlock(_Strict):
-    """``beam.spill`` (:func:`hazard.pipeline.spill.spill_summary`)."""
-
-    leaves_scene_w: Number
-    shared_w: Number
-    peak_profile: Number
-    stopped: list[Stopped]
-    nohd_m: Number
-    aided: list[AidedNohd]
+# ``beam.spill``: :class:`hazard.pipeline.spill.SpillSummary` (its ``aided[]`` :class:`~hazard.pipeline.spill.AidedNohd`,
+# also the aid's part of ``sdz.aided[]``; its ``stopped[]`` :class:`~hazard.pipeline.spill.StoppedSpill`)
+AidedNohd = _from_dataclass(SpillAidedNohd, "AidedNohd")
+SpillBlock = _from_dataclass(SpillSummary, "SpillBlock", override={"stopped": list[_from_dataclass(StoppedSpill, "Stopped")],  # type: ignore[misc]
+                                                                   "aided": list[AidedNohd]})  # type: ignore[valid-type]
 
 
 class SdzDirections(_Strict):
@@ -369,7 +325,7 @@ class _ZoneFields(_Strict):
     outside_boundary_m2: Number = ABSENT
 
 
-class AidedZone(AidedNohd, _ZoneFields):
+class AidedZone(AidedNohd, _ZoneFields):  # type: ignore[valid-type,misc]
     """``sdz.aided[]``: the aid and its zone."""
 
 
@@ -404,24 +360,8 @@ class SdzBlock(_ZoneFields):
     mirror_beams: list[MirrorBeam] = ABSENT
 
 
-class VerdictCounts(_Strict):
-    hazardous: int
-    total: int
-    tracks_hazardous: int
-    tracks: int
-    flight_zones_exceeded: int
-    flight_zones: int
-
-
-class VerdictBlock(_Strict):
-    """``verdict``: :func:`hazard.pipeline.verdict.verdict` without ``warnings`` (report.json's top level)."""
-
-    headline: str
-    hazard_at_observers: bool
-    hazard_zones: bool
-    any_hazard: bool
-    zones: list[str]
-    observers: VerdictCounts
+# ``verdict``: :class:`hazard.pipeline.verdict.Verdict` without ``warnings`` (report.json's top level)
+VerdictBlock = _from_dataclass(Verdict, "VerdictBlock", omit=Verdict.NOT_IN_BLOCK)
 
 
 class LevelDistances(_Strict):
@@ -454,31 +394,9 @@ class VisualBlock(_Strict):
     nohd_attenuation: str
 
 
-class FlightZone(_Strict):
-    """:func:`hazard.pipeline.airspace._zone_check`."""
-
-    name: str
-    limit: str
-    limit_w_m2: Optional[Number]
-    floor_agl_m: Number
-    ceiling_agl_m: Number
-    holds: bool
-    worst_effective_irradiance_w_m2: Number
-    worst_point_m: Optional[list[Number]]
-    worst_time_s: Optional[Number]
-    worst_path: Optional[str]
-    vcf_applied: Number
-    lattice_spacing_m: Number
-    times_checked: int
-
-
-class AirspaceBlock(_Strict):
-    """``airspace`` (:func:`hazard.pipeline.airspace.check_zones`)."""
-
-    zones: list[FlightZone]
-    method: str
-    visual_correction_factor: Number
-    note: str = ABSENT  # not visible
+# ``airspace``: :class:`hazard.pipeline.airspace.AirspaceCheck` (``note`` only for a laser that is not visible),
+# its zones :class:`~hazard.pipeline.airspace.FlightZoneCheck`
+AirspaceBlock = _from_dataclass(AirspaceCheck, "AirspaceBlock", override={"zones": list[_from_dataclass(FlightZoneCheck, "FlightZone")]})  # type: ignore[misc]
 
 
 class WorstWindow(_Strict):
@@ -584,10 +502,10 @@ class ReportModel(_Strict):
     mpe: MpeBlock  # type: ignore[valid-type]
     pulse: Optional[PulseBlock]  # type: ignore[valid-type]
     mpe_w_m2: Number
-    uv_24h: Optional[Uv24hBlock]  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
-    extended_source: ExtendedSourceBlock
+    uv_24h: Optional[Uv24hBlock]  # type: ignore[valid-type]  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe), null elsewhere
+    extended_source: ExtendedSourceBlock  # type: ignore[valid-type]
     attenuation_per_m: Number
-    limiting_aperture: LimitingAperture
+    limiting_aperture: LimitingAperture  # type: ignore[valid-type]
     beam: BeamBlock
     sdz: Optional[SdzBlock]
     stages: list[StageRecord]  # type: ignore[valid-type]
@@ -597,14 +515,14 @@ class ReportModel(_Strict):
     observers: list[ObserverRow]  # type: ignore[valid-type]
     observers_listed: ObserversListed
     verdict_changes: list[str]
-    verdict: VerdictBlock
+    verdict: VerdictBlock  # type: ignore[valid-type]
     hazard_at_observers: bool
     hazard_zones: bool
     any_hazard: bool
     warnings: list[str]
     notes: list[str]
     visual_interference: Optional[VisualBlock]
-    airspace: Optional[AirspaceBlock]
+    airspace: Optional[AirspaceBlock]  # type: ignore[valid-type]
     motion: Optional[MotionBlock]
     tracks: list[PathBlock]
     map_outputs: Optional[MapOutputsBlock] = None

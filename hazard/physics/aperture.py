@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Apertures", "limiting_aperture_m", "disk_fraction", "aperture_irradiance_w_m2", "observer_apertures",
+__all__ = ["Apertures", "LimitingAperture", "limiting_aperture", "limiting_aperture_m", "disk_fraction", "aperture_irradiance_w_m2", "observer_apertures",
            "PUPIL_RADIUS_M"]
 
 PUPIL_RADIUS_M = 3.5e-3  # the dark-adapted pupil an optical aid delivers into (7 mm)
@@ -87,6 +87,42 @@ def limiting_aperture_m(wavelength_nm, duration_s, *, skin=False) -> float:
     if t <= 10.0:
         return 1.5e-3 * t ** 0.375
     return 3.5e-3
+
+
+@dataclass(frozen=True)
+class LimitingAperture:
+    """What the MPE is compared with (report.json ``limiting_aperture``; :func:`limiting_aperture`).
+
+    Attributes
+    ----------
+    diameter_m : float
+        The limiting aperture's diameter D_f [m] (:func:`limiting_aperture_m`).
+    source : str
+        The standards' tables it comes from, with their editions.
+    optical_aids : str
+        How an optical aid collects and delivers the beam, in words.
+    applies_to : str
+        Which beams are averaged over it and which keep the point value, in words.
+    """
+
+    diameter_m: float
+    source: str
+    optical_aids: str
+    applies_to: str
+
+    def to_dict(self) -> dict:
+        return {"diameter_m": self.diameter_m, "source": self.source, "optical_aids": self.optical_aids, "applies_to": self.applies_to}
+
+
+def limiting_aperture(wavelength_nm, duration_s) -> LimitingAperture:
+    """The eye's limiting aperture at ``wavelength_nm`` [nm] and exposure ``duration_s`` [s], and how the analysis uses it."""
+    return LimitingAperture(
+        diameter_m=limiting_aperture_m(wavelength_nm, duration_s),
+        source="ANSI Z136.1-2014 sec. 8.3 / Table 8; IEC 60825-1:2014 Table A.5",
+        optical_aids="collect over min(D_o, 7 mm M), delivered into the 7 mm pupil (tau P / (pi (3.5 mm)^2)); "
+                     "the naked eye's value if larger",
+        applies_to="the direct beam and flat mirrors' beams (exact Gaussian power through the disk); diffuse "
+                   "reflections and curved mirrors keep the point value (times the aid's fixed gain)")
 
 
 def disk_fraction(radius_m, offset_m, beam_radius_m) -> np.ndarray:

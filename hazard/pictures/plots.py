@@ -305,13 +305,13 @@ def _uv_day_static(uv, mpe_w_m2, single_w_m2, duration_s) -> dict:
     """The UV day's limit for :class:`ExposureDisplay` of a fixed observer, when it governs
     its MPE (:func:`hazard.pipeline.limits.exposure_limits` lowered the MPE ``mpe_w_m2`` to
     the day's average, below the one exposure's ``single_w_m2``): the summed dose of all the
-    day's exposures, ``uv_24h.radiant_exposure_j_m2``."""
-    avg = None if not uv else uv["average_irradiance_w_m2"]
+    day's exposures, ``uv.radiant_exposure_j_m2`` (``uv``: :class:`hazard.physics.mpe.UV24hResult`, or None)."""
+    avg = None if uv is None else uv.average_irradiance_w_m2
     if avg is None or avg > mpe_w_m2 * (1 + 1e-9) or not avg < single_w_m2 * (1 - 1e-12):
         return {}
-    return {"uv_day_j_m2": float(uv["radiant_exposure_j_m2"]),
-            "uv_day_text": (f"UV day's limit: the doses of {uv['total_on_time_s']:.4g} s exposed in 24 h add up to at most "
-                            f"{uv['radiant_exposure_j_m2']:.4g} J/m^2 (governs; [M]); this plot is one {duration_s:.4g} s "
+    return {"uv_day_j_m2": float(uv.radiant_exposure_j_m2),
+            "uv_day_text": (f"UV day's limit: the doses of {uv.total_on_time_s:.4g} s exposed in 24 h add up to at most "
+                            f"{uv.radiant_exposure_j_m2:.4g} J/m^2 (governs; [M]); this plot is one {duration_s:.4g} s "
                             f"exposure, held to its share (the MPE line)")}
 
 

@@ -147,11 +147,11 @@ def _airspace_blocks(result, blocks) -> None:
         line["cumulative_exposure_j_m2"] = p.cumulative_j_m2
         line["time_s"] = p.times_s
         blocks[f"track_{p.name}"] = line
-    rows = {z["name"]: z for z in (result.airspace or {}).get("zones", [])}
+    rows = {z.name: z for z in (() if result.airspace is None else result.airspace.zones)}
     for zs in ([] if result.scene.spec.airspace is None else result.scene.spec.airspace.zones):
         v, faces = zone_prism(result, zs)
         mesh = pv.PolyData(v - off, np.concatenate([[len(f), *f] for f in faces]))
-        mesh["holds"] = np.full(mesh.n_cells, int(bool(rows.get(zs.name, {}).get("holds", True))), np.uint8)
+        mesh["holds"] = np.full(mesh.n_cells, int(rows[zs.name].holds if zs.name in rows else True), np.uint8)
         blocks[f"airspace_{zs.name}"] = mesh
     if (result.visual_interference or {}).get("applies"):
         for level in ("szed", "czed", "lfed"):

@@ -30,13 +30,98 @@ lattice spacing is reported. Attenuation: credited for the visual levels only wi
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
 from hazard.physics.engine import mirror_axis, specular_irradiance, spot_irradiance, spot_line_of_sight
 from hazard.physics.visual import level_limit_w_m2
 
-__all__ = ["check_zones", "TIMES_MAX", "LATTICE", "LEVELS"]
+__all__ = ["AirspaceCheck", "FlightZoneCheck", "check_zones", "TIMES_MAX", "LATTICE", "LEVELS"]
+
+
+@dataclass(frozen=True)
+class FlightZoneCheck:
+    """One flight zone's check (:func:`_zone_check`; report.json ``airspace.zones[]``).
+
+    Attributes
+    ----------
+    name, limit : str
+        The zone's name and the level it must hold (``"lfed"``, ``"czed"``, ``"szed"`` or ``"nohd"``).
+    limit_w_m2 : float or None
+        That level as an effective irradiance [W/m^2] (with the VCF applied; None: not finite).
+    floor_agl_m, ceiling_agl_m : float
+        The zone's floor and ceiling above ground [m].
+    holds : bool
+        The worst effective irradiance found stays below the limit.
+    worst_effective_irradiance_w_m2 : float
+        The worst effective irradiance found in the zone [W/m^2] (reported even where it holds).
+    worst_point_m : tuple of float or None
+        Where (world x, y, z [m]); None: nothing reached the zone.
+    worst_time_s : float or None
+        When [s]; None: nothing reached the zone.
+    worst_path : str or None
+        Which beam: ``"direct"`` or the mirror target's path; None: nothing reached the zone.
+    vcf_applied : float
+        The visual correction factor applied (unitless; 1 for ``nohd``).
+    lattice_spacing_m : float
+        The spacing of the zone's lattice of points [m].
+    times_checked : int
+        The lased analysed times checked.
+    """
+
+    name: str
+    limit: str
+    limit_w_m2: float | None
+    floor_agl_m: float
+    ceiling_agl_m: float
+    holds: bool
+    worst_effective_irradiance_w_m2: float
+    worst_point_m: tuple[float, ...] | None
+    worst_time_s: float | None
+    worst_path: str | None
+    vcf_applied: float
+    lattice_spacing_m: float
+    times_checked: int
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "limit": self.limit, "limit_w_m2": self.limit_w_m2, "floor_agl_m": self.floor_agl_m,
+                "ceiling_agl_m": self.ceiling_agl_m, "holds": self.holds,
+                "worst_effective_irradiance_w_m2": self.worst_effective_irradiance_w_m2,
+                "worst_point_m": None if self.worst_point_m is None else list(self.worst_point_m),
+                "worst_time_s": self.worst_time_s, "worst_path": self.worst_path, "vcf_applied": self.vcf_applied,
+                "lattice_spacing_m": self.lattice_spacing_m, "times_checked": self.times_checked}
+
+
+@dataclass(frozen=True)
+class AirspaceCheck:
+    """The flight zones' checks (:func:`check_zones`; report.json ``airspace``).
+
+    Attributes
+    ----------
+    zones : tuple of FlightZoneCheck
+        One per ``[[airspace.zones]]``, in the scene's order.
+    method : str
+        How the zones were searched, in words.
+    visual_correction_factor : float
+        The VCF the visual levels use (unitless; 0 for a laser that is not visible).
+    note : str or None
+        Why the visual levels cannot be exceeded (a laser that is not visible); None: the key is absent.
+    """
+
+    zones: tuple[FlightZoneCheck, ...]
+    method: str
+    visual_correction_factor: float
+    note: str | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("note",)
+
+    def to_dict(self) -> dict:
+        out = {"zones": [z.to_dict() for z in self.zones], "method": self.method, "visual_correction_factor": self.visual_correction_factor}
+        if self.note is not None:
+            out["note"] = self.note
+        return out
 
 TIMES_MAX = 2000
 LATTICE = 24
@@ -181,7 +266,7 @@ def _mirror_points(zone, spots, reach_m) -> np.ndarray:
     return np.concatenate(out) if out else np.empty((0, 3))
 
 
-def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
+def _zone_check(result, zone, steps, vcf, mu, lattice) -> FlightZoneCheck:
     """The worst effective irradiance in one zone over the analysed times."""
     key = zone.spec.limit
     e_lim = level_limit_w_m2(key, result.mpe_w_m2, vcf)
@@ -189,7 +274,7 @@ def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
     o = np.asarray(result.scene.laser_position_m, float)
     span = zone.distance_span_m(o)  # the axis's part that can lie in the zone (its worst value is reported even where it holds)
     pts, spacing = lattice
-    best = (0.0, None, None, None)
+    best: tuple[float, np.ndarray | None, float | None, str | None] = (0.0, None, None, None)  # value, point, time, path
     b = result.scene.spec.laser.pointing_buffer_rad
     for t, u0, spots, tracer, ray_scene in steps:
         ring = _pointing_ring(u0, b)
@@ -203,12 +288,11 @@ def _zone_check(result, zone, steps, vcf, mu, lattice) -> dict:
             best = (float(total[k]), p[k], t, "direct" if direct[k] >= refl[k] else _which(spots, p[k], mu, ray_scene, result.states))
     off = np.asarray(result.scene.offset_m, float)
     worst, point, t, path = best
-    return {"name": zone.spec.name, "limit": key, "limit_w_m2": e_lim * eff if math.isfinite(e_lim) else None,
-            "floor_agl_m": zone.spec.floor_agl_m, "ceiling_agl_m": zone.spec.ceiling_agl_m,
-            "holds": bool(worst < (e_lim * eff if math.isfinite(e_lim) else math.inf)),
-            "worst_effective_irradiance_w_m2": worst, "worst_point_m": None if point is None else (point + off).tolist(),
-            "worst_time_s": t, "worst_path": path, "vcf_applied": eff, "lattice_spacing_m": spacing,
-            "times_checked": len(steps)}
+    return FlightZoneCheck(name=zone.spec.name, limit=key, limit_w_m2=e_lim * eff if math.isfinite(e_lim) else None,
+                           floor_agl_m=zone.spec.floor_agl_m, ceiling_agl_m=zone.spec.ceiling_agl_m,
+                           holds=bool(worst < (e_lim * eff if math.isfinite(e_lim) else math.inf)),
+                           worst_effective_irradiance_w_m2=worst, worst_point_m=None if point is None else tuple((point + off).tolist()),
+                           worst_time_s=t, worst_path=path, vcf_applied=eff, lattice_spacing_m=spacing, times_checked=len(steps))
 
 
 def _pointing_ring(u, b) -> list:
@@ -227,7 +311,7 @@ def _which(spots, p, mu, ray_scene, states) -> str | None:
     return spots[int(np.argmax(vals))].target.name if vals else None
 
 
-def check_zones(result, first) -> dict:
+def check_zones(result, first) -> AirspaceCheck:
     """report.json ``airspace``: per zone whether it holds, with the worst point and time
     (see the module notes). ``first``: (traced, tracer, ray_scene) of the analysis."""
     spec = result.scene.spec
@@ -244,10 +328,8 @@ def check_zones(result, first) -> dict:
         z = _Zone(zs, result.scene)
         mu = result.attenuation_per_m if zs.limit == "nohd" else vi["attenuation_per_m"]
         zones.append(_zone_check(result, z, steps, 1.0 if zs.limit == "nohd" else vcf_levels, mu, z.lattice()))
-    out = {"zones": zones, "method": "hazard.pipeline.airspace: the direct beam's axis entry, each mirror beam's axis and a "
-                                      f"lattice of {LATTICE} x {LATTICE} x {LEVELS} points per zone, at every lased analysed time",
-            "visual_correction_factor": vcf_levels}
-    if not vi["applies"]:
-        out["note"] = (f"{spec.laser.wavelength_nm:g} nm is not visible: the visual levels (lfed, czed, szed) cannot be "
-                       f"exceeded; 'nohd' zones are checked against the MPE")
-    return out
+    note = None if vi["applies"] else (f"{spec.laser.wavelength_nm:g} nm is not visible: the visual levels (lfed, czed, szed) "
+                                       f"cannot be exceeded; 'nohd' zones are checked against the MPE")
+    return AirspaceCheck(zones=tuple(zones), method="hazard.pipeline.airspace: the direct beam's axis entry, each mirror beam's "
+                         f"axis and a lattice of {LATTICE} x {LATTICE} x {LEVELS} points per zone, at every lased analysed time",
+                         visual_correction_factor=vcf_levels, note=note)

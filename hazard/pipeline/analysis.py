@@ -115,10 +115,10 @@ def hazard_result(r, stages=()) -> HazardResult:
         states=hist.states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol, traced.square),
         spill=r["spill"].summary, sdz=r["sdz"].zone if beams is None else {**r["sdz"].zone, "mirror_beams": beams},
         motion=r["motion"].motion,
-        extended_source={} if ext is None else ext.summary,
+        extended_source=None if ext is None else ext.summary,
         visual_interference={} if air is None else air.visual_interference,
-        airspace={} if air is None else air.zones,
-        uv_24h=None if exposure.uv_24h is None else exposure.uv_24h.to_dict(),
+        airspace=None if air is None else air.zones,
+        uv_24h=exposure.uv_24h,
     )
 
 
@@ -202,12 +202,12 @@ def _spill(log, crossings, beam, mpe) -> SpillResult:
     scene = crossings.scene
     with log.run("spill") as st:
         out = spill.spill_summary(scene, beam.traced, mpe.attenuation_per_m, mpe.exposure.irradiance_w_m2, lobes.scene_aids(scene))
-        stopped = "; ".join(f"{d['power_w']:.4g} W stopped by {d['object']} at {d['range_m']:.4g} m, {d['reflected']}" for d in out["stopped"])
-        st.detail = (f"{out['leaves_scene_w']:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
-                     f"{out['nohd_m']:.4g} m (the spill's highest point of the beam profile: {out['peak_profile']:.3g})"
+        stopped = "; ".join(f"{d.power_w:.4g} W stopped by {d.object} at {d.range_m:.4g} m, {d.reflected}" for d in out.stopped)
+        st.detail = (f"{out.leaves_scene_w:.4g} W leaves the scene past the targets, direct-beam NOHD along it "
+                     f"{out.nohd_m:.4g} m (the spill's highest point of the beam profile: {out.peak_profile:.3g})"
                      + (f"; {stopped}" if stopped else "")
-                     + (f"; {out['shared_w']:.4g} W in beam cells shared by a target and a stopper (it lands on one of them)"
-                        if out["shared_w"] > 0 else ""))
+                     + (f"; {out.shared_w:.4g} W in beam cells shared by a target and a stopper (it lands on one of them)"
+                        if out.shared_w > 0 else ""))
     return SpillResult(out)
 
 
@@ -419,7 +419,7 @@ def _airspace(log, **r) -> AirspaceResult:
 
     result = hazard_result(r)
     first = (r["history"].traced, r["rays"].tracer, r["rays"].ray_scene)
-    spec, zones = result.scene.spec, {}
+    spec, zones = result.scene.spec, None
     with log.run("airspace") as st:
         vi = visual_interference(result)
         st.detail = (("visual levels apply: " if vi["applies"] else "not a visible laser: ")
@@ -428,8 +428,8 @@ def _airspace(log, **r) -> AirspaceResult:
             from hazard.pipeline.airspace import check_zones
 
             zones = check_zones(replace(result, visual_interference=vi), first)
-            held = sum(z["holds"] for z in zones["zones"])
-            st.detail += f"; {held} of {len(zones['zones'])} flight zone(s) hold their limit"
+            held = sum(z.holds for z in zones.zones)
+            st.detail += f"; {held} of {len(zones.zones)} flight zone(s) hold their limit"
     return AirspaceResult(vi, zones)
 
 

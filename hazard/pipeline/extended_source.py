@@ -81,12 +81,16 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from hazard.physics import mpe as _mpe
 
 __all__ = [
+    "ExtendedMpe",
+    "ExtendedSourceSummary",
+    "NOT_APPLIED",
     "ExtendedSourceMPE",
     "spot_subtense_rad",
     "observer_subtense_rad",
@@ -318,7 +322,7 @@ def _point_source_only(result, alpha, m, seconds):
     return ExtendedSourceResult(
         angular_subtense_rad=alpha, c_e=np.ones(m), mpe_w_m2=np.full(m, float(result.mpe_w_m2)),
         mpe_radiant_exposure_j_m2=np.full(m, float(result.mpe_radiant_exposure_j_m2)), first_exceedance_s=None,
-        summary={"applied": False}, notes=(),
+        summary=NOT_APPLIED, notes=(),
         record=Stage("extended_source", False, "point-source MPE (conservative); set [exposure] extended_source = true to apply "
                      "C_E (the spot subtense is still computed for the report)", seconds))
 
@@ -378,35 +382,129 @@ def _stage_detail(c_e, alpha, ext, specular, known, n_above, m) -> str:
     return "; ".join(parts)
 
 
-def _mpe_entry(a, v) -> dict:
+@dataclass(frozen=True)
+class ExtendedMpe:
+    """The MPE at one angular subtense, every step (report.json ``extended_source.mpe_smallest_alpha``
+    and ``mpe_largest_alpha``; :func:`_mpe_entry`).
+
+    Attributes
+    ----------
+    alpha_rad : float
+        The apparent source's angular subtense alpha [rad].
+    c_e : float
+        The extended-source correction factor C_E at it (unitless, >= 1).
+    alpha_max_rad : float
+        alpha_max [rad] (C_E stops growing beyond it).
+    T2_s : float
+        The time T2 [s] of the thermal limit for an extended source.
+    mpe_w_m2 : float
+        The MPE there [W/m^2].
+    table_row, formula, label : str
+        The standard's table row, its formula and the limit's label.
+    unverified : bool
+        The row is labelled [M] (not verified against the printed standard).
+    steps : tuple of str
+        Every step of the calculation, as a safety officer redoes it by hand.
+    pulse : RepetitivePulseResult or None
+        The repetitive-pulse rules at this subtense (None: continuous wave).
+    """
+
+    alpha_rad: float
+    c_e: float
+    alpha_max_rad: float
+    T2_s: float
+    mpe_w_m2: float
+    table_row: str
+    formula: str
+    label: str
+    unverified: bool
+    steps: tuple[str, ...]
+    pulse: _mpe.RepetitivePulseResult | None
+
+    def to_dict(self) -> dict:
+        return {"alpha_rad": self.alpha_rad, "c_e": self.c_e, "alpha_max_rad": self.alpha_max_rad, "T2_s": self.T2_s,
+                "mpe_w_m2": self.mpe_w_m2, "table_row": self.table_row, "formula": self.formula, "label": self.label,
+                "unverified": self.unverified, "steps": list(self.steps),
+                "pulse": None if self.pulse is None else self.pulse.to_dict()}
+
+
+@dataclass(frozen=True)
+class ExtendedSourceSummary:
+    """The stage's summary: report.json ``extended_source`` (``{"applied": false}`` alone when C_E
+    was not applied: the fields of :attr:`ONLY_WHEN_APPLIED` are then None and not written).
+
+    Attributes
+    ----------
+    applied : bool
+        C_E applied per observer (``[exposure] extended_source = true``).
+    alpha_min_rad, alpha_max_rad : float
+        alpha_min [rad] (a point source below it: C_E = 1) and alpha_max [rad] at the exposure duration.
+    spot_size, point_sources : str
+        How the spot's size and subtense are taken, and which observers keep C_E = 1, in words.
+    exact : bool
+        The per-observer MPEs are exact (every subtense evaluated; else interpolated conservatively).
+    observers_above_alpha_min, observers_kept_specular : int
+        Observers that see a subtense above alpha_min; observers kept at C_E = 1 (specular irradiance).
+    mpe_smallest_alpha, mpe_largest_alpha : ExtendedMpe or None
+        The MPE calculation at the smallest and the largest subtense applied (None: no such subtense).
+    """
+
+    applied: bool
+    alpha_min_rad: float | None = None
+    alpha_max_rad: float | None = None
+    spot_size: str | None = None
+    point_sources: str | None = None
+    exact: bool | None = None
+    observers_above_alpha_min: int | None = None
+    observers_kept_specular: int | None = None
+    mpe_smallest_alpha: ExtendedMpe | None = None
+    mpe_largest_alpha: ExtendedMpe | None = None
+
+    ONLY_WHEN_APPLIED: ClassVar[tuple[str, ...]] = (
+        "alpha_min_rad", "alpha_max_rad", "spot_size", "point_sources", "exact", "observers_above_alpha_min",
+        "observers_kept_specular", "mpe_smallest_alpha", "mpe_largest_alpha")
+
+    def to_dict(self) -> dict:
+        if not self.applied:
+            return {"applied": False}
+        return {"applied": True, "alpha_min_rad": self.alpha_min_rad, "alpha_max_rad": self.alpha_max_rad,
+                "spot_size": self.spot_size, "point_sources": self.point_sources, "exact": self.exact,
+                "observers_above_alpha_min": self.observers_above_alpha_min, "observers_kept_specular": self.observers_kept_specular,
+                "mpe_smallest_alpha": None if self.mpe_smallest_alpha is None else self.mpe_smallest_alpha.to_dict(),
+                "mpe_largest_alpha": None if self.mpe_largest_alpha is None else self.mpe_largest_alpha.to_dict()}
+
+
+NOT_APPLIED = ExtendedSourceSummary(applied=False)  # the point-source MPE everywhere
+
+
+def _mpe_entry(a, v) -> ExtendedMpe:
     res, pulse, e = v
-    return {"alpha_rad": a, "c_e": res.factors.C_E, "alpha_max_rad": res.factors.alpha_max_rad, "T2_s": res.factors.T2_s,
-            "mpe_w_m2": e, "table_row": res.table_row, "formula": res.formula, "label": res.label,
-            "unverified": res.unverified, "steps": list(res.steps),
-            "pulse": None if pulse is None else pulse.to_dict()}
+    return ExtendedMpe(alpha_rad=a, c_e=res.factors.C_E, alpha_max_rad=res.factors.alpha_max_rad, T2_s=res.factors.T2_s,
+                       mpe_w_m2=e, table_row=res.table_row, formula=res.formula, label=res.label,
+                       unverified=res.unverified, steps=tuple(res.steps), pulse=pulse)
 
 
-def _summary(spec, ext, known, n_above, n_spec, t_exp) -> dict:
+def _summary(spec, ext, known, n_above, n_spec, t_exp) -> ExtendedSourceSummary:
     """The report's ``extended_source`` block."""
     applied = [(a, v) for a, v in sorted(ext.evaluations.items()) if a > 0]
     laser = spec.laser
-    return {
-        "applied": True,
-        "alpha_min_rad": ALPHA_MIN_RAD,
-        "alpha_max_rad": _mpe.correction_factors(laser.wavelength_nm, t_exp, 0.0, spec.exposure.standard).alpha_max_rad,
-        "spot_size": "1/e (d63) diameter from the spot's second moments (the Gaussian beam footprint when one flat target "
-                     "holds the whole beam, else the scatter of the beam samples: a lower bound); smaller principal axis "
-                     "projected perpendicular to the line of sight; "
-                     "alpha = 2 atan(D / 2R) from the spot centroid; smallest over the spots an observer faces",
-        "point_sources": "observers receiving specular irradiance keep C_E = 1"
-                         + ("" if known else " (not known per observer: every observer when a target has a mirror lobe)"),
-        "exact": ext.exact,
-        "observers_above_alpha_min": n_above,
-        "observers_kept_specular": n_spec,
+    return ExtendedSourceSummary(
+        applied=True,
+        alpha_min_rad=ALPHA_MIN_RAD,
+        alpha_max_rad=_mpe.correction_factors(laser.wavelength_nm, t_exp, 0.0, spec.exposure.standard).alpha_max_rad,
+        spot_size="1/e (d63) diameter from the spot's second moments (the Gaussian beam footprint when one flat target "
+                  "holds the whole beam, else the scatter of the beam samples: a lower bound); smaller principal axis "
+                  "projected perpendicular to the line of sight; "
+                  "alpha = 2 atan(D / 2R) from the spot centroid; smallest over the spots an observer faces",
+        point_sources="observers receiving specular irradiance keep C_E = 1"
+                      + ("" if known else " (not known per observer: every observer when a target has a mirror lobe)"),
+        exact=ext.exact,
+        observers_above_alpha_min=n_above,
+        observers_kept_specular=n_spec,
         # the MPE calculation at the smallest and the largest subtense applied (every step)
-        "mpe_smallest_alpha": _mpe_entry(*applied[0]) if applied else None,
-        "mpe_largest_alpha": _mpe_entry(*applied[-1]) if len(applied) > 1 else None,
-    }
+        mpe_smallest_alpha=_mpe_entry(*applied[0]) if applied else None,
+        mpe_largest_alpha=_mpe_entry(*applied[-1]) if len(applied) > 1 else None,
+    )
 
 
 def _subtense_by_block(result, observers, whole) -> np.ndarray:
@@ -433,7 +531,7 @@ class ExtendedSourceResult:
     mpe_w_m2: np.ndarray
     mpe_radiant_exposure_j_m2: np.ndarray
     first_exceedance_s: np.ndarray | None
-    summary: dict
+    summary: ExtendedSourceSummary
     notes: tuple
     record: object
 

@@ -13,7 +13,12 @@ from hazard.physics.keepout import Footprint, Lobe
 if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
     from scenes.observers import Observers
 
+    from hazard.physics.mpe import UV24hResult
+    from hazard.pipeline.airspace import AirspaceCheck
+    from hazard.pipeline.extended_source import ExtendedSourceSummary
     from hazard.pipeline.motion_stage import MotionResult
+    from hazard.pipeline.spill import SpillSummary
+    from hazard.pipeline.spots import BeamSampling
 
 __all__ = ["Stage", "TargetResult", "ObserverResults", "HazardResult"]
 
@@ -206,14 +211,14 @@ class HazardResult:
     spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
     beam: object | None = None
     states: dict = field(default_factory=dict)  # target index -> states over times_s
-    extended_source: dict = field(default_factory=dict)  # C_E summary for the report (hazard.pipeline.extended_source)
-    beam_sampling: dict = field(default_factory=dict)  # rays, levels, error bound, exact targets (the beam stage)
-    spill: dict = field(default_factory=dict)  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill)
+    extended_source: ExtendedSourceSummary | None = None  # C_E summary for the report (hazard.pipeline.extended_source); None: not run
+    beam_sampling: BeamSampling | None = None  # rays, levels, error bound, exact targets (hazard.pipeline.spots.beam_sampling); None: not traced
+    spill: SpillSummary | None = None  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill); None: not run
     sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.physics.visual)
-    airspace: dict = field(default_factory=dict)  # the flight zones' checks (hazard.pipeline.airspace)
-    uv_24h: dict | None = None  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe, [M]), else None
+    airspace: AirspaceCheck | None = None  # the flight zones' checks (hazard.pipeline.airspace); None: no [airspace] zones
+    uv_24h: UV24hResult | None = None  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe, [M]), else None
 
     @property
     def motion_hazardous(self) -> np.ndarray | None:
@@ -255,9 +260,9 @@ class HazardResult:
             return x is not None and x > 0
 
         tracks = [] if self.motion is None else self.motion.tracks()
-        zones = (self.airspace or {}).get("zones") or []
+        zones = () if self.airspace is None else self.airspace.zones
         return bool(np.any(self.hazardous)) or positive((self.sdz or {}).get("nohd_m")) or any(
-            p.summary["hazardous"] for p in tracks) or any(not z["holds"] for z in zones) or any(
+            p.summary["hazardous"] for p in tracks) or any(not z.holds for z in zones) or any(
             (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
             or positive(t.specular_nohd_static_m) or positive(t.specular_nohd_dynamic_m)
             for t in self.targets

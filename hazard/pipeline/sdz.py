@@ -397,7 +397,7 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
     d = pointing_directions(scene)
     power = laser.average_power_w
     naked, aided = direct_nohds(laser, power, mpe_w_m2, mu, aids)
-    gain = max([1.0] + [a["gain"] for a in aided])  # the widest hazardous beam: one cast serves every zone
+    gain = max([1.0] + [a.gain for a in aided])  # the widest hazardous beam: one cast serves every zone
     s_max = math.sqrt(max(math.log(4 * power * gain / (math.pi * laser.beam_diameter_m ** 2 * mpe_w_m2)), 0.0))
     origin = np.asarray(scene.laser_position_m, float)
     backstop_m = beam_stop_m(laser, origin, d.unit, ray_scene, len(scene.targets), s_max)
@@ -414,6 +414,6 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
                           "area_m2": math.inf if np.isinf(z0.reach_m).any() else float(z0.polygon.area)}
     out["aided"] = []
     for a in aided:
-        z = _zone(scene, d.unit, backstop_m, a["nohd_m"], power * a["gain"], mpe_w_m2, mu)
-        out["aided"].append({**a, **_zone_dict(scene, z, d.unit, boundary)})
+        z = _zone(scene, d.unit, backstop_m, a.nohd_m, power * a.gain, mpe_w_m2, mu)
+        out["aided"].append({**a.to_dict(), **_zone_dict(scene, z, d.unit, boundary)})
     return out

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from hazard.physics.visual import level_limit_w_m2, visual_correction_factor
 from hazard.pipeline.limits import exposure_limits
 from hazard.pipeline.lobes import scene_aids
 
-__all__ = ["BeamStage", "TailSquare", "ray_scene", "sampled_square", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
+__all__ = ["BeamSampling", "NotReflected", "BeamStage", "TailSquare", "ray_scene", "sampled_square", "scene_beam", "trace_beam", "unlit_targets", "tail_notes"]
 
 
 class FlatScene:
@@ -228,26 +229,100 @@ def _beam_detail(cells, built, power_w) -> str:
             f"{built.error_w:.3g} W ({built.error_w / power_w:.2g} of the beam, added to the spots){exact}")
 
 
-def beam_sampling(cells, built, rtol, square=None) -> dict:
+@dataclass(frozen=True)
+class NotReflected:
+    """Beam power that reached a target but is not reflected (report.json ``beam.sampling.not_reflected[]``).
+
+    Attributes
+    ----------
+    target : str
+        The target's name.
+    side : str
+        The face lit (``"front"``/``"back"``) that does not reflect, or ``"unresolved"``
+        (beam cells too coarse to tell).
+    power_w : float
+        The power that reached it there [W].
+    """
+
+    target: str
+    side: str
+    power_w: float
+
+    def to_dict(self) -> dict:
+        return {"target": self.target, "side": self.side, "power_w": self.power_w}
+
+
+@dataclass(frozen=True)
+class BeamSampling:
+    """The beam stage's accuracy (report.json ``beam.sampling``; :func:`beam_sampling`).
+
+    Attributes
+    ----------
+    rays : int
+        Rays traced over all levels of beam cells.
+    levels : int
+        Refinement levels of cells used.
+    rtol : float
+        The relative tolerance asked for (``[analysis] beam_rtol``, unitless).
+    error_bound_w : float
+        Bound on the power misassigned between objects [W] (added to the spots: conservative).
+    exact_targets : tuple of str
+        Targets whose spot power is the exact outline integral.
+    not_reflected : tuple of NotReflected
+        Power that reached a target but is not reflected, per target and face.
+    half_width_w : float
+        The sampled square's half-width, in 1/e beam radii ``w`` (not watts: the name's ``w``
+        is the beam radius).
+    tail_point_bound_w_m2, tail_aperture_bound_w_m2, tail_limit_w_m2 : float or None
+        With a sampled square (:class:`TailSquare`): the bounds [W/m^2] on the irradiance the
+        square leaves out (at a point after a flat or diffuse reflection; over the limiting
+        aperture) and the limit [W/m^2] they were held below. None without a square: the keys
+        are then absent from report.json (:attr:`ABSENT_WHEN_NONE`).
+    """
+
+    rays: int
+    levels: int
+    rtol: float
+    error_bound_w: float
+    exact_targets: tuple[str, ...]
+    not_reflected: tuple[NotReflected, ...]
+    half_width_w: float
+    tail_point_bound_w_m2: float | None = None
+    tail_aperture_bound_w_m2: float | None = None
+    tail_limit_w_m2: float | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("tail_point_bound_w_m2", "tail_aperture_bound_w_m2", "tail_limit_w_m2")
+
+    def to_dict(self) -> dict:
+        """report.json's ``beam.sampling``: the fields in their order, the ``tail_*`` keys only with a square."""
+        out = {"rays": self.rays, "levels": self.levels, "rtol": self.rtol, "error_bound_w": self.error_bound_w,
+               "exact_targets": list(self.exact_targets), "not_reflected": [n.to_dict() for n in self.not_reflected],
+               "half_width_w": self.half_width_w}
+        for key in self.ABSENT_WHEN_NONE:
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        return out
+
+
+def beam_sampling(cells, built, rtol, square=None) -> BeamSampling:
     """The beam stage's accuracy for the report: rays, levels, the bound on the power
     misassigned between objects [W], which targets got exact outline integrals, and the
     sampled square (:class:`TailSquare`): its half-width [1/e radii] and the bounds [W/m^2]
     on what it leaves out (point after a flat or diffuse reflection; limiting aperture)."""
-    out = {"rays": int(cells.rays_traced), "levels": int(cells.levels_used), "rtol": float(rtol),
-           "error_bound_w": float(built.error_w), "exact_targets": list(built.exact),
-           "not_reflected": [{"target": n, "side": s, "power_w": float(p)} for n, s, p in built.unreflected],
-           "half_width_w": float(cells.half_width)}
-    if square is not None:
-        out.update(tail_point_bound_w_m2=float(square.peak_bound_w_m2), tail_aperture_bound_w_m2=float(square.power_bound_w_m2),
-                   tail_limit_w_m2=float(square.limit_w_m2))
-    return out
+    tail = {} if square is None else {"tail_point_bound_w_m2": float(square.peak_bound_w_m2),
+                                      "tail_aperture_bound_w_m2": float(square.power_bound_w_m2),
+                                      "tail_limit_w_m2": float(square.limit_w_m2)}
+    return BeamSampling(rays=int(cells.rays_traced), levels=int(cells.levels_used), rtol=float(rtol),
+                        error_bound_w=float(built.error_w), exact_targets=tuple(built.exact),
+                        not_reflected=tuple(NotReflected(n, s, float(p)) for n, s, p in built.unreflected),
+                        half_width_w=float(cells.half_width), **tail)
 
 
 def unlit_targets(targets, spots, unreflected) -> list:
     """A row for every target without a spot (after the spots' rows, same order as the
     file), so no target disappears from a report: what reached it and why nothing reflects."""
     lit = {sp.target.index for sp in spots}
-    why = {}
+    why: dict[str, list[tuple[str, float]]] = {}
     for name, side, p in unreflected:
         why.setdefault(name, []).append((side, p))
     rows = []

@@ -39,7 +39,7 @@ import time
 import types
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field, fields, is_dataclass, replace
+from dataclasses import dataclass, fields, is_dataclass, replace
 from pathlib import PurePath
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
@@ -53,6 +53,8 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.pipeline.direct import DirectBeam
     from hazard.pipeline.limits import ExposureLimits
     from hazard.pipeline.motion_stage import MotionResult
+    from hazard.pipeline.airspace import AirspaceCheck
+    from hazard.pipeline.spill import SpillSummary
     from hazard.pipeline.spots import BeamStage
 
 __all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS",
@@ -497,10 +499,11 @@ class DirectResult:
 
 @dataclass(frozen=True)
 class SpillResult:
-    """Stage ``spill``: report.json ``spill`` (the beam past the targets: powers [W],
-    where it is stopped, its NOHD [m]; keys and types: :class:`hazard.outputs.report_schema.SpillBlock`)."""
+    """Stage ``spill``: report.json ``beam.spill`` (the beam past the targets: powers [W],
+    where it is stopped, its NOHD [m]; :class:`hazard.pipeline.spill.SpillSummary`, the schema's
+    ``SpillBlock`` generated from it)."""
 
-    summary: dict
+    summary: SpillSummary
 
 
 @dataclass(frozen=True)
@@ -572,8 +575,8 @@ class MotionStageResult:
 @dataclass(frozen=True)
 class AirspaceResult:
     """Stage ``airspace``: report.json ``visual_interference`` (FAA levels' distances [m])
-    and ``airspace`` (the flight zones' checks; empty without ``[airspace]`` zones); keys and types:
-    :class:`hazard.outputs.report_schema.VisualBlock`, :class:`~hazard.outputs.report_schema.AirspaceBlock`."""
+    and ``airspace`` (the flight zones' checks, :class:`hazard.pipeline.airspace.AirspaceCheck`; None
+    without ``[airspace]`` zones); keys and types of the first: :class:`hazard.outputs.report_schema.VisualBlock`."""
 
     visual_interference: dict
-    zones: dict = field(default_factory=dict)
+    zones: AirspaceCheck | None = None

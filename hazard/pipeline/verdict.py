@@ -23,33 +23,102 @@ the first, the second, or either (:func:`fails`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from hazard.pipeline.plausibility import answer_warnings
 
-__all__ = ["verdict", "fails", "zone_findings", "escape_way", "FAIL_ON_CHOICES"]
+__all__ = ["Verdict", "VerdictCounts", "verdict", "fails", "zone_findings", "escape_way", "FAIL_ON_CHOICES"]
 
 FAIL_ON_CHOICES = ("observers", "zones", "any")  # --fail-on-hazard WHICH (default observers)
 CIRCLE_SEGS = 16  # segments per quarter circle of a lobe's disc; the disc is drawn about the circle (never inside it)
 
 
-def _observer_counts(result) -> dict:
+@dataclass(frozen=True)
+class VerdictCounts:
+    """Who the scene lists and how many of them are over their limit (report.json ``verdict.observers``).
+
+    Attributes
+    ----------
+    hazardous, total : int
+        Fixed observer points at or above the MPE (their peak, or over time), of all listed.
+    tracks_hazardous, tracks : int
+        Moving observers (tracks) over the MPE, of all tracks.
+    flight_zones_exceeded, flight_zones : int
+        Flight zones whose FAA level is exceeded somewhere in them, of all flight zones.
+    """
+
+    hazardous: int
+    total: int
+    tracks_hazardous: int
+    tracks: int
+    flight_zones_exceeded: int
+    flight_zones: int
+
+    def to_dict(self) -> dict:
+        """report.json's ``verdict.observers``: the fields in their order."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The verdict of an analysis (:func:`verdict`; the module notes say what each flag means).
+
+    Attributes
+    ----------
+    headline : str
+        The one line stdout, report.json (``verdict.headline``) and the review page print.
+    hazard_at_observers : bool
+        A listed observer point, track or flight zone at or above its limit.
+    hazard_zones : bool
+        A hazard zone not contained or beyond the range boundary (``zones`` not empty).
+    any_hazard : bool
+        Either, or any NOHD > 0 anywhere, even contained.
+    zones : tuple of str
+        Each hazard zone not contained, and why.
+    observers : VerdictCounts
+        The counts the headline states.
+    warnings : tuple of str
+        The plausibility warnings (:func:`hazard.pipeline.plausibility.answer_warnings`):
+        report.json's top-level ``warnings``, not part of its ``verdict`` block.
+    """
+
+    headline: str
+    hazard_at_observers: bool
+    hazard_zones: bool
+    any_hazard: bool
+    zones: tuple[str, ...]
+    observers: VerdictCounts
+    warnings: tuple[str, ...]
+
+    #: fields report.json writes elsewhere than in its ``verdict`` block
+    NOT_IN_BLOCK = ("warnings",)
+
+    def to_dict(self) -> dict:
+        """report.json's ``verdict`` block: every field but ``warnings`` (written at the top level)."""
+        return {"headline": self.headline, "hazard_at_observers": self.hazard_at_observers, "hazard_zones": self.hazard_zones,
+                "any_hazard": self.any_hazard, "zones": list(self.zones), "observers": self.observers.to_dict()}
+
+
+def _observer_counts(result) -> VerdictCounts:
     """Hazardous fixed observer points, moving observers and exceeded flight zones."""
     tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
-    zones = (getattr(result, "airspace", None) or {}).get("zones") or []
-    return {"hazardous": int(np.sum(result.hazardous)), "total": len(result.observers),
-            "tracks_hazardous": sum(bool(p.summary["hazardous"]) for p in tracks), "tracks": len(tracks),
-            "flight_zones_exceeded": sum(not z["holds"] for z in zones), "flight_zones": len(zones)}
+    air = getattr(result, "airspace", None)
+    zones = () if air is None else air.zones
+    return VerdictCounts(hazardous=int(np.sum(result.hazardous)), total=len(result.observers),
+                         tracks_hazardous=sum(bool(p.summary["hazardous"]) for p in tracks), tracks=len(tracks),
+                         flight_zones_exceeded=sum(not z.holds for z in zones), flight_zones=len(zones))
 
 
-def _observers_text(c) -> str:
-    text = f"{c['hazardous']} of {c['total']} observer point(s) at or above the MPE"
-    if c["tracks"]:
-        text += f", {c['tracks_hazardous']} of {c['tracks']} moving observer(s) over the MPE"
-    if c["flight_zones"]:
-        text += f", {c['flight_zones_exceeded']} of {c['flight_zones']} flight zone(s) over their limit"
+def _observers_text(c: VerdictCounts) -> str:
+    text = f"{c.hazardous} of {c.total} observer point(s) at or above the MPE"
+    if c.tracks:
+        text += f", {c.tracks_hazardous} of {c.tracks} moving observer(s) over the MPE"
+    if c.flight_zones:
+        text += f", {c.flight_zones_exceeded} of {c.flight_zones} flight zone(s) over their limit"
     return text
 
 
@@ -193,29 +262,27 @@ def _headline(c, obs, zones, any_hazard) -> str:
     return f"No hazard: {text}, and every NOHD is 0"
 
 
-def verdict(result) -> dict:
+def verdict(result) -> Verdict:
     """The verdict of ``result`` (a :class:`hazard.HazardResult`).
 
     Returns
     -------
-    dict
-        ``headline`` (str: the same line on stdout, in report.json and on the review
-        page), ``hazard_at_observers`` and ``hazard_zones`` (bool; module notes),
-        ``any_hazard`` (bool: either, or any NOHD > 0 even contained), ``zones`` (list of
-        str: each zone not contained and why), ``observers`` (counts) and ``warnings``
-        (list of str: the plausibility warnings, :func:`hazard.pipeline.plausibility.answer_warnings`).
+    Verdict
+        The headline (the same line on stdout, in report.json and on the review page), the
+        two questions of the module notes, ``any_hazard``, the zones not contained and why,
+        the counts and the plausibility warnings.
     """
     c = _observer_counts(result)
-    obs = bool(c["hazardous"] or c["tracks_hazardous"] or c["flight_zones_exceeded"])
+    obs = bool(c.hazardous or c.tracks_hazardous or c.flight_zones_exceeded)
     zones = zone_findings(result)
     any_hazard = bool(result.any_hazard or obs or zones)
-    return {"headline": _headline(c, obs, zones, any_hazard), "hazard_at_observers": obs, "hazard_zones": bool(zones),
-            "any_hazard": any_hazard, "zones": zones, "observers": c, "warnings": answer_warnings(result)}
+    return Verdict(headline=_headline(c, obs, zones, any_hazard), hazard_at_observers=obs, hazard_zones=bool(zones),
+                   any_hazard=any_hazard, zones=tuple(zones), observers=c, warnings=tuple(answer_warnings(result)))
 
 
-def fails(v: dict, which: str) -> bool:
+def fails(v: Verdict, which: str) -> bool:
     """Whether ``--fail-on-hazard which`` fails on verdict ``v``: ``observers``, ``zones`` or ``any`` (either)."""
     if which not in FAIL_ON_CHOICES:
         raise ValueError(f"--fail-on-hazard={which!r}: expected one of {list(FAIL_ON_CHOICES)}")
-    return {"observers": v["hazard_at_observers"], "zones": v["hazard_zones"],
-            "any": v["hazard_at_observers"] or v["hazard_zones"]}[which]
+    return {"observers": v.hazard_at_observers, "zones": v.hazard_zones,
+            "any": v.hazard_at_observers or v.hazard_zones}[which]

@@ -136,7 +136,7 @@ def test_default_is_point_source_and_ratio_unchanged():
         # the subtense is still reported (by hand)
         np.testing.assert_allclose(res.observers.angular_subtense_rad, [alpha_hand(20.0), alpha_hand(20.0, 60.0), alpha_hand(2.0)],
                                    rtol=1e-9)
-        assert res.extended_source == {"applied": False}
+        assert res.extended_source.to_dict() == {"applied": False}
 
 
 def test_extended_source_divides_the_ratio_by_c_e():

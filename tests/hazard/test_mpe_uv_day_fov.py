@@ -251,7 +251,7 @@ def test_scene_with_firing_windows_compares_the_summed_dose():
     win = "[[0.0, 600.0], [3600.0, 4200.0], [7200.0, 7800.0], [10800.0, 11400.0], [14400.0, 15000.0]]"
     day = hz.analyze(_plate_scene(355.0, 1e4, win))
     assert day.mpe_w_m2 == pytest.approx(1e4 / 3000.0, rel=REL)
-    assert day.hazardous[0] and day.uv_24h["total_on_time_s"] == pytest.approx(3000.0)
+    assert day.hazardous[0] and day.uv_24h.total_on_time_s == pytest.approx(3000.0)
     assert any("3000 s within 24 h" in n for n in day.notes)
 
 

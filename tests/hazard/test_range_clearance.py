@@ -24,8 +24,8 @@ def test_the_danger_zone_is_contained_by_the_hill_and_stays_on_the_range(result)
 
 
 def test_the_spill_is_hazardous_on_its_way_and_found_on_the_grid(result):
-    (stop,) = result.spill["stopped"]
-    assert stop["object"] == "terrain" and stop["hazard_ratio"] > 1
+    (stop,) = result.spill.stopped
+    assert stop.object == "terrain" and stop.hazard_ratio > 1
     labels = result.observers.labels
     hot = [labels[i] for i in np.flatnonzero(result.hazardous)]
     assert hot and all(n.startswith("approach:crossing") for n in hot)

@@ -17,10 +17,16 @@ import scenes
 from hazard.cli import main
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import observer_columns, report_dict
-from hazard.outputs.report_schema import (DemBlock, MpeBlock, ObserverRow, PulseBlock, StageRecord, TargetReport, Uv24hBlock, report_schema,
-                                          validate_report)
+from hazard.outputs.report_schema import (DemBlock, MpeBlock, ObserverRow, PulseBlock, StageRecord, TargetReport, Uv24hBlock, VerdictBlock,
+                                          SamplingBlock, SpillBlock, ExtendedSourceBlock, AirspaceBlock,
+                                          report_schema, validate_report)
 from hazard.physics.mpe import MPEResult, RepetitivePulseResult, uv_24h_mpe
 from hazard.pipeline.results import Stage
+from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
+from hazard.pipeline.extended_source import NOT_APPLIED, ExtendedMpe, ExtendedSourceSummary
+from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
+from hazard.pipeline.spots import BeamSampling, NotReflected
+from hazard.pipeline.verdict import Verdict, VerdictCounts, verdict
 from scenes.dem import DemInfo
 from tests._bundled import bundled
 
@@ -174,6 +180,46 @@ def test_schema_follows_the_result_types():
     PulseBlock.model_validate(json.loads(json.dumps(pulse.to_dict())), strict=True)
     assert set(Uv24hBlock.model_fields) == set(uv_24h_mpe(355.0, [60.0]).to_dict())
     assert set(DemBlock.model_fields) == {f.name for f in dataclasses.fields(DemInfo)}
+    # the verdict: Verdict's fields but warnings (report.json's top level), its counts VerdictCounts'
+    v = verdict(result)
+    assert set(VerdictBlock.model_fields) == {f.name for f in dataclasses.fields(Verdict)} - {"warnings"} == set(v.to_dict())
+    assert set(VerdictBlock.model_fields["observers"].annotation.model_fields) == {f.name for f in dataclasses.fields(VerdictCounts)}
+    VerdictBlock.model_validate(json.loads(json.dumps(v.to_dict())), strict=True)
+    # beam.sampling: BeamSampling's fields, the tail_* keys present with a sampled square only (never null)
+    assert set(SamplingBlock.model_fields) == {f.name for f in dataclasses.fields(BeamSampling)} == set(result.beam_sampling.to_dict())
+    bare = BeamSampling(9, 2, 0.01, 1e-3, ("a",), (NotReflected("b", "back", 0.5),), 4.0)
+    assert set(bare.to_dict()) == set(SamplingBlock.model_fields) - set(BeamSampling.ABSENT_WHEN_NONE)
+    SamplingBlock.model_validate(json.loads(json.dumps(bare.to_dict())), strict=True)
+    with pytest.raises(ValidationError, match="tail_limit_w_m2"):
+        SamplingBlock.model_validate({**bare.to_dict(), "tail_limit_w_m2": None}, strict=True)
+    # beam.spill: SpillSummary's fields, its stopped[] StoppedSpill's, its aided[] AidedNohd's
+    spill = SpillSummary(1.0, 0.0, 0.5, (StoppedSpill("terrain", 0.2, 300.0, 10.0, 2.0, 0.0, "reflected"),), 40.0,
+                         (AidedNohd(7, 0.05, 0.9, 44.1, 250.0),))
+    doc = json.loads(json.dumps(spill.to_dict()))
+    assert set(SpillBlock.model_fields) == {f.name for f in dataclasses.fields(SpillSummary)} == set(doc)
+    assert set(doc["stopped"][0]) == {f.name for f in dataclasses.fields(StoppedSpill)}
+    assert set(doc["aided"][0]) == {f.name for f in dataclasses.fields(AidedNohd)}
+    SpillBlock.model_validate(doc, strict=True)
+    with pytest.raises(dataclasses.FrozenInstanceError):  # a stage's result is not changed by its readers
+        spill.nohd_m = 0.0  # type: ignore[misc]
+    # extended_source: ExtendedSourceSummary's fields ({"applied": false} alone when not applied), ExtendedMpe's
+    assert set(ExtendedSourceBlock.model_fields) == {f.name for f in dataclasses.fields(ExtendedSourceSummary)}
+    assert NOT_APPLIED.to_dict() == {"applied": False} and result.extended_source.to_dict() == {"applied": False}
+    at = ExtendedMpe(0.01, 6.7, 0.1, 10.0, 67.0, "row", "f", "label", False, ("s1",), None)
+    ext = ExtendedSourceSummary(True, 1.5e-3, 0.1, "d63", "specular: C_E = 1", True, 3, 0, at, None)
+    doc = json.loads(json.dumps(ext.to_dict()))
+    assert set(doc) == set(ExtendedSourceBlock.model_fields) and set(doc["mpe_smallest_alpha"]) == {f.name for f in dataclasses.fields(ExtendedMpe)}
+    ExtendedSourceBlock.model_validate(doc, strict=True)
+    with pytest.raises(ValidationError, match="alpha_min_rad"):  # written only when applied, and never null
+        ExtendedSourceBlock.model_validate({**doc, "alpha_min_rad": None}, strict=True)
+    # airspace: AirspaceCheck's fields (note only for a laser that is not visible), its zones FlightZoneCheck's
+    zone = FlightZoneCheck("z", "lfed", 5e-4, 0.0, 300.0, False, 1e-3, (1.0, 2.0, 3.0), 0.0, "direct", 0.5, 50.0, 1)
+    air = AirspaceCheck((zone,), "lattice", 0.5)
+    doc = json.loads(json.dumps(air.to_dict()))
+    assert set(doc) == set(AirspaceBlock.model_fields) - {"note"} and set(doc["zones"][0]) == {f.name for f in dataclasses.fields(FlightZoneCheck)}
+    assert set(AirspaceBlock.model_fields) == {f.name for f in dataclasses.fields(AirspaceCheck)}
+    AirspaceBlock.model_validate(doc, strict=True)
+    AirspaceBlock.model_validate({**doc, "note": "not visible"}, strict=True)
 
 
 def test_cli_prints_the_schema():

@@ -257,7 +257,7 @@ def _fake_static(uv, mpe_w_m2, single_w_m2):
     (1e4 / 3000.0, 1.0, 995.8, False),
 ])
 def test_uv_day_line_only_where_the_day_rule_governs(avg, mpe, single, drawn):
-    uv = {"average_irradiance_w_m2": avg, "radiant_exposure_j_m2": avg * 3000.0, "total_on_time_s": 3000.0}
+    uv = SimpleNamespace(average_irradiance_w_m2=avg, radiant_exposure_j_m2=avg * 3000.0, total_on_time_s=3000.0)  # a UV24hResult's fields
     r = _fake_static(uv, mpe, single)
     r.observers = SimpleNamespace(irradiance_w_m2=np.array([[3.5]]), labels=["east"], first_exceedance_s=np.array([np.nan]))
     d = plots.ExposureDisplay.from_result(_Len1(r), 0)

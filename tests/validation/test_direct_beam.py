@@ -151,12 +151,12 @@ def test_spill_nohd_from_the_nearest_unshadowed_point(half):
     sp = res.spill
     w_t = (A + R_T * PHI) / 2
     q = math.exp(-(half / w_t) ** 2)
-    assert q <= sp["peak_profile"] <= q * 1.01
+    assert q <= sp.peak_profile <= q * 1.01
     mpe = res.mpe_w_m2
     want = (math.sqrt(4 * P * q / (math.pi * mpe)) - A) / PHI
-    assert want * (1 - 1e-9) <= sp["nohd_m"] <= want * 1.01
-    assert sp["leaves_scene_w"] == pytest.approx(P * (1 - ref.rect_fraction(-half, half, -half, half, w_t)), rel=1e-9)
-    assert res.stage("spill").ran and sp["stopped"] == []
+    assert want * (1 - 1e-9) <= sp.nohd_m <= want * 1.01
+    assert sp.leaves_scene_w == pytest.approx(P * (1 - ref.rect_fraction(-half, half, -half, half, w_t)), rel=1e-9)
+    assert res.stage("spill").ran and sp.stopped == ()
 
 
 def test_spill_stopped_by_an_occluder_is_reported_with_its_range():
@@ -165,9 +165,9 @@ def test_spill_stopped_by_an_occluder_is_reported_with_its_range():
     here checked as a bound: between 0 and the whole spill) and its range (~299 m)."""
     box = (np.array([1.3, 300.0 - R_T, 0.0]), (2.0, 2.0, 2.0))
     res = hazard.analyze(_scene([("o", _at(100.0, x=50.0), None)], plate=0.5, occluder=box))
-    (stop,) = res.spill["stopped"]
-    assert stop["object"] == "occluders[0]" and 0 < stop["power_w"] < P
-    assert stop["range_m"] == pytest.approx(299.0, abs=0.5)
+    (stop,) = res.spill.stopped
+    assert stop.object == "occluders[0]" and 0 < stop.power_w < P
+    assert stop.range_m == pytest.approx(299.0, abs=0.5)
 
 
 def _road(start, end, count):

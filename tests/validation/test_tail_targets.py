@@ -88,7 +88,7 @@ def test_a_box_in_the_beams_tail_gets_its_spot(s_edge):
     # the front face inside the square; at most the stated bound above it (the power in mixed
     # cells and outside the square, added to every spot; the side face's sliver is 2e-8 W)
     assert got >= front * (1 - 1e-9)
-    assert got <= front + res.beam_sampling["error_bound_w"] + 1e-12 * P
+    assert got <= front + res.beam_sampling.error_bound_w + 1e-12 * P
 
 
 def test_a_target_beyond_the_square_is_below_the_bound():
@@ -264,7 +264,7 @@ def test_flat_ground_only_the_tail_reaches():
     assert s_min > 4.0 and big_l > s_min  # tail-only ground, inside the square
     (ground,) = [sp for sp in res.spots if sp.target.name == "terrain"]
     inside = P / 4 * (erf(big_l) - erf(s_min)) * 2 * erf(big_l)
-    assert inside * (1 - 1e-9) <= ground.total_power_w <= inside + res.beam_sampling["error_bound_w"] * (1 + 1e-9)
+    assert inside * (1 - 1e-9) <= ground.total_power_w <= inside + res.beam_sampling.error_bound_w * (1 + 1e-9)
     got = np.asarray(res.observers.reflected_irradiance_w_m2, float)
     for i, eye in enumerate(eyes):
         want = _ground_reference(eye, s_min, big_l, big_l)

@@ -78,15 +78,15 @@ def test_the_ground_reflects_the_spill_with_its_material_or_reflectance_1(rho):
     want = [_lambert(p, 1.0 if rho is None else rho, _ground_power()) for p in pts]
     got = res.observers.reflected_irradiance_w_m2
     assert np.all(got >= np.array(want) * (1 - 1e-9)) and np.all(got <= np.array(want) * (1 + 3e-3)), (got, want)
-    (stop,) = res.spill["stopped"]
-    assert stop["object"] == "terrain" and stop["power_w"] == pytest.approx(_ground_power(), rel=3e-3)
-    assert ("Lambertian of reflectance 1" in stop["reflected"]) == (rho is None)
+    (stop,) = res.spill.stopped
+    assert stop.object == "terrain" and stop.power_w == pytest.approx(_ground_power(), rel=3e-3)
+    assert ("Lambertian of reflectance 1" in stop.reflected) == (rho is None)
     # on its way from the plate to the ground the spill is the beam outside the square:
     # its highest point is on the square's edge, E = 4 P / (pi D^2) exp(-h^2 / w^2) at the plate's range
     r_c = float(np.linalg.norm(C - O))
     d = A + r_c * PHI
     peak = 4 * P / (math.pi * d * d) * math.exp(-(HALF / (d / 2)) ** 2)
-    assert peak <= stop["peak_irradiance_w_m2"] <= peak * (1 + 1e-4) and stop["hazard_ratio"] == pytest.approx(peak / res.mpe_w_m2, rel=1e-4)
+    assert peak <= stop.peak_irradiance_w_m2 <= peak * (1 + 1e-4) and stop.hazard_ratio == pytest.approx(peak / res.mpe_w_m2, rel=1e-4)
     assert "terrain" in [t.name for t in res.targets]
 
 
