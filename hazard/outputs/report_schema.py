@@ -47,6 +47,7 @@ from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
 from hazard.physics.aperture import LimitingAperture as LimitingApertureInfo
 from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult, UV24hResult
+from hazard.physics.specular import MirrorBeamSteps
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
 from hazard.pipeline.extended_source import ExtendedSourceSummary
@@ -163,6 +164,10 @@ class KeepoutSummary(_Strict):
     near_field: Block
 
 
+# ``targets[].specular_steps``: :class:`hazard.physics.specular.MirrorBeamSteps`
+MirrorBeamStepsBlock = _from_dataclass(MirrorBeamSteps, "MirrorBeamSteps")
+
+
 class TargetReport(_Strict):
     """One entry of ``targets``: :meth:`hazard.pipeline.results.TargetResult.to_dict` and ``hit``."""
 
@@ -186,6 +191,7 @@ class TargetReport(_Strict):
     melt: Block
     slump: Block
     aided: list[Any]
+    specular_steps: Optional[MirrorBeamStepsBlock]  # type: ignore[valid-type]
     hit: Literal["beam", "wing only", "not reflected", "not hit"]
 
 

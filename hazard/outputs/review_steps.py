@@ -276,12 +276,72 @@ def _lobe_blocks(doc: dict, ln: dict) -> list:
                                   f"targets[{name}].keepout_dynamic.max_nohd_m"))
         out += _aided_lobe_blocks(t, st, dy, ln)
         if t.get("specular_nohd_static_m") is not None:
-            out.append({"title": f"target {name}: mirror beam NOHD", "result_m": None, "key": "specular_nohd_static_m",
-                        "lines": ["no closed-form step: the mirror beam's NOHD is solved per sample of the spot from its peak "
-                                  "and wavefront radius (hazard.physics.specular), not one formula; report.json "
-                                  f"specular_nohd_static_m = {g(t['specular_nohd_static_m'])} m"],
-                        "check": {"text": "", "agrees": None}})
+            out.append(mirror_steps(f"target {name}: mirror beam NOHD (static)", t.get("specular_steps"), ln["mpe"], ln["mu"],
+                                    t["specular_nohd_static_m"], f"targets[{name}].specular_nohd_static_m"))
     return out
+
+
+def mirror_steps(title: str, steps, mpe_w_m2: float, mu_per_m: float, reported, key: str) -> dict:
+    """A mirror beam's NOHD beyond the mirror from its governing part (``targets[].specular_steps``,
+    :class:`hazard.physics.specular.MirrorBeamSteps`): ``E(D) = rho E_peak exp(-mu D) / ((1 + D
+    v_t)(1 + D v_s)) = MPE``, in closed form where ``v_t = v_s`` (the direct beam's form with a
+    = 1/v, phi = 1) or where the aperture's power cap governs, else solved by bisection here."""
+    kind = (steps or {}).get("governed_by")
+    if kind == "aperture power cap":
+        cap = float(steps["aperture_cap_w_m2"])
+        r = math.log(cap / mpe_w_m2) / mu_per_m if mu_per_m > 0 else math.inf
+        lines = ["the mirror lobe's whole power over the limiting aperture governs: cap exp(-mu D) = MPE",
+                 f"cap = K P_r / A = {g(cap)} W/m², MPE = {g(mpe_w_m2)} W/m², mu = {g(mu_per_m)} 1/m",
+                 f"D = ln(cap / MPE) / mu = {g(r)} m"]
+        return {"title": title, "lines": lines, "result_m": r, "check": _check(r, reported, key), "key": key}
+    if kind not in ("sample", "whole-target bound"):
+        why = {"curved side": "a curved side's Coddington spreading along its worst reflected ray",
+               "curved facets": "a curved mesh's ray tubes through their focus"}.get(kind, "report.json holds no numbers for it")
+        return {"title": title, "lines": [f"no closed-form step: {why} (hazard.physics.specular)"], "result_m": None,
+                "check": {"text": f"report.json {key} = {g(reported)} m", "agrees": None}, "key": key}
+    rho, e_in = float(steps["reflectance"]), float(steps["incident_peak_w_m2"])
+    vt, vs = float(steps["vergence_t_per_m"]), float(steps["vergence_s_per_m"])
+    e0 = rho * e_in
+    lines = ["E(D) = rho E_peak exp(-mu D) / ((1 + D v_t)(1 + D v_s)) = MPE: the mirror beam D beyond the mirror "
+             f"({'its hottest sample' if kind == 'sample' else 'the whole target: its edge bound'})",
+             f"rho = {g(rho)}, E_peak = {g(e_in)} W/m² (incident), v_t = {g(vt)} 1/m, v_s = {g(vs)} 1/m (1 / the virtual "
+             f"source's distance), MPE = {g(mpe_w_m2)} W/m², mu = {g(mu_per_m)} 1/m",
+             f"rho E_peak = {g(e0)} W/m²"]
+    if e0 < mpe_w_m2:
+        r = 0.0
+        lines.append("rho E_peak < MPE: NOHD = 0 m")
+    elif vt == vs and vt > 0:
+        d0 = math.sqrt(e0 / mpe_w_m2) / vt
+        lines.append(f"v_t = v_s = v: the direct beam's form with a = 1/v = {g(1 / vt)} m, phi = 1, "
+                     f"D0 = sqrt(rho E_peak / MPE) / v = {g(d0)} m")
+        r, more = _beam_range(d0, 1.0 / vt, 1.0, mu_per_m)
+        lines += more
+    elif vt == vs == 0.0:
+        r = math.log(e0 / mpe_w_m2) / mu_per_m if mu_per_m > 0 else math.inf
+        lines.append(f"collimated (v = 0): D = ln(rho E_peak / MPE) / mu = {g(r)} m")
+    else:
+        r = _bisect_mirror(e0, vt, vs, mu_per_m, mpe_w_m2)
+        lines.append(f"v_t != v_s: solved by bisection of ln(rho E_peak / MPE) - mu D - ln(1 + D v_t) - ln(1 + D v_s) = 0: "
+                     f"D = {g(r)} m")
+    return {"title": title, "lines": lines, "result_m": r, "check": _check(r, reported, key), "key": key}
+
+
+def _bisect_mirror(e0: float, vt: float, vs: float, mu: float, mpe: float) -> float:
+    """Root D [m] of ``ln(e0 / mpe) - mu D - ln(1 + D vt) - ln(1 + D vs)`` (falling in D) to 1e-12."""
+    c = math.log(e0 / mpe)
+
+    def f(d):
+        return c - mu * d - math.log1p(d * vt) - math.log1p(d * vs)
+
+    if f(1e12) >= 0:
+        return math.inf
+    lo, hi = 0.0, 1.0
+    while f(hi) > 0:
+        lo, hi = hi, 2 * hi
+    while hi - lo > 1e-12 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if f(mid) > 0 else (lo, mid)
+    return hi
 
 
 def _aided_lobe_blocks(t: dict, st: dict, dy: dict, ln: dict) -> list:

@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -1112,13 +1113,50 @@ def mesh_mirror_irradiance(spot, observers_m, gain, attenuation_per_m, states=No
     return aperture_irradiance(rays, rho, obs, gain, mu, getattr(spot, "aperture_m", 7e-3))
 
 
+@dataclass(frozen=True)
+class MirrorBeamSteps:
+    """The numbers behind a mirror beam's NOHD, for its worked steps (review page): the
+    governing part's ``E(D) = K rho E_peak exp(-mu D) / ((1 + D v_t)(1 + D v_s)) = MPE``.
+
+    Attributes
+    ----------
+    governed_by : str
+        "sample" (a flat sample of the spot), "whole-target bound" (a faceted target's
+        edge bound), "aperture power cap" (the lobe's whole power over the limiting
+        aperture: ``D = ln(K P_r / (A MPE)) / mu``), "curved side" or "curved facets"
+        (no closed form: Coddington spreading or ray tubes along the worst ray).
+    reflectance : float or None
+        rho of the governing part (largest over the history's states).
+    incident_peak_w_m2 : float or None
+        E_peak [W/m^2]: its highest incident irradiance (after the laser -> mirror path).
+    vergence_t_per_m, vergence_s_per_m : float or None
+        v_t, v_s [1/m]: the reflected wavefront's vergences (1 / the virtual source's distance).
+    aperture_cap_w_m2 : float or None
+        K P_r / A [W/m^2]: no mirror beam averages more over the limiting aperture.
+    """
+
+    governed_by: str
+    reflectance: float | None = None
+    incident_peak_w_m2: float | None = None
+    vergence_t_per_m: float | None = None
+    vergence_s_per_m: float | None = None
+    aperture_cap_w_m2: float | None = None
+
+    def to_dict(self) -> dict:
+        return {"governed_by": self.governed_by, "reflectance": self.reflectance,
+                "incident_peak_w_m2": self.incident_peak_w_m2, "vergence_t_per_m": self.vergence_t_per_m,
+                "vergence_s_per_m": self.vergence_s_per_m, "aperture_cap_w_m2": self.aperture_cap_w_m2}
+
+
 class SpecularNohd:
     """Specular NOHD of a spot: the farthest distance beyond the mirror [m] at which some
-    part of the reflected beam still reaches the MPE, and its direction (unit, or None)."""
+    part of the reflected beam still reaches the MPE, its direction (unit, or None) and
+    the numbers behind it (:class:`MirrorBeamSteps`, or None)."""
 
-    def __init__(self, nohd_m, direction):
+    def __init__(self, nohd_m, direction, steps: MirrorBeamSteps | None = None):
         self.nohd_m = nohd_m
         self.direction = direction
+        self.steps = steps
 
 
 def _level_roots(e0, vt, vs, mu, mpe_w_m2) -> np.ndarray:
@@ -1183,7 +1221,18 @@ def _flat_sample_roots(spot, mpe_w_m2, mu, states, gain):
         v = 1.0 / spot.edge_source_m
         vt, vs = np.append(vt, v), np.append(vs, v)
     roots = _level_roots(e_flat, vt, vs, mu, mpe_w_m2)
-    return np.minimum(roots, _cap_root(_aperture_power(spot, states) * gain, mu, mpe_w_m2)), e0
+    cap_w_m2 = _aperture_power(spot, states) * gain
+    cap = _cap_root(cap_w_m2, mu, mpe_w_m2)
+    i = int(np.argmax(roots)) if len(roots) else 0
+    if not len(roots) or roots[i] <= 0:
+        steps = None
+    elif roots[i] > cap:
+        steps = MirrorBeamSteps("aperture power cap", aperture_cap_w_m2=cap_w_m2)
+    else:
+        rho_i = float(rho[i]) if i < len(rho) else _facet_reflectance_max(spot, rho, states)
+        steps = MirrorBeamSteps("sample" if i < len(rho) else "whole-target bound", rho_i, float(e_flat[i]) / (rho_i * gain),
+                                float(vt[i]), float(vs[i]), cap_w_m2)
+    return np.minimum(roots, cap), e0, steps
 
 
 def _cap_root(cap_w_m2, mu, mpe_w_m2) -> float:
@@ -1312,7 +1361,7 @@ def _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
     if not spot.material.has_specular:
         return SpecularNohd(None, None)
     mu = attenuation_per_m
-    roots, e0 = _flat_sample_roots(spot, mpe_w_m2, mu, states, gain)
+    roots, e0, steps = _flat_sample_roots(spot, mpe_w_m2, mu, states, gain)
     i = int(np.argmax(roots))
     n_s = len(spot.power_w)  # the whole-target bound, if last, points along the hottest sample's mirror direction
     j = i if (roots[i] > 0 and i < n_s) else int(np.argmax(e0[:n_s]))
@@ -1320,8 +1369,8 @@ def _samples_nohd(spot, mpe_w_m2, attenuation_per_m, states=None, gain=1.0) -> S
     if spot.target.mesh.analytic is not None:
         curved, _, u = _curved_nohd(spot, mpe_w_m2, mu, states, gain)
         if curved > nohd:
-            nohd, direction = curved, u
-    return SpecularNohd(nohd, np.asarray(direction, float).tolist())
+            nohd, direction, steps = curved, u, MirrorBeamSteps("curved side")
+    return SpecularNohd(nohd, np.asarray(direction, float).tolist(), steps)
 
 
 def _edge_reflectance(spot, rho, states):
@@ -1373,7 +1422,7 @@ def _curved_mesh_nohd(spot, mpe_w_m2, mu, states, gain, flat: SpecularNohd) -> S
     dist, direction = tube_nohd(rays, rho, mpe_w_m2, mu, getattr(spot, "aperture_m", 7e-3), gain)
     if lit_planes(spot) and flat.nohd_m >= dist:  # flat facets lit too
         return flat
-    return SpecularNohd(dist, flat.direction if direction is None else _unit(direction).tolist())
+    return SpecularNohd(dist, flat.direction if direction is None else _unit(direction).tolist(), MirrorBeamSteps("curved facets"))
 
 
 def mirror_directions(spot):

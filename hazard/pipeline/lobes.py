@@ -63,18 +63,19 @@ def slump_summary(sp, states, mpe_w_m2, mu, lobe, gain=1.0) -> dict | None:
 
 
 def _specular(sp, mpe_w_m2, mu, initial, dyn_states, gain):
-    """Specular NOHD static and dynamic [m] and the direction of the longer (or Nones)."""
+    """Specular NOHD static and dynamic [m], the direction of the longer and the static
+    one's numbers (:class:`hazard.physics.specular.MirrorBeamSteps`), or Nones."""
     if not sp.material.has_specular:
-        return None, None, None
+        return None, None, None, None
     ns = specular_nohd(sp, mpe_w_m2, mu, initial, gain=gain)
     nd = specular_nohd(sp, mpe_w_m2, mu, dyn_states, gain=gain) if dyn_states is not None else ns
-    return ns.nohd_m, nd.nohd_m, (nd.direction if nd.nohd_m >= ns.nohd_m else ns.direction)
+    return ns.nohd_m, nd.nohd_m, (nd.direction if nd.nohd_m >= ns.nohd_m else ns.direction), ns.steps
 
 
 def _hazards(sp, states, mpe_w_m2, mu, analysis, gain=1.0):
     """Static and dynamic lobes at ``analysis.direction_grid_deg`` with
-    ``analysis.refine_levels`` levels, and the specular NOHDs (static, dynamic,
-    direction), for an eye with optical gain ``gain``."""
+    ``analysis.refine_levels`` levels, the specular NOHDs (static, dynamic, direction,
+    the static one's numbers) and the slump, for an eye with optical gain ``gain``."""
     t = sp.target
     initial = states[t.index][:1] if t.index in states else None
     dyn_states = _dynamic_states(t, states)
@@ -108,7 +109,7 @@ def profile_fraction(sp, mu) -> float:
 def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
     """One lit target's row: spot, naked-eye lobes and specular NOHDs, state range."""
     t = sp.target
-    *hz, slump = _hazards(sp, states, mpe_w_m2, mu, analysis)
+    *hz, steps, slump = _hazards(sp, states, mpe_w_m2, mu, analysis)
     row = TargetResult(
         t.name, sp.total_power_w, sp.size_m, *hz,
         _name_list(t.material.state_name) if t.material.is_dynamic else None,
@@ -116,6 +117,7 @@ def target_result(sp, states, mpe_w_m2, mu, analysis) -> TargetResult:
         sp.power_error_w, sp.exact, sp.max_irradiance_w_m2, sp.mean_irradiance_w_m2, sp.side,
     )
     row.beam_profile_fraction = profile_fraction(sp, mu)
+    row.specular_steps = steps
     row.slump = slump
     return row
 
@@ -143,7 +145,7 @@ def aided_nohds(sp, states, mpe_w_m2, mu, analysis, aid) -> dict:
     diffuse light fills the objective; for the mirror beam the beam-size limit is not
     taken, an upper bound)."""
     k = optical_gain(aid.magnification, aid.objective_diameter_m, aid.transmission)
-    static_lobe, dynamic_lobe, spec_static, spec_dyn, _, _ = _hazards(sp, states, mpe_w_m2, mu, analysis, gain=k)
+    static_lobe, dynamic_lobe, spec_static, spec_dyn, _, _, _ = _hazards(sp, states, mpe_w_m2, mu, analysis, gain=k)
     return {"magnification": aid.magnification, "objective_diameter_m": aid.objective_diameter_m,
             "transmission": aid.transmission, "gain": k, "nohd_static_m": static_lobe.max_range_m,
             "nohd_dynamic_m": dynamic_lobe.max_range_m, "specular_nohd_static_m": spec_static, "specular_nohd_dynamic_m": spec_dyn}

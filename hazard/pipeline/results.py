@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hazard.physics.keepout import Footprint, Lobe
+from hazard.physics.specular import MirrorBeamSteps
 
 if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
     from scenes.observers import Observers
@@ -59,6 +60,7 @@ class TargetResult:
     beam_profile_fraction: float = 1.0  # hottest incident irradiance / the beam's on-axis value there (hazard.pipeline.lobes)
     melt: dict | None = None  # melt onset and full-melt times [s] where the history knows them (hazard.pipeline.history)
     slump: dict | None = None  # the slump the dynamic lobe covers, with its sampling (hazard.pipeline.lobes)
+    specular_steps: MirrorBeamSteps | None = None  # the numbers behind specular_nohd_static_m (review page)
 
     def to_dict(self):
         def lobe(lb):  # a target without a spot reflects nothing: an empty lobe, said in lit_side
@@ -86,6 +88,7 @@ class TargetResult:
             "melt": self.melt,
             "slump": self.slump,
             "aided": list(self.aided),
+            "specular_steps": None if self.specular_steps is None else self.specular_steps.to_dict(),
         }
 
 

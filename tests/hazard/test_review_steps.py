@@ -15,6 +15,7 @@ import math
 import re
 
 import pytest
+from scipy.optimize import brentq
 from scipy.special import lambertw
 
 import scenes
@@ -118,7 +119,21 @@ def _check_block(title, lines, checks, doc):
         k = _get(text, "K") if "ENOHD" in title else 1.0
         r = _point_range(k * _get(text, "I"), _get(text, "MPE"), _get(text, "mu"))
         return r, _reported(checks, "report.json")
+    if "mirror beam NOHD" in title:
+        return _mirror_range(_get(text, "rho"), _get(text, "E_peak"), _get(text, "v_t"), _get(text, "v_s"), _get(text, "MPE"),
+                             _get(text, "mu")), _reported(checks, "report.json")
     raise AssertionError(title)
+
+
+def _mirror_range(rho, e_peak, vt, vs, mpe, mu):
+    """rho E_peak exp(-mu D) / ((1 + D v_t)(1 + D v_s)) = MPE, solved for D: the closed form for
+    v_t = v_s (no attenuation: D = (sqrt(rho E / MPE) - 1) / v), else scipy's brentq."""
+    if rho * e_peak < mpe:
+        return 0.0
+    if vt == vs and mu == 0:
+        return (math.sqrt(rho * e_peak / mpe) - 1) / vt
+    f = lambda d: math.log(rho * e_peak / mpe) - mu * d - math.log1p(d * vt) - math.log1p(d * vs)  # noqa: E731
+    return brentq(f, 0.0, 1e12, xtol=1e-9, rtol=1e-13)
 
 
 def _json_value(doc, checks):
@@ -248,3 +263,45 @@ def test_named_observers_beyond_the_top_ten_are_added():
     assert titles == [f"observer o{k}" for k in range(29, 19, -1)] + ["observer o3"]  # the ten highest, then o3
     assert st["missing"] == ["ghost"]
     assert all(c["agrees"] for b in st["observers"] for c in b["checks"])
+
+
+def test_mirror_beam_nohd_redone_from_the_page_and_the_optics(tmp_path):
+    """mirror_window: the glass window's mirror beam NOHD with its steps (it said "no
+    closed-form step"), redone from the page and from the scene's optics alone: Fresnel
+    R_s of n = 1.5 at 30 deg (the laser's polarisation unknown: the larger of R_s, R_p),
+    the beam's peak 4 P / (pi (a + r phi)^2) at r = 100 m, its virtual source a / phi
+    behind the laser, and D = p (sqrt(rho E / MPE) - 1)."""
+    doc, page = _run(tmp_path, open(scenes.example_path("mirror_window")).read())
+    blocks, done = _verify(doc, page)
+    (title, lines, checks), = [b for b in blocks.values() if "mirror beam NOHD" in b[0]]
+    text = "\n".join(lines)
+    ci = math.cos(math.radians(30.0))
+    ct = math.sqrt(1 - (math.sin(math.radians(30.0)) / 1.5) ** 2)
+    rs, rp = ((ci - 1.5 * ct) / (ci + 1.5 * ct)) ** 2, ((1.5 * ci - ct) / (1.5 * ci + ct)) ** 2
+    e_peak = 4 * 1000.0 / (math.pi * (0.192 + 100.0 * 8e-5) ** 2)
+    p = 100.0 + 0.192 / 8e-5
+    # the hottest sample's ray leaves the axis by ~1e-5 rad (the virtual source 2.5 km back): R_s within 1e-4
+    assert _get(text, "rho") == pytest.approx(max(rs, rp), rel=1e-4)
+    assert _get(text, "E_peak") == pytest.approx(e_peak, rel=1e-9)
+    assert _get(text, "v_t") == pytest.approx(1 / p, rel=1e-9) and _get(text, "v_s") == pytest.approx(1 / p, rel=1e-9)
+    nohd = p * (math.sqrt(max(rs, rp) * e_peak / doc["mpe_w_m2"]) - 1)
+    assert doc["targets"][0]["specular_nohd_static_m"] == pytest.approx(nohd, rel=1e-4)
+    assert "DIFFERS" not in page and done >= 2
+
+
+def test_mirror_steps_of_an_astigmatic_beam_and_of_the_aperture_cap():
+    """The other forms, on numbers typed here: v_t != v_s (bisection on the page, brentq
+    here) and the aperture power cap (D = ln(cap / MPE) / mu); a curved side says why it
+    has no step."""
+    from hazard.outputs.review_steps import mirror_steps
+
+    st = {"governed_by": "sample", "reflectance": 0.9, "incident_peak_w_m2": 5e4, "vergence_t_per_m": 2e-3,
+          "vergence_s_per_m": 5e-4, "aperture_cap_w_m2": 1e9}
+    ref = _mirror_range(0.9, 5e4, 2e-3, 5e-4, 25.0, 1e-4)
+    b = mirror_steps("m", st, 25.0, 1e-4, ref, "k")
+    assert b["result_m"] == pytest.approx(ref, rel=1e-9) and b["check"]["agrees"]
+    cap = {"governed_by": "aperture power cap", "aperture_cap_w_m2": 3e5}
+    b = mirror_steps("m", cap, 25.0, 2e-4, math.log(3e5 / 25.0) / 2e-4, "k")
+    assert b["result_m"] == pytest.approx(math.log(12000.0) / 2e-4, rel=1e-12) and b["check"]["agrees"]
+    b = mirror_steps("m", {"governed_by": "curved side"}, 25.0, 0.0, 123.0, "k")
+    assert b["result_m"] is None and b["lines"][0].startswith("no closed-form step: a curved side")
