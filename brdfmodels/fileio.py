@@ -43,7 +43,8 @@ LIMITS = {
                       "about 0.5 kB each while a level is evaluated: 5e7 passed 9.3 GB"),
     "KEEPOUT_STATE_CELLS": (2e9, "worst-case keep-out cells x time steps of a dynamic lobe (each cell's maximum over the states)"),
     "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
-    "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
+    "SAMPLES": (2_000_000, "pixels or samples read from a measurement file (each array of a screen test: a fit took about "
+                "0.6 kB per value; 5e7, the limit before, passed 11.6 GB)"),
     "SCATTERED_SAMPLES": (200_000, "measured samples triangulated into a scattered BRDF table (1e5 took 35 s to build)"),
     "CSV_ROWS": (2_000_000, "lines of a CSV file read as columns (a history, pyrometer, oxidation or BRDF-angle table); "
                  "counted before parsing: a 250 MB history of 1e7 rows took past 4.4 GB"),

@@ -157,3 +157,17 @@ def test_measured_text_files_are_counted_before_parsing(name, tmp_path, monkeypa
 @given(text=st.text(alphabet=" ,;\t\n\r ab1.\u00e9\u4e2d", max_size=80), block=st.integers(1, 100))
 def test_count_values_counts_the_fields(text, block):
     assert count_values(text, block=block) == len(re.findall(r"[^ \t\r\n,;]+", text))
+
+
+def test_a_screen_image_over_the_default_limit_is_refused(tmp_path):
+    """HAZARD_MAX_SAMPLES = 2e6 (was 5e7: a fit of 5e7 values passed 11.6 GB): a point-source
+    image of 1415 x 1415 = 2 002 225 values is refused before any fit, naming the file."""
+    from brdfmodels import validation
+    from tests.hazard.test_cli_fit import write_test
+
+    test = write_test(tmp_path, "t0", validation.SyntheticGroovedMetal(), *validation.FIT_TESTS[0])
+    np.save(tmp_path / "t0_ps.npy", np.zeros((1415, 1415)))
+    code, lines = _cli("fit", "screen", test, "-o", tmp_path / "m.json")
+    assert code == 2 and len(lines) == 1, lines
+    assert f"t0_ps.npy values = {1415 * 1415} exceeds the limit 2e+06" in lines[0] and "HAZARD_MAX_SAMPLES" in lines[0], lines[0]
+    assert not (tmp_path / "m.json").exists()
