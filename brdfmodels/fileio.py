@@ -50,7 +50,7 @@ LIMITS = {
     "SCATTERED_SAMPLES": (200_000, "measured samples triangulated into a scattered BRDF table (1e5 took 35 s to build)"),
     "CSV_ROWS": (2_000_000, "lines of a CSV file read as columns (a history, pyrometer, oxidation or BRDF-angle table); "
                  "counted before parsing: a 250 MB history of 1e7 rows took past 4.4 GB"),
-    "MESH_TRIANGLES": (1_000_000, "triangles of a mesh file (a target or occluder; a 3.2e5-triangle STL in front of the beam: "
+    "MESH_TRIANGLES": (1_000_000, "triangles of the mesh files of a scene (targets, occluders; at 3.2e5 in front of the beam: "
                        "run 18 s CPU, 0.8 GB)"),
     "TEXT_VALUES": (2_000_000, "numbers in a measured BRDF text file (.bsdf, ASTM), counted before parsing "
                     "(a 16 MB .bsdf of 4e6 values took 13 s of CPU and 2.5 GB)"),

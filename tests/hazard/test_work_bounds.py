@@ -124,6 +124,14 @@ def test_a_mesh_over_its_triangle_limit_is_refused(tmp_path, monkeypatch):
     assert "file='m.stl': triangles = 12 exceeds the limit 11" in lines[0] and "HAZARD_MAX_MESH_TRIANGLES" in lines[0]
     monkeypatch.setenv("HAZARD_MAX_MESH_TRIANGLES", "12")
     scenes.load(tmp_path / "s.toml")
+    # the limit bounds the files' sum too: a second mesh target (an occluder alike) of 12 more
+    second = text.split("[[targets]]", 1)[1].split("[[observers]]", 1)[0].replace('name = "plate"', 'name = "two"')
+    (tmp_path / "two.toml").write_text(text.replace("[[observers]]", "[[targets]]" + second + "[[observers]]", 1))
+    monkeypatch.setenv("HAZARD_MAX_MESH_TRIANGLES", "23")
+    with pytest.raises(scenes.SceneError, match=r"triangles of the mesh files in all \(up to targets\[1\]\) = 24 exceeds the limit 23"):
+        scenes.load(tmp_path / "two.toml")
+    monkeypatch.setenv("HAZARD_MAX_MESH_TRIANGLES", "24")
+    assert len(scenes.load(tmp_path / "two.toml").targets) == 2
 
 
 def _bsdf(k):
