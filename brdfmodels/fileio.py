@@ -41,8 +41,8 @@ LIMITS = {
     "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
     "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
     "TABLE_NODES": (2_000_000, "nodes of a BRDF table gridded from samples (grid_deg; a MERL table has 1.46e6)"),
-    "KEEPOUT_CELLS": (5_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels); "
-                      "about 0.5 kB each while a level is evaluated: 5e7 passed 9.3 GB"),
+    "KEEPOUT_CELLS": (10_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels; the finest "
+                      "convergence levels make 8.3e6); about 0.5 kB each while a level is evaluated: 5e7 passed 9.3 GB"),
     "KEEPOUT_STATE_CELLS": (2e9, "worst-case keep-out cells x time steps of a dynamic lobe (each cell's maximum over the states)"),
     "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
     "SAMPLES": (2_000_000, "pixels or samples read from a measurement file (each array of a screen test: a fit took about "
