@@ -23,13 +23,15 @@ import numpy as np
 
 __all__ = ["LIMITS", "LIMIT_CEILING", "DEPTH_CEILING", "limit", "check_limit", "check_input_file", "read_input_text",
            "toml_depth", "toml_depth_at", "data_depth", "parse_toml", "current_umask", "fsync_dir", "fsync_file",
-           "atomic_write", "atomic_write_text", "read_toml", "read_csv_columns"]
+           "atomic_write", "atomic_write_text", "read_toml", "read_csv_columns", "count_values"]
 
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {
     "FILE_MB": (256, "size of an input file [MB]"),
     "SCENE_MB": (32, "size of a scene's TOML text [MB] (parsing takes about 0.8 s of CPU per MB)"),
     "DEPTH": (32, "nesting depth of arrays and tables in an input file"),
+    "ARRAYS": (2_000_000, "arrays and tables of a TOML file ('[' and '{' counted before parsing; about 7 us and 0.3 kB each "
+               "to parse: a 32 MB scene of arrays 32 deep took 110 s of CPU and 4.5 GB)"),
     "OBSERVERS": (1_000_000, "observer points of a scene"),
     "POINTS": (100_000, "explicit observer points (points_m): each is a feature of the map outputs"),
     "TARGETS": (100, "targets of a scene"),
@@ -39,13 +41,19 @@ LIMITS = {
     "OBSERVER_STEPS": (200_000_000, "observer points x time steps of a dynamic analysis (the flagship map is 1e8)"),
     "MOTION_SAMPLES": (2_000_000, "time samples of a moving path (the motion span / motion.time_step_s; a beam crossing's refinement)"),
     "TABLE_NODES": (2_000_000, "nodes of a BRDF table gridded from samples (grid_deg; a MERL table has 1.46e6)"),
-    "KEEPOUT_CELLS": (50_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels)"),
+    "KEEPOUT_CELLS": (10_000_000, "worst-case keep-out direction cells per lobe ((90/g) x (360/g) x 4^refine_levels; the finest "
+                      "convergence levels make 8.3e6); about 0.5 kB each while a level is evaluated: 5e7 passed 9.3 GB"),
     "KEEPOUT_STATE_CELLS": (2e9, "worst-case keep-out cells x time steps of a dynamic lobe (each cell's maximum over the states)"),
     "SCENARIOS": (1_000, "scenarios of a study (each a whole run: 1.3 s of CPU for the small power_sweep example)"),
-    "SAMPLES": (50_000_000, "pixels or samples read from a measurement file"),
+    "SAMPLES": (2_000_000, "pixels or samples read from a measurement file (each array of a screen test: a fit took about "
+                "0.6 kB per value; 5e7, the limit before, passed 11.6 GB)"),
     "SCATTERED_SAMPLES": (200_000, "measured samples triangulated into a scattered BRDF table (1e5 took 35 s to build)"),
     "CSV_ROWS": (2_000_000, "lines of a CSV file read as columns (a history, pyrometer, oxidation or BRDF-angle table); "
                  "counted before parsing: a 250 MB history of 1e7 rows took past 4.4 GB"),
+    "MESH_TRIANGLES": (1_000_000, "triangles of the mesh files of a scene (targets, occluders; at 3.2e5 in front of the beam: "
+                       "run 18 s CPU, 0.8 GB)"),
+    "TEXT_VALUES": (2_000_000, "numbers in a measured BRDF text file (.bsdf, ASTM), counted before parsing "
+                    "(a 16 MB .bsdf of 4e6 values took 13 s of CPU and 2.5 GB)"),
     "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)
@@ -110,6 +118,24 @@ def read_input_text(path, what: str | None = None) -> str:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path}: not UTF-8 text (byte {exc.start})") from None
+
+
+def count_values(text: str, separators: str = " \t\r\n,;", *, block: int = 1 << 24) -> int:
+    """Fields of ``text`` split at runs of ``separators`` (its numbers, for a table of
+    numbers), counted in blocks of ``block`` characters without making a string of each
+    (a reader that splits first spends about 0.6 kB per field before it can refuse)."""
+    import numpy as np
+
+    seps = np.frombuffer(separators.encode("ascii"), np.uint8)
+    count, prev_sep = 0, True
+    for lo in range(0, len(text), block):
+        b = np.frombuffer(text[lo:lo + block].encode("utf-8", "replace"), np.uint8)
+        if not len(b):
+            continue
+        sep = np.isin(b, seps)
+        count += int(np.count_nonzero(~sep[1:] & sep[:-1])) + int(prev_sep and not sep[0])
+        prev_sep = bool(sep[-1])
+    return count
 
 
 def toml_depth(text: str) -> int:
@@ -184,7 +210,8 @@ def data_depth(data) -> int:
 
 
 def parse_toml(text: str, source: str) -> dict:
-    """Parse TOML text with bounded nesting; ValueError with one line naming ``source``."""
+    """Parse TOML text with bounded nesting and arrays; ValueError with one line naming ``source``."""
+    check_limit("ARRAYS", text.count("[") + text.count("{"), f"{source}: arrays and tables ('[' and '{{' in the text)")
     depth, line = toml_depth_at(text)
     if depth > limit("DEPTH"):  # the line and its key, not its contents
         key = re.match(r"[ \t]*([A-Za-z0-9_.-]{1,64})[ \t]*=", text.split("\n", line)[line - 1][:300])  # a bare key only

@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .fileio import check_limit, read_csv_columns, read_input_text
+from .fileio import check_limit, count_values, read_csv_columns, read_input_text
 from .geometry import spherical_to_vector
 from .screen import Samples
 
@@ -190,8 +190,9 @@ def _block_values(block, tokens, start, path) -> np.ndarray:
 def read_bsdf(path):
     """Samples from a Zemax / Radiant ASCII ``.bsdf`` file (see the module notes)."""
     path = Path(path)
-    lines = [(k + 1, ln.split()) for k, ln in enumerate(read_input_text(path, "BSDF file").splitlines())
-             if ln.strip() and not ln.lstrip().startswith("#")]
+    text = read_input_text(path, "BSDF file")
+    check_limit("TEXT_VALUES", count_values(text), f"{path}: values")  # before the split: 0.6 kB a value
+    lines = [(k + 1, ln.split()) for k, ln in enumerate(text.splitlines()) if ln.strip() and not ln.lstrip().startswith("#")]
     head, i = _bsdf_header(lines, path)
     for key, name, want in (("spectralcontent", "SpectralContent", "Monochrome"), ("scattertype", "ScatterType", "BRDF")):
         if key not in head:  # was taken as BRDF: a BTDF (transmission) file whose ScatterType line was lost read as reflection
@@ -315,6 +316,7 @@ def _astm_table(path, ignore):
     """(the VARS names used, their rows (M, n) [rad, 1/sr, nm], notes) of an ASTM table;
     rows repeating another's angles (and wavelength) skipped, NUM_POINTS checked."""
     text = read_input_text(path, "ASTM E1392 file")
+    check_limit("TEXT_VALUES", count_values(text), f"{path}: values")  # before any row is parsed
     n_points, names, rows, seen, n_rows, first = None, None, [], set(), 0, {}
     for k, line in enumerate(text.splitlines(), start=1):
         s = line.strip()

@@ -205,7 +205,7 @@ MESH_TYPES = ("stl", "obj", "ply", "off")  # self-contained mesh formats a shape
 def _mesh_file(spec, frame, base_dir):
     import trimesh  # only for scenes with mesh files
 
-    from brdfmodels.fileio import check_input_file
+    from brdfmodels.fileio import check_input_file, check_limit
 
     path = input_path(spec.file, base_dir)
     kind = path.suffix.lower().lstrip(".")
@@ -221,6 +221,7 @@ def _mesh_file(spec, frame, base_dir):
                          f"a damaged file, or another format?)") from None
     if len(m.faces) == 0:
         raise ValueError(f"file={spec.file!r}: the mesh has no triangles")
+    check_limit("MESH_TRIANGLES", len(m.faces), f"file={spec.file!r}: triangles")
     v = np.asarray(m.vertices, float) * spec.scale
     if not np.all(np.isfinite(v)) or np.abs(v).max() > 1e8:
         raise ValueError(f"file={spec.file!r}: vertices must be finite and within 1e8 m")

@@ -910,6 +910,15 @@ def _check_aim_track(spec, laser_local, direction, offset) -> None:
         raise SceneError(str(exc)) from None
 
 
+def _check_triangles(total: int, where: str) -> None:
+    """The mesh files' triangles read so far within HAZARD_MAX_MESH_TRIANGLES (one file is
+    checked alone as it is read; this bounds their sum)."""
+    try:
+        check_limit("MESH_TRIANGLES", total, f"triangles of the mesh files in all (up to {where})")
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+
+
 def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, site=None) -> Scene:
     offset = np.asarray(spec.targets[0].center_m, float)
     lp = np.asarray(spec.laser.position_m, float)
@@ -924,7 +933,11 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
                          f"at least 1 um away, or a non-zero direction)")
     d = d / norm
 
-    targets = [_target(i, ts, offset, base_dir, spec.laser.polarization, spec.laser.wavelength_nm) for i, ts in enumerate(spec.targets)]
+    targets, triangles = [], 0  # the mesh files' triangles in all, checked as each is read (100 files of 1e6 each: ~10 GB)
+    for i, ts in enumerate(spec.targets):
+        targets.append(_target(i, ts, offset, base_dir, spec.laser.polarization, spec.laser.wavelength_nm))
+        triangles += len(targets[-1].mesh.faces) if ts.shape == "mesh" else 0
+        _check_triangles(triangles, f"targets[{i}]")
     held = _check_series_cover(spec, targets)
     occluders = []
     for i, os_ in enumerate(spec.occluders):
@@ -934,6 +947,8 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
             raise SceneError(f"occluders[{i}]: {exc}") from None
         m.vertices = m.vertices - offset
         occluders.append(m)
+        triangles += len(m.faces) if os_.shape == "mesh" else 0
+        _check_triangles(triangles, f"occluders[{i}]")
     terrain = terrain_target = None
     if spec.terrain is not None:
         try:

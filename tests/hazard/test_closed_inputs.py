@@ -90,6 +90,11 @@ CASES = {
     # and at 1e5, the time-step limit, past 6.6 GB)
     "a dynamic keep-out of 1e4 steps": (MELT, {("analysis", "time_step_s"): 1e-3}, {},
                                         ["keep-out cells x time steps (518400 x 10000", "HAZARD_MAX_KEEPOUT_STATE_CELLS"]),
+    # (90/0.0565)(360/0.0565) = 1593 x 6372 = 1.015e7 cells, all evaluated at once at refine_levels = 0: over 1e7
+    # (at 1e7 a run took 5.15 GB; at 5e7, the limit before, it passed 9.3 GB and was killed)
+    "a keep-out grid of 1.015e7 cells": (PLATE, {("analysis",): {"direction_grid_deg": 0.0565, "refine_levels": 0}}, {},
+                                         [f"keep-out cells at direction_grid_deg=0.0565, refine_levels=0 = {1593 * 6372:.4g}",
+                                          "HAZARD_MAX_KEEPOUT_CELLS"]),
     # 49 + 65 + 400 observer points x 10 s / 0.05 s = 200 steps: 102 800 > 1e5
     "observer points x time steps over the limit": (MELT, {}, {"HAZARD_MAX_OBSERVER_STEPS": "1e5"},
                                                     ["observer points x time steps (514 x 200)", "HAZARD_MAX_OBSERVER_STEPS"]),
@@ -135,14 +140,17 @@ def test_just_inside_the_limits_loads(tmp_path, monkeypatch):
     """The counterparts the limits accept: 100 targets, 5 points at HAZARD_MAX_POINTS = 5, a
     1e-9 rad divergence, a 1e-13 s window, 2e6 motion samples, an aim passing 1 mm from the
     aperture, the bundled risk example (3.1e7 point evaluations), a dynamic keep-out of 3858
-    steps (2.0e9 cell-steps), a 1 deg x 1 deg x 2 deg table."""
+    steps (2.0e9 cell-steps), a 1 deg x 1 deg x 2 deg table, a keep-out grid of 9.97e6 cells and
+    hazard convergence's finest refine_levels (5 at 2 deg: 8.3e6)."""
     monkeypatch.setenv("HAZARD_MAX_POINTS", "5")
     near = {"times_s": [0.0, 10.0], "aim_m": [[0.001, -60.0, 0.0], [0.001, -40.0, 0.0]]}
     for base, changes in ((PLATE, {("targets",): _targets(100)}), (PLATE, {("observers",): _points(5)}),
                           (MELT, {("laser", "divergence_rad"): 1e-9}), (MELT, {("analysis", "time_end_s"): 1e-13}),
                           (PLATE, {("laser", "aim_track"): SLEW, ("motion",): {"time_step_s": 10.0 / 1_999_999}}),
                           (PLATE, {("laser", "aim_track"): near}), (RISK, {}),
-                          (MELT, {("analysis", "time_step_s"): 10.0 / 3858})):  # 518 400 x 3858 = 2.0e9
+                          (MELT, {("analysis", "time_step_s"): 10.0 / 3858}),  # 518 400 x 3858 = 2.0e9
+                          (PLATE, {("analysis",): {"direction_grid_deg": 0.0570, "refine_levels": 0}}),  # 1579 x 6316 = 9.97e6
+                          (PLATE, {("analysis",): {"direction_grid_deg": 2.0, "refine_levels": 5}})):  # 45 x 180 x 4^5 = 8.3e6
         scenes.load(_write(tmp_path, _with(base, changes)))
     d = _with(PLATE, {("targets", 0, "material"): dict(TABLE, grid_deg=[1.0, 1.0, 2.0])})
     with pytest.raises(scenes.SceneError, match="samples.csv"):  # past the node count: the missing file is the error
