@@ -21,13 +21,14 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
   (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`), ``airspace``
   (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``limiting_aperture``
-  (:class:`hazard.physics.aperture.LimitingAperture`) and the aid's part of
+  (:class:`hazard.physics.aperture.LimitingAperture`), ``map_outputs``
+  (:class:`hazard.outputs.map_outputs.MapOutputs`) and the aid's part of
   ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`): a field added there is in
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
   example, and the tests of the scenes that write the optional keys validate theirs): ``frame``,
-  ``sdz``, ``visual_interference``, ``motion``, ``tracks`` and ``map_outputs``.
+  ``sdz``, ``visual_interference``, ``motion`` and ``tracks``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -42,6 +43,7 @@ from typing import Any, Literal, Optional, get_args, get_origin, get_type_hints
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
+from hazard.outputs.map_outputs import MapOutputs
 from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
@@ -478,14 +480,9 @@ class MotionBlock(_Strict):
     method: str
 
 
-class MapOutputsBlock(_Strict):
-    """``map_outputs`` (:func:`hazard.outputs.map_outputs.map_files`)."""
-
-    files: list[str]
-    not_written: dict[str, str]
-    frame: Literal["local", "site"]
-    features: dict[Literal[ZONE_KINDS], int]  # type: ignore[valid-type]
-    absent: dict[Literal[ZONE_KINDS], str]  # type: ignore[valid-type]
+# ``map_outputs``: :class:`hazard.outputs.map_outputs.MapOutputs` (:func:`~hazard.outputs.map_outputs.map_files`), the kinds of zone typed
+MapOutputsBlock = _from_dataclass(MapOutputs, "MapOutputsBlock", override={"features": dict[Literal[ZONE_KINDS], int],  # type: ignore[valid-type]
+                                                                           "absent": dict[Literal[ZONE_KINDS], str]})  # type: ignore[valid-type]
 
 
 class ReportModel(_Strict):
@@ -525,7 +522,7 @@ class ReportModel(_Strict):
     airspace: Optional[AirspaceBlock]  # type: ignore[valid-type]
     motion: Optional[MotionBlock]
     tracks: list[PathBlock]
-    map_outputs: Optional[MapOutputsBlock] = None
+    map_outputs: Optional[MapOutputsBlock] = None  # type: ignore[valid-type]
 
 
 def report_schema() -> dict:

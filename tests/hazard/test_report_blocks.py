@@ -9,12 +9,16 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import pydantic
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hazard.outputs.report import json_safe
-from hazard.outputs.report_schema import AirspaceBlock, ExtendedSourceBlock, LimitingAperture, SamplingBlock, SpillBlock, Uv24hBlock, VerdictBlock
+from hazard.outputs.map_outputs import MapOutputs
+from hazard.outputs.map_zones import ZONE_KINDS
+from hazard.outputs.report_schema import (AirspaceBlock, ExtendedSourceBlock, LimitingAperture, MapOutputsBlock, SamplingBlock, SpillBlock,
+                                          Uv24hBlock, VerdictBlock)
 from hazard.physics import aperture
 from hazard.physics.mpe import RepetitivePulseResult, UV24hResult, uv_24h_mpe
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
@@ -51,8 +55,12 @@ zone_checks = st.builds(FlightZoneCheck, text, text, maybe, num, num, st.boolean
 airspaces = st.builds(AirspaceCheck, _tuple(zone_checks), text, num, st.none() | text)
 apertures = st.builds(aperture.limiting_aperture, st.floats(180.0, 1e6), st.floats(1e-13, 3e4))  # the whole table's domain
 
+kinds = st.sampled_from(ZONE_KINDS)
+map_outputs = st.builds(MapOutputs, _tuple(text), st.dictionaries(text, text, max_size=3), st.sampled_from(["local", "site"]),
+                        st.dictionaries(kinds, count), st.dictionaries(kinds, text))
+
 CASES = [(verdicts, VerdictBlock), (samplings, SamplingBlock), (spills, SpillBlock), (extended, ExtendedSourceBlock),
-         (airspaces, AirspaceBlock), (apertures, LimitingAperture)]
+         (airspaces, AirspaceBlock), (apertures, LimitingAperture), (map_outputs, MapOutputsBlock)]
 
 
 def _written(block) -> dict:
@@ -112,3 +120,23 @@ def test_a_block_is_frozen_and_its_dict_a_copy():
         air.note = "changed"  # type: ignore[misc]
     air.to_dict()["zones"].clear()
     assert air.to_dict()["zones"] == [z.to_dict()] and "note" not in air.to_dict()
+
+
+def test_the_map_outputs_are_read_only_and_their_dict_a_copy():
+    """``map_outputs``: its mappings cannot be changed through the result, and ``to_dict``
+    writes plain dicts in the order given (report.json's key order)."""
+    counts = {k: i for i, k in enumerate(reversed(ZONE_KINDS))}
+    m = MapOutputs(("zones.geojson",), {"zones.kml": "why"}, "local", counts, {"sdz": "none"})
+    with pytest.raises(TypeError):
+        m.features["sdz"] = 99  # type: ignore[index]
+    d = m.to_dict()
+    d["features"].clear()
+    d["files"].append("x")
+    assert m.to_dict() == {"files": ["zones.geojson"], "not_written": {"zones.kml": "why"}, "frame": "local", "features": counts,
+                           "absent": {"sdz": "none"}}
+    assert list(m.to_dict()) == ["files", "not_written", "frame", "features", "absent"]
+    assert list(m.to_dict()["features"]) == list(reversed(ZONE_KINDS))
+    with pytest.raises(pydantic.ValidationError):
+        MapOutputsBlock.model_validate({**m.to_dict(), "frame": "geo"}, strict=True)  # only "local" or "site"
+    with pytest.raises(pydantic.ValidationError):
+        MapOutputsBlock.model_validate({**m.to_dict(), "absent": {"no_such_kind": "x"}}, strict=True)
