@@ -481,13 +481,13 @@ def _cmd_run(args, out, err):
         if not args.quiet:
             err.write("hazard: map outputs...\n")
         maps, section = map_files(result)
-        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section}, verdict_doc=v)
+        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section.to_dict()}, verdict_doc=v)
         if args.report:  # the review page embeds the pictures just written (and those of hazard render, carried over)
             unit.carry()
             names += [p.name for p in _write_review(unit.stage, args, err)]
     paths = [Path(args.output) / n for n in names]
     if args.json:
-        out.write(json.dumps({**report_dict(result, verdict_doc=v), "map_outputs": json_safe(section)}, indent=1) + "\n")
+        out.write(json.dumps({**report_dict(result, verdict_doc=v), "map_outputs": json_safe(section.to_dict())}, indent=1) + "\n")
         err.write(_kept_lines(unit))
     else:
         out.write(summary_text(result, verbose=args.verbose, verdict_doc=v) + "\n")

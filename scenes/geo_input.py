@@ -17,12 +17,114 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field
+from typing import ClassVar, Literal
 
 import numpy as np
 
+from .dem import DemInfo
 from .geo import GeoError, SiteFrame
 
-__all__ = ["GeoSite", "resolve_geo"]
+__all__ = ["Conversion", "FrameDescription", "GeoSite", "resolve_geo"]
+
+
+def _frozen(v):
+    """Nested lists as nested tuples (the values unchanged: an int stays an int)."""
+    return tuple(_frozen(x) for x in v) if isinstance(v, (list, tuple)) else v
+
+
+def _listed(v):
+    """Nested tuples back to nested lists (as JSON writes them)."""
+    return [_listed(x) for x in v] if isinstance(v, (list, tuple)) else v
+
+
+@dataclass(frozen=True)
+class Conversion:
+    """One ``*_geo`` value converted to the site frame (report.json ``frame.converted[]``).
+
+    Attributes
+    ----------
+    key : str
+        The scene key as written, e.g. ``"laser.position_geo"``.
+    given : tuple
+        The value as written: ``(lat_deg, lon_deg(, height_m))`` [deg, deg, m], or a tuple of them.
+    m : tuple
+        The position(s) it became in the site frame: x, y(, z) [m], or a tuple of them.
+    """
+
+    key: str
+    given: tuple
+    m: tuple
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "given", _frozen(self.given))
+        object.__setattr__(self, "m", _frozen(self.m))
+
+    def to_dict(self) -> dict:
+        return {"key": self.key, "given": _listed(self.given), "m": _listed(self.m)}
+
+
+@dataclass(frozen=True)
+class FrameDescription:
+    """The coordinate frame report.json's positions are in (report.json ``frame``): the
+    scene's local frame (``kind`` and ``statement`` alone), or a site's
+    (:meth:`scenes.geo.SiteFrame.describe`, with its DEM and conversions, :meth:`GeoSite.describe`).
+
+    Attributes
+    ----------
+    kind : {"local", "site"}
+        The scene's local metres, or an exact east-north-up frame on WGS 84.
+    statement : str
+        The frame in words.
+    origin_deg_m : tuple of float or None
+        The site origin: latitude, longitude [deg], height [m] in the site's vertical datum.
+    origin_ellipsoidal_height_m : float or None
+        The origin's height above the ellipsoid [m].
+    vertical : str or None
+        The vertical datum of input heights (``"ellipsoid"`` or ``"egm96"``).
+    crs : str or None
+        The CRS ``*_geo`` positions are read in.
+    refraction_k : float or None
+        The refraction coefficient k (unitless).
+    earth_radius_m : float or None
+        The earth radius R of the refraction rise k d^2 / (2 R) [m].
+    laser_xy_m : tuple of float or None
+        The laser's x, y in the site frame [m].
+    dem : DemInfo or None
+        The terrain file read (None: no DEM).
+    converted : tuple of Conversion or None
+        The ``*_geo`` values converted, in the order read (empty: none).
+
+    Every field that is None is absent from the block (a local frame writes ``kind`` and ``statement`` only).
+    """
+
+    kind: Literal["local", "site"]
+    statement: str
+    origin_deg_m: tuple[float, ...] | None = None
+    origin_ellipsoidal_height_m: float | None = None
+    vertical: str | None = None
+    crs: str | None = None
+    refraction_k: float | None = None
+    earth_radius_m: float | None = None
+    laser_xy_m: tuple[float, ...] | None = None
+    dem: DemInfo | None = None
+    converted: tuple[Conversion, ...] | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("origin_deg_m", "origin_ellipsoidal_height_m", "vertical", "crs", "refraction_k",
+                                                   "earth_radius_m", "laser_xy_m", "dem", "converted")
+
+    def to_dict(self) -> dict:
+        out: dict = {"kind": self.kind, "statement": self.statement}
+        for name in self.ABSENT_WHEN_NONE:
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if name == "dem":
+                out[name] = dict(v.__dict__)
+            elif name == "converted":
+                out[name] = [c.to_dict() for c in v]
+            else:
+                out[name] = list(v) if isinstance(v, tuple) else v
+        return out
 
 # table -> position stems that take a *_geo form (observers' points is a list of positions)
 _STEMS = {"laser": ("position", "aim"), "target": ("center",), "occluder": ("center",), "terrain": ("center",),
@@ -50,12 +152,12 @@ class GeoSite:
                     f"away): set vertical = 'egm96' if the file follows its specification"]
         return []
 
-    def describe(self) -> dict:
-        out = self.frame.describe()
-        if self.dem is not None:
-            out["dem"] = dict(self.dem.__dict__)
-        out["converted"] = self.conversions
-        return out
+    def describe(self) -> FrameDescription:
+        """The site frame as report.json's ``frame`` says it (:meth:`scenes.geo.SiteFrame.describe`,
+        the DEM read and the conversions made)."""
+        d = self.frame.describe()
+        return FrameDescription(**{**d, "origin_deg_m": tuple(d["origin_deg_m"]), "laser_xy_m": tuple(d["laser_xy_m"])},
+                                dem=self.dem, converted=tuple(Conversion(**c) for c in self.conversions))
 
 
 def _tables(data: dict):

@@ -27,17 +27,53 @@ from __future__ import annotations
 import json
 import math
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Literal, Mapping
 
 import numpy as np
 
 from hazard.outputs.map_zones import ZONE_KINDS, observers_on_map, zones
 
-__all__ = ["MAP_NAMES", "map_files", "map_names", "geojson_document", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
+__all__ = ["MAP_NAMES", "MapOutputs", "map_files", "map_names", "geojson_document", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
 
 DEGREE_DECIMALS = 8  # 1e-8 deg = 1.1 mm: below any outline's own resolution
 
 
 MAP_NAMES = ("zones.geojson", "zones.kml", "hazard.tif", "zones_local_frame.json", "hazard_local_frame.tif")  # every one
+
+
+@dataclass(frozen=True)
+class MapOutputs:
+    """What the map outputs of a run hold (:func:`map_files`; report.json ``map_outputs``).
+
+    Attributes
+    ----------
+    files : tuple of str
+        The map files written, sorted by name.
+    not_written : Mapping of str to str
+        Each map file not written (file name -> why), in the order they were considered.
+    frame : {"local", "site"}
+        The frame the files are in: the scene's local metres, or WGS 84 through its ``[site]``.
+    features : Mapping of str to int
+        Per kind of zone (:data:`hazard.outputs.map_zones.ZONE_KINDS`, in that order), the number of features drawn.
+    absent : Mapping of str to str
+        Each kind of zone the run has none of (in the order of ``ZONE_KINDS``) -> why.
+    """
+
+    files: tuple[str, ...]
+    not_written: Mapping[str, str]
+    frame: Literal["local", "site"]
+    features: Mapping[str, int]
+    absent: Mapping[str, str]
+
+    def __post_init__(self) -> None:  # read-only views: no reader changes what the report writes
+        for name in ("not_written", "features", "absent"):
+            object.__setattr__(self, name, MappingProxyType(dict(getattr(self, name))))
+
+    def to_dict(self) -> dict:
+        return {"files": list(self.files), "not_written": dict(self.not_written), "frame": self.frame,
+                "features": dict(self.features), "absent": dict(self.absent)}
 
 
 def map_names(scene) -> tuple:
@@ -302,8 +338,8 @@ def _frame_info(result) -> dict:
             "(no [site]: not placed on the earth; no CRS)"}
 
 
-def map_files(result) -> tuple[dict, dict]:
-    """The map files (name -> bytes) of ``result`` and report.json's ``map_outputs``."""
+def map_files(result) -> tuple[dict, MapOutputs]:
+    """The map files (name -> bytes) of ``result`` and report.json's ``map_outputs`` (its ``to_dict``)."""
     import importlib.util
 
     zs, absent = zones(result)
@@ -327,5 +363,5 @@ def map_files(result) -> tuple[dict, dict]:
         else:
             files[tif] = data
     counts = {k: sum(z.kind == k for z in zs) for k in ZONE_KINDS}
-    return files, {"files": sorted(files), "not_written": not_written, "frame": frame["kind"], "features": counts,
-                   "absent": absent}
+    return files, MapOutputs(files=tuple(sorted(files)), not_written=not_written, frame=frame["kind"], features=counts,
+                             absent=absent)

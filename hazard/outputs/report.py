@@ -23,6 +23,7 @@ from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
+from scenes.geo_input import FrameDescription
 from scenes.quantities import as_written_lines
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
@@ -200,12 +201,12 @@ def json_safe(obj):
     return obj
 
 
-def _frame(scene) -> dict:
+def _frame(scene) -> FrameDescription:
     """The coordinate frame the report's positions are in (:mod:`scenes.geo` for a site)."""
     site = getattr(scene, "site", None)
     if site is None:
-        return {"kind": "local", "statement": "the scene's local frame: x, y, z [m] as the scene file gives them "
-                "(no [site]: not placed on the earth)"}
+        return FrameDescription(kind="local", statement="the scene's local frame: x, y, z [m] as the scene file gives them "
+                                "(no [site]: not placed on the earth)")
     return site.describe()
 
 
@@ -240,7 +241,7 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc: Verdict | Non
                   "offset_m": scene.offset_m.tolist(), "echo": scene.echo(),
                   "units_as_written": dict(getattr(scene, "units_as_written", None) or {}),  # scenes.quantities.as_written
                   "beam_conventions": getattr(scene, "beam_conventions", None)},
-        "frame": _frame(scene),
+        "frame": _frame(scene).to_dict(),
         "mpe": result.mpe.to_dict(),
         "pulse": None if result.pulse is None else result.pulse.to_dict(),
         "mpe_w_m2": result.mpe_w_m2,

@@ -21,13 +21,14 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
   (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`), ``airspace``
   (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``limiting_aperture``
-  (:class:`hazard.physics.aperture.LimitingAperture`) and the aid's part of
+  (:class:`hazard.physics.aperture.LimitingAperture`), ``map_outputs``
+  (:class:`hazard.outputs.map_outputs.MapOutputs`), ``frame`` (:class:`scenes.geo_input.FrameDescription`) and the aid's part of
   ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`): a field added there is in
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
-  example, and the tests of the scenes that write the optional keys validate theirs): ``frame``,
-  ``sdz``, ``visual_interference``, ``motion``, ``tracks`` and ``map_outputs``.
+  example, and the tests of the scenes that write the optional keys validate theirs):
+  ``sdz``, ``visual_interference``, ``motion`` and ``tracks``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -42,6 +43,7 @@ from typing import Any, Literal, Optional, get_args, get_origin, get_type_hints
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
+from hazard.outputs.map_outputs import MapOutputs
 from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.motion_outputs import MOTION_COLUMNS
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
@@ -57,6 +59,8 @@ from hazard.pipeline.spill import SpillSummary, StoppedSpill
 from hazard.pipeline.spots import BeamSampling
 from hazard.pipeline.verdict import Verdict
 from scenes.dem import DemInfo
+from scenes.geo_input import Conversion as GeoConversion
+from scenes.geo_input import FrameDescription
 
 __all__ = ["ReportModel", "report_schema", "validate_report"]
 
@@ -255,32 +259,13 @@ Uv24hBlock = _from_dataclass(UV24hResult, "Uv24hBlock", omit=("mpe",), add={
     "accumulation_s": Number, "governing_limit": str, "table_row": str, "unverified": bool})
 
 
-class Conversion(_Strict):
-    """A ``*_geo`` value converted to the local frame (:mod:`scenes.geo_input`)."""
-
-    key: str
-    given: list[Number] | list[list[Number]]  # as written: [lat_deg, lon_deg(, height_m)], or a list of them
-    m: list[Number] | list[list[Number]]
-
-
 DemBlock = _from_dataclass(DemInfo, "DemBlock")  # frame.dem: scenes.dem.DemInfo
-
-
-class FrameBlock(_Strict):
-    """``frame``: the local frame, or :meth:`scenes.geo.SiteFrame.describe` (with ``dem``
-    and ``converted`` from :mod:`scenes.geo_input`)."""
-
-    kind: Literal["local", "site"]
-    statement: str
-    origin_deg_m: list[Number] = ABSENT
-    origin_ellipsoidal_height_m: Number = ABSENT
-    vertical: str = ABSENT
-    crs: str = ABSENT
-    refraction_k: Number = ABSENT
-    earth_radius_m: Number = ABSENT
-    laser_xy_m: list[Number] = ABSENT
-    dem: DemBlock = ABSENT  # type: ignore[valid-type]
-    converted: list[Conversion] = ABSENT
+_AS_WRITTEN = list[Number] | list[list[Number]]  # [lat_deg, lon_deg(, height_m)] or x, y(, z) [m], or a list of them
+# ``frame.converted[]``: :class:`scenes.geo_input.Conversion`, a ``*_geo`` value converted to the local frame
+Conversion = _from_dataclass(GeoConversion, "Conversion", override={"given": _AS_WRITTEN, "m": _AS_WRITTEN})
+# ``frame``: :class:`scenes.geo_input.FrameDescription`: the local frame (``kind``, ``statement``), or
+# :meth:`scenes.geo.SiteFrame.describe` with ``dem`` and ``converted`` (:meth:`scenes.geo_input.GeoSite.describe`)
+FrameBlock = _from_dataclass(FrameDescription, "FrameBlock", override={"dem": DemBlock, "converted": list[Conversion]})  # type: ignore[valid-type]
 
 
 # ``extended_source``: :class:`hazard.pipeline.extended_source.ExtendedSourceSummary` (``applied`` alone when the
@@ -484,14 +469,9 @@ class MotionBlock(_Strict):
     method: str
 
 
-class MapOutputsBlock(_Strict):
-    """``map_outputs`` (:func:`hazard.outputs.map_outputs.map_files`)."""
-
-    files: list[str]
-    not_written: dict[str, str]
-    frame: Literal["local", "site"]
-    features: dict[Literal[ZONE_KINDS], int]  # type: ignore[valid-type]
-    absent: dict[Literal[ZONE_KINDS], str]  # type: ignore[valid-type]
+# ``map_outputs``: :class:`hazard.outputs.map_outputs.MapOutputs` (:func:`~hazard.outputs.map_outputs.map_files`), the kinds of zone typed
+MapOutputsBlock = _from_dataclass(MapOutputs, "MapOutputsBlock", override={"features": dict[Literal[ZONE_KINDS], int],  # type: ignore[valid-type]
+                                                                           "absent": dict[Literal[ZONE_KINDS], str]})  # type: ignore[valid-type]
 
 
 class ReportModel(_Strict):
@@ -504,7 +484,7 @@ class ReportModel(_Strict):
     version: Literal[REPORT_VERSION]  # type: ignore[valid-type]
     versions: dict[str, str]
     scene: SceneEcho
-    frame: FrameBlock
+    frame: FrameBlock  # type: ignore[valid-type]
     mpe: MpeBlock  # type: ignore[valid-type]
     pulse: Optional[PulseBlock]  # type: ignore[valid-type]
     mpe_w_m2: Number
@@ -531,7 +511,7 @@ class ReportModel(_Strict):
     airspace: Optional[AirspaceBlock]  # type: ignore[valid-type]
     motion: Optional[MotionBlock]
     tracks: list[PathBlock]
-    map_outputs: Optional[MapOutputsBlock] = None
+    map_outputs: Optional[MapOutputsBlock] = None  # type: ignore[valid-type]
 
 
 def report_schema() -> dict:

@@ -52,7 +52,7 @@ def _timed(fn, *args):
 
 def _outputs(result, folder: Path):
     maps, section = map_files(result)
-    return report.write_set(result, folder, extra=maps, sections={"map_outputs": section})
+    return report.write_set(result, folder, extra=maps, sections={"map_outputs": section.to_dict()})
 
 
 def run(rows: int = 1000, repeat: int = REPEAT) -> dict:

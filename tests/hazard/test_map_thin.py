@@ -28,7 +28,7 @@ def out(tmp_path_factory):
     result = bundled(NAME)
     maps, section = map_files(result)
     out = tmp_path_factory.mktemp("thin") / "out"
-    write_outputs(result, out, extra=maps, sections={"map_outputs": section})
+    write_outputs(result, out, extra=maps, sections={"map_outputs": section.to_dict()})
     write_map_page(out)
     return out
 

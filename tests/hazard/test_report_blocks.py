@@ -9,12 +9,16 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import pydantic
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hazard.outputs.report import json_safe
-from hazard.outputs.report_schema import AirspaceBlock, ExtendedSourceBlock, LimitingAperture, SamplingBlock, SpillBlock, Uv24hBlock, VerdictBlock
+from hazard.outputs.map_outputs import MapOutputs
+from hazard.outputs.map_zones import ZONE_KINDS
+from hazard.outputs.report_schema import (AirspaceBlock, ExtendedSourceBlock, FrameBlock, LimitingAperture, MapOutputsBlock, SamplingBlock, SpillBlock,
+                                          Uv24hBlock, VerdictBlock)
 from hazard.physics import aperture
 from hazard.physics.mpe import RepetitivePulseResult, UV24hResult, uv_24h_mpe
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
@@ -22,6 +26,8 @@ from hazard.pipeline.extended_source import ExtendedMpe, ExtendedSourceSummary
 from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
 from hazard.pipeline.spots import BeamSampling, NotReflected
 from hazard.pipeline.verdict import Verdict, VerdictCounts
+from scenes.dem import DemInfo
+from scenes.geo_input import Conversion, FrameDescription
 
 FEW = settings(derandomize=True, deadline=None, max_examples=30)
 MANY = settings(derandomize=True, deadline=None, max_examples=400)
@@ -51,8 +57,20 @@ zone_checks = st.builds(FlightZoneCheck, text, text, maybe, num, num, st.boolean
 airspaces = st.builds(AirspaceCheck, _tuple(zone_checks), text, num, st.none() | text)
 apertures = st.builds(aperture.limiting_aperture, st.floats(180.0, 1e6), st.floats(1e-13, 3e4))  # the whole table's domain
 
+kinds = st.sampled_from(ZONE_KINDS)
+map_outputs = st.builds(MapOutputs, _tuple(text), st.dictionaries(text, text, max_size=3), st.sampled_from(["local", "site"]),
+                        st.dictionaries(kinds, count), st.dictionaries(kinds, text))
+point = st.lists(num, min_size=2, max_size=3)
+as_written = st.lists(st.integers(-90, 90) | num, min_size=2, max_size=3)  # as written: an int stays an int
+conversions = st.builds(Conversion, text, as_written | st.lists(as_written, min_size=1, max_size=3), point | st.lists(point, min_size=1, max_size=3))
+dems = st.builds(DemInfo, text, text, num, num, count, count, count, count, count, text)
+frames = st.builds(FrameDescription, st.just("local"), text) | st.builds(
+    FrameDescription, st.just("site"), text, st.tuples(num, num, num), num, text, text, num, num, st.tuples(num, num),
+    st.none() | dems, _tuple(conversions))
+
 CASES = [(verdicts, VerdictBlock), (samplings, SamplingBlock), (spills, SpillBlock), (extended, ExtendedSourceBlock),
-         (airspaces, AirspaceBlock), (apertures, LimitingAperture)]
+         (airspaces, AirspaceBlock), (apertures, LimitingAperture), (map_outputs, MapOutputsBlock),
+         (frames, FrameBlock)]
 
 
 def _written(block) -> dict:
@@ -112,3 +130,34 @@ def test_a_block_is_frozen_and_its_dict_a_copy():
         air.note = "changed"  # type: ignore[misc]
     air.to_dict()["zones"].clear()
     assert air.to_dict()["zones"] == [z.to_dict()] and "note" not in air.to_dict()
+
+
+def test_the_map_outputs_are_read_only_and_their_dict_a_copy():
+    """``map_outputs``: its mappings cannot be changed through the result, and ``to_dict``
+    writes plain dicts in the order given (report.json's key order)."""
+    counts = {k: i for i, k in enumerate(reversed(ZONE_KINDS))}
+    m = MapOutputs(("zones.geojson",), {"zones.kml": "why"}, "local", counts, {"sdz": "none"})
+    with pytest.raises(TypeError):
+        m.features["sdz"] = 99  # type: ignore[index]
+    d = m.to_dict()
+    d["features"].clear()
+    d["files"].append("x")
+    assert m.to_dict() == {"files": ["zones.geojson"], "not_written": {"zones.kml": "why"}, "frame": "local", "features": counts,
+                           "absent": {"sdz": "none"}}
+    assert list(m.to_dict()) == ["files", "not_written", "frame", "features", "absent"]
+    assert list(m.to_dict()["features"]) == list(reversed(ZONE_KINDS))
+    with pytest.raises(pydantic.ValidationError):
+        MapOutputsBlock.model_validate({**m.to_dict(), "frame": "geo"}, strict=True)  # only "local" or "site"
+    with pytest.raises(pydantic.ValidationError):
+        MapOutputsBlock.model_validate({**m.to_dict(), "absent": {"no_such_kind": "x"}}, strict=True)
+
+
+def test_a_conversion_keeps_the_values_as_written():
+    """``frame.converted[]``: the value as written (ints stay ints) and the metres, as lists again."""
+    c = Conversion("laser.position_geo", [51, -1.5, 100], [[1.0, 2.0, 3.0]])
+    assert c.given == (51, -1.5, 100) and c.m == ((1.0, 2.0, 3.0),)
+    assert json.dumps(c.to_dict()) == '{"key": "laser.position_geo", "given": [51, -1.5, 100], "m": [[1.0, 2.0, 3.0]]}'
+    local = FrameDescription("local", "words")
+    assert local.to_dict() == {"kind": "local", "statement": "words"}
+    with pytest.raises(pydantic.ValidationError):
+        FrameBlock.model_validate({**local.to_dict(), "kind": "global"}, strict=True)
