@@ -246,8 +246,8 @@ def faa_marks(result) -> list:
     """(path, text, world point on the aim) of the direct beam's FAA distances
     (``visual_interference.direct``; visible lasers only), the text saying when the beam
     is stopped before it (the danger zone's range, a contained zone)."""
-    vi = getattr(result, "visual_interference", None) or {}
-    if not vi.get("applies"):
+    vi = getattr(result, "visual_interference", None)  # hazard.physics.visual.VisualInterference
+    if vi is None or not vi.applies:
         return []
     z = getattr(result, "sdz", None) or {}
     stop = float(z.get("max_range_m") or math.inf) if z.get("contained") else math.inf
@@ -255,7 +255,7 @@ def faa_marks(result) -> list:
     origin = np.asarray(scene.laser_position_m, float) + np.asarray(scene.offset_m, float)
     out = []
     for level in ("szed", "czed", "lfed"):
-        d = (vi.get("direct") or {}).get(f"{level}_m")
+        d = vi.direct.distance_m(level)
         if not finite(d) or not d > 0:
             continue
         text = f"{level.upper()} {_metres(d)} along the beam"

@@ -230,13 +230,13 @@ def _airspace(result) -> list:
             "name": zs.name, "limit": zs.limit, "floor_agl_m": zs.floor_agl_m, "ceiling_agl_m": zs.ceiling_agl_m,
             "holds": row.get("holds"), "worst_effective_irradiance_w_m2": row.get("worst_effective_irradiance_w_m2"),
             "worst_time_s": row.get("worst_time_s"), "hazard": "none" if row.get("holds", True) else "naked eye"}, z_m=0.0))
-    if (result.visual_interference or {}).get("applies"):
+    vi = result.visual_interference  # hazard.physics.visual.VisualInterference
+    if vi is not None and vi.applies:
         for level in ("szed", "czed", "lfed"):
             g = visual_outline_xy(result, level)
             if g is not None and not g.is_empty:
-                out.append(Zone("visual_zone", g, {"level": level, "distance_m": result.visual_interference["direct"][f"{level}_m"],
-                                                   "limit_w_m2": result.visual_interference["levels_w_m2"][level],
-                                                   "vcf": result.visual_interference["vcf"], "path": "direct",
+                out.append(Zone("visual_zone", g, {"level": level, "distance_m": vi.direct.distance_m(level),
+                                                   "limit_w_m2": vi.levels_w_m2[level], "vcf": vi.vcf, "path": "direct",
                                                    "hazard": "visual interference"}, z_m=0.0))
     return out
 
@@ -263,6 +263,6 @@ def zones(result) -> tuple[list, dict]:
            "observer": "no observers", "range_boundary": "no [range] boundary", "laser": "", "target": "",
            "track": "no moving observer (kind = 'track')", "airspace_zone": "no [airspace] zones",
            "visual_zone": ("not a visible laser (400-700 nm): the FAA visual levels do not apply"
-                           if not (result.visual_interference or {}).get("applies") else "no level reached")}
+                           if result.visual_interference is None or not result.visual_interference.applies else "no level reached")}
     absent = {k: why[k] for k in ZONE_KINDS if k not in present}
     return out, absent

@@ -33,11 +33,11 @@ def _world(result, p) -> np.ndarray:
 def visual_levels(result, peak_w_m2: float) -> tuple[float | None, list]:
     """The effective peak VCF x E [W/m^2] of a path and the FAA levels it reaches
     (visible lasers; None and [] otherwise)."""
-    vi = result.visual_interference or {}
-    if not vi.get("applies"):
+    vi = result.visual_interference  # hazard.physics.visual.VisualInterference
+    if vi is None or not vi.applies:
         return None, []
-    eff = vi["vcf"] * float(peak_w_m2)
-    return eff, [k for k in ("szed", "czed", "lfed") if eff >= vi["levels_w_m2"][k]]
+    eff = vi.vcf * float(peak_w_m2)
+    return eff, [k for k in ("szed", "czed", "lfed") if eff >= vi.levels_w_m2[k]]
 
 
 def _track_dict(result, p) -> dict:
@@ -52,7 +52,8 @@ def _track_dict(result, p) -> dict:
 def motion_sections(result) -> dict:
     """The report sections of the motion and airspace stages (absent stages: None, said)."""
     m = result.motion
-    out = {"visual_interference": result.visual_interference or None, "airspace": None if result.airspace is None else result.airspace.to_dict()}
+    vi = result.visual_interference
+    out = {"visual_interference": None if vi is None else vi.to_dict(), "airspace": None if result.airspace is None else result.airspace.to_dict()}
     if m is None:
         out.update(motion=None, tracks=[])
         return out

@@ -990,11 +990,11 @@ def _motion_lines(result) -> list:
         out.append(f"  flight zone {z.name} ({z.limit}): " + ("holds" if z.holds else
                    f"EXCEEDED: {z.worst_effective_irradiance_w_m2:.4g} W/m^2 effective at t = {z.worst_time_s:.6g} s "
                    f"(limit {z.limit_w_m2:.4g}, {z.worst_path})"))
-    vi = getattr(result, "visual_interference", None) or {}
-    if vi.get("applies"):
-        d = vi["direct"]
-        out.append(f"  visual interference, direct beam (VCF {vi['vcf']:.4g}): LFED {d['lfed_m']:.5g} m, CZED {d['czed_m']:.5g} m, "
-                   f"SZED {d['szed_m']:.5g} m, NOHD {d['nohd_m']:.5g} m")
+    vi = getattr(result, "visual_interference", None)  # hazard.physics.visual.VisualInterference
+    if vi is not None and vi.applies:
+        d = vi.direct
+        out.append(f"  visual interference, direct beam (VCF {vi.vcf:.4g}): LFED {d.lfed_m:.5g} m, CZED {d.czed_m:.5g} m, "
+                   f"SZED {d.szed_m:.5g} m, NOHD {d.nohd_m:.5g} m")
     return (["Over time and in the airspace:"] + out) if out else []
 
 

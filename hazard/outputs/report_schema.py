@@ -20,15 +20,17 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   without ``warnings``), ``beam.sampling`` (:class:`hazard.pipeline.spots.BeamSampling`),
   ``beam.spill`` (:class:`hazard.pipeline.spill.SpillSummary`), ``extended_source``
   (:class:`hazard.pipeline.extended_source.ExtendedSourceSummary`), ``airspace``
-  (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``limiting_aperture``
+  (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``visual_interference``
+  (:class:`hazard.physics.visual.VisualInterference`), ``limiting_aperture``
   (:class:`hazard.physics.aperture.LimitingAperture`), ``map_outputs``
   (:class:`hazard.outputs.map_outputs.MapOutputs`), ``frame`` (:class:`scenes.geo_input.FrameDescription`) and the aid's part of
-  ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`): a field added there is in
+  ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`), ``targets[].specular_steps``
+  (:class:`hazard.physics.specular.MirrorBeamSteps`): a field added there is in
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
   example, and the tests of the scenes that write the optional keys validate theirs):
-  ``sdz``, ``visual_interference``, ``motion`` and ``tracks``.
+  ``sdz``, ``motion`` and ``tracks``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -50,6 +52,7 @@ from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
 from hazard.physics.aperture import LimitingAperture as LimitingApertureInfo
 from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult, UV24hResult
 from hazard.physics.specular import MirrorBeamSteps
+from hazard.physics.visual import TargetLevelDistances, VisualInterference
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
 from hazard.pipeline.extended_source import ExtendedSourceSummary
@@ -355,34 +358,13 @@ class SdzBlock(_ZoneFields):
 VerdictBlock = _from_dataclass(Verdict, "VerdictBlock", omit=Verdict.NOT_IN_BLOCK)
 
 
-class LevelDistances(_Strict):
-    lfed_m: Optional[Number]
-    czed_m: Optional[Number]
-    szed_m: Optional[Number]
-    nohd_m: Number
-
-
-class TargetLevels(LevelDistances):
-    beam_states: int
-
-
-class VisualBlock(_Strict):
-    """``visual_interference`` (:func:`hazard.physics.visual.visual_interference`)."""
-
-    applies: bool
-    wavelength_nm: Number
-    vcf: Number
-    weighting: str
-    attenuation_credited: bool
-    attenuation_per_m: Number
-    levels_w_m2: dict[Literal["lfed", "czed", "szed"], Number]
-    levels: dict[Literal["lfed", "czed", "szed", "nohd"], str]
-    mpe_w_m2: Number
-    source: str
-    reason: str = ABSENT  # not visible
-    direct: LevelDistances
-    targets: dict[str, TargetLevels]
-    nohd_attenuation: str
+# ``visual_interference``: :class:`hazard.physics.visual.VisualInterference` (``reason`` only for a laser that is not
+# visible), ``direct`` :class:`~hazard.physics.visual.LevelDistances`, each of ``targets``
+# :class:`~hazard.physics.visual.TargetLevelDistances`; the mappings' keys are the levels and the targets' names
+VisualBlock = _from_dataclass(VisualInterference, "VisualBlock", override={  # type: ignore[misc]
+    "levels_w_m2": dict[Literal["lfed", "czed", "szed"], Number],
+    "levels": dict[Literal["lfed", "czed", "szed", "nohd"], str],
+    "targets": dict[str, _from_dataclass(TargetLevelDistances, "TargetLevels")]})  # type: ignore[misc]
 
 
 # ``airspace``: :class:`hazard.pipeline.airspace.AirspaceCheck` (``note`` only for a laser that is not visible),
@@ -507,7 +489,7 @@ class ReportModel(_Strict):
     any_hazard: bool
     warnings: list[str]
     notes: list[str]
-    visual_interference: Optional[VisualBlock]
+    visual_interference: Optional[VisualBlock]  # type: ignore[valid-type]
     airspace: Optional[AirspaceBlock]  # type: ignore[valid-type]
     motion: Optional[MotionBlock]
     tracks: list[PathBlock]

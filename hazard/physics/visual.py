@@ -37,12 +37,15 @@ not confirmed: an explicit flag).
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
+from dataclasses import dataclass
 from importlib import resources
+from typing import ClassVar
 
 import numpy as np
 
 __all__ = ["LEVELS_W_M2", "VISIBLE_NM", "photopic_v", "visual_correction_factor", "level_limit_w_m2",
-           "visual_interference", "zone_distances_m"]
+           "visual_interference", "zone_distances_m", "LevelDistances", "TargetLevelDistances", "VisualInterference"]
 
 LEVELS_W_M2 = {"szed": 1.0, "czed": 5e-2, "lfed": 5e-4}  # range-safety.md section 5 (FAA flight-zone levels, CW)
 VISIBLE_NM = (400.0, 700.0)
@@ -50,6 +53,124 @@ LEVEL_TEXT = {"szed": "sensitive-zone exposure distance (100 uW/cm^2: no flash b
               "czed": "critical-zone exposure distance (5 uW/cm^2: no glare beyond)",
               "lfed": "laser-free-zone exposure distance (50 nW/cm^2: no distraction beyond)",
               "nohd": "nominal ocular hazard distance (the MPE, no visual correction)"}
+
+
+@dataclass(frozen=True)
+class LevelDistances:
+    """The direct beam's distances to the FAA levels and to the MPE
+    (:func:`zone_distances_m`; report.json ``visual_interference.direct``).
+
+    Attributes
+    ----------
+    lfed_m, czed_m, szed_m : float or None
+        Along the beam from the laser to where the effective irradiance VCF x E falls to
+        the laser-free, critical and sensitive zone level [m] (0: the level is not
+        reached); None: not a visible laser, the levels do not apply.
+    nohd_m : float
+        To where the irradiance falls to the MPE, without the VCF [m].
+    """
+
+    lfed_m: float | None
+    czed_m: float | None
+    szed_m: float | None
+    nohd_m: float
+
+    def distance_m(self, level: str) -> float | None:
+        """The distance [m] of ``level`` (``"lfed"``, ``"czed"``, ``"szed"`` or ``"nohd"``)."""
+        if level not in ("lfed", "czed", "szed", "nohd"):
+            raise ValueError(f"level={level!r}: expected 'lfed', 'czed', 'szed' or 'nohd'")
+        return getattr(self, f"{level}_m")
+
+    def to_dict(self) -> dict:
+        return {"lfed_m": self.lfed_m, "czed_m": self.czed_m, "szed_m": self.szed_m, "nohd_m": self.nohd_m}
+
+
+@dataclass(frozen=True)
+class TargetLevelDistances(LevelDistances):
+    """A lit target's distances (report.json ``visual_interference.targets.<name>``), from
+    the target: its lobe's and mirror beam's largest reach over the spots computed.
+
+    Attributes
+    ----------
+    lfed_m, czed_m, szed_m : float or None
+        Reach at each FAA level, the effective irradiance VCF x E [m]; None: not a visible laser.
+    nohd_m : float
+        Reach at the MPE [m]: the keepout stage's NOHD (the scene's attenuation), and a
+        moving beam's spots' at the MPE.
+    beam_states : int
+        The spots whose distances were computed (the static one and, for a moving beam,
+        up to ``SPOTS_PER_TARGET`` of its states).
+    """
+
+    beam_states: int
+
+    def to_dict(self) -> dict:
+        return {**super().to_dict(), "beam_states": self.beam_states}
+
+
+@dataclass(frozen=True)
+class VisualInterference:
+    """The FAA visual-interference levels and their distances (:func:`visual_interference`;
+    report.json ``visual_interference``, written by :meth:`to_dict` in this field order).
+
+    Attributes
+    ----------
+    applies : bool
+        A visible laser (400-700 nm): the visual levels apply.
+    wavelength_nm : float
+        The laser's wavelength [nm].
+    vcf : float
+        The visual correction factor (unitless; 0 when the levels do not apply).
+    weighting : str
+        How the VCF is weighted, in words.
+    attenuation_credited : bool
+        Atmospheric attenuation is credited for the levels (``[airspace] credit_attenuation``).
+    attenuation_per_m : float
+        The attenuation coefficient the levels use [1/m] (0 when not credited).
+    levels_w_m2 : Mapping of str to float
+        Each level's effective irradiance [W/m^2] (``"szed"``, ``"czed"``, ``"lfed"``; read only).
+    levels : Mapping of str to str
+        Each distance's meaning, in words (the levels and ``"nohd"``; read only).
+    mpe_w_m2 : float
+        The MPE the NOHD is taken at [W/m^2].
+    source : str
+        Where the levels and the formula come from.
+    reason : str or None
+        Why the levels do not apply (not a visible laser); None: the key is absent.
+    direct : LevelDistances
+        The direct beam's distances, from the laser.
+    targets : Mapping of str to TargetLevelDistances
+        Per lit target (by name, read only), its distances from the target.
+    nohd_attenuation : str
+        Which attenuation the NOHD values use, in words.
+    """
+
+    applies: bool
+    wavelength_nm: float
+    vcf: float
+    weighting: str
+    attenuation_credited: bool
+    attenuation_per_m: float
+    levels_w_m2: Mapping[str, float]
+    levels: Mapping[str, str]
+    mpe_w_m2: float
+    source: str
+    reason: str | None
+    direct: LevelDistances
+    targets: Mapping[str, TargetLevelDistances]
+    nohd_attenuation: str
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("reason",)
+
+    def to_dict(self) -> dict:
+        out = {"applies": self.applies, "wavelength_nm": self.wavelength_nm, "vcf": self.vcf, "weighting": self.weighting,
+               "attenuation_credited": self.attenuation_credited, "attenuation_per_m": self.attenuation_per_m,
+               "levels_w_m2": dict(self.levels_w_m2), "levels": dict(self.levels), "mpe_w_m2": self.mpe_w_m2, "source": self.source}
+        if self.reason is not None:
+            out["reason"] = self.reason
+        out.update(direct=self.direct.to_dict(), targets={name: t.to_dict() for name, t in self.targets.items()},
+                   nohd_attenuation=self.nohd_attenuation)
+        return out
 
 
 @functools.cache
@@ -143,12 +264,12 @@ def _lit_spots(result) -> dict:
     """Target name -> the spots whose distances are computed: the static analysis's, and
     for a moving beam or target the ``SPOTS_PER_TARGET`` most powerful of its beam states
     (a target the sweep lights but the nominal aim misses is not left out)."""
-    out = {}
+    out: dict[str, list] = {}
     for sp in result.spots:
         out.setdefault(sp.target.name, []).append(sp)
     run = None if result.motion is None else result.motion.run
     if run is not None and run.motion.beam_moves:
-        moving = {}
+        moving: dict[str, list] = {}
         for bs in run.states_list:
             for sp in bs.spots:
                 moving.setdefault(sp.target.name, []).append(sp)
@@ -157,7 +278,7 @@ def _lit_spots(result) -> dict:
     return out
 
 
-def visual_interference(result) -> dict:
+def visual_interference(result) -> VisualInterference:
     """report.json ``visual_interference``: the levels, the VCF and the distances per path
     (``direct``, and per lit target)."""
     spec = result.scene.spec
@@ -168,29 +289,29 @@ def visual_interference(result) -> dict:
     mu = float(result.attenuation_per_m) if credit else 0.0
     vis = applies(la.wavelength_nm)
     vcf = visual_correction_factor(la.wavelength_nm, weighting) if vis else 0.0
-    out = {"applies": vis, "wavelength_nm": la.wavelength_nm, "vcf": vcf,
-           "weighting": "CIE 1924 photopic V(lambda)" if weighting == "photopic" else "none (VCF = 1)",
-           "attenuation_credited": credit, "attenuation_per_m": mu, "levels_w_m2": dict(LEVELS_W_M2),
-           "levels": LEVEL_TEXT, "mpe_w_m2": float(result.mpe_w_m2),
-           "source": "range-safety.md section 5 (FAA Order JO 7400.2 Part 6 Ch. 29 / AC 70-1 levels); D = (sqrt(4 P VCF / "
-                     "(pi E_lim)) - a) / phi for the direct beam"}
+    direct = zone_distances_m(la.average_power_w, la.beam_diameter_m, la.divergence_rad, result.mpe_w_m2, vcf, mu)
     if not vis:
-        out["reason"] = f"{la.wavelength_nm:g} nm is outside the visible band 400-700 nm: the FAA visual levels do not apply"
-    out["direct"] = zone_distances_m(la.average_power_w, la.beam_diameter_m, la.divergence_rad, result.mpe_w_m2, vcf, mu)
+        direct.update(lfed_m=None, czed_m=None, szed_m=None)
     rows = {t.name: t for t in result.targets}
-    out["targets"] = {}
+    static_ids = {id(x) for x in result.spots}
+    targets: dict[str, TargetLevelDistances] = {}
     for name, spots in _lit_spots(result).items():  # the NOHD is the keepout stage's (the scene's attenuation); levels: visible only
-        levels = {"lfed_m": None, "czed_m": None, "szed_m": None}
+        levels: dict[str, float | None] = {"lfed_m": None, "czed_m": None, "szed_m": None}
         if vis:
             each = [_target_distances(sp, result.states, result.mpe_w_m2, vcf, mu, spec.analysis) for sp in spots]
             levels = {k: max(d[k] for d in each) for k in levels}
         row = rows.get(name)
         static = [_row_nohd_m(row)] if row is not None and row.spot_power_w else []
-        static_ids = {id(x) for x in result.spots}
         moving = [_spot_reach_m(sp, result.mpe_w_m2, result.attenuation_per_m, result.states, spec.analysis)
                   for sp in spots if id(sp) not in static_ids]
-        out["targets"][name] = {**levels, "nohd_m": max(static + moving), "beam_states": len(spots)}
-    if not vis:
-        out["direct"].update(lfed_m=None, czed_m=None, szed_m=None)
-    out["nohd_attenuation"] = "targets: the scene's attenuation (the keepout stage's NOHD); direct: as the levels"
-    return out
+        targets[name] = TargetLevelDistances(**levels, nohd_m=max(static + moving), beam_states=len(spots))
+    return VisualInterference(
+        applies=vis, wavelength_nm=la.wavelength_nm, vcf=vcf,
+        weighting="CIE 1924 photopic V(lambda)" if weighting == "photopic" else "none (VCF = 1)",
+        attenuation_credited=credit, attenuation_per_m=mu, levels_w_m2=dict(LEVELS_W_M2), levels=dict(LEVEL_TEXT),
+        mpe_w_m2=float(result.mpe_w_m2),
+        source="range-safety.md section 5 (FAA Order JO 7400.2 Part 6 Ch. 29 / AC 70-1 levels); D = (sqrt(4 P VCF / "
+               "(pi E_lim)) - a) / phi for the direct beam",
+        reason=None if vis else f"{la.wavelength_nm:g} nm is outside the visible band 400-700 nm: the FAA visual levels do not apply",
+        direct=LevelDistances(**direct), targets=targets,
+        nohd_attenuation="targets: the scene's attenuation (the keepout stage's NOHD); direct: as the levels")

@@ -153,7 +153,7 @@ def _airspace_blocks(result, blocks) -> None:
         mesh = pv.PolyData(v - off, np.concatenate([[len(f), *f] for f in faces]))
         mesh["holds"] = np.full(mesh.n_cells, int(rows[zs.name].holds if zs.name in rows else True), np.uint8)
         blocks[f"airspace_{zs.name}"] = mesh
-    if (result.visual_interference or {}).get("applies"):
+    if result.visual_interference is not None and result.visual_interference.applies:
         for level in ("szed", "czed", "lfed"):
             surf = visual_surface(result, level)
             if surf is not None:

@@ -316,7 +316,7 @@ def check_zones(result, first) -> AirspaceCheck:
     (see the module notes). ``first``: (traced, tracer, ray_scene) of the analysis."""
     spec = result.scene.spec
     vi = result.visual_interference
-    vcf_levels = vi["vcf"] if vi["applies"] else 0.0
+    vcf_levels = vi.vcf if vi.applies else 0.0
     traced, tracer, ray_scene = first
     timed = _times(result)
     if timed is None:
@@ -326,9 +326,9 @@ def check_zones(result, first) -> AirspaceCheck:
     zones = []
     for zs in spec.airspace.zones:
         z = _Zone(zs, result.scene)
-        mu = result.attenuation_per_m if zs.limit == "nohd" else vi["attenuation_per_m"]
+        mu = result.attenuation_per_m if zs.limit == "nohd" else vi.attenuation_per_m
         zones.append(_zone_check(result, z, steps, 1.0 if zs.limit == "nohd" else vcf_levels, mu, z.lattice()))
-    note = None if vi["applies"] else (f"{spec.laser.wavelength_nm:g} nm is not visible: the visual levels (lfed, czed, szed) "
+    note = None if vi.applies else (f"{spec.laser.wavelength_nm:g} nm is not visible: the visual levels (lfed, czed, szed) "
                                        f"cannot be exceeded; 'nohd' zones are checked against the MPE")
     return AirspaceCheck(zones=tuple(zones), method="hazard.pipeline.airspace: the direct beam's axis entry, each mirror beam's "
                          f"axis and a lattice of {LATTICE} x {LATTICE} x {LEVELS} points per zone, at every lased analysed time",

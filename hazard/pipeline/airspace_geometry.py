@@ -53,8 +53,8 @@ def _level_args(result, level):
     la = result.scene.spec.laser
     from hazard.physics.visual import LEVELS_W_M2
 
-    return (la.average_power_w, la.beam_diameter_m, la.divergence_rad, LEVELS_W_M2[level], vi["vcf"],
-            vi["attenuation_per_m"]), vi["direct"][f"{level}_m"]
+    return (la.average_power_w, la.beam_diameter_m, la.divergence_rad, LEVELS_W_M2[level], vi.vcf,
+            vi.attenuation_per_m), vi.direct.distance_m(level)
 
 
 def visual_outline_xy(result, level):

@@ -116,7 +116,7 @@ def hazard_result(r, stages=()) -> HazardResult:
         spill=r["spill"].summary, sdz=r["sdz"].zone if beams is None else {**r["sdz"].zone, "mirror_beams": beams},
         motion=r["motion"].motion,
         extended_source=None if ext is None else ext.summary,
-        visual_interference={} if air is None else air.visual_interference,
+        visual_interference=None if air is None else air.visual_interference,
         airspace=None if air is None else air.zones,
         uv_24h=exposure.uv_24h,
     )
@@ -422,8 +422,8 @@ def _airspace(log, **r) -> AirspaceResult:
     spec, zones = result.scene.spec, None
     with log.run("airspace") as st:
         vi = visual_interference(result)
-        st.detail = (("visual levels apply: " if vi["applies"] else "not a visible laser: ")
-                     + ", ".join(f"{k} {v:.4g}" for k, v in vi["direct"].items() if v is not None))
+        st.detail = (("visual levels apply: " if vi.applies else "not a visible laser: ")
+                     + ", ".join(f"{k} {v:.4g}" for k, v in vi.direct.to_dict().items() if v is not None))
         if spec.airspace is not None and spec.airspace.zones:
             from hazard.pipeline.airspace import check_zones
 

@@ -15,6 +15,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through t
     from scenes.observers import Observers
 
     from hazard.physics.mpe import UV24hResult
+    from hazard.physics.visual import VisualInterference
     from hazard.pipeline.airspace import AirspaceCheck
     from hazard.pipeline.extended_source import ExtendedSourceSummary
     from hazard.pipeline.motion_stage import MotionResult
@@ -219,7 +220,7 @@ class HazardResult:
     spill: SpillSummary | None = None  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill); None: not run
     sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
-    visual_interference: dict = field(default_factory=dict)  # FAA levels' distances per path (hazard.physics.visual)
+    visual_interference: VisualInterference | None = None  # FAA levels' distances per path (hazard.physics.visual); None: the airspace stage has not run
     airspace: AirspaceCheck | None = None  # the flight zones' checks (hazard.pipeline.airspace); None: no [airspace] zones
     uv_24h: UV24hResult | None = None  # 180-400 nm: the day's summed-dose limit (hazard.physics.mpe.uv_24h_mpe, [M]), else None
 

@@ -54,6 +54,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.pipeline.limits import ExposureLimits
     from hazard.pipeline.motion_stage import MotionResult
     from hazard.pipeline.airspace import AirspaceCheck
+    from hazard.physics.visual import VisualInterference
     from hazard.pipeline.spill import SpillSummary
     from hazard.pipeline.spots import BeamStage
 
@@ -574,9 +575,9 @@ class MotionStageResult:
 
 @dataclass(frozen=True)
 class AirspaceResult:
-    """Stage ``airspace``: report.json ``visual_interference`` (FAA levels' distances [m])
-    and ``airspace`` (the flight zones' checks, :class:`hazard.pipeline.airspace.AirspaceCheck`; None
-    without ``[airspace]`` zones); keys and types of the first: :class:`hazard.outputs.report_schema.VisualBlock`."""
+    """Stage ``airspace``: report.json ``visual_interference`` (FAA levels' distances [m],
+    :class:`hazard.physics.visual.VisualInterference`) and ``airspace`` (the flight zones' checks,
+    :class:`hazard.pipeline.airspace.AirspaceCheck`; None without ``[airspace]`` zones)."""
 
-    visual_interference: dict
+    visual_interference: VisualInterference
     zones: AirspaceCheck | None = None

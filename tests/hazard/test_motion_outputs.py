@@ -259,7 +259,7 @@ ceiling_agl_m = 100.0
 """)
     res = hazard.analyze(sc)
     vi = res.visual_interference
-    assert not vi["applies"] and vi["direct"]["lfed_m"] is None and vi["direct"]["nohd_m"] > 0
+    assert not vi.applies and vi.direct.lfed_m is None and vi.direct.nohd_m > 0 and "visible band" in vi.reason
     assert res.airspace.zones[0].holds and "not visible" in res.airspace.note
     validate_report(json.loads(json.dumps(report_dict(res))))  # visual_interference's reason, airspace's note (issue 35)
 

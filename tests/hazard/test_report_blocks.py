@@ -18,9 +18,10 @@ from hazard.outputs.report import json_safe
 from hazard.outputs.map_outputs import MapOutputs
 from hazard.outputs.map_zones import ZONE_KINDS
 from hazard.outputs.report_schema import (AirspaceBlock, ExtendedSourceBlock, FrameBlock, LimitingAperture, MapOutputsBlock, SamplingBlock, SpillBlock,
-                                          Uv24hBlock, VerdictBlock)
+                                          Uv24hBlock, VerdictBlock, VisualBlock)
 from hazard.physics import aperture
 from hazard.physics.mpe import RepetitivePulseResult, UV24hResult, uv_24h_mpe
+from hazard.physics.visual import LevelDistances, TargetLevelDistances, VisualInterference
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe, ExtendedSourceSummary
 from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
@@ -55,6 +56,11 @@ extended = st.just(ExtendedSourceSummary(applied=False)) | st.builds(
 zone_checks = st.builds(FlightZoneCheck, text, text, maybe, num, num, st.booleans(), num, st.none() | st.tuples(num, num, num),
                         maybe, st.none() | text, num, num, count)
 airspaces = st.builds(AirspaceCheck, _tuple(zone_checks), text, num, st.none() | text)
+level_keys = st.sampled_from(["lfed", "czed", "szed"])
+visuals = st.builds(VisualInterference, st.booleans(), num, num, text, st.booleans(), num,
+                    st.dictionaries(level_keys, num), st.dictionaries(level_keys | st.just("nohd"), text), num, text,
+                    st.none() | text, st.builds(LevelDistances, maybe, maybe, maybe, num),
+                    st.dictionaries(text, st.builds(TargetLevelDistances, maybe, maybe, maybe, num, count), max_size=3), text)
 apertures = st.builds(aperture.limiting_aperture, st.floats(180.0, 1e6), st.floats(1e-13, 3e4))  # the whole table's domain
 
 kinds = st.sampled_from(ZONE_KINDS)
@@ -69,7 +75,7 @@ frames = st.builds(FrameDescription, st.just("local"), text) | st.builds(
     st.none() | dems, _tuple(conversions))
 
 CASES = [(verdicts, VerdictBlock), (samplings, SamplingBlock), (spills, SpillBlock), (extended, ExtendedSourceBlock),
-         (airspaces, AirspaceBlock), (apertures, LimitingAperture), (map_outputs, MapOutputsBlock),
+         (airspaces, AirspaceBlock), (visuals, VisualBlock), (apertures, LimitingAperture), (map_outputs, MapOutputsBlock),
          (frames, FrameBlock)]
 
 
@@ -161,3 +167,27 @@ def test_a_conversion_keeps_the_values_as_written():
     assert local.to_dict() == {"kind": "local", "statement": "words"}
     with pytest.raises(pydantic.ValidationError):
         FrameBlock.model_validate({**local.to_dict(), "kind": "global"}, strict=True)
+
+
+@FEW
+@given(visuals)
+def test_the_visual_block_is_written_in_its_fields_order_and_copied(vi):
+    """``visual_interference``: ``to_dict`` writes the keys in the fields' order (report.json's
+    order, ``reason`` absent when None), the targets' and ``direct``'s keys in theirs; the
+    block is frozen and its dict a copy (a reader changing it leaves the stage's result)."""
+    names = [f.name for f in dataclasses.fields(VisualInterference)]
+    doc = vi.to_dict()
+    assert list(doc) == [n for n in names if not (n == "reason" and vi.reason is None)]
+    assert list(doc["direct"]) == ["lfed_m", "czed_m", "szed_m", "nohd_m"]
+    assert all(list(t) == ["lfed_m", "czed_m", "szed_m", "nohd_m", "beam_states"] for t in doc["targets"].values())
+    assert list(doc["targets"]) == list(vi.targets)
+    doc["levels_w_m2"]["lfed"] = doc["levels"]["nohd"] = -1.0
+    doc["targets"]["changed"] = {}
+    assert vi.to_dict()["levels_w_m2"] == dict(vi.levels_w_m2) and "changed" not in vi.to_dict()["targets"]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        vi.direct.nohd_m = 0.0  # type: ignore[misc]
+    for level in ("lfed", "czed", "szed", "nohd"):
+        got, want = vi.direct.distance_m(level), doc["direct"][f"{level}_m"]
+        assert got is want or got == want
+    with pytest.raises(ValueError, match="level='sz'"):
+        vi.direct.distance_m("sz")
