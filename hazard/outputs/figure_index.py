@@ -194,13 +194,13 @@ def finding_paths(result) -> dict:
     ``mirror`` (target name -> its mirror beam), ``lobe`` ((target name, kind) -> its
     keep-out lobe), ``target`` (name -> path), ``observers`` (row of the observer table
     -> path) and ``footprint`` (the footprints with cells)."""
-    z = getattr(result, "sdz", None) or {}
+    z = getattr(result, "sdz", None)
     targets = {t.name: f"targets[{j}]" for j, t in enumerate(result.targets)}
     mirror = dict(targets)
-    mirror.update({m["target"]: f"sdz.mirror_beams[{k}]" for k, m in enumerate(z.get("mirror_beams") or [])})
+    mirror.update({m.target: f"sdz.mirror_beams[{k}]" for k, m in enumerate(() if z is None else z.mirror_beams or ())})
     foot = [f"footprint.{key}" for key, f in (("dynamic", result.footprint_dynamic), ("static", result.footprint_static))
             if f is not None and f.mask.any()]
-    return {"zone": "sdz" if z.get("polygon_m") else None, "aided": [f"sdz.aided[{k}]" for k in range(len(z.get("aided") or []))],
+    return {"zone": "sdz" if z is not None and z.polygon_m else None, "aided": [f"sdz.aided[{k}]" for k in range(0 if z is None else len(z.aided))],
             "mirror": mirror, "target": targets,
             "lobe": {(name, kind): f"{p}.keepout_{kind}" for name, p in targets.items() for kind in ("static", "dynamic")},
             "observers": report_observer_paths(result), "footprint": foot}
@@ -249,8 +249,8 @@ def faa_marks(result) -> list:
     vi = getattr(result, "visual_interference", None)  # hazard.physics.visual.VisualInterference
     if vi is None or not vi.applies:
         return []
-    z = getattr(result, "sdz", None) or {}
-    stop = float(z.get("max_range_m") or math.inf) if z.get("contained") else math.inf
+    z = getattr(result, "sdz", None)
+    stop = float(z.max_range_m or math.inf) if z is not None and z.contained else math.inf
     scene = result.scene
     origin = np.asarray(scene.laser_position_m, float) + np.asarray(scene.offset_m, float)
     out = []

@@ -84,21 +84,23 @@ def _footprints(result, off) -> list:
 def _sdz(result) -> list:
     from shapely.geometry import Polygon
 
-    z = getattr(result, "sdz", None) or {}
-    out = []
-    if z.get("polygon_m"):
-        out.append(Zone("sdz", Polygon(z["polygon_m"]), {
-            "nohd_m": z.get("nohd_m"), "max_range_m": z.get("max_range_m"), "area_m2": z.get("area_m2"),
-            "unbounded": z.get("unbounded"), "buffer_rad": (z.get("directions") or {}).get("buffer_rad"),
+    z = getattr(result, "sdz", None)  # hazard.pipeline.sdz.DangerZone
+    out: list = []
+    if z is None:
+        return out
+    if z.polygon_m:
+        out.append(Zone("sdz", Polygon(z.polygon_m), {
+            "nohd_m": z.nohd_m, "max_range_m": z.max_range_m, "area_m2": z.area_m2,
+            "unbounded": z.unbounded, "buffer_rad": z.directions.buffer_rad,
             "hazard": "naked eye", "what": "laser surface danger zone of the direct beam (with the pointing buffer)"}))
-    if (z.get("nominal") or {}).get("polygon_m"):
-        out.append(Zone("sdz_nominal", Polygon(z["nominal"]["polygon_m"]), {
+    if z.nominal is not None and z.nominal.polygon_m:
+        out.append(Zone("sdz_nominal", Polygon(z.nominal.polygon_m), {
             "hazard": "naked eye", "what": "the danger zone without the pointing buffer"}))
-    for a in z.get("aided") or []:
-        if a.get("polygon_m"):
-            out.append(Zone("sdz_aided", Polygon(a["polygon_m"]), {
-                "magnification": a.get("magnification"), "objective_diameter_m": a.get("objective_diameter_m"),
-                "nohd_m": a.get("nohd_m"), "hazard": "aided only", "what": "danger zone through optics"}))
+    for a in z.aided:
+        if a.polygon_m:
+            out.append(Zone("sdz_aided", Polygon(a.polygon_m), {
+                "magnification": a.aid.magnification, "objective_diameter_m": a.aid.objective_diameter_m,
+                "nohd_m": a.nohd_m, "hazard": "aided only", "what": "danger zone through optics"}))
     return out
 
 

@@ -12,6 +12,7 @@ import json
 import math
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -25,6 +26,9 @@ from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
 from scenes.geo_input import FrameDescription
 from scenes.quantities import as_written_lines
+
+if TYPE_CHECKING:  # annotations only
+    from hazard.pipeline.sdz import DangerZone, MirrorBeam
 
 __all__ = ["report_dict", "write_outputs", "OutputExistsError", "atomic_write_text", "observer_rows",
            "summary_text", "answer_text", "stages_text", "cause_shares"]
@@ -253,7 +257,7 @@ def report_dict(result, cols=None, *, row_dicts=True, verdict_doc: Verdict | Non
         "beam": {"power_w": result.beam_power_w, "spill_w": result.spill_w, "blocked_w": result.blocked_w,
                  "sampling": None if getattr(result, "beam_sampling", None) is None else result.beam_sampling.to_dict(),
                  "spill": None if getattr(result, "spill", None) is None else result.spill.to_dict()},
-        "sdz": getattr(result, "sdz", None) or None,
+        "sdz": None if getattr(result, "sdz", None) is None else result.sdz.to_dict(),  # hazard.pipeline.sdz.DangerZone
         "stages": [s.to_dict() for s in result.stages],
         "times_s": {"start": float(result.times_s[0]), "end": float(result.times_s[-1]), "count": int(len(result.times_s))},
         "targets": [{**t.to_dict(), "hit": target_hit(t)} for t in result.targets],
@@ -870,7 +874,7 @@ def _nohd_lines(result) -> list:
         way = (f" (up to {d.peak_irradiance_w_m2:.3g} W/m^2 on its way from {d.from_range_m:.4g} m, hazard ratio "
                f"{d.hazard_ratio:.3g}: an eye in it is at risk)" if d.hazard_ratio >= 1 else "")
         lines.append(f"  {d.power_w:.4g} W of the beam stopped by {d.object} at {d.range_m:.4g} m{way}: {d.reflected}")
-    lines += _sdz_lines(getattr(result, "sdz", None) or {})
+    lines += _sdz_lines(getattr(result, "sdz", None))
     fs, fd = result.footprint_static, result.footprint_dynamic
     if fs is not None and fd is not None:
         lines.append(f"  hazardous ground from the reflections at {fs.eye_height_m:g} m eye height (analysis.footprint_eye_height_m): "
@@ -878,47 +882,47 @@ def _nohd_lines(result) -> list:
     return lines
 
 
-def _sdz_lines(z) -> list:
+def _sdz_lines(z: DangerZone | None) -> list:
     """The laser surface danger zone in a few lines (report.json ``sdz``)."""
-    if not z:
+    if z is None:
         return []
-    d = z["directions"]
+    d = z.directions
     where = {"aim": "the aim alone (no pointing error given: set [laser] pointing_error_rad)",
-             "cone": f"the pointing cone of {d['buffer_rad']:.3g} rad"
-                     + (f" ({d['pointing_error_sigmas']:g} sigma)" if d["pointing_error_kind"] == "sigma" else " (bound)"),
-             "sector": f"the sector widened by {d['buffer_rad']:.3g} rad"}[d["kind"]]
-    if d.get("aim_track"):
+             "cone": f"the pointing cone of {d.buffer_rad:.3g} rad"
+                     + (f" ({d.pointing_error_sigmas:g} sigma)" if d.pointing_error_kind == "sigma" else " (bound)"),
+             "sector": f"the sector widened by {d.buffer_rad:.3g} rad"}[d.kind]
+    if d.aim_track:
         where += " and the aim track (the beam may stop anywhere along its slew)"
-    size = ("unbounded (a collimated beam in clear air: its NOHD is infinite; the polygon is drawn to 100 km)" if z.get("unbounded")
-            else f"{z['area_m2']:.4g} m^2")
-    lines = [f"  laser surface danger zone over {where}: {size}, out to {z['max_range_m']:.4g} m "
-             f"(direct-beam NOHD {z['nohd_m']:.4g} m); "
-             + ("contained by backstops" if z["contained"] else
-                f"NOT contained: {z['escaping_directions']} of {d['count']} directions{escape_way(z)} reach the NOHD without a backstop "
+    size = ("unbounded (a collimated beam in clear air: its NOHD is infinite; the polygon is drawn to 100 km)" if z.unbounded
+            else f"{z.area_m2:.4g} m^2")
+    lines = [f"  laser surface danger zone over {where}: {size}, out to {z.max_range_m:.4g} m "
+             f"(direct-beam NOHD {z.nohd_m:.4g} m); "
+             + ("contained by backstops" if z.contained else
+                f"NOT contained: {z.escaping_directions} of {d.count} directions{escape_way(z)} reach the NOHD without a backstop "
                 "(no terrain or occluder across them; targets are not backstops)"
-                + (", some above the horizon" if z["above_horizon"] else ""))]
-    if z.get("leaves_boundary"):
-        lines.append(f"    it LEAVES the range boundary: {z['outside_boundary_m2']:.4g} m^2 outside")
-    elif "leaves_boundary" in z:
+                + (", some above the horizon" if z.above_horizon else ""))]
+    if z.leaves_boundary:
+        lines.append(f"    it LEAVES the range boundary: {z.outside_boundary_m2:.4g} m^2 outside")
+    elif z.leaves_boundary is not None:
         lines.append("    it stays within the range boundary")
-    for a in z.get("aided", []):
-        lines.append(f"    through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics: {a['area_m2']:.4g} m^2 out to "
-                     f"{a['max_range_m']:.4g} m" + ("" if a["contained"] else ", not contained"))
-    lines += [_mirror_line(m) for m in z.get("mirror_beams", []) if m["nohd_m"] > 0]
+    for a in z.aided:
+        lines.append(f"    through {a.aid.magnification:g}x{1e3 * a.aid.objective_diameter_m:g} optics: {a.area_m2:.4g} m^2 out to "
+                     f"{a.max_range_m:.4g} m" + ("" if a.contained else ", not contained"))
+    lines += [_mirror_line(m) for m in z.mirror_beams or () if m.nohd_m > 0]
     return lines
 
 
-def _mirror_line(m) -> str:
+def _mirror_line(m: MirrorBeam) -> str:
     """One mirror beam's fate (report.json ``sdz.mirror_beams``)."""
-    fate = ("contained by backstops" if m["contained"] else
+    fate = ("contained by backstops" if m.contained else
             "NOT contained: it reaches its NOHD without a backstop (no terrain or occluder across it; targets are not "
-            "backstops)" + (", above the horizon" if m["above_horizon"] else ""))
-    if m.get("leaves_boundary"):
+            "backstops)" + (", above the horizon" if m.above_horizon else ""))
+    if m.leaves_boundary:
         fate += "; it LEAVES the range boundary"
-    a = m.get("aided")
-    if a and (not a["contained"] or a.get("leaves_boundary")) and (m["contained"] and not m.get("leaves_boundary")):
-        fate += f"; through optics (NOHD {a['nohd_m']:.4g} m) it is not contained" + (" and leaves the range" if a.get("leaves_boundary") else "")
-    return f"  mirror beam of {m['target']} (specular NOHD {m['nohd_m']:.4g} m, reaches {m['max_reach_m']:.4g} m): {fate}"
+    a = m.aided
+    if a and (not a.contained or a.leaves_boundary) and (m.contained and not m.leaves_boundary):
+        fate += f"; through optics (NOHD {a.nohd_m:.4g} m) it is not contained" + (" and leaves the range" if a.leaves_boundary else "")
+    return f"  mirror beam of {m.target} (specular NOHD {m.nohd_m:.4g} m, reaches {m.max_reach_m:.4g} m): {fate}"
 
 
 def _not_modelled_lines(result) -> list:

@@ -23,14 +23,15 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   (:class:`hazard.pipeline.airspace.AirspaceCheck`), ``visual_interference``
   (:class:`hazard.physics.visual.VisualInterference`), ``limiting_aperture``
   (:class:`hazard.physics.aperture.LimitingAperture`), ``map_outputs``
-  (:class:`hazard.outputs.map_outputs.MapOutputs`), ``frame`` (:class:`scenes.geo_input.FrameDescription`) and the aid's part of
+  (:class:`hazard.outputs.map_outputs.MapOutputs`), ``frame`` (:class:`scenes.geo_input.FrameDescription`),
+  ``sdz`` (:class:`hazard.pipeline.sdz.DangerZone`, ``mirror_beams`` merged in from that stage) with the aid's part of
   ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`), ``targets[].specular_steps``
   (:class:`hazard.physics.specular.MirrorBeamSteps`): a field added there is in
   the schema;
 - still from the dicts the stages write (their keys written once here, each model naming the
   function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
   example, and the tests of the scenes that write the optional keys validate theirs):
-  ``sdz``, ``motion`` and ``tracks``.
+  ``motion`` and ``tracks``.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -54,6 +55,8 @@ from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResu
 from hazard.physics.specular import MirrorBeamSteps
 from hazard.physics.visual import TargetLevelDistances, VisualInterference
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
+from hazard.pipeline.sdz import AidedZone as SdzAidedZone
+from hazard.pipeline.sdz import DangerZone
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
 from hazard.pipeline.extended_source import ExtendedSourceSummary
 from hazard.pipeline.results import Stage
@@ -289,69 +292,15 @@ SpillBlock = _from_dataclass(SpillSummary, "SpillBlock", override={"stopped": li
                                                                    "aided": list[AidedNohd]})  # type: ignore[valid-type]
 
 
-class SdzDirections(_Strict):
-    kind: str
-    aim_track: bool
-    count: int
-    step_rad: Number
-    buffer_rad: Number
-    pointing_error_rad: Number
-    pointing_error_kind: str
-    pointing_error_sigmas: Optional[Number]
-    pointing_error_source: str
-
-
-class _ZoneFields(_Strict):
-    """:func:`hazard.pipeline.sdz._zone_dict`: one zone in world coordinates."""
-
-    nohd_m: Number
-    polygon_m: list[list[Number]]
-    area_m2: Number
-    unbounded: bool
-    max_range_m: Number
-    hazard_half_width_m: Number
-    contained: bool
-    escaping_directions: int
-    above_horizon: bool
-    escaping_bearing_deg: list[Number] = ABSENT  # when some direction escapes
-    escaping_elevation_deg: list[Number] = ABSENT
-    leaves_boundary: bool = ABSENT  # with a [range]
-    outside_boundary_m2: Number = ABSENT
-
-
-class AidedZone(AidedNohd, _ZoneFields):  # type: ignore[valid-type,misc]
+# ``sdz``: :class:`hazard.pipeline.sdz.DangerZone` (the naked-eye zone's keys :class:`~hazard.pipeline.sdz.GroundZone`
+# at its top level, ``directions`` :class:`~hazard.pipeline.sdz.SdzDirections`, ``nominal``
+# :class:`~hazard.pipeline.sdz.NominalZone`, ``mirror_beams[]`` :class:`~hazard.pipeline.sdz.MirrorBeam`); ``aided[]``
+# :class:`~hazard.pipeline.sdz.AidedZone`: the aid's keys (``AidedNohd``) then the zone's, written flat
+class AidedZone(AidedNohd, _from_dataclass(SdzAidedZone, "AidedZoneFields", omit=("aid",))):  # type: ignore[valid-type,misc]
     """``sdz.aided[]``: the aid and its zone."""
 
 
-class NominalZone(_Strict):
-    polygon_m: list[list[Number]]
-    area_m2: Number
-
-
-class MirrorReach(_Strict):
-    nohd_m: Number
-    max_reach_m: Number
-    contained: bool
-    above_horizon: bool
-    leaves_boundary: bool = ABSENT
-
-
-class MirrorBeam(MirrorReach):
-    """``sdz.mirror_beams[]`` (:func:`hazard.pipeline.mirror_reach.mirror_beams`; ``aided``
-    when an aid reaches further)."""
-
-    target: str
-    rays: int
-    aided: MirrorReach = ABSENT
-
-
-class SdzBlock(_ZoneFields):
-    """``sdz`` (:func:`hazard.pipeline.sdz.danger_zone`, ``mirror_beams`` from the stage of that name)."""
-
-    directions: SdzDirections
-    nominal: NominalZone = ABSENT  # a sector with a buffer: the sector itself
-    aided: list[AidedZone]
-    mirror_beams: list[MirrorBeam] = ABSENT
+SdzBlock = _from_dataclass(DangerZone, "SdzBlock", override={"aided": list[AidedZone]})
 
 
 # ``verdict``: :class:`hazard.pipeline.verdict.Verdict` without ``warnings`` (report.json's top level)
@@ -475,7 +424,7 @@ class ReportModel(_Strict):
     attenuation_per_m: Number
     limiting_aperture: LimitingAperture  # type: ignore[valid-type]
     beam: BeamBlock
-    sdz: Optional[SdzBlock]
+    sdz: Optional[SdzBlock]  # type: ignore[valid-type]
     stages: list[StageRecord]  # type: ignore[valid-type]
     times_s: TimesBlock
     targets: list[TargetReport]

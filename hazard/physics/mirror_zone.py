@@ -94,7 +94,13 @@ def side_view_ring(zone: MirrorZone, to_2d) -> np.ndarray | None:
 def mirror_stops_m(result) -> dict:
     """Per target, where the analysis stops its mirror beam's farthest ray [m] (report.json
     ``sdz.mirror_beams[].max_reach_m``; None or inf where nothing stops it)."""
-    return {m["target"]: m.get("max_reach_m") for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}
+    return {m.target: m.max_reach_m for m in _mirror_beams(result)}
+
+
+def _mirror_beams(result) -> tuple:
+    """The result's mirror beams (:class:`hazard.pipeline.sdz.MirrorBeam`; none without a danger zone or that stage)."""
+    z = getattr(result, "sdz", None)
+    return () if z is None else z.mirror_beams or ()
 
 def _irradiance(spot, pts, gain, mu, states) -> np.ndarray:
 
@@ -304,14 +310,14 @@ def eye_rows(result, row) -> list:
     spec = result.scene.spec
     pupil_m = 0.5 * limiting_aperture_m(spec.laser.wavelength_nm, spec.exposure.duration_s)  # the standard's aperture (7 mm at 400-1400 nm)
     stops = mirror_stops_m(result)
-    entry = {m["target"]: m for m in ((getattr(result, "sdz", None) or {}).get("mirror_beams") or [])}.get(row.name, {})
+    entry = {m.target: m for m in _mirror_beams(result)}.get(row.name)
     out = [("naked eye", 1.0, pupil_m, row.specular_nohd_dynamic_m, stops.get(row.name))]
     for a in row.aided or []:
         nohd = a.get("specular_nohd_dynamic_m")
         if not nohd:
             continue
         m, d = float(a["magnification"]), float(a["objective_diameter_m"])
-        stop = (entry.get("aided") or {}).get("max_reach_m", stops.get(row.name))
+        stop = entry.aided.max_reach_m if entry is not None and entry.aided is not None else stops.get(row.name)
         out.append((f"{m:g}x{1e3 * d:g} optics", optical_gain(m, d, a.get("transmission", 1.0)),
                     0.5 * min(d, 2 * PUPIL_RADIUS_M * m), nohd, stop))  # an aid delivers into the 7 mm pupil (hazard.physics.aperture)
     return out

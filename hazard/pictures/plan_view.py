@@ -79,17 +79,17 @@ class PlanViewDisplay(DisplayBase):
     def from_result(cls, result) -> "PlanViewDisplay":
         scene = result.scene
         off = np.asarray(scene.offset_m, float)
-        z = getattr(result, "sdz", None) or {}
+        z = getattr(result, "sdz", None)
         laser = np.asarray(scene.laser_position_m, float) + off
         reach = aim_reach_m(result)
         aim = np.array([laser[:2], laser[:2] + np.asarray(scene.laser_direction, float)[:2] * reach])
-        zone = np.asarray(z["polygon_m"], float) if z.get("polygon_m") else None
+        zone = np.asarray(z.polygon_m, float) if z is not None and z.polygon_m else None
         aim = clip_to_zone(aim, zone)
-        aided = [(f"LSDZ through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", np.asarray(a["polygon_m"], float))
-                 for a in z.get("aided", [])]
+        aided = [(f"LSDZ through {a.aid.magnification:g}x{1e3 * a.aid.objective_diameter_m:g} optics", np.asarray(a.polygon_m, float))
+                 for a in (() if z is None else z.aided)]
         boundary = np.asarray(scene.spec.range.boundary_m, float) if scene.spec.range is not None else None
         obs = result.observers
-        nominal = np.asarray(z["nominal"]["polygon_m"], float) if z.get("nominal") else None
+        nominal = np.asarray(z.nominal.polygon_m, float) if z is not None and z.nominal is not None else None
         with_optics = np.array([o is not None for o in obs.observers.optics], bool)
         d = cls(f"{scene.name}: plan view", laser[:2], aim, zone, _zone_label(z), aided, nominal, boundary,
                    _targets(result, off), _mirrors(result, off), *_footprint(result, off), _contours(scene, off),
@@ -332,26 +332,28 @@ def beam_ends(result, aim_end_xy, off) -> list:
     (with the lit targets named when the beam passes them: a target is not a backstop), a
     backstop, or the 100 km drawn of an unbounded zone. The same reach and reason as the
     text (report.json ``sdz``), so picture and text agree."""
-    z = getattr(result, "sdz", None) or {}
-    out = []
+    z = getattr(result, "sdz", None)
+    out: list = []
+    if z is None:
+        return out + _mirror_ends(result, off)
     laser = (np.asarray(result.scene.laser_position_m, float) + off)[:2]
     aim = np.asarray(result.scene.laser_direction, float)[:2]
     horizontal = float(np.hypot(*aim))
-    if z.get("polygon_m"):
-        r = float(z.get("max_range_m") or 0.0)
+    if z.polygon_m:
+        r = float(z.max_range_m or 0.0)
         why = _zone_why(result, z, r)
         run = float(np.hypot(*(np.asarray(aim_end_xy, float) - laser)))
         text = f"danger zone ends at {_metres(min(r, 1e5))} ({why})"
         if horizontal > 0 and run < 0.99 * min(r, 1e5) * horizontal:  # the aim's own direction stops sooner
             text = f"aim line ends at {_metres(run / horizontal)}; the zone reaches {_metres(min(r, 1e5))} ({why})"
         out.append((np.asarray(aim_end_xy, float), text))
-    for a in z.get("aided") or []:
-        r = float(a.get("max_range_m") or 0.0)
-        if not (a.get("polygon_m") and r > float(z.get("max_range_m") or 0.0) * (1 + 1e-9) and horizontal > 0):
+    for a in z.aided:
+        r = float(a.max_range_m or 0.0)
+        if not (a.polygon_m and r > float(z.max_range_m or 0.0) * (1 + 1e-9) and horizontal > 0):
             continue  # an aided zone ending where the naked one does shares its end mark
-        ring = np.asarray(a["polygon_m"], float)
+        ring = np.asarray(a.polygon_m, float)
         end = clip_to_zone(np.array([laser, laser + aim * min(r, 1e5)]), ring)[1]
-        eye = f"{a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics"
+        eye = f"{a.aid.magnification:g}x{1e3 * a.aid.objective_diameter_m:g} optics"
         out.append((end, f"danger zone through {eye} ends at {_metres(min(r, 1e5))} ({_zone_why(result, a, r)})"))
     out += _mirror_ends(result, off)
     return out
@@ -370,9 +372,9 @@ def _passed_targets(result, reach_m) -> str:
 
 
 def _zone_why(result, zone, reach_m) -> str:
-    """Why a danger zone ``zone`` (report.json ``sdz`` or one of its ``aided``) ends at ``reach_m``."""
+    """Why a danger zone ``zone`` (:class:`hazard.pipeline.sdz.GroundZone`: report.json ``sdz`` or one of its ``aided``) ends at ``reach_m``."""
     passes = _passed_targets(result, reach_m)
-    if zone.get("contained"):
+    if zone.contained:
         return "every direction stopped by a backstop"
     if not math.isfinite(reach_m) or reach_m > 1e5:
         return "unbounded: drawn to 100 km" + passes
@@ -475,7 +477,7 @@ def clip_to_zone(aim, ring) -> np.ndarray:
 def aim_reach_m(result) -> float:
     """How far the aim line is drawn [m]: the danger zone's range, at most 100 km (an
     unbounded zone is drawn to 100 km, never to 0); 0 without a zone."""
-    r = float((result.sdz or {}).get("max_range_m", 0.0) or 0.0)
+    r = 0.0 if result.sdz is None else float(result.sdz.max_range_m or 0.0)
     return min(r, 1e5) if math.isfinite(r) else 1e5
 
 
@@ -679,12 +681,12 @@ def matplotlib_circle(xy, r, colour, style, label=None, lw=0.8):
 
 
 def _zone_label(z) -> str:
-    if not z:
+    if z is None:
         return "LSDZ"
-    d = z["directions"]
-    what = {"aim": "aim only", "cone": f"pointing cone {d['buffer_rad']:.2g} rad", "sector": "sector + buffer"}[d["kind"]]
-    what += " + aim track" if d.get("aim_track") else ""
-    state = "contained" if z["contained"] else "NOT contained"
+    d = z.directions
+    what = {"aim": "aim only", "cone": f"pointing cone {d.buffer_rad:.2g} rad", "sector": "sector + buffer"}[d.kind]
+    what += " + aim track" if d.aim_track else ""
+    state = "contained" if z.contained else "NOT contained"
     return f"laser surface danger zone ({what}; {state})"
 
 

@@ -113,7 +113,7 @@ def hazard_result(r, stages=()) -> HazardResult:
         spill_w=built.spill_w, blocked_w=built.blocked_w, beam_power_w=traced.beam.power_w,
         footprint_static=fp.static, footprint_dynamic=fp.dynamic, notes=notes, spots=built.spots, beam=traced.beam,
         states=hist.states, beam_sampling=beam_stage.beam_sampling(traced.cells, built, scene.spec.analysis.beam_rtol, traced.square),
-        spill=r["spill"].summary, sdz=r["sdz"].zone if beams is None else {**r["sdz"].zone, "mirror_beams": beams},
+        spill=r["spill"].summary, sdz=r["sdz"].zone if beams is None else replace(r["sdz"].zone, mirror_beams=beams),
         motion=r["motion"].motion,
         extended_source=None if ext is None else ext.summary,
         visual_interference=None if air is None else air.visual_interference,
@@ -217,11 +217,11 @@ def _sdz(log, crossings, mpe, rays) -> SdzResult:
     scene = crossings.scene
     with log.run("sdz") as st:
         out = sdz.danger_zone(scene, mpe.exposure.irradiance_w_m2, mpe.attenuation_per_m, lobes.scene_aids(scene), rays.ray_scene)
-        d = out["directions"]
-        st.detail = (f"{d['count']} direction(s) ({d['kind']}, buffer {d['buffer_rad']:.3g} rad, step {d['step_rad']:.3g} rad); "
-                     f"{out['area_m2']:.4g} m^2 out to {out['max_range_m']:.4g} m; "
-                     + ("contained by backstops" if out["contained"] else f"{out['escaping_directions']} direction(s) reach their NOHD "
-                        f"({out['nohd_m']:.4g} m) without a backstop" + (", some above the horizon" if out["above_horizon"] else "")))
+        d = out.directions
+        st.detail = (f"{d.count} direction(s) ({d.kind}, buffer {d.buffer_rad:.3g} rad, step {d.step_rad:.3g} rad); "
+                     f"{out.area_m2:.4g} m^2 out to {out.max_range_m:.4g} m; "
+                     + ("contained by backstops" if out.contained else f"{out.escaping_directions} direction(s) reach their NOHD "
+                        f"({out.nohd_m:.4g} m) without a backstop" + (", some above the horizon" if out.above_horizon else "")))
     return SdzResult(out)
 
 

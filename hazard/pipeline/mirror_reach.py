@@ -18,11 +18,13 @@ not cast (its rays are the samples'): said in the stage detail.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from hazard.physics.specular import mirror_directions
 from hazard.pipeline.backstops import first_backstop_rays
-from hazard.pipeline.sdz import UNBOUNDED_DRAW_M, boundary_polygon
+from hazard.pipeline.sdz import UNBOUNDED_DRAW_M, MirrorBeam, MirrorReach, boundary_polygon
 
 __all__ = ["mirror_beams", "summary"]
 
@@ -41,7 +43,7 @@ def _rays(spot) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(spot.points, float) + 1e-6 * max(spot.size_m, 1e-3) * r, r
 
 
-def _one(scene, spot, nohd_m, ray_scene, boundary) -> dict:
+def _one(scene, spot, nohd_m, ray_scene, boundary) -> MirrorBeam:
     """One mirror's beam out to ``nohd_m`` (see the module notes)."""
     from shapely.geometry import LineString, MultiLineString
 
@@ -49,17 +51,18 @@ def _one(scene, spot, nohd_m, ray_scene, boundary) -> dict:
     stop = first_backstop_rays(o, r, ray_scene, len(scene.targets))
     reach = np.minimum(stop, nohd_m)
     stopped = np.isfinite(stop) & (stop <= nohd_m)
-    out = {"target": spot.target.name, "nohd_m": nohd_m, "max_reach_m": float(reach.max()), "rays": int(len(r)),
-           "contained": bool(nohd_m <= 0 or stopped.all()), "above_horizon": bool(nohd_m > 0 and np.any(~stopped & (r[:, 2] > 0)))}
+    leaves = None
     if boundary is not None and nohd_m > 0:
         ends = o + r * np.minimum(reach, UNBOUNDED_DRAW_M)[:, None]
         lines = MultiLineString([LineString([a[:2], b[:2]]) for a, b in zip(o, ends) if np.hypot(*(b - a)[:2]) > 0])
         outside = lines.difference(boundary) if not lines.is_empty else lines
-        out["leaves_boundary"] = bool(outside.length > 1e-9)
-    return out
+        leaves = bool(outside.length > 1e-9)
+    return MirrorBeam(target=spot.target.name, nohd_m=nohd_m, max_reach_m=float(reach.max()), rays=int(len(r)),
+                      contained=bool(nohd_m <= 0 or stopped.all()), above_horizon=bool(nohd_m > 0 and np.any(~stopped & (r[:, 2] > 0))),
+                      leaves_boundary=leaves)
 
 
-def mirror_beams(scene, rows, spots, ray_scene) -> list:
+def mirror_beams(scene, rows, spots, ray_scene) -> tuple[MirrorBeam, ...]:
     """Per lit mirror target: its beam's reach and containment, naked and aided
     (report.json ``sdz.mirror_beams``; see the module notes)."""
     by_name = {r.name: r for r in rows}
@@ -73,9 +76,10 @@ def mirror_beams(scene, rows, spots, ray_scene) -> list:
         entry = _one(scene, sp, naked, ray_scene, boundary)
         if aided > naked:
             a = _one(scene, sp, aided, ray_scene, boundary)
-            entry["aided"] = {k: a[k] for k in a if k not in ("target", "rays")}
+            entry = replace(entry, aided=MirrorReach(nohd_m=a.nohd_m, max_reach_m=a.max_reach_m, contained=a.contained,
+                                                     above_horizon=a.above_horizon, leaves_boundary=a.leaves_boundary))
         out.append(entry)
-    return out
+    return tuple(out)
 
 
 def summary(entries) -> str:
@@ -84,9 +88,9 @@ def summary(entries) -> str:
         return "no lit mirror"
     parts = []
     for e in entries:
-        fate = "contained by backstops" if e["contained"] else (
-            f"reaches its NOHD {e['nohd_m']:.4g} m without a backstop" + (", above the horizon" if e["above_horizon"] else ""))
-        if e.get("leaves_boundary"):
+        fate = "contained by backstops" if e.contained else (
+            f"reaches its NOHD {e.nohd_m:.4g} m without a backstop" + (", above the horizon" if e.above_horizon else ""))
+        if e.leaves_boundary:
             fate += ", LEAVES the range boundary"
-        parts.append(f"{e['target']}: {fate} ({e['rays']} sample rays; the beam's width about them not cast)")
+        parts.append(f"{e.target}: {fate} ({e.rays} sample rays; the beam's width about them not cast)")
     return "; ".join(parts)

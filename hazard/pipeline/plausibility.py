@@ -42,7 +42,8 @@ def _target_distance_m(result):
 
 def _short_nohd(result) -> list:
     """The direct beam's NOHD under NOHD_TARGET_FRACTION of the distance to the target."""
-    nohd = (getattr(result, "sdz", None) or {}).get("nohd_m")
+    z = getattr(result, "sdz", None)
+    nohd = None if z is None else z.nohd_m
     dist, name = _target_distance_m(result)
     if nohd is None or dist is None or not nohd < NOHD_TARGET_FRACTION * dist:
         return []

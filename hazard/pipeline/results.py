@@ -17,6 +17,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through t
     from hazard.physics.mpe import UV24hResult
     from hazard.physics.visual import VisualInterference
     from hazard.pipeline.airspace import AirspaceCheck
+    from hazard.pipeline.sdz import DangerZone
     from hazard.pipeline.extended_source import ExtendedSourceSummary
     from hazard.pipeline.motion_stage import MotionResult
     from hazard.pipeline.spill import SpillSummary
@@ -218,7 +219,7 @@ class HazardResult:
     extended_source: ExtendedSourceSummary | None = None  # C_E summary for the report (hazard.pipeline.extended_source); None: not run
     beam_sampling: BeamSampling | None = None  # rays, levels, error bound, exact targets (hazard.pipeline.spots.beam_sampling); None: not traced
     spill: SpillSummary | None = None  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill); None: not run
-    sdz: dict = field(default_factory=dict)  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz)
+    sdz: DangerZone | None = None  # the laser surface danger zone of the direct beam (hazard.pipeline.sdz), mirror beams merged in
     motion: MotionResult | None = None  # hazard.pipeline.motion_stage.MotionResult: tracks and fixed observers over time (None: nothing moves)
     visual_interference: VisualInterference | None = None  # FAA levels' distances per path (hazard.physics.visual); None: the airspace stage has not run
     airspace: AirspaceCheck | None = None  # the flight zones' checks (hazard.pipeline.airspace); None: no [airspace] zones
@@ -265,7 +266,7 @@ class HazardResult:
 
         tracks = [] if self.motion is None else self.motion.tracks()
         zones = () if self.airspace is None else self.airspace.zones
-        return bool(np.any(self.hazardous)) or positive((self.sdz or {}).get("nohd_m")) or any(
+        return bool(np.any(self.hazardous)) or positive(None if self.sdz is None else self.sdz.nohd_m) or any(
             p.summary["hazardous"] for p in tracks) or any(not z.holds for z in zones) or any(
             (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
             or positive(t.specular_nohd_static_m) or positive(t.specular_nohd_dynamic_m)

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -50,9 +51,9 @@ from scenes.geometry import direction_in_sector, widened_azimuths_rad
 from hazard.physics.beam import perp_basis
 from hazard.pipeline.backstops import first_backstop_rays
 from hazard.pipeline.pointing import aim_track_directions
-from hazard.pipeline.spill import direct_nohds
+from hazard.pipeline.spill import AidedNohd, direct_nohds
 
-__all__ = ["Directions", "pointing_directions", "bearing_vectors", "danger_zone", "zone_polygon", "MAX_RAYS"]
+__all__ = ["DangerZone", "GroundZone", "AidedZone", "NominalZone", "SdzDirections", "MirrorReach", "MirrorBeam", "Directions", "pointing_directions", "bearing_vectors", "danger_zone", "zone_polygon", "MAX_RAYS"]
 
 MAX_RAYS = 1_000_000  # directions cast per zone (a sector finer than this gets a coarser step, said)
 CONE_STEP = 1.0 / 32  # cone: ring and arc step in buffer angles (area overestimate 0.5-2.2 %, 4 ms: README table)
@@ -60,6 +61,255 @@ SECTOR_STEP = 1.0 / 4  # sector: lattice step in buffer angles (range-safety.md 
 SECTOR_STEP_NO_BUFFER_RAD = 1e-3  # sector without a pointing error: 1 mrad steps
 UNBOUNDED_DRAW_M = 1e5  # an infinite NOHD's zone is drawn this far (its area and range are reported as inf)
 BUFFER_QUAD_SEGS = 16  # segments per quarter circle of the widened zone's round corners
+
+
+@dataclass(frozen=True, kw_only=True)
+class MirrorReach:
+    """How far a mirror beam reaches and whether it is contained (report.json
+    ``sdz.mirror_beams[].aided``, and the naked-eye keys of ``sdz.mirror_beams[]``).
+
+    Attributes
+    ----------
+    nohd_m : float
+        The target's largest specular NOHD used for every sample ray [m].
+    max_reach_m : float
+        The farthest reach min(first backstop, NOHD) of its rays [m].
+    contained : bool
+        Every ray is stopped by a backstop before the NOHD (or the NOHD is 0).
+    above_horizon : bool
+        A ray not stopped rises above the horizon.
+    leaves_boundary : bool or None
+        A ray's ground track leaves the ``[range]`` boundary; None (absent): no ``[range]`` or NOHD 0.
+    """
+
+    nohd_m: float
+    max_reach_m: float
+    contained: bool
+    above_horizon: bool
+    leaves_boundary: bool | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("leaves_boundary",)
+
+    def to_dict(self) -> dict:
+        out = {"nohd_m": self.nohd_m, "max_reach_m": self.max_reach_m, "contained": self.contained,
+               "above_horizon": self.above_horizon}
+        if self.leaves_boundary is not None:
+            out["leaves_boundary"] = self.leaves_boundary
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class MirrorBeam(MirrorReach):
+    """One lit mirror's beam (:func:`hazard.pipeline.mirror_reach.mirror_beams`; report.json
+    ``sdz.mirror_beams[]``), naked eye, and through the aid that reaches furthest.
+
+    Attributes
+    ----------
+    target : str
+        The mirror target's name.
+    rays : int
+        How many sample rays were cast.
+    aided : MirrorReach or None
+        The beam out to the largest aided specular NOHD; None (absent): no aid reaches further.
+    """
+
+    target: str
+    rays: int
+    aided: MirrorReach | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("leaves_boundary", "aided")
+
+    def to_dict(self) -> dict:
+        out = {"target": self.target, "nohd_m": self.nohd_m, "max_reach_m": self.max_reach_m, "rays": self.rays,
+               "contained": self.contained, "above_horizon": self.above_horizon}
+        if self.leaves_boundary is not None:
+            out["leaves_boundary"] = self.leaves_boundary
+        if self.aided is not None:
+            out["aided"] = self.aided.to_dict()
+        return out
+
+
+@dataclass(frozen=True)
+class SdzDirections:
+    """The directions the danger zone was cast over (report.json ``sdz.directions``).
+
+    Attributes
+    ----------
+    kind : str
+        What they cover: ``"aim"``, ``"cone"`` or ``"sector"``.
+    aim_track : bool
+        A slewing beam's track is among them.
+    count : int
+        How many directions were cast.
+    step_rad : float
+        The sampling step [rad].
+    buffer_rad : float
+        The buffer angle theta_b [rad].
+    pointing_error_rad : float
+        The scene's pointing error [rad].
+    pointing_error_kind : str
+        Whether it is a bound or standard deviations.
+    pointing_error_sigmas : float or None
+        How many standard deviations the buffer is (None: a bound).
+    pointing_error_source : str
+        Where the pointing error comes from, in words.
+    """
+
+    kind: str
+    aim_track: bool
+    count: int
+    step_rad: float
+    buffer_rad: float
+    pointing_error_rad: float
+    pointing_error_kind: str
+    pointing_error_sigmas: float | None
+    pointing_error_source: str
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "aim_track": self.aim_track, "count": self.count, "step_rad": self.step_rad,
+                "buffer_rad": self.buffer_rad, "pointing_error_rad": self.pointing_error_rad,
+                "pointing_error_kind": self.pointing_error_kind, "pointing_error_sigmas": self.pointing_error_sigmas,
+                "pointing_error_source": self.pointing_error_source}
+
+
+@dataclass(frozen=True, kw_only=True)
+class GroundZone:
+    """One danger zone on the ground in world coordinates (:func:`_zone_dict`; the zone keys of
+    report.json ``sdz`` and of each ``sdz.aided[]``).
+
+    Attributes
+    ----------
+    nohd_m : float
+        The NOHD along every direction [m] (inf: unbounded).
+    polygon_m : tuple of tuple of float
+        The zone's outline, world x, y [m] (rounded to 1 mm).
+    area_m2 : float
+        Its area [m^2] (inf: unbounded; 0 for a NOHD of 0).
+    unbounded : bool
+        Some direction reaches an infinite NOHD without a backstop.
+    max_range_m : float
+        The farthest reach min(NOHD, first backstop) over the directions [m].
+    hazard_half_width_m : float
+        The beam's largest hazardous half-width the zone is widened by [m].
+    contained : bool
+        Every direction ends on a backstop before its NOHD.
+    escaping_directions : int
+        How many directions reach their NOHD without a backstop.
+    above_horizon : bool
+        One of those rises above the horizon.
+    escaping_bearing_deg, escaping_elevation_deg : tuple of float or None
+        ``[first, last]`` compass bearing [deg] and ``[low, high]`` elevation [deg] the escaping
+        directions span (:func:`escaping_span_deg`); None (the keys absent): none escapes.
+    leaves_boundary : bool or None
+        The zone leaves the ``[range]`` boundary; None (absent): no ``[range]``.
+    outside_boundary_m2 : float or None
+        Its area outside the boundary [m^2]; None (absent): no ``[range]``.
+    """
+
+    nohd_m: float
+    polygon_m: tuple[tuple[float, ...], ...]
+    area_m2: float
+    unbounded: bool
+    max_range_m: float
+    hazard_half_width_m: float
+    contained: bool
+    escaping_directions: int
+    above_horizon: bool
+    escaping_bearing_deg: tuple[float, ...] | None = None
+    escaping_elevation_deg: tuple[float, ...] | None = None
+    leaves_boundary: bool | None = None
+    outside_boundary_m2: float | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("escaping_bearing_deg", "escaping_elevation_deg", "leaves_boundary",
+                                                   "outside_boundary_m2")
+
+    def zone_dict(self) -> dict:
+        """The zone's keys as report.json writes them (the optional ones only when set)."""
+        out = {"nohd_m": self.nohd_m, "polygon_m": [list(p) for p in self.polygon_m], "area_m2": self.area_m2,
+               "unbounded": self.unbounded, "max_range_m": self.max_range_m, "hazard_half_width_m": self.hazard_half_width_m,
+               "contained": self.contained, "escaping_directions": self.escaping_directions, "above_horizon": self.above_horizon}
+        if self.escaping_bearing_deg is not None:
+            out["escaping_bearing_deg"] = list(self.escaping_bearing_deg)
+        if self.escaping_elevation_deg is not None:
+            out["escaping_elevation_deg"] = list(self.escaping_elevation_deg)
+        if self.leaves_boundary is not None:
+            out["leaves_boundary"] = self.leaves_boundary
+        if self.outside_boundary_m2 is not None:
+            out["outside_boundary_m2"] = self.outside_boundary_m2
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class AidedZone(GroundZone):
+    """The danger zone through one optical aid (report.json ``sdz.aided[]``: the aid's keys,
+    then the zone's).
+
+    Attributes
+    ----------
+    aid : AidedNohd
+        The aid and its direct-beam NOHD [m] (:class:`hazard.pipeline.spill.AidedNohd`; its
+        ``nohd_m`` is the zone's).
+    """
+
+    aid: AidedNohd
+
+    def to_dict(self) -> dict:
+        return {**self.aid.to_dict(), **self.zone_dict()}
+
+
+@dataclass(frozen=True)
+class NominalZone:
+    """A sector's zone without the pointing buffer (report.json ``sdz.nominal``).
+
+    Attributes
+    ----------
+    polygon_m : tuple of tuple of float
+        Its outline, world x, y [m].
+    area_m2 : float
+        Its area [m^2] (inf: unbounded).
+    """
+
+    polygon_m: tuple[tuple[float, ...], ...]
+    area_m2: float
+
+    def to_dict(self) -> dict:
+        return {"polygon_m": [list(p) for p in self.polygon_m], "area_m2": self.area_m2}
+
+
+@dataclass(frozen=True, kw_only=True)
+class DangerZone(GroundZone):
+    """The laser surface danger zone of the direct beam (:func:`danger_zone`; report.json ``sdz``:
+    ``directions``, the naked-eye zone's keys (:class:`GroundZone`), ``nominal``, ``aided``,
+    ``mirror_beams``).
+
+    Attributes
+    ----------
+    directions : SdzDirections
+        The directions cast.
+    nominal : NominalZone or None
+        A sector with a buffer: the sector itself; None (absent) otherwise.
+    aided : tuple of AidedZone
+        One per optical aid reaching further than the naked eye (may be empty).
+    mirror_beams : tuple of MirrorBeam or None
+        Each lit mirror's beam (:func:`hazard.pipeline.mirror_reach.mirror_beams`, merged in from
+        the ``mirror_beams`` stage by :func:`dataclasses.replace`); None (absent): that stage was skipped.
+    """
+
+    directions: SdzDirections
+    nominal: NominalZone | None = None
+    aided: tuple[AidedZone, ...] = ()
+    mirror_beams: tuple[MirrorBeam, ...] | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = GroundZone.ABSENT_WHEN_NONE + ("nominal", "mirror_beams")
+
+    def to_dict(self) -> dict:
+        out = {"directions": self.directions.to_dict(), **self.zone_dict()}
+        if self.nominal is not None:
+            out["nominal"] = self.nominal.to_dict()
+        out["aided"] = [a.to_dict() for a in self.aided]
+        if self.mirror_beams is not None:
+            out["mirror_beams"] = [m.to_dict() for m in self.mirror_beams]
+        return out
 
 
 @dataclass(frozen=True)
@@ -319,7 +569,7 @@ class Zone:
     """One LSDZ: its polygon (local, shapely), NOHD [m], and per direction the reach [m]
     and whether a backstop stops it."""
 
-    polygon: object
+    polygon: Any  # shapely Polygon
     nohd_m: float
     reach_m: np.ndarray
     stopped: np.ndarray
@@ -345,19 +595,20 @@ def _zone(scene, dirs, backstop_m, nohd_m, power_w, mpe_w_m2, mu) -> Zone:
     return Zone(zone_polygon(origin[:2], ends[:, :2], half + 1e-9), nohd_m, reach, stopped, half)
 
 
-def _zone_dict(scene, z: Zone, dirs, boundary) -> dict:
-    """A zone as report data (world coordinates)."""
+def _zone_fields(scene, z: Zone, dirs, boundary) -> dict:
+    """A zone's :class:`GroundZone` fields (world coordinates)."""
     poly = z.polygon
     ring = np.asarray(poly.exterior.coords) + scene.offset_m[:2]
     escape = ~z.stopped
     unbounded = bool(np.isinf(z.reach_m).any())
     area = math.inf if unbounded else (float(poly.area) if z.nohd_m > 0 else 0.0)  # NOHD 0: only the 1e-9 m pad is drawn
-    out = {"nohd_m": z.nohd_m, "polygon_m": ring.round(3).tolist(), "area_m2": area,
+    out = {"nohd_m": z.nohd_m, "polygon_m": tuple(tuple(p) for p in ring.round(3).tolist()), "area_m2": area,
            "unbounded": unbounded,
            "max_range_m": float(z.reach_m.max()), "hazard_half_width_m": z.half_width_m, "contained": bool(z.stopped.all()),
            "escaping_directions": int(escape.sum()), "above_horizon": bool(np.any(escape & (dirs[:, 2] > 0)))}
     if escape.any():  # which way the zone escapes: said with every "NOT contained"
-        out["escaping_bearing_deg"], out["escaping_elevation_deg"] = escaping_span_deg(dirs[escape])
+        bearing, elevation = escaping_span_deg(dirs[escape])
+        out["escaping_bearing_deg"], out["escaping_elevation_deg"] = tuple(bearing), tuple(elevation)
     if boundary is not None:
         outside = poly.difference(boundary)
         out["leaves_boundary"] = bool(outside.area > 0)
@@ -389,7 +640,7 @@ def boundary_polygon(scene):
     return b if b.is_valid else b.buffer(0)
 
 
-def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
+def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> DangerZone:
     """The LSDZ of the direct beam, naked and through each optical aid (report.json
     ``sdz``; see the module notes). ``ray_scene``: the analysis' ray scene (targets,
     occluders, terrain), None when the scene has no terrain and no occluders."""
@@ -402,18 +653,17 @@ def danger_zone(scene, mpe_w_m2, mu, aids, ray_scene=None) -> dict:
     origin = np.asarray(scene.laser_position_m, float)
     backstop_m = beam_stop_m(laser, origin, d.unit, ray_scene, len(scene.targets), s_max)
     boundary = boundary_polygon(scene)
-    out = {"directions": {"kind": d.kind, "aim_track": d.aim_track, "count": int(len(d.unit)), "step_rad": d.step_rad, "buffer_rad": d.buffer_rad,
-                          "pointing_error_rad": laser.pointing_error_rad, "pointing_error_kind": laser.pointing_error_kind,
-                          "pointing_error_sigmas": laser.pointing_error_sigmas, "pointing_error_source": laser.pointing_error_source}}
-    out.update(_zone_dict(scene, _zone(scene, d.unit, backstop_m, naked, power, mpe_w_m2, mu), d.unit, boundary))
+    dirs = SdzDirections(kind=d.kind, aim_track=d.aim_track, count=int(len(d.unit)), step_rad=d.step_rad, buffer_rad=d.buffer_rad,
+                         pointing_error_rad=laser.pointing_error_rad, pointing_error_kind=laser.pointing_error_kind,
+                         pointing_error_sigmas=laser.pointing_error_sigmas, pointing_error_source=laser.pointing_error_source)
+    naked_zone = _zone_fields(scene, _zone(scene, d.unit, backstop_m, naked, power, mpe_w_m2, mu), d.unit, boundary)
+    nominal = None
     if d.kind == "sector" and d.buffer_rad > 0:  # the sector itself, without the buffer (drawn in the plan view)
         unit, _ = _sector(laser.sector, 0.0)
         stop = beam_stop_m(laser, origin, unit, ray_scene, len(scene.targets), s_max)
         z0 = _zone(scene, unit, stop, naked, power, mpe_w_m2, mu)
-        out["nominal"] = {"polygon_m": (np.asarray(z0.polygon.exterior.coords) + scene.offset_m[:2]).round(3).tolist(),
-                          "area_m2": math.inf if np.isinf(z0.reach_m).any() else float(z0.polygon.area)}
-    out["aided"] = []
-    for a in aided:
-        z = _zone(scene, d.unit, backstop_m, a.nohd_m, power * a.gain, mpe_w_m2, mu)
-        out["aided"].append({**a.to_dict(), **_zone_dict(scene, z, d.unit, boundary)})
-    return out
+        nominal = NominalZone(polygon_m=tuple(tuple(p) for p in (np.asarray(z0.polygon.exterior.coords) + scene.offset_m[:2]).round(3).tolist()),
+                              area_m2=math.inf if np.isinf(z0.reach_m).any() else float(z0.polygon.area))
+    aided_zones = tuple(AidedZone(aid=a, **_zone_fields(scene, _zone(scene, d.unit, backstop_m, a.nohd_m, power * a.gain, mpe_w_m2, mu),
+                                                         d.unit, boundary)) for a in aided)
+    return DangerZone(directions=dirs, nominal=nominal, aided=aided_zones, **naked_zone)

@@ -55,6 +55,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.pipeline.motion_stage import MotionResult
     from hazard.pipeline.airspace import AirspaceCheck
     from hazard.physics.visual import VisualInterference
+    from hazard.pipeline.sdz import DangerZone, MirrorBeam
     from hazard.pipeline.spill import SpillSummary
     from hazard.pipeline.spots import BeamStage
 
@@ -510,10 +511,10 @@ class SpillResult:
 @dataclass(frozen=True)
 class SdzResult:
     """Stage ``sdz``: report.json ``sdz`` without ``mirror_beams`` (the laser surface
-    danger zone of the direct beam: area [m^2], reach [m], containment; keys and types:
-    :class:`hazard.outputs.report_schema.SdzBlock`)."""
+    danger zone of the direct beam: area [m^2], reach [m], containment;
+    :class:`hazard.pipeline.sdz.DangerZone`, the schema's ``SdzBlock`` generated from it)."""
 
-    zone: dict
+    zone: DangerZone
 
 
 @dataclass(frozen=True)
@@ -551,9 +552,9 @@ class KeepoutResult:
 @dataclass(frozen=True)
 class MirrorBeamsResult:
     """Stage ``mirror_beams``: report.json ``sdz.mirror_beams`` (each mirror beam's reach
-    [m] and containment, :class:`hazard.outputs.report_schema.MirrorBeam`); None when skipped (the key is then absent)."""
+    [m] and containment, :class:`hazard.pipeline.sdz.MirrorBeam`); None when skipped (the key is then absent)."""
 
-    beams: list | None
+    beams: tuple[MirrorBeam, ...] | None
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,8 +124,14 @@ def _observers_text(c: VerdictCounts) -> str:
 
 
 def escape_way(z) -> str:
-    """Which way a zone escapes (``escaping_bearing_deg`` / ``escaping_elevation_deg``)."""
-    b, e = z.get("escaping_bearing_deg"), z.get("escaping_elevation_deg")
+    """Which way a zone escapes (``escaping_bearing_deg`` / ``escaping_elevation_deg``): ``z``
+    a :class:`hazard.pipeline.sdz.GroundZone` or its report.json dict."""
+    b: Any
+    e: Any
+    if isinstance(z, dict):  # report.json's (the review page reads the document)
+        b, e = z.get("escaping_bearing_deg"), z.get("escaping_elevation_deg")
+    else:  # hazard.pipeline.sdz.GroundZone
+        b, e = z.escaping_bearing_deg, z.escaping_elevation_deg
     if not b:
         return ""
     bearing = f"bearing {b[0]:g} deg" if b[0] == b[1] else f"bearings {b[0]:g} to {b[1]:g} deg (clockwise)"
@@ -146,42 +153,45 @@ def _not_backstops(result) -> str:
 
 def _sdz_findings(result) -> list:
     """The direct beam's danger zone, naked and aided: not contained (why), or leaving the range."""
-    z = getattr(result, "sdz", None) or {}
+    z = getattr(result, "sdz", None)
+    if z is None:
+        return []
     out = []
     for label, zone in [("the direct beam's danger zone", z)] + [
-            (f"the direct beam's danger zone through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", a)
-            for a in z.get("aided") or []]:
-        nohd = zone.get("nohd_m") or 0.0
+            (f"the direct beam's danger zone through {a.aid.magnification:g}x{1e3 * a.aid.objective_diameter_m:g} optics", a)
+            for a in z.aided]:
+        nohd = zone.nohd_m or 0.0
         if not nohd > 0:
             continue
-        if not zone.get("contained", False):
-            n, count = zone.get("escaping_directions", "?"), (z.get("directions") or {}).get("count", "?")
-            out.append(f"{label} (NOHD {nohd:.4g} m) is NOT contained: {n} of {count} direction(s){escape_way(zone)} reach the NOHD "
-                       f"without a backstop{' (some above the horizon)' if zone.get('above_horizon') else ''}: "
+        if not zone.contained:
+            out.append(f"{label} (NOHD {nohd:.4g} m) is NOT contained: {zone.escaping_directions} of {z.directions.count} "
+                       f"direction(s){escape_way(zone)} reach the NOHD "
+                       f"without a backstop{' (some above the horizon)' if zone.above_horizon else ''}: "
                        f"{_not_backstops(result)}")
-        if zone.get("leaves_boundary"):
-            out.append(f"{label} (NOHD {nohd:.4g} m) LEAVES the range boundary: {zone.get('outside_boundary_m2', math.nan):.4g} "
+        if zone.leaves_boundary:
+            outside = math.nan if zone.outside_boundary_m2 is None else zone.outside_boundary_m2
+            out.append(f"{label} (NOHD {nohd:.4g} m) LEAVES the range boundary: {outside:.4g} "
                        "m^2 of it outside")
     return out
 
 
 def _mirror_findings(result) -> list:
     """Mirror beams not contained or leaving the range, and mirror NOHDs not traced."""
-    z = getattr(result, "sdz", None) or {}
-    beams = z.get("mirror_beams") or []
+    z = getattr(result, "sdz", None)
+    beams = () if z is None else z.mirror_beams or ()
     way = {t.name: _mirror_way(t) for t in result.targets}
     out = []
     for m in beams:
-        for label, e in ((f"the mirror beam of {m['target']!r}", m), (f"the mirror beam of {m['target']!r} through optics", m.get("aided"))):
-            if not e or not (e.get("nohd_m") or 0) > 0:
+        for label, e in ((f"the mirror beam of {m.target!r}", m), (f"the mirror beam of {m.target!r} through optics", m.aided)):
+            if e is None or not (e.nohd_m or 0) > 0:
                 continue
-            if not e.get("contained", False):
-                out.append(f"{label} (specular NOHD {e['nohd_m']:.4g} m{way.get(m['target'], '')}) is NOT contained: no terrain "
-                           f"or occluder stops it within its NOHD{' (it rises above the horizon)' if e.get('above_horizon') else ''}; "
+            if not e.contained:
+                out.append(f"{label} (specular NOHD {e.nohd_m:.4g} m{way.get(m.target, '')}) is NOT contained: no terrain "
+                           f"or occluder stops it within its NOHD{' (it rises above the horizon)' if e.above_horizon else ''}; "
                            "a target is not a backstop")
-            if e.get("leaves_boundary"):
-                out.append(f"{label} (specular NOHD {e['nohd_m']:.4g} m) LEAVES the range boundary")
-    traced = {m["target"] for m in beams}
+            if e.leaves_boundary:
+                out.append(f"{label} (specular NOHD {e.nohd_m:.4g} m) LEAVES the range boundary")
+    traced = {m.target for m in beams}
     for t in result.targets:
         nohd = max([x for x in (t.specular_nohd_static_m, t.specular_nohd_dynamic_m) if x is not None] + [0.0])
         if nohd > 0 and t.name not in traced:

@@ -85,9 +85,9 @@ def test_the_aided_zone_has_its_own_end_mark_at_the_backstop_and_the_naked_one_s
     xy, text = ends["danger zone through 7x50 optics"]
     assert xy[1] == pytest.approx(BERM_FACE_Y_M, abs=0.01)  # on the berm's face, not at the aided NOHD 2.2 km
     assert text.endswith("at 1 km (every direction stopped by a backstop)")
-    aided_zone = berm.sdz["aided"][0]
-    ring = np.asarray(aided_zone["polygon_m"], float)
-    half = aided_zone["hazard_half_width_m"]  # the outline's round cap about the end (0.64 m, inside the 10 m berm)
+    aided_zone = berm.sdz.aided[0]
+    ring = np.asarray(aided_zone.polygon_m, float)
+    half = aided_zone.hazard_half_width_m  # the outline's round cap about the end (0.64 m, inside the 10 m berm)
     assert ring[:, 1].max() <= BERM_FACE_Y_M + half + 0.01  # the aided zone is drawn to the berm, never past
     # the text says the same: the naked zone not contained because a target is not a backstop
     from hazard.pipeline.verdict import zone_findings
@@ -111,27 +111,27 @@ def _check_ends(result):
     from hazard.pictures.plan_view import PlanViewDisplay
 
     d = PlanViewDisplay.from_result(result)
-    z, texts = result.sdz or {}, [t for _, t in d.ends]
+    z, texts = result.sdz, [t for _, t in d.ends]
     laser = np.asarray(result.scene.laser_position_m, float) + result.scene.offset_m
-    zones = ([("danger zone", z)] if z.get("polygon_m") else []) + [
-        (f"danger zone through {a['magnification']:g}x{1e3 * a['objective_diameter_m']:g} optics", a) for a in z.get("aided", [])]
+    zones = ([("danger zone", z)] if z is not None and z.polygon_m else []) + [
+        (f"danger zone through {a.aid.magnification:g}x{1e3 * a.aid.objective_diameter_m:g} optics", a) for a in (() if z is None else z.aided)]
     for name, zone in zones:
-        r = float(zone["max_range_m"])
-        ring = np.asarray(zone["polygon_m"], float)
+        r = float(zone.max_range_m)
+        ring = np.asarray(zone.polygon_m, float)
         if math.isfinite(r):  # drawn no farther than its reach, plus its half-width padded (shapely's cap circumscribed)
-            pad = zone["hazard_half_width_m"] / math.cos(math.pi / (4 * BUFFER_QUAD_SEGS))
+            pad = zone.hazard_half_width_m / math.cos(math.pi / (4 * BUFFER_QUAD_SEGS))
             assert np.hypot(*(ring - laser[:2]).T).max() <= r + pad + 1e-3, name
         near = {sp.target.name: float(np.min(sp.range_from_laser_m)) for sp in result.spots}
         for t in texts:  # a target named as passed lies within the zone's reach (airspace's board, 2 km out, is past its 990 m)
             if t.startswith(f"{name} ends at") and "not a backstop" in t:
                 named = re.findall(r"'([^']+)'", t.split("(its NOHD; ", 1)[1] if "(its NOHD; " in t else t)
                 assert named and all(near[n] < min(r, 1e5) for n in named), (t, near, r)
-        shared = name != "danger zone" and r <= float(z.get("max_range_m", 0.0)) * (1 + 1e-9)
+        shared = name != "danger zone" and r <= float(z.max_range_m) * (1 + 1e-9)
         assert shared or any(t.startswith(f"{name} ends at") or (name == "danger zone" and t.startswith("aim line ends")) for t in texts), name
-    for m in (z.get("mirror_beams") or []):
-        for entry, eye in ((m, "naked"), (m.get("aided"), "aided")):
-            if entry and entry.get("nohd_m", 0) > 0:
-                assert any(t.startswith(f"mirror beam of {m['target']}") for t in texts), (m["target"], eye)
+    for m in (() if z is None else z.mirror_beams or ()):
+        for entry, eye in ((m, "naked"), (m.aided, "aided")):
+            if entry is not None and entry.nohd_m > 0:
+                assert any(t.startswith(f"mirror beam of {m.target}") for t in texts), (m.target, eye)
     for target, eye, ring, start, u in d.mirror_zones:
         row = next(t for t in result.targets if t.name == target)
         (nohd, stop), = [(nohd, stop) for e, _, _, nohd, stop in eye_rows(result, row) if e == eye]
@@ -148,7 +148,7 @@ def _check_elevation(result):
     from hazard.pictures.elevation_view import ElevationViewDisplay
 
     e = ElevationViewDisplay.from_result(result)
-    r = float((result.sdz or {}).get("max_range_m") or 0.0)
+    r = 0.0 if result.sdz is None else float(result.sdz.max_range_m or 0.0)
     ends = [e.aim_sz[1]] + ([e.aim_past[1]] if e.aim_past is not None else [])
     drawn = max(float(np.hypot(*(p - e.aim_sz[0]))) for p in ends)
     assert drawn <= min(r, 1e5) * (1 + 1e-9) + 1e-6, (drawn, r)
@@ -173,8 +173,8 @@ def test_binoculars_aided_zone_past_the_copper_panel_is_marked_and_says_why():
     res = bundled("binoculars")
     _check_ends(res)
     (text,) = [t for _, t in _ends(res) if t.startswith("danger zone through 7x50 optics")]
-    aided = res.sdz["aided"][0]
-    assert f"ends at {aided['max_range_m'] / 1e3:.3g} km (its NOHD; 'copper-panel' not a backstop" in text
+    aided = res.sdz.aided[0]
+    assert f"ends at {aided.max_range_m / 1e3:.3g} km (its NOHD; 'copper-panel' not a backstop" in text
 
 
 @pytest.mark.slow

@@ -120,7 +120,7 @@ def test_the_static_analysis_holds_the_beam_anywhere_on_its_slew():
     on_axis = 4 * 10.0 / (math.pi * d * d)
     assert res.observers.direct_irradiance_w_m2[0] == pytest.approx(on_axis, rel=2e-3)
     assert res.observers.direct_at_aim_irradiance_w_m2[0] == 0.0  # 5 deg off the nominal aim
-    assert res.sdz["directions"]["aim_track"] and res.hazardous[0]
+    assert res.sdz.directions.aim_track and res.hazardous[0]
     doc = json.loads(json.dumps(report_dict(res)))
     validate_report(doc)  # the motion block with an aim track's rates, and a fixed observer over time (issue 35)
     assert doc["motion"]["aim_track"]["azimuth_rate_deg_s"] == 1.0 and doc["motion"]["fixed_observers"]

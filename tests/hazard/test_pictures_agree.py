@@ -80,9 +80,9 @@ def test_the_elevation_aim_line_stops_where_its_centre_meets_a_hill(tmp_path):
     s = np.linspace(s0, s1, 400)[1:-1]  # and is above the ground all the way there
     z = z0 + (s - s0) * (z1 - z0) / (s1 - s0)
     assert np.all(z > ground(s) - 1e-6)
-    assert s1 < float(res.sdz["max_range_m"]) + 1e-6 and 600.0 < s1  # past the target at 600 m, short of the zone's end
+    assert s1 < float(res.sdz.max_range_m) + 1e-6 and 600.0 < s1  # past the target at 600 m, short of the zone's end
     if d.aim_past is not None:  # what goes on is drawn dotted, never past the zone's range
-        assert d.aim_past[1][0] <= float(res.sdz["max_range_m"]) + 1e-6
+        assert d.aim_past[1][0] <= float(res.sdz.max_range_m) + 1e-6
 
 
 def _exaggeration(ax) -> float:

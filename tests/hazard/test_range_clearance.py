@@ -17,10 +17,10 @@ def result():
 
 def test_the_danger_zone_is_contained_by_the_hill_and_stays_on_the_range(result):
     z = result.sdz
-    assert z["directions"]["kind"] == "cone" and z["directions"]["buffer_rad"] == pytest.approx(3 * 5e-5)
-    assert z["contained"] and not z["leaves_boundary"] and not z["above_horizon"]
-    assert z["max_range_m"] < 1700 < z["nohd_m"]  # the hill, not the NOHD, ends it
-    assert all(a["contained"] and a["nohd_m"] > z["nohd_m"] for a in z["aided"])
+    assert z.directions.kind == "cone" and z.directions.buffer_rad == pytest.approx(3 * 5e-5)
+    assert z.contained and z.leaves_boundary is False and not z.above_horizon
+    assert z.max_range_m < 1700 < z.nohd_m  # the hill, not the NOHD, ends it
+    assert all(a.contained and a.nohd_m > z.nohd_m for a in z.aided)
 
 
 def test_the_spill_is_hazardous_on_its_way_and_found_on_the_grid(result):

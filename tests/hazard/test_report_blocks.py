@@ -17,13 +17,14 @@ from hypothesis import strategies as st
 from hazard.outputs.report import json_safe
 from hazard.outputs.map_outputs import MapOutputs
 from hazard.outputs.map_zones import ZONE_KINDS
-from hazard.outputs.report_schema import (AirspaceBlock, ExtendedSourceBlock, FrameBlock, LimitingAperture, MapOutputsBlock, SamplingBlock, SpillBlock,
-                                          Uv24hBlock, VerdictBlock, VisualBlock)
+from hazard.outputs.report_schema import (AidedZone as AidedZoneBlock, AirspaceBlock, ExtendedSourceBlock, FrameBlock, LimitingAperture,
+                                          MapOutputsBlock, SamplingBlock, SdzBlock, SpillBlock, Uv24hBlock, VerdictBlock, VisualBlock)
 from hazard.physics import aperture
 from hazard.physics.mpe import RepetitivePulseResult, UV24hResult, uv_24h_mpe
 from hazard.physics.visual import LevelDistances, TargetLevelDistances, VisualInterference
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe, ExtendedSourceSummary
+from hazard.pipeline.sdz import AidedZone, DangerZone, MirrorBeam, MirrorReach, NominalZone, SdzDirections
 from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
 from hazard.pipeline.spots import BeamSampling, NotReflected
 from hazard.pipeline.verdict import Verdict, VerdictCounts
@@ -62,6 +63,18 @@ visuals = st.builds(VisualInterference, st.booleans(), num, num, text, st.boolea
                     st.none() | text, st.builds(LevelDistances, maybe, maybe, maybe, num),
                     st.dictionaries(text, st.builds(TargetLevelDistances, maybe, maybe, maybe, num, count), max_size=3), text)
 apertures = st.builds(aperture.limiting_aperture, st.floats(180.0, 1e6), st.floats(1e-13, 3e4))  # the whole table's domain
+flag = st.booleans()
+span = st.none() | st.tuples(num, num)
+polygon = _tuple(st.tuples(num, num), 4)
+zone_fields = dict(nohd_m=num, polygon_m=polygon, area_m2=num, unbounded=flag, max_range_m=num, hazard_half_width_m=num,
+                   contained=flag, escaping_directions=count, above_horizon=flag, escaping_bearing_deg=span,
+                   escaping_elevation_deg=span, leaves_boundary=st.none() | flag, outside_boundary_m2=maybe)
+reach_fields = dict(nohd_m=num, max_reach_m=num, contained=flag, above_horizon=flag, leaves_boundary=st.none() | flag)
+aided_zones = st.builds(AidedZone, aid=st.builds(AidedNohd, num, num, num, num, num), **zone_fields)
+mirror_beams = st.builds(MirrorBeam, target=text, rays=count, aided=st.none() | st.builds(MirrorReach, **reach_fields), **reach_fields)
+danger_zones = st.builds(DangerZone, directions=st.builds(SdzDirections, text, flag, count, num, num, num, text, maybe, text),
+                         nominal=st.none() | st.builds(NominalZone, polygon, num), aided=_tuple(aided_zones, 2),
+                         mirror_beams=st.none() | _tuple(mirror_beams, 2), **zone_fields)
 
 kinds = st.sampled_from(ZONE_KINDS)
 map_outputs = st.builds(MapOutputs, _tuple(text), st.dictionaries(text, text, max_size=3), st.sampled_from(["local", "site"]),
@@ -76,7 +89,7 @@ frames = st.builds(FrameDescription, st.just("local"), text) | st.builds(
 
 CASES = [(verdicts, VerdictBlock), (samplings, SamplingBlock), (spills, SpillBlock), (extended, ExtendedSourceBlock),
          (airspaces, AirspaceBlock), (visuals, VisualBlock), (apertures, LimitingAperture), (map_outputs, MapOutputsBlock),
-         (frames, FrameBlock)]
+         (frames, FrameBlock), (danger_zones, SdzBlock)]
 
 
 def _written(block) -> dict:
@@ -191,3 +204,32 @@ def test_the_visual_block_is_written_in_its_fields_order_and_copied(vi):
         assert got is want or got == want
     with pytest.raises(ValueError, match="level='sz'"):
         vi.direct.distance_m("sz")
+
+
+@FEW
+@given(aided_zones)
+def test_an_aided_danger_zone_is_the_aids_keys_then_the_zones(zone):
+    """``sdz.aided[]`` is written flat: :class:`AidedNohd`'s keys, then the zone's (its
+    ``nohd_m`` the zone's); the schema model is both types' fields, nothing hand-written."""
+    doc = _written(zone)
+    aid = [f.name for f in dataclasses.fields(AidedNohd)]
+    assert list(doc)[:len(aid)] == aid and doc["nohd_m"] == json.loads(json.dumps(json_safe(zone.nohd_m)))
+    assert set(AidedZoneBlock.model_fields) == set(aid) | {f.name for f in dataclasses.fields(AidedZone)} - {"aid"}
+    assert set(doc) <= set(AidedZoneBlock.model_fields)
+    AidedZoneBlock.model_validate(doc, strict=True)
+
+
+def test_the_mirror_beams_are_merged_into_a_copy_of_the_danger_zone():
+    """The ``mirror_beams`` stage's beams join the ``sdz`` block by :func:`dataclasses.replace`: the
+    sdz stage's own result keeps no ``mirror_beams`` key, the merged one writes them after ``aided``."""
+    d = SdzDirections("aim", False, 1, 0.0, 0.0, 0.0, "bound", None, "")
+    zone = DangerZone(directions=d, nohd_m=10.0, polygon_m=((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)), area_m2=0.5, unbounded=False,
+                      max_range_m=10.0, hazard_half_width_m=0.1, contained=True, escaping_directions=0, above_horizon=False)
+    beam = MirrorBeam(target="m", rays=4, nohd_m=5.0, max_reach_m=5.0, contained=False, above_horizon=True)
+    merged = dataclasses.replace(zone, mirror_beams=(beam,))
+    assert "mirror_beams" not in zone.to_dict() and zone.mirror_beams is None
+    assert list(merged.to_dict())[-2:] == ["aided", "mirror_beams"]
+    assert merged.to_dict()["mirror_beams"] == [{"target": "m", "nohd_m": 5.0, "max_reach_m": 5.0, "rays": 4, "contained": False,
+                                                 "above_horizon": True}]
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        merged.nohd_m = 0.0  # type: ignore[misc]

@@ -202,7 +202,7 @@ def test_datasheet_1_over_e2_gives_the_right_nohd():
     for name, extra in (("right", conv), ("wrong", "")):
         res = analyze(_load(_scene(laser="wavelength_nm = 1064.0\n" + laser + "\n" + extra, exposure='duration = "100 s"')), threads=1)
         assert res.mpe_w_m2 == pytest.approx(E, rel=1e-12)
-        got[name] = res.sdz["nohd_m"]
+        got[name] = res.sdz.nohd_m
     assert got["right"] == pytest.approx(right, rel=1e-9)
     assert got["wrong"] == pytest.approx(wrong, rel=1e-9)
 

@@ -346,10 +346,10 @@ def summary(res, target_names):
         "peak_irradiance_w_m2": (col("peak_irradiance_w_m2"), np.zeros(len(ts))),
         "specular_nohd_static_m": (col("specular_nohd_static_m"), np.zeros(len(ts))),
     }
-    sdz = res.sdz or {}
+    sdz = res.sdz
 
     def one(key):
-        v = sdz.get(key)
+        v = None if sdz is None else getattr(sdz, key)
         return np.array([np.nan if v is None else v], bool if isinstance(v, bool) else float), np.zeros(1)
 
     beam = {f"sdz {k}": one(k) for k in ("nohd_m", "max_range_m", "hazard_half_width_m", "contained")}

@@ -108,7 +108,7 @@ def _power_linearity(R1, a, phi, f, tilt, az, mirror, mu, k, power, obs):
 def _check_nohds(base, scaled, beam, mu, k, mirror, size):
     """Each NOHD follows its formula from the base run's value."""
     a, phi = beam.a, beam.phi
-    n0, nk = base.sdz.get("nohd_m"), scaled.sdz.get("nohd_m")
+    n0, nk = base.sdz.nohd_m, scaled.sdz.nohd_m
     if n0 is not None and n0 > 0:
         want = _root(lambda r: -mu * r - 2 * math.log(a + r * phi), n0, k)
         assert nk == pytest.approx(want, rel=1e-7), "direct-beam NOHD"

@@ -62,7 +62,7 @@ def _scene(out_dir_m, **kw):
 
 
 def _entry(res):
-    (entry,) = res.sdz["mirror_beams"]
+    (entry,) = res.sdz.mirror_beams
     return entry
 
 
@@ -71,9 +71,9 @@ def test_a_mirror_beam_in_the_open_is_not_contained_and_is_a_hazard():
     res = hazard.analyze(_scene([1.0, 0.0, -0.05], boundary=nohd / 2))  # descending: every ray below the horizon
     assert res.targets[0].specular_nohd_static_m == pytest.approx(nohd, rel=1e-3)
     e = _entry(res)
-    assert e["nohd_m"] == pytest.approx(nohd, rel=1e-3) and e["max_reach_m"] == pytest.approx(nohd, rel=1e-3)
+    assert e.nohd_m == pytest.approx(nohd, rel=1e-3) and e.max_reach_m == pytest.approx(nohd, rel=1e-3)
     # no terrain: nothing stops it; its ground track (along +x from x ~ 0) crosses x = nohd / 2
-    assert e["contained"] is False and e["leaves_boundary"] is True and e["above_horizon"] is False
+    assert e.contained is False and e.leaves_boundary is True and e.above_horizon is False
     assert res.any_hazard
     import json
 
@@ -85,27 +85,27 @@ def test_a_mirror_beam_in_the_open_is_not_contained_and_is_a_hazard():
 
 def test_a_mirror_beam_inside_a_large_range_still_reaches_its_nohd_in_the_open():
     e = _entry(hazard.analyze(_scene([1.0, 0.0, 0.0], boundary=2 * _mirror_nohd() + 400)))
-    assert e["contained"] is False and e["leaves_boundary"] is False
+    assert e.contained is False and e.leaves_boundary is False
 
 
 def test_a_wall_before_the_nohd_contains_the_mirror_beam():
     nohd = _mirror_nohd()
     wall = nohd / 2
     e = _entry(hazard.analyze(_scene([1.0, 0.0, 0.0], wall_x=wall, boundary=nohd)))
-    assert e["contained"] is True and e["leaves_boundary"] is False
-    assert e["max_reach_m"] == pytest.approx(wall - 0.5, rel=1e-3)  # the wall's near face; the rays start within 1 m of x = 0
+    assert e.contained is True and e.leaves_boundary is False
+    assert e.max_reach_m == pytest.approx(wall - 0.5, rel=1e-3)  # the wall's near face; the rays start within 1 m of x = 0
 
 
 def test_a_wall_beyond_the_nohd_contains_nothing():
     e = _entry(hazard.analyze(_scene([1.0, 0.0, 0.0], wall_x=1.5 * _mirror_nohd())))
-    assert e["contained"] is False and "leaves_boundary" not in e
+    assert e.contained is False and e.leaves_boundary is None
 
 
 @ref.FAST
 @given(rise=st.floats(0.01, 0.5), side=st.sampled_from([1.0, -1.0]))
 def test_a_rising_mirror_beam_is_above_the_horizon(rise, side):
     e = _entry(hazard.analyze(_scene([side, 0.0, rise])))
-    assert e["contained"] is False and e["above_horizon"] is True
+    assert e.contained is False and e.above_horizon is True
 
 
 def test_mirror_beam_hazard_exits_3_with_no_observer(tmp_path):
@@ -131,4 +131,4 @@ def test_a_beam_below_the_mpe_at_its_aperture_has_an_empty_contained_zone():
     assert 4 * power / (math.pi * A * A) < MPE
     res = hazard.analyze(_scene([1.0, 0.0, 0.0], power=power))
     z = res.sdz
-    assert z["nohd_m"] == 0.0 and z["contained"] is True and z["escaping_directions"] == 0 and z["area_m2"] == 0.0
+    assert z.nohd_m == 0.0 and z.contained is True and z.escaping_directions == 0 and z.area_m2 == 0.0

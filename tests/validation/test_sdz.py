@@ -75,11 +75,11 @@ def test_a_horizontal_pointing_cone_sweeps_a_circular_sector(theta):
     z = res.sdz
     h = _half_width(L)
     area = theta * L * L + (2 * L + 2 * theta * L) * h + math.pi * h * h
-    assert z["nohd_m"] == pytest.approx(L, rel=1e-9) and z["max_range_m"] == pytest.approx(L, rel=1e-9)
-    assert z["hazard_half_width_m"] == pytest.approx(h, rel=1e-5) and z["hazard_half_width_m"] >= h
-    assert area * (1 - 1e-6) <= z["area_m2"] <= area * 1.02
-    assert not z["contained"] and z["escaping_directions"] == z["directions"]["count"] and z["above_horizon"]
-    assert z["directions"]["kind"] == "cone" and z["directions"]["buffer_rad"] == theta
+    assert z.nohd_m == pytest.approx(L, rel=1e-9) and z.max_range_m == pytest.approx(L, rel=1e-9)
+    assert z.hazard_half_width_m == pytest.approx(h, rel=1e-5) and z.hazard_half_width_m >= h
+    assert area * (1 - 1e-6) <= z.area_m2 <= area * 1.02
+    assert not z.contained and z.escaping_directions == z.directions.count and z.above_horizon
+    assert z.directions.kind == "cone" and z.directions.buffer_rad == theta
 
 
 CONE_DRAW = dict(beta_deg=st.floats(8.0, 60.0), theta_deg=st.floats(0.5, 5.0), height=st.floats(5.0, 100.0), bearing=st.floats(-3.1, 3.1))
@@ -132,9 +132,9 @@ def _downward_cone_case(beta_deg, theta_deg, height, bearing):
     t_out = z0 / (math.sin(eps) - s_o * PHI / 2 * math.cos(eps))
     h = _half_width(t_out)
     hull = MultiPoint(np.vstack([ground[:, :2], o[:2]]).tolist()).convex_hull.buffer(h, quad_segs=256)
-    assert z["contained"] and z["escaping_directions"] == 0 and not z["above_horizon"]
-    assert r_star * (1 - 1e-6) <= z["max_range_m"] <= t_out * (1 + 1e-5)  # measured along the outer ray itself
-    assert hull.area * (1 - 1e-4) <= z["area_m2"] <= hull.area * (t_out * math.sin(eps) / height) ** 2 * 1.05
+    assert z.contained and z.escaping_directions == 0 and not z.above_horizon
+    assert r_star * (1 - 1e-6) <= z.max_range_m <= t_out * (1 + 1e-5)  # measured along the outer ray itself
+    assert hull.area * (1 - 1e-4) <= z.area_m2 <= hull.area * (t_out * math.sin(eps) / height) ** 2 * 1.05
 
 
 def test_a_wall_across_the_cone_contains_it():
@@ -144,8 +144,8 @@ def test_a_wall_across_the_cone_contains_it():
     res = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], pointing=2e-3, extra=wall, plate_at=(0.0, 250.0, 30.0)))
     assert res.targets[0].spot_power_w > 0
     z = res.sdz
-    assert z["contained"] and 500.0 / math.cos(2e-3) * (1 - 1e-9) <= z["max_range_m"] <= 500.0 / math.cos(2e-3) * (1 + 2e-5)
-    assert z["area_m2"] <= 2e-3 * 500.0**2 * 1.02 + (2 * 500.0 * 1.002 + 2e-3 * 1000) * _half_width(500.0 / math.cos(2e-3)) * 1.02 + 1.0
+    assert z.contained and 500.0 / math.cos(2e-3) * (1 - 1e-9) <= z.max_range_m <= 500.0 / math.cos(2e-3) * (1 + 2e-5)
+    assert z.area_m2 <= 2e-3 * 500.0**2 * 1.02 + (2 * 500.0 * 1.002 + 2e-3 * 1000) * _half_width(500.0 / math.cos(2e-3)) * 1.02 + 1.0
 
 
 def test_a_sector_and_a_range_boundary():
@@ -159,18 +159,18 @@ def test_a_sector_and_a_range_boundary():
     z = res.sdz
     h = _half_width(L)
     area = half * L * L + (2 * L + 2 * half * L) * h + math.pi * h * h
-    assert z["directions"]["kind"] == "sector" and z["directions"]["step_rad"] <= 1e-3 / 4 * (1 + 1e-9)
-    assert area * (1 - 1e-6) <= z["area_m2"] <= area * 1.02
-    assert z["leaves_boundary"]
+    assert z.directions.kind == "sector" and z.directions.step_rad <= 1e-3 / 4 * (1 + 1e-9)
+    assert area * (1 - 1e-6) <= z.area_m2 <= area * 1.02
+    assert z.leaves_boundary
     # the sector without its buffer: half-angle 10 deg exactly
     half0 = math.radians(10.0)
     area0 = half0 * L * L + (2 * L + 2 * half0 * L) * h + math.pi * h * h
-    assert area0 * (1 - 1e-6) <= z["nominal"]["area_m2"] <= area0 * 1.02 and z["nominal"]["area_m2"] < z["area_m2"]
+    assert area0 * (1 - 1e-6) <= z.nominal.area_m2 <= area0 * 1.02 and z.nominal.area_m2 < z.area_m2
     psi = np.linspace(-half, half, 4001)
     sector = MultiPoint([[0.0, 0.0]] + (L * np.stack([np.sin(psi), np.cos(psi)], 1)).tolist()).convex_hull
     from shapely.geometry import box
     outside = sector.difference(box(-1500.0, -1500.0, 1500.0, 1500.0)).area
-    assert z["outside_boundary_m2"] >= outside * (1 - 1e-6)
+    assert z.outside_boundary_m2 >= outside * (1 - 1e-6)
     # report.json's sdz block with its optional keys (nominal, leaves_boundary, escaping_*) against its schema (issue 35)
     import json
 
@@ -191,7 +191,7 @@ def test_a_sigma_pointing_error_needs_its_multiple_and_uses_it():
     sc = scenes.loads(base.replace("[exposure]", 'pointing_error_rad = 1e-4\npointing_error_kind = "sigma"\npointing_error_sigmas = 3.0\n'
                                                  'pointing_error_source = "range SOP table 2"\n[exposure]'))
     z = hazard.analyze(sc).sdz
-    assert z["directions"]["buffer_rad"] == pytest.approx(3e-4) and z["directions"]["pointing_error_source"] == "range SOP table 2"
+    assert z.directions.buffer_rad == pytest.approx(3e-4) and z.directions.pointing_error_source == "range SOP table 2"
 
 
 def test_a_collimated_beam_in_clear_air_is_never_contained():
@@ -202,7 +202,7 @@ def test_a_collimated_beam_in_clear_air_is_never_contained():
                                         tangent=np.array([1.0, 0.0, 0.0]), size=(1.0, 1.0), material=ref.lambertian(0.5))])
     text = text.replace("[exposure]", "pointing_error_rad = 1e-3\n[exposure]").replace("[analysis]", FLAT + "[analysis]")
     z = hazard.analyze(scenes.loads(text)).sdz
-    assert z["unbounded"] and not z["contained"] and z["above_horizon"] and z["escaping_directions"] > 0
+    assert z.unbounded and not z.contained and z.above_horizon and z.escaping_directions > 0
 
 
 @pytest.mark.parametrize("clearance, contained", [(-0.5, False), (1.5, True)])
@@ -218,9 +218,9 @@ def test_a_wall_the_beam_only_clips_does_not_contain_it(clearance, contained):
     top = 30.0 + (rh * 0.5 if clearance < 0 else clearance * s0 * w)
     wall = f'[[occluders]]\nshape = "box"\ncenter_m = [0.0, 501.0, {ref.fmt(top - 20.0)}]\nsize_m = [40.0, 2.0, 40.0]\n'
     z = hazard.analyze(_scene([0.0, 0.0, 30.0], [0.0, 1000.0, 30.0], extra=wall)).sdz
-    assert z["contained"] == contained
+    assert z.contained == contained
     if not contained:
-        assert z["max_range_m"] == pytest.approx(L, rel=1e-9)  # the part over the wall goes on to the NOHD
+        assert z.max_range_m == pytest.approx(L, rel=1e-9)  # the part over the wall goes on to the NOHD
 
 
 def test_an_aim_outside_the_sector_is_in_the_zone():
@@ -231,7 +231,7 @@ def test_an_aim_outside_the_sector_is_in_the_zone():
     z = hazard.analyze(sc).sdz
     from shapely.geometry import Point, Polygon
 
-    zone = Polygon(z["polygon_m"])
+    zone = Polygon(z.polygon_m)
     assert zone.contains(Point(0.0, 0.9 * L)) and zone.contains(Point(0.9 * L, 0.0))
 
 
@@ -321,8 +321,8 @@ def test_a_zone_beyond_100_km_is_drawn_to_its_nohd():
                  tangent=np.array([1.0, 0.0, 0.0]), size=(1.0, 1.0), material=ref.lambertian(0.5))
     text = ref.scene_text(power=P, a=A, phi=phi, position=np.array([0.0, 0.0, 30.0]), aim=np.array([0.0, 1000.0, 30.0]), targets=[plate])
     z = hazard.analyze(scenes.loads(text)).sdz
-    assert l_far > 1.2e5 and z["max_range_m"] == pytest.approx(l_far, rel=1e-9)
-    ring = np.asarray(z["polygon_m"])
+    assert l_far > 1.2e5 and z.max_range_m == pytest.approx(l_far, rel=1e-9)
+    ring = np.asarray(z.polygon_m)
     far = float(ring[:, 1].max())  # along the aim (+y) from the laser at y = 0
-    assert l_far * (1 - 1e-6) <= far <= l_far + z["hazard_half_width_m"] + 1.0
-    assert z["area_m2"] >= 2 * z["hazard_half_width_m"] * l_far * (1 - 1e-6)
+    assert l_far * (1 - 1e-6) <= far <= l_far + z.hazard_half_width_m + 1.0
+    assert z.area_m2 >= 2 * z.hazard_half_width_m * l_far * (1 - 1e-6)

@@ -140,7 +140,7 @@ def _check(az0, width, e0, rise, b, t, L):
               f"elevation_deg = [{ref.fmt(e0)}, {ref.fmt(math.degrees(e1r))}] }}\n")
     res = hazard.analyze(scenes.loads(text.replace("[exposure]", sector + "[exposure]")))
     assert res.mpe_w_m2 == pytest.approx(MPE)
-    zone = Polygon(res.sdz["polygon_m"])
+    zone = Polygon(res.sdz.polygon_m)
     verdict = res.hazardous
     ground = res.observers.position_m[:, :2]
     for i, (p, dist, want) in enumerate(obs):
