@@ -132,8 +132,9 @@ def _driver_text(sens) -> str:
     of = {"exceedance": "of the exceedance", "log_ratio": "of ln(E / MPE): under 10 exceedances in the sample"}
     of_text = of.get(sens.get("of"), f"of {sens.get('of')}")
     driver = sens.get("driver")
-    if driver is None:
-        return f"none: no index defined ({of_text})"
+    if driver is None:  # "of" then says why (risk.results: no sensitivity draw varied the irradiance)
+        why = str(sens.get("of") or "no index defined")
+        return why if why.startswith("none") else f"none: no index defined ({why})"
     index = (sens.get("first_order") or {}).get(driver)
     return f"{driver} (first-order index {fmt_p(index)}, {of_text}; {fmt_number(sens.get('draws'))} base draws)"
 

@@ -235,3 +235,14 @@ def test_map_prints_its_smallest_text_at_6_pt_on_the_portrait_page():
     width_px = imread(io.BytesIO(png)).shape[1]
     assert width_px == seen["width_px"]
     assert printed_pt(seen["text_px_min"], width_px, page_in=(210.0 - 2 * 12.0) / 25.4) >= 6.0
+
+
+def test_a_point_without_a_sensitivity_driver_says_why():
+    """risk.html's driver cell read "none: no index defined (of none: the irradiance does not
+    vary ...)" where no sensitivity draw varied the irradiance: it now says that once."""
+    from hazard.outputs.risk_page import _driver_text
+
+    why = "none: the irradiance does not vary over the 16 sensitivity draws (raise sensitivity_draws)"
+    assert _driver_text({"of": why, "draws": 16, "first_order": {"tilt": None}, "driver": None}) == why
+    assert "of none" not in _driver_text({"of": why, "driver": None})
+    assert _driver_text({"of": "exceedance", "draws": 16, "first_order": {"tilt": 0.5}, "driver": "tilt"}).startswith("tilt (first-order")
