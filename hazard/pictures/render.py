@@ -177,24 +177,23 @@ class Framing:
         return bool(np.isfinite(self.r0_m))
 
     def draw(self, points) -> np.ndarray:
+        """Drawn coordinates of true ``points``: beyond ``r0_m`` from the centre a radius r is
+        drawn at ``r0 (1 + ln(r / r0))``."""
+        return self._radially(points, lambda r: self.r0_m * (1.0 + np.log(r / self.r0_m)))
+
+    def undraw(self, points) -> np.ndarray:
+        """True coordinates of drawn ``points`` (the inverse of :meth:`draw`)."""
+        return self._radially(points, lambda r: self.r0_m * np.exp(np.minimum(r / self.r0_m - 1.0, 700.0)))
+
+    def _radially(self, points, radius_of) -> np.ndarray:
+        """``points`` moved along their direction from the centre: a radius r beyond
+        ``r0_m`` goes to ``radius_of(r)``, nearer ones stay (the identity when not compressed)."""
         p = np.asarray(points, float)
         if not self.compressed:
             return p
         d = p - self.centre_m
         r = np.linalg.norm(d, axis=-1, keepdims=True)
-        far = r > self.r0_m
-        scale = np.where(far, self.r0_m * (1.0 + np.log(np.maximum(r, self.r0_m) / self.r0_m)) / np.maximum(r, 1e-300), 1.0)
-        return self.centre_m + d * scale
-
-    def undraw(self, points) -> np.ndarray:
-        """True coordinates of drawn ``points`` (the inverse of :meth:`draw`)."""
-        p = np.asarray(points, float)
-        if not self.compressed:
-            return p
-        d = p - self.centre_m
-        rd = np.linalg.norm(d, axis=-1, keepdims=True)
-        far = rd > self.r0_m
-        scale = np.where(far, self.r0_m * np.exp(np.minimum(rd / self.r0_m - 1.0, 700.0)) / np.maximum(rd, 1e-300), 1.0)
+        scale = np.where(r > self.r0_m, radius_of(np.maximum(r, self.r0_m)) / np.maximum(r, 1e-300), 1.0)
         return self.centre_m + d * scale
 
     def mesh(self, mesh):

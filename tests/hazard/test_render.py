@@ -72,3 +72,21 @@ def test_import_hazard_does_not_load_pyvista():
     code = "import sys, hazard, scenes; hazard.analyze; print('pyvista' in sys.modules, 'matplotlib' in sys.modules, 'distributed' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False False False"
+
+
+def test_framing_draws_far_points_on_a_log_scale_and_undraws_them():
+    """Framing.draw: true within r0 of the centre, r0 (1 + ln(r / r0)) beyond (written here),
+    along the same direction; undraw is its inverse; not compressed (r0 = inf): the identity."""
+    from hazard.pictures.render import Framing
+
+    rng = np.random.default_rng(7)
+    c = np.array([10.0, -5.0, 2.0])
+    p = c + rng.normal(size=(500, 3)) * 10 ** rng.uniform(-2, 5, size=(500, 1))
+    f = Framing(np.zeros((3, 2)), c, 100.0)
+    r = np.linalg.norm(p - c, axis=1)
+    drawn = f.draw(p)
+    want = np.where(r > 100.0, 100.0 * (1 + np.log(np.maximum(r, 100.0) / 100.0)), r)
+    assert np.allclose(np.linalg.norm(drawn - c, axis=1), want, rtol=1e-12)
+    assert np.allclose(f.undraw(drawn), p, rtol=1e-9, atol=1e-9)
+    flat = Framing(np.zeros((3, 2)), c)
+    assert np.array_equal(flat.draw(p), p) and np.array_equal(flat.undraw(p), p)
