@@ -139,16 +139,29 @@ def escape_way(z) -> str:
     return f" toward {bearing}, {elevation}"
 
 
-def _not_backstops(result) -> str:
-    """Why the beam is not stopped though it meets targets: targets are not backstops."""
+def _not_backstops(result, nohd_m: float) -> str:
+    """Why the beam is not stopped though it meets targets: targets are not backstops (and a
+    fixed target beyond the zone's NOHD, ``nohd_m`` [m], could not end the zone anyway)."""
     lit = [t for t in result.targets if t.spot_power_w > 0]
     if not lit:
         return "no terrain or occluder stops it within the NOHD"
     total = max(float(result.beam_power_w), 1e-300)
-    names = ", ".join(f"{t.name!r} ({100 * t.spot_power_w / total:.3g} % of the beam)" for t in lit[:3])
+    names = ", ".join(f"{t.name!r} ({100 * t.spot_power_w / total:.3g} % of the beam{_beyond(result, t.name, nohd_m)})"
+                      for t in lit[:3])
     return (f"at the aim the beam meets target(s) {names}{', ...' if len(lit) > 3 else ''}, but a target is not a backstop "
             "(within the pointing error the beam can miss it; only the terrain and occluders stop the beam), and no terrain "
             "or occluder stops it within the NOHD")
+
+
+def _beyond(result, name: str, nohd_m: float) -> str:
+    """``", x m from the laser: beyond the NOHD"`` for a fixed target whose centre lies past
+    ``nohd_m`` [m]; empty for a nearer, a moving or an unknown target."""
+    scene = getattr(result, "scene", None)
+    target = next((t for t in getattr(scene, "targets", ()) if t.name == name), None)
+    if target is None or getattr(target.spec, "track", None) is not None:
+        return ""
+    distance_m = float(np.linalg.norm(np.asarray(target.center_m, float) - np.asarray(scene.laser_position_m, float)))
+    return f", {distance_m:.4g} m from the laser: beyond the NOHD" if distance_m > nohd_m else ""
 
 
 def _sdz_findings(result) -> list:
@@ -167,7 +180,7 @@ def _sdz_findings(result) -> list:
             out.append(f"{label} (NOHD {nohd:.4g} m) is NOT contained: {zone.escaping_directions} of {z.directions.count} "
                        f"direction(s){escape_way(zone)} reach the NOHD "
                        f"without a backstop{' (some above the horizon)' if zone.above_horizon else ''}: "
-                       f"{_not_backstops(result)}")
+                       f"{_not_backstops(result, nohd)}")
         if zone.leaves_boundary:
             outside = math.nan if zone.outside_boundary_m2 is None else zone.outside_boundary_m2
             out.append(f"{label} (NOHD {nohd:.4g} m) LEAVES the range boundary: {outside:.4g} "

@@ -515,3 +515,19 @@ def test_a_keep_out_lobe_beyond_the_range_is_a_zone_hazard(edges, plate_result, 
 def test_a_keep_out_lobe_beyond_the_range_property(edges, plate_result):
     with pytest.MonkeyPatch.context() as mp:
         _lobe_case(plate_result, mp, edges)
+
+
+# -- a target past the zone's NOHD: the zone's text says it could not end the zone anyway --------
+def test_a_target_beyond_the_nohd_is_said_to_be_beyond_it(right, tmp_path):
+    """At 2 W the direct-beam NOHD is (sqrt(4 P / (pi MPE)) - a) / phi = 4.11 km, short of the
+    plate at 12 km: the zone's finding names the plate with its range and 'beyond the NOHD'
+    (it read as if the plate met the hazardous beam); at 20 W (NOHD 13.9 km) it does not."""
+    power = 2.0
+    assert nohd_direct(power) < R_T < nohd_direct()
+    code, out, _, _ = run_scene(tmp_path, scene_text(power=power))
+    assert code == 0
+    zone = next(line for line in out.splitlines() if "danger zone (NOHD" in line and "NOT contained" in line)
+    assert f"NOHD {nohd_direct(power):.4g} m" in zone
+    assert f"{R_T:.4g} m from the laser: beyond the NOHD" in zone
+    near = next(line for line in right[1].splitlines() if "danger zone (NOHD" in line and "NOT contained" in line)
+    assert "'plate' (" in near and "beyond the NOHD" not in near
