@@ -59,6 +59,8 @@ class ElevationViewDisplay(DisplayBase):
     tracks: list = field(default_factory=list)  # (paths, name, (N, 2) sz, text) moving observers
     flight_zones: list = field(default_factory=list)  # (path, (4, 2) sz box: along-aim span x floor-ceiling, exceeded, text, worst sz)
     mirror_zones: list = field(default_factory=list)  # (target, eye, (K, 2) sz outline): :func:`hazard.physics.mirror_zone.side_view_ring`
+    occluders_cut: list = field(default_factory=list)  # (K, 2) sz rings: occluders' sections by the aim's vertical plane
+    occluders_beside: list = field(default_factory=list)  # (K, 2) sz outlines: occluders that plane misses, projected
 
     @classmethod
     def from_result(cls, result) -> "ElevationViewDisplay":
@@ -90,6 +92,7 @@ class ElevationViewDisplay(DisplayBase):
 
         d.mirror_zones = [(m.target, m.eye, ring) for m in mirror_zones(result) if (ring := side_view_ring(m, sz)) is not None]
         d.aim_sz, d.aim_past = clip_at_ground(aim, d.profile)
+        d.occluders_cut, d.occluders_beside = occluder_outlines(scene.occluders, view, sz)
         d.aim_label = "aim line (to the danger zone's range)" if zone_reach > 0 else "aim line"
         from hazard.outputs.figure_index import finding_paths, flight_zone_rings, track_lines
 
@@ -161,6 +164,7 @@ class ElevationViewDisplay(DisplayBase):
             floor = ground.min() - max(1.0, 0.2 * float(np.ptp(ground)))
             ax.fill_between(s, ground, floor, color=C.GROUND, lw=0, label="terrain under the aim line")
             ax.plot(s, ground + eye, c="#4d7a3a", lw=0.8, ls=":", label=f"eye height ({eye:g} m) above it")
+        self._draw_occluders(ax)
         ax.plot(*self.aim_sz.T, c=C.ZONE, lw=0.9, ls="--", label=self.aim_label)
         if self.aim_past is not None:
             ax.plot(*self.aim_past.T, c=C.ZONE, lw=0.6, ls=":", alpha=0.7,
@@ -185,6 +189,16 @@ class ElevationViewDisplay(DisplayBase):
             draw_hazardous(ax, self.observers_sz[self.hazardous], self.unlabelled,
                            [rows.get(int(i)) for i in np.flatnonzero(self.hazardous)])
 
+    def _draw_occluders(self, ax):
+        """Occluders the aim's vertical plane cuts, filled (what stands under or across the aim
+        line); the others outlined dashed (beside the aim: the plan view says where)."""
+        for i, ring in enumerate(self.occluders_cut):
+            ax.fill(*ring.T, fc="#999999", ec="#555555", lw=0.8, zorder=3,
+                    label="occluders cut by the aim's vertical plane" if i == 0 else None)
+        for i, ring in enumerate(self.occluders_beside):
+            ax.plot(*ring.T, c="#777777", lw=0.8, ls="--", zorder=3,
+                    label="occluders beside the aim's plane (projected)" if i == 0 else None)
+
     def _draw_airspace(self, ax):
         """Flight zones as their along-aim span between floor and ceiling (exceeded: red
         hatched) and the moving observers' tracks projected, each named with its verdict."""
@@ -203,6 +217,46 @@ class ElevationViewDisplay(DisplayBase):
             ax.annotate(text, pts[0], xytext=(0, 8), textcoords="offset points", fontsize=6, color="#6a3d9a", zorder=11,
                         bbox=dict(boxstyle="round,pad=0.2", fc="white", ec="none", alpha=0.8))
             mark(ax, paths, text, pts, "line")
+
+
+def occluder_outlines(occluders, view, sz) -> tuple:
+    """(cut, beside): the closed (K, 2) rings in (distance, height) [m] of each occluder mesh's
+    section by the view's vertical plane through the aim line, and, for an occluder that plane
+    misses, the outline (convex hull) of its projection onto it. ``sz`` maps local points to
+    the view's coordinates."""
+    from shapely.geometry import MultiLineString, MultiPoint
+    from shapely.ops import polygonize
+
+    cut, beside = [], []
+    for mesh in occluders:
+        segments = plane_section(mesh.vertices, mesh.faces, view.origin_m, view.n)
+        if len(segments):
+            lines = MultiLineString([sz(seg).tolist() for seg in segments])
+            cut += [np.asarray(p.exterior.coords) for p in polygonize(lines.geoms)] or \
+                   [np.asarray(line.coords) for line in lines.geoms]  # an open section (a plate edge-on): its segments
+            continue
+        hull = MultiPoint(sz(np.asarray(mesh.vertices, float)).tolist()).convex_hull
+        beside.append(np.asarray(hull.exterior.coords if hull.geom_type == "Polygon" else hull.coords, float))
+    return cut, beside
+
+
+def plane_section(vertices_m, faces, origin_m, normal) -> np.ndarray:
+    """Segments (S, 2, 3) [m] where the triangles cross the plane through ``origin_m`` with
+    unit ``normal``: on each edge whose ends lie on opposite sides, the point at which the
+    signed distance is zero (linear along the edge). Triangles that only touch it are left out."""
+    vertices_m = np.asarray(vertices_m, float)
+    dist = (vertices_m - np.asarray(origin_m, float)) @ np.asarray(normal, float)  # signed, per vertex
+    faces = np.asarray(faces)
+    d = dist[faces]  # (F, 3)
+    faces = faces[(d > 0).any(axis=1) & (d < 0).any(axis=1)]
+    lo = np.minimum(faces, np.roll(faces, -1, axis=1))  # the three edges, each from its lower vertex index:
+    hi = np.maximum(faces, np.roll(faces, -1, axis=1))  # the two triangles on an edge get the same point, bit for bit
+    crossed = (dist[lo] > 0) != (dist[hi] > 0)  # (F', 3): two per crossing triangle
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(crossed, dist[lo] / (dist[lo] - dist[hi]), 0.0)
+    points = vertices_m[lo] + t[..., None] * (vertices_m[hi] - vertices_m[lo])  # (F', 3, 3)
+    two = crossed.sum(axis=1) == 2
+    return points[two][crossed[two]].reshape(-1, 2, 3)
 
 
 def clip_at_ground(aim, profile) -> tuple:

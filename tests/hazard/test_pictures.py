@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hazard.pictures import palette as C
 from hazard.pictures.palette import rgb
@@ -198,3 +200,65 @@ def test_the_elevation_of_a_scene_with_ground_draws_the_terrain_under_the_aim():
     assert eye == res.scene.spec.analysis.footprint_eye_height_m
     lo, hi = t.x0, t.x0 + t.dx * (t.heights.shape[1] - 1)
     assert np.all((xy[:, 0] >= lo - 1e-9) & (xy[:, 0] <= hi + 1e-9))  # not drawn past the terrain's edge
+
+
+def _box_mesh(center, size):
+    """An axis-aligned box: 8 corners, 12 triangles (written here, not the scene's)."""
+    from types import SimpleNamespace
+
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float) * np.asarray(size) / 2
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    faces = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    return SimpleNamespace(vertices=corners + np.asarray(center, float), faces=faces)
+
+
+def test_the_elevation_cuts_an_occluder_on_the_aim_plane_and_outlines_one_beside_it():
+    """A berm across the aim (x = 0 plane) is cut: its section is the rectangle y in [8, 12],
+    z in [-1, 5]; a box 30 m to the side is not cut and is outlined by its projection."""
+    from shapely.geometry import Polygon
+
+    from hazard.outputs.lobe_outline import elevation_frame
+    from hazard.pictures.elevation_view import occluder_outlines
+
+    view = elevation_frame(np.zeros(3), np.array([0.0, 1.0, 0.0]))  # aim north: s = y, plane x = 0
+
+    def sz(points):
+        return view.to_2d(points)
+
+    cut, beside = occluder_outlines([_box_mesh([0.5, 10.0, 2.0], [3.0, 4.0, 6.0]), _box_mesh([30.0, 50.0, 1.0], [2, 2, 2])], view, sz)
+    assert len(cut) == 1 and len(beside) == 1
+    section = Polygon(cut[0])
+    assert section.area == pytest.approx(4.0 * 6.0, rel=1e-12)
+    np.testing.assert_allclose(section.bounds, [8.0, -1.0, 12.0, 5.0], atol=1e-12)
+    np.testing.assert_allclose(Polygon(beside[0]).bounds, [49.0, 0.0, 51.0, 2.0], atol=1e-12)
+
+
+@given(st.floats(-80, 80), st.floats(-0.9, 0.9), st.floats(0.5, 5.0))
+@settings(max_examples=25, derandomize=True, deadline=None)
+def test_a_section_lies_on_the_plane_and_in_the_box(azimuth_deg, offset_rel, half_m):
+    """For any vertical plane through a cube's inside, every section point is on the plane and
+    in the cube, and the section closes into one polygon whose area is the cube's height times
+    the chord length across the square at that offset (the chord written from the geometry)."""
+    from shapely.geometry import Polygon
+
+    from hazard.outputs.lobe_outline import elevation_frame
+    from hazard.pictures.elevation_view import occluder_outlines, plane_section
+
+    a = np.radians(azimuth_deg)
+    aim = np.array([np.sin(a), np.cos(a), 0.0])
+    normal = np.array([aim[1], -aim[0], 0.0])
+    laser = -offset_rel * half_m * normal - 100.0 * aim
+    box = _box_mesh([0.0, 0.0, 0.0], [2 * half_m] * 3)
+    view = elevation_frame(laser, aim)
+    seg = plane_section(box.vertices, box.faces, view.origin_m, view.n)
+    assert len(seg)
+    pts = seg.reshape(-1, 3)
+    np.testing.assert_allclose((pts - view.origin_m) @ view.n, 0.0, atol=1e-9 * half_m)
+    assert np.all(np.abs(pts) <= half_m * (1 + 1e-12))
+    cut, beside = occluder_outlines([box], view, view.to_2d)
+    assert len(cut) == 1 and not beside
+    t = np.linspace(-3 * half_m, 3 * half_m, 600001)  # the chord across the square |x|, |y| <= h, sampled densely
+    p = (-offset_rel * half_m * normal)[None, :2] + t[:, None] * aim[None, :2]
+    inside = np.all(np.abs(p) <= half_m, axis=1)
+    chord = t[inside].max() - t[inside].min()
+    assert Polygon(cut[0]).area == pytest.approx(chord * 2 * half_m, rel=5e-5)
