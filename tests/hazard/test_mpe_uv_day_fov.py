@@ -292,21 +292,23 @@ def test_path_summary_holds_the_day_dose():
     # Each 10 s window holds 200 J/m^2, far below the 10 s MPE (Table 5a 315-400 nm: 1.0 J/cm^2).
     # Three periods: the day holds 6060 J/m^2 in 300 s against 1.0 J/cm^2 = 1e4 J/m^2 (ratio 0.606).
     s3 = path_summary(_lit([10.0, 3610.0, 7210.0], 100.0, 20.0, 7400.0), 10.0, 355.0, ANSI)
-    uv = s3["uv_24h"]
-    assert uv["exposed_s"] == pytest.approx(300.0) and uv["limit_j_m2"] == pytest.approx(1e4, rel=REL)
-    assert uv["dose_j_m2"] == pytest.approx(3 * 2020.0, rel=1e-12) and not s3["hazardous"]
-    assert 0.606 <= uv["ratio"] <= 0.606 * 1.01  # x (1 + the integral's relative error estimate)
-    assert s3["worst_window"]["ratio"] < 0.1
-    from hazard.outputs.report_schema import PathUv24h
+    uv = s3.uv_24h
+    assert uv.exposed_s == pytest.approx(300.0) and uv.limit_j_m2 == pytest.approx(1e4, rel=REL)
+    assert uv.dose_j_m2 == pytest.approx(3 * 2020.0, rel=1e-12) and not s3.hazardous
+    assert 0.606 <= uv.ratio <= 0.606 * 1.01  # x (1 + the integral's relative error estimate)
+    assert s3.worst_window.ratio < 0.1
+    from hazard.outputs.motion_outputs import TrackEntry
+    from hazard.outputs.report_schema import PathBlock
 
-    PathUv24h.model_validate(s3["uv_24h"], strict=True)  # report.json's tracks[].uv_24h (issue 35)
+    # report.json's tracks[].uv_24h against its model, generated from PathUv24h (issue 35)
+    PathBlock.model_validate(TrackEntry(s3, None, (), None, "g").to_dict(), strict=True)
     # five periods: 1.01e4 J/m^2 > 1e4 J/m^2: hazardous, though no exposure of duration_s is
     s5 = path_summary(_lit([10.0 + 3600.0 * k for k in range(5)], 100.0, 20.0, 18100.0), 10.0, 355.0, ANSI)
-    assert s5["hazardous"] and s5["uv_24h"]["ratio"] >= 1.0 and s5["exposure_ratio"] == s5["uv_24h"]["ratio"]
-    assert s5["worst_window"]["ratio"] < 0.1
+    assert s5.hazardous and s5.uv_24h.ratio >= 1.0 and s5.exposure_ratio == s5.uv_24h.ratio
+    assert s5.worst_window.ratio < 0.1
     # the first exceedance lies in the fifth period (4 x 2020 = 8080 J/m^2 before it)
-    assert 4 * 3600.0 + 10.0 <= s5["first_exceedance_s"] <= 4 * 3600.0 + 111.0
-    assert path_summary(_lit([10.0], 100.0, 20.0, 200.0), 10.0, 532.0, ANSI)["uv_24h"] is None
+    assert 4 * 3600.0 + 10.0 <= s5.first_exceedance_s <= 4 * 3600.0 + 111.0
+    assert path_summary(_lit([10.0], 100.0, 20.0, 200.0), 10.0, 532.0, ANSI).uv_24h is None
 
 
 def test_path_summary_slides_a_24h_window():
@@ -316,12 +318,12 @@ def test_path_summary_slides_a_24h_window():
     # holds both (ratio about 0.6, not 1.2)
     one = 20.0 * 300.0 + 2 * 0.5 * 20.0 * 1.0
     s = path_summary(_lit([10.0, 108000.0], 300.0, 20.0, 108400.0), 10.0, 355.0, ANSI)
-    assert s["uv_24h"]["dose_j_m2"] == pytest.approx(one, rel=1e-12)
-    assert s["uv_24h"]["exposed_s"] == pytest.approx(300.0, rel=1e-12)
-    assert one / 1e4 <= s["uv_24h"]["ratio"] <= one / 1e4 * 1.01 and not s["hazardous"]
+    assert s.uv_24h.dose_j_m2 == pytest.approx(one, rel=1e-12)
+    assert s.uv_24h.exposed_s == pytest.approx(300.0, rel=1e-12)
+    assert one / 1e4 <= s.uv_24h.ratio <= one / 1e4 * 1.01 and not s.hazardous
     # 20 h apart: one 24 h holds both, 12040 > 1e4 J/m^2 (Table 5a 315-400 nm): hazardous
     s2 = path_summary(_lit([10.0, 72000.0], 300.0, 20.0, 108400.0), 10.0, 355.0, ANSI)
-    assert s2["uv_24h"]["dose_j_m2"] == pytest.approx(2 * one, rel=1e-12) and s2["hazardous"]
+    assert s2.uv_24h.dose_j_m2 == pytest.approx(2 * one, rel=1e-12) and s2.hazardous
 
 
 def test_cli_exposures_per_day():
