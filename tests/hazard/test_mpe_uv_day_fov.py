@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import hazard as hz
 from hazard.physics import mpe as M
+from scenes.motion import Windows
 
 ANSI, IEC = "ansi-z136.1-2014", "iec-60825-1-2014"
 REL = 1e-9
@@ -186,7 +187,23 @@ def test_uv_24h_rejects_bad_input():
     ([[1e5, 1e5 + 10], [0, 5]], 10.0),  # unsorted
 ])
 def test_on_time_in_24h(windows, expected_s):
-    assert M.on_time_in_24h_s(windows) == pytest.approx(expected_s, rel=1e-12)
+    assert M.on_time_in_24h_s(Windows.of(windows).intervals) == pytest.approx(expected_s, rel=1e-12)
+
+
+@pytest.mark.parametrize("intervals, match", [
+    ([[0.0, 60.0], [30.0, 90.0]], r"intervals_s\[1\] = \[30.0, 90.0\] starts at or before intervals_s\[0\] = \[0.0, 60.0\] ends"),
+    ([[100.0, 110.0], [0.0, 5.0]], r"intervals_s\[1\] = \[0.0, 5.0\].*expected sorted, merged"),
+    ([[0.0, 60.0], [60.0, 90.0]], r"intervals_s\[1\]"),  # touching: one window once merged
+    ([[10.0, 5.0]], r"intervals_s\[0\] = \[10.0, 5.0\]: expected t1_s >= t0_s"),
+    ([[0.0, float("nan")]], r"intervals_s\[0\]"),
+    ([0.0, 1.0, 2.0], r"intervals_s: shape \(3,\): expected \(n, 2\)"),
+])
+def test_on_time_in_24h_takes_merged_intervals_only(intervals, match):
+    """The one merge of the firing windows is :meth:`scenes.motion.Windows.of`: intervals not
+    merged are an error naming the interval, never counted twice or summed out of order."""
+    with pytest.raises(ValueError, match=match):
+        M.on_time_in_24h_s(intervals)
+    assert M.on_time_in_24h_s(np.zeros((0, 2))) == 0.0
 
 
 _WINDOWS = st.lists(st.tuples(st.floats(0, 3e5), st.floats(1.0, 5e3)), min_size=1, max_size=8)
@@ -221,7 +238,7 @@ def _check_on_time(pairs):
         return sum(max(0.0, min(b, s + 86400.0) - max(a, s)) for a, b in union)
 
     best = max(on(s) for s in [a for a, _ in union] + list(np.linspace(-86400.0, 3.1e5, 400)))
-    assert M.on_time_in_24h_s(w) == pytest.approx(best, rel=1e-9, abs=1e-6)
+    assert M.on_time_in_24h_s(Windows.of(w).intervals) == pytest.approx(best, rel=1e-9, abs=1e-6)
 
 
 def _plate_scene(wl, power_w, windows=None, standard=ANSI):
