@@ -12,7 +12,9 @@ Run (from a checkout; ``BEFORE_SRC`` e.g. ``git archive <commit> | tar -x -C /tm
 ``run`` calls ``python -m hazard run NAME -o OUT/NAME --force`` with ``PYTHONPATH=SRC`` for
 every ``scenes/examples/*.toml`` of SRC and every variant below (written to ``OUT/_scenes``).
 ``compare`` reads every file of both folders but pictures (``.png``, ``.tif``): ``report.json``
-with each ``"seconds"`` value (the stages' and the motion stage's run times) replaced by 0,
+with each ``"seconds"`` value (the stages' and the motion stage's run times) replaced by 0 and
+``scene.source`` (the scene file's path, in each checkout) by the file's name, the run times
+in the stages' ``detail`` texts (:data:`RUN_TIME_TEXT`) by ``<run time>``,
 every other file as bytes. It prints one line per file (``=`` identical, ``*`` differs, with
 the first differing JSON path or line) and exits 1 when any differs or is missing.
 """
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -41,6 +44,9 @@ VARIANTS = [
        'material = { model = "lambertian", reflectance = 0.3 }\n[targets.track]\ntimes_s = [0.0, 10.0]\n'
        'center_m = [[0.0, 2000.0, 100.0], [2.0, 2000.0, 100.0]]')]),
 ]
+
+#: The run times a stage's ``detail`` text gives: "(0.000424 s)" (specular), "0.0546 s summed over threads".
+RUN_TIME_TEXT = r"(?<=\()[0-9.e+-]+ s(?=\))|[0-9.e+-]+ s(?= summed over threads)"
 
 PICTURES = {".png", ".tif", ".tiff", ".jpg", ".svg", ".pdf"}
 
@@ -75,9 +81,15 @@ def run(src: Path, out: Path) -> int:
 
 
 def _masked(obj):
-    """``obj`` with every ``"seconds"`` value 0 (run times)."""
+    """``obj`` with every ``"seconds"`` value 0 (run times) and ``scene.source``, the scene
+    file's path (a different checkout), cut to the file's name."""
     if isinstance(obj, dict):
-        return {k: (0 if k == "seconds" else _masked(v)) for k, v in obj.items()}
+        out = {k: (0 if k == "seconds" else _masked(v)) for k, v in obj.items()}
+        if isinstance(out.get("scene"), dict) and isinstance(out["scene"].get("source"), str):
+            out["scene"]["source"] = Path(out["scene"]["source"]).name
+        if isinstance(out.get("detail"), str):  # a stage record: the run times its text gives
+            out["detail"] = re.sub(RUN_TIME_TEXT, "<run time> s", out["detail"])
+        return out
     if isinstance(obj, list):
         return [_masked(v) for v in obj]
     return obj

@@ -355,3 +355,18 @@ positions_m = [[0.0, 0.0, -500.0], [10.0, 0.0, -500.0]]
 """
     res = hazard.analyze(scenes.loads(text, base_dir=p.parent))
     assert any("track mole:" in n and "under the terrain" in n for n in res.motion.notes)
+
+
+def test_the_track_text_of_the_pictures_says_the_faa_levels_the_report_lists():
+    """The pictures' text of a track (plan and elevation views, figures.json) names the FAA
+    levels report.json's ``tracks[k].visual_levels_reached`` lists: the helicopter of the
+    airspace example reaches all three (it read none before the path summaries were typed:
+    the text looked for a key only the report's copy had)."""
+    from hazard.outputs.figure_index import track_lines
+
+    res = bundled("airspace")
+    doc = report_dict(res)
+    ((_, name, xyz, text),) = track_lines(res, {"observers": {}})
+    levels = doc["tracks"][0]["visual_levels_reached"]
+    assert name == "helicopter" and levels == ["szed", "czed", "lfed"] and xyz.shape[1] == 3
+    assert text.endswith(f"FAA levels reached: {', '.join(x.upper() for x in levels)})"), text
