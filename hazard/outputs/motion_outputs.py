@@ -17,7 +17,8 @@ from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.pipeline.motion_results import PathSummary, fields_dict
 from scenes.motion import AimTrackDescription
 
-__all__ = ["TrackEntry", "MotionSection", "motion_sections", "track_files", "track_file_name", "track_columns", "motion_columns", "TRACK_CSV_COLUMNS"]
+__all__ = ["TrackEntry", "MotionSection", "track_entry", "motion_section", "motion_sections", "track_files", "track_file_name",
+           "track_columns", "motion_columns", "TRACK_CSV_COLUMNS"]
 
 TRACK_CSV_COLUMNS = ["time_s", "x_m", "y_m", "z_m", "lased", "direct_irradiance_w_m2", "reflected_irradiance_w_m2",
                      "irradiance_w_m2", "cumulative_exposure_j_m2"]

@@ -217,7 +217,7 @@ class ExposureDisplay(DisplayBase):
 
     @classmethod
     def from_path(cls, result, path):
-        """A moving observer's samples (:class:`hazard.pipeline.motion.PathResult`) over its
+        """A moving observer's samples (:class:`hazard.pipeline.motion.SummarisedPath`) over its
         own time steps; the hazard ratio is its worst window's exposure ratio."""
         from hazard.physics import mpe as _mpe
 
