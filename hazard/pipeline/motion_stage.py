@@ -38,7 +38,7 @@ class MotionResult:
     notes : tuple of str
         What the evaluation left out or assumed (report.json ``motion.notes``).
     seconds : float
-        The stage's run time [s] (CPU-independent wall time; masked when outputs are compared).
+        The stage's wall-clock run time [s] (time.perf_counter; masked when outputs are compared).
     run : MotionRun or None
         The run's shared state (its beam states serve the airspace and visual checks).
     """
