@@ -26,10 +26,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
-__all__ = ["TrackPath", "AimSchedule", "Windows", "TargetTrack", "Motion", "motion_of", "bearing_elevation", "check_aim_sector"]
+if TYPE_CHECKING:  # annotations only
+    from scenes.spec import MotionSpec
+
+__all__ = ["TrackPath", "AimSchedule", "AimTrackDescription", "Windows", "TargetTrack", "Motion", "motion_of", "bearing_elevation", "check_aim_sector"]
 
 
 def _segment(times, t):
@@ -114,6 +118,37 @@ class TrackPath:
         return float(np.max(np.linalg.norm(np.diff(p, axis=0), axis=1) / np.diff(self.times_s)))
 
 
+@dataclass(frozen=True)
+class AimTrackDescription:
+    """The aim track as report.json's ``motion.aim_track`` says it (:meth:`AimSchedule.describe`).
+
+    Attributes
+    ----------
+    times_s : tuple of 2 float
+        The first and last time [s] of the schedule.
+    knots : int
+        Number of times given (aim points or the two ends of the rates).
+    azimuth_rate_deg_s, elevation_rate_deg_s : float or None
+        The bearing's and the elevation's rates [deg/s] of a schedule given by rates; None
+        (the keys absent) for one given by aim points.
+    """
+
+    times_s: tuple[float, float]
+    knots: int
+    azimuth_rate_deg_s: float | None = None
+    elevation_rate_deg_s: float | None = None
+
+    ABSENT_WHEN_NONE: ClassVar[tuple[str, ...]] = ("azimuth_rate_deg_s", "elevation_rate_deg_s")
+
+    def to_dict(self) -> dict:
+        out: dict = {"times_s": list(self.times_s), "knots": self.knots}
+        if self.azimuth_rate_deg_s is not None:
+            out["azimuth_rate_deg_s"] = self.azimuth_rate_deg_s
+        if self.elevation_rate_deg_s is not None:
+            out["elevation_rate_deg_s"] = self.elevation_rate_deg_s
+        return out
+
+
 @dataclass
 class AimSchedule:
     """The beam's direction over time: aim points (K, 3) at ``times_s``, or rates [rad/s]
@@ -143,11 +178,13 @@ class AimSchedule:
         el = np.clip(self.start[1] + self.rates_rad_s[1] * tc, -np.pi / 2, np.pi / 2)
         return np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1)
 
-    def describe(self) -> dict:
-        out = {"times_s": [float(self.times_s[0]), float(self.times_s[-1])], "knots": int(len(self.times_s))}
-        if self.aims_m is None:
-            out["azimuth_rate_deg_s"], out["elevation_rate_deg_s"] = (math.degrees(r) for r in self.rates_rad_s)
-        return out
+    def describe(self) -> AimTrackDescription:
+        """What report.json says of the schedule (``motion.aim_track``)."""
+        span = (float(self.times_s[0]), float(self.times_s[-1]))
+        if self.aims_m is not None:
+            return AimTrackDescription(span, int(len(self.times_s)))
+        az, el = (math.degrees(r) for r in self.rates_rad_s)
+        return AimTrackDescription(span, int(len(self.times_s)), az, el)
 
 
 @dataclass
@@ -209,7 +246,7 @@ class Motion:
     target_tracks: list
     t_start_s: float
     t_end_s: float
-    spec: object  # scenes.spec.MotionSpec (defaults when the scene has no [motion])
+    spec: MotionSpec  # defaults when the scene has no [motion]
 
     def knots(self) -> np.ndarray:
         """Times inside the span where something changes its rate (must be sampled)."""

@@ -99,7 +99,7 @@ def _quantities(res):
         "peak_irradiance_w_m2": float(np.max(res.observers.peak_irradiance_w_m2)) if len(res.observers) else 0.0,
         "spot_power_w": sum(t["spot_power_w"] for t in tr),
         # the largest radiant exposure along a moving observer's path (or a fixed one under a moving beam)
-        "max_path_exposure_j_m2": max((p.summary["radiant_exposure_j_m2"] for p in res.motion.paths), default=0.0)
+        "max_path_exposure_j_m2": max((p.summary.radiant_exposure_j_m2 for p in res.motion.paths), default=0.0)
         if res.motion is not None else 0.0,
     }
 

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hazard.outputs.motion_outputs import visual_levels
+
 __all__ = ["FIGURES_NAME", "mark", "drawn_findings", "arrow_to", "figure_entry", "figures_document", "report_observer_paths", "finding_paths",
            "track_lines", "flight_zone_rings", "faa_marks", "lobe_paths", "view_entry"]
 
@@ -215,11 +217,11 @@ def track_lines(result, paths) -> list:
     m = len(result.observers)
     out = []
     for k, p in enumerate(tracks):
-        s = p.summary
-        verdict = "OVER the MPE" if s.get("hazardous") else "below the MPE"
-        levels = s.get("visual_levels_reached") or []
+        s = p.summary  # hazard.pipeline.motion_results.PathSummary
+        verdict = "OVER the MPE" if s.hazardous else "below the MPE"
+        _, levels = visual_levels(result, s.peak_irradiance_w_m2)  # report.json's tracks[k].visual_levels_reached
         faa = f"; FAA levels reached: {', '.join(x.upper() for x in levels)}" if levels else ""
-        text = f"track {p.name}: {verdict} (exposure ratio {float(s.get('exposure_ratio', math.nan)):.3g}{faa})"
+        text = f"track {p.name}: {verdict} (exposure ratio {float(s.exposure_ratio):.3g}{faa})"
         row = paths["observers"].get(m + k)
         out.append(((f"tracks[{k}]",) + ((row,) if row else ()), p.name, track_polyline(result, p), text))
     return out

@@ -219,11 +219,11 @@ def _airspace(result) -> list:
     out = []
     for p in ([] if result.motion is None else result.motion.tracks()):
         xyz = track_polyline(result, p)
-        s = p.summary
+        s = p.summary  # hazard.pipeline.motion_results.PathSummary
         geom = LineString(xyz[:, :2]) if len(xyz) > 1 else Point(xyz[0, :2])
-        out.append(Zone("track", geom, {"name": p.name, "verdict": "hazardous" if s["hazardous"] else "below the MPE",
-                                        "hazard": "naked eye" if s["hazardous"] else "none", "exposure_ratio": s["exposure_ratio"],
-                                        "peak_time_s": s["peak_time_s"], "first_exceedance_s": s["first_exceedance_s"]},
+        out.append(Zone("track", geom, {"name": p.name, "verdict": "hazardous" if s.hazardous else "below the MPE",
+                                        "hazard": "naked eye" if s.hazardous else "none", "exposure_ratio": s.exposure_ratio,
+                                        "peak_time_s": s.peak_time_s, "first_exceedance_s": s.first_exceedance_s},
                         z_m=xyz[:, 2] if len(xyz) > 1 else float(xyz[0, 2])))
     zone_rows = {z.name: z.to_dict() for z in (() if result.airspace is None else result.airspace.zones)}
     for zs in ([] if result.scene.spec.airspace is None else result.scene.spec.airspace.zones):

@@ -963,7 +963,7 @@ def answer_text(result, max_observers=ANSWER_MAX_OBSERVERS, *, verdict_doc: Verd
 
 
 def _levels_text(result, s) -> str:
-    eff, reached = visual_levels(result, s["peak_irradiance_w_m2"])
+    eff, reached = visual_levels(result, s.peak_irradiance_w_m2)
     if eff is None:
         return ""
     return (f"; effective {eff:.4g} W/m^2: inside the {'/'.join(x.upper() for x in reached)} level(s)" if reached
@@ -975,19 +975,19 @@ def _motion_lines(result) -> list:
     out = []
     m = getattr(result, "motion", None)
     for p in ([] if m is None else m.tracks()):
-        s = p.summary
-        first = "" if s["first_exceedance_s"] is None else f", first over the MPE at t = {s['first_exceedance_s']:.6g} s"
-        uv = s.get("uv_24h")
-        where = (f"the UV dose within 24 h: {uv['dose_j_m2']:.4g} J/m^2 over {uv['exposed_s']:.4g} s exposed against {uv['limit_j_m2']:.4g}"
-                 if uv and uv["ratio"] >= s["worst_window"]["ratio"] else f"in its worst {s['worst_window']['duration_s']:.3g} s window")
-        out.append(f"  track {p.name}: {'HAZARD' if s['hazardous'] else 'below the MPE'} (exposure ratio "
-                   f"{s['exposure_ratio']:.3g} {where}{first}); peak "
-                   f"{s['peak_irradiance_w_m2']:.4g} W/m^2 at t = {s['peak_time_s']:.6g} s; {s['samples']} samples, "
-                   f"smallest step {s['min_step_s']:.3g} s" + _levels_text(result, s))
+        s = p.summary  # hazard.pipeline.motion_results.PathSummary
+        first = "" if s.first_exceedance_s is None else f", first over the MPE at t = {s.first_exceedance_s:.6g} s"
+        uv = s.uv_24h
+        where = (f"the UV dose within 24 h: {uv.dose_j_m2:.4g} J/m^2 over {uv.exposed_s:.4g} s exposed against {uv.limit_j_m2:.4g}"
+                 if uv is not None and uv.ratio >= s.worst_window.ratio else f"in its worst {s.worst_window.duration_s:.3g} s window")
+        out.append(f"  track {p.name}: {'HAZARD' if s.hazardous else 'below the MPE'} (exposure ratio "
+                   f"{s.exposure_ratio:.3g} {where}{first}); peak "
+                   f"{s.peak_irradiance_w_m2:.4g} W/m^2 at t = {s.peak_time_s:.6g} s; {s.samples} samples, "
+                   f"smallest step {s.min_step_s:.3g} s" + _levels_text(result, s))
     out += [f"  note: {n}" for n in ([] if m is None else m.notes)]
     fixed = [] if m is None else m.fixed()
     if fixed:
-        n = sum(p.summary["hazardous"] for p in fixed)
+        n = sum(p.summary.hazardous for p in fixed)
         out.append(f"  over time (the beam or a target moves): {n} of {len(fixed)} fixed observer(s) hazardous")
     air = getattr(result, "airspace", None)
     for z in () if air is None else air.zones:

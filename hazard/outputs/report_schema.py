@@ -26,12 +26,11 @@ NOHD must not vanish). The blocks of the stages (issue 35):
   (:class:`hazard.outputs.map_outputs.MapOutputs`), ``frame`` (:class:`scenes.geo_input.FrameDescription`),
   ``sdz`` (:class:`hazard.pipeline.sdz.DangerZone`, ``mirror_beams`` merged in from that stage) with the aid's part of
   ``sdz.aided[]`` (:class:`hazard.pipeline.spill.AidedNohd`), ``targets[].specular_steps``
-  (:class:`hazard.physics.specular.MirrorBeamSteps`): a field added there is in
-  the schema;
-- still from the dicts the stages write (their keys written once here, each model naming the
-  function that writes its dict; ``tests/hazard/test_report_schema.py`` checks every bundled
-  example, and the tests of the scenes that write the optional keys validate theirs):
-  ``motion`` and ``tracks``.
+  (:class:`hazard.physics.specular.MirrorBeamSteps`), ``motion`` (:class:`hazard.outputs.motion_outputs.MotionSection`,
+  its ``aim_track`` :class:`scenes.motion.AimTrackDescription`), ``tracks[]`` and ``motion.fixed_observers[]``
+  (:class:`hazard.outputs.motion_outputs.TrackEntry`: the path's
+  :class:`hazard.pipeline.motion_results.PathSummary` written flat, then its own keys): a field added there is in
+  the schema.
 
 A key a stage writes only in some cases (e.g. ``sdz.escaping_bearing_deg`` when the zone
 escapes, ``sdz.leaves_boundary`` with a ``[range]``) is optional here, typed when present.
@@ -42,13 +41,13 @@ read), ``targets[].melt``/``slump``/``aided`` and ``keepout_*.near_field``.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Literal, Optional, get_args, get_origin, get_type_hints
+from typing import Annotated, Any, Literal, Optional, get_args, get_origin, get_type_hints
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
 from hazard.outputs.map_outputs import MapOutputs
 from hazard.outputs.map_zones import ZONE_KINDS
-from hazard.outputs.motion_outputs import MOTION_COLUMNS
+from hazard.outputs.motion_outputs import MOTION_COLUMNS, MotionSection, TrackEntry
 from hazard.outputs.report import REPORT_FORMAT, REPORT_VERSION
 from hazard.physics.aperture import LimitingAperture as LimitingApertureInfo
 from hazard.physics.mpe import CorrectionFactors, MPEResult, RepetitivePulseResult, UV24hResult
@@ -59,6 +58,7 @@ from hazard.pipeline.sdz import AidedZone as SdzAidedZone
 from hazard.pipeline.sdz import DangerZone
 from hazard.pipeline.extended_source import ExtendedMpe as ExtendedMpeResult
 from hazard.pipeline.extended_source import ExtendedSourceSummary
+from hazard.pipeline.motion_results import PathSummary
 from hazard.pipeline.results import Stage
 from hazard.pipeline.spill import AidedNohd as SpillAidedNohd
 from hazard.pipeline.spill import SpillSummary, StoppedSpill
@@ -85,7 +85,7 @@ class _Strict(BaseModel):
 def _json_type(hint: Any) -> Any:
     """The JSON type of a dataclass field's annotation: floats may be "inf"/"nan", a bare
     tuple is written as a list of str (the steps) unless the caller says otherwise, a
-    ``tuple[X, ...]`` as a list of X, ``X | None`` as X's type or null, a nested dataclass as its own strict model
+    ``tuple[X, ...]`` as a list of X, ``tuple[X, X]`` as a list of exactly two X, ``X | None`` as X's type or null, a nested dataclass as its own strict model
     (:func:`_from_dataclass`, named as the class)."""
     if hint is float:
         return Number
@@ -97,6 +97,9 @@ def _json_type(hint: Any) -> Any:
         return Optional[_json_type(next(a for a in get_args(hint) if a is not type(None)))]
     if get_origin(hint) is tuple and len(get_args(hint)) == 2 and get_args(hint)[1] is Ellipsis:
         return list[_json_type(get_args(hint)[0])]  # type: ignore[misc]
+    if get_origin(hint) is tuple and len(set(get_args(hint))) == 1:  # tuple[X, X, X]: a list of exactly 3 X
+        n = len(get_args(hint))
+        return Annotated[list[_json_type(get_args(hint)[0])], Field(min_length=n, max_length=n)]  # type: ignore[misc]
     if dataclasses.is_dataclass(hint) and isinstance(hint, type):
         return _from_dataclass(hint, hint.__name__)
     return hint
@@ -321,83 +324,17 @@ VisualBlock = _from_dataclass(VisualInterference, "VisualBlock", override={  # t
 AirspaceBlock = _from_dataclass(AirspaceCheck, "AirspaceBlock", override={"zones": list[_from_dataclass(FlightZoneCheck, "FlightZone")]})  # type: ignore[misc]
 
 
-class WorstWindow(_Strict):
-    duration_s: Number
-    exposure_j_m2: Number
-    mpe_radiant_exposure_j_m2: Number
-    ratio: Number
+# ``tracks[]`` and ``motion.fixed_observers[]``: :class:`hazard.outputs.motion_outputs.TrackEntry`, written flat: its
+# :class:`hazard.pipeline.motion_results.PathSummary`'s keys (``worst_window``
+# :class:`~hazard.pipeline.motion_results.WorstWindow`, ``uv_24h`` :class:`~hazard.pipeline.motion_results.PathUv24h`),
+# then the entry's own
+class PathBlock(_from_dataclass(TrackEntry, "TrackEntryFields", omit=("summary",)),  # type: ignore[misc]
+                _from_dataclass(PathSummary, "PathSummaryFields")):  # type: ignore[misc]
+    """A track or a fixed observer over time (``csv`` null for a fixed observer)."""
 
 
-class PathUv24h(_Strict):
-    """:func:`hazard.pipeline.motion_stage._uv_24h`."""
-
-    dose_j_m2: Number
-    exposed_s: Number
-    limit_j_m2: Number
-    ratio: Number
-    window_end_s: Number
-    first_exceedance_s: Optional[Number]
-    label: str
-
-
-class PathBlock(_Strict):
-    """A track or a fixed observer over time: :func:`hazard.pipeline.motion_stage.path_summary`
-    and :func:`hazard.outputs.motion_outputs._track_dict` (``csv`` null for a fixed observer)."""
-
-    name: str
-    kind: str
-    peak_irradiance_w_m2: Number
-    peak_time_s: Number
-    worst_point_m: list[Number] = Field(min_length=3, max_length=3)
-    peak_direct_w_m2: Number
-    peak_reflected_w_m2: Number
-    radiant_exposure_j_m2: Number
-    path_exposure_j_m2: Number
-    exposure_error_estimate_j_m2: Number
-    worst_window: WorstWindow
-    exposure_ratio: Number
-    hazardous: bool
-    uv_24h: Optional[PathUv24h]
-    first_exceedance_s: Optional[Number]
-    time_span_s: list[Number]
-    samples: int
-    base_step_s: Number
-    min_step_s: Number
-    adaptive: bool
-    lased_s: Number
-    pointing_bias_rad: list[Number] = ABSENT  # the worst pointing bias of a path (motion_stage)
-    pointing_buffer_rad: Number = ABSENT
-    peak_effective_irradiance_w_m2: Optional[Number]
-    visual_levels_reached: list[str]
-    csv: Optional[str]
-    group: str
-
-
-class AimTrack(_Strict):
-    """:meth:`scenes.motion.AimTrack.describe`."""
-
-    times_s: list[Number]
-    knots: int
-    azimuth_rate_deg_s: Number = ABSENT
-    elevation_rate_deg_s: Number = ABSENT
-
-
-class MotionBlock(_Strict):
-    """``motion`` (:func:`hazard.outputs.motion_outputs.motion_sections`)."""
-
-    time_span_s: list[Number]
-    beam_states: int
-    beam_state_step: str
-    aim_track: Optional[AimTrack]
-    windows_s: Optional[list[list[Number]]]
-    target_tracks: list[str]
-    time_step_s: Number
-    adaptive: bool
-    samples_per_width: int
-    fixed_observers: list[PathBlock]
-    notes: list[str]
-    seconds: Number
-    method: str
+# ``motion``: :class:`hazard.outputs.motion_outputs.MotionSection` (``aim_track`` :class:`scenes.motion.AimTrackDescription`)
+MotionBlock = _from_dataclass(MotionSection, "MotionBlock", override={"fixed_observers": list[PathBlock]})
 
 
 # ``map_outputs``: :class:`hazard.outputs.map_outputs.MapOutputs` (:func:`~hazard.outputs.map_outputs.map_files`), the kinds of zone typed
@@ -440,7 +377,7 @@ class ReportModel(_Strict):
     notes: list[str]
     visual_interference: Optional[VisualBlock]  # type: ignore[valid-type]
     airspace: Optional[AirspaceBlock]  # type: ignore[valid-type]
-    motion: Optional[MotionBlock]
+    motion: Optional[MotionBlock]  # type: ignore[valid-type]
     tracks: list[PathBlock]
     map_outputs: Optional[MapOutputsBlock] = None  # type: ignore[valid-type]
 

@@ -770,20 +770,39 @@ def uv_24h_mpe(wavelength_nm, exposure_durations_s, *, standard=DEFAULT_STANDARD
 
 
 def on_time_in_24h_s(intervals_s) -> float:
-    """Largest time [s] the laser is on within any 24 h, for firing windows
-    ``[[t0_s, t1_s], ...]`` (overlaps counted once). A sliding 24 h window holds the most
-    when it starts at a window's start, so those starts are the only ones tried."""
-    w = np.asarray(intervals_s, float).reshape(-1, 2)
-    if not len(w):
+    """Largest time [s] the laser is on within any 24 h, for merged firing windows.
+
+    Parameters
+    ----------
+    intervals_s : array_like, shape (n, 2)
+        The closed lasing intervals ``[[t0_s, t1_s], ...]`` [s], sorted and merged (each
+        starts after the previous one ends): :attr:`scenes.motion.Windows.intervals` of
+        ``scenes.motion.Windows.of(windows)``, the one merge of the firing windows.
+
+    Returns
+    -------
+    float
+        The lased time [s] of the 24 h holding the most (a sliding 24 h window holds the
+        most when it starts at a window's start, so those starts are the only ones tried).
+
+    Raises
+    ------
+    ValueError
+        Intervals not of shape (n, 2), an interval ending before it starts, or intervals
+        unsorted or overlapping (not merged).
+    """
+    m = np.asarray(intervals_s, float)
+    if m.size == 0:
         return 0.0
-    w = w[np.argsort(w[:, 0])]
-    merged = [list(w[0])]
-    for a, b in w[1:]:
-        if a <= merged[-1][1]:
-            merged[-1][1] = max(merged[-1][1], b)
-        else:
-            merged.append([a, b])
-    m = np.asarray(merged)
+    if m.ndim != 2 or m.shape[1] != 2:
+        raise ValueError(f"intervals_s: shape {m.shape}: expected (n, 2) [[t0_s, t1_s], ...]")
+    bad = np.flatnonzero(~(m[:, 1] >= m[:, 0]))
+    if len(bad):
+        raise ValueError(f"intervals_s[{bad[0]}] = {m[bad[0]].tolist()}: expected t1_s >= t0_s")
+    bad = np.flatnonzero(~(m[1:, 0] > m[:-1, 1]))
+    if len(bad):
+        raise ValueError(f"intervals_s[{bad[0] + 1}] = {m[bad[0] + 1].tolist()} starts at or before intervals_s[{bad[0]}] = "
+                         f"{m[bad[0]].tolist()} ends: expected sorted, merged intervals (scenes.motion.Windows.of(windows).intervals)")
     cum = np.concatenate([[0.0], np.cumsum(m[:, 1] - m[:, 0])])
 
     def on_before(t):  # lased time in (-inf, t]

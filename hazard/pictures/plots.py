@@ -217,7 +217,7 @@ class ExposureDisplay(DisplayBase):
 
     @classmethod
     def from_path(cls, result, path):
-        """A moving observer's samples (:class:`hazard.pipeline.motion.PathResult`) over its
+        """A moving observer's samples (:class:`hazard.pipeline.motion.SummarisedPath`) over its
         own time steps; the hazard ratio is its worst window's exposure ratio."""
         from hazard.physics import mpe as _mpe
 
@@ -226,11 +226,11 @@ class ExposureDisplay(DisplayBase):
         el = np.clip(t - t[0], _mpe.DURATION_MIN_S, _mpe.DURATION_MAX_S)
         limit = np.array([_mpe.ocular_mpe(spec.laser.wavelength_nm, x, standard=spec.exposure.standard).radiant_exposure_j_m2
                           for x in el])
-        s = path.summary
-        first = math.nan if s.get("first_exceedance_s") is None else float(s["first_exceedance_s"])
+        s = path.summary  # hazard.pipeline.motion_results.PathSummary
+        first = math.nan if s.first_exceedance_s is None else float(s.first_exceedance_s)
         return cls(t, path.irradiance_w_m2, path.cumulative_j_m2, limit, f"{path.name} ({path.kind})",
-                   float(result.mpe_w_m2), first, float(s["exposure_ratio"]),
-                   f"worst {s['worst_window']['duration_s']:.3g} s window's H / MPE", duration_s=float(spec.exposure.duration_s),
+                   float(result.mpe_w_m2), first, float(s.exposure_ratio),
+                   f"worst {s.worst_window.duration_s:.3g} s window's H / MPE", duration_s=float(spec.exposure.duration_s),
                    rule="window", **_uv_day_path(s))
 
     def verdict_exceedance_s(self) -> float:
@@ -318,13 +318,13 @@ def _uv_day_static(uv, mpe_w_m2, single_w_m2, duration_s) -> dict:
 def _uv_day_path(summary) -> dict:
     """The UV day's limit for :class:`ExposureDisplay` of a moving observer, when its 24 h
     dose ratio is the path's exposure ratio (``uv_24h`` of
-    :func:`hazard.pipeline.motion_stage.path_summary`)."""
-    uv = summary.get("uv_24h")
-    if not uv or uv["ratio"] < summary["worst_window"]["ratio"]:
+    :func:`hazard.pipeline.motion_stage.path_summary`, a :class:`~hazard.pipeline.motion_results.PathSummary`)."""
+    uv = summary.uv_24h
+    if uv is None or uv.ratio < summary.worst_window.ratio:
         return {}
-    return {"uv_day_j_m2": float(uv["limit_j_m2"]),
-            "uv_day_text": (f"UV day's limit for {uv['exposed_s']:.4g} s exposed in 24 h: {uv['limit_j_m2']:.4g} J/m^2 "
-                            f"(the path's dose in 24 h / limit = {uv['ratio']:.3g}, governs; [M])")}
+    return {"uv_day_j_m2": float(uv.limit_j_m2),
+            "uv_day_text": (f"UV day's limit for {uv.exposed_s:.4g} s exposed in 24 h: {uv.limit_j_m2:.4g} J/m^2 "
+                            f"(the path's dose in 24 h / limit = {uv.ratio:.3g}, governs; [M])")}
 
 
 @dataclass

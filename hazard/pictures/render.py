@@ -397,7 +397,7 @@ def airspace_entries(result) -> list:
 
     paths = finding_paths(result)
     tracks = [] if getattr(result, "motion", None) is None else result.motion.tracks()
-    out = [(f"track_{name}", ps, text, C.HAZARDOUS if t.summary.get("hazardous") else C.SAFE, "line")
+    out = [(f"track_{name}", ps, text, C.HAZARDOUS if t.summary.hazardous else C.SAFE, "line")
            for (ps, name, _, text), t in zip(track_lines(result, paths), tracks)]
     specs = [] if result.scene.spec.airspace is None else list(result.scene.spec.airspace.zones)
     out += [(f"airspace_{spec.name}", (path,), text, C.ZONE if exceeded else C.STATIC, "patch")

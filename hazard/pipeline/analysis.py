@@ -402,7 +402,7 @@ def _motion(log, crossings, history, rays, mpe, backend, threads) -> MotionStage
     with log.run("motion") as st:
         out = run_motion(scene, motion, first, history.states, history.times_s, mpe.attenuation_per_m, mpe.exposure, backend, threads)
         st.detail = (f"{len(out.tracks())} track(s), {len(out.fixed())} fixed observer(s) over [{out.span_s[0]:g}, "
-                     f"{out.span_s[1]:g}] s; {out.key_step_text}; {sum(p.summary['samples'] for p in out.paths)} samples"
+                     f"{out.span_s[1]:g}] s; {out.key_step_text}; {sum(p.summary.samples for p in out.paths)} samples"
                      + "".join(f"; {n}" for n in out.notes))
     return MotionStageResult(out)
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from scenes.motion import Windows
+
 from hazard.physics import mpe as _mpe
 from hazard.physics.nohd import attenuation_from_visibility
 
@@ -56,11 +58,12 @@ def uv_24h_limit(spec):
 
     An observer held in place is exposed whenever the laser fires: the exposure time in 24 h
     is the largest lased time of the firing windows (``[laser] windows``) within any 24 h
-    (:func:`hazard.physics.mpe.on_time_in_24h_s`), or ``exposure.duration_s`` if longer or when no
+    (:func:`hazard.physics.mpe.on_time_in_24h_s` of the windows merged once, by
+    :meth:`scenes.motion.Windows.of`, as the motion stage lases them), or ``exposure.duration_s`` if longer or when no
     windows are given (then the exposure duration is taken as the day's whole exposure).
     """
     laser, t_exp = spec.laser, spec.exposure.duration_s
-    on = _mpe.on_time_in_24h_s(laser.windows) if laser.windows else 0.0
+    on = _mpe.on_time_in_24h_s(Windows.of(laser.windows).intervals) if laser.windows else 0.0
     total = min(max(t_exp, on), _mpe.UV_ACCUMULATION_S)
     uv = _mpe.uv_24h_mpe(laser.wavelength_nm, total, standard=spec.exposure.standard)
     if laser.windows:

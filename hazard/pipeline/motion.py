@@ -59,14 +59,20 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hazard.physics.engine import spot_irradiance, spot_line_of_sight, specular_irradiance
 from hazard.physics.nohd import optical_gain
 from hazard.physics.aperture import aperture_irradiance_w_m2, observer_apertures
+from hazard.pipeline.motion_results import PathSummary
 
-__all__ = ["PathResult", "MotionRun", "bias_frame", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
+if TYPE_CHECKING:  # annotations only
+    from scenes.motion import Motion
+    from scenes.scene import Scene
+
+__all__ = ["PathResult", "SummarisedPath", "MotionRun", "bias_frame", "BEAM_STATES_MAX", "FIXED_OBSERVERS_MAX"]
 
 BEAM_STATES_MAX = 200  # beam states traced when the beam or a target moves (a coarser key step is said)
 FIXED_OBSERVERS_MAX = 2000  # fixed observers evaluated over time when the beam moves (beyond: said, static verdict only)
@@ -91,9 +97,11 @@ class BeamState:
     ray_scene: object | None
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class PathResult:
-    """One path's samples and what they mean."""
+    """One path's samples: times [s], positions [m] (the analysis frame), whether the laser
+    was on, and the direct and reflected irradiance [W/m^2] at the eye (or the aid) at each;
+    ``bias_rad``: the constant pointing bias [rad] (right, up) it was sampled under."""
 
     name: str
     group: int
@@ -105,8 +113,7 @@ class PathResult:
     reflected_w_m2: np.ndarray
     base_step_s: float
     adaptive: bool
-    summary: dict = field(default_factory=dict)
-    bias_rad: tuple = (0.0, 0.0)  # the pointing bias it was sampled under (the worst within the buffer)
+    bias_rad: tuple[float, float] = (0.0, 0.0)
 
     @property
     def irradiance_w_m2(self) -> np.ndarray:
@@ -118,12 +125,26 @@ class PathResult:
         return np.concatenate([[0.0], np.cumsum(0.5 * (e[1:] + e[:-1]) * np.diff(self.times_s))])
 
 
+@dataclass(frozen=True, eq=False)
+class SummarisedPath(PathResult):
+    """A path's samples and what they mean: ``summary``
+    (:class:`hazard.pipeline.motion_results.PathSummary`, of
+    :func:`hazard.pipeline.motion_stage.path_summary`)."""
+
+    summary: PathSummary = field(kw_only=True)
+
+    @classmethod
+    def of(cls, path: PathResult, summary: PathSummary) -> SummarisedPath:
+        """``path``'s samples with their summary."""
+        return cls(**{f.name: getattr(path, f.name) for f in dataclasses.fields(PathResult)}, summary=summary)
+
+
 @dataclass
 class MotionRun:
     """Everything the motion stage needs, built once."""
 
-    scene: object
-    motion: object
+    scene: Scene
+    motion: Motion
     mu: float
     mpe_w_m2: float
     pulse_limit_w_m2: float | None

@@ -7,33 +7,56 @@ from __future__ import annotations
 import functools
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from hazard.physics import mpe as _mpe
-from hazard.pipeline.motion import FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, base_grid, beam_states, evaluate
+from hazard.pipeline.motion import (FIXED_OBSERVERS_MAX, WINDOW_DURATIONS, MotionRun, PathResult, SummarisedPath, base_grid, beam_states,
+                                    evaluate)
+from hazard.pipeline.motion_results import PathSummary, PathUv24h, WorstWindow
 from hazard.pipeline.motion_steps import crossing_times, refine_by_change
 
 __all__ = ["MotionResult", "run_motion", "path_summary"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class MotionResult:
-    """The paths evaluated over time, how, and what was left out."""
+    """Stage ``motion``: the paths evaluated over time, how, and what was left out.
 
-    paths: list
-    span_s: tuple
+    Attributes
+    ----------
+    paths : tuple of SummarisedPath
+        The moving observers' tracks (in the scene's order), then the fixed observers
+        evaluated over time; each with its samples and :class:`~hazard.pipeline.motion_results.PathSummary`.
+    span_s : tuple of 2 float
+        The analysed span [s] (``[motion] time_start_s``, ``time_end_s``).
+    beam_states : int
+        Number of beam states traced (key times).
+    key_step_text : str
+        How the key times were chosen, in words.
+    notes : tuple of str
+        What the evaluation left out or assumed (report.json ``motion.notes``).
+    seconds : float
+        The stage's wall-clock run time [s] (time.perf_counter; masked when outputs are compared).
+    run : MotionRun or None
+        The run's shared state (its beam states serve the airspace and visual checks).
+    """
+
+    paths: tuple[SummarisedPath, ...]
+    span_s: tuple[float, float]
     beam_states: int
     key_step_text: str
-    notes: list = field(default_factory=list)
+    notes: tuple[str, ...] = ()
     seconds: float = 0.0
-    run: object = None  # the MotionRun (its beam states serve the airspace checks)
+    run: MotionRun | None = field(default=None, repr=False, compare=False)
 
-    def tracks(self) -> list:
+    def tracks(self) -> list[SummarisedPath]:
+        """The moving observers' paths."""
         return [p for p in self.paths if p.kind == "track"]
 
-    def fixed(self) -> list:
+    def fixed(self) -> list[SummarisedPath]:
+        """The fixed observers' paths (the beam or a target moves)."""
         return [p for p in self.paths if p.kind == "fixed"]
 
 
@@ -114,7 +137,7 @@ def _uv_day_h_j_m2(wavelength_nm, bin_k, standard) -> float:
     return _mpe.uv_24h_mpe(wavelength_nm, _mpe.DURATION_MIN_S * 1.01**bin_k, standard=standard).radiant_exposure_j_m2
 
 
-def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> dict:
+def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> PathUv24h:
     """UV (180-400 nm): the largest dose of the path within any 24 h against the limit for
     the time exposed in that 24 h (the exposures of a day add up: :func:`hazard.physics.mpe.uv_24h_mpe`).
 
@@ -143,12 +166,12 @@ def _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) -> dict:
     ratio = np.where(doses > 0, doses * (1.0 + rel_err) / h, 0.0)
     w = int(np.argmax(ratio))
     over = ratio >= 1.0
-    return {"dose_j_m2": float(doses[w]), "exposed_s": float(on[w]), "limit_j_m2": float(h[w]), "ratio": float(ratio[w]),
-            "window_end_s": float(ends[w]), "first_exceedance_s": float(ends[over].min()) if over.any() else None,
-            "label": "[M] UV 24 h accumulation (ANSI Z136.1-2014 8.2, IEC 60825-1:2014 A.3; unverified)"}
+    return PathUv24h(dose_j_m2=float(doses[w]), exposed_s=float(on[w]), limit_j_m2=float(h[w]), ratio=float(ratio[w]),
+                     window_end_s=float(ends[w]), first_exceedance_s=float(ends[over].min()) if over.any() else None,
+                     label="[M] UV 24 h accumulation (ANSI Z136.1-2014 8.2, IEC 60825-1:2014 A.3; unverified)")
 
 
-def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limit_w_m2=None) -> dict:
+def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limit_w_m2=None) -> PathSummary:
     """Peak, radiant exposure (largest over windows of ``duration_s``), the whole path's,
     the verdict over every window length and the first exceedance of one path; in the UV
     also the largest dose within 24 h against the day's limit (``uv_24h``, :func:`_uv_24h`),
@@ -170,26 +193,27 @@ def path_summary(pr: PathResult, duration_s, wavelength_nm, standard, pulse_limi
         first.append(t[np.argmax(e >= pulse_limit_w_m2)])
     hazardous = bool(ratio[w] >= 1.0 or (pulse_limit_w_m2 is not None and e[k] >= pulse_limit_w_m2))
     uv = _uv_24h(t, e, cum, wavelength_nm, standard, rel_err) if wavelength_nm < 400 and len(t) > 1 else None
-    if uv is not None and uv["ratio"] >= 1.0:
+    if uv is not None and uv.ratio >= 1.0:
         hazardous = True
-        first.append(uv["first_exceedance_s"])
+        first.append(uv.first_exceedance_s)
     dt = np.diff(t)
     steps = dt[dt > 1e-9 * pr.base_step_s]  # not the zero-width pairs at the windows' edges
-    return {
-        "name": pr.name, "kind": pr.kind,
-        "peak_irradiance_w_m2": float(e[k]), "peak_time_s": float(t[k]), "worst_point_m": pr.positions_m[k].tolist(),
-        "peak_direct_w_m2": float(pr.direct_w_m2[k]), "peak_reflected_w_m2": float(pr.reflected_w_m2[k]),
-        "radiant_exposure_j_m2": float(best[lengths == duration_s][0]), "path_exposure_j_m2": float(cum[-1]),
-        "exposure_error_estimate_j_m2": err,
-        "worst_window": {"duration_s": float(lengths[w]), "exposure_j_m2": float(best[w]), "mpe_radiant_exposure_j_m2": float(mpe_h[w]),
-                         "ratio": float(ratio[w])},
-        "exposure_ratio": float(max(ratio[w], 0.0 if uv is None else uv["ratio"])), "hazardous": hazardous,
-        "uv_24h": uv,  # UV: the day's summed dose against its limit (None outside 180-400 nm)
-        "first_exceedance_s": float(min(first)) if first else None,
-        "time_span_s": [float(t[0]), float(t[-1])], "samples": int(len(t)), "base_step_s": pr.base_step_s,
-        "min_step_s": float(steps.min()) if len(steps) else pr.base_step_s, "adaptive": pr.adaptive,
-        "lased_s": float(np.sum(dt * (pr.lased[1:] & pr.lased[:-1]))) if len(t) > 1 else 0.0,
-    }
+    x, y, z = (float(c) for c in pr.positions_m[k])
+    return PathSummary(
+        name=pr.name, kind=pr.kind,
+        peak_irradiance_w_m2=float(e[k]), peak_time_s=float(t[k]), worst_point_m=(x, y, z),
+        peak_direct_w_m2=float(pr.direct_w_m2[k]), peak_reflected_w_m2=float(pr.reflected_w_m2[k]),
+        radiant_exposure_j_m2=float(best[lengths == duration_s][0]), path_exposure_j_m2=float(cum[-1]),
+        exposure_error_estimate_j_m2=err,
+        worst_window=WorstWindow(duration_s=float(lengths[w]), exposure_j_m2=float(best[w]), mpe_radiant_exposure_j_m2=float(mpe_h[w]),
+                                 ratio=float(ratio[w])),
+        exposure_ratio=float(max(ratio[w], 0.0 if uv is None else uv.ratio)), hazardous=hazardous,
+        uv_24h=uv,  # UV: the day's summed dose against its limit (None outside 180-400 nm)
+        first_exceedance_s=float(min(first)) if first else None,
+        time_span_s=(float(t[0]), float(t[-1])), samples=int(len(t)), base_step_s=pr.base_step_s,
+        min_step_s=float(steps.min()) if len(steps) else pr.base_step_s, adaptive=pr.adaptive,
+        lased_s=float(np.sum(dt * (pr.lased[1:] & pr.lased[:-1]))) if len(t) > 1 else 0.0,
+    )
 
 
 def _floor_w_m2(run: MotionRun) -> float:
@@ -213,7 +237,8 @@ def _sample_path(run: MotionRun, name, group, kind, at, span, optics) -> PathRes
     parts = parts_at(t)
     if ms.adaptive and len(t) > 1:
         t, parts, _ = refine_by_change(t, parts, parts_at, _floor_w_m2(run))
-    return PathResult(name, group, kind, t, at(t), run.motion.windows.lased(t), parts[0], parts[1], ms.time_step_s, ms.adaptive)
+    return PathResult(name, group, kind, t, at(t), run.motion.windows.lased(t), parts[0], parts[1], ms.time_step_s, ms.adaptive,
+                      tuple(run.bias_rad))
 
 
 BIAS_CANDIDATES = 8  # closest approaches of a track to the aim tried as the pointing bias's direction
@@ -226,7 +251,7 @@ def _bias_candidates(run: MotionRun, pr: PathResult, b: float) -> list:
     from hazard.pipeline.motion import bias_frame
 
     u = run.nominal_direction(pr.times_s)
-    q = pr.positions_m - np.asarray(run.scene.laser_position_m, float)
+    q = pr.positions_m - np.asarray(run.scene.laser_position_m, dtype=float)
     z = np.einsum("ij,ij->i", q, u)
     e1, e2 = bias_frame(u)
     a, c = np.arctan2(np.einsum("ij,ij->i", q, e1), z), np.arctan2(np.einsum("ij,ij->i", q, e2), z)
@@ -239,29 +264,27 @@ def _bias_candidates(run: MotionRun, pr: PathResult, b: float) -> list:
     return [(float(a[i] * s), float(c[i] * s)) for i in idx for s in (min(1.0, b / max(float(delta[i]), 1e-300)),)]
 
 
-def _worst_over_bias(run: MotionRun, pr: PathResult, sample, summarise) -> PathResult:
+def _worst_over_bias(run: MotionRun, pr: PathResult, sample, summarise) -> SummarisedPath:
     """The track under the worst constant pointing bias within ``[laser]`` pointing buffer
     (a bias, not jitter: the beam may sit anywhere within its error, and a track passing
     within it may be crossed through the axis). ``sample()`` samples the path under
-    ``run.bias_rad``; ``summarise(path)`` gives its summary. The nominal aim is one candidate."""
+    ``run.bias_rad``; ``summarise(path)`` gives its summary. The nominal aim is one candidate
+    (the first of equal ratios is kept); the summary then says the bias and the buffer."""
     b = run.scene.spec.laser.pointing_buffer_rad
-    pr.summary = summarise(pr)
+    best = SummarisedPath.of(pr, summarise(pr))
     if b <= 0:
-        return pr
-    best = pr
+        return best
     for bias in _bias_candidates(run, pr, b):
         run.bias_rad = bias
         try:
             cand = sample()
         finally:
             run.bias_rad = (0.0, 0.0)
-        cand.summary = summarise(cand)
-        if cand.summary["exposure_ratio"] > best.summary["exposure_ratio"]:
-            best = cand
-            best.bias_rad = bias
-    best.summary["pointing_bias_rad"] = list(best.bias_rad)
-    best.summary["pointing_buffer_rad"] = b
-    return best
+        s = summarise(cand)
+        if s.exposure_ratio > best.summary.exposure_ratio:
+            best = SummarisedPath.of(cand, s)
+    bx, by = best.bias_rad
+    return SummarisedPath.of(best, replace(best.summary, pointing_bias_rad=(bx, by), pointing_buffer_rad=b))
 
 
 def _track_notes(run: MotionRun, tr, p: PathResult | None) -> list:
@@ -287,11 +310,11 @@ def _track_notes(run: MotionRun, tr, p: PathResult | None) -> list:
     return out
 
 
-def _fixed_paths(run: MotionRun, notes) -> list:
+def _fixed_paths(run: MotionRun, notes) -> list[PathResult]:
     """The fixed observers' paths when the beam or a target moves."""
     obs = run.scene.observers
     m = len(obs) if obs is not None else 0
-    if not run.motion.beam_moves or m == 0:
+    if obs is None or not run.motion.beam_moves or m == 0:
         return []
     if m > FIXED_OBSERVERS_MAX:
         notes.append(f"the {m} fixed observers are not evaluated over time (more than {FIXED_OBSERVERS_MAX}): their verdicts "
@@ -303,8 +326,10 @@ def _fixed_paths(run: MotionRun, notes) -> list:
     for i in range(m):
         p = pos[i]
         optics = obs.optics[obs.group[i]]
-        out.append(_sample_path(run, labels[i], int(obs.group[i]), "fixed",
-                                lambda ts, p=p: np.broadcast_to(p, (len(np.atleast_1d(ts)), 3)).copy(), span, optics))
+        path = _sample_path(run, labels[i], int(obs.group[i]), "fixed",
+                            lambda ts, p=p: np.broadcast_to(p, (len(np.atleast_1d(ts)), 3)).copy(), span, optics)
+        if path is not None:  # never None: the span is the run's own
+            out.append(path)
     return out
 
 
@@ -343,8 +368,7 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
         if p is not None:
             paths.append(_worst_over_bias(run, p, sample, summarise))
     for p in _fixed_paths(run, notes):  # their pointing error is the static analysis's (the beam held anywhere in it)
-        p.summary = summarise(p)
-        paths.append(p)
+        paths.append(SummarisedPath.of(p, summarise(p)))
     if spec.laser.pointing_buffer_rad > 0 and motion.tracks:
         notes.append(f"tracks under the worst constant pointing bias within {spec.laser.pointing_buffer_rad:.3g} rad (toward "
                      f"each track's closest approaches to the aim; reflections at the nominal aim)")
@@ -352,7 +376,7 @@ def run_motion(scene, motion, first, states, history_times_s, mu, limits, backen
         notes.append(f"lased time beyond the history's end ({history_times_s[-1]:g} s): the last state is held")
     if math.isfinite(run.mpe_w_m2) and spec.laser.pulse_energy_j is not None:
         notes.append("pulsed laser: tracks take the average-power rule over every window and the per-pulse rule on the peak")
-    return MotionResult(paths, (motion.t_start_s, motion.t_end_s), len(run.states_list), run.key_step_text, notes,
+    return MotionResult(tuple(paths), (motion.t_start_s, motion.t_end_s), len(run.states_list), run.key_step_text, tuple(notes),
                         time.perf_counter() - t_start, run)
 
 

@@ -231,7 +231,7 @@ class HazardResult:
         fixed = [] if self.motion is None else self.motion.fixed()
         if not fixed:
             return None
-        return np.array([p.summary["hazardous"] for p in fixed], bool)
+        return np.array([p.summary.hazardous for p in fixed], bool)
 
     @property
     def observer_mpe_w_m2(self):
@@ -267,7 +267,7 @@ class HazardResult:
         tracks = [] if self.motion is None else self.motion.tracks()
         zones = () if self.airspace is None else self.airspace.zones
         return bool(np.any(self.hazardous)) or positive(None if self.sdz is None else self.sdz.nohd_m) or any(
-            p.summary["hazardous"] for p in tracks) or any(not z.holds for z in zones) or any(
+            p.summary.hazardous for p in tracks) or any(not z.holds for z in zones) or any(
             (t.static_lobe is not None and t.static_lobe.max_range_m > 0) or (t.dynamic_lobe is not None and t.dynamic_lobe.max_range_m > 0)
             or positive(t.specular_nohd_static_m) or positive(t.specular_nohd_dynamic_m)
             for t in self.targets

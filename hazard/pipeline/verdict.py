@@ -110,7 +110,7 @@ def _observer_counts(result) -> VerdictCounts:
     air = getattr(result, "airspace", None)
     zones = () if air is None else air.zones
     return VerdictCounts(hazardous=int(np.sum(result.hazardous)), total=len(result.observers),
-                         tracks_hazardous=sum(bool(p.summary["hazardous"]) for p in tracks), tracks=len(tracks),
+                         tracks_hazardous=sum(bool(p.summary.hazardous) for p in tracks), tracks=len(tracks),
                          flight_zones_exceeded=sum(not z.holds for z in zones), flight_zones=len(zones))
 
 

@@ -60,7 +60,7 @@ def run(repeat=5) -> dict:
     for _ in range(repeat):
         res = hazard.analyze(sc)
         times.append(res.stage("motion").seconds)
-        samples = res.motion.tracks()[0].summary["samples"]
+        samples = res.motion.tracks()[0].summary.samples
     floor = statistics.median(_floor(samples) for _ in range(repeat))
     t = statistics.median(times)
     return {"samples": samples, "crossings": 20, "motion_stage_s": t, "floor_s": floor, "ratio": t / max(floor, 1e-12)}

@@ -167,8 +167,8 @@ duration_s = 10.0
     moving = '[targets.track]\ntimes_s = [0.0, 10.0]\ncenter_m = [[-0.5, 0.0, 0.0], [0.5, 0.0, 0.0]]'
     a = hazard.analyze(scenes.loads(base % "")).motion.tracks()[0].summary
     b = hazard.analyze(scenes.loads(base % moving)).motion.tracks()[0].summary
-    assert b["radiant_exposure_j_m2"] == pytest.approx(a["radiant_exposure_j_m2"], rel=1e-2)
-    assert a["hazardous"] and b["hazardous"]
+    assert b.radiant_exposure_j_m2 == pytest.approx(a.radiant_exposure_j_m2, rel=1e-2)
+    assert a.hazardous and b.hazardous
 
 
 def test_a_standing_track_sees_the_dynamic_history_the_fixed_observer_sees():
@@ -190,7 +190,7 @@ positions_m = [[{x!r}, {y!r}, {z!r}], [{x!r}, {y!r}, {z!r}]]
 """
     res = hazard.analyze(scenes.loads(text, base_dir=p.parent))
     s = res.motion.tracks()[0].summary
-    assert s["peak_irradiance_w_m2"] == pytest.approx(float(res0.observers.peak_irradiance_w_m2[i]), rel=1e-9)
+    assert s.peak_irradiance_w_m2 == pytest.approx(float(res0.observers.peak_irradiance_w_m2[i]), rel=1e-9)
 
 
 def test_map_outputs_carry_the_tracks_zones_and_visual_outlines(airspace_run):
@@ -274,12 +274,12 @@ def test_a_track_within_the_pointing_error_of_the_beam_is_crossed_through_its_ax
     nominal = hazard.analyze(scenes.loads(text)).motion.tracks()[0].summary
     biased = hazard.analyze(scenes.loads(text.replace("aim_m = [0.0, 20000.0, 0.0]", "aim_m = [0.0, 20000.0, 0.0]\npointing_error_rad = 0.001")))
     s = biased.motion.tracks()[0].summary
-    assert nominal["radiant_exposure_j_m2"] < 1e-6 * h
-    assert s["radiant_exposure_j_m2"] == pytest.approx(h, rel=1e-3)
-    assert math.hypot(*s["pointing_bias_rad"]) == pytest.approx(3.0 / 5000.0, rel=1e-3)
+    assert nominal.radiant_exposure_j_m2 < 1e-6 * h
+    assert s.radiant_exposure_j_m2 == pytest.approx(h, rel=1e-3)
+    assert math.hypot(*s.pointing_bias_rad) == pytest.approx(3.0 / 5000.0, rel=1e-3)
     assert "worst constant pointing bias" in biased.stage("motion").detail
     doc = json.loads(json.dumps(report_dict(biased)))
-    assert doc["tracks"][0]["pointing_bias_rad"] == list(s["pointing_bias_rad"]) and doc["tracks"][0]["pointing_buffer_rad"] == 0.001
+    assert doc["tracks"][0]["pointing_bias_rad"] == list(s.pointing_bias_rad) and doc["tracks"][0]["pointing_buffer_rad"] == 0.001
     validate_report(doc)  # a track's pointing_bias_rad against its schema (issue 35)
 
 
@@ -355,3 +355,18 @@ positions_m = [[0.0, 0.0, -500.0], [10.0, 0.0, -500.0]]
 """
     res = hazard.analyze(scenes.loads(text, base_dir=p.parent))
     assert any("track mole:" in n and "under the terrain" in n for n in res.motion.notes)
+
+
+def test_the_track_text_of_the_pictures_says_the_faa_levels_the_report_lists():
+    """The pictures' text of a track (plan and elevation views, figures.json) names the FAA
+    levels report.json's ``tracks[k].visual_levels_reached`` lists: the helicopter of the
+    airspace example reaches all three (it read none before the path summaries were typed:
+    the text looked for a key only the report's copy had)."""
+    from hazard.outputs.figure_index import track_lines
+
+    res = bundled("airspace")
+    doc = report_dict(res)
+    ((_, name, xyz, text),) = track_lines(res, {"observers": {}})
+    levels = doc["tracks"][0]["visual_levels_reached"]
+    assert name == "helicopter" and levels == ["szed", "czed", "lfed"] and xyz.shape[1] == 3
+    assert text.endswith(f"FAA levels reached: {', '.join(x.upper() for x in levels)})"), text

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import hazard as hz
 from hazard.physics import mpe as M
+from scenes.motion import Windows
 
 ANSI, IEC = "ansi-z136.1-2014", "iec-60825-1-2014"
 REL = 1e-9
@@ -186,7 +187,23 @@ def test_uv_24h_rejects_bad_input():
     ([[1e5, 1e5 + 10], [0, 5]], 10.0),  # unsorted
 ])
 def test_on_time_in_24h(windows, expected_s):
-    assert M.on_time_in_24h_s(windows) == pytest.approx(expected_s, rel=1e-12)
+    assert M.on_time_in_24h_s(Windows.of(windows).intervals) == pytest.approx(expected_s, rel=1e-12)
+
+
+@pytest.mark.parametrize("intervals, match", [
+    ([[0.0, 60.0], [30.0, 90.0]], r"intervals_s\[1\] = \[30.0, 90.0\] starts at or before intervals_s\[0\] = \[0.0, 60.0\] ends"),
+    ([[100.0, 110.0], [0.0, 5.0]], r"intervals_s\[1\] = \[0.0, 5.0\].*expected sorted, merged"),
+    ([[0.0, 60.0], [60.0, 90.0]], r"intervals_s\[1\]"),  # touching: one window once merged
+    ([[10.0, 5.0]], r"intervals_s\[0\] = \[10.0, 5.0\]: expected t1_s >= t0_s"),
+    ([[0.0, float("nan")]], r"intervals_s\[0\]"),
+    ([0.0, 1.0, 2.0], r"intervals_s: shape \(3,\): expected \(n, 2\)"),
+])
+def test_on_time_in_24h_takes_merged_intervals_only(intervals, match):
+    """The one merge of the firing windows is :meth:`scenes.motion.Windows.of`: intervals not
+    merged are an error naming the interval, never counted twice or summed out of order."""
+    with pytest.raises(ValueError, match=match):
+        M.on_time_in_24h_s(intervals)
+    assert M.on_time_in_24h_s(np.zeros((0, 2))) == 0.0
 
 
 _WINDOWS = st.lists(st.tuples(st.floats(0, 3e5), st.floats(1.0, 5e3)), min_size=1, max_size=8)
@@ -221,7 +238,7 @@ def _check_on_time(pairs):
         return sum(max(0.0, min(b, s + 86400.0) - max(a, s)) for a, b in union)
 
     best = max(on(s) for s in [a for a, _ in union] + list(np.linspace(-86400.0, 3.1e5, 400)))
-    assert M.on_time_in_24h_s(w) == pytest.approx(best, rel=1e-9, abs=1e-6)
+    assert M.on_time_in_24h_s(Windows.of(w).intervals) == pytest.approx(best, rel=1e-9, abs=1e-6)
 
 
 def _plate_scene(wl, power_w, windows=None, standard=ANSI):
@@ -292,21 +309,23 @@ def test_path_summary_holds_the_day_dose():
     # Each 10 s window holds 200 J/m^2, far below the 10 s MPE (Table 5a 315-400 nm: 1.0 J/cm^2).
     # Three periods: the day holds 6060 J/m^2 in 300 s against 1.0 J/cm^2 = 1e4 J/m^2 (ratio 0.606).
     s3 = path_summary(_lit([10.0, 3610.0, 7210.0], 100.0, 20.0, 7400.0), 10.0, 355.0, ANSI)
-    uv = s3["uv_24h"]
-    assert uv["exposed_s"] == pytest.approx(300.0) and uv["limit_j_m2"] == pytest.approx(1e4, rel=REL)
-    assert uv["dose_j_m2"] == pytest.approx(3 * 2020.0, rel=1e-12) and not s3["hazardous"]
-    assert 0.606 <= uv["ratio"] <= 0.606 * 1.01  # x (1 + the integral's relative error estimate)
-    assert s3["worst_window"]["ratio"] < 0.1
-    from hazard.outputs.report_schema import PathUv24h
+    uv = s3.uv_24h
+    assert uv.exposed_s == pytest.approx(300.0) and uv.limit_j_m2 == pytest.approx(1e4, rel=REL)
+    assert uv.dose_j_m2 == pytest.approx(3 * 2020.0, rel=1e-12) and not s3.hazardous
+    assert 0.606 <= uv.ratio <= 0.606 * 1.01  # x (1 + the integral's relative error estimate)
+    assert s3.worst_window.ratio < 0.1
+    from hazard.outputs.motion_outputs import TrackEntry
+    from hazard.outputs.report_schema import PathBlock
 
-    PathUv24h.model_validate(s3["uv_24h"], strict=True)  # report.json's tracks[].uv_24h (issue 35)
+    # report.json's tracks[].uv_24h against its model, generated from PathUv24h (issue 35)
+    PathBlock.model_validate(TrackEntry(s3, None, (), None, "g").to_dict(), strict=True)
     # five periods: 1.01e4 J/m^2 > 1e4 J/m^2: hazardous, though no exposure of duration_s is
     s5 = path_summary(_lit([10.0 + 3600.0 * k for k in range(5)], 100.0, 20.0, 18100.0), 10.0, 355.0, ANSI)
-    assert s5["hazardous"] and s5["uv_24h"]["ratio"] >= 1.0 and s5["exposure_ratio"] == s5["uv_24h"]["ratio"]
-    assert s5["worst_window"]["ratio"] < 0.1
+    assert s5.hazardous and s5.uv_24h.ratio >= 1.0 and s5.exposure_ratio == s5.uv_24h.ratio
+    assert s5.worst_window.ratio < 0.1
     # the first exceedance lies in the fifth period (4 x 2020 = 8080 J/m^2 before it)
-    assert 4 * 3600.0 + 10.0 <= s5["first_exceedance_s"] <= 4 * 3600.0 + 111.0
-    assert path_summary(_lit([10.0], 100.0, 20.0, 200.0), 10.0, 532.0, ANSI)["uv_24h"] is None
+    assert 4 * 3600.0 + 10.0 <= s5.first_exceedance_s <= 4 * 3600.0 + 111.0
+    assert path_summary(_lit([10.0], 100.0, 20.0, 200.0), 10.0, 532.0, ANSI).uv_24h is None
 
 
 def test_path_summary_slides_a_24h_window():
@@ -316,12 +335,12 @@ def test_path_summary_slides_a_24h_window():
     # holds both (ratio about 0.6, not 1.2)
     one = 20.0 * 300.0 + 2 * 0.5 * 20.0 * 1.0
     s = path_summary(_lit([10.0, 108000.0], 300.0, 20.0, 108400.0), 10.0, 355.0, ANSI)
-    assert s["uv_24h"]["dose_j_m2"] == pytest.approx(one, rel=1e-12)
-    assert s["uv_24h"]["exposed_s"] == pytest.approx(300.0, rel=1e-12)
-    assert one / 1e4 <= s["uv_24h"]["ratio"] <= one / 1e4 * 1.01 and not s["hazardous"]
+    assert s.uv_24h.dose_j_m2 == pytest.approx(one, rel=1e-12)
+    assert s.uv_24h.exposed_s == pytest.approx(300.0, rel=1e-12)
+    assert one / 1e4 <= s.uv_24h.ratio <= one / 1e4 * 1.01 and not s.hazardous
     # 20 h apart: one 24 h holds both, 12040 > 1e4 J/m^2 (Table 5a 315-400 nm): hazardous
     s2 = path_summary(_lit([10.0, 72000.0], 300.0, 20.0, 108400.0), 10.0, 355.0, ANSI)
-    assert s2["uv_24h"]["dose_j_m2"] == pytest.approx(2 * one, rel=1e-12) and s2["hazardous"]
+    assert s2.uv_24h.dose_j_m2 == pytest.approx(2 * one, rel=1e-12) and s2.hazardous
 
 
 def test_cli_exposures_per_day():

@@ -17,19 +17,23 @@ from hypothesis import strategies as st
 from hazard.outputs.report import json_safe
 from hazard.outputs.map_outputs import MapOutputs
 from hazard.outputs.map_zones import ZONE_KINDS
+from hazard.outputs.motion_outputs import MotionSection, TrackEntry
 from hazard.outputs.report_schema import (AidedZone as AidedZoneBlock, AirspaceBlock, ExtendedSourceBlock, FrameBlock, LimitingAperture,
-                                          MapOutputsBlock, SamplingBlock, SdzBlock, SpillBlock, Uv24hBlock, VerdictBlock, VisualBlock)
+                                          MapOutputsBlock, MotionBlock, PathBlock, SamplingBlock, SdzBlock, SpillBlock, Uv24hBlock,
+                                          VerdictBlock, VisualBlock)
 from hazard.physics import aperture
 from hazard.physics.mpe import RepetitivePulseResult, UV24hResult, uv_24h_mpe
 from hazard.physics.visual import LevelDistances, TargetLevelDistances, VisualInterference
 from hazard.pipeline.airspace import AirspaceCheck, FlightZoneCheck
 from hazard.pipeline.extended_source import ExtendedMpe, ExtendedSourceSummary
+from hazard.pipeline.motion_results import PathSummary, PathUv24h, WorstWindow
 from hazard.pipeline.sdz import AidedZone, DangerZone, MirrorBeam, MirrorReach, NominalZone, SdzDirections
 from hazard.pipeline.spill import AidedNohd, SpillSummary, StoppedSpill
 from hazard.pipeline.spots import BeamSampling, NotReflected
 from hazard.pipeline.verdict import Verdict, VerdictCounts
 from scenes.dem import DemInfo
 from scenes.geo_input import Conversion, FrameDescription
+from scenes.motion import AimTrackDescription
 
 FEW = settings(derandomize=True, deadline=None, max_examples=30)
 MANY = settings(derandomize=True, deadline=None, max_examples=400)
@@ -87,9 +91,19 @@ frames = st.builds(FrameDescription, st.just("local"), text) | st.builds(
     FrameDescription, st.just("site"), text, st.tuples(num, num, num), num, text, text, num, num, st.tuples(num, num),
     st.none() | dems, _tuple(conversions))
 
+pair, triple = st.tuples(num, num), st.tuples(num, num, num)
+path_summaries = st.builds(
+    PathSummary, text, st.sampled_from(["track", "fixed"]), num, num, triple, num, num, num, num, num,
+    st.builds(WorstWindow, num, num, num, num), num, flag, st.none() | st.builds(PathUv24h, num, num, num, num, num, maybe, text),
+    maybe, pair, count, num, num, flag, num, st.none() | pair, maybe)
+track_entries = st.builds(TrackEntry, path_summaries, maybe, _tuple(st.sampled_from(["szed", "czed", "lfed"])), st.none() | text, text)
+aim_tracks = st.none() | st.builds(AimTrackDescription, pair, count, maybe, maybe)
+motion_sections = st.builds(MotionSection, pair, count, text, aim_tracks, st.none() | _tuple(pair), _tuple(text), num, flag, count,
+                            _tuple(track_entries, 2), _tuple(text), num, text)
+
 CASES = [(verdicts, VerdictBlock), (samplings, SamplingBlock), (spills, SpillBlock), (extended, ExtendedSourceBlock),
          (airspaces, AirspaceBlock), (visuals, VisualBlock), (apertures, LimitingAperture), (map_outputs, MapOutputsBlock),
-         (frames, FrameBlock), (danger_zones, SdzBlock)]
+         (frames, FrameBlock), (danger_zones, SdzBlock), (motion_sections, MotionBlock)]
 
 
 def _written(block) -> dict:
@@ -233,3 +247,58 @@ def test_the_mirror_beams_are_merged_into_a_copy_of_the_danger_zone():
                                                  "above_horizon": True}]
     with pytest.raises(dataclasses.FrozenInstanceError):
         merged.nohd_m = 0.0  # type: ignore[misc]
+
+
+#: The keys of a ``tracks[]`` entry in the order report.json wrote them before the types (issue 35): the
+#: path's, then the entry's own (``pointing_*`` only for a track under a pointing buffer).
+TRACK_KEYS = ["name", "kind", "peak_irradiance_w_m2", "peak_time_s", "worst_point_m", "peak_direct_w_m2", "peak_reflected_w_m2",
+              "radiant_exposure_j_m2", "path_exposure_j_m2", "exposure_error_estimate_j_m2", "worst_window", "exposure_ratio",
+              "hazardous", "uv_24h", "first_exceedance_s", "time_span_s", "samples", "base_step_s", "min_step_s", "adaptive",
+              "lased_s", "pointing_bias_rad", "pointing_buffer_rad", "peak_effective_irradiance_w_m2", "visual_levels_reached",
+              "csv", "group"]
+
+
+@FEW
+@given(track_entries)
+def test_a_track_entry_is_the_paths_keys_then_its_own(entry):
+    """``tracks[]`` and ``motion.fixed_observers[]`` are written flat, in the order report.json
+    always had (:data:`TRACK_KEYS`; the pointing keys absent when None, ``uv_24h`` null); the
+    schema model is both types' fields, nothing hand-written; the nested blocks in their fields' order."""
+    doc = _written(entry)
+    s = entry.summary
+    absent = {k for k in ("pointing_bias_rad", "pointing_buffer_rad") if getattr(s, k) is None}
+    assert list(doc) == [k for k in TRACK_KEYS if k not in absent]
+    assert set(PathBlock.model_fields) == set(TRACK_KEYS)
+    assert set(TRACK_KEYS) == {f.name for f in dataclasses.fields(PathSummary)} | {f.name for f in dataclasses.fields(TrackEntry)} - {"summary"}
+    assert list(doc["worst_window"]) == ["duration_s", "exposure_j_m2", "mpe_radiant_exposure_j_m2", "ratio"]
+    assert doc["uv_24h"] is None or list(doc["uv_24h"]) == ["dose_j_m2", "exposed_s", "limit_j_m2", "ratio", "window_end_s",
+                                                            "first_exceedance_s", "label"]
+    PathBlock.model_validate(doc, strict=True)
+
+
+def test_a_track_entry_has_exactly_three_coordinates_and_two_times():
+    """The fixed-length tuples of the types are lists of exactly that length in the schema."""
+    s = PathSummary("t", "track", 1.0, 2.0, (0.0, 1.0, 2.0), 1.0, 0.0, 0.5, 0.6, 0.0, WorstWindow(0.25, 0.5, 1.0, 0.5), 0.5, False,
+                    None, None, (0.0, 10.0), 11, 1.0, 1.0, True, 10.0)
+    doc = TrackEntry(s, None, (), "track_t.csv", "g").to_dict()
+    PathBlock.model_validate(doc, strict=True)
+    for key, bad in (("worst_point_m", [0.0, 1.0]), ("time_span_s", [0.0, 1.0, 2.0]), ("pointing_bias_rad", [0.0])):
+        with pytest.raises(pydantic.ValidationError):
+            PathBlock.model_validate({**doc, key: bad}, strict=True)
+    with pytest.raises(pydantic.ValidationError):
+        PathBlock.model_validate({**doc, "hazardous": "no"}, strict=True)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.hazardous = True  # type: ignore[misc]
+    d = s.to_dict()
+    d["worst_point_m"].append(3.0)
+    assert s.to_dict()["worst_point_m"] == [0.0, 1.0, 2.0]
+
+
+@FEW
+@given(st.builds(AimTrackDescription, pair, count, maybe, maybe))
+def test_the_aim_track_leaves_out_the_rates_of_aim_points(aim):
+    """``motion.aim_track``: the rates only for a schedule given by rates (absent, not null, otherwise)."""
+    doc = _written(aim)
+    assert list(doc)[:2] == ["times_s", "knots"]
+    assert ("azimuth_rate_deg_s" in doc) == (aim.azimuth_rate_deg_s is not None)
+    assert ("elevation_rate_deg_s" in doc) == (aim.elevation_rate_deg_s is not None)

@@ -217,8 +217,10 @@ def test_exposure_plot_of_a_path_draws_the_uv_days_limit_where_it_governs():
     for a in (10.0, 1010.0, 2010.0, 3010.0, 4010.0):
         e[(t >= a) & (t <= a + 100.0)] = 20.0
     for wl, day in ((355.0, 1e4), (532.0, None)):  # 532 nm: no day rule
+        from hazard.pipeline.motion import SummarisedPath
+
         p = _path(t, e)
-        p.summary = path_summary(p, 10.0, wl, "ansi-z136.1-2014")
+        p = SummarisedPath.of(p, path_summary(p, 10.0, wl, "ansi-z136.1-2014"))
         result = SimpleNamespace(mpe_w_m2=1.0, scene=SimpleNamespace(spec=SimpleNamespace(
             laser=SimpleNamespace(wavelength_nm=wl), exposure=SimpleNamespace(standard="ansi-z136.1-2014", duration_s=10.0))))
         d = plots.ExposureDisplay.from_path(result, p)
@@ -227,7 +229,7 @@ def test_exposure_plot_of_a_path_draws_the_uv_days_limit_where_it_governs():
         if day is None:
             assert d.uv_day_j_m2 is None and not any(x.startswith("UV day's limit") for x in labels)
             continue
-        assert d.uv_day_j_m2 == pytest.approx(day, rel=1e-9) and p.summary["uv_24h"]["ratio"] > 1.0
+        assert d.uv_day_j_m2 == pytest.approx(day, rel=1e-9) and p.summary.uv_24h.ratio > 1.0
         assert any(x.startswith("UV day's limit for 500 s exposed in 24 h: 1e+04 J/m^2") for x in labels), labels
 
 

@@ -366,7 +366,7 @@ def _motion(res):
     zero = np.zeros(len(paths))
 
     def col(key, kind=float):
-        return np.array([p.summary[key] for p in paths], kind), zero
+        return np.array([getattr(p.summary, key) for p in paths], kind), zero
 
     return {"motion peak_irradiance_w_m2": col("peak_irradiance_w_m2"), "motion radiant_exposure_j_m2":
             col("radiant_exposure_j_m2"), "motion hazardous": col("hazardous", bool),

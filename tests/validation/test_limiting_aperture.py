@@ -408,7 +408,7 @@ def test_a_track_beside_a_narrow_beam_is_judged_through_the_aperture():
     path = _track_run(track)
     w = (2e-3 + 50.0 * 1e-6) / 2
     want = ref.aperture_irradiance(1.0, w, 4e-3)
-    assert path.summary["peak_direct_w_m2"] == pytest.approx(want, rel=1e-6)
+    assert path.summary.peak_direct_w_m2 == pytest.approx(want, rel=1e-6)
     assert want > 1e4 * 1.0 / (math.pi * w * w) * math.exp(-(4e-3 / w) ** 2)
 
 
@@ -433,5 +433,5 @@ def test_a_moving_track_passing_beside_a_narrow_beam_is_sampled_where_its_apertu
     path = _track_run(track)
     w = (2e-3 + 50.0 * 1e-6) / 2
     want = ref.aperture_irradiance(1.0, w, b)
-    got = path.summary["peak_direct_w_m2"]
+    got = path.summary.peak_direct_w_m2
     assert 0.98 * want <= got <= want * (1 + 1e-6)
