@@ -158,9 +158,9 @@ def _beyond(result, name: str, nohd_m: float) -> str:
     ``nohd_m`` [m]; empty for a nearer, a moving or an unknown target."""
     scene = getattr(result, "scene", None)
     target = next((t for t in getattr(scene, "targets", ()) if t.name == name), None)
-    if target is None or getattr(target.spec, "track", None) is not None:
+    if scene is None or target is None or getattr(target.spec, "track", None) is not None:
         return ""
-    distance_m = float(np.linalg.norm(np.asarray(target.center_m, float) - np.asarray(scene.laser_position_m, float)))
+    distance_m = float(np.linalg.norm(np.subtract(target.center_m, scene.laser_position_m, dtype=np.float64)))
     return f", {distance_m:.4g} m from the laser: beyond the NOHD" if distance_m > nohd_m else ""
 
 
