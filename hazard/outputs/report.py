@@ -21,7 +21,7 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
-from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_rows, row_tools
+from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_rows, number_cells, row_tools
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
@@ -327,11 +327,11 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
             values += [geo[:, 0], geo[:, 1], geo[:, 2]]
         keys = ["x"] * len(values) + rest
         values += [_at(cols[k], slice(a0, a1)) for k in rest]
+        if tools is not None and (names := _name_parts(tools, arrow, cols["labels"], a0, a1)) is not None:
+            return _joined_block, (tools, names, values, keys)
         names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
         if names is None:
             return _repr_block, (cols["labels"][a0:a1], values, keys)
-        if tools is not None:
-            return _joined_block, (tools, names, values, keys)
         return _arrow_block, (arrow, names, values, keys)
 
     yield from _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=2 if arrow else 1)
@@ -419,15 +419,30 @@ def _json_names(arrow, labels, rows):
     return pc.binary_join_element_wise(_group_names(arrow, obs, rows, bases), '"', "")
 
 
+def _name_parts(tools, arrow, labels, a0, a1):
+    """The names of rows ``a0:a1`` as parts of :func:`hazard.outputs.row_text.joined_rows`
+    (a list), or None where one needs quotes: a block of one grid as its name + ``[``, the
+    indices by orjson each followed by ``]`` (no joined name array), else :func:`_arrow_names`."""
+    obs = getattr(labels, "observers", None)
+    if obs is not None and a1 > a0:
+        g = obs.group[a0:a1]
+        name = obs.group_names[g[0]]
+        if obs.group_sizes[g[0]] > 1 and (g == g[0]).all() and not any(c in name for c in ',"\r\n'):
+            return [name + "[", number_cells(tools, obs.index_in_group[a0:a1], "]")]
+    names = _arrow_names(arrow, labels, a0, a1)
+    return None if names is None else [names]
+
+
 def _joined_block(tools, names, values, keys):
     """Rows of observers.csv made column by column (:mod:`hazard.outputs.row_text`, with
-    orjson and pyarrow): floats in orjson's shortest text that reads back as the same
-    double (``1.0``, ``-0.0``, ``0.00001``, ``1e-7``, ``1e16``), nan and inf as repr writes
-    them, an empty cell where NaN means "not applicable", True/False, the names as given."""
+    orjson and pyarrow): ``names`` (parts, :func:`_name_parts`), floats in orjson's shortest
+    text that reads back as the same double (``1.0``, ``-0.0``, ``0.00001``, ``1e-7``,
+    ``1e16``), nan and inf as repr writes them, an empty cell where NaN means "not
+    applicable", True/False."""
     blank = CSV_TEXTS._replace(nan="")
     columns = [(v, blank if k in _CSV_BLANK_NAN else CSV_TEXTS) for v, k in zip(values, keys)]
     afters = [","] * (len(columns) - 1) + ["\r\n"]
-    return joined_rows(tools, [names, ","] + column_parts(tools, columns, afters), len(names))
+    return joined_rows(tools, [*names, ","] + column_parts(tools, columns, afters), len(values[0]))
 
 
 _ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}

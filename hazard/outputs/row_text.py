@@ -20,7 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "column_parts", "joined_rows"]
+__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "column_parts", "joined_rows"]
 
 
 class CellTexts(NamedTuple):
@@ -47,7 +47,7 @@ def row_tools():
     return orjson, pyarrow, pyarrow.compute
 
 
-def _number_cells(tools, v: np.ndarray, end: str):
+def number_cells(tools, v: np.ndarray, end: str):
     """Cells of a finite float64 (or integer) column ``v`` by orjson, each followed by ``end``
     (one ASCII character), as a pyarrow string array: orjson writes ``[a,b,c]``; the ``]``
     becomes a comma, every comma ``end``, and the cells are the text between them."""
@@ -66,16 +66,24 @@ def _number_cells(tools, v: np.ndarray, end: str):
 
 
 def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts):
-    """:func:`_number_cells` of a float64 column whose non-finite values take ``texts``."""
-    _, pa, _ = tools
+    """:func:`number_cells` of a float64 column whose non-finite values take ``texts``. A
+    column that mostly repeats its values (a grid's coordinates; judged on 256 rows spread
+    over it) has each distinct value (by its bits: -0.0 is not 0.0) written once and the
+    cells taken by index (27 against 45 ns a value for 1000 distinct x of a 16 384-row block)."""
+    _, pa, pc = tools
+    bits = v.view(np.int64)
+    sample = bits[::max(1, len(bits) // 256)]
+    if len(v) > 64 and 4 * len(np.unique(sample)) < len(sample):
+        enc = pc.dictionary_encode(pa.array(bits))
+        return _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), end, texts).take(enc.indices)
     finite = np.isfinite(v)
     if finite.all():
-        return _number_cells(tools, v, end)
+        return number_cells(tools, v, end)
     keep = np.flatnonzero(finite)
     index = np.where(np.isnan(v), len(keep), np.where(v > 0, len(keep) + 1, len(keep) + 2))
     index[keep] = np.arange(len(keep))
     other = pa.array([texts.nan + end, texts.inf + end, texts.ninf + end], pa.string())
-    cells = [_number_cells(tools, v[keep], end), other] if len(keep) else [other]
+    cells = [number_cells(tools, v[keep], end), other] if len(keep) else [other]
     return pa.concat_arrays(cells).take(pa.array(index))
 
 
@@ -83,7 +91,9 @@ def _one_text(tools, v: np.ndarray, texts: CellTexts) -> str:
     """The cell of a column's first value, without the text after it."""
     if v.dtype == bool:
         return texts.true if v[0] else texts.false
-    return _float_cells(tools, v[:1], ",", texts)[0].as_py()[:-1] if v.dtype.kind == "f" else str(int(v[0]))
+    if v.dtype.kind == "f" and not np.isfinite(v[0]):
+        return texts.nan if np.isnan(v[0]) else (texts.inf if v[0] > 0 else texts.ninf)
+    return tools[0].dumps(v[:1], option=tools[0].OPT_SERIALIZE_NUMPY)[1:-1].decode()  # as number_cells writes it
 
 
 def column_parts(tools, columns, afters) -> list:
@@ -117,7 +127,7 @@ def column_parts(tools, columns, afters) -> list:
         elif v.dtype == bool:
             cells = pc.if_else(pa.array(v), texts.true + after[0], texts.false + after[0])
         elif v.dtype.kind in "iu":
-            cells = _number_cells(tools, v.astype(np.int64), after[0])
+            cells = number_cells(tools, v, after[0])
         else:
             cells = _float_cells(tools, v, after[0], texts)
         done.append((v, texts, after[0], cells))
