@@ -316,7 +316,7 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
     yield (",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n").encode()
     arrow = _arrow()
-    tools = row_tools()
+    tools = row_tools() if arrow else None
 
     def block(a0):  # the block's columns, on this thread (the geodetic transform included)
         a1 = min(a0 + block_rows, len(pos))
