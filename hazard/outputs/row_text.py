@@ -48,11 +48,24 @@ def row_tools():
 
 
 def number_cells(tools, v: np.ndarray, end: str):
-    """Cells of a finite float64 (or integer) column ``v`` by orjson, each followed by ``end``
-    (one ASCII character), as a pyarrow string array: orjson writes ``[a,b,c]``; the ``]``
-    becomes a comma, every comma ``end``, and the cells are the text between them."""
+    """Cells of a finite float64 (or integer) column by orjson, as a pyarrow string array.
+
+    orjson writes ``[a,b,c]``; the ``]`` becomes a comma, every comma ``end``, and the
+    cells are the text between them (each with its ``end``).
+
+    Parameters
+    ----------
+    tools : tuple
+        :func:`row_tools`.
+    v : numpy.ndarray
+        (n,) finite float64 values, or integers (any unit: the digits only).
+    end : str
+        One ASCII character written after each cell (a separator).
+    """
     orjson, pa, _ = tools
     text = np.frombuffer(orjson.dumps(np.ascontiguousarray(v), option=orjson.OPT_SERIALIZE_NUMPY), np.uint8).copy()
+    if len(text) >= 2**31:  # pyarrow's string offsets are int32 (the callers' blocks are a few MB)
+        raise ValueError(f"a column of {len(v)} values is {len(text)} bytes of text; expected under 2 GiB (write it in blocks)")
     text[-1] = ord(",")
     data = text[1:]
     stops = np.flatnonzero(data == ord(","))
@@ -136,10 +149,21 @@ def column_parts(tools, columns, afters) -> list:
 
 
 def joined_rows(tools, parts, n: int, drop_last: int = 0):
-    """The ``n`` rows of ``parts`` (:func:`column_parts`, with any other arrays and str)
-    one after another, as one bytes-like buffer (no copy of the joined text), without its
-    last ``drop_last`` bytes (a separator after the last row); consecutive str are joined
-    first (fewer parts to join in every row)."""
+    """The rows' text, one row after another, as one bytes-like buffer (no copy of the joined text).
+
+    Parameters
+    ----------
+    tools : tuple
+        :func:`row_tools`.
+    parts : list
+        Each row's pieces in order: pyarrow string arrays (``n`` values: one per row,
+        :func:`column_parts`) and str (the same text in every row); consecutive str are
+        joined first (each part costs ~13 ns a row).
+    n : int
+        The number of rows.
+    drop_last : int
+        Bytes left off the end (a separator after the last row).
+    """
     _, pa, pc = tools
     merged: list = []
     for p in parts:
