@@ -35,7 +35,7 @@ import numpy as np
 
 from hazard.outputs.map_zones import ZONE_KINDS, observers_on_map, zones
 
-__all__ = ["MAP_NAMES", "MapOutputs", "map_files", "map_names", "geojson_document", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
+__all__ = ["MAP_NAMES", "MapOutputs", "map_files", "map_names", "geojson_document", "geojson_bytes", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
 
 DEGREE_DECIMALS = 8  # 1e-8 deg = 1.1 mm: below any outline's own resolution
 
@@ -330,6 +330,27 @@ def hazard_tiff(result, frame_info) -> bytes | None:
         return mem.read()
 
 
+def geojson_bytes(doc: dict) -> bytes:
+    """The zones document as JSON text: by orjson when it is installed and its text holds no
+    ``null`` (orjson writes a NaN as null, where ``json.dumps(allow_nan=False)`` refuses it:
+    no number may vanish into a null), else by ``json.dumps``. The same values either way;
+    orjson's layout has no spaces and its floats the shortest round-trip digits (``0.00001``,
+    ``1e16`` where json writes ``1e-05``, ``1e+16``). 0.12 -> 0.02 s CPU for the 20 000 observer points of the
+    1e6-observer benchmark."""
+    try:
+        import orjson
+    except ImportError:
+        orjson = None
+    if orjson is not None:
+        try:
+            text = orjson.dumps(doc)
+        except TypeError:  # a type orjson does not write (json's error, if any, comes below)
+            text = b"null"
+        if b"null" not in text:
+            return text
+    return json.dumps(doc, indent=None, allow_nan=False).encode()
+
+
 def _frame_info(result) -> dict:
     site = result.scene.site
     if site is not None:
@@ -347,7 +368,7 @@ def map_files(result) -> tuple[dict, MapOutputs]:
     gj = geojson_document(result, zs, absent, frame)
     site = result.scene.site is not None
     names = map_names(result.scene)
-    files = {names[0]: json.dumps(gj, indent=None, allow_nan=False).encode()}
+    files = {names[0]: geojson_bytes(gj)}
     not_written = {}
     if site:
         files["zones.kml"] = kml_document(zs, gj)

@@ -21,6 +21,7 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
+from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_rows, number_cells, row_tools
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
@@ -315,6 +316,7 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
     rest = CSV_COLUMNS[4:] + [k for k in _MOTION_BLANK if k in cols]
     yield (",".join(CSV_COLUMNS[:4] + (GEO_COLUMNS if site else []) + rest) + "\r\n").encode()
     arrow = _arrow()
+    tools = row_tools() if arrow else None
 
     def block(a0):  # the block's columns, on this thread (the geodetic transform included)
         a1 = min(a0 + block_rows, len(pos))
@@ -325,6 +327,8 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS):
             values += [geo[:, 0], geo[:, 1], geo[:, 2]]
         keys = ["x"] * len(values) + rest
         values += [_at(cols[k], slice(a0, a1)) for k in rest]
+        if tools is not None and (names := _name_parts(tools, arrow, cols["labels"], a0, a1)) is not None:
+            return _joined_block, (tools, names, values, keys)
         names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
         if names is None:
             return _repr_block, (cols["labels"][a0:a1], values, keys)
@@ -413,6 +417,32 @@ def _json_names(arrow, labels, rows):
         return pa.array([json.dumps(n) for n in names], pa.string())
     bases = [json.dumps(n)[:-1] for n in obs.group_names]  # the closing quote after the index
     return pc.binary_join_element_wise(_group_names(arrow, obs, rows, bases), '"', "")
+
+
+def _name_parts(tools, arrow, labels, a0, a1):
+    """The names of rows ``a0:a1`` as parts of :func:`hazard.outputs.row_text.joined_rows`
+    (a list), or None where one needs quotes: a block of one grid as its name + ``[``, the
+    indices by orjson each followed by ``]`` (no joined name array), else :func:`_arrow_names`."""
+    obs = getattr(labels, "observers", None)
+    if obs is not None and a1 > a0:
+        g = obs.group[a0:a1]
+        name = obs.group_names[g[0]]
+        if obs.group_sizes[g[0]] > 1 and (g == g[0]).all() and not any(c in name for c in ',"\r\n'):
+            return [name + "[", number_cells(tools, obs.index_in_group[a0:a1], "]")]
+    names = _arrow_names(arrow, labels, a0, a1)
+    return None if names is None else [names]
+
+
+def _joined_block(tools, names, values, keys):
+    """Rows of observers.csv made column by column (:mod:`hazard.outputs.row_text`, with
+    orjson and pyarrow): ``names`` (parts, :func:`_name_parts`), floats in orjson's shortest
+    text that reads back as the same double (``1.0``, ``-0.0``, ``0.00001``, ``1e-7``,
+    ``1e16``), nan and inf as repr writes them, an empty cell where NaN means "not
+    applicable", True/False."""
+    blank = CSV_TEXTS._replace(nan="")
+    columns = [(v, blank if k in _CSV_BLANK_NAN else CSV_TEXTS) for v, k in zip(values, keys)]
+    afters = [","] * (len(columns) - 1) + ["\r\n"]
+    return joined_rows(tools, [*names, ","] + column_parts(tools, columns, afters), len(values[0]))
 
 
 _ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}
@@ -539,6 +569,8 @@ def report_json_pieces(doc: dict, cols=None) -> list:
     return [(before + "[").encode(), rows, ("\n ]" + after).encode()]
 
 
+_JSON_TEXTS = CellTexts("true", "false", '"nan"', '"inf"', '"-inf"')  # as json_safe makes them (row_text's cells)
+_JSON_NULL_TEXTS = CellTexts("true", "false", "null", "null", "null")  # not applicable: null
 _JSON_NULL = {"angular_subtense_rad", "first_exceedance_s", "aperture_diameter_m", "direct_point_irradiance_w_m2",
               *MOTION_COLUMNS}  # NaN (or inf) there means "not applicable": JSON null
 
@@ -553,9 +585,14 @@ def _rows_json(cols, rows):
     values = {k: _at(cols[k], rows) for k in keys}
     if arrow is None or not len(rows) or any(v.dtype.kind not in "fbiu" for v in values.values()):
         return ",".join("\n  " + json.dumps(r, allow_nan=False) for r in observer_rows(None, rows, cols)).encode()
-    pa, pc, _ = arrow
     pos = _at(cols["position_m"], rows)
     parts = ["\n  {\"name\": ", _json_names(arrow, cols["labels"], rows), ", \"position_m\": ["]
+    if (tools := row_tools()) is not None:  # every column's cells by orjson, each with the separator after it
+        columns = [(pos[:, 0], _JSON_TEXTS), (pos[:, 1], _JSON_TEXTS), (pos[:, 2], _JSON_TEXTS)]
+        columns += [(values[k], _JSON_NULL_TEXTS if k in _JSON_NULL else _JSON_TEXTS) for k in keys]
+        afters = [", ", ", "] + [f"], {json.dumps(k)}: " for k in keys[:1]] + [f", {json.dumps(k)}: " for k in keys[1:]] + ["},"]
+        afters[2] = afters[2] if keys else "]},"
+        return joined_rows(tools, parts + column_parts(tools, columns, afters), len(rows), drop_last=1)  # the last row's comma off
     columns = [(pos[:, 0], False), (pos[:, 1], False), (pos[:, 2], False)] + [(values[k], k in _JSON_NULL) for k in keys]
     before = ["", ", ", ", "] + [f"], {json.dumps(keys[0])}: "] * bool(keys) + [f", {json.dumps(k)}: " for k in keys[1:]]
     done: list = []  # (values, null, text) of the columns formatted so far

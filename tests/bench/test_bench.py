@@ -58,7 +58,7 @@ def test_bench_whole_run():
     check_goal("whole run", res["ratio"], goal(1.3, 4.0))
 
 
-@not_met("issue 37: outputs 2.07x the analysis in CPU, 2.12x wall (1e6 observers, 2026-11-26, load 11-14; 2.87 / 3.10 before); goal 1")
+@not_met("issue 37: outputs 1.43x the analysis in CPU, 1.31x wall (1e6 observers, 2026-11-26, load 11-12, orjson's cells; 2.07 / 2.12 before); goal 1")
 def test_bench_outputs():
     from .bench_outputs import run
 

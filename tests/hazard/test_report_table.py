@@ -167,15 +167,30 @@ def _read_back_exact(data: bytes, result):
         assert np.isnan(got).tolist() == np.isnan(v).tolist(), k
 
 
-def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path):
-    """With pyarrow, the blocks are written by its CSV writer (shortest round-trip digits):
-    the header unchanged, every number read back bit for bit, whatever the block size."""
+@pytest.mark.parametrize("writer", ["joined", "arrow"])
+def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path, monkeypatch, writer):
+    """With pyarrow, the blocks are made column by column: with orjson its cells joined by
+    pyarrow (``joined``), else pyarrow's CSV writer (``arrow``); both the shortest
+    round-trip digits: the header unchanged, every number read back bit for bit, whatever
+    the block size."""
     pytest.importorskip("pyarrow")
+    if writer == "joined":
+        pytest.importorskip("orjson")
+    else:
+        monkeypatch.setattr(report, "row_tools", lambda: None)
+    ran = []
+
+    def spy(name):
+        fn = getattr(report, name)
+        return lambda *a: (ran.append(name), fn(*a))[1]
+
+    for name in ("_joined_block", "_arrow_block", "_repr_block"):
+        monkeypatch.setattr(report, name, spy(name))
     res = hazard.analyze(scenes.loads(SCENE.replace('name = "field, west"', 'name = "field"')))
     report.write_outputs(res, tmp_path / "o")
     data = (tmp_path / "o" / "observers.csv").read_bytes()
     _read_back_exact(data, res)
-    assert data != _csv_module_text(res)  # the pyarrow writer ran (its layout: 1 for 1.0)
+    assert set(ran) == {f"_{writer}_block"}  # that writer made every block
     cols = report.observer_columns(res)
     for rows in (1, 2, 7, 10_000):
         assert b"".join(report._csv_chunks(res, cols, rows)) == data
@@ -310,10 +325,14 @@ def _rows_from_columns(cols, rows):
     return json.loads("[" + text + "\n]")
 
 
-def test_report_rows_written_from_the_columns_are_the_row_dicts():
-    """report.json's listed rows written from the columns (pyarrow's float text, ".0" where
-    it reads as an integer) load as the very dicts observer_rows builds: every float the
-    same double, ints stay ints, non-finite values as strings or null, names escaped."""
+@pytest.mark.parametrize("cells", ["orjson", "pyarrow"])
+def test_report_rows_written_from_the_columns_are_the_row_dicts(monkeypatch, cells):
+    """report.json's listed rows written from the columns (orjson's cells, or without it
+    pyarrow's float text with ".0" where it reads as an integer) load as the very dicts
+    observer_rows builds: every float the same double, ints stay ints, non-finite values as
+    strings or null, names escaped."""
+    if cells == "pyarrow":
+        monkeypatch.setattr(report, "row_tools", lambda: None)
     inf, nan = float("inf"), float("nan")
     specials = np.array([0.5, inf, nan, -0.0, 1e15, 1e16, 1e-5, 5e-324, 1.0 / 3.0, 16791.0, -inf, 1e22])
     n = len(specials)

@@ -1,0 +1,169 @@
+"""Rows of text made column by column (:mod:`hazard.outputs.row_text`, issue 37 item 3):
+observers.csv's blocks and report.json's listed rows by orjson's cells joined by pyarrow.
+
+The oracle is Python itself: ``float(cell)`` of every cell must give the array's double
+bit for bit (-0.0 is not 0.0), NaN and inf the texts asked for; ``json.loads`` of the rows
+the very values. Doubles are drawn as random bit patterns (every exponent: subnormals,
+huge, NaN payloads, +-0, +-inf), not from the engine.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hazard.outputs import report, row_text
+from hazard.outputs.map_outputs import geojson_bytes
+
+TOOLS = row_text.row_tools()
+pytestmark = pytest.mark.skipif(TOOLS is None, reason="orjson or pyarrow is not installed")
+
+_SPECIAL = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, -np.nan, 5e-324, -5e-324, 2.2250738585072014e-308,
+                     -2.2250738585072009e-308, 1.7976931348623157e308, -1.7976931348623157e308, 1e16, 1e15, 1e-5,
+                     1e-7, 0.1, 1.0 / 3.0, 123456789.0, 1e22, 1e21, 9007199254740993.0, 2.0**53, 1.5]).view(np.uint64).tolist()
+_BITS = st.lists(st.one_of(st.integers(0, 2**64 - 1), st.sampled_from(_SPECIAL),
+                           st.integers(0, 2**52 - 1)), min_size=1, max_size=200)  # the last: subnormals (and +0)
+
+
+def _doubles(n: int, seed: int) -> np.ndarray:
+    """``n`` doubles from random bits: a third any bit pattern, a third subnormal (either
+    sign), a third normal numbers of any exponent, with the specials spread through."""
+    rng = np.random.default_rng(seed)
+    bits = rng.integers(0, 2**64, n, dtype=np.uint64)
+    sub = rng.integers(0, 2**52, n, dtype=np.uint64) | (rng.integers(0, 2, n, dtype=np.uint64) << np.uint64(63))
+    bits = np.where(np.arange(n) % 3 == 1, sub, bits)
+    at = np.linspace(0, n - 1, min(n, len(_SPECIAL))).astype(int)
+    bits[at] = np.array(_SPECIAL, np.uint64)[: len(at)]
+    return bits.view(np.float64)
+
+
+def _cell_is(cell: str, x: float, blank: bool) -> bool:
+    if x != x:
+        return cell == ("" if blank else "nan")
+    return np.float64(float(cell)).view(np.uint64) == np.float64(x).view(np.uint64)
+
+
+def _csv_lines(columns, keys) -> list:
+    n = len(columns[0])
+    names = [f"o[{i}]" for i in range(n)]
+    block = report._joined_block(TOOLS, [TOOLS[1].array(names)], columns, keys)
+    lines = bytes(block).decode().split("\r\n")
+    assert lines[-1] == "" and len(lines) == n + 1
+    return [line.split(",") for line in lines[:-1]]
+
+
+def _csv_round_trip(v, blank: bool):
+    """``v`` as a column (and twice repeated, and as a column of one value) through the
+    joined block writer: every cell reads back as its double, the names and flags too."""
+    key = "first_exceedance_s" if blank else "x"
+    for col in (v, np.repeat(v, 70), np.full(4, v[0])):  # distinct; repeating (each distinct value once); constant
+        rows = _csv_lines([col, col > 0, col], [key, "hazardous", "y"])
+        for i, (row, x) in enumerate(zip(rows, col.tolist())):
+            name, a, flag, b = row
+            assert name == f"o[{i}]" and flag == str(x > 0), row
+            assert _cell_is(a, x, blank) and _cell_is(b, x, False), (row, x)
+
+
+@settings(derandomize=True, deadline=None, max_examples=20)
+@given(bits=_BITS, blank=st.booleans())
+def test_csv_cells_round_trip_any_double(bits, blank):
+    """Any float64 (random bit patterns), blank or not where NaN means "not applicable"."""
+    _csv_round_trip(np.asarray(bits, np.uint64).view(np.float64), blank)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=500)
+@given(bits=_BITS, blank=st.booleans())
+def test_csv_cells_round_trip_any_double_many(bits, blank):
+    _csv_round_trip(np.asarray(bits, np.uint64).view(np.float64), blank)
+
+
+def _bulk(n: int, seed: int):
+    v = _doubles(n, seed)
+    rows = _csv_lines([v], ["first_exceedance_s"])
+    cells = [r[1] for r in rows]
+    nan = np.isnan(v)
+    assert [c == "" for c in cells] == nan.tolist()
+    got = np.array([float(c) if c else np.nan for c in cells])
+    np.testing.assert_array_equal(got.view(np.uint64)[~nan], v.view(np.uint64)[~nan])
+
+
+def test_csv_cells_round_trip_random_doubles():
+    """2e4 random doubles (a third subnormal) in one block: every cell the same double."""
+    _bulk(20_000, 1)
+
+
+@pytest.mark.slow
+def test_csv_cells_round_trip_random_doubles_many():
+    """2e6 random doubles, a third subnormal."""
+    for seed in range(4):
+        _bulk(500_000, 10 + seed)
+
+
+def test_csv_columns_equal_to_an_earlier_one_keep_their_own_texts():
+    """A column with an earlier one's bits takes its cells; -0.0 and 0.0, or the same
+    values with a different NaN text, are not taken for each other."""
+    v = np.array([0.0, 1.5, np.nan, -2.0, 3.0] * 30)
+    w = np.where(v == 0.0, -0.0, v)
+    rows = _csv_lines([v, v, w, v], ["x", "y", "z", "first_exceedance_s"])
+    for row, x, y in zip(rows, v.tolist(), w.tolist()):
+        assert _cell_is(row[1], x, False) and _cell_is(row[2], x, False) and _cell_is(row[3], y, False), row
+        assert _cell_is(row[4], x, True), row
+    assert {r[3] for r in rows if r[1] == "0.0"} == {"-0.0"}
+
+
+def test_integer_and_bool_columns():
+    """Integers by orjson are Python's str() of each; bools the given texts."""
+    n = np.array([0, -1, 2**63 - 1, -(2**63), 7] * 20, np.int64)
+    u = np.array([0, 2**64 - 1, 5, 1, 9] * 20, np.uint64)
+    parts = row_text.column_parts(TOOLS, [(n, row_text.CSV_TEXTS), (u, row_text.CSV_TEXTS), (n % 2 == 0, row_text.CSV_TEXTS)],
+                                  [";", ";", "\n"])
+    lines = bytes(row_text.joined_rows(TOOLS, parts, len(n))).decode().split("\n")[:-1]
+    assert lines == [f"{a};{b};{a % 2 == 0}" for a, b in zip(n.tolist(), u.tolist())]
+
+
+def _json_rows(cols, rows):
+    text = bytes(report._rows_json(cols, rows)).decode()
+    return json.loads("[" + text + "\n]")
+
+
+def test_json_rows_load_as_the_values_for_any_double():
+    """report.json's listed rows by orjson's cells: json.loads gives each double bit for bit
+    (a whole number stays a float: ``1.0``), non-finite values as the row dicts give them
+    (strings, or null where NaN means "not applicable"), ints and bools as they are."""
+    v = _doubles(3000, 5)
+    n = len(v)
+    cols = {"labels": [f"o{i}" for i in range(n)], "position_m": np.column_stack([v, v[::-1], np.full(n, -0.0)]),
+            "hazard_ratio": v, "first_exceedance_s": np.roll(v, 7), "count": np.arange(n) - 5, "hazardous": v > 1}
+    want = json.loads(json.dumps(report.observer_rows(None, np.arange(n), cols)))
+    got = _json_rows(cols, np.arange(n))
+    assert len(got) == n
+    for g, w in zip(got, want):
+        assert list(g) == list(w)
+        for k in w:
+            a, b = (g[k], w[k]) if k != "position_m" else (tuple(g[k]), tuple(w[k]))
+            assert type(a) is type(b), (k, a, b)
+            if isinstance(a, float):
+                assert np.float64(a).view(np.uint64) == np.float64(b).view(np.uint64), (k, a, b)
+            elif isinstance(a, tuple):
+                assert [np.float64(x).view(np.uint64) if isinstance(x, float) else x for x in a] == \
+                       [np.float64(x).view(np.uint64) if isinstance(x, float) else x for x in b], (k, a, b)
+            else:
+                assert a == b, (k, a, b)
+
+
+def test_geojson_bytes_same_values_and_never_a_hidden_nan():
+    """The zones document by orjson loads as json.dumps's; a NaN is refused as json.dumps
+    refuses it (orjson would write null), a real null is written by json.dumps."""
+    doc = {"type": "FeatureCollection", "features": [{"type": "Feature", "geometry": {"type": "Point", "coordinates": (1e-5, -0.0)},
+                                                      "properties": {"name": "a\"b", "hazard_ratio": 1.0 / 3.0, "n": 3}}]}
+    text = geojson_bytes(doc)
+    assert json.loads(text) == json.loads(json.dumps(doc)) and b" " not in text  # orjson's layout
+    assert json.loads(text)["features"][0]["geometry"]["coordinates"][1] == 0.0
+    assert str(json.loads(text)["features"][0]["geometry"]["coordinates"][1]) == "-0.0"
+    with pytest.raises(ValueError):
+        geojson_bytes({**doc, "bad": float("nan")})
+    with_null = {**doc, "none": None}
+    assert geojson_bytes(with_null) == json.dumps(with_null, indent=None, allow_nan=False).encode()
