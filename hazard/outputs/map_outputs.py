@@ -340,14 +340,15 @@ def geojson_bytes(doc: dict) -> bytes:
     try:
         import orjson
     except ImportError:
-        orjson = None
-    if orjson is not None:
-        try:
-            text = orjson.dumps(doc)
-        except TypeError:  # a type orjson does not write (json's error, if any, comes below)
-            text = b"null"
-        if b"null" not in text:
-            return text
+        return _json_bytes(doc)
+    try:
+        text = orjson.dumps(doc)
+    except TypeError:  # a type orjson does not write (json's error, if any, comes below)
+        return _json_bytes(doc)
+    return text if b"null" not in text else _json_bytes(doc)
+
+
+def _json_bytes(doc) -> bytes:
     return json.dumps(doc, indent=None, allow_nan=False).encode()
 
 
