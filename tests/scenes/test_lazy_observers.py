@@ -119,10 +119,23 @@ def test_a_point_inside_a_solid_is_found_without_generating_the_grid(yaw, tilt, 
         scenes.loads(text)
 
 
-def test_the_analysis_never_holds_the_whole_grid():
+def test_the_analysis_never_holds_a_large_grid(monkeypatch):
+    monkeypatch.setattr(scenes.observers, "KEEP_ROWS", 200 * 150 - 1)  # the table is one row too many to keep
     s = scenes.loads(BASE + _grid([-20.0, -30.0, 0.0], [40.0, 0.0, 0.0], [0.0, 25.0, 2.0], (200, 150)))
     res = hazard.analyze(s)
     assert res.observers.observers.lazy  # map, direct beam, crossings and subtense generated their blocks
     assert len(res.observers) >= 200 * 150 and res.observers.peak_irradiance_w_m2.max() > 0
     p = res.observers.position_m  # the report's table asks for it
     assert p.shape == (len(res.observers), 3)
+
+
+def test_a_small_grid_is_generated_once_and_kept(monkeypatch):
+    """At most KEEP_ROWS rows: the points are generated once (by blocks on threads) and
+    the direct beam, the map and the subtense read them; they are the grid's formula."""
+    monkeypatch.setattr(scenes.observers, "KEEP_ROWS", 200 * 150 + 100)  # the grid and the beam's crossings
+    s = scenes.loads(BASE + _grid([-20.0, -30.0, 0.0], [40.0, 0.0, 0.0], [0.0, 25.0, 2.0], (200, 150)))
+    lazy = s.observers.block(0, len(s.observers)).copy()  # generated, not kept
+    assert s.observers.lazy
+    res = hazard.analyze(s)
+    assert len(res.observers) <= 200 * 150 + 100 and not res.observers.observers.lazy
+    assert np.array_equal(res.observers.observers.positions_m[:len(lazy)], lazy)
