@@ -386,28 +386,35 @@ def _rule(xs, ss, gs, dens, oi, samp, batch):
 class _Batch:
     """Kernel nodes ``(samples, source points, observer rows, scales)`` gathered across
     the rule's depths and the point-form pairs of a block of observers, evaluated in
-    calls of ``step`` nodes and added to ``e`` (:func:`_scatter_add`): a kernel call has
-    a fixed cost (the BRDF's input checks and set-up), so a few large calls replace one
-    per depth. At most ``step`` nodes wait (bounded memory)."""
+    calls of at most ``step`` nodes: a kernel call has a fixed cost (the BRDF's input
+    checks and set-up), so a few large calls replace one per depth. Each added part is
+    added to ``e`` in its own pieces of ``step`` nodes, in the order added
+    (:func:`_scatter_add`), as a kernel call per piece would: the sums are the same bit
+    for bit. At most ``step`` nodes wait (bounded memory)."""
 
     def __init__(self, e, kernel, obs, step):
         self.e, self.kernel, self.obs, self.step = e, kernel, obs, step
-        self.parts, self.n = [], 0
+        self.pieces, self.n = [], 0
 
     def add(self, samples, x, rows, scale):
-        self.parts.append((samples, x, rows, scale))
-        self.n += len(rows)
-        if self.n >= self.step:
-            self.flush()
+        for a in range(0, len(rows), self.step):
+            b = min(len(rows), a + self.step)
+            if self.n + b - a > self.step:
+                self.flush()
+            self.pieces.append((samples[a:b], x[a:b], rows[a:b], scale[a:b]))
+            self.n += b - a
 
     def flush(self):
-        if not self.parts:
+        if not self.pieces:
             return
-        smp, x, o, w = (np.concatenate(v) if len(self.parts) > 1 else v[0] for v in zip(*self.parts))
-        self.parts, self.n = [], 0
-        for a in range(0, len(o), self.step):
-            b = min(len(o), a + self.step)
-            _scatter_add(self.e, o[a:b], self.kernel(smp[a:b], x[a:b], self.obs[o[a:b]], w[a:b]))
+        smp, x, o, w = (np.concatenate(v) if len(self.pieces) > 1 else v[0] for v in zip(*self.pieces))
+        f = self.kernel(smp, x, self.obs[o], w)
+        a = 0
+        for piece in self.pieces:
+            b = a + len(piece[2])
+            _scatter_add(self.e, piece[2], f[a:b])
+            a = b
+        self.pieces, self.n = [], 0
 
 
 def _expand(patches, io, is_):
