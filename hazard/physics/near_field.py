@@ -387,7 +387,9 @@ class _Batch:
     """Kernel nodes ``(samples, source points, observer rows, scales)`` gathered across
     the rule's depths and the point-form pairs of a block of observers, evaluated in
     calls of at most ``step`` nodes: a kernel call has a fixed cost (the BRDF's input
-    checks and set-up), so a few large calls replace one per depth. Each added part is
+    checks and set-up), so a few large calls replace one per depth (small parts are
+    gathered; a part of a quarter call or more is evaluated alone as it comes, after the
+    parts waiting before it, so large parts are not copied). Each added part is
     added to ``e`` in its own pieces of ``step`` nodes, in the order added
     (:func:`_scatter_add`), as a kernel call per piece would: the sums are the same bit
     for bit. At most ``step`` nodes wait (bounded memory)."""
@@ -399,10 +401,13 @@ class _Batch:
     def add(self, samples, x, rows, scale):
         for a in range(0, len(rows), self.step):
             b = min(len(rows), a + self.step)
-            if self.n + b - a > self.step:
+            big = b - a >= self.step // 4  # evaluated alone, after those waiting: not copied
+            if big or self.n + b - a > self.step:
                 self.flush()
             self.pieces.append((samples[a:b], x[a:b], rows[a:b], scale[a:b]))
             self.n += b - a
+            if big:
+                self.flush()
 
     def flush(self):
         if not self.pieces:
