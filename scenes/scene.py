@@ -633,13 +633,13 @@ def _near_aperture(observers, laser_m, direction, groups=(), offset=0.0) -> list
     groups of ``observers.parts``, in order; ``offset`` local to world) is checked only in
     the index window about the aperture (:func:`_near_rows`), every other part whole."""
     front, behind, names = 0, 0, []
-    for a0, p in _near_rows(observers, laser_m, groups, offset):
+    for rows, p in _near_rows(observers, laser_m, groups, offset):
         rel = p - laser_m
         near = np.flatnonzero(np.einsum("ij,ij->i", rel, rel) < NEAR_APERTURE_M ** 2)
         if len(near):
             ahead = rel[near] @ direction >= -1e-9  # on the plane within 1 nm (hazard.pipeline.direct.APERTURE_PLANE_TOL_M)
             front, behind = front + int(ahead.sum()), behind + int((~ahead).sum())
-            names += [int(a0[i]) for i in near[:3 - len(names)]] if len(names) < 3 else []
+            names += [int(rows[i]) for i in near[:3 - len(names)]] if len(names) < 3 else []
     if not front + behind:
         return []
     labels = observers.labels()
