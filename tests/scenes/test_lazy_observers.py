@@ -149,9 +149,20 @@ def _aperture_warning(pts, laser, d, labels):
     return int(ahead.sum()), int((~ahead).sum()), [labels[i] for i in near[:3]]
 
 
+_NEAR_APERTURE = dict(yaw=st.floats(0, 6.28), tilt=st.floats(-1.5, 1.5), nu=st.integers(2, 60), nv=st.integers(2, 60),
+                      fu=st.floats(-0.1, 1.1), fv=st.floats(-0.1, 1.1), dz=st.floats(-1.5, 1.5), span=st.floats(1.0, 30.0))
+
+
+@pytest.mark.slow
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(**_NEAR_APERTURE)
+def test_points_near_the_aperture_are_found_without_generating_the_grid_many(yaw, tilt, nu, nv, fu, fv, dz, span):
+    """The same over more random grids."""
+    test_points_near_the_aperture_are_found_without_generating_the_grid.hypothesis.inner_test(yaw, tilt, nu, nv, fu, fv, dz, span)
+
+
 @settings(max_examples=25, deadline=None, derandomize=True)
-@given(yaw=st.floats(0, 6.28), tilt=st.floats(-1.5, 1.5), nu=st.integers(2, 60), nv=st.integers(2, 60),
-       fu=st.floats(-0.1, 1.1), fv=st.floats(-0.1, 1.1), dz=st.floats(-1.5, 1.5), span=st.floats(1.0, 30.0))
+@given(**_NEAR_APERTURE)
 def test_points_near_the_aperture_are_found_without_generating_the_grid(yaw, tilt, nu, nv, fu, fv, dz, span):
     """A random (turned, tilted up to near vertical) grid about the laser: the load's
     warning counts the points within 1 m of the aperture, in front of and behind it, and

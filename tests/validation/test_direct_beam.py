@@ -216,8 +216,19 @@ def test_a_mirror_beam_crossing_a_road_is_found():
     assert "the mirror beam of mirror crosses" in res.stage("crossings").detail
 
 
+_BEAM_AT = dict(seed=st.integers(0, 2 ** 31 - 1), reach=st.sampled_from([0.0, 1e-3, 0.05, 2.0]), mu=st.sampled_from([0.0, 2e-3]))
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(**_BEAM_AT)
+def test_beam_at_rows_and_values_from_the_formula_many(seed, reach, mu):
+    """The same over more random point sets."""
+    test_beam_at_rows_and_values_from_the_formula.hypothesis.inner_test(seed, reach, mu)
+
+
 @ref.FAST
-@given(seed=st.integers(0, 2 ** 31 - 1), reach=st.sampled_from([0.0, 1e-3, 0.05, 2.0]), mu=st.sampled_from([0.0, 2e-3]))
+@given(**_BEAM_AT)
 def test_beam_at_rows_and_values_from_the_formula(seed, reach, mu):
     """``beam_at`` on random points out to 60 beam radii across (the far ones' point value
     underflows to exactly 0, and only rows within ``reach`` of where it does not are
