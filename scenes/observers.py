@@ -23,6 +23,7 @@ __all__ = ["Observers", "GroupPoints", "stored", "grid_generator"]
 
 BLOCK = 1 << 18  # rows generated at a time when a whole table is needed (bounded memory)
 THREAD_BLOCK = 1 << 16  # rows per block of a per-observer pass run on threads (Observers.map_blocks)
+KEEP_ROWS = 1 << 21  # Observers.keep_points keeps a table of at most this many rows (2.1e6 rows: 50 MB)
 
 
 @dataclass(frozen=True)
@@ -137,6 +138,27 @@ class Observers:
                 out[a0:a1] = p
             self._cache = out
         return self._cache
+
+    def keep_points(self, max_rows: int | None = None) -> bool:
+        """Generate every point once, in blocks on threads, and keep them (as
+        :attr:`positions_m` does) when the table has at most ``max_rows`` rows, so that
+        the passes over the observers (direct beam, map, subtense) read them instead of
+        generating them again; a larger table stays lazy (bounded memory). ``max_rows``
+        defaults to :data:`KEEP_ROWS`. Returns True when the points are kept."""
+        if self._cache is not None:
+            return True
+        if len(self) > (KEEP_ROWS if max_rows is None else max_rows):
+            return False
+        from brdfmodels.parallel import map_blocks
+
+        out = np.empty((len(self), 3))
+
+        def fill(a0, a1):
+            out[a0:a1] = self.block(a0, a1)
+
+        map_blocks(fill, len(self), THREAD_BLOCK)
+        self._cache = out
+        return True
 
     def group_rows(self, g: int) -> np.ndarray:
         """Rows of group ``g`` in their order within the group."""

@@ -625,19 +625,21 @@ def _magnitude_warnings(spec: SceneSpec) -> list:
 NEAR_APERTURE_M = 1.0  # observer points this close to the laser aperture are named in a warning [m]
 
 
-def _near_aperture(observers, laser_m, direction) -> list:
+def _near_aperture(observers, laser_m, direction, groups=(), offset=0.0) -> list:
     """Observer points within ``NEAR_APERTURE_M`` of the aperture, said explicitly: on or in
     front of the aperture plane they are in the beam as it leaves (its full exit
     irradiance inside its diameter); behind it they are out of the beam (the laser emits
-    forward only), not 0 W/m^2 by accident."""
+    forward only), not 0 W/m^2 by accident. A generated grid (``groups``: the observer
+    groups of ``observers.parts``, in order; ``offset`` local to world) is checked only in
+    the index window about the aperture (:func:`_near_rows`), every other part whole."""
     front, behind, names = 0, 0, []
-    for a0, _a1, p in observers.blocks():
+    for rows, p in _near_rows(observers, laser_m, groups, offset):
         rel = p - laser_m
         near = np.flatnonzero(np.einsum("ij,ij->i", rel, rel) < NEAR_APERTURE_M ** 2)
         if len(near):
             ahead = rel[near] @ direction >= -1e-9  # on the plane within 1 nm (hazard.pipeline.direct.APERTURE_PLANE_TOL_M)
             front, behind = front + int(ahead.sum()), behind + int((~ahead).sum())
-            names += [a0 + int(i) for i in near[:3 - len(names)]] if len(names) < 3 else []
+            names += [int(rows[i]) for i in near[:3 - len(names)]] if len(names) < 3 else []
     if not front + behind:
         return []
     labels = observers.labels()
@@ -645,6 +647,25 @@ def _near_aperture(observers, laser_m, direction) -> list:
     return [f"observers: {front + behind} point(s) within {NEAR_APERTURE_M:g} m of the laser aperture ({shown}): {front} on or "
             f"in front of the aperture plane are in the beam as it leaves (the exit irradiance inside its diameter), {behind} "
             f"behind it are out of the beam (the laser emits forward only; direct beam 0 W/m^2 there)"]
+
+
+def _near_rows(observers, laser_m, groups, offset):
+    """``(rows, points)`` blocks in row order holding every observer point within
+    ``NEAR_APERTURE_M`` of ``laser_m`` (local): a generated grid's rows in the xy index
+    window about it (:func:`_grid_candidates`, a superset: a point within the radius is
+    within it in plan, whatever its height), the rest block by block."""
+    parts = observers.parts if len(groups) == len(observers.parts) else ()
+    for ob, part in zip(groups, parts):
+        rows = None
+        if not part.is_stored and ob.layout == "grid":
+            rows = _grid_candidates(ob, np.asarray(laser_m, float) + offset, NEAR_APERTURE_M, xy=True)
+        rows = np.arange(part.count) if rows is None else rows
+        for a in range(0, len(rows), BLOCK):
+            r = rows[a:a + BLOCK]
+            yield part.start + r, part.at(r)
+    if not parts:
+        for a0, a1, p in observers.blocks():
+            yield np.arange(a0, a1), p
 
 
 def _check_laser_in_open_air(spec: SceneSpec, lp, offset, terrain) -> None:
@@ -826,14 +847,15 @@ def _solid_radius_m(s) -> float:
     return float(np.hypot(size[0] / 2, size[1] / 2))
 
 
-def _grid_candidates(ob, centre_m, radius_m) -> np.ndarray | None:
+def _grid_candidates(ob, centre_m, radius_m, xy=False) -> np.ndarray | None:
     """Rows of a grid group whose points may lie within ``radius_m`` of ``centre_m``
     (world): the index window around the ellipse that the sphere's disk maps to in the
-    grid's (a, b) coordinates (xy only when placed at eye height); None when u and v are
-    (nearly) parallel, so every row must be checked."""
+    grid's (a, b) coordinates (xy only when placed at eye height, or when ``xy``: a
+    point's height then may be anything); None when u and v are (nearly) parallel, so
+    every row must be checked."""
     nu, nv = ob.counts
     o, u, v = (np.asarray(x, float) for x in (ob.origin_m, ob.u_m, ob.v_m))
-    dims = slice(0, 2) if ob.eye_height_m is not None else slice(0, 3)
+    dims = slice(0, 2) if (xy or ob.eye_height_m is not None) else slice(0, 3)
     m = np.stack([u[dims], v[dims]], axis=1)
     gram = m.T @ m
     if nu < 2 or nv < 2 or np.linalg.det(gram) <= 1e-12 * gram[0, 0] * gram[1, 1]:
@@ -976,7 +998,7 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         terrain_target=terrain_target,
         warnings=(_warnings(spec) + _buried_targets(targets, terrain) + _material_notes(targets)
                   + ([] if site is None else site.warnings)
-                  + _near_aperture(observers, lp - offset, d) + held),
+                  + _near_aperture(observers, lp - offset, d, spec.observers, offset) + held),
         site=site,
     )
     _check_work(scene)

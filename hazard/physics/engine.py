@@ -971,11 +971,14 @@ def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states):
     sample's material frame and incidence)."""
     model = spot.material
     wi_all = to_local(spot.frames, -spot.incoming)
+    frames = np.asarray(spot.frames, float)
+    one = frames[0] if len(frames) and np.all(frames == frames[0]) else None  # a flat spot: one frame (no per-node gather)
 
     def kernel(samples, x, o, scale):
         v = o - x
         r = np.maximum(np.sqrt(np.einsum("ij,ij->i", v, v)), 1e-300)
-        wo = to_local(spot.frames[samples], v / r[:, None])
+        u = v / r[:, None]
+        wo = to_local(frames[samples], u) if one is None else np.einsum("ij,nj->ni", one, u)  # the same sums
         s = scale / (r * r)
         if attenuation_per_m:
             s = s * np.exp(-attenuation_per_m * r)

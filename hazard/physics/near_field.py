@@ -154,7 +154,7 @@ def describe(counts: dict) -> str:
 
 def _triangle_radius(tri_x):
     """Largest distance [m] of a triangle's vertices from its centroid (K,)."""
-    c = tri_x.mean(axis=1)
+    c = (tri_x[:, 0] + tri_x[:, 1] + tri_x[:, 2]) / 3.0  # tri_x.mean(axis=1), bit for bit, without its generic set-up
     return np.sqrt(((tri_x - c[:, None, :]) ** 2).sum(-1)).max(axis=1), c
 
 
@@ -368,25 +368,58 @@ def _scatter_add(e, rows, values):
     e[r[starts]] += np.add.reduceat(np.asarray(values)[order], starts, axis=0)
 
 
-def _rule(xs, ss, gs, dens, oi, obs, kernel, samp, e):
-    """Add the 7-point rule of triangles (P, 3, .) to ``e`` at observers ``oi``; ``dens``
-    (P,) already holds the per-pair factors, ``gs`` (P, 3) the perspective weights (the
-    nodes are the rule's in ``s``, mapped onto the surface as the rays map them).
-    Returns the number of nodes evaluated."""
+def _rule(xs, ss, gs, dens, oi, samp, batch):
+    """Add the 7-point rule of triangles (P, 3, .) at observers ``oi`` to ``batch`` (a
+    :class:`_Batch`); ``dens`` (P,) already holds the per-pair factors, ``gs`` (P, 3)
+    the perspective weights (the nodes are the rule's in ``s``, mapped onto the surface
+    as the rays map them). Returns the number of nodes."""
     if not len(oi):
         return 0
     bg = RULE_BARY[None, :, :] * gs[:, None, :]  # (P, 7, 3)
     x = (bg @ xs / bg.sum(-1, keepdims=True)).reshape(-1, 3)  # a batched product (several times einsum's speed here)
     s = RULE_BARY @ ss
     w = (_area_s(ss) * dens)[:, None] * RULE_W[None, :] * np.exp(-(s * s).sum(-1))
-    o = np.repeat(oi, len(RULE_W))
-    smp = np.repeat(samp, len(RULE_W))
-    w = w.ravel()
-    step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
-    for a in range(0, len(o), step):
-        b = min(len(o), a + step)
-        _scatter_add(e, o[a:b], kernel(smp[a:b], x[a:b], obs[o[a:b]], w[a:b]))
-    return len(o)
+    batch.add(np.repeat(samp, len(RULE_W)), x, np.repeat(oi, len(RULE_W)), w.ravel())
+    return len(w) * len(RULE_W)
+
+
+class _Batch:
+    """Kernel nodes ``(samples, source points, observer rows, scales)`` gathered across
+    the rule's depths and the point-form pairs of a block of observers, evaluated in
+    calls of at most ``step`` nodes: a kernel call has a fixed cost (the BRDF's input
+    checks and set-up), so a few large calls replace one per depth (small parts are
+    gathered; a part of a quarter call or more is evaluated alone as it comes, after the
+    parts waiting before it, so large parts are not copied). Each added part is
+    added to ``e`` in its own pieces of ``step`` nodes, in the order added
+    (:func:`_scatter_add`), as a kernel call per piece would: the sums are the same bit
+    for bit. At most ``step`` nodes wait (bounded memory)."""
+
+    def __init__(self, e, kernel, obs, step):
+        self.e, self.kernel, self.obs, self.step = e, kernel, obs, step
+        self.pieces, self.n = [], 0
+
+    def add(self, samples, x, rows, scale):
+        for a in range(0, len(rows), self.step):
+            b = min(len(rows), a + self.step)
+            big = b - a >= self.step // 4  # evaluated alone, after those waiting: not copied
+            if big or self.n + b - a > self.step:
+                self.flush()
+            self.pieces.append((samples[a:b], x[a:b], rows[a:b], scale[a:b]))
+            self.n += b - a
+            if big:
+                self.flush()
+
+    def flush(self):
+        if not self.pieces:
+            return
+        smp, x, o, w = (np.concatenate(v) if len(self.pieces) > 1 else v[0] for v in zip(*self.pieces))
+        f = self.kernel(smp, x, self.obs[o], w)
+        a = 0
+        for piece in self.pieces:
+            b = a + len(piece[2])
+            _scatter_add(self.e, piece[2], f[a:b])
+            a = b
+        self.pieces, self.n = [], 0
 
 
 def _expand(patches, io, is_):
@@ -461,12 +494,10 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     po, ps = np.nonzero(ok)
     io, is_ = np.nonzero(~ok)
     po, io = rows[po], rows[io]
-    n_eval = 0
-    step = max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1))
-    for a in range(0, len(po), step):
-        o, s = po[a:a + step], ps[a:a + step]
-        _scatter_add(e, o, src.kernel(s, pt[s], obs[o], src.power_w[s] * weight[o]))
-    n_eval += len(po)
+    batch = _Batch(e, src.kernel, obs, max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1)))
+    if len(po):
+        batch.add(ps, pt[ps], po, src.power_w[ps] * weight[po])
+    n_eval = len(po)
     oi, tri = _expand(src.patches, io, is_)
     p = src.patches
     xs, ss, gs, samp = p.tri_x[tri], p.tri_s[tri], p.weights()[tri], p.sample[tri]
@@ -475,14 +506,21 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     for depth in range(MAX_DEPTH + 1):
         if not len(oi):
             break
-        above = np.einsum("pvk,pk->pv", obs[oi][:, None, :] - xs, src.normals[samp]).max(axis=1) > 0
-        xs, ss, gs, samp, oi, dens = xs[above], ss[above], gs[above], samp[above], oi[above], dens[above]
+        at = obs[oi]
+        above = np.einsum("pvk,pk->pv", at[:, None, :] - xs, src.normals[samp]).max(axis=1) > 0
+        if not above.all():  # (most often every pair is: nothing to drop)
+            xs, ss, gs, samp, oi, dens, at = (v[above] for v in (xs, ss, gs, samp, oi, dens, at))
         rad, c = _triangle_radius(xs)
-        good = np.linalg.norm(obs[oi] - c, axis=1) >= RULE_REACH * rad
+        good = np.linalg.norm(at - c, axis=1) >= RULE_REACH * rad
         if depth == MAX_DEPTH:
             unresolved += int((~good).sum())
             good[:] = True
-        n_eval += _rule(xs[good], ss[good], gs[good], dens[good], oi[good], obs, src.kernel, samp[good], e)
-        xs, ss, gs = _split(xs[~good], ss[~good], gs[~good])
-        samp, oi, dens = (np.tile(v[~good], 2) for v in (samp, oi, dens))
+        if good.all():
+            n_eval += _rule(xs, ss, gs, dens, oi, samp, batch)
+            break
+        split = ~good
+        n_eval += _rule(xs[good], ss[good], gs[good], dens[good], oi[good], samp[good], batch)
+        xs, ss, gs = _split(xs[split], ss[split], gs[split])
+        samp, oi, dens = (np.tile(v[split], 2) for v in (samp, oi, dens))
+    batch.flush()
     return np.array([len(np.unique(io)), len(io), n_eval, unresolved])

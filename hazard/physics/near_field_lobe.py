@@ -429,14 +429,18 @@ class NearLobeFn:
         at least ``r - extent`` away and seen within the cone), so hazard needs ``r <=
         extent + cone reach``; bisected (``CONE_BISECTIONS``) within the box's exit."""
         hi = self._r_hi(w_loc)
-        lo = np.minimum(np.full(len(w_loc), self.ext_m), hi)
-        ok = self.ext_m + self._cone_reach(w_loc, hi) >= hi  # hazard possible out to the box's exit
-        top = np.where(ok, hi, np.nan)
-        for _ in range(CONE_BISECTIONS):
-            mid = 0.5 * (lo + hi)
-            reach = self.ext_m + self._cone_reach(w_loc, mid) >= mid
-            lo, hi = np.where(reach, mid, lo), np.where(reach, hi, mid)
-        return np.where(ok, top, hi)
+        ok = self.ext_m + self._cone_reach(w_loc, hi) >= hi  # hazard possible out to the box's exit: start there
+        out = hi.copy()
+        k = np.flatnonzero(~ok)  # the others: bisected (only they are)
+        if len(k):
+            w, hi = w_loc[k], hi[k]
+            lo = np.minimum(np.full(len(k), self.ext_m), hi)
+            for _ in range(CONE_BISECTIONS):
+                mid = 0.5 * (lo + hi)
+                reach = self.ext_m + self._cone_reach(w, mid) >= mid
+                lo, hi = np.where(reach, mid, lo), np.where(reach, hi, mid)
+            out[k] = hi
+        return out
 
     def roots(self, w_loc, r_floor):
         """Farthest roots [m] beyond ``r_floor`` (N,) along mean-frame directions (N, 3),

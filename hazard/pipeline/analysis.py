@@ -183,6 +183,7 @@ def _direct(log, crossings, plan, beam, rays, mpe) -> DirectResult:
     with log.run("direct") as st:
         laser = scene.spec.laser
         apertures = _apertures(scene)
+        scene.observers.keep_points()  # generated once for the direct beam, the map and the subtense (a small table)
         d = direct.direct_beam(traced.beam, scene.observers, rays.tracer, mu, apertures)
         if laser.pointing_buffer_rad > 0 or laser.sector is not None or laser.aim_track is not None:
             d = direct.with_pointing(d, scene, traced.beam, scene.observers, mu, rays.ray_scene, apertures)
@@ -260,6 +261,7 @@ def _map(log, crossings, plan, history, rays, mpe, direct, keep_history, threads
     """The irradiance map: every observer over the analysis times (mirror lobes, lines of
     sight, the static or dynamic pass, the exposure)."""
     scene, exposure, direct_beam = crossings.scene, mpe.exposure, direct.direct_beam
+    scene.observers.keep_points()  # no-op when the direct beam kept them
     inp = _map_inputs(scene, history.traced, history.states, history.times_s, mpe.attenuation_per_m, exposure, rays.ray_scene,
                       keep_history, threads, plan)
     if direct_beam is not None and direct_beam.irradiance_w_m2.any():

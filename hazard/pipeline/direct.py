@@ -107,6 +107,7 @@ class BeamAt:
 
 
 _UNDERFLOW_S = 27.3  # exp(-27.3^2) < 1e-323: a point farther out (units of w) gets exactly 0
+_EXP_ZERO = 746.0  # exp(-x) is exactly 0.0 in float64 for x >= this (the smallest subnormal is exp(-744.44))
 
 
 def beam_at(beam, points_m, mu, reach_m=0.0) -> BeamAt:
@@ -119,8 +120,14 @@ def beam_at(beam, points_m, mu, reach_m=0.0) -> BeamAt:
     # P / (pi w0^2) exp(-|s|^2)); behind it (z < 0) the laser emits nothing. "On the plane"
     # within APERTURE_PLANE_TOL_M: rounding puts a point given on it 1e-17 m either side.
     z = np.where(np.abs(z) <= APERTURE_PLANE_TOL_M, 0.0, z)
-    inside = np.isfinite(z) & (z >= 0) & np.all(np.isfinite(s), axis=1)
-    idx = np.flatnonzero(inside)
+    s2 = s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1]  # (s ** 2).sum(axis=1), bit for bit
+    inside = np.isfinite(z) & (z >= 0) & np.isfinite(s[:, 0]) & np.isfinite(s[:, 1])
+    # the point value is exactly 0 where exp(-|s|^2) underflows (|s|^2 >= _EXP_ZERO): only the
+    # other rows, and those within reach of the beam, are evaluated (the same values)
+    near = inside & (s2 < _EXP_ZERO)
+    if reach_m > 0:
+        near |= inside & (np.sqrt(s2) - reach_m / (beam.diameter_at(z) / 2) < _UNDERFLOW_S)
+    idx = np.flatnonzero(near)
     if len(idx) < len(p):  # gathers only where some point drops out (the values are the same)
         s, z, p = s[idx], z[idx], p[idx]
     e = beam.irradiance_w_m2(s, z)

@@ -45,21 +45,31 @@ def cpu_s(fn):
 @contextlib.contextmanager
 def map_cpu():
     """Record the CPU time [s] of every irradiance map made inside (the map stages:
-    ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``) in the yielded list."""
+    ``line_of_sight``, ``static`` | ``dynamic``, ``exposure``) in the yielded list, plus
+    that of generating the observers' points it reads when they were made before it
+    (:meth:`scenes.observers.Observers.keep_points`, before the direct beam: the floor
+    makes them too). A scene analysed again keeps its points: time fresh scenes."""
     from hazard.pipeline import irradiance_map as module
+    from scenes.observers import Observers
 
-    made, real = [], module.irradiance_map
+    made, real, real_keep, pending = [], module.irradiance_map, Observers.keep_points, [0.0]
+
+    def keep(self, *args, **kwargs):
+        t, out = cpu_s(lambda: real_keep(self, *args, **kwargs))
+        pending[0] += t
+        return out
 
     def timed(inp):
         t, out = cpu_s(lambda: real(inp))
-        made.append(t)
+        made.append(t + pending[0])
+        pending[0] = 0.0
         return out
 
-    module.irradiance_map = timed
+    module.irradiance_map, Observers.keep_points = timed, keep
     try:
         yield made
     finally:
-        module.irradiance_map = real
+        module.irradiance_map, Observers.keep_points = real, real_keep
 
 
 def blas_one_thread():

@@ -5,7 +5,7 @@ Run on demand:  python -m tests.bench.bench_outputs   (or pytest tests/bench -m 
 Scene: the bundled ``plate`` (100 W at 1064 nm on a Lambertian plate 50 m down range)
 with its two observers replaced by a ``rows x rows`` grid at 1.5 m in front of the plate
 (1000 x 1000: the 1e6-observer run of the README). Timed, median of ``repeat``, in one
-process: ``hazard.analyze`` of the loaded scene (the ray cache kept: a run builds its
+process: ``hazard.analyze`` of a freshly loaded scene (the ray cache kept: a run builds its
 14 triangles once), and the outputs ``hazard run`` writes after it: the map files
 (:func:`hazard.outputs.map_outputs.map_files`) and report.json + observers.csv
 (:func:`hazard.outputs.report.write_set`, each file fsynced) into a temporary folder. Goal
@@ -57,10 +57,11 @@ def _outputs(result, folder: Path):
 
 def run(rows: int = 1000, repeat: int = REPEAT) -> dict:
     """Analysis and outputs, wall and CPU [s] (median of ``repeat``), and their ratio."""
-    scene = scenes.loads(scene_text(rows))
+    text = scene_text(rows)
     ana, out = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(repeat):
+            scene = scenes.loads(text)  # a fresh scene, as `hazard run` has: one analysed keeps its observers' points
             w, c, result = _timed(hazard.analyze, scene)
             ana.append((w, c))
             folder = Path(tmp) / f"o{i}"

@@ -42,7 +42,7 @@ def test_bench_evaluate_many():
     check_goal("evaluate_many", res["ratio"], goal(1.5, 3.0))
 
 
-@not_met("issue 37: map stages 1.28-1.37 in CPU time against the complete floor (2026-11-26, load 18-20): at the edge; goal 1.3")
+@not_met("issue 37: map stages 1.34-1.35 in CPU time against the complete floor, the points counted (2026-11-26, load 11-15): at the edge; goal 1.3")
 def test_bench_hazard_map():
     from .bench_engine import run
 
@@ -50,7 +50,7 @@ def test_bench_hazard_map():
     check_goal("hazard map stages", res["ratio"], goal(1.3, 5.0))  # quick: 1.4-3.5 in CPU time at load 5-25 (0.05-0.08 s floor)
 
 
-@not_met("issue 37: whole run 1.86 in CPU time against the complete, unpadded floor (2026-11-26, load 20): the keep-out's near-field lobes 1.9 s against 0.94 s of kernel work; goal 1.3")
+@not_met("issue 37: whole run 1.46-1.57 in CPU time against the complete, unpadded floor (2026-11-26, load 10-15; 1.82 before): the near-field lobes 1.5 s against 1.03 s of kernel work; goal 1.3")
 def test_bench_whole_run():
     from .bench_whole_run import run
 

@@ -119,10 +119,65 @@ def test_a_point_inside_a_solid_is_found_without_generating_the_grid(yaw, tilt, 
         scenes.loads(text)
 
 
-def test_the_analysis_never_holds_the_whole_grid():
+def test_the_analysis_never_holds_a_large_grid(monkeypatch):
+    monkeypatch.setattr(scenes.observers, "KEEP_ROWS", 200 * 150 - 1)  # the table is one row too many to keep
     s = scenes.loads(BASE + _grid([-20.0, -30.0, 0.0], [40.0, 0.0, 0.0], [0.0, 25.0, 2.0], (200, 150)))
     res = hazard.analyze(s)
     assert res.observers.observers.lazy  # map, direct beam, crossings and subtense generated their blocks
     assert len(res.observers) >= 200 * 150 and res.observers.peak_irradiance_w_m2.max() > 0
     p = res.observers.position_m  # the report's table asks for it
     assert p.shape == (len(res.observers), 3)
+
+
+def test_a_small_grid_is_generated_once_and_kept(monkeypatch):
+    """At most KEEP_ROWS rows: the points are generated once (by blocks on threads) and
+    the direct beam, the map and the subtense read them; they are the grid's formula."""
+    monkeypatch.setattr(scenes.observers, "KEEP_ROWS", 200 * 150 + 100)  # the grid and the beam's crossings
+    s = scenes.loads(BASE + _grid([-20.0, -30.0, 0.0], [40.0, 0.0, 0.0], [0.0, 25.0, 2.0], (200, 150)))
+    lazy = s.observers.block(0, len(s.observers)).copy()  # generated, not kept
+    assert s.observers.lazy
+    res = hazard.analyze(s)
+    assert len(res.observers) <= 200 * 150 + 100 and not res.observers.observers.lazy
+    assert np.array_equal(res.observers.observers.positions_m[:len(lazy)], lazy)
+
+
+def _aperture_warning(pts, laser, d, labels):
+    """The near-aperture warning's counts and first names by brute force over ``pts``."""
+    rel = pts - laser
+    near = np.flatnonzero((rel * rel).sum(1) < 1.0)
+    ahead = rel[near] @ d >= -1e-9
+    return int(ahead.sum()), int((~ahead).sum()), [labels[i] for i in near[:3]]
+
+
+_NEAR_APERTURE = dict(yaw=st.floats(0, 6.28), tilt=st.floats(-1.5, 1.5), nu=st.integers(2, 60), nv=st.integers(2, 60),
+                      fu=st.floats(-0.1, 1.1), fv=st.floats(-0.1, 1.1), dz=st.floats(-1.5, 1.5), span=st.floats(1.0, 30.0))
+
+
+@pytest.mark.slow
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(**_NEAR_APERTURE)
+def test_points_near_the_aperture_are_found_without_generating_the_grid_many(yaw, tilt, nu, nv, fu, fv, dz, span):
+    """The same over more random grids."""
+    test_points_near_the_aperture_are_found_without_generating_the_grid.hypothesis.inner_test(yaw, tilt, nu, nv, fu, fv, dz, span)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(**_NEAR_APERTURE)
+def test_points_near_the_aperture_are_found_without_generating_the_grid(yaw, tilt, nu, nv, fu, fv, dz, span):
+    """A random (turned, tilted up to near vertical) grid about the laser: the load's
+    warning counts the points within 1 m of the aperture, in front of and behind it, and
+    names the first three, as brute force over the formula's points (the loader looks
+    only at the index window about the aperture)."""
+    laser, d = np.array([0.0, -50.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    u = span * np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    v = span * np.array([-np.sin(yaw) * np.cos(tilt), np.cos(yaw) * np.cos(tilt), np.sin(tilt)])
+    o = laser + np.array([0.0, 0.0, dz]) - fu * u - fv * v
+    s = scenes.loads(BASE + _grid(o, u, v, (nu, nv)))
+    front, behind, names = _aperture_warning(_formula(o, u, v, (nu, nv)), laser, d, [f"g[{i}]" for i in range(nu * nv)])
+    said = [w for w in s.warnings if "laser aperture" in w]
+    if not front + behind:
+        assert not said
+        return
+    assert len(said) == 1
+    assert said[0].startswith(f"observers: {front + behind} point(s) within 1 m of the laser aperture ({', '.join(names)}")
+    assert f": {front} on or in front" in said[0] and f"{behind} behind it" in said[0]

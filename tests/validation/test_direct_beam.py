@@ -214,3 +214,42 @@ def test_a_mirror_beam_crossing_a_road_is_found():
     assert res.observers.position_m[k][1] == pytest.approx(0.0, abs=1e-3)
     assert res.observers.peak_irradiance_w_m2[k] == pytest.approx(rho * 4 * P / (math.pi * D * D), rel=1e-3)
     assert "the mirror beam of mirror crosses" in res.stage("crossings").detail
+
+
+_BEAM_AT = dict(seed=st.integers(0, 2 ** 31 - 1), reach=st.sampled_from([0.0, 1e-3, 0.05, 2.0]), mu=st.sampled_from([0.0, 2e-3]))
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(**_BEAM_AT)
+def test_beam_at_rows_and_values_from_the_formula_many(seed, reach, mu):
+    """The same over more random point sets."""
+    test_beam_at_rows_and_values_from_the_formula.hypothesis.inner_test(seed, reach, mu)
+
+
+@ref.FAST
+@given(**_BEAM_AT)
+def test_beam_at_rows_and_values_from_the_formula(seed, reach, mu):
+    """``beam_at`` on random points out to 60 beam radii across (the far ones' point value
+    underflows to exactly 0, and only rows within ``reach`` of where it does not are
+    kept), behind the aperture and on its plane: the rows kept are those with a non-zero
+    Gaussian or within reach, their values the Gaussian written here,
+    ``P / (pi w^2) exp(-|s|^2) sqrt(1 + |s|^2 phi^2 / 4) exp(-mu path)``."""
+    from hazard.physics.beam import BeamGeometry
+    from hazard.pipeline.direct import beam_at
+
+    rng = np.random.default_rng(seed)
+    beam = BeamGeometry.create(np.array([0.0, -R_T, 0.0]), np.array([0.0, 1.0, 0.0]), P, A, PHI)
+    n = 2000
+    zr = np.concatenate([rng.uniform(-5.0, 3000.0, n - 10), np.zeros(10)])  # some on the aperture plane
+    w = (A + np.maximum(zr, 0.0) * PHI) / 2
+    ang, rad = rng.uniform(0, 2 * math.pi, n), w * rng.uniform(0.0, 60.0, n) ** rng.uniform(0.5, 1.0, n)
+    pts = np.stack([rad * np.cos(ang), zr - R_T, rad * np.sin(ang)], axis=1)
+    at = beam_at(beam, pts, mu, reach)
+    s = rad / w
+    e = P / (math.pi * w * w) * np.exp(-s * s) * np.sqrt(1.0 + s * s * (PHI / 2) ** 2)
+    want = np.flatnonzero((zr >= 0) & ((e > 0) | ((s - reach / w < 27.3) if reach > 0 else False)))
+    assert np.array_equal(at.rows, want)
+    origin = beam.position_m + (pts[want] - beam.position_m - np.outer(zr[want], beam.axis)) * (A / 2) / w[want, None]
+    path = np.linalg.norm(pts[want] - origin, axis=1)
+    np.testing.assert_allclose(at.irradiance_w_m2, e[want] * np.exp(-mu * path), rtol=1e-9, atol=0)
