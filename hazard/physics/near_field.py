@@ -490,6 +490,12 @@ class _Sources:
         return _sample_masses(self.patches)
 
     @cached_property
+    def ball_radius_m(self) -> np.ndarray:
+        """Per sample: the largest distance [m] of its triangles' vertices from its point
+        (the ball about ``points`` holding its triangles); bounds only."""
+        return _sample_radius(self.patches.tri_x, self.patches.sample, self.points)
+
+    @cached_property
     def sample_lowest_m(self) -> np.ndarray:
         """Per sample: the smallest ``n.x`` [m] over its triangles' vertices along its normal
         (so ``n.o - lowest`` is the largest height of an observer ``o`` over them); bounds only."""
@@ -598,7 +604,7 @@ def _bound_whole(src: _Sources, obs, weight, live, e):
     upper bound for the whole spot added to ``e`` (``fr_bound x mass / (D - A)^2``, the
     masses of :func:`_sample_masses` summed, ``cos(theta_r) <= 1``). Returns the others."""
     c = src.points.mean(axis=0)
-    big = float(np.max(np.linalg.norm(src.points - c, axis=1) + src.radius_m))
+    big = float(np.max(np.linalg.norm(src.points - c, axis=1) + src.ball_radius_m))
     dist = np.linalg.norm(obs[live] - c, axis=1)
     far = dist >= 3.0 * big
     o, dd = live[far], (dist[far] - big) * (1.0 - 1e-9)
@@ -615,7 +621,7 @@ def _bound_samples(src: _Sources, obs, weight, io, is_, dist_m, e):
     sample (as :func:`_bound_pairs` for one triangle, with the sample's bounding ball:
     ``d = dist - a``; ``h`` over all its vertices, :attr:`_Sources.sample_lowest_m`; its
     mass :func:`_sample_masses`). Returns the other pairs."""
-    a = src.radius_m[is_]
+    a = src.ball_radius_m[is_]
     far = dist_m >= 3.0 * a
     o, s, a, dd = io[far], is_[far], a[far], (dist_m[far] - a[far]) * (1.0 - 1e-9)
     if len(o):
