@@ -1002,12 +1002,18 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
 def _check_work(scene: Scene) -> None:
     """The checks of a loaded scene that every verb runs before work (so ``hazard validate``
     refuses what ``run``, ``risk`` and ``study`` would): its motion within the limits and
-    its aim track clear of the aperture (:func:`scenes.motion.check_motion`), and every
+    its aim track clear of the aperture (:func:`scenes.motion.check_motion`), a height
+    map's footprint work (``FOOTPRINT_WORK``), and every
     material file of ``[uncertainty] materials`` readable and valid for its target."""
     from .motion import check_motion
 
+    t, a = scene.spec.terrain, scene.spec.analysis
     try:
         check_motion(scene)
+        if t is not None and t.kind == "heightmap":  # its nodes are known only now (scenes.spec.total_work counts the others)
+            n, spots = scene.terrain.heights.size, len(scene.targets) + 1
+            check_limit("FOOTPRINT_WORK", float(n) * a.beam_samples * spots, f"ground footprint work: height map nodes x "
+                        f"beam_samples x spots ({n} x {a.beam_samples} x {spots}; fewer analysis.beam_samples)")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
     u = scene.spec.uncertainty

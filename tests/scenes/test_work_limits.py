@@ -91,3 +91,17 @@ def test_validate_refuses_as_run_does(text, tmp_path):
     assert cv == cr == 2 and len(lv) == len(lr) == 1
     assert lv[0].removeprefix("hazard validate: error: ") == lr[0].removeprefix("hazard run: error: ")
     assert "HAZARD_MAX_" in lv[0]
+
+
+def test_a_height_maps_footprint_work_is_checked_once_read(tmp_path, monkeypatch):
+    # a height map's nodes are known only when read: 41 x 41 = 1681 nodes x 1024 beam samples x 2 spots = 3.4e6
+    import numpy as np
+
+    np.save(tmp_path / "ground.npy", np.full((41, 41), -3.0))
+    text = _scene(analysis="beam_samples = 1024",
+                  terrain='[terrain]\nkind = "heightmap"\nfile = "ground.npy"\norigin_m = [-20.0, -40.0]\nspacing_m = 1.0\n')
+    scenes.loads(text, base_dir=tmp_path)
+    monkeypatch.setenv("HAZARD_MAX_FOOTPRINT_WORK", "3e6")
+    with pytest.raises(scenes.SceneError, match=r"height map nodes x beam_samples x spots \(1681 x 1024 x 2.*"
+                                                r"HAZARD_MAX_FOOTPRINT_WORK"):
+        scenes.loads(text, base_dir=tmp_path)
