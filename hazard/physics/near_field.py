@@ -529,8 +529,10 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     dens = p.density_w[tri] * src.ratio[samp] * weight[oi]
     stop = MAX_DEPTH if src.fr_bound_per_sr is None else min(BOUND_DEPTH, MAX_DEPTH)
     evals, unresolved, n_bound = _adaptive(src, obs, oi, (xs, ss, gs, samp, dens), e, stop)
-    if n_bound:
-        BOUNDED.add(len(np.unique(io)), n_bound)
+    if src.fr_bound_per_sr is not None:  # nothing integrated: counted in BOUNDED
+        if n_bound:
+            BOUNDED.add(len(np.unique(io)), n_bound)
+        return np.array([0, 0, n_eval, 0])
     return np.array([len(np.unique(io)), len(io), n_eval + evals, unresolved])
 
 
