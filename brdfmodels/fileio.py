@@ -54,6 +54,11 @@ LIMITS = {
                        "run 18 s CPU, 0.8 GB)"),
     "TEXT_VALUES": (2_000_000, "numbers in a measured BRDF text file (.bsdf, ASTM), counted before parsing "
                     "(a 16 MB .bsdf of 4e6 values took 13 s of CPU and 2.5 GB)"),
+    "FOOTPRINT_WORK": (4e9, "terrain nodes x beam samples x spots of the ground footprint (its near-field pairs at most; "
+                       "range_geo at 5 m: 7.4e8)"),
+    "WORK_CPU_S": (1200, "estimated CPU seconds of a run: spots x (observer points x time steps, keep-out cells, keep-out "
+                   "cells x time steps, terrain nodes x beam samples, each times its measured cost; scenes.spec.WORK_S): "
+                   "the products the single limits leave unbounded"),
     "TERRAIN_NODES": (2_000_000, "terrain grid nodes ((extent / resolution + 1)^2, or a height map's size; 16e6 took 43 s and 5 GB)"),
 }
 LIMIT_CEILING = 1e15  # a HAZARD_MAX_* value above this is refused (1e308 overflowed an integer conversion)

@@ -941,9 +941,8 @@ def _check_triangles(total: int, where: str) -> None:
         raise SceneError(str(exc)) from None
 
 
-def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, site=None) -> Scene:
-    offset = np.asarray(spec.targets[0].center_m, float)
-    lp = np.asarray(spec.laser.position_m, float)
+def _beam_direction(spec: SceneSpec, lp) -> np.ndarray:
+    """The laser's unit direction from ``aim_m`` (or ``direction``); SceneError when undefined."""
     if spec.laser.aim_m is not None:
         d = np.asarray(spec.laser.aim_m, float) - lp
     else:
@@ -953,9 +952,13 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         which = "aim_m" if spec.laser.aim_m is not None else "direction"
         raise SceneError(f"laser.{which}: the beam direction is undefined ({norm:.3g} m from the laser; expected an aim point "
                          f"at least 1 um away, or a non-zero direction)")
-    d = d / norm
+    return d / norm
 
-    targets, triangles = [], 0  # the mesh files' triangles in all, checked as each is read (100 files of 1e6 each: ~10 GB)
+
+def _bodies(spec: SceneSpec, offset, base_dir: Path | None):
+    """Targets and occluder meshes in the scene's frame, the mesh files' triangles in all
+    checked as each is read (100 files of 1e6 each: ~10 GB); also the series-cover notes."""
+    targets, triangles = [], 0
     for i, ts in enumerate(spec.targets):
         targets.append(_target(i, ts, offset, base_dir, spec.laser.polarization, spec.laser.wavelength_nm))
         triangles += len(targets[-1].mesh.faces) if ts.shape == "mesh" else 0
@@ -971,14 +974,27 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
         occluders.append(m)
         triangles += len(m.faces) if os_.shape == "mesh" else 0
         _check_triangles(triangles, f"occluders[{i}]")
-    terrain = terrain_target = None
-    if spec.terrain is not None:
-        try:
-            hf = site.heightfield if site is not None else terrain_heightfield(spec.terrain, base_dir)
-        except ValueError as exc:
-            raise SceneError(str(exc)) from None
-        terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
-        terrain_target = _terrain_target(spec, terrain, len(targets) + len(occluders), base_dir)
+    return targets, occluders, held
+
+
+def _ground(spec: SceneSpec, offset, base_dir: Path | None, site, n_bodies: int):
+    """The terrain in the scene's frame and its reflecting target (None, None without one)."""
+    if spec.terrain is None:
+        return None, None
+    try:
+        hf = site.heightfield if site is not None else terrain_heightfield(spec.terrain, base_dir)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    terrain = Heightfield(hf.x0 - offset[0], hf.y0 - offset[1], hf.dx, hf.heights - offset[2])
+    return terrain, _terrain_target(spec, terrain, n_bodies, base_dir)
+
+
+def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, site=None) -> Scene:
+    offset = np.asarray(spec.targets[0].center_m, float)
+    lp = np.asarray(spec.laser.position_m, float)
+    d = _beam_direction(spec, lp)
+    targets, occluders, held = _bodies(spec, offset, base_dir)
+    terrain, terrain_target = _ground(spec, offset, base_dir, site, len(targets) + len(occluders))
     _check_laser_in_open_air(spec, lp, offset, terrain)
 
     observers = _observers(spec, offset, terrain, None if site is None else site.frame.refraction_rise_m)
@@ -1008,12 +1024,18 @@ def _compile(spec: SceneSpec, source: str, base_dir: Path | None, text: str, sit
 def _check_work(scene: Scene) -> None:
     """The checks of a loaded scene that every verb runs before work (so ``hazard validate``
     refuses what ``run``, ``risk`` and ``study`` would): its motion within the limits and
-    its aim track clear of the aperture (:func:`scenes.motion.check_motion`), and every
+    its aim track clear of the aperture (:func:`scenes.motion.check_motion`), a height
+    map's footprint work (``FOOTPRINT_WORK``), and every
     material file of ``[uncertainty] materials`` readable and valid for its target."""
     from .motion import check_motion
 
+    t, a = scene.spec.terrain, scene.spec.analysis
     try:
         check_motion(scene)
+        if t is not None and t.kind == "heightmap":  # its nodes are known only now (scenes.spec.total_work counts the others)
+            n, spots = scene.terrain.heights.size, len(scene.targets) + 1
+            check_limit("FOOTPRINT_WORK", float(n) * a.beam_samples * spots, f"ground footprint work: height map nodes x "
+                        f"beam_samples x spots ({n} x {a.beam_samples} x {spots}; fewer analysis.beam_samples)")
     except ValueError as exc:
         raise SceneError(str(exc)) from None
     u = scene.spec.uncertainty

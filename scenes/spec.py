@@ -1015,6 +1015,40 @@ def check_risk(spec: "SceneSpec", draws: int | None = None, sensitivity_draws: i
                                        "(observer points + map cells))")
 
 
+# measured CPU seconds per unit of work (README, Input checks), for the estimate of TOTAL_WORK
+WORK_S = dict(observer_step=5.7e-8,  # the flagship map at OBSERVER_STEPS: 11.4 s CPU for 2e8
+              keepout_cell=1.5e-6,  # the worst keep-out lobe at KEEPOUT_CELLS: 14.6 s CPU for 1e7 cells
+              keepout_cell_step=3.3e-8,  # a dynamic lobe: 17 s CPU for 5.2e8 cells x steps
+              footprint_pair=1.15e-7)  # range_geo at 5 m integrated exactly: 85 s CPU for 7.4e8 node x sample x spot
+
+
+def total_work(spec, n_obs, steps, cells) -> float:
+    """The work estimates of a scene before any work (README, Input checks), each checked
+    against its limit. ``FOOTPRINT_WORK`` = terrain nodes x beam_samples x spots (the ground
+    footprint's near-field pairs at most: every node against every beam sample of every
+    spot). ``WORK_CPU_S`` = spots x (observer points x steps x 5.7e-8 s + keep-out cells x
+    1.5e-6 s + keep-out cells x steps x 3.3e-8 s + terrain nodes x beam_samples x 1.15e-7 s)
+    (:data:`WORK_S`): the products of the single limits (targets x observers x steps, targets
+    x keep-out cells, ...) in CPU seconds. spots = targets (+ 1 with terrain, whose ground
+    reflects); steps = time steps (1 when static). A height map's nodes are known only when
+    it is read (``TERRAIN_NODES``) and are not counted. Returns the estimate [s]."""
+    t, a, k = spec.terrain, spec.analysis, WORK_S
+    spots = len(spec.targets) + (t is not None)
+    nodes = 0.0 if t is None or t.kind == "heightmap" else (2 * math.ceil(t.extent_m / t.resolution_m) + 1) ** 2.0
+    fp = nodes * a.beam_samples * spots
+    check_limit("FOOTPRINT_WORK", fp, f"ground footprint work: terrain nodes x beam_samples x spots ({nodes:.0f} x "
+                f"{a.beam_samples} x {spots}; fewer with a coarser terrain.resolution_m, a smaller terrain.extent_m or "
+                "fewer analysis.beam_samples)")
+    cpu = spots * (k["observer_step"] * n_obs * steps + k["keepout_cell"] * cells + k["keepout_cell_step"] * cells * steps
+                   + k["footprint_pair"] * nodes * a.beam_samples)
+    check_limit("WORK_CPU_S", cpu, f"estimated CPU seconds: spots x (observer points x steps, keep-out cells (x steps), "
+                f"terrain nodes x beam_samples, each x its measured cost) with {spots} spots, {n_obs} x {steps:.0f} "
+                f"observer steps, {cells:.0f} keep-out cells, {nodes:.0f} x {a.beam_samples} footprint pairs; each within "
+                "its own limit (HAZARD_MAX_TARGETS, HAZARD_MAX_OBSERVER_STEPS, HAZARD_MAX_KEEPOUT_CELLS, "
+                "HAZARD_MAX_KEEPOUT_STATE_CELLS, HAZARD_MAX_FOOTPRINT_WORK) but not their product")
+    return cpu
+
+
 class SceneSpec(_Strict):
     """A scene file. Positions are in one right-handed world frame [m], z up: with a
     ``[site]`` the exact local east-north-up frame at the site's origin (x east, y north),
@@ -1070,14 +1104,16 @@ class SceneSpec(_Strict):
                     "explicit observer points (points_m) in all")
         check_limit("TARGETS", len(self.targets), "targets")
         check_risk(self)
+        a, steps = self.analysis, 1.0
+        g = a.direction_grid_deg
+        cells = max(2, round(90 / g)) * max(4, round(360 / g)) * 4.0**a.refine_levels
         if any(t.history is not None for t in self.targets):
-            a = self.analysis
             t_end = a.time_end_s or self.exposure.duration_s
             steps = t_end / (a.time_step_s or t_end / 100.0)
             check_limit("TIME_STEPS", steps, f"time steps (time_end_s {t_end:g} s / time_step_s {a.time_step_s or t_end / 100:g} s)")
             check_limit("OBSERVER_STEPS", n_obs * steps, f"observer points x time steps ({n_obs} x {steps:.0f})")
-            g = a.direction_grid_deg  # a dynamic lobe takes each cell's maximum over the states: 1e4 steps ran past 10 min
-            cells = max(2, round(90 / g)) * max(4, round(360 / g)) * 4.0**a.refine_levels
+            # a dynamic lobe takes each cell's maximum over the states: 1e4 steps ran past 10 min
             check_limit("KEEPOUT_STATE_CELLS", cells * steps, f"keep-out cells x time steps ({cells:.0f} x {steps:.0f}; "
-                        "fewer with a coarser analysis.direction_grid_deg or refine_levels, or a longer time_step_s)")
+                        "fewer with a coarser analysis.direction_grid_deg or refine_levels, or a longer time_step_s")
+        total_work(self, n_obs, steps, cells)
         return self

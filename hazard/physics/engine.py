@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from brdfmodels import DynamicBRDF, Scaled, StateTable, Sum
+from brdfmodels import DynamicBRDF, Lambertian, Scaled, StateTable, Sum
 
 from hazard.physics.beam import HALF_WIDTH
 from hazard.physics.near_field import leaf_corners_s, near_field_irradiance, patches_from_leaves, patches_from_pieces, perspective_weights
@@ -875,7 +875,7 @@ def to_local(frames, v):
     return np.einsum("nij,nj->ni", frames, v)
 
 
-def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=None, visible=None, *, sparse=False):
+def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=None, visible=None, *, sparse=False, bound=False):
     """BRDF-reflected irradiance [W/m^2] at observers (M, 3) from one spot.
 
     Returns ``(E, far)``: E of shape (M,) or (M, T) with states, and the far-field mask.
@@ -883,7 +883,9 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
     the per-observer factor, so occluded observers cost no extra pass. With
     ``sparse=True`` it returns ``((rows, E_rows), far)``: when every observer is in the
     far field only the rows that receive light (maps skip everyone behind the surface or
-    out of sight), otherwise all rows.
+    out of sight), otherwise all rows. ``bound=True``: near the spot an upper bound where
+    the integral over its triangles would be needed and the material has one
+    (:func:`brdf_bound`; :func:`near_field_w_m2`), the exact value elsewhere.
     """
     if spot.slump is not None and states is not None:
         from hazard.physics.slump import slumped_irradiance
@@ -926,7 +928,7 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
         e[far] = projected_brdf(model, wi, wo, states, scale)
     near = np.flatnonzero(~far & (vis > 0))
     if len(near) and spot.patches is not None:
-        e[near] = near_field_w_m2(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
+        e[near] = near_field_w_m2(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states, bound=bound)
     elif len(near):  # a spot built without its patches (by hand): its samples as point sources
         e[near] = _samples_as_points(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states)
     return ((np.arange(m), e), far) if sparse else (e, far)
@@ -964,11 +966,19 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     return row, len(idx)
 
 
-def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states):
+def brdf_bound(model) -> float | None:
+    """An upper bound [1/sr] of ``f_r`` over every pair of directions and state, where one
+    is proven: ``rho / pi`` for a Lambertian material; None otherwise."""
+    return model.reflectance / math.pi if type(model) is Lambertian else None
+
+
+def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states, bound=False):
     """Irradiance [W/m^2] (M,) or (M, T) at near observers ``obs`` (M, 3) with factors
     ``weight`` (gain x line of sight): the integral over the spot's patches
     (:func:`hazard.physics.near_field.near_field_irradiance`, ``f_r cos(theta_r)`` of each
-    sample's material frame and incidence)."""
+    sample's material frame and incidence). ``bound=True`` and a material with
+    :func:`brdf_bound`: an upper bound where the integral over triangles would
+    be needed (the point form's pairs exact)."""
     model = spot.material
     wi_all = to_local(spot.frames, -spot.incoming)
     frames = np.asarray(spot.frames, float)
@@ -985,8 +995,9 @@ def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states):
         return projected_brdf(model, wi_all[samples], wo, states, s)
 
     shape = (len(obs),) if states is None else (len(obs), len(states))
+    fr_bound = brdf_bound(model) if bound else None
     return near_field_irradiance(spot.patches, spot.points, spot.spread_m2, spot.frames[:, 2], spot.power_w, obs, weight, kernel,
-                                 shape)
+                                 shape, fr_bound_per_sr=fr_bound)
 
 
 def specular_power_w(spot: Spot, states=None):

@@ -29,7 +29,7 @@ import numpy as np
 import brdfmodels
 from brdfmodels.parallel import block_rows, map_blocks
 
-from hazard.physics.engine import Spot, path_states, projected_brdf, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
+from hazard.physics.engine import Spot, path_states, projected_brdf, brdf_bound, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
 from hazard.physics.near_field_lobe import near_lobe_fn
 from hazard.physics.nohd import range_from_intensity
 from hazard.progress import terminal_bar
@@ -403,10 +403,12 @@ class Footprint:
     direct_ratio: np.ndarray | None = None
 
 
-def _spot_lobes(spot, p, gain, mu, states):
+def _spot_lobes(spot, p, gain, mu, states, bound=False):
     """A spot's BRDF and mirror lobes at points ``p`` (rows x T each; the mirror None
-    without one), every line of sight clear."""
-    e, _ = spot_irradiance(spot, p, gain, mu, states)
+    without one), every line of sight clear; ``bound``: the BRDF lobe an upper bound near
+    the spot where the integral over its triangles would be needed (see
+    :func:`hazard.physics.engine.spot_irradiance`)."""
+    e, _ = spot_irradiance(spot, p, gain, mu, states, bound=bound)
     m = specular_irradiance(spot, p, gain, mu, None, states) if spot.material.has_specular else None
     return (e if e.ndim == 2 else e[:, None]), (None if m is None else m if m.ndim == 2 else m[:, None])
 
@@ -424,7 +426,21 @@ def _clip_to_sight(spot, lobe_pair, over, p, gain, mu, states, ray_scene):
         m[idx] = mi if mi.ndim == 2 else mi[:, None]
 
 
-def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None, max_range_m=np.inf) -> Footprint:
+def _exact_where(parts, top, spots, p, gain, mu, states_by_target, mpe_w_m2):
+    """Rows whose summed upper bound ``top`` reaches the MPE: the bounded spots' BRDF
+    lobes integrated exactly there, in place, and ``top`` updated."""
+    rows = np.flatnonzero(top >= mpe_w_m2)
+    redo = [i for i, spot in enumerate(spots) if spot.patches is not None and brdf_bound(spot.material) is not None]
+    if not len(rows) or not redo:
+        return
+    for i in redo:
+        e, _ = spot_irradiance(spots[i], p[rows], gain[rows], mu, states_by_target.get(spots[i].target.index))
+        parts[i][0][rows] = e if e.ndim == 2 else e[:, None]
+    top[rows] = sum(e[rows] if m is None else e[rows] + m[rows] for e, m in parts).max(axis=1)
+
+
+def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_m, eye_height_m, *, states_by_target=None,
+                     max_range_m=np.inf, bound_below_mpe=True) -> Footprint:
     """Hazardous ground area: terrain nodes whose eye-height point receives at least the
     MPE at some time, the irradiance summed over every spot (BRDF and specular lobes, each
     with its own line of sight) as in the observer map, max over the states in time
@@ -438,6 +454,13 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     none does alone, so every node is evaluated. Rays are traced only where the
     unoccluded sum exceeds the MPE (occlusion can only lower it). Nodes go in blocks
     (bounded memory, threads).
+
+    ``bound_below_mpe``: near a spot whose material has a proven bound of ``f_r cos``
+    (:func:`hazard.physics.engine.brdf_bound`, a Lambertian ground), the
+    integral over its triangles is first replaced by an upper bound
+    (:func:`hazard.physics.near_field.near_field_irradiance`); only nodes whose bounded
+    sum reaches the MPE are integrated. The mask is the exact one; a node left at its
+    bound keeps it as its ``ratio`` (below 1, conservative). False: every node integrated.
     """
     states_by_target = states_by_target or {}
     ny, nx = terrain.heights.shape
@@ -463,8 +486,11 @@ def ground_footprint(spots, beam, terrain, ray_scene, mpe_w_m2, attenuation_per_
     def block(a, b):
         p = pts[a:b]
         gain = np.ones(b - a)
-        parts = [_spot_lobes(spot, p, gain, attenuation_per_m, states_by_target.get(spot.target.index)) for spot in spots]
+        parts = [_spot_lobes(spot, p, gain, attenuation_per_m, states_by_target.get(spot.target.index), bound_below_mpe)
+                 for spot in spots]
         top = sum(e if m is None else e + m for e, m in parts).max(axis=1)
+        if bound_below_mpe:
+            _exact_where(parts, top, spots, p, gain, attenuation_per_m, states_by_target, mpe_w_m2)
         over = top >= mpe_w_m2  # as for observers: ratio >= 1
         if ray_scene is not None and over.any():
             for spot, lobe_pair in zip(spots, parts):

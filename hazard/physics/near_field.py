@@ -54,7 +54,8 @@ from functools import cached_property
 import numpy as np
 
 __all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_field_irradiance", "point_form_ok",
-           "stats_since", "describe", "leaf_corners_s", "perspective_weights", "NEAR_FIELD_RTOL", "RULE_REACH", "MAX_DEPTH", "STATS"]
+           "stats_since", "describe", "leaf_corners_s", "perspective_weights", "point_triangle_distance", "NEAR_FIELD_RTOL",
+           "RULE_REACH", "MAX_DEPTH", "STATS", "BOUNDED"]
 
 NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
 RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
@@ -66,6 +67,7 @@ MOMENT_LEVEL = 3  # the point form's centroid and spread: the 7-point rule on 4*
 # triangles are below it (ratio - 1: median 6e-6, 99th percentile 1.3e-4); the sub-triangles cost 1.2 s per spot
 MOMENT_AFFINE_RTOL = 1e-5
 MAX_DEPTH = 40  # bisections of a triangle at most (its area / 1e12)
+BOUND_DEPTH = 4  # with a bound of f_r cos (fr_bound_per_sr): bisections before the unresolved pairs are bounded
 _NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
 _PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
 
@@ -133,6 +135,28 @@ class _Stats:
 
 
 STATS = _Stats()
+
+
+class _Bounded:
+    """Counts of (observer, triangle) pairs given an upper bound instead of the integral
+    (``fr_bound`` of :func:`near_field_irradiance`), and of their observers (kept apart
+    from :data:`STATS`, whose keys are reported per stage)."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self.pairs = self.observers = 0
+
+    def add(self, observers, pairs):
+        with self._lock:
+            self.observers += observers
+            self.pairs += pairs
+
+    def snapshot(self) -> dict:
+        with self._lock:
+            return dict(observers=self.observers, pairs=self.pairs)
+
+
+BOUNDED = _Bounded()
 
 
 def stats_since(before: dict) -> dict:
@@ -435,7 +459,7 @@ def _expand(patches, io, is_):
 
 
 def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, power_w, obs, weight, kernel, shape,
-                          rtol=NEAR_FIELD_RTOL):
+                          rtol=NEAR_FIELD_RTOL, fr_bound_per_sr=None):
     """Irradiance [W/m^2] of a spot at observers ``obs`` (M, 3), shape ``shape`` ((M,) or
     (M, T)): each (observer, sample) pair by the point form where :func:`point_form_ok`,
     else by the adaptive triangle rule (module notes).
@@ -448,6 +472,13 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
     ``f_r cos(theta_r) exp(-mu R) scale / R^2`` for source points ``x`` of ``samples``
     and observers ``o`` (rows, shape (N,) or (N, T)). Observers go in blocks (bounded
     memory whatever the spot's number of triangles).
+
+    ``fr_bound_per_sr``: an upper bound [1/sr] of the BRDF ``f_r`` over every pair of
+    directions (``rho / pi`` for a Lambertian material; the kernel's ``cos(theta_r)`` is
+    taken about ``normals``). Given, the pairs the point
+    form does not serve get an upper bound instead of the adaptive rule
+    (:func:`_bound_pairs`): the result is then an upper bound of the irradiance, exact
+    where every pair took the point form (counted in :data:`BOUNDED`).
     """
     t0 = time.perf_counter()
     e = np.zeros(shape)
@@ -461,7 +492,9 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
         c, v, r, has = patches.moments
         points = np.where(has[:, None], c, points)
         spread, radius = np.where(has, v, spread), np.where(has, r, radius)
-    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel)
+    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel, fr_bound_per_sr)
+    if fr_bound_per_sr is not None:
+        live = _bound_whole(src, obs, weight, live, e)
     counts = np.zeros(4, int)
     block = max(1, _PAIR_BLOCK // max(len(points), len(patches.sample), 1))
     for a in range(0, len(live), block):
@@ -482,6 +515,27 @@ class _Sources:
     power_w: np.ndarray
     ratio: np.ndarray
     kernel: object
+    fr_bound_per_sr: float | None = None
+
+    @cached_property
+    def sample_mass(self) -> np.ndarray:
+        """:func:`_sample_masses` of the patches (bounds only)."""
+        return _sample_masses(self.patches)
+
+    @cached_property
+    def ball_radius_m(self) -> np.ndarray:
+        """Per sample: the largest distance [m] of its triangles' vertices from its point
+        (the ball about ``points`` holding its triangles); bounds only."""
+        return _sample_radius(self.patches.tri_x, self.patches.sample, self.points)
+
+    @cached_property
+    def sample_lowest_m(self) -> np.ndarray:
+        """Per sample: the smallest ``n.x`` [m] over its triangles' vertices along its normal
+        (so ``n.o - lowest`` is the largest height of an observer ``o`` over them); bounds only."""
+        p = self.patches
+        low = np.full(len(self.normals), np.inf)
+        np.minimum.at(low, p.sample, np.einsum("pvk,pk->pv", p.tri_x, self.normals[p.sample]).min(axis=1))
+        return low
 
 
 def _near_block(src: _Sources, obs, weight, rows, e, rtol):
@@ -492,18 +546,42 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     d = np.linalg.norm(obs[rows][:, None, :] - pt[None, :, :], axis=-1)
     ok = point_form_ok(src.radius_m[None, :], d, rtol, src.spread_m2[None, :])
     po, ps = np.nonzero(ok)
-    io, is_ = np.nonzero(~ok)
-    po, io = rows[po], rows[io]
+    io_local, is_ = np.nonzero(~ok)
+    po, io = rows[po], rows[io_local]
     batch = _Batch(e, src.kernel, obs, max(1, _NODE_BLOCK // max(1, e.shape[1] if e.ndim == 2 else 1)))
     if len(po):
         batch.add(ps, pt[ps], po, src.power_w[ps] * weight[po])
     n_eval = len(po)
+    if src.fr_bound_per_sr is not None:
+        io, is_ = _bound_samples(src, obs, weight, io, is_, d[io_local, is_], e)
     oi, tri = _expand(src.patches, io, is_)
     p = src.patches
     xs, ss, gs, samp = p.tri_x[tri], p.tri_s[tri], p.weights()[tri], p.sample[tri]
     dens = p.density_w[tri] * src.ratio[samp] * weight[oi]
-    unresolved = 0
-    for depth in range(MAX_DEPTH + 1):
+    stop = MAX_DEPTH if src.fr_bound_per_sr is None else min(BOUND_DEPTH, MAX_DEPTH)
+    evals, unresolved, n_bound = _adaptive(src, obs, oi, (xs, ss, gs, samp, dens), e, stop, batch)
+    batch.flush()
+    if src.fr_bound_per_sr is not None:  # nothing integrated: counted in BOUNDED
+        if n_bound:
+            BOUNDED.add(len(np.unique(io)), n_bound)
+        return np.array([0, 0, n_eval, 0])
+    return np.array([len(np.unique(io)), len(io), n_eval + evals, unresolved])
+
+
+def _adaptive(src: _Sources, obs, oi, tris, e, stop, batch):
+    """The adaptive rule on (observer ``oi``, triangle) pairs, ``tris`` = (surface
+    vertices, ``s`` vertices, perspective weights, samples, per-pair densities): each
+    pair's triangle takes the 7-point rule once the observer is ``RULE_REACH`` radii away,
+    else is bisected; at depth ``stop`` (``MAX_DEPTH``) the pairs still unresolved get the
+    rule (counted unresolved), its nodes gathered in ``batch`` (a :class:`_Batch`). With
+    ``src.fr_bound_per_sr`` every pair gets instead an upper
+    bound of what the rule and the rest of the recursion would give it
+    (:func:`_bound_pairs`): a resolved pair at once, the others after up to ``stop``
+    bisections (tighter near the observer). Returns (kernel evaluations, pairs
+    unresolved, pairs bounded)."""
+    xs, ss, gs, samp, dens = tris
+    n_eval = unresolved = n_bound = 0
+    for depth in range(stop + 1):
         if not len(oi):
             break
         at = obs[oi]
@@ -512,15 +590,121 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
             xs, ss, gs, samp, oi, dens, at = (v[above] for v in (xs, ss, gs, samp, oi, dens, at))
         rad, c = _triangle_radius(xs)
         good = np.linalg.norm(at - c, axis=1) >= RULE_REACH * rad
-        if depth == MAX_DEPTH:
+        if src.fr_bound_per_sr is not None:  # bounds only: the resolved pairs, and every pair at the last depth
+            good |= depth == stop
+            n_bound += _bound_pairs(src, obs, oi[good], xs[good], ss[good], samp[good], dens[good], e)
+        elif depth == MAX_DEPTH:
             unresolved += int((~good).sum())
             good[:] = True
         if good.all():
-            n_eval += _rule(xs, ss, gs, dens, oi, samp, batch)
+            if src.fr_bound_per_sr is None:
+                n_eval += _rule(xs, ss, gs, dens, oi, samp, batch)
             break
         split = ~good
-        n_eval += _rule(xs[good], ss[good], gs[good], dens[good], oi[good], samp[good], batch)
+        if src.fr_bound_per_sr is None:
+            n_eval += _rule(xs[good], ss[good], gs[good], dens[good], oi[good], samp[good], batch)
         xs, ss, gs = _split(xs[split], ss[split], gs[split])
         samp, oi, dens = (np.tile(v[split], 2) for v in (samp, oi, dens))
-    batch.flush()
-    return np.array([len(np.unique(io)), len(io), n_eval, unresolved])
+    return n_eval, unresolved, n_bound
+
+
+def point_triangle_distance(p, tri) -> np.ndarray:
+    """Euclidean distance [m] from points ``p`` (N, 3) to the closed triangles ``tri``
+    (N, 3, 3): to the plane where the point projects inside the triangle, else to the
+    nearest of its three edges (degenerate triangles: their edges alone)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    e0, e1, v2 = b - a, c - a, p - a
+    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+    d20, d21 = (v2 * e0).sum(1), (v2 * e1).sum(1)
+    den = d00 * d11 - d01 * d01
+    ok = den > 1e-12 * d00 * d11
+    safe = np.where(ok, den, 1.0)
+    v, w = (d11 * d20 - d01 * d21) / safe, (d00 * d21 - d01 * d20) / safe
+    inside = ok & (v >= 0) & (w >= 0) & (v + w <= 1)
+    n = np.cross(e0, e1)
+    plane = np.abs((v2 * n).sum(1)) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
+    edges = []
+    for q0, q1 in ((a, b), (b, c), (c, a)):
+        d = q1 - q0
+        t = np.clip(((p - q0) * d).sum(1) / np.maximum((d * d).sum(1), 1e-300), 0.0, 1.0)
+        edges.append(np.linalg.norm(p - q0 - t[:, None] * d, axis=1))
+    return np.where(inside, plane, np.minimum.reduce(edges))
+
+
+def _sample_masses(patches: SpotPatches) -> np.ndarray:
+    """Per sample (n,): the sum over its triangles of the density x the area in ``s`` x the
+    largest ``exp(-|s|^2)`` on the triangle's bounding disc in ``s``, at least the mass
+    any rule or split puts on them (:func:`_bound_pairs`)."""
+    rad_s, c_s = _triangle_radius(patches.tri_s)
+    peak = np.exp(-np.maximum(np.sqrt(np.einsum("ij,ij->i", c_s, c_s)) - rad_s, 0.0) ** 2)
+    return np.bincount(patches.sample, patches.density_w * _area_s(patches.tri_s) * peak,
+                       minlength=len(patches.sample_power_w))
+
+
+def _bound_whole(src: _Sources, obs, weight, live, e):
+    """Observers ``live`` at least 3 radii from the ball holding every sample's ball: an
+    upper bound for the whole spot added to ``e`` (``fr_bound x mass / (D - A)^2``, the
+    masses of :func:`_sample_masses` summed, ``cos(theta_r) <= 1``). Returns the others."""
+    c = src.points.mean(axis=0)
+    big = float(np.max(np.linalg.norm(src.points - c, axis=1) + src.ball_radius_m))
+    dist = np.linalg.norm(obs[live] - c, axis=1)
+    far = dist >= 3.0 * big
+    o, dd = live[far], (dist[far] - big) * (1.0 - 1e-9)
+    if len(o):
+        b = src.fr_bound_per_sr * float((src.sample_mass * src.ratio).sum()) * weight[o] / (dd * dd)
+        e[o] += b if e.ndim == 1 else b[:, None]
+        BOUNDED.add(len(o), 0)
+    return live[~far]
+
+
+def _bound_samples(src: _Sources, obs, weight, io, is_, dist_m, e):
+    """(observer ``io``, sample ``is_``) pairs ``dist_m`` from the sample's point at least 3
+    of its radii away: an upper bound of the rule's value added to ``e`` for the whole
+    sample (as :func:`_bound_pairs` for one triangle, with the sample's bounding ball:
+    ``d = dist - a``; ``h`` over all its vertices, :attr:`_Sources.sample_lowest_m`; its
+    mass :func:`_sample_masses`). Returns the other pairs."""
+    a = src.ball_radius_m[is_]
+    far = dist_m >= 3.0 * a
+    o, s, a, dd = io[far], is_[far], a[far], (dist_m[far] - a[far]) * (1.0 - 1e-9)
+    if len(o):
+        h = np.einsum("ij,ij->i", obs[o], src.normals[s]) - src.sample_lowest_m[s]
+        mass = src.sample_mass[s] * src.ratio[s] * weight[o]
+        b = np.where((h > 0) & (mass > 0), src.fr_bound_per_sr * mass * np.minimum(1.0, h / dd) / (dd * dd), 0.0)
+        _scatter_add(e, o, b if e.ndim == 1 else np.repeat(b[:, None], e.shape[1], axis=1))
+        BOUNDED.add(0, len(o))
+    return io[~far], is_[~far]
+
+
+def _bound_pairs(src: _Sources, obs, oi, xs, ss, samp, dens, e) -> int:
+    """Add to ``e`` an upper bound of what the adaptive rule would give each (observer
+    ``oi``, triangle) pair: ``fr_bound x min(1, h / d) x mass / d^2``. ``d`` is at most the
+    observer's distance to the triangle, where every quadrature node of the rule and of
+    its splits lies (the rays' map is a convex combination of the vertices): the distance
+    to the triangle's bounding ball (centroid, largest vertex distance), or where that is
+    under one radius the exact distance to the triangle; shrunk by 1e-9 relative against
+    rounding; exp(-mu R) <= 1. ``h`` is the largest height ``n.(o - x)`` of the observer
+    over the vertices along the sample's normal ``n`` (affine in ``x``, so ``cos(theta_r) =
+    n.(o - x) / |o - x| <= h / d`` on the triangle). ``mass`` is the density x the
+    triangle's area in ``s`` x the largest ``exp(-|s|^2)`` on the triangle's bounding disc
+    in ``s`` (each node's weight carries ``exp(-|s|^2)`` at a node in the triangle, the
+    rule's weights are positive and sum to 1, and splits share the area). Pairs whose
+    observer is behind the triangle's plane are dropped as the rule drops them. Returns
+    the pairs bounded."""
+    if not len(oi):
+        return 0
+    o = obs[oi]
+    height = np.einsum("pvk,pk->pv", o[:, None, :] - xs, src.normals[samp]).max(axis=1)  # n.(o - x) is largest at a vertex
+    above = height > 0
+    o, xs, ss, dens, oi, height = o[above], xs[above], ss[above], dens[above], oi[above], height[above]
+    rad, c = _triangle_radius(xs)
+    d = np.sqrt(np.einsum("ij,ij->i", o - c, o - c)) - rad
+    close = np.flatnonzero(d < rad)
+    d[close] = point_triangle_distance(o[close], xs[close])
+    d *= 1.0 - 1e-9
+    rad_s, c_s = _triangle_radius(ss)
+    peak = np.exp(-np.maximum(np.sqrt(np.einsum("ij,ij->i", c_s, c_s)) - rad_s, 0.0) ** 2)
+    mass = dens * _area_s(ss) * peak
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):  # d = 0 (an observer on the triangle): inf
+        b = np.where(mass > 0, src.fr_bound_per_sr * mass * np.minimum(1.0, height / d) / (d * d), 0.0)
+    _scatter_add(e, oi, b if e.ndim == 1 else np.repeat(b[:, None], e.shape[1], axis=1))
+    return len(oi)

@@ -27,7 +27,7 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
     """Ground cells at ``eye_height_m`` where the irradiance summed over every spot
     reaches the MPE, out to the longest NOHD of any target (diffuse or specular);
     ``aperture_m``: the limiting aperture the direct beam's ratio is taken through."""
-    before = _near.STATS.snapshot()
+    before, bounded = _near.STATS.snapshot(), _near.BOUNDED.snapshot()
     lit = [tr for tr in target_rows if tr.dynamic_lobe is not None]  # unlit targets' rows carry no lobe
     rmax = max([tr.dynamic_lobe.max_range_m for tr in lit] + [tr.specular_nohd_dynamic_m or 0.0 for tr in lit] + [0.0])
     initial = {k: v[:1] for k, v in states.items()}
@@ -42,6 +42,10 @@ def footprints(spots, beam, terrain, ray_scene, mpe_w_m2, mu, eye_height_m, stat
     fp_static, fp_dyn = replace(fp_static, direct_ratio=direct), replace(fp_dyn, direct_ratio=direct)
     detail = (f"hazardous ground at {eye_height_m:g} m eye height: static {fp_static.area_m2:.4g} m^2, "
               f"dynamic {fp_dyn.area_m2:.4g} m^2; {_near.describe(_near.stats_since(before))}")
+    b = {k: v - bounded[k] for k, v in _near.BOUNDED.snapshot().items()}
+    if b["observers"] or b["pairs"]:
+        detail += (f"; near a Lambertian spot {b['observers']} node(s) and {b['pairs']} node-sample/triangle pair(s) bounded "
+                   "first (nodes whose bound stays below the MPE are not integrated: their ratio is that bound)")
     return Footprints(fp_static, fp_dyn, detail)
 
 
