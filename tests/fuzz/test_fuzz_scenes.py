@@ -18,6 +18,7 @@ import copy
 import io
 import json
 import math
+import random
 import signal
 import threading
 import time
@@ -319,25 +320,46 @@ def test_every_mutation(tmp_path):
     assert not failures, "\n".join(failures[:20])
 
 
+def second_path(a, k):
+    """The mutant of the enumerated case ``a`` and the path of its ``k``-th field (modulo
+    their count) that a second mutation hits; (None, None) when there is no such field."""
+    name, path, first = a
+    once = _mutate(BASES[name][0], path, first)
+    if once is None:
+        return None, None
+    paths = list(_paths(once))
+    return (once, paths[k % len(paths)]) if paths else (None, None)
+
+
+def run_pair(a, kind, k, *, cli=False, tmp=None) -> str:
+    """Two mutations at once: the enumerated case ``a``, then ``kind`` at the ``k``-th field
+    of its mutant; the outcome of :func:`run_case` ("skipped" when there is no second field)."""
+    once, path = second_path(a, k)
+    if path is None:
+        return "skipped"
+    name = f"{a[0]}+"
+    BASES[name] = (once, BASES[a[0]][1])
+    try:
+        return run_case(name, path, kind, cli=cli, tmp=tmp)
+    finally:
+        del BASES[name]
+
+
+def pair_cases(n, seed=30, firsts=None):
+    """``n`` seeded pairs (first case, second mutation, field index) for the resumable runner
+    (tests/fuzz/run_corpus.py --pairs); the first drawn from ``firsts`` (default: every case)."""
+    rng = random.Random(seed)
+    firsts = list(firsts) if firsts is not None else ALL_CASES
+    return [(rng.choice(firsts), rng.choice(MUTATIONS), rng.randrange(10_001)) for _ in range(n)]
+
+
 @pytest.mark.slow
 @settings(max_examples=2000, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(a=st.sampled_from(ALL_CASES), kind=st.sampled_from(MUTATIONS), k=st.integers(0, 10_000))
 def test_pairs_of_mutations(a, kind, k, tmp_path):
     """Two mutations at once: one enumerated, one more at another path of the mutant."""
-    name, path, first = a
-    data, base_dir = BASES[name]
-    once = _mutate(data, path, first)
-    if once is None:
-        return
-    paths = list(_paths(once))
-    if not paths:
-        return
-    BASES[f"{name}+"] = (once, base_dir)
-    try:
-        run_case(f"{name}+", paths[k % len(paths)], kind)
-    finally:
-        del BASES[f"{name}+"]
+    run_pair(a, kind, k)
 
 
 def test_a_nesting_depth_error_names_the_line():
