@@ -198,9 +198,9 @@ def _non_finite(obj, where=""):
     return out
 
 
-def run_case(name, path, kind, *, cli=False, tmp=None) -> str:
-    """Run one mutant; returns its outcome ("rejected", "accepted", "skipped") or raises
-    AssertionError describing the failure."""
+def run_case(name, path, kind, *, cli=False, tmp=None, analyse=True) -> str:
+    """Run one mutant; returns its outcome ("rejected", "accepted", "skipped"; "loaded" for
+    an accepted one when not ``analyse``) or raises AssertionError describing the failure."""
     data, base_dir = BASES[name]
     mutant = _mutate(data, path, kind)
     if mutant is None:
@@ -229,6 +229,8 @@ def run_case(name, path, kind, *, cli=False, tmp=None) -> str:
         assert len(lines) == (0 if accepted else 1), f"{label}: stderr {err.getvalue()!r}"
     if not accepted:
         return "rejected"
+    if not analyse:
+        return "loaded"
     old = _time_box(CASE_SECONDS)
     cpu_start = time.process_time()
     try:
@@ -262,6 +264,17 @@ STATS: Counter = Counter()
 @given(case=st.sampled_from(ALL_CASES), use_cli=st.integers(0, 3))
 def test_mutated_scenes(case, use_cli, tmp_path):
     STATS[run_case(*case, cli=use_cli == 0, tmp=tmp_path)] += 1
+
+
+BOUNDARY_SAMPLE = 150  # mutants through loads (validate on a quarter) in the default run: 2.0 s CPU (240: 3.4 s)
+
+
+def test_the_input_boundary_of_a_sample(tmp_path):
+    """A seeded sample of the mutants through the input boundary only (no analysis: the cases
+    above and the slow corpus do that): one clear line or acceptance, validate == loads."""
+    counts = Counter(run_case(*c, cli=i % 4 == 0, tmp=tmp_path, analyse=False)
+                     for i, c in enumerate(random.Random(7).sample(ALL_CASES, BOUNDARY_SAMPLE)))
+    assert counts["rejected"] > 0 and counts["loaded"] > 0, counts  # both sides of the boundary are met
 
 
 def test_named_examples_of_the_issue(tmp_path):
