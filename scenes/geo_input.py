@@ -265,6 +265,10 @@ def _resolve_table(site: GeoSite, kind: str, path: str, t: dict) -> None:
         if kind == "observer" and not keep_z and isinstance(t[key], list) and _two_numbers(t[key], stem == "points"):
             raise GeoError(f"{path}.{key}: two numbers [lat_deg, lon_deg] stand on the terrain: give the group's eye_height_m "
                            f"(or [lat_deg, lon_deg, height_m])")
+        if keep_z and _rows(t[key], f"{path}.{key}", stem == "points").shape[1] == 3:  # two heights: one would be dropped
+            raise GeoError(f"{path}.{key}: three numbers [lat_deg, lon_deg, height_m] place the points by their height, and "
+                           f"the group's eye_height_m would replace it: give [lat_deg, lon_deg] to stand at eye height, or "
+                           f"drop eye_height_m")
         height = 0.0
         if _two_numbers(t[key], stem == "points"):  # a height above the terrain is used only here; else said below
             site.on_terrain.add(f"{path}.{stem}")
