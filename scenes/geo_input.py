@@ -23,6 +23,7 @@ import numpy as np
 
 from .dem import DemInfo
 from .geo import GeoError, SiteFrame
+from .spec import RANGE_SPAN_MAX_M, range_span_outlier
 
 __all__ = ["Conversion", "FrameDescription", "GeoSite", "resolve_geo"]
 
@@ -348,6 +349,11 @@ def _outline(site: GeoSite, value, where: str) -> list:
     lat, lon, _ = site.frame.input_to_geodetic(a, where)
     p = site.frame.enu_m(lat, lon, np.full(len(lat), site.frame.h0_m))
     out = p[:, :2].tolist()
+    far = range_span_outlier(out) if where == "range.boundary_geo" else None
+    if far is not None:
+        raise GeoError(f"{where}: the range spans {far[1] / 1e3:.4g} km (point {far[0]} = {a[far[0]].tolist()} is the "
+                       f"farthest from the others); expected at most {RANGE_SPAN_MAX_M / 1e3:g} km across: a latitude or "
+                       f"longitude typed wrong? (leave out [range] for no boundary)")
     site.conversions.append({"key": where, "given": a.tolist(), "m": out})
     return out
 

@@ -746,6 +746,22 @@ class AnalysisSpec(_Strict):
         "accepted so older scenes load"))
 
 
+RANGE_SPAN_MAX_M = 1e6  # a range boundary's extent [m]: the largest ranges are a few hundred km across
+
+
+def range_span_outlier(xy) -> tuple | None:
+    """``(k, span_m)`` when the boundary ``[[x, y], ...]`` [m] spans more than
+    :data:`RANGE_SPAN_MAX_M` in x or y (k: the vertex farthest from the vertices' median,
+    the likely typo), else None. A boundary too wide puts beams that leave the real range
+    inside it: a lat / lon typed 0 put one vertex 3400 km off and was analysed silently."""
+    a = [[float(x), float(y)] for x, y in xy]
+    span = max(max(c) - min(c) for c in zip(*a))
+    if span <= RANGE_SPAN_MAX_M:
+        return None
+    med = [sorted(c)[len(c) // 2] for c in zip(*a)]
+    return max(range(len(a)), key=lambda i: math.dist(a[i], med)), span
+
+
 class RangeSpec(_Strict):
     """The range: its boundary, a polygon of [x, y] points [m] (world coordinates)."""
 
@@ -767,6 +783,11 @@ class RangeSpec(_Strict):
 
             why = explain_validity(poly) if not poly.is_valid else "no area (collinear points)"
             raise ValueError(f"boundary_m: expected a simple polygon (points in order around the range), got {why}")
+        far = range_span_outlier(self.boundary_m)
+        if far is not None:
+            raise ValueError(f"boundary_m: the range spans {far[1] / 1e3:.4g} km (point {far[0]} is the farthest from the "
+                             f"others); expected at most {RANGE_SPAN_MAX_M / 1e3:g} km across: a coordinate typed wrong? "
+                             f"(leave out [range] for no boundary)")
         return self
 
 

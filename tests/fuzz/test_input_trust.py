@@ -234,3 +234,19 @@ def test_a_merl_file_without_data_is_an_input_error(tmp_path):
     """Every cell NaN: a raw NumPy 'All-NaN slice' warning, then an error naming no file."""
     (tmp_path / "m.binary").write_bytes(b"\x01\x00\x00\x00" * 3 + b"\xff" * 24)
     _refused(tmp_path, _table("m.binary"), "m.binary", "no cell of the MERL file has data", verbs=("validate",))
+
+
+@pytest.mark.parametrize("boundary, words", [
+    ("[[0.0, 0.0], [3000000.0, 0.0], [3000000.0, 10.0], [0.0, 10.0]]", "range: boundary_m: the range spans 3000 km"),
+    ("[[-100.0, -100.0], [100.0, -100.0], [100.0, 100.0], [-100.0, 1200000.0]]", "the range spans 1200 km (point 3"),
+])
+def test_a_range_boundary_over_1000_km_across_is_refused(boundary, words, tmp_path):
+    """A range boundary with a coordinate typed wrong (the fuzz's lat = 0: 3400 km off) put
+    beams that leave the real range inside it, silently. 1000 km is past the largest
+    ranges (a few hundred km across); 990 km is accepted."""
+    assert "s.toml" in _refused(tmp_path, BASE + f"[range]\nboundary_m = {boundary}\n", words)
+
+
+def test_a_range_boundary_of_990_km_is_accepted(tmp_path):
+    out, err, doc = _run(tmp_path, BASE + "[range]\nboundary_m = [[-495000.0, -100.0], [495000.0, -100.0], [0.0, 1000.0]]\n")
+    assert doc["targets"][0]["name"] == "plate"

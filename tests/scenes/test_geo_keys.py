@@ -29,6 +29,11 @@ def _text(old, new):
     ('points_geo = [[32.6080, -106.2905]]', 'points_geo = [[32.6080, -106.2905, 1.0]]',
      "observers[0].points_geo: three numbers [lat_deg, lon_deg, height_m] place the points by their height, and the "
      "group's eye_height_m would replace it"),
+    # a range boundary's latitude typed 0 (issue 30 fuzz): one vertex 3400 km south, the range 3421 km across, analysed
+    # silently, and every beam that leaves the real range "inside" it
+    ('[[32.585, -106.325], [32.585, -106.275]', '[[0.0, -106.325], [32.585, -106.275]',
+     "range.boundary_geo: the range spans 3421 km (point 0 = [0.0, -106.325] is the farthest from the others); expected at "
+     "most 1000 km across"),
     ('start_geo = [32.6050, -106.3150]\nend_geo = [32.6050, -106.2850]',
      'start_geo = [32.6050, -106.3150, 1203.0]\nend_geo = [32.6050, -106.2850, 1203.0]', "observers[1].start_geo: three numbers"),
 ])
