@@ -397,3 +397,21 @@ def test_a_nesting_depth_error_names_the_line():
     line = next(i for i, ln in enumerate(mutant.split("\n"), 1) if "[[[" in ln)
     with pytest.raises(scenes.SceneError, match=rf"<fuzz>: line {line}: nesting depth = {DEEP + 1} exceeds the limit 32"):
         scenes.loads(mutant, source="<fuzz>", base_dir=base_dir)
+
+
+def test_pairs_resume_by_key(tmp_path):
+    """The resumable pairs runner (tests/fuzz/run_corpus.py --pairs): a seeded sample is the
+    same sample each time, its keys name both mutations, a case in the log is not run again,
+    and a pair leaves the bases as they were."""
+    from tests.fuzz import run_corpus
+
+    a, b = run_corpus._pairs(40, 5, None), run_corpus._pairs(40, 5, None)
+    assert [k for _, k, _ in a] == [k for _, k, _ in b] and len({k for _, k, _ in a}) == len(a)
+    assert all(k.count(":") == 3 and "+" in k for _, k, _ in a)
+    log = tmp_path / "pairs.jsonl"
+    assert run_corpus.main([str(log), "--pairs", "6", "--seed", "5"]) == 0
+    first = log.read_text()
+    assert run_corpus.main([str(log), "--pairs", "6", "--seed", "5"]) == 0 and log.read_text() == first  # nothing re-run
+    assert run_corpus.summary(log, 6)["cases"] == len(run_corpus._pairs(6, 5, None))
+    assert set(BASES) == set(scenes.examples())
+    assert run_pair((("plate", ("laser", "power_w"), "0")), "delete", 0) == "rejected"
