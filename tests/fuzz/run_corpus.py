@@ -86,15 +86,18 @@ def _singles(how: str, only: set) -> list:
     return [(i, _key(c), lambda cli, tmp, c=c: fz.run_case(*c, cli=cli, tmp=tmp)) for i, c in _order(fz.ALL_CASES, how, only)]
 
 
-def summary(log: Path, of: int | None = None) -> dict:
+def summary(log: Path, of: int | None = None, keys: set | None = None) -> dict:
     """Counts of outcomes, CPU time and the failing cases of a log (a started case with no
-    end line is a hang or a crash of the runner)."""
+    end line is a hang or a crash of the runner); with ``keys``, of those cases only (the
+    others are counted as ``stale``: cases of a sample drawn by an older harness)."""
     recs = [json.loads(ln) for ln in log.read_text().splitlines()]
+    stale = {r["key"] for r in recs if keys is not None and r["key"] not in keys}
+    recs = [r for r in recs if r["key"] not in stale]
     ended = {r["key"]: r for r in recs if r["outcome"] != "start"}
     started = [r for r in recs if r["outcome"] == "start" and r["key"] not in ended]
     out = Counter(r["outcome"] for r in ended.values())
     cpu = sorted(((r["cpu_s"], r["key"]) for r in ended.values()), reverse=True)
-    return {"cases": len(ended), "of": of or len(fz.ALL_CASES), "outcomes": dict(out),
+    return {"cases": len(ended), "of": of or len(fz.ALL_CASES), "stale": len(stale), "outcomes": dict(out),
             "cpu_s_total": round(sum(c for c, _ in cpu), 1), "slowest": cpu[:10],
             "never_ended": [r["key"] for r in started],
             "failures": [(r["key"], r["detail"]) for r in ended.values() if r["outcome"] in ("failure", "traceback")]}
@@ -112,7 +115,8 @@ def main(argv=None) -> int:
                     help="a single-mutation log: draw first mutations from its accepted cases")
     args = ap.parse_args(argv)
     if args.summary:
-        json.dump(summary(args.log, args.pairs or None), sys.stdout, indent=1)
+        keys = {k for _, k, _ in _pairs(args.pairs, args.seed, args.first_accepted_in)} if args.pairs else None
+        json.dump(summary(args.log, len(keys) if keys else None, keys), sys.stdout, indent=1)
         print()
         return 0
     done = _done(args.log)
