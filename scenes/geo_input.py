@@ -23,6 +23,7 @@ import numpy as np
 
 from .dem import DemInfo
 from .geo import GeoError, SiteFrame
+from .spec import RANGE_SPAN_MAX_M, range_span_outlier
 
 __all__ = ["Conversion", "FrameDescription", "GeoSite", "resolve_geo"]
 
@@ -265,6 +266,10 @@ def _resolve_table(site: GeoSite, kind: str, path: str, t: dict) -> None:
         if kind == "observer" and not keep_z and isinstance(t[key], list) and _two_numbers(t[key], stem == "points"):
             raise GeoError(f"{path}.{key}: two numbers [lat_deg, lon_deg] stand on the terrain: give the group's eye_height_m "
                            f"(or [lat_deg, lon_deg, height_m])")
+        if keep_z and _rows(t[key], f"{path}.{key}", stem == "points").shape[1] == 3:  # two heights: one would be dropped
+            raise GeoError(f"{path}.{key}: three numbers [lat_deg, lon_deg, height_m] place the points by their height, and "
+                           f"the group's eye_height_m would replace it: give [lat_deg, lon_deg] to stand at eye height, or "
+                           f"drop eye_height_m")
         height = 0.0
         if _two_numbers(t[key], stem == "points"):  # a height above the terrain is used only here; else said below
             site.on_terrain.add(f"{path}.{stem}")
@@ -344,6 +349,11 @@ def _outline(site: GeoSite, value, where: str) -> list:
     lat, lon, _ = site.frame.input_to_geodetic(a, where)
     p = site.frame.enu_m(lat, lon, np.full(len(lat), site.frame.h0_m))
     out = p[:, :2].tolist()
+    far = range_span_outlier(out) if where == "range.boundary_geo" else None
+    if far is not None:
+        raise GeoError(f"{where}: the range spans {far[1] / 1e3:.4g} km (point {far[0]} = {a[far[0]].tolist()} is the "
+                       f"farthest from the others); expected at most {RANGE_SPAN_MAX_M / 1e3:g} km across: a latitude or "
+                       f"longitude typed wrong? (leave out [range] for no boundary)")
     site.conversions.append({"key": where, "given": a.tolist(), "m": out})
     return out
 

@@ -87,6 +87,7 @@ def _nonzero(v, name):
 Time = Annotated[float, Field(ge=-1e9, le=1e9)]  # scenario time [s]
 
 
+POINT_SPACING_MIN_M = 1e-6  # the least length [m] of an observer grid's edge or line holding several points
 MOTION_STEP_MIN_S = 1e-6  # the least time between a moving thing's key times, or a firing window's length [s]
 
 
@@ -644,11 +645,30 @@ class ObserverSpec(_Strict):
                 _finite(p, "points_m")
         if self.counts is not None and any(c < 1 for c in self.counts):
             raise ValueError(f"counts={self.counts!r}: expected positive counts")
+        self._spread(kind)
         for key in ("count", "counts"):
             if getattr(self, key) is not None and key not in ({"line": ("count",), "grid": ("counts",), "shell": ("count",)}.get(kind) or ()):
                 raise ValueError(f"{key}: not used by a {kind} layout; remove it")
         check_limit("OBSERVERS", self.n_points, f"observer points of {self.name!r}")
         return self
+
+    def _spread(self, kind):
+        """A grid edge or a line of several points must have a length (at least 1 um; its
+        horizontal part at eye height, where the height is the terrain's): a zero u_m put
+        a grid's columns on one another (issue 30 fuzz), the same point counted N times."""
+        dims = 2 if self.eye_height_m is not None else 3
+        where = " horizontal" if dims == 2 else ""
+        if kind == "grid":
+            edges = [("u_m", self.u_m, self.counts[0]), ("v_m", self.v_m, self.counts[1])]
+        elif kind == "line":
+            edges = [("end_m", [b - a for a, b in zip(self.start_m, self.end_m)], self.count)]
+        else:
+            return
+        for key, edge, n in edges:
+            if n > 1 and math.hypot(*edge[:dims]) < POINT_SPACING_MIN_M:
+                what = "the grid's edge" if kind == "grid" else "the line from start_m"
+                raise ValueError(f"{key}: {what} has a{where} length of {math.hypot(*edge[:dims]):.3g} m, so its {n} points "
+                                 f"lie on one another; expected at least {POINT_SPACING_MIN_M:g} m (or one point along it)")
 
     def _track(self):
         others = [k for k in ("points_m", "end_m", "count", "origin_m", "u_m", "v_m", "counts", "center_m", "radius_m",
@@ -746,6 +766,22 @@ class AnalysisSpec(_Strict):
         "accepted so older scenes load"))
 
 
+RANGE_SPAN_MAX_M = 1e6  # a range boundary's extent [m]: the largest ranges are a few hundred km across
+
+
+def range_span_outlier(xy) -> tuple | None:
+    """``(k, span_m)`` when the boundary ``[[x, y], ...]`` [m] spans more than
+    :data:`RANGE_SPAN_MAX_M` in x or y (k: the vertex farthest from the vertices' median,
+    the likely typo), else None. A boundary too wide puts beams that leave the real range
+    inside it: a lat / lon typed 0 put one vertex 3400 km off and was analysed silently."""
+    a = [[float(x), float(y)] for x, y in xy]
+    span = max(max(c) - min(c) for c in zip(*a))
+    if span <= RANGE_SPAN_MAX_M:
+        return None
+    med = [sorted(c)[len(c) // 2] for c in zip(*a)]
+    return max(range(len(a)), key=lambda i: math.dist(a[i], med)), span
+
+
 class RangeSpec(_Strict):
     """The range: its boundary, a polygon of [x, y] points [m] (world coordinates)."""
 
@@ -767,6 +803,11 @@ class RangeSpec(_Strict):
 
             why = explain_validity(poly) if not poly.is_valid else "no area (collinear points)"
             raise ValueError(f"boundary_m: expected a simple polygon (points in order around the range), got {why}")
+        far = range_span_outlier(self.boundary_m)
+        if far is not None:
+            raise ValueError(f"boundary_m: the range spans {far[1] / 1e3:.4g} km (point {far[0]} is the farthest from the "
+                             f"others); expected at most {RANGE_SPAN_MAX_M / 1e3:g} km across: a coordinate typed wrong? "
+                             f"(leave out [range] for no boundary)")
         return self
 
 

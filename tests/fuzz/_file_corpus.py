@@ -165,6 +165,11 @@ def build_bases(tmp: Path) -> dict:
 TEXT_MUTATIONS = ("truncate", "flip", "del_line", "dup_line", "del_col", "dup_col", "number", "string", "empty", "bom",
                   "utf16", "delim", "crlf", "garbage", "nul")
 BINARY_MUTATIONS = ("truncate", "flip", "empty", "garbage", "zero_block", "ff_block", "as_is")
+# the security review's cases (issue 30 item 1), as mutations of a named file: a GDAL VRT in a
+# DEM's place that fetches a URL or reads another file's bytes as heights, the file a symlink to
+# a credentials-like file outside the folder, or to a device. Refused, or read without quoting
+SECURITY_MUTATIONS = ("vrt_url", "vrt_raw", "link_secret", "link_dev_zero")
+SECRET_FILE = "".join(f"{SECRET},{i},0.5,{SECRET}\n" for i in range(64))  # rows a CSV reader might take
 NUMBERS = ("nan", "inf", "-inf", "-0", "1e308", "-1e308", "1e-320", "-1", "0", "99999999999999999999", "4294967297",
            SECRET, '"' + SECRET + '"', "", "1e400", "0x10", "3.7")
 _STR = re.compile(rb'"[^"\n]*"')
@@ -250,8 +255,27 @@ def mutate(data: bytes, kind: str, rng: random.Random) -> bytes:
     raise ValueError(kind)
 
 
+def _security(folder: Path, name: str, kind: str) -> None:
+    """Put the security mutation ``kind`` in place of ``folder / name`` (a file outside the
+    folder holds SECRET, as a credentials file would)."""
+    from tests.scenes.test_dem_trust import _vrt_over_url, _vrt_raw
+
+    secret = folder.parent / "outside" / "credentials.csv"
+    secret.parent.mkdir(exist_ok=True)
+    secret.write_text(SECRET_FILE)
+    target = folder / name
+    target.unlink(missing_ok=True)
+    if kind == "vrt_url":  # port 9 (discard): nothing is fetched while GDAL's network is off
+        target.write_text(_vrt_over_url(9))
+    elif kind == "vrt_raw":
+        target.write_text(_vrt_raw(secret))
+    else:
+        target.symlink_to(secret if kind == "link_secret" else Path("/dev/zero"))
+
+
 def all_cases(bases: dict, seeds: int = 6) -> list:
-    """(base, file, mutation, seed) for every base, mutable file, mutation and seed."""
+    """(base, file, mutation, seed) for every base, mutable file, mutation and seed, and the
+    security mutations once for each file they apply to."""
     cases = []
     for name, base in bases.items():
         if not base.targets:  # a raster variant as GDAL wrote it
@@ -261,6 +285,9 @@ def all_cases(bases: dict, seeds: int = 6) -> list:
             for kind in BINARY_MUTATIONS if binary else TEXT_MUTATIONS:
                 if kind != "as_is":
                     cases.extend((name, f, kind, s) for s in range(seeds if kind not in ("empty", "bom", "utf16", "crlf") else 1))
+            # a scene or study TOML is what the user names, and echoed by design: only the device
+            security = SECURITY_MUTATIONS if binary else ("link_dev_zero",) if f.endswith(".toml") else SECURITY_MUTATIONS[2:]
+            cases.extend((name, f, kind, 0) for kind in security)
     return cases
 
 
@@ -299,7 +326,11 @@ def run_case(bases, case, tmp: Path) -> str:
     folder.mkdir(parents=True, exist_ok=True)
     rng = random.Random(f"{name}/{target}/{kind}/{seed}")
     for f, data in base.files.items():
-        (folder / f).write_bytes(mutate(data, kind, rng) if f == target else data)
+        if f == target and kind in SECURITY_MUTATIONS:
+            _security(folder, f, kind)
+        else:
+            (folder / f).unlink(missing_ok=True)  # not through a link a former case left
+            (folder / f).write_bytes(mutate(data, kind, rng) if f == target else data)
     main_file = folder / next(iter(base.files))
     label = f"{name}:{target}<-{kind}#{seed}"
     outcomes = {}

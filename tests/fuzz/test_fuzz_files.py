@@ -30,7 +30,7 @@ from collections import Counter
 
 import pytest
 
-from tests.fuzz._file_corpus import SECRET, all_cases, build_bases, run_case
+from tests.fuzz._file_corpus import SECRET, SECURITY_MUTATIONS, all_cases, build_bases, run_case
 
 SAMPLE = 75  # cases in the default run (seeded) of the 6-seed corpus (150 took 58 s CPU on 2 idle cores, 400 took 64 s under less work per case); -m slow: every case of 20 seeds
 
@@ -69,6 +69,16 @@ def test_mutated_files_sample(corpus, tmp_path):
     sample = rng.sample(cases, min(SAMPLE, len(cases)))
     counts = _run_all(bases, sample, tmp_path)
     assert counts["refused"] > 0 and counts["accepted"] > 0  # both outcomes occur: the classification is exercised
+
+
+def test_the_security_cases(corpus, tmp_path):
+    """Every security mutation (a VRT fetching a URL or reading another file as heights in a
+    DEM's place, a named file that is a link to a credentials-like file or to /dev/zero), in
+    the default run (each a refusal of about 10 ms): one line naming the file, nothing quoted."""
+    bases, cases = corpus
+    security = [c for c in cases if c[2] in SECURITY_MUTATIONS]
+    assert {c[2] for c in security} == set(SECURITY_MUTATIONS)
+    assert _run_all(bases, security, tmp_path)["refused"] == len(security)
 
 
 @pytest.mark.slow

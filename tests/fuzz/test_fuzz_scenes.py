@@ -18,6 +18,7 @@ import copy
 import io
 import json
 import math
+import random
 import signal
 import threading
 import time
@@ -44,6 +45,7 @@ REQUIRE_ALL_TARGETS = True
 # took 158 s wall and was reported as a hang
 CASE_SECONDS = 120
 DEEP = 200  # nesting depth of the "deep list" mutation (the limit is 32)
+MAX_PATH_DEPTH = 8  # a second mutation's field path at most this deep (the bundled scenes' deepest: 6)
 
 _MISSING = object()
 MUTATIONS = ("delete", "nan", "inf", "-inf", "1e308", "-1", "0", "true", "str", "empty", "deep", "longer", "shorter", "unknown")
@@ -197,9 +199,9 @@ def _non_finite(obj, where=""):
     return out
 
 
-def run_case(name, path, kind, *, cli=False, tmp=None) -> str:
-    """Run one mutant; returns its outcome ("rejected", "accepted", "skipped") or raises
-    AssertionError describing the failure."""
+def run_case(name, path, kind, *, cli=False, tmp=None, analyse=True) -> str:
+    """Run one mutant; returns its outcome ("rejected", "accepted", "skipped"; "loaded" for
+    an accepted one when not ``analyse``) or raises AssertionError describing the failure."""
     data, base_dir = BASES[name]
     mutant = _mutate(data, path, kind)
     if mutant is None:
@@ -228,6 +230,8 @@ def run_case(name, path, kind, *, cli=False, tmp=None) -> str:
         assert len(lines) == (0 if accepted else 1), f"{label}: stderr {err.getvalue()!r}"
     if not accepted:
         return "rejected"
+    if not analyse:
+        return "loaded"
     old = _time_box(CASE_SECONDS)
     cpu_start = time.process_time()
     try:
@@ -261,6 +265,17 @@ STATS: Counter = Counter()
 @given(case=st.sampled_from(ALL_CASES), use_cli=st.integers(0, 3))
 def test_mutated_scenes(case, use_cli, tmp_path):
     STATS[run_case(*case, cli=use_cli == 0, tmp=tmp_path)] += 1
+
+
+BOUNDARY_SAMPLE = 150  # mutants through loads (validate on a quarter) in the default run: 2.0 s CPU (240: 3.4 s)
+
+
+def test_the_input_boundary_of_a_sample(tmp_path):
+    """A seeded sample of the mutants through the input boundary only (no analysis: the cases
+    above and the slow corpus do that): one clear line or acceptance, validate == loads."""
+    counts = Counter(run_case(*c, cli=i % 4 == 0, tmp=tmp_path, analyse=False)
+                     for i, c in enumerate(random.Random(7).sample(ALL_CASES, BOUNDARY_SAMPLE)))
+    assert counts["rejected"] > 0 and counts["loaded"] > 0, counts  # both sides of the boundary are met
 
 
 def test_named_examples_of_the_issue(tmp_path):
@@ -319,25 +334,48 @@ def test_every_mutation(tmp_path):
     assert not failures, "\n".join(failures[:20])
 
 
+def second_path(a, k):
+    """The mutant of the enumerated case ``a`` and the path of its ``k``-th field (modulo
+    their count) that a second mutation hits; (None, None) when there is no such field."""
+    name, path, first = a
+    once = _mutate(BASES[name][0], path, first)
+    if once is None:
+        return None, None
+    # not inside a "deep" list (its 200 levels are one case; a second "deep" in it made 400,
+    # past the recursion limit of this file's TOML writer: 2 "tracebacks" of the harness)
+    paths = [p for p in _paths(once) if len(p) <= MAX_PATH_DEPTH]
+    return (once, paths[k % len(paths)]) if paths else (None, None)
+
+
+def run_pair(a, kind, k, *, cli=False, tmp=None) -> str:
+    """Two mutations at once: the enumerated case ``a``, then ``kind`` at the ``k``-th field
+    of its mutant; the outcome of :func:`run_case` ("skipped" when there is no second field)."""
+    once, path = second_path(a, k)
+    if path is None:
+        return "skipped"
+    name = f"{a[0]}+"
+    BASES[name] = (once, BASES[a[0]][1])
+    try:
+        return run_case(name, path, kind, cli=cli, tmp=tmp)
+    finally:
+        del BASES[name]
+
+
+def pair_cases(n, seed=30, firsts=None):
+    """``n`` seeded pairs (first case, second mutation, field index) for the resumable runner
+    (tests/fuzz/run_corpus.py --pairs); the first drawn from ``firsts`` (default: every case)."""
+    rng = random.Random(seed)
+    firsts = list(firsts) if firsts is not None else ALL_CASES
+    return [(rng.choice(firsts), rng.choice(MUTATIONS), rng.randrange(10_001)) for _ in range(n)]
+
+
 @pytest.mark.slow
 @settings(max_examples=2000, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(a=st.sampled_from(ALL_CASES), kind=st.sampled_from(MUTATIONS), k=st.integers(0, 10_000))
 def test_pairs_of_mutations(a, kind, k, tmp_path):
     """Two mutations at once: one enumerated, one more at another path of the mutant."""
-    name, path, first = a
-    data, base_dir = BASES[name]
-    once = _mutate(data, path, first)
-    if once is None:
-        return
-    paths = list(_paths(once))
-    if not paths:
-        return
-    BASES[f"{name}+"] = (once, base_dir)
-    try:
-        run_case(f"{name}+", paths[k % len(paths)], kind)
-    finally:
-        del BASES[f"{name}+"]
+    run_pair(a, kind, k)
 
 
 def test_a_nesting_depth_error_names_the_line():
@@ -359,3 +397,21 @@ def test_a_nesting_depth_error_names_the_line():
     line = next(i for i, ln in enumerate(mutant.split("\n"), 1) if "[[[" in ln)
     with pytest.raises(scenes.SceneError, match=rf"<fuzz>: line {line}: nesting depth = {DEEP + 1} exceeds the limit 32"):
         scenes.loads(mutant, source="<fuzz>", base_dir=base_dir)
+
+
+def test_pairs_resume_by_key(tmp_path):
+    """The resumable pairs runner (tests/fuzz/run_corpus.py --pairs): a seeded sample is the
+    same sample each time, its keys name both mutations, a case in the log is not run again,
+    and a pair leaves the bases as they were."""
+    from tests.fuzz import run_corpus
+
+    a, b = run_corpus._pairs(40, 5, None), run_corpus._pairs(40, 5, None)
+    assert [k for _, k, _ in a] == [k for _, k, _ in b] and len({k for _, k, _ in a}) == len(a)
+    assert all(k.count(":") == 3 and "+" in k for _, k, _ in a)
+    log = tmp_path / "pairs.jsonl"
+    assert run_corpus.main([str(log), "--pairs", "6", "--seed", "5"]) == 0
+    first = log.read_text()
+    assert run_corpus.main([str(log), "--pairs", "6", "--seed", "5"]) == 0 and log.read_text() == first  # nothing re-run
+    assert run_corpus.summary(log, 6)["cases"] == len(run_corpus._pairs(6, 5, None))
+    assert set(BASES) == set(scenes.examples())
+    assert run_pair((("plate", ("laser", "power_w"), "0")), "delete", 0) == "rejected"

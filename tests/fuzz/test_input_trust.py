@@ -234,3 +234,47 @@ def test_a_merl_file_without_data_is_an_input_error(tmp_path):
     """Every cell NaN: a raw NumPy 'All-NaN slice' warning, then an error naming no file."""
     (tmp_path / "m.binary").write_bytes(b"\x01\x00\x00\x00" * 3 + b"\xff" * 24)
     _refused(tmp_path, _table("m.binary"), "m.binary", "no cell of the MERL file has data", verbs=("validate",))
+
+
+@pytest.mark.parametrize("boundary, words", [
+    ("[[0.0, 0.0], [3000000.0, 0.0], [3000000.0, 10.0], [0.0, 10.0]]", "range: boundary_m: the range spans 3000 km"),
+    ("[[-100.0, -100.0], [100.0, -100.0], [100.0, 100.0], [-100.0, 1200000.0]]", "the range spans 1200 km (point 3"),
+])
+def test_a_range_boundary_over_1000_km_across_is_refused(boundary, words, tmp_path):
+    """A range boundary with a coordinate typed wrong (the fuzz's lat = 0: 3400 km off) put
+    beams that leave the real range inside it, silently. 1000 km is past the largest
+    ranges (a few hundred km across); 990 km is accepted."""
+    assert "s.toml" in _refused(tmp_path, BASE + f"[range]\nboundary_m = {boundary}\n", words)
+
+
+def test_a_range_boundary_of_990_km_is_accepted(tmp_path):
+    out, err, doc = _run(tmp_path, BASE + "[range]\nboundary_m = [[-495000.0, -100.0], [495000.0, -100.0], [0.0, 1000.0]]\n")
+    assert doc["targets"][0]["name"] == "plate"
+
+
+GRID = '[[observers]]\nname = "g"\norigin_m = [-5.0, -30.0, 1.0]\nu_m = {u}\nv_m = [0.0, 10.0, 0.0]\ncounts = [3, 3]\n{eye}'
+LINE = '[[observers]]\nname = "l"\nstart_m = [-5.0, -30.0, 1.0]\nend_m = {end}\ncount = 4\n{eye}'
+FLAT = '[terrain]\nkind = "flat"\ncenter_m = [0.0, -20.0, 0.0]\nextent_m = 200.0\nresolution_m = 10.0\n'
+
+
+@pytest.mark.parametrize("extra, words", [
+    (GRID.format(u="[0.0, 0.0, 0.0]", eye=""), "observers[1]: u_m: the grid's edge has a length of 0 m, so its 3 points"),
+    (GRID.format(u="[1e-9, 0.0, 0.0]", eye=""), "u_m: the grid's edge has a length of 1e-09 m"),
+    (LINE.format(end="[-5.0, -30.0, 1.0]", eye=""), "observers[1]: end_m: the line from start_m has a length of 0 m, so its 4"),
+    # at eye height only the horizontal part spreads the points (their height is the terrain's)
+    (FLAT + GRID.format(u="[0.0, 0.0, 3.0]", eye="eye_height_m = 1.7\n"), "u_m: the grid's edge has a horizontal length of 0 m"),
+    (FLAT + LINE.format(end="[-5.0, -30.0, 9.0]", eye="eye_height_m = 1.7\n"), "end_m: the line from start_m has a horizontal"),
+])
+def test_observer_points_laid_on_one_another_are_refused(extra, words, tmp_path):
+    """A grid edge or a line of several points with no length: the fuzz's u_m = [0, 0, 0]
+    was analysed as 9 points, 3 of each on one another (issue 30). Refused by the one
+    acceptance of every verb (validate == run: tests/fuzz/test_validate_equals_run.py)."""
+    assert "s.toml" in _refused(tmp_path, BASE + extra, words, verbs=("validate",))
+
+
+def test_one_point_along_a_zero_edge_or_a_1_um_edge_is_accepted(tmp_path):
+    for i, ok in enumerate((GRID.format(u="[0.0, 0.0, 0.0]", eye="").replace("[3, 3]", "[1, 3]"),
+                            GRID.format(u="[1e-6, 0.0, 0.0]", eye=""))):
+        (tmp_path / str(i)).mkdir()
+        out, err, doc = _run(tmp_path / str(i), BASE + ok)
+        assert sum(o["name"].startswith("g[") for o in doc["observers"]) == (3 if "[1, 3]" in ok else 9)

@@ -15,7 +15,6 @@ References written here, never from the engine:
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
@@ -25,7 +24,7 @@ from hypothesis import strategies as st
 import hazard
 
 from . import _refs as ref
-from .test_near_field_spot import EYE, GY, G_EXTENT, W, _ground_reference, _ground_scene
+from .test_near_field_spot import EYE, GY, G_EXTENT, _ground_reference, _ground_scene
 
 FEW = settings(ref.FAST, max_examples=8)
 MANY = settings(ref.SLOW, max_examples=80)
