@@ -161,7 +161,10 @@ def _beyond(result, name: str, nohd_m: float) -> str:
     if scene is None or target is None or getattr(target.spec, "track", None) is not None:
         return ""
     distance_m = float(np.linalg.norm(np.subtract(target.center_m, scene.laser_position_m, dtype=np.float64)))
-    return f", {distance_m:.4g} m from the laser: beyond the NOHD" if distance_m > nohd_m else ""
+    if not distance_m > nohd_m:
+        return ""
+    return f", {distance_m / 1e3:.4g} km from the laser: beyond the NOHD" if distance_m >= 1e4 else \
+        f", {distance_m:.4g} m from the laser: beyond the NOHD"
 
 
 def _sdz_findings(result) -> list:
