@@ -34,6 +34,10 @@ SLOW = settings(max_examples=120, derandomize=True, deadline=None, database=None
 # the default run of a property whose @pytest.mark.slow twin (same helper) sweeps SLOW: 10
 # drawn examples (the twin holds the breadth; 25 cost 2-9 s per property of whole analyses)
 FAST_TWIN = settings(FAST, max_examples=10)
+# the same for a property whose example costs 1-2 s of CPU (a whole analysis of a curved
+# mirror): 4 drawn examples by default (10 took 12-20 s of the default run each), the slow
+# twin sweeps SLOW
+HEAVY_TWIN = settings(FAST, max_examples=4)
 
 # --------------------------------------------------------------------------- vectors
 

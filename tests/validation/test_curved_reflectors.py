@@ -41,6 +41,7 @@ import hazard
 import scenes
 
 from . import _refs as ref
+from ._refs import HEAVY_TWIN
 
 
 
@@ -172,7 +173,7 @@ def _sphere_property(r, L, w_over_r, q, mu, rho, obs, rot):
     _observed_off_beam(_sphere_case, _check_sphere, r, L, w_over_r, q, mu, rho, obs, rot)
 
 
-@ref.FAST_TWIN
+@HEAVY_TWIN
 @given(**SPHERE_ARGS)
 def test_sphere_far_field_property(**kw):
     """Random spheres (r 2-30 cm, beam w 0.1-5 r: spheres ten times the beam down to a
@@ -303,7 +304,7 @@ def _cylinder_property(r, R1, w_over_r, q, mu, rho, obs, rot):
     _observed_off_beam(_cylinder_case, _check_cylinder, r, R1, w_over_r, q, mu, rho, obs, rot)
 
 
-@ref.FAST_TWIN
+@HEAVY_TWIN
 @given(**CYL_ARGS)
 def test_cylinder_fan_property(**kw):
     """Random cylinders (r 5-50 cm, beam w 0.1-2 r: radius up to ten beam radii; length 40

@@ -117,8 +117,11 @@ def test_observer_in_the_beam_is_a_hazard_on_the_command_line(tmp_path):
     assert code == 3 and "in-beam" in out.getvalue()
 
 
-@ref.FAST
-@given(R=st.floats(5.0, 3000.0), x=st.floats(-3.0, 3.0), z=st.floats(-3.0, 3.0), mu=st.sampled_from([0.0, 1e-4, 2e-3]))
+DIRECT_ARGS = dict(R=st.floats(5.0, 3000.0), x=st.floats(-3.0, 3.0), z=st.floats(-3.0, 3.0), mu=st.sampled_from([0.0, 1e-4, 2e-3]))
+
+
+@ref.FAST_TWIN  # 25 examples took 5.5 s CPU of the default run (10: 2 s); the slow twin below sweeps 120
+@given(**DIRECT_ARGS)
 def test_direct_beam_property(R, x, z, mu):
     """Random observers in front of and beyond the target, on and off the beam: the
     Gaussian at their range where the plate does not shadow them, else 0."""
@@ -135,6 +138,13 @@ def test_direct_beam_property(R, x, z, mu):
     # is longer than the axial range by about r^2 / (2R)
     path_excess = mu * ((x * x + z * z) * w * w) / (2 * R)
     assert got == pytest.approx(want, rel=1e-6 + path_excess, abs=1e-9 * _e_axis(R, mu))
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(**DIRECT_ARGS)
+def test_direct_beam_property_sweep(R, x, z, mu):
+    test_direct_beam_property.hypothesis.inner_test(R, x, z, mu)
 
 
 @pytest.mark.parametrize("half", [0.2, 0.5, 0.9])

@@ -387,11 +387,15 @@ def test_plate_partly_hidden_by_a_plate_in_front(front, back):
     assert abs(got["back"].spot_power_w - want_back) <= got["back"].spot_power_error_w + 1e-6 * want_back + 1e-9 * P
 
 
-@ref.FAST
-@given(R_f=st.floats(5.0, 200.0), gap=st.floats(0.5, 100.0), a=ref.log_uniform(2e-3, 0.05), phi=ref.log_uniform(1e-4, 2e-3),
-       f=st.tuples(st.floats(-2.0, 2.0), st.floats(0.02, 2.0), st.floats(-2.0, 2.0), st.floats(0.02, 2.0)),
-       b=st.tuples(st.floats(-2.0, 2.0), st.floats(0.02, 3.0), st.floats(-2.0, 2.0), st.floats(0.02, 3.0)),
-       mu=st.sampled_from([0.0, 2e-3]))
+HIDDEN_ARGS = dict(
+    R_f=st.floats(5.0, 200.0), gap=st.floats(0.5, 100.0), a=ref.log_uniform(2e-3, 0.05), phi=ref.log_uniform(1e-4, 2e-3),
+    f=st.tuples(st.floats(-2.0, 2.0), st.floats(0.02, 2.0), st.floats(-2.0, 2.0), st.floats(0.02, 2.0)),
+    b=st.tuples(st.floats(-2.0, 2.0), st.floats(0.02, 3.0), st.floats(-2.0, 2.0), st.floats(0.02, 3.0)),
+    mu=st.sampled_from([0.0, 2e-3]))
+
+
+@ref.FAST_TWIN  # 25 examples took 7.8 s CPU; the slow twin below sweeps 120
+@given(**HIDDEN_ARGS)
 def test_plate_partly_hidden_property(R_f, gap, a, phi, f, b, mu):
     """Random front/back plate pairs normal to the beam (offsets to 2 D, sizes 0.02-3 D,
     attenuation): the back plate's spot power is the erf rectangle less its shadowed part
@@ -407,6 +411,13 @@ def test_plate_partly_hidden_property(R_f, gap, a, phi, f, b, mu):
     for name, want, R in (("front", want_front, R_f), ("back", want_back, R_b)):
         tol = max(0.01 * want, 1e-6 * P) + want * (1 - math.exp(-mu * 8 * max(D_f, D_b) ** 2 / R))
         assert abs(got[name] - want) <= tol, f"{name}: engine {got[name]:.6g} W vs reference {want:.6g} W"
+
+
+@pytest.mark.slow
+@ref.SLOW
+@given(**HIDDEN_ARGS)
+def test_plate_partly_hidden_property_slow(R_f, gap, a, phi, f, b, mu):
+    test_plate_partly_hidden_property.hypothesis.inner_test(R_f, gap, a, phi, f, b, mu)
 
 
 def test_peak_irradiance_beside_a_shadow():
