@@ -75,7 +75,7 @@ class Observers:
     index_in_group: np.ndarray
     group_names: tuple
     optics: tuple = ()
-    _cache: np.ndarray | None = field(default=None, repr=False)
+    _cache: np.ndarray | None = field(default=None, repr=False, compare=False)  # a memo of the points (not the table's value)
 
     @classmethod
     def from_points(cls, positions_m, group, index_in_group, group_names, optics=()) -> "Observers":
