@@ -241,9 +241,9 @@ GLOSSY = ('{ model = "sum", models = [{ type = "lambertian", params = { reflecta
 
 def _fingerprint(x, depth=0):
     """A comparable picture of a value: arrays by content, containers and dataclasses by
-    their members (4 levels deep; a member declared ``compare=False`` is a memo of the
-    others, e.g. the observers' generated points, and may fill later), any other object by
-    identity."""
+    their members (4 levels deep; a private member declared ``compare=False`` is a memo of
+    the others, e.g. the observers' generated points, and may fill later), any other object
+    by identity."""
     if isinstance(x, (bool, int, float, str, type(None))):
         return x if not (isinstance(x, float) and x != x) else "nan"
     if isinstance(x, np.ndarray):
@@ -255,7 +255,7 @@ def _fingerprint(x, depth=0):
     if isinstance(x, (list, tuple)):
         return (type(x).__name__, tuple(_fingerprint(v, depth + 1) for v in x))
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
-        return (type(x).__name__, tuple((f.name, _fingerprint(getattr(x, f.name), depth + 1)) for f in dataclasses.fields(x) if f.compare))
+        return (type(x).__name__, tuple((f.name, _fingerprint(getattr(x, f.name), depth + 1)) for f in dataclasses.fields(x) if f.compare or not f.name.startswith("_")))
     return ("id", id(x))
 
 
