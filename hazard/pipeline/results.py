@@ -11,10 +11,13 @@ import numpy as np
 from hazard.physics.keepout import Footprint, Lobe
 from hazard.physics.specular import MirrorBeamSteps
 
-if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
+if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline, `import hazard` stays light)
     from scenes.observers import Observers
+    from scenes.scene import Scene
 
-    from hazard.physics.mpe import UV24hResult
+    from hazard.physics.beam import BeamGeometry
+    from hazard.physics.engine import Spot
+    from hazard.physics.mpe import MPEResult, RepetitivePulseResult, UV24hResult
     from hazard.physics.visual import VisualInterference
     from hazard.pipeline.airspace import AirspaceCheck
     from hazard.pipeline.sdz import DangerZone
@@ -197,25 +200,25 @@ class ObserverLabels(Sequence):
 class HazardResult:
     """Everything an analysis produced, with the stages that ran."""
 
-    scene: object
-    mpe: object
+    scene: Scene  # the scene analysed (with the observer points the crossings stage added)
+    mpe: MPEResult  # the ocular MPE with its steps (hazard.physics.mpe.ocular_mpe)
     mpe_w_m2: float
     mpe_radiant_exposure_j_m2: float
-    pulse: object | None
+    pulse: RepetitivePulseResult | None  # the repetitive-pulse rules (hazard.physics.mpe.repetitive_pulse_mpe); None: a CW laser
     attenuation_per_m: float
     times_s: np.ndarray
-    stages: list
-    targets: list
+    stages: list[Stage]  # the stage log: ran or skipped, why, the run time [s]
+    targets: list[TargetResult]
     observers: ObserverResults
     spill_w: float
     blocked_w: float
     beam_power_w: float
     footprint_static: Footprint | None = None
     footprint_dynamic: Footprint | None = None
-    notes: list = field(default_factory=list)
-    spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
-    beam: object | None = None
-    states: dict = field(default_factory=dict)  # target index -> states over times_s
+    notes: list[str] = field(default_factory=list)
+    spots: list[Spot] = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
+    beam: BeamGeometry | None = None  # the laser's beam (hazard.physics.beam); None only on results built by hand
+    states: dict[int, np.ndarray] = field(default_factory=dict)  # target index -> states over times_s ((T,) or (T, k))
     extended_source: ExtendedSourceSummary | None = None  # C_E summary for the report (hazard.pipeline.extended_source); None: not run
     beam_sampling: BeamSampling | None = None  # rays, levels, error bound, exact targets (hazard.pipeline.spots.beam_sampling); None: not traced
     spill: SpillSummary | None = None  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill); None: not run
