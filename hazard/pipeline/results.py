@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,18 +53,18 @@ class TargetResult:
     dynamic_lobe: Lobe | None
     specular_nohd_static_m: float | None
     specular_nohd_dynamic_m: float | None
-    specular_direction: list | None
-    state_name: str | None
-    state_range: list | None
+    specular_direction: list[float] | None  # unit vector of the mirror beam (None: no mirror part)
+    state_name: str | list[str] | None  # the dynamic material's state(s); None: static
+    state_range: list[float] | list[list[float]] | None  # [lo, hi] of the state over the run, one pair per state of two
     spot_power_error_w: float = 0.0  # bound on the spot power's error (already added to it: conservative)
     spot_power_exact: bool = False  # spot power is the exact outline integral
     peak_irradiance_w_m2: float = 0.0  # highest incident irradiance on the lit part (normal to the beam, attenuated)
     mean_irradiance_w_m2: float = 0.0  # spot power over its lit area normal to the beam
     lit_side: str = "front"
-    aided: list = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
+    aided: list[dict[str, Any]] = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
     beam_profile_fraction: float = 1.0  # hottest incident irradiance / the beam's on-axis value there (hazard.pipeline.lobes)
-    melt: dict | None = None  # melt onset and full-melt times [s] where the history knows them (hazard.pipeline.history)
-    slump: dict | None = None  # the slump the dynamic lobe covers, with its sampling (hazard.pipeline.lobes)
+    melt: dict[str, float | None] | None = None  # melt onset and full-melt times [s] where the history knows them (hazard.pipeline.history)
+    slump: dict[str, Any] | None = None  # the slump the dynamic lobe covers, with its sampling (hazard.pipeline.lobes)
     specular_steps: MirrorBeamSteps | None = None  # the numbers behind specular_nohd_static_m (review page)
 
     def to_dict(self):

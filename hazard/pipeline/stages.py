@@ -51,6 +51,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.physics.keepout import Footprint
     from hazard.pipeline.results import ObserverResults, TargetResult
     from hazard.pipeline.direct import DirectBeam
+    from hazard.pipeline.history import Melt
     from hazard.pipeline.limits import ExposureLimits
     from hazard.pipeline.motion_stage import MotionResult
     from hazard.pipeline.airspace import AirspaceCheck
@@ -525,8 +526,8 @@ class HistoryResult:
     is dynamic; a new object otherwise, the beam stage's result is not changed)."""
 
     times_s: np.ndarray
-    states: dict
-    melts: dict
+    states: dict[int, np.ndarray]
+    melts: dict[int, Melt]
     traced: BeamStage
 
 
