@@ -19,7 +19,9 @@ import pytest
 
 import hazard
 import scenes
-from hazard.pipeline import history, limits, results, stages
+from hazard.physics import engine
+from hazard.pipeline import history, limits, results, spots, stages
+from hazard.pipeline.analysis import run_pipeline
 from tests._bundled import bundled
 from tests._scene_text import PLATE_AT_50M
 
@@ -95,7 +97,8 @@ def test_the_checker_refuses_what_it_should():
 
 
 @pytest.mark.parametrize("cls", [results.HazardResult, results.TargetResult, results.Stage, limits.ExposureLimits,
-                                 history.StateHistories, stages.HistoryResult, stages.LimitsResult, stages.KeepoutResult])
+                                 history.StateHistories, stages.HistoryResult, stages.LimitsResult, stages.KeepoutResult,
+                                 stages.CrossingsResult, stages.RaysResult, spots.BeamStage, engine.SpotBuild])
 def test_no_field_is_typed_only_as_object_list_or_dict(cls):
     hints = _hints(cls)  # resolves every annotation (a name missing from the TYPE_CHECKING block fails here)
     loose = [name for name, h in hints.items()
@@ -134,6 +137,31 @@ def test_a_bundled_run_has_values_of_its_annotated_types_slow(name):
     """The slower examples: melting and slumping (two states), heating next to a series,
     flight zones, terrain."""
     _assert_typed(bundled(name))
+
+
+def _assert_stages_typed(res) -> None:
+    for name, out in res.items():
+        _check(out)
+        for traced in (getattr(out, "traced", None),):  # beam, history: the trace and its spots
+            if traced is not None:
+                _check(traced)
+                _check(traced.built)
+
+
+def test_the_stage_results_have_values_of_their_annotated_types():
+    """Every stage's result of a flat-plate run (analytic hits: no ray scene) and of a
+    dynamic one, with the trace and the spots inside."""
+    res, _ = run_pipeline(scenes.loads(PLATE_AT_50M))
+    assert res["rays"].ray_scene is None and res["beam"].traced.square is not None
+    _assert_stages_typed(res)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["range_terrain", "steel_vs_copper"])
+def test_the_stage_results_have_values_of_their_annotated_types_slow(name):
+    """A ray-traced scene (terrain) and a dynamic one (a new trace from the history)."""
+    res, _ = run_pipeline(scenes.load(scenes.example_path(name)))
+    _assert_stages_typed(res)
 
 
 def test_limits_of_a_spec_built_around_its_validator_name_the_missing_prf():
