@@ -97,8 +97,9 @@ def test_the_checker_refuses_what_it_should():
 
 
 @pytest.mark.parametrize("cls", [results.HazardResult, results.TargetResult, results.Stage, limits.ExposureLimits,
-                                 history.StateHistories, stages.HistoryResult, stages.LimitsResult, stages.KeepoutResult,
-                                 stages.CrossingsResult, stages.RaysResult, spots.BeamStage, engine.SpotBuild])
+                                 history.StateHistories, spots.BeamStage, engine.SpotBuild,
+                                 *dict.fromkeys(d.result for d in stages.REGISTRY.values())],
+                         ids=lambda c: c.__name__)
 def test_no_field_is_typed_only_as_object_list_or_dict(cls):
     hints = _hints(cls)  # resolves every annotation (a name missing from the TYPE_CHECKING block fails here)
     loose = [name for name, h in hints.items()
@@ -140,12 +141,12 @@ def test_a_bundled_run_has_values_of_its_annotated_types_slow(name):
 
 
 def _assert_stages_typed(res) -> None:
-    for name, out in res.items():
+    for out in res.values():
         _check(out)
-        for traced in (getattr(out, "traced", None),):  # beam, history: the trace and its spots
-            if traced is not None:
-                _check(traced)
-                _check(traced.built)
+        traced = getattr(out, "traced", None)  # beam, history: the trace and its spots
+        if traced is not None:
+            _check(traced)
+            _check(traced.built)
 
 
 def test_the_stage_results_have_values_of_their_annotated_types():
