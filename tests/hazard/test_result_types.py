@@ -96,7 +96,7 @@ def test_the_checker_refuses_what_it_should():
     assert _mismatch(("a", "b"), tuple[str, ...]) is None and _mismatch(("a", 1), tuple[str, ...]) is not None
 
 
-@pytest.mark.parametrize("cls", [results.HazardResult, results.TargetResult, results.Stage, limits.ExposureLimits,
+@pytest.mark.parametrize("cls", [results.HazardResult, results.TargetResult, results.Stage, results.ObserverResults, limits.ExposureLimits,
                                  history.StateHistories, spots.BeamStage, engine.SpotBuild,
                                  *dict.fromkeys(d.result for d in stages.REGISTRY.values())],
                          ids=lambda c: c.__name__)
@@ -109,6 +109,7 @@ def test_no_field_is_typed_only_as_object_list_or_dict(cls):
 
 def _assert_typed(res) -> None:
     _check(res)
+    _check(res.observers)
     for t in res.targets:
         _check(t)
     for s in res.stages:
