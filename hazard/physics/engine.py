@@ -207,13 +207,13 @@ def _frames(target, normals):
 class SpotBuild:
     """Spots of one beam and what else the beam did (powers after no attenuation)."""
 
-    spots: list
+    spots: list[Spot]
     spill_w: float
     blocked_w: float
-    unreflected: list  # (target name, side, power [W]) lit but not reflected (back face without material)
-    exact: list  # target names whose power is the exact outline integral
+    unreflected: list[tuple[str, str, float]]  # (target name, side, power [W]) lit but not reflected (back face without material)
+    exact: list[str]  # target names whose power is the exact outline integral
     error_w: float  # bound on the power misassigned between objects (unresolved cells + truncation)
-    negligible: list = field(default_factory=list)  # (target name, leaves, power [W], floor [W/m^2]) left out (:func:`_negligible_tail`)
+    negligible: list[tuple[str, int, float, float]] = field(default_factory=list)  # (target name, leaves, power [W], floor [W/m^2]) left out (:func:`_negligible_tail`)
 
 
 def flat_outlines(beam, targets) -> dict:

@@ -81,11 +81,14 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from hazard.physics import mpe as _mpe
+
+if TYPE_CHECKING:  # annotations only (results imports this module's summary type for its own)
+    from hazard.pipeline.results import Stage
 
 __all__ = [
     "ExtendedMpe",
@@ -532,8 +535,8 @@ class ExtendedSourceResult:
     mpe_radiant_exposure_j_m2: np.ndarray
     first_exceedance_s: np.ndarray | None
     summary: ExtendedSourceSummary
-    notes: tuple
-    record: object
+    notes: tuple[str, ...]
+    record: Stage
 
     def observer_fields(self) -> dict:
         """The :class:`hazard.pipeline.results.ObserverResults` fields this stage sets, by name."""

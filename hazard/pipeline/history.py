@@ -20,9 +20,9 @@ class StateHistories:
     spot's peak irradiance); ``melt``: target index -> :class:`Melt`, where known (a
     heating history, or a series with a ``melt_fraction`` state)."""
 
-    states: dict
+    states: dict[int, np.ndarray]
     detail: str
-    melt: dict = field(default_factory=dict)
+    melt: dict[int, Melt] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from scenes.motion import Windows
 
 from hazard.physics import mpe as _mpe
 from hazard.physics.nohd import attenuation_from_visibility
+
+if TYPE_CHECKING:  # annotations only
+    from scenes.spec import SceneSpec
 
 __all__ = ["ExposureLimits", "exposure_limits", "uv_24h_limit", "attenuation_per_m"]
 
@@ -18,16 +22,16 @@ class ExposureLimits:
     (repetitive-pulse result or None), the irradiance limit [W/m^2] (the smaller of the
     average-power MPE and per-pulse MPE x PRF) and the radiant-exposure limit [J/m^2]."""
 
-    mpe: object
-    pulse: object | None
+    mpe: _mpe.MPEResult
+    pulse: _mpe.RepetitivePulseResult | None
     irradiance_w_m2: float
     radiant_exposure_j_m2: float
     detail: str
-    uv_24h: object | None = None  # hazard.physics.mpe.UV24hResult (180-400 nm): the day's summed dose limit
-    notes: list = field(default_factory=list)
+    uv_24h: _mpe.UV24hResult | None = None  # (180-400 nm): the day's summed dose limit
+    notes: list[str] = field(default_factory=list)
 
 
-def exposure_limits(spec) -> ExposureLimits:
+def exposure_limits(spec: SceneSpec) -> ExposureLimits:
     """Ocular MPE for the laser and exposure of a scene spec (ANSI Z136.1 / IEC 60825-1
     tables via :mod:`hazard.physics.mpe`); pulsed lasers take the smaller of the average-power
     MPE and the per-pulse MPE times the PRF (the repetitive-pulse rules). In the UV the
@@ -38,9 +42,12 @@ def exposure_limits(spec) -> ExposureLimits:
     pulse = None
     mpe_w_m2 = res.irradiance_w_m2
     if laser.power_w is None:
-        pulse = _mpe.repetitive_pulse_mpe(wl, laser.pulse_duration_s, laser.prf_hz, t_exp, standard=std)
-        mpe_w_m2 = min(mpe_w_m2, pulse.per_pulse_radiant_exposure_j_m2 * laser.prf_hz)
-        detail = f"pulsed: per-pulse MPE x PRF = {pulse.per_pulse_radiant_exposure_j_m2 * laser.prf_hz:.6g} W/m^2 average"
+        prf_hz = laser.prf_hz
+        if prf_hz is None:  # the spec's validator requires it of a pulsed laser: a spec built around it
+            raise ValueError("laser.prf_hz = None: a pulsed laser (no power_w) needs prf_hz [Hz] > 0")
+        pulse = _mpe.repetitive_pulse_mpe(wl, laser.pulse_duration_s, prf_hz, t_exp, standard=std)
+        mpe_w_m2 = min(mpe_w_m2, pulse.per_pulse_radiant_exposure_j_m2 * prf_hz)
+        detail = f"pulsed: per-pulse MPE x PRF = {pulse.per_pulse_radiant_exposure_j_m2 * prf_hz:.6g} W/m^2 average"
     else:
         detail = f"{res.irradiance_w_m2:.6g} W/m^2 for {t_exp:g} s"
     uv, notes = None, []
@@ -53,7 +60,7 @@ def exposure_limits(spec) -> ExposureLimits:
     return ExposureLimits(res, pulse, mpe_w_m2, mpe_w_m2 * t_exp, detail, uv, notes)
 
 
-def uv_24h_limit(spec):
+def uv_24h_limit(spec: SceneSpec) -> tuple[_mpe.UV24hResult, str]:
     """The UV (180-400 nm) day's limit of a scene (:func:`hazard.physics.mpe.uv_24h_mpe`) and a note.
 
     An observer held in place is exposed whenever the laser fires: the exposure time in 24 h
@@ -78,7 +85,7 @@ def uv_24h_limit(spec):
     return uv, note
 
 
-def attenuation_per_m(spec) -> float:
+def attenuation_per_m(spec: SceneSpec) -> float:
     """Beer-Lambert coefficient mu [1/m]: given, or from the visibility (Kruse model,
     :func:`hazard.physics.nohd.attenuation_from_visibility`), else 0."""
     atm = spec.atmosphere

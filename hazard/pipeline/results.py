@@ -4,17 +4,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hazard.physics.keepout import Footprint, Lobe
 from hazard.physics.specular import MirrorBeamSteps
 
-if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline)
+if TYPE_CHECKING:  # annotations only (no import at run time: no cycle through the pipeline, `import hazard` stays light)
     from scenes.observers import Observers
+    from scenes.scene import Scene
 
-    from hazard.physics.mpe import UV24hResult
+    from hazard.physics.beam import BeamGeometry
+    from hazard.physics.engine import Spot
+    from hazard.physics.mpe import MPEResult, RepetitivePulseResult, UV24hResult
     from hazard.physics.visual import VisualInterference
     from hazard.pipeline.airspace import AirspaceCheck
     from hazard.pipeline.sdz import DangerZone
@@ -50,18 +53,18 @@ class TargetResult:
     dynamic_lobe: Lobe | None
     specular_nohd_static_m: float | None
     specular_nohd_dynamic_m: float | None
-    specular_direction: list | None
-    state_name: str | None
-    state_range: list | None
+    specular_direction: list[float] | None  # unit vector of the mirror beam (None: no mirror part)
+    state_name: str | list[str] | None  # the dynamic material's state(s); None: static
+    state_range: list[float] | list[list[float]] | None  # [lo, hi] of the state over the run, one pair per state of two
     spot_power_error_w: float = 0.0  # bound on the spot power's error (already added to it: conservative)
     spot_power_exact: bool = False  # spot power is the exact outline integral
     peak_irradiance_w_m2: float = 0.0  # highest incident irradiance on the lit part (normal to the beam, attenuated)
     mean_irradiance_w_m2: float = 0.0  # spot power over its lit area normal to the beam
     lit_side: str = "front"
-    aided: list = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
+    aided: list[dict[str, Any]] = field(default_factory=list)  # NOHDs through each optical aid of the scene (hazard.pipeline.lobes)
     beam_profile_fraction: float = 1.0  # hottest incident irradiance / the beam's on-axis value there (hazard.pipeline.lobes)
-    melt: dict | None = None  # melt onset and full-melt times [s] where the history knows them (hazard.pipeline.history)
-    slump: dict | None = None  # the slump the dynamic lobe covers, with its sampling (hazard.pipeline.lobes)
+    melt: dict[str, float | None] | None = None  # melt onset and full-melt times [s] where the history knows them (hazard.pipeline.history)
+    slump: dict[str, Any] | None = None  # the slump the dynamic lobe covers, with its sampling (hazard.pipeline.lobes)
     specular_steps: MirrorBeamSteps | None = None  # the numbers behind specular_nohd_static_m (review page)
 
     def to_dict(self):
@@ -197,25 +200,25 @@ class ObserverLabels(Sequence):
 class HazardResult:
     """Everything an analysis produced, with the stages that ran."""
 
-    scene: object
-    mpe: object
+    scene: Scene  # the scene analysed (with the observer points the crossings stage added)
+    mpe: MPEResult  # the ocular MPE with its steps (hazard.physics.mpe.ocular_mpe)
     mpe_w_m2: float
     mpe_radiant_exposure_j_m2: float
-    pulse: object | None
+    pulse: RepetitivePulseResult | None  # the repetitive-pulse rules (hazard.physics.mpe.repetitive_pulse_mpe); None: a CW laser
     attenuation_per_m: float
     times_s: np.ndarray
-    stages: list
-    targets: list
+    stages: list[Stage]  # the stage log: ran or skipped, why, the run time [s]
+    targets: list[TargetResult]
     observers: ObserverResults
     spill_w: float
     blocked_w: float
     beam_power_w: float
     footprint_static: Footprint | None = None
     footprint_dynamic: Footprint | None = None
-    notes: list = field(default_factory=list)
-    spots: list = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
-    beam: object | None = None
-    states: dict = field(default_factory=dict)  # target index -> states over times_s
+    notes: list[str] = field(default_factory=list)
+    spots: list[Spot] = field(default_factory=list)  # the beam's spots (for renders and re-evaluation)
+    beam: BeamGeometry | None = None  # the laser's beam (hazard.physics.beam); None only on results built by hand
+    states: dict[int, np.ndarray] = field(default_factory=dict)  # target index -> states over times_s ((T,) or (T, k))
     extended_source: ExtendedSourceSummary | None = None  # C_E summary for the report (hazard.pipeline.extended_source); None: not run
     beam_sampling: BeamSampling | None = None  # rays, levels, error bound, exact targets (hazard.pipeline.spots.beam_sampling); None: not traced
     spill: SpillSummary | None = None  # the beam past the targets: where it goes, its NOHD (hazard.pipeline.spill); None: not run

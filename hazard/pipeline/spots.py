@@ -14,8 +14,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from hazard.physics.beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, sample_cells, tail_bounds_w_m2, tail_half_width
-from hazard.physics.engine import build_spots, flat_outlines
+from hazard.physics.beam import HALF_WIDTH, TAIL_MARGIN, BeamGeometry, CellSampling, sample_cells, tail_bounds_w_m2, tail_half_width
+from hazard.physics.engine import SpotBuild, build_spots, flat_outlines
 from hazard.physics.nohd import optical_gain
 from hazard.pipeline.results import TargetResult
 from hazard.physics.visual import applies as visual_applies
@@ -88,12 +88,12 @@ class BeamStage:
     them (:class:`hazard.physics.engine.SpotBuild`) and the notes the stage leaves."""
 
     beam: BeamGeometry
-    cells: object
-    built: object
-    notes: list
+    cells: CellSampling
+    built: SpotBuild
+    notes: list[str]
     detail: str
-    outlines: dict  # flat targets' projected outlines: index -> (upper, lower) polygons in s
-    square: object = None  # the sampled square (:class:`TailSquare`)
+    outlines: dict[int, np.ndarray]  # flat targets' projected outlines: index -> upper-bound polygon in s
+    square: TailSquare | None = None  # the sampled square
 
 
 def scene_beam(scene, direction=None) -> BeamGeometry:

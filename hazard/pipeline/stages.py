@@ -48,16 +48,20 @@ import numpy as np
 from pydantic import BaseModel
 
 if TYPE_CHECKING:  # annotations only (no import at run time: the stages' modules import this one)
+    from scenes.scene import Scene
+
     from hazard.physics.keepout import Footprint
+    from hazard.physics.rays import RayScene
     from hazard.pipeline.results import ObserverResults, TargetResult
     from hazard.pipeline.direct import DirectBeam
+    from hazard.pipeline.history import Melt
     from hazard.pipeline.limits import ExposureLimits
     from hazard.pipeline.motion_stage import MotionResult
     from hazard.pipeline.airspace import AirspaceCheck
     from hazard.physics.visual import VisualInterference
     from hazard.pipeline.sdz import DangerZone, MirrorBeam
     from hazard.pipeline.spill import SpillSummary
-    from hazard.pipeline.spots import BeamStage
+    from hazard.pipeline.spots import BeamStage, FlatScene
 
 __all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS",
            "StageMemo", "Unfingerprintable", "fingerprint", "UNREAD_SPEC", "UNREAD_SCENE", "CARRIES_SCENE",
@@ -469,8 +473,8 @@ class RaysResult:
     """Stage ``rays``: the ray scene (None: hits computed analytically) and the tracer the
     beam and the lines of sight use (the ray scene, or :class:`~hazard.pipeline.spots.FlatScene`)."""
 
-    ray_scene: Any
-    tracer: Any
+    ray_scene: RayScene | None
+    tracer: RayScene | FlatScene
 
 
 @dataclass(frozen=True)
@@ -488,7 +492,7 @@ class CrossingsResult:
     """Stage ``crossings``: the scene with the observer points added where a beam crosses
     a line between its points (the input scene itself when skipped)."""
 
-    scene: Any
+    scene: Scene
 
 
 @dataclass(frozen=True)
@@ -525,8 +529,8 @@ class HistoryResult:
     is dynamic; a new object otherwise, the beam stage's result is not changed)."""
 
     times_s: np.ndarray
-    states: dict
-    melts: dict
+    states: dict[int, np.ndarray]
+    melts: dict[int, Melt]
     traced: BeamStage
 
 
