@@ -1076,6 +1076,7 @@ def total_work(spec, n_obs, steps, cells) -> float:
     t, a, k = spec.terrain, spec.analysis, WORK_S
     spots = len(spec.targets) + (t is not None)
     nodes = 0.0 if t is None or t.kind == "heightmap" else (2 * math.ceil(t.extent_m / t.resolution_m) + 1) ** 2.0
+    check_limit("TERRAIN_NODES", nodes, "terrain: nodes ((2 extent_m / resolution_m + 1)^2)")  # the single limit speaks first
     fp = nodes * a.beam_samples * spots
     check_limit("FOOTPRINT_WORK", fp, f"ground footprint work: terrain nodes x beam_samples x spots ({nodes:.0f} x "
                 f"{a.beam_samples} x {spots}; fewer with a coarser terrain.resolution_m, a smaller terrain.extent_m or "

@@ -126,7 +126,9 @@ def beam_at(beam, points_m, mu, reach_m=0.0) -> BeamAt:
     # other rows, and those within reach of the beam, are evaluated (the same values)
     near = inside & (s2 < _EXP_ZERO)
     if reach_m > 0:
-        near |= inside & (np.sqrt(s2) - reach_m / (beam.diameter_at(z) / 2) < _UNDERFLOW_S)
+        far = np.flatnonzero(inside & ~near)  # (behind the laser the beam's width is not defined)
+        with np.errstate(divide="ignore"):  # a zero width (a focus): within reach, kept
+            near[far] = np.sqrt(s2[far]) - reach_m / (beam.diameter_at(z[far]) / 2) < _UNDERFLOW_S
     idx = np.flatnonzero(near)
     if len(idx) < len(p):  # gathers only where some point drops out (the values are the same)
         s, z, p = s[idx], z[idx], p[idx]
