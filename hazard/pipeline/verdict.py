@@ -154,13 +154,15 @@ def _not_backstops(result, nohd_m: float) -> str:
 
 
 def _beyond(result, name: str, nohd_m: float) -> str:
-    """``", x m from the laser: beyond the NOHD"`` for a fixed target whose centre lies past
-    ``nohd_m`` [m]; empty for a nearer, a moving or an unknown target."""
+    """``", x m from the laser: beyond the NOHD"`` for a fixed target whose nearest vertex lies
+    past ``nohd_m`` [m] (all of it beyond); empty for a nearer, a moving or an unknown target."""
     scene = getattr(result, "scene", None)
     target = next((t for t in getattr(scene, "targets", ()) if t.name == name), None)
     if scene is None or target is None or getattr(target.spec, "track", None) is not None:
         return ""
-    distance_m = float(np.linalg.norm(np.subtract(target.center_m, scene.laser_position_m, dtype=np.float64)))
+    mesh = getattr(target, "mesh", None)
+    points = np.atleast_2d(target.center_m if mesh is None else mesh.vertices)
+    distance_m = float(np.min(np.linalg.norm(np.subtract(points, scene.laser_position_m, dtype=np.float64), axis=-1)))
     if not distance_m > nohd_m:
         return ""
     return f", {distance_m / 1e3:.4g} km from the laser: beyond the NOHD" if distance_m >= 1e4 else \
