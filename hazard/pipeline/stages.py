@@ -63,7 +63,7 @@ if TYPE_CHECKING:  # annotations only (no import at run time: the stages' module
     from hazard.pipeline.spill import SpillSummary
     from hazard.pipeline.spots import BeamStage, FlatScene
 
-__all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS",
+__all__ = ["StageDef", "StagePlanError", "stage", "derive_plan", "run_stages", "REGISTRY", "INPUTS", "value_fields",
            "StageMemo", "Unfingerprintable", "fingerprint", "UNREAD_SPEC", "UNREAD_SCENE", "CARRIES_SCENE",
            "LimitsResult", "RaysResult", "BeamResult", "CrossingsResult", "DirectResult", "SpillResult", "SdzResult",
            "HistoryResult", "MapResult", "KeepoutResult", "MirrorBeamsResult", "FootprintResult", "MotionStageResult",
@@ -244,7 +244,8 @@ class Unfingerprintable(TypeError):
 
 def fingerprint(obj, *, drop=()) -> str:
     """SHA-256 (hex) of ``obj`` by value: numbers by their exact repr, numpy arrays by
-    dtype, shape and bytes, containers in order, dataclasses by their fields, pydantic
+    dtype, shape and bytes, containers in order, dataclasses by their fields but memos
+    (:func:`value_fields`), pydantic
     models by their dump, functions by their code and the values they captured (globals
     and named code as they are in this process), other objects by their ``__dict__`` and
     slots; ``drop``: dotted key paths
@@ -258,6 +259,13 @@ def fingerprint(obj, *, drop=()) -> str:
     h = hashlib.sha256()
     _feed(h, obj, {}, tuple(p.split(".") for p in drop))
     return h.hexdigest()
+
+
+def value_fields(obj) -> list:
+    """The fields of dataclass ``obj`` that make its value: all but a memo, a private field
+    declared ``compare=False`` (a cache of the others, e.g. the observers' generated points,
+    that may fill after the object is made without changing what it is)."""
+    return [f for f in fields(obj) if f.compare or not f.name.startswith("_")]
 
 
 def _dropped(data: dict, drop) -> dict:
@@ -304,7 +312,7 @@ def _feed(h, obj, seen: dict, drop=()) -> None:
     elif isinstance(obj, BaseModel):
         _feed(h, _dropped(obj.model_dump(mode="python"), drop), seen)
     elif is_dataclass(obj) and not isinstance(obj, type):
-        for f in fields(obj):
+        for f in value_fields(obj):
             h.update(f.name.encode())
             _feed(h, getattr(obj, f.name), seen)
     elif isinstance(obj, types.FunctionType):  # a closure (an observer group's point generator): code and captured values

@@ -423,3 +423,16 @@ def test_dask_study_workers_reuse_stages_like_the_serial_study(tmp_path, monkeyp
         assert {name for name, _ in memo.reused} == BEFORE_KEEPOUT
         assert memo.computed.count("keepout") == 3 and memo.computed.count("mpe") == 1
     assert hs._MEMOS == {}
+
+
+def test_a_memo_filling_does_not_change_the_key():
+    """The observers keep their generated points once analysed (a memo): the scene's key is
+    the same before and after, so a study or a convergence run re-using the scene hits its
+    memo instead of running the stages again; a point moved still changes the key."""
+    scene = scenes.load(scenes.example_path("plate"))
+    before = fingerprint(scene.observers)
+    assert scene.observers.keep_points()
+    assert fingerprint(scene.observers) == before
+    path = scenes.example_path("plate")
+    moved = scenes.loads(path.read_text().replace("[[10.0, -17.0", "[[10.5, -17.0"), base_dir=path.parent)
+    assert fingerprint(moved.observers) != before

@@ -16,7 +16,7 @@ import scenes
 from hazard.pipeline.analysis import hazard_result, run_pipeline
 from hazard.pipeline.log import StageLog
 from hazard.pipeline.plan import plan
-from hazard.pipeline.stages import INPUTS, REGISTRY, StagePlanError, derive_plan, run_stages, stage, stage_records
+from hazard.pipeline.stages import INPUTS, REGISTRY, StagePlanError, derive_plan, run_stages, stage, stage_records, value_fields
 from tests._bundled import bundled
 from tests._scene_text import PLATE_AT_50M
 
@@ -241,9 +241,8 @@ GLOSSY = ('{ model = "sum", models = [{ type = "lambertian", params = { reflecta
 
 def _fingerprint(x, depth=0):
     """A comparable picture of a value: arrays by content, containers and dataclasses by
-    their members (4 levels deep; a private member declared ``compare=False`` is a memo of
-    the others, e.g. the observers' generated points, and may fill later), any other object
-    by identity."""
+    their members (4 levels deep; not a memo, :func:`hazard.pipeline.stages.value_fields`,
+    which may fill later), any other object by identity."""
     if isinstance(x, (bool, int, float, str, type(None))):
         return x if not (isinstance(x, float) and x != x) else "nan"
     if isinstance(x, np.ndarray):
@@ -255,7 +254,7 @@ def _fingerprint(x, depth=0):
     if isinstance(x, (list, tuple)):
         return (type(x).__name__, tuple(_fingerprint(v, depth + 1) for v in x))
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
-        return (type(x).__name__, tuple((f.name, _fingerprint(getattr(x, f.name), depth + 1)) for f in dataclasses.fields(x) if f.compare or not f.name.startswith("_")))
+        return (type(x).__name__, tuple((f.name, _fingerprint(getattr(x, f.name), depth + 1)) for f in value_fields(x)))
     return ("id", id(x))
 
 
