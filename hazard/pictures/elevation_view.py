@@ -28,7 +28,7 @@ import numpy as np
 from hazard.pictures import palette as C
 from hazard.outputs.figure_index import lobe_paths, mark
 from hazard.outputs.label_place import place_labels
-from hazard.pictures.plan_view import aim_reach_m, draw_mirrors, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, square_limits, two_lines, two_panels
+from hazard.pictures.plan_view import aim_reach_m, draw_mirrors, hull_outline, draw_hazardous, draw_lobe, draw_scale_bar, hazardous_labels, keep_texts_inside, label_points, legend_below, square_limits, two_lines, two_panels
 from hazard.outputs.finding_geometry import mirror_segments
 from hazard.pictures.plots import DisplayBase
 
@@ -224,7 +224,7 @@ def occluder_outlines(occluders, view, sz) -> tuple:
     section by the view's vertical plane through the aim line, and, for an occluder that plane
     misses, the outline (convex hull) of its projection onto it. ``sz`` maps local points to
     the view's coordinates."""
-    from shapely.geometry import MultiLineString, MultiPoint
+    from shapely.geometry import MultiLineString
     from shapely.ops import polygonize
 
     cut, beside = [], []
@@ -235,8 +235,7 @@ def occluder_outlines(occluders, view, sz) -> tuple:
             cut += [np.asarray(p.exterior.coords) for p in polygonize(lines.geoms)] or \
                    [np.asarray(line.coords) for line in lines.geoms]  # an open section (a plate edge-on): its segments
             continue
-        hull = MultiPoint(sz(np.asarray(mesh.vertices, float)).tolist()).convex_hull
-        beside.append(np.asarray(hull.exterior.coords if hull.geom_type == "Polygon" else hull.coords, float))
+        beside.append(hull_outline(sz(np.asarray(mesh.vertices, float))))
     return cut, beside
 
 

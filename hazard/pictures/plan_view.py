@@ -706,18 +706,18 @@ def _targets(result, off) -> list:
 def _occluders(scene, off) -> list:
     """Plan outlines (convex hulls of the vertices) of the occluders, world x, y: a closed
     ring, or the two ends of a wall seen edge-on (a vertical plate)."""
+    return [hull_outline(np.asarray(m.vertices, float)[:, :2] + off[:2]) for m in scene.occluders]
+
+
+def hull_outline(points_2d) -> np.ndarray:
+    """The convex hull of 2-D points [m] as drawn: a closed ring (K, 2), the two ends of a
+    segment (a wall seen edge-on) or one point (a rod seen end-on)."""
     from shapely.geometry import MultiPoint
 
-    out = []
-    for m in scene.occluders:
-        hull = MultiPoint((np.asarray(m.vertices, float)[:, :2] + off[:2]).tolist()).convex_hull
-        if hull.geom_type == "Polygon":
-            out.append(np.asarray(hull.exterior.coords))
-        elif hull.geom_type == "LineString":
-            out.append(np.asarray(hull.coords))
-        else:  # a vertical rod seen end-on: a point
-            out.append(np.asarray(hull.coords)[:1])
-    return out
+    hull = MultiPoint(np.asarray(points_2d, float).tolist()).convex_hull
+    if hull.geom_type == "Polygon":
+        return np.asarray(hull.exterior.coords)
+    return np.asarray(hull.coords)[:2]
 
 
 def _finite_or_0(x) -> float:
