@@ -131,10 +131,10 @@ def beam_at(beam, points_m, mu, reach_m=0.0) -> BeamAt:
             near[far] = np.sqrt(s2[far]) - reach_m / (beam.diameter_at(z[far]) / 2) < _UNDERFLOW_S
     idx = np.flatnonzero(near)
     if len(idx) < len(p):  # gathers only where some point drops out (the values are the same)
-        s, z, p = s[idx], z[idx], p[idx]
+        s, z, p, s2 = s[idx], z[idx], p[idx], s2[idx]
     e = beam.irradiance_w_m2(s, z)
     w = beam.diameter_at(z) / 2
-    r = np.sqrt((s ** 2).sum(axis=1))
+    r = np.sqrt(s2)  # |s|, from the squares above (not summed again)
     live = e > 0  # exp(-|s|^2) underflows to 0 only far outside the beam
     if reach_m > 0:
         live |= r - reach_m / w < _UNDERFLOW_S
