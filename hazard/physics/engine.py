@@ -962,7 +962,13 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular
     idx = np.flatnonzero(need)
     row = np.zeros(len(p), bool)
-    row[idx] = ~ray_scene.occluded(np.broadcast_to(start, (len(idx), 3)), p[idx], transparent=own_object(spot.target))
+    own = own_object(spot.target)
+    plain = np.zeros(len(idx), bool)  # segments the target's own triangles cannot cross: no trace back from their end
+    if own is not None and len(idx) and ray_scene.behind_plane(own, start, nrm):
+        plain = (p[idx] - start) @ nrm > 0
+    for rows, transparent in ((idx[plain], None), (idx[~plain], own)):
+        if len(rows):
+            row[rows] = ~ray_scene.occluded(np.broadcast_to(start, (len(rows), 3)), p[rows], transparent=transparent)
     return row, len(idx)
 
 

@@ -198,6 +198,25 @@ class RayScene:
             t[ref] = t_ref
         return face, t, obj
 
+    def behind_plane(self, obj: int, point_m, normal) -> bool:
+        """True when every triangle of object ``obj`` lies behind the plane through
+        ``point_m`` with unit ``normal``, by more than the engine's float32 rounding of
+        the points (a relative 2**-23 of the largest coordinate, four times over) and
+        of its own test (the same of the distances): then no segment from ``point_m`` to
+        a point in front of that plane crosses them (it lies in front of the plane)."""
+        key = ("object_vertices", int(obj))
+        v = self._kept.get(key)
+        if v is None:
+            v = self.vertices[np.unique(self.faces[self.face_object == obj])]
+            self._kept[key] = v  # the views share it (a race only makes it twice)
+        if not len(v):
+            return True
+        p = np.asarray(point_m, float)
+        rel = v - p
+        eps = float(np.finfo(np.float32).eps)
+        tol = 4.0 * eps * max(float(np.abs(v).max()), float(np.abs(p).max())) + 8.0 * eps * float(np.abs(rel).max())
+        return float(np.max(rel @ np.asarray(normal, float))) < -tol
+
     def off_surface(self, point_m, normal) -> np.ndarray:
         """A segment start just off a surface (tnear is 0, so a ray leaving a surface
         must not begin on it): ``point + normal * 1e-6 * max(scene size, 1 m)``."""
