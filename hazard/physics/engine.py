@@ -958,14 +958,15 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     c, nrm = spot.centroid, spot.mean_frame[2]
     start = ray_scene.off_surface(spot.sight_point_m, nrm)  # in front of a convex mesh's own bulge too
     rel = p - c
+    along = rel @ nrm
     far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
-    need = ~far | (np.einsum("ij,j->i", rel, nrm) > 0) | spot.material.has_specular
+    need = ~far | (along > 0) | spot.material.has_specular
     idx = np.flatnonzero(need)
     row = np.zeros(len(p), bool)
     own = own_object(spot.target)
     plain = np.zeros(len(idx), bool)  # segments the target's own triangles cannot cross: no trace back from their end
     if own is not None and len(idx) and ray_scene.behind_plane(own, start, nrm):
-        plain = (p[idx] - start) @ nrm > 0
+        plain = along[idx] > float((start - c) @ nrm)  # the end in front of the plane through the start
     for rows, transparent in ((idx[plain], None), (idx[~plain], own)):
         if len(rows):
             row[rows] = ~ray_scene.occluded(np.broadcast_to(start, (len(rows), 3)), p[rows], transparent=transparent)
