@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, ClassVar
 import numpy as np
 
 if TYPE_CHECKING:  # annotations only
+    from scenes.geo import SiteFrame
     from scenes.spec import MotionSpec
 
 __all__ = ["TrackPath", "AimSchedule", "AimTrackDescription", "Windows", "TargetTrack", "Motion", "motion_of", "bearing_elevation", "check_aim_sector"]
@@ -74,7 +75,7 @@ class TrackPath:
     positions_m: np.ndarray
     optics: object = None
     geo: np.ndarray | None = None
-    frame: object = None
+    frame: SiteFrame | None = None
     offset_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
     raise_local: bool = False  # a [site] scene: local positions are raised by the refraction rise as made
 
@@ -100,6 +101,7 @@ class TrackPath:
     def _geodesic(self, t) -> np.ndarray:
         from pyproj import Geod
 
+        assert self.geo is not None and self.frame is not None, "a geodesic track has its points and site frame"
         g = Geod(ellps="WGS84")
         k, f = _segment(self.times_s, t)
         a, b = self.geo[k], self.geo[k + 1]

@@ -69,6 +69,7 @@ from hazard.physics.aperture import aperture_irradiance_w_m2, observer_apertures
 from hazard.pipeline.motion_results import PathSummary
 
 if TYPE_CHECKING:  # annotations only
+    from hazard.physics.beam import BeamGeometry
     from scenes.motion import Motion
     from scenes.scene import Scene
 
@@ -157,7 +158,7 @@ class MotionRun:
     notes: list = field(default_factory=list)
     key_step_text: str = ""
     dwell_keys_s: np.ndarray | None = None  # per beam state: lased time of the surface under its spot before it (made once)
-    beam: object = None  # hazard.physics.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
+    beam: BeamGeometry | None = None  # hazard.physics.beam.BeamGeometry of the static analysis (its profile; the axis is the direction of t)
     aperture_reach_m: float = 0.0  # the largest collecting radius of any path's eye or aid (hazard.physics.aperture)
 
     # -- the schedule ----------------------------------------------------------------
@@ -206,10 +207,9 @@ def base_grid(motion, t0: float, t1: float) -> np.ndarray:
 
     step = motion.spec.time_step_s
     n = check_base_steps(motion, t0, t1) - 1  # checked at load over the whole span (scenes.motion.check_motion)
-    t = [t0 + step * np.arange(n + 1), [t1], motion.knots()]
     edges = motion.windows.edges()
-    t += [edges, np.nextafter(edges, -np.inf), np.nextafter(edges, np.inf)]
-    t = np.unique(np.concatenate([np.asarray(x, float).ravel() for x in t]))
+    parts = [t0 + step * np.arange(n + 1), [t1], motion.knots(), edges, np.nextafter(edges, -np.inf), np.nextafter(edges, np.inf)]
+    t = np.unique(np.concatenate([np.asarray(x, float).ravel() for x in parts]))
     return t[(t >= t0) & (t <= t1)]
 
 
@@ -317,19 +317,21 @@ def blocked(tracer, origin, p, dist) -> np.ndarray:
 def _direct_w_m2(run: MotionRun, p, t, state_idx, optics) -> np.ndarray:
     """The direct beam at points ``p`` (N, 3) at times ``t`` (see the module notes),
     through the limiting aperture or the aid's collecting disk (:mod:`hazard.physics.aperture`)."""
+    beam = run.beam
+    assert beam is not None, "the motion stage's run carries the static analysis's beam"
     u = run.direction(t)
-    e, w, dist = gaussian_along_w_m2(run.beam, u, p, run.mu)
-    z = np.einsum("ij,ij->i", np.asarray(p, float) - run.beam.position_m, np.broadcast_to(u, np.shape(p)))
+    e, w, dist = gaussian_along_w_m2(beam, u, p, run.mu)
+    z = np.einsum("ij,ij->i", np.asarray(p, float) - beam.position_m, np.broadcast_to(u, np.shape(p)))
     r = np.sqrt(np.maximum(dist**2 - z**2, 0.0))
     spec = run.scene.spec
     ap = observer_apertures([optics], np.zeros(len(e), int), spec.laser.wavelength_nm, spec.exposure.duration_s)
-    tilt = np.sqrt(1.0 + (r / w) ** 2 * (run.beam.divergence_rad / 2) ** 2)
-    through = aperture_irradiance_w_m2(run.beam.power_w * np.exp(-run.mu * dist) * tilt, w, r, ap)
+    tilt = np.sqrt(1.0 + (r / w) ** 2 * (beam.divergence_rad / 2) ** 2)
+    through = aperture_irradiance_w_m2(beam.power_w * np.exp(-run.mu * dist) * tilt, w, r, ap)
     e = np.where(run.motion.windows.lased(t) & (z > 0), through, 0.0)
     live = np.flatnonzero(e > 0)
     for k in np.unique(state_idx[live]):
         rows = live[state_idx[live] == k]
-        e[rows] = np.where(blocked(run.states_list[k].tracer, run.beam.position_m, p[rows], dist[rows]), 0.0, e[rows])
+        e[rows] = np.where(blocked(run.states_list[k].tracer, beam.position_m, p[rows], dist[rows]), 0.0, e[rows])
     return e
 
 
