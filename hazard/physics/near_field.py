@@ -589,7 +589,7 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
         c, v, r, has = patches.moments
         points = np.where(has[:, None], c, points)
         spread, radius = np.where(has, v, spread), np.where(has, r, radius)
-    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel, fr_bound_per_sr, _subdivision(patches))
+    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel, _subdivision(patches), fr_bound_per_sr)
     if fr_bound_per_sr is not None:
         live = _bound_whole(src, obs, weight, live, e)
     counts = np.zeros(4, int)
@@ -614,8 +614,8 @@ class _Sources:
     power_w: np.ndarray
     ratio: np.ndarray
     kernel: object
+    tree: _Subdivision
     fr_bound_per_sr: float | None = None
-    tree: "_Subdivision | None" = None
 
     @cached_property
     def sample_mass(self) -> np.ndarray:
