@@ -388,10 +388,14 @@ def _scatter_add(e, rows, values):
     or (N, T)."""
     if not len(rows):
         return
-    order = np.argsort(rows, kind="stable")
-    r = rows[order]
+    values = np.asarray(values)
+    if np.all(rows[1:] >= rows[:-1]):  # already in order (a rule's nodes of sorted pairs): the stable sort is the identity
+        r = rows
+    else:
+        order = np.argsort(rows, kind="stable")
+        r, values = rows[order], values[order]
     starts = np.flatnonzero(np.concatenate(([True], r[1:] != r[:-1])))
-    e[r[starts]] += np.add.reduceat(np.asarray(values)[order], starts, axis=0)
+    e[r[starts]] += np.add.reduceat(values, starts, axis=0)
 
 
 def _rule(tree, nd, dens, oi, samp, batch):
