@@ -415,7 +415,7 @@ class _Subdivision:
     """A spot's triangles and their bisections (:func:`_split`) as a tree of nodes, the
     spot's triangles first (node ``k`` is triangle ``k``): each node's surface, ``s``
     and weight vertices ``xs`` (N, 3, 3), ``ss`` (N, 3, 2), ``gs`` (N, 3), its
-    centroid ``c`` (N, 3) and radius ``rad`` (N,) (:func:`_triangle_radius`), its
+    centroid ``c`` (N, 3) and radius ``rad`` (N,) (:func:`_triangle_radius`, :meth:`size`), its
     children ``kids`` (N, 2) (-1: not made yet) and, made when first asked
     (:meth:`rule`), its 7-point rule's surface nodes, ``s``-area and ``exp(-|s|^2)``.
     Every value is a function of the node's vertices alone, computed row by row as the
@@ -425,7 +425,7 @@ class _Subdivision:
         self.n = len(patches.tri_x)
         self.xs, self.ss, self.gs = patches.tri_x, patches.tri_s, patches.weights()  # the patches' own (copied when grown)
         self._own = False
-        self.rad, self.c = _triangle_radius(self.xs)
+        self.rad, self.c, self.sized = np.zeros(self.n), np.zeros((self.n, 3)), np.zeros(self.n, bool)  # made when asked
         self.kids = np.full((self.n, 2), -1)
         self.ruled = np.zeros(self.n, bool)
         self.rule_x, self.area, self.rule_e = np.zeros((self.n, len(RULE_W), 3)), np.zeros(self.n), np.zeros((self.n, len(RULE_W)))
@@ -455,10 +455,22 @@ class _Subdivision:
                 return out
             self._own = True
             self.xs, self.ss, self.gs, self.rad, self.c = (grow(a) for a in (self.xs, self.ss, self.gs, self.rad, self.c))
-            self.kids, self.ruled = grow(self.kids, -1), grow(self.ruled, False)
+            self.kids, self.ruled, self.sized = grow(self.kids, -1), grow(self.ruled, False), grow(self.sized, False)
             self.rule_x, self.area, self.rule_e = (grow(a) for a in (self.rule_x, self.area, self.rule_e))
         self.xs[n0:n1], self.ss[n0:n1], self.gs[n0:n1], self.rad[n0:n1], self.c[n0:n1] = xs, ss, gs, rad, c
+        self.sized[n0:n1] = True
         self.n = n1
+
+    def size(self, nd):
+        """Radii (P,) [m] and centroids (P, 3) [m] of nodes ``nd`` (:func:`_triangle_radius`;
+        the spot's own triangles made when first asked: a call that needs a few of many
+        triangles makes only those)."""
+        miss = nd[~self.sized[nd]]
+        if len(miss):
+            miss = np.unique(miss)
+            self.rad[miss], self.c[miss] = _triangle_radius(self.xs[miss])
+            self.sized[miss] = True
+        return self.rad[nd], self.c[nd]
 
     def rule(self, nd):
         """The 7-point rule on nodes ``nd`` (P,): surface nodes (7P, 3) [m] (barycentric
@@ -695,7 +707,8 @@ def _adaptive(src: _Sources, obs, oi, pairs, e, stop, batch):
         above = np.einsum("pvk,pk->pv", at[:, None, :] - tree.xs[nd], src.normals[samp]).max(axis=1) > 0
         if not above.all():  # (most often every pair is: nothing to drop)
             nd, samp, oi, dens, at = (v[above] for v in (nd, samp, oi, dens, at))
-        good = np.linalg.norm(at - tree.c[nd], axis=1) >= RULE_REACH * tree.rad[nd]
+        rad, c = tree.size(nd)
+        good = np.linalg.norm(at - c, axis=1) >= RULE_REACH * rad
         if src.fr_bound_per_sr is not None:  # bounds only: the resolved pairs, and every pair at the last depth
             good |= depth == stop
             g = nd[good]
