@@ -71,7 +71,7 @@ MAX_DEPTH = 40  # bisections of a triangle at most (its area / 1e12)
 BOUND_DEPTH = 4  # with a bound of f_r cos (fr_bound_per_sr): bisections before the unresolved pairs are bounded
 _NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
 _PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
-_TREE_NODES = 1 << 17  # a spot's shared bisections (_Subdivision, ~0.4 kB a node) start afresh beyond this many nodes
+_TREE_NODES = 1 << 16  # shared bisections (_Subdivision, 426 bytes a node, ~56 MB doubled) start afresh past this many (between blocks)
 
 # Dunavant degree-5 rule on a triangle: barycentric nodes and weights (sum 1)
 _A1, _B1, _W1 = 0.059715871789770, 0.470142064105115, 0.132394152788506
