@@ -383,9 +383,9 @@ def _area_s(ss):
 
 def _scatter_add(e, rows, values):
     """``e[rows] += values`` with repeated rows summed (``np.add.at``'s result, several
-    times faster): the values sorted by row (stable: each row's values keep their order)
-    and summed per row with ``np.add.reduceat``. ``e`` (M,) or (M, T); ``values`` (N,)
-    or (N, T)."""
+    times faster): the values sorted by row (stable: each row's values keep their order;
+    rows already in order are taken as they are, the same permutation) and summed per
+    row with ``np.add.reduceat``. ``e`` (M,) or (M, T); ``values`` (N,) or (N, T)."""
     if not len(rows):
         return
     values = np.asarray(values)
