@@ -48,6 +48,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -55,7 +56,7 @@ import numpy as np
 
 __all__ = ["SpotPatches", "patches_from_leaves", "patches_from_pieces", "near_field_irradiance", "point_form_ok",
            "stats_since", "describe", "leaf_corners_s", "perspective_weights", "point_triangle_distance", "NEAR_FIELD_RTOL",
-           "RULE_REACH", "MAX_DEPTH", "STATS", "BOUNDED"]
+           "RULE_REACH", "MAX_DEPTH", "STATS", "BOUNDED", "shared_subdivisions"]
 
 NEAR_FIELD_RTOL = 1e-2  # point form of a sample: error <= this x P / d^2 (as FAR_FIELD_SPOT_SIZES for the whole spot)
 RULE_REACH = 3.0  # the 7-point rule on a triangle only from >= this many triangle radii (error <= 4e-5 P / d^2, measured)
@@ -70,6 +71,7 @@ MAX_DEPTH = 40  # bisections of a triangle at most (its area / 1e12)
 BOUND_DEPTH = 4  # with a bound of f_r cos (fr_bound_per_sr): bisections before the unresolved pairs are bounded
 _NODE_BLOCK = 1 << 18  # quadrature nodes evaluated at once (bounded memory)
 _PAIR_BLOCK = 1 << 17  # (observer, sample or triangle) pairs formed at once
+_TREE_NODES = 1 << 16  # shared bisections (_Subdivision, 426 bytes a node, ~56 MB doubled) start afresh past this many (between blocks)
 
 # Dunavant degree-5 rule on a triangle: barycentric nodes and weights (sum 1)
 _A1, _B1, _W1 = 0.059715871789770, 0.470142064105115, 0.132394152788506
@@ -381,30 +383,141 @@ def _area_s(ss):
 
 def _scatter_add(e, rows, values):
     """``e[rows] += values`` with repeated rows summed (``np.add.at``'s result, several
-    times faster): the values sorted by row (stable: each row's values keep their order)
-    and summed per row with ``np.add.reduceat``. ``e`` (M,) or (M, T); ``values`` (N,)
-    or (N, T)."""
+    times faster): the values sorted by row (stable: each row's values keep their order;
+    rows already in order are taken as they are, the same permutation) and summed per
+    row with ``np.add.reduceat``. ``e`` (M,) or (M, T); ``values`` (N,) or (N, T)."""
     if not len(rows):
         return
-    order = np.argsort(rows, kind="stable")
-    r = rows[order]
+    values = np.asarray(values)
+    if np.all(rows[1:] >= rows[:-1]):  # already in order (a rule's nodes of sorted pairs): the stable sort is the identity
+        r = rows
+    else:
+        order = np.argsort(rows, kind="stable")
+        r, values = rows[order], values[order]
     starts = np.flatnonzero(np.concatenate(([True], r[1:] != r[:-1])))
-    e[r[starts]] += np.add.reduceat(np.asarray(values)[order], starts, axis=0)
+    e[r[starts]] += np.add.reduceat(values, starts, axis=0)
 
 
-def _rule(xs, ss, gs, dens, oi, samp, batch):
-    """Add the 7-point rule of triangles (P, 3, .) at observers ``oi`` to ``batch`` (a
-    :class:`_Batch`); ``dens`` (P,) already holds the per-pair factors, ``gs`` (P, 3)
-    the perspective weights (the nodes are the rule's in ``s``, mapped onto the surface
-    as the rays map them). Returns the number of nodes."""
+def _rule(tree, nd, dens, oi, samp, batch):
+    """Add the 7-point rule of the tree's triangles ``nd`` (P,) at observers ``oi`` to
+    ``batch`` (a :class:`_Batch`); ``dens`` (P,) already holds the per-pair factors (the
+    nodes are the rule's in ``s``, mapped onto the surface as the rays map them:
+    :meth:`_Subdivision.rule`). Returns the number of nodes."""
     if not len(oi):
         return 0
-    bg = RULE_BARY[None, :, :] * gs[:, None, :]  # (P, 7, 3)
-    x = (bg @ xs / bg.sum(-1, keepdims=True)).reshape(-1, 3)  # a batched product (several times einsum's speed here)
-    s = RULE_BARY @ ss
-    w = (_area_s(ss) * dens)[:, None] * RULE_W[None, :] * np.exp(-(s * s).sum(-1))
+    x, area, ex = tree.rule(nd)
+    w = (area * dens)[:, None] * RULE_W[None, :] * ex
     batch.add(np.repeat(samp, len(RULE_W)), x, np.repeat(oi, len(RULE_W)), w.ravel())
     return len(w) * len(RULE_W)
+
+
+class _Subdivision:
+    """A spot's triangles and their bisections (:func:`_split`) as a tree of nodes, the
+    spot's triangles first (node ``k`` is triangle ``k``): each node's surface, ``s``
+    and weight vertices ``xs`` (N, 3, 3), ``ss`` (N, 3, 2), ``gs`` (N, 3), its
+    centroid ``c`` (N, 3) and radius ``rad`` (N,) (:func:`_triangle_radius`, :meth:`size`), its
+    children ``kids`` (N, 2) (-1: not made yet) and, made when first asked
+    (:meth:`rule`), its 7-point rule's surface nodes, ``s``-area and ``exp(-|s|^2)``.
+    Every value is a function of the node's vertices alone, computed row by row as the
+    per-pair arrays were: sharing a node among observers changes no bit."""
+
+    def __init__(self, patches: SpotPatches):
+        self.n = len(patches.tri_x)
+        self.xs, self.ss, self.gs = patches.tri_x, patches.tri_s, patches.weights()  # the patches' own (copied when grown)
+        self._own = False
+        self.rad, self.c, self.sized = np.zeros(self.n), np.zeros((self.n, 3)), np.zeros(self.n, bool)  # made when asked
+        self.kids = np.full((self.n, 2), -1)
+        self.ruled = np.zeros(self.n, bool)
+        self.rule_x, self.area, self.rule_e = np.zeros((self.n, len(RULE_W), 3)), np.zeros(self.n), np.zeros((self.n, len(RULE_W)))
+
+    def children(self, nd):
+        """The children of nodes ``nd`` (P,): (2P,), first children then second (as
+        :func:`_split` returns them), made where missing."""
+        miss = nd[self.kids[nd, 0] < 0]
+        if len(miss):
+            miss = np.unique(miss)
+            xs, ss, gs = _split(self.xs[miss], self.ss[miss], self.gs[miss])
+            m, n0 = len(miss), self.n
+            rad, c = _triangle_radius(xs)
+            self._append(xs, ss, gs, rad, c)
+            self.kids[miss, 0], self.kids[miss, 1] = n0 + np.arange(m), n0 + m + np.arange(m)
+        k = self.kids[nd]
+        return np.concatenate([k[:, 0], k[:, 1]])
+
+    def _append(self, xs, ss, gs, rad, c):
+        n0, n1 = self.n, self.n + len(xs)
+        if n1 > len(self.xs) or not self._own:
+            cap = max(n1, 2 * len(self.xs))
+
+            def grow(a, fill=0):
+                out = np.full((cap,) + a.shape[1:], fill, a.dtype)
+                out[:n0] = a[:n0]
+                return out
+            self._own = True
+            self.xs, self.ss, self.gs, self.rad, self.c = (grow(a) for a in (self.xs, self.ss, self.gs, self.rad, self.c))
+            self.kids, self.ruled, self.sized = grow(self.kids, -1), grow(self.ruled, False), grow(self.sized, False)
+            self.rule_x, self.area, self.rule_e = (grow(a) for a in (self.rule_x, self.area, self.rule_e))
+        self.xs[n0:n1], self.ss[n0:n1], self.gs[n0:n1], self.rad[n0:n1], self.c[n0:n1] = xs, ss, gs, rad, c
+        self.sized[n0:n1] = True
+        self.n = n1
+
+    def size(self, nd):
+        """Radii (P,) [m] and centroids (P, 3) [m] of nodes ``nd`` (:func:`_triangle_radius`;
+        the spot's own triangles made when first asked: a call that needs a few of many
+        triangles makes only those)."""
+        miss = nd[~self.sized[nd]]
+        if len(miss):
+            miss = np.unique(miss)
+            self.rad[miss], self.c[miss] = _triangle_radius(self.xs[miss])
+            self.sized[miss] = True
+        return self.rad[nd], self.c[nd]
+
+    def rule(self, nd):
+        """The 7-point rule on nodes ``nd`` (P,): surface nodes (7P, 3) [m] (barycentric
+        in ``s``, mapped with the perspective weights), ``s``-areas (P,) and ``exp(-|s|^2)``
+        at the nodes (P, 7); made once per node."""
+        miss = nd[~self.ruled[nd]]
+        if len(miss):
+            miss = np.unique(miss)
+            xs, ss, gs = self.xs[miss], self.ss[miss], self.gs[miss]
+            bg = RULE_BARY[None, :, :] * gs[:, None, :]  # (P, 7, 3)
+            self.rule_x[miss] = bg @ xs / bg.sum(-1, keepdims=True)  # a batched product (several times einsum's speed here)
+            s = RULE_BARY @ ss
+            self.area[miss], self.rule_e[miss] = _area_s(ss), np.exp(-(s * s).sum(-1))
+            self.ruled[miss] = True
+        return self.rule_x[nd].reshape(-1, 3), self.area[nd], self.rule_e[nd]
+
+
+_SHARED = threading.local()  # .trees: {id(patches): (patches, _Subdivision)} inside shared_subdivisions(), per thread
+
+
+@contextmanager
+def shared_subdivisions():
+    """Within the ``with`` block, the calls of :func:`near_field_irradiance` on this thread
+    share each spot's bisections (:class:`_Subdivision`; e.g. a keep-out lobe's scan,
+    whose rays sample the same spot again and again); outside it, one call shares them
+    among its observers. The results are the same bit for bit; memory stays bounded
+    (:data:`_TREE_NODES`)."""
+    old = getattr(_SHARED, "trees", None)
+    if old is None:
+        _SHARED.trees = {}
+    try:
+        yield
+    finally:
+        if old is None:
+            _SHARED.trees = None
+
+
+def _subdivision(patches: SpotPatches) -> _Subdivision:
+    """The tree of ``patches`` shared within :func:`shared_subdivisions` (a fresh one past
+    :data:`_TREE_NODES` nodes), else a new one."""
+    trees = getattr(_SHARED, "trees", None)
+    if trees is None:
+        return _Subdivision(patches)
+    got = trees.get(id(patches))
+    if got is None or got[0] is not patches or got[1].n > _TREE_NODES:
+        got = trees[id(patches)] = (patches, _Subdivision(patches))
+    return got[1]
 
 
 class _Batch:
@@ -492,12 +605,14 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
         c, v, r, has = patches.moments
         points = np.where(has[:, None], c, points)
         spread, radius = np.where(has, v, spread), np.where(has, r, radius)
-    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel, fr_bound_per_sr)
+    src = _Sources(patches, points, spread, radius, normals, power_w, ratio, kernel, _subdivision(patches), fr_bound_per_sr)
     if fr_bound_per_sr is not None:
         live = _bound_whole(src, obs, weight, live, e)
     counts = np.zeros(4, int)
     block = max(1, _PAIR_BLOCK // max(len(points), len(patches.sample), 1))
     for a in range(0, len(live), block):
+        if src.tree.n > _TREE_NODES:  # bounded memory: the same nodes are made again as needed (the same bits)
+            src.tree = _subdivision(patches)
         counts += _near_block(src, obs, weight, live[a:a + block], e, rtol)
     STATS.add(int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3]), time.perf_counter() - t0)
     return e
@@ -515,6 +630,7 @@ class _Sources:
     power_w: np.ndarray
     ratio: np.ndarray
     kernel: object
+    tree: _Subdivision
     fr_bound_per_sr: float | None = None
 
     @cached_property
@@ -556,10 +672,10 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
         io, is_ = _bound_samples(src, obs, weight, io, is_, d[io_local, is_], e)
     oi, tri = _expand(src.patches, io, is_)
     p = src.patches
-    xs, ss, gs, samp = p.tri_x[tri], p.tri_s[tri], p.weights()[tri], p.sample[tri]
+    samp = p.sample[tri]
     dens = p.density_w[tri] * src.ratio[samp] * weight[oi]
     stop = MAX_DEPTH if src.fr_bound_per_sr is None else min(BOUND_DEPTH, MAX_DEPTH)
-    evals, unresolved, n_bound = _adaptive(src, obs, oi, (xs, ss, gs, samp, dens), e, stop, batch)
+    evals, unresolved, n_bound = _adaptive(src, obs, oi, (tri, samp, dens), e, stop, batch)
     batch.flush()
     if src.fr_bound_per_sr is not None:  # nothing integrated: counted in BOUNDED
         if n_bound:
@@ -568,42 +684,46 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     return np.array([len(np.unique(io)), len(io), n_eval + evals, unresolved])
 
 
-def _adaptive(src: _Sources, obs, oi, tris, e, stop, batch):
-    """The adaptive rule on (observer ``oi``, triangle) pairs, ``tris`` = (surface
-    vertices, ``s`` vertices, perspective weights, samples, per-pair densities): each
-    pair's triangle takes the 7-point rule once the observer is ``RULE_REACH`` radii away,
-    else is bisected; at depth ``stop`` (``MAX_DEPTH``) the pairs still unresolved get the
-    rule (counted unresolved), its nodes gathered in ``batch`` (a :class:`_Batch`). With
-    ``src.fr_bound_per_sr`` every pair gets instead an upper
+def _adaptive(src: _Sources, obs, oi, pairs, e, stop, batch):
+    """The adaptive rule on (observer ``oi``, triangle) pairs, ``pairs`` = (nodes of
+    ``src.tree`` (a :class:`_Subdivision`: the spot's triangles first), samples, per-pair
+    densities): each pair's triangle takes the 7-point rule once the observer is
+    ``RULE_REACH`` radii away, else is bisected; at depth ``stop`` (``MAX_DEPTH``) the
+    pairs still unresolved get the rule (counted unresolved), its nodes gathered in
+    ``batch`` (a :class:`_Batch`). A triangle's bisections, radii and rule nodes are
+    made once in the tree and shared by every observer that needs them (the same
+    values as made per pair). With ``src.fr_bound_per_sr`` every pair gets instead an upper
     bound of what the rule and the rest of the recursion would give it
     (:func:`_bound_pairs`): a resolved pair at once, the others after up to ``stop``
     bisections (tighter near the observer). Returns (kernel evaluations, pairs
     unresolved, pairs bounded)."""
-    xs, ss, gs, samp, dens = tris
+    nd, samp, dens = pairs
+    tree = src.tree
     n_eval = unresolved = n_bound = 0
     for depth in range(stop + 1):
         if not len(oi):
             break
         at = obs[oi]
-        above = np.einsum("pvk,pk->pv", at[:, None, :] - xs, src.normals[samp]).max(axis=1) > 0
+        above = np.einsum("pvk,pk->pv", at[:, None, :] - tree.xs[nd], src.normals[samp]).max(axis=1) > 0
         if not above.all():  # (most often every pair is: nothing to drop)
-            xs, ss, gs, samp, oi, dens, at = (v[above] for v in (xs, ss, gs, samp, oi, dens, at))
-        rad, c = _triangle_radius(xs)
+            nd, samp, oi, dens, at = (v[above] for v in (nd, samp, oi, dens, at))
+        rad, c = tree.size(nd)
         good = np.linalg.norm(at - c, axis=1) >= RULE_REACH * rad
         if src.fr_bound_per_sr is not None:  # bounds only: the resolved pairs, and every pair at the last depth
             good |= depth == stop
-            n_bound += _bound_pairs(src, obs, oi[good], xs[good], ss[good], samp[good], dens[good], e)
+            g = nd[good]
+            n_bound += _bound_pairs(src, obs, oi[good], tree.xs[g], tree.ss[g], samp[good], dens[good], e)
         elif depth == MAX_DEPTH:
             unresolved += int((~good).sum())
             good[:] = True
         if good.all():
             if src.fr_bound_per_sr is None:
-                n_eval += _rule(xs, ss, gs, dens, oi, samp, batch)
+                n_eval += _rule(tree, nd, dens, oi, samp, batch)
             break
         split = ~good
         if src.fr_bound_per_sr is None:
-            n_eval += _rule(xs[good], ss[good], gs[good], dens[good], oi[good], samp[good], batch)
-        xs, ss, gs = _split(xs[split], ss[split], gs[split])
+            n_eval += _rule(tree, nd[good], dens[good], oi[good], samp[good], batch)
+        nd = tree.children(nd[split])
         samp, oi, dens = (np.tile(v[split], 2) for v in (samp, oi, dens))
     return n_eval, unresolved, n_bound
 

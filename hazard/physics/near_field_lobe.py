@@ -490,7 +490,8 @@ class NearLobeFn:
         steps = np.zeros(0)
         if need.any():
             self.prepare(dirs, r0)
-            val[need], steps = self.roots(dirs[need], r0[need])
+            with near_field.shared_subdivisions():  # the scan's points share the spot's bisections (the same sums)
+                val[need], steps = self.roots(dirs[need], r0[need])
         self.cap_m = self.far_m + getattr(self, "smallest_m", 0.0)  # no near-field root lies beyond (scan start + step)
         # the lobe at the nodes, never below the point form (capped where the point form is far: the envelope covers the near field)
         v = np.where(need, np.maximum(val, r0), np.minimum(r0, self.cap_m)).reshape(tt.shape)
