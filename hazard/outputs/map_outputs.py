@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 import xml.etree.ElementTree as ET
+from collections import Counter
 from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Literal, Mapping
@@ -127,6 +128,23 @@ def _jsonable(v):
     return v
 
 
+_PLAIN = frozenset({str, bool, int, float, type(None)})  # the types _jsonable returns unchanged (a float when finite)
+
+
+def _properties(zs) -> list:
+    """Each zone's properties as the GeoJSON writes them (:func:`_jsonable` of each value).
+    When every value of every zone is a str, bool, int, None or a finite float (the common
+    case: 20 000 observer points), :func:`_jsonable` changes none of them and each dict is
+    copied as it is: the types of all values checked at once, the floats' finiteness by
+    their sum (a sum that overflows to inf sends the zones the value-by-value way)."""
+    from itertools import chain
+
+    values = list(chain.from_iterable(z.properties.values() for z in zs))
+    if set(map(type, values)) <= _PLAIN and math.isfinite(sum(v for v in values if type(v) is float)):
+        return [dict(z.properties) for z in zs]
+    return [{k: _jsonable(v) for k, v in z.properties.items()} for z in zs]
+
+
 def _points(zs, frame, height) -> dict:
     """GeoJSON geometry of each point zone (index -> mapping), all converted at once: the
     values :func:`to_lonlat` (``frame``) or :func:`_local` give one by one."""
@@ -158,10 +176,10 @@ def geojson_document(result, zs, absent, frame_info) -> dict:
     height = _height_fn(result, result.scene.spec.analysis.footprint_eye_height_m)
     feats = []
     points = _points(zs, None if site is None else site.frame, height)
+    props = _properties(zs)
     for i, z in enumerate(zs):
         g = points.get(i) or mapping(to_lonlat(z.geometry, site.frame, height, z.z_m) if site is not None else _local(z.geometry))
-        feats.append({"type": "Feature", "geometry": g,
-                      "properties": {k: _jsonable(v) for k, v in z.properties.items()}})
+        feats.append({"type": "Feature", "geometry": g, "properties": props[i]})
     _, which = observers_on_map(result)
     doc: dict = {"type": "FeatureCollection", "features": feats}
     doc["laser_hazard"] = {"frame": frame_info, "kinds": list(ZONE_KINDS), "absent": absent, "observers": which,
@@ -384,6 +402,7 @@ def map_files(result) -> tuple[dict, MapOutputs]:
             not_written[tif] = "no ground grid at eye height (the scene has no terrain, or no spot to reflect)"
         else:
             files[tif] = data
-    counts = {k: sum(z.kind == k for z in zs) for k in ZONE_KINDS}
+    kinds = Counter(z.kind for z in zs)
+    counts = {k: kinds[k] for k in ZONE_KINDS}
     return files, MapOutputs(files=tuple(sorted(files)), not_written=not_written, frame=frame["kind"], features=counts,
                              absent=absent)

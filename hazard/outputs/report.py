@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -534,12 +535,67 @@ def _csv_text(result, cols) -> str:
     return b"".join(_csv_chunks(result, cols)).decode()
 
 
-def _write_csv_synced(path: Path, result, cols) -> None:
+def _write_csv_synced(path: Path, result, cols, stop=None) -> None:
+    """observers.csv written block by block into ``path`` and fsynced; ``stop`` (a
+    :class:`threading.Event`): set, the writing ends after the block under way (the
+    staging folder of a failed run is discarded: no partial table is ever switched in)."""
     with open(path, "wb") as fh:
         for piece in _csv_chunks(result, cols):
+            if stop is not None and stop.is_set():
+                return
             fh.write(piece)
         fh.flush()
         os.fsync(fh.fileno())
+
+
+class CsvWriting:
+    """observers.csv of ``result`` written into ``folder`` on a worker thread
+    (:func:`csv_started`) while the caller makes the other outputs on its own: the map
+    files and report.json are Python work holding the GIL, the table's joins, writes and
+    fsync run without it. :meth:`wait` returns when the file is written and synced, and
+    raises the writer's error, if any."""
+
+    def __init__(self, result, folder):
+        import threading
+
+        self.cols = observer_columns(result)  # once, for the table and the report (write_set)
+        self.path = Path(folder) / "observers.csv"
+        self._stop = threading.Event()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, args=(result,), name="observers.csv", daemon=True)
+        self._thread.start()
+
+    def _run(self, result) -> None:
+        try:
+            _write_csv_synced(self.path, result, self.cols, self._stop)
+        except BaseException as exc:  # handed to the caller's wait()
+            self._error = exc
+
+    def wait(self) -> None:
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+
+    def stop(self) -> None:
+        """End the writing early (the caller failed) and wait for the thread: nothing
+        writes into the staging folder after this returns."""
+        self._stop.set()
+        self._thread.join()
+
+
+@contextmanager
+def csv_started(result, folder):
+    """Start writing observers.csv of ``result`` into ``folder`` (a staging folder) on a
+    worker thread; yields the :class:`CsvWriting` for :func:`write_set` (``csv=``). Leaving
+    the block by an error stops the writer before the error goes on (the staging folder is
+    discarded with it); leaving it normally waits for the file."""
+    job = CsvWriting(result, folder)
+    try:
+        yield job
+    except BaseException:
+        job.stop()
+        raise
+    job.wait()
 
 
 def report_json_text(doc: dict, cols=None) -> str:
@@ -664,25 +720,32 @@ def _write_synced(path: Path, data) -> None:
         os.fsync(fh.fileno())
 
 
-def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict | None = None) -> list:
+def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict | None = None,
+              csv: CsvWriting | None = None) -> list:
     """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
     ``folder`` (a staging folder of :class:`brdfmodels.output_sets.OutputUnit`), each fsynced;
     returns the names written. ``verdict_doc``: the run's verdict, when the caller has it
-    (:func:`report_dict`)."""
+    (:func:`report_dict`). observers.csv is written on a worker thread while report.json
+    is made and the other files written (:func:`csv_started`); ``csv``: that writer,
+    started by the caller before it made ``extra`` (the map files), else started here."""
+    if csv is None:
+        with csv_started(result, folder) as job:
+            return write_set(result, folder, extra=extra, sections=sections, verdict_doc=verdict_doc, csv=job)
     folder = Path(folder)
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
-    cols = observer_columns(result)  # once, for the report and the table
+    cols = csv.cols  # once, for the report and the table
     doc = report_dict(result, cols, row_dicts=False, verdict_doc=verdict_doc)  # the listed rows written from the columns
     doc.update(json_safe(dict(sections or {})))
     texts = {"report.json": report_json_pieces(doc, cols), **extra}
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
-        if n == "observers.csv":  # written by blocks of rows from the columns
-            _write_csv_synced(folder / n, result, cols)
-        else:
-            _write_synced(folder / n, texts[n])
+        if n == "observers.csv":  # written by blocks of rows from the columns, on the writer's thread
+            continue
+        _write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)
+    csv.wait()
+    os.chmod(csv.path, 0o666 & ~mask)
     if (arrow := _arrow()) is not None:
         arrow[0].default_memory_pool().release_unused()  # the writers' text buffers back to the system
     return list(names)
