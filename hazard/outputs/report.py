@@ -22,7 +22,7 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
-from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_rows, number_cells, row_tools
+from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_rows, row_tools
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
@@ -422,14 +422,15 @@ def _json_names(arrow, labels, rows):
 
 def _name_parts(tools, arrow, labels, a0, a1):
     """The names of rows ``a0:a1`` as parts of :func:`hazard.outputs.row_text.joined_rows`
-    (a list), or None where one needs quotes: a block of one grid as its name + ``[``, the
-    indices by orjson each followed by ``]`` (no joined name array), else :func:`_arrow_names`."""
+    (a list), or None where one needs quotes: a block of one grid as its name + ``[`` and
+    the indices (an integer array: a column of :func:`_joined_block`, followed by ``]``; no
+    joined name array), else :func:`_arrow_names`."""
     obs = getattr(labels, "observers", None)
     if obs is not None and a1 > a0:
         g = obs.group[a0:a1]
         name = obs.group_names[g[0]]
         if obs.group_sizes[g[0]] > 1 and (g == g[0]).all() and not any(c in name for c in ',"\r\n'):
-            return [name + "[", number_cells(tools, obs.index_in_group[a0:a1], "]")]
+            return [name + "[", np.asarray(obs.index_in_group[a0:a1])]  # the indices a column of their own
     names = _arrow_names(arrow, labels, a0, a1)
     return None if names is None else [names]
 
@@ -443,7 +444,11 @@ def _joined_block(tools, names, values, keys):
     blank = CSV_TEXTS._replace(nan="")
     columns = [(v, blank if k in _CSV_BLANK_NAN else CSV_TEXTS) for v, k in zip(values, keys)]
     afters = [","] * (len(columns) - 1) + ["\r\n"]
-    return joined_rows(tools, [*names, ","] + column_parts(tools, columns, afters), len(values[0]))
+    if isinstance(names[-1], np.ndarray):  # a grid's indices: a column followed by "],"
+        head, columns, afters = names[:-1], [(names[-1], CSV_TEXTS)] + columns, ["],"] + afters
+    else:
+        head = [*names, ","]
+    return joined_rows(tools, column_parts(tools, columns, afters, head), len(values[0]))
 
 
 _ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}
@@ -648,7 +653,7 @@ def _rows_json(cols, rows):
         columns += [(values[k], _JSON_NULL_TEXTS if k in _JSON_NULL else _JSON_TEXTS) for k in keys]
         afters = [", ", ", "] + [f"], {json.dumps(k)}: " for k in keys[:1]] + [f", {json.dumps(k)}: " for k in keys[1:]] + ["},"]
         afters[2] = afters[2] if keys else "]},"
-        return joined_rows(tools, parts + column_parts(tools, columns, afters), len(rows), drop_last=1)  # the last row's comma off
+        return joined_rows(tools, column_parts(tools, columns, afters, parts), len(rows), drop_last=1)  # the last row's comma off
     columns = [(pos[:, 0], False), (pos[:, 1], False), (pos[:, 2], False)] + [(values[k], k in _JSON_NULL) for k in keys]
     before = ["", ", ", ", "] + [f"], {json.dumps(keys[0])}: "] * bool(keys) + [f", {json.dumps(k)}: " for k in keys[1:]]
     done: list = []  # (values, null, text) of the columns formatted so far
