@@ -254,3 +254,73 @@ def test_repeated_values_judged_on_a_scrambled_sample():
     assert row_text._repeats(x)
     assert not row_text._repeats(_doubles(16_384, 3))
     assert not row_text._repeats(np.repeat(x[:5], 10))  # 50 rows: too few to judge
+
+
+def _points(n: int, seed: int, names):
+    from hazard.outputs.map_zones import ObserverPoints
+
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-3, 6, (n, 1))
+    p[::7, 0] = -0.0
+    haz = rng.random(n) < 0.4
+    return ObserverPoints(np.arange(n), p, _doubles(n, seed), _doubles(n, seed + 1)[::-1].copy(), haz,
+                          haz & (rng.random(n) < 0.5), [names[i % len(names)] for i in range(n)])
+
+
+def _feature_text(op, common) -> bytes:
+    """What the map wrote before: one dict per observer (map_zones.observer_zones), its
+    values made JSON-safe, and orjson's text of the list."""
+    import orjson
+
+    from hazard.outputs import map_outputs
+    from hazard.outputs.map_zones import observer_zones
+
+    feats = [{"type": "Feature", "geometry": {"type": "Point", "coordinates": tuple(np.round(op.position_m[i, :2], 4).tolist())},
+              "properties": {k: map_outputs._jsonable(v) for k, v in z.properties.items()}}
+             for i, z in enumerate(observer_zones(op, common))]
+    return orjson.dumps(feats)[1:-1]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_map_observer_features_column_by_column_are_the_dicts_text(seed):
+    """The observer points of the zones file made column by column: byte for byte orjson's
+    text of the per-observer dicts, for doubles from random bits (NaN, inf as strings),
+    -0.0 and large and small positions, names with quotes, backslashes, non-ASCII."""
+    from hazard.outputs import map_outputs
+
+    op = _points(600, seed, ['a"b[1]', "x\\", "\u00e9t\u00e9[12]", "plain", "tab\there"])
+    common = {"standard": "ansi-z136.1-2014", "exposure_duration_s": 0.25, "mpe_w_m2": 1e-7, "wavelength_nm": 1064.0, "scene": "s"}
+    assert map_outputs._observer_features(TOOLS, op, common) == _feature_text(op, common)
+    assert map_outputs._observer_features(TOOLS, op, {}) == _feature_text(op, {})
+
+
+def test_map_observer_features_left_to_the_dicts_where_their_text_differs():
+    """A position not finite (orjson would write null: json.dumps refuses it), a name with
+    ``null`` in it (the zones file then goes through json.dumps) or a common property that
+    would replace a point's own: None, and the map writes the dicts as before."""
+    from hazard.outputs import map_outputs
+
+    op = _points(20, 3, ["o"])
+    bad = _points(20, 3, ["o"])
+    bad.position_m[3, 1] = np.nan
+    assert map_outputs._observer_features(TOOLS, op, {"scene": "s"}) is not None
+    assert map_outputs._observer_features(TOOLS, bad, {"scene": "s"}) is None
+    assert map_outputs._observer_features(TOOLS, _points(20, 3, ["nullable"]), {"scene": "s"}) is None
+    assert map_outputs._observer_features(TOOLS, op, {"name": "x"}) is None
+
+
+def test_map_files_same_bytes_with_the_points_as_columns(monkeypatch):
+    """The whole zones file and the map section of a grid run: the same with the observer
+    points written column by column as with one zone dict each (the path kept for a site)."""
+    import hazard
+    import scenes
+    from hazard.outputs import map_outputs
+
+    text = scenes.example_path("plate").read_text().split("[[observers]]")[0]
+    result = hazard.analyze(scenes.loads(text + '[[observers]]\nname = "g"\norigin_m = [-5.0, -45.0, 1.5]\n'
+                                         'u_m = [10.0, 0.0, 0.0]\nv_m = [0.0, 33.0, 0.0]\ncounts = [30, 20]\n'))
+    fast, section = map_outputs.map_files(result)
+    assert section.features["observer"] == 600
+    monkeypatch.setattr(map_outputs, "_geojson_text", lambda *a: None)
+    slow, section2 = map_outputs.map_files(result)
+    assert fast == slow and section == section2
