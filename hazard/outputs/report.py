@@ -761,6 +761,8 @@ def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict
         with csv_started(result, folder) as job:
             return write_set(result, folder, extra=extra, sections=sections, verdict_doc=verdict_doc, csv=job)
     folder = Path(folder)
+    if csv.path.parent != folder:
+        raise ValueError(f"csv: observers.csv is being written into {csv.path.parent}; expected the folder {folder}")
     extra = {**track_files(result), **dict(extra or {})}
     names = ("report.json", "observers.csv") + tuple(extra)
     cols = csv.cols  # once, for the report and the table

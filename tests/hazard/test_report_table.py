@@ -420,3 +420,11 @@ def test_the_csv_writers_error_reaches_the_caller(tmp_path, result):
         with report.csv_started(result, tmp_path / "missing") as job:
             pass
     assert not job._thread.is_alive()
+
+
+def test_write_set_refuses_a_csv_writer_of_another_folder(tmp_path, result):
+    """A writer started for another folder is named, not joined to this set."""
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    with report.csv_started(result, tmp_path / "a") as job:
+        with pytest.raises(ValueError, match="observers.csv is being written into"):
+            report.write_set(result, tmp_path / "b", csv=job)
