@@ -583,8 +583,8 @@ class CsvWriting:
     files and report.json are Python work holding the GIL, the table's joins, writes and
     fsync run without it. One more thread makes the table's blocks ahead of the writer
     (two, beside the caller's, took more CPU and system time in GIL hand-overs: at 1e6
-    observers, load 3-5, median of 7, 0.86 -> 0.81 s user, 0.30 -> 0.11 s system, 1.21 ->
-    0.94 s wall). :meth:`wait` returns when the file is written and synced, and raises the
+    observers, load 3.3, median of 9 alternated, 0.83 -> 0.81 s user, 0.60 -> 0.37 s
+    system, 1.41 -> 1.22 s wall). :meth:`wait` returns when the file is written and synced, and raises the
     writer's error, if any."""
 
     def __init__(self, result, folder):
