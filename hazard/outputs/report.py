@@ -306,7 +306,7 @@ def _csv_name(label: str) -> str:
 CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects; ~4 MB of bytes with pyarrow)
 
 
-def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2):
+def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2, gate=None):
     """observers.csv as bytes-like pieces: the header, then ``block_rows`` observers at a time (every
     observer, one row each, each column formatted from its array); with a [site], each
     position also as latitude, longitude and height. The bytes of the whole table at once;
@@ -335,14 +335,21 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2
             return _repr_block, (cols["labels"][a0:a1], values, keys)
         return _arrow_block, (arrow, names, values, keys)
 
-    yield from _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0)
+    yield from _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0, gate=gate)
 
 
-def _in_order(jobs, threads: int):
+def _gated(gate, fn, args):
+    with gate:
+        return fn(*args)
+
+
+def _in_order(jobs, threads: int, gate=None):
     """``fn(*args)`` of each ``(fn, args)`` of ``jobs``, in order, on up to ``threads``
     threads (pyarrow's joins run without the GIL) with at most ``2 threads`` results
     waiting: the memory of a few blocks. One thread: the blocks made ahead while the
-    consumer writes the last; 0 (or a process limited to one thread): made here."""
+    consumer writes the last; 0 (or a process limited to one thread): made here.
+    ``gate`` (a :class:`threading.Semaphore`): each job runs holding one of its slots
+    (fewer threads at work while another holds some)."""
     from brdfmodels.parallel import default_threads
 
     if threads <= 0 or default_threads() <= 1:
@@ -356,7 +363,7 @@ def _in_order(jobs, threads: int):
     with ThreadPoolExecutor(threads) as pool:
         ahead: deque = deque()
         for fn, args in jobs:
-            ahead.append(pool.submit(fn, *args))
+            ahead.append(pool.submit(fn, *args) if gate is None else pool.submit(_gated, gate, fn, args))
             if len(ahead) > 2 * threads:
                 yield ahead.popleft().result()
         while ahead:
@@ -541,14 +548,14 @@ def _csv_text(result, cols) -> str:
     return b"".join(_csv_chunks(result, cols)).decode()
 
 
-def _write_csv_synced(path: Path, result, cols, stop=None, threads: int = 2) -> None:
+def _write_csv_synced(path: Path, result, cols, stop=None, threads: int = 2, gate=None) -> None:
     """observers.csv written block by block into ``path`` and fsynced, the blocks made on
-    ``threads`` threads (:func:`_in_order`); ``stop`` (a :class:`threading.Event`): set,
-    the writing ends after the block under way (the staging folder of a failed run is
-    discarded: no partial table is ever switched in)."""
+    ``threads`` threads (:func:`_in_order`, ``gate`` its slots); ``stop`` (a
+    :class:`threading.Event`): set, the writing ends after the block under way (the
+    staging folder of a failed run is discarded: no partial table is ever switched in)."""
     with open(path, "wb") as fh:
         flushed = _Flushed(fh)
-        for piece in _csv_chunks(result, cols, threads=threads):
+        for piece in _csv_chunks(result, cols, threads=threads, gate=gate):
             if stop is not None and stop.is_set():
                 return
             fh.write(piece)
@@ -582,9 +589,10 @@ class CsvWriting:
     (:func:`csv_started`) while the caller makes the other outputs on its own: the map
     files and report.json are Python work holding the GIL, the table's joins, writes and
     fsync run without it. One more thread makes the table's blocks ahead of the writer
-    (two, beside the caller's, took more CPU and system time in GIL hand-overs: at 1e6
-    observers, load 3.3, median of 9 alternated, 0.83 -> 0.81 s user, 0.60 -> 0.37 s
-    system, 1.41 -> 1.22 s wall). :meth:`wait` returns when the file is written and synced, and raises the
+    while the caller works, two once it is done (:meth:`caller_done`, called by
+    :meth:`wait`): two beside the caller's took more CPU and system time in GIL
+    hand-overs (at 1e6 observers, load 3.3, median of 9 alternated: 0.83 -> 0.81 s user,
+    0.60 -> 0.37 s system, 1.41 -> 1.22 s wall with one). :meth:`wait` returns when the file is written and synced, and raises the
     writer's error, if any."""
 
     def __init__(self, result, folder):
@@ -593,17 +601,27 @@ class CsvWriting:
         self.cols = observer_columns(result)  # once, for the table and the report (write_set)
         self.path = Path(folder) / "observers.csv"
         self._stop = threading.Event()
+        self._gate = threading.Semaphore(2)  # two threads make blocks; one slot is the caller's until caller_done()
+        self._gate.acquire()
+        self._caller = True
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, args=(result,), name="observers.csv", daemon=True)
         self._thread.start()
 
     def _run(self, result) -> None:
         try:
-            _write_csv_synced(self.path, result, self.cols, self._stop, threads=1)  # one makes blocks, this one writes
+            _write_csv_synced(self.path, result, self.cols, self._stop, threads=2, gate=self._gate)  # this thread writes
         except BaseException as exc:  # handed to the caller's wait()
             self._error = exc
 
+    def caller_done(self) -> None:
+        """The caller's own work is done: its slot goes to a second thread making blocks."""
+        if self._caller:
+            self._caller = False
+            self._gate.release()
+
     def wait(self) -> None:
+        self.caller_done()
         self._thread.join()
         if self._error is not None:
             raise self._error
@@ -774,6 +792,7 @@ def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict
     doc = report_dict(result, cols, row_dicts=False, verdict_doc=verdict_doc)  # the listed rows written from the columns
     doc.update(json_safe(dict(sections or {})))
     texts = {"report.json": report_json_pieces(doc, cols), **extra}
+    csv.caller_done()  # what is left here is writing (without the GIL): a second thread makes the table's blocks
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
         if n == "observers.csv":  # written by blocks of rows from the columns, on the writer's thread
