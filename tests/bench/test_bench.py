@@ -58,7 +58,7 @@ def test_bench_whole_run():
     check_goal("whole run", res["ratio"], goal(1.3, 4.0))
 
 
-@not_met("issue 37: outputs 1.25-1.51x the analysis in wall time, 1.23-1.52x in CPU (user ~0.8 s against 0.9; the kernel's page allocation for 334 MB of new files 0.1-0.6 s) at 1e6 observers, 2026-11-26, load 2-4, not quiet; 1.82 wall, 1.63-1.70 CPU before, alternated; goal 1")
+@not_met("issue 37: outputs 1.19-1.58x the analysis in wall time, 1.18-1.54x in CPU (user ~0.8 s against 0.9; the kernel's page allocation for 334 MB of new files 0.1-0.6 s) at 1e6 observers, 2026-11-26, load 1.6-3.2, not quiet; 1.53-1.91 wall, 1.49-1.73 CPU before, alternated; goal 1")
 def test_bench_outputs():
     from .bench_outputs import run
 
