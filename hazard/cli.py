@@ -456,7 +456,7 @@ def _finish(args, result, v=None):
 def _cmd_run(args, out, err):
     from brdfmodels.output_sets import output_unit
 
-    from hazard.outputs.report import json_safe, report_dict, summary_text, write_set
+    from hazard.outputs.report import csv_started, json_safe, report_dict, summary_text, write_set
     from hazard.pipeline.verdict import verdict
 
     from hazard.pictures.figures import FIXED_NAMES
@@ -480,8 +480,10 @@ def _cmd_run(args, out, err):
                                 rendered=kept_render_entries(unit))  # hazard render's 3-D pictures kept beside: still listed
         if not args.quiet:
             err.write("hazard: map outputs...\n")
-        maps, section = map_files(result)
-        names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section.to_dict()}, verdict_doc=v)
+        with csv_started(result, unit.stage) as csv:  # observers.csv written on a worker thread meanwhile
+            maps, section = map_files(result)
+            names = write_set(result, unit.stage, extra={**extra, **maps}, sections={"map_outputs": section.to_dict()},
+                              verdict_doc=v, csv=csv)
         if args.report:  # the review page embeds the pictures just written (and those of hazard render, carried over)
             unit.carry()
             names += [p.name for p in _write_review(unit.stage, args, err)]

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Zone", "ZONE_KINDS", "zones"]
+__all__ = ["Zone", "ZONE_KINDS", "ObserverPoints", "zones", "observer_points", "observer_zones", "common_properties"]
 
 ZONE_KINDS = ("footprint", "sdz", "sdz_nominal", "sdz_aided", "keepout_lobe", "mirror_beam", "mirror_beam_zone", "observer",
               "range_boundary", "laser", "target", "track", "airspace_zone", "visual_zone")
@@ -47,6 +47,11 @@ class Zone:
     geometry: object
     properties: dict = field(default_factory=dict)
     z_m: float | np.ndarray | None = None  # world height of a point, or of each vertex (None: the terrain / eye height below each)
+
+
+def common_properties(result) -> dict:
+    """The properties every zone of ``result`` ends with (standard, exposure, MPE, wavelength, scene)."""
+    return _common(result)
 
 
 def _common(result) -> dict:
@@ -172,27 +177,75 @@ def observers_on_map(result) -> tuple[np.ndarray, str]:
     return order, f"{len(order)} of {m}: every hazardous one, then the highest hazard ratios (all in observers.csv)"
 
 
-def _observers(result) -> list:
-    import shapely
+@dataclass(frozen=True)
+class ObserverPoints:
+    """The observer points a map shows (:func:`observers_on_map`), column by column: what
+    :func:`zones` makes one ``observer`` :class:`Zone` of each row from (its properties:
+    ``name``, ``verdict``, ``hazard_ratio``, ``radiant_exposure_j_m2``, ``hazard``, ``z_m``).
 
+    Attributes
+    ----------
+    rows : numpy.ndarray
+        (n,) the observers' rows in the result.
+    position_m : numpy.ndarray
+        (n, 3) world positions [m].
+    hazard_ratio, radiant_exposure_j_m2 : numpy.ndarray
+        (n,) peak irradiance / MPE [-] and radiant exposure [J/m^2].
+    hazardous, aided : numpy.ndarray
+        (n,) bool: above the MPE; its group looks through an optical aid.
+    names : list of str
+        (n,) the observers' names.
+    which : str
+        Which observers a map shows (:func:`observers_on_map`).
+    """
+
+    rows: np.ndarray
+    position_m: np.ndarray
+    hazard_ratio: np.ndarray
+    radiant_exposure_j_m2: np.ndarray
+    hazardous: np.ndarray
+    aided: np.ndarray
+    names: list
+    which: str = "all"  # which observers are shown (observers_on_map's statement)
+
+    kind = "observer"
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+def observer_points(result) -> ObserverPoints:
+    """The observer points a map of ``result`` shows, as columns (:class:`ObserverPoints`)."""
     obs = result.observers
-    rows, _ = observers_on_map(result)
+    rows, which = observers_on_map(result)
     p = np.asarray(obs.position_at(rows), float).reshape(-1, 3)  # world, the rows shown only
-    ratio = np.asarray(result.hazard_ratio, float)[rows].tolist()
-    haz = np.asarray(result.hazardous, bool)[rows].tolist()
     groups = obs.observers
     with_aid = np.array([o is not None for o in groups.optics], bool)
-    aided = (with_aid[groups.group[rows]] if len(p) and len(with_aid) else np.zeros(len(p), bool)).tolist()
-    h_exp = np.asarray(obs.radiant_exposure_j_m2, float)[rows].tolist()
-    labels = obs.labels.take(rows)  # the listed rows' names only
+    aided = with_aid[groups.group[rows]] if len(p) and len(with_aid) else np.zeros(len(p), bool)
+    return ObserverPoints(rows, p, np.asarray(result.hazard_ratio, float)[rows], np.asarray(obs.radiant_exposure_j_m2, float)[rows],
+                          np.asarray(result.hazardous, bool)[rows], aided, obs.labels.take(rows), which)  # the listed rows' names only
+
+
+def _observers(result) -> list:
+    return observer_zones(observer_points(result))
+
+
+def observer_zones(op: ObserverPoints, common: dict | None = None) -> list:
+    """One ``observer`` :class:`Zone` for each row of ``op``; with ``common``
+    (:func:`common_properties`), its properties complete as :func:`zones` gives them
+    (``kind`` first, ``common`` last)."""
+    import shapely
+
+    p = op.position_m
+    ratio, haz, aided, h_exp = op.hazard_ratio.tolist(), op.hazardous.tolist(), op.aided.tolist(), op.radiant_exposure_j_m2.tolist()
+    labels = op.names
     points = shapely.points(p[:, :2])  # made at once
     out = []
     for j, z in enumerate(p[:, 2].tolist()):
         verdict = ("hazardous, aided" if aided[j] else "hazardous") if haz[j] else "below the MPE"
-        out.append(Zone("observer", points[j], {
-            "name": labels[j], "verdict": verdict, "hazard_ratio": ratio[j],
-            "radiant_exposure_j_m2": h_exp[j], "hazard": ("aided only" if aided[j] else "naked eye") if haz[j] else "none",
-            "z_m": z}, z_m=z))
+        props = {"name": labels[j], "verdict": verdict, "hazard_ratio": ratio[j], "radiant_exposure_j_m2": h_exp[j],
+                 "hazard": ("aided only" if aided[j] else "naked eye") if haz[j] else "none", "z_m": z}
+        out.append(Zone("observer", points[j], props if common is None else {"kind": "observer", **props, **common}, z_m=z))
     return out
 
 
@@ -243,17 +296,26 @@ def _airspace(result) -> list:
     return out
 
 
-def zones(result) -> tuple[list, dict]:
-    """Every zone of ``result`` (world x, y [m]) and the kinds absent with the reason."""
+def zones(result, *, points_as_columns: bool = False) -> tuple[list, dict]:
+    """Every zone of ``result`` (world x, y [m]) and the kinds absent with the reason.
+    ``points_as_columns``: the observer points as one :class:`ObserverPoints` in their
+    place (when there are any), not one :class:`Zone` each (their common properties,
+    :func:`common_properties`, then added by the caller)."""
     off = np.asarray(result.scene.offset_m, float)
+    if points_as_columns:
+        op = observer_points(result)
+        points: list = [op] if len(op) else []
+    else:
+        points = _observers(result)
     parts = {"footprint": _footprints(result, off) if result.scene.terrain is not None else [],
              "sdz": _sdz(result), "keepout_lobe": _lobes(result, off), "mirror_beam": _mirrors(result, off),
              "mirror_beam_zone": _mirror_zones(result, off),
-             "observer": _observers(result), "things": _things(result, off), "airspace": _airspace(result)}
+             "observer": points, "things": _things(result, off), "airspace": _airspace(result)}
     common = _common(result)
     out = [z for zs in parts.values() for z in zs]
     for z in out:
-        z.properties = {"kind": z.kind, **z.properties, **common}
+        if isinstance(z, Zone):
+            z.properties = {"kind": z.kind, **z.properties, **common}
     present = {z.kind for z in out}
     t = result.scene.terrain
     why = {"footprint": "no terrain (the ground footprint needs one)" if t is None

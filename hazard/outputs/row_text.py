@@ -16,6 +16,7 @@ nor any other project module).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -78,16 +79,14 @@ def number_cells(tools, v: np.ndarray, end: str):
     return pa.StringArray.from_buffers(len(v), pa.py_buffer(offsets), pa.py_buffer(data))
 
 
-def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts):
+def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: bool | None = None):
     """:func:`number_cells` of a float64 column whose non-finite values take ``texts``. A
-    column that mostly repeats its values (a grid's coordinates; judged on 256 rows spread
-    over it) has each distinct value (by its bits: -0.0 is not 0.0) written once and the
-    cells taken by index (27 against 45 ns a value for 1000 distinct x of a 16 384-row block)."""
+    column that repeats its values (:func:`_repeats`) has each distinct value (by its bits:
+    -0.0 is not 0.0) written once and the cells taken by index (``repeated``: that judgement,
+    when the caller made it)."""
     _, pa, pc = tools
-    bits = v.view(np.int64)
-    sample = bits[::max(1, len(bits) // 256)]
-    if len(v) > 64 and 4 * len(np.unique(sample)) < len(sample):
-        enc = pc.dictionary_encode(pa.array(bits))
+    if _repeats(v) if repeated is None else repeated:
+        enc = pc.dictionary_encode(pa.array(v.view(np.int64)))
         return _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), end, texts).take(enc.indices)
     finite = np.isfinite(v)
     if finite.all():
@@ -109,9 +108,97 @@ def _one_text(tools, v: np.ndarray, texts: CellTexts) -> str:
     return tools[0].dumps(v[:1], option=tools[0].OPT_SERIALIZE_NUMPY)[1:-1].decode()  # as number_cells writes it
 
 
-def column_parts(tools, columns, afters) -> list:
+def _repeats(v: np.ndarray) -> bool:
+    """Whether a float64 column repeats its values enough that writing each distinct one
+    once and taking the cells by index is the cheaper (a grid's coordinates: 27 against
+    45 ns a value for the 1000 distinct x of a 16 384-row block), judged by its bits (-0.0
+    is not 0.0) on 1024 rows spread over it in a scrambled order (a strided sample sees a
+    grid's period as distinct values): under 80 % of them distinct."""
+    if len(v) <= 64:
+        return False
+    at = _sample_rows(len(v))
+    sample = np.sort(v.view(np.int64)[at])
+    return 5 * (1 + np.count_nonzero(sample[1:] != sample[:-1])) < 4 * len(at)  # the distinct values of the sample
+
+
+@lru_cache(maxsize=8)
+def _sample_rows(n: int) -> np.ndarray:
+    """:func:`_repeats`' rows of a column of ``n``: 1024 (or all), 7919 apart modulo ``n``
+    (a prime: they spread over the block in a scrambled order)."""
+    return (np.arange(min(n, 1024), dtype=np.int64) * 7919) % n
+
+
+def _kinds(tools, columns, afters):
+    """Each column's values (contiguous), and what it is: ``("text", str)`` one value
+    throughout; ``("same", j)`` the bits and texts of the earlier column ``j`` (and the same
+    first character after it); ``("plain", None)`` cells of its own, each with the first
+    character after it; ``("any", None)`` cells that take any literal text around them at
+    no cost (bools by ``if_else`` of two texts, repeated values by the texts of the distinct
+    ones)."""
+    values, kinds = [], []
+    for i, ((v, texts), after) in enumerate(zip(columns, afters)):
+        v = np.asarray(v)
+        v = np.ascontiguousarray(v) if v.dtype == bool or v.dtype.kind in "iu" else np.ascontiguousarray(v, np.float64)
+        raw = v.view(np.int64 if v.dtype.itemsize == 8 else np.int8).reshape(len(v), -1)  # by bits: -0.0 is not 0.0
+        values.append(v)
+        if not len(v) or (raw == raw[0]).all():  # one value throughout (a constant MPE, an unused column): one text
+            kinds.append(["text", _one_text(tools, v, texts) if len(v) else ""])
+            continue
+        same = [j for j in range(i) if kinds[j][0] in ("plain", "any") and columns[j][1] == texts
+                and afters[j][0] == after[0] and values[j].dtype == v.dtype
+                and np.array_equal(values[j][:64].view(np.int8), v[:64].view(np.int8))
+                and np.array_equal(values[j].view(np.int8), v.view(np.int8))]
+        if same:
+            kinds[same[0]][0] = "plain"  # its cells serve both: no literal text taken in
+            kinds.append(["same", same[0]])
+        elif v.dtype == bool or (v.dtype.kind == "f" and _repeats(v)):
+            kinds.append(["any", None])
+        else:
+            kinds.append(["plain", None])
+    return values, kinds
+
+
+def _row_items(kinds, afters, head) -> list:
+    """The row as items: ``["lit", bytes]``, ``["arr", array]`` (a part of ``head``) or
+    ``["col", i, lead, trail]`` (column ``i``'s cells: ``lead``, its text, ``trail``; the
+    first character after a column always in its cells), consecutive literals merged, and
+    each ASCII literal taken into the cells on its either side of an ``any`` column (the
+    left one first)."""
+    seq: list = []
+
+    def lit(b: bytes):
+        if b:
+            if seq and seq[-1][0] == "lit":
+                seq[-1][1] += b
+            else:
+                seq.append(["lit", b])
+
+    for h in head:
+        if isinstance(h, str):
+            lit(h.encode())
+        else:
+            seq.append(["arr", h])
+    for i, ((kind, text), after) in enumerate(zip(kinds, afters)):
+        if kind == "text":
+            lit(text.encode() + after.encode())
+        else:
+            seq.append(["col", i, b"", after[:1].encode()])
+            lit(after[1:].encode())
+    takes = [s[0] == "col" and kinds[s[1]][0] == "any" for s in seq]
+    for k, s in enumerate(seq):
+        if s[0] == "lit" and s[1].isascii():
+            if k > 0 and takes[k - 1]:
+                seq[k - 1][3], s[1] = seq[k - 1][3] + s[1], b""
+            elif k + 1 < len(seq) and takes[k + 1]:
+                seq[k + 1][2], s[1] = s[1], b""
+    return [s for s in seq if s[0] != "lit" or s[1]]
+
+
+def column_parts(tools, columns, afters, head=()) -> list:
     """The parts of every row (pyarrow string arrays, one cell each row, and str, the same
-    text in every row) for :func:`joined_rows`.
+    text in every row) for :func:`joined_rows`: the literal text beside a column of bools
+    or of repeated values taken into its cells (each part costs the join ~12 ns a row, a
+    literal as much as a column).
 
     Parameters
     ----------
@@ -122,30 +209,40 @@ def column_parts(tools, columns, afters) -> list:
     afters : list of str
         The text after each column's cell in the row (a separator, the line's end); not
         empty, its first character ASCII.
+    head : sequence of str or pyarrow string arrays
+        Parts before the first column (a row's name).
     """
     _, pa, pc = tools
+    values, kinds = _kinds(tools, columns, afters)
+    made: dict = {}
     parts: list = []
-    done: list = []  # (values, texts, first character after, cells) of the columns made so far
-    for (v, texts), after in zip(columns, afters):
-        v = np.asarray(v)
-        v = np.ascontiguousarray(v) if v.dtype == bool or v.dtype.kind in "iu" else np.ascontiguousarray(v, np.float64)
-        raw = v.view(np.int64 if v.dtype.itemsize == 8 else np.int8).reshape(len(v), -1)  # by bits: -0.0 is not 0.0
-        if not len(v) or (raw == raw[0]).all():  # one value throughout (a constant MPE, an unused column): one text
-            parts += [_one_text(tools, v, texts) if len(v) else "", after]
+    for s in _row_items(kinds, afters, head):
+        if s[0] != "col":
+            parts.append(s[1].decode() if s[0] == "lit" else s[1])
             continue
-        same = [c for (w, t, e, c) in done if t == texts and e == after[0] and w.dtype == v.dtype
-                and np.array_equal(w[:64].view(np.int8), v[:64].view(np.int8)) and np.array_equal(w.view(np.int8), v.view(np.int8))]
-        if same:
-            cells = same[0]
-        elif v.dtype == bool:
-            cells = pc.if_else(pa.array(v), texts.true + after[0], texts.false + after[0])
-        elif v.dtype.kind in "iu":
-            cells = number_cells(tools, v, after[0])
-        else:
-            cells = _float_cells(tools, v, after[0], texts)
-        done.append((v, texts, after[0], cells))
-        parts += [cells, after[1:]]
+        i, lead, trail = s[1:]
+        j = kinds[i][1] if kinds[i][0] == "same" else i
+        if j not in made:
+            made[j] = _cells(tools, values[j], lead.decode(), trail.decode(), columns[j][1], kinds[j][0] == "any")
+        parts.append(made[j])
     return parts
+
+
+def _cells(tools, v: np.ndarray, lead: str, trail: str, texts: CellTexts, repeated: bool):
+    """A column's cells, each ``lead`` + its text + ``trail`` (``trail`` not empty, its first
+    character ASCII; ``lead`` empty unless ``repeated``, or bools)."""
+    _, pa, pc = tools
+    if v.dtype == bool:
+        return pc.if_else(pa.array(v), lead + texts.true + trail, lead + texts.false + trail)
+    if v.dtype.kind in "iu":
+        return number_cells(tools, v, trail)
+    if not repeated:
+        return _float_cells(tools, v, trail, texts, repeated=False)
+    enc = pc.dictionary_encode(pa.array(v.view(np.int64)))  # each distinct value (by its bits) written once
+    cells = _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), trail[0], texts)
+    if lead or trail[1:]:
+        cells = pc.binary_join_element_wise(lead, cells, trail[1:], "")
+    return cells.take(enc.indices)
 
 
 def joined_rows(tools, parts, n: int, drop_last: int = 0):

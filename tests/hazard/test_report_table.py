@@ -386,3 +386,45 @@ def test_rows_json_names_of_groups_escaped_once_each():
     assert _same(got, json.loads(json.dumps(report.observer_rows(None, rows, cols))))
     block = np.arange(9)  # rows of one grid: the names by one join
     assert [r["name"] for r in _rows_from_columns(cols, block)] == [f'yard "B" \u00e9t\u00e9 \\ 1[{i}]' for i in range(9)]
+
+
+def test_csv_written_beside_the_caller_is_the_same_set(tmp_path, result):
+    """observers.csv written on its worker thread while the caller makes the map files
+    (``csv_started``, as ``hazard run`` does) or within ``write_set``: the same bytes in
+    every file as the table made in one piece on this thread."""
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.mkdir(), b.mkdir()
+    report.write_set(result, a, extra={"x.bin": b"x"})
+    with report.csv_started(result, b) as job:
+        names = report.write_set(result, b, extra={"x.bin": b"x"}, csv=job)
+    assert names == ["report.json", "observers.csv", "x.bin"]
+    assert (a / "observers.csv").read_bytes() == (b / "observers.csv").read_bytes() == \
+        report._csv_text(result, report.observer_columns(result)).encode()
+    for n in ("report.json", "x.bin"):
+        ra, rb = (a / n).read_text(), (b / n).read_text()
+        assert ra.split('"seconds"')[0] == rb.split('"seconds"')[0] and len(ra) > 0
+
+
+def test_a_failure_beside_the_csv_writer_stops_it_before_going_on(tmp_path, result):
+    """The caller fails while observers.csv is being written: the writer is stopped and
+    joined before the error goes on (nothing writes into a staging folder being discarded)."""
+    with pytest.raises(RuntimeError, match="map failed"):
+        with report.csv_started(result, tmp_path) as job:
+            raise RuntimeError("map failed")
+    assert not job._thread.is_alive() and job._stop.is_set()
+
+
+def test_the_csv_writers_error_reaches_the_caller(tmp_path, result):
+    """A writer that cannot write (no such folder) raises its error in the caller."""
+    with pytest.raises(FileNotFoundError):
+        with report.csv_started(result, tmp_path / "missing") as job:
+            pass
+    assert not job._thread.is_alive()
+
+
+def test_write_set_refuses_a_csv_writer_of_another_folder(tmp_path, result):
+    """A writer started for another folder is named, not joined to this set."""
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    with report.csv_started(result, tmp_path / "a") as job:
+        with pytest.raises(ValueError, match="observers.csv is being written into"):
+            report.write_set(result, tmp_path / "b", csv=job)

@@ -167,3 +167,160 @@ def test_geojson_bytes_same_values_and_never_a_hidden_nan():
         geojson_bytes({**doc, "bad": float("nan")})
     with_null = {**doc, "none": None}
     assert geojson_bytes(with_null) == json.dumps(with_null, indent=None, allow_nan=False).encode()
+
+
+_SEPS = [",", ";", "|x|", ", \"k\": ", "|\u00e9|", "\r\n"]  # each a text no cell holds (its first character ASCII)
+
+
+def _layout(bits, kinds, seps, head_text):
+    """Columns of each kind: distinct (random bit patterns), repeated (each of ``bits`` 70
+    times: written once each, the literal beside it taken into its cells), bools,
+    one value throughout (a literal), and a copy of the first column (its cells shared)."""
+    v = np.asarray(bits, np.uint64).view(np.float64)
+    n = len(v) * 70
+    cols = []
+    for j, k in enumerate(kinds):
+        w = np.roll(np.repeat(v, 70), 3 * j)
+        cols.append({"distinct": _doubles(n, len(v) + j), "repeated": w, "bool": w > 0, "one": np.full(n, v[0]),
+                     "copy": cols[0] if cols else w}[k])
+    afters = [seps[j % len(seps)] for j in range(len(cols) - 1)] + ["\r\n"]
+    return cols, afters, [head_text]
+
+
+def _split_rows(text: str, head: str, afters, n: int) -> list:
+    """Each row's cells, read off by the known texts between them (no cell holds one)."""
+    rows, at = [], 0
+    for _ in range(n):
+        assert text.startswith(head, at)
+        at += len(head)
+        cells = []
+        for sep in afters:
+            end = text.index(sep, at)
+            cells.append(text[at:end])
+            at = end + len(sep)
+        rows.append(cells)
+    assert at == len(text)
+    return rows
+
+
+def _absorbed_round_trip(bits, kinds, seps, head_text, blank):
+    texts = row_text.CSV_TEXTS._replace(nan="") if blank else row_text.CSV_TEXTS
+    cols, afters, head = _layout(bits, kinds, seps, head_text)
+    parts = row_text.column_parts(TOOLS, [(c, texts) for c in cols], afters, head)
+    n = len(cols[0])
+    rows = _split_rows(bytes(row_text.joined_rows(TOOLS, parts, n)).decode(), head_text, afters, n)
+    for j, c in enumerate(cols):
+        for row, x in zip(rows, c.tolist()):
+            if c.dtype == bool:
+                assert row[j] == str(x), (j, row, x)
+            else:
+                assert _cell_is(row[j], x, blank), (j, row, x)
+    return parts
+
+
+_KINDS = st.lists(st.sampled_from(["distinct", "repeated", "bool", "one", "copy"]), min_size=1, max_size=7)
+
+
+@settings(derandomize=True, deadline=None, max_examples=25)
+@given(bits=_BITS, kinds=_KINDS, seps=st.lists(st.sampled_from(_SEPS[:-1]), min_size=1, max_size=4),
+       head_text=st.sampled_from(["", "o[", "\u00e9[", "\"name\": "]), blank=st.booleans())
+def test_literals_taken_into_the_cells_of_bools_and_repeated_values(bits, kinds, seps, head_text, blank):
+    """Any mix of distinct, repeated, bool, constant and copied columns, with literal text
+    (ASCII or not) between them: every cell reads back as its double (or bool, or the
+    NaN text), the literals where they were, whichever cells took them in."""
+    _absorbed_round_trip(bits, kinds, seps, head_text, blank)
+
+
+@pytest.mark.slow
+@settings(derandomize=True, deadline=None, max_examples=300)
+@given(bits=_BITS, kinds=_KINDS, seps=st.lists(st.sampled_from(_SEPS[:-1]), min_size=1, max_size=4),
+       head_text=st.sampled_from(["", "o[", "\u00e9[", "\"name\": "]), blank=st.booleans())
+def test_literals_taken_into_the_cells_of_bools_and_repeated_values_many(bits, kinds, seps, head_text, blank):
+    _absorbed_round_trip(bits, kinds, seps, head_text, blank)
+
+
+def test_literals_beside_bools_and_repeated_values_leave_no_part_of_their_own():
+    """The row text before, between and after a bool and a repeated column, and a constant
+    column between them, are all inside their cells: the join has two parts, not five."""
+    bits = np.array([1.5, -2.0, 0.25, 3.0], np.float64).view(np.uint64).tolist()
+    parts = _absorbed_round_trip(bits, ["bool", "one", "repeated"], [";"], "o[", False)
+    assert not any(isinstance(p, str) for p in parts) and len(parts) == 2
+
+
+def test_repeated_values_judged_on_a_scrambled_sample():
+    """A grid's x (1000 values, each 16 times in a block) is judged repeated (a sample
+    strided by 64 would see 125 distinct values in 256); distinct doubles are not."""
+    x = np.tile(np.linspace(-50.0, 50.0, 1000), 17)[:16_384]
+    assert row_text._repeats(x)
+    assert not row_text._repeats(_doubles(16_384, 3))
+    assert not row_text._repeats(np.repeat(x[:5], 10))  # 50 rows: too few to judge
+
+
+def _points(n: int, seed: int, names):
+    from hazard.outputs.map_zones import ObserverPoints
+
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3)) * 10.0 ** rng.integers(-3, 6, (n, 1))
+    p[::7, 0] = -0.0
+    haz = rng.random(n) < 0.4
+    return ObserverPoints(np.arange(n), p, _doubles(n, seed), _doubles(n, seed + 1)[::-1].copy(), haz,
+                          haz & (rng.random(n) < 0.5), [names[i % len(names)] for i in range(n)])
+
+
+def _feature_text(op, common) -> bytes:
+    """What the map wrote before: one dict per observer (map_zones.observer_zones), its
+    values made JSON-safe, and orjson's text of the list."""
+    import orjson
+
+    from hazard.outputs import map_outputs
+    from hazard.outputs.map_zones import observer_zones
+
+    feats = [{"type": "Feature", "geometry": {"type": "Point", "coordinates": tuple(np.round(op.position_m[i, :2], 4).tolist())},
+              "properties": {k: map_outputs._jsonable(v) for k, v in z.properties.items()}}
+             for i, z in enumerate(observer_zones(op, common))]
+    return orjson.dumps(feats)[1:-1]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_map_observer_features_column_by_column_are_the_dicts_text(seed):
+    """The observer points of the zones file made column by column: byte for byte orjson's
+    text of the per-observer dicts, for doubles from random bits (NaN, inf as strings),
+    -0.0 and large and small positions, names with quotes, backslashes, non-ASCII."""
+    from hazard.outputs import map_outputs
+
+    op = _points(600, seed, ['a"b[1]', "x\\", "\u00e9t\u00e9[12]", "plain", "tab\there"])
+    common = {"standard": "ansi-z136.1-2014", "exposure_duration_s": 0.25, "mpe_w_m2": 1e-7, "wavelength_nm": 1064.0, "scene": "s"}
+    assert map_outputs._observer_features(TOOLS, op, common) == _feature_text(op, common)
+    assert map_outputs._observer_features(TOOLS, op, {}) == _feature_text(op, {})
+
+
+def test_map_observer_features_left_to_the_dicts_where_their_text_differs():
+    """A position not finite (orjson would write null: json.dumps refuses it), a name with
+    ``null`` in it (the zones file then goes through json.dumps) or a common property that
+    would replace a point's own: None, and the map writes the dicts as before."""
+    from hazard.outputs import map_outputs
+
+    op = _points(20, 3, ["o"])
+    bad = _points(20, 3, ["o"])
+    bad.position_m[3, 1] = np.nan
+    assert map_outputs._observer_features(TOOLS, op, {"scene": "s"}) is not None
+    assert map_outputs._observer_features(TOOLS, bad, {"scene": "s"}) is None
+    assert map_outputs._observer_features(TOOLS, _points(20, 3, ["nullable"]), {"scene": "s"}) is None
+    assert map_outputs._observer_features(TOOLS, op, {"name": "x"}) is None
+
+
+def test_map_files_same_bytes_with_the_points_as_columns(monkeypatch):
+    """The whole zones file and the map section of a grid run: the same with the observer
+    points written column by column as with one zone dict each (the path kept for a site)."""
+    import hazard
+    import scenes
+    from hazard.outputs import map_outputs
+
+    text = scenes.example_path("plate").read_text().split("[[observers]]")[0]
+    result = hazard.analyze(scenes.loads(text + '[[observers]]\nname = "g"\norigin_m = [-5.0, -45.0, 1.5]\n'
+                                         'u_m = [10.0, 0.0, 0.0]\nv_m = [0.0, 33.0, 0.0]\ncounts = [30, 20]\n'))
+    fast, section = map_outputs.map_files(result)
+    assert section.features["observer"] == 600
+    monkeypatch.setattr(map_outputs, "_geojson_text", lambda *a: None)
+    slow, section2 = map_outputs.map_files(result)
+    assert fast == slow and section == section2
