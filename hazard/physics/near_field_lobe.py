@@ -238,7 +238,14 @@ def _smallest_extent_m(spot, frame) -> float:
 class NearLobeFn:
     """``fn(wo (N, 3)) -> range [m]`` in the spot's mean frame: the point form ``base``,
     raised to the near-field integral's farthest root where the grid of module notes says
-    so. ``info`` holds the grid's figures (directions integrated, scan step, seconds)."""
+    so. ``info`` holds the grid's figures (directions integrated, scan step) and the BRDF
+    work its build made (each ``f_r cos`` row counted where it is asked for, and times
+    the states it is asked at): the integral's kernel (``kernel_evaluations``,
+    ``kernel_state_evaluations``), the samples' bound ((point, sample) pairs:
+    ``bound_evaluations``, ``bound_state_evaluations``) and the point form ``base``
+    (directions of the grid, the peaks and the scan start's cone:
+    ``point_form_evaluations``, ``point_form_state_evaluations``); the directions the
+    lobe's users ask for afterwards are not in it (the keep-out lobe counts its own)."""
 
     def __init__(self, spot, base, mpe_w_m2, mu, gain, states):
         self.spot, self.base, self.mpe, self.mu, self.gain = spot, base, float(mpe_w_m2), float(mu), float(gain)
