@@ -238,7 +238,14 @@ def _smallest_extent_m(spot, frame) -> float:
 class NearLobeFn:
     """``fn(wo (N, 3)) -> range [m]`` in the spot's mean frame: the point form ``base``,
     raised to the near-field integral's farthest root where the grid of module notes says
-    so. ``info`` holds the grid's figures (directions integrated, scan step, seconds)."""
+    so. ``info`` holds the grid's figures (directions integrated, scan step) and the BRDF
+    work its build made (each ``f_r cos`` row counted where it is asked for, and times
+    the states it is asked at): the integral's kernel (``kernel_evaluations``,
+    ``kernel_state_evaluations``), the samples' bound ((point, sample) pairs:
+    ``bound_evaluations``, ``bound_state_evaluations``) and the point form ``base``
+    (directions of the grid, the peaks and the scan start's cone:
+    ``point_form_evaluations``, ``point_form_state_evaluations``); the directions the
+    lobe's users ask for afterwards are not in it (the keep-out lobe counts its own)."""
 
     def __init__(self, spot, base, mpe_w_m2, mu, gain, states):
         self.spot, self.base, self.mpe, self.mu, self.gain = spot, base, float(mpe_w_m2), float(mu), float(gain)
@@ -252,6 +259,8 @@ class NearLobeFn:
         self.floor = None  # through an aid (gain > 1): the naked eye's lobe, which it never falls below
         self.evaluations = self.bound_points = 0  # kernel evaluations of the integral; points the bound decided
         self.state_evaluations = 0  # those evaluations times the states each was evaluated at
+        self.bound_evaluations = 0  # (point, sample) pairs of the samples' bound (_upper: f_r cos at every state of ``states``)
+        self.point_form_evaluations = 0  # directions of the point form ``base`` evaluated by the build (grid, peaks, scan start's cone)
 
     # -- the integral ------------------------------------------------------------------------
     def _setup(self, reach_m, peaks):
@@ -262,7 +271,7 @@ class NearLobeFn:
         self.ext_m = float(sp.extent_m)
         rot = np.einsum("nij,kj->nik", np.asarray(sp.frames, float), self.frame)  # each sample's frame in the mean one
         self.tilt_rad = float(np.arccos(np.clip((np.trace(rot, axis1=1, axis2=2).min() - 1) / 2, -1.0, 1.0)))
-        self.peaks, self.r_peaks = peaks, np.asarray(self.base(peaks), float)
+        self.peaks, self.r_peaks = peaks, np.asarray(self._point_form(peaks), float)
         self.pts, self.p_w = np.asarray(sp.points, float), np.asarray(sp.power_w, float)
         self.a_m = np.asarray(sp.patches.radius_m, float)
         spread = np.zeros(len(self.pts)) if sp.spread_m2 is None else np.asarray(sp.spread_m2, float)
@@ -314,6 +323,15 @@ class NearLobeFn:
         peaks = np.concatenate([dirs[np.argmax(r0)][None], wi[None] * np.array([[-1.0, -1, 1]]), wi[None]])
         self._setup(float(r0.max()), peaks)
 
+    def _n_states(self) -> int:
+        """The states each BRDF evaluation of the build is made at (1 without a history)."""
+        return 1 if self.states is None else len(self.states)
+
+    def _point_form(self, w_loc):
+        """``base`` at mean-frame directions (N, 3), counted (``point_form_evaluations``)."""
+        self.point_form_evaluations += len(w_loc)
+        return self.base(w_loc)
+
     def _upper(self, pts):
         """Upper bounds of the integral / MPE at world points ``pts`` (M, 3): the samples'
         point forms plus their Taylor remainders ``k_i 12 sigma_i^2 / (d_i - a_i)^4``
@@ -329,6 +347,7 @@ class NearLobeFn:
             parts = [self._upper(pts[a:a + step]) for a in range(0, len(pts), step)]
             return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
         sp = self.spot
+        self.bound_evaluations += len(pts) * len(self.pts)
         v = pts[:, None, :] - self.pts[None]
         d = np.maximum(np.sqrt((v * v).sum(-1)), 1e-300)  # (M, n)
         wo = np.einsum("nij,mnj->mni", sp.frames, v / d[..., None]).reshape(-1, 3)
@@ -418,8 +437,8 @@ class NearLobeFn:
         d = d.reshape(len(w_loc), -1, 3)
         d[..., 2] = np.maximum(d[..., 2], 0.0)
         d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
-        best = np.asarray(self.base(d.reshape(-1, 3)), float).reshape(len(w_loc), -1).max(axis=1)
-        best = np.maximum(best, np.asarray(self.base(w_loc), float))
+        best = np.asarray(self._point_form(d.reshape(-1, 3)), float).reshape(len(w_loc), -1).max(axis=1)
+        best = np.maximum(best, np.asarray(self._point_form(w_loc), float))
         inside = np.arccos(np.clip(w_loc @ self.peaks.T, -1.0, 1.0)) <= alpha[:, None]
         return np.maximum(best, np.where(inside, self.r_peaks[None, :], 0.0).max(axis=1))
 
@@ -481,7 +500,7 @@ class NearLobeFn:
         ph = np.radians(np.arange(-180.0, 180.0 + 1e-9, GRID_PHI_DEG))
         tt, pp = np.meshgrid(th, ph, indexing="ij")
         dirs = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
-        r0 = np.asarray(self.base(dirs), float)
+        r0 = np.asarray(self._point_form(dirs), float)
         # a lobe that is 0 in every direction (f_r cos P = 0: a pure mirror's, whose beam the mirror
         # stage handles) has no near field either; the scan would end on the spot itself, where the
         # bound's remainders give a 1e-12 m "lobe" and a hazard zone that is not one
@@ -512,7 +531,11 @@ class NearLobeFn:
         self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
                      "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
                      "kernel_evaluations": int(self.evaluations),
-                     "kernel_state_evaluations": int(self.state_evaluations), "points_by_bound": int(self.bound_points)}
+                     "kernel_state_evaluations": int(self.state_evaluations), "points_by_bound": int(self.bound_points),
+                     "bound_evaluations": int(self.bound_evaluations),
+                     "bound_state_evaluations": int(self.bound_evaluations * self._n_states()),
+                     "point_form_evaluations": int(self.point_form_evaluations),
+                     "point_form_state_evaluations": int(self.point_form_evaluations * self._n_states())}
 
     def envelope(self, wo):
         """The near-field range [m] at mean-frame directions (N, 3) from the grid (0 in

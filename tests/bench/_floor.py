@@ -22,6 +22,7 @@ from threadpoolctl import threadpool_limits
 QUICK = os.environ.get("BENCH_QUICK", "0").strip() not in ("", "0")
 REPEAT = 5  # every time [s] is the median of 5 runs, the real path's and its floor's alike
 MAP_BLOCK = 32768  # observers per block, as the map's (hazard.pipeline.irradiance_map.MAP_CHUNK)
+BRDF_BLOCK = 1 << 18  # (row, state) values per BRDF call, as the near field's kernel batches them (hazard.physics.near_field._NODE_BLOCK)
 
 
 def median_s(fn, repeat=REPEAT):
@@ -191,6 +192,24 @@ class MapFloor:
         with threadpool_limits(1, user_api="blas"), ThreadPoolExecutor(self.threads) as pool:
             list(pool.map(lambda ab: self.block(*ab), bounds))
         return self.peak
+
+
+def brdf_blocked(material, wi, wo, states, row_scale=None, reduce=None, group=1, post=None):
+    """``projected_brdf`` at rows ``wo`` (N, 3) and ``states`` (T,) in calls of at most
+    :data:`BRDF_BLOCK` (row, state) values, whole groups of ``group`` rows each (as the
+    real path blocks its evaluations: one huge call is memory-bound and unsteady, 0.79-1.27 s
+    CPU for 2.3e7 values against a steady 0.72 s in blocks), each block's values handed to
+    ``post`` (the reduction the real path makes of them). Returns the rows evaluated."""
+    from hazard.physics.engine import projected_brdf
+
+    k = 1 if states is None else len(states)
+    step = max(group, (BRDF_BLOCK // max(k, 1)) // group * group)
+    for a in range(0, len(wo), step):
+        b = min(len(wo), a + step)
+        f = projected_brdf(material, wi[a:b], wo[a:b], states, None if row_scale is None else row_scale[a:b], reduce)
+        if post is not None:
+            post(f)
+    return len(wo)
 
 
 def mpe_of_elapsed(scene, times_s):

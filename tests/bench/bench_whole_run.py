@@ -12,9 +12,16 @@ shared machine stays out), median of 5. Floor, measured in the same run alternat
 the whole runs, each part on its own (CPU time, median of 5): reading and parsing the scene file and the material file; the raw
 embreex build of the same triangles; the complete map written by hand
 (:class:`tests.bench._floor.MapFloor`: points, occlusion queries, basis, GEMM, exp, peak,
-exposure and first exceedance, on the map's threads); and one BRDF evaluation of the keep-out lobes' 2x2
-Gauss points on the initial grid (static and dynamic), and the near-field lobes' integrals
-(as many kernel evaluations as they made, at as many states in all: ``kernel_state_evaluations``). Goal (issue 37): ratio <= 1.3.
+exposure and first exceedance, on the map's threads); the keep-out lobes' point form at
+every direction they evaluated (their ``evaluations``: grid levels, refinement, polish); and
+the near-field lobes' BRDF work, counted by the lobes themselves (their ``near_field``
+info): the integrals' kernel (``kernel_evaluations`` at ``kernel_state_evaluations`` states
+in all), the samples' bound (``bound_evaluations`` pairs at every path state) and the
+build's point form (``point_form_evaluations``: grid, peaks, the scan start's cone). Every
+BRDF part is evaluated in calls of at most 2^18 (row, state) values, as the real path's
+kernel batches them (:func:`tests.bench._floor.brdf_blocked`): one call of 2.3e7 values
+is memory-bound and took 0.79-1.27 s CPU from one run to the next for the same work.
+Goal (issue 37): ratio <= 1.3.
 Reported: time, floor and its parts, ratio, and the stages' wall times of the median run.
 """
 
@@ -31,10 +38,9 @@ import brdfmodels as bm
 import hazard
 import scenes
 from hazard.physics import rays
-from hazard.physics.engine import projected_brdf, spot_directions
-from hazard.physics.keepout import _cell_points, _grid_cells
+from hazard.physics.engine import path_states, spot_directions
 
-from ._floor import MapFloor, RawEmbree, blas_one_thread, cpu_s
+from ._floor import MapFloor, RawEmbree, blas_one_thread, brdf_blocked, cpu_s
 from .bench_engine import SCENE, write_material
 
 
@@ -77,42 +83,100 @@ def _floor_once(path, scene, res) -> tuple:
     floor = MapFloor(scene, scene.targets[0].material, res.times_s, tracer)
     parts["map"], _ = cpu_s(floor)
     sp = res.spots[0]
-    wo = _cell_points(_grid_cells(scene.spec.analysis.direction_grid_deg)).reshape(-1, 3)
-    wi = np.broadcast_to(spot_directions(sp), wo.shape)
-    states = res.states[sp.target.index]
-    parts["keepout_evaluation"], _ = cpu_s(lambda: (projected_brdf(sp.material, wi, wo, states[:1], reduce="max"),
-                                                    projected_brdf(sp.material, wi, wo, np.unique(states), reduce="max")))
-    parts["keepout_near_field"], _ = cpu_s(lambda: _near_field_floor(res, sp, states))
+    lobes = _lobes(res, sp)
+    parts["keepout_evaluation"], _ = cpu_s(lambda: _lobe_floor(sp, lobes))
+    kernel, bound, point_form = _near_field_floor(sp, lobes)
+    parts["keepout_near_field"], _ = cpu_s(kernel)
+    parts["keepout_bound"], _ = cpu_s(bound)
+    parts["keepout_point_form"], _ = cpu_s(point_form)
     return parts, floor
 
 
-def _near_field_floor(res, sp, states):
-    """The near-field lobes' kernel work by hand: as many ``f_r cos`` evaluations as the
-    lobes' integrals made (their ``kernel_evaluations``), at as many states in all as
-    they were evaluated at (``kernel_state_evaluations``: most points at one state, some
-    at the whole path), in one call per lobe and state count, summed per point (groups
-    of 1024) and the largest state taken. Random directions above the spot: the cost of
-    an SH evaluation depends on neither the directions nor the states' values."""
-    rng = np.random.default_rng(0)
+def _lobes(res, sp):
+    """The spot's keep-out lobes (static, and dynamic when it is another), each with the
+    states its lobe function evaluates the point form at (:func:`path_states`)."""
     t = res.targets[sp.target.index]
-    lobes = [t.static_lobe] + ([t.dynamic_lobe] if t.dynamic_lobe is not t.static_lobe else [])
-    lo, hi = float(np.min(states)), float(np.max(states))
-    for lobe in lobes:
-        info = lobe.near_field or {}
-        n, n_states = int(info.get("kernel_evaluations", 0)), int(info.get("kernel_state_evaluations", 0))
-        if not n:
-            continue
-        q = n_states // n  # (n - extra) rows at q states, extra rows at q + 1: n_states in all
-        extra = n_states - q * n
-        for rows, k in ((n - extra, q), (extra, q + 1)):
-            if not rows or not k:
+    states = res.states[sp.target.index]
+    out = [(t.static_lobe, path_states(sp.material, states[:1]))]
+    if t.dynamic_lobe is not t.static_lobe:
+        out.append((t.dynamic_lobe, path_states(sp.material, states)))
+    return out
+
+
+def _above(rng, n):
+    """``n`` random unit vectors above the spot (the cost of an SH evaluation depends on
+    neither the directions nor the states' values)."""
+    wo = rng.normal(size=(n, 3))
+    wo[:, 2] = np.abs(wo[:, 2])
+    return wo / np.linalg.norm(wo, axis=1, keepdims=True)
+
+
+def _lobe_floor(sp, lobes):
+    """The keep-out lobes' own directions by hand: as many point-form ``f_r cos`` rows as
+    each lobe evaluated (its ``evaluations``: the grid's 2x2 Gauss points and midpoints
+    at every refinement level, the mirror and retro directions, the polish), at the
+    lobe's path states, ``reduce="path-max"`` as the lobe's, in blocks
+    (:func:`brdf_blocked`). (Directions other stages ask the lobe for, outlines and
+    renders, are left out: the floor stays below the real work.)"""
+    rng = np.random.default_rng(1)
+    wi0 = spot_directions(sp)
+    for lobe, st in lobes:
+        wo = _above(rng, int(lobe.evaluations))
+        brdf_blocked(sp.material, np.broadcast_to(wi0, wo.shape), wo, st, reduce="path-max")
+
+
+def _near_field_floor(sp, lobes):
+    """The near-field lobes' BRDF work by hand, three parts (each a function to time), per
+    lobe with a near-field grid (its ``near_field`` info) and each in blocks of
+    :data:`BRDF_BLOCK` values as the real path batches them (:func:`brdf_blocked`):
+
+    * the integral's kernel: as many ``f_r cos`` evaluations as its integrals made
+      (``kernel_evaluations``), at as many states in all (``kernel_state_evaluations``:
+      most points at one state, some at the whole path), with a row factor, summed per
+      point (groups of 1024) and the largest state taken;
+    * the samples' bound: its (point, sample) pairs (``bound_evaluations``) at every
+      state of the lobe's path (``bound_state_evaluations``), with a row factor, summed
+      over each point's samples;
+    * the build's point form: its directions (``point_form_evaluations``: the grid, the
+      peaks, the scan start's cone) at the path's states, ``reduce="path-max"``."""
+    infos, seen = [], set()
+    for lobe, st in lobes:
+        info = lobe.near_field
+        if info and id(info) not in seen and int(info.get("kernel_evaluations", 0)) + int(info.get("point_form_evaluations", 0)):
+            seen.add(id(info))  # a lobe function shared by two lobes did its work once
+            assert int(info["bound_state_evaluations"]) == int(info["bound_evaluations"]) * len(st)
+            infos.append((info, st))
+    wi0, n_samples = spot_directions(sp), len(sp.points)
+
+    def kernel():
+        rng = np.random.default_rng(0)
+        for info, st in infos:
+            n, n_states = int(info["kernel_evaluations"]), int(info["kernel_state_evaluations"])
+            if not n:
                 continue
-            wo = rng.normal(size=(rows, 3))
-            wo[:, 2] = np.abs(wo[:, 2])
-            wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-            wi = np.broadcast_to(spot_directions(sp), wo.shape)
-            f = projected_brdf(sp.material, wi, wo, np.linspace(lo, hi, k), np.full(rows, 1.0))
-            np.add.reduceat(f, np.arange(0, rows, 1024), axis=0).max(axis=-1)
+            q = n_states // n  # (n - extra) rows at q states, extra rows at q + 1: n_states in all
+            extra = n_states - q * n
+            for rows, k in ((n - extra, q), (extra, q + 1)):
+                if rows and k:
+                    wo = _above(rng, rows)
+                    brdf_blocked(sp.material, np.broadcast_to(wi0, wo.shape), wo, np.linspace(st.min(), st.max(), k), np.ones(rows),
+                                 post=lambda f: np.add.reduceat(f, np.arange(0, len(f), 1024), axis=0).max(axis=-1))
+
+    def bound():
+        rng = np.random.default_rng(2)
+        for info, st in infos:
+            rows = int(info["bound_evaluations"])
+            wo = _above(rng, rows)
+            brdf_blocked(sp.material, np.broadcast_to(wi0, wo.shape), wo, st, np.ones(rows), group=n_samples,
+                         post=lambda f: f.reshape(-1, n_samples, f.shape[-1]).sum(axis=1))
+
+    def point_form():
+        rng = np.random.default_rng(3)
+        for info, st in infos:
+            wo = _above(rng, int(info["point_form_evaluations"]))
+            brdf_blocked(sp.material, np.broadcast_to(wi0, wo.shape), wo, st, reduce="path-max")
+
+    return kernel, bound, point_form
 
 
 def run(rows=1000, n_states=100, verbose=True, repeat=5) -> dict:

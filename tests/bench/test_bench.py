@@ -50,7 +50,7 @@ def test_bench_hazard_map():
     check_goal("hazard map stages", res["ratio"], goal(1.3, 5.0))  # quick: 1.4-3.5 in CPU time at load 5-25 (0.05-0.08 s floor)
 
 
-@not_met("issue 37: whole run 1.46-1.57 in CPU time against the complete, unpadded floor (2026-11-26, load 10-15; 1.82 before): the near-field lobes 1.5 s against 1.03 s of kernel work; goal 1.3")
+@not_met("issue 37: whole run 1.36-1.44 in CPU time against the complete floor, its BRDF work blocked as the real path's (x40, 2026-11-26, load 2.5-3.9; 1.27-1.49 against the one-call floor without the bound and the refinement): the keep-out lobes' non-BRDF work; goal 1.3")
 def test_bench_whole_run():
     from .bench_whole_run import run
 

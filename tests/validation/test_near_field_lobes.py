@@ -553,3 +553,69 @@ def test_state_evaluations_count_each_kernel_evaluation_at_its_states(seed, n_st
     made = fn.evaluations - before[0], fn.state_evaluations - before[1]
     assert n > 0 and made == (n, n_states_done)
     assert n <= made[1] <= n * n_states
+
+
+@settings(ref.FAST, max_examples=2)
+@given(n_states=st.integers(1, 12), mpe_scale=st.floats(0.3, 3.0))
+def test_build_counters_are_every_brdf_row_it_evaluates(n_states, mpe_scale):
+    """:func:`_check_build_counters` on a few draws."""
+    _check_build_counters(n_states, mpe_scale)
+
+
+@pytest.mark.slow
+@settings(ref.SLOW, max_examples=24)
+@given(n_states=st.integers(1, 40), mpe_scale=st.floats(0.05, 20.0))
+def test_build_counters_are_every_brdf_row_it_evaluates_many(n_states, mpe_scale):
+    """:func:`_check_build_counters` over more states and MPEs (slow: ~0.3 s a draw)."""
+    _check_build_counters(n_states, mpe_scale)
+
+
+def _check_build_counters(n_states, mpe_scale):
+    """The lobe's counters of BRDF work (the near-field floor of tests/bench/bench_whole_run.py
+    repeats each) are exactly the rows of ``f_r cos`` its build asks for, counted here by
+    wrapping the three callers of ``projected_brdf``: the point form ``base``
+    (``point_form_evaluations``: the grid, the peaks, the scan start's cone), the samples'
+    bound (``bound_evaluations``: (point, sample) pairs) and the integral's kernel
+    (``kernel_evaluations``); each ``*_state_evaluations`` the rows times the states each
+    call was made at. A fresh lobe function (not the memoised one), MPE scaled so that
+    the scans differ."""
+    from hazard.physics import engine, keepout
+    from hazard.physics.engine import path_states
+
+    res = bundled_witness()
+    spot = res.spots[0]
+    lo, hi = spot.material.state_range
+    states = path_states(spot.material, np.linspace(lo, hi, n_states))
+    mpe = res.mpe_w_m2 * mpe_scale
+    base = nohd_range_fn(spot, mpe, 0.0, 1.0, np.linspace(lo, hi, n_states), near_field=False)
+    rows = {"base": [0, 0], "bound": [0, 0], "kernel": [0, 0]}
+    real = {m: m.projected_brdf for m in (keepout, near_field_lobe, engine)}
+
+    def counting(module, key):
+        def f(model, wi, wo, st_=None, row_scale=None, reduce=None):
+            rows[key][0] += len(wo)
+            rows[key][1] += len(wo) * (1 if st_ is None else len(st_))
+            return real[module](model, wi, wo, st_, row_scale, reduce)
+        return f
+
+    fn = near_field_lobe.NearLobeFn(spot, base, mpe, 0.0, 1.0, states)
+    for module, key in ((keepout, "base"), (near_field_lobe, "bound"), (engine, "kernel")):
+        module.projected_brdf = counting(module, key)
+    try:
+        fn.envelope(np.array([[0.0, 0.0, 1.0]]))  # builds the grid; the envelope itself evaluates no BRDF
+    finally:
+        for module, f in real.items():
+            module.projected_brdf = f
+    info = fn.info
+    assert rows["base"][0] > 0  # the grid at least
+    assert [info["point_form_evaluations"], info["point_form_state_evaluations"]] == rows["base"]
+    assert [info["bound_evaluations"], info["bound_state_evaluations"]] == rows["bound"]
+    assert [info["kernel_evaluations"], info["kernel_state_evaluations"]] == rows["kernel"]
+    assert rows["base"][1] == rows["base"][0] * len(states) and rows["bound"][1] == rows["bound"][0] * len(states)
+
+
+def bundled_witness():
+    """The witness screen's analysis (a state-looping dynamic material; read only)."""
+    from tests._bundled import bundled
+
+    return bundled("witness_screen")
