@@ -42,15 +42,14 @@ def test_bench_evaluate_many():
     check_goal("evaluate_many", res["ratio"], goal(1.5, 3.0))
 
 
-@not_met("issue 37: map stages 1.34-1.35 in CPU time against the complete floor, the points counted (2026-11-26, load 11-15): at the edge; goal 1.3")
-def test_bench_hazard_map():
+def test_bench_hazard_map():  # issue 37: 1.16-1.23 in CPU time, quiet (2026-11-26, load 0.9-1.3; 1.34-1.35 before the plain lines of sight)
     from .bench_engine import run
 
     res = run(rows=50 if QUICK else 1000)
     check_goal("hazard map stages", res["ratio"], goal(1.3, 5.0))  # quick: 1.4-3.5 in CPU time at load 5-25 (0.05-0.08 s floor)
 
 
-@not_met("issue 37: whole run 1.36-1.44 in CPU time against the complete floor, its BRDF work blocked as the real path's (x40, 2026-11-26, load 2.5-3.9; 1.27-1.49 against the one-call floor without the bound and the refinement): the keep-out lobes' non-BRDF work; goal 1.3")
+@not_met("issue 37: whole run 1.32-1.35 in CPU time against the complete floor (its BRDF work blocked as the real path's, the bound and the point form counted), quiet (2026-11-26, load 0.9-1.3): the keep-out lobes' non-BRDF work, the direct beam and the subtense outside the floor; goal 1.3")
 def test_bench_whole_run():
     from .bench_whole_run import run
 
@@ -58,7 +57,7 @@ def test_bench_whole_run():
     check_goal("whole run", res["ratio"], goal(1.3, 4.0))
 
 
-@not_met("issue 37: outputs 1.19-1.58x the analysis in wall time, 1.18-1.54x in CPU (user ~0.8 s against 0.9; the kernel's page allocation for 334 MB of new files 0.1-0.6 s) at 1e6 observers, 2026-11-26, load 1.6-3.2, not quiet; 1.53-1.91 wall, 1.49-1.73 CPU before, alternated; goal 1")
+@not_met("issue 37: outputs 0.97-1.14x the analysis in wall time, 1.19-1.43x in CPU at 1e6 observers, quiet (2026-11-26, load 1.0-1.5; observers.csv formatted beside the map and report.json); goal 1 (wall): met in one run of three")
 def test_bench_outputs():
     from .bench_outputs import run
 
