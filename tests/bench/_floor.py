@@ -122,7 +122,7 @@ class MapFloor:
     could exceed it). Everything the map computes and nothing else; no checks, no near
     field, no sparse bookkeeping."""
 
-    def __init__(self, scene, material, times_s, tracer, threads=None):
+    def __init__(self, scene, material, times_s, tracer, threads=None, keep_points=False):
         from brdfmodels.states import interpolation_weights
 
         self.part = scene.observers.parts[0]
@@ -156,11 +156,14 @@ class MapFloor:
         self.static = np.zeros(self.n)
         self.exposure = np.zeros(self.n)
         self.first = np.full(self.n, np.nan)
+        self.points = np.empty((self.n, 3)) if keep_points else None  # kept for the direct beam and the subtense (as the real path keeps them)
 
     def block(self, a0, a1):
         from brdfmodels.geometry import half_diff_parts
 
         p = self.part.at(np.arange(a0, a1))
+        if self.points is not None:
+            self.points[a0:a1] = p
         d = p - self.centre
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         wo = (d / r[:, None]) @ self.frame.T

@@ -40,7 +40,7 @@ import scenes
 from hazard.physics import rays
 from hazard.physics.engine import path_states, spot_directions
 
-from ._floor import MapFloor, RawEmbree, blas_one_thread, brdf_blocked, cpu_s
+from ._floor import MAP_BLOCK, MapFloor, RawEmbree, blas_one_thread, brdf_blocked, cpu_s
 from .bench_engine import SCENE, write_material
 
 
@@ -80,9 +80,11 @@ def _floor_once(path, scene, res) -> tuple:
     terrain = scene.terrain.mesh()
     meshes.append((terrain.vertices, terrain.faces))
     parts["embree_build"], tracer = cpu_s(lambda: RawEmbree(meshes))
-    floor = MapFloor(scene, scene.targets[0].material, res.times_s, tracer)
+    floor = MapFloor(scene, scene.targets[0].material, res.times_s, tracer, keep_points=True)
     parts["map"], _ = cpu_s(floor)
     sp = res.spots[0]
+    parts["direct"], floor.direct = cpu_s(lambda: _by_block(_direct_floor, floor.points, res.beam, _reach_m(scene)))
+    parts["subtense"], floor.alpha = cpu_s(lambda: _by_block(_subtense_floor, floor.points, res.beam, sp))
     lobes = _lobes(res, sp)
     parts["keepout_evaluation"], _ = cpu_s(lambda: _lobe_floor(sp, lobes))
     kernel, bound, point_form = _near_field_floor(sp, lobes)
@@ -90,6 +92,55 @@ def _floor_once(path, scene, res) -> tuple:
     parts["keepout_bound"], _ = cpu_s(bound)
     parts["keepout_point_form"], _ = cpu_s(point_form)
     return parts, floor
+
+
+def _reach_m(scene) -> float:
+    """The largest radius [m] of the observers' limiting apertures (7 mm pupils: 3.5 mm; no aids here)."""
+    assert all(o is None for o in scene.observers.optics), "the floor is written for observers without optical aids"
+    return 3.5e-3
+
+
+def _by_block(fn, points, *args):
+    """``fn(points[a:b], *args)`` over blocks of :data:`MAP_BLOCK` rows, joined (as the real
+    path works through its observers: small arrays, no large fresh allocations)."""
+    return np.concatenate([fn(points[a:a + MAP_BLOCK], *args) for a in range(0, len(points), MAP_BLOCK)])
+
+
+def _direct_floor(p, beam, reach_m):
+    """The direct beam at every observer by hand: each point's axial distance z and offset
+    from the axis in 1/e radii w(z) = (D + z phi) / 2; the Gaussian exp(-|s|^2) is exactly 0
+    in float64 beyond |s| = 27.3, and an aperture of radius ``reach_m`` reaches at most that
+    much closer. The benchmark's observers are all beyond it (checked, so the floor needs
+    no evaluation there): the irradiance is 0 for every one."""
+    rel = p - beam.position_m
+    z = rel @ beam.axis
+    w = 0.5 * (beam.diameter_m + z * beam.divergence_rad)
+    s1, s2 = rel @ beam.e1, rel @ beam.e2
+    off = np.sqrt(s1 * s1 + s2 * s2)
+    reach = (z >= 0) & (off - reach_m < 27.3 * w)
+    assert not reach.any(), "the floor's direct beam is written for observers the beam does not reach"
+    return np.zeros(len(p))
+
+
+def _subtense_floor(p, beam, sp):
+    """The spot's angular subtense at every observer by hand (the spot holds the whole beam
+    on a plate: its second moments are the Gaussian footprint's, D^2 / 8 across the beam
+    direction b carried onto the plate's plane n): the smaller principal moment lambda
+    across each line of sight u (from the trace and the cofactor along u), the 1/e diameter
+    2 sqrt(2 lambda), alpha = 2 atan(diameter / 2 R); 0 behind the plate."""
+    b, n = sp.mean_incoming, sp.mean_frame[2]
+    d = beam.diameter_m + sp.mean_range_m * beam.divergence_rad
+    m = np.eye(3) - np.outer(b, n) / (b @ n)
+    cov = m @ ((d * d / 8.0) * (np.eye(3) - np.outer(b, b))) @ m.T
+    adj = np.column_stack([np.cross(cov[:, 1], cov[:, 2]), np.cross(cov[:, 2], cov[:, 0]), np.cross(cov[:, 0], cov[:, 1])])
+    v = p - sp.centroid
+    r = np.sqrt(np.einsum("ij,ij->i", v, v))
+    u = v / r[:, None]
+    half = 0.5 * (np.trace(cov) - np.einsum("ij,ij->i", u @ cov, u))
+    prod = np.maximum(np.einsum("ij,ij->i", u @ adj, u), 0.0)
+    lam = prod / (half + np.sqrt(np.maximum(half * half - prod, 0.0)))
+    alpha = 2.0 * np.arctan(np.sqrt(2.0 * lam) / r)
+    return np.where(u @ n > 0, alpha, 0.0)
 
 
 def _lobes(res, sp):
@@ -197,6 +248,8 @@ def run(rows=1000, n_states=100, verbose=True, repeat=5) -> dict:
         fl = floors[-1][1]
         assert np.array_equal(fl.peak > 0, res.observers.peak_irradiance_w_m2 > 0)  # the same observers evaluated
         assert np.array_equal(np.isnan(fl.first), np.isnan(res.observers.first_exceedance_s))  # and the same exceedances
+        assert np.array_equal(fl.direct, res.observers.direct_irradiance_w_m2)  # the same direct beam
+        np.testing.assert_allclose(fl.alpha, res.observers.angular_subtense_rad, rtol=1e-9, atol=0)  # and subtense
         parts = {k: float(np.median([f[0][k] for f in floors])) for k in floors[0][0]}
         n_tri = len(scene.terrain.mesh().faces)
     floor = sum(parts.values())
