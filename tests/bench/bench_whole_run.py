@@ -12,7 +12,10 @@ shared machine stays out), median of 5. Floor, measured in the same run alternat
 the whole runs, each part on its own (CPU time, median of 5): reading and parsing the scene file and the material file; the raw
 embreex build of the same triangles; the complete map written by hand
 (:class:`tests.bench._floor.MapFloor`: points, occlusion queries, basis, GEMM, exp, peak,
-exposure and first exceedance, on the map's threads); the keep-out lobes' point form at
+exposure and first exceedance, on the map's threads, its points kept as the real path keeps
+them); the direct beam and the angular subtense at every observer from those points, in
+blocks of the map's rows (:func:`_direct_floor`, :func:`_subtense_floor`: the same values
+asserted); the keep-out lobes' point form at
 every direction they evaluated (their ``evaluations``: grid levels, refinement, polish); and
 the near-field lobes' BRDF work, counted by the lobes themselves (their ``near_field``
 info): the integrals' kernel (``kernel_evaluations`` at ``kernel_state_evaluations`` states

@@ -49,8 +49,7 @@ def test_bench_hazard_map():  # issue 37: 1.16-1.23 in CPU time, quiet (2026-11-
     check_goal("hazard map stages", res["ratio"], goal(1.3, 5.0))  # quick: 1.4-3.5 in CPU time at load 5-25 (0.05-0.08 s floor)
 
 
-@not_met("issue 37: whole run 1.32-1.35 in CPU time against the complete floor (its BRDF work blocked as the real path's, the bound and the point form counted), quiet (2026-11-26, load 0.9-1.3): the keep-out lobes' non-BRDF work, the direct beam and the subtense outside the floor; goal 1.3")
-def test_bench_whole_run():
+def test_bench_whole_run():  # issue 37: 1.23-1.25 in CPU time against the complete floor, quiet (2026-11-26, load 0.9-1.2)
     from .bench_whole_run import run
 
     res = run(rows=50 if QUICK else 1000)
