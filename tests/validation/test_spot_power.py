@@ -415,7 +415,7 @@ def test_plate_partly_hidden_property(R_f, gap, a, phi, f, b, mu):
 
 @pytest.mark.xfail(strict=True, reason="known defect (2026-11-26): a back plate whose edge and its shadow's edge both lie on the "
                    "beam axis (s = 0, a quadtree cell boundary) gets 260 W where 69 W reach it (the spill 492 W, not 683 W), "
-                   "with an error bound of 4e-7 W; 1e-6 m off the axis it is exact. Found by the slow twin below.")
+                   "with an error bound of 4e-7 W; with the back plate's edge 1e-6 m off the axis it is exact. Found by the slow twin below.")
 def test_shadow_edges_on_the_beam_axis():
     """The slow property's shrunk example: front plate [0, D_f]^2 at 5 m, back strip
     x in [-1.5 D_b, 0.5 D_b], z in [0, 0.125 D_b] at 6 m (D = a + R phi, a = e^-3 m,
