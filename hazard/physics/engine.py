@@ -358,6 +358,23 @@ def _hole_cells(outline, fronts, n0, half_width):
     return holes, polys, slack
 
 
+def _unseen_fronts(beam, cells, k, outlines, tracer, fronts) -> set:
+    """The flat targets a ray through the centroid of a piece of target ``k``'s outline
+    meets first that the sampling did not count as in front of it (no cell's ray lay
+    inside the outline: a thin target whose edges lie on the cells' boundaries), when
+    every such target is itself a front target (nothing else inside its own outline);
+    else the empty set (the outline is then not what is lit: the rays decide)."""
+    oc = outline_cells(outlines[k][0], cells.n0, beam.half_width)
+    if not oc.pieces:
+        return set()
+    m = oc.moments
+    lit = np.flatnonzero((m.fraction > 0) & np.isfinite(m.r2_min))
+    o, dirs = beam.rays(m.mean[lit])
+    hit = set(np.unique(tracer.first_hit(o, dirs).obj).tolist()) - {k, -1} - set(fronts)
+    ok = all(j in outlines and j in cells.exact_targets and not cells.occluders.get(j) for j in hit)
+    return hit if ok else set()
+
+
 def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     """Samples of a flat target from its outline cut by the coarsest cells (exact powers,
     centroids, covariances and nearest-to-axis points), less the parts hidden by the flat
@@ -772,6 +789,10 @@ def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None, gr
         fronts = {j: outlines[j] for j in cells.occluders.get(k, ())}
         if k in cells.exact_targets and k in outlines and all(j in outlines for j in cells.occluders.get(k, ())):
             ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu, fronts)
+            seen = _unseen_fronts(beam, cells, k, outlines, tracer, fronts) if ex is None else set()
+            if seen:  # flat targets in front that no cell's ray saw inside this outline (its edges on the cells' boundaries)
+                fronts = {j: outlines[j] for j in set(fronts) | seen}
+                ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu, fronts)
         if ex is None:
             totals += _sampled_spot(beam, cells, target, tracer, mu, out)
             continue
