@@ -48,7 +48,10 @@ def _num(x):
     return x if math.isfinite(x) else None
 
 
-JSON_OBSERVERS_MAX = 100_000  # observers listed in report.json (highest hazard ratio first beyond it); all are in observers.csv
+# observers listed in report.json (highest hazard ratio first beyond it, every hazardous one first); all are in
+# observers.csv. 1e4: report.json is the run's summary (a person, a review page, a script's json.load); at 1e5 its
+# list was 79 MB at 1e6 observers and as long to write as the whole analysis (issue 37), a copy of observers.csv's rows.
+JSON_OBSERVERS_MAX = 10_000
 
 # observers.csv: each column and the observer_columns key it is read from
 CSV_COLUMNS = ["name", "x_m", "y_m", "z_m", "static_irradiance_w_m2", "peak_irradiance_w_m2", "direct_irradiance_w_m2",
