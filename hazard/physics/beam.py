@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["BeamGeometry", "CellSampling", "PolygonMoments", "clip_to_box", "polygon_fraction", "polygon_moments", "r2_min_outside", "rectangle_fraction", "sample_cells", "tail_half_width", "tail_bounds_w_m2", "HALF_WIDTH",
+__all__ = ["BeamGeometry", "CellSampling", "OutlineCells", "PolygonMoments", "outline_cells", "clip_to_box", "polygon_fraction", "polygon_moments", "r2_min_outside", "rectangle_fraction", "sample_cells", "tail_half_width", "tail_bounds_w_m2", "HALF_WIDTH",
            "TAIL_MARGIN"]
 
 HALF_WIDTH = 4.0  # beam square half-width in units of the 1/e radius (outside: 3.1e-8 of the power)
@@ -672,6 +672,39 @@ def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
     return out
 
 
+@dataclass
+class OutlineCells:
+    """A flat target's projected outline cut by the beam's coarsest cells: per piece its
+    cell key (``i n0 + j``), vertices in s and exact Gaussian moments
+    (:func:`hazard.physics.beam.polygon_moments`)."""
+
+    keys: np.ndarray
+    pieces: list
+    moments: object
+
+
+def outline_cells(outline_s, n0, half_width=HALF_WIDTH) -> OutlineCells:
+    """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
+    beam square of half-width ``half_width`` 1/e radii); pieces carrying no power are dropped."""
+    d = 2 * half_width / n0
+    lo = np.clip(np.floor((outline_s.min(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
+    hi = np.clip(np.floor((outline_s.max(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
+    ii, jj = (g.ravel() for g in np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"))
+    s0, t0 = -half_width + ii * d, -half_width + jj * d
+    corners = np.stack([np.stack([s0 + a * d, t0 + b * d], axis=1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)
+    full = inside_convex(corners.reshape(-1, 2), outline_s).reshape(-1, 4).all(axis=1)
+    pieces = [corners[k] if full[k] else clip_to_box(outline_s, s0[k], s0[k] + d, t0[k], t0[k] + d) for k in range(len(s0))]
+    live = [k for k, p in enumerate(pieces) if len(p) >= 3]
+    m = polygon_moments([pieces[k] for k in live])
+    keep = np.flatnonzero(m.fraction > 0)
+    rows = np.asarray(live, int)[keep]
+    if not len(rows):  # wholly outside the beam square (< 3.1e-8 of the power): one piece
+        whole = polygon_moments([outline_s])
+        return OutlineCells(np.array([-1]), [np.asarray(outline_s, float)], whole) if whole.fraction[0] > 0 else \
+            OutlineCells(np.zeros(0, int), [], whole)
+    return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows], m.take(keep))
+
+
 def _foreign_hits(outlines, foreign, s, labels):
     """Add to ``foreign[k]`` the objects (-1: nothing) hit by rays (at s, labels (n, 5))
     inside flat target k's outline other than k itself (in place)."""
@@ -682,6 +715,35 @@ def _foreign_hits(outlines, foreign, s, labels):
             # rays within 1e-6 w of the outline may graze its edge in floating point
             inside = inside_convex(s[other], poly, margin=1e-6)
             foreign[k].update(np.unique(lab[other][inside]).tolist())
+
+
+def _piece_hits(beam, tracer, targets, outlines, n0, foreign) -> int:
+    """Add to ``foreign[k]`` what a ray through each piece of flat target k's outline cut
+    by the coarsest cells (through the piece's power-weighted mean, inside it) meets before
+    k's plane; returns the rays traced. The cells' own rays may never fall inside a part
+    of an outline: a thin target whose edges lie on the cells' rays, behind a cell that
+    shows another target at all five of its rays. The outline would then look clean where
+    that target hides it. (A hit beyond the plane is a float32 graze past k's edge: no
+    evidence; nothing else can be there.)"""
+    points = {k: outline_cells(poly, n0, beam.half_width).moments.mean for k, poly in outlines.items()}
+    points = {k: p[np.all(np.isfinite(p), axis=1)] for k, p in points.items()}
+    points = {k: p for k, p in points.items() if len(p)}
+    if not points:
+        return 0
+    o, dirs = beam.rays(np.concatenate(list(points.values())))
+    hits = tracer.first_hit(o, dirs)
+    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    start = 0
+    for k, p in points.items():
+        rows = slice(start, start + len(p))
+        start += len(p)
+        c, n = targets[k].center_m, targets[k].normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            plane_m = ((c - o[rows]) @ n) / (unit[rows] @ n)
+        lab, t = hits.obj[rows], hits.t[rows]
+        front = hits.hit[rows] & (lab != k) & (t < plane_m * (1 - 1e-9))
+        foreign[k].update(np.unique(lab[front]).tolist())
+    return len(o)
 
 
 def exact_classes(foreign) -> dict:
@@ -718,7 +780,7 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
     n_targets = len(targets)
     hit_by_centre = set()
     leaves = {k: [] for k in ("level", "i", "j", "power_w", "labels", "faces", "point", "t", "direction")}
-    rays = 0
+    rays = _piece_hits(beam, tracer, targets, outlines, n0, foreign)
     lv = 0
     while len(level_i):
         lvl = np.full(len(level_i), lv)

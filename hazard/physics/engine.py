@@ -32,7 +32,7 @@ import numpy as np
 
 from brdfmodels import DynamicBRDF, Lambertian, Scaled, StateTable, Sum
 
-from hazard.physics.beam import HALF_WIDTH
+from hazard.physics.beam import HALF_WIDTH, OutlineCells, outline_cells
 from hazard.physics.near_field import leaf_corners_s, near_field_irradiance, patches_from_leaves, patches_from_pieces, perspective_weights
 from hazard.physics.rays import own_object
 
@@ -241,41 +241,6 @@ def _exact_power(beam, outline, upper_fraction):
     return upper, upper - beam.power_w * polygon_fraction(outline[1])
 
 
-@dataclass
-class OutlineCells:
-    """A flat target's projected outline cut by the beam's coarsest cells: per piece its
-    cell key (``i n0 + j``), vertices in s and exact Gaussian moments
-    (:func:`hazard.physics.beam.polygon_moments`)."""
-
-    keys: np.ndarray
-    pieces: list
-    moments: object
-
-
-def outline_cells(outline_s, n0, half_width=HALF_WIDTH) -> OutlineCells:
-    """Clip a convex outline (V, 2) by the coarsest grid (``n0`` cells per side over the
-    beam square of half-width ``half_width`` 1/e radii); pieces carrying no power are dropped."""
-    from hazard.physics.beam import clip_to_box, inside_convex, polygon_moments
-
-    d = 2 * half_width / n0
-    lo = np.clip(np.floor((outline_s.min(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
-    hi = np.clip(np.floor((outline_s.max(axis=0) + half_width) / d).astype(int), 0, n0 - 1)
-    ii, jj = (g.ravel() for g in np.meshgrid(np.arange(lo[0], hi[0] + 1), np.arange(lo[1], hi[1] + 1), indexing="ij"))
-    s0, t0 = -half_width + ii * d, -half_width + jj * d
-    corners = np.stack([np.stack([s0 + a * d, t0 + b * d], axis=1) for a, b in ((0, 0), (1, 0), (1, 1), (0, 1))], axis=1)
-    full = inside_convex(corners.reshape(-1, 2), outline_s).reshape(-1, 4).all(axis=1)
-    pieces = [corners[k] if full[k] else clip_to_box(outline_s, s0[k], s0[k] + d, t0[k], t0[k] + d) for k in range(len(s0))]
-    live = [k for k, p in enumerate(pieces) if len(p) >= 3]
-    m = polygon_moments([pieces[k] for k in live])
-    keep = np.flatnonzero(m.fraction > 0)
-    rows = np.asarray(live, int)[keep]
-    if not len(rows):  # wholly outside the beam square (< 3.1e-8 of the power): one piece
-        whole = polygon_moments([outline_s])
-        return OutlineCells(np.array([-1]), [np.asarray(outline_s, float)], whole) if whole.fraction[0] > 0 else \
-            OutlineCells(np.zeros(0, int), [], whole)
-    return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows], m.take(keep))
-
-
 def _subtract_holes(oc, holes_oc, hole_polys):
     """Moments of each piece minus those of the holes' pieces in the same cell (power,
     area, first and second moments add over disjoint regions); the nearest point to the
@@ -356,23 +321,6 @@ def _hole_cells(outline, fronts, n0, half_width):
             big = clip_convex(outline[0], front[0])
             slack += (polygon_fraction(big) if len(big) else 0.0) - (polygon_fraction(small) if len(small) else 0.0)
     return holes, polys, slack
-
-
-def _unseen_fronts(beam, cells, k, outlines, tracer, fronts) -> set:
-    """The flat targets a ray through the centroid of a piece of target ``k``'s outline
-    meets first that the sampling did not count as in front of it (no cell's ray lay
-    inside the outline: a thin target whose edges lie on the cells' boundaries), when
-    every such target is itself a front target (nothing else inside its own outline);
-    else the empty set (the outline is then not what is lit: the rays decide)."""
-    oc = outline_cells(outlines[k][0], cells.n0, beam.half_width)
-    if not oc.pieces:
-        return set()
-    m = oc.moments
-    lit = np.flatnonzero((m.fraction > 0) & np.isfinite(m.r2_min))
-    o, dirs = beam.rays(m.mean[lit])
-    hit = set(np.unique(tracer.first_hit(o, dirs).obj).tolist()) - {k, -1} - set(fronts)
-    ok = all(j in outlines and j in cells.exact_targets and not cells.occluders.get(j) for j in hit)
-    return hit if ok else set()
 
 
 def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
@@ -789,10 +737,6 @@ def build_spots(beam, cells, targets, tracer, mu, outlines=None, ground=None, gr
         fronts = {j: outlines[j] for j in cells.occluders.get(k, ())}
         if k in cells.exact_targets and k in outlines and all(j in outlines for j in cells.occluders.get(k, ())):
             ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu, fronts)
-            seen = _unseen_fronts(beam, cells, k, outlines, tracer, fronts) if ex is None else set()
-            if seen:  # flat targets in front that no cell's ray saw inside this outline (its edges on the cells' boundaries)
-                fronts = {j: outlines[j] for j in set(fronts) | seen}
-                ex = _exact_samples(beam, cells.n0, target, outlines[k], tracer, mu, fronts)
         if ex is None:
             totals += _sampled_spot(beam, cells, target, tracer, mu, out)
             continue
