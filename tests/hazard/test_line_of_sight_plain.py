@@ -99,6 +99,8 @@ def _check(shape, offset, tilt, boxes, seed, beam_m=0.01):
     rays_back = RayScene(ray_meshes(scene))
     rays_back.behind_plane = lambda *a: False
     np.testing.assert_array_equal(got, engine.spot_line_of_sight(rays_back, spot, pts)[0])
+    # the other ray backend (float64 numpy) takes the same split and gives the same answers
+    np.testing.assert_array_equal(got, engine.spot_line_of_sight(RayScene(ray_meshes(scene), backend="numpy"), spot, pts)[0])
     # an independent reference on the rows in front of the spot's plane
     nrm = spot.mean_frame[2]
     start = rays.off_surface(spot.sight_point_m, nrm)
@@ -122,7 +124,8 @@ def test_plain_lines_of_sight_match_the_trace_back_and_float64(shape, offset, ti
     """Random convex targets (plate, box, sphere), tilts, 1-3 boxes in front, observers all
     around (boxes beside the beam), the scene 0, 1 km or 1000 km from the origin, a 1 cm
     or a 0.5 m beam (its near field, 20 spot sizes, reaches behind the target): the lines of sight are
-    the trace back's, and in front of the spot those of the float64 segment test."""
+    the trace back's and the numpy backend's, and in front of the spot those of the float64
+    segment test."""
     _check(shape, offset, tilt, boxes, seed, beam_m)
 
 
