@@ -600,16 +600,18 @@ def _trace_cells(beam, tracer, s):
 
 
 def _seed_cells(seeds, s0, t0, d, cell_i, cell_j, half_width):
-    """Cells (lower corners s0 = -half_width + cell_i d, t0 likewise; side d) that contain a
-    target's projected point and are larger than its projection. Each point is tested
-    against the three cells about its own in each axis, with the comparisons of the cell
-    bounds themselves (a loop over the points made a 2e4-triangle mesh in the beam take
-    34 s of CPU in this function alone)."""
+    """Cells (lower corners s0 = -half_width + cell_i d, t0 likewise; side d) larger than
+    twice a target's projected width that contain one of its projected points or overlap
+    the hull of them. Each point is tested against the three cells about its own in each
+    axis, with the comparisons of the cell bounds themselves (a loop over the points made
+    a 2e4-triangle mesh in the beam take 34 s of CPU in this function alone); the hull by
+    separating axes (:func:`_boxes_meet_convex`): a long thin target's middle, far from its
+    vertices, may lie between every ray of the cells it crosses."""
     force = np.zeros(len(s0), bool)
     if not seeds or not len(s0):
         return force
     keys = []
-    for pts, extent in seeds:
+    for pts, extent, *hull in seeds:
         if not d > extent / 2:
             continue
         p = np.asarray(pts, float)
@@ -620,17 +622,43 @@ def _seed_cells(seeds, s0, t0, d, cell_i, cell_j, half_width):
                 lo_s, lo_t = -half_width + ci * d, -half_width + cj * d
                 ok = (p[:, 0] >= lo_s) & (p[:, 0] < lo_s + d) & (p[:, 1] >= lo_t) & (p[:, 1] < lo_t + d)
                 keys.append(ci[ok] * _KEY + cj[ok])
+        if hull and hull[0] is not None:
+            force |= _boxes_meet_convex(hull[0], np.asarray(s0, float), np.asarray(t0, float), d)
     if keys:
-        force = np.isin(np.asarray(cell_i, np.int64) * _KEY + np.asarray(cell_j, np.int64), np.concatenate(keys))
+        force |= np.isin(np.asarray(cell_i, np.int64) * _KEY + np.asarray(cell_j, np.int64), np.concatenate(keys))
     return force
 
 
 _KEY = np.int64(1) << 32  # cell (i, j) -> i * 2^32 + j: the grid is at most n0 2^MAX_LEVEL cells across
 
 
+def _boxes_meet_convex(hull, s0, t0, d) -> np.ndarray:
+    """Whether the squares [s0, s0 + d] x [t0, t0 + d] share a point with the convex
+    polygon ``hull`` (V, 2), closed sets: by separating axes (the squares' two and the
+    polygon's edge normals), for the squares in the polygon's bounding box."""
+    lo, hi = hull.min(axis=0), hull.max(axis=0)
+    out = (s0 <= hi[0]) & (s0 + d >= lo[0]) & (t0 <= hi[1]) & (t0 + d >= lo[1])
+    rows = np.flatnonzero(out)
+    if not len(rows) or len(hull) < 3:
+        return out
+    edge = np.roll(hull, -1, axis=0) - hull
+    normal = np.stack([edge[:, 1], -edge[:, 0]], axis=1)  # either orientation: both ends of each interval are tested
+    proj = hull @ normal.T  # (V, E)
+    pmin, pmax = proj.min(axis=0), proj.max(axis=0)
+    reach = d / 2 * np.abs(normal).sum(axis=1)
+    for a in range(0, len(rows), 4096):
+        r = rows[a:a + 4096]
+        centre = np.stack([s0[r] + d / 2, t0[r] + d / 2], axis=1) @ normal.T  # (N, E)
+        out[r] = np.all((centre - reach <= pmax) & (centre + reach >= pmin), axis=1)
+    return out
+
+
 def target_seeds(beam: BeamGeometry, targets) -> list:
-    """Per target: its vertices and centre projected into s, and the projection's extent."""
+    """Per target: its vertices and centre projected into s (those in the beam square),
+    the projection's width (the least over its hull's edges' normals: a tilted strip is
+    as thin as it looks) and the hull (None when the points span no area)."""
     seeds = []
+    square = (np.array([-beam.half_width]), np.array([-beam.half_width]), 2 * beam.half_width)
     for t in targets:
         v = t.mesh.vertices
         pts = np.vstack([v, v.mean(axis=0, keepdims=True), t.center_m[None]])
@@ -639,11 +667,24 @@ def target_seeds(beam: BeamGeometry, targets) -> list:
         if len(s) == 0:
             continue
         inside = s[np.all(np.abs(s) < beam.half_width, axis=1)]
-        extent = float(np.min(np.ptp(s, axis=0))) if len(s) > 1 else 0.0
-        # a closed shape's projected outline is at least its bounding box's smaller side
-        if len(inside):
-            seeds.append((inside, max(extent, 1e-9)))
+        hull, extent = _hull_and_width(s)
+        # a closed shape's projected outline is at least its hull's least width
+        if len(inside) or (hull is not None and _boxes_meet_convex(hull, *square)[0]):
+            seeds.append((inside, max(extent, 1e-9), hull))
     return seeds
+
+
+def _hull_and_width(s) -> tuple:
+    """The convex hull (V, 2) of points s (N, 2) and its least width (over its edges'
+    normals); (None, the bounding box's smaller side) when they span no area."""
+    box = float(np.min(np.ptp(s, axis=0))) if len(s) > 1 else 0.0
+    hull = _hull_s(s) if box > 0 else None
+    if hull is None or len(hull) < 3:
+        return None, box
+    edge = np.roll(hull, -1, axis=0) - hull
+    normal = np.stack([edge[:, 1], -edge[:, 0]], axis=1) / np.linalg.norm(edge, axis=1)[:, None]
+    proj = hull @ normal.T
+    return hull, min(box, float(np.min(proj.max(axis=0) - proj.min(axis=0))))
 
 
 def inside_convex(points_s, polygon_s, margin=0.0) -> np.ndarray:
@@ -882,10 +923,15 @@ def _hull_s(points_s) -> np.ndarray:
     """Convex hull (V, 2) of points in s, counter-clockwise (Qhull)."""
     from scipy.spatial import ConvexHull
 
+    from scipy.spatial import QhullError
+
     pts = np.unique(np.asarray(points_s, float), axis=0)
     if len(pts) < 3:
         return pts
-    return pts[ConvexHull(pts).vertices]
+    try:
+        return pts[ConvexHull(pts).vertices]
+    except QhullError:  # collinear (no area)
+        return pts[:0]
 
 
 def _convex_outline_s(beam, analytic, radius, half_length, n, outer):

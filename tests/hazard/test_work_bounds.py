@@ -30,7 +30,7 @@ import scenes
 from brdfmodels.fileio import count_values
 from brdfmodels.io import read_astm_e1392, read_bsdf
 from hazard.cli import main
-from hazard.physics.beam import BeamGeometry, _seed_cells
+from hazard.physics.beam import BeamGeometry, _boxes_meet_convex, _hull_and_width, _seed_cells
 from hazard.pipeline import spots as spots_mod
 
 from tests._scene_text import PLATE_AT_50M
@@ -68,6 +68,35 @@ def test_seed_cells_are_the_cells_holding_a_point(seed, n0, level, hw):
     got = _seed_cells(seeds, s0, t0, d, i, j, hw)
     assert np.array_equal(got, _seed_by_definition(seeds, s0, t0, d))
     assert _seed_cells([], s0, t0, d, i, j, hw).sum() == 0
+
+
+@FAST
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 40), stretch=st.floats(1e-3, 1.0), turn=st.floats(0.0, math.pi))
+def test_boxes_meeting_a_hull_and_its_width_match_shapely(seed, n, stretch, turn):
+    """Random convex hulls (thin and turned: a tilted strip) against random cells: the cells
+    the separating-axis test says meet the hull are shapely's ``intersects`` (closed sets),
+    away from touching within 1e-12; the hull's least width is the least spread of the
+    points over 2e5 directions (a brute-force scan, 1.6e-5 rad apart), to within the scan's step."""
+    import shapely
+
+    rng = np.random.default_rng(seed)
+    c, s_ = math.cos(turn), math.sin(turn)
+    pts = rng.normal(size=(n, 2)) * [1.0, stretch] @ np.array([[c, s_], [-s_, c]])
+    hull, width = _hull_and_width(pts)
+    poly = shapely.Polygon(hull)
+    theta = np.linspace(0.0, math.pi, 200_001)
+    spread = np.ptp(pts @ np.stack([np.cos(theta), np.sin(theta)]), axis=0)
+    step = theta[1]  # the scan's minimum is above the true one by at most the diameter x the step (a corner of width(theta))
+    assert spread.min() - 2 * np.abs(pts).max() * step <= width <= spread.min() * (1 + 1e-12)
+    d = float(rng.choice([0.01, 0.1, 0.5]))
+    s0, t0 = rng.uniform(-3, 3, 2000), rng.uniform(-3, 3, 2000)
+    got = _boxes_meet_convex(hull, s0, t0, d)
+    boxes = shapely.box(s0, t0, s0 + d, t0 + d)
+    want = shapely.intersects(boxes, poly)
+    apart = shapely.distance(boxes, poly)
+    shared = shapely.area(shapely.intersection(boxes, poly))
+    near = (apart < 1e-12) & (shared < 1e-12 * d * d)  # touching only: either answer within rounding
+    assert np.array_equal(got[~near], want[~near]) and want.any()
 
 
 def test_nearest_edge_in_blocks_is_the_nearest_of_all(monkeypatch):
