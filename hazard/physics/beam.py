@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -501,6 +502,7 @@ class CellSampling:
     half_width: float = HALF_WIDTH  # the square's half-width L [1/e radii] (the beam's)
     exact_targets: frozenset = frozenset()  # flat targets whose outline integral is their power
     occluders: dict = field(default_factory=dict)  # exact target -> the exact targets in front of it (outlines subtracted)
+    unseen_w: dict = field(default_factory=dict)  # sampled target -> power [W] of leaves its hull meets with no ray on it and one on nothing
     _lookup: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -611,7 +613,7 @@ def _seed_cells(seeds, s0, t0, d, cell_i, cell_j, half_width):
     if not seeds or not len(s0):
         return force
     keys = []
-    for pts, extent, *hull in seeds:
+    for pts, extent, *hull in seeds:  # (points, width) or a Seed
         if not d > extent / 2:
             continue
         p = np.asarray(pts, float)
@@ -633,9 +635,11 @@ _KEY = np.int64(1) << 32  # cell (i, j) -> i * 2^32 + j: the grid is at most n0 
 
 
 def _boxes_meet_convex(hull, s0, t0, d) -> np.ndarray:
-    """Whether the squares [s0, s0 + d] x [t0, t0 + d] share a point with the convex
-    polygon ``hull`` (V, 2), closed sets: by separating axes (the squares' two and the
-    polygon's edge normals), for the squares in the polygon's bounding box."""
+    """Whether the squares [s0, s0 + d] x [t0, t0 + d] (``d`` one side or one per square)
+    share a point with the convex polygon ``hull`` (V, 2), closed sets: by separating axes
+    (the squares' two and the polygon's edge normals), for the squares in the polygon's
+    bounding box."""
+    d = np.broadcast_to(np.asarray(d, float), np.shape(s0))
     lo, hi = hull.min(axis=0), hull.max(axis=0)
     out = (s0 <= hi[0]) & (s0 + d >= lo[0]) & (t0 <= hi[1]) & (t0 + d >= lo[1])
     rows = np.flatnonzero(out)
@@ -645,18 +649,28 @@ def _boxes_meet_convex(hull, s0, t0, d) -> np.ndarray:
     normal = np.stack([edge[:, 1], -edge[:, 0]], axis=1)  # either orientation: both ends of each interval are tested
     proj = hull @ normal.T  # (V, E)
     pmin, pmax = proj.min(axis=0), proj.max(axis=0)
-    reach = d / 2 * np.abs(normal).sum(axis=1)
+    spread = np.abs(normal).sum(axis=1)
     for a in range(0, len(rows), 4096):
         r = rows[a:a + 4096]
-        centre = np.stack([s0[r] + d / 2, t0[r] + d / 2], axis=1) @ normal.T  # (N, E)
+        centre = np.stack([s0[r] + d[r] / 2, t0[r] + d[r] / 2], axis=1) @ normal.T  # (N, E)
+        reach = d[r, None] / 2 * spread[None]
         out[r] = np.all((centre - reach <= pmax) & (centre + reach >= pmin), axis=1)
     return out
 
 
-def target_seeds(beam: BeamGeometry, targets) -> list:
-    """Per target: its vertices and centre projected into s (those in the beam square),
-    the projection's width (the least over its hull's edges' normals: a tilted strip is
-    as thin as it looks) and the hull (None when the points span no area)."""
+class Seed(NamedTuple):
+    """A target's vertices and centre projected into s (those in the beam square), the
+    projection's width (the least over its hull's edges' normals: a tilted strip is as
+    thin as it looks), the hull (None when the points span no area) and its index."""
+
+    points: np.ndarray
+    extent: float
+    hull: np.ndarray | None
+    index: int
+
+
+def target_seeds(beam: BeamGeometry, targets) -> list[Seed]:
+    """A :class:`Seed` per target whose projection reaches the beam square."""
     seeds = []
     square = (np.array([-beam.half_width]), np.array([-beam.half_width]), 2 * beam.half_width)
     for t in targets:
@@ -670,7 +684,7 @@ def target_seeds(beam: BeamGeometry, targets) -> list:
         hull, extent = _hull_and_width(s)
         # a closed shape's projected outline is at least its hull's least width
         if len(inside) or (hull is not None and _boxes_meet_convex(hull, *square)[0]):
-            seeds.append((inside, max(extent, 1e-9), hull))
+            seeds.append(Seed(inside, max(extent, 1e-9), hull, t.index))
     return seeds
 
 
@@ -834,7 +848,7 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
         _foreign_hits(outlines, foreign, s_rays, labels)
         clean = set(exact_classes(foreign))
         power = beam.power_w * rectangle_fraction(s0, s0 + d, t0, t0 + d)
-        need = _needs_split(labels, clean)
+        need = _needs_split(labels, clean, seeds, (s0, t0, d))
         split = _seed_cells(seeds, s0, t0, d, level_i, level_j, beam.half_width) | _unseen_cells(labels, hit_by_centre, clean, n_targets)
         if need.any() and power[need].sum() > rtol * beam.power_w:
             split |= need
@@ -849,11 +863,34 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
         lv += 1
     cat = {k: np.concatenate(v) for k, v in leaves.items()}
     truncated = beam.power_w * (1.0 - float(_erf(beam.half_width)) ** 2)
-    unresolved = float(cat["power_w"][_needs_split(cat["labels"], clean)].sum())
+    d = 2 * beam.half_width / (n0 * 2.0 ** cat["level"])
+    boxes = (-beam.half_width + cat["i"] * d, -beam.half_width + cat["j"] * d, d)
+    unresolved = float(cat["power_w"][_needs_split(cat["labels"], clean, seeds, boxes)].sum())
     out = CellSampling(n0, cat["level"], cat["i"], cat["j"], cat["power_w"], cat["labels"], cat["faces"], cat["point"], cat["t"],
                        cat["direction"], rays, lv, unresolved, truncated, half_width=beam.half_width)
     out.exact_targets = frozenset(clean)
     out.occluders = {k: v for k, v in exact_classes(foreign).items() if v}
+    out.unseen_w = _unseen_power(seeds, clean, cat["labels"], beam.power_w, boxes)
+    return out
+
+
+def _unseen_power(seeds, clean, labels, power_w: float, boxes) -> dict:
+    """Per target the rays sample (not clean): the beam's power [W] in the parts of its
+    projected hull inside leaves that have no ray on it and one that meets nothing (the
+    beam passes there: part of the target may lie between the rays; exact Gaussian
+    integrals of hull and leaf, :func:`polygon_moments`). ``power_w``: the beam's total
+    [W]; ``boxes``: the leaves' (s0, t0, d)."""
+    out = {}
+    open_ = np.any(labels == -1, axis=1)
+    s0, t0, d = boxes
+    for seed in seeds:
+        if seed.hull is None or seed.index in clean:
+            continue
+        rows = np.flatnonzero(open_ & ~np.any(labels == seed.index, axis=1))
+        rows = rows[_boxes_meet_convex(seed.hull, s0[rows], t0[rows], d[rows])]
+        parts = [clip_to_box(seed.hull, s0[r], s0[r] + d[r], t0[r], t0[r] + d[r]) for r in rows]
+        parts = [p for p in parts if len(p) >= 3]
+        out[seed.index] = power_w * float(polygon_moments(parts).fraction.sum()) if parts else 0.0
     return out
 
 
@@ -866,13 +903,21 @@ def _unseen_cells(labels, hit_by_centre, clean, n_targets) -> np.ndarray:
     return np.any(np.isin(labels, unseen), axis=1)
 
 
-def _needs_split(labels, clean) -> np.ndarray:
-    """Mixed cells, except those mixed only between clean flat targets and empty beam."""
+def _needs_split(labels, clean, seeds=(), boxes=None) -> np.ndarray:
+    """Mixed cells, except those mixed only between clean flat targets and empty beam,
+    unless such a cell meets the projected hull of a target the rays must sample (one of
+    ``seeds`` not clean; ``boxes``: the cells' lower corners and sides (s0, t0, d)): that
+    target may lie between its rays (a sphere's rim beside a plate's edge)."""
     mixed = np.any(labels != labels[:, :1], axis=1)
-    if clean:
-        benign = np.all(np.isin(labels, list(clean) + [-1]), axis=1)
-        return mixed & ~benign
-    return mixed
+    if not clean:
+        return mixed
+    benign = mixed & np.all(np.isin(labels, list(clean) + [-1]), axis=1)
+    rows = np.flatnonzero(benign)
+    for seed in seeds if boxes is not None and len(rows) else ():
+        if seed.hull is not None and seed.index not in clean:
+            s0, t0, d = (np.broadcast_to(np.asarray(x, float), labels.shape[:1])[rows] for x in boxes)
+            benign[rows[_boxes_meet_convex(seed.hull, s0, t0, d)]] = False
+    return mixed & ~benign
 
 
 def flat_outline_s(beam: BeamGeometry, target, n_disk=1024):

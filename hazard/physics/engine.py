@@ -611,7 +611,7 @@ def _sampled_spot(beam, cells, target, tracer, mu, out, floor_w_m2=None):
     # cylinder takes its exact outline's power where nothing else shows inside it, else
     # the rays' total plus what its facets may lose (_curved_total)
     raw = float(cells.power_w[rows].sum())
-    err = float(cells.power_w[touch].sum()) + cells.truncated_w
+    err = float(cells.power_w[touch].sum()) + cells.truncated_w + cells.unseen_w.get(k, 0.0)  # + where it may lie between rays
     whole = raw - float(cells.power_w[rows][cells.mixed[rows]].sum())
     curved = _curved_total(beam, cells, target, tracer)
     if curved is not None and curved[0] is not None:
