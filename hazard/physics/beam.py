@@ -36,6 +36,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from hazard.physics.rays import CONVEX_SHAPES
+
 __all__ = ["BeamGeometry", "CellSampling", "OutlineCells", "PolygonMoments", "outline_cells", "clip_to_box", "polygon_fraction", "polygon_moments", "r2_min_outside", "rectangle_fraction", "sample_cells", "tail_half_width", "tail_bounds_w_m2", "HALF_WIDTH",
            "TAIL_MARGIN"]
 
@@ -661,12 +663,15 @@ def _boxes_meet_convex(hull, s0, t0, d) -> np.ndarray:
 class Seed(NamedTuple):
     """A target's vertices and centre projected into s (those in the beam square), the
     projection's width (the least over its hull's edges' normals: a tilted strip is as
-    thin as it looks), the hull (None when the points span no area) and its index."""
+    thin as it looks), the hull (None when the points span no area), its index and
+    whether it is convex (:data:`hazard.physics.rays.CONVEX_SHAPES`: its projection is
+    its hull)."""
 
     points: np.ndarray
     extent: float
     hull: np.ndarray | None
     index: int
+    convex: bool = True
 
 
 def target_seeds(beam: BeamGeometry, targets) -> list[Seed]:
@@ -684,7 +689,7 @@ def target_seeds(beam: BeamGeometry, targets) -> list[Seed]:
         hull, extent = _hull_and_width(s)
         # a closed shape's projected outline is at least its hull's least width
         if len(inside) or (hull is not None and _boxes_meet_convex(hull, *square)[0]):
-            seeds.append(Seed(inside, max(extent, 1e-9), hull, t.index))
+            seeds.append(Seed(inside, max(extent, 1e-9), hull, t.index, getattr(t.spec, "shape", None) in CONVEX_SHAPES))
     return seeds
 
 
@@ -875,16 +880,18 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
 
 
 def _unseen_power(seeds, clean, labels, power_w: float, boxes) -> dict:
-    """Per target the rays sample (not clean): the beam's power [W] in the parts of its
-    projected hull inside leaves that have no ray on it and one that meets nothing (the
-    beam passes there: part of the target may lie between the rays; exact Gaussian
+    """Per convex target the rays sample (not clean): the beam's power [W] in the parts of
+    its projected hull inside leaves that have no ray on it and one that meets nothing
+    (the beam passes there: part of the target may lie between the rays; exact Gaussian
     integrals of hull and leaf, :func:`polygon_moments`). ``power_w``: the beam's total
-    [W]; ``boxes``: the leaves' (s0, t0, d)."""
+    [W]; ``boxes``: the leaves' (s0, t0, d). A mesh's hull also covers its hollows, where
+    rays that meet nothing are the truth: it is left out (its rays and the refinement
+    decide, as before)."""
     out = {}
     open_ = np.any(labels == -1, axis=1)
     s0, t0, d = boxes
     for seed in seeds:
-        if seed.hull is None or seed.index in clean:
+        if seed.hull is None or seed.index in clean or not seed.convex:
             continue
         rows = np.flatnonzero(open_ & ~np.any(labels == seed.index, axis=1))
         rows = rows[_boxes_meet_convex(seed.hull, s0[rows], t0[rows], d[rows])]
