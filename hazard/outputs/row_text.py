@@ -48,20 +48,24 @@ def row_tools():
     return orjson, pyarrow, pyarrow.compute
 
 
-def number_cells(tools, v: np.ndarray, end: str):
+def number_cells(tools, v: np.ndarray, end: str, per_row: int = 1):
     """Cells of a finite float64 (or integer) column by orjson, as a pyarrow string array.
 
-    orjson writes ``[a,b,c]``; the ``]`` becomes a comma, every comma ``end``, and the
-    cells are the text between them (each with its ``end``).
+    orjson writes ``[a,b,c]``; the ``]`` becomes a comma, every ``per_row``-th comma
+    ``end``, and the cells are the text between them (each with its ``end``).
 
     Parameters
     ----------
     tools : tuple
         :func:`row_tools`.
     v : numpy.ndarray
-        (n,) finite float64 values, or integers (any unit: the digits only).
+        (n,) finite float64 values, or integers (any unit: the digits only); with
+        ``per_row`` > 1, the values of ``per_row`` columns row after row (n * per_row
+        values, :func:`_stack_parts`): each cell is a row's values, comma-separated.
     end : str
         One ASCII character written after each cell (a separator).
+    per_row : int
+        Values per cell.
     """
     orjson, pa, _ = tools
     text = np.frombuffer(orjson.dumps(np.ascontiguousarray(v), option=orjson.OPT_SERIALIZE_NUMPY), np.uint8).copy()
@@ -72,11 +76,13 @@ def number_cells(tools, v: np.ndarray, end: str):
     stops = np.flatnonzero(data == ord(","))
     if len(stops) != len(v):  # cannot happen for numbers; a guard against a changed orjson layout
         raise RuntimeError(f"orjson wrote {len(stops)} cells for {len(v)} values")
+    if per_row > 1:
+        stops = stops[per_row - 1::per_row]
     if end != ",":
         data[stops] = ord(end)
-    offsets = np.zeros(len(v) + 1, np.int32)
+    offsets = np.zeros(len(stops) + 1, np.int32)
     offsets[1:] = stops + 1
-    return pa.StringArray.from_buffers(len(v), pa.py_buffer(offsets), pa.py_buffer(data))
+    return pa.StringArray.from_buffers(len(stops), pa.py_buffer(offsets), pa.py_buffer(data))
 
 
 def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: bool | None = None):
@@ -212,11 +218,13 @@ def column_parts(tools, columns, afters, head=()) -> list:
     head : sequence of str or pyarrow string arrays
         Parts before the first column (a row's name).
     """
-    _, pa, pc = tools
     values, kinds = _kinds(tools, columns, afters)
     made: dict = {}
     parts: list = []
-    for s in _row_items(kinds, afters, head):
+    for s in _stacks(_row_items(kinds, afters, head), kinds, values):
+        if s[0] == "stack":
+            parts += _stack_parts(tools, [values[i] for i in s[1]], s[2].decode(), [columns[i][1] for i in s[1]])
+            continue
         if s[0] != "col":
             parts.append(s[1].decode() if s[0] == "lit" else s[1])
             continue
@@ -226,6 +234,39 @@ def column_parts(tools, columns, afters, head=()) -> list:
             made[j] = _cells(tools, values[j], lead.decode(), trail.decode(), columns[j][1], kinds[j][0] == "any")
         parts.append(made[j])
     return parts
+
+
+def _stacks(items: list, kinds, values) -> list:
+    """:func:`_row_items` with each run of two or more consecutive float64 columns of cells
+    of their own (``plain``, none an earlier column's ``same``), a comma alone between them,
+    as one item ``["stack", [i, ...], trail]`` (``trail``: the last one's)."""
+    shared = {k[1] for k in kinds if k[0] == "same"}
+
+    def own(s) -> bool:
+        return s[0] == "col" and kinds[s[1]][0] == "plain" and s[1] not in shared and values[s[1]].dtype == np.float64
+
+    out: list = []
+    run: list = []  # the current run's items
+    for s in items + [["end"]]:
+        if own(s) and run and run[-1][3] == b",":
+            run.append(s)
+            continue
+        out += [["stack", [r[1] for r in run], run[-1][3]]] if len(run) > 1 else run
+        run = [s] if own(s) else []
+        if not run and s[0] != "end":
+            out.append(s)
+    return out
+
+
+def _stack_parts(tools, vs: list, trail: str, texts: list) -> list:
+    """The parts of a run of :func:`_stacks`: one (:func:`number_cells` of their values row after row) when every value
+    is finite, else each column's cells (their non-finite values' texts) and the commas."""
+    rows = np.empty((len(vs[0]), len(vs)))
+    for k, v in enumerate(vs):
+        rows[:, k] = v
+    if np.isfinite(rows).all():
+        return [number_cells(tools, rows.reshape(-1), trail, per_row=len(vs))]
+    return [_float_cells(tools, v, "," if k + 1 < len(vs) else trail, t, repeated=False) for k, (v, t) in enumerate(zip(vs, texts))]
 
 
 def _cells(tools, v: np.ndarray, lead: str, trail: str, texts: CellTexts, repeated: bool):
