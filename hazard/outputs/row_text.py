@@ -93,7 +93,7 @@ def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: boo
     _, pa, pc = tools
     if _repeats(v) if repeated is None else repeated:
         enc = pc.dictionary_encode(pa.array(v.view(np.int64)))
-        return _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), end, texts).take(enc.indices)
+        return _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), end, texts, repeated=False).take(enc.indices)
     finite = np.isfinite(v)
     if finite.all():
         return number_cells(tools, v, end)
@@ -105,13 +105,16 @@ def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: boo
     return pa.concat_arrays(cells).take(pa.array(index))
 
 
-def _one_text(tools, v: np.ndarray, texts: CellTexts) -> str:
-    """The cell of a column's first value, without the text after it."""
+@lru_cache(maxsize=256)
+def _one_text(tools, dtype: str, bits: bytes, texts: CellTexts) -> str:
+    """The cell of a value (its dtype and bytes: a column's first value, written once for
+    every block of a table), without the text after it."""
+    v = np.frombuffer(bits, dtype)
     if v.dtype == bool:
         return texts.true if v[0] else texts.false
     if v.dtype.kind == "f" and not np.isfinite(v[0]):
         return texts.nan if np.isnan(v[0]) else (texts.inf if v[0] > 0 else texts.ninf)
-    return tools[0].dumps(v[:1], option=tools[0].OPT_SERIALIZE_NUMPY)[1:-1].decode()  # as number_cells writes it
+    return tools[0].dumps(v, option=tools[0].OPT_SERIALIZE_NUMPY)[1:-1].decode()  # as number_cells writes it
 
 
 def _repeats(v: np.ndarray) -> bool:
@@ -142,25 +145,23 @@ def _kinds(tools, columns, afters):
     no cost (bools by ``if_else`` of two texts, repeated values by the texts of the distinct
     ones)."""
     values, kinds = [], []
+    seen: dict = {}  # (dtype, texts, first character after, the first 64 values' bytes) -> the plain or any columns of that start
     for i, ((v, texts), after) in enumerate(zip(columns, afters)):
         v = np.asarray(v)
         v = np.ascontiguousarray(v) if v.dtype == bool or v.dtype.kind in "iu" else np.ascontiguousarray(v, np.float64)
         raw = v.view(np.int64 if v.dtype.itemsize == 8 else np.int8).reshape(len(v), -1)  # by bits: -0.0 is not 0.0
         values.append(v)
-        if not len(v) or (raw == raw[0]).all():  # one value throughout (a constant MPE, an unused column): one text
-            kinds.append(["text", _one_text(tools, v, texts) if len(v) else ""])
+        if not len(v) or ((raw[:64] == raw[0]).all() and (raw == raw[0]).all()):  # one value throughout: one text
+            kinds.append(["text", _one_text(tools, v.dtype.str, raw[0].tobytes(), texts) if len(v) else ""])
             continue
-        same = [j for j in range(i) if kinds[j][0] in ("plain", "any") and columns[j][1] == texts
-                and afters[j][0] == after[0] and values[j].dtype == v.dtype
-                and np.array_equal(values[j][:64].view(np.int8), v[:64].view(np.int8))
-                and np.array_equal(values[j].view(np.int8), v.view(np.int8))]
+        key = (v.dtype.str, texts, after[0], raw[:64].tobytes())
+        same = [j for j in seen.get(key, ()) if np.array_equal(values[j].view(np.int8), v.view(np.int8))]
         if same:
             kinds[same[0]][0] = "plain"  # its cells serve both: no literal text taken in
             kinds.append(["same", same[0]])
-        elif v.dtype == bool or (v.dtype.kind == "f" and _repeats(v)):
-            kinds.append(["any", None])
-        else:
-            kinds.append(["plain", None])
+            continue
+        seen.setdefault(key, []).append(i)
+        kinds.append(["any", None] if v.dtype == bool or (v.dtype.kind == "f" and _repeats(v)) else ["plain", None])
     return values, kinds
 
 
@@ -280,7 +281,7 @@ def _cells(tools, v: np.ndarray, lead: str, trail: str, texts: CellTexts, repeat
     if not repeated:
         return _float_cells(tools, v, trail, texts, repeated=False)
     enc = pc.dictionary_encode(pa.array(v.view(np.int64)))  # each distinct value (by its bits) written once
-    cells = _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), trail[0], texts)
+    cells = _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), trail[0], texts, repeated=False)  # distinct
     if lead or trail[1:]:
         cells = pc.binary_join_element_wise(lead, cells, trail[1:], "")
     return cells.take(enc.indices)
