@@ -306,10 +306,7 @@ def _csv_name(label: str) -> str:
     return label
 
 
-# observers.csv rows formatted at once (~50 MB of text objects by Python's reprs; ~8 MB of bytes with pyarrow). 32 768:
-# a block's fixed costs (its columns' checks, ~30 calls) spread over more rows than at 16 384 (1e6 rows, one thread, load
-# 2.5, median of 9 alternated: 0.609 -> 0.573 s CPU); ~6 blocks in flight (_in_order) are ~80 MB at most.
-CSV_BLOCK_ROWS = 32_768
+CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects; ~4 MB of bytes with pyarrow)
 
 
 def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2, gate=None):
