@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "column_parts", "joined_rows"]
+__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "column_parts", "joined_rows", "joined_pieces"]
 
 
 class CellTexts(NamedTuple):
@@ -316,3 +316,10 @@ def joined_rows(tools, parts, n: int, drop_last: int = 0):
     text = pc.binary_join_element_wise(*merged, "")
     off = np.frombuffer(text.buffers()[1], np.int32)[text.offset:text.offset + len(text) + 1]
     return text.buffers()[2].slice(int(off[0]), int(off[-1] - off[0]) - drop_last)
+
+
+def joined_pieces(tools, parts, n: int, rows: int) -> list:
+    """:func:`joined_rows` of ``rows`` rows at a time (the last piece the rest): the same
+    text as one join, in pieces of a bounded size (the parts' cells made once for all ``n``)."""
+    return [joined_rows(tools, [p if isinstance(p, str) else p[a:a + rows] for p in parts], min(rows, n - a))
+            for a in range(0, n, rows)]

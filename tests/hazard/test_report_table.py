@@ -194,6 +194,9 @@ def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path, monkeypatch, w
     cols = report.observer_columns(res)
     for rows in (1, 2, 7, 10_000):
         assert b"".join(report._csv_chunks(res, cols, rows)) == data
+    monkeypatch.setattr(report, "CSV_JOIN_ROWS", 3)  # a block's text joined in pieces of 3 rows
+    for rows in (7, 10_000):
+        assert b"".join(report._csv_chunks(res, cols, rows)) == data
 
 
 def _bits_round_trip(bits, blank):

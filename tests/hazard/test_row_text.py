@@ -49,7 +49,7 @@ def _csv_lines(columns, keys) -> list:
     n = len(columns[0])
     names = [f"o[{i}]" for i in range(n)]
     block = report._joined_block(TOOLS, [TOOLS[1].array(names)], columns, keys)
-    lines = bytes(block).decode().split("\r\n")
+    lines = b"".join(bytes(p) for p in block).decode().split("\r\n")
     assert lines[-1] == "" and len(lines) == n + 1
     return [line.split(",") for line in lines[:-1]]
 
@@ -210,7 +210,11 @@ def _absorbed_round_trip(bits, kinds, seps, head_text, blank):
     cols, afters, head = _layout(bits, kinds, seps, head_text)
     parts = row_text.column_parts(TOOLS, [(c, texts) for c in cols], afters, head)
     n = len(cols[0])
-    rows = _split_rows(bytes(row_text.joined_rows(TOOLS, parts, n)).decode(), head_text, afters, n)
+    text = bytes(row_text.joined_rows(TOOLS, parts, n))
+    for k in (1, 37, n):  # the same text joined in pieces of k rows (observers.csv's blocks)
+        pieces = row_text.joined_pieces(TOOLS, parts, n, k)
+        assert len(pieces) == -(-n // k) and b"".join(bytes(p) for p in pieces) == text, k
+    rows = _split_rows(text.decode(), head_text, afters, n)
     for j, c in enumerate(cols):
         for row, x in zip(rows, c.tolist()):
             if c.dtype == bool:
