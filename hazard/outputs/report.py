@@ -306,12 +306,13 @@ def _csv_name(label: str) -> str:
     return label
 
 
-# observers.csv rows formatted at once (~50 MB of text objects by Python's reprs, ~8 MB of bytes with pyarrow), their
-# joined text made CSV_JOIN_ROWS at a time: 32 768 rows spread a block's fixed costs (its columns' checks, ~30 calls)
-# over twice the rows of 16 384, and a joined text of 4 MB (an 8 MB one cost more system time than it saved: freed
-# to the kernel and faulted in again). At 1e6 observers, the whole outputs, median of 9 alternated, load 4-5:
-# 0.89-1.09 -> 0.80-0.86 s CPU (one 8 MB text: 1.07 s, 0.30 s of it system).
-CSV_BLOCK_ROWS = 32_768
+# observers.csv rows formatted at once (~16 MB of bytes by orjson and pyarrow), the text joined CSV_JOIN_ROWS rows at a
+# time (4 MB pieces: one 8 MB text cost more system time than it saved, freed to the kernel and faulted in again; the
+# other writers' blocks CSV_JOIN_ROWS rows at a time too, ~50 MB of Python text objects by the reprs). 65 536 rows
+# spread a block's fixed costs (its columns' checks, ~30 calls, the GIL hand-overs around them) over four times the
+# rows of 16 384. At 1e6 observers, the whole outputs, median of 9 alternated in one process, load 4-5.5: user CPU
+# 0.74 (16 384) -> 0.70-0.77 (32 768) -> 0.60-0.66 s; 1e7 observers `hazard run`: peak 1.61-1.63 -> 1.69-1.71 GB.
+CSV_BLOCK_ROWS = 65_536
 CSV_JOIN_ROWS = 16_384
 
 
@@ -328,24 +329,35 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2
     arrow = _arrow()
     tools = row_tools() if arrow else None
 
-    def block(a0):  # the block's columns, on this thread (the geodetic transform included)
-        a1 = min(a0 + block_rows, len(pos))
+    def columns(a0, a1):  # the columns of rows a0:a1, on this thread (the geodetic transform included)
         p = pos[a0:a1]
         values = [p[:, 0], p[:, 1], p[:, 2]]
         if site:
             geo = observer_geodetic(result, p)
             values += [geo[:, 0], geo[:, 1], geo[:, 2]]
-        keys = ["x"] * len(values) + rest
-        values += [_at(cols[k], slice(a0, a1)) for k in rest]
-        if tools is not None and (names := _name_parts(tools, arrow, cols["labels"], a0, a1)) is not None:
-            return _joined_block, (tools, names, values, keys)
+        return values + [_at(cols[k], slice(a0, a1)) for k in rest], ["x"] * len(values) + rest
+
+    def other(a0, a1):  # rows a0:a1 by pyarrow's CSV writer, or by Python's reprs where a name needs quotes
+        values, keys = columns(a0, a1)
         names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
         if names is None:
             return _repr_block, (cols["labels"][a0:a1], values, keys)
         return _arrow_block, (arrow, names, values, keys)
 
+    def block(a0):
+        a1 = min(a0 + block_rows, len(pos))
+        if tools is not None and (names := _name_parts(tools, arrow, cols["labels"], a0, a1)) is not None:
+            return _joined_block, (tools, names, *columns(a0, a1))
+        return _each, ([other(b0, min(b0 + CSV_JOIN_ROWS, a1)) for b0 in range(a0, a1, CSV_JOIN_ROWS)],)  # their memory
+
     for piece in _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0, gate=gate):
-        yield from piece if isinstance(piece, list) else (piece,)  # a joined block: its pieces (_joined_block)
+        yield from piece if isinstance(piece, list) else (piece,)  # a block's pieces
+
+
+def _each(jobs) -> list:
+    """``fn(*args)`` of each ``(fn, args)`` of ``jobs`` in turn: a block's text by the other writers, ``CSV_JOIN_ROWS``
+    rows at a time (the Python text objects of one piece at a time, ~50 MB by the reprs)."""
+    return [fn(*args) for fn, args in jobs]
 
 
 def _gated(gate, fn, args):
