@@ -306,13 +306,14 @@ def _csv_name(label: str) -> str:
     return label
 
 
-# observers.csv rows formatted at once (~16 MB of bytes by orjson and pyarrow), the text joined CSV_JOIN_ROWS rows at a
+# observers.csv rows formatted at once (~8 MB of bytes by orjson and pyarrow), the text joined CSV_JOIN_ROWS rows at a
 # time (4 MB pieces: one 8 MB text cost more system time than it saved, freed to the kernel and faulted in again; the
-# other writers' blocks CSV_JOIN_ROWS rows at a time too, ~50 MB of Python text objects by the reprs). 65 536 rows
-# spread a block's fixed costs (its columns' checks, ~30 calls, the GIL hand-overs around them) over four times the
-# rows of 16 384. At 1e6 observers, the whole outputs, median of 9 alternated in one process, load 4-5.5: user CPU
-# 0.74 (16 384) -> 0.70-0.77 (32 768) -> 0.60-0.66 s; 1e7 observers `hazard run`: peak 1.61-1.63 -> 1.69-1.71 GB.
-CSV_BLOCK_ROWS = 65_536
+# other writers' blocks CSV_JOIN_ROWS rows at a time too, ~25 MB of Python text objects by the reprs). 32 768 rows
+# spread a block's fixed costs (its columns' checks, ~30 calls, the GIL hand-overs around them) over twice the rows
+# of 16 384: at 1e6 observers, the whole outputs, median of 9 alternated in one process, load 4-5, 0.89-1.09 ->
+# 0.80-0.86 s CPU. 65 536 cut the user CPU again (0.70-0.77 -> 0.60-0.66 s) but its blocks' memory went back to the
+# kernel and was faulted in again (text and write at 1e6: 2 250 -> 16 540 minor faults, 0.08 -> 0.23 s system).
+CSV_BLOCK_ROWS = 32_768
 CSV_JOIN_ROWS = 16_384
 
 
