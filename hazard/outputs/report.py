@@ -357,7 +357,7 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2
 
 def _each(jobs) -> list:
     """``fn(*args)`` of each ``(fn, args)`` of ``jobs`` in turn: a block's text by the other writers, ``CSV_JOIN_ROWS``
-    rows at a time (the Python text objects of one piece at a time, ~50 MB by the reprs)."""
+    rows at a time (the Python text objects of one piece at a time, ~25 MB by the reprs)."""
     return [fn(*args) for fn, args in jobs]
 
 

@@ -260,8 +260,10 @@ def _stacks(items: list, kinds, values) -> list:
 
 
 def _stack_parts(tools, vs: list, trail: str, texts: list) -> list:
-    """The parts of a run of :func:`_stacks`: one (:func:`number_cells` of their values row after row) when every value
-    is finite, else each column's cells (their non-finite values' texts) and the commas."""
+    """The parts of a run of :func:`_stacks`: one (:func:`number_cells` of their values row
+    after row, each cell a row's values and ``trail``) when every value is finite, else each
+    column's own cells (its non-finite values' texts; a comma after each, ``trail`` after
+    the last)."""
     rows = np.empty((len(vs[0]), len(vs)))
     for k, v in enumerate(vs):
         rows[:, k] = v
