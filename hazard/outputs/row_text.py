@@ -144,18 +144,19 @@ def _kinds(tools, columns, afters):
     character after it; ``("any", None)`` cells that take any literal text around them at
     no cost (bools by ``if_else`` of two texts, repeated values by the texts of the distinct
     ones)."""
-    values, kinds = [], []
+    values, kinds, raws = [], [], []
     seen: dict = {}  # (dtype, texts, first character after, the first 64 values' bytes) -> the plain or any columns of that start
     for i, ((v, texts), after) in enumerate(zip(columns, afters)):
         v = np.asarray(v)
         v = np.ascontiguousarray(v) if v.dtype == bool or v.dtype.kind in "iu" else np.ascontiguousarray(v, np.float64)
         raw = v.view(np.int64 if v.dtype.itemsize == 8 else np.int8).reshape(len(v), -1)  # by bits: -0.0 is not 0.0
         values.append(v)
+        raws.append(raw)
         if not len(v) or ((raw[:64] == raw[0]).all() and (raw == raw[0]).all()):  # one value throughout: one text
             kinds.append(["text", _one_text(tools, v.dtype.str, raw[0].tobytes(), texts) if len(v) else ""])
             continue
         key = (v.dtype.str, texts, after[0], raw[:64].tobytes())
-        same = [j for j in seen.get(key, ()) if np.array_equal(values[j].view(np.int8), v.view(np.int8))]
+        same = [j for j in seen.get(key, ()) if np.array_equal(raws[j], raw)]  # the same bits (dtypes equal: in the key)
         if same:
             kinds[same[0]][0] = "plain"  # its cells serve both: no literal text taken in
             kinds.append(["same", same[0]])
