@@ -22,7 +22,7 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
-from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_rows, row_tools
+from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_pieces, joined_rows, row_tools
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
 from scenes.conventions import beam_headline
@@ -306,7 +306,15 @@ def _csv_name(label: str) -> str:
     return label
 
 
-CSV_BLOCK_ROWS = 16_384  # observers.csv rows formatted at once (~25 MB of text objects; ~4 MB of bytes with pyarrow)
+# observers.csv rows formatted at once (~8 MB of bytes by orjson and pyarrow), the text joined CSV_JOIN_ROWS rows at a
+# time (4 MB pieces: one 8 MB text cost more system time than it saved, freed to the kernel and faulted in again; the
+# other writers' blocks CSV_JOIN_ROWS rows at a time too, ~25 MB of Python text objects by the reprs). 32 768 rows
+# spread a block's fixed costs (its columns' checks, ~30 calls, the GIL hand-overs around them) over twice the rows
+# of 16 384: at 1e6 observers, the whole outputs, median of 9 alternated in one process, load 4-5, 0.89-1.09 ->
+# 0.80-0.86 s CPU. 65 536 cut the user CPU again (0.70-0.77 -> 0.60-0.66 s) but its blocks' memory went back to the
+# kernel and was faulted in again (text and write at 1e6: 2 250 -> 16 540 minor faults, 0.08 -> 0.23 s system).
+CSV_BLOCK_ROWS = 32_768
+CSV_JOIN_ROWS = 16_384
 
 
 def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2, gate=None):
@@ -322,23 +330,35 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2
     arrow = _arrow()
     tools = row_tools() if arrow else None
 
-    def block(a0):  # the block's columns, on this thread (the geodetic transform included)
-        a1 = min(a0 + block_rows, len(pos))
+    def columns(a0, a1):  # the columns of rows a0:a1, on this thread (the geodetic transform included)
         p = pos[a0:a1]
         values = [p[:, 0], p[:, 1], p[:, 2]]
         if site:
             geo = observer_geodetic(result, p)
             values += [geo[:, 0], geo[:, 1], geo[:, 2]]
-        keys = ["x"] * len(values) + rest
-        values += [_at(cols[k], slice(a0, a1)) for k in rest]
-        if tools is not None and (names := _name_parts(tools, arrow, cols["labels"], a0, a1)) is not None:
-            return _joined_block, (tools, names, values, keys)
+        return values + [_at(cols[k], slice(a0, a1)) for k in rest], ["x"] * len(values) + rest
+
+    def other(a0, a1):  # rows a0:a1 by pyarrow's CSV writer, or by Python's reprs where a name needs quotes
+        values, keys = columns(a0, a1)
         names = _arrow_names(arrow, cols["labels"], a0, a1) if arrow else None
         if names is None:
             return _repr_block, (cols["labels"][a0:a1], values, keys)
         return _arrow_block, (arrow, names, values, keys)
 
-    yield from _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0, gate=gate)
+    def block(a0):
+        a1 = min(a0 + block_rows, len(pos))
+        if tools is not None and (names := _name_parts(tools, arrow, cols["labels"], a0, a1)) is not None:
+            return _joined_block, (tools, names, *columns(a0, a1))
+        return _each, ([other(b0, min(b0 + CSV_JOIN_ROWS, a1)) for b0 in range(a0, a1, CSV_JOIN_ROWS)],)  # their memory
+
+    for piece in _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0, gate=gate):
+        yield from piece if isinstance(piece, list) else (piece,)  # a block's pieces
+
+
+def _each(jobs) -> list:
+    """``fn(*args)`` of each ``(fn, args)`` of ``jobs`` in turn: a block's text by the other writers, ``CSV_JOIN_ROWS``
+    rows at a time (the Python text objects of one piece at a time, ~25 MB by the reprs)."""
+    return [fn(*args) for fn, args in jobs]
 
 
 def _gated(gate, fn, args):
@@ -451,7 +471,8 @@ def _joined_block(tools, names, values, keys):
     orjson and pyarrow): ``names`` (parts, :func:`_name_parts`), floats in orjson's shortest
     text that reads back as the same double (``1.0``, ``-0.0``, ``0.00001``, ``1e-7``,
     ``1e16``), nan and inf as repr writes them, an empty cell where NaN means "not
-    applicable", True/False."""
+    applicable", True/False. A list of bytes-like pieces, ``CSV_JOIN_ROWS`` rows each
+    (:func:`hazard.outputs.row_text.joined_pieces`)."""
     blank = CSV_TEXTS._replace(nan="")
     columns = [(v, blank if k in _CSV_BLANK_NAN else CSV_TEXTS) for v, k in zip(values, keys)]
     afters = [","] * (len(columns) - 1) + ["\r\n"]
@@ -459,7 +480,7 @@ def _joined_block(tools, names, values, keys):
         head, columns, afters = names[:-1], [(names[-1], CSV_TEXTS)] + columns, ["],"] + afters
     else:
         head = [*names, ","]
-    return joined_rows(tools, column_parts(tools, columns, afters, head), len(values[0]))
+    return joined_pieces(tools, column_parts(tools, columns, afters, head), len(values[0]), CSV_JOIN_ROWS)
 
 
 _ARROW_OPTIONS = {"include_header": False, "quoting_style": "none", "eol": "\r\n"}

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "column_parts", "joined_rows"]
+__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "column_parts", "joined_rows", "joined_pieces"]
 
 
 class CellTexts(NamedTuple):
@@ -48,20 +48,24 @@ def row_tools():
     return orjson, pyarrow, pyarrow.compute
 
 
-def number_cells(tools, v: np.ndarray, end: str):
+def number_cells(tools, v: np.ndarray, end: str, per_row: int = 1):
     """Cells of a finite float64 (or integer) column by orjson, as a pyarrow string array.
 
-    orjson writes ``[a,b,c]``; the ``]`` becomes a comma, every comma ``end``, and the
-    cells are the text between them (each with its ``end``).
+    orjson writes ``[a,b,c]``; the ``]`` becomes a comma, every ``per_row``-th comma
+    ``end``, and the cells are the text between them (each with its ``end``).
 
     Parameters
     ----------
     tools : tuple
         :func:`row_tools`.
     v : numpy.ndarray
-        (n,) finite float64 values, or integers (any unit: the digits only).
+        (n,) finite float64 values, or integers (any unit: the digits only); with
+        ``per_row`` > 1, the values of ``per_row`` columns row after row (n * per_row
+        values, :func:`_stack_parts`): each cell is a row's values, comma-separated.
     end : str
         One ASCII character written after each cell (a separator).
+    per_row : int
+        Values per cell.
     """
     orjson, pa, _ = tools
     text = np.frombuffer(orjson.dumps(np.ascontiguousarray(v), option=orjson.OPT_SERIALIZE_NUMPY), np.uint8).copy()
@@ -72,11 +76,13 @@ def number_cells(tools, v: np.ndarray, end: str):
     stops = np.flatnonzero(data == ord(","))
     if len(stops) != len(v):  # cannot happen for numbers; a guard against a changed orjson layout
         raise RuntimeError(f"orjson wrote {len(stops)} cells for {len(v)} values")
+    if per_row > 1:
+        stops = stops[per_row - 1::per_row]
     if end != ",":
         data[stops] = ord(end)
-    offsets = np.zeros(len(v) + 1, np.int32)
+    offsets = np.zeros(len(stops) + 1, np.int32)
     offsets[1:] = stops + 1
-    return pa.StringArray.from_buffers(len(v), pa.py_buffer(offsets), pa.py_buffer(data))
+    return pa.StringArray.from_buffers(len(stops), pa.py_buffer(offsets), pa.py_buffer(data))
 
 
 def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: bool | None = None):
@@ -87,7 +93,7 @@ def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: boo
     _, pa, pc = tools
     if _repeats(v) if repeated is None else repeated:
         enc = pc.dictionary_encode(pa.array(v.view(np.int64)))
-        return _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), end, texts).take(enc.indices)
+        return _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), end, texts, repeated=False).take(enc.indices)
     finite = np.isfinite(v)
     if finite.all():
         return number_cells(tools, v, end)
@@ -99,13 +105,16 @@ def _float_cells(tools, v: np.ndarray, end: str, texts: CellTexts, repeated: boo
     return pa.concat_arrays(cells).take(pa.array(index))
 
 
-def _one_text(tools, v: np.ndarray, texts: CellTexts) -> str:
-    """The cell of a column's first value, without the text after it."""
+@lru_cache(maxsize=256)
+def _one_text(tools, dtype: str, bits: bytes, texts: CellTexts) -> str:
+    """The cell of a value (its dtype and bytes: a column's first value, written once for
+    every block of a table), without the text after it."""
+    v = np.frombuffer(bits, dtype)
     if v.dtype == bool:
         return texts.true if v[0] else texts.false
     if v.dtype.kind == "f" and not np.isfinite(v[0]):
         return texts.nan if np.isnan(v[0]) else (texts.inf if v[0] > 0 else texts.ninf)
-    return tools[0].dumps(v[:1], option=tools[0].OPT_SERIALIZE_NUMPY)[1:-1].decode()  # as number_cells writes it
+    return tools[0].dumps(v, option=tools[0].OPT_SERIALIZE_NUMPY)[1:-1].decode()  # as number_cells writes it
 
 
 def _repeats(v: np.ndarray) -> bool:
@@ -135,26 +144,25 @@ def _kinds(tools, columns, afters):
     character after it; ``("any", None)`` cells that take any literal text around them at
     no cost (bools by ``if_else`` of two texts, repeated values by the texts of the distinct
     ones)."""
-    values, kinds = [], []
+    values, kinds, raws = [], [], []
+    seen: dict = {}  # (dtype, texts, first character after, the first 64 values' bytes) -> the plain or any columns of that start
     for i, ((v, texts), after) in enumerate(zip(columns, afters)):
         v = np.asarray(v)
         v = np.ascontiguousarray(v) if v.dtype == bool or v.dtype.kind in "iu" else np.ascontiguousarray(v, np.float64)
         raw = v.view(np.int64 if v.dtype.itemsize == 8 else np.int8).reshape(len(v), -1)  # by bits: -0.0 is not 0.0
         values.append(v)
-        if not len(v) or (raw == raw[0]).all():  # one value throughout (a constant MPE, an unused column): one text
-            kinds.append(["text", _one_text(tools, v, texts) if len(v) else ""])
+        raws.append(raw)
+        if not len(v) or ((raw[:64] == raw[0]).all() and (raw == raw[0]).all()):  # one value throughout: one text
+            kinds.append(["text", _one_text(tools, v.dtype.str, raw[0].tobytes(), texts) if len(v) else ""])
             continue
-        same = [j for j in range(i) if kinds[j][0] in ("plain", "any") and columns[j][1] == texts
-                and afters[j][0] == after[0] and values[j].dtype == v.dtype
-                and np.array_equal(values[j][:64].view(np.int8), v[:64].view(np.int8))
-                and np.array_equal(values[j].view(np.int8), v.view(np.int8))]
+        key = (v.dtype.str, texts, after[0], raw[:64].tobytes())
+        same = [j for j in seen.get(key, ()) if np.array_equal(raws[j], raw)]  # the same bits (dtypes equal: in the key)
         if same:
             kinds[same[0]][0] = "plain"  # its cells serve both: no literal text taken in
             kinds.append(["same", same[0]])
-        elif v.dtype == bool or (v.dtype.kind == "f" and _repeats(v)):
-            kinds.append(["any", None])
-        else:
-            kinds.append(["plain", None])
+            continue
+        seen.setdefault(key, []).append(i)
+        kinds.append(["any", None] if v.dtype == bool or (v.dtype.kind == "f" and _repeats(v)) else ["plain", None])
     return values, kinds
 
 
@@ -212,11 +220,13 @@ def column_parts(tools, columns, afters, head=()) -> list:
     head : sequence of str or pyarrow string arrays
         Parts before the first column (a row's name).
     """
-    _, pa, pc = tools
     values, kinds = _kinds(tools, columns, afters)
     made: dict = {}
     parts: list = []
-    for s in _row_items(kinds, afters, head):
+    for s in _stacks(_row_items(kinds, afters, head), kinds, values):
+        if s[0] == "stack":
+            parts += _stack_parts(tools, [values[i] for i in s[1]], s[2].decode(), [columns[i][1] for i in s[1]])
+            continue
         if s[0] != "col":
             parts.append(s[1].decode() if s[0] == "lit" else s[1])
             continue
@@ -226,6 +236,41 @@ def column_parts(tools, columns, afters, head=()) -> list:
             made[j] = _cells(tools, values[j], lead.decode(), trail.decode(), columns[j][1], kinds[j][0] == "any")
         parts.append(made[j])
     return parts
+
+
+def _stacks(items: list, kinds, values) -> list:
+    """:func:`_row_items` with each run of two or more consecutive float64 columns of cells
+    of their own (``plain``, none an earlier column's ``same``), a comma alone between them,
+    as one item ``["stack", [i, ...], trail]`` (``trail``: the last one's)."""
+    shared = {k[1] for k in kinds if k[0] == "same"}
+
+    def own(s) -> bool:
+        return s[0] == "col" and kinds[s[1]][0] == "plain" and s[1] not in shared and values[s[1]].dtype == np.float64
+
+    out: list = []
+    run: list = []  # the current run's items
+    for s in items + [["end"]]:
+        if own(s) and run and run[-1][3] == b",":
+            run.append(s)
+            continue
+        out += [["stack", [r[1] for r in run], run[-1][3]]] if len(run) > 1 else run
+        run = [s] if own(s) else []
+        if not run and s[0] != "end":
+            out.append(s)
+    return out
+
+
+def _stack_parts(tools, vs: list, trail: str, texts: list) -> list:
+    """The parts of a run of :func:`_stacks`: one (:func:`number_cells` of their values row
+    after row, each cell a row's values and ``trail``) when every value is finite, else each
+    column's own cells (its non-finite values' texts; a comma after each, ``trail`` after
+    the last)."""
+    rows = np.empty((len(vs[0]), len(vs)))
+    for k, v in enumerate(vs):
+        rows[:, k] = v
+    if np.isfinite(rows).all():
+        return [number_cells(tools, rows.reshape(-1), trail, per_row=len(vs))]
+    return [_float_cells(tools, v, "," if k + 1 < len(vs) else trail, t, repeated=False) for k, (v, t) in enumerate(zip(vs, texts))]
 
 
 def _cells(tools, v: np.ndarray, lead: str, trail: str, texts: CellTexts, repeated: bool):
@@ -239,7 +284,7 @@ def _cells(tools, v: np.ndarray, lead: str, trail: str, texts: CellTexts, repeat
     if not repeated:
         return _float_cells(tools, v, trail, texts, repeated=False)
     enc = pc.dictionary_encode(pa.array(v.view(np.int64)))  # each distinct value (by its bits) written once
-    cells = _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), trail[0], texts)
+    cells = _float_cells(tools, enc.dictionary.to_numpy().view(np.float64), trail[0], texts, repeated=False)  # distinct
     if lead or trail[1:]:
         cells = pc.binary_join_element_wise(lead, cells, trail[1:], "")
     return cells.take(enc.indices)
@@ -274,3 +319,10 @@ def joined_rows(tools, parts, n: int, drop_last: int = 0):
     text = pc.binary_join_element_wise(*merged, "")
     off = np.frombuffer(text.buffers()[1], np.int32)[text.offset:text.offset + len(text) + 1]
     return text.buffers()[2].slice(int(off[0]), int(off[-1] - off[0]) - drop_last)
+
+
+def joined_pieces(tools, parts, n: int, rows: int) -> list:
+    """:func:`joined_rows` of ``rows`` rows at a time (the last piece the rest): the same
+    text as one join, in pieces of a bounded size (the parts' cells made once for all ``n``)."""
+    return [joined_rows(tools, [p if isinstance(p, str) else p[a:a + rows] for p in parts], min(rows, n - a))
+            for a in range(0, n, rows)]

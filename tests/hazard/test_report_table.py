@@ -140,6 +140,9 @@ def test_streamed_csv_is_the_csv_module_table_byte_for_byte(monkeypatch, tmp_pat
     cols = report.observer_columns(result)
     for rows in (1, 2, 7, 10_000):
         assert b"".join(report._csv_chunks(result, cols, rows)) == expected
+    monkeypatch.setattr(report, "CSV_JOIN_ROWS", 3)  # a block written 3 rows at a time
+    for rows in (7, 10_000):
+        assert b"".join(report._csv_chunks(result, cols, rows)) == expected
 
 
 def _read_back_exact(data: bytes, result):
@@ -193,6 +196,9 @@ def test_csv_by_pyarrow_reads_back_every_number_exactly(tmp_path, monkeypatch, w
     assert set(ran) == {f"_{writer}_block"}  # that writer made every block
     cols = report.observer_columns(res)
     for rows in (1, 2, 7, 10_000):
+        assert b"".join(report._csv_chunks(res, cols, rows)) == data
+    monkeypatch.setattr(report, "CSV_JOIN_ROWS", 3)  # a block's text joined (or written) in pieces of 3 rows
+    for rows in (7, 10_000):
         assert b"".join(report._csv_chunks(res, cols, rows)) == data
 
 

@@ -49,7 +49,7 @@ def _csv_lines(columns, keys) -> list:
     n = len(columns[0])
     names = [f"o[{i}]" for i in range(n)]
     block = report._joined_block(TOOLS, [TOOLS[1].array(names)], columns, keys)
-    lines = bytes(block).decode().split("\r\n")
+    lines = b"".join(bytes(p) for p in block).decode().split("\r\n")
     assert lines[-1] == "" and len(lines) == n + 1
     return [line.split(",") for line in lines[:-1]]
 
@@ -173,7 +173,8 @@ _SEPS = [",", ";", "|x|", ", \"k\": ", "|\u00e9|", "\r\n"]  # each a text no cel
 
 
 def _layout(bits, kinds, seps, head_text):
-    """Columns of each kind: distinct (random bit patterns), repeated (each of ``bits`` 70
+    """Columns of each kind: distinct (random bit patterns), finite (the same, NaN and inf
+    made -0.0: consecutive ones with a comma between are one stacked part), repeated (each of ``bits`` 70
     times: written once each, the literal beside it taken into its cells), bools,
     one value throughout (a literal), and a copy of the first column (its cells shared)."""
     v = np.asarray(bits, np.uint64).view(np.float64)
@@ -181,8 +182,9 @@ def _layout(bits, kinds, seps, head_text):
     cols = []
     for j, k in enumerate(kinds):
         w = np.roll(np.repeat(v, 70), 3 * j)
-        cols.append({"distinct": _doubles(n, len(v) + j), "repeated": w, "bool": w > 0, "one": np.full(n, v[0]),
-                     "copy": cols[0] if cols else w}[k])
+        d = _doubles(n, len(v) + j)
+        cols.append({"distinct": d, "finite": np.where(np.isfinite(d), d, -0.0), "repeated": w, "bool": w > 0,
+                     "one": np.full(n, v[0]), "copy": cols[0] if cols else w}[k])
     afters = [seps[j % len(seps)] for j in range(len(cols) - 1)] + ["\r\n"]
     return cols, afters, [head_text]
 
@@ -208,7 +210,11 @@ def _absorbed_round_trip(bits, kinds, seps, head_text, blank):
     cols, afters, head = _layout(bits, kinds, seps, head_text)
     parts = row_text.column_parts(TOOLS, [(c, texts) for c in cols], afters, head)
     n = len(cols[0])
-    rows = _split_rows(bytes(row_text.joined_rows(TOOLS, parts, n)).decode(), head_text, afters, n)
+    text = bytes(row_text.joined_rows(TOOLS, parts, n))
+    for k in (1, 37, n):  # the same text joined in pieces of k rows (observers.csv's blocks)
+        pieces = row_text.joined_pieces(TOOLS, parts, n, k)
+        assert len(pieces) == -(-n // k) and b"".join(bytes(p) for p in pieces) == text, k
+    rows = _split_rows(text.decode(), head_text, afters, n)
     for j, c in enumerate(cols):
         for row, x in zip(rows, c.tolist()):
             if c.dtype == bool:
@@ -218,7 +224,7 @@ def _absorbed_round_trip(bits, kinds, seps, head_text, blank):
     return parts
 
 
-_KINDS = st.lists(st.sampled_from(["distinct", "repeated", "bool", "one", "copy"]), min_size=1, max_size=7)
+_KINDS = st.lists(st.sampled_from(["distinct", "finite", "repeated", "bool", "one", "copy"]), min_size=1, max_size=7)
 
 
 @settings(derandomize=True, deadline=None, max_examples=25)
@@ -245,6 +251,22 @@ def test_literals_beside_bools_and_repeated_values_leave_no_part_of_their_own():
     bits = np.array([1.5, -2.0, 0.25, 3.0], np.float64).view(np.uint64).tolist()
     parts = _absorbed_round_trip(bits, ["bool", "one", "repeated"], [";"], "o[", False)
     assert not any(isinstance(p, str) for p in parts) and len(parts) == 2
+
+
+def test_consecutive_columns_of_finite_doubles_are_one_part():
+    """Columns of distinct finite doubles with a comma alone between them are one part of
+    the join (one orjson call on their values row after row), the row's other text around
+    it; one holding NaN or inf leaves the run to each column's cells (its texts), and a
+    column whose cells a later copy shares keeps its own part."""
+    bits = np.array([1.5, -2.0, 0.25, 3.0], np.float64).view(np.uint64).tolist()
+    def arrays(kinds, seps, blank=False) -> int:
+        return sum(not isinstance(p, str) for p in _absorbed_round_trip(bits, kinds, seps, "", blank))
+
+    assert arrays(["finite"] * 4, [","]) == 1  # a,b,c,d\r\n
+    assert arrays(["finite"] * 4, [",", ",", ";"]) == 2  # a,b,c;d
+    assert arrays(["finite"] * 4, [";", ","]) == 3  # a;b,c;d
+    assert arrays(["distinct", "finite"], [","], blank=True) == 2  # NaN and inf in the first: no stack
+    assert arrays(["finite", "copy", "finite"], [","]) == 3  # the first's cells serve the copy too
 
 
 def test_repeated_values_judged_on_a_scrambled_sample():
