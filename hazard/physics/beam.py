@@ -647,8 +647,7 @@ def _boxes_meet_convex(hull, s0, t0, d) -> np.ndarray:
     rows = np.flatnonzero(out)
     if not len(rows) or len(hull) < 3:
         return out
-    edge = np.roll(hull, -1, axis=0) - hull
-    normal = np.stack([edge[:, 1], -edge[:, 0]], axis=1)  # either orientation: both ends of each interval are tested
+    normal = _edge_normals(hull)  # either orientation: both ends of each interval are tested
     proj = hull @ normal.T  # (V, E)
     pmin, pmax = proj.min(axis=0), proj.max(axis=0)
     spread = np.abs(normal).sum(axis=1)
@@ -693,6 +692,12 @@ def target_seeds(beam: BeamGeometry, targets) -> list[Seed]:
     return seeds
 
 
+def _edge_normals(hull) -> np.ndarray:
+    """Normals (E, 2) of a polygon's edges, as long as the edges (one orientation)."""
+    edge = np.roll(hull, -1, axis=0) - hull
+    return np.stack([edge[:, 1], -edge[:, 0]], axis=1)
+
+
 def _hull_and_width(s) -> tuple:
     """The convex hull (V, 2) of points s (N, 2) and its least width (over its edges'
     normals); (None, the bounding box's smaller side) when they span no area."""
@@ -700,9 +705,8 @@ def _hull_and_width(s) -> tuple:
     hull = _hull_s(s) if box > 0 else None
     if hull is None or len(hull) < 3:
         return None, box
-    edge = np.roll(hull, -1, axis=0) - hull
-    normal = np.stack([edge[:, 1], -edge[:, 0]], axis=1) / np.linalg.norm(edge, axis=1)[:, None]
-    proj = hull @ normal.T
+    normal = _edge_normals(hull)
+    proj = hull @ (normal / np.linalg.norm(normal, axis=1)[:, None]).T
     return hull, min(box, float(np.min(proj.max(axis=0) - proj.min(axis=0))))
 
 
@@ -920,10 +924,11 @@ def _needs_split(labels, clean, seeds=(), boxes=None) -> np.ndarray:
         return mixed
     benign = mixed & np.all(np.isin(labels, list(clean) + [-1]), axis=1)
     rows = np.flatnonzero(benign)
-    for seed in seeds if boxes is not None and len(rows) else ():
-        if seed.hull is not None and seed.index not in clean:
-            s0, t0, d = (np.broadcast_to(np.asarray(x, float), labels.shape[:1])[rows] for x in boxes)
-            benign[rows[_boxes_meet_convex(seed.hull, s0, t0, d)]] = False
+    sampled = [seed.hull for seed in seeds if seed.hull is not None and seed.index not in clean]
+    if boxes is not None and len(rows) and sampled:
+        s0, t0, d = (np.broadcast_to(np.asarray(x, float), labels.shape[:1])[rows] for x in boxes)
+        for hull in sampled:
+            benign[rows[_boxes_meet_convex(hull, s0, t0, d)]] = False
     return mixed & ~benign
 
 
