@@ -4,6 +4,10 @@ the one write-then-rename of a single file), bounded input files (regular files 
 size, bounded nesting) and TOML reading with one clear error line. Sets of files replaced
 as one unit (output folders, ``hazard fit``'s files): :mod:`brdfmodels.output_sets`.
 
+Large new files written piece by piece and made durable, past the page cache where the
+system allows (:class:`SyncedFile`, :func:`write_synced`): see the notes at
+:data:`DIRECT_BUFFER_BYTES`.
+
 Input limits (:data:`LIMITS`) protect against memory bombs and endless reads; each can be
 raised with an environment variable ``HAZARD_MAX_<NAME>`` (e.g. ``HAZARD_MAX_OBSERVERS=2e6``),
 and every error that hits a limit says so.
@@ -12,18 +16,25 @@ and every error that hits a limit says so.
 from __future__ import annotations
 
 import csv
+import errno
 import math
+import mmap
 import os
 import re
 import tempfile
 import tomllib
 from pathlib import Path
 
+try:
+    import fcntl
+except ImportError:  # not POSIX: no O_DIRECT either
+    fcntl = None  # type: ignore[assignment]
+
 import numpy as np
 
 __all__ = ["LIMITS", "LIMIT_CEILING", "DEPTH_CEILING", "limit", "check_limit", "check_input_file", "read_input_text",
            "toml_depth", "toml_depth_at", "data_depth", "parse_toml", "current_umask", "fsync_dir", "fsync_file",
-           "atomic_write", "atomic_write_text", "read_toml", "read_csv_columns", "count_values"]
+           "atomic_write", "atomic_write_text", "SyncedFile", "write_synced", "DIRECT_BUFFER_BYTES", "read_toml", "read_csv_columns", "count_values"]
 
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {
@@ -322,6 +333,153 @@ def atomic_write_text(path, text: str) -> Path:
             fh.write(text)
 
     return atomic_write(path, write)
+
+
+# A new file written piece by piece and made durable (fsynced), past the page cache where it can.
+#
+# A run's large outputs (observers.csv: ~250 bytes an observer, 247 MB at 1e6) cost the kernel
+# more than the text costs Python when they go through the page cache: every page of the file is
+# a new page of memory, copied into and, on a virtual machine, first given by the host
+# (``copy_folio_from_iter_atomic``: 0.07 s of system time for 247 MB when those pages were warm,
+# 0.4-0.65 s when they were not; measured with ``perf record`` on this project's 2-core machine).
+# With ``O_DIRECT`` the bytes go from one reused, page-aligned buffer to the disk: 0.01-0.02 s of
+# system time, and the writer's thread waits for the disk without holding a core (0.14-0.20 s
+# wall for 247 MB, while the other threads go on making text).
+#
+# ``O_DIRECT`` needs the buffer, the length and the file offset aligned to the disk's block: the
+# buffer is an anonymous ``mmap`` (page-aligned), whole buffers are written while the file grows,
+# and the last partial buffer is written with ``O_DIRECT`` switched off (``fcntl``). Where
+# ``O_DIRECT`` is missing (not Linux) or refused (a file system without it: ``EINVAL``), the
+# same bytes go through the page cache with write-back started every ``step`` bytes
+# (:class:`_Flushed`). Either way the file is fsynced before :meth:`SyncedFile.close` returns.
+
+# the aligned buffer: 8 MiB (a whole number of every disk block size), written at once when full
+DIRECT_BUFFER_BYTES = 8 << 20
+
+
+class _Flushed:
+    """Write-back of a file being written started every ``step`` bytes
+    (``posix_fadvise(DONTNEED)``: the kernel starts writing the dirty pages out without
+    waiting for them, and drops them from the cache once clean), so that the fsync at the
+    end waits for the last part only (0.11-0.13 -> 0.03 s for 247 MB) and the cache holds no
+    more of the file than it must. The fsync still makes the whole file durable; without
+    ``posix_fadvise`` (not Linux) nothing is done here."""
+
+    def __init__(self, fd: int, step: int = 32 << 20):
+        self.fd, self.step, self.done, self.written = fd, step, 0, 0
+        self.advise = getattr(os, "posix_fadvise", None)
+
+    def wrote(self, n: int) -> None:
+        self.written += n
+        if self.advise is not None and self.written - self.done >= self.step:
+            self.advise(self.fd, self.done, self.written - self.done, os.POSIX_FADV_DONTNEED)
+            self.done = self.written
+
+
+def _write_all(fd: int, data) -> None:
+    """``os.write`` until every byte of ``data`` (a bytes-like object) is written."""
+    view = memoryview(data).cast("B")
+    while len(view):
+        view = view[os.write(fd, view):]
+
+
+class SyncedFile:
+    """A new file at ``path`` (created or truncated), written by :meth:`write` and made
+    durable by :meth:`close` (fsync). ``direct``: try ``O_DIRECT`` (module docstring); false,
+    every byte goes through the page cache. :attr:`direct` says which way the file went."""
+
+    def __init__(self, path, direct: bool = True):
+        flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_CLOEXEC", 0)
+        want = direct and hasattr(os, "O_DIRECT") and fcntl is not None
+        self.fd = _open(path, flags, os.O_DIRECT if want else 0)
+        self.direct = want and bool(fcntl.fcntl(self.fd, fcntl.F_GETFL) & os.O_DIRECT)
+        self.buffer = mmap.mmap(-1, DIRECT_BUFFER_BYTES) if self.direct else None
+        self.held = 0  # bytes in the buffer not yet written
+        self.flushed = _Flushed(self.fd)
+
+    def write(self, data) -> None:
+        """Append ``data`` (a bytes-like object) to the file."""
+        view, size = memoryview(data).cast("B"), DIRECT_BUFFER_BYTES
+        while len(view) and self.direct:  # into the aligned buffer, written whenever it is full
+            n = min(size - self.held, len(view))
+            self.buffer[self.held:self.held + n] = view[:n]
+            self.held, view = self.held + n, view[n:]
+            if self.held == size:
+                self._write_buffer()
+        if len(view):  # through the page cache (O_DIRECT not taken, or refused on the way)
+            _write_all(self.fd, view)
+            self.flushed.wrote(len(view))
+
+    def _write_buffer(self) -> None:
+        """The full buffer to the disk with ``O_DIRECT``; refused (``EINVAL``: an alignment
+        the disk does not take), the rest of it and of the file through the page cache."""
+        view = memoryview(self.buffer)
+        try:
+            while len(view):
+                view = view[os.write(self.fd, view):]
+        except OSError as exc:
+            if exc.errno != errno.EINVAL:
+                raise
+            self._buffered()
+            _write_all(self.fd, view)  # what O_DIRECT had not written of the buffer
+        finally:
+            view.release()
+        self.held = 0
+
+    def _buffered(self) -> None:
+        """Switch ``O_DIRECT`` off: the rest goes through the page cache."""
+        fcntl.fcntl(self.fd, fcntl.F_SETFL, fcntl.fcntl(self.fd, fcntl.F_GETFL) & ~os.O_DIRECT)
+        self.direct = False
+
+    def close(self) -> None:
+        """Write what the buffer holds, fsync the file and close it."""
+        try:
+            if self.buffer is not None:
+                if self.held:
+                    if self.direct:
+                        self._buffered()  # the last, partial block is not aligned
+                    _write_all(self.fd, memoryview(self.buffer)[:self.held])
+                self.buffer.close()
+                self.buffer = None
+            os.fsync(self.fd)
+        finally:
+            os.close(self.fd)
+
+    def abandon(self) -> None:
+        """Close without syncing (the file is being discarded)."""
+        if self.buffer is not None:
+            self.buffer.close()
+            self.buffer = None
+        os.close(self.fd)
+
+
+def _open(path, flags: int, direct: int) -> int:
+    """``os.open`` with ``direct`` added to ``flags``; refused for it (``EINVAL``), without."""
+    if direct:
+        try:
+            return os.open(path, flags | direct, 0o666)
+        except OSError as exc:
+            if exc.errno != errno.EINVAL:
+                raise
+    return os.open(path, flags, 0o666)
+
+
+def write_synced(path, data, direct: bool = True, stop=None) -> None:
+    """Write ``data`` (bytes-like, or an iterable of bytes-like pieces one after another) to a
+    new file at ``path`` and fsync it (:class:`SyncedFile`). ``stop`` (a
+    :class:`threading.Event`, or None): set, the writing ends before the next piece and the
+    file is closed unsynced (its caller discards it); so does an error."""
+    out = SyncedFile(path, direct=direct)
+    try:
+        for piece in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
+            if stop is not None and stop.is_set():
+                out.abandon()
+                return
+            out.write(piece)
+    except BaseException:
+        out.abandon()
+        raise
+    out.close()
 
 
 def read_toml(path) -> dict:

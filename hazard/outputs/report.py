@@ -22,6 +22,7 @@ from brdfmodels.fileio import atomic_write_text, current_umask
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
+from brdfmodels.fileio import write_synced
 from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_pieces, joined_rows, row_tools
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
@@ -573,39 +574,12 @@ def _csv_text(result, cols) -> str:
 
 
 def _write_csv_synced(path: Path, result, cols, stop=None, threads: int = 2, gate=None) -> None:
-    """observers.csv written block by block into ``path`` and fsynced, the blocks made on
-    ``threads`` threads (:func:`_in_order`, ``gate`` its slots); ``stop`` (a
-    :class:`threading.Event`): set, the writing ends after the block under way (the
-    staging folder of a failed run is discarded: no partial table is ever switched in)."""
-    with open(path, "wb") as fh:
-        flushed = _Flushed(fh)
-        for piece in _csv_chunks(result, cols, threads=threads, gate=gate):
-            if stop is not None and stop.is_set():
-                return
-            fh.write(piece)
-            flushed.wrote(len(piece))
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
-class _Flushed:
-    """Write-back of a file being written started every ``step`` bytes
-    (``posix_fadvise(DONTNEED)``: the kernel starts writing the dirty pages out without
-    waiting for them, and drops them from the cache once clean), so that the fsync at the
-    end waits for the last part only (0.11-0.13 -> 0.03 s for 247 MB) and the cache holds no
-    more of the file than it must. The fsync still makes the whole file durable; without
-    ``posix_fadvise`` (not Linux) nothing is done here."""
-
-    def __init__(self, fh, step: int = 32 << 20):
-        self.fh, self.step, self.done, self.written = fh, step, 0, 0
-        self.advise = getattr(os, "posix_fadvise", None)
-
-    def wrote(self, n: int) -> None:
-        self.written += n
-        if self.advise is not None and self.written - self.done >= self.step:
-            self.fh.flush()
-            self.advise(self.fh.fileno(), self.done, self.written - self.done, os.POSIX_FADV_DONTNEED)
-            self.done = self.written
+    """observers.csv written block by block into ``path`` and fsynced (:func:`write_synced`: past
+    the page cache where the system allows), the blocks made on ``threads`` threads
+    (:func:`_in_order`, ``gate`` its slots); ``stop`` (a :class:`threading.Event`): set, the
+    writing ends after the block under way (the staging folder of a failed run is discarded: no
+    partial table is ever switched in)."""
+    write_synced(path, _csv_chunks(result, cols, threads=threads, gate=gate), stop=stop)
 
 
 class CsvWriting:
@@ -785,17 +759,6 @@ def _json_numbers(arrow, a: np.ndarray, null: bool):
     return pc.if_else(pa.array(finite), text, pa.array(other, pa.string()))
 
 
-def _write_synced(path: Path, data) -> None:
-    """Write ``data`` (bytes, or a list of bytes one after another) and fsync it."""
-    with open(path, "wb") as fh:
-        flushed = _Flushed(fh)
-        for piece in [data] if isinstance(data, (bytes, bytearray)) else data:
-            fh.write(piece)
-            flushed.wrote(len(piece))
-        fh.flush()
-        os.fsync(fh.fileno())
-
-
 def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict | None = None,
               csv: CsvWriting | None = None) -> list:
     """Write report.json, observers.csv and the files of ``extra`` (name -> bytes) into
@@ -821,7 +784,7 @@ def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict
     for n in names:
         if n == "observers.csv":  # written by blocks of rows from the columns, on the writer's thread
             continue
-        _write_synced(folder / n, texts[n])
+        write_synced(folder / n, texts[n])
         os.chmod(folder / n, 0o666 & ~mask)
     csv.wait()
     os.chmod(csv.path, 0o666 & ~mask)
