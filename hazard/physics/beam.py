@@ -591,8 +591,8 @@ def _ray_s(s0, t0, d) -> np.ndarray:
 
 
 def _trace_cells(beam, tracer, s):
-    """What the five rays per cell (``_ray_s``) hit: labels and faces (n, 5), and the
-    centre ray's hit point, range and unit direction."""
+    """What the five rays per cell (``_ray_s``) hit: labels and faces (n, 5), the centre
+    ray's hit point, range and unit direction, and every ray's range [m] (n, 5; inf: none)."""
     o, dirs = beam.rays(s)
     hits = tracer.first_hit(o, dirs)
     n = len(s) // 5
@@ -600,7 +600,7 @@ def _trace_cells(beam, tracer, s):
     faces = np.where(hits.hit, hits.face, -1).reshape(n, 5)
     unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     c = np.arange(n) * 5
-    return labels, faces, hits.point[c], hits.t[c], unit[c]
+    return labels, faces, hits.point[c], hits.t[c], unit[c], hits.t.reshape(n, 5)
 
 
 def _seed_cells(seeds, s0, t0, d, cell_i, cell_j, half_width):
@@ -769,16 +769,30 @@ def outline_cells(outline_s, n0, half_width=HALF_WIDTH) -> OutlineCells:
     return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows], m.take(keep))
 
 
-def _foreign_hits(outlines, foreign, s, labels):
-    """Add to ``foreign[k]`` the objects (-1: nothing) hit by rays (at s, labels (n, 5))
-    inside flat target k's outline other than k itself (in place)."""
-    lab = labels.ravel()
+def _foreign_hits(beam, targets, outlines, foreign, s, labels, t):
+    """Add to ``foreign[k]`` the objects hit before flat target k's plane by rays (at s
+    (5n, 2); labels and distances ``t`` [m] (n, 5)) inside k's outline other than k itself
+    (in place). A hit beyond the plane, or none, along a ray inside the outline is a
+    float32 graze past k's edge: no evidence of anything in front (:func:`_before_plane`)."""
+    lab, dist = labels.ravel(), t.ravel()
     for k, poly in outlines.items():
-        other = lab != k
-        if np.any(other):
-            # rays within 1e-6 w of the outline may graze its edge in floating point
-            inside = inside_convex(s[other], poly, margin=1e-6)
-            foreign[k].update(np.unique(lab[other][inside]).tolist())
+        rows = np.flatnonzero(lab != k)
+        if not len(rows):
+            continue
+        rows = rows[inside_convex(s[rows], poly, margin=1e-6)]  # within 1e-6 w of the outline: a graze either way
+        if len(rows):
+            foreign[k].update(np.unique(lab[rows][_before_plane(beam, targets[k], s[rows], dist[rows])]).tolist())
+
+
+def _before_plane(beam, target, s, t) -> np.ndarray:
+    """Whether hits at distances ``t`` [m] along the beam's rays through ``s`` (N, 2) lie
+    before flat ``target``'s plane (by more than 1e-9 of the way: a hit beyond it, or on it,
+    is a float32 graze past the target's edge; no hit has t = inf)."""
+    o, dirs = beam.rays(np.asarray(s, float).reshape(-1, 2))
+    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        plane_m = ((target.center_m - o) @ target.normal) / (unit @ target.normal)
+    return np.asarray(t) < plane_m * (1 - 1e-9)
 
 
 def _piece_hits(beam, tracer, targets, outlines, n0, foreign) -> int:
@@ -794,20 +808,15 @@ def _piece_hits(beam, tracer, targets, outlines, n0, foreign) -> int:
     points = {k: p for k, p in points.items() if len(p)}
     if not points:
         return 0
-    o, dirs = beam.rays(np.concatenate(list(points.values())))
-    hits = tracer.first_hit(o, dirs)
-    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    s = np.concatenate(list(points.values()))
+    hits = tracer.first_hit(*beam.rays(s))
     start = 0
     for k, p in points.items():
         rows = slice(start, start + len(p))
         start += len(p)
-        c, n = targets[k].center_m, targets[k].normal
-        with np.errstate(divide="ignore", invalid="ignore"):
-            plane_m = ((c - o[rows]) @ n) / (unit[rows] @ n)
-        lab, t = hits.obj[rows], hits.t[rows]
-        front = hits.hit[rows] & (lab != k) & (t < plane_m * (1 - 1e-9))
-        foreign[k].update(np.unique(lab[front]).tolist())
-    return len(o)
+        front = hits.hit[rows] & (hits.obj[rows] != k) & _before_plane(beam, targets[k], s[rows], hits.t[rows])
+        foreign[k].update(np.unique(hits.obj[rows][front]).tolist())
+    return len(s)
 
 
 def exact_classes(foreign) -> dict:
@@ -851,10 +860,10 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
         d = 2 * beam.half_width / (n0 * 2.0**lv)
         s0, t0 = -beam.half_width + level_i * d, -beam.half_width + level_j * d
         s_rays = _ray_s(s0, t0, d)
-        labels, faces, point, t, direction = _trace_cells(beam, tracer, s_rays)
+        labels, faces, point, t, direction, ranges = _trace_cells(beam, tracer, s_rays)
         hit_by_centre.update(np.unique(labels[:, 0]).tolist())
         rays += 5 * len(level_i)
-        _foreign_hits(outlines, foreign, s_rays, labels)
+        _foreign_hits(beam, targets, outlines, foreign, s_rays, labels, ranges)
         clean = set(exact_classes(foreign))
         power = beam.power_w * rectangle_fraction(s0, s0 + d, t0, t0 + d)
         need = _needs_split(labels, clean, seeds, (s0, t0, d))

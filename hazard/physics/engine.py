@@ -327,7 +327,10 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     """Samples of a flat target from its outline cut by the coarsest cells (exact powers,
     centroids, covariances and nearest-to-axis points), less the parts hidden by the flat
     targets ``fronts`` (index -> outline) in front of it; None when a ray through a
-    piece's centroid meets anything else first (the outline is then not what is lit).
+    piece's centroid meets anything else before the target's plane (the outline is then
+    not what is lit; a hit beyond the plane is a float32 graze past the outline's edge, or
+    a disk's circumscribed polygon reaching past the disk, and nothing is in front there:
+    the rule of the sampler's piece rays, ``beam._piece_hits``).
     Attenuation per piece uses its shortest path (an upper bound); the spread to the
     longest goes into the error bound. The power outside the beam square (<= 3.1e-8 P)
     is spread over the pieces."""
@@ -345,11 +348,11 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     oc = OutlineCells(oc.keys[lit], [oc.pieces[q] for q in lit], None)
     m = m.take(lit)
     o, dirs = beam.rays(m.mean)
-    label = tracer.first_hit(o, dirs).obj
-    allowed = [target.index, -1] + list(fronts or {})
-    if np.any(~np.isin(label, allowed)):
-        return None
+    hits = tracer.first_hit(o, dirs)
     pts, unit, path, z = _plane_hits(beam, target, m.mean)
+    allowed = [target.index, -1] + list(fronts or {})
+    if np.any(~np.isin(hits.obj, allowed) & (hits.t < path * (1 - 1e-9))):  # beyond the plane: a graze past its edge
+        return None
     verts = np.concatenate(oc.pieces)
     counts = [len(p) for p in oc.pieces]
     owner = np.repeat(np.arange(len(oc.pieces)), counts)

@@ -279,3 +279,24 @@ def test_curved_spot_power_fine_rtol(rtol, backstop, screen):
     text, expected = _case("sphere", 100.0, 0.02, 1e-3, 5.0 / 6.0, 0.0, 0.25, 1.0 / 6.0, (0, -1, 0), (0, 0, 0), backstop, rtol,
                            screen)
     _check(text, expected)
+
+
+@pytest.mark.parametrize("rot", [pytest.param((0.0, 0.0, 0.0), marks=pytest.mark.slow), (0.7, -0.4, 1.9),
+                                 pytest.param((-2.1, 0.3, 0.9), marks=pytest.mark.slow)])  # ~4 s each
+def test_screen_in_front_stays_exact_in_a_turned_scene(rot):
+    """Found on 2026-11-27 by the path matrix's "moved" variant on the sphere-rim case: the
+    whole scene turned, the wide screen in front of the sphere lost its exact outline
+    integral (447.26 W, bound 0) for the rays' total (473.88 W, bound 43.9 W) and its peak
+    irradiance rose by 7e-5. A cell's ray inside the screen's outline, a float32 graze past
+    its edge, went on to the sphere behind and counted as "something in front" of the
+    screen. Hits beyond a target's plane are no such evidence (``beam._before_plane``).
+    Reference (range-safety.md 1): the screen (20 D wide) is a half-plane whose edge lies
+    d = 3/64 D from the beam's axis: power P erfc(d/w)/2, peak E0 exp(-d^2/w^2),
+    E0 = P / (pi w^2), w = D/2; in every orientation of the scene."""
+    a = math.exp(-3.0)
+    text, _ = _case("sphere", 50.0, a, 0.0, 1.0, 0.125, 0.103125, -0.0625, (0.75, 0.0, 1.0), rot, screen=True)
+    screen = next(t for t in hazard.analyze(scenes.loads(text)).targets if t.name == "screen")
+    w, d = a / 2, (0.103125 - 0.15) * -a  # the edge 0.3 r = 0.15 D left of the sphere's centre
+    assert screen.spot_power_w == pytest.approx(P * math.erfc(d / w) / 2, rel=1e-6)
+    assert screen.spot_power_error_w <= 1e-9 * P
+    assert screen.peak_irradiance_w_m2 == pytest.approx(P / (math.pi * w * w) * math.exp(-(d / w) ** 2), rel=1e-9)
