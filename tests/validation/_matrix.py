@@ -272,6 +272,9 @@ def move_rigidly(data, angles=(0.7, -0.4, 1.9), shift_m=(1234.5, -678.25, 42.0))
         _move_up_dependent(data, yaw, Q, T)
     else:
         Q = _rot_z(angles[0]) @ _rot_y(angles[1]) @ _rot_x(angles[2])
+    for shape in [*data.get("targets", []), *data.get("occluders", [])]:  # a default frame turns with the scene too
+        shape.setdefault("normal", [0.0, 0.0, 1.0])
+        shape.setdefault("tangent", [1.0, 0.0, 0.0])
     _transform(data, Q, T)
     return data
 
@@ -391,9 +394,10 @@ def differences(base, other, floors, who):
         if b.dtype == bool:
             bad = b != v
         else:
-            both_nan = np.isnan(b) & np.isnan(v)
-            allowed = RTOL * np.maximum(np.abs(b), np.abs(v)) + eb + ev + floor
-            bad = ~both_nan & ~(np.abs(v - b) <= allowed)
+            same = (np.isnan(b) & np.isnan(v)) | (b == v)  # equal, an unbounded NOHD (inf) included
+            with np.errstate(invalid="ignore"):  # inf - inf: the "same" above
+                allowed = RTOL * np.maximum(np.abs(b), np.abs(v)) + eb + ev + floor
+                bad = ~same & ~(np.abs(v - b) <= allowed)
         lines += [f"{key} [{labels[i]}]: {b[i]!r} -> {v[i]!r}" for i in np.flatnonzero(bad)]
     return lines
 

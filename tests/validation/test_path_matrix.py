@@ -23,6 +23,7 @@ from . import _matrix as mx
 from . import _refs as ref
 from . import test_crossings_surfaces as cs
 from . import test_curved_reflectors as cr
+from . import test_curved_spot_power as cv
 from . import test_diffuse_and_back_face as db
 from . import test_direct_beam as dbm
 from . import test_motion_refs as mo
@@ -103,6 +104,32 @@ def _spot(name):
 def _shadowed(tmp):
     """test_spot_power: a plate partly hidden by a plate in front of it."""
     return scenes.loads(sp._shadowed_pair(100.0, 150.0, 0.05, 1e-3, (-0.05, 0.2, -0.1, 0.1), (-0.3, 0.3, -0.3, 0.3), 1e-4))
+
+
+def _edges_on_axis(tmp):
+    """test_spot_power: a strip behind a plate, both lower edges on the beam's axis and the
+    strip's on the sampling cells' boundaries (its piece rays see the shadow)."""
+    R_f, R_b, a, phi = 5.0, 6.0, math.exp(-3.0), math.exp(-7.0)
+    D_f, D_b = a + R_f * phi, a + R_b * phi
+    return scenes.loads(sp._shadowed_pair(R_f, R_b, a, phi, (0.0, D_f, 0.0, D_f), (-1.5 * D_b, 0.5 * D_b, 0.0, 0.125 * D_b)))
+
+
+def _strip_box(tmp):
+    """test_spot_power: a strip thinner than the coarse cells, half hidden by a box."""
+    return scenes.loads(sp._strip_behind_box_text(-2.6875, 1.25, -0.234375, -0.203125, 0.0625))
+
+
+def _thin_cylinder(tmp):
+    """test_curved_spot_power: a 1/16 D cylinder along a screen's edge, between the cells' rays."""
+    return scenes.loads(cv._case("cylinder", cv.SWEEP_R1, 0.01, math.exp(-7.0), 0.0625, 2.0, -0.021875, -0.4375, (1.0, 0.0, 0.0),
+                                 (0.0, 0.0, 0.0), screen=True)[0])
+
+
+def _sphere_rim(tmp):
+    """test_curved_spot_power: a sphere's rim beside a screen's edge, between the rays of
+    cells mixed only between the screen and empty beam."""
+    return scenes.loads(cv._case("sphere", 50.0, math.exp(-3.0), 0.0, 1.0, 0.125, 0.103125, -0.0625, (0.75, 0.0, 1.0),
+                                 (0.0, 0.0, 0.0), screen=True)[0])
 
 
 def _terrain(tmp):
@@ -191,6 +218,10 @@ register("direct-beam", _direct, fast=True)
 register("spot-spec-slot", _spot("spec-slot-10x4mm"))
 register("spot-tilted-45-cut", _spot("tilted-45-cut"))
 register("spot-shadowed-pair", _shadowed)
+register("spot-edges-on-axis", _edges_on_axis)
+register("spot-strip-behind-box", _strip_box)
+register("curved-thin-cylinder-screen", _thin_cylinder)
+register("curved-sphere-rim-screen", _sphere_rim)
 register("terrain-reflection", _terrain, fast=FAST_NO_BACKEND, without=("ground",))
 register("pointing-cone", _pointing)
 register("sector", _sector)
