@@ -394,6 +394,7 @@ class SyncedFile:
         self.fd = _open(path, flags, os.O_DIRECT if want else 0)
         self.direct = want and bool(fcntl.fcntl(self.fd, fcntl.F_GETFL) & os.O_DIRECT)
         self.buffer = mmap.mmap(-1, DIRECT_BUFFER_BYTES) if self.direct else None
+        self._bytes = None if self.buffer is None else np.frombuffer(self.buffer, np.uint8)  # numpy copies without the GIL
         self.held = 0  # bytes in the buffer not yet written
         self.flushed = _Flushed(self.fd)
 
@@ -402,7 +403,7 @@ class SyncedFile:
         view, size = memoryview(data).cast("B"), DIRECT_BUFFER_BYTES
         while len(view) and self.direct:  # into the aligned buffer, written whenever it is full
             n = min(size - self.held, len(view))
-            self.buffer[self.held:self.held + n] = view[:n]
+            self._bytes[self.held:self.held + n] = np.frombuffer(view[:n], np.uint8)
             self.held, view = self.held + n, view[n:]
             if self.held == size:
                 self._write_buffer()
@@ -439,8 +440,7 @@ class SyncedFile:
                     if self.direct:
                         self._buffered()  # the last, partial block is not aligned
                     _write_all(self.fd, memoryview(self.buffer)[:self.held])
-                self.buffer.close()
-                self.buffer = None
+                self._release()
             os.fsync(self.fd)
         finally:
             os.close(self.fd)
@@ -448,9 +448,14 @@ class SyncedFile:
     def abandon(self) -> None:
         """Close without syncing (the file is being discarded)."""
         if self.buffer is not None:
-            self.buffer.close()
-            self.buffer = None
+            self._release()
         os.close(self.fd)
+
+    def _release(self) -> None:
+        """Unmap the aligned buffer (its numpy view first: an exported buffer cannot close)."""
+        self._bytes = None
+        self.buffer.close()
+        self.buffer = None
 
 
 def _open(path, flags: int, direct: int) -> int:
