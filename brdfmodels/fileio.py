@@ -34,7 +34,8 @@ import numpy as np
 
 __all__ = ["LIMITS", "LIMIT_CEILING", "DEPTH_CEILING", "limit", "check_limit", "check_input_file", "read_input_text",
            "toml_depth", "toml_depth_at", "data_depth", "parse_toml", "current_umask", "fsync_dir", "fsync_file",
-           "atomic_write", "atomic_write_text", "SyncedFile", "write_synced", "DIRECT_BUFFER_BYTES", "read_toml", "read_csv_columns", "count_values"]
+           "atomic_write", "atomic_write_text", "SyncedFile", "write_synced", "DIRECT_BUFFER_BYTES", "read_toml",
+           "read_csv_columns", "count_values"]
 
 # name -> (default, what it bounds); HAZARD_MAX_<NAME> overrides the default
 LIMITS = {

@@ -17,12 +17,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from brdfmodels.fileio import atomic_write_text, current_umask
+from brdfmodels.fileio import atomic_write_text, current_umask, write_synced
 
 from hazard.outputs._select import top_rows
 from hazard.outputs.csv_text import GEO_COLUMNS, column_text, observer_geodetic
 from hazard.outputs.motion_outputs import MOTION_COLUMNS, motion_columns, motion_sections, track_columns, track_files, visual_levels
-from brdfmodels.fileio import write_synced
 from hazard.outputs.row_text import CSV_TEXTS, CellTexts, column_parts, joined_pieces, joined_rows, row_tools
 from hazard.physics.aperture import limiting_aperture
 from hazard.pipeline.verdict import Verdict, escape_way, verdict
