@@ -317,7 +317,7 @@ CSV_BLOCK_ROWS = 32_768
 CSV_JOIN_ROWS = 16_384
 
 
-def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2, gate=None):
+def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2):
     """observers.csv as bytes-like pieces: the header, then ``block_rows`` observers at a time (every
     observer, one row each, each column formatted from its array); with a [site], each
     position also as latitude, longitude and height. The bytes of the whole table at once;
@@ -351,7 +351,7 @@ def _csv_chunks(result, cols, block_rows: int = CSV_BLOCK_ROWS, threads: int = 2
             return _joined_block, (tools, names, *columns(a0, a1))
         return _each, ([other(b0, min(b0 + CSV_JOIN_ROWS, a1)) for b0 in range(a0, a1, CSV_JOIN_ROWS)],)  # their memory
 
-    for piece in _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0, gate=gate):
+    for piece in _in_order((block(a0) for a0 in range(0, len(pos), block_rows)), threads=threads if arrow else 0):
         yield from piece if isinstance(piece, list) else (piece,)  # a block's pieces
 
 
@@ -361,18 +361,11 @@ def _each(jobs) -> list:
     return [fn(*args) for fn, args in jobs]
 
 
-def _gated(gate, fn, args):
-    with gate:
-        return fn(*args)
-
-
-def _in_order(jobs, threads: int, gate=None):
+def _in_order(jobs, threads: int):
     """``fn(*args)`` of each ``(fn, args)`` of ``jobs``, in order, on up to ``threads``
     threads (pyarrow's joins run without the GIL) with at most ``2 threads`` results
     waiting: the memory of a few blocks. One thread: the blocks made ahead while the
-    consumer writes the last; 0 (or a process limited to one thread): made here.
-    ``gate`` (a :class:`threading.Semaphore`): each job runs holding one of its slots
-    (fewer threads at work while another holds some)."""
+    consumer writes the last; 0 (or a process limited to one thread): made here."""
     from brdfmodels.parallel import default_threads
 
     if threads <= 0 or default_threads() <= 1:
@@ -386,7 +379,7 @@ def _in_order(jobs, threads: int, gate=None):
     with ThreadPoolExecutor(threads) as pool:
         ahead: deque = deque()
         for fn, args in jobs:
-            ahead.append(pool.submit(fn, *args) if gate is None else pool.submit(_gated, gate, fn, args))
+            ahead.append(pool.submit(fn, *args))
             if len(ahead) > 2 * threads:
                 yield ahead.popleft().result()
         while ahead:
@@ -572,25 +565,24 @@ def _csv_text(result, cols) -> str:
     return b"".join(_csv_chunks(result, cols)).decode()
 
 
-def _write_csv_synced(path: Path, result, cols, stop=None, threads: int = 2, gate=None) -> None:
+def _write_csv_synced(path: Path, result, cols, stop=None, threads: int = 2) -> None:
     """observers.csv written block by block into ``path`` and fsynced (:func:`write_synced`: past
     the page cache where the system allows), the blocks made on ``threads`` threads
-    (:func:`_in_order`, ``gate`` its slots); ``stop`` (a :class:`threading.Event`): set, the
-    writing ends after the block under way (the staging folder of a failed run is discarded: no
-    partial table is ever switched in)."""
-    write_synced(path, _csv_chunks(result, cols, threads=threads, gate=gate), stop=stop)
+    (:func:`_in_order`); ``stop`` (a :class:`threading.Event`): set, the writing ends after the
+    block under way (the staging folder of a failed run is discarded: no partial table is ever
+    switched in)."""
+    write_synced(path, _csv_chunks(result, cols, threads=threads), stop=stop)
 
 
 class CsvWriting:
     """observers.csv of ``result`` written into ``folder`` on a worker thread
     (:func:`csv_started`) while the caller makes the other outputs on its own: the map
     files and report.json are Python work holding the GIL, the table's joins, writes and
-    fsync run without it. One more thread makes the table's blocks ahead of the writer
-    while the caller works, two once it is done (:meth:`caller_done`, called by
-    :meth:`wait`): two beside the caller's took more CPU and system time in GIL
-    hand-overs (at 1e6 observers, load 3.3, median of 9 alternated: 0.83 -> 0.81 s user,
-    0.60 -> 0.37 s system, 1.41 -> 1.22 s wall with one). :meth:`wait` returns when the file is written and synced, and raises the
-    writer's error, if any."""
+    fsync run without it. Two more threads make the table's blocks ahead of the writer
+    from the start (once the file went past the page cache, holding one back while the
+    caller worked cost wall time: at 1e6 observers, medians of 7-9 alternated, load 1.2-2.6,
+    0.694 -> 0.614, 0.770 -> 0.717, 1.091 -> 1.031 s). :meth:`wait` returns when the file is
+    written and synced, and raises the writer's error, if any."""
 
     def __init__(self, result, folder):
         import threading
@@ -598,27 +590,17 @@ class CsvWriting:
         self.cols = observer_columns(result)  # once, for the table and the report (write_set)
         self.path = Path(folder) / "observers.csv"
         self._stop = threading.Event()
-        self._gate = threading.Semaphore(2)  # two threads make blocks; one slot is the caller's until caller_done()
-        self._gate.acquire()
-        self._caller = True
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, args=(result,), name="observers.csv", daemon=True)
         self._thread.start()
 
     def _run(self, result) -> None:
         try:
-            _write_csv_synced(self.path, result, self.cols, self._stop, threads=2, gate=self._gate)  # this thread writes
+            _write_csv_synced(self.path, result, self.cols, self._stop, threads=2)  # this thread writes
         except BaseException as exc:  # handed to the caller's wait()
             self._error = exc
 
-    def caller_done(self) -> None:
-        """The caller's own work is done: its slot goes to a second thread making blocks."""
-        if self._caller:
-            self._caller = False
-            self._gate.release()
-
     def wait(self) -> None:
-        self.caller_done()
         self._thread.join()
         if self._error is not None:
             raise self._error
@@ -778,7 +760,6 @@ def write_set(result, folder, *, extra=None, sections=None, verdict_doc: Verdict
     doc = report_dict(result, cols, row_dicts=False, verdict_doc=verdict_doc)  # the listed rows written from the columns
     doc.update(json_safe(dict(sections or {})))
     texts = {"report.json": report_json_pieces(doc, cols), **extra}
-    csv.caller_done()  # what is left here is writing (without the GIL): a second thread makes the table's blocks
     mask = current_umask()  # read, not set: the process's mask never changes
     for n in names:
         if n == "observers.csv":  # written by blocks of rows from the columns, on the writer's thread
