@@ -605,11 +605,18 @@ def _trace_cells(beam, tracer, s):
 
 
 def _hit_depths(beam, tracer, hits) -> np.ndarray:
-    """Axial depth ``(point - aperture) . axis`` [m] of each hit (inf: none)."""
+    """Axial depth ``(point - aperture) . axis`` [m] of each hit (inf: none), kept within
+    the depths of the hit triangle's vertices (a tracer with ``vertices`` and ``faces``:
+    a ray grazing a triangle's plane gets its float64 range from that plane, which may
+    lie far from the triangle; the hit itself lies on it)."""
     hit = hits.hit
     depth = np.full(len(hit), np.inf)
     rows = np.flatnonzero(hit)
     depth[rows] = (hits.point[rows] - beam.position_m) @ beam.axis
+    verts, tris = getattr(tracer, "vertices", None), getattr(tracer, "faces", None)
+    if isinstance(verts, np.ndarray) and isinstance(tris, np.ndarray) and len(rows):
+        corner = (verts[tris[hits.face[rows]]] - beam.position_m) @ beam.axis  # (N, 3)
+        depth[rows] = np.clip(depth[rows], corner.min(axis=1), corner.max(axis=1))
     return depth
 
 
