@@ -592,7 +592,8 @@ def _ray_s(s0, t0, d) -> np.ndarray:
 
 def _trace_cells(beam, tracer, s):
     """What the five rays per cell (``_ray_s``) hit: labels and faces (n, 5), the centre
-    ray's hit point, range and unit direction, and every ray's range [m] (n, 5; inf: none)."""
+    ray's hit point, range and unit direction, and the axial depth [m] of each ray's hit
+    (n, 5; inf where it meets nothing; :func:`hit_depths_m`)."""
     o, dirs = beam.rays(s)
     hits = tracer.first_hit(o, dirs)
     n = len(s) // 5
@@ -600,7 +601,23 @@ def _trace_cells(beam, tracer, s):
     faces = np.where(hits.hit, hits.face, -1).reshape(n, 5)
     unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     c = np.arange(n) * 5
-    return labels, faces, hits.point[c], hits.t[c], unit[c], hits.t.reshape(n, 5)
+    return labels, faces, hits.point[c], hits.t[c], unit[c], hit_depths_m(beam, tracer, hits).reshape(n, 5)
+
+
+def hit_depths_m(beam, tracer, hits) -> np.ndarray:
+    """Axial depth ``(point - aperture) . axis`` [m] of each hit (inf: none), kept within
+    the depths of the hit triangle's vertices (a tracer with ``vertices`` and ``faces``:
+    a ray grazing a triangle's plane gets its float64 range from that plane, which may
+    lie far from the triangle; the hit itself lies on it)."""
+    hit = hits.hit
+    depth = np.full(len(hit), np.inf)
+    rows = np.flatnonzero(hit)
+    depth[rows] = (hits.point[rows] - beam.position_m) @ beam.axis
+    verts, tris = getattr(tracer, "vertices", None), getattr(tracer, "faces", None)
+    if isinstance(verts, np.ndarray) and isinstance(tris, np.ndarray) and len(rows):
+        corner = (verts[tris[hits.face[rows]]] - beam.position_m) @ beam.axis  # (N, 3)
+        depth[rows] = np.clip(depth[rows], corner.min(axis=1), corner.max(axis=1))
+    return depth
 
 
 def _seed_cells(seeds, s0, t0, d, cell_i, cell_j, half_width):
@@ -664,13 +681,15 @@ class Seed(NamedTuple):
     projection's width (the least over its hull's edges' normals: a tilted strip is as
     thin as it looks), the hull (None when the points span no area), its index and
     whether it is convex (:data:`hazard.physics.rays.CONVEX_SHAPES`: its projection is
-    its hull)."""
+    its hull), and the least axial depth [m] of its exact surface (:func:`nearest_depth_m`;
+    -inf, the default, makes whatever a ray meets count as possibly behind it)."""
 
     points: np.ndarray
     extent: float
     hull: np.ndarray | None
     index: int
     convex: bool = True
+    near_m: float = -math.inf
 
 
 def target_seeds(beam: BeamGeometry, targets) -> list[Seed]:
@@ -688,8 +707,30 @@ def target_seeds(beam: BeamGeometry, targets) -> list[Seed]:
         hull, extent = _hull_and_width(s)
         # a closed shape's projected outline is at least its hull's least width
         if len(inside) or (hull is not None and _boxes_meet_convex(hull, *square)[0]):
-            seeds.append(Seed(inside, max(extent, 1e-9), hull, t.index, getattr(t.spec, "shape", None) in CONVEX_SHAPES))
+            seeds.append(Seed(inside, max(extent, 1e-9), hull, t.index, getattr(t.spec, "shape", None) in CONVEX_SHAPES,
+                              nearest_depth_m(beam, t)))
     return seeds
+
+
+def nearest_depth_m(beam: BeamGeometry, target) -> float:
+    """The least axial depth ``(x - aperture) . axis`` [m] over a target's exact surface:
+    its mesh vertices' (exact for plates and boxes), lowered to the exact sphere's,
+    capped cylinder's or disk's (their meshes are inscribed in them: the surface reaches
+    nearer than the vertices)."""
+    u, pos = beam.axis, beam.position_m
+    depth = float(np.min((np.asarray(target.mesh.vertices, float) - pos) @ u))
+    an = target.mesh.analytic
+    if an is not None and an[0] == "sphere":
+        depth = min(depth, float((np.asarray(an[1], float) - pos) @ u) - float(an[2]))
+    elif an is not None and an[0] == "cylinder":
+        along = abs(float(np.asarray(an[2], float) @ u))
+        reach = float(an[4]) * along + float(an[3]) * math.sqrt(max(1.0 - along * along, 0.0))
+        depth = min(depth, float((np.asarray(an[1], float) - pos) @ u) - reach)
+    elif getattr(target.spec, "shape", None) == "disk":
+        tilt = float(np.asarray(target.normal, float) @ u)
+        reach = target.spec.size_m[0] / 2 * math.sqrt(max(1.0 - tilt * tilt, 0.0))
+        depth = min(depth, float((target.center_m - pos) @ u) - reach)
+    return depth
 
 
 def _edge_normals(hull) -> np.ndarray:
@@ -769,30 +810,33 @@ def outline_cells(outline_s, n0, half_width=HALF_WIDTH) -> OutlineCells:
     return OutlineCells((ii * n0 + jj)[rows], [pieces[k] for k in rows], m.take(keep))
 
 
-def _foreign_hits(beam, targets, outlines, foreign, s, labels, t):
+def _foreign_hits(beam, targets, outlines, foreign, s, labels, depth):
     """Add to ``foreign[k]`` the objects hit before flat target k's plane by rays (at s
-    (5n, 2); labels and distances ``t`` [m] (n, 5)) inside k's outline other than k itself
-    (in place). A hit beyond the plane, or none, along a ray inside the outline is a
-    float32 graze past k's edge: no evidence of anything in front (:func:`_before_plane`)."""
-    lab, dist = labels.ravel(), t.ravel()
+    (5n, 2); labels and the hits' axial depths [m] (n, 5; inf: none), :func:`hit_depths_m`)
+    inside k's outline other than k itself (in place). A hit beyond the plane, or none,
+    along a ray inside the outline is a float32 graze past k's edge: no evidence of
+    anything in front (:func:`_before_plane`)."""
+    lab, deep = labels.ravel(), depth.ravel()
     for k, poly in outlines.items():
         rows = np.flatnonzero(lab != k)
         if not len(rows):
             continue
         rows = rows[inside_convex(s[rows], poly, margin=1e-6)]  # within 1e-6 w of the outline: a graze either way
         if len(rows):
-            foreign[k].update(np.unique(lab[rows][_before_plane(beam, targets[k], s[rows], dist[rows])]).tolist())
+            foreign[k].update(np.unique(lab[rows][_before_plane(beam, targets[k], s[rows], deep[rows])]).tolist())
 
 
-def _before_plane(beam, target, s, t) -> np.ndarray:
-    """Whether hits at distances ``t`` [m] along the beam's rays through ``s`` (N, 2) lie
-    before flat ``target``'s plane (by more than 1e-9 of the way: a hit beyond it, or on it,
-    is a float32 graze past the target's edge; no hit has t = inf)."""
+def _before_plane(beam, target, s, depth_m) -> np.ndarray:
+    """Whether hits at axial depths ``depth_m`` [m] (:func:`hit_depths_m`; inf: none) along
+    the beam's rays through ``s`` (N, 2) lie before flat ``target``'s plane (by more than
+    1e-9 of the way to it: a hit beyond it, or on it, is a float32 graze past the target's
+    edge)."""
     o, dirs = beam.rays(np.asarray(s, float).reshape(-1, 2))
     unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     with np.errstate(divide="ignore", invalid="ignore"):
         plane_m = ((target.center_m - o) @ target.normal) / (unit @ target.normal)
-    return np.asarray(t) < plane_m * (1 - 1e-9)
+        plane_depth = (o - beam.position_m) @ beam.axis + plane_m * (unit @ beam.axis)
+        return np.asarray(depth_m) < plane_depth - 1e-9 * np.abs(plane_m)
 
 
 def _piece_hits(beam, tracer, targets, outlines, n0, foreign) -> int:
@@ -810,11 +854,12 @@ def _piece_hits(beam, tracer, targets, outlines, n0, foreign) -> int:
         return 0
     s = np.concatenate(list(points.values()))
     hits = tracer.first_hit(*beam.rays(s))
+    depth = hit_depths_m(beam, tracer, hits)
     start = 0
     for k, p in points.items():
         rows = slice(start, start + len(p))
         start += len(p)
-        front = hits.hit[rows] & (hits.obj[rows] != k) & _before_plane(beam, targets[k], s[rows], hits.t[rows])
+        front = hits.hit[rows] & (hits.obj[rows] != k) & _before_plane(beam, targets[k], s[rows], depth[rows])
         foreign[k].update(np.unique(hits.obj[rows][front]).tolist())
     return len(s)
 
@@ -852,7 +897,7 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
     seeds = target_seeds(beam, targets)
     n_targets = len(targets)
     hit_by_centre = set()
-    leaves = {k: [] for k in ("level", "i", "j", "power_w", "labels", "faces", "point", "t", "direction")}
+    leaves = {k: [] for k in ("level", "i", "j", "power_w", "labels", "faces", "point", "t", "direction", "depth")}
     rays = _piece_hits(beam, tracer, targets, outlines, n0, foreign)
     lv = 0
     while len(level_i):
@@ -860,10 +905,10 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
         d = 2 * beam.half_width / (n0 * 2.0**lv)
         s0, t0 = -beam.half_width + level_i * d, -beam.half_width + level_j * d
         s_rays = _ray_s(s0, t0, d)
-        labels, faces, point, t, direction, ranges = _trace_cells(beam, tracer, s_rays)
+        labels, faces, point, t, direction, depth = _trace_cells(beam, tracer, s_rays)
         hit_by_centre.update(np.unique(labels[:, 0]).tolist())
         rays += 5 * len(level_i)
-        _foreign_hits(beam, targets, outlines, foreign, s_rays, labels, ranges)
+        _foreign_hits(beam, targets, outlines, foreign, s_rays, labels, depth)
         clean = set(exact_classes(foreign))
         power = beam.power_w * rectangle_fraction(s0, s0 + d, t0, t0 + d)
         need = _needs_split(labels, clean, seeds, (s0, t0, d))
@@ -874,7 +919,7 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
             split[:] = False
         keep = ~split
         for k, v in (("level", lvl), ("i", level_i), ("j", level_j), ("power_w", power), ("labels", labels), ("faces", faces),
-                     ("point", point), ("t", t), ("direction", direction)):
+                     ("point", point), ("t", t), ("direction", direction), ("depth", depth)):
             leaves[k].append(v[keep])
         level_i = np.concatenate([2 * level_i[split] + a for a in (0, 1, 0, 1)])
         level_j = np.concatenate([2 * level_j[split] + b for b in (0, 0, 1, 1)])
@@ -888,25 +933,31 @@ def sample_cells(beam: BeamGeometry, tracer, targets, *, n0=16, rtol=1e-4, max_l
                        cat["direction"], rays, lv, unresolved, truncated, half_width=beam.half_width)
     out.exact_targets = frozenset(clean)
     out.occluders = {k: v for k, v in exact_classes(foreign).items() if v}
-    out.unseen_w = _unseen_power(seeds, clean, cat["labels"], beam.power_w, boxes)
+    out.unseen_w = _unseen_power(seeds, clean, cat["labels"], cat["depth"], beam.power_w, boxes)
     return out
 
 
-def _unseen_power(seeds, clean, labels, power_w: float, boxes) -> dict:
+def _unseen_power(seeds, clean, labels, depth, power_w: float, boxes) -> dict:
     """Per convex target the rays sample (not clean): the beam's power [W] in the parts of
-    its projected hull inside leaves that have no ray on it and one that meets nothing
-    (the beam passes there: part of the target may lie between the rays; exact Gaussian
-    integrals of hull and leaf, :func:`polygon_moments`). ``power_w``: the beam's total
-    [W]; ``boxes``: the leaves' (s0, t0, d). A mesh's hull also covers its hollows, where
-    rays that meet nothing are the truth: it is left out (its rays and the refinement
-    decide, as before)."""
+    its projected hull inside leaves that have no ray on it and that do not show one
+    object in front of all of it at all five rays (exact Gaussian integrals of hull and
+    leaf, :func:`polygon_moments`): a ray that meets nothing, or meets something at an
+    axial depth beyond the target's nearest point (a wall behind it), passes where the
+    target may be, and between two objects there may be a gap; part of the target may
+    then lie between the rays. ``labels``, ``depth``: the leaves' objects and the axial
+    depths [m] of their hits (n, 5; inf: nothing); ``power_w``: the beam's total [W];
+    ``boxes``: the leaves' (s0, t0, d). A mesh's hull also covers its hollows, where rays
+    that meet nothing are the truth: it is left out (its rays and the refinement decide,
+    as before)."""
     out = {}
-    open_ = np.any(labels == -1, axis=1)
+    several = np.any(labels != labels[:, :1], axis=1)
     s0, t0, d = boxes
     for seed in seeds:
         if seed.hull is None or seed.index in clean or not seed.convex:
             continue
-        rows = np.flatnonzero(open_ & ~np.any(labels == seed.index, axis=1))
+        # conservative: depths within 1e-9 of the target's nearest point count as behind it
+        behind = np.any(depth >= seed.near_m - 1e-9 * (abs(seed.near_m) + 1.0), axis=1)
+        rows = np.flatnonzero((behind | several) & ~np.any(labels == seed.index, axis=1))
         rows = rows[_boxes_meet_convex(seed.hull, s0[rows], t0[rows], d[rows])]
         parts = [clip_to_box(seed.hull, s0[r], s0[r] + d[r], t0[r], t0[r] + d[r]) for r in rows]
         parts = [p for p in parts if len(p) >= 3]

@@ -334,7 +334,7 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     Attenuation per piece uses its shortest path (an upper bound); the spread to the
     longest goes into the error bound. The power outside the beam square (<= 3.1e-8 P)
     is spread over the pieces."""
-    from hazard.physics.beam import polygon_moments
+    from hazard.physics.beam import hit_depths_m, polygon_moments
 
     oc = outline_cells(outline[0], n0, beam.half_width)
     if not oc.pieces:
@@ -351,7 +351,8 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     hits = tracer.first_hit(o, dirs)
     pts, unit, path, z = _plane_hits(beam, target, m.mean)
     allowed = [target.index, -1] + list(fronts or {})
-    if np.any(~np.isin(hits.obj, allowed) & (hits.t < path * (1 - 1e-9))):  # beyond the plane: a graze past its edge
+    before = hit_depths_m(beam, tracer, hits) < z - 1e-9 * path  # beyond the plane: a graze past its edge (beam._before_plane)
+    if np.any(~np.isin(hits.obj, allowed) & before):
         return None
     verts = np.concatenate(oc.pieces)
     counts = [len(p) for p in oc.pieces]

@@ -153,3 +153,28 @@ def test_inside_convex_many_matches_the_edge_test(seed, n, sx, sy):
     got = inside_convex_many(pts, poly)
     assert np.all(got >= inside_convex(pts, poly, margin=1e-9))
     assert np.all(got <= inside_convex(pts, poly, margin=-1e-9))
+
+
+def test_unseen_power_counts_leaves_whose_rays_pass_behind_the_target():
+    """``beam._unseen_power``: a sampled convex target's hull inside a leaf with no ray on
+    it counts when a ray meets nothing, meets something deeper than the target's nearest
+    point (a wall behind it) or the rays meet two objects (a gap between them); not when
+    one object is hit in front of it at all five rays. The hit depths are kept within the
+    hit triangle's (a ray grazing its plane gets a float64 range far off it)."""
+    from types import SimpleNamespace
+
+    from hazard.physics.beam import Seed, _unseen_power, hit_depths_m, polygon_moments
+
+    hull = _poly_rect(-0.25, 0.25, -0.25, 0.25)
+    seed = Seed(np.zeros((0, 2)), 0.5, hull, 0, True, 10.0)
+    depth = {"nothing": [np.inf] * 5, "wall": [12.0] * 5, "screen": [9.0] * 5, "two": [9.0] * 5}
+    labels = {"nothing": [-1] * 5, "wall": [1] * 5, "screen": [2] * 5, "two": [2, 2, 3, 3, 3]}
+    box = (np.array([-0.5]), np.array([-0.5]), np.array([1.0]))
+    whole = 1000.0 * polygon_moments([hull]).fraction[0]
+    for case, want in (("nothing", whole), ("wall", whole), ("screen", 0.0), ("two", whole)):
+        got = _unseen_power([seed], set(), np.array([labels[case]]), np.array([depth[case]], float), 1000.0, box)[0]
+        assert got == pytest.approx(want, rel=1e-12), case
+    tracer = SimpleNamespace(vertices=np.array([[0, 0, 11.0], [1, 0, 12.0], [0, 1, 12.0]]), faces=np.array([[0, 1, 2]]))
+    beam = SimpleNamespace(position_m=np.zeros(3), axis=np.array([0.0, 0.0, 1.0]))
+    hits = SimpleNamespace(hit=np.array([True, False]), face=np.array([0, -1]), point=np.array([[0.2, 0.2, 3.0], [np.nan] * 3]))
+    assert hit_depths_m(beam, tracer, hits).tolist() == [11.0, math.inf]

@@ -265,6 +265,23 @@ def test_sphere_rim_beside_a_screen_edge_between_rays():
                                                            (0.75, 0.0, 1.0), R1=50.0)
 
 
+@pytest.mark.parametrize("backstop", [False, True])
+def test_sphere_rim_between_rays_on_a_wall_behind_it(backstop):
+    """Found on 2026-11-27 with a wall behind the body as well as the screen in front (R1 =
+    50 m, collimated, the grid along x and z): a sphere of one beam diameter whose top
+    poked 1/32 of the radius into a coarsest cell (side w/2) between its five rays, which
+    all met the wall behind it. The cell was never split (not mixed) and, none of its rays
+    meeting nothing, gave the sphere nothing (the cap holds 1.97 W): at beam_rtol 3e-3
+    (1.7 s; 2.8 s at the default 1e-3, 423.089 W, bound 1.145 W) 423.356 W (bound 1.983 W)
+    of the exact 424.817 W; without the wall 425.673 W (bound 4.300 W). Now a ray whose
+    hit lies deeper than the target's nearest point counts like one that meets nothing
+    (``beam._unseen_power``): the wall changes nothing, 425.673 W either way.
+    exact <= engine <= exact + bound."""
+    text, expected = _case("sphere", 50.0, math.exp(-3.0), 0.0, 1.0, 0.5, -0.125, -0.234375, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0),
+                           backstop, 3e-3, screen=True)
+    _check(text, expected)
+
+
 # every case here is slow (the unscreened 1e-4 one took 93 s of the default suite): the default run keeps
 # test_curved_spot_power_property and the named cases (exact <= engine <= exact + bound at the default beam_rtol)
 @pytest.mark.parametrize("rtol, backstop", [pytest.param(1e-4, False, marks=pytest.mark.slow),
