@@ -477,6 +477,12 @@ def clip_convex(polygon_s, window_s) -> np.ndarray:
 
 
 # -- adaptive cell sampling ----------------------------------------------------------------
+def mixed_rows(labels) -> np.ndarray:
+    """Per cell (labels (n, 5) of its five rays): whether its rays meet more than one object
+    (-1, nothing, is one)."""
+    return np.any(labels != labels[:, :1], axis=1)
+
+
 @dataclass
 class CellSampling:
     """Leaf cells of the beam quadtree and what each one's five rays hit.
@@ -509,7 +515,7 @@ class CellSampling:
 
     @property
     def mixed(self) -> np.ndarray:
-        return np.any(self.labels != self.labels[:, :1], axis=1)
+        return mixed_rows(self.labels)
 
     def size(self, level=None) -> np.ndarray:
         lv = self.level if level is None else level
@@ -815,7 +821,7 @@ def _foreign_hits(beam, targets, outlines, foreign, s, labels, depth):
     (5n, 2); labels and the hits' axial depths [m] (n, 5; inf: none), :func:`hit_depths_m`)
     inside k's outline other than k itself (in place). A hit beyond the plane, or none,
     along a ray inside the outline is a float32 graze past k's edge: no evidence of
-    anything in front (:func:`_before_plane`)."""
+    anything in front (:func:`before_plane`)."""
     lab, deep = labels.ravel(), depth.ravel()
     for k, poly in outlines.items():
         rows = np.flatnonzero(lab != k)
@@ -823,10 +829,10 @@ def _foreign_hits(beam, targets, outlines, foreign, s, labels, depth):
             continue
         rows = rows[inside_convex(s[rows], poly, margin=1e-6)]  # within 1e-6 w of the outline: a graze either way
         if len(rows):
-            foreign[k].update(np.unique(lab[rows][_before_plane(beam, targets[k], s[rows], deep[rows])]).tolist())
+            foreign[k].update(np.unique(lab[rows][before_plane(beam, targets[k], s[rows], deep[rows])]).tolist())
 
 
-def _before_plane(beam, target, s, depth_m) -> np.ndarray:
+def before_plane(beam, target, s, depth_m) -> np.ndarray:
     """Whether hits at axial depths ``depth_m`` [m] (:func:`hit_depths_m`; inf: none) along
     the beam's rays through ``s`` (N, 2) lie before flat ``target``'s plane (by more than
     1e-9 of the way to it: a hit beyond it, or on it, is a float32 graze past the target's
@@ -859,7 +865,7 @@ def _piece_hits(beam, tracer, targets, outlines, n0, foreign) -> int:
     for k, p in points.items():
         rows = slice(start, start + len(p))
         start += len(p)
-        front = hits.hit[rows] & (hits.obj[rows] != k) & _before_plane(beam, targets[k], s[rows], depth[rows])
+        front = hits.hit[rows] & (hits.obj[rows] != k) & before_plane(beam, targets[k], s[rows], depth[rows])
         foreign[k].update(np.unique(hits.obj[rows][front]).tolist())
     return len(s)
 
@@ -950,7 +956,7 @@ def _unseen_power(seeds, clean, labels, depth, power_w: float, boxes) -> dict:
     that meet nothing are the truth: it is left out (its rays and the refinement decide,
     as before)."""
     out = {}
-    several = np.any(labels != labels[:, :1], axis=1)
+    several = mixed_rows(labels)
     s0, t0, d = boxes
     for seed in seeds:
         if seed.hull is None or seed.index in clean or not seed.convex:
@@ -979,7 +985,7 @@ def _needs_split(labels, clean, seeds=(), boxes=None) -> np.ndarray:
     unless such a cell meets the projected hull of a target the rays must sample (one of
     ``seeds`` not clean; ``boxes``: the cells' lower corners and sides (s0, t0, d)): that
     target may lie between its rays (a sphere's rim beside a plate's edge)."""
-    mixed = np.any(labels != labels[:, :1], axis=1)
+    mixed = mixed_rows(labels)
     if not clean:
         return mixed
     benign = mixed & np.all(np.isin(labels, list(clean) + [-1]), axis=1)

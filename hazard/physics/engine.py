@@ -330,11 +330,11 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     piece's centroid meets anything else before the target's plane (the outline is then
     not what is lit; a hit beyond the plane is a float32 graze past the outline's edge, or
     a disk's circumscribed polygon reaching past the disk, and nothing is in front there:
-    the rule of the sampler's piece rays, ``beam._piece_hits``).
+    the rule of the sampler's piece rays, ``beam.before_plane``).
     Attenuation per piece uses its shortest path (an upper bound); the spread to the
     longest goes into the error bound. The power outside the beam square (<= 3.1e-8 P)
     is spread over the pieces."""
-    from hazard.physics.beam import hit_depths_m, polygon_moments
+    from hazard.physics.beam import before_plane, hit_depths_m, polygon_moments
 
     oc = outline_cells(outline[0], n0, beam.half_width)
     if not oc.pieces:
@@ -349,11 +349,11 @@ def _exact_samples(beam, n0, target, outline, tracer, mu, fronts=()):
     m = m.take(lit)
     o, dirs = beam.rays(m.mean)
     hits = tracer.first_hit(o, dirs)
-    pts, unit, path, z = _plane_hits(beam, target, m.mean)
     allowed = [target.index, -1] + list(fronts or {})
-    before = hit_depths_m(beam, tracer, hits) < z - 1e-9 * path  # beyond the plane: a graze past its edge (beam._before_plane)
+    before = before_plane(beam, target, m.mean, hit_depths_m(beam, tracer, hits))  # beyond the plane: a graze past its edge
     if np.any(~np.isin(hits.obj, allowed) & before):
         return None
+    pts, unit, path, z = _plane_hits(beam, target, m.mean)
     verts = np.concatenate(oc.pieces)
     counts = [len(p) for p in oc.pieces]
     owner = np.repeat(np.arange(len(oc.pieces)), counts)

@@ -306,7 +306,7 @@ def test_screen_in_front_stays_exact_in_a_turned_scene(rot):
     integral (447.26 W, bound 0) for the rays' total (473.88 W, bound 43.9 W) and its peak
     irradiance rose by 7e-5. A cell's ray inside the screen's outline, a float32 graze past
     its edge, went on to the sphere behind and counted as "something in front" of the
-    screen. Hits beyond a target's plane are no such evidence (``beam._before_plane``).
+    screen. Hits beyond a target's plane are no such evidence (``beam.before_plane``).
     Reference (range-safety.md 1): the screen (20 D wide) is a half-plane whose edge lies
     d = 3/64 D from the beam's axis: power P erfc(d/w)/2, peak E0 exp(-d^2/w^2),
     E0 = P / (pi w^2), w = D/2; in every orientation of the scene."""

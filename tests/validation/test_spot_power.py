@@ -168,7 +168,7 @@ def test_disk_just_in_front_of_a_wall_is_exact(f, ox):
     there, met the wall behind and refused the exact integral; the rays' total then gave
     774 W (bound 503 W) for the exact 632 W, 240 W for 161 W and 992 W for 979 W. A hit
     beyond the disk's plane is no evidence of anything in front of it (the sampler's rule,
-    ``beam._before_plane``). Reference: the Marcum-Q disk fraction (range-safety.md 1) for
+    ``beam.before_plane``). Reference: the Marcum-Q disk fraction (range-safety.md 1) for
     the disk, and the wall's exact 1 m square less the disk for the wall: never below, the
     stated bound (the disk polygon's, under 1e-5 P) covers the difference."""
     a = 0.02
