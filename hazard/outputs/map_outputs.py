@@ -35,7 +35,7 @@ from typing import Literal, Mapping
 import numpy as np
 
 from hazard.outputs.map_zones import ZONE_KINDS, Zone, common_properties, observer_zones, observers_on_map, zones
-from hazard.outputs.row_text import CellTexts, column_parts, joined_rows, row_tools
+from hazard.outputs.row_text import CellTexts, column_parts, joined_rows, row_tools, string_cells
 
 __all__ = ["MAP_NAMES", "MapOutputs", "map_files", "map_names", "geojson_document", "geojson_bytes", "kml_document", "hazard_tiff", "site_crs", "to_lonlat"]
 
@@ -407,13 +407,13 @@ def _observer_features(tools, op, common: dict):
         return None
     common_text = orjson.dumps(common).decode()[1:-1]
     xy = np.round(p[:, :2], 4)
-    names = pa.array([orjson.dumps(n).decode() for n in op.names], pa.string())
+    names = string_cells(tools, list(op.names), ",")
     which = pa.array(op.hazardous.astype(np.int8) * (1 + op.aided.astype(np.int8)))  # below the MPE, hazardous, through an aid
     verdict = pa.array(['"below the MPE"', '"hazardous"', '"hazardous, aided"']).take(which)
     hazard = pa.array(['"none"', '"naked eye"', '"aided only"']).take(which)
     parts = column_parts(tools, [(xy[:, 0], _JSON_CELLS), (xy[:, 1], _JSON_CELLS)], [",", ']},"properties":{"kind":"observer","name":'],
                          ['{"type":"Feature","geometry":{"type":"Point","coordinates":['])
-    parts += [names, ',"verdict":', verdict, ',"hazard_ratio":']
+    parts += [names, '"verdict":', verdict, ',"hazard_ratio":']
     parts += column_parts(tools, [(op.hazard_ratio, _JSON_CELLS), (op.radiant_exposure_j_m2, _JSON_CELLS)],
                           [',"radiant_exposure_j_m2":', ',"hazard":'])
     parts += [hazard, ',"z_m":']

@@ -161,16 +161,19 @@ def _mirror_zones(result, off) -> list:
 MAP_OBSERVERS_MAX = 20_000  # observer points on a map: every hazardous one, then the highest ratios (all in observers.csv)
 
 
-def observers_on_map(result) -> tuple[np.ndarray, str]:
+def observers_on_map(result, ratio: np.ndarray | None = None, haz: np.ndarray | None = None) -> tuple[np.ndarray, str]:
     """Which observers a map shows: all up to :data:`MAP_OBSERVERS_MAX`, else every
-    hazardous one and then the highest hazard ratios; and a statement of which."""
-    ratio = np.nan_to_num(np.array(result.hazard_ratio, float), copy=False, nan=np.inf)  # our copy, changed in place
+    hazardous one and then the highest hazard ratios; and a statement of which.
+    ``ratio``, ``haz``: ``result.hazard_ratio`` and ``result.hazardous`` when the caller
+    has them (each a whole-column computation); neither is changed."""
+    ratio = result.hazard_ratio if ratio is None else ratio
     m = len(ratio)
     if m <= MAP_OBSERVERS_MAX:
         return np.arange(m), "all"
     from hazard.outputs._select import top_rows
 
-    haz = np.asarray(result.hazardous, bool)
+    ratio = np.nan_to_num(np.array(ratio, float), copy=False, nan=np.inf)  # our copy, changed in place
+    haz = np.asarray(result.hazardous if haz is None else haz, bool)
     n_haz = int(haz.sum())
     ratio[haz] = -np.inf  # the others by ratio (a ratio is >= 0: no other row is -inf)
     order = np.unique(np.concatenate([np.flatnonzero(haz), top_rows(ratio, MAP_OBSERVERS_MAX - n_haz)]))
@@ -217,13 +220,15 @@ class ObserverPoints:
 def observer_points(result) -> ObserverPoints:
     """The observer points a map of ``result`` shows, as columns (:class:`ObserverPoints`)."""
     obs = result.observers
-    rows, which = observers_on_map(result)
+    ratio = np.asarray(result.hazard_ratio, float)
+    haz = np.asarray(result.hazardous, bool)
+    rows, which = observers_on_map(result, ratio, haz)
     p = np.asarray(obs.position_at(rows), float).reshape(-1, 3)  # world, the rows shown only
     groups = obs.observers
     with_aid = np.array([o is not None for o in groups.optics], bool)
     aided = with_aid[groups.group[rows]] if len(p) and len(with_aid) else np.zeros(len(p), bool)
-    return ObserverPoints(rows, p, np.asarray(result.hazard_ratio, float)[rows], np.asarray(obs.radiant_exposure_j_m2, float)[rows],
-                          np.asarray(result.hazardous, bool)[rows], aided, obs.labels.take(rows), which)  # the listed rows' names only
+    return ObserverPoints(rows, p, ratio[rows], np.asarray(obs.radiant_exposure_j_m2, float)[rows],
+                          haz[rows], aided, obs.labels.take(rows), which)  # the listed rows' names only
 
 
 def _observers(result) -> list:

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "column_parts", "joined_rows", "joined_pieces"]
+__all__ = ["CellTexts", "CSV_TEXTS", "row_tools", "number_cells", "string_cells", "column_parts", "joined_rows", "joined_pieces"]
 
 
 class CellTexts(NamedTuple):
@@ -80,6 +80,38 @@ def number_cells(tools, v: np.ndarray, end: str, per_row: int = 1):
         stops = stops[per_row - 1::per_row]
     if end != ",":
         data[stops] = ord(end)
+    offsets = np.zeros(len(stops) + 1, np.int32)
+    offsets[1:] = stops + 1
+    return pa.StringArray.from_buffers(len(stops), pa.py_buffer(offsets), pa.py_buffer(data))
+
+
+def string_cells(tools, names: list, end: str):
+    """Each of ``names`` as orjson writes it (``"map[0]"``: quotes and escapes included)
+    followed by ``end``, as a pyarrow string array: one ``orjson.dumps`` of the list, cut
+    after each comma between its items (each ``","``; that comma and the closing ``]``
+    made ``end``). A name with a comma next to a quote of its text (``","`` itself, ``a\\",``)
+    writes one more ``","``: then each name is written on its own.
+
+    Parameters
+    ----------
+    tools : tuple
+        :func:`row_tools`.
+    names : list of str
+        The texts (not empty).
+    end : str
+        One ASCII character written after each cell (a separator).
+    """
+    orjson, pa, _ = tools
+    text = np.frombuffer(orjson.dumps(names), np.uint8).copy()
+    if len(text) >= 2**31:
+        raise ValueError(f"{len(names)} names are {len(text)} bytes of text; expected under 2 GiB (write them in blocks)")
+    data = text[1:]
+    data[-1] = ord(end)
+    q, c = ord('"'), ord(",")
+    stops = np.append(np.flatnonzero((data[:-2] == q) & (data[1:-1] == c) & (data[2:] == q)) + 1, len(data) - 1)
+    if len(stops) != len(names):  # a "," inside a name as well as between them
+        return pa.array([orjson.dumps(n).decode() + end for n in names], pa.string())
+    data[stops] = ord(end)
     offsets = np.zeros(len(stops) + 1, np.int32)
     offsets[1:] = stops + 1
     return pa.StringArray.from_buffers(len(stops), pa.py_buffer(offsets), pa.py_buffer(data))

@@ -278,6 +278,22 @@ def test_repeated_values_judged_on_a_scrambled_sample():
     assert not row_text._repeats(np.repeat(x[:5], 10))  # 50 rows: too few to judge
 
 
+_NAMES = ['a"b[1]', "x\\", "\u00e9t\u00e9[12]", "plain", "tab\there"]
+
+
+@settings(derandomize=True, deadline=None, max_examples=60)
+@given(names=st.lists(st.text(alphabet=st.sampled_from('ab,"\\[]0\u00e9\u2028\t '), max_size=6), min_size=1, max_size=30),
+       end=st.sampled_from([",", ";", "\n"]))
+def test_string_cells_are_each_names_orjson_text(names, end):
+    """One orjson text of the list cut into its items: each name's own ``orjson.dumps``
+    and ``end``, for names of commas, quotes, backslashes, brackets and non-ASCII (a comma
+    beside a quote inside a name: each written on its own)."""
+    import orjson
+
+    cells = row_text.string_cells(TOOLS, names, end).to_pylist()
+    assert cells == [orjson.dumps(n).decode() + end for n in names]
+
+
 def _points(n: int, seed: int, names):
     from hazard.outputs.map_zones import ObserverPoints
 
@@ -303,14 +319,15 @@ def _feature_text(op, common) -> bytes:
     return orjson.dumps(feats)[1:-1]
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_map_observer_features_column_by_column_are_the_dicts_text(seed):
+@pytest.mark.parametrize("seed, names", [(0, _NAMES), (1, _NAMES), (2, _NAMES + [",", 'a",', ",b"])])
+def test_map_observer_features_column_by_column_are_the_dicts_text(seed, names):
     """The observer points of the zones file made column by column: byte for byte orjson's
     text of the per-observer dicts, for doubles from random bits (NaN, inf as strings),
-    -0.0 and large and small positions, names with quotes, backslashes, non-ASCII."""
+    -0.0 and large and small positions, names with quotes, backslashes, non-ASCII, and
+    commas beside quotes (each name written on its own, :func:`row_text.string_cells`)."""
     from hazard.outputs import map_outputs
 
-    op = _points(600, seed, ['a"b[1]', "x\\", "\u00e9t\u00e9[12]", "plain", "tab\there"])
+    op = _points(600, seed, names)
     common = {"standard": "ansi-z136.1-2014", "exposure_duration_s": 0.25, "mpe_w_m2": 1e-7, "wavelength_nm": 1064.0, "scene": "s"}
     assert map_outputs._observer_features(TOOLS, op, common) == _feature_text(op, common)
     assert map_outputs._observer_features(TOOLS, op, {}) == _feature_text(op, {})
