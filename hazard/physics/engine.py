@@ -948,13 +948,15 @@ def brdf_bound(model) -> float | None:
     return model.reflectance / math.pi if type(model) is Lambertian else None
 
 
-def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states, bound=False):
+def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states, bound=False, max_evaluations=None):
     """Irradiance [W/m^2] (M,) or (M, T) at near observers ``obs`` (M, 3) with factors
     ``weight`` (gain x line of sight): the integral over the spot's patches
     (:func:`hazard.physics.near_field.near_field_irradiance`, ``f_r cos(theta_r)`` of each
     sample's material frame and incidence). ``bound=True`` and a material with
     :func:`brdf_bound`: an upper bound where the integral over triangles would
-    be needed (the point form's pairs exact)."""
+    be needed (the point form's pairs exact). ``max_evaluations``: the integral's
+    ceiling in kernel evaluations (NaN at the observers it leaves unfinished:
+    :func:`hazard.physics.near_field.near_field_irradiance`)."""
     model = spot.material
     wi_all = to_local(spot.frames, -spot.incoming)
     frames = np.asarray(spot.frames, float)
@@ -973,7 +975,7 @@ def near_field_w_m2(spot: Spot, obs, weight, attenuation_per_m, states, bound=Fa
     shape = (len(obs),) if states is None else (len(obs), len(states))
     fr_bound = brdf_bound(model) if bound else None
     return near_field_irradiance(spot.patches, spot.points, spot.spread_m2, spot.frames[:, 2], spot.power_w, obs, weight, kernel,
-                                 shape, fr_bound_per_sr=fr_bound)
+                                 shape, fr_bound_per_sr=fr_bound, max_evaluations=max_evaluations)
 
 
 def specular_power_w(spot: Spot, states=None):

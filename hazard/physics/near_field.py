@@ -572,7 +572,7 @@ def _expand(patches, io, is_):
 
 
 def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, power_w, obs, weight, kernel, shape,
-                          rtol=NEAR_FIELD_RTOL, fr_bound_per_sr=None):
+                          rtol=NEAR_FIELD_RTOL, fr_bound_per_sr=None, max_evaluations=None):
     """Irradiance [W/m^2] of a spot at observers ``obs`` (M, 3), shape ``shape`` ((M,) or
     (M, T)): each (observer, sample) pair by the point form where :func:`point_form_ok`,
     else by the adaptive triangle rule (module notes).
@@ -592,6 +592,11 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
     form does not serve get an upper bound instead of the adaptive rule
     (:func:`_bound_pairs`): the result is then an upper bound of the irradiance, exact
     where every pair took the point form (counted in :data:`BOUNDED`).
+
+    ``max_evaluations``: the work's ceiling in kernel evaluations (None: none). Checked
+    before each block of observers and between the rule's depths within one; once
+    reached, the observers not finished get NaN (deterministic: the same observers for
+    the same inputs). Below it the result is the same, bit for bit, as without it.
     """
     t0 = time.perf_counter()
     e = np.zeros(shape)
@@ -611,9 +616,13 @@ def near_field_irradiance(patches: SpotPatches, points, spread_m2, normals, powe
     counts = np.zeros(4, int)
     block = max(1, _PAIR_BLOCK // max(len(points), len(patches.sample), 1))
     for a in range(0, len(live), block):
+        if max_evaluations is not None and counts[2] >= max_evaluations:  # the ceiling: the rest not integrated
+            e[live[a:]] = np.nan
+            break
         if src.tree.n > _TREE_NODES:  # bounded memory: the same nodes are made again as needed (the same bits)
             src.tree = _subdivision(patches)
-        counts += _near_block(src, obs, weight, live[a:a + block], e, rtol)
+        counts += _near_block(src, obs, weight, live[a:a + block], e, rtol,
+                              None if max_evaluations is None else max_evaluations - counts[2])
     STATS.add(int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3]), time.perf_counter() - t0)
     return e
 
@@ -654,10 +663,12 @@ class _Sources:
         return low
 
 
-def _near_block(src: _Sources, obs, weight, rows, e, rtol):
+def _near_block(src: _Sources, obs, weight, rows, e, rtol, budget=None):
     """Observers ``rows``: the point form for the (observer, sample) pairs it serves, the
     adaptive rule for the rest. Returns counts (observers integrated, pairs integrated,
-    kernel evaluations, pairs unresolved at ``MAX_DEPTH``)."""
+    kernel evaluations, pairs unresolved at ``MAX_DEPTH``). ``budget``: kernel
+    evaluations the block may make (None: any); past it between the rule's depths the
+    block stops and its observers get NaN."""
     pt = src.points
     d = np.linalg.norm(obs[rows][:, None, :] - pt[None, :, :], axis=-1)
     ok = point_form_ok(src.radius_m[None, :], d, rtol, src.spread_m2[None, :])
@@ -675,8 +686,11 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     samp = p.sample[tri]
     dens = p.density_w[tri] * src.ratio[samp] * weight[oi]
     stop = MAX_DEPTH if src.fr_bound_per_sr is None else min(BOUND_DEPTH, MAX_DEPTH)
-    evals, unresolved, n_bound = _adaptive(src, obs, oi, (tri, samp, dens), e, stop, batch)
+    evals, unresolved, n_bound, cut = _adaptive(src, obs, oi, (tri, samp, dens), e, stop, batch,
+                                                None if budget is None else budget - n_eval)
     batch.flush()
+    if cut:
+        e[rows] = np.nan
     if src.fr_bound_per_sr is not None:  # nothing integrated: counted in BOUNDED
         if n_bound:
             BOUNDED.add(len(np.unique(io)), n_bound)
@@ -684,7 +698,7 @@ def _near_block(src: _Sources, obs, weight, rows, e, rtol):
     return np.array([len(np.unique(io)), len(io), n_eval + evals, unresolved])
 
 
-def _adaptive(src: _Sources, obs, oi, pairs, e, stop, batch):
+def _adaptive(src: _Sources, obs, oi, pairs, e, stop, batch, budget=None):
     """The adaptive rule on (observer ``oi``, triangle) pairs, ``pairs`` = (nodes of
     ``src.tree`` (a :class:`_Subdivision`: the spot's triangles first), samples, per-pair
     densities): each pair's triangle takes the 7-point rule once the observer is
@@ -695,8 +709,9 @@ def _adaptive(src: _Sources, obs, oi, pairs, e, stop, batch):
     values as made per pair). With ``src.fr_bound_per_sr`` every pair gets instead an upper
     bound of what the rule and the rest of the recursion would give it
     (:func:`_bound_pairs`): a resolved pair at once, the others after up to ``stop``
-    bisections (tighter near the observer). Returns (kernel evaluations, pairs
-    unresolved, pairs bounded)."""
+    bisections (tighter near the observer). ``budget``: the kernel evaluations it may
+    make (None: any); checked before each depth's splits. Returns (kernel evaluations,
+    pairs unresolved, pairs bounded, whether it stopped at the budget with pairs left)."""
     nd, samp, dens = pairs
     tree = src.tree
     n_eval = unresolved = n_bound = 0
@@ -723,9 +738,11 @@ def _adaptive(src: _Sources, obs, oi, pairs, e, stop, batch):
         split = ~good
         if src.fr_bound_per_sr is None:
             n_eval += _rule(tree, nd[good], dens[good], oi[good], samp[good], batch)
+        if budget is not None and n_eval >= budget:  # pairs left and the work's ceiling reached
+            return n_eval, unresolved, n_bound, True
         nd = tree.children(nd[split])
         samp, oi, dens = (np.tile(v[split], 2) for v in (samp, oi, dens))
-    return n_eval, unresolved, n_bound
+    return n_eval, unresolved, n_bound, False
 
 
 def point_triangle_distance(p, tri) -> np.ndarray:

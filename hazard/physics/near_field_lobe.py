@@ -37,7 +37,10 @@ of the largest point-form sum alone (hazard there decides), then only at the sta
 own bound reaches the MPE: the same decision as the integral at every state. The integral's work per lobe function is
 capped at ``MAX_EVALUATIONS`` kernel evaluations (deterministic); past it the bound alone
 decides (never short for a Lambertian spot, looser: ``info["points_by_bound"]`` counts
-those points).
+those points). A call started below the cap stops at ``CEILING_FACTOR`` times it in all,
+the points it leaves decided by the bound too (a spot's leaves on a facet edge-on to the
+beam map onto triangles kilometres long, each bisected down to every observer's
+distance: one call of a scan's 143 first samples cost 674 million evaluations, 391 s).
 
 ``r_start``: nothing beyond it can reach the MPE. Every part of the spot is at least
 ``r - extent`` from ``c + r w`` and seen from it within a cone of half-angle ``asin(extent
@@ -91,6 +94,7 @@ ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its fa
 FLOOR_RTOL = 0.005  # the point form is kept where the integral's root lies within this of it (its 1 % in irradiance)
 SCAN_MIN_STEPS = 8  # the scan's step is at most r_start / this (and at most the spot's smallest extent)
 MAX_EVALUATIONS = 500_000  # kernel evaluations of the integral per lobe function; beyond, the samples' bound decides
+CEILING_FACTOR = 4  # no call of the integral takes a lobe function's evaluations past this x MAX_EVALUATIONS (its points left: the bound)
 CONE_RINGS = (0.25, 0.5, 0.75, 1.0)  # the cone bound's rings, as fractions of its half-angle
 CONE_AZIMUTHS = 12  # ... and its azimuths per ring
 CONE_BISECTIONS = 8  # bisections of the cone bound's farthest radius
@@ -361,14 +365,23 @@ class NearLobeFn:
 
     def _integral_hot(self, pts, states):
         """The integral at world points ``pts`` reaches the MPE at some state of ``states``
-        (None: no history); counts its kernel evaluations."""
+        (None: no history); counts its kernel evaluations. The call stops at the
+        ceiling, ``CEILING_FACTOR x MAX_EVALUATIONS`` evaluations in all (one call started
+        below the budget can cost a thousand times it: a spot's leaves on a facet edge-on
+        to the beam make triangles kilometres long, bisected down to each observer's
+        distance); the points it leaves are hazardous by the bound (they are candidates:
+        the bound reaches the MPE there), counted in ``bound_points``."""
         before = near_field.STATS.snapshot()
-        e = near_field_w_m2(self.spot, pts, np.full(len(pts), self.gain), self.mu, states)
+        e = near_field_w_m2(self.spot, pts, np.full(len(pts), self.gain), self.mu, states,
+                            max_evaluations=CEILING_FACTOR * MAX_EVALUATIONS - self.evaluations)
         n = near_field.stats_since(before)["evaluations"]
         self.evaluations += n
         self.state_evaluations += n * (1 if states is None else len(states))
-        STATS.points += len(pts)
-        return (e if e.ndim == 1 else e.max(axis=1)) >= self.mpe
+        top = e if e.ndim == 1 else e.max(axis=1)
+        cut = np.isnan(top)  # not integrated: past the ceiling
+        self.bound_points += int(cut.sum())
+        STATS.points += len(pts) - int(cut.sum())
+        return cut | (top >= self.mpe)
 
     def hazardous(self, pts):
         """True where the spot's near-field integral (:func:`hazard.physics.engine.near_field_w_m2`,

@@ -532,9 +532,9 @@ def test_state_evaluations_count_each_kernel_evaluation_at_its_states(seed, n_st
     spot, fn, mpe, reach = _history_lobe(n_states)
     calls, real = [], near_field_lobe.near_field_w_m2
 
-    def counted(sp, pts, weight, mu, states):
+    def counted(sp, pts, weight, mu, states, **kw):
         before = near_field.STATS.snapshot()["evaluations"]
-        out = real(sp, pts, weight, mu, states)
+        out = real(sp, pts, weight, mu, states, **kw)
         calls.append((near_field.STATS.snapshot()["evaluations"] - before, 1 if states is None else len(states)))
         return out
 
