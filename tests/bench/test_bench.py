@@ -56,7 +56,7 @@ def test_bench_whole_run():  # issue 37: 1.23-1.25 in CPU time against the compl
     check_goal("whole run", res["ratio"], goal(1.3, 4.0))
 
 
-@not_met("issue 37: outputs 0.94-1.21x the analysis in wall time (median 1.08 of seven), 1.17-1.34x in CPU at 1e6 observers, quiet (2026-11-27, load 1.1-1.5; observers.csv past the page cache, system time 0.13-0.26 s; what is left is the GIL-bound text, orjson's digits ~0.2 s); goal 1 (wall)")
+@not_met("issue 37: outputs 0.94-1.14x the analysis in wall time (median 1.01 of eleven, met in five), 1.07-1.34x in CPU at 1e6 observers, quiet (2026-11-27, load 1.3-1.7; the table's text at polars' floor; what is left is the GIL-bound text, orjson's digits ~0.2 s); goal 1 (wall)")
 def test_bench_outputs():
     from .bench_outputs import run
 
