@@ -34,7 +34,7 @@ def top_rows(score: np.ndarray, k: int) -> np.ndarray:
     sub = score if rows is None else score[rows]
     kth = np.partition(sub, len(sub) - k)[len(sub) - k]  # the k-th largest value
     above = np.flatnonzero(sub > kth)  # fewer than k
-    tie = np.flatnonzero(sub == kth)[: k - len(above)]  # in row order: the candidates are
+    tie = np.flatnonzero(sub == kth)[: k - len(above)]  # the lowest rows first (the candidates are ascending)
     picked = np.sort(np.concatenate([above, tie]))
     return picked if rows is None else rows[picked]
 
