@@ -465,8 +465,9 @@ def map_files(result) -> tuple[dict, MapOutputs]:
     names = map_names(result.scene)
     text = None if site else _geojson_text(result, zs, absent, frame)
     if text is None:  # a zone each, as geojson_document makes them
+        op = next((z for z in zs if not isinstance(z, Zone)), None)  # its statement of the observers shown, made once
         zs = _each_point(result, zs)
-        gj = geojson_document(result, zs, absent, frame)
+        gj = geojson_document(result, zs, absent, frame) if op is None else _document(result, zs, absent, frame, op.which)
         text = geojson_bytes(gj)
     files = {names[0]: text}
     not_written = {}
