@@ -278,6 +278,22 @@ def test_repeated_values_judged_on_a_scrambled_sample():
     assert not row_text._repeats(np.repeat(x[:5], 10))  # 50 rows: too few to judge
 
 
+@pytest.mark.parametrize("width", [100, 999, 1000, 1024, 1500])
+def test_grid_columns_of_a_csv_block_are_judged_repeated(width):
+    """observers.csv's blocks are 32 768 rows: a grid ``width`` wide has that many distinct
+    x in a block (and ~32 768 / width distinct y), each in many rows. Both are judged
+    repeated, whatever the width's relation to the sample's rows (a sample 7919 rows apart
+    modulo the block saw 870 distinct x of a 1000-wide grid in 1024 and wrote them one by
+    one); a column of distinct values is not, nor one with each value in two rows."""
+    from hazard.outputs.report import CSV_BLOCK_ROWS
+
+    i = np.arange(CSV_BLOCK_ROWS)
+    x, y = -50.0 + 0.1 * (i % width), 3.0 * (i // width) - 45.0
+    assert row_text._repeats(x) and row_text._repeats(y)
+    assert not row_text._repeats(_doubles(CSV_BLOCK_ROWS, 5))
+    assert not row_text._repeats(np.repeat(_doubles(CSV_BLOCK_ROWS // 2, 6), 2))
+
+
 _NAMES = ['a"b[1]', "x\\", "\u00e9t\u00e9[12]", "plain", "tab\there"]
 
 
