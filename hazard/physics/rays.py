@@ -100,6 +100,8 @@ class RayScene:
         self.backend = backend
         self.threads = None if threads is None else max(1, int(threads))
         self.scale_m = float(np.ptp(self.vertices, axis=0).max()) if len(self.vertices) else 1.0
+        pad = 1e-3 * self.scale_m + 1e-9  # far beyond float32's rounding of a start near the box
+        self._box = (self.vertices.min(axis=0) - pad, self.vertices.max(axis=0) + pad) if len(self.vertices) else None
         self._kept = {}  # arrays made on first use, shared with the views (with_threads)
         self._impl = None
         if len(self.faces):
@@ -157,11 +159,31 @@ class RayScene:
         point = np.where(hit[:, None], o + d * np.where(hit, t, 0.0)[:, None], np.nan)
         return Hits(hit, t, face, obj, point)
 
+    def _ahead(self, o, d) -> np.ndarray:
+        """How far [m] each ray (unit ``d``) may start ahead of ``o`` with nothing skipped:
+        to just before the box of every triangle (padded by 1e-3 of the scene's size); 0
+        for a start inside it or a ray that misses it. Embree rounds a start and direction
+        to float32: from a laser 186 m away that is ~1e-5 m across the beam at the target
+        (its ulp, and the direction's 6e-8 over the range), so rays passing that close
+        outside a cylinder's cap seen edge-on were hits (0.017 W of a 546 W spot more than
+        the exact surface's, beyond the stated bound); started at the box, the error is
+        the box's own float32 rounding."""
+        lo, hi = self._box
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a, b = (lo - o) / d, (hi - o) / d
+            enter = np.nanmax(np.minimum(a, b), axis=1)
+            leave = np.nanmin(np.maximum(a, b), axis=1)
+        return np.where((enter > 0) & (enter <= leave) & np.isfinite(enter), enter, 0.0)
+
     def _first(self, o, d):
         """Face (-1: none), distance [m] (inf: none) and object (-1: none) of the nearest
         hit along unit directions ``d`` from ``o``, ``t`` refined in float64 against the
-        hit triangle's plane (Embree works in float32)."""
-        face, t = self._map(lambda a, b: self._impl.first(o[a:b], d[a:b]), len(o), 2)
+        hit triangle's plane (Embree works in float32; each ray starts at the box of the
+        triangles, :meth:`_ahead`)."""
+        t0 = self._ahead(o, d)
+        start = o + t0[:, None] * d
+        face, t = self._map(lambda a, b: self._impl.first(start[a:b], d[a:b]), len(o), 2)
+        t = t + t0
         hit = face >= 0
         ref = np.flatnonzero(hit)
         if len(ref):
@@ -185,8 +207,10 @@ class RayScene:
         """As :meth:`_first`, for a caller that discards the hits of object ``own``: only
         the faces are asked of the engine, and ``t`` is made on the other objects' hits
         (inf on ``own``'s; Embree's own ``t`` asked again only where a ray is parallel to
-        its triangle's plane)."""
-        (face,) = self._map(lambda a, b: (self._impl.first_face(o[a:b], d[a:b]),), len(o), 1)
+        its triangle's plane; each ray starts at the box of the triangles, :meth:`_ahead`)."""
+        t0 = self._ahead(o, d)
+        start = o + t0[:, None] * d
+        (face,) = self._map(lambda a, b: (self._impl.first_face(start[a:b], d[a:b]),), len(o), 1)
         hit = face >= 0
         obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)
         ref = np.flatnonzero(hit & (obj != own))
@@ -194,7 +218,8 @@ class RayScene:
         if len(ref):
             t_ref, good = self._plane_t(o, d, face, ref)
             if not good.all():
-                t_ref[~good] = self._impl.first(o[ref[~good]], d[ref[~good]])[1]
+                bad = ref[~good]
+                t_ref[~good] = self._impl.first(start[bad], d[bad])[1] + t0[bad]
             t[ref] = t_ref
         return face, t, obj
 
