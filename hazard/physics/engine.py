@@ -844,6 +844,69 @@ def to_local(frames, v):
     return np.einsum("nij,nj->ni", frames, v)
 
 
+def frame_groups(spot: Spot):
+    """The spot's samples grouped by their material frame, for its point form: ``(frames
+    (G, 3, 3), wi (G, 3), share (G,))`` - each group's frame, its power-weighted incoming
+    direction in that frame (towards the source) and its share of the spot's power; None
+    where every sample has the same frame (a flat spot: the mean frame's point form is
+    exact). A curved spot (a sphere's or cylinder's facets, a terrain's) sends light
+    into directions its mean plane would call grazing or behind it: a Lambertian sphere's
+    radiant intensity at 90 deg from the beam is 2 rho P / (3 pi^2), where the mean
+    frame's ``rho / pi cos`` gives 0."""
+    fr = np.asarray(spot.frames, float).reshape(len(spot.frames), 9)
+    if not len(fr) or bool(np.all(fr == fr[0])):
+        return None
+    u, inv = np.unique(fr, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    w = spot._weights
+    inc = np.zeros((len(u), 3))
+    np.add.at(inc, inv, spot.incoming * w[:, None])
+    inc /= np.maximum(np.linalg.norm(inc, axis=1, keepdims=True), 1e-300)
+    frames = u.reshape(-1, 3, 3)
+    total = float(spot.power_w.sum())
+    share = np.bincount(inv, weights=spot.power_w, minlength=len(u)) / total if total > 0 else np.full(len(u), 1.0 / len(u))
+    return frames, to_local(frames, -inc), share
+
+
+def point_form(spot: Spot, d, scale, states=None, reduce=None):
+    """The spot's radiant intensity over its power, ``f_r cos``, at unit world directions
+    ``d`` (M, 3) from its centroid, times ``scale`` (M,): (M,) or (M, T) with states
+    (``reduce`` as :func:`projected_brdf`), and where it is evaluated (M,) bool (in front
+    and ``scale > 0``; 0 elsewhere). The mean frame's ``f_r cos``; for a spot of several
+    frames (:func:`frame_groups`) the larger of that and the sum of each frame's share:
+    the sum alone rests on a curved spot's few samples (15 on a 5 cm sphere in a 2 m
+    beam gave 0.71 of a Lambertian sphere's intensity 30 deg off the backscatter, where
+    the mean frame gives 1.48), the mean frame alone gives 0 at and behind its plane."""
+    e, live = _frames_sum(spot, d, scale, states, reduce, None)
+    groups = frame_groups(spot)
+    if groups is not None:
+        e2, live2 = _frames_sum(spot, d, scale, states, reduce, groups)
+        e, live = np.maximum(e, e2), live | live2
+    return e, live
+
+
+def _frames_sum(spot: Spot, d, scale, states, reduce, groups):
+    """:func:`point_form`'s sum over ``groups`` (frames, wi, share), or the mean frame's alone (None)."""
+    model = spot.material
+    if groups is None:
+        frames, wi, share = spot.mean_frame[None], to_local(spot.mean_frame, -spot.mean_incoming)[None], np.ones(1)
+    else:
+        frames, wi, share = groups
+    m = len(d)
+    e = np.zeros((m,) if states is None or reduce is not None else (m, len(states)))
+    live = np.zeros(m, bool)
+    for g in range(len(frames)):
+        wo = to_local(frames[g], d)
+        on = (wo[:, 2] > 0) & (scale > 0)
+        if on.all() and len(frames) == 1:  # wi is one direction (1, 3): the models broadcast it after checking it once
+            return projected_brdf(model, wi[g][None], wo, states, scale * share[g], reduce=reduce), on
+        rows = np.flatnonzero(on)
+        if len(rows):
+            e[rows] += projected_brdf(model, wi[g][None], wo[rows], states, scale[rows] * share[g], reduce=reduce)
+        live |= on
+    return e, live
+
+
 def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=None, visible=None, *, sparse=False, bound=False):
     """BRDF-reflected irradiance [W/m^2] at observers (M, 3) from one spot.
 
@@ -862,39 +925,26 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
         return slumped_irradiance(spot_irradiance, spot, observers_m, gain, attenuation_per_m, states, visible, sparse)
     obs = np.asarray(observers_m, float)
     m = len(obs)
-    model = spot.material
     c = spot.centroid
     rng = np.linalg.norm(obs - c, axis=1)
     far = rng >= FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
     vis = np.ones(m) if visible is None else np.asarray(visible, float)
     if np.all(far):
-        fr = spot.mean_frame
-        wi = to_local(fr, -spot.mean_incoming)[None, :]
-        wo = to_local(fr, (obs - c) / rng[:, None])
         scale = spot.total_power_w * gain * vis / rng**2
         if attenuation_per_m:
             scale *= np.exp(-attenuation_per_m * rng)
-        # observers behind the surface or out of sight receive nothing: evaluate the rest only
-        live = (wo[:, 2] > 0) & (scale > 0)
-        # wi is one direction (1, 3): the models broadcast it after checking it once
+        # observers behind the surface or out of sight receive nothing: evaluated only in front (point_form)
+        e, live = point_form(spot, (obs - c) / rng[:, None], scale, states)
         if sparse:
             rows = np.flatnonzero(live)
-            return (rows, projected_brdf(model, wi, wo[rows], states, scale[rows])), far
-        if live.all():
-            return projected_brdf(model, wi, wo, states, scale), far
-        e = np.zeros((m,) if states is None else (m, len(states)))
-        if live.any():
-            e[live] = projected_brdf(model, wi, wo[live], states, scale[live])
+            return (rows, e[rows]), far
         return e, far
     shape = (m,) if states is None else (m, len(states))
     e = np.zeros(shape)
     if np.any(far):
-        fr = spot.mean_frame
-        wi = to_local(fr, -spot.mean_incoming)[None, :]
         d = (obs[far] - c) / rng[far, None]
-        wo = to_local(fr, d)
         scale = spot.total_power_w * np.exp(-attenuation_per_m * rng[far]) * gain[far] * vis[far] / rng[far] ** 2
-        e[far] = projected_brdf(model, wi, wo, states, scale)
+        e[far] = point_form(spot, d, scale, states)[0]
     near = np.flatnonzero(~far & (vis > 0))
     if len(near) and spot.patches is not None:
         e[near] = near_field_w_m2(spot, obs[near], gain[near] * vis[near], attenuation_per_m, states, bound=bound)
@@ -922,14 +972,16 @@ def spot_line_of_sight(ray_scene, spot: Spot, p) -> tuple[np.ndarray, int]:
     """Line of sight from ``spot`` to points ``p`` (N, 3): one occlusion query from just
     off the spot's centroid, in which a convex target's own triangles do not block (the
     centroid of a curved spot lies inside the tessellation); far-field points behind the
-    spot's surface receive nothing whatever is in between (evaluated with the mean
-    frame): no ray needed, False. Returns (mask, segments traced)."""
+    spot's surface receive nothing whatever is in between (behind every one of its
+    frames' planes, :func:`frame_groups`): no ray needed, False. Returns (mask, segments traced)."""
     c, nrm = spot.centroid, spot.mean_frame[2]
     start = ray_scene.off_surface(spot.sight_point_m, nrm)  # in front of a convex mesh's own bulge too
     rel = p - c
     along = rel @ nrm
+    groups = frame_groups(spot)  # in front of any of its frames' surfaces: lit in the far field (point_form)
+    front = along > 0 if groups is None else (rel @ groups[0][:, 2].T).max(axis=1) > 0
     far = np.einsum("ij,ij->i", rel, rel) >= (FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)) ** 2
-    need = ~far | (along > 0) | spot.material.has_specular
+    need = ~far | front | spot.material.has_specular
     idx = np.flatnonzero(need)
     row = np.zeros(len(p), bool)
     own = own_object(spot.target)
@@ -1013,4 +1065,4 @@ def spot_directions(spot: Spot):
     return to_local(spot.mean_frame, -spot.mean_incoming)
 
 
-__all__ += ["specular_power_w", "mirror_axis", "spot_directions", "SpotBuild", "path_states"]
+__all__ += ["specular_power_w", "mirror_axis", "spot_directions", "SpotBuild", "path_states", "frame_groups", "point_form"]

@@ -29,7 +29,7 @@ import numpy as np
 import brdfmodels
 from brdfmodels.parallel import block_rows, map_blocks
 
-from hazard.physics.engine import Spot, path_states, projected_brdf, brdf_bound, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
+from hazard.physics.engine import Spot, path_states, projected_brdf, brdf_bound, frame_groups, point_form, spot_directions, spot_irradiance, spot_line_of_sight, specular_irradiance
 from hazard.physics.near_field_lobe import near_lobe_fn
 from hazard.physics.nohd import range_from_intensity
 from hazard.progress import terminal_bar
@@ -95,9 +95,14 @@ def nohd_range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None, n
         return union_range_fn(spot, states, range_of, lambda s: path_states(model, s), slump_step_rad)
     wi = spot_directions(spot)
     st = None if states is None else path_states(model, states)
+    curved = frame_groups(spot) is not None
 
     def intensity(wo):
-        """Radiant intensity I = f_r cos(theta_r) P [W/sr] toward wo (the max over the history)."""
+        """Radiant intensity I = f_r cos(theta_r) P [W/sr] toward wo (the max over the history);
+        a spot of several frames (curved) sums each frame's (:func:`point_form`)."""
+        if curved:
+            wo = np.asarray(wo, float)
+            return point_form(spot, wo @ spot.mean_frame, np.full(len(wo), power), st, reduce="path-max")[0]
         return projected_brdf(model, wi[None, :], wo, st, reduce="path-max") * power
 
     def fn(wo):

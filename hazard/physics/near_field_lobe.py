@@ -82,13 +82,14 @@ import numpy as np
 from brdfmodels import Lambertian, Scaled, StateTable, Sum
 
 from hazard.physics import near_field
-from hazard.physics.engine import FAR_FIELD_SPOT_SIZES, near_field_w_m2, to_local, projected_brdf, spot_directions
+from hazard.physics.engine import FAR_FIELD_SPOT_SIZES, frame_groups, near_field_w_m2, to_local, projected_brdf, spot_directions
 
 __all__ = ["NearLobeFn", "near_lobe_fn", "near_field_reach_m", "projected_brdf_max", "ENABLED", "THETA_ROWS_DEG", "GRID_PHI_DEG", "ROOT_RTOL", "FLOOR_RTOL", "SCAN_MIN_STEPS", "MAX_EVALUATIONS",
            "STATS", "describe_since"]
 
 ENABLED = True  # read when a lobe function is made; False: the point form alone (tests of the point-form lobe's machinery)
 THETA_ROWS_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 80.0, 85.0, 87.5, 89.0, 89.5)  # polar rows of the grid [deg]
+BELOW_ROWS_DEG = tuple(180.0 - t for t in reversed(THETA_ROWS_DEG))  # a curved spot's rows below its mean plane (90.5 ... 180)
 GRID_PHI_DEG = 30.0  # azimuth step of the grid [deg]
 ROOT_RTOL = 1e-3  # bisection of the farthest root's bracket, relative to its far end (or to 1/8 of the scan step)
 FLOOR_RTOL = 0.005  # the point form is kept where the integral's root lies within this of it (its 1 % in irradiance)
@@ -257,6 +258,7 @@ class NearLobeFn:
         self.samples = getattr(base, "samples", 1)
         self.frame = spot.mean_frame
         self.c = spot.centroid
+        self.curved = frame_groups(spot) is not None  # light below its mean plane too: the grid's rows go on to 180 deg
         self.far_m = FAR_FIELD_SPOT_SIZES * max(spot.size_m, 1e-9)
         self._grid = None
         self.info = None
@@ -448,7 +450,8 @@ class NearLobeFn:
         d = (np.cos(ring)[..., None] * w_loc[:, None, None, :]
              + np.sin(ring)[..., None] * (np.cos(az)[..., None] * e1[:, None, None, :] + np.sin(az)[..., None] * e2[:, None, None, :]))
         d = d.reshape(len(w_loc), -1, 3)
-        d[..., 2] = np.maximum(d[..., 2], 0.0)
+        if not self.curved:  # a flat spot sends nothing below its plane
+            d[..., 2] = np.maximum(d[..., 2], 0.0)
         d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
         best = np.asarray(self._point_form(d.reshape(-1, 3)), float).reshape(len(w_loc), -1).max(axis=1)
         best = np.maximum(best, np.asarray(self._point_form(w_loc), float))
@@ -509,7 +512,8 @@ class NearLobeFn:
     # -- the grid and the envelope ---------------------------------------------------------------
     def _build(self):
         t0 = time.perf_counter()
-        th = np.radians(np.asarray(THETA_ROWS_DEG))
+        rows_deg = THETA_ROWS_DEG + (BELOW_ROWS_DEG if self.curved else ())
+        th = np.radians(np.asarray(rows_deg))
         ph = np.radians(np.arange(-180.0, 180.0 + 1e-9, GRID_PHI_DEG))
         tt, pp = np.meshgrid(th, ph, indexing="ij")
         dirs = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
@@ -541,7 +545,7 @@ class NearLobeFn:
         dt = time.perf_counter() - t0
         STATS.directions += int(need.sum())
         STATS.seconds += dt
-        self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(THETA_ROWS_DEG), "grid_phi_deg": GRID_PHI_DEG,
+        self.info = {"directions_integrated": int(need.sum()), "directions_raised": int(raised.sum()), "grid_theta_deg": list(rows_deg), "grid_phi_deg": GRID_PHI_DEG,
                      "scan_step_max_m": float(steps.max()) if len(steps) else 0.0, "root_rtol": ROOT_RTOL,
                      "kernel_evaluations": int(self.evaluations),
                      "kernel_state_evaluations": int(self.state_evaluations), "points_by_bound": int(self.bound_points),
