@@ -868,41 +868,52 @@ def frame_groups(spot: Spot):
     return frames, to_local(frames, -inc), share
 
 
-def point_form(spot: Spot, d, scale, states=None, reduce=None):
+def point_form(spot: Spot, d, scale, states=None, reduce=None, sparse=False):
     """The spot's radiant intensity over its power, ``f_r cos``, at unit world directions
     ``d`` (M, 3) from its centroid, times ``scale`` (M,): (M,) or (M, T) with states
     (``reduce`` as :func:`projected_brdf`), and where it is evaluated (M,) bool (in front
-    and ``scale > 0``; 0 elsewhere). The mean frame's ``f_r cos``; for a spot of several
-    frames (:func:`frame_groups`) the larger of that and the sum of each frame's share:
-    the sum alone rests on a curved spot's few samples (15 on a 5 cm sphere in a 2 m
-    beam gave 0.71 of a Lambertian sphere's intensity 30 deg off the backscatter, where
-    the mean frame gives 1.48), the mean frame alone gives 0 at and behind its plane."""
-    e, live = _frames_sum(spot, d, scale, states, reduce, None)
+    and ``scale > 0``; 0 elsewhere); ``sparse``: (rows evaluated, their values) instead.
+    The mean frame's ``f_r cos``; for a spot of several frames (:func:`frame_groups`) the
+    larger of that and the sum of each frame's share: the sum alone rests on a curved
+    spot's few samples (15 on a 5 cm sphere in a 2 m beam gave 0.71 of a Lambertian
+    sphere's intensity 30 deg off the backscatter, where the mean frame gives 1.48), the
+    mean frame alone gives 0 at and behind its plane."""
+    fr = spot.mean_frame
+    wo = to_local(fr, d)
+    live = (wo[:, 2] > 0) & (scale > 0)  # behind the surface or out of sight: nothing, not evaluated
+    wi = to_local(fr, -spot.mean_incoming)[None, :]  # one direction: the models broadcast it after checking it once
     groups = frame_groups(spot)
+    if groups is None and live.all():
+        v = projected_brdf(spot.material, wi, wo, states, scale, reduce=reduce)
+        return (np.arange(len(d)), v) if sparse else (v, live)
+    rows = np.flatnonzero(live)
+    v = projected_brdf(spot.material, wi, wo[rows], states, scale[rows], reduce=reduce)
+    if groups is None and sparse:
+        return rows, v
+    e = np.zeros((len(d),) if states is None or reduce is not None else (len(d), len(states)))
+    e[rows] = v
     if groups is not None:
         e2, live2 = _frames_sum(spot, d, scale, states, reduce, groups)
         e, live = np.maximum(e, e2), live | live2
+    if sparse:
+        rows = np.flatnonzero(live)
+        return rows, e[rows]
     return e, live
 
 
 def _frames_sum(spot: Spot, d, scale, states, reduce, groups):
-    """:func:`point_form`'s sum over ``groups`` (frames, wi, share), or the mean frame's alone (None)."""
-    model = spot.material
-    if groups is None:
-        frames, wi, share = spot.mean_frame[None], to_local(spot.mean_frame, -spot.mean_incoming)[None], np.ones(1)
-    else:
-        frames, wi, share = groups
+    """:func:`point_form`'s sum over ``groups`` (frames, wi, share): (M,) or (M, T), and
+    where some frame faces ``d`` (M,)."""
+    frames, wi, share = groups
     m = len(d)
     e = np.zeros((m,) if states is None or reduce is not None else (m, len(states)))
     live = np.zeros(m, bool)
     for g in range(len(frames)):
         wo = to_local(frames[g], d)
         on = (wo[:, 2] > 0) & (scale > 0)
-        if on.all() and len(frames) == 1:  # wi is one direction (1, 3): the models broadcast it after checking it once
-            return projected_brdf(model, wi[g][None], wo, states, scale * share[g], reduce=reduce), on
         rows = np.flatnonzero(on)
         if len(rows):
-            e[rows] += projected_brdf(model, wi[g][None], wo[rows], states, scale[rows] * share[g], reduce=reduce)
+            e[rows] += projected_brdf(spot.material, wi[g][None], wo[rows], states, scale[rows] * share[g], reduce=reduce)
         live |= on
     return e, live
 
@@ -934,11 +945,9 @@ def spot_irradiance(spot: Spot, observers_m, gain, attenuation_per_m, states=Non
         if attenuation_per_m:
             scale *= np.exp(-attenuation_per_m * rng)
         # observers behind the surface or out of sight receive nothing: evaluated only in front (point_form)
-        e, live = point_form(spot, (obs - c) / rng[:, None], scale, states)
         if sparse:
-            rows = np.flatnonzero(live)
-            return (rows, e[rows]), far
-        return e, far
+            return point_form(spot, (obs - c) / rng[:, None], scale, states, sparse=True), far
+        return point_form(spot, (obs - c) / rng[:, None], scale, states)[0], far
     shape = (m,) if states is None else (m, len(states))
     e = np.zeros(shape)
     if np.any(far):
