@@ -56,8 +56,7 @@ def test_bench_whole_run():  # issue 37: 1.23-1.25 in CPU time against the compl
     check_goal("whole run", res["ratio"], goal(1.3, 4.0))
 
 
-@not_met("issue 37: outputs 0.94-1.14x the analysis in wall time (median 1.01 of eleven, met in five), 1.07-1.34x in CPU at 1e6 observers, quiet (2026-11-27, load 1.3-1.7; the table's text at polars' floor; what is left is the GIL-bound text, orjson's digits ~0.2 s); goal 1 (wall)")
-def test_bench_outputs():
+def test_bench_outputs():  # issue 37: 0.83-1.04x the analysis in wall time, median 0.94 of six (met), quiet (2026-11-27, load 1.4-1.9)
     from .bench_outputs import run
 
     res = run(rows=100 if QUICK else 1000, repeat=3)
