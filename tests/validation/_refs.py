@@ -824,3 +824,22 @@ def off_incident_beam(beam, p, factor=2.0):
     R = float(d @ beam.u)
     r = math.sqrt(max(float(d @ d) - R * R, 0.0))
     return R < 0 or r > factor * beam.diameter(R)
+
+
+def farthest_root(irradiance, c, w, mpe, rs):
+    """Farthest radius along ``c + r w`` where ``irradiance`` (points (N, 3) -> W/m^2)
+    reaches ``mpe``: the last hot radius of the increasing scan ``rs``, then bisected to
+    1e-7 (relative) toward the next; 0 where none is hot. The scan must end beyond the
+    hazard (asserted)."""
+    hot = np.flatnonzero(irradiance(c + rs[:, None] * w) >= mpe)
+    if not len(hot):
+        return 0.0
+    assert hot[-1] < len(rs) - 1, "the reference scan did not reach beyond the hazard"
+    lo, hi = rs[hot[-1]], rs[hot[-1] + 1]
+    while hi - lo > 1e-7 * hi:
+        mid = 0.5 * (lo + hi)
+        if irradiance((c + mid * w)[None])[0] >= mpe:
+            lo = mid
+        else:
+            hi = mid
+    return hi

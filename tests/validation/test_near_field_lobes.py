@@ -92,20 +92,8 @@ def _ref_irradiance(nodes, o):
 
 def _ref_root(nodes, c, w, mpe, r_max):
     """Farthest radius along ``c + r w`` where the reference reaches ``mpe``: a scan of
-    250 radii to ``r_max``, then bisection."""
-    rs = np.linspace(r_max / 250, r_max, 250)
-    hot = np.flatnonzero(_ref_irradiance(nodes, c + rs[:, None] * w) >= mpe)
-    if not len(hot):
-        return 0.0
-    assert hot[-1] < len(rs) - 1, "the reference scan did not reach beyond the hazard"
-    lo, hi = rs[hot[-1]], rs[hot[-1] + 1]
-    while hi - lo > 1e-7 * hi:
-        mid = 0.5 * (lo + hi)
-        if _ref_irradiance(nodes, (c + mid * w)[None])[0] >= mpe:
-            lo = mid
-        else:
-            hi = mid
-    return hi
+    250 radii to ``r_max``, then bisection (:func:`_refs.farthest_root`)."""
+    return ref.farthest_root(lambda p: _ref_irradiance(nodes, p), c, w, mpe, np.linspace(r_max / 250, r_max, 250))
 
 
 def _plate_spot(inc_deg, power_w, half_len_m, half_wid_m):
