@@ -337,7 +337,7 @@ def _targets(log, crossings, history, mpe) -> KeepoutResult:
                      + (f"; each also through {len(aids)} optical aid(s)" if aids and spots else "")
                      + f"; {_near_field_text(before, rows)}")
     rows = rows + beam_stage.unlit_targets(scene.targets, spots, history.traced.built.unreflected)
-    notes = lobes.near_field_lobe_notes(spots, rows)
+    notes = lobes.near_field_lobe_notes(spots, rows) + lobes.curved_spot_notes(spots)
     melt_by_name = {scene.targets[k].name: m for k, m in history.melts.items()}
     for row in rows:  # this stage's own rows
         row.melt = melt_by_name[row.name].summary() if row.name in melt_by_name else None

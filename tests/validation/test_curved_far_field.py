@@ -89,3 +89,19 @@ def test_sphere_far_field_beside_and_behind(g):
 def test_sphere_far_field_crescent(g):
     got, want = _sphere_far_field(1000.0, 2.0, 0.025, 50.0, g, 40.0, (0.0, 0.0, 0.0))
     assert got >= want * (1 - 3e-3), f"g = {g:g} deg: engine {got:.6g} W/m^2 below the Lambert sphere's {want:.6g}"
+
+
+def test_a_report_names_its_curved_spots():
+    """A run with a sphere in the beam says what its curved spot's results rest on (the
+    frames' sum, the zone's hemisphere); a plate's spot is not named (traced only)."""
+    from hazard.pipeline import lobes
+    from hazard.pipeline.spots import ray_scene, trace_beam
+
+    t = dict(name="ball", shape="sphere", center=np.zeros(3), normal=[0.0, 0.0, 1.0], tangent=[1.0, 0.0, 0.0],
+             size=(0.05,), material=ref.lambertian(RHO))
+    text = ref.scene_text(power=1.0, a=0.1, phi=0.0, position=[0.0, -50.0, 0.0], aim=np.zeros(3), targets=[t])
+    notes = [n for n in hazard.analyze(scenes.loads(text)).notes if n.startswith("curved spot(s): ball (")]
+    assert len(notes) == 1 and "hemisphere above each spot's mean plane" in notes[0]
+    plate = dict(t, name="plate", shape="plate", size=(0.5, 0.5), normal=[0.0, -1.0, 0.0])
+    scene = scenes.loads(ref.scene_text(power=1.0, a=0.1, phi=0.0, position=[0.0, -50.0, 0.0], aim=np.zeros(3), targets=[plate]))
+    assert lobes.curved_spot_notes(trace_beam(scene, ray_scene(scene, "embree", 1), 0.0).built.spots) == []
