@@ -20,7 +20,9 @@ the power is set from a drawn D* so the reference root is D* by construction.
 Checks: the target row's ``specular_nohd_static_m`` equals D* (1e-4, never lower by more),
 its direction is straight back along the beam, and observers on that ray at 0.99 D* are
 hazardous while at 1.01 D* they are not (the reflection alone,
-``reflected_irradiance_w_m2``: the NOHD and the observers are one function).
+``reflected_irradiance_w_m2``). The observers' values are averaged over the 7 mm limiting
+aperture and the NOHD is the peak's: at 0.99 D* an eye may lie below the MPE by the
+average's loss, never below the Gaussian's least value over the disk (:func:`_pupil_floor`).
 """
 
 from __future__ import annotations
@@ -86,6 +88,22 @@ def _case(kind, r, R1, w_over_r, q, mu, rho, m, rot):
     return hazard.analyze(scenes.loads(text)), nohd, back
 
 
+PUPIL_RADIUS_M = 3.5e-3  # the 7 mm limiting aperture at 1064 nm (ANSI Z136.1 Table 8)
+
+
+def _pupil_floor(r, R1, w_over_r, q, m, **_):
+    """The least fraction of the peak irradiance an eye at 0.99 D* takes through the 7 mm
+    aperture: the reflected beam is never narrower than the incident one's own 1/e radius
+    w = (a + (z_v + D) phi) / 2 (a convex mirror only adds divergence), and the Gaussian
+    is above exp(-a^2 / w^2) of its peak over the disk. The observers are averaged over
+    the aperture (the standard's quantity) and the NOHD is the peak's (longer): a 3 cm
+    cylinder in a 2.2 cm beam has its eye at 0.99 D* at 0.986 MPE (the average's 2.5 %)."""
+    db = 2 * w_over_r * r
+    phi, a, z_v = q * db / R1, (1 - q) * db, R1 - r
+    w = (a + (z_v + 0.99 * m * r) * phi) / 2
+    return math.exp(-(PUPIL_RADIUS_M / w) ** 2)
+
+
 def _check(kind, **kw):
     res, nohd, back = _case(kind, **kw)
     assert res.mpe_w_m2 == pytest.approx(MPE)
@@ -95,7 +113,8 @@ def _check(kind, **kw):
     assert got == pytest.approx(nohd, rel=1e-4)
     assert np.degrees(math.acos(min(1.0, float(np.dot(row.specular_direction, back))))) < 0.05
     ratio = res.observers.reflected_irradiance_w_m2 / MPE
-    assert ratio[0] >= 1.0, f"{kind}: observer at 0.99 NOHD not hazardous (E/MPE {ratio[0]:.6g})"
+    floor = _pupil_floor(**kw)
+    assert ratio[0] >= floor, f"{kind}: observer at 0.99 NOHD below {floor:.6g} MPE (E/MPE {ratio[0]:.6g})"
     assert ratio[1] < 1.0, f"{kind}: observer at 1.01 NOHD hazardous (E/MPE {ratio[1]:.6g})"
 
 
