@@ -868,11 +868,12 @@ def frame_groups(spot: Spot):
     return frames, to_local(frames, -inc), share
 
 
-def point_form(spot: Spot, d, scale, states=None, reduce=None, sparse=False):
+def point_form(spot: Spot, d, scale, states=None, reduce=None, sparse=False, groups=False):
     """The spot's radiant intensity over its power, ``f_r cos``, at unit world directions
     ``d`` (M, 3) from its centroid, times ``scale`` (M,): (M,) or (M, T) with states
     (``reduce`` as :func:`projected_brdf`), and where it is evaluated (M,) bool (in front
-    and ``scale > 0``; 0 elsewhere); ``sparse``: (rows evaluated, their values) instead.
+    and ``scale > 0``; 0 elsewhere); ``sparse``: (rows evaluated, their values) instead;
+    ``groups``: the spot's :func:`frame_groups` when the caller has them (False: made here).
     The mean frame's ``f_r cos``; for a spot of several frames (:func:`frame_groups`) the
     larger of that and the sum of each frame's share: the sum alone rests on a curved
     spot's few samples (15 on a 5 cm sphere in a 2 m beam gave 0.71 of a Lambertian
@@ -882,7 +883,7 @@ def point_form(spot: Spot, d, scale, states=None, reduce=None, sparse=False):
     wo = to_local(fr, d)
     live = (wo[:, 2] > 0) & (scale > 0)  # behind the surface or out of sight: nothing, not evaluated
     wi = to_local(fr, -spot.mean_incoming)[None, :]  # one direction: the models broadcast it after checking it once
-    groups = frame_groups(spot)
+    groups = frame_groups(spot) if groups is False else groups
     if groups is None and live.all():
         v = projected_brdf(spot.material, wi, wo, states, scale, reduce=reduce)
         return (np.arange(len(d)), v) if sparse else (v, live)

@@ -95,14 +95,14 @@ def nohd_range_fn(spot: Spot, mpe_w_m2, mu, gain, states, slump_step_rad=None, n
         return union_range_fn(spot, states, range_of, lambda s: path_states(model, s), slump_step_rad)
     wi = spot_directions(spot)
     st = None if states is None else path_states(model, states)
-    curved = frame_groups(spot) is not None
+    groups = frame_groups(spot)  # once: the lobe asks for the intensity many times
 
     def intensity(wo):
         """Radiant intensity I = f_r cos(theta_r) P [W/sr] toward wo (the max over the history);
         a spot of several frames (curved) sums each frame's (:func:`point_form`)."""
-        if curved:
+        if groups is not None:
             wo = np.asarray(wo, float)
-            return point_form(spot, wo @ spot.mean_frame, np.full(len(wo), power), st, reduce="path-max")[0]
+            return point_form(spot, wo @ spot.mean_frame, np.full(len(wo), power), st, reduce="path-max", groups=groups)[0]
         return projected_brdf(model, wi[None, :], wo, st, reduce="path-max") * power
 
     def fn(wo):

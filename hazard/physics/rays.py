@@ -159,10 +159,10 @@ class RayScene:
         point = np.where(hit[:, None], o + d * np.where(hit, t, 0.0)[:, None], np.nan)
         return Hits(hit, t, face, obj, point)
 
-    def _ahead(self, o, d) -> np.ndarray:
-        """How far [m] each ray (unit ``d``) may start ahead of ``o`` with nothing skipped:
-        to just before the box of every triangle (padded by 1e-3 of the scene's size); 0
-        for a start inside it or a ray that misses it. Embree rounds a start and direction
+    def _ahead(self, o, d) -> tuple[np.ndarray, np.ndarray]:
+        """Where each ray (unit ``d``) may start with nothing skipped, and how far [m] ahead
+        of ``o`` that is: just before the box of every triangle (padded by 1e-3 of the
+        scene's size); ``o`` itself (0) for a start inside it or a ray that misses it. Embree rounds a start and direction
         to float32: from a laser 186 m away that is ~1e-5 m across the beam at the target
         (its ulp, and the direction's 6e-8 over the range), so rays passing that close
         outside a cylinder's cap seen edge-on were hits (0.017 W of a 546 W spot more than
@@ -173,15 +173,15 @@ class RayScene:
             a, b = (lo - o) / d, (hi - o) / d
             enter = np.nanmax(np.minimum(a, b), axis=1)
             leave = np.nanmin(np.maximum(a, b), axis=1)
-        return np.where((enter > 0) & (enter <= leave) & np.isfinite(enter), enter, 0.0)
+        t0 = np.where((enter > 0) & (enter <= leave) & np.isfinite(enter), enter, 0.0)
+        return o + t0[:, None] * d, t0
 
     def _first(self, o, d):
         """Face (-1: none), distance [m] (inf: none) and object (-1: none) of the nearest
         hit along unit directions ``d`` from ``o``, ``t`` refined in float64 against the
         hit triangle's plane (Embree works in float32; each ray starts at the box of the
         triangles, :meth:`_ahead`)."""
-        t0 = self._ahead(o, d)
-        start = o + t0[:, None] * d
+        start, t0 = self._ahead(o, d)
         face, t = self._map(lambda a, b: self._impl.first(start[a:b], d[a:b]), len(o), 2)
         t = t + t0
         hit = face >= 0
@@ -208,8 +208,7 @@ class RayScene:
         the faces are asked of the engine, and ``t`` is made on the other objects' hits
         (inf on ``own``'s; Embree's own ``t`` asked again only where a ray is parallel to
         its triangle's plane; each ray starts at the box of the triangles, :meth:`_ahead`)."""
-        t0 = self._ahead(o, d)
-        start = o + t0[:, None] * d
+        start, t0 = self._ahead(o, d)
         (face,) = self._map(lambda a, b: (self._impl.first_face(start[a:b], d[a:b]),), len(o), 1)
         hit = face >= 0
         obj = np.where(hit, self.face_object[np.maximum(face, 0)], -1)

@@ -40,7 +40,7 @@ def _edge_on_cylinder_spot():
     text, _ = _case("cylinder", 100.0, 0.01, 0.0, 0.25, 0.5, 0.03125, 0.0625, (0, 0, 1), ROTATION, backstop=True, screen=True)
     scene = scenes.loads(text)
     ahead = rays.RayScene._ahead
-    rays.RayScene._ahead = lambda self, o, d: np.zeros(len(o))  # every ray from the laser itself
+    rays.RayScene._ahead = lambda self, o, d: (o, np.zeros(len(o)))  # every ray from the laser itself
     try:
         return next(s for s in trace_beam(scene, ray_scene(scene, "embree", 1), 0.0).built.spots if s.target.name == "t")
     finally:

@@ -76,7 +76,8 @@ def test_rays_that_miss_the_box_or_start_inside_it_are_not_moved():
     scene = RayScene([mesh], backend="numpy")
     o = np.array([[0.0, -1000.0, 0.0], [0.0, -0.0001, 0.0], [0.0, -1000.0, 0.0], [5.0, -1000.0, 0.0]])
     d = np.array([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
-    ahead = scene._ahead(o, d)
+    start, ahead = scene._ahead(o, d)
+    np.testing.assert_array_equal(start, o + ahead[:, None] * d)
     pad = 1e-3 * SIDE
     np.testing.assert_allclose(ahead, [1000.0 - pad, 0.0, 0.0, 0.0], rtol=0, atol=1e-9)
     hits = scene.first_hit(o, d)
